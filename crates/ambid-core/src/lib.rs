@@ -1,0 +1,17 @@
+//! # ambid-core
+//!
+//! A closed-loop system-identification library: linear models ([`lti`]), dense linear algebra glue
+//! ([`linalg`]), excitation signals ([`signal`]) and, in later modules, nonparametric FRF estimation,
+//! parametric estimation and validation. Pure computation: no file I/O, no plotting.
+//!
+//! Conventions (see `docs/conventions.md`): SI units, frequencies in Hz at every public boundary,
+//! polynomials in ascending powers of $q^{-1}$, every discrete model carries its sample time.
+#![warn(missing_docs)]
+
+pub mod error;
+pub mod linalg;
+pub mod lti;
+pub mod signal;
+
+pub use error::{Error, Result};
+pub use faer::c64;

@@ -1,0 +1,374 @@
+//! Dense linear-algebra glue on [faer]: what the identification code needs and faer does not
+//! provide directly.
+//!
+//! * [`expm`]: matrix exponential by Padé(13) scaling and squaring (Higham 2005).
+//! * [`eigenvalues`]: eigenvalues of a general real matrix (faer's real Schur based EVD).
+//! * [`roots`]: polynomial roots as eigenvalues of the balanced companion matrix.
+//! * [`lstsq`]: least squares by Householder QR.
+//! * [`solve`], [`solve_c64`]: square solves by LU with partial pivoting.
+//! * [`singular_values`]: singular values, largest first.
+//!
+//! # Matrix exponential
+//! With $s = \max(0, \lceil \log_2(\lVert A \rVert_1 / \theta_{13}) \rceil)$ and the $[13/13]$ Padé
+//! approximant $r_{13}(X) = q_{13}(X)^{-1} p_{13}(X)$,
+//! $$ e^{A} \approx r_{13}(2^{-s}A)^{2^s}, \qquad \theta_{13} = 5.37192\ldots, $$
+//! which is accurate to double precision in exact arithmetic (backward error below $2^{-53}$).
+//!
+//! # Example
+//! ```
+//! use ambid_core::linalg::{expm, roots};
+//! use faer::mat;
+//! let a = mat![[0.0, 1.0], [-1.0, 0.0]];
+//! let e = expm(a.as_ref()).unwrap();
+//! assert!((e[(0, 0)] - 1f64.cos()).abs() < 1e-14);
+//! // z^2 - 3z + 2 = (z - 1)(z - 2)
+//! let mut r: Vec<f64> = roots(&[1.0, -3.0, 2.0]).unwrap().iter().map(|z| z.re).collect();
+//! r.sort_by(|a, b| a.partial_cmp(b).unwrap());
+//! assert!((r[0] - 1.0).abs() < 1e-12 && (r[1] - 2.0).abs() < 1e-12);
+//! ```
+
+use crate::error::{Error, Result};
+use faer::linalg::solvers::{Solve, SolveLstsq};
+use faer::{c64, Mat, MatRef};
+
+/// Induced 1-norm (maximum absolute column sum).
+pub fn norm1(a: MatRef<'_, f64>) -> f64 {
+    (0..a.ncols())
+        .map(|j| (0..a.nrows()).map(|i| a[(i, j)].abs()).sum::<f64>())
+        .fold(0.0, f64::max)
+}
+
+fn check_square(context: &'static str, a: MatRef<'_, f64>) -> Result<()> {
+    if a.nrows() != a.ncols() {
+        return Err(Error::DimensionMismatch {
+            context,
+            expected: "a square matrix".into(),
+            got: format!("{}×{}", a.nrows(), a.ncols()),
+        });
+    }
+    check_finite_mat(context, a)
+}
+
+fn check_finite_mat(context: &'static str, a: MatRef<'_, f64>) -> Result<()> {
+    for j in 0..a.ncols() {
+        for i in 0..a.nrows() {
+            if !a[(i, j)].is_finite() {
+                return Err(Error::numerical(
+                    context,
+                    format!("matrix entry ({i}, {j}) is not finite"),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Matrix exponential $e^{A}$ by Padé(13) scaling and squaring.
+///
+/// Complexity $O(n^3 (6 + s))$. Errors on a non-square or non-finite matrix.
+pub fn expm(a: MatRef<'_, f64>) -> Result<Mat<f64>> {
+    check_square("expm", a)?;
+    let n = a.nrows();
+    if n == 0 {
+        return Ok(Mat::zeros(0, 0));
+    }
+    const B: [f64; 14] = [
+        64764752532480000.0,
+        32382376266240000.0,
+        7771770303897600.0,
+        1187353796428800.0,
+        129060195264000.0,
+        10559470521600.0,
+        670442572800.0,
+        33522128640.0,
+        1323241920.0,
+        40840800.0,
+        960960.0,
+        16380.0,
+        182.0,
+        1.0,
+    ];
+    const THETA13: f64 = 5.371920351148152;
+    let nrm = norm1(a);
+    let s = if nrm > THETA13 {
+        (nrm / THETA13).log2().ceil().max(0.0) as i32
+    } else {
+        0
+    };
+    let scale = 0.5f64.powi(s);
+    let x = Mat::from_fn(n, n, |i, j| a[(i, j)] * scale);
+    let id = Mat::<f64>::identity(n, n);
+    let x2 = &x * &x;
+    let x4 = &x2 * &x2;
+    let x6 = &x4 * &x2;
+    let lin = |c6: f64, c4: f64, c2: f64, c0: f64| {
+        Mat::from_fn(n, n, |i, j| {
+            c6 * x6[(i, j)] + c4 * x4[(i, j)] + c2 * x2[(i, j)] + c0 * id[(i, j)]
+        })
+    };
+    let u_inner = &x6 * lin(B[13], B[11], B[9], 0.0) + lin(B[7], B[5], B[3], B[1]);
+    let u = &x * &u_inner;
+    let v = &x6 * lin(B[12], B[10], B[8], 0.0) + lin(B[6], B[4], B[2], B[0]);
+    let p = &v + &u;
+    let q = &v - &u;
+    let mut r = q.partial_piv_lu().solve(&p);
+    check_finite_mat("expm", r.as_ref())?;
+    for _ in 0..s {
+        r = &r * &r;
+    }
+    Ok(r)
+}
+
+/// Eigenvalues of a general real square matrix.
+pub fn eigenvalues(a: MatRef<'_, f64>) -> Result<Vec<c64>> {
+    check_square("eigenvalues", a)?;
+    if a.nrows() == 0 {
+        return Ok(Vec::new());
+    }
+    a.eigenvalues()
+        .map_err(|e| Error::numerical("eigenvalues", format!("{e:?}")))
+}
+
+/// Parlett–Reinsch balancing: returns $D^{-1} A D$ with $D$ a diagonal of powers of two.
+pub fn balance(a: MatRef<'_, f64>) -> Mat<f64> {
+    let n = a.nrows();
+    let mut m = a.to_owned();
+    let radix = 2.0f64;
+    let mut converged = false;
+    let mut sweeps = 0;
+    while !converged && sweeps < 100 {
+        converged = true;
+        sweeps += 1;
+        for i in 0..n {
+            let mut c = 0.0;
+            let mut r = 0.0;
+            for j in 0..n {
+                if j != i {
+                    c += m[(j, i)].abs();
+                    r += m[(i, j)].abs();
+                }
+            }
+            if c == 0.0 || r == 0.0 {
+                continue;
+            }
+            let s = c + r;
+            let mut f = 1.0;
+            let mut cc = c;
+            let mut rr = r;
+            while cc < rr / radix {
+                cc *= radix;
+                rr /= radix;
+                f *= radix;
+            }
+            while cc >= rr * radix {
+                cc /= radix;
+                rr *= radix;
+                f /= radix;
+            }
+            if (cc + rr) < 0.95 * s {
+                converged = false;
+                for j in 0..n {
+                    m[(i, j)] /= f;
+                }
+                for j in 0..n {
+                    m[(j, i)] *= f;
+                }
+            }
+        }
+    }
+    m
+}
+
+/// Roots of the polynomial $c_0 z^{m} + c_1 z^{m-1} + \dots + c_m$ (coefficients in *descending*
+/// powers, as `numpy.roots`).
+///
+/// Leading zeros are dropped; trailing zeros give roots at 0. The roots are the eigenvalues of the
+/// balanced companion matrix. A polynomial in ascending powers of $q^{-1}$, $[1, a_1, \dots, a_n]$,
+/// has the same coefficient list in descending powers of $z$, so `roots(&a)` gives its zeros in $z$.
+pub fn roots(coeffs: &[f64]) -> Result<Vec<c64>> {
+    crate::error::check_finite("polynomial coefficients", coeffs)?;
+    let first = match coeffs.iter().position(|c| *c != 0.0) {
+        Some(f) => f,
+        None => {
+            return Err(Error::invalid(
+                "coeffs",
+                "the zero polynomial has no defined roots",
+            ))
+        }
+    };
+    let c = &coeffs[first..];
+    let last = c.iter().rposition(|v| *v != 0.0).unwrap_or(0);
+    let n_zero = c.len() - 1 - last;
+    let c = &c[..=last];
+    let m = c.len() - 1;
+    let mut out = Vec::with_capacity(m + n_zero);
+    if m > 0 {
+        let comp = Mat::from_fn(m, m, |i, j| {
+            if i == 0 {
+                -c[j + 1] / c[0]
+            } else if i == j + 1 {
+                1.0
+            } else {
+                0.0
+            }
+        });
+        let bal = balance(comp.as_ref());
+        out.extend(eigenvalues(bal.as_ref())?);
+    }
+    out.extend(std::iter::repeat_n(c64::new(0.0, 0.0), n_zero));
+    Ok(out)
+}
+
+/// Monic real polynomial (descending powers) with the given roots. Complex roots must come in
+/// conjugate pairs; imaginary parts of the product are discarded.
+pub fn poly_from_roots(r: &[c64]) -> Vec<f64> {
+    let mut p = vec![c64::new(1.0, 0.0)];
+    for z in r {
+        let mut q = vec![c64::new(0.0, 0.0); p.len() + 1];
+        for (k, pk) in p.iter().enumerate() {
+            q[k] += *pk;
+            q[k + 1] -= *pk * *z;
+        }
+        p = q;
+    }
+    p.into_iter().map(|z| z.re).collect()
+}
+
+/// Least-squares solution of $\min_X \lVert A X - B \rVert_F$ by Householder QR.
+///
+/// Requires `A` to have at least as many rows as columns and full column rank; a rank-deficient
+/// problem is reported as [`Error::Numerical`].
+pub fn lstsq(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> Result<Mat<f64>> {
+    if a.nrows() != b.nrows() {
+        return Err(Error::DimensionMismatch {
+            context: "lstsq",
+            expected: format!("{} right-hand-side rows", a.nrows()),
+            got: format!("{}", b.nrows()),
+        });
+    }
+    if a.nrows() < a.ncols() {
+        return Err(Error::invalid(
+            "a",
+            format!(
+                "least squares needs at least as many equations ({}) as unknowns ({}); collect more data or reduce the model order",
+                a.nrows(),
+                a.ncols()
+            ),
+        ));
+    }
+    check_finite_mat("lstsq", a)?;
+    check_finite_mat("lstsq", b)?;
+    let sv = singular_values(a)?;
+    if let (Some(&smax), Some(&smin)) = (sv.first(), sv.last()) {
+        if smax == 0.0 || smin <= smax * 1e-13 * (a.nrows().max(a.ncols()) as f64) {
+            return Err(Error::numerical(
+                "lstsq",
+                format!("regressor matrix is rank deficient (singular values {smax:.3e} … {smin:.3e}); the data do not excite all parameters"),
+            ));
+        }
+    }
+    let x = a.qr().solve_lstsq(b);
+    check_finite_mat("lstsq", x.as_ref())?;
+    Ok(x)
+}
+
+/// Solves the square real system $A X = B$ by LU with partial pivoting.
+pub fn solve(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> Result<Mat<f64>> {
+    check_square("solve", a)?;
+    let x = a.partial_piv_lu().solve(b);
+    check_finite_mat("solve", x.as_ref())
+        .map_err(|_| Error::numerical("solve", "matrix is singular to working precision"))?;
+    Ok(x)
+}
+
+/// Solves the square complex system $A X = B$ by LU with partial pivoting.
+pub fn solve_c64(a: MatRef<'_, c64>, b: MatRef<'_, c64>) -> Result<Mat<c64>> {
+    if a.nrows() != a.ncols() || a.nrows() != b.nrows() {
+        return Err(Error::DimensionMismatch {
+            context: "solve_c64",
+            expected: format!("square A and {} rows in B", a.nrows()),
+            got: format!("{}×{} and {} rows", a.nrows(), a.ncols(), b.nrows()),
+        });
+    }
+    let x = a.partial_piv_lu().solve(b);
+    for j in 0..x.ncols() {
+        for i in 0..x.nrows() {
+            if !(x[(i, j)].re.is_finite() && x[(i, j)].im.is_finite()) {
+                return Err(Error::numerical(
+                    "solve_c64",
+                    "matrix is singular to working precision",
+                ));
+            }
+        }
+    }
+    Ok(x)
+}
+
+/// Singular values of a real matrix, largest first.
+pub fn singular_values(a: MatRef<'_, f64>) -> Result<Vec<f64>> {
+    check_finite_mat("singular_values", a)?;
+    if a.nrows() == 0 || a.ncols() == 0 {
+        return Ok(Vec::new());
+    }
+    let mut s = a
+        .singular_values()
+        .map_err(|e| Error::numerical("singular_values", format!("{e:?}")))?;
+    s.sort_by(|x, y| y.total_cmp(x));
+    Ok(s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use faer::mat;
+
+    #[test]
+    fn expm_rotation_and_scaling() {
+        // exp([[0, w], [-w, 0]] t) is a rotation; large norm exercises scaling and squaring.
+        for &w in &[0.1, 1.0, 30.0, 1000.0] {
+            let a = mat![[0.0, w], [-w, 0.0]];
+            let e = expm(a.as_ref()).unwrap();
+            assert!((e[(0, 0)] - w.cos()).abs() < 1e-12 * w.max(1.0));
+            assert!((e[(0, 1)] - w.sin()).abs() < 1e-12 * w.max(1.0));
+        }
+        // Jordan block: exp([[l, 1], [0, l]]) = e^l [[1, 1], [0, 1]]
+        let a = mat![[-2.0, 1.0], [0.0, -2.0]];
+        let e = expm(a.as_ref()).unwrap();
+        let el = (-2.0f64).exp();
+        assert!((e[(0, 0)] - el).abs() < 1e-15 && (e[(0, 1)] - el).abs() < 1e-15);
+        assert!(e[(1, 0)].abs() < 1e-15);
+    }
+
+    #[test]
+    fn roots_known_polynomials() {
+        // (z-1)(z-2)(z-3)(z+0.5)
+        let r = [1.0, 2.0, 3.0, -0.5].map(|x| c64::new(x, 0.0));
+        let p = poly_from_roots(&r);
+        let mut got: Vec<f64> = roots(&p).unwrap().iter().map(|z| z.re).collect();
+        got.sort_by(|a, b| a.total_cmp(b));
+        for (g, w) in got.iter().zip([-0.5, 1.0, 2.0, 3.0]) {
+            assert!((g - w).abs() < 1e-9, "{g} vs {w}");
+        }
+        // trailing zeros and leading zeros
+        let got = roots(&[0.0, 1.0, 0.0, 4.0, 0.0]).unwrap();
+        assert_eq!(got.len(), 3);
+        assert!(got.iter().filter(|z| z.norm() < 1e-15).count() == 1);
+        assert!(got.iter().any(|z| (z - c64::new(0.0, 2.0)).norm() < 1e-12));
+        assert!(roots(&[0.0, 0.0]).is_err());
+        assert!(roots(&[1.0, f64::NAN]).is_err());
+    }
+
+    #[test]
+    fn lstsq_recovers_exact_solution_and_flags_rank_deficiency() {
+        let a = mat![[1.0, 0.0], [1.0, 1.0], [1.0, 2.0], [1.0, 3.0]];
+        let b = mat![[1.0], [3.0], [5.0], [7.0]];
+        let x = lstsq(a.as_ref(), b.as_ref()).unwrap();
+        assert!((x[(0, 0)] - 1.0).abs() < 1e-13 && (x[(1, 0)] - 2.0).abs() < 1e-13);
+        let a = mat![[1.0, 2.0], [2.0, 4.0], [3.0, 6.0]];
+        let b = mat![[1.0], [2.0], [3.0]];
+        assert!(matches!(
+            lstsq(a.as_ref(), b.as_ref()),
+            Err(Error::Numerical { .. })
+        ));
+    }
+}

@@ -1,0 +1,1 @@
+//! Excitation signals (PRBS, chirp, noise, multisine) and their analysis.

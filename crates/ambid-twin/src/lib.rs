@@ -1,0 +1,1 @@
+//! The embedded AMB digital twin (under construction).
