@@ -1,3 +1,504 @@
+//! `ambid`: command-line front end. Each command parses its arguments, calls the library and
+//! writes files; see `ambid --help`.
+
+use ambid::experiment::{self, ExcitationKind, ExcitationPlan, Experiment};
+use ambid::io::{write_frf_csv, write_time_csv, FrfColumn};
+use ambid_core::signal::{
+    ChirpSpec, Distribution, ExcitationSpec, Grid, MultisineSpec, NoiseSpec, Phases, PrbsSpec,
+    Sweep,
+};
+use ambid_twin::{Mode, TwinConfig};
+use anyhow::{bail, Context, Result};
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use std::path::{Path, PathBuf};
+
+#[derive(Parser)]
+#[command(
+    name = "ambid",
+    version,
+    about = "Closed-loop black-box identification of active magnetic bearing systems",
+    long_about = "Closed-loop black-box identification of active magnetic bearing (AMB) systems.\n\n\
+        Design excitation signals, run the embedded AMB digital twin (or read measured files), and \
+        identify the open-loop-unstable plant from closed-loop data.",
+    arg_required_else_help = true
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Design an excitation signal, write it as CSV (t, r) and print its band/duration report.
+    Excite(ExciteArgs),
+    /// Run the embedded AMB twin in closed loop and write data.csv, truth.csv and meta.json.
+    Simulate(SimulateArgs),
+    /// Print the twin's default configuration as TOML (edit it and pass it with --config).
+    Config,
+    /// Print the twin's linearised facts: closed-loop modes, peak sensitivity, unstable plant poles.
+    Info(TwinArgs),
+}
+
+#[derive(Args)]
+struct ExciteArgs {
+    #[command(subcommand)]
+    signal: SignalCmd,
+    /// Sample rate in Hz.
+    #[arg(long, default_value_t = 20_000.0, global = true)]
+    fs: f64,
+    /// Output CSV file (columns t, r). Without it only the report is printed.
+    #[arg(long, global = true)]
+    out: Option<PathBuf>,
+    /// Print the report as JSON instead of text.
+    #[arg(long, global = true)]
+    json: bool,
+}
+
+#[derive(Subcommand)]
+enum SignalCmd {
+    /// Maximum-length pseudo-random binary sequence.
+    Prbs {
+        /// LFSR order n (2..=31); period 2^n − 1 bits.
+        #[arg(long, default_value_t = 10)]
+        order: u32,
+        /// Samples per bit Nb.
+        #[arg(long, default_value_t = 5)]
+        samples_per_bit: usize,
+        /// Number of periods Np.
+        #[arg(long, default_value_t = 20)]
+        periods: usize,
+        /// Amplitude in A (values ±amplitude + offset).
+        #[arg(long, default_value_t = 0.2)]
+        amplitude: f64,
+        /// Mean offset in A.
+        #[arg(long, default_value_t = 0.0)]
+        offset: f64,
+    },
+    /// Swept sine.
+    Chirp {
+        /// Start frequency, Hz.
+        #[arg(long, default_value_t = 1.0)]
+        f0: f64,
+        /// End frequency, Hz.
+        #[arg(long, default_value_t = 1000.0)]
+        f1: f64,
+        /// Duration of one sweep, s.
+        #[arg(long, default_value_t = 10.0)]
+        duration: f64,
+        /// Amplitude in A.
+        #[arg(long, default_value_t = 0.2)]
+        amplitude: f64,
+        /// Sweep law.
+        #[arg(long, value_enum, default_value_t = SweepArg::Linear)]
+        sweep: SweepArg,
+        /// Number of sweeps.
+        #[arg(long, default_value_t = 1)]
+        periods: usize,
+    },
+    /// White noise, Gaussian or uniform, optionally band-limited.
+    Noise {
+        /// RMS value in A.
+        #[arg(long, default_value_t = 0.1)]
+        rms: f64,
+        /// Number of samples.
+        #[arg(long, default_value_t = 102_300)]
+        samples: usize,
+        /// Distribution.
+        #[arg(long, value_enum, default_value_t = DistArg::Gaussian)]
+        distribution: DistArg,
+        /// Lower band edge, Hz (band-limited noise needs both edges).
+        #[arg(long, requires = "band_hi")]
+        band_lo: Option<f64>,
+        /// Upper band edge, Hz.
+        #[arg(long, requires = "band_lo")]
+        band_hi: Option<f64>,
+        /// Random seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+    },
+    /// Periodic multisine with bin-aligned lines.
+    Multisine {
+        /// Lowest line, Hz.
+        #[arg(long, default_value_t = 5.0)]
+        f_min: f64,
+        /// Highest line, Hz.
+        #[arg(long, default_value_t = 2000.0)]
+        f_max: f64,
+        /// Samples per period.
+        #[arg(long, default_value_t = 5115)]
+        period_samples: usize,
+        /// Number of periods.
+        #[arg(long, default_value_t = 20)]
+        periods: usize,
+        /// RMS value in A.
+        #[arg(long, default_value_t = 0.1)]
+        rms: f64,
+        /// Frequency grid.
+        #[arg(long, value_enum, default_value_t = GridArg::Odd)]
+        grid: GridArg,
+        /// Phases.
+        #[arg(long, value_enum, default_value_t = PhaseArg::Schroeder)]
+        phases: PhaseArg,
+        /// Random seed (random phases, random-odd grid).
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+    },
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum SweepArg {
+    Linear,
+    Logarithmic,
+}
+#[derive(Clone, Copy, ValueEnum)]
+enum DistArg {
+    Gaussian,
+    Uniform,
+}
+#[derive(Clone, Copy, ValueEnum)]
+enum GridArg {
+    Full,
+    Odd,
+    RandomOdd,
+}
+#[derive(Clone, Copy, ValueEnum)]
+enum PhaseArg {
+    Schroeder,
+    Random,
+}
+#[derive(Clone, Copy, ValueEnum)]
+enum ModeArg {
+    Linear,
+    Nonlinear,
+}
+
+#[derive(Args)]
+struct TwinArgs {
+    /// Twin configuration (TOML); defaults to the nominal rig (see `ambid config`).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Bias current i0 in A (overrides the configuration).
+    #[arg(long)]
+    bias: Option<f64>,
+    /// Nominal air gap g0 in m (overrides the configuration), e.g. 0.00041.
+    #[arg(long)]
+    gap: Option<f64>,
+}
+
+#[derive(Args)]
+struct SimulateArgs {
+    #[command(flatten)]
+    twin: TwinArgs,
+    /// Excitation injected at the controller output of bearing A.
+    #[arg(long, value_enum, default_value_t = ExcitationKind::Prbs)]
+    excitation: ExcitationKind,
+    /// Excitation level as a fraction of the saturation current i_sat (peak for PRBS, chirp and
+    /// multisine; RMS for noise). 0.1 = 10 %.
+    #[arg(long, default_value_t = 0.10)]
+    amplitude: f64,
+    /// PRBS order n.
+    #[arg(long, default_value_t = 10)]
+    order: u32,
+    /// PRBS samples per bit.
+    #[arg(long, default_value_t = 5)]
+    samples_per_bit: usize,
+    /// Periods (PRBS, chirp, multisine).
+    #[arg(long, default_value_t = 20)]
+    periods: usize,
+    /// Lowest frequency (chirp, noise band, multisine), Hz.
+    #[arg(long, default_value_t = 1.0)]
+    f_min: f64,
+    /// Highest frequency (chirp, noise band, multisine), Hz.
+    #[arg(long, default_value_t = 2000.0)]
+    f_max: f64,
+    /// Period length for chirp/multisine, record length for noise and none, s.
+    #[arg(long, default_value_t = 0.2558)]
+    period: f64,
+    /// Simulation mode.
+    #[arg(long, value_enum, default_value_t = ModeArg::Nonlinear)]
+    mode: ModeArg,
+    /// Seed for sensor noise and random excitations.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Switch the sensor noise off.
+    #[arg(long)]
+    no_noise: bool,
+    /// Also record bearing B (columns u_b, i_b, y_b).
+    #[arg(long)]
+    record_b: bool,
+    /// Number of log-spaced truth frequencies from 1 Hz to fs/2.
+    #[arg(long, default_value_t = 400)]
+    truth_points: usize,
+    /// Output directory.
+    #[arg(long, default_value = "out")]
+    out: PathBuf,
+}
+
 fn main() {
-    println!("ambid: under construction");
+    let cli = Cli::parse();
+    if let Err(e) = dispatch(cli) {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn dispatch(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Excite(a) => excite(a),
+        Command::Simulate(a) => simulate(a),
+        Command::Config => {
+            print!("{}", TwinConfig::default().to_toml_string()?);
+            Ok(())
+        }
+        Command::Info(a) => info(a),
+    }
+}
+
+fn excite(a: ExciteArgs) -> Result<()> {
+    if !(a.fs.is_finite() && a.fs > 0.0) {
+        bail!("--fs must be a positive sample rate in Hz, got {}", a.fs);
+    }
+    let ts = 1.0 / a.fs;
+    let spec = match a.signal {
+        SignalCmd::Prbs {
+            order,
+            samples_per_bit,
+            periods,
+            amplitude,
+            offset,
+        } => ExcitationSpec::Prbs(PrbsSpec {
+            order,
+            samples_per_bit,
+            periods,
+            amplitude,
+            offset,
+        }),
+        SignalCmd::Chirp {
+            f0,
+            f1,
+            duration,
+            amplitude,
+            sweep,
+            periods,
+        } => ExcitationSpec::Chirp(ChirpSpec {
+            f0_hz: f0,
+            f1_hz: f1,
+            duration_s: duration,
+            amplitude,
+            sweep: match sweep {
+                SweepArg::Linear => Sweep::Linear,
+                SweepArg::Logarithmic => Sweep::Logarithmic,
+            },
+            periods,
+        }),
+        SignalCmd::Noise {
+            rms,
+            samples,
+            distribution,
+            band_lo,
+            band_hi,
+            seed,
+        } => ExcitationSpec::Noise(NoiseSpec {
+            distribution: match distribution {
+                DistArg::Gaussian => Distribution::Gaussian,
+                DistArg::Uniform => Distribution::Uniform,
+            },
+            rms,
+            n_samples: samples,
+            band_hz: band_lo.zip(band_hi),
+            seed,
+        }),
+        SignalCmd::Multisine {
+            f_min,
+            f_max,
+            period_samples,
+            periods,
+            rms,
+            grid,
+            phases,
+            seed,
+        } => ExcitationSpec::Multisine(MultisineSpec {
+            f_min_hz: f_min,
+            f_max_hz: f_max,
+            period_samples,
+            periods,
+            rms,
+            grid: match grid {
+                GridArg::Full => Grid::Full,
+                GridArg::Odd => Grid::Odd,
+                GridArg::RandomOdd => Grid::RandomOdd,
+            },
+            phases: match phases {
+                PhaseArg::Schroeder => Phases::Schroeder,
+                PhaseArg::Random => Phases::Random,
+            },
+            seed,
+        }),
+    };
+    let report = spec.report(ts)?;
+    if let Some(out) = &a.out {
+        let e = spec.generate(ts)?;
+        let t: Vec<f64> = (0..e.values.len()).map(|k| k as f64 * ts).collect();
+        ensure_parent(out)?;
+        write_time_csv(out, &[("t", &t), ("r", &e.values)])?;
+    }
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        println!("{report}");
+        if let Some(out) = &a.out {
+            println!("written: {}", out.display());
+        }
+    }
+    Ok(())
+}
+
+fn ensure_parent(p: &Path) -> Result<()> {
+    if let Some(d) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(d).with_context(|| format!("cannot create {}", d.display()))?;
+    }
+    Ok(())
+}
+
+fn twin_config(a: &TwinArgs) -> Result<TwinConfig> {
+    let mut cfg = match &a.config {
+        Some(p) => {
+            let s = std::fs::read_to_string(p)
+                .with_context(|| format!("cannot read {}", p.display()))?;
+            TwinConfig::from_toml_str(&s).with_context(|| format!("in {}", p.display()))?
+        }
+        None => TwinConfig::default(),
+    };
+    if let Some(b) = a.bias {
+        cfg.operating_point.bias_current = b;
+    }
+    if let Some(g) = a.gap {
+        cfg.operating_point.air_gap = g;
+    }
+    cfg.validate()?;
+    Ok(cfg)
+}
+
+fn info(a: TwinArgs) -> Result<()> {
+    let twin = ambid_twin::Twin::new(twin_config(&a)?)?;
+    let lp = twin.linear_params();
+    println!("linearised magnet: k_i = {:.2} N/A, k_x = {:.4e} N/m", lp.k_i, lp.k_x);
+    println!("closed-loop modes (lightly damped pole pairs):");
+    for m in twin.closed_loop_modes() {
+        println!("  {:8.1} Hz   damping {:.3}", m.freq_hz, m.damping);
+    }
+    let (f, s) = twin.peak_sensitivity();
+    println!("peak sensitivity |S| = {s:.3} at {f:.1} Hz");
+    println!("unstable poles of the assembled plant P (z; s = ln z / Ts):");
+    for z in twin.plant_unstable_poles() {
+        let s = z.ln() / twin.ts();
+        println!(
+            "  z = {:.6}{:+.6}j   s = {:.2}{:+.2}j rad/s",
+            z.re, z.im, s.re, s.im
+        );
+    }
+    Ok(())
+}
+
+fn simulate(a: SimulateArgs) -> Result<()> {
+    let cfg = twin_config(&a.twin)?;
+    let exp = Experiment {
+        twin: cfg,
+        excitation: ExcitationPlan {
+            kind: a.excitation,
+            amplitude_frac: a.amplitude,
+            prbs_order: a.order,
+            samples_per_bit: a.samples_per_bit,
+            periods: a.periods,
+            f_min_hz: a.f_min,
+            f_max_hz: a.f_max,
+            period_s: a.period,
+            seed: a.seed,
+        },
+        mode: match a.mode {
+            ModeArg::Linear => Mode::Linear,
+            ModeArg::Nonlinear => Mode::Nonlinear,
+        },
+        seed: a.seed,
+        noise: !a.no_noise,
+        record_b: a.record_b,
+    };
+    if a.truth_points < 2 {
+        bail!("--truth-points must be at least 2");
+    }
+    let out = experiment::run(&exp)?;
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("cannot create {}", a.out.display()))?;
+    let rec = &out.record;
+    let mut cols: Vec<(&str, &[f64])> = vec![
+        ("t", &rec.t),
+        ("w", &rec.w),
+        ("r", &rec.r),
+        ("u", &rec.u),
+        ("i", &rec.i),
+        ("y", &rec.y),
+    ];
+    if let Some(b) = &rec.b {
+        cols.extend([("u_b", &b.u[..]), ("i_b", &b.i[..]), ("y_b", &b.y[..])]);
+    }
+    let data_path = a.out.join("data.csv");
+    write_time_csv(&data_path, &cols)?;
+    let grid = experiment::log_grid(1.0, 0.5 * out.twin.fs() * 0.999, a.truth_points);
+    let truth = experiment::truth(&out.twin, &grid)?;
+    let truth_path = a.out.join("truth.csv");
+    write_frf_csv(
+        &truth_path,
+        &truth.f_hz,
+        &[
+            FrfColumn {
+                name: "plant",
+                values: &truth.plant,
+                std: None,
+            },
+            FrfColumn {
+                name: "t_ry",
+                values: &truth.t_ry,
+                std: None,
+            },
+            FrfColumn {
+                name: "t_ru",
+                values: &truth.t_ru,
+                std: None,
+            },
+            FrfColumn {
+                name: "controller",
+                values: &truth.controller,
+                std: None,
+            },
+        ],
+    )?;
+    let meta = serde_json::json!({
+        "excitation": exp.excitation,
+        "excitation_samples": out.excitation.values.len(),
+        "period_samples": out.excitation.period_samples,
+        "periods": out.excitation.periods,
+        "simulation": rec.meta,
+        "twin": exp.twin,
+    });
+    let meta_path = a.out.join("meta.json");
+    std::fs::write(&meta_path, serde_json::to_string_pretty(&meta)?)?;
+    println!(
+        "simulated {} samples ({:.3} s at {} Hz), {:?} mode",
+        rec.t.len(),
+        rec.t.len() as f64 * rec.ts,
+        out.twin.fs(),
+        exp.mode
+    );
+    let sat = rec.meta.saturated_fraction;
+    if sat > 0.0 {
+        eprintln!(
+            "warning: the amplifier or controller output saturated in {:.3} % of the samples; \
+             the data are not from a linear operating regime — reduce --amplitude",
+            100.0 * sat
+        );
+    }
+    for p in [&data_path, &truth_path, &meta_path] {
+        println!("written: {}", p.display());
+    }
+    Ok(())
 }

@@ -1,0 +1,238 @@
+//! Running an identification experiment on the embedded twin: design the excitation, simulate the
+//! closed loop, collect the exact linearised truth on a frequency grid.
+//!
+//! This is the library behind `ambid simulate`; everything it computes is reachable from Rust.
+
+use ambid_core::signal::{
+    ChirpSpec, Distribution, Excitation, ExcitationSpec, Grid, MultisineSpec, NoiseSpec, Phases,
+    PrbsSpec, Sweep,
+};
+use ambid_twin::{Mode, SimOptions, SimRecord, Twin, TwinConfig};
+use anyhow::{bail, Context, Result};
+use num_complex::Complex64;
+use serde::Serialize;
+
+/// Which excitation to inject at the controller output of bearing A.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ExcitationKind {
+    /// Maximum-length PRBS (the seed paper's choice).
+    Prbs,
+    /// Swept sine.
+    Chirp,
+    /// Gaussian white noise.
+    Noise,
+    /// Schroeder-phased odd multisine.
+    Multisine,
+    /// No excitation (noise-only run, e.g. for the output SNR).
+    None,
+}
+
+/// Parameters of the excitation for a twin experiment. The level is a fraction of the amplifier's
+/// saturation current `i_sat`: the peak value for PRBS, chirp and multisine, the RMS for noise.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ExcitationPlan {
+    /// Signal family.
+    pub kind: ExcitationKind,
+    /// Level as a fraction of i_sat (0.1 = 10 %).
+    pub amplitude_frac: f64,
+    /// PRBS order n (period 2^n − 1 bits).
+    pub prbs_order: u32,
+    /// PRBS samples per bit Nb.
+    pub samples_per_bit: usize,
+    /// Number of periods (PRBS, chirp, multisine).
+    pub periods: usize,
+    /// Lower frequency (chirp start, multisine lowest line, noise band), Hz.
+    pub f_min_hz: f64,
+    /// Upper frequency (chirp end, multisine highest line, noise band), Hz.
+    pub f_max_hz: f64,
+    /// Duration of one period (chirp, multisine) or of the whole record (noise), s.
+    pub period_s: f64,
+    /// Seed for random signals (noise, random phases).
+    pub seed: u64,
+}
+
+impl Default for ExcitationPlan {
+    /// The seed paper's experiment: PRBS n = 10, Nb = 5, Np = 20 at 10 % of i_sat.
+    fn default() -> Self {
+        Self {
+            kind: ExcitationKind::Prbs,
+            amplitude_frac: 0.10,
+            prbs_order: 10,
+            samples_per_bit: 5,
+            periods: 20,
+            f_min_hz: 1.0,
+            f_max_hz: 2000.0,
+            period_s: 0.2558,
+            seed: 1,
+        }
+    }
+}
+
+impl ExcitationPlan {
+    /// The signal specification in amperes for a given saturation current, or `None` for no
+    /// excitation.
+    pub fn spec(&self, i_sat: f64, ts: f64) -> Result<Option<ExcitationSpec>> {
+        if !(self.amplitude_frac.is_finite() && self.amplitude_frac >= 0.0) {
+            bail!(
+                "excitation amplitude must be a finite, non-negative fraction of i_sat, got {}",
+                self.amplitude_frac
+            );
+        }
+        if self.amplitude_frac > 1.0 {
+            bail!(
+                "excitation amplitude {} exceeds i_sat (1.0 = 100 %); the amplifier would saturate permanently",
+                self.amplitude_frac
+            );
+        }
+        let amp = self.amplitude_frac * i_sat;
+        let period_samples = (self.period_s / ts).round() as usize;
+        Ok(Some(match self.kind {
+            ExcitationKind::None => return Ok(None),
+            ExcitationKind::Prbs => ExcitationSpec::Prbs(PrbsSpec {
+                order: self.prbs_order,
+                samples_per_bit: self.samples_per_bit,
+                periods: self.periods,
+                amplitude: amp,
+                offset: 0.0,
+            }),
+            ExcitationKind::Chirp => ExcitationSpec::Chirp(ChirpSpec {
+                f0_hz: self.f_min_hz,
+                f1_hz: self.f_max_hz,
+                duration_s: self.period_s,
+                amplitude: amp,
+                sweep: Sweep::Logarithmic,
+                periods: self.periods,
+            }),
+            ExcitationKind::Noise => ExcitationSpec::Noise(NoiseSpec {
+                distribution: Distribution::Gaussian,
+                rms: amp,
+                n_samples: period_samples,
+                band_hz: Some((self.f_min_hz, self.f_max_hz)),
+                seed: self.seed,
+            }),
+            ExcitationKind::Multisine => ExcitationSpec::Multisine(MultisineSpec {
+                f_min_hz: self.f_min_hz,
+                f_max_hz: self.f_max_hz,
+                period_samples,
+                periods: self.periods,
+                rms: amp,
+                grid: Grid::Odd,
+                phases: Phases::Schroeder,
+                seed: self.seed,
+            }),
+        }))
+    }
+
+    /// Generates the excitation for the twin's sample time; a multisine is rescaled so its peak is
+    /// the requested level. `None` gives `samples` zeros.
+    pub fn generate(&self, i_sat: f64, ts: f64, samples: usize) -> Result<Excitation> {
+        match self.spec(i_sat, ts)? {
+            None => Ok(Excitation {
+                values: vec![0.0; samples],
+                ts,
+                period_samples: samples,
+                periods: 1,
+            }),
+            Some(spec) => {
+                let mut e = spec.generate(ts).context("designing the excitation")?;
+                if self.kind == ExcitationKind::Multisine {
+                    let peak = e.values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                    if peak > 0.0 {
+                        let g = self.amplitude_frac * i_sat / peak;
+                        e.values.iter_mut().for_each(|v| *v *= g);
+                    }
+                }
+                Ok(e)
+            }
+        }
+    }
+}
+
+/// Exact linearised truth of the twin on a frequency grid.
+#[derive(Debug, Clone)]
+pub struct Truth {
+    /// Frequencies, Hz.
+    pub f_hz: Vec<f64>,
+    /// Assembled plant P (u → y).
+    pub plant: Vec<Complex64>,
+    /// Process sensitivity T_ry = P/(1+PC).
+    pub t_ry: Vec<Complex64>,
+    /// Sensitivity S = T_ru = 1/(1+PC).
+    pub t_ru: Vec<Complex64>,
+    /// Controller C.
+    pub controller: Vec<Complex64>,
+}
+
+/// Logarithmic grid of `n` points from `f0` to `f1` Hz.
+pub fn log_grid(f0: f64, f1: f64, n: usize) -> Vec<f64> {
+    if n < 2 {
+        return vec![f0];
+    }
+    let (l0, l1) = (f0.ln(), f1.ln());
+    (0..n)
+        .map(|k| (l0 + (l1 - l0) * k as f64 / (n - 1) as f64).exp())
+        .collect()
+}
+
+/// Evaluates the twin's truth at `f_hz`.
+pub fn truth(twin: &Twin, f_hz: &[f64]) -> Result<Truth> {
+    Ok(Truth {
+        f_hz: f_hz.to_vec(),
+        plant: twin.plant_frf(f_hz)?,
+        t_ry: twin.t_ry_frf(f_hz)?,
+        t_ru: twin.sensitivity_frf(f_hz)?,
+        controller: twin.controller_frf(f_hz)?,
+    })
+}
+
+/// A complete twin experiment: the excitation plan, the twin configuration and how to run it.
+#[derive(Debug, Clone)]
+pub struct Experiment {
+    /// Twin parameters (operating point included).
+    pub twin: TwinConfig,
+    /// Excitation design.
+    pub excitation: ExcitationPlan,
+    /// Linear or nonlinear simulation.
+    pub mode: Mode,
+    /// Seed of the sensor noise.
+    pub seed: u64,
+    /// Sensor noise on or off.
+    pub noise: bool,
+    /// Record bearing B too.
+    pub record_b: bool,
+}
+
+/// What an experiment produced.
+pub struct ExperimentOutput {
+    /// The twin that was run (for its truth).
+    pub twin: Twin,
+    /// The excitation that was injected.
+    pub excitation: Excitation,
+    /// The recorded signals.
+    pub record: SimRecord,
+}
+
+/// Runs the experiment on the twin.
+pub fn run(exp: &Experiment) -> Result<ExperimentOutput> {
+    let twin = Twin::new(exp.twin.clone()).context("building the AMB twin")?;
+    let default_len = (exp.excitation.period_s / twin.ts()).round() as usize;
+    let excitation = exp
+        .excitation
+        .generate(twin.i_sat(), twin.ts(), default_len)?;
+    let opts = SimOptions {
+        mode: exp.mode,
+        seed: exp.seed,
+        noise: exp.noise,
+        record_b: exp.record_b,
+        ..SimOptions::default()
+    };
+    let record = twin
+        .simulate(&excitation.values, &opts)
+        .context("simulating the closed loop")?;
+    Ok(ExperimentOutput {
+        twin,
+        excitation,
+        record,
+    })
+}

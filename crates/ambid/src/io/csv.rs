@@ -1,0 +1,242 @@
+//! CSV time data and FRF files.
+//!
+//! Time data: a header row, one column per signal, SI units. An optional `t` column holds the
+//! time in seconds; without it the sample rate must be given by the caller. Numbers are written
+//! with 17 significant digits so a file read back reproduces the `f64` values exactly.
+//!
+//! FRF data: `f_hz, <q>_re, <q>_im, <q>_std, …` per quantity `q`, plus optional real columns such
+//! as `coh_ry`.
+
+use anyhow::{anyhow, bail, Context, Result};
+use num_complex::Complex64;
+use std::path::Path;
+
+/// Time-domain data read from a file: named columns of equal length and the sample time.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TimeData {
+    /// Sample time in seconds.
+    pub ts: f64,
+    /// Column names in file order (without `t`).
+    pub names: Vec<String>,
+    /// Column values, same order as `names`.
+    pub columns: Vec<Vec<f64>>,
+}
+
+impl TimeData {
+    /// The column called `name`, or an error listing the available columns.
+    pub fn column(&self, name: &str) -> Result<&[f64]> {
+        self.names
+            .iter()
+            .position(|n| n == name)
+            .map(|k| self.columns[k].as_slice())
+            .ok_or_else(|| {
+                anyhow!(
+                    "unknown column `{name}`; the file has columns: {}",
+                    self.names.join(", ")
+                )
+            })
+    }
+}
+
+/// Writes equal-length columns with a header row. Errors on unequal lengths.
+pub fn write_time_csv(path: &Path, columns: &[(&str, &[f64])]) -> Result<()> {
+    let n = columns.first().map_or(0, |c| c.1.len());
+    if let Some((name, c)) = columns.iter().find(|c| c.1.len() != n) {
+        bail!(
+            "column `{name}` has {} samples but the first column has {n}",
+            c.len()
+        );
+    }
+    let mut w = ::csv::Writer::from_path(path)
+        .with_context(|| format!("cannot create {}", path.display()))?;
+    w.write_record(columns.iter().map(|c| c.0))?;
+    let mut row = Vec::with_capacity(columns.len());
+    for k in 0..n {
+        row.clear();
+        row.extend(columns.iter().map(|c| format!("{:.17e}", c.1[k])));
+        w.write_record(&row)?;
+    }
+    w.flush()?;
+    Ok(())
+}
+
+/// One complex FRF quantity for [`write_frf_csv`]: name (e.g. `t_ry`), values, optional standard
+/// deviation of the complex estimate (written as 0 when absent, meaning exact).
+pub struct FrfColumn<'a> {
+    /// Quantity name, used as the column prefix.
+    pub name: &'a str,
+    /// Complex values at each frequency.
+    pub values: &'a [Complex64],
+    /// Standard deviation $\sqrt{E|\hat G - G|^2}$ at each frequency, if known.
+    pub std: Option<&'a [f64]>,
+}
+
+/// Writes an FRF CSV: `f_hz`, then `<q>_re, <q>_im, <q>_std` for each quantity.
+pub fn write_frf_csv(path: &Path, f_hz: &[f64], quantities: &[FrfColumn<'_>]) -> Result<()> {
+    for q in quantities {
+        if q.values.len() != f_hz.len() || q.std.is_some_and(|s| s.len() != f_hz.len()) {
+            bail!(
+                "FRF quantity `{}` has {} values but there are {} frequencies",
+                q.name,
+                q.values.len(),
+                f_hz.len()
+            );
+        }
+    }
+    let mut w = ::csv::Writer::from_path(path)
+        .with_context(|| format!("cannot create {}", path.display()))?;
+    let mut header = vec!["f_hz".to_string()];
+    for q in quantities {
+        for s in ["re", "im", "std"] {
+            header.push(format!("{}_{s}", q.name));
+        }
+    }
+    w.write_record(&header)?;
+    for (k, f) in f_hz.iter().enumerate() {
+        let mut row = vec![format!("{f:.17e}")];
+        for q in quantities {
+            let v = q.values[k];
+            row.push(format!("{:.17e}", v.re));
+            row.push(format!("{:.17e}", v.im));
+            row.push(format!("{:.17e}", q.std.map_or(0.0, |s| s[k])));
+        }
+        w.write_record(&row)?;
+    }
+    w.flush()?;
+    Ok(())
+}
+
+/// Reads a time-data CSV. The sample time comes from the `t` column when present (it must be
+/// uniformly spaced), otherwise from `fs_hz`. Every value must parse as a finite number.
+pub fn read_time_csv(path: &Path, fs_hz: Option<f64>) -> Result<TimeData> {
+    let mut rdr = ::csv::ReaderBuilder::new()
+        .trim(::csv::Trim::All)
+        .from_path(path)
+        .with_context(|| format!("cannot open {}", path.display()))?;
+    let header: Vec<String> = rdr
+        .headers()
+        .with_context(|| format!("{}: cannot read the header row", path.display()))?
+        .iter()
+        .map(str::to_string)
+        .collect();
+    if header.is_empty() || header.iter().any(String::is_empty) {
+        bail!(
+            "{}: the header row must name every column (got {:?})",
+            path.display(),
+            header
+        );
+    }
+    let mut cols: Vec<Vec<f64>> = vec![Vec::new(); header.len()];
+    for (line, rec) in rdr.records().enumerate() {
+        let rec = rec.with_context(|| format!("{}: data row {}", path.display(), line + 1))?;
+        if rec.len() != header.len() {
+            bail!(
+                "{}: data row {} has {} fields, the header has {}",
+                path.display(),
+                line + 1,
+                rec.len(),
+                header.len()
+            );
+        }
+        for (k, field) in rec.iter().enumerate() {
+            let v: f64 = field.parse().map_err(|_| {
+                anyhow!(
+                    "{}: data row {}, column `{}`: `{field}` is not a number",
+                    path.display(),
+                    line + 1,
+                    header[k]
+                )
+            })?;
+            if !v.is_finite() {
+                bail!(
+                    "{}: data row {}, column `{}` is not finite ({field}); repair or remove the sample",
+                    path.display(),
+                    line + 1,
+                    header[k]
+                );
+            }
+            cols[k].push(v);
+        }
+    }
+    let n = cols[0].len();
+    if n < 2 {
+        bail!("{}: needs at least 2 data rows, found {n}", path.display());
+    }
+    let t_idx = header.iter().position(|h| h == "t");
+    let ts = match (t_idx, fs_hz) {
+        (Some(k), _) => {
+            let t = &cols[k];
+            let ts = (t[n - 1] - t[0]) / (n - 1) as f64;
+            if !(ts > 0.0) {
+                bail!("{}: the `t` column must increase", path.display());
+            }
+            if let Some(j) = (1..n).find(|&j| ((t[j] - t[j - 1]) - ts).abs() > 1e-6 * ts) {
+                bail!(
+                    "{}: the `t` column is not uniformly sampled (step at row {} is {} s, mean step {ts} s)",
+                    path.display(),
+                    j + 1,
+                    t[j] - t[j - 1]
+                );
+            }
+            ts
+        }
+        (None, Some(fs)) if fs.is_finite() && fs > 0.0 => 1.0 / fs,
+        (None, Some(fs)) => bail!("sample rate must be positive and finite, got {fs}"),
+        (None, None) => bail!(
+            "{}: no `t` column; give the sample rate (--fs) to read this file",
+            path.display()
+        ),
+    };
+    let mut names = Vec::new();
+    let mut columns = Vec::new();
+    for (k, (h, c)) in header.into_iter().zip(cols).enumerate() {
+        if Some(k) != t_idx {
+            names.push(h);
+            columns.push(c);
+        }
+    }
+    Ok(TimeData { ts, names, columns })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tmp(name: &str) -> std::path::PathBuf {
+        let dir = std::env::temp_dir().join(format!("ambid-io-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        dir.join(name)
+    }
+
+    #[test]
+    fn time_csv_round_trip_is_exact() {
+        let p = tmp("rt.csv");
+        let t: Vec<f64> = (0..50).map(|k| k as f64 * 5e-5).collect();
+        let y: Vec<f64> = (0..50).map(|k| (k as f64 * 0.37).sin() * 1e-6).collect();
+        write_time_csv(&p, &[("t", &t), ("y", &y)]).unwrap();
+        let d = read_time_csv(&p, None).unwrap();
+        assert_eq!(d.names, vec!["y"]);
+        assert_eq!(d.column("y").unwrap(), y.as_slice());
+        assert!((d.ts - 5e-5).abs() < 1e-18);
+        let e = d.column("x").unwrap_err().to_string();
+        assert!(e.contains("unknown column `x`") && e.contains("y"), "{e}");
+    }
+
+    #[test]
+    fn malformed_files_give_clear_errors() {
+        let p = tmp("bad.csv");
+        std::fs::write(&p, "t,y\n0,1\n0.1,abc\n").unwrap();
+        let e = read_time_csv(&p, None).unwrap_err().to_string();
+        assert!(e.contains("not a number"), "{e}");
+        std::fs::write(&p, "y\n1\n2\n").unwrap();
+        let e = read_time_csv(&p, None).unwrap_err().to_string();
+        assert!(e.contains("--fs"), "{e}");
+        assert!(read_time_csv(&p, Some(100.0)).is_ok());
+        std::fs::write(&p, "t,y\n0,1\n0.1,NaN\n").unwrap();
+        let e = read_time_csv(&p, None).unwrap_err().to_string();
+        assert!(e.contains("not finite"), "{e}");
+        std::fs::write(&p, "t,y\n0,1\n0.1,2,3\n").unwrap();
+        assert!(read_time_csv(&p, None).is_err());
+        assert!(write_time_csv(&p, &[("a", &[1.0, 2.0]), ("b", &[1.0])]).is_err());
+    }
+}
