@@ -523,21 +523,30 @@ impl StateSpace {
 
     /// Transfer-function coefficients of a SISO model, `(num, den)`, both of length
     /// `order + 1`, in descending powers of $s$ or $z$ (for a discrete model that is also
-    /// ascending powers of $q^{-1}$), with monic `den`:
-    /// $$ \mathrm{den} = \det(\lambda I - A), \qquad
-    ///    \mathrm{num} = \det(\lambda I - A + BC) + (D - 1)\,\mathrm{den}, $$
-    /// as `scipy.signal.ss2tf` computes them (characteristic polynomials from eigenvalues);
-    /// numerically sound for orders up to about 20.
+    /// ascending powers of $q^{-1}$), with monic `den`.
+    ///
+    /// The denominator is the characteristic polynomial $\det(\lambda I - A) = \sum_i a_i
+    /// \lambda^{n-i}$ (from the eigenvalues, as `numpy.poly`). The numerator follows from the
+    /// Markov parameters $h_k = C A^{k-1} B$: since $G(\lambda) - D = \sum_{k \ge 1} h_k
+    /// \lambda^{-k}$, multiplying by the denominator gives
+    /// $$ \mathrm{num}_0 = D, \qquad \mathrm{num}_k = D a_k + \sum_{i=0}^{k-1} a_i h_{k-i},
+    ///    \quad k = 1, \dots, n. $$
+    /// This avoids the cancellation in `scipy.signal.ss2tf`'s
+    /// $\det(\lambda I - A + BC) + (D - 1)\det(\lambda I - A)$ when the numerator is small
+    /// compared with the denominator. Numerically sound for orders up to about 20.
     pub fn tf_coefficients(&self) -> Result<(Vec<f64>, Vec<f64>)> {
         self.require_siso("tf_coefficients")?;
+        let n = self.order();
         let den = linalg::charpoly(self.a.as_ref())?;
-        let abc = &self.a - &self.b * &self.c;
-        let nb = linalg::charpoly(abc.as_ref())?;
+        let mut h = vec![0.0; n + 1];
+        let mut ab = self.b.clone();
+        for hk in h.iter_mut().skip(1) {
+            *hk = (&self.c * &ab)[(0, 0)];
+            ab = &self.a * &ab;
+        }
         let d = self.d[(0, 0)];
-        let num = nb
-            .iter()
-            .zip(den.iter())
-            .map(|(x, y)| x + (d - 1.0) * y)
+        let num = (0..=n)
+            .map(|k| d * den[k] + (0..k).map(|i| den[i] * h[k - i]).sum::<f64>())
             .collect();
         Ok((num, den))
     }
