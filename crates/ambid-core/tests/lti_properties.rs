@@ -476,7 +476,7 @@ fn model_strategy() -> impl Strategy<Value = (u64, usize, usize)> {
 fn config() -> Config {
     Config {
         cases: 24,
-        rng_seed: RngSeed::Fixed(0x0A3B_1D),
+        rng_seed: RngSeed::Fixed(0x000A_3B1D),
         failure_persistence: None,
         ..Config::default()
     }
@@ -516,13 +516,13 @@ proptest! {
         let gd = Frd::from_model(&g, &f).unwrap();
         let kd = Frd::from_model(&k, &f).unwrap();
         let sd = gd.series(&kd).unwrap();
-        for i in 0..f.len() {
-            prop_assert!(close(sd.values()[i], s[i]));
+        for (x, y) in sd.values().iter().zip(&s) {
+            prop_assert!(close(*x, *y));
         }
     }
 
     #[test]
-    fn c2d_d2c_round_trips_preserve_frequency_response((seed, n, _m) in model_strategy()) {
+    fn c2d_d2c_round_trips_recover_the_model((seed, n, _m) in model_strategy()) {
         let mut rng = Rng(seed);
         // continuous model with poles well below Nyquist (ts = 1e-3 → 500 Hz)
         let a0 = rng.mat(n, n, 100.0);
@@ -534,9 +534,9 @@ proptest! {
             sys.c2d_tustin(ts, None).unwrap().d2c_tustin(None).unwrap(),
             sys.c2d_tustin(ts, Some(100.0)).unwrap().d2c_tustin(Some(100.0)).unwrap(),
         ] {
-            prop_assert!((&back.a() - &sys.a()).norm_max() <= 1e-9 * sys.a().norm_max());
-            prop_assert!((&back.b() - &sys.b()).norm_max() <= 1e-9 * sys.b().norm_max());
-            prop_assert!((&back.d() - &sys.d()).norm_max() <= 1e-9 * (1.0 + sys.d().norm_max()));
+            prop_assert!((back.a() - sys.a()).norm_max() <= 1e-9 * sys.a().norm_max());
+            prop_assert!((back.b() - sys.b()).norm_max() <= 1e-9 * sys.b().norm_max());
+            prop_assert!((back.d() - sys.d()).norm_max() <= 1e-9 * (1.0 + sys.d().norm_max()));
         }
     }
 }
