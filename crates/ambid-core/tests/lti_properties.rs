@@ -400,6 +400,21 @@ fn typed_errors() {
     assert!(TransferFunction::new(vec![1.0], vec![0.0, 1.0], 1e-3).is_err());
     assert!(TransferFunction::new(vec![], vec![1.0], 1e-3).is_err());
     assert!(TransferFunction::from_state_space(&gc).is_err());
+    let tf2 = TransferFunction::new(vec![1.0], vec![1.0, -0.5], 2e-3).unwrap();
+    assert!(matches!(
+        tf.series(&tf2),
+        Err(Error::SampleTimeMismatch { .. })
+    ));
+    assert!(matches!(
+        tf.feedback(&tf2),
+        Err(Error::SampleTimeMismatch { .. })
+    ));
+    // G = K = 1 (static) in positive feedback: 1/(1 - 1) is not well posed
+    let one = TransferFunction::new(vec![1.0], vec![1.0], 1e-3).unwrap();
+    assert!(matches!(
+        one.feedback_with_sign(&one, FeedbackSign::Positive),
+        Err(Error::Numerical { .. })
+    ));
     // ill-posed algebraic loop: D_G D_K = -1 under negative feedback
     let dg = StateSpace::discrete(
         Mat::zeros(0, 0),
@@ -511,6 +526,22 @@ proptest! {
                     prop_assert!((t[i] - want).norm() <= 1e-7 * (1.0 + want.norm()));
                 }
             }
+        }
+        // transfer-function algebra agrees too
+        let gt = TransferFunction::from_state_space(&g).unwrap();
+        let kt = TransferFunction::from_state_space(&k).unwrap();
+        let st = gt.series(&kt).unwrap().freq_response(&f).unwrap();
+        let pt = gt.parallel(&kt).unwrap().freq_response(&f).unwrap();
+        let ft = Frd::from_transfer_function(&gt.feedback(&kt).unwrap(), &f).unwrap();
+        let fd = Frd::from_transfer_function(&gt, &f)
+            .unwrap()
+            .feedback(&Frd::from_transfer_function(&kt, &f).unwrap())
+            .unwrap();
+        for i in 0..f.len() {
+            prop_assert!((st[i] - s[i]).norm() <= 1e-8 * (1.0 + s[i].norm()));
+            prop_assert!((pt[i] - p[i]).norm() <= 1e-8 * (1.0 + p[i].norm()));
+            let w = fd.values()[i];
+            prop_assert!((ft.values()[i] - w).norm() <= 1e-7 * (1.0 + w.norm()));
         }
         // Frd algebra agrees with the model algebra
         let gd = Frd::from_model(&g, &f).unwrap();

@@ -118,6 +118,12 @@ impl Frd {
         Self::new(f_hz.to_vec(), v, None, model.ts())
     }
 
+    /// The response of a discrete transfer function at `f_hz` (no variance).
+    pub fn from_transfer_function(tf: &super::TransferFunction, f_hz: &[f64]) -> Result<Self> {
+        let v = tf.freq_response(f_hz)?;
+        Self::new(f_hz.to_vec(), v, None, Some(tf.ts()))
+    }
+
     /// A constant (static gain) response on the grid `f_hz`.
     pub fn constant(f_hz: &[f64], gain: f64, ts: Option<f64>) -> Result<Self> {
         Self::new(

@@ -15,6 +15,8 @@
 //! $$ A = \begin{bmatrix} -a_1 & \cdots & -a_{L-1} & -a_L \\ 1 & & & 0 \\ & \ddots & & \vdots
 //!    \\ & & 1 & 0 \end{bmatrix},\quad B = e_1,\quad C = [c_1, \dots, c_L]. $$
 //!
+//! Series, parallel and feedback combine the polynomials directly (no pole–zero cancellation).
+//!
 //! # Example
 //! ```
 //! use ambid_core::lti::TransferFunction;
@@ -27,6 +29,7 @@
 //! assert_eq!(y, vec![0.0, 0.5, 0.25]);
 //! ```
 
+use super::interconnect::{check_same_ts, FeedbackSign};
 use super::ss::{check_ts, StateSpace};
 use crate::error::{check_finite, Error, Result};
 use crate::linalg;
@@ -197,4 +200,61 @@ impl TransferFunction {
         }
         Ok(y)
     }
+    /// Series connection $G_{\text{self}}\, G_{\text{other}}$: numerators and denominators
+    /// multiplied (no cancellation is attempted).
+    pub fn series(&self, other: &TransferFunction) -> Result<Self> {
+        check_same_ts(Some(self.ts), Some(other.ts))?;
+        Self::new(
+            poly_mul(&self.num, &other.num),
+            poly_mul(&self.den, &other.den),
+            self.ts,
+        )
+    }
+
+    /// Parallel connection $G_1 + G_2 = (b_1 a_2 + b_2 a_1) / (a_1 a_2)$.
+    pub fn parallel(&self, other: &TransferFunction) -> Result<Self> {
+        check_same_ts(Some(self.ts), Some(other.ts))?;
+        Self::new(
+            poly_add(
+                &poly_mul(&self.num, &other.den),
+                &poly_mul(&other.num, &self.den),
+            ),
+            poly_mul(&self.den, &other.den),
+            self.ts,
+        )
+    }
+
+    /// Negative feedback $G / (1 + G K)$ with `k` in the feedback path.
+    pub fn feedback(&self, k: &TransferFunction) -> Result<Self> {
+        self.feedback_with_sign(k, FeedbackSign::Negative)
+    }
+
+    /// Feedback with sign $\sigma$:
+    /// $G / (1 - \sigma G K) = b_G a_K / (a_G a_K - \sigma b_G b_K)$.
+    /// Errors if the closed loop is not causal (its $q^0$ denominator coefficient vanishes).
+    pub fn feedback_with_sign(&self, k: &TransferFunction, sign: FeedbackSign) -> Result<Self> {
+        check_same_ts(Some(self.ts), Some(k.ts))?;
+        let s = sign.value();
+        let bb: Vec<f64> = poly_mul(&self.num, &k.num).iter().map(|x| -s * x).collect();
+        let den = poly_add(&poly_mul(&self.den, &k.den), &bb);
+        Self::new(poly_mul(&self.num, &k.den), den, self.ts).map_err(|e| match e {
+            Error::InvalidArgument { name: "den", .. } => Error::numerical(
+                "TransferFunction::feedback",
+                "1 - sign·G·K vanishes at q^-1 = 0: the loop is not well posed",
+            ),
+            other => other,
+        })
+    }
+}
+
+/// Sum of two polynomials with ascending coefficients.
+pub(crate) fn poly_add(a: &[f64], b: &[f64]) -> Vec<f64> {
+    let mut out = vec![0.0; a.len().max(b.len())];
+    for (i, x) in a.iter().enumerate() {
+        out[i] += x;
+    }
+    for (i, x) in b.iter().enumerate() {
+        out[i] += x;
+    }
+    out
 }
