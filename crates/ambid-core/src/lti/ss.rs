@@ -264,26 +264,320 @@ impl StateSpace {
                     got: x0.len().to_string(),
                 })
             }
-            Some(x0) => x0.to_vec(),
+            Some(x0) => {
+                crate::error::check_finite("x0", x0)?;
+                x0.to_vec()
+            }
             None => vec![0.0; n],
         };
         let mut xn = vec![0.0; n];
         let mut y = Vec::with_capacity(u.len());
         for &uk in u {
-            let mut yk = self.d[(0, 0)] * uk;
-            for i in 0..n {
-                yk += self.c[(0, i)] * x[i];
-            }
+            let yk = self.d[(0, 0)] * uk
+                + x.iter()
+                    .enumerate()
+                    .map(|(i, xi)| self.c[(0, i)] * xi)
+                    .sum::<f64>();
             y.push(yk);
-            for i in 0..n {
-                let mut s = self.b[(i, 0)] * uk;
-                for j in 0..n {
-                    s += self.a[(i, j)] * x[j];
-                }
-                xn[i] = s;
+            for (i, xni) in xn.iter_mut().enumerate() {
+                *xni = self.b[(i, 0)] * uk
+                    + x.iter()
+                        .enumerate()
+                        .map(|(j, xj)| self.a[(i, j)] * xj)
+                        .sum::<f64>();
             }
             std::mem::swap(&mut x, &mut xn);
         }
         Ok(y)
+    }
+
+    /// Simulates a discrete model from initial state `x0` (zeros if `None`): `u` is `N × m`
+    /// (one row per sample), the result `N × p`.
+    ///
+    /// $$ y_k = C x_k + D u_k, \qquad x_{k+1} = A x_k + B u_k. $$
+    pub fn simulate(&self, u: MatRef<'_, f64>, x0: Option<&[f64]>) -> Result<Mat<f64>> {
+        if self.ts.is_none() {
+            return Err(Error::TimeDomain(
+                "simulation needs a discrete-time model; discretise it with c2d first".into(),
+            ));
+        }
+        if u.ncols() != self.ninputs() {
+            return Err(Error::DimensionMismatch {
+                context: "simulate input columns",
+                expected: self.ninputs().to_string(),
+                got: u.ncols().to_string(),
+            });
+        }
+        check_mat("u", u)?;
+        let n = self.order();
+        let mut x = match x0 {
+            Some(x0) if x0.len() != n => {
+                return Err(Error::DimensionMismatch {
+                    context: "simulate initial state",
+                    expected: n.to_string(),
+                    got: x0.len().to_string(),
+                })
+            }
+            Some(x0) => {
+                crate::error::check_finite("x0", x0)?;
+                Mat::from_fn(n, 1, |i, _| x0[i])
+            }
+            None => Mat::zeros(n, 1),
+        };
+        let (p, m) = (self.noutputs(), self.ninputs());
+        let mut y = Mat::zeros(u.nrows(), p);
+        for k in 0..u.nrows() {
+            let uk = Mat::from_fn(m, 1, |i, _| u[(k, i)]);
+            let yk = &self.c * &x + &self.d * &uk;
+            for i in 0..p {
+                y[(k, i)] = yk[(i, 0)];
+            }
+            x = &self.a * &x + &self.b * &uk;
+        }
+        Ok(y)
+    }
+
+    /// Impulse response (Markov parameters) of a discrete model: $h_0 = D$,
+    /// $h_k = C A^{k-1} B$ for $k = 1, \dots, n-1$; one `p × m` matrix per sample.
+    pub fn impulse_response(&self, n: usize) -> Result<Vec<Mat<f64>>> {
+        if self.ts.is_none() {
+            return Err(Error::TimeDomain(
+                "the impulse response is computed for discrete-time models; discretise first"
+                    .into(),
+            ));
+        }
+        let mut out = Vec::with_capacity(n);
+        let mut ab = self.b.clone();
+        for k in 0..n {
+            if k == 0 {
+                out.push(self.d.clone());
+            } else {
+                out.push(&self.c * &ab);
+                ab = &self.a * &ab;
+            }
+        }
+        Ok(out)
+    }
+
+    /// Impulse response of a discrete SISO model, `n` samples.
+    pub fn impulse_response_siso(&self, n: usize) -> Result<Vec<f64>> {
+        self.require_siso("impulse_response_siso")?;
+        Ok(self
+            .impulse_response(n)?
+            .into_iter()
+            .map(|h| h[(0, 0)])
+            .collect())
+    }
+
+    /// Transmission zeros of a square model ($p = m$): the finite generalized eigenvalues of the
+    /// Rosenbrock system pencil
+    /// $$ \begin{bmatrix} A & B \\ C & D \end{bmatrix} - \lambda
+    ///    \begin{bmatrix} I & 0 \\ 0 & 0 \end{bmatrix}. $$
+    /// Infinite eigenvalues ($|\beta| \le 10^{-9} |\alpha|$, relative to the pencil scale) are
+    /// dropped. For a SISO model these are the roots of the transfer-function numerator.
+    /// A degenerate pencil (e.g. an input that reaches no state and no output) has no well
+    /// defined zeros; the result is then meaningless.
+    pub fn zeros(&self) -> Result<Vec<c64>> {
+        let (n, m, p) = (self.order(), self.ninputs(), self.noutputs());
+        if m != p {
+            return Err(Error::DimensionMismatch {
+                context: "zeros (square systems only)",
+                expected: format!("as many outputs as inputs ({m})"),
+                got: p.to_string(),
+            });
+        }
+        let big = Mat::from_fn(n + m, n + m, |i, j| match (i < n, j < n) {
+            (true, true) => self.a[(i, j)],
+            (true, false) => self.b[(i, j - n)],
+            (false, true) => self.c[(i - n, j)],
+            (false, false) => self.d[(i - n, j - n)],
+        });
+        let e = Mat::from_fn(n + m, n + m, |i, j| if i == j && i < n { 1.0 } else { 0.0 });
+        let pairs = linalg::generalized_eigenvalues(big.as_ref(), e.as_ref())?;
+        Ok(pairs
+            .into_iter()
+            .filter(|(al, be)| be.norm() > 1e-9 * al.norm() && be.norm() > 0.0)
+            .map(|(al, be)| al / be)
+            .collect())
+    }
+
+    fn require_continuous(&self, context: &str) -> Result<()> {
+        if self.ts.is_some() {
+            return Err(Error::TimeDomain(format!(
+                "{context} needs a continuous-time model; this one is already discrete"
+            )));
+        }
+        Ok(())
+    }
+
+    fn require_discrete(&self, context: &str) -> Result<f64> {
+        self.ts.ok_or_else(|| {
+            Error::TimeDomain(format!(
+                "{context} needs a discrete-time model; this one is continuous"
+            ))
+        })
+    }
+
+    /// Tustin (bilinear) discretisation with sample time `ts`, optionally prewarped so that the
+    /// frequency response matches exactly at `prewarp_hz`.
+    ///
+    /// With $T = T_s$, or $T = 2\tan(\omega_p T_s / 2)/\omega_p$ when prewarping at
+    /// $\omega_p = 2\pi f_p$ (the substitution $s = \frac{2}{T}\frac{z-1}{z+1}$), and
+    /// $M = I - A T/2$:
+    /// $$ A_d = M^{-1}(I + A T/2),\quad B_d = M^{-1} B T,\quad C_d = C M^{-1},\quad
+    ///    D_d = D + C B_d / 2, $$
+    /// the realisation of `scipy.signal.cont2discrete(method="bilinear")` (python-control for the
+    /// prewarped form). Errors if $M$ is singular (a pole at $s = 2/T$) or if
+    /// $f_p \ge 1/(2 T_s)$.
+    pub fn c2d_tustin(&self, ts: f64, prewarp_hz: Option<f64>) -> Result<StateSpace> {
+        self.require_continuous("c2d_tustin")?;
+        check_ts(ts)?;
+        let t = warped_period(ts, prewarp_hz)?;
+        let n = self.order();
+        let id = Mat::<f64>::identity(n, n);
+        let m = Mat::from_fn(n, n, |i, j| id[(i, j)] - 0.5 * t * self.a[(i, j)]);
+        let p = Mat::from_fn(n, n, |i, j| id[(i, j)] + 0.5 * t * self.a[(i, j)]);
+        let sing = |_| Error::numerical("c2d_tustin", "I - A T/2 is singular (a pole at s = 2/T)");
+        let ad = linalg::solve(m.as_ref(), p.as_ref()).map_err(sing)?;
+        let bt = Mat::from_fn(n, self.ninputs(), |i, j| self.b[(i, j)] * t);
+        let bd = linalg::solve(m.as_ref(), bt.as_ref()).map_err(sing)?;
+        let ct = linalg::solve(m.transpose(), self.c.transpose()).map_err(sing)?;
+        let cd = ct.transpose().to_owned();
+        let cb = &self.c * &bd;
+        let dd = Mat::from_fn(self.noutputs(), self.ninputs(), |i, j| {
+            self.d[(i, j)] + 0.5 * cb[(i, j)]
+        });
+        StateSpace::discrete(ad, bd, cd, dd, ts)
+    }
+
+    /// Inverse of [`c2d_tustin`](Self::c2d_tustin) (same `prewarp_hz`): with $T$ as there,
+    /// $$ A = \tfrac{2}{T}(A_d - I)(A_d + I)^{-1},\quad B = \tfrac{2}{T}(A_d + I)^{-1} B_d,\quad
+    ///    C = 2 C_d (A_d + I)^{-1},\quad D = D_d - C_d (A_d + I)^{-1} B_d. $$
+    /// Errors if $A_d$ has an eigenvalue at $z = -1$ (no continuous equivalent).
+    pub fn d2c_tustin(&self, prewarp_hz: Option<f64>) -> Result<StateSpace> {
+        let ts = self.require_discrete("d2c_tustin")?;
+        let t = warped_period(ts, prewarp_hz)?;
+        let n = self.order();
+        let id = Mat::<f64>::identity(n, n);
+        let ap = &self.a + &id;
+        let am = &self.a - &id;
+        let sing = |_| {
+            Error::numerical(
+                "d2c_tustin",
+                "A_d + I is singular: the model has a pole at z = -1, which has no continuous-time equivalent",
+            )
+        };
+        // (A_d - I)(A_d + I)^{-1} = ((A_d + I)^{-T} (A_d - I)^T)^T
+        let a = linalg::solve(ap.transpose(), am.transpose())
+            .map_err(sing)?
+            .transpose()
+            .to_owned();
+        let a = Mat::from_fn(n, n, |i, j| a[(i, j)] * 2.0 / t);
+        let x = linalg::solve(ap.as_ref(), self.b.as_ref()).map_err(sing)?;
+        let b = Mat::from_fn(n, self.ninputs(), |i, j| x[(i, j)] * 2.0 / t);
+        let ct = linalg::solve(ap.transpose(), self.c.transpose()).map_err(sing)?;
+        let c = Mat::from_fn(self.noutputs(), n, |i, j| 2.0 * ct[(j, i)]);
+        let cx = &self.c * &x;
+        let d = &self.d - &cx;
+        StateSpace::continuous(a, b, c, d)
+    }
+
+    /// Inverse of [`c2d_zoh`](Self::c2d_zoh) by the principal matrix logarithm
+    /// ([`linalg::logm`]):
+    /// $$ \begin{bmatrix} A & B \\ 0 & 0\end{bmatrix} = \frac{1}{T_s}
+    ///    \log \begin{bmatrix} A_d & B_d \\ 0 & I\end{bmatrix}. $$
+    /// Well defined when $A_d$ has no eigenvalue on the closed negative real axis; otherwise
+    /// [`Error::InvalidArgument`]. The result is the continuous model whose poles have
+    /// $|\operatorname{Im} s| < \pi / T_s$ (below the Nyquist frequency).
+    pub fn d2c_zoh(&self) -> Result<StateSpace> {
+        let ts = self.require_discrete("d2c_zoh")?;
+        let (n, m) = (self.order(), self.ninputs());
+        for l in self.poles()? {
+            if l.re <= 0.0 && l.im.abs() <= 1e-12 * l.norm().max(1.0) {
+                return Err(Error::invalid(
+                    "model",
+                    format!(
+                        "d2c_zoh: the pole {:.6e}{:+.3e}i lies on the non-positive real axis, so no continuous model has this ZOH equivalent; use d2c_tustin or resample",
+                        l.re, l.im
+                    ),
+                ));
+            }
+        }
+        let big = Mat::from_fn(n + m, n + m, |i, j| match (i < n, j < n) {
+            (true, true) => self.a[(i, j)],
+            (true, false) => self.b[(i, j - n)],
+            (false, true) => 0.0,
+            (false, false) => {
+                if i == j {
+                    1.0
+                } else {
+                    0.0
+                }
+            }
+        });
+        let l = linalg::logm(big.as_ref())?;
+        let a = Mat::from_fn(n, n, |i, j| l[(i, j)] / ts);
+        let b = Mat::from_fn(n, m, |i, j| l[(i, n + j)] / ts);
+        StateSpace::continuous(a, b, self.c.clone(), self.d.clone())
+    }
+
+    /// Transfer-function coefficients of a SISO model, `(num, den)`, both of length
+    /// `order + 1`, in descending powers of $s$ or $z$ (for a discrete model that is also
+    /// ascending powers of $q^{-1}$), with monic `den`.
+    ///
+    /// The denominator is the characteristic polynomial $\det(\lambda I - A) = \sum_i a_i
+    /// \lambda^{n-i}$ (from the eigenvalues, as `numpy.poly`). The numerator follows from the
+    /// Markov parameters $h_k = C A^{k-1} B$: since $G(\lambda) - D = \sum_{k \ge 1} h_k
+    /// \lambda^{-k}$, multiplying by the denominator gives
+    /// $$ \mathrm{num}_0 = D, \qquad \mathrm{num}_k = D a_k + \sum_{i=0}^{k-1} a_i h_{k-i},
+    ///    \quad k = 1, \dots, n. $$
+    /// This avoids the cancellation in `scipy.signal.ss2tf`'s
+    /// $\det(\lambda I - A + BC) + (D - 1)\det(\lambda I - A)$ when the numerator is small
+    /// compared with the denominator. Numerically sound for orders up to about 20.
+    pub fn tf_coefficients(&self) -> Result<(Vec<f64>, Vec<f64>)> {
+        self.require_siso("tf_coefficients")?;
+        let n = self.order();
+        let den = linalg::charpoly(self.a.as_ref())?;
+        let mut h = vec![0.0; n + 1];
+        let mut ab = self.b.clone();
+        for hk in h.iter_mut().skip(1) {
+            *hk = (&self.c * &ab)[(0, 0)];
+            ab = &self.a * &ab;
+        }
+        let d = self.d[(0, 0)];
+        let num = (0..=n)
+            .map(|k| d * den[k] + (0..k).map(|i| den[i] * h[k - i]).sum::<f64>())
+            .collect();
+        Ok((num, den))
+    }
+}
+
+pub(crate) fn check_ts(ts: f64) -> Result<()> {
+    if !(ts.is_finite() && ts > 0.0) {
+        return Err(Error::invalid(
+            "ts",
+            format!("sample time must be positive and finite, got {ts}"),
+        ));
+    }
+    Ok(())
+}
+
+/// The bilinear-transform period: `ts`, or $2\tan(\omega_p T_s/2)/\omega_p$ when prewarping.
+fn warped_period(ts: f64, prewarp_hz: Option<f64>) -> Result<f64> {
+    match prewarp_hz {
+        None => Ok(ts),
+        Some(f) => {
+            if !(f.is_finite() && f > 0.0 && f < 0.5 / ts) {
+                return Err(Error::invalid(
+                    "prewarp_hz",
+                    format!(
+                        "the prewarping frequency must lie in (0, {}) Hz (below Nyquist), got {f}",
+                        0.5 / ts
+                    ),
+                ));
+            }
+            let w = 2.0 * std::f64::consts::PI * f;
+            Ok(2.0 * (w * ts / 2.0).tan() / w)
+        }
     }
 }
