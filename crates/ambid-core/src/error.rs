@@ -38,7 +38,9 @@ pub enum Error {
         index: usize,
     },
     /// Two models or data sets with different sample times were combined.
-    #[error("sample time mismatch: {left} s vs {right} s; resample or rediscretise one of them first")]
+    #[error(
+        "sample time mismatch: {left} s vs {right} s; resample or rediscretise one of them first"
+    )]
     SampleTimeMismatch {
         /// Sample time of the left operand (0 for continuous time).
         left: f64,
