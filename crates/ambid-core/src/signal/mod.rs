@@ -12,7 +12,7 @@
 //! | [`PrbsSpec`] | flat $\operatorname{sinc}^2$-shaped envelope, lines at $k/(L N_b T_s)$ | exact, periodic | $1$ (two levels) | none when whole periods are analysed |
 //! | [`ChirpSpec`] | band $[f_0, f_1]$, energy per band set by the sweep law | exact | $\sqrt 2$ | small ripple at the band edges |
 //! | [`NoiseSpec`] | continuous, random amplitude at every bin | only through the seed | $\approx 3\text{–}4$ (Gaussian), $\sqrt 3$ (uniform) | yes, needs windows and averaging |
-//! | [`MultisineSpec`] | exactly the chosen DFT bins, flat amplitude | exact, periodic | $\approx 1.5\text{–}1.8$ (Schroeder) | none when whole periods are analysed |
+//! | [`MultisineSpec`] | exactly the chosen DFT bins, flat amplitude | exact, periodic | $\approx 1.5\text{–}1.9$ (Schroeder) | none when whole periods are analysed |
 //!
 //! * **PRBS** (pseudo-random binary sequence, [`prbs`]): a maximum-length shift-register sequence of
 //!   order $n$, length $L = 2^n - 1$, each bit held for $N_b$ samples. Its circular autocorrelation is

@@ -11,8 +11,9 @@
 //! by one inverse real FFT.
 //!
 //! Phases:
-//! * Schroeder: $\varphi_i = -\pi\, i (i-1) / F$ — a deterministic low crest factor (about
-//!   1.5–1.8 for a flat spectrum of many lines, versus about 3–4 for random phases);
+//! * Schroeder: $\varphi_i = -\pi\, i (i-1) / F$ — a deterministic low crest factor for a flat
+//!   spectrum of many lines: about 1.45–1.65 when the band starts at the first bin, about 1.8–1.9
+//!   for a band away from DC, versus about 3–4 for random phases;
 //! * random: $\varphi_i \sim \mathcal U[0, 2\pi)$ from a seeded [`ChaCha8Rng`].
 //!
 //! Grids (which bins in $[f_{\min}, f_{\max}]$ are excited):
