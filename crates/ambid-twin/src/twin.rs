@@ -82,12 +82,11 @@ impl Twin {
         let discrete = continuous.c2d_zoh(ts)?;
         let mut ad = [[0.0; NX]; NX];
         let mut bd = [[0.0; 2]; NX];
-        for i in 0..NX {
-            for j in 0..NX {
-                ad[i][j] = discrete.a()[(i, j)];
+        for (i, (row, brow)) in ad.iter_mut().zip(bd.iter_mut()).enumerate() {
+            for (j, v) in row.iter_mut().enumerate() {
+                *v = discrete.a()[(i, j)];
             }
-            bd[i][0] = discrete.b()[(i, 0)];
-            bd[i][1] = discrete.b()[(i, 1)];
+            *brow = [discrete.b()[(i, 0)], discrete.b()[(i, 1)]];
         }
         let controller = pid.state_space(ts)?;
         let (plant, closed) = assemble(&ad, &bd, &pid, ts)?;
