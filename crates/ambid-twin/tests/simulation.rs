@@ -127,13 +127,11 @@ fn nonlinear_deviation(twin: &Twin, frac: f64) -> f64 {
     };
     let e = estimate(twin, frac, &opts, 1000.0);
     let t_true = twin.t_ry_frf(&e.f).unwrap();
-    let mut worst: f64 = 0.0;
-    for k in 0..e.f.len() {
-        if e.f[k] >= 10.0 {
-            worst = worst.max((e.t_ry[k] - t_true[k]).norm() / t_true[k].norm());
-        }
-    }
-    worst
+    e.f.iter()
+        .zip(e.t_ry.iter().zip(&t_true))
+        .filter(|(f, _)| **f >= 10.0)
+        .map(|(_, (est, tru))| (est - tru).norm() / tru.norm())
+        .fold(0.0, f64::max)
 }
 
 #[test]
@@ -240,8 +238,8 @@ fn record_layout_and_timing() {
         .unwrap();
         sub.simulate_siso(&pulse, None).unwrap()
     };
-    for k in 0..50 {
-        assert!((rec.y[k] - y_ss[k]).abs() < 1e-12 + 1e-9 * y_ss[k].abs());
+    for (y, y_ref) in rec.y.iter().zip(&y_ss) {
+        assert!((y - y_ref).abs() < 1e-12 + 1e-9 * y_ref.abs());
     }
 }
 
