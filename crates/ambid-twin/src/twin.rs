@@ -96,6 +96,7 @@ impl Twin {
             .copied()
             .max_by(|a, b| a.norm().total_cmp(&b.norm()))
             .unwrap_or(c64::new(0.0, 0.0));
+        let worst = if worst.im < 0.0 { worst.conj() } else { worst };
         if worst.norm() >= 1.0 {
             let s = z_to_s(worst, ts);
             let kp = cfg.controller.kp;
