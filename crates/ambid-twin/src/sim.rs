@@ -228,28 +228,46 @@ impl Nl {
         ]
     }
 
+    /// One classical RK4 step of length `h` with the references held.
     #[inline(always)]
     fn rk4(&self, x: &mut [f64; NX], ira: f64, irb: f64, h: f64, flags: &mut u8) {
+        let hh = 0.5 * h;
         let k1 = self.deriv(x, ira, irb, flags);
-        let mut t = [0.0; NX];
-        for j in 0..NX {
-            t[j] = x[j] + 0.5 * h * k1[j];
-        }
+        let t: [f64; NX] = std::array::from_fn(|j| x[j] + hh * k1[j]);
         let k2 = self.deriv(&t, ira, irb, flags);
-        for j in 0..NX {
-            t[j] = x[j] + 0.5 * h * k2[j];
-        }
+        let t: [f64; NX] = std::array::from_fn(|j| x[j] + hh * k2[j]);
         let k3 = self.deriv(&t, ira, irb, flags);
-        for j in 0..NX {
-            t[j] = x[j] + h * k3[j];
-        }
+        let t: [f64; NX] = std::array::from_fn(|j| x[j] + h * k3[j]);
         let k4 = self.deriv(&t, ira, irb, flags);
         let h6 = h / 6.0;
         for j in 0..NX {
-            x[j] += h6 * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j]);
+            x[j] += h6 * ((k1[j] + k4[j]) + 2.0 * (k2[j] + k3[j]));
         }
         x[6] = x[6].clamp(-self.imax, self.imax);
         x[7] = x[7].clamp(-self.imax, self.imax);
+    }
+
+    /// Advances one control period with `nsub` RK4 substeps; returns the limit flags, or the
+    /// substep and displacements at which |x| reached the gap (or became non-finite).
+    #[inline(never)]
+    fn period(
+        &self,
+        x: &mut [f64; NX],
+        ira: f64,
+        irb: f64,
+        h: f64,
+        nsub: usize,
+    ) -> std::result::Result<u8, (usize, f64, f64)> {
+        let mut flags = 0u8;
+        for s in 0..nsub {
+            self.rk4(x, ira, irb, h, &mut flags);
+            let xa = x[0] - self.a * x[1] + self.phi_a * x[2];
+            let xb = x[0] + self.b * x[1] + self.phi_b * x[2];
+            if !(xa.abs() < self.g0 && xb.abs() < self.g0) {
+                return Err((s, xa, xb));
+            }
+        }
+        Ok(flags)
     }
 }
 
@@ -424,10 +442,9 @@ impl Twin {
             }
             // advance the continuous part over [t_k, t_{k+1}) with the delayed references
             if NL {
-                for s in 0..nsub {
-                    nl.rk4(&mut x, da, db, h, &mut flags);
-                    let (xa, xb) = disp(&x);
-                    if !(xa.abs() < g0 && xb.abs() < g0) {
+                match nl.period(&mut x, da, db, h, nsub) {
+                    Ok(f) => flags |= f,
+                    Err((s, xa, xb)) => {
                         touchdown(xa, xb, k, k as f64 * ts + (s + 1) as f64 * h)?;
                     }
                 }

@@ -39,7 +39,10 @@ fn negative_gap_and_other_bad_values() {
     assert!(e.to_string().contains("operating_point.air_gap_m"), "{e}");
     let mut cfg = TwinConfig::default();
     cfg.rotor.mass_kg = f64::NAN;
-    assert!(Twin::new(cfg).unwrap_err().to_string().contains("rotor.mass_kg"));
+    assert!(Twin::new(cfg)
+        .unwrap_err()
+        .to_string()
+        .contains("rotor.mass_kg"));
     let mut cfg = TwinConfig::default();
     cfg.operating_point.bias_current_a = 0.0;
     assert!(Twin::new(cfg).is_err());
@@ -60,7 +63,13 @@ fn bad_signals() {
     let mut r = vec![0.01; 100];
     r[42] = f64::NAN;
     let e = twin.simulate(&r, &SimOptions::default()).unwrap_err();
-    assert_eq!(e, TwinError::NonFinite { what: "r", index: 42 });
+    assert_eq!(
+        e,
+        TwinError::NonFinite {
+            what: "r",
+            index: 42
+        }
+    );
     assert!(e.to_string().contains("index 42"));
     let r = vec![0.01; 100];
     let e = twin
@@ -92,7 +101,13 @@ fn bad_signals() {
             },
         )
         .unwrap_err();
-    assert_eq!(e, TwinError::NonFinite { what: "w", index: 7 });
+    assert_eq!(
+        e,
+        TwinError::NonFinite {
+            what: "w",
+            index: 7
+        }
+    );
     assert!(twin.simulate(&[], &SimOptions::default()).is_err());
     assert!(twin.plant_frf(&[f64::NAN]).is_err());
 }
@@ -127,5 +142,8 @@ fn reference_step_is_followed_and_large_reference_touches_down() {
         )
         .unwrap_err();
     eprintln!("{e}");
-    assert!(matches!(e, TwinError::Touchdown { .. } | TwinError::Diverged { .. }));
+    assert!(matches!(
+        e,
+        TwinError::Touchdown { .. } | TwinError::Diverged { .. }
+    ));
 }
