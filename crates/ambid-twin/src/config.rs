@@ -25,24 +25,24 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RotorConfig {
-    /// Rotor mass $m$ [kg].
+    /// Rotor mass $m$ \[kg\].
     pub mass_kg: f64,
-    /// Rotor length $L$ [m] (used for the default transverse inertia $J = m L^2 / 12$).
+    /// Rotor length $L$ \[m\] (used for the default transverse inertia $J = m L^2 / 12$).
     pub length_m: f64,
-    /// Transverse moment of inertia $J$ about the centre of mass [kg·m²]; `None` means $m L^2/12$.
+    /// Transverse moment of inertia $J$ about the centre of mass \[kg·m²\]; `None` means $m L^2/12$.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub transverse_inertia_kgm2: Option<f64>,
-    /// Distance $a$ from the centre of mass to bearing (and sensor) A [m].
+    /// Distance $a$ from the centre of mass to bearing (and sensor) A \[m\].
     pub bearing_a_m: f64,
-    /// Distance $b$ from the centre of mass to bearing (and sensor) B [m], on the other side.
+    /// Distance $b$ from the centre of mass to bearing (and sensor) B \[m\], on the other side.
     pub bearing_b_m: f64,
-    /// Free–free bending eigenfrequency [Hz].
+    /// Free–free bending eigenfrequency \[Hz\].
     pub bending_freq_hz: f64,
-    /// Modal damping ratio of the bending mode [-].
+    /// Modal damping ratio of the bending mode \[-\].
     pub bending_damping: f64,
-    /// Mass-normalised bending mode-shape value $\varphi_A$ at bearing A [kg^-½].
+    /// Mass-normalised bending mode-shape value $\varphi_A$ at bearing A \[kg^-½\].
     pub mode_shape_a: f64,
-    /// Mass-normalised bending mode-shape value $\varphi_B$ at bearing B [kg^-½].
+    /// Mass-normalised bending mode-shape value $\varphi_B$ at bearing B \[kg^-½\].
     pub mode_shape_b: f64,
 }
 
@@ -63,7 +63,7 @@ impl Default for RotorConfig {
 }
 
 impl RotorConfig {
-    /// Transverse inertia $J$ actually used [kg·m²].
+    /// Transverse inertia $J$ actually used \[kg·m²\].
     pub fn inertia(&self) -> f64 {
         self.transverse_inertia_kgm2
             .unwrap_or(self.mass_kg * self.length_m * self.length_m / 12.0)
@@ -76,11 +76,11 @@ impl RotorConfig {
 pub struct MagnetConfig {
     /// Number of turns $N$ per coil.
     pub turns: f64,
-    /// Pole face area $A$ [m²].
+    /// Pole face area $A$ \[m²\].
     pub pole_area_m2: f64,
-    /// Pole angle $\alpha$ to the bearing axis [deg].
+    /// Pole angle $\alpha$ to the bearing axis \[deg\].
     pub pole_angle_deg: f64,
-    /// Control-current saturation $i_\mathrm{sat}$ [A]: controller clamp, DAC limit and amplifier limit.
+    /// Control-current saturation $i_\mathrm{sat}$ \[A\]: controller clamp, DAC limit and amplifier limit.
     pub i_sat_a: f64,
 }
 
@@ -99,13 +99,13 @@ impl Default for MagnetConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct AmplifierConfig {
-    /// Closed-loop current bandwidth (first-order lag corner) [Hz].
+    /// Closed-loop current bandwidth (first-order lag corner) \[Hz\].
     pub bandwidth_hz: f64,
-    /// Bus voltage $V_\mathrm{bus}$ [V] (slew limit).
+    /// Bus voltage $V_\mathrm{bus}$ \[V\] (slew limit).
     pub bus_voltage_v: f64,
-    /// Coil inductance $L_c$ [H] (slew limit).
+    /// Coil inductance $L_c$ \[H\] (slew limit).
     pub inductance_h: f64,
-    /// Coil resistance $R_c$ [Ω] (slew limit).
+    /// Coil resistance $R_c$ \[Ω\] (slew limit).
     pub resistance_ohm: f64,
 }
 
@@ -124,17 +124,17 @@ impl Default for AmplifierConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SensorConfig {
-    /// Sensitivity [V/m] (10 V/mm = 1e4 V/m). Used for the ADC quantisation.
+    /// Sensitivity \[V/m\] (10 V/mm = 1e4 V/m). Used for the ADC quantisation.
     pub gain_v_per_m: f64,
-    /// First-order low-pass corner [Hz].
+    /// First-order low-pass corner \[Hz\].
     pub bandwidth_hz: f64,
-    /// RMS of the white Gaussian measurement noise [m] (when noise is switched on).
+    /// RMS of the white Gaussian measurement noise \[m\] (when noise is switched on).
     pub noise_rms_m: f64,
     /// Quantise the sampled sensor voltage with the ADC below.
     pub quantize: bool,
-    /// ADC resolution [bit].
+    /// ADC resolution \[bit\].
     pub adc_bits: u32,
-    /// ADC full-scale range ±`adc_range_v` [V].
+    /// ADC full-scale range ±`adc_range_v` \[V\].
     pub adc_range_v: f64,
 }
 
@@ -159,23 +159,23 @@ impl SensorConfig {
 }
 
 /// Decentralised digital PID controller (identical at A and B):
-/// $$C(s) = \frac{K_p + K_i/s + K_d\,s/(1+s/\omega_d)}{1+s/\omega_l},\qquad K_i = K_p\,2\pi f_i,$$
+/// $$C(s) = \frac{K_p + K_i/s + K_d\ s/(1+s/\omega_d)}{1+s/\omega_l},\qquad K_i = K_p\ 2\pi f_i,$$
 /// discretised with Tustin at $f_s$, one sample of computation delay, output clamp at
 /// $\pm i_\mathrm{sat}$ with integrator anti-windup.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ControllerConfig {
-    /// Sampling frequency $f_s$ [Hz].
+    /// Sampling frequency $f_s$ \[Hz\].
     pub fs_hz: f64,
-    /// Proportional gain $K_p$ [A/m].
+    /// Proportional gain $K_p$ \[A/m\].
     pub kp: f64,
-    /// Integrator corner $f_i$ [Hz], $K_i = K_p\, 2\pi f_i$ [A/(m·s)]; 0 disables the integrator.
+    /// Integrator corner $f_i$ \[Hz\], $K_i = K_p\  2\pi f_i$ \[A/(m·s)\]; 0 disables the integrator.
     pub integral_corner_hz: f64,
-    /// Derivative gain $K_d$ [A·s/m].
+    /// Derivative gain $K_d$ \[A·s/m\].
     pub kd: f64,
-    /// Derivative filter corner $\omega_d/2\pi$ [Hz].
+    /// Derivative filter corner $\omega_d/2\pi$ \[Hz\].
     pub derivative_cutoff_hz: f64,
-    /// Output low-pass corner $\omega_l/2\pi$ [Hz].
+    /// Output low-pass corner $\omega_l/2\pi$ \[Hz\].
     pub lowpass_hz: f64,
 }
 
@@ -193,7 +193,7 @@ impl Default for ControllerConfig {
 }
 
 impl ControllerConfig {
-    /// Integral gain $K_i = K_p\, 2\pi f_i$ [A/(m·s)].
+    /// Integral gain $K_i = K_p\  2\pi f_i$ \[A/(m·s)\].
     pub fn ki(&self) -> f64 {
         self.kp * 2.0 * std::f64::consts::PI * self.integral_corner_hz
     }
@@ -203,9 +203,9 @@ impl ControllerConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct OperatingPoint {
-    /// Bias current $i_0$ [A].
+    /// Bias current $i_0$ \[A\].
     pub bias_current_a: f64,
-    /// Nominal air gap $g_0$ [m] (rotor centred).
+    /// Nominal air gap $g_0$ \[m\] (rotor centred).
     pub air_gap_m: f64,
 }
 

@@ -29,9 +29,9 @@ pub enum TwinError {
     UnstableClosedLoop {
         /// Largest pole magnitude of the discrete closed loop (≥ 1).
         max_pole_magnitude: f64,
-        /// Real part of that pole mapped to continuous time, s = ln(z)/Ts [rad/s].
+        /// Real part of that pole mapped to continuous time, s = ln(z)/Ts \[rad/s\].
         s_re: f64,
-        /// Imaginary part of that pole mapped to continuous time [rad/s].
+        /// Imaginary part of that pole mapped to continuous time \[rad/s\].
         s_im: f64,
         /// What to change.
         hint: String,
@@ -71,13 +71,13 @@ pub enum TwinError {
     Touchdown {
         /// `'A'` or `'B'`.
         bearing: char,
-        /// Time of the event relative to the start of the record (negative during the pre-roll) [s].
+        /// Time of the event relative to the start of the record (negative during the pre-roll) \[s\].
         time_s: f64,
         /// Sample index of the control period in which it happened (relative to the record start).
         sample: i64,
-        /// The displacement that reached the gap [m].
+        /// The displacement that reached the gap \[m\].
         displacement_m: f64,
-        /// The air gap [m].
+        /// The air gap \[m\].
         gap_m: f64,
     },
     /// The simulation state became non-finite.

@@ -5,12 +5,12 @@
 //! and the modal coordinate $\eta$ of the free–free bending mode (mass normalised, eigenfrequency
 //! $\omega_b$, damping ratio $\zeta_b$). The displacements at bearing (= sensor) A, a distance $a$
 //! on one side of the centre of mass, and at B, a distance $b$ on the other side, are
-//! $$ x_A = z - a\,\theta + \varphi_A\,\eta = c_A^\top q, \qquad
-//!    x_B = z + b\,\theta + \varphi_B\,\eta = c_B^\top q, $$
+//! $$ x_A = z - a\ \theta + \varphi_A\ \eta = c_A^\top q, \qquad
+//!    x_B = z + b\ \theta + \varphi_B\ \eta = c_B^\top q, $$
 //! $c_A = (1, -a, \varphi_A)$, $c_B = (1, b, \varphi_B)$. The bearing forces enter through the
 //! transpose (virtual work):
-//! $$ \operatorname{diag}(m, J, 1)\,\ddot q + \operatorname{diag}(0, 0, 2\zeta_b\omega_b)\,\dot q
-//!    + \operatorname{diag}(0, 0, \omega_b^2)\,q = c_A F_A + c_B F_B . $$
+//! $$ \operatorname{diag}(m, J, 1)\ \ddot q + \operatorname{diag}(0, 0, 2\zeta_b\omega_b)\ \dot q
+//!    + \operatorname{diag}(0, 0, \omega_b^2)\ q = c_A F_A + c_B F_B . $$
 //!
 //! # Magnet
 //! Each bearing is a differential pair with coil currents $i_0 \pm i$ and gaps $g_0 \mp x$:
@@ -33,20 +33,20 @@
 //! With the state $\xi = (q, \dot q, i_A, i_B, y_{sA}, y_{sB}) \in \mathbb R^{10}$ and the input
 //! $(i_{\mathrm{ref},A}, i_{\mathrm{ref},B})$, the linear model $\dot \xi = A_c \xi + B_c v$ is
 //! discretised exactly for a zero-order-hold input: $A_d = e^{A_c T_s}$,
-//! $B_d = \int_0^{T_s} e^{A_c \tau} d\tau\, B_c$.
+//! $B_d = \int_0^{T_s} e^{A_c \tau} d\tau\  B_c$.
 //!
 //! # Controller (Tustin)
 //! With $\alpha = 2/T_s$ (no prewarping) the three parts of $C(s)$ become
 //! * integrator: $x_I^+ = x_I + K_i T_s e$, output $x_I + \tfrac{K_i T_s}{2} e$;
-//! * filtered derivative $K_d \omega_d s/(s+\omega_d) \to g\,(z-1)/(z-p)$,
+//! * filtered derivative $K_d \omega_d s/(s+\omega_d) \to g\ (z-1)/(z-p)$,
 //!   $p = \frac{\alpha-\omega_d}{\alpha+\omega_d}$, $g = \frac{K_d\omega_d\alpha}{\alpha+\omega_d}$:
 //!   $x_D^+ = p x_D + e$, output $g(p-1)x_D + g e$;
-//! * low-pass $\omega_l/(s+\omega_l) \to h\,(z+1)/(z-q)$,
+//! * low-pass $\omega_l/(s+\omega_l) \to h\ (z+1)/(z-q)$,
 //!   $q = \frac{\alpha-\omega_l}{\alpha+\omega_l}$, $h = \frac{\omega_l}{\alpha+\omega_l}$:
 //!   $x_L^+ = q x_L + v$, output $h(1+q)x_L + h v$, where $v$ is the PID sum.
 //!
 //! # Assembled plant
-//! State $(\xi, d_A, d_B, x_{C,B})$ with the delay registers $d_A = u_A[k-1]$, $d_B = u_B[k-1]$
+//! State $(\xi, d_A, d_B, x_{C,B})$ with the delay registers $d_A = u_A\[k-1\]$, $d_B = u_B\[k-1\]$
 //! (computation delay) and loop B closed, $u_B = C(q)(-y_B)$:
 //! $$ \xi^+ = A_d\xi + B_d (d_A, d_B)^\top,\quad d_A^+ = u_A,\quad d_B^+ = C_C x_{C,B} - D_C y_{sB},
 //!    \quad x_{C,B}^+ = A_C x_{C,B} - B_C y_{sB}, \quad y_A = y_{sA}. $$
@@ -58,21 +58,21 @@ use faer::Mat;
 use serde::Serialize;
 use std::f64::consts::PI;
 
-/// Vacuum permeability $\mu_0$ [H/m].
+/// Vacuum permeability $\mu_0$ \[H/m\].
 pub const MU0: f64 = 4e-7 * PI;
 
 /// Linearised magnet parameters at the configured operating point.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct LinearParams {
-    /// Force constant $k = \mu_0 N^2 A\cos\alpha / 4$ [N·m²/A²].
+    /// Force constant $k = \mu_0 N^2 A\cos\alpha / 4$ \[N·m²/A²\].
     pub force_constant: f64,
-    /// Current gain $k_i = 4 k i_0 / g_0^2$ [N/A].
+    /// Current gain $k_i = 4 k i_0 / g_0^2$ \[N/A\].
     pub k_i: f64,
-    /// Negative stiffness $k_x = 4 k i_0^2 / g_0^3$ [N/m].
+    /// Negative stiffness $k_x = 4 k i_0^2 / g_0^3$ \[N/m\].
     pub k_x: f64,
-    /// Bias current $i_0$ [A].
+    /// Bias current $i_0$ \[A\].
     pub bias_current_a: f64,
-    /// Air gap $g_0$ [m].
+    /// Air gap $g_0$ \[m\].
     pub air_gap_m: f64,
 }
 
@@ -242,15 +242,15 @@ impl Physics {
 /// holds bearing B with the positive net stiffness $k_B \approx k_i K_p - k_x$ (the
 /// proportional action; the integrator and the derivative matter little at the pole's
 /// frequency). The rigid rotor $(z, \theta)$ then obeys
-/// $$ \operatorname{diag}(m, J)\,\ddot q + K q = 0, \qquad
-///    K = k_B\, c_B c_B^\top - k_x\, c_A c_A^\top, \; c_A = (1, -a),\; c_B = (1, b), $$
+/// $$ \operatorname{diag}(m, J)\ \ddot q + K q = 0, \qquad
+///    K = k_B\  c_B c_B^\top - k_x\  c_A c_A^\top, \  c_A = (1, -a),\  c_B = (1, b), $$
 /// whose stiffness matrix has exactly **one** negative eigenvalue (the one-dimensional negative
 /// spring at A cannot make more than one direction unstable; the other direction is held by
 /// $k_B > 0$). It gives one real unstable pole $s_+ = \sqrt{-\lambda_{\min}(M^{-1}K)}$ and its
 /// mirror image $-s_+$; in discrete time one pole $z = e^{s_+ T_s} > 1$.
 /// The limit $k_B \to \infty$ pins the rotor at B: it rotates about B with inertia
 /// $J_B = J + m b^2$ and the lever $(a+b)$ at A,
-/// $$ J_B \ddot\psi = k_x (a+b)^2 \psi \;\Rightarrow\; s_+ = \sqrt{k_x (a+b)^2 / J_B}, $$
+/// $$ J_B \ddot\psi = k_x (a+b)^2 \psi \ \Rightarrow\  s_+ = \sqrt{k_x (a+b)^2 / J_B}, $$
 /// a lower bound (a finite $k_B$ lets B yield and raises $s_+$). The bending mode (730 Hz) and
 /// the dynamics of amplifier, sensor and digital loop B shift the exact value only slightly;
 /// the exact value is the eigenvalue of the discrete assembled plant, mapped by $s = \ln z/T_s$.
@@ -258,11 +258,11 @@ impl Physics {
 pub struct UnstablePolePrediction {
     /// Predicted number of unstable poles (always 1 for a stabilised loop B).
     pub count: usize,
-    /// $\sqrt{k_x (a+b)^2/J_B}$, rotor pinned at B [rad/s].
+    /// $\sqrt{k_x (a+b)^2/J_B}$, rotor pinned at B \[rad/s\].
     pub pinned_at_b_rad_s: f64,
-    /// Rigid rotor with bearing B as the spring $k_B = k_i K_p - k_x$ [rad/s].
+    /// Rigid rotor with bearing B as the spring $k_B = k_i K_p - k_x$ \[rad/s\].
     pub rigid_spring_b_rad_s: f64,
-    /// $k_B$ used above [N/m].
+    /// $k_B$ used above \[N/m\].
     pub bearing_b_stiffness_n_per_m: f64,
 }
 

@@ -2,16 +2,16 @@
 //!
 //! # One control period
 //! At $t_k = k T_s$ the controller of each bearing reads the sampled sensor output
-//! $y[k] = y_s(t_k) + v[k]$ (white Gaussian noise $v$, then optional ADC quantisation), computes
-//! $c[k] = C(q)\,(w[k] - y[k])$ (Tustin PID, clamp $\pm i_\mathrm{sat}$, anti-windup) and, at
-//! bearing A, the recorded output $u[k] = \operatorname{clamp}(c[k] + r[k], \pm i_\mathrm{sat})$.
-//! Because of the one-sample computation delay, $u[k]$ is the amplifier's current reference
-//! (zero-order hold) during $[t_{k+1}, t_{k+2})$. The recorded $i[k]$ is the actual coil control
+//! $y\[k\] = y_s(t_k) + v\[k\]$ (white Gaussian noise $v$, then optional ADC quantisation), computes
+//! $c\[k\] = C(q)\ (w\[k\] - y\[k\])$ (Tustin PID, clamp $\pm i_\mathrm{sat}$, anti-windup) and, at
+//! bearing A, the recorded output $u\[k\] = \operatorname{clamp}(c\[k\] + r\[k\], \pm i_\mathrm{sat})$.
+//! Because of the one-sample computation delay, $u\[k\]$ is the amplifier's current reference
+//! (zero-order hold) during $[t_{k+1}, t_{k+2})$. The recorded $i\[k\]$ is the actual coil control
 //! current at $t_k$.
 //!
 //! # Modes
 //! * [`Mode::Linear`]: linearised force law, linear amplifier and sensor; the continuous part
-//!   advances exactly, $\xi_{k+1} = A_d \xi_k + B_d\, i_{\mathrm{ref}}$ (ZOH), so with noise off and
+//!   advances exactly, $\xi_{k+1} = A_d \xi_k + B_d\  i_{\mathrm{ref}}$ (ZOH), so with noise off and
 //!   no clamp active the record obeys the linear truth to rounding error.
 //! * [`Mode::Nonlinear`]: the exact force law with the actual coil currents $i_0 \pm i$, amplifier
 //!   output limit and slew limit; the continuous part advances with classical RK4 at
@@ -23,7 +23,7 @@
 //! The amplifier drives the two coils of a pair with $i_1 = i_0 + i$ and $i_2 = i_0 - i$. A coil
 //! obeys $L_c \dot i_j + R_c i_j = V_j$ with $|V_j| \le V_\mathrm{bus}$. Raising $i$ means charging
 //! coil 1 (and discharging coil 2, which the bus does faster), lowering $i$ means charging coil 2:
-//! $$ -\frac{V_\mathrm{bus} - R_c (i_0 - i)}{L_c} \;\le\; \dot i \;\le\;
+//! $$ -\frac{V_\mathrm{bus} - R_c (i_0 - i)}{L_c} \ \le\  \dot i \ \le\
 //!     \frac{V_\mathrm{bus} - R_c (i_0 + i)}{L_c}, $$
 //! applied to the first-order lag $\dot i = \omega_a (i_\mathrm{ref} - i)$. The output is limited
 //! to $|i| \le \min(i_\mathrm{sat}, i_0)$: the unipolar coil currents never go negative.
@@ -55,7 +55,7 @@ pub struct SimOptions {
     pub seed: u64,
     /// Sensor noise on (both sensors, RMS `sensor.noise_rms_m`). Default: on.
     pub noise: bool,
-    /// Position reference $w$ at bearing A [m], one per sample of `r`; `None` means zero.
+    /// Position reference $w$ at bearing A \[m\], one per sample of `r`; `None` means zero.
     pub w: Option<Vec<f64>>,
     /// Also record $u$, $i$, $y$ of bearing B.
     pub record_b: bool,
@@ -79,11 +79,11 @@ impl Default for SimOptions {
 /// Recorded channels of bearing B.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Channels {
-    /// Controller output (DAC value) [A].
+    /// Controller output (DAC value) \[A\].
     pub u: Vec<f64>,
-    /// Actual coil control current at the sample instants [A].
+    /// Actual coil control current at the sample instants \[A\].
     pub i: Vec<f64>,
-    /// Sampled displacement (with noise and quantisation) [m].
+    /// Sampled displacement (with noise and quantisation) \[m\].
     pub y: Vec<f64>,
 }
 
@@ -99,7 +99,7 @@ pub struct SimMeta {
     pub seed: u64,
     /// Whether noise was on.
     pub noise: bool,
-    /// RMS of the sensor noise actually added [m] (0 with noise off).
+    /// RMS of the sensor noise actually added \[m\] (0 with noise off).
     pub noise_rms_m: f64,
     /// Whether the ADC quantisation was applied.
     pub quantized: bool,
@@ -109,17 +109,17 @@ pub struct SimMeta {
     pub samples: usize,
     /// Pre-roll samples.
     pub settle_samples: usize,
-    /// Sampling frequency [Hz].
+    /// Sampling frequency \[Hz\].
     pub fs_hz: f64,
     /// RK4 substeps per period (nonlinear mode), 0 for the exact linear update.
     pub substeps: usize,
-    /// Bias current $i_0$ [A].
+    /// Bias current $i_0$ \[A\].
     pub bias_current_a: f64,
-    /// Air gap $g_0$ [m].
+    /// Air gap $g_0$ \[m\].
     pub air_gap_m: f64,
-    /// $k_i$ at the operating point [N/A].
+    /// $k_i$ at the operating point \[N/A\].
     pub k_i: f64,
-    /// $k_x$ at the operating point [N/m].
+    /// $k_x$ at the operating point \[N/m\].
     pub k_x: f64,
     /// Fraction of samples with any limit active (clamp, amplifier output limit or slew limit).
     pub saturated_fraction: f64,
@@ -129,28 +129,28 @@ pub struct SimMeta {
     pub amp_limit_fraction: f64,
     /// Fraction of samples with the slew-rate limit active (nonlinear mode).
     pub slew_limited_fraction: f64,
-    /// Largest true $|x_A|$ at the recorded sample instants [m].
+    /// Largest true $|x_A|$ at the recorded sample instants \[m\].
     pub max_abs_displacement_a_m: f64,
-    /// Largest true $|x_B|$ at the recorded sample instants [m].
+    /// Largest true $|x_B|$ at the recorded sample instants \[m\].
     pub max_abs_displacement_b_m: f64,
 }
 
 /// A simulation record of bearing A (and B on request). All vectors have one value per sample.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SimRecord {
-    /// Sample time [s].
+    /// Sample time \[s\].
     pub ts: f64,
-    /// Time $t_k = k T_s$ [s].
+    /// Time $t_k = k T_s$ \[s\].
     pub t: Vec<f64>,
-    /// Position reference [m].
+    /// Position reference \[m\].
     pub w: Vec<f64>,
-    /// Excitation added to the controller output [A].
+    /// Excitation added to the controller output \[A\].
     pub r: Vec<f64>,
-    /// Recorded controller output including $r$ (after the DAC clamp) [A].
+    /// Recorded controller output including $r$ (after the DAC clamp) \[A\].
     pub u: Vec<f64>,
-    /// Actual coil control current at $t_k$ [A].
+    /// Actual coil control current at $t_k$ \[A\].
     pub i: Vec<f64>,
-    /// Sampled displacement with noise and quantisation [m].
+    /// Sampled displacement with noise and quantisation \[m\].
     pub y: Vec<f64>,
     /// Bearing B, if `record_b`.
     pub b: Option<Channels>,
@@ -272,7 +272,7 @@ impl Nl {
 }
 
 impl Twin {
-    /// Simulates the closed loop with excitation `r` [A] added to controller A's output.
+    /// Simulates the closed loop with excitation `r` \[A\] added to controller A's output.
     ///
     /// Returns one record sample per element of `r`. Errors: non-finite `r` or `w` (with the
     /// index), `w` of the wrong length, empty `r`, touchdown ([`TwinError::Touchdown`]) or a

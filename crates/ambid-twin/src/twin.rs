@@ -14,13 +14,13 @@ pub const LIGHTLY_DAMPED: f64 = 0.5;
 /// A complex closed-loop pole pair, mapped to continuous time by $s = \ln(z)/T_s$.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct ClosedLoopMode {
-    /// Natural frequency $|s|/2\pi$ [Hz].
+    /// Natural frequency $|s|/2\pi$ \[Hz\].
     pub freq_hz: f64,
-    /// Damped frequency $\operatorname{Im}(s)/2\pi$ [Hz].
+    /// Damped frequency $\operatorname{Im}(s)/2\pi$ \[Hz\].
     pub damped_freq_hz: f64,
     /// Damping ratio $\zeta = -\operatorname{Re}(s)/|s|$.
     pub damping: f64,
-    /// The discrete pole (upper half plane member of the pair); serialised as `[re, im]`.
+    /// The discrete pole (upper half plane member of the pair); serialised as `\[re, im\]`.
     #[serde(serialize_with = "ser_c64")]
     pub z: c64,
 }
@@ -137,17 +137,17 @@ impl Twin {
         })
     }
 
-    /// Sample time $T_s = 1/f_s$ [s].
+    /// Sample time $T_s = 1/f_s$ \[s\].
     pub fn ts(&self) -> f64 {
         self.ph.ts
     }
 
-    /// Sampling frequency $f_s$ [Hz].
+    /// Sampling frequency $f_s$ \[Hz\].
     pub fn fs(&self) -> f64 {
         self.cfg.controller.fs_hz
     }
 
-    /// Control-current saturation $i_\mathrm{sat}$ [A].
+    /// Control-current saturation $i_\mathrm{sat}$ \[A\].
     pub fn i_sat(&self) -> f64 {
         self.ph.i_sat
     }
@@ -191,7 +191,7 @@ impl Twin {
         &self.closed
     }
 
-    /// Exact frequency response of the assembled plant $P(e^{j2\pi f T_s})$ at `f_hz` [Hz].
+    /// Exact frequency response of the assembled plant $P(e^{j2\pi f T_s})$ at `f_hz` \[Hz\].
     pub fn plant_frf(&self, f_hz: &[f64]) -> Result<Vec<c64>> {
         Ok(self.plant.freq_response_siso(f_hz)?)
     }
