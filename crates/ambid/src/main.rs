@@ -68,25 +68,25 @@ enum SignalCmd {
         #[arg(long, default_value_t = 20)]
         periods: usize,
         /// Amplitude in A (values ±amplitude + offset).
-        #[arg(long, default_value_t = 0.2)]
+        #[arg(long, default_value_t = 0.2, allow_negative_numbers = true)]
         amplitude: f64,
         /// Mean offset in A.
-        #[arg(long, default_value_t = 0.0)]
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
         offset: f64,
     },
     /// Swept sine.
     Chirp {
         /// Start frequency, Hz.
-        #[arg(long, default_value_t = 1.0)]
+        #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
         f0: f64,
         /// End frequency, Hz.
-        #[arg(long, default_value_t = 1000.0)]
+        #[arg(long, default_value_t = 1000.0, allow_negative_numbers = true)]
         f1: f64,
         /// Duration of one sweep, s.
-        #[arg(long, default_value_t = 10.0)]
+        #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
         duration: f64,
         /// Amplitude in A.
-        #[arg(long, default_value_t = 0.2)]
+        #[arg(long, default_value_t = 0.2, allow_negative_numbers = true)]
         amplitude: f64,
         /// Sweep law.
         #[arg(long, value_enum, default_value_t = SweepArg::Linear)]
@@ -98,7 +98,7 @@ enum SignalCmd {
     /// White noise, Gaussian or uniform, optionally band-limited.
     Noise {
         /// RMS value in A.
-        #[arg(long, default_value_t = 0.1)]
+        #[arg(long, default_value_t = 0.1, allow_negative_numbers = true)]
         rms: f64,
         /// Number of samples.
         #[arg(long, default_value_t = 102_300)]
@@ -119,10 +119,10 @@ enum SignalCmd {
     /// Periodic multisine with bin-aligned lines.
     Multisine {
         /// Lowest line, Hz.
-        #[arg(long, default_value_t = 5.0)]
+        #[arg(long, default_value_t = 5.0, allow_negative_numbers = true)]
         f_min: f64,
         /// Highest line, Hz.
-        #[arg(long, default_value_t = 2000.0)]
+        #[arg(long, default_value_t = 2000.0, allow_negative_numbers = true)]
         f_max: f64,
         /// Samples per period.
         #[arg(long, default_value_t = 5115)]
@@ -131,7 +131,7 @@ enum SignalCmd {
         #[arg(long, default_value_t = 20)]
         periods: usize,
         /// RMS value in A.
-        #[arg(long, default_value_t = 0.1)]
+        #[arg(long, default_value_t = 0.1, allow_negative_numbers = true)]
         rms: f64,
         /// Frequency grid.
         #[arg(long, value_enum, default_value_t = GridArg::Odd)]
@@ -178,10 +178,10 @@ struct TwinArgs {
     #[arg(long)]
     config: Option<PathBuf>,
     /// Bias current i0 in A (overrides the configuration).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     bias: Option<f64>,
     /// Nominal air gap g0 in m (overrides the configuration), e.g. 0.00041.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     gap: Option<f64>,
 }
 
@@ -194,7 +194,7 @@ struct SimulateArgs {
     excitation: ExcitationKind,
     /// Excitation level as a fraction of the saturation current i_sat (peak for PRBS, chirp and
     /// multisine; RMS for noise). 0.1 = 10 %.
-    #[arg(long, default_value_t = 0.10)]
+    #[arg(long, default_value_t = 0.10, allow_negative_numbers = true)]
     amplitude: f64,
     /// PRBS order n.
     #[arg(long, default_value_t = 10)]
@@ -206,13 +206,13 @@ struct SimulateArgs {
     #[arg(long, default_value_t = 20)]
     periods: usize,
     /// Lowest frequency (chirp, noise band, multisine), Hz.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     f_min: f64,
     /// Highest frequency (chirp, noise band, multisine), Hz.
-    #[arg(long, default_value_t = 2000.0)]
+    #[arg(long, default_value_t = 2000.0, allow_negative_numbers = true)]
     f_max: f64,
     /// Period length for chirp/multisine, record length for noise and none, s.
-    #[arg(long, default_value_t = 0.2558)]
+    #[arg(long, default_value_t = 0.2558, allow_negative_numbers = true)]
     period: f64,
     /// Simulation mode.
     #[arg(long, value_enum, default_value_t = ModeArg::Nonlinear)]
@@ -370,10 +370,10 @@ fn twin_config(a: &TwinArgs) -> Result<TwinConfig> {
         None => TwinConfig::default(),
     };
     if let Some(b) = a.bias {
-        cfg.operating_point.bias_current = b;
+        cfg.operating_point.bias_current_a = b;
     }
     if let Some(g) = a.gap {
-        cfg.operating_point.air_gap = g;
+        cfg.operating_point.air_gap_m = g;
     }
     cfg.validate()?;
     Ok(cfg)
@@ -382,21 +382,30 @@ fn twin_config(a: &TwinArgs) -> Result<TwinConfig> {
 fn info(a: TwinArgs) -> Result<()> {
     let twin = ambid_twin::Twin::new(twin_config(&a)?)?;
     let lp = twin.linear_params();
-    println!("linearised magnet: k_i = {:.2} N/A, k_x = {:.4e} N/m", lp.k_i, lp.k_x);
+    println!(
+        "linearised magnet: k_i = {:.2} N/A, k_x = {:.4e} N/m",
+        lp.k_i, lp.k_x
+    );
     println!("closed-loop modes (lightly damped pole pairs):");
     for m in twin.closed_loop_modes() {
         println!("  {:8.1} Hz   damping {:.3}", m.freq_hz, m.damping);
     }
-    let (f, s) = twin.peak_sensitivity();
+    let (f, s) = twin.peak_sensitivity()?;
     println!("peak sensitivity |S| = {s:.3} at {f:.1} Hz");
     println!("unstable poles of the assembled plant P (z; s = ln z / Ts):");
-    for z in twin.plant_unstable_poles() {
-        let s = z.ln() / twin.ts();
+    for z in twin.plant_unstable_poles()? {
+        let s = twin.pole_to_s(z);
         println!(
             "  z = {:.6}{:+.6}j   s = {:.2}{:+.2}j rad/s",
             z.re, z.im, s.re, s.im
         );
     }
+    let pred = twin.predicted_unstable_pole();
+    println!(
+        "physics prediction ({} unstable pole): rigid rotor with loop B as a spring k_B = {:.4e} N/m: \
+         s = +{:.2} rad/s; rotor pinned at B (lower bound): s = +{:.2} rad/s",
+        pred.count, pred.bearing_b_stiffness_n_per_m, pred.rigid_spring_b_rad_s, pred.pinned_at_b_rad_s
+    );
     Ok(())
 }
 

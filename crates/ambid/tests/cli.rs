@@ -80,7 +80,10 @@ fn bad_inputs_exit_nonzero_with_a_message() {
         (&["simulate", "--bias", "-1"], "bias"),
         (&["simulate", "--frobnicate"], "--frobnicate"),
         (&["simulate", "--mode", "quadratic"], "quadratic"),
-        (&["simulate", "--config", "/nonexistent/twin.toml"], "cannot read"),
+        (
+            &["simulate", "--config", "/nonexistent/twin.toml"],
+            "cannot read",
+        ),
     ];
     for (args, needle) in cases {
         let o = ambid(args);
@@ -98,7 +101,13 @@ fn malformed_or_unstable_config_is_rejected() {
     let d = tmpdir("cfg");
     let bad = d.join("bad.toml");
     std::fs::write(&bad, "[rotor]\nmass = \"heavy\"\n").unwrap();
-    let o = ambid(&["simulate", "--config", bad.to_str().unwrap(), "--out", d.to_str().unwrap()]);
+    let o = ambid(&[
+        "simulate",
+        "--config",
+        bad.to_str().unwrap(),
+        "--out",
+        d.to_str().unwrap(),
+    ]);
     assert!(!o.status.success());
     let unknown = d.join("unknown.toml");
     std::fs::write(&unknown, "[rotor]\nmasss = 5.0\n").unwrap();
