@@ -167,7 +167,7 @@ pub fn read_time_csv(path: &Path, fs_hz: Option<f64>) -> Result<TimeData> {
         (Some(k), _) => {
             let t = &cols[k];
             let ts = (t[n - 1] - t[0]) / (n - 1) as f64;
-            if !(ts > 0.0) {
+            if ts.is_nan() || ts <= 0.0 {
                 bail!("{}: the `t` column must increase", path.display());
             }
             if let Some(j) = (1..n).find(|&j| ((t[j] - t[j - 1]) - ts).abs() > 1e-6 * ts) {
