@@ -4,8 +4,8 @@
 use ambid::experiment::{self, ExcitationKind, ExcitationPlan, Experiment};
 use ambid::io::{write_frf_csv, write_time_csv, FrfColumn};
 use ambid_core::signal::{
-    ChirpSpec, Distribution, ExcitationSpec, Grid, MultisineSpec, NoiseSpec, Phases, PrbsSpec,
-    Sweep,
+    amplitude_spectrum, autocorrelation, ChirpSpec, Distribution, ExcitationSpec, Grid,
+    MultisineSpec, NoiseSpec, Phases, PrbsSpec, Sweep,
 };
 use ambid_twin::{Mode, TwinConfig};
 use anyhow::{bail, Context, Result};
@@ -52,6 +52,13 @@ struct ExciteArgs {
     /// Print the report as JSON instead of text.
     #[arg(long, global = true)]
     json: bool,
+    /// Write the one-sided amplitude spectrum of one period (columns f_hz, amplitude) to this CSV.
+    #[arg(long, global = true)]
+    spectrum: Option<PathBuf>,
+    /// Write the normalised autocorrelation of one period (columns lag_s, r; circular for
+    /// periodic signals) to this CSV.
+    #[arg(long, global = true)]
+    autocorr: Option<PathBuf>,
 }
 
 #[derive(Subcommand)]
@@ -336,11 +343,27 @@ fn excite(a: ExciteArgs) -> Result<()> {
         }),
     };
     let report = spec.report(ts)?;
-    if let Some(out) = &a.out {
+    if a.out.is_some() || a.spectrum.is_some() || a.autocorr.is_some() {
         let e = spec.generate(ts)?;
-        let t: Vec<f64> = (0..e.values.len()).map(|k| k as f64 * ts).collect();
-        ensure_parent(out)?;
-        write_time_csv(out, &[("t", &t), ("r", &e.values)])?;
+        if let Some(out) = &a.out {
+            ensure_parent(out)?;
+            write_time_csv(out, &[("t", &e.times()), ("r", &e.values)])?;
+        }
+        // one period of a periodic signal (the whole record otherwise)
+        let period = e.period(0).unwrap_or(&e.values);
+        if let Some(path) = &a.spectrum {
+            let (f, amp) = amplitude_spectrum(period, ts)?;
+            ensure_parent(path)?;
+            write_time_csv(path, &[("f_hz", &f), ("amplitude", &amp)])?;
+        }
+        if let Some(path) = &a.autocorr {
+            let max_lag = (period.len() - 1).min(MAX_AUTOCORR_LAG);
+            let circular = e.periods > 1 || e.period_samples < e.values.len();
+            let rho = autocorrelation(period, max_lag, circular)?;
+            let lag: Vec<f64> = (0..rho.len()).map(|k| k as f64 * ts).collect();
+            ensure_parent(path)?;
+            write_time_csv(path, &[("lag_s", &lag), ("r", &rho)])?;
+        }
     }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -352,6 +375,9 @@ fn excite(a: ExciteArgs) -> Result<()> {
     }
     Ok(())
 }
+
+/// Longest autocorrelation lag written by `excite --autocorr` (samples).
+const MAX_AUTOCORR_LAG: usize = 20_000;
 
 fn ensure_parent(p: &Path) -> Result<()> {
     if let Some(d) = p.parent().filter(|d| !d.as_os_str().is_empty()) {

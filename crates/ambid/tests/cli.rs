@@ -159,8 +159,36 @@ fn simulate_with_defaults_writes_data_truth_and_meta() {
 }
 
 #[test]
-fn large_excitation_warns_about_saturation() {
+fn large_excitation_warns_about_saturation_or_stops_at_touchdown() {
     let d = tmpdir("sat");
+    // high-frequency multisine at 90 % of i_sat: the rotor barely moves, the amplifier slews
+    let o = ambid(&[
+        "simulate",
+        "--excitation",
+        "multisine",
+        "--f-min",
+        "1500",
+        "--f-max",
+        "3000",
+        "--amplitude",
+        "0.9",
+        "--periods",
+        "2",
+        "--period",
+        "0.05",
+        "--out",
+        d.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("warning") && err.contains("saturated"),
+        "{err}"
+    );
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("meta.json")).unwrap()).unwrap();
+    assert!(meta["simulation"]["saturated_fraction"].as_f64().unwrap() > 0.1);
+    // a 90 % PRBS pushes the rotor into the magnet: a clear error, non-zero exit
     let o = ambid(&[
         "simulate",
         "--amplitude",
@@ -170,10 +198,50 @@ fn large_excitation_warns_about_saturation() {
         "--out",
         d.to_str().unwrap(),
     ]);
-    let t = text(&o);
-    // Either the run completes with a saturation warning or it stops with a touchdown error; never silent.
-    assert!(
-        t.contains("saturated") || t.to_lowercase().contains("touch"),
-        "{t}"
-    );
+    assert!(!o.status.success());
+    assert!(text(&o).contains("touched down"), "{}", text(&o));
+}
+
+#[test]
+fn excite_writes_spectrum_and_autocorrelation_of_one_period() {
+    let d = tmpdir("analysis");
+    let (s, a) = (d.join("s.csv"), d.join("a.csv"));
+    let o = ambid(&[
+        "excite",
+        "prbs",
+        "--order",
+        "7",
+        "--samples-per-bit",
+        "1",
+        "--periods",
+        "3",
+        "--amplitude",
+        "1",
+        "--spectrum",
+        s.to_str().unwrap(),
+        "--autocorr",
+        a.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let col = |p: &PathBuf| -> Vec<f64> {
+        std::fs::read_to_string(p)
+            .unwrap()
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').nth(1).unwrap().parse().unwrap())
+            .collect()
+    };
+    // Nb = 1: flat line spectrum |X_k| = sqrt(L+1)/L·2 (one-sided), DC = 1/L
+    let (amp, l) = (col(&s), 127.0);
+    assert_eq!(amp.len(), 64);
+    assert!((amp[0] - 1.0 / l).abs() < 1e-12);
+    for v in &amp[1..] {
+        assert!((v - 2.0 * (l + 1.0f64).sqrt() / l).abs() < 1e-12, "{v}");
+    }
+    // circular autocorrelation: 1 at lag 0, −1/L elsewhere
+    let rho = col(&a);
+    assert!((rho[0] - 1.0).abs() < 1e-12);
+    for v in &rho[1..] {
+        assert!((v + 1.0 / l).abs() < 1e-12, "{v}");
+    }
 }
