@@ -46,7 +46,8 @@ pub struct ExcitationPlan {
     pub f_min_hz: f64,
     /// Upper frequency (chirp end, multisine highest line, noise band), Hz.
     pub f_max_hz: f64,
-    /// Duration of one period (chirp, multisine) or of the whole record (noise), s.
+    /// Duration of one period (chirp, multisine), s. Noise and no-excitation records last
+    /// `periods × period_s` so that every kind gives a record of the same length by default.
     pub period_s: f64,
     /// Seed for random signals (noise, random phases).
     pub seed: u64,
@@ -63,7 +64,7 @@ impl Default for ExcitationPlan {
             periods: 20,
             f_min_hz: 1.0,
             f_max_hz: 2000.0,
-            period_s: 0.2558,
+            period_s: 0.25575,
             seed: 1,
         }
     }
@@ -107,7 +108,7 @@ impl ExcitationPlan {
             ExcitationKind::Noise => ExcitationSpec::Noise(NoiseSpec {
                 distribution: Distribution::Gaussian,
                 rms: amp,
-                n_samples: period_samples,
+                n_samples: period_samples * self.periods,
                 band_hz: Some((self.f_min_hz, self.f_max_hz)),
                 seed: self.seed,
             }),
@@ -125,15 +126,21 @@ impl ExcitationPlan {
     }
 
     /// Generates the excitation for the twin's sample time; a multisine is rescaled so its peak is
-    /// the requested level. `None` gives `samples` zeros.
-    pub fn generate(&self, i_sat: f64, ts: f64, samples: usize) -> Result<Excitation> {
+    /// the requested level. `None` gives `periods × period_s` of zeros.
+    pub fn generate(&self, i_sat: f64, ts: f64) -> Result<Excitation> {
         match self.spec(i_sat, ts)? {
-            None => Ok(Excitation {
-                values: vec![0.0; samples],
-                ts,
-                period_samples: samples,
-                periods: 1,
-            }),
+            None => {
+                let period_samples = (self.period_s / ts).round() as usize;
+                if period_samples == 0 || self.periods == 0 {
+                    bail!("a record without excitation needs --period > 0 and --periods ≥ 1");
+                }
+                Ok(Excitation {
+                    values: vec![0.0; period_samples * self.periods],
+                    ts,
+                    period_samples,
+                    periods: self.periods,
+                })
+            }
             Some(spec) => {
                 let mut e = spec.generate(ts).context("designing the excitation")?;
                 if self.kind == ExcitationKind::Multisine {
@@ -216,10 +223,7 @@ pub struct ExperimentOutput {
 /// Runs the experiment on the twin.
 pub fn run(exp: &Experiment) -> Result<ExperimentOutput> {
     let twin = Twin::new(exp.twin.clone()).context("building the AMB twin")?;
-    let default_len = (exp.excitation.period_s / twin.ts()).round() as usize;
-    let excitation = exp
-        .excitation
-        .generate(twin.i_sat(), twin.ts(), default_len)?;
+    let excitation = exp.excitation.generate(twin.i_sat(), twin.ts())?;
     let opts = SimOptions {
         mode: exp.mode,
         seed: exp.seed,
@@ -235,4 +239,58 @@ pub fn run(exp: &Experiment) -> Result<ExperimentOutput> {
         excitation,
         record,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn peak(x: &[f64]) -> f64 {
+        x.iter().fold(0.0f64, |m, v| m.max(v.abs()))
+    }
+
+    #[test]
+    fn every_kind_gives_the_seed_record_length_and_the_stated_level() {
+        let (i_sat, ts) = (2.0, 5e-5);
+        for kind in [
+            ExcitationKind::Prbs,
+            ExcitationKind::Chirp,
+            ExcitationKind::Noise,
+            ExcitationKind::Multisine,
+            ExcitationKind::None,
+        ] {
+            let plan = ExcitationPlan {
+                kind,
+                ..ExcitationPlan::default()
+            };
+            let e = plan.generate(i_sat, ts).unwrap();
+            assert_eq!(e.values.len(), 102_300, "{kind:?}");
+            let level = 0.1 * i_sat;
+            match kind {
+                ExcitationKind::Prbs | ExcitationKind::Chirp => {
+                    assert!((peak(&e.values) - level).abs() < 1e-3 * level, "{kind:?}")
+                }
+                ExcitationKind::Multisine => {
+                    assert!((peak(&e.values) - level).abs() < 1e-12, "{kind:?}")
+                }
+                ExcitationKind::Noise => {
+                    let rms = (e.values.iter().map(|v| v * v).sum::<f64>() / e.values.len() as f64)
+                        .sqrt();
+                    assert!((rms - level).abs() < 1e-9, "{rms}")
+                }
+                ExcitationKind::None => assert_eq!(peak(&e.values), 0.0),
+            }
+        }
+    }
+
+    #[test]
+    fn out_of_range_levels_are_rejected() {
+        for frac in [-0.1, f64::NAN, f64::INFINITY, 1.5] {
+            let plan = ExcitationPlan {
+                amplitude_frac: frac,
+                ..ExcitationPlan::default()
+            };
+            assert!(plan.generate(2.0, 5e-5).is_err(), "{frac}");
+        }
+    }
 }

@@ -218,8 +218,9 @@ struct SimulateArgs {
     /// Highest frequency (chirp, noise band, multisine), Hz.
     #[arg(long, default_value_t = 2000.0, allow_negative_numbers = true)]
     f_max: f64,
-    /// Period length for chirp/multisine, record length for noise and none, s.
-    #[arg(long, default_value_t = 0.2558, allow_negative_numbers = true)]
+    /// Period length for chirp and multisine, s (default: one period of the seed PRBS, 5115
+    /// samples). Noise and `none` records last periods × period.
+    #[arg(long, default_value_t = 0.25575, allow_negative_numbers = true)]
     period: f64,
     /// Simulation mode.
     #[arg(long, value_enum, default_value_t = ModeArg::Nonlinear)]
