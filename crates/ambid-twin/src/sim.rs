@@ -335,15 +335,23 @@ impl Nl {
     }
 
     /// One Lawson (integrating-factor) RK4 step of length `t.h` with the references held.
+    ///
+    /// The matrix products run column by column (`acc += column · scalar`), which vectorises
+    /// without horizontal sums.
     #[inline(always)]
     fn exp_rk4(&self, t: &ExpTables, x: &mut [f64; NX], ira: f64, irb: f64, flags: &mut u8) {
         let h = t.h;
-        // exact linear flows Φ_h ξ (full) and P Φ_{h/2} ξ (projected)
-        let w: [f64; NX] =
-            std::array::from_fn(|i| t.g_h[i][0] * ira + t.g_h[i][1] * irb + dot10(&t.e_h[i], x));
-        let a: [f64; 4] = std::array::from_fn(|i| {
-            t.pg_half[i][0] * ira + t.pg_half[i][1] * irb + dot10(&t.pe_half[i], x)
+        let hh = 0.5 * h;
+        let v: [f64; NX + 2] = std::array::from_fn(|j| {
+            if j < NX {
+                x[j]
+            } else if j == NX {
+                ira
+            } else {
+                irb
+            }
         });
+        // n_1 at the current state
         let p1 = [
             x[0] - self.a * x[1] + self.phi_a * x[2],
             x[0] + self.b * x[1] + self.phi_b * x[2],
@@ -351,38 +359,44 @@ impl Nl {
             x[7],
         ];
         let n1 = self.residual(&p1, ira, irb, flags);
-        let hh = 0.5 * h;
-        let p2: [f64; 4] = std::array::from_fn(|i| a[i] + hh * dot4(&t.pebn_half[i], &n1));
+        // exact linear flows: Φ_h ξ (full) and P Φ_{h/2} ξ (projected)
+        let mut w = [0.0f64; NX];
+        let mut a = [0.0f64; 4];
+        for j in 0..NX + 2 {
+            axpy(&mut w, &t.lin_h[j], v[j]);
+            axpy(&mut a, &t.plin_half[j], v[j]);
+        }
+        let mut p2 = a;
+        for j in 0..4 {
+            axpy(&mut p2, &t.pebn_half[j], hh * n1[j]);
+        }
         let n2 = self.residual(&p2, ira, irb, flags);
         // P B_n = [0 0 0 0; 0 0 0 0; 0 0 1 0; 0 0 0 1]: forces do not move x_A, x_B directly
         let p3 = [a[0], a[1], a[2] + hh * n2[2], a[3] + hh * n2[3]];
         let n3 = self.residual(&p3, ira, irb, flags);
-        let p4 = [
-            t.pw[0][0] * w[0]
-                + t.pw[0][1] * w[1]
-                + t.pw[0][2] * w[2]
-                + h * dot4(&t.pebn_half[0], &n3),
-            t.pw[1][0] * w[0]
-                + t.pw[1][1] * w[1]
-                + t.pw[1][2] * w[2]
-                + h * dot4(&t.pebn_half[1], &n3),
-            w[6] + h * dot4(&t.pebn_half[2], &n3),
-            w[7] + h * dot4(&t.pebn_half[3], &n3),
+        let mut p4 = [
+            t.pw[0][0] * w[0] + t.pw[0][1] * w[1] + t.pw[0][2] * w[2],
+            t.pw[1][0] * w[0] + t.pw[1][1] * w[1] + t.pw[1][2] * w[2],
+            w[6],
+            w[7],
         ];
+        for j in 0..4 {
+            axpy(&mut p4, &t.pebn_half[j], h * n3[j]);
+        }
         let n4 = self.residual(&p4, ira, irb, flags);
         let h6 = h / 6.0;
-        let m1: [f64; 4] = std::array::from_fn(|j| h6 * n1[j]);
-        let m23: [f64; 4] = std::array::from_fn(|j| 2.0 * h6 * (n2[j] + n3[j]));
-        for i in 0..NX {
-            x[i] = w[i] + dot4(&t.ebn_h[i], &m1) + dot4(&t.ebn_half[i], &m23);
+        for j in 0..4 {
+            axpy(&mut w, &t.kn[j], h6 * n1[j]);
+            axpy(&mut w, &t.kn[4 + j], 2.0 * h6 * (n2[j] + n3[j]));
         }
-        // + h/6 B_n n4 (sparse)
+        // + h/6 B_n n_4 (sparse)
         let (fa, fb) = (h6 * n4[0], h6 * n4[1]);
-        x[3] += (fa + fb) * self.inv_m;
-        x[4] += (self.b * fb - self.a * fa) * self.inv_j;
-        x[5] += self.phi_a * fa + self.phi_b * fb;
-        x[6] = (x[6] + h6 * n4[2]).clamp(-self.imax, self.imax);
-        x[7] = (x[7] + h6 * n4[3]).clamp(-self.imax, self.imax);
+        w[3] += (fa + fb) * self.inv_m;
+        w[4] += (self.b * fb - self.a * fa) * self.inv_j;
+        w[5] += self.phi_a * fa + self.phi_b * fb;
+        w[6] = (w[6] + h6 * n4[2]).clamp(-self.imax, self.imax);
+        w[7] = (w[7] + h6 * n4[3]).clamp(-self.imax, self.imax);
+        *x = w;
     }
 
     /// Advances one control period with `t`'s exponential RK4 steps; same contract as
@@ -408,23 +422,12 @@ impl Nl {
     }
 }
 
+/// `acc += col · s`.
 #[inline(always)]
-fn dot10(a: &[f64; NX], x: &[f64; NX]) -> f64 {
-    // two independent partial sums shorten the dependent chain
-    let mut s0 = a[0] * x[0];
-    let mut s1 = a[1] * x[1];
-    let mut j = 2;
-    while j < NX {
-        s0 += a[j] * x[j];
-        s1 += a[j + 1] * x[j + 1];
-        j += 2;
+fn axpy<const N: usize>(acc: &mut [f64; N], col: &[f64; N], s: f64) {
+    for (a, c) in acc.iter_mut().zip(col) {
+        *a += c * s;
     }
-    s0 + s1
-}
-
-#[inline(always)]
-fn dot4(a: &[f64; 4], x: &[f64; 4]) -> f64 {
-    (a[0] * x[0] + a[1] * x[1]) + (a[2] * x[2] + a[3] * x[3])
 }
 
 /// Precomputed tables of the exponential (Lawson) RK4 integrator, built once per twin (see the
@@ -435,12 +438,13 @@ pub(crate) struct ExpTables {
     h: f64,
     /// Steps per control period.
     steps: usize,
-    e_h: [[f64; NX]; NX],
-    g_h: [[f64; 2]; NX],
-    pe_half: [[f64; NX]; 4],
-    pg_half: [[f64; 2]; 4],
-    ebn_h: [[f64; 4]; NX],
-    ebn_half: [[f64; 4]; NX],
+    /// Columns of $[E_h \ G_h]$.
+    lin_h: [[f64; NX]; NX + 2],
+    /// Columns of $[P E_{h/2} \ P G_{h/2}]$.
+    plin_half: [[f64; 4]; NX + 2],
+    /// Columns of $[E_h B_n \ E_{h/2} B_n]$.
+    kn: [[f64; NX]; 8],
+    /// Columns of $P E_{h/2} B_n$.
     pebn_half: [[f64; 4]; 4],
     /// Rows $c_A$, $c_B$ of $P$ on $(z, \theta, \eta)$.
     pw: [[f64; 3]; 2],
@@ -495,21 +499,41 @@ impl ExpTables {
         let pe_half: [[f64; NX]; 4] = std::array::from_fn(|i| {
             std::array::from_fn(|j| (0..NX).map(|k| p[i][k] * e_half[k][j]).sum())
         });
-        let pg_half = std::array::from_fn(|i| {
+        let pg_half: [[f64; 2]; 4] = std::array::from_fn(|i| {
             std::array::from_fn(|j| (0..NX).map(|k| p[i][k] * g_half[k][j]).sum())
         });
-        let pebn_half = std::array::from_fn(|i| {
+        let pebn_half: [[f64; 4]; 4] = std::array::from_fn(|i| {
             std::array::from_fn(|j| (0..NX).map(|k| p[i][k] * ebn_half[k][j]).sum())
         });
+        // column-major copies for the hot loop
+        let lin_h = std::array::from_fn(|j| {
+            std::array::from_fn(|i| if j < NX { e_h[i][j] } else { g_h[i][j - NX] })
+        });
+        let plin_half = std::array::from_fn(|j| {
+            std::array::from_fn(|i| {
+                if j < NX {
+                    pe_half[i][j]
+                } else {
+                    pg_half[i][j - NX]
+                }
+            })
+        });
+        let kn = std::array::from_fn(|j| {
+            std::array::from_fn(|i| {
+                if j < 4 {
+                    ebn_h[i][j]
+                } else {
+                    ebn_half[i][j - 4]
+                }
+            })
+        });
+        let pebn_half = std::array::from_fn(|j| std::array::from_fn(|i| pebn_half[i][j]));
         Ok(ExpTables {
             h,
             steps,
-            e_h,
-            g_h,
-            pe_half,
-            pg_half,
-            ebn_h,
-            ebn_half,
+            lin_h,
+            plin_half,
+            kn,
             pebn_half,
             pw: [ca, cb],
         })
