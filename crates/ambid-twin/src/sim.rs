@@ -362,13 +362,13 @@ impl Nl {
         // exact linear flows: Φ_h ξ (full) and P Φ_{h/2} ξ (projected)
         let mut w = [0.0f64; NX];
         let mut a = [0.0f64; 4];
-        for j in 0..NX + 2 {
-            axpy(&mut w, &t.lin_h[j], v[j]);
-            axpy(&mut a, &t.plin_half[j], v[j]);
+        for ((cw, ca), &vj) in t.lin_h.iter().zip(&t.plin_half).zip(&v) {
+            axpy(&mut w, cw, vj);
+            axpy(&mut a, ca, vj);
         }
         let mut p2 = a;
-        for j in 0..4 {
-            axpy(&mut p2, &t.pebn_half[j], hh * n1[j]);
+        for (c, &nj) in t.pebn_half.iter().zip(&n1) {
+            axpy(&mut p2, c, hh * nj);
         }
         let n2 = self.residual(&p2, ira, irb, flags);
         // P B_n = [0 0 0 0; 0 0 0 0; 0 0 1 0; 0 0 0 1]: forces do not move x_A, x_B directly
@@ -380,8 +380,8 @@ impl Nl {
             w[6],
             w[7],
         ];
-        for j in 0..4 {
-            axpy(&mut p4, &t.pebn_half[j], h * n3[j]);
+        for (c, &nj) in t.pebn_half.iter().zip(&n3) {
+            axpy(&mut p4, c, h * nj);
         }
         let n4 = self.residual(&p4, ira, irb, flags);
         let h6 = h / 6.0;
