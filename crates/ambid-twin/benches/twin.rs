@@ -4,11 +4,14 @@
 //! Run: `cargo bench -p ambid-twin`.
 //!
 //! Measured (shared 2-core AMD EPYC VM, release profile, default target CPU, medians):
-//! linear 5.9 ms (≈ 860× real time); nonlinear RK4 (10 substeps, 4.09 M right-hand-side
+//! linear 5.8 ms (≈ 880× real time); nonlinear RK4 (10 substeps, 4.09 M right-hand-side
 //! evaluations ≈ 15 ns each) 62 ms (≈ 83× real time); nonlinear exponential RK4
 //! (`simulation.integrator = "exp_rk4"`, exact linear flow + RK4 on the nonlinear residual)
-//! 18.6 ms with 1 step per period (≈ 275× real time), 28.7 ms with 2. The nonlinear target of
-//! ≤ 10 ms (≥ 500× real time) is NOT met by either; the physics was not reduced to chase it.
+//! 16.5 ms with 1 step per period (≈ 310× real time), 26.2 ms with 2. The step is bound by
+//! instruction throughput (one 10×12 and one 4×12 product, four residual evaluations, two 10×4
+//! products per step, SSE2 only); an AVX2 build of the step gained only ≈ 5 % and was not kept.
+//! The nonlinear target of ≤ 10 ms (≥ 500× real time) is NOT met by either integrator; the
+//! physics was not reduced to chase it.
 
 use ambid_twin::{Integrator, Mode, SimOptions, Twin, TwinConfig};
 use divan::{black_box, Bencher};

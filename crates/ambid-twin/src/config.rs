@@ -512,6 +512,24 @@ mod tests {
     }
 
     #[test]
+    fn integrator_settings() {
+        let c = TwinConfig::from_toml_str(
+            "[simulation]\nintegrator = \"exp_rk4\"\nexp_substeps = 2\nsubsteps = 4\n",
+        )
+        .unwrap();
+        assert_eq!(c.simulation.integrator, Integrator::ExpRk4);
+        assert_eq!(c.simulation.steps_per_period(), 2);
+        assert_eq!(TwinConfig::default().simulation.integrator, Integrator::Rk4);
+        let e =
+            TwinConfig::from_toml_str("[simulation]\nintegrator = \"exp_rk4\"\nexp_substeps = 0\n")
+                .unwrap_err();
+        assert!(e.to_string().contains("exp_substeps"), "{e}");
+        assert!(TwinConfig::from_toml_str("[simulation]\nintegrator = \"euler\"\n").is_err());
+        assert_eq!("exp-rk4".parse::<Integrator>().unwrap(), Integrator::ExpRk4);
+        assert_eq!(Integrator::ExpRk4.to_string(), "exp_rk4");
+    }
+
+    #[test]
     fn mode_parse() {
         assert_eq!("Linear".parse::<Mode>().unwrap(), Mode::Linear);
         assert_eq!("nonlinear".parse::<Mode>().unwrap(), Mode::Nonlinear);
