@@ -218,17 +218,79 @@ impl Default for OperatingPoint {
     }
 }
 
-/// Numerical settings of the simulation.
+/// Integrator of the continuous part in nonlinear mode.
+///
+/// Both integrate the same exact nonlinear right-hand side $\dot\xi = f(\xi, i_\mathrm{ref})$
+/// (exact force law, amplifier output and slew limits) with the references held over a control
+/// period (ZOH); see [`crate::sim`] for the schemes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Integrator {
+    /// Classical RK4 with `simulation.substeps` (≥ 10) steps per control period. The default and
+    /// the reference.
+    #[default]
+    Rk4,
+    /// Exponential (Lawson / integrating-factor) RK4 with `simulation.exp_substeps` (≥ 1) steps
+    /// per control period: the linearised model $A_c\xi + B_c i_\mathrm{ref}$ is propagated
+    /// exactly with precomputed matrix exponentials, RK4 acts only on the nonlinear residual
+    /// $f - A_c\xi - B_c i_\mathrm{ref}$ (force-law residuals and amplifier-limit corrections).
+    ExpRk4,
+}
+
+impl std::fmt::Display for Integrator {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Integrator::Rk4 => "rk4",
+            Integrator::ExpRk4 => "exp_rk4",
+        })
+    }
+}
+
+impl std::str::FromStr for Integrator {
+    type Err = TwinError;
+    fn from_str(s: &str) -> Result<Integrator> {
+        match s.trim().to_ascii_lowercase().replace('-', "_").as_str() {
+            "rk4" => Ok(Integrator::Rk4),
+            "exp_rk4" | "exprk4" => Ok(Integrator::ExpRk4),
+            other => Err(TwinError::InvalidArgument {
+                name: "integrator",
+                reason: format!("unknown integrator `{other}`; use `rk4` or `exp_rk4`"),
+            }),
+        }
+    }
+}
+
+/// Numerical settings of the simulation (nonlinear mode only; the linear mode is exact).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SimulationConfig {
-    /// RK4 substeps per control period in nonlinear mode (≥ 10).
+    /// Integrator of the nonlinear mode. Default: [`Integrator::Rk4`].
+    pub integrator: Integrator,
+    /// RK4 substeps per control period for [`Integrator::Rk4`] (≥ 10). Default 10.
     pub substeps: usize,
+    /// Exponential-RK4 steps per control period for [`Integrator::ExpRk4`] (≥ 1, ≤ 1000).
+    /// Default 1: one step of $T_s$ (the linear part is exact at any step; the step only limits
+    /// how well RK4 follows the small nonlinear residual, see [`crate::sim`]).
+    pub exp_substeps: usize,
 }
 
 impl Default for SimulationConfig {
     fn default() -> Self {
-        Self { substeps: 10 }
+        Self {
+            integrator: Integrator::Rk4,
+            substeps: 10,
+            exp_substeps: 1,
+        }
+    }
+}
+
+impl SimulationConfig {
+    /// Steps per control period of the configured integrator.
+    pub fn steps_per_period(&self) -> usize {
+        match self.integrator {
+            Integrator::Rk4 => self.substeps,
+            Integrator::ExpRk4 => self.exp_substeps,
+        }
     }
 }
 
@@ -297,7 +359,7 @@ impl TwinConfig {
 
     /// Checks every value: positive masses, lengths, gaps, bandwidths and gains where physics
     /// needs them, finite everything, $i_0 > 0$, $g_0 > 0$, $i_\mathrm{sat} > 0$, $f_s > 0$,
-    /// substeps ≥ 10, sensor and filter corners below… nothing else (Nyquist is allowed to be
+    /// substeps ≥ 10 (for `rk4`), exp_substeps in 1..=1000, sensor and filter corners below… nothing else (Nyquist is allowed to be
     /// violated by a continuous-time corner: it is physics, not a sampled filter).
     pub fn validate(&self) -> Result<()> {
         let r = &self.rotor;
@@ -352,7 +414,16 @@ impl TwinConfig {
         let o = &self.operating_point;
         positive("operating_point.bias_current_a", o.bias_current_a)?;
         positive("operating_point.air_gap_m", o.air_gap_m)?;
-        if self.simulation.substeps < 10 {
+        if !(1..=1000).contains(&self.simulation.exp_substeps) {
+            return Err(TwinError::Config {
+                field: "simulation.exp_substeps".into(),
+                reason: format!(
+                    "exponential RK4 needs between 1 and 1000 steps per control period, got {}",
+                    self.simulation.exp_substeps
+                ),
+            });
+        }
+        if self.simulation.integrator == Integrator::Rk4 && self.simulation.substeps < 10 {
             return Err(TwinError::Config {
                 field: "simulation.substeps".into(),
                 reason: format!(
@@ -438,6 +509,24 @@ mod tests {
         assert!(e.to_string().contains("substeps"), "{e}");
         let e = TwinConfig::from_toml_str("[rotor\n").unwrap_err();
         assert!(matches!(e, TwinError::Toml(_)));
+    }
+
+    #[test]
+    fn integrator_settings() {
+        let c = TwinConfig::from_toml_str(
+            "[simulation]\nintegrator = \"exp_rk4\"\nexp_substeps = 2\nsubsteps = 4\n",
+        )
+        .unwrap();
+        assert_eq!(c.simulation.integrator, Integrator::ExpRk4);
+        assert_eq!(c.simulation.steps_per_period(), 2);
+        assert_eq!(TwinConfig::default().simulation.integrator, Integrator::Rk4);
+        let e =
+            TwinConfig::from_toml_str("[simulation]\nintegrator = \"exp_rk4\"\nexp_substeps = 0\n")
+                .unwrap_err();
+        assert!(e.to_string().contains("exp_substeps"), "{e}");
+        assert!(TwinConfig::from_toml_str("[simulation]\nintegrator = \"euler\"\n").is_err());
+        assert_eq!("exp-rk4".parse::<Integrator>().unwrap(), Integrator::ExpRk4);
+        assert_eq!(Integrator::ExpRk4.to_string(), "exp_rk4");
     }
 
     #[test]

@@ -70,7 +70,7 @@ pub mod sim;
 mod twin;
 
 pub use config::{
-    AmplifierConfig, ControllerConfig, MagnetConfig, Mode, OperatingPoint, RotorConfig,
+    AmplifierConfig, ControllerConfig, Integrator, MagnetConfig, Mode, OperatingPoint, RotorConfig,
     SensorConfig, SimulationConfig, TwinConfig,
 };
 pub use error::{Result, TwinError};

@@ -3,6 +3,7 @@
 use crate::config::TwinConfig;
 use crate::error::{Result, TwinError};
 use crate::model::{assemble, LinearParams, Physics, Pid, UnstablePolePrediction, NX};
+use crate::sim::ExpTables;
 use ambid_core::lti::StateSpace;
 use faer::c64;
 use serde::Serialize;
@@ -58,6 +59,7 @@ pub struct Twin {
     pub(crate) pid: Pid,
     pub(crate) ad: [[f64; NX]; NX],
     pub(crate) bd: [[f64; 2]; NX],
+    pub(crate) exp: ExpTables,
     continuous: StateSpace,
     discrete: StateSpace,
     controller: StateSpace,
@@ -88,6 +90,7 @@ impl Twin {
             }
             *brow = [discrete.b()[(i, 0)], discrete.b()[(i, 1)]];
         }
+        let exp = ExpTables::new(&ph, &continuous, cfg.simulation.exp_substeps)?;
         let controller = pid.state_space(ts)?;
         let (plant, closed) = assemble(&ad, &bd, &pid, ts)?;
         let cl_poles = closed.poles()?;
@@ -128,6 +131,7 @@ impl Twin {
             pid,
             ad,
             bd,
+            exp,
             continuous,
             discrete,
             controller,
