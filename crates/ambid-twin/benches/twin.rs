@@ -22,19 +22,18 @@ fn main() {
     divan::main();
 }
 
+/// The seed experiment's PRBS (order 10, 5 samples per bit, 20 periods = 102 300 samples) at
+/// 2 % of i_sat.
 fn excitation() -> Vec<f64> {
-    // a deterministic ±2 % PRBS-like square pattern (LFSR order 10, 5 samples per bit)
-    let mut state: u16 = 0x3ff;
-    let mut v = Vec::with_capacity(SAMPLES);
-    while v.len() < SAMPLES {
-        let b = state & 1;
-        let fb = (state ^ (state >> 3)) & 1;
-        state = (state >> 1) | (fb << 9);
-        for _ in 0..5 {
-            v.push(if b == 1 { 0.04 } else { -0.04 });
-        }
-    }
-    v.truncate(SAMPLES);
+    let spec = ambid_core::signal::PrbsSpec {
+        order: 10,
+        samples_per_bit: 5,
+        periods: 20,
+        amplitude: 0.04,
+        offset: 0.0,
+    };
+    let v = spec.generate(5e-5).unwrap().values;
+    assert_eq!(v.len(), SAMPLES);
     v
 }
 
