@@ -114,6 +114,14 @@ fn malformed_or_unstable_config_is_rejected() {
     let o = ambid(&["simulate", "--config", unknown.to_str().unwrap()]);
     assert!(!o.status.success());
     assert!(text(&o).contains("masss"), "{}", text(&o));
+    // too little proportional gain: the negative magnetic stiffness wins, the loop is unstable
+    let weak = d.join("weak.toml");
+    std::fs::write(&weak, "[controller]\nkp = 3000.0\n").unwrap();
+    for cmd in ["simulate", "info"] {
+        let o = ambid(&[cmd, "--config", weak.to_str().unwrap()]);
+        assert!(!o.status.success());
+        assert!(text(&o).to_lowercase().contains("unstable"), "{}", text(&o));
+    }
 }
 
 #[test]
