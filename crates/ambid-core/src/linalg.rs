@@ -79,7 +79,8 @@ fn check_finite_mat(context: &'static str, a: MatRef<'_, f64>) -> Result<()> {
     Ok(())
 }
 
-/// Matrix exponential $e^{A}$ by Padé(13) scaling and squaring.
+/// Matrix exponential $e^{A}$ by Padé(13) scaling and squaring, on the balanced matrix
+/// ($e^{A} = D\,e^{D^{-1} A D}\,D^{-1}$, see [`balance_with_scaling`]).
 ///
 /// Complexity $O(n^3 (6 + s))$. Errors on a non-square or non-finite matrix.
 pub fn expm(a: MatRef<'_, f64>) -> Result<Mat<f64>> {
@@ -105,6 +106,10 @@ pub fn expm(a: MatRef<'_, f64>) -> Result<Mat<f64>> {
         1.0,
     ];
     const THETA13: f64 = 5.371920351148152;
+    // Balance first, e^{A} = D e^{D^{-1} A D} D^{-1}: exact scaling by powers of two that makes
+    // the result accurate entry by entry for badly scaled matrices (and often lowers the norm).
+    let (bal, dscale) = balance_with_scaling(a);
+    let a = bal.as_ref();
     let nrm = norm1(a);
     let s = if nrm > THETA13 {
         (nrm / THETA13).log2().ceil().max(0.0) as i32
@@ -132,23 +137,36 @@ pub fn expm(a: MatRef<'_, f64>) -> Result<Mat<f64>> {
     for _ in 0..s {
         r = &r * &r;
     }
-    Ok(r)
+    Ok(Mat::from_fn(n, n, |i, j| dscale[i] * r[(i, j)] / dscale[j]))
 }
 
-/// Eigenvalues of a general real square matrix.
+/// Eigenvalues of a general real square matrix, computed on the balanced matrix
+/// ([`balance`]) so that badly scaled matrices keep their small eigenvalues accurate.
 pub fn eigenvalues(a: MatRef<'_, f64>) -> Result<Vec<c64>> {
     check_square("eigenvalues", a)?;
     if a.nrows() == 0 {
         return Ok(Vec::new());
     }
-    a.eigenvalues()
+    balance(a)
+        .eigenvalues()
         .map_err(|e| Error::numerical("eigenvalues", format!("{e:?}")))
 }
 
 /// Parlett–Reinsch balancing: returns $D^{-1} A D$ with $D$ a diagonal of powers of two.
 pub fn balance(a: MatRef<'_, f64>) -> Mat<f64> {
+    balance_with_scaling(a).0
+}
+
+/// Parlett–Reinsch balancing with its scaling: returns $(B, d)$ with $B = D^{-1} A D$,
+/// $D = \operatorname{diag}(d)$, every $d_i$ a power of two (so $B$ is exact in floating point).
+///
+/// Balancing equalises the norms of each row and its column, which makes eigenvalues and the
+/// matrix exponential of badly scaled matrices (states in m, rad, A and gains of $10^4$ A/m side
+/// by side) accurate componentwise, not only normwise.
+pub fn balance_with_scaling(a: MatRef<'_, f64>) -> (Mat<f64>, Vec<f64>) {
     let n = a.nrows();
     let mut m = a.to_owned();
+    let mut d = vec![1.0f64; n];
     let radix = 2.0f64;
     let mut converged = false;
     let mut sweeps = 0;
@@ -183,6 +201,7 @@ pub fn balance(a: MatRef<'_, f64>) -> Mat<f64> {
             }
             if (cc + rr) < 0.95 * s {
                 converged = false;
+                d[i] *= f;
                 for j in 0..n {
                     m[(i, j)] /= f;
                 }
@@ -192,7 +211,7 @@ pub fn balance(a: MatRef<'_, f64>) -> Mat<f64> {
             }
         }
     }
-    m
+    (m, d)
 }
 
 /// Roots of the polynomial $c_0 z^{m} + c_1 z^{m-1} + \dots + c_m$ (coefficients in *descending*
@@ -533,6 +552,40 @@ mod tests {
         let el = (-2.0f64).exp();
         assert!((e[(0, 0)] - el).abs() < 1e-15 && (e[(0, 1)] - el).abs() < 1e-15);
         assert!(e[(1, 0)].abs() < 1e-15);
+    }
+
+    #[test]
+    fn badly_scaled_matrices_are_accurate_entry_by_entry() {
+        // S A S^{-1} with S = diag(1e-6, 1, 1e6, 1e3): exp and eigenvalues follow exactly, so each
+        // entry of expm(S A S^{-1}) must equal S_i exp(A)_ij / S_j to working precision.
+        let a = mat![
+            [-1.0, 2.0, 0.5, 0.0],
+            [-3.0, -0.5, 0.0, 1.0],
+            [0.2, 0.0, -2.0, 4.0],
+            [0.0, -1.0, -4.0, -0.3]
+        ];
+        let sc = [1e-6, 1.0, 1e6, 1e3];
+        let b = Mat::from_fn(4, 4, |i, j| sc[i] * a[(i, j)] / sc[j]);
+        let ea = expm(a.as_ref()).unwrap();
+        let eb = expm(b.as_ref()).unwrap();
+        for i in 0..4 {
+            for j in 0..4 {
+                let want = sc[i] * ea[(i, j)] / sc[j];
+                assert!(
+                    (eb[(i, j)] - want).abs() <= 1e-13 * want.abs().max(1e-300),
+                    "({i},{j}): {} vs {want}",
+                    eb[(i, j)]
+                );
+            }
+        }
+        let mut la: Vec<c64> = eigenvalues(a.as_ref()).unwrap();
+        let mut lb: Vec<c64> = eigenvalues(b.as_ref()).unwrap();
+        let key = |z: &c64| (z.re * 1e6).round() as i64 * 1_000_000 + (z.im * 1e6).round() as i64;
+        la.sort_by_key(key);
+        lb.sort_by_key(key);
+        for (x, y) in la.iter().zip(&lb) {
+            assert!((x - y).norm() < 1e-12 * x.norm(), "{x} vs {y}");
+        }
     }
 
     #[test]

@@ -5,7 +5,7 @@ use crate::error::{Result, TwinError};
 use crate::model::{assemble, LinearParams, Physics, Pid, UnstablePolePrediction, NX};
 use crate::sim::ExpTables;
 use ambid_core::lti::StateSpace;
-use faer::{c64, Mat};
+use faer::c64;
 use serde::Serialize;
 use std::f64::consts::PI;
 
@@ -81,7 +81,7 @@ impl Twin {
         let pid = Pid::new(&cfg);
         let ts = ph.ts;
         let continuous = ph.continuous_model()?;
-        let discrete = c2d_zoh_balanced(&continuous, ts)?;
+        let discrete = continuous.c2d_zoh(ts)?;
         let mut ad = [[0.0; NX]; NX];
         let mut bd = [[0.0; 2]; NX];
         for (i, (row, brow)) in ad.iter_mut().zip(bd.iter_mut()).enumerate() {
@@ -93,7 +93,7 @@ impl Twin {
         let exp = ExpTables::new(&ph, &continuous, cfg.simulation.exp_substeps)?;
         let controller = pid.state_space(ts)?;
         let (plant, closed) = assemble(&ad, &bd, &pid, ts)?;
-        let cl_poles = balanced_poles(&closed)?;
+        let cl_poles = closed.poles()?;
         let worst = cl_poles
             .iter()
             .copied()
@@ -311,7 +311,9 @@ impl Twin {
 
     /// Poles of the assembled plant $P$ outside the unit circle ($|z| > 1$), in $z$.
     pub fn plant_unstable_poles(&self) -> Result<Vec<c64>> {
-        Ok(balanced_poles(&self.plant)?
+        Ok(self
+            .plant
+            .poles()?
             .into_iter()
             .filter(|z| z.norm() > 1.0)
             .collect())
@@ -326,94 +328,6 @@ impl Twin {
     pub fn pole_to_s(&self, z: c64) -> c64 {
         z_to_s(z, self.ts())
     }
-}
-
-/// Eigenvalues of $A$ after Parlett–Reinsch balancing (an exact similarity by powers of two).
-///
-/// The assembled models mix states of very different scale (m, rad, A, controller states driven
-/// by gains of $10^4$ A/m), so the fast poles (amplifier, sensor, controller filters near
-/// $|z| \approx 0.04$ and $0.25$) are ill-conditioned in the raw coordinates: unbalanced, the
-/// nominal closed-loop pair at $z \approx -0.0196 \pm 0.0330j$ came out wrong by $1.6\cdot10^{-3}$
-/// (relative), against an independent scipy oracle (`tests/oracle.rs`). Balanced, every pole
-/// agrees to $\sim 10^{-12}$.
-fn balanced_poles(ss: &StateSpace) -> Result<Vec<c64>> {
-    let bal = ambid_core::linalg::balance(ss.a());
-    Ok(ambid_core::linalg::eigenvalues(bal.as_ref())?)
-}
-
-/// ZOH discretisation like [`StateSpace::c2d_zoh`], but with the augmented matrix
-/// $M = \begin{bmatrix} A T_s & B T_s \\ 0 & 0 \end{bmatrix}$ balanced first by a diagonal
-/// similarity of powers of two, $M' = F^{-1} M F$ (Parlett–Reinsch, exact in floating point), so
-/// that $e^{M} = F e^{M'} F^{-1}$.
-///
-/// The states span many orders of magnitude (rotor m and rad, A, sensor m), and the unbalanced
-/// Padé-13 scaling-and-squaring left componentwise errors up to $1.7\cdot10^{-9}$ in the
-/// bending-mode and sensor entries of $A_d$, $B_d$ (normwise only $5\cdot10^{-12}$), i.e.
-/// $1.6\cdot10^{-8}$ relative in $T_{ry}$ near 780 Hz against the scipy oracle
-/// (`tests/oracle.rs`). Balanced, the entries agree with a 40-digit `mpmath` reference to
-/// $\sim 10^{-15}$.
-fn c2d_zoh_balanced(ct: &StateSpace, ts: f64) -> Result<StateSpace> {
-    let (a, b) = (ct.a(), ct.b());
-    let (n, m) = (a.nrows(), b.ncols());
-    let big = Mat::<f64>::from_fn(n + m, n + m, |i, j| {
-        if i < n && j < n {
-            a[(i, j)] * ts
-        } else if i < n {
-            b[(i, j - n)] * ts
-        } else {
-            0.0
-        }
-    });
-    // Parlett–Reinsch: f_i scales column i by f_i and row i by 1/f_i.
-    let nb = n + m;
-    let mut f = vec![1.0f64; nb];
-    let mut mb = big.clone();
-    for _sweep in 0..100 {
-        let mut converged = true;
-        for i in 0..nb {
-            let (mut c, mut r) = (0.0, 0.0);
-            for j in (0..nb).filter(|&j| j != i) {
-                c += mb[(j, i)].abs();
-                r += mb[(i, j)].abs();
-            }
-            if c == 0.0 || r == 0.0 {
-                continue;
-            }
-            let s = c + r;
-            let mut g = 1.0;
-            while c < r / 2.0 {
-                c *= 2.0;
-                r /= 2.0;
-                g *= 2.0;
-            }
-            while c >= r * 2.0 {
-                c /= 2.0;
-                r *= 2.0;
-                g /= 2.0;
-            }
-            if c + r < 0.95 * s {
-                converged = false;
-                f[i] *= g;
-                for j in 0..nb {
-                    mb[(i, j)] /= g;
-                    mb[(j, i)] *= g;
-                }
-            }
-        }
-        if converged {
-            break;
-        }
-    }
-    let e = ambid_core::linalg::expm(mb.as_ref())?;
-    let ad = Mat::<f64>::from_fn(n, n, |i, j| e[(i, j)] * f[i] / f[j]);
-    let bd = Mat::<f64>::from_fn(n, m, |i, j| e[(i, n + j)] * f[i] / f[n + j]);
-    Ok(StateSpace::discrete(
-        ad,
-        bd,
-        ct.c().to_owned(),
-        ct.d().to_owned(),
-        ts,
-    )?)
 }
 
 pub(crate) fn z_to_s(z: c64, ts: f64) -> c64 {
