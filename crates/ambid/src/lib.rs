@@ -1,7 +1,8 @@
 //! # ambid
 //!
-//! The ambid application as a library: file formats ([`io`]) and the twin experiment
-//! ([`experiment`]). The `ambid` binary is a thin command-line layer over these.
+//! The ambid application as a library: file formats ([`io`]), the twin experiment
+//! ([`experiment`]) and the excitation comparison ([`comparison`]). The `ambid` binary is a thin command-line layer over these.
 
+pub mod comparison;
 pub mod experiment;
 pub mod io;

@@ -1,6 +1,7 @@
 //! `ambid`: command-line front end. Each command parses its arguments, calls the library and
 //! writes files; see `ambid --help`.
 
+use ambid::comparison::Compared;
 use ambid::experiment::{self, ExcitationKind, ExcitationPlan, Experiment};
 use ambid::io::{write_frf_csv, write_time_csv, FrfColumn};
 use ambid_core::signal::{
@@ -31,6 +32,9 @@ struct Cli {
 enum Command {
     /// Design an excitation signal, write it as CSV (t, r) and print its band/duration report.
     Excite(ExciteArgs),
+    /// Compare PRBS, chirp, white noise and multisine at one RMS level (the seed paper's figure 3):
+    /// print their statistics, write their waveforms, spectra and autocorrelations.
+    Compare(CompareArgs),
     /// Run the embedded AMB twin in closed loop and write data.csv, truth.csv and meta.json.
     Simulate(SimulateArgs),
     /// Print the twin's default configuration as TOML (edit it and pass it with --config).
@@ -185,6 +189,25 @@ enum ModeArg {
 }
 
 #[derive(Args)]
+struct CompareArgs {
+    /// Sample rate in Hz.
+    #[arg(long, default_value_t = 20_000.0, allow_negative_numbers = true)]
+    fs: f64,
+    /// Common RMS level in A.
+    #[arg(long, default_value_t = 0.1, allow_negative_numbers = true)]
+    level: f64,
+    /// Seed of the noise signal.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Longest autocorrelation lag written, samples.
+    #[arg(long, default_value_t = 1000)]
+    max_lag: usize,
+    /// Output directory for waveforms.csv, spectra.csv, autocorr.csv and comparison.json.
+    #[arg(long, default_value = "out/excitation")]
+    out: PathBuf,
+}
+
+#[derive(Args)]
 struct TwinArgs {
     /// Twin configuration (TOML); defaults to the nominal rig (see `ambid config`).
     #[arg(long)]
@@ -263,6 +286,7 @@ fn main() {
 fn dispatch(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Excite(a) => excite(a),
+        Command::Compare(a) => compare(a),
         Command::Simulate(a) => simulate(a),
         Command::Config => {
             print!("{}", TwinConfig::default().to_toml_string()?);
@@ -389,6 +413,51 @@ fn excite(a: ExciteArgs) -> Result<()> {
 
 /// Longest autocorrelation lag written by `excite --autocorr` (samples).
 const MAX_AUTOCORR_LAG: usize = 20_000;
+
+fn compare(a: CompareArgs) -> Result<()> {
+    let c = ambid::comparison::compare(a.fs, a.level, a.seed, a.max_lag)?;
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("cannot create {}", a.out.display()))?;
+    let t: Vec<f64> = (0..c.signals[0].values.len())
+        .map(|k| k as f64 * c.ts)
+        .collect();
+    let lag: Vec<f64> = (0..c.signals[0].autocorr.len())
+        .map(|k| k as f64 * c.ts)
+        .collect();
+    let write = |file: &str, first: (&str, &[f64]), pick: fn(&Compared) -> &[f64]| {
+        let mut cols: Vec<(&str, &[f64])> = vec![first];
+        cols.extend(c.signals.iter().map(|s| (s.name, pick(s))));
+        write_time_csv(&a.out.join(file), &cols)
+    };
+    write("waveforms.csv", ("t", &t), |s| &s.values)?;
+    write("spectra.csv", ("f_hz", &c.f_hz), |s| &s.spectrum)?;
+    write("autocorr.csv", ("lag_s", &lag), |s| &s.autocorr)?;
+    let table: serde_json::Map<String, serde_json::Value> = c
+        .signals
+        .iter()
+        .map(|s| Ok((s.name.to_string(), serde_json::to_value(&s.report)?)))
+        .collect::<Result<_>>()?;
+    std::fs::write(
+        a.out.join("comparison.json"),
+        serde_json::to_string_pretty(&table)?,
+    )?;
+    println!(
+        "{:<10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>7}",
+        "signal", "f_min Hz", "f_max Hz", "Δf Hz", "rms A", "peak A", "crest"
+    );
+    for s in &c.signals {
+        let r = &s.report;
+        println!(
+            "{:<10} {:>10.3} {:>10.1} {:>10.3} {:>10.4} {:>10.4} {:>7.3}",
+            s.name, r.f_min_hz, r.f_max_hz, r.resolution_hz, r.rms, r.peak, r.crest_factor
+        );
+    }
+    println!(
+        "written: {}/{{waveforms,spectra,autocorr}}.csv, comparison.json",
+        a.out.display()
+    );
+    Ok(())
+}
 
 fn ensure_parent(p: &Path) -> Result<()> {
     if let Some(d) = p.parent().filter(|d| !d.as_os_str().is_empty()) {

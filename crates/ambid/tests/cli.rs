@@ -253,3 +253,28 @@ fn excite_writes_spectrum_and_autocorrelation_of_one_period() {
         assert!((v + 1.0 / l).abs() < 1e-12, "{v}");
     }
 }
+
+#[test]
+fn compare_writes_the_four_signals_side_by_side() {
+    let d = tmpdir("compare");
+    let o = ambid(&["compare", "--level", "0.2", "--out", d.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    for f in ["waveforms.csv", "spectra.csv", "autocorr.csv"] {
+        let s = std::fs::read_to_string(d.join(f)).unwrap();
+        let header = s.lines().next().unwrap();
+        assert!(
+            header.ends_with(",prbs,chirp,noise,multisine"),
+            "{f}: {header}"
+        );
+    }
+    let rep: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("comparison.json")).unwrap()).unwrap();
+    assert!((rep["prbs"]["rms"].as_f64().unwrap() - 0.2).abs() < 1e-12);
+    assert!((rep["prbs"]["crest_factor"].as_f64().unwrap() - 1.0).abs() < 1e-12);
+    let o = ambid(&["compare", "--level", "-1"]);
+    assert!(
+        !o.status.success() && text(&o).contains("RMS level"),
+        "{}",
+        text(&o)
+    );
+}
