@@ -423,11 +423,13 @@ impl TwinConfig {
                 ),
             });
         }
-        if self.simulation.integrator == Integrator::Rk4 && self.simulation.substeps < 10 {
+        if self.simulation.integrator == Integrator::Rk4
+            && !(10..=10_000).contains(&self.simulation.substeps)
+        {
             return Err(TwinError::Config {
                 field: "simulation.substeps".into(),
                 reason: format!(
-                    "RK4 needs at least 10 substeps per control period, got {}",
+                    "RK4 needs between 10 and 10000 substeps per control period, got {}",
                     self.simulation.substeps
                 ),
             });
