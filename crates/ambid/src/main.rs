@@ -56,6 +56,14 @@ struct ExciteArgs {
     /// Print the report as JSON instead of text.
     #[arg(long, global = true)]
     json: bool,
+    /// The amplifier's saturation current in A, to state the level as a percentage of it.
+    #[arg(
+        long,
+        default_value_t = 2.0,
+        global = true,
+        allow_negative_numbers = true
+    )]
+    i_sat: f64,
     /// Write the one-sided amplitude spectrum of one period (columns f_hz, amplitude) to this CSV.
     #[arg(long, global = true)]
     spectrum: Option<PathBuf>,
@@ -300,7 +308,14 @@ fn excite(a: ExciteArgs) -> Result<()> {
     if !(a.fs.is_finite() && a.fs > 0.0) {
         bail!("--fs must be a positive sample rate in Hz, got {}", a.fs);
     }
+    if !(a.i_sat.is_finite() && a.i_sat > 0.0) {
+        bail!("--i-sat must be a positive current in A, got {}", a.i_sat);
+    }
     let ts = 1.0 / a.fs;
+    let prbs_bits = match &a.signal {
+        SignalCmd::Prbs { order, .. } if (2..=31).contains(order) => Some((1u64 << order) - 1),
+        _ => None,
+    };
     let spec = match a.signal {
         SignalCmd::Prbs {
             order,
@@ -403,7 +418,16 @@ fn excite(a: ExciteArgs) -> Result<()> {
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
+        if let Some(l) = prbs_bits {
+            println!("period        L = 2^n - 1 = {l} bits");
+        }
         println!("{report}");
+        println!(
+            "level         peak {:.3} % / rms {:.3} % of i_sat = {} A",
+            100.0 * report.peak / a.i_sat,
+            100.0 * report.rms / a.i_sat,
+            a.i_sat
+        );
         if let Some(out) = &a.out {
             println!("written: {}", out.display());
         }
