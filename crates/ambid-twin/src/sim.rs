@@ -298,6 +298,15 @@ impl Nl {
         x[7] = x[7].clamp(-self.imax, self.imax);
     }
 
+    /// Displacements $(x_A, x_B)$ at the two bearings.
+    #[inline(always)]
+    fn bearings(&self, x: &[f64; NX]) -> (f64, f64) {
+        (
+            x[0] - self.a * x[1] + self.phi_a * x[2],
+            x[0] + self.b * x[1] + self.phi_b * x[2],
+        )
+    }
+
     /// Advances one control period with `nsub` RK4 substeps; returns the limit flags, or the
     /// substep and displacements at which |x| reached the gap (or became non-finite).
     #[inline(never)]
@@ -312,8 +321,7 @@ impl Nl {
         let mut flags = 0u8;
         for s in 0..nsub {
             self.rk4(x, ira, irb, h, &mut flags);
-            let xa = x[0] - self.a * x[1] + self.phi_a * x[2];
-            let xb = x[0] + self.b * x[1] + self.phi_b * x[2];
+            let (xa, xb) = self.bearings(x);
             if !(xa.abs() < self.g0 && xb.abs() < self.g0) {
                 return Err((s, xa, xb));
             }
@@ -352,12 +360,8 @@ impl Nl {
             }
         });
         // n_1 at the current state
-        let p1 = [
-            x[0] - self.a * x[1] + self.phi_a * x[2],
-            x[0] + self.b * x[1] + self.phi_b * x[2],
-            x[6],
-            x[7],
-        ];
+        let (xa, xb) = self.bearings(x);
+        let p1 = [xa, xb, x[6], x[7]];
         let n1 = self.residual(&p1, ira, irb, flags);
         // exact linear flows: Φ_h ξ (full) and P Φ_{h/2} ξ (projected)
         let mut w = [0.0f64; NX];
@@ -412,8 +416,7 @@ impl Nl {
         let mut flags = 0u8;
         for s in 0..t.steps {
             self.exp_rk4(t, x, ira, irb, &mut flags);
-            let xa = x[0] - self.a * x[1] + self.phi_a * x[2];
-            let xb = x[0] + self.b * x[1] + self.phi_b * x[2];
+            let (xa, xb) = self.bearings(x);
             if !(xa.abs() < self.g0 && xb.abs() < self.g0) {
                 return Err((s, xa, xb));
             }

@@ -76,11 +76,7 @@ pub struct ChirpSpec {
 }
 
 impl ChirpSpec {
-    /// Validates against `ts` and returns the samples per period.
-    fn validate(&self, ts: f64) -> Result<usize> {
-        check_ts(ts)?;
-        check_positive("amplitude", self.amplitude)?;
-        check_count("periods", self.periods, 1)?;
+    fn check_duration(&self) -> Result<()> {
         if !(self.duration_s.is_finite() && self.duration_s > 0.0) {
             return Err(Error::invalid(
                 "duration_s",
@@ -90,6 +86,15 @@ impl ChirpSpec {
                 ),
             ));
         }
+        Ok(())
+    }
+
+    /// Validates against `ts` and returns the samples per period.
+    fn validate(&self, ts: f64) -> Result<usize> {
+        check_ts(ts)?;
+        check_positive("amplitude", self.amplitude)?;
+        check_count("periods", self.periods, 1)?;
+        self.check_duration()?;
         let n = (self.duration_s / ts).round();
         if n < 2.0 {
             return Err(Error::invalid(
@@ -149,15 +154,7 @@ impl ChirpSpec {
         if !t.is_finite() {
             return Err(Error::invalid("t", format!("must be finite, got {t}")));
         }
-        if !(self.duration_s.is_finite() && self.duration_s > 0.0) {
-            return Err(Error::invalid(
-                "duration_s",
-                format!(
-                    "must be a finite number of seconds > 0, got {}",
-                    self.duration_s
-                ),
-            ));
-        }
+        self.check_duration()?;
         if !(self.f0_hz.is_finite() && self.f1_hz.is_finite()) {
             return Err(Error::invalid("f0_hz", "frequencies must be finite"));
         }
