@@ -6,6 +6,7 @@ use ambid_core::signal::{
     NoiseSpec, Phases, PrbsSpec, Sweep,
 };
 use proptest::prelude::*;
+use proptest::test_runner::RngSeed;
 
 fn all_specs() -> Vec<ExcitationSpec> {
     vec![
@@ -165,7 +166,13 @@ fn hostile_ts() -> impl Strategy<Value = f64> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
+    // Fixed seed: CI runs are reproducible (a failure names its input; add it as a plain test).
+    #![proptest_config(ProptestConfig {
+        cases: 200,
+        rng_seed: RngSeed::Fixed(0x5167_2026),
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    })]
 
     /// Any PRBS design is either reported or refused with an error; generation succeeds exactly
     /// when the report does and the design is small.
@@ -222,10 +229,33 @@ proptest! {
         };
         if let Ok(x) = spec.generate(ts) {
             prop_assert_eq!(x.len(), n * periods);
-            let r = ambid_core::signal::rms(x.period(0).unwrap()).unwrap();
-            prop_assert!((r - rms).abs() <= 1e-9 * rms);
+            // exact RMS wherever the samples stay normal floats (not at subnormal levels ~1e-308)
+            if rms > 1e-290 {
+                let r = ambid_core::signal::rms(x.period(0).unwrap()).unwrap();
+                prop_assert!((r - rms).abs() <= 1e-9 * rms);
+            }
         }
         let _ = spec.report(ts);
         let _ = spec.lines(ts);
+    }
+}
+
+/// Found by the property test above with a random seed: a multisine at the smallest normal RMS
+/// level generates (its samples are subnormal, so the RMS is not exact) and does not panic.
+#[test]
+fn multisine_at_the_smallest_normal_level_generates() {
+    let spec = MultisineSpec {
+        f_min_hz: 1e-307,
+        f_max_hz: 6.82,
+        period_samples: 4,
+        periods: 1,
+        rms: f64::MIN_POSITIVE,
+        grid: Grid::Full,
+        phases: Phases::Schroeder,
+        seed: 0,
+    };
+    let ts = 0.052534678978579885;
+    if let Ok(x) = spec.generate(ts) {
+        assert!(x.values.iter().all(|v| v.is_finite()));
     }
 }
