@@ -77,3 +77,45 @@ fn peak_sensitivity(bencher: Bencher) {
     let twin = Twin::new(TwinConfig::default()).unwrap();
     bencher.bench(|| black_box(twin.peak_sensitivity().unwrap()));
 }
+
+/// The floor of any RK4 twin at 10 substeps: a stripped-down kernel with only the rigid rotor
+/// (translation and tilt), the exact force law at both bearings and a constant proportional
+/// current command — no bending mode, amplifier, sensor, noise, controller or recording — run
+/// for the same 102 300 control periods × 10 substeps. It is not the twin; it shows how much of
+/// the twin's RK4 time the dependent chain of right-hand-side evaluations alone costs.
+#[divan::bench(sample_count = 10)]
+fn rk4_floor_rigid_rotor_force_law_only() -> [f64; 4] {
+    let (m, j, a, b) = (5.0f64, 5.0 * 0.25 / 12.0, 0.2165f64, 0.2165f64);
+    let (k, i0, g0) = (1.1609e-6f64, 2.0f64, 4e-4f64);
+    let kp = 21_000.0f64;
+    let force = |i: f64, x: f64| {
+        let (p, n, gp, gn) = (i0 + i, i0 - i, g0 - x, g0 + x);
+        let (pg, ng, d) = (p * gn, n * gp, gp * gn);
+        k * (pg * pg - ng * ng) / (d * d)
+    };
+    // state: z, θ, ż, θ̇; currents held per control period from a stiff P law
+    let deriv = |s: &[f64; 4], ia: f64, ib: f64| -> [f64; 4] {
+        let (xa, xb) = (s[0] - a * s[1], s[0] + b * s[1]);
+        let (fa, fb) = (force(ia, xa), force(ib, xb));
+        [s[2], s[3], (fa + fb) / m, (b * fb - a * fa) / j]
+    };
+    let h = 5e-5 / 10.0;
+    let mut s = black_box([1e-6, 0.0, 0.0, 0.0]);
+    for _ in 0..SAMPLES {
+        let (xa, xb) = (s[0] - a * s[1], s[0] + b * s[1]);
+        let (ia, ib) = ((-kp * xa).clamp(-2.0, 2.0), (-kp * xb).clamp(-2.0, 2.0));
+        for _ in 0..10 {
+            let k1 = deriv(&s, ia, ib);
+            let t = std::array::from_fn(|q| s[q] + 0.5 * h * k1[q]);
+            let k2 = deriv(&t, ia, ib);
+            let t = std::array::from_fn(|q| s[q] + 0.5 * h * k2[q]);
+            let k3 = deriv(&t, ia, ib);
+            let t = std::array::from_fn(|q| s[q] + h * k3[q]);
+            let k4 = deriv(&t, ia, ib);
+            for q in 0..4 {
+                s[q] += h / 6.0 * (k1[q] + 2.0 * (k2[q] + k3[q]) + k4[q]);
+            }
+        }
+    }
+    s
+}
