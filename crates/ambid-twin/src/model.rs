@@ -377,6 +377,20 @@ pub(crate) fn assemble(
     ts: f64,
 ) -> Result<(StateSpace, StateSpace)> {
     let (ac, bc, cc, dc) = pid.matrices();
+    // Wires a controller (states from `ctrl`) acting on −(sensor state `sensor`) into the delay
+    // register `delay`: d⁺ = C_C x_C − D_C y_s, x_C⁺ = A_C x_C − B_C y_s.
+    let close_loop = |a: &mut Mat<f64>, delay: usize, ctrl: usize, sensor: usize| {
+        for j in 0..3 {
+            a[(delay, ctrl + j)] = cc[j];
+        }
+        a[(delay, sensor)] = -dc;
+        for i in 0..3 {
+            for j in 0..3 {
+                a[(ctrl + i, ctrl + j)] = ac[i][j];
+            }
+            a[(ctrl + i, sensor)] = -bc[i];
+        }
+    };
     let fill_common = |a: &mut Mat<f64>| {
         for i in 0..NX {
             for j in 0..NX {
@@ -386,16 +400,7 @@ pub(crate) fn assemble(
             a[(i, IDB)] = bd[i][1];
         }
         // loop B: d_B⁺ = C_C x_CB − D_C y_sB ; x_CB⁺ = A_C x_CB − B_C y_sB
-        for j in 0..3 {
-            a[(IDB, ICB + j)] = cc[j];
-        }
-        a[(IDB, 9)] = -dc;
-        for i in 0..3 {
-            for j in 0..3 {
-                a[(ICB + i, ICB + j)] = ac[i][j];
-            }
-            a[(ICB + i, 9)] = -bc[i];
-        }
+        close_loop(a, IDB, ICB, 9);
     };
     let np = NX + 5;
     let mut ap = Mat::<f64>::zeros(np, np);
@@ -410,16 +415,7 @@ pub(crate) fn assemble(
     let mut af = Mat::<f64>::zeros(nf, nf);
     fill_common(&mut af);
     // u_A = C_C x_CA + D_C (w − y_sA) + r ; d_A⁺ = u_A ; x_CA⁺ = A_C x_CA + B_C (w − y_sA)
-    for j in 0..3 {
-        af[(IDA, ICA + j)] = cc[j];
-    }
-    af[(IDA, 8)] = -dc;
-    for i in 0..3 {
-        for j in 0..3 {
-            af[(ICA + i, ICA + j)] = ac[i][j];
-        }
-        af[(ICA + i, 8)] = -bc[i];
-    }
+    close_loop(&mut af, IDA, ICA, 8);
     let mut bf = Mat::<f64>::zeros(nf, 2);
     bf[(IDA, 0)] = 1.0; // r
     bf[(IDA, 1)] = dc; // w

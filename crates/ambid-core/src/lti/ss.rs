@@ -249,46 +249,9 @@ impl StateSpace {
     /// Simulates a discrete SISO model from initial state `x0` (zeros if `None`).
     pub fn simulate_siso(&self, u: &[f64], x0: Option<&[f64]>) -> Result<Vec<f64>> {
         self.require_siso("simulate_siso")?;
-        if self.ts.is_none() {
-            return Err(Error::TimeDomain(
-                "simulation needs a discrete-time model; discretise it with c2d first".into(),
-            ));
-        }
-        crate::error::check_finite("u", u)?;
-        let n = self.order();
-        let mut x = match x0 {
-            Some(x0) if x0.len() != n => {
-                return Err(Error::DimensionMismatch {
-                    context: "simulate_siso initial state",
-                    expected: n.to_string(),
-                    got: x0.len().to_string(),
-                })
-            }
-            Some(x0) => {
-                crate::error::check_finite("x0", x0)?;
-                x0.to_vec()
-            }
-            None => vec![0.0; n],
-        };
-        let mut xn = vec![0.0; n];
-        let mut y = Vec::with_capacity(u.len());
-        for &uk in u {
-            let yk = self.d[(0, 0)] * uk
-                + x.iter()
-                    .enumerate()
-                    .map(|(i, xi)| self.c[(0, i)] * xi)
-                    .sum::<f64>();
-            y.push(yk);
-            for (i, xni) in xn.iter_mut().enumerate() {
-                *xni = self.b[(i, 0)] * uk
-                    + x.iter()
-                        .enumerate()
-                        .map(|(j, xj)| self.a[(i, j)] * xj)
-                        .sum::<f64>();
-            }
-            std::mem::swap(&mut x, &mut xn);
-        }
-        Ok(y)
+        let u = faer::MatRef::from_column_major_slice(u, u.len(), 1);
+        let y = self.simulate(u, x0)?;
+        Ok(y.col_as_slice(0).to_vec())
     }
 
     /// Simulates a discrete model from initial state `x0` (zeros if `None`): `u` is `N × m`
