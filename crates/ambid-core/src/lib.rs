@@ -8,7 +8,9 @@
 //! polynomials in ascending powers of $q^{-1}$, every discrete model carries its sample time.
 #![warn(missing_docs)]
 
+pub mod data;
 pub mod error;
+pub mod frf;
 pub mod linalg;
 pub mod lti;
 pub mod signal;

@@ -6,3 +6,5 @@
 pub mod comparison;
 pub mod experiment;
 pub mod io;
+pub mod stepped_sine;
+pub mod study;

@@ -11,6 +11,7 @@
 
 mod frd;
 mod interconnect;
+pub mod pid;
 mod poly;
 mod ss;
 mod tf;

@@ -3,6 +3,7 @@
 //! * time data: CSV with a header row, one column per signal, SI units, optional `t` column;
 //! * frequency-response data: CSV `f_hz, <q>_re, <q>_im, <q>_std, …`.
 
+pub mod controller;
 pub mod csv;
 
 pub use self::csv::{read_time_csv, write_frf_csv, write_time_csv, FrfColumn, TimeData};

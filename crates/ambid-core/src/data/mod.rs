@@ -1,0 +1,1 @@
+//! Measured input-output data and its preprocessing.

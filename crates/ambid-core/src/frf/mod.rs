@@ -1,0 +1,9 @@
+//! Nonparametric frequency-response estimation from (closed-loop) data.
+
+pub mod closed_loop;
+pub mod periodic;
+pub mod quality;
+pub mod resonance;
+pub mod stepped_sine;
+pub mod welch;
+pub mod window;
