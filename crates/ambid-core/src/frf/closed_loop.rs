@@ -1,1 +1,436 @@
-//! (to be written)
+//! Closed-loop frequency responses with propagated variances.
+//!
+//! Conventions (injection at the controller output, `docs/conventions.md`):
+//!
+//! $$u = C(w - y) + r,\qquad y = P u + v,$$
+//! $$T_{ry} = \frac{P}{1+PC},\quad S = T_{ru} = \frac{1}{1+PC},\quad
+//!   P = \frac{T_{ry}}{T_{ru}}\ \text{(joint input–output)},\quad
+//!   P = \frac{T_{ry}}{1 - C\,T_{ry}}\ \text{(indirect)},\quad C = \frac{r-u}{y}\ (w = 0).$$
+//!
+//! # Estimates and variances
+//! **Periodic data** (from [`PeriodicSpectra`]): with the period means $\bar R, \bar U, \bar Y$ on a
+//! line and the covariance of the means $\Sigma = \hat\sigma/P$ (module [`periodic`](super::periodic)),
+//! every quantity $Z = \phi(\bar R, \bar U, \bar Y)$ gets the first-order variance
+//!
+//! $$\sigma_Z^2 = g^{\mathsf H}\Sigma\, g\ \text{ with }\ g = \nabla\phi,\qquad
+//!   \text{e.g. } P = \bar Y/\bar U:\ \sigma_P^2 = \frac{\Sigma_{YY} + |P|^2\Sigma_{UU}
+//!   - 2\,\mathrm{Re}\,(\bar P\,\Sigma_{YU})}{|\bar U|^2}.$$
+//!
+//! Noise that enters the loop shows up in both $u$ and $y$; the cross term $\Sigma_{YU}$ is what
+//! makes the joint estimate's band honest.
+//!
+//! **Welch spectra** (from [`CrossSpectra`], $r$ as the reference): $\hat T_{ry} = S_{ry}/S_{rr}$,
+//! $\hat T_{ru} = S_{ru}/S_{rr}$, $\hat P = S_{ry}/S_{ru}$, $\hat C = (S_{rr} - S_{ru})/S_{ry}$. With
+//! the residual (noise) spectra $\Phi_{ab} = S_{ab} - S_{ar}S_{rb}/S_{rr}$ and $n$ effective averages,
+//!
+//! $$\sigma^2_{T_{ry}} = \frac{\Phi_{yy}}{n S_{rr}},\qquad
+//!   \sigma^2_P = \frac{\Phi_{yy} + |P|^2\Phi_{uu} - 2\,\mathrm{Re}(P\,\Phi_{yu})}{n S_{rr} |T_{ru}|^2},$$
+//!
+//! the classical $(1-\gamma^2)|H|^2/(n\gamma^2)$ for $T_{ry}$ and its two-channel extension.
+//!
+//! **Indirect**: $P = T/(1 - CT)$ with the controller's exact response, so
+//! $\sigma_P^2 = \sigma_T^2 / |1 - CT|^4$; an error $\Delta C$ in the controller model biases it by
+//! $\Delta P \approx P^2 \Delta C$ (first order), which is why the joint estimate is the default.
+//!
+//! # Confidence bands
+//! For a circular complex Gaussian error, $|\hat G - G|^2/\hat\sigma^2$ follows an $F(2, 2\nu)$
+//! law when $\hat\sigma^2$ has $\nu$ complex degrees of freedom ($\nu = P - 1$ periods), so the
+//! radius of the level-$\alpha$ disc is $\hat\sigma\sqrt{q}$ with
+//! $q = \nu\big((1-\alpha)^{-1/\nu} - 1\big)$ ([`band_radius_factor`]; $q \to -\ln(1-\alpha)$ for
+//! $\nu\to\infty$).
+//!
+//! # Example
+//! ```
+//! use ambid_core::frf::periodic::{PeriodicAnalyzer, PeriodicOptions};
+//! use ambid_core::frf::closed_loop::{from_periodic, Channels};
+//! // r periodic; u = 0.5 r; y = 2 u (P = 2, static), four periods of 8 samples
+//! let base = [1.0, -1.0, 1.0, 1.0, -1.0, -1.0, 1.0, -1.0];
+//! let r: Vec<f64> = (0..32).map(|k| base[k % 8]).collect();
+//! let u: Vec<f64> = r.iter().map(|v| 0.5 * v).collect();
+//! let y: Vec<f64> = u.iter().map(|v| 2.0 * v).collect();
+//! let s = PeriodicAnalyzer::new(8).unwrap()
+//!     .analyze(&[&r, &u, &y], 1000.0, &PeriodicOptions::new(8)).unwrap();
+//! let lines = s.excited_lines(0, 1e-9).unwrap();
+//! let frf = from_periodic(&s, Channels { r: 0, u: 1, y: 2 }, &lines, None).unwrap();
+//! assert!(frf.plant.values().iter().all(|p| (p.re - 2.0).abs() < 1e-12 && p.im.abs() < 1e-12));
+//! assert!(frf.t_ru.values().iter().all(|v| (v.re - 0.5).abs() < 1e-12));
+//! ```
+
+use super::periodic::PeriodicSpectra;
+use super::welch::CrossSpectra;
+use crate::error::{Error, Result};
+use crate::lti::{Frd, StateSpace};
+use faer::c64;
+
+/// Which channel holds $r$, $u$ and $y$.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Channels {
+    /// Excitation $r$ (added to the controller output).
+    pub r: usize,
+    /// Controller output $u$ (including $r$).
+    pub u: usize,
+    /// Measured output $y$.
+    pub y: usize,
+}
+
+/// How the spectra were averaged.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Averaging {
+    /// Period-synchronous averaging over this many periods.
+    Periods(usize),
+    /// Welch averaging over this many segments (and this effective number of averages).
+    Welch {
+        /// Segments averaged.
+        segments: usize,
+        /// Effective number of independent averages (overlap-corrected).
+        effective: f64,
+    },
+}
+
+/// Closed-loop FRFs on a common frequency grid, each with its variance, plus coherences.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ClosedLoopFrf {
+    /// $T_{ry}$, $r \to y$.
+    pub t_ry: Frd,
+    /// $S = T_{ru}$, $r \to u$.
+    pub t_ru: Frd,
+    /// The plant $P$ by the joint input–output method $T_{ry}/T_{ru}$.
+    pub plant: Frd,
+    /// The plant by the indirect method (only with a known controller).
+    pub plant_indirect: Option<Frd>,
+    /// The controller estimated from data, $C = (r-u)/y$ (valid with $w = 0$).
+    pub controller: Frd,
+    /// Coherence $\gamma^2_{ry}$.
+    pub coh_ry: Vec<f64>,
+    /// Coherence $\gamma^2_{ru}$.
+    pub coh_ru: Vec<f64>,
+    /// How the estimate was averaged.
+    pub averaging: Averaging,
+    /// Complex degrees of freedom $\nu$ of the variance estimates (for [`band_radius_factor`]).
+    pub dof: f64,
+}
+
+impl ClosedLoopFrf {
+    /// Frequencies \[Hz\].
+    pub fn f_hz(&self) -> &[f64] {
+        self.plant.f_hz()
+    }
+
+    /// Radius factor of the level-`level` confidence disc for this estimate's degrees of freedom.
+    pub fn band_factor(&self, level: f64) -> Result<f64> {
+        band_radius_factor(level, self.dof)
+    }
+}
+
+/// Radius of the level-$\alpha$ confidence disc in units of the estimated standard deviation,
+/// $\sqrt{\nu((1-\alpha)^{-1/\nu}-1)}$ ($\nu$ complex degrees of freedom; `f64::INFINITY` gives the
+/// known-variance value $\sqrt{-\ln(1-\alpha)}$).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] unless $0 < \alpha < 1$ and $\nu > 0$.
+///
+/// # Example
+/// ```
+/// use ambid_core::frf::closed_loop::band_radius_factor;
+/// let inf = band_radius_factor(0.95, f64::INFINITY).unwrap();
+/// assert!((inf - 20f64.ln().sqrt()).abs() < 1e-12);
+/// assert!(band_radius_factor(0.95, 19.0).unwrap() > inf);
+/// ```
+pub fn band_radius_factor(level: f64, dof: f64) -> Result<f64> {
+    if !(level > 0.0 && level < 1.0) {
+        return Err(Error::invalid(
+            "level",
+            format!("a confidence level must be in (0, 1), got {level}"),
+        ));
+    }
+    if !(dof > 0.0) {
+        return Err(Error::invalid(
+            "dof",
+            format!("degrees of freedom must be positive, got {dof}; at least 2 periods or segments are needed"),
+        ));
+    }
+    let q = if dof.is_infinite() {
+        -(1.0 - level).ln()
+    } else {
+        dof * ((1.0 - level).powf(-1.0 / dof) - 1.0)
+    };
+    Ok(q.sqrt())
+}
+
+/// Variance $g^{\mathsf H} \Sigma g$ of a linear combination $\sum_i g_i\,\delta X_i$ with
+/// $\Sigma_{ij} = \mathrm E[\delta X_i \overline{\delta X_j}]$.
+fn quad_form(g: &[c64; 3], cov: impl Fn(usize, usize) -> c64) -> f64 {
+    let mut v = 0.0;
+    for i in 0..3 {
+        for j in 0..3 {
+            v += (g[i] * cov(i, j) * g[j].conj()).re;
+        }
+    }
+    v.max(0.0)
+}
+
+fn controller_response(ctrl: &StateSpace, f_hz: &[f64], ts_data: f64) -> Result<Vec<c64>> {
+    match ctrl.ts() {
+        None => Err(Error::TimeDomain(
+            "the controller for the indirect method is continuous-time; discretise it at the data's \
+             sample time first"
+                .into(),
+        )),
+        Some(ts) if ((ts - ts_data) / ts_data).abs() > 1e-9 => Err(Error::SampleTimeMismatch {
+            left: ts,
+            right: ts_data,
+        }),
+        Some(_) => ctrl.freq_response_siso(f_hz),
+    }
+}
+
+/// Closed-loop FRFs from period-synchronous averages on the given `lines` (e.g.
+/// [`PeriodicSpectra::excited_lines`] restricted to a band); `controller` enables the indirect
+/// estimate.
+///
+/// # Errors
+/// * [`Error::InvalidArgument`]: a channel index out of range, no line, a line beyond Nyquist or
+///   where $\bar R$, $\bar U$ or $\bar Y$ vanishes (not excited);
+/// * [`Error::SampleTimeMismatch`] / [`Error::TimeDomain`]: a controller whose sample time is not
+///   the data's.
+pub fn from_periodic(
+    s: &PeriodicSpectra,
+    ch: Channels,
+    lines: &[usize],
+    controller: Option<&StateSpace>,
+) -> Result<ClosedLoopFrf> {
+    let nc = s.n_channels();
+    for (name, c) in [("r", ch.r), ("u", ch.u), ("y", ch.y)] {
+        if c >= nc {
+            return Err(Error::invalid(
+                "channels",
+                format!("channel `{name}` has index {c} but only {nc} channels were analysed"),
+            ));
+        }
+    }
+    if lines.is_empty() {
+        return Err(Error::invalid(
+            "lines",
+            "no frequency line selected: the excitation has no power in the requested band; widen \
+             the band or check the excitation",
+        ));
+    }
+    if let Some(&k) = lines.iter().find(|&&k| k == 0 || k >= s.n_lines()) {
+        return Err(Error::invalid(
+            "lines",
+            format!(
+                "line {k} is outside 1..{} (DC is not used; lines stop at Nyquist)",
+                s.n_lines()
+            ),
+        ));
+    }
+    let p = s.periods() as f64;
+    let idx = [ch.r, ch.u, ch.y];
+    let ts = 1.0 / s.fs();
+    let f: Vec<f64> = lines.iter().map(|&k| s.line_hz(k)).collect();
+    let n = lines.len();
+    let (mut t, mut sv, mut pl, mut c) = (
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+    );
+    let (mut vt, mut vs, mut vp, mut vc) = (
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+    );
+    let (mut coh_ry, mut coh_ru) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    for &k in lines {
+        let rr = s.mean(ch.r)[k];
+        let uu = s.mean(ch.u)[k];
+        let yy = s.mean(ch.y)[k];
+        for (name, v) in [("r", rr), ("u", uu), ("y", yy)] {
+            if v.norm() == 0.0 {
+                return Err(Error::invalid(
+                    "lines",
+                    format!(
+                        "channel `{name}` has no power on line {k} ({:.3} Hz); select excited lines only",
+                        s.line_hz(k)
+                    ),
+                ));
+            }
+        }
+        let cov = |i: usize, j: usize| s.cov_at(idx[i], idx[j], k) / p;
+        let one = c64::new(1.0, 0.0);
+        let zero = c64::new(0.0, 0.0);
+        let tk = yy / rr;
+        let sk = uu / rr;
+        let pk = yy / uu;
+        let ck = (rr - uu) / yy;
+        vt.push(quad_form(&[-yy / (rr * rr), zero, one / rr], cov));
+        vs.push(quad_form(&[-uu / (rr * rr), one / rr, zero], cov));
+        vp.push(quad_form(&[zero, -yy / (uu * uu), one / uu], cov));
+        vc.push(quad_form(
+            &[one / yy, -one / yy, -(rr - uu) / (yy * yy)],
+            cov,
+        ));
+        t.push(tk);
+        sv.push(sk);
+        pl.push(pk);
+        c.push(ck);
+        coh_ry.push(s.coherence_at(ch.r, ch.y, k));
+        coh_ru.push(s.coherence_at(ch.r, ch.u, k));
+    }
+    let has_var = s.periods() > 1;
+    let var = |v: Vec<f64>| if has_var { Some(v) } else { None };
+    let t_ry = Frd::new(f.clone(), t, var(vt), Some(ts))?;
+    let plant_indirect = controller
+        .map(|ctrl| indirect(&t_ry, ctrl, ts))
+        .transpose()?;
+    Ok(ClosedLoopFrf {
+        t_ry,
+        t_ru: Frd::new(f.clone(), sv, var(vs), Some(ts))?,
+        plant: Frd::new(f.clone(), pl, var(vp), Some(ts))?,
+        plant_indirect,
+        controller: Frd::new(f, c, var(vc), Some(ts))?,
+        coh_ry,
+        coh_ru,
+        averaging: Averaging::Periods(s.periods()),
+        dof: (s.periods() as f64 - 1.0).max(0.0),
+    })
+}
+
+/// The indirect plant estimate $T/(1 - C T)$ from an estimated $T_{ry}$ and a known discrete
+/// controller (same sample time), with $\sigma_P^2 = \sigma_T^2/|1 - CT|^4$.
+///
+/// # Errors
+/// Sample-time or time-domain mismatch of the controller; a non-SISO controller.
+pub fn indirect(t_ry: &Frd, controller: &StateSpace, ts: f64) -> Result<Frd> {
+    let cf = controller_response(controller, t_ry.f_hz(), ts)?;
+    let mut vals = Vec::with_capacity(cf.len());
+    let mut var = t_ry.variance().map(|_| Vec::with_capacity(cf.len()));
+    for (k, (&t, &c)) in t_ry.values().iter().zip(&cf).enumerate() {
+        let d = c64::new(1.0, 0.0) - c * t;
+        vals.push(t / d);
+        if let (Some(v), Some(vt)) = (var.as_mut(), t_ry.variance()) {
+            v.push(vt[k] / d.norm_sqr().powi(2));
+        }
+    }
+    Frd::new(t_ry.f_hz().to_vec(), vals, var, Some(ts))
+}
+
+/// Closed-loop FRFs from Welch spectra (channel indices into `spectra`), $r$ as the reference;
+/// frequencies restricted to `[f_min, f_max]` and to bins where $S_{rr}$ exceeds `rel_threshold`
+/// times its maximum.
+///
+/// # Errors
+/// * [`Error::InvalidArgument`]: a channel out of range, or no bin with excitation power in the
+///   band (names the band);
+/// * controller errors as in [`from_periodic`].
+pub fn from_welch(
+    spectra: &CrossSpectra,
+    ch: Channels,
+    band: (f64, f64),
+    rel_threshold: f64,
+    controller: Option<&StateSpace>,
+) -> Result<ClosedLoopFrf> {
+    let nc = spectra.n_channels();
+    for (name, c) in [("r", ch.r), ("u", ch.u), ("y", ch.y)] {
+        if c >= nc {
+            return Err(Error::invalid(
+                "channels",
+                format!("channel `{name}` has index {c} but the spectra hold {nc} channels"),
+            ));
+        }
+    }
+    let f_all = spectra.f_hz();
+    let srr = spectra.get(ch.r, ch.r);
+    let peak = srr.iter().skip(1).fold(0.0f64, |m, v| m.max(v.re));
+    let bins: Vec<usize> = (1..f_all.len())
+        .filter(|&k| f_all[k] >= band.0 && f_all[k] <= band.1 && srr[k].re > rel_threshold * peak)
+        .collect();
+    if bins.is_empty() || peak == 0.0 {
+        return Err(Error::invalid(
+            "band",
+            format!(
+                "the excitation has no power in {}–{} Hz; widen the band or check the excitation channel",
+                band.0, band.1
+            ),
+        ));
+    }
+    let ts = 1.0 / spectra.fs();
+    let n_eff = spectra.effective_averages();
+    let (sru, sry) = (spectra.get(ch.r, ch.u), spectra.get(ch.r, ch.y));
+    let (suu, syy, syu) = (
+        spectra.get(ch.u, ch.u),
+        spectra.get(ch.y, ch.y),
+        spectra.get(ch.y, ch.u),
+    );
+    let (sur, syr) = (spectra.get(ch.u, ch.r), spectra.get(ch.y, ch.r));
+    let m = bins.len();
+    let mut f = Vec::with_capacity(m);
+    let (mut t, mut sv, mut pl, mut c) = (vec![], vec![], vec![], vec![]);
+    let (mut vt, mut vs, mut vp, mut vc) = (vec![], vec![], vec![], vec![]);
+    let (mut coh_ry, mut coh_ru) = (vec![], vec![]);
+    for &k in &bins {
+        f.push(f_all[k]);
+        let rr = srr[k].re;
+        // residual spectra Φ_ab = S_ab − S_ar S_rb / S_rr  (S_ab = E[conj(a) b])
+        let phi_yy = (syy[k].re - syr[k].norm_sqr() / rr).max(0.0);
+        let phi_uu = (suu[k].re - sur[k].norm_sqr() / rr).max(0.0);
+        let phi_yu = syu[k] - syr[k] * sru[k] / rr;
+        let tk = sry[k] / rr;
+        let sk = sru[k] / rr;
+        let pk = sry[k] / sru[k];
+        let ck = (c64::new(rr, 0.0) - sru[k]) / sry[k];
+        let nr = n_eff * rr;
+        vt.push(phi_yy / nr);
+        vs.push(phi_uu / nr);
+        vp.push(
+            ((phi_yy + pk.norm_sqr() * phi_uu - 2.0 * (pk * phi_yu).re).max(0.0))
+                / (nr * sk.norm_sqr()),
+        );
+        vc.push(
+            ((phi_uu + ck.norm_sqr() * phi_yy + 2.0 * (ck * phi_yu.conj()).re).max(0.0))
+                / (nr * tk.norm_sqr()),
+        );
+        t.push(tk);
+        sv.push(sk);
+        pl.push(pk);
+        c.push(ck);
+        coh_ry.push((sry[k].norm_sqr() / (rr * syy[k].re)).min(1.0));
+        coh_ru.push((sru[k].norm_sqr() / (rr * suu[k].re)).min(1.0));
+    }
+    let t_ry = Frd::new(f.clone(), t, Some(vt), Some(ts))?;
+    let plant_indirect = controller
+        .map(|ctrl| indirect(&t_ry, ctrl, ts))
+        .transpose()?;
+    Ok(ClosedLoopFrf {
+        t_ry,
+        t_ru: Frd::new(f.clone(), sv, Some(vs), Some(ts))?,
+        plant: Frd::new(f.clone(), pl, Some(vp), Some(ts))?,
+        plant_indirect,
+        controller: Frd::new(f, c, Some(vc), Some(ts))?,
+        coh_ry,
+        coh_ru,
+        averaging: Averaging::Welch {
+            segments: spectra.n_segments(),
+            effective: n_eff,
+        },
+        dof: (n_eff - 1.0).max(1.0),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn band_factor_matches_f_distribution_quantile() {
+        // F(2, 2ν) CDF: 1 − (1 + x/ν)^(−ν); check the quantile inverts it.
+        for &nu in &[1.0, 4.0, 19.0, 200.0] {
+            let q = band_radius_factor(0.95, nu).unwrap().powi(2);
+            let cdf = 1.0 - (1.0 + q / nu).powf(-nu);
+            assert!((cdf - 0.95).abs() < 1e-12, "ν = {nu}");
+        }
+        assert!(band_radius_factor(1.0, 3.0).is_err());
+        assert!(band_radius_factor(0.9, 0.0).is_err());
+    }
+}
