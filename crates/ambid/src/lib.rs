@@ -3,6 +3,7 @@
 //! The ambid application as a library: file formats ([`io`]), the twin experiment
 //! ([`experiment`]) and the excitation comparison ([`comparison`]). The `ambid` binary is a thin command-line layer over these.
 
+pub mod analysis;
 pub mod comparison;
 pub mod experiment;
 pub mod io;
