@@ -87,13 +87,16 @@ pub fn seed_levels() -> Vec<f64> {
     (1..=8).map(|k| 0.02 * k as f64).collect()
 }
 
+/// The true plant response at given frequencies (twin runs).
+pub type TruthFn<'a> = dyn Fn(&[f64]) -> Result<Vec<ambid_core::c64>> + 'a;
+
 /// Analyses recorded experiments (one per level) and recommends a range.
 pub fn amplitude_from_records(
     records: &[LevelRecord],
     fs: f64,
     y_noise: Option<&[f64]>,
     settings: &FrfSettings,
-    truth: Option<&dyn Fn(&[f64]) -> Result<Vec<ambid_core::c64>>>,
+    truth: Option<&TruthFn<'_>>,
     rule: Recommendation,
 ) -> Result<AmplitudeOutcome> {
     if records.len() < 2 {

@@ -143,7 +143,7 @@ pub fn band_radius_factor(level: f64, dof: f64) -> Result<f64> {
             format!("a confidence level must be in (0, 1), got {level}"),
         ));
     }
-    if !(dof > 0.0) {
+    if dof.is_nan() || dof <= 0.0 {
         return Err(Error::invalid(
             "dof",
             format!("degrees of freedom must be positive, got {dof}; at least 2 periods or segments are needed"),

@@ -107,7 +107,7 @@ pub fn find_resonances(f_hz: &[f64], g: &[c64], opts: &ResonanceOptions) -> Resu
             "frequencies must be strictly increasing",
         ));
     }
-    if !(opts.min_prominence_db >= 0.0) {
+    if opts.min_prominence_db.is_nan() || opts.min_prominence_db < 0.0 {
         return Err(Error::invalid(
             "min_prominence_db",
             format!("must be non-negative, got {}", opts.min_prominence_db),
