@@ -73,6 +73,23 @@ pub struct FrfColumn<'a> {
 
 /// Writes an FRF CSV: `f_hz`, then `<q>_re, <q>_im, <q>_std` for each quantity.
 pub fn write_frf_csv(path: &Path, f_hz: &[f64], quantities: &[FrfColumn<'_>]) -> Result<()> {
+    write_frf_csv_with(path, f_hz, quantities, &[])
+}
+
+/// Writes an FRF CSV with extra real columns after the quantities (e.g. `coh_ry`, `coh_ru`).
+pub fn write_frf_csv_with(
+    path: &Path,
+    f_hz: &[f64],
+    quantities: &[FrfColumn<'_>],
+    extras: &[(&str, &[f64])],
+) -> Result<()> {
+    if let Some((name, v)) = extras.iter().find(|e| e.1.len() != f_hz.len()) {
+        bail!(
+            "FRF column `{name}` has {} values but there are {} frequencies",
+            v.len(),
+            f_hz.len()
+        );
+    }
     for q in quantities {
         if q.values.len() != f_hz.len() || q.std.is_some_and(|s| s.len() != f_hz.len()) {
             bail!(
@@ -91,6 +108,7 @@ pub fn write_frf_csv(path: &Path, f_hz: &[f64], quantities: &[FrfColumn<'_>]) ->
             header.push(format!("{}_{s}", q.name));
         }
     }
+    header.extend(extras.iter().map(|e| e.0.to_string()));
     w.write_record(&header)?;
     for (k, f) in f_hz.iter().enumerate() {
         let mut row = vec![format!("{f:.17e}")];
@@ -100,6 +118,7 @@ pub fn write_frf_csv(path: &Path, f_hz: &[f64], quantities: &[FrfColumn<'_>]) ->
             row.push(format!("{:.17e}", v.im));
             row.push(format!("{:.17e}", q.std.map_or(0.0, |s| s[k])));
         }
+        row.extend(extras.iter().map(|e| format!("{:.17e}", e.1[k])));
         w.write_record(&row)?;
     }
     w.flush()?;
