@@ -6,4 +6,6 @@
 pub mod controller;
 pub mod csv;
 
-pub use self::csv::{read_time_csv, write_frf_csv, write_frf_csv_with, write_time_csv, FrfColumn, TimeData};
+pub use self::csv::{
+    read_time_csv, write_frf_csv, write_frf_csv_with, write_time_csv, FrfColumn, TimeData,
+};
