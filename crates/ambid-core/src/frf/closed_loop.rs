@@ -160,13 +160,22 @@ pub fn band_radius_factor(level: f64, dof: f64) -> Result<f64> {
 /// Variance $g^{\mathsf H} \Sigma g$ of a linear combination $\sum_i g_i\,\delta X_i$ with
 /// $\Sigma_{ij} = \mathrm E[\delta X_i \overline{\delta X_j}]$.
 fn quad_form(g: &[c64; 3], cov: impl Fn(usize, usize) -> c64) -> f64 {
+    // Hermitian: diagonal terms plus twice the real part of the upper triangle
     let mut v = 0.0;
     for i in 0..3 {
-        for j in 0..3 {
-            v += (g[i] * cov(i, j) * g[j].conj()).re;
+        v += g[i].norm_sqr() * cov(i, i).re;
+        for j in i + 1..3 {
+            v += 2.0 * (g[i] * cov(i, j) * g[j].conj()).re;
         }
     }
     v.max(0.0)
+}
+
+/// $|a|^2 s_{aa} + |b|^2 s_{bb} + 2\,\mathrm{Re}(a\, s_{ab}\, \bar b)$: [`quad_form`] for two
+/// non-zero coefficients.
+#[inline]
+fn quad_form2(a: c64, b: c64, saa: f64, sbb: f64, sab: c64) -> f64 {
+    (a.norm_sqr() * saa + b.norm_sqr() * sbb + 2.0 * (a * sab * b.conj()).re).max(0.0)
 }
 
 fn controller_response(ctrl: &StateSpace, f_hz: &[f64], ts_data: f64) -> Result<Vec<c64>> {
@@ -242,10 +251,13 @@ pub fn from_periodic(
         Vec::with_capacity(n),
     );
     let (mut coh_ry, mut coh_ru) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    let covs: Vec<Vec<(&[c64], bool)>> = idx
+        .iter()
+        .map(|&i| idx.iter().map(|&j| s.cov_slice(i, j)).collect())
+        .collect();
+    let (mr, mu, my) = (s.mean(ch.r), s.mean(ch.u), s.mean(ch.y));
     for &k in lines {
-        let rr = s.mean(ch.r)[k];
-        let uu = s.mean(ch.u)[k];
-        let yy = s.mean(ch.y)[k];
+        let (rr, uu, yy) = (mr[k], mu[k], my[k]);
         for (name, v) in [("r", rr), ("u", uu), ("y", yy)] {
             if v.norm() == 0.0 {
                 return Err(Error::invalid(
@@ -257,26 +269,35 @@ pub fn from_periodic(
                 ));
             }
         }
-        let cov = |i: usize, j: usize| s.cov_at(idx[i], idx[j], k) / p;
+        // covariance of the means of (R, U, Y) on this line
+        let mut sig = [[c64::new(0.0, 0.0); 3]; 3];
+        for (i, row) in covs.iter().enumerate() {
+            for (j, (slice, conj)) in row.iter().enumerate() {
+                let v = slice[k] / p;
+                sig[i][j] = if *conj { v.conj() } else { v };
+            }
+        }
+        let cov = |i: usize, j: usize| sig[i][j];
         let one = c64::new(1.0, 0.0);
-        let zero = c64::new(0.0, 0.0);
-        let tk = yy / rr;
-        let sk = uu / rr;
-        let pk = yy / uu;
-        let ck = (rr - uu) / yy;
-        vt.push(quad_form(&[-yy / (rr * rr), zero, one / rr], cov));
-        vs.push(quad_form(&[-uu / (rr * rr), one / rr, zero], cov));
-        vp.push(quad_form(&[zero, -yy / (uu * uu), one / uu], cov));
-        vc.push(quad_form(
-            &[one / yy, -one / yy, -(rr - uu) / (yy * yy)],
-            cov,
-        ));
+        let (ir, iu, iy) = (one / rr, one / uu, one / yy);
+        let tk = yy * ir;
+        let sk = uu * ir;
+        let pk = yy * iu;
+        let ck = (rr - uu) * iy;
+        vt.push(quad_form2(-tk * ir, ir, sig[0][0].re, sig[2][2].re, sig[0][2]));
+        vs.push(quad_form2(-sk * ir, ir, sig[0][0].re, sig[1][1].re, sig[0][1]));
+        vp.push(quad_form2(-pk * iu, iu, sig[1][1].re, sig[2][2].re, sig[1][2]));
+        vc.push(quad_form(&[iy, -iy, -ck * iy], cov));
         t.push(tk);
         sv.push(sk);
         pl.push(pk);
         c.push(ck);
-        coh_ry.push(s.coherence_at(ch.r, ch.y, k));
-        coh_ru.push(s.coherence_at(ch.r, ch.u, k));
+        // coherences from the period moments M_ab = (P − 1) Σ_ab + X̄_a X̄_b*
+        let m = [rr, uu, yy];
+        let mom = |a: usize, b: usize| sig[a][b] * (p - 1.0) + m[a] * m[b].conj();
+        let (m_rr, m_uu, m_yy) = (mom(0, 0).re, mom(1, 1).re, mom(2, 2).re);
+        coh_ry.push((mom(0, 2).norm_sqr() / (m_rr * m_yy)).min(1.0));
+        coh_ru.push((mom(0, 1).norm_sqr() / (m_rr * m_uu)).min(1.0));
     }
     let has_var = s.periods() > 1;
     let var = |v: Vec<f64>| if has_var { Some(v) } else { None };

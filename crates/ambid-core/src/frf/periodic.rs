@@ -156,7 +156,8 @@ impl PeriodicAnalyzer {
     ///   from the planned length, fewer than one period left after the skipped ones, or (strict)
     ///   a record that is not an integer number of periods;
     /// * [`Error::DimensionMismatch`]: channels of different lengths;
-    /// * [`Error::NonFinite`]: a NaN or infinite sample (repair it with `data` first).
+    /// * [`Error::NonFinite`]: a NaN or infinite sample in the analysed periods (repair it with
+    ///   `data` first; samples of skipped periods and of an ignored tail are not read).
     pub fn analyze(
         &mut self,
         channels: &[&[f64]],
@@ -191,7 +192,6 @@ impl PeriodicAnalyzer {
                     got: format!("{} (channel {c})", x.len()),
                 });
             }
-            check_finite("channel", x)?;
         }
         let total_periods = len / n;
         let tail = len % n;
@@ -233,18 +233,72 @@ impl PeriodicAnalyzer {
 
         // Exactly periodic channels: one transform, zero (co)variance.
         for c in (0..nc).filter(|&c| exact[c]) {
-            let x = &channels[c][start..start + n];
-            for (b, v) in self.buf.iter_mut().zip(x) {
-                *b = c64::new(*v, 0.0);
-            }
-            self.fft
-                .process_with_scratch(&mut self.buf, &mut self.scratch);
+            self.transform_pair(&channels[c][start..start + n], None, start)?;
             mean[c].copy_from_slice(&self.buf[..lines]);
         }
 
         // Noisy channels, packed two per complex FFT.
         let noisy: Vec<usize> = (0..nc).filter(|&c| !exact[c]).collect();
-        if !noisy.is_empty() {
+        if noisy.len() == 2 {
+            // the common case (u and y): split, deviate and accumulate in one pass per period
+            let (ia, ib) = (noisy[0], noisy[1]);
+            let (ca, cb) = (channels[ia], channels[ib]);
+            let mut ref_a = vec![zero; lines];
+            let mut ref_b = vec![zero; lines];
+            let (mut s1a, mut s1b) = (vec![zero; lines], vec![zero; lines]);
+            let (mut saa, mut sbb) = (vec![0.0f64; lines], vec![0.0f64; lines]);
+            let mut sab = vec![zero; lines];
+            for p in 0..p_used {
+                let off = start + p * n;
+                self.transform_pair(&ca[off..off + n], Some(&cb[off..off + n]), off)?;
+                let z = &self.buf;
+                // A_k = (Z_k + conj Z_{N−k})/2, B_k = (Z_k − conj Z_{N−k})/(2j); Z_N ≡ Z_0
+                let split = |k: usize, zc: c64| {
+                    let zk = z[k];
+                    let d = zk - zc;
+                    ((zk + zc) * 0.5, c64::new(d.im * 0.5, -d.re * 0.5))
+                };
+                if p == 0 {
+                    (ref_a[0], ref_b[0]) = split(0, z[0].conj());
+                    for k in 1..lines {
+                        (ref_a[k], ref_b[k]) = split(k, z[n - k].conj());
+                    }
+                    continue;
+                }
+                let mut acc = |k: usize, (a, b): (c64, c64)| {
+                    let (da, db) = (a - ref_a[k], b - ref_b[k]);
+                    s1a[k] += da;
+                    s1b[k] += db;
+                    saa[k] += da.norm_sqr();
+                    sbb[k] += db.norm_sqr();
+                    sab[k] += da * db.conj();
+                };
+                acc(0, split(0, z[0].conj()));
+                for k in 1..lines {
+                    acc(k, split(k, z[n - k].conj()));
+                }
+            }
+            let pf = p_used as f64;
+            for k in 0..lines {
+                mean[ia][k] = ref_a[k] + s1a[k] / pf;
+                mean[ib][k] = ref_b[k] + s1b[k] / pf;
+            }
+            if p_used > 1 {
+                let denom = pf - 1.0;
+                let (paa, pbb, pab) = (
+                    pair_index(nc, ia, ia),
+                    pair_index(nc, ib, ib),
+                    pair_index(nc, ia, ib),
+                );
+                for k in 0..lines {
+                    let va = (saa[k] - s1a[k].norm_sqr() / pf) / denom;
+                    let vb = (sbb[k] - s1b[k].norm_sqr() / pf) / denom;
+                    cov[paa][k] = c64::new(va.max(0.0), 0.0);
+                    cov[pbb][k] = c64::new(vb.max(0.0), 0.0);
+                    cov[pab][k] = (sab[k] - s1a[k] * s1b[k].conj() / pf) / denom;
+                }
+            }
+        } else if !noisy.is_empty() {
             let nn = noisy.len();
             // spectra of the current period and of the reference (first) period
             let mut cur = vec![vec![zero; lines]; nn];
@@ -256,7 +310,7 @@ impl PeriodicAnalyzer {
                 for pair in (0..nn).step_by(2) {
                     let a = channels[noisy[pair]];
                     let b = noisy.get(pair + 1).map(|&c| channels[c]);
-                    self.transform_pair(&a[off..off + n], b.map(|b| &b[off..off + n]));
+                    self.transform_pair(&a[off..off + n], b.map(|b| &b[off..off + n]), off)?;
                     split_pair(&self.buf, n, lines, &mut cur, pair, b.is_some());
                 }
                 if p == 0 {
@@ -328,21 +382,38 @@ impl PeriodicAnalyzer {
         })
     }
 
-    fn transform_pair(&mut self, a: &[f64], b: Option<&[f64]>) {
+    /// Packs `a + j b` into the buffer and transforms it. The finiteness check rides along the
+    /// packing loop (`x·0` is NaN exactly for NaN and ±inf), so the data are read once; `off` is
+    /// the position of the period in the record, for the error message.
+    fn transform_pair(&mut self, a: &[f64], b: Option<&[f64]>, off: usize) -> Result<()> {
+        let mut guard = 0.0f64;
         match b {
             Some(b) => {
                 for ((z, x), y) in self.buf.iter_mut().zip(a).zip(b) {
+                    guard += x * 0.0 + y * 0.0;
                     *z = c64::new(*x, *y);
                 }
             }
             None => {
                 for (z, x) in self.buf.iter_mut().zip(a) {
+                    guard += x * 0.0;
                     *z = c64::new(*x, 0.0);
                 }
             }
         }
+        if !guard.is_finite() {
+            let bad = check_finite("channel", a)
+                .and_then(|_| b.map_or(Ok(()), |b| check_finite("channel", b)));
+            if let Err(Error::NonFinite { what, index }) = bad {
+                return Err(Error::NonFinite {
+                    what,
+                    index: off + index,
+                });
+            }
+        }
         self.fft
             .process_with_scratch(&mut self.buf, &mut self.scratch);
+        Ok(())
     }
 }
 
@@ -445,6 +516,17 @@ impl PeriodicSpectra {
             .iter()
             .map(|v| v.re)
             .collect()
+    }
+
+    /// The stored covariance row of the pair `(i, j)` and whether it must be conjugated to give
+    /// $\hat\sigma_{ij}$ (the upper triangle is stored).
+    pub fn cov_slice(&self, i: usize, j: usize) -> (&[c64], bool) {
+        let nc = self.n_channels;
+        if i <= j {
+            (&self.cov[pair_index(nc, i, j)], false)
+        } else {
+            (&self.cov[pair_index(nc, j, i)], true)
+        }
     }
 
     /// One covariance entry without allocating.
@@ -558,43 +640,47 @@ mod tests {
                 })
                 .collect();
             let w: Vec<f64> = (0..len).map(|_| StandardNormal.sample(&mut rng)).collect();
-            let chans: [&[f64]; 4] = [&r, &u, &y, &w];
-            let mut an = PeriodicAnalyzer::new(n).unwrap();
-            let s = an
-                .analyze(&chans, 100.0, &PeriodicOptions::new(n).skip(skip))
-                .unwrap();
-            let p = periods - skip;
-            assert_eq!(s.periods(), p);
-            assert!(s.is_exactly_periodic(0) && (p == 1 || !s.is_exactly_periodic(1)));
-            for k in 0..s.n_lines() {
-                let dft: Vec<Vec<c64>> = chans
-                    .iter()
-                    .map(|x| {
-                        (skip..periods)
-                            .map(|q| naive_dft(&x[q * n..(q + 1) * n], k))
-                            .collect()
-                    })
-                    .collect();
-                let means: Vec<c64> = dft
-                    .iter()
-                    .map(|d| d.iter().sum::<c64>() / p as f64)
-                    .collect();
-                for i in 0..4 {
-                    assert!(
-                        (s.mean(i)[k] - means[i]).norm() < 1e-10,
-                        "mean {i} line {k}"
-                    );
-                    for j in 0..4 {
-                        let c: c64 = (0..p)
-                            .map(|q| (dft[i][q] - means[i]) * (dft[j][q] - means[j]).conj())
-                            .sum::<c64>()
-                            / (p as f64 - 1.0);
-                        let c = if p == 1 { c64::new(0.0, 0.0) } else { c };
+            let all: [&[f64]; 4] = [&r, &u, &y, &w];
+            // 3 channels: the fused two-noisy-channel path; 4: the general path
+            for m in [3usize, 4] {
+                let chans = &all[..m];
+                let mut an = PeriodicAnalyzer::new(n).unwrap();
+                let s = an
+                    .analyze(chans, 100.0, &PeriodicOptions::new(n).skip(skip))
+                    .unwrap();
+                let p = periods - skip;
+                assert_eq!(s.periods(), p);
+                assert!(s.is_exactly_periodic(0) && (p == 1 || !s.is_exactly_periodic(1)));
+                for k in 0..s.n_lines() {
+                    let dft: Vec<Vec<c64>> = chans
+                        .iter()
+                        .map(|x| {
+                            (skip..periods)
+                                .map(|q| naive_dft(&x[q * n..(q + 1) * n], k))
+                                .collect()
+                        })
+                        .collect();
+                    let means: Vec<c64> = dft
+                        .iter()
+                        .map(|d| d.iter().sum::<c64>() / p as f64)
+                        .collect();
+                    for i in 0..m {
                         assert!(
-                            (s.cov_at(i, j, k) - c).norm() < 1e-9,
-                            "cov {i}{j} line {k}: {} vs {c}",
-                            s.cov_at(i, j, k)
+                            (s.mean(i)[k] - means[i]).norm() < 1e-10,
+                            "mean {i} line {k}"
                         );
+                        for j in 0..m {
+                            let c: c64 = (0..p)
+                                .map(|q| (dft[i][q] - means[i]) * (dft[j][q] - means[j]).conj())
+                                .sum::<c64>()
+                                / (p as f64 - 1.0);
+                            let c = if p == 1 { c64::new(0.0, 0.0) } else { c };
+                            assert!(
+                                (s.cov_at(i, j, k) - c).norm() < 1e-9,
+                                "cov {i}{j} line {k}: {} vs {c}",
+                                s.cov_at(i, j, k)
+                            );
+                        }
                     }
                 }
             }
