@@ -8,6 +8,8 @@
 //!   `{ts, num, den}`); conversions to and from state space.
 //! * [`PolyModel`]: $A y = (B/F) u + (C/D) e$ with a [`Structure`] tag.
 //! * [`Frd`]: frequency-response data in Hz with optional variance, and its algebra.
+//! * [`PidSpec`]: a continuous filtered PID and its discrete equivalent (Tustin, prewarped
+//!   Tustin or ZOH, optional computation delay).
 
 mod frd;
 mod interconnect;
@@ -18,6 +20,7 @@ mod tf;
 
 pub use frd::Frd;
 pub use interconnect::FeedbackSign;
+pub use pid::{Discretisation, PidSpec};
 pub use poly::{PolyModel, Structure};
 pub use ss::StateSpace;
 pub use tf::TransferFunction;
