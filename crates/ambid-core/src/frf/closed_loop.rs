@@ -259,7 +259,7 @@ pub fn from_periodic(
     for &k in lines {
         let (rr, uu, yy) = (mr[k], mu[k], my[k]);
         for (name, v) in [("r", rr), ("u", uu), ("y", yy)] {
-            if v.norm() == 0.0 {
+            if v.norm_sqr() == 0.0 {
                 return Err(Error::invalid(
                     "lines",
                     format!(

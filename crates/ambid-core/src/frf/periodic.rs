@@ -253,29 +253,24 @@ impl PeriodicAnalyzer {
                 self.transform_pair(&ca[off..off + n], Some(&cb[off..off + n]), off)?;
                 let z = &self.buf;
                 // A_k = (Z_k + conj Z_{N−k})/2, B_k = (Z_k − conj Z_{N−k})/(2j); Z_N ≡ Z_0
-                let split = |k: usize, zc: c64| {
+                let first = p == 0;
+                for k in 0..lines {
                     let zk = z[k];
+                    let zc = if k == 0 { z[0] } else { z[n - k] }.conj();
                     let d = zk - zc;
-                    ((zk + zc) * 0.5, c64::new(d.im * 0.5, -d.re * 0.5))
-                };
-                if p == 0 {
-                    (ref_a[0], ref_b[0]) = split(0, z[0].conj());
-                    for k in 1..lines {
-                        (ref_a[k], ref_b[k]) = split(k, z[n - k].conj());
+                    let a = (zk + zc) * 0.5;
+                    let b = c64::new(d.im * 0.5, -d.re * 0.5);
+                    if first {
+                        ref_a[k] = a;
+                        ref_b[k] = b;
+                    } else {
+                        let (da, db) = (a - ref_a[k], b - ref_b[k]);
+                        s1a[k] += da;
+                        s1b[k] += db;
+                        saa[k] += da.norm_sqr();
+                        sbb[k] += db.norm_sqr();
+                        sab[k] += da * db.conj();
                     }
-                    continue;
-                }
-                let mut acc = |k: usize, (a, b): (c64, c64)| {
-                    let (da, db) = (a - ref_a[k], b - ref_b[k]);
-                    s1a[k] += da;
-                    s1b[k] += db;
-                    saa[k] += da.norm_sqr();
-                    sbb[k] += db.norm_sqr();
-                    sab[k] += da * db.conj();
-                };
-                acc(0, split(0, z[0].conj()));
-                for k in 1..lines {
-                    acc(k, split(k, z[n - k].conj()));
                 }
             }
             let pf = p_used as f64;
@@ -581,7 +576,7 @@ impl PeriodicSpectra {
             ));
         }
         let m = &self.mean[c];
-        let peak = m[1..].iter().fold(0.0f64, |a, v| a.max(v.norm()));
+        let peak = m[1..].iter().fold(0.0f64, |a, v| a.max(v.norm_sqr()));
         if peak == 0.0 {
             return Err(Error::invalid(
                 "excitation",
@@ -590,7 +585,7 @@ impl PeriodicSpectra {
             ));
         }
         Ok((1..m.len())
-            .filter(|&k| m[k].norm() > rel_threshold * peak)
+            .filter(|&k| m[k].norm_sqr() > rel_threshold * rel_threshold * peak)
             .collect())
     }
 }
