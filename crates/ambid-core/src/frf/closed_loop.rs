@@ -362,7 +362,7 @@ pub fn from_welch(
         }
     }
     let f_all = spectra.f_hz();
-    let srr = spectra.get(ch.r, ch.r);
+    let srr = spectra.get(ch.r, ch.r)?;
     let peak = srr.iter().skip(1).fold(0.0f64, |m, v| m.max(v.re));
     let bins: Vec<usize> = (1..f_all.len())
         .filter(|&k| f_all[k] >= band.0 && f_all[k] <= band.1 && srr[k].re > rel_threshold * peak)
@@ -376,15 +376,15 @@ pub fn from_welch(
             ),
         ));
     }
-    let ts = 1.0 / spectra.fs();
+    let ts = 1.0 / spectra.options().fs;
     let n_eff = spectra.effective_averages();
-    let (sru, sry) = (spectra.get(ch.r, ch.u), spectra.get(ch.r, ch.y));
+    let (sru, sry) = (spectra.get(ch.r, ch.u)?, spectra.get(ch.r, ch.y)?);
     let (suu, syy, syu) = (
-        spectra.get(ch.u, ch.u),
-        spectra.get(ch.y, ch.y),
-        spectra.get(ch.y, ch.u),
+        spectra.get(ch.u, ch.u)?,
+        spectra.get(ch.y, ch.y)?,
+        spectra.get(ch.y, ch.u)?,
     );
-    let (sur, syr) = (spectra.get(ch.u, ch.r), spectra.get(ch.y, ch.r));
+    let (sur, syr) = (spectra.get(ch.u, ch.r)?, spectra.get(ch.y, ch.r)?);
     let m = bins.len();
     let mut f = Vec::with_capacity(m);
     let (mut t, mut sv, mut pl, mut c) = (vec![], vec![], vec![], vec![]);
