@@ -13,6 +13,8 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::{Path, PathBuf};
 
+mod cli_frf;
+
 #[derive(Parser)]
 #[command(
     name = "ambid",
@@ -41,6 +43,13 @@ enum Command {
     Config,
     /// Print the twin's linearised facts: closed-loop modes, peak sensitivity, unstable plant poles.
     Info(TwinArgs),
+    /// Nonparametric closed-loop FRFs from recorded data (T_ry, S, plant by the joint and, with a
+    /// controller file, the indirect method, the controller from data), with standard deviations,
+    /// coherences, quality measures and resonance peaks; writes the FRF CSV.
+    Frf(cli_frf::FrfArgs),
+    /// The seed paper's studies: excitation amplitude and operating point.
+    #[command(subcommand)]
+    Study(cli_frf::StudyCmd),
 }
 
 #[derive(Args)]
@@ -191,7 +200,7 @@ enum IntegratorArg {
     ExpRk4,
 }
 #[derive(Clone, Copy, ValueEnum)]
-enum ModeArg {
+pub(crate) enum ModeArg {
     Linear,
     Nonlinear,
 }
@@ -301,6 +310,8 @@ fn dispatch(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Info(a) => info(a),
+        Command::Frf(a) => cli_frf::frf(a),
+        Command::Study(c) => cli_frf::study(c),
     }
 }
 

@@ -6,7 +6,7 @@
 //! * **operating point** (its figure 7): plant FRFs at nominal, bias ±20 % and air gap ±10 µm,
 //!   with the deviation from nominal per band (low frequency, resonance region, high frequency).
 
-use crate::analysis::{analyze, FrfAnalysis, FrfSettings};
+use crate::analysis::{analyze, FrfAnalysis, FrfSettings, Record};
 use crate::experiment::{run, ExcitationKind, ExcitationPlan, Experiment};
 use ambid_core::lti::Frd;
 use ambid_twin::{Mode, TwinConfig};
@@ -108,7 +108,14 @@ pub fn amplitude_from_records(
     let mut rows = Vec::with_capacity(records.len());
     let mut plants = Vec::with_capacity(records.len());
     for rec in records {
-        let a: FrfAnalysis = analyze(&rec.r, &rec.u, &rec.y, fs, settings, y_noise)
+        let record = Record {
+            r: &rec.r,
+            u: &rec.u,
+            y: &rec.y,
+            i: rec.i.as_deref(),
+            fs,
+        };
+        let a: FrfAnalysis = analyze(&record, settings, y_noise)
             .with_context(|| format!("level {:.1} %", 100.0 * rec.level))?;
         let err = match truth {
             Some(t) => {
@@ -273,6 +280,8 @@ pub fn amplitude_on_twin(study: &TwinAmplitudeStudy) -> Result<AmplitudeOutcome>
     let twin = twin.context("no level given")?;
     let mut settings = FrfSettings::periodic(period, study.skip_periods);
     settings.band = study.band;
+    settings.quality_band = study.band;
+    settings.i_sat = Some(twin.i_sat());
     let truth = |f: &[f64]| -> Result<Vec<ambid_core::c64>> { Ok(twin.plant_frf(f)?) };
     amplitude_from_records(
         &records,
@@ -396,8 +405,17 @@ pub fn operating_point_on_twin(
         .with_context(|| format!("operating point `{}`", case.name))?;
         let mut settings = FrfSettings::periodic(out.excitation.period_samples, skip_periods);
         settings.band = band;
+        settings.quality_band = band;
+        settings.i_sat = Some(out.twin.i_sat());
         let rec = &out.record;
-        let a = analyze(&rec.r, &rec.u, &rec.y, out.twin.fs(), &settings, None)
+        let record = Record {
+            r: &rec.r,
+            u: &rec.u,
+            y: &rec.y,
+            i: Some(&rec.i),
+            fs: out.twin.fs(),
+        };
+        let a = analyze(&record, &settings, None)
             .with_context(|| format!("operating point `{}`", case.name))?;
         let truth = out.twin.plant_frf(a.frf.f_hz())?;
         truth_errors.push(median(

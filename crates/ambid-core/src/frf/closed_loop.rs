@@ -284,9 +284,27 @@ pub fn from_periodic(
         let sk = uu * ir;
         let pk = yy * iu;
         let ck = (rr - uu) * iy;
-        vt.push(quad_form2(-tk * ir, ir, sig[0][0].re, sig[2][2].re, sig[0][2]));
-        vs.push(quad_form2(-sk * ir, ir, sig[0][0].re, sig[1][1].re, sig[0][1]));
-        vp.push(quad_form2(-pk * iu, iu, sig[1][1].re, sig[2][2].re, sig[1][2]));
+        vt.push(quad_form2(
+            -tk * ir,
+            ir,
+            sig[0][0].re,
+            sig[2][2].re,
+            sig[0][2],
+        ));
+        vs.push(quad_form2(
+            -sk * ir,
+            ir,
+            sig[0][0].re,
+            sig[1][1].re,
+            sig[0][1],
+        ));
+        vp.push(quad_form2(
+            -pk * iu,
+            iu,
+            sig[1][1].re,
+            sig[2][2].re,
+            sig[1][2],
+        ));
         vc.push(quad_form(&[iy, -iy, -ck * iy], cov));
         t.push(tk);
         sv.push(sk);

@@ -126,7 +126,9 @@ pub fn write_frf_csv_with(
 }
 
 /// Reads a time-data CSV. The sample time comes from the `t` column when present (it must be
-/// uniformly spaced), otherwise from `fs_hz`. Every value must parse as a finite number.
+/// uniformly spaced), otherwise from `fs_hz`. Every value must parse as a number; `NaN`, `inf` and
+/// empty fields in a signal column are read as missing samples (NaN) for the screening of
+/// `ambid frf`, the `t` column must be finite.
 pub fn read_time_csv(path: &Path, fs_hz: Option<f64>) -> Result<TimeData> {
     let mut rdr = ::csv::ReaderBuilder::new()
         .trim(::csv::Trim::All)
@@ -158,7 +160,13 @@ pub fn read_time_csv(path: &Path, fs_hz: Option<f64>) -> Result<TimeData> {
             );
         }
         for (k, field) in rec.iter().enumerate() {
-            let v: f64 = field.parse().map_err(|_| {
+            // an empty field is a missing sample (NaN); NaN/inf are kept for the screening
+            let v: f64 = if field.is_empty() {
+                Ok(f64::NAN)
+            } else {
+                field.parse()
+            }
+            .map_err(|_| {
                 anyhow!(
                     "{}: data row {}, column `{}`: `{field}` is not a number",
                     path.display(),
@@ -166,9 +174,9 @@ pub fn read_time_csv(path: &Path, fs_hz: Option<f64>) -> Result<TimeData> {
                     header[k]
                 )
             })?;
-            if !v.is_finite() {
+            if !v.is_finite() && header[k] == "t" {
                 bail!(
-                    "{}: data row {}, column `{}` is not finite ({field}); repair or remove the sample",
+                    "{}: data row {}, column `{}` is not finite ({field}); the time column must be complete",
                     path.display(),
                     line + 1,
                     header[k]
@@ -251,7 +259,11 @@ mod tests {
         let e = read_time_csv(&p, None).unwrap_err().to_string();
         assert!(e.contains("--fs"), "{e}");
         assert!(read_time_csv(&p, Some(100.0)).is_ok());
-        std::fs::write(&p, "t,y\n0,1\n0.1,NaN\n").unwrap();
+        // missing or non-finite samples in a signal column are kept (as NaN) for the screening
+        std::fs::write(&p, "t,y\n0,1\n0.1,NaN\n0.2,\n").unwrap();
+        let d = read_time_csv(&p, None).unwrap();
+        assert!(d.column("y").unwrap()[1].is_nan() && d.column("y").unwrap()[2].is_nan());
+        std::fs::write(&p, "t,y\n0,1\nNaN,2\n").unwrap();
         let e = read_time_csv(&p, None).unwrap_err().to_string();
         assert!(e.contains("not finite"), "{e}");
         std::fs::write(&p, "t,y\n0,1\n0.1,2,3\n").unwrap();

@@ -1,0 +1,547 @@
+//! `ambid frf` and `ambid study`: argument parsing and file output over `ambid::analysis` and
+//! `ambid::study`.
+
+use ambid::analysis::{analyze, FrfAnalysis, FrfMethod, FrfSettings, Record};
+use ambid::experiment::ExcitationPlan;
+use ambid::io::{read_controller, read_time_csv, write_frf_csv_with, FrfColumn};
+use ambid::study::{
+    amplitude_from_records, amplitude_on_twin, operating_point_on_twin, seed_cases, seed_levels,
+    LevelRecord, Recommendation, TwinAmplitudeStudy,
+};
+use ambid_core::frf::resonance::{find_resonances, order_from_peaks, ResonanceOptions};
+use ambid_core::frf::window::Window;
+use ambid_twin::{Mode, TwinConfig};
+use anyhow::{bail, Context, Result};
+use clap::{Args, Subcommand, ValueEnum};
+use std::path::{Path, PathBuf};
+
+/// Parses `a,b` as a frequency band in Hz.
+fn parse_band(s: &str) -> std::result::Result<(f64, f64), String> {
+    let (a, b) = s
+        .split_once(',')
+        .ok_or_else(|| format!("`{s}`: give a band as f_min,f_max in Hz, e.g. 10,1000"))?;
+    let lo: f64 = a
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{a}` is not a number"))?;
+    let hi: f64 = b
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{b}` is not a number"))?;
+    if !(lo.is_finite() && hi.is_finite() && lo >= 0.0 && hi > lo) {
+        return Err(format!("`{s}`: need 0 ≤ f_min < f_max"));
+    }
+    Ok((lo, hi))
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum WindowArg {
+    Rect,
+    Hann,
+    Hamming,
+    Blackman,
+    Flattop,
+}
+
+impl From<WindowArg> for Window {
+    fn from(w: WindowArg) -> Window {
+        match w {
+            WindowArg::Rect => Window::Rectangular,
+            WindowArg::Hann => Window::Hann,
+            WindowArg::Hamming => Window::Hamming,
+            WindowArg::Blackman => Window::Blackman,
+            WindowArg::Flattop => Window::FlatTop,
+        }
+    }
+}
+
+#[derive(Args)]
+pub struct FrfArgs {
+    /// Time-data CSV (header row; optional `t` column in seconds).
+    data: PathBuf,
+    /// Sample rate in Hz (needed when the file has no `t` column).
+    #[arg(long)]
+    fs: Option<f64>,
+    /// Column of the excitation r.
+    #[arg(long, default_value = "r")]
+    excitation: String,
+    /// Column of the controller output u (including r).
+    #[arg(long, default_value = "u")]
+    input: String,
+    /// Column of the measured output y.
+    #[arg(long, default_value = "y")]
+    output: String,
+    /// Column of the coil current (saturation check); used when present.
+    #[arg(long, default_value = "i")]
+    current: String,
+    /// Controller file (TOML/JSON: pid, tf or ss) for the indirect plant estimate.
+    #[arg(long)]
+    controller: Option<PathBuf>,
+    /// Samples per excitation period: selects period-synchronous averaging (otherwise Welch).
+    #[arg(long)]
+    period_samples: Option<usize>,
+    /// Leading periods dropped as transient (period averaging).
+    #[arg(long, default_value_t = 1)]
+    skip_periods: usize,
+    /// Welch segment length in samples (default: 1/8 of the record, at least 256).
+    #[arg(long)]
+    nperseg: Option<usize>,
+    /// Welch overlap in samples (default: half a segment).
+    #[arg(long)]
+    noverlap: Option<usize>,
+    /// Welch window.
+    #[arg(long, value_enum, default_value_t = WindowArg::Hann)]
+    window: WindowArg,
+    /// Leading samples dropped as transient (Welch).
+    #[arg(long, default_value_t = 0)]
+    skip_samples: usize,
+    /// Band of the written FRF, Hz (f_min,f_max; default 1 Hz to fs/2).
+    #[arg(long, value_parser = parse_band)]
+    band: Option<(f64, f64)>,
+    /// Band of the quality averages, Hz.
+    #[arg(long, value_parser = parse_band, default_value = "10,1000")]
+    quality_band: (f64, f64),
+    /// Saturation current of u and i in A (otherwise flat tops are looked for).
+    #[arg(long)]
+    i_sat: Option<f64>,
+    /// Time-data CSV recorded without excitation under the same loop: output SNR.
+    #[arg(long)]
+    noise: Option<PathBuf>,
+    /// Do not screen for NaN/Inf, spikes and stuck samples.
+    #[arg(long)]
+    no_screen: bool,
+    /// Output FRF CSV.
+    #[arg(long, default_value = "frf.csv")]
+    out: PathBuf,
+}
+
+fn ensure_parent(p: &Path) -> Result<()> {
+    if let Some(d) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(d).with_context(|| format!("cannot create {}", d.display()))?;
+    }
+    Ok(())
+}
+
+fn write_analysis(path: &Path, a: &FrfAnalysis) -> Result<()> {
+    ensure_parent(path)?;
+    let frf = &a.frf;
+    let stds: Vec<Option<Vec<f64>>> = [&frf.t_ry, &frf.t_ru, &frf.plant, &frf.controller]
+        .iter()
+        .map(|f| f.std())
+        .collect();
+    let mut q = vec![
+        FrfColumn {
+            name: "t_ry",
+            values: frf.t_ry.values(),
+            std: stds[0].as_deref(),
+        },
+        FrfColumn {
+            name: "t_ru",
+            values: frf.t_ru.values(),
+            std: stds[1].as_deref(),
+        },
+        FrfColumn {
+            name: "plant",
+            values: frf.plant.values(),
+            std: stds[2].as_deref(),
+        },
+        FrfColumn {
+            name: "controller",
+            values: frf.controller.values(),
+            std: stds[3].as_deref(),
+        },
+    ];
+    let ind_std = frf.plant_indirect.as_ref().and_then(|p| p.std());
+    if let Some(p) = &frf.plant_indirect {
+        q.push(FrfColumn {
+            name: "plant_indirect",
+            values: p.values(),
+            std: ind_std.as_deref(),
+        });
+    }
+    write_frf_csv_with(
+        path,
+        frf.f_hz(),
+        &q,
+        &[("coh_ry", &frf.coh_ry), ("coh_ru", &frf.coh_ru)],
+    )
+}
+
+fn print_quality(a: &FrfAnalysis) {
+    let q = &a.quality;
+    println!(
+        "quality over {}–{} Hz ({} lines): mean coherence γ²_ry {:.4}, γ²_ru {:.4}; \
+         single-period plant variance {:.3e} (relative {:.3e})",
+        q.band.0,
+        q.band.1,
+        q.lines,
+        q.mean_coherence_ry,
+        q.mean_coherence_ru,
+        q.mean_plant_variance,
+        q.mean_plant_rel_variance
+    );
+    if let Some(s) = q.output_snr_db {
+        println!("output SNR: {s:.2} dB");
+    }
+}
+
+pub fn frf(a: FrfArgs) -> Result<()> {
+    let data = read_time_csv(&a.data, a.fs)?;
+    if let Some(fs) = a.fs {
+        let file_fs = 1.0 / data.ts;
+        if ((file_fs - fs) / fs).abs() > 1e-6 {
+            bail!("--fs {fs} Hz disagrees with the file's `t` column ({file_fs} Hz)");
+        }
+    }
+    let r = data.column(&a.excitation)?;
+    let u = data.column(&a.input)?;
+    let y = data.column(&a.output)?;
+    let i = data.column(&a.current).ok();
+    let fs = 1.0 / data.ts;
+    let method = match a.period_samples {
+        Some(p) => FrfMethod::Periodic {
+            period_samples: p,
+            skip_periods: a.skip_periods,
+        },
+        None => FrfMethod::Welch {
+            nperseg: a.nperseg.unwrap_or((r.len() / 8).max(256)),
+            noverlap: a.noverlap,
+            window: a.window.into(),
+            skip_samples: a.skip_samples,
+        },
+    };
+    let controller = match &a.controller {
+        Some(p) => {
+            let c = read_controller(p)?;
+            c.check_ts(data.ts)?;
+            Some(c.state_space().clone())
+        }
+        None => None,
+    };
+    let settings = FrfSettings {
+        method,
+        band: a.band.unwrap_or((1.0, 0.5 * fs)),
+        quality_band: a.quality_band,
+        rel_threshold: 1e-6,
+        controller,
+        i_sat: a.i_sat,
+        screen: !a.no_screen,
+    };
+    let noise = match &a.noise {
+        Some(p) => {
+            let d = read_time_csv(p, a.fs.or(Some(fs)))?;
+            Some(d.column(&a.output)?.to_vec())
+        }
+        None => None,
+    };
+    let rec = Record { r, u, y, i, fs };
+    let res = analyze(&rec, &settings, noise.as_deref())?;
+    for w in &res.warnings {
+        eprintln!("warning: {w}");
+    }
+    match &res.frf.averaging {
+        ambid_core::frf::closed_loop::Averaging::Periods(p) => println!(
+            "period averaging: {p} periods, {} lines in {:.1}–{:.1} Hz",
+            res.frf.f_hz().len(),
+            res.frf.f_hz()[0],
+            res.frf.f_hz()[res.frf.f_hz().len() - 1]
+        ),
+        ambid_core::frf::closed_loop::Averaging::Welch {
+            segments,
+            effective,
+        } => println!(
+            "Welch: {segments} segments ({effective:.1} effective averages), {} bins",
+            res.frf.f_hz().len()
+        ),
+    }
+    print_quality(&res);
+    // resonance peaks of the plant in the quality band, on lines whose relative standard
+    // deviation is below 10 % (noise ripple must not count as a mode)
+    let (qf, qg): (Vec<f64>, Vec<_>) = {
+        let f = res.frf.f_hz();
+        let v = res.frf.plant.values();
+        let sd = res.frf.plant.std();
+        (0..f.len())
+            .filter(|&k| f[k] >= a.quality_band.0 && f[k] <= a.quality_band.1)
+            .filter(|&k| sd.as_ref().is_none_or(|s| s[k] <= 0.1 * v[k].norm()))
+            .map(|k| (f[k], v[k]))
+            .unzip()
+    };
+    if qf.len() >= 3 {
+        let peaks = find_resonances(&qf, &qg, &ResonanceOptions::default())?;
+        println!(
+            "plant resonance peaks in {}–{} Hz (≥ 3 dB prominence): {} → order estimate ≥ {}",
+            a.quality_band.0,
+            a.quality_band.1,
+            peaks.len(),
+            order_from_peaks(&peaks)
+        );
+        for p in &peaks {
+            match p.damping {
+                Some(z) => println!(
+                    "  {:8.1} Hz  |P| {:.3e} m/A  ζ ≈ {z:.3}",
+                    p.f_hz, p.magnitude
+                ),
+                None => println!("  {:8.1} Hz  |P| {:.3e} m/A", p.f_hz, p.magnitude),
+            }
+        }
+    }
+    write_analysis(&a.out, &res)?;
+    println!("written: {}", a.out.display());
+    Ok(())
+}
+
+#[derive(Subcommand)]
+pub enum StudyCmd {
+    /// Excitation-amplitude study (the seed's figure 6): coherence, FRF variance and output SNR
+    /// per level, and a recommended range.
+    Amplitude(AmplitudeArgs),
+    /// Operating-point study (the seed's figure 7): plant FRFs at nominal, bias ±20 % and air gap
+    /// ±10 µm, with the deviation from nominal per band.
+    OperatingPoint(OperatingPointArgs),
+}
+
+#[derive(Args)]
+pub struct AmplitudeArgs {
+    /// Levels in % of i_sat (comma-separated).
+    #[arg(long, value_delimiter = ',', default_values_t = seed_levels().iter().map(|l| 100.0 * l).collect::<Vec<f64>>())]
+    levels: Vec<f64>,
+    /// Recorded files instead of the twin, one per level (same order as --levels), with columns
+    /// r, u, y.
+    #[arg(long, value_delimiter = ',')]
+    files: Vec<PathBuf>,
+    /// Noise-only file (files mode) for the output SNR.
+    #[arg(long)]
+    noise: Option<PathBuf>,
+    /// Sample rate for files without a `t` column.
+    #[arg(long)]
+    fs: Option<f64>,
+    /// Samples per excitation period (files mode; the twin uses its PRBS period).
+    #[arg(long, default_value_t = 5115)]
+    period_samples: usize,
+    /// PRBS periods per level (twin mode; the seed used 50).
+    #[arg(long, default_value_t = 20)]
+    periods: usize,
+    /// Leading periods dropped.
+    #[arg(long, default_value_t = 1)]
+    skip_periods: usize,
+    /// Twin mode.
+    #[arg(long, value_enum, default_value_t = crate::ModeArg::Nonlinear)]
+    mode: crate::ModeArg,
+    /// Twin configuration (TOML).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Noise seed (twin mode).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Band of the averages, Hz.
+    #[arg(long, value_parser = parse_band, default_value = "10,1000")]
+    band: (f64, f64),
+    /// Output CSV of the figures.
+    #[arg(long, default_value = "amplitude_study.csv")]
+    out: PathBuf,
+}
+
+#[derive(Args)]
+pub struct OperatingPointArgs {
+    /// Twin mode.
+    #[arg(long, value_enum, default_value_t = crate::ModeArg::Nonlinear)]
+    mode: crate::ModeArg,
+    /// Twin configuration (TOML) of the nominal point.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Excitation level as a fraction of i_sat.
+    #[arg(long, default_value_t = 0.10)]
+    amplitude: f64,
+    /// Noise seed.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Band of the FRFs, Hz.
+    #[arg(long, value_parser = parse_band, default_value = "10,2000")]
+    band: (f64, f64),
+    /// Output CSV of the deviations per case and band.
+    #[arg(long, default_value = "operating_point_study.csv")]
+    out: PathBuf,
+    /// Output CSV of the plant FRF magnitudes of all cases (f_hz, then |P| and phase per case).
+    #[arg(long, default_value = "operating_point_frf.csv")]
+    frf_out: PathBuf,
+}
+
+fn load_config(p: &Option<PathBuf>) -> Result<TwinConfig> {
+    match p {
+        Some(p) => {
+            let s = std::fs::read_to_string(p)
+                .with_context(|| format!("cannot read {}", p.display()))?;
+            Ok(TwinConfig::from_toml_str(&s).with_context(|| format!("in {}", p.display()))?)
+        }
+        None => Ok(TwinConfig::default()),
+    }
+}
+
+fn write_rows<T: serde::Serialize>(path: &Path, rows: &[T]) -> Result<()> {
+    ensure_parent(path)?;
+    let mut w = csv::Writer::from_path(path)
+        .with_context(|| format!("cannot create {}", path.display()))?;
+    for r in rows {
+        w.serialize(r)?;
+    }
+    w.flush()?;
+    Ok(())
+}
+
+pub fn study(cmd: StudyCmd) -> Result<()> {
+    match cmd {
+        StudyCmd::Amplitude(a) => amplitude(a),
+        StudyCmd::OperatingPoint(a) => operating_point(a),
+    }
+}
+
+fn mode(m: crate::ModeArg) -> Mode {
+    match m {
+        crate::ModeArg::Linear => Mode::Linear,
+        crate::ModeArg::Nonlinear => Mode::Nonlinear,
+    }
+}
+
+fn amplitude(a: AmplitudeArgs) -> Result<()> {
+    if let Some(l) = a
+        .levels
+        .iter()
+        .find(|l| !(l.is_finite() && **l > 0.0 && **l <= 100.0))
+    {
+        bail!("--levels must be in (0, 100] % of i_sat, got {l}");
+    }
+    let out = if a.files.is_empty() {
+        let study = TwinAmplitudeStudy {
+            twin: load_config(&a.config)?,
+            excitation: ExcitationPlan {
+                periods: a.periods,
+                ..ExcitationPlan::default()
+            },
+            levels: a.levels.iter().map(|l| l / 100.0).collect(),
+            mode: mode(a.mode),
+            seed: a.seed,
+            skip_periods: a.skip_periods,
+            band: a.band,
+            noise: true,
+        };
+        amplitude_on_twin(&study)?
+    } else {
+        if a.files.len() != a.levels.len() {
+            bail!(
+                "{} files for {} levels: pass one file per level, in the order of --levels",
+                a.files.len(),
+                a.levels.len()
+            );
+        }
+        let mut records = Vec::new();
+        let mut fs = None;
+        for (p, l) in a.files.iter().zip(&a.levels) {
+            let d = read_time_csv(p, a.fs)?;
+            fs = Some(1.0 / d.ts);
+            records.push(LevelRecord {
+                level: l / 100.0,
+                r: d.column("r")?.to_vec(),
+                u: d.column("u")?.to_vec(),
+                y: d.column("y")?.to_vec(),
+                i: d.column("i").ok().map(|v| v.to_vec()),
+                saturated_fraction: None,
+            });
+        }
+        let fs = fs.context("no file")?;
+        let noise = match &a.noise {
+            Some(p) => Some(read_time_csv(p, Some(fs))?.column("y")?.to_vec()),
+            None => None,
+        };
+        let mut settings = FrfSettings::periodic(a.period_samples, a.skip_periods);
+        settings.band = a.band;
+        settings.quality_band = a.band;
+        amplitude_from_records(
+            &records,
+            fs,
+            noise.as_deref(),
+            &settings,
+            None,
+            Recommendation::default(),
+        )?
+    };
+    println!(
+        "{:>7} {:>9} {:>9} {:>12} {:>12} {:>9} {:>9}",
+        "level %", "coh_ry", "coh_ru", "FRF var", "rel var", "SNR dB", "sat %"
+    );
+    for r in &out.rows {
+        println!(
+            "{:7.1} {:9.4} {:9.4} {:12.4e} {:12.4e} {:>9} {:9.3}",
+            r.level_pct,
+            r.mean_coh_ry,
+            r.mean_coh_ru,
+            r.mean_plant_var,
+            r.mean_plant_rel_var,
+            r.snr_db.map_or("-".into(), |s| format!("{s:.2}")),
+            100.0 * r.saturated_fraction
+        );
+    }
+    match out.recommended_pct {
+        Some((lo, hi)) => println!("recommended excitation: {lo:.0}–{hi:.0} % of i_sat"),
+        None => println!("no level recommended"),
+    }
+    println!("({})", out.reasoning);
+    write_rows(&a.out, &out.rows)?;
+    println!("written: {}", a.out.display());
+    Ok(())
+}
+
+fn operating_point(a: OperatingPointArgs) -> Result<()> {
+    let nominal = load_config(&a.config)?;
+    let cases = seed_cases(&nominal);
+    let out = operating_point_on_twin(
+        &nominal,
+        &cases,
+        &ExcitationPlan {
+            amplitude_frac: a.amplitude,
+            ..ExcitationPlan::default()
+        },
+        mode(a.mode),
+        a.seed,
+        1,
+        a.band,
+    )?;
+    println!(
+        "{:>10} {:>10} {:>14} {:>14} {:>10}",
+        "case", "band", "median dev %", "true dev %", "max dB"
+    );
+    for d in &out.deviations {
+        println!(
+            "{:>10} {:>10} {:14.2} {:>14} {:10.2}",
+            d.case,
+            d.band,
+            100.0 * d.median_rel_dev,
+            d.truth_median_rel_dev
+                .map_or("-".into(), |t| format!("{:.2}", 100.0 * t)),
+            d.max_abs_db_dev
+        );
+    }
+    write_rows(&a.out, &out.deviations)?;
+    // overlay file
+    ensure_parent(&a.frf_out)?;
+    let mut w = csv::Writer::from_path(&a.frf_out)
+        .with_context(|| format!("cannot create {}", a.frf_out.display()))?;
+    let mut header = vec!["f_hz".to_string()];
+    for c in &out.cases {
+        header.push(format!("{}_mag", c.name));
+        header.push(format!("{}_phase_deg", c.name));
+    }
+    w.write_record(&header)?;
+    let f = out.plants[0].f_hz();
+    for k in 0..f.len() {
+        let mut row = vec![format!("{:.17e}", f[k])];
+        for p in &out.plants {
+            row.push(format!("{:.17e}", p.values()[k].norm()));
+            row.push(format!("{:.17e}", p.values()[k].arg().to_degrees()));
+        }
+        w.write_record(&row)?;
+    }
+    w.flush()?;
+    println!("written: {}, {}", a.out.display(), a.frf_out.display());
+    Ok(())
+}

@@ -1,0 +1,264 @@
+//! `ambid frf` and `ambid study` end to end: files written, numbers against the twin's truth,
+//! and the bad-input messages issue 3 asks for.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn ambid(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_ambid"))
+        .args(args)
+        .output()
+        .expect("the ambid binary runs")
+}
+
+fn text(o: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+fn tmpdir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("ambid-frf-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// Simulates the linear seed experiment into `dir` (data.csv, truth.csv).
+fn simulate(dir: &Path) {
+    let o = ambid(&["simulate", "--mode", "linear", "--out", s(dir)]);
+    assert!(o.status.success(), "{}", text(&o));
+}
+
+fn read_csv(p: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
+    let mut r = csv::Reader::from_path(p).unwrap();
+    let h: Vec<String> = r.headers().unwrap().iter().map(String::from).collect();
+    let rows = r
+        .records()
+        .map(|rec| rec.unwrap().iter().map(|v| v.parse().unwrap()).collect())
+        .collect();
+    (h, rows)
+}
+
+const CONTROLLER: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/tests/fixtures/twin_controller.toml"
+);
+
+#[test]
+fn frf_writes_the_closed_loop_frfs_and_they_match_the_twin() {
+    let d = tmpdir("ok");
+    simulate(&d);
+    let out = d.join("frf.csv");
+    let o = ambid(&[
+        "frf",
+        s(&d.join("data.csv")),
+        "--period-samples",
+        "5115",
+        "--controller",
+        CONTROLLER,
+        "--i-sat",
+        "2.0",
+        "--band",
+        "10,1000",
+        "--out",
+        s(&out),
+    ]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    assert!(
+        t.contains("19 periods") && t.contains("mean coherence"),
+        "{t}"
+    );
+    assert!(!t.contains("warning"), "{t}");
+    let (h, rows) = read_csv(&out);
+    for col in [
+        "f_hz",
+        "t_ry_re",
+        "t_ry_std",
+        "t_ru_re",
+        "plant_re",
+        "plant_im",
+        "plant_std",
+        "controller_re",
+        "plant_indirect_re",
+        "coh_ry",
+        "coh_ru",
+    ] {
+        assert!(h.iter().any(|c| c == col), "missing {col} in {h:?}");
+    }
+    assert_eq!(rows.len(), 253);
+    // the plant against the twin's own truth (library call, same default configuration)
+    let twin = ambid_twin::Twin::new(ambid_twin::TwinConfig::default()).unwrap();
+    let f: Vec<f64> = rows.iter().map(|r| r[0]).collect();
+    let truth = twin.plant_frf(&f).unwrap();
+    let col = |name: &str| h.iter().position(|c| c == name).unwrap();
+    let (pr, pi, ps) = (col("plant_re"), col("plant_im"), col("plant_std"));
+    let mut inside = 0;
+    for (row, t) in rows.iter().zip(&truth) {
+        let e = ((row[pr] - t.re).powi(2) + (row[pi] - t.im).powi(2)).sqrt();
+        if e <= 1.81 * row[ps] {
+            inside += 1;
+        }
+    }
+    let frac = inside as f64 / rows.len() as f64;
+    assert!(frac > 0.88, "{frac} of the lines inside the 95 % disc");
+}
+
+#[test]
+fn frf_bad_inputs_name_the_fix() {
+    let d = tmpdir("bad");
+    simulate(&d);
+    let data = d.join("data.csv");
+    let out = d.join("x.csv");
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (
+            vec!["--period-samples", "5000"],
+            "not an integer number of periods",
+        ),
+        (
+            vec!["--period-samples", "5115", "--skip-periods", "19"],
+            "at least 2",
+        ),
+        (
+            vec!["--period-samples", "5115", "--excitation", "w"],
+            "no power",
+        ),
+        (
+            vec!["--period-samples", "5115", "--excitation", "nope"],
+            "unknown column `nope`",
+        ),
+        (vec!["--nperseg", "200000"], "nperseg"),
+        (
+            vec!["--period-samples", "5115", "--band", "10"],
+            "f_min,f_max",
+        ),
+    ];
+    for (extra, expect) in cases {
+        let mut args = vec!["frf", s(&data), "--out", s(&out)];
+        args.extend(extra.iter().copied());
+        let o = ambid(&args);
+        let t = text(&o);
+        assert!(!o.status.success(), "{extra:?} should fail");
+        assert!(t.contains(expect), "{extra:?}: {t}");
+    }
+    // a controller sampled at another rate than the data
+    let ctrl = d.join("ctrl.toml");
+    let body = std::fs::read_to_string(CONTROLLER)
+        .unwrap()
+        .replace("fs_hz = 20000.0", "fs_hz = 10000.0")
+        .replace("lowpass_hz = 5000.0", "lowpass_hz = 4500.0");
+    std::fs::write(&ctrl, body).unwrap();
+    let o = ambid(&[
+        "frf",
+        s(&data),
+        "--period-samples",
+        "5115",
+        "--controller",
+        s(&ctrl),
+        "--out",
+        s(&out),
+    ]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("rediscretise"), "{}", text(&o));
+}
+
+#[test]
+fn frf_reports_repaired_samples_and_saturation() {
+    let d = tmpdir("dirty");
+    let o = ambid(&[
+        "simulate",
+        "--mode",
+        "nonlinear",
+        "--amplitude",
+        "0.6",
+        "--out",
+        s(&d),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    // knock out one sample of y and add a spike
+    let p = d.join("data.csv");
+    let body = std::fs::read_to_string(&p).unwrap();
+    let mut lines: Vec<String> = body.lines().map(String::from).collect();
+    for (row, how) in [(30_001usize, "nan"), (40_001, "spike")] {
+        let mut f: Vec<String> = lines[row].split(',').map(String::from).collect();
+        let y: f64 = f[5].parse().unwrap();
+        f[5] = if how == "nan" {
+            "NaN".into()
+        } else {
+            format!("{:e}", y + 1e-3)
+        };
+        lines[row] = f.join(",");
+    }
+    std::fs::write(&p, lines.join("\n")).unwrap();
+    let o = ambid(&[
+        "frf",
+        s(&p),
+        "--period-samples",
+        "5115",
+        "--i-sat",
+        "2.0",
+        "--out",
+        s(&d.join("f.csv")),
+    ]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    assert!(t.contains("warning") && t.contains("saturated"), "{t}");
+    assert!(
+        t.contains("1 non-finite") || t.contains("non-finite"),
+        "{t}"
+    );
+    assert!(t.contains("spike"), "{t}");
+    // the clamp plateaus of u are reported as saturation, not "repaired" as spikes
+    assert!(!t.contains("u - r:"), "{t}");
+}
+
+#[test]
+fn studies_write_their_figures() {
+    let d = tmpdir("study");
+    let out = d.join("amp.csv");
+    let o = ambid(&[
+        "study",
+        "amplitude",
+        "--levels",
+        "4,10",
+        "--periods",
+        "4",
+        "--mode",
+        "linear",
+        "--out",
+        s(&out),
+    ]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    let (h, rows) = {
+        let mut r = csv::Reader::from_path(&out).unwrap();
+        let h: Vec<String> = r.headers().unwrap().iter().map(String::from).collect();
+        (h, r.records().count())
+    };
+    assert_eq!(rows, 2);
+    assert!(h.contains(&"mean_coh_ry".to_string()) && h.contains(&"snr_db".to_string()));
+    let dev = d.join("op.csv");
+    let frf = d.join("opf.csv");
+    let o = ambid(&[
+        "study",
+        "operating-point",
+        "--mode",
+        "linear",
+        "--out",
+        s(&dev),
+        "--frf-out",
+        s(&frf),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let n = csv::Reader::from_path(&dev).unwrap().records().count();
+    assert_eq!(n, 4 * 3, "four off-nominal cases × three bands");
+    let o = ambid(&["study", "amplitude", "--levels", "4,200"]);
+    assert!(!o.status.success() && text(&o).contains("(0, 100]"));
+}
