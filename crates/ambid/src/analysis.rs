@@ -180,7 +180,7 @@ pub fn analyze(
                 ..AbnormalOptions::default()
             }
         } else {
-            opts.clone()
+            opts
         };
         let (c2, rc) = repair_abnormal(&c, &copts).context("screening u − r")?;
         let u2: Vec<f64> = c2.iter().zip(rec.r).map(|(c, r)| c + r).collect();

@@ -533,8 +533,8 @@ fn operating_point(a: OperatingPointArgs) -> Result<()> {
     }
     w.write_record(&header)?;
     let f = out.plants[0].f_hz();
-    for k in 0..f.len() {
-        let mut row = vec![format!("{:.17e}", f[k])];
+    for (k, fk) in f.iter().enumerate() {
+        let mut row = vec![format!("{fk:.17e}")];
         for p in &out.plants {
             row.push(format!("{:.17e}", p.values()[k].norm()));
             row.push(format!("{:.17e}", p.values()[k].arg().to_degrees()));
