@@ -180,8 +180,35 @@ fn print_quality(a: &FrfAnalysis) {
         q.mean_plant_variance,
         q.mean_plant_rel_variance
     );
-    if let Some(s) = q.output_snr_db {
-        println!("output SNR: {s:.2} dB");
+    match (q.output_snr_db, &a.spectra) {
+        (Some(s), _) => {
+            println!("output SNR: {s:.2} dB (excited record over the noise-only record)")
+        }
+        (None, Some(sp)) => {
+            // no noise-only record: per-line SNR of y from the period spread, averaged in dB
+            let lines: Vec<usize> = a
+                .frf
+                .f_hz()
+                .iter()
+                .filter(|f| **f >= q.band.0 && **f <= q.band.1)
+                .map(|f| (f / sp.resolution_hz()).round() as usize)
+                .collect();
+            let snr = ambid_core::frf::quality::line_snr(sp, 2, &lines);
+            let db: Vec<f64> = snr
+                .iter()
+                .filter(|v| v.is_finite() && **v > 0.0)
+                .map(|v| 10.0 * v.log10())
+                .collect();
+            if !db.is_empty() {
+                println!(
+                    "per-line output SNR from the period spread: mean {:.1} dB over {} lines \
+                     (pass --noise for the seed's output SNR)",
+                    db.iter().sum::<f64>() / db.len() as f64,
+                    db.len()
+                );
+            }
+        }
+        _ => {}
     }
 }
 

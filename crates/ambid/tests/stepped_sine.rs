@@ -277,6 +277,9 @@ fn stepped_sine_vs_prbs_on_the_same_lines() {
         253.0 * per_line_sine,
         100.0 * med(&prbs_err)
     );
-    assert!(med(&sine_err) < med(&prbs_err), "{sine_err:?} vs {prbs_err:?}");
+    assert!(
+        med(&sine_err) < med(&prbs_err),
+        "{sine_err:?} vs {prbs_err:?}"
+    );
     assert!(253.0 * per_line_sine > 10.0 * 5.115);
 }
