@@ -1,10 +1,10 @@
 //! Speed of the period-averaged closed-loop FRF on the seed data set (issue 3's bar: ≤ 3× one
 //! real FFT of the whole record). Run: `cargo bench -p ambid --bench frf`.
 
-use ambid::experiment::{run, ExcitationPlan, Experiment};
+use ambid::experiment::{run, Experiment};
 use ambid_core::frf::closed_loop::{from_periodic, Channels};
 use ambid_core::frf::periodic::{PeriodicAnalyzer, PeriodicOptions};
-use ambid_twin::{Mode, SimRecord, TwinConfig};
+use ambid_twin::{Mode, SimRecord};
 use divan::{black_box, Bencher};
 use realfft::RealFftPlanner;
 
@@ -15,18 +15,9 @@ fn main() {
 }
 
 fn seed_record() -> SimRecord {
-    let mut cfg = TwinConfig::default();
-    cfg.sensor.noise_rms_m = 1e-7;
-    run(&Experiment {
-        twin: cfg,
-        excitation: ExcitationPlan::default(),
-        mode: Mode::Linear,
-        seed: 1,
-        noise: true,
-        record_b: false,
-    })
-    .expect("seed experiment")
-    .record
+    run(&Experiment::seed_paper(Mode::Linear, 1e-7, 1))
+        .expect("seed experiment")
+        .record
 }
 
 /// The reference: one forward real FFT of the whole 102 300-sample record (plan made outside).

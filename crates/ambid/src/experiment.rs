@@ -210,6 +210,24 @@ pub struct Experiment {
     pub record_b: bool,
 }
 
+impl Experiment {
+    /// The seed paper's experiment on the nominal twin (PRBS n = 10, 5 samples per bit, 20 periods
+    /// at 10 % of i_sat) with sensor noise of `noise_rms_m` (issue 3 uses 0.1 µm) and noise seed
+    /// `seed`.
+    pub fn seed_paper(mode: Mode, noise_rms_m: f64, seed: u64) -> Self {
+        let mut twin = TwinConfig::default();
+        twin.sensor.noise_rms_m = noise_rms_m;
+        Self {
+            twin,
+            excitation: ExcitationPlan::default(),
+            mode,
+            seed,
+            noise: noise_rms_m > 0.0,
+            record_b: false,
+        }
+    }
+}
+
 /// What an experiment produced.
 pub struct ExperimentOutput {
     /// The twin that was run (for its truth).

@@ -1,11 +1,11 @@
 //! ambid's nonparametric FRFs against a numpy/scipy reference pipeline on the same twin data
 //! (fixture from `tests/fixtures/make_frf_reference.py`).
 
-use ambid::experiment::{run, ExcitationPlan, Experiment};
+use ambid::experiment::{run, Experiment};
 use ambid_core::c64;
 use ambid_core::frf::closed_loop::{from_periodic, Channels};
 use ambid_core::frf::periodic::{PeriodicAnalyzer, PeriodicOptions};
-use ambid_twin::{Mode, TwinConfig};
+use ambid_twin::Mode;
 use serde_json::Value;
 
 fn fixture() -> Value {
@@ -34,17 +34,7 @@ fn floats(v: &Value) -> Vec<f64> {
 }
 
 fn seed_record() -> ambid::experiment::ExperimentOutput {
-    let mut cfg = TwinConfig::default();
-    cfg.sensor.noise_rms_m = 1e-7;
-    run(&Experiment {
-        twin: cfg,
-        excitation: ExcitationPlan::default(),
-        mode: Mode::Linear,
-        seed: 1,
-        noise: true,
-        record_b: false,
-    })
-    .unwrap()
+    run(&Experiment::seed_paper(Mode::Linear, 1e-7, 1)).unwrap()
 }
 
 fn median_p90(mut e: Vec<f64>) -> (f64, f64) {

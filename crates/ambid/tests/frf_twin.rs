@@ -1,7 +1,7 @@
 //! End to end: the twin's seed experiment → nonparametric closed-loop FRFs → compared with the
 //! twin's exact linearised truth (issue 3's accuracy, coverage and indirect-method bars).
 
-use ambid::experiment::{run, ExcitationPlan, Experiment};
+use ambid::experiment::{run, Experiment};
 use ambid_core::frf::closed_loop::{from_periodic, Channels, ClosedLoopFrf};
 use ambid_core::frf::periodic::{PeriodicAnalyzer, PeriodicOptions};
 use ambid_core::lti::StateSpace;
@@ -16,14 +16,7 @@ fn seed_config() -> TwinConfig {
 }
 
 fn seed_experiment(seed: u64) -> Experiment {
-    Experiment {
-        twin: seed_config(),
-        excitation: ExcitationPlan::default(),
-        mode: Mode::Linear,
-        seed,
-        noise: true,
-        record_b: false,
-    }
+    Experiment::seed_paper(Mode::Linear, 0.1e-6, seed)
 }
 
 /// Period-averaged closed-loop FRFs of the seed experiment on the excited lines in 10–1000 Hz.
