@@ -10,6 +10,7 @@
 
 pub mod data;
 pub mod error;
+pub mod estimate;
 pub mod frf;
 pub mod linalg;
 pub mod lti;

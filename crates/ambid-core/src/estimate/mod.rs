@@ -1,0 +1,35 @@
+//! Parametric estimation from time-domain data: FIR and ARX by least squares, ARMAX / OE / BJ by
+//! the prediction-error method, subspace state-space models, and order selection.
+
+pub mod arx;
+pub mod order;
+pub mod pem;
+pub mod subspace;
+
+use faer::Mat;
+
+/// A fitted model with its parameter uncertainty and fit statistics.
+#[derive(Debug, Clone)]
+pub struct Fitted<M> {
+    /// The model.
+    pub model: M,
+    /// The estimated parameter vector $\hat\theta$ (ordering documented by each estimator).
+    pub params: Vec<f64>,
+    /// Covariance of $\hat\theta$ (from the final Jacobian / regressor), if computed.
+    pub covariance: Option<Mat<f64>>,
+    /// Loss $V_N = \frac1N \sum \varepsilon_k^2$ of the prediction errors on the estimation data.
+    pub loss: f64,
+    /// Estimated innovation variance $\hat\lambda$ (loss corrected for the number of parameters).
+    pub noise_variance: f64,
+    /// Samples used in the criterion.
+    pub n_samples: usize,
+}
+
+impl<M> Fitted<M> {
+    /// Standard deviations $\sqrt{\mathrm{diag}\,P}$ of the parameters, if a covariance exists.
+    pub fn std(&self) -> Option<Vec<f64>> {
+        self.covariance
+            .as_ref()
+            .map(|p| (0..p.nrows()).map(|i| p[(i, i)].max(0.0).sqrt()).collect())
+    }
+}
