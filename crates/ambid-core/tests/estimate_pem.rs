@@ -553,6 +553,61 @@ fn unstable_plant_gives_a_clear_error_for_oe_and_bj() {
 }
 
 #[test]
+fn iterating_into_the_stability_boundary_is_an_error_not_a_model() {
+    // open-loop data of an unstable plant, stable starts: the output error of a stable F cannot
+    // follow the growing output, the iteration drives a pole of F onto the unit circle and must
+    // fail there instead of returning a model with a pole at 0.9999…
+    let n = 300;
+    let u = gaussian(n, 1.0, 85);
+    let truth = PolyModel::oe(vec![0.0, 1.0], conv(&[1.0, -1.02], &[1.0, -0.8]), 1.0).unwrap();
+    let y = truth
+        .simulate(&u, Some(&gaussian(n, 0.01, 86)), None)
+        .unwrap();
+    for f0 in [pair(0.5, 0.3), vec![1.0, -1.5, 0.56], vec![1.0, 0.2, -0.3]] {
+        let start = PolyModel::oe(vec![0.0, 0.5], f0.clone(), 1.0).unwrap();
+        match refine(&y, &u, &start, &PemOptions::default()) {
+            Err(Error::Unstable { reason, .. }) => {
+                assert!(
+                    reason.contains("unit circle") && reason.contains("T_ry"),
+                    "{reason}"
+                )
+            }
+            Ok((fit, rep)) => panic!("start {f0:?}: returned F = {:?} ({rep:?})", fit.model.f()),
+            Err(other) => panic!("start {f0:?}: {other}"),
+        }
+    }
+}
+
+#[test]
+fn a_very_lightly_damped_stable_mode_is_not_mistaken_for_the_boundary() {
+    // poles at 0.9995 e^{±0.05j} (ζ ≈ 0.01): close to the unit circle but inside
+    let n = 5000;
+    let u = gaussian(n, 1.0, 87);
+    let truth = PolyModel::oe(vec![0.0, 0.002, 0.002], pair(0.9995, 0.05), 1.0).unwrap();
+    let y = truth
+        .simulate(&u, Some(&gaussian(n, 0.05, 88)), None)
+        .unwrap();
+    let (fit, rep) = oe(&y, &u, 2, 2, 1, 1.0, &PemOptions::default()).unwrap();
+    let sd = fit.std().unwrap();
+    let want = Orders::of(&truth).params(&truth).unwrap();
+    println!(
+        "lightly damped OE: {:?} ± {sd:?}, {} iterations",
+        fit.params,
+        rep.iterations()
+    );
+    for k in 0..4 {
+        assert!((fit.params[k] - want[k]).abs() < 4.0 * sd[k], "{k}");
+    }
+    let r = fit
+        .model
+        .poles()
+        .unwrap()
+        .iter()
+        .fold(0.0f64, |m, p| m.max(p.norm()));
+    assert!(r < 1.0 && r > 0.999, "{r}");
+}
+
+#[test]
 fn refine_rejects_a_start_with_an_unstable_predictor() {
     let n = 200;
     let u = gaussian(n, 1.0, 91);

@@ -69,8 +69,14 @@
 //!   then up to four iterations of the *simplified refined instrumental variable* method
 //!   (SRIV): prefilter $y, u$ by $1/F$ and use the simulated noise-free output $\frac BF u$ (also
 //!   prefiltered) as instruments. For OE data the prefiltered equation has white noise, so SRIV
-//!   is close to the OE optimum and consistent for any noise colour in open loop.
-//! * $A, B, C$ (ARMAX, general): Hannan–Rissanen. A long ARX model (order
+//!   is close to the OE optimum and consistent for any noise colour in open loop. A lightly
+//!   damped pole that SRIV puts just outside the unit circle (radius below 1.02) is moved
+//!   radially to 0.9995 (same frequency) for the next prefilter; an ARX/IV start with poles
+//!   further out is the "unstable system" error below.
+//! * $A \cdot F$ of the general structure: SRIV with a denominator of order $n_a + n_f$, a
+//!   Hannan–Rissanen ARMA model of the output error, and $A$ = the roots of $\widehat{AF}$
+//!   closest to those of the noise denominator $\widehat{AD}$ (the factor the two share).
+//! * $A, B, C$ (ARMAX; general without $F$): Hannan–Rissanen. A long ARX model (order
 //!   $\max(20, 3(n_a + n_c + n_d + n_f))$, at most $N/10$) estimates the innovations $\hat e$;
 //!   then $y_t - \hat e_t$ is regressed on $[-y_{t-i}, u_{t-n_k-j}, \hat e_{t-k}]$, a linear problem.
 //! * $C, D$ (BJ, general, simulation focus): Hannan–Rissanen on the output error
@@ -97,24 +103,31 @@
 //! where $\varepsilon_{\rm sim} = \mathcal H e$ with the lower-triangular Toeplitz matrix $\mathcal H$ of the
 //! estimated $H = C/(AD)$ (so $\mathcal H^\top\Psi_G$ is an anticausal filtering). It accounts for the
 //! coloured output error seen by the $G$ fit and for the $G$ error that the second stage
-//! inherits; for OE it reduces to $\hat\lambda(\Psi^\top\Psi)^{-1}$.
+//! inherits; for OE it reduces to $\hat\lambda(\Psi^\top\Psi)^{-1}$. The second-stage $C, D$ also
+//! inherit an $O(1/N)$ *bias* from the $G$ error, which no covariance covers (for
+//! $c_1 = 0.5$: about $-0.06$ at $N = 1000$, $-0.017$ at $N = 4000$); use the prediction focus
+//! when the noise model matters.
 //!
 //! # Requirements on the problem
 //! * Open-loop data, or closed-loop data with a noise model that contains the true one
 //!   (ARMAX/BJ with the prediction focus; OE and the simulation focus are biased in closed loop).
 //! * A persistently exciting input of order at least $n_b + n_f$ (or $n_a + n_b$); a constant
 //!   input is an error.
-//! * $N > \max$ lag $+ 2d$ samples for $d$ parameters; the long model of the start needs more
-//!   (it shrinks with $N$).
+//! * $N > \max$ lag $+ 2d$ samples for $d$ parameters (the long model of the start uses up to
+//!   $N/10$ lags, fewer on short records).
 //! * The true $C$ (and $F$ for OE/BJ) stable; otherwise see "Minimisation".
-//! * Complexity: $O(N d^2)$ per iteration; typically 5–30 iterations.
+//! * Complexity: $O(N d^2)$ per iteration. Over 300 random OE/ARMAX/BJ systems (orders up to
+//!   4, 40 % lightly damped, noise 1–100 % of the output, $N$ = 2000) the median was 5
+//!   iterations, the 90th percentile 13; two of the 300 (4th-order, lightly damped, noise as
+//!   large as the output) ended in a worse local minimum than the truth.
 //!
 //! # Reference
-//! L. Ljung, *System Identification: Theory for the User*, 2nd ed., Prentice Hall, 1999,
-//! §7.2 (predictors), §9 (asymptotic covariance), §10.2 (gradients of the predictor), §10.4
-//! (initialisation). E. J. Hannan and J. Rissanen, "Recursive estimation of mixed
-//! autoregressive-moving average order", *Biometrika* 69(1), 1982. P. C. Young, "Some observations
-//! on instrumental variable methods of time-series analysis", *Int. J. Control* 23(5), 1976
+//! L. Ljung, *System Identification: Theory for the User*, 2nd ed., Prentice Hall, 1999:
+//! ch. 4 (polynomial structures and their predictors), ch. 7 (the prediction-error criterion),
+//! ch. 9 (asymptotic covariance), ch. 10 (iterative search, gradients, initial values).
+//! E. J. Hannan and J. Rissanen, "Recursive estimation of mixed autoregressive-moving average
+//! order", *Biometrika* 69(1), 1982. P. C. Young, "Some observations on instrumental variable
+//! methods of time-series analysis", *Int. J. Control* 23(5), 1976
 //! (SRIV). J. J. Moré, "The Levenberg–Marquardt algorithm: implementation and theory", 1978.
 //!
 //! # Example
@@ -550,8 +563,9 @@ fn check_data(y: &[f64], u: &[f64], o: &Orders, ts: f64) -> Result<()> {
 /// Prediction-error estimate of a polynomial model of the given structure and orders.
 ///
 /// The general entry point behind [`armax`], [`oe`] and [`bj`]: also FIR, ARX (one
-/// Gauss–Newton step from the least-squares start) and the general structure (start: ARMAX by
-/// Hannan–Rissanen with $D = F = 1$, best effort). Returns the model with sample time `ts`, its
+/// Gauss–Newton step from the least-squares start) and the general structure (start: see the
+/// module docs; $A$ and $F$ are told apart only through the noise model, so local minima
+/// with their roots swapped exist). Returns the model with sample time `ts`, its
 /// parameters, covariance and losses ([`Fitted::loss`] is $\frac1N\sum\varepsilon_t^2$ of the
 /// prediction errors of the returned model, [`Fitted::noise_variance`] $= \sum\varepsilon_t^2/(N-d)$)
 /// and a [`PemReport`].

@@ -109,21 +109,31 @@ fn with_delay(nk: usize, b: &[f64]) -> Vec<f64> {
     p
 }
 
+/// A SRIV estimate of F with poles up to this radius is moved inside; see [`oe_start`].
+const SRIV_MAX_RADIUS: f64 = 1.02;
+/// The radius it is moved to.
+const SRIV_CONTRACTED: f64 = 0.9995;
+
+/// $p_i \mapsto p_i \rho^i$: every root scaled by $\rho$ (same angle).
+fn scale_radius(mut p: Vec<f64>, rho: f64) -> Vec<f64> {
+    let mut s = 1.0;
+    for c in p.iter_mut() {
+        *c *= s;
+        s *= rho;
+    }
+    p
+}
+
 /// Moves the roots of a start polynomial radially inside $|z| \le 0.95$ if any lies beyond
 /// $0.99$: $p_i \mapsto p_i \rho^i$ scales every root by $\rho$. Used only on starting values of
 /// noise polynomials, never on an estimate.
-fn contract(mut p: Vec<f64>) -> Vec<f64> {
+fn contract(p: Vec<f64>) -> Vec<f64> {
     let r = max_root(&p);
     if !r.is_finite() {
         return monic(&vec![0.0; p.len() - 1]);
     }
     if r > 0.99 {
-        let rho = 0.95 / r;
-        let mut s = 1.0;
-        for c in p.iter_mut() {
-            *c *= s;
-            s *= rho;
-        }
+        return scale_radius(p, 0.95 / r);
     }
     p
 }
@@ -179,7 +189,10 @@ pub(crate) fn unstable_start(radius: f64) -> Error {
 }
 
 /// $B$ and $F$ (orders `nb`, `nf`, delay `nk`): ARX, then up to four iterations of the
-/// simplified refined instrumental variable method (SRIV).
+/// simplified refined instrumental variable method (SRIV). An SRIV estimate of a lightly damped
+/// $F$ that lands just outside the unit circle (radius below 1.02) is moved radially to 0.9995
+/// as the next prefilter and start; the returned start may carry such a pole, never the
+/// estimate (the iteration moves it, and fails if the optimum lies on the boundary).
 pub(crate) fn oe_start(
     y: &[f64],
     u: &[f64],
@@ -231,9 +244,15 @@ pub(crate) fn oe_start(
         let Some(th) = iv_solve(&design(t0, n, &pc), &design(t0, n, &zc), &yf[t0..]) else {
             break;
         };
-        let fnew = monic(&th[..nf]);
+        let mut fnew = monic(&th[..nf]);
         if !is_stable(&fnew) {
-            break;
+            // a lightly damped pole estimated just outside the circle: move it radially
+            // inside (same frequency) and go on; further out, keep the last stable estimate
+            let r = max_root(&fnew);
+            if r.is_nan() || r >= SRIV_MAX_RADIUS {
+                break;
+            }
+            fnew = scale_radius(fnew, SRIV_CONTRACTED / r);
         }
         let bnew = with_delay(nk, &th[nf..]);
         let change = fnew

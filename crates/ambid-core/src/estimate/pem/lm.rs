@@ -29,19 +29,24 @@
 //!   $10\times$), $\varrho > 3/4$ (or a Gauss–Newton step) doubles $\lVert s\rVert$ as the new $\Delta$.
 //!   A step is taken when $\varrho \ge 10^{-4}$.
 //! * A trial point whose residuals are undefined (the problem returns `None`, e.g. an unstable
-//!   predictor) or not finite is rejected like a failed step and shrinks $\Delta$ tenfold. So the
-//!   iterates never leave the admissible set, and [`LmReport::ended_on_boundary`] tells when the
-//!   method stopped because every shorter step still left it.
+//!   predictor) or not finite is rejected like a failed step and shrinks $\Delta$ tenfold, so the
+//!   iterates never leave the admissible set. When the iteration stops (other than on the
+//!   gradient test), the full Gauss–Newton step from the final point is tried once: at an
+//!   interior minimum it vanishes ($J^\top r = 0$), at a minimum pressed against the boundary it
+//!   crosses it, which [`LmReport::ended_on_boundary`] reports (the last trial being
+//!   inadmissible is used when $J$ is rank deficient or the iteration limit was reached).
 //!
-//! Stopping (the first that holds): the relative reduction of $\lVert r\rVert^2$, actual and
-//! predicted, is at most `loss_tol` ([`StopReason::LossChange`]); the trust region allows no
-//! parameter to move by more than `step_tol` $= \tau$ relative to itself,
-//! $\Delta / d_j \le \tau\,(|x_j| + \tau)$ for every $j$
-//! ([`StopReason::StepSize`]; component-wise rather than MINPACK's $\Delta \le \tau\lVert Dx\rVert$,
-//! so that a weakly determined parameter next to strong ones, such as $C$ of data with
-//! tiny noise, is not declared converged while it can still move); the largest cosine between $r$ and a column of
-//! $J$ is at most `gradient_tol`, or $r = 0$ ([`StopReason::Gradient`]); `max_iterations` accepted
-//! steps ([`StopReason::MaxIterations`]).
+//! Stopping (the first that holds):
+//! * [`StopReason::LossChange`]: the relative reduction of $\lVert r\rVert^2$, actual and
+//!   predicted, is at most `loss_tol`;
+//! * [`StopReason::StepSize`]: the trust region lets no parameter move by more than
+//!   `step_tol` $= \tau$ relative to itself, $\Delta / d_j \le \tau\,(|x_j| + \tau)$ for every $j$
+//!   (component-wise rather than MINPACK's $\Delta \le \tau\lVert Dx\rVert$, so that a weakly
+//!   determined parameter next to strong ones, such as $C$ of data with tiny noise, is not
+//!   declared converged while it can still move);
+//! * [`StopReason::Gradient`]: the largest cosine between $r$ and a column of $J$ is at most
+//!   `gradient_tol`, or $r = 0$;
+//! * [`StopReason::MaxIterations`]: `max_iterations` accepted steps.
 //!
 //! Complexity per iteration: one Jacobian, one $O(m n^2)$ QR, a few $O(n^3)$ small QRs.
 //!
@@ -231,8 +236,8 @@ pub struct LmReport {
     pub cost: f64,
     /// Trial points rejected because the residuals were undefined (outside the admissible set).
     pub rejected_inadmissible: usize,
-    /// The last trial before stopping was inadmissible: the minimum along the search lies on
-    /// the boundary of the admissible set (for a predictor: the stability boundary).
+    /// The returned point is a minimum on the boundary of the admissible set (for a predictor:
+    /// the stability boundary): the Gauss–Newton step from it leaves the set.
     pub ended_on_boundary: bool,
 }
 
@@ -610,10 +615,54 @@ pub fn minimize<P: LeastSquaresProblem + ?Sized>(
     };
     report.reason = reason;
     report.cost = 0.5 * fnorm * fnorm;
-    if reason == StopReason::Gradient {
-        report.ended_on_boundary = false;
-    }
+    report.ended_on_boundary = match reason {
+        StopReason::Gradient => false,
+        // not at a minimum: the Gauss–Newton step says nothing, keep the last trial's verdict
+        StopReason::MaxIterations => report.ended_on_boundary,
+        StopReason::LossChange | StopReason::StepSize => {
+            match gauss_newton_leaves(problem, &x, &r, m) {
+                Some(leaves) => {
+                    report.evaluations += 1;
+                    leaves
+                }
+                None => report.ended_on_boundary,
+            }
+        }
+    };
     Ok((x, report))
+}
+
+/// Whether the full Gauss–Newton step from the final point leaves the admissible set. At an
+/// interior (local) minimum $J^\top r = 0$ and the step vanishes; at a minimum on the boundary
+/// the gradient points outwards and the step crosses it. `None` if $J$ is rank deficient.
+fn gauss_newton_leaves<P: LeastSquaresProblem + ?Sized>(
+    problem: &mut P,
+    x: &[f64],
+    r: &[f64],
+    m: usize,
+) -> Option<bool> {
+    let n = x.len();
+    let jac = problem.jacobian(x)?;
+    if jac.nrows() != m || jac.ncols() != n {
+        return None;
+    }
+    let aug = Mat::from_fn(m.max(n + 1), n + 1, |i, j| match (i < m, j < n) {
+        (false, _) => 0.0,
+        (true, true) => jac[(i, j)],
+        (true, false) => r[i],
+    });
+    let t = qr_triangle(&aug);
+    let rmat = Mat::from_fn(n, n, |i, j| t[(i, j)]);
+    if !full_rank(&rmat) {
+        return None;
+    }
+    let z: Vec<f64> = (0..n).map(|i| t[(i, n)]).collect();
+    let step = solve_upper(&rmat, &z);
+    let xt: Vec<f64> = x.iter().zip(&step).map(|(a, s)| a - s).collect();
+    if xt.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    Some(finite_residuals(problem, &xt, m).is_none())
 }
 
 #[cfg(test)]
