@@ -175,6 +175,18 @@ pub enum Focus {
 }
 
 /// Options of the prediction-error estimators; the setters validate their arguments.
+///
+/// # Example
+/// ```
+/// use ambid_core::estimate::pem::{Focus, PemOptions};
+/// let o = PemOptions::default()
+///     .with_focus(Focus::Simulation)
+///     .with_max_iterations(50)
+///     .unwrap();
+/// assert_eq!(o.focus(), Focus::Simulation);
+/// assert_eq!(o.lm().max_iterations(), 50);
+/// assert!(PemOptions::default().with_loss_tol(-1.0).is_err());
+/// ```
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct PemOptions {
     focus: Focus,
@@ -239,6 +251,17 @@ impl PemOptions {
 
 /// Polynomial orders in MATLAB's `[na nb nc nd nf nk]` sense: `nb` coefficients of $B$ after
 /// `nk` leading zeros, `na` (etc.) free coefficients of the monic polynomials.
+///
+/// # Example
+/// ```
+/// use ambid_core::estimate::pem::Orders;
+/// use ambid_core::lti::{PolyModel, Structure};
+/// let m = PolyModel::oe(vec![0.0, 0.0, 1.0, 0.5], vec![1.0, -0.9], 1.0).unwrap();
+/// let o = Orders::of(&m);
+/// assert_eq!(o, Orders::oe(2, 1, 2));
+/// assert_eq!(o.params(&m).unwrap(), vec![1.0, 0.5, -0.9]); // [b, f]
+/// assert_eq!(o.model(Structure::Oe, &[1.0, 0.5, -0.9], 1.0).unwrap(), m);
+/// ```
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub struct Orders {
     /// Free coefficients of $A$.
@@ -422,7 +445,25 @@ pub fn armax(
 /// See [`pem`].
 ///
 /// # Example
-/// See the module docs.
+/// ```
+/// use ambid_core::estimate::pem::{oe, PemOptions};
+/// use ambid_core::lti::PolyModel;
+/// use rand::{RngExt, SeedableRng};
+/// use rand_chacha::ChaCha8Rng;
+/// use rand_distr::StandardNormal;
+/// // a lightly damped mode, poles 0.98 e^{±0.3j}, with 10 % output noise
+/// let truth = PolyModel::oe(vec![0.0, 0.1, 0.08], vec![1.0, -1.8724, 0.9604], 1.0).unwrap();
+/// let mut rng = ChaCha8Rng::seed_from_u64(7);
+/// let u: Vec<f64> = (0..2000).map(|_| rng.sample(StandardNormal)).collect();
+/// let e: Vec<f64> = (0..2000).map(|_| 0.1 * rng.sample::<f64, _>(StandardNormal)).collect();
+/// let y = truth.simulate(&u, Some(&e), None).unwrap();
+/// let (fit, report) = oe(&y, &u, 2, 2, 1, 1.0, &PemOptions::default()).unwrap();
+/// let sd = fit.std().unwrap();
+/// for (k, want) in [0.1, 0.08, -1.8724, 0.9604].into_iter().enumerate() {
+///     assert!((fit.params[k] - want).abs() < 5.0 * sd[k]);
+/// }
+/// assert!(report.reason().converged());
+/// ```
 pub fn oe(
     y: &[f64],
     u: &[f64],
