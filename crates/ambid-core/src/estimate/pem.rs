@@ -1,1 +1,1097 @@
-//! (to be written)
+//! ARMAX, output-error (OE) and Box–Jenkins (BJ) models by the prediction-error method (PEM).
+//!
+//! # Predictor and criterion
+//! The general SISO structure (see [`PolyModel`]) is
+//! $$ A(q)\,y_t = \frac{B(q)}{F(q)}\,u_t + \frac{C(q)}{D(q)}\,e_t, $$
+//! $e$ white, $A, C, D, F$ monic. Solving for the innovation gives the prediction error
+//! $$ \varepsilon_t(\theta) = \frac{D}{C}\Bigl(A\,y_t - \frac BF\,u_t\Bigr) = \frac DC\, w_t,
+//!    \qquad w_t = A\,y_t - v_t,\quad v_t = \frac BF\,u_t, $$
+//! and the one-step predictor $\hat y_t = y_t - \varepsilon_t$. PEM minimises
+//! $$ V(\theta) = \tfrac12 \sum_{t=0}^{N-1} \varepsilon_t(\theta)^2 $$
+//! over $\theta = [a_1 \dots a_{n_a},\; b_0 \dots b_{n_b-1},\; c_1 \dots c_{n_c},\; d_1 \dots d_{n_d},\;
+//! f_1 \dots f_{n_f}]$, where $b_j$ multiplies $q^{-(n_k+j)}$ (MATLAB's `[na nb nc nd nf nk]`).
+//! This is also the order of [`Fitted::params`] and of the covariance. All filters start from
+//! zero initial conditions (samples before $t = 0$ are taken as zero, MATLAB's
+//! `InitialCondition = 'zero'`); records that do not start at rest should have their first
+//! transient removed (`data::drop_transient`).
+//!
+//! The output error $w$ is computed in double-double arithmetic and rounded once, so it is
+//! accurate relative to $|w|$ even when $A y$ and $\frac BF u$ cancel many digits (data with
+//! very little noise, where plain double precision would leave the loss noisy at the level of
+//! $10^{-16}|y|/|w|$ and the noise polynomials undetermined).
+//!
+//! The predictor is a stable filter of the data only if $C$ and $F$ are stable; $D$ is in the
+//! numerator and $A$ acts as an FIR filter on $y$, so ARX and ARMAX predictors stay stable even
+//! for an unstable $A$ (an open-loop unstable plant).
+//!
+//! # Analytic gradient
+//! With $\partial(1/P)/\partial p_i = -q^{-i}/P^2$ for a monic $P = 1 + \sum p_i q^{-i}$, the gradient
+//! $\psi_t = \partial\varepsilon_t/\partial\theta$ consists of filtered, delayed signals:
+//! $$ \begin{aligned}
+//! \frac{\partial\varepsilon_t}{\partial a_i} &= \frac DC\, y_{t-i}, &
+//! \frac{\partial\varepsilon_t}{\partial b_j} &= -\frac{D}{CF}\, u_{t-n_k-j}, &
+//! \frac{\partial\varepsilon_t}{\partial f_i} &= \frac{D\,B}{C\,F^2}\, u_{t-i} = \frac{D}{CF}\, v_{t-i}, \\
+//! \frac{\partial\varepsilon_t}{\partial c_i} &= -\frac{D\,w_t}{C^2}\Big|_{q^{-i}} = -\frac1C\,\varepsilon_{t-i}, &
+//! \frac{\partial\varepsilon_t}{\partial d_i} &= \frac1C\, w_{t-i}. &&
+//! \end{aligned} $$
+//! The signs: $a_i$ enters $w$ with $+q^{-i}y$; $b_j$ enters with $-q^{-n_k-j}u/F$; $f_i$ enters through
+//! $-B/F$, whose derivative is $+Bq^{-i}/F^2$; $c_i$ enters through $1/C$ (derivative
+//! $-q^{-i}/C^2$) and $d_i$ through the numerator. With zero initial conditions, filtering and
+//! delaying commute exactly, so these are the exact derivatives of the finite-sample criterion
+//! (tested against finite differences). The Jacobian $J = [\psi_0 \dots \psi_{N-1}]^\top$ costs about
+//! five filter passes, $O(N (n_a + n_b + n_c + n_d + n_f))$.
+//!
+//! # Focus
+//! [`Focus::Prediction`] minimises the one-step prediction errors above. [`Focus::Simulation`]
+//! fits the deterministic part only, with the noise model fixed to 1: it minimises
+//! $\tfrac12\sum (y_t - \frac{B}{AF} u_t)^2$ over $A, B, F$ (so $A \cdot F$ must be stable and only one
+//! of $n_a, n_f$ may be positive), then, with $G$ fixed, fits $C, D$ to the output error
+//! $w = A y - (B/F) u$ by the prediction criterion. Its gradient: $\partial\varepsilon/\partial a_i =
+//! \frac{1}{A}\frac{B}{AF}u_{t-i}$, $\partial\varepsilon/\partial b_j = -\frac{1}{AF}u_{t-n_k-j}$,
+//! $\partial\varepsilon/\partial f_i = \frac1F\frac{B}{AF}u_{t-i}$.
+//!
+//! # Minimisation
+//! Levenberg–Marquardt with Moré's scaling and trust-region control of the damping ([`lm`]):
+//! each step is the least-squares solution of the scaled augmented Jacobian by QR. A trial
+//! step that makes the predictor unstable ($C$ or $F$, or $A F$ under the simulation focus) is
+//! rejected and shrinks the trust region; the returned model therefore always has a stable
+//! predictor. Poles are never reflected. If the iteration ends pressed against the stability
+//! boundary, or the consistent instrumental-variable start already has an unstable $F$, the
+//! best model has an unstable predictor and the estimator fails with [`Error::Unstable`]: an
+//! OE/BJ model cannot describe an unstable plant, so identify the stable closed-loop map
+//! $T_{ry}$ from the excitation $r$, or use ARX/ARMAX (stable predictor for unstable $A$).
+//!
+//! # Initialisation
+//! The start decides which local minimum is found, so it comes from consistent non-iterative
+//! estimators (each a few least-squares problems):
+//! * $B, F$ (OE, BJ, and $B/A$ under the simulation focus): ARX of matched orders by least
+//!   squares; if its $F$ is unstable, a basic IV estimate with delayed inputs as instruments;
+//!   then up to four iterations of the *simplified refined instrumental variable* method
+//!   (SRIV): prefilter $y, u$ by $1/F$ and use the simulated noise-free output $\frac BF u$ (also
+//!   prefiltered) as instruments. For OE data the prefiltered equation has white noise, so SRIV
+//!   is close to the OE optimum and consistent for any noise colour in open loop. A lightly
+//!   damped pole that SRIV puts just outside the unit circle (radius below 1.02) is moved
+//!   radially to 0.9995 (same frequency) for the next prefilter; an ARX/IV start with poles
+//!   further out is the "unstable system" error below.
+//! * $A \cdot F$ of the general structure: SRIV with a denominator of order $n_a + n_f$, a
+//!   Hannan–Rissanen ARMA model of the output error, and $A$ = the roots of $\widehat{AF}$
+//!   closest to those of the noise denominator $\widehat{AD}$ (the factor the two share).
+//! * $A, B, C$ (ARMAX; general without $F$): Hannan–Rissanen. A long ARX model (order
+//!   $\max(20, 3(n_a + n_c + n_d + n_f))$, at most $N/10$) estimates the innovations $\hat e$;
+//!   then $y_t - \hat e_t$ is regressed on $[-y_{t-i}, u_{t-n_k-j}, \hat e_{t-k}]$, a linear problem.
+//! * $C, D$ (BJ, general, simulation focus): Hannan–Rissanen on the output error
+//!   $w = A y - \frac BF u$ with a long AR model.
+//! * A start $C$ or $D$ with a root beyond $|z| = 0.99$ is moved radially to $0.95$ (a start
+//!   only; the estimate is never altered). For noise-free data the long model leaves no residual
+//!   and $C = D = 1$ is used.
+//!
+//! A long-ARX residual was chosen over a matched-order ARX residual because it is consistent
+//! for the innovations whatever the true structure; the SRIV step was chosen over plain IV
+//! because its prefiltering makes it nearly efficient for OE, which shortens the iteration.
+//!
+//! # Uncertainty
+//! At the minimum, $P = \hat\lambda (J^\top J)^{-1}$ with $\hat\lambda = 2V/(N - d)$, computed from the
+//! Jacobian at the returned parameters (column-equilibrated, so that badly scaled parameters do
+//! not matter). This is the asymptotic covariance when the model structure contains the true
+//! system. It is omitted (`None`) when $J$ is numerically rank deficient (for example $C$ on
+//! noise-free data). Under the simulation focus the estimate solves the stacked equations
+//! $g(\theta) = [\Psi_G^\top \varepsilon_{\rm sim};\; J_H^\top \varepsilon] = 0$ ($\Psi_G$: simulation gradient in
+//! $G$'s parameters, $J_H$: prediction gradient in $C, D$), whose covariance is the sandwich
+//! $$ P = \hat\lambda\, M^{-1} X^\top X M^{-\top}, \quad
+//!    M = \begin{bmatrix} \Psi_G^\top\Psi_G & 0 \\ J_H^\top J_G & J_H^\top J_H \end{bmatrix}, \quad
+//!    X = [\mathcal H^\top \Psi_G,\; J_H], $$
+//! where $\varepsilon_{\rm sim} = \mathcal H e$ with the lower-triangular Toeplitz matrix $\mathcal H$ of the
+//! estimated $H = C/(AD)$ (so $\mathcal H^\top\Psi_G$ is an anticausal filtering). It accounts for the
+//! coloured output error seen by the $G$ fit and for the $G$ error that the second stage
+//! inherits; for OE it reduces to $\hat\lambda(\Psi^\top\Psi)^{-1}$. The second-stage $C, D$ also
+//! inherit an $O(1/N)$ *bias* from the $G$ error, which no covariance covers (for
+//! $c_1 = 0.5$: about $-0.06$ at $N = 1000$, $-0.017$ at $N = 4000$); use the prediction focus
+//! when the noise model matters.
+//!
+//! # Requirements on the problem
+//! * Open-loop data, or closed-loop data with a noise model that contains the true one
+//!   (ARMAX/BJ with the prediction focus; OE and the simulation focus are biased in closed loop).
+//! * A persistently exciting input of order at least $n_b + n_f$ (or $n_a + n_b$); a constant
+//!   input is an error.
+//! * $N > \max$ lag $+ 2d$ samples for $d$ parameters (the long model of the start uses up to
+//!   $N/10$ lags, fewer on short records).
+//! * The true $C$ (and $F$ for OE/BJ) stable; otherwise see "Minimisation".
+//! * Complexity: $O(N d^2)$ per iteration. Over 300 random OE/ARMAX/BJ systems (orders up to
+//!   4, 40 % lightly damped, noise 1–100 % of the output, $N$ = 2000) the median was 5
+//!   iterations, the 90th percentile 13; two of the 300 (4th-order, lightly damped, noise as
+//!   large as the output) ended in a worse local minimum than the truth.
+//!
+//! # Reference
+//! L. Ljung, *System Identification: Theory for the User*, 2nd ed., Prentice Hall, 1999:
+//! ch. 4 (polynomial structures and their predictors), ch. 7 (the prediction-error criterion),
+//! ch. 9 (asymptotic covariance), ch. 10 (iterative search, gradients, initial values).
+//! E. J. Hannan and J. Rissanen, "Recursive estimation of mixed autoregressive-moving average
+//! order", *Biometrika* 69(1), 1982. P. C. Young, "Some observations on instrumental variable
+//! methods of time-series analysis", *Int. J. Control* 23(5), 1976
+//! (SRIV). J. J. Moré, "The Levenberg–Marquardt algorithm: implementation and theory", 1978.
+//!
+//! # Example
+//! ```
+//! use ambid_core::estimate::pem::{oe, PemOptions};
+//! use ambid_core::lti::PolyModel;
+//! use rand::{RngExt, SeedableRng};
+//! use rand_chacha::ChaCha8Rng;
+//! use rand_distr::StandardNormal;
+//! // y = (0.5 q^-1 + 0.2 q^-2) / (1 - 1.5 q^-1 + 0.7 q^-2) u, white input, no noise
+//! let truth = PolyModel::oe(vec![0.0, 0.5, 0.2], vec![1.0, -1.5, 0.7], 1e-3).unwrap();
+//! let mut rng = ChaCha8Rng::seed_from_u64(1);
+//! let u: Vec<f64> = (0..1000).map(|_| rng.sample(StandardNormal)).collect();
+//! let y = truth.simulate(&u, None, None).unwrap();
+//! let (fit, report) = oe(&y, &u, 2, 2, 1, 1e-3, &PemOptions::default()).unwrap();
+//! // θ = [b0, b1, f1, f2]
+//! for (got, want) in fit.params.iter().zip([0.5, 0.2, -1.5, 0.7]) {
+//!     assert!((got - want).abs() < 1e-9);
+//! }
+//! assert!(report.lm.reason.converged());
+//! ```
+
+pub mod lm;
+
+mod init;
+mod predictor;
+
+use self::lm::{LeastSquaresProblem, LmOptions, LmReport, StopReason};
+use self::predictor::{errors, errors_and_gradient, filter, max_root, mul, Polys};
+use super::Fitted;
+use crate::error::{check_finite, Error, Result};
+use crate::lti::{PolyModel, Structure};
+use faer::Mat;
+
+/// What the criterion fits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum Focus {
+    /// One-step prediction errors $\varepsilon = (D/C)(A y - (B/F) u)$: the maximum-likelihood
+    /// criterion for Gaussian innovations.
+    #[default]
+    Prediction,
+    /// Simulation errors $y - B/(AF)\,u$ for $G$ (noise model fixed to 1), then the noise
+    /// model with $G$ fixed. Emphasises the fit of $G$ in open-loop simulation.
+    Simulation,
+}
+
+/// Options of the prediction-error estimators; the setters validate their arguments.
+///
+/// # Example
+/// ```
+/// use ambid_core::estimate::pem::{Focus, PemOptions};
+/// let o = PemOptions::default()
+///     .with_focus(Focus::Simulation)
+///     .with_max_iterations(50)
+///     .unwrap();
+/// assert_eq!(o.focus(), Focus::Simulation);
+/// assert_eq!(o.lm().max_iterations(), 50);
+/// assert!(PemOptions::default().with_loss_tol(-1.0).is_err());
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PemOptions {
+    focus: Focus,
+    lm: LmOptions,
+}
+
+impl PemOptions {
+    /// Sets the criterion (default [`Focus::Prediction`]).
+    pub fn with_focus(mut self, focus: Focus) -> Self {
+        self.focus = focus;
+        self
+    }
+    /// Sets all Levenberg–Marquardt options at once.
+    pub fn with_lm(mut self, lm: LmOptions) -> Self {
+        self.lm = lm;
+        self
+    }
+    /// Maximum number of Levenberg–Marquardt steps (default 100).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for 0.
+    pub fn with_max_iterations(mut self, n: usize) -> Result<Self> {
+        self.lm = self.lm.with_max_iterations(n)?;
+        Ok(self)
+    }
+    /// Relative loss-change tolerance (default 1e-12). Stopping at a relative change $\tau$
+    /// leaves the estimate within about $\sqrt{N\tau}$ standard deviations of the exact
+    /// minimiser (5e-5 σ for N = 2000): statistically irrelevant, but set 0 to iterate to
+    /// machine precision when the exact optimum matters.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for a negative or non-finite value.
+    pub fn with_loss_tol(mut self, tol: f64) -> Result<Self> {
+        self.lm = self.lm.with_loss_tol(tol)?;
+        Ok(self)
+    }
+    /// Relative step tolerance (default 1e-10).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for a negative or non-finite value.
+    pub fn with_step_tol(mut self, tol: f64) -> Result<Self> {
+        self.lm = self.lm.with_step_tol(tol)?;
+        Ok(self)
+    }
+    /// Gradient (cosine) tolerance (default 1e-12).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for a negative or non-finite value.
+    pub fn with_gradient_tol(mut self, tol: f64) -> Result<Self> {
+        self.lm = self.lm.with_gradient_tol(tol)?;
+        Ok(self)
+    }
+    /// The criterion.
+    pub fn focus(&self) -> Focus {
+        self.focus
+    }
+    /// The Levenberg–Marquardt options.
+    pub fn lm(&self) -> &LmOptions {
+        &self.lm
+    }
+}
+
+/// Polynomial orders in MATLAB's `[na nb nc nd nf nk]` sense: `nb` coefficients of $B$ after
+/// `nk` leading zeros, `na` (etc.) free coefficients of the monic polynomials.
+///
+/// # Example
+/// ```
+/// use ambid_core::estimate::pem::Orders;
+/// use ambid_core::lti::{PolyModel, Structure};
+/// let m = PolyModel::oe(vec![0.0, 0.0, 1.0, 0.5], vec![1.0, -0.9], 1.0).unwrap();
+/// let o = Orders::of(&m);
+/// assert_eq!(o, Orders::oe(2, 1, 2));
+/// assert_eq!(o.params(&m).unwrap(), vec![1.0, 0.5, -0.9]); // [b, f]
+/// assert_eq!(o.model(Structure::Oe, &[1.0, 0.5, -0.9], 1.0).unwrap(), m);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub struct Orders {
+    /// Free coefficients of $A$.
+    pub na: usize,
+    /// Coefficients of $B$ (at least 1).
+    pub nb: usize,
+    /// Free coefficients of $C$.
+    pub nc: usize,
+    /// Free coefficients of $D$.
+    pub nd: usize,
+    /// Free coefficients of $F$.
+    pub nf: usize,
+    /// Input delay (leading zeros of $B$).
+    pub nk: usize,
+}
+
+impl Orders {
+    /// ARMAX orders.
+    pub fn armax(na: usize, nb: usize, nc: usize, nk: usize) -> Self {
+        Self {
+            na,
+            nb,
+            nc,
+            nk,
+            ..Self::default()
+        }
+    }
+    /// OE orders.
+    pub fn oe(nb: usize, nf: usize, nk: usize) -> Self {
+        Self {
+            nb,
+            nf,
+            nk,
+            ..Self::default()
+        }
+    }
+    /// BJ orders.
+    pub fn bj(nb: usize, nc: usize, nd: usize, nf: usize, nk: usize) -> Self {
+        Self {
+            nb,
+            nc,
+            nd,
+            nf,
+            nk,
+            ..Self::default()
+        }
+    }
+    /// The orders of a model: lengths of its polynomials, $n_k$ = leading zeros of $B$.
+    pub fn of(model: &PolyModel) -> Self {
+        let nk = model.delay().min(model.b().len().saturating_sub(1));
+        Self {
+            na: model.a().len() - 1,
+            nb: model.b().len() - nk,
+            nc: model.c().len() - 1,
+            nd: model.d().len() - 1,
+            nf: model.f().len() - 1,
+            nk,
+        }
+    }
+    /// Number of parameters $d = n_a + n_b + n_c + n_d + n_f$.
+    pub fn n_params(&self) -> usize {
+        self.na + self.nb + self.nc + self.nd + self.nf
+    }
+    /// Longest lag of any regressor: $\max(n_a, n_k + n_b - 1, n_c, n_d, n_f)$.
+    pub fn max_lag(&self) -> usize {
+        self.na
+            .max((self.nk + self.nb).saturating_sub(1))
+            .max(self.nc)
+            .max(self.nd)
+            .max(self.nf)
+    }
+    /// The parameter vector $\theta$ of `model` in the order documented in the module docs.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] if the model's polynomials do not have these orders.
+    pub fn params(&self, model: &PolyModel) -> Result<Vec<f64>> {
+        if Orders::of(model) != *self {
+            return Err(Error::invalid(
+                "orders",
+                format!(
+                    "the model has orders {:?}, not {:?}",
+                    Orders::of(model),
+                    self
+                ),
+            ));
+        }
+        Ok(Polys::from_model(model).theta(self))
+    }
+    /// The model with parameters `theta` (order as in the module docs).
+    ///
+    /// # Errors
+    /// [`Error::DimensionMismatch`] for a wrong length; the errors of [`PolyModel::new`].
+    pub fn model(&self, structure: Structure, theta: &[f64], ts: f64) -> Result<PolyModel> {
+        if theta.len() != self.n_params() {
+            return Err(Error::DimensionMismatch {
+                context: "Orders::model: parameter vector",
+                expected: self.n_params().to_string(),
+                got: theta.len().to_string(),
+            });
+        }
+        let p = Polys::from_theta(self, theta);
+        PolyModel::new(structure, p.a, p.b, p.c, p.d, p.f, ts)
+    }
+}
+
+/// What the prediction-error iteration did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PemReport {
+    /// The starting model (ARX / IV / Hannan–Rissanen, or the one given to [`refine`]).
+    pub start: PolyModel,
+    /// The Levenberg–Marquardt run (under [`Focus::Simulation`]: the fit of $G$).
+    pub lm: LmReport,
+    /// Under [`Focus::Simulation`] with noise polynomials: the second run that fits $C, D$.
+    pub noise_lm: Option<LmReport>,
+}
+
+impl PemReport {
+    /// Accepted Levenberg–Marquardt steps over all runs.
+    pub fn iterations(&self) -> usize {
+        self.lm.iterations + self.noise_lm.map_or(0, |r| r.iterations)
+    }
+    /// Why the (main) iteration stopped.
+    pub fn reason(&self) -> StopReason {
+        self.lm.reason
+    }
+}
+
+/// ARMAX model $A y = B u + C e$ by the prediction-error method.
+///
+/// `na`, `nc`: free coefficients of $A$, $C$; `nb` coefficients of $B$ after `nk` delays;
+/// `ts` the sample time of the returned model. $\theta = [a_1..a_{n_a}, b_0..b_{n_b-1}, c_1..c_{n_c}]$.
+///
+/// # Errors
+/// See [`pem`].
+///
+/// # Example
+/// ```
+/// use ambid_core::estimate::pem::{armax, PemOptions};
+/// use ambid_core::lti::PolyModel;
+/// use rand::{RngExt, SeedableRng};
+/// use rand_chacha::ChaCha8Rng;
+/// use rand_distr::StandardNormal;
+/// let truth = PolyModel::armax(vec![1.0, -1.5, 0.7], vec![0.0, 1.0, 0.5], vec![1.0, -0.5], 1.0).unwrap();
+/// let mut rng = ChaCha8Rng::seed_from_u64(3);
+/// let u: Vec<f64> = (0..2000).map(|_| rng.sample(StandardNormal)).collect();
+/// let e: Vec<f64> = (0..2000).map(|_| 0.1 * rng.sample::<f64, _>(StandardNormal)).collect();
+/// let y = truth.simulate(&u, Some(&e), None).unwrap();
+/// let (fit, _) = armax(&y, &u, 2, 2, 1, 1, 1.0, &PemOptions::default()).unwrap();
+/// let sd = fit.std().unwrap();
+/// for (k, want) in [-1.5, 0.7, 1.0, 0.5, -0.5].into_iter().enumerate() {
+///     assert!((fit.params[k] - want).abs() < 5.0 * sd[k]);
+/// }
+/// ```
+#[allow(clippy::too_many_arguments)]
+pub fn armax(
+    y: &[f64],
+    u: &[f64],
+    na: usize,
+    nb: usize,
+    nc: usize,
+    nk: usize,
+    ts: f64,
+    opts: &PemOptions,
+) -> Result<(Fitted<PolyModel>, PemReport)> {
+    pem(
+        y,
+        u,
+        Structure::Armax,
+        &Orders::armax(na, nb, nc, nk),
+        ts,
+        opts,
+    )
+}
+
+/// Output-error model $y = (B/F) u + e$ by the prediction-error method.
+///
+/// $\theta = [b_0..b_{n_b-1}, f_1..f_{n_f}]$. The predictor needs a stable $F$: an unstable plant
+/// gives [`Error::Unstable`] (see the module docs for the closed-loop route).
+///
+/// # Errors
+/// See [`pem`].
+///
+/// # Example
+/// ```
+/// use ambid_core::estimate::pem::{oe, PemOptions};
+/// use ambid_core::lti::PolyModel;
+/// use rand::{RngExt, SeedableRng};
+/// use rand_chacha::ChaCha8Rng;
+/// use rand_distr::StandardNormal;
+/// // a lightly damped mode, poles 0.98 e^{±0.3j}, with 10 % output noise
+/// let truth = PolyModel::oe(vec![0.0, 0.1, 0.08], vec![1.0, -1.8724, 0.9604], 1.0).unwrap();
+/// let mut rng = ChaCha8Rng::seed_from_u64(7);
+/// let u: Vec<f64> = (0..2000).map(|_| rng.sample(StandardNormal)).collect();
+/// let e: Vec<f64> = (0..2000).map(|_| 0.1 * rng.sample::<f64, _>(StandardNormal)).collect();
+/// let y = truth.simulate(&u, Some(&e), None).unwrap();
+/// let (fit, report) = oe(&y, &u, 2, 2, 1, 1.0, &PemOptions::default()).unwrap();
+/// let sd = fit.std().unwrap();
+/// for (k, want) in [0.1, 0.08, -1.8724, 0.9604].into_iter().enumerate() {
+///     assert!((fit.params[k] - want).abs() < 5.0 * sd[k]);
+/// }
+/// assert!(report.reason().converged());
+/// ```
+pub fn oe(
+    y: &[f64],
+    u: &[f64],
+    nb: usize,
+    nf: usize,
+    nk: usize,
+    ts: f64,
+    opts: &PemOptions,
+) -> Result<(Fitted<PolyModel>, PemReport)> {
+    pem(y, u, Structure::Oe, &Orders::oe(nb, nf, nk), ts, opts)
+}
+
+/// Box–Jenkins model $y = (B/F) u + (C/D) e$ by the prediction-error method.
+///
+/// $\theta = [b_0..b_{n_b-1}, c_1..c_{n_c}, d_1..d_{n_d}, f_1..f_{n_f}]$.
+///
+/// # Errors
+/// See [`pem`].
+///
+/// # Example
+/// ```
+/// use ambid_core::estimate::pem::{bj, PemOptions};
+/// use ambid_core::lti::PolyModel;
+/// use rand::{RngExt, SeedableRng};
+/// use rand_chacha::ChaCha8Rng;
+/// use rand_distr::StandardNormal;
+/// let truth = PolyModel::bj(vec![0.0, 0.4], vec![1.0, 0.5], vec![1.0, -0.8],
+///                           vec![1.0, -0.7], 1.0).unwrap();
+/// let mut rng = ChaCha8Rng::seed_from_u64(5);
+/// let u: Vec<f64> = (0..2000).map(|_| rng.sample(StandardNormal)).collect();
+/// let e: Vec<f64> = (0..2000).map(|_| 0.1 * rng.sample::<f64, _>(StandardNormal)).collect();
+/// let y = truth.simulate(&u, Some(&e), None).unwrap();
+/// let (fit, _) = bj(&y, &u, 1, 1, 1, 1, 1, 1.0, &PemOptions::default()).unwrap();
+/// assert!((fit.model.f()[1] + 0.7).abs() < 0.02);
+/// assert!((fit.model.d()[1] + 0.8).abs() < 0.1);
+/// ```
+#[allow(clippy::too_many_arguments)]
+pub fn bj(
+    y: &[f64],
+    u: &[f64],
+    nb: usize,
+    nc: usize,
+    nd: usize,
+    nf: usize,
+    nk: usize,
+    ts: f64,
+    opts: &PemOptions,
+) -> Result<(Fitted<PolyModel>, PemReport)> {
+    pem(
+        y,
+        u,
+        Structure::Bj,
+        &Orders::bj(nb, nc, nd, nf, nk),
+        ts,
+        opts,
+    )
+}
+
+fn check_orders(structure: Structure, o: &Orders, focus: Focus) -> Result<()> {
+    if o.nb == 0 {
+        return Err(Error::invalid(
+            "nb",
+            "B needs at least one coefficient (nb ≥ 1); for a pure noise model use a time-series method",
+        ));
+    }
+    let fixed: &[(&'static str, usize)] = match structure {
+        Structure::Fir => &[("na", o.na), ("nc", o.nc), ("nd", o.nd), ("nf", o.nf)],
+        Structure::Arx => &[("nc", o.nc), ("nd", o.nd), ("nf", o.nf)],
+        Structure::Armax => &[("nd", o.nd), ("nf", o.nf)],
+        Structure::Oe => &[("na", o.na), ("nc", o.nc), ("nd", o.nd)],
+        Structure::Bj => &[("na", o.na)],
+        Structure::General => &[],
+    };
+    for (name, v) in fixed {
+        if *v != 0 {
+            return Err(Error::invalid(
+                name,
+                format!(
+                    "a {} model fixes this polynomial to 1, so its order must be 0 (got {v}); use Structure::General for a free one",
+                    structure.name()
+                ),
+            ));
+        }
+    }
+    if focus == Focus::Simulation && o.na > 0 && o.nf > 0 {
+        return Err(Error::invalid(
+            "focus",
+            "the simulation criterion sees only the product A·F, so A and F cannot both be estimated; set na = 0 or nf = 0",
+        ));
+    }
+    Ok(())
+}
+
+fn check_data(y: &[f64], u: &[f64], o: &Orders, ts: f64) -> Result<()> {
+    if !(ts.is_finite() && ts > 0.0) {
+        return Err(Error::invalid(
+            "ts",
+            format!("sample time must be positive and finite, got {ts}"),
+        ));
+    }
+    if y.len() != u.len() {
+        return Err(Error::DimensionMismatch {
+            context: "pem: output y and input u",
+            expected: format!("{} samples", y.len()),
+            got: format!("{} samples", u.len()),
+        });
+    }
+    check_finite("y", y)?;
+    check_finite("u", u)?;
+    let n = y.len();
+    let d = o.n_params();
+    let need = o.max_lag() + 2 * d + 1;
+    if n < need {
+        return Err(Error::invalid(
+            "y",
+            format!(
+                "{n} samples cannot support {d} parameters with lags up to {}: at least {need} are needed; collect more data or lower the orders",
+                o.max_lag()
+            ),
+        ));
+    }
+    let (lo, hi) = u
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(*v), b.max(*v))
+        });
+    if hi - lo <= 0.0 {
+        return Err(Error::invalid(
+            "u",
+            format!(
+                "the input is constant ({lo}), so it does not excite the system; apply a persistently exciting input (PRBS, multisine or noise)"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Prediction-error estimate of a polynomial model of the given structure and orders.
+///
+/// The general entry point behind [`armax`], [`oe`] and [`bj`]: also FIR, ARX (one
+/// Gauss–Newton step from the least-squares start) and the general structure (start: see the
+/// module docs; $A$ and $F$ are told apart only through the noise model, so local minima
+/// with their roots swapped exist). Returns the model with sample time `ts`, its
+/// parameters, covariance and losses ([`Fitted::loss`] is $\frac1N\sum\varepsilon_t^2$ of the
+/// prediction errors of the returned model, [`Fitted::noise_variance`] $= \sum\varepsilon_t^2/(N-d)$)
+/// and a [`PemReport`].
+///
+/// # Errors
+/// * [`Error::DimensionMismatch`] if `y` and `u` differ in length; [`Error::NonFinite`] for a NaN
+///   or infinite sample.
+/// * [`Error::InvalidArgument`] for `nb = 0`, an order that the structure fixes to 0, too few
+///   samples for the orders, a constant input, `ts` not positive, or both `na`, `nf` under
+///   [`Focus::Simulation`].
+/// * [`Error::Numerical`] if the start regression is rank deficient (an input that does not
+///   excite all parameters) or the iteration fails numerically.
+/// * [`Error::Unstable`] if the best model's predictor is unstable ($F$ of an OE/BJ model, $A F$
+///   under the simulation focus, or $C$ with a zero on the unit circle); the message suggests
+///   the closed-loop route.
+///
+/// # Example
+/// ```
+/// use ambid_core::estimate::pem::{pem, Orders, PemOptions};
+/// use ambid_core::lti::{PolyModel, Structure};
+/// use rand::{RngExt, SeedableRng};
+/// use rand_chacha::ChaCha8Rng;
+/// use rand_distr::StandardNormal;
+/// let truth = PolyModel::arx(vec![1.0, -0.9], vec![0.0, 1.0], 1.0).unwrap();
+/// let mut rng = ChaCha8Rng::seed_from_u64(2);
+/// let u: Vec<f64> = (0..500).map(|_| rng.sample(StandardNormal)).collect();
+/// let y = truth.simulate(&u, None, None).unwrap();
+/// let o = Orders { na: 1, nb: 1, nk: 1, ..Orders::default() };
+/// let (fit, _) = pem(&y, &u, Structure::Arx, &o, 1.0, &PemOptions::default()).unwrap();
+/// assert!((fit.params[0] + 0.9).abs() < 1e-10 && (fit.params[1] - 1.0).abs() < 1e-10);
+/// ```
+pub fn pem(
+    y: &[f64],
+    u: &[f64],
+    structure: Structure,
+    orders: &Orders,
+    ts: f64,
+    opts: &PemOptions,
+) -> Result<(Fitted<PolyModel>, PemReport)> {
+    check_orders(structure, orders, opts.focus)?;
+    check_data(y, u, orders, ts)?;
+    let start = init::start(y, u, orders, opts.focus)?;
+    run(y, u, structure, orders, ts, opts, start)
+}
+
+/// Prediction-error refinement of a given model (for example from a subspace method or an
+/// earlier fit): the same iteration as [`pem`], started from `start`, with its structure, its
+/// orders ([`Orders::of`]) and its sample time.
+///
+/// # Errors
+/// As [`pem`]; [`Error::Unstable`] if the start's predictor is unstable ($C$ or $F$, or $A F$
+/// under the simulation focus).
+///
+/// # Example
+/// ```
+/// use ambid_core::estimate::pem::{refine, PemOptions};
+/// use ambid_core::lti::PolyModel;
+/// use rand::{RngExt, SeedableRng};
+/// use rand_chacha::ChaCha8Rng;
+/// use rand_distr::StandardNormal;
+/// let truth = PolyModel::oe(vec![0.0, 1.0], vec![1.0, -0.9], 1.0).unwrap();
+/// let mut rng = ChaCha8Rng::seed_from_u64(4);
+/// let u: Vec<f64> = (0..500).map(|_| rng.sample(StandardNormal)).collect();
+/// let y = truth.simulate(&u, None, None).unwrap();
+/// let guess = PolyModel::oe(vec![0.0, 0.5], vec![1.0, -0.5], 1.0).unwrap();
+/// let (fit, _) = refine(&y, &u, &guess, &PemOptions::default()).unwrap();
+/// assert!((fit.model.f()[1] + 0.9).abs() < 1e-9);
+/// ```
+pub fn refine(
+    y: &[f64],
+    u: &[f64],
+    start: &PolyModel,
+    opts: &PemOptions,
+) -> Result<(Fitted<PolyModel>, PemReport)> {
+    let o = Orders::of(start);
+    check_orders(start.structure(), &o, opts.focus)?;
+    check_data(y, u, &o, start.ts())?;
+    let p = Polys::from_model(start);
+    run(y, u, start.structure(), &o, start.ts(), opts, p)
+}
+
+/// Prediction errors of `model` on the data and their analytic gradient
+/// $\psi = \partial\varepsilon/\partial\theta$ ($N \times d$, columns in the order of $\theta$ for
+/// `Orders::of(model)`), with zero initial conditions. Under [`Focus::Simulation`] the errors
+/// are $y - B/(AF)\,u$ and the columns of $C, D$ are zero.
+///
+/// # Errors
+/// [`Error::DimensionMismatch`] / [`Error::NonFinite`] for bad data; [`Error::Unstable`] if the
+/// predictor is unstable ($C$ or $F$; $A$ or $F$ under the simulation focus).
+///
+/// # Example
+/// ```
+/// use ambid_core::estimate::pem::{prediction_errors, Focus};
+/// use ambid_core::lti::PolyModel;
+/// let m = PolyModel::oe(vec![0.0, 1.0], vec![1.0, -0.5], 1.0).unwrap();
+/// let u = [1.0, 0.0, 0.0, 0.0];
+/// let y = m.simulate(&u, None, None).unwrap();
+/// let (e, psi) = prediction_errors(&m, &y, &u, Focus::Prediction).unwrap();
+/// assert!(e.iter().all(|v| v.abs() < 1e-15));
+/// // ∂ε/∂b0 = −u(t−1)/F: −[0, 1, 0.5, 0.25]
+/// assert!((psi[(2, 0)] + 0.5).abs() < 1e-15);
+/// ```
+pub fn prediction_errors(
+    model: &PolyModel,
+    y: &[f64],
+    u: &[f64],
+    focus: Focus,
+) -> Result<(Vec<f64>, Mat<f64>)> {
+    if y.len() != u.len() {
+        return Err(Error::DimensionMismatch {
+            context: "prediction_errors: output y and input u",
+            expected: format!("{} samples", y.len()),
+            got: format!("{} samples", u.len()),
+        });
+    }
+    check_finite("y", y)?;
+    check_finite("u", u)?;
+    let o = Orders::of(model);
+    let p = Polys::from_model(model);
+    errors_and_gradient(&p, &o, y, u, focus).ok_or_else(|| Error::Unstable {
+        context: "prediction_errors",
+        reason: format!(
+            "the predictor is unstable or overflows (largest |root| of C: {:.6}, of F: {:.6}, of A: {:.6}); the {} focus needs stable {}",
+            max_root(&p.c),
+            max_root(&p.f),
+            max_root(&p.a),
+            if focus == Focus::Prediction { "prediction" } else { "simulation" },
+            if focus == Focus::Prediction { "C and F" } else { "A and F" },
+        ),
+    })
+}
+
+/// The criterion restricted to the free parameters `free` of $\theta$.
+struct Criterion<'a> {
+    y: &'a [f64],
+    u: &'a [f64],
+    o: Orders,
+    focus: Focus,
+    theta: Vec<f64>,
+    free: Vec<usize>,
+}
+
+impl Criterion<'_> {
+    fn polys(&self, x: &[f64]) -> Polys {
+        let mut th = self.theta.clone();
+        for (k, &i) in self.free.iter().enumerate() {
+            th[i] = x[k];
+        }
+        Polys::from_theta(&self.o, &th)
+    }
+    fn full(&self, x: &[f64]) -> Vec<f64> {
+        let mut th = self.theta.clone();
+        for (k, &i) in self.free.iter().enumerate() {
+            th[i] = x[k];
+        }
+        th
+    }
+}
+
+impl LeastSquaresProblem for Criterion<'_> {
+    fn residuals(&mut self, x: &[f64]) -> Option<Vec<f64>> {
+        errors(&self.polys(x), self.y, self.u, self.focus)
+    }
+    fn jacobian(&mut self, x: &[f64]) -> Option<Mat<f64>> {
+        let (_, j) = errors_and_gradient(&self.polys(x), &self.o, self.y, self.u, self.focus)?;
+        Some(Mat::from_fn(j.nrows(), self.free.len(), |t, k| {
+            j[(t, self.free[k])]
+        }))
+    }
+}
+
+/// Index ranges of the polynomial blocks in $\theta$.
+fn blocks(o: &Orders) -> [std::ops::Range<usize>; 5] {
+    let ia = o.na;
+    let ib = ia + o.nb;
+    let ic = ib + o.nc;
+    let id = ic + o.nd;
+    [0..ia, ia..ib, ib..ic, ic..id, id..id + o.nf]
+}
+
+/// $(J^\top J)^{-1}$ over the columns `cols` of `j`, with column equilibration; `None` if the
+/// equilibrated matrix is numerically rank deficient.
+fn inverse_gram(j: &Mat<f64>, cols: &[usize]) -> Option<Mat<f64>> {
+    let d = cols.len();
+    let n = j.nrows();
+    let s: Vec<f64> = cols
+        .iter()
+        .map(|&c| (0..n).map(|t| j[(t, c)].powi(2)).sum::<f64>().sqrt())
+        .collect();
+    if s.iter().any(|v| !(*v > 0.0 && v.is_finite())) {
+        return None;
+    }
+    let js = Mat::from_fn(n, d, |t, k| j[(t, cols[k])] / s[k]);
+    let sv = crate::linalg::singular_values(js.as_ref()).ok()?;
+    let (smax, smin) = (*sv.first()?, *sv.last()?);
+    if smin <= smax * 1e-10 {
+        return None;
+    }
+    let g = js.transpose() * &js;
+    let inv = crate::linalg::solve(g.as_ref(), Mat::<f64>::identity(d, d).as_ref()).ok()?;
+    Some(Mat::from_fn(d, d, |a, b| {
+        0.5 * (inv[(a, b)] + inv[(b, a)]) / (s[a] * s[b])
+    }))
+}
+
+fn boundary_error(p: &Polys, focus: Focus, context: &'static str) -> Error {
+    let rc = max_root(&p.c);
+    let rf = max_root(&p.f);
+    let ra = max_root(&p.a);
+    let (den_name, rden) = match focus {
+        Focus::Prediction => ("F", rf),
+        Focus::Simulation => ("A·F", ra.max(rf)),
+    };
+    if focus == Focus::Prediction && rc >= rden {
+        Error::Unstable {
+            context,
+            reason: format!(
+                "the best fit pushes a zero of the noise polynomial C onto the unit circle (largest |z| = {rc:.6}), where the predictor (D/C)(A y - (B/F) u) becomes unstable: the noise spectrum seems to vanish at some frequency (filtered or over-differenced data). Lower nc, or fit an OE model"
+            ),
+        }
+    } else {
+        Error::Unstable {
+            context,
+            reason: format!(
+                "the best fit pushes a pole of {den_name} onto the unit circle (largest |z| = {rden:.6}) and the output-error predictor needs it stable: the system from u to y looks unstable, which an OE/BJ model (or the simulation focus) cannot describe. Identify the stable closed-loop map T_ry from the excitation r (then P = T_ry / (1 - C T_ry)), or fit ARX/ARMAX with the prediction focus, whose predictor stays stable for an unstable A"
+            ),
+        }
+    }
+}
+
+fn start_error(p: &Polys, focus: Focus) -> Error {
+    let rc = max_root(&p.c);
+    let (name, r) = match focus {
+        Focus::Prediction => ("F", max_root(&p.f)),
+        Focus::Simulation => ("A·F", max_root(&mul(&p.a, &p.f))),
+    };
+    if r >= 1.0 {
+        Error::Unstable {
+            context: "pem start",
+            reason: format!(
+                "the starting model's {name} has a pole on or outside the unit circle (largest |z| = {r:.6}), so its output-error predictor is unstable; an OE/BJ model (or the simulation focus) cannot describe an unstable system. Identify the stable closed-loop map T_ry from the excitation r (then P = T_ry / (1 - C T_ry)), or fit ARX/ARMAX with the prediction focus"
+            ),
+        }
+    } else {
+        Error::Unstable {
+            context: "pem start",
+            reason: format!(
+                "the starting C has a zero on or outside the unit circle (largest |z| = {rc:.6}), so the predictor (D/C)(A y - (B/F) u) is unstable; start from a minimum-phase C"
+            ),
+        }
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn run(
+    y: &[f64],
+    u: &[f64],
+    structure: Structure,
+    o: &Orders,
+    ts: f64,
+    opts: &PemOptions,
+    start: Polys,
+) -> Result<(Fitted<PolyModel>, PemReport)> {
+    const CTX: &str = "pem";
+    let focus = opts.focus;
+    let n = y.len();
+    let theta0 = start.theta(o);
+    let start_model = PolyModel::new(
+        structure,
+        start.a.clone(),
+        start.b.clone(),
+        start.c.clone(),
+        start.d.clone(),
+        start.f.clone(),
+        ts,
+    )?;
+    if !predictor::predictor_stable(&start, focus) {
+        return Err(start_error(&start, focus));
+    }
+    let [ra, rb, rc, rd, rf] = blocks(o);
+    let (theta, lm_main, noise_lm, cov) = match focus {
+        Focus::Prediction => {
+            let free: Vec<usize> = (0..o.n_params()).collect();
+            let mut crit = Criterion {
+                y,
+                u,
+                o: *o,
+                focus,
+                theta: theta0.clone(),
+                free,
+            };
+            let (x, rep) = lm::minimize(&mut crit, &theta0, &opts.lm)?;
+            let th = crit.full(&x);
+            if rep.ended_on_boundary {
+                return Err(boundary_error(&Polys::from_theta(o, &th), focus, CTX));
+            }
+            (th, rep, None, None)
+        }
+        Focus::Simulation => {
+            let g_free: Vec<usize> = ra.clone().chain(rb.clone()).chain(rf.clone()).collect();
+            let mut crit = Criterion {
+                y,
+                u,
+                o: *o,
+                focus: Focus::Simulation,
+                theta: theta0.clone(),
+                free: g_free.clone(),
+            };
+            let x0: Vec<f64> = g_free.iter().map(|&i| theta0[i]).collect();
+            let (x, rep) = lm::minimize(&mut crit, &x0, &opts.lm)?;
+            let mut th = crit.full(&x);
+            if rep.ended_on_boundary {
+                return Err(boundary_error(&Polys::from_theta(o, &th), focus, CTX));
+            }
+            // the G block of the covariance is formed after the noise model is known
+            let (_, psi) =
+                errors_and_gradient(&Polys::from_theta(o, &th), o, y, u, Focus::Simulation)
+                    .ok_or_else(|| {
+                        Error::numerical(CTX, "the simulation gradient overflowed at the estimate")
+                    })?;
+            let h_free: Vec<usize> = rc.clone().chain(rd.clone()).collect();
+            let mut noise_rep = None;
+            if !h_free.is_empty() {
+                let p = Polys::from_theta(o, &th);
+                let ay = filter(&p.a, &[1.0], y);
+                let v = filter(&p.b, &p.f, u);
+                let w: Vec<f64> = ay.iter().zip(&v).map(|(a, b)| a - b).collect();
+                let (c, d) = init::arma_start(&w, o.nc, o.nd, init::noise_order(n, o));
+                th[rc.clone()].copy_from_slice(&c[1..]);
+                th[rd.clone()].copy_from_slice(&d[1..]);
+                let mut crit = Criterion {
+                    y,
+                    u,
+                    o: *o,
+                    focus: Focus::Prediction,
+                    theta: th.clone(),
+                    free: h_free.clone(),
+                };
+                let x0: Vec<f64> = h_free.iter().map(|&i| th[i]).collect();
+                let (x, rep2) = lm::minimize(&mut crit, &x0, &opts.lm)?;
+                th = crit.full(&x);
+                if rep2.ended_on_boundary {
+                    return Err(boundary_error(
+                        &Polys::from_theta(o, &th),
+                        Focus::Prediction,
+                        CTX,
+                    ));
+                }
+                noise_rep = Some(rep2);
+            }
+            (th, rep, noise_rep, Some((psi, g_free, h_free)))
+        }
+    };
+    let p = Polys::from_theta(o, &theta);
+    let (eps, jac) = errors_and_gradient(&p, o, y, u, Focus::Prediction).ok_or_else(|| {
+        Error::numerical(
+            CTX,
+            "the prediction errors overflow at the estimate; check the data scaling",
+        )
+    })?;
+    let d = o.n_params();
+    let sse: f64 = eps.iter().map(|e| e * e).sum();
+    let lambda = sse / (n - d) as f64;
+    let covariance = match cov {
+        None => inverse_gram(&jac, &(0..d).collect::<Vec<_>>())
+            .map(|m| Mat::from_fn(d, d, |i, j| lambda * m[(i, j)])),
+        Some((psi, g_free, h_free)) => sim_covariance(&p, &psi, &jac, &g_free, &h_free, lambda, d),
+    };
+    let model = PolyModel::new(structure, p.a, p.b, p.c, p.d, p.f, ts)?;
+    Ok((
+        Fitted {
+            model,
+            params: theta,
+            covariance,
+            loss: sse / n as f64,
+            noise_variance: lambda,
+            n_samples: n,
+        },
+        PemReport {
+            start: start_model,
+            lm: lm_main,
+            noise_lm,
+        },
+    ))
+}
+
+/// Covariance of the two-stage estimate under the simulation focus (see the module docs): the
+/// sandwich $\hat\lambda M^{-1} X^\top X M^{-\top}$ of the stacked estimating equations.
+fn sim_covariance(
+    p: &Polys,
+    psi: &Mat<f64>,
+    jac: &Mat<f64>,
+    g_free: &[usize],
+    h_free: &[usize],
+    lambda: f64,
+    d: usize,
+) -> Option<Mat<f64>> {
+    let n = psi.nrows();
+    let (dg, dh) = (g_free.len(), h_free.len());
+    let k = dg + dh;
+    // X = [Φ, J_H] with Φ = Hᵀ Ψ_G: anticausal filtering by H = C/(A D)
+    let ad = mul(&p.a, &p.d);
+    let mut x = Mat::<f64>::zeros(n, k);
+    for (c, &i) in g_free.iter().enumerate() {
+        let rev: Vec<f64> = (0..n).rev().map(|t| psi[(t, i)]).collect();
+        let f = filter(&p.c, &ad, &rev);
+        for t in 0..n {
+            x[(t, c)] = f[n - 1 - t];
+        }
+    }
+    for (c, &i) in h_free.iter().enumerate() {
+        for t in 0..n {
+            x[(t, dg + c)] = jac[(t, i)];
+        }
+    }
+    // column scales from the Jacobians that define M
+    let col = |m: &Mat<f64>, i: usize| (0..n).map(|t| m[(t, i)].powi(2)).sum::<f64>().sqrt();
+    let s: Vec<f64> = g_free
+        .iter()
+        .map(|&i| col(psi, i))
+        .chain(h_free.iter().map(|&i| col(jac, i)))
+        .collect();
+    if s.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
+        return None;
+    }
+    // M = [[Ψ_Gᵀ Ψ_G, 0], [J_Hᵀ J_G, J_Hᵀ J_H]], scaled: D⁻¹ M D⁻¹
+    let left = |r: usize, t: usize| {
+        if r < dg {
+            psi[(t, g_free[r])]
+        } else {
+            jac[(t, h_free[r - dg])]
+        }
+    };
+    let right = |c: usize, t: usize, r: usize| {
+        if r < dg {
+            psi[(t, g_free[c])]
+        } else if c < dg {
+            jac[(t, g_free[c])]
+        } else {
+            jac[(t, h_free[c - dg])]
+        }
+    };
+    let m = Mat::from_fn(k, k, |r, c| {
+        if r < dg && c >= dg {
+            0.0
+        } else {
+            (0..n).map(|t| left(r, t) * right(c, t, r)).sum::<f64>() / (s[r] * s[c])
+        }
+    });
+    let xt = Mat::from_fn(k, n, |r, t| x[(t, r)] / s[r]);
+    let sv = crate::linalg::singular_values(m.as_ref()).ok()?;
+    if *sv.last()? <= sv[0] * 1e-12 {
+        return None;
+    }
+    let b = crate::linalg::solve(m.as_ref(), xt.as_ref()).ok()?; // M̃⁻¹ X̃ᵀ
+    let pk = &b * b.transpose();
+    let order: Vec<usize> = g_free.iter().chain(h_free).copied().collect();
+    let mut out = Mat::<f64>::zeros(d, d);
+    for (a, &i) in order.iter().enumerate() {
+        for (c, &j) in order.iter().enumerate() {
+            out[(i, j)] = lambda * 0.5 * (pk[(a, c)] + pk[(c, a)]) / (s[a] * s[c]);
+        }
+    }
+    (0..d).all(|i| out[(i, i)].is_finite()).then_some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn theta_round_trip() {
+        let o = Orders {
+            na: 2,
+            nb: 2,
+            nc: 1,
+            nd: 1,
+            nf: 2,
+            nk: 3,
+        };
+        let th: Vec<f64> = (1..=o.n_params()).map(|k| k as f64 * 0.25).collect();
+        let m = o.model(Structure::General, &th, 1.0).unwrap();
+        assert_eq!(m.b(), &[0.0, 0.0, 0.0, 0.75, 1.0]);
+        assert_eq!(Orders::of(&m), o);
+        assert_eq!(o.params(&m).unwrap(), th);
+        assert_eq!(o.max_lag(), 4);
+    }
+}

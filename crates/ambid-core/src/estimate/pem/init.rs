@@ -1,0 +1,493 @@
+//! Starting values for the prediction-error iteration: least squares (ARX), the simplified
+//! refined instrumental variable method for $B/F$, and Hannan–Rissanen for the noise polynomials.
+//! See the parent module's "Initialisation" section for the reasoning.
+
+use super::predictor::{filter, is_stable, max_root, Polys};
+use super::{Focus, Orders};
+use crate::error::{Error, Result};
+use faer::linalg::solvers::SolveLstsq;
+use faer::Mat;
+
+const CTX: &str = "pem initialisation";
+
+/// One regressor column: signal, lag, sign.
+type Col<'a> = (&'a [f64], usize, f64);
+
+fn lagged(x: &[f64], k: usize, t: usize) -> f64 {
+    if t >= k {
+        x[t - k]
+    } else {
+        0.0
+    }
+}
+
+/// Regressor matrix with rows $t = t_0, \dots, N-1$.
+fn design(t0: usize, n: usize, cols: &[Col<'_>]) -> Mat<f64> {
+    Mat::from_fn(n - t0, cols.len(), |i, j| {
+        let (x, k, s) = cols[j];
+        s * lagged(x, k, t0 + i)
+    })
+}
+
+fn column_scales(m: &Mat<f64>) -> Vec<f64> {
+    (0..m.ncols())
+        .map(|j| {
+            let s = (0..m.nrows())
+                .map(|i| m[(i, j)].powi(2))
+                .sum::<f64>()
+                .sqrt();
+            if s > 0.0 {
+                s
+            } else {
+                1.0
+            }
+        })
+        .collect()
+}
+
+/// Least squares $\Phi\theta \approx y$ with column equilibration, by [`crate::linalg::lstsq`];
+/// a rank-deficient regressor becomes an error that names the likely cause.
+fn regress(phi: &Mat<f64>, target: &[f64], what: &str) -> Result<Vec<f64>> {
+    let s = column_scales(phi);
+    let ps = Mat::from_fn(phi.nrows(), phi.ncols(), |i, j| phi[(i, j)] / s[j]);
+    let rhs = Mat::from_fn(target.len(), 1, |i, _| target[i]);
+    let x = crate::linalg::lstsq(ps.as_ref(), rhs.as_ref()).map_err(|e| match e {
+        Error::Numerical { .. } => Error::numerical(
+            CTX,
+            format!(
+                "the {what} regression is rank deficient: the input does not excite all parameters \
+                 (a constant, periodic with too few lines, too smooth or too short input for these \
+                 orders), the output does not respond to it, or the orders are higher than the \
+                 data support; use a persistently exciting input or lower orders"
+            ),
+        ),
+        other => other,
+    })?;
+    Ok((0..phi.ncols()).map(|j| x[(j, 0)] / s[j]).collect())
+}
+
+/// Residual of the least-squares fit without a rank test (the residual of a Householder QR
+/// solve is accurate even when the coefficients are not); `None` if not finite.
+fn ls_residual(phi: &Mat<f64>, target: &[f64]) -> Option<Vec<f64>> {
+    let s = column_scales(phi);
+    let ps = Mat::from_fn(phi.nrows(), phi.ncols(), |i, j| phi[(i, j)] / s[j]);
+    let rhs = Mat::from_fn(target.len(), 1, |i, _| target[i]);
+    let x = ps.qr().solve_lstsq(rhs);
+    let fit = &ps * &x;
+    let r: Vec<f64> = (0..target.len()).map(|i| target[i] - fit[(i, 0)]).collect();
+    r.iter().all(|v| v.is_finite()).then_some(r)
+}
+
+/// Instrumental-variable solve $(Z^\top\Phi)\theta = Z^\top y$ with column equilibration.
+fn iv_solve(phi: &Mat<f64>, z: &Mat<f64>, target: &[f64]) -> Option<Vec<f64>> {
+    let sp = column_scales(phi);
+    let sz = column_scales(z);
+    let d = phi.ncols();
+    let m = Mat::from_fn(d, d, |i, j| {
+        (0..phi.nrows())
+            .map(|t| z[(t, i)] * phi[(t, j)])
+            .sum::<f64>()
+            / (sz[i] * sp[j])
+    });
+    let rhs = Mat::from_fn(d, 1, |i, _| {
+        (0..phi.nrows()).map(|t| z[(t, i)] * target[t]).sum::<f64>() / sz[i]
+    });
+    let x = crate::linalg::lstsq(m.as_ref(), rhs.as_ref()).ok()?;
+    let th: Vec<f64> = (0..d).map(|j| x[(j, 0)] / sp[j]).collect();
+    th.iter().all(|v| v.is_finite()).then_some(th)
+}
+
+fn monic(s: &[f64]) -> Vec<f64> {
+    let mut p = vec![1.0];
+    p.extend_from_slice(s);
+    p
+}
+
+fn with_delay(nk: usize, b: &[f64]) -> Vec<f64> {
+    let mut p = vec![0.0; nk];
+    p.extend_from_slice(b);
+    p
+}
+
+/// A SRIV estimate of F with poles up to this radius is moved inside; see [`oe_start`].
+const SRIV_MAX_RADIUS: f64 = 1.02;
+/// The radius it is moved to.
+const SRIV_CONTRACTED: f64 = 0.9995;
+
+/// $p_i \mapsto p_i \rho^i$: every root scaled by $\rho$ (same angle).
+fn scale_radius(mut p: Vec<f64>, rho: f64) -> Vec<f64> {
+    let mut s = 1.0;
+    for c in p.iter_mut() {
+        *c *= s;
+        s *= rho;
+    }
+    p
+}
+
+/// Moves the roots of a start polynomial radially inside $|z| \le 0.95$ if any lies beyond
+/// $0.99$: $p_i \mapsto p_i \rho^i$ scales every root by $\rho$. Used only on starting values of
+/// noise polynomials, never on an estimate.
+fn contract(p: Vec<f64>) -> Vec<f64> {
+    let r = max_root(&p);
+    if !r.is_finite() {
+        return monic(&vec![0.0; p.len() - 1]);
+    }
+    if r > 0.99 {
+        return scale_radius(p, 0.95 / r);
+    }
+    p
+}
+
+/// Order of the long ARX / AR models of the Hannan–Rissanen step.
+fn long_order(n: usize, o: &Orders) -> usize {
+    let want = (3 * (o.na + o.nc + o.nd + o.nf)).max(20);
+    let cap = (n / 10).max(o.max_lag() + 1);
+    want.min(cap).max(1)
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+}
+
+/// Innovations estimate $\hat e$ as the residual of a long ARX (`u = Some`) or AR model of
+/// order `nl`; zero before the first full row. `None` if the data leave no residual (noise-free
+/// data fitted exactly) or the fit fails.
+fn innovations(y: &[f64], u: Option<(&[f64], usize)>, nl: usize) -> Option<(Vec<f64>, usize)> {
+    let n = y.len();
+    let mut cols: Vec<Col<'_>> = (1..=nl).map(|i| (y, i, -1.0)).collect();
+    let mut t0 = nl;
+    if let Some((u, nk)) = u {
+        cols.extend((0..nl).map(|j| (u, nk + j, 1.0)));
+        t0 = t0.max(nk + nl - 1);
+    }
+    if n <= t0 + 2 * cols.len() {
+        return None;
+    }
+    let phi = design(t0, n, &cols);
+    let r = ls_residual(&phi, &y[t0..])?;
+    if norm(&r) <= 1e-11 * norm(&y[t0..]) {
+        return None;
+    }
+    let mut e = vec![0.0; n];
+    e[t0..].copy_from_slice(&r);
+    Some((e, t0))
+}
+
+/// The F-polynomial start failed: the consistent (IV) estimate is unstable.
+pub(crate) fn unstable_start(radius: f64) -> Error {
+    Error::Unstable {
+        context: "pem initialisation",
+        reason: format!(
+            "the least-squares and instrumental-variable estimates of the denominator (F; A under \
+             the simulation focus) both have a pole outside the unit circle (largest |z| = {radius:.6}): the system from u to y looks unstable, and the \
+             output-error predictor (B/F) u of an OE/BJ model (or B/(AF) u under the simulation \
+             focus) cannot follow it. Identify the stable closed-loop map T_ry from the excitation r \
+             (then P = T_ry / (1 - C T_ry)), or fit ARX/ARMAX with the prediction focus, whose \
+             predictor stays stable for an unstable A"
+        ),
+    }
+}
+
+/// $B$ and $F$ (orders `nb`, `nf`, delay `nk`): ARX, then up to four iterations of the
+/// simplified refined instrumental variable method (SRIV). An SRIV estimate of a lightly damped
+/// $F$ that lands just outside the unit circle (radius below 1.02) is moved radially to 0.9995
+/// as the next prefilter and start; the returned start may carry such a pole, never the
+/// estimate (the iteration moves it, and fails if the optimum lies on the boundary).
+pub(crate) fn oe_start(
+    y: &[f64],
+    u: &[f64],
+    nb: usize,
+    nf: usize,
+    nk: usize,
+) -> Result<(Vec<f64>, Vec<f64>)> {
+    let n = y.len();
+    if nf == 0 {
+        let t0 = nk + nb - 1;
+        let cols: Vec<Col<'_>> = (0..nb).map(|j| (u, nk + j, 1.0)).collect();
+        let th = regress(&design(t0, n, &cols), &y[t0..], "FIR")?;
+        return Ok((with_delay(nk, &th), vec![1.0]));
+    }
+    let t0 = nf.max(nk + nb - 1);
+    let mut cols: Vec<Col<'_>> = (1..=nf).map(|i| (y, i, -1.0)).collect();
+    cols.extend((0..nb).map(|j| (u, nk + j, 1.0)));
+    let th = regress(&design(t0, n, &cols), &y[t0..], "ARX")?;
+    let mut f = monic(&th[..nf]);
+    let mut b = with_delay(nk, &th[nf..]);
+    if !is_stable(&f) {
+        // basic IV with further delayed inputs as instruments (consistent in open loop)
+        let t1 = nk + nb + nf - 1;
+        if n <= t1 + 2 * (nb + nf) {
+            return Err(unstable_start(max_root(&f)));
+        }
+        let phi = design(t1, n, &cols);
+        let mut zc: Vec<Col<'_>> = (0..nf).map(|i| (u, nk + nb + i, 1.0)).collect();
+        zc.extend((0..nb).map(|j| (u, nk + j, 1.0)));
+        let z = design(t1, n, &zc);
+        match iv_solve(&phi, &z, &y[t1..]) {
+            Some(th) if is_stable(&monic(&th[..nf])) => {
+                f = monic(&th[..nf]);
+                b = with_delay(nk, &th[nf..]);
+            }
+            _ => return Err(unstable_start(max_root(&f))),
+        }
+    }
+    // SRIV: prefilter by 1/F, instruments from the noise-free simulated output
+    for _ in 0..4 {
+        let yf = filter(&[1.0], &f, y);
+        let uf = filter(&[1.0], &f, u);
+        let x = filter(&b, &f, u);
+        let xf = filter(&[1.0], &f, &x);
+        let mut pc: Vec<Col<'_>> = (1..=nf).map(|i| (yf.as_slice(), i, -1.0)).collect();
+        pc.extend((0..nb).map(|j| (uf.as_slice(), nk + j, 1.0)));
+        let mut zc: Vec<Col<'_>> = (1..=nf).map(|i| (xf.as_slice(), i, -1.0)).collect();
+        zc.extend((0..nb).map(|j| (uf.as_slice(), nk + j, 1.0)));
+        let Some(th) = iv_solve(&design(t0, n, &pc), &design(t0, n, &zc), &yf[t0..]) else {
+            break;
+        };
+        let mut fnew = monic(&th[..nf]);
+        if !is_stable(&fnew) {
+            // a lightly damped pole estimated just outside the circle: move it radially
+            // inside (same frequency) and go on; further out, keep the last stable estimate
+            let r = max_root(&fnew);
+            if r.is_nan() || r >= SRIV_MAX_RADIUS {
+                break;
+            }
+            fnew = scale_radius(fnew, SRIV_CONTRACTED / r);
+        }
+        let bnew = with_delay(nk, &th[nf..]);
+        let change = fnew
+            .iter()
+            .zip(&f)
+            .chain(bnew.iter().zip(&b))
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        let scale = fnew.iter().chain(&bnew).fold(0.0f64, |m, v| m.max(v.abs()));
+        f = fnew;
+        b = bnew;
+        if change <= 1e-12 * scale {
+            break;
+        }
+    }
+    Ok((b, f))
+}
+
+/// $A, B, C$ of an ARMAX model by Hannan–Rissanen: innovations from a long ARX model, then
+/// least squares of $y(t) - \hat e(t)$ on $[-y(t-i), u(t-n_k-j), \hat e(t-k)]$.
+fn armax_start(
+    y: &[f64],
+    u: &[f64],
+    o: &Orders,
+    nl: usize,
+) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>)> {
+    let n = y.len();
+    let (na, nb, nc, nk) = (o.na, o.nb, o.nc, o.nk);
+    let arx_t0 = na.max(nk + nb - 1);
+    let mut cols: Vec<Col<'_>> = (1..=na).map(|i| (y, i, -1.0)).collect();
+    cols.extend((0..nb).map(|j| (u, nk + j, 1.0)));
+    let arx = |cols: &[Col<'_>]| regress(&design(arx_t0, n, cols), &y[arx_t0..], "ARX");
+    if nc == 0 {
+        let th = arx(&cols)?;
+        return Ok((monic(&th[..na]), with_delay(nk, &th[na..]), vec![1.0]));
+    }
+    let Some((e, te)) = innovations(y, Some((u, nk)), nl) else {
+        let th = arx(&cols)?;
+        return Ok((
+            monic(&th[..na]),
+            with_delay(nk, &th[na..]),
+            monic(&vec![0.0; nc]),
+        ));
+    };
+    let t0 = te + arx_t0.max(nc);
+    if n <= t0 + 2 * o.n_params() {
+        let th = arx(&cols)?;
+        return Ok((
+            monic(&th[..na]),
+            with_delay(nk, &th[na..]),
+            monic(&vec![0.0; nc]),
+        ));
+    }
+    cols.extend((1..=nc).map(|k| (e.as_slice(), k, 1.0)));
+    let target: Vec<f64> = (t0..n).map(|t| y[t] - e[t]).collect();
+    let th = regress(&design(t0, n, &cols), &target, "Hannan–Rissanen ARMAX")?;
+    Ok((
+        monic(&th[..na]),
+        with_delay(nk, &th[na..na + nb]),
+        contract(monic(&th[na + nb..])),
+    ))
+}
+
+/// $C, D$ of the ARMA model $D w = C e$ by Hannan–Rissanen (long AR, then least squares). Never
+/// fails: if the data do not determine them (noise-free data), $C = D = 1$.
+pub(crate) fn arma_start(w: &[f64], nc: usize, nd: usize, nl: usize) -> (Vec<f64>, Vec<f64>) {
+    let ones = (monic(&vec![0.0; nc]), monic(&vec![0.0; nd]));
+    if nc == 0 && nd == 0 {
+        return ones;
+    }
+    let n = w.len();
+    if nc == 0 {
+        let cols: Vec<Col<'_>> = (1..=nd).map(|i| (w, i, -1.0)).collect();
+        if n <= nd + 2 * nd {
+            return ones;
+        }
+        return match regress(&design(nd, n, &cols), &w[nd..], "AR") {
+            Ok(th) => (vec![1.0], contract(monic(&th))),
+            Err(_) => ones,
+        };
+    }
+    let Some((e, te)) = innovations(w, None, nl) else {
+        return ones;
+    };
+    let t0 = te + nc.max(nd);
+    if n <= t0 + 2 * (nc + nd) {
+        return ones;
+    }
+    let mut cols: Vec<Col<'_>> = (1..=nd).map(|i| (w, i, -1.0)).collect();
+    cols.extend((1..=nc).map(|k| (e.as_slice(), k, 1.0)));
+    let target: Vec<f64> = (t0..n).map(|t| w[t] - e[t]).collect();
+    match regress(&design(t0, n, &cols), &target, "ARMA") {
+        Ok(th) => (contract(monic(&th[nd..])), contract(monic(&th[..nd]))),
+        Err(_) => ones,
+    }
+}
+
+/// Starting polynomials for `orders` under `focus` (see the module docs of `pem`).
+pub(crate) fn start(y: &[f64], u: &[f64], o: &Orders, focus: Focus) -> Result<Polys> {
+    let nl = long_order(y.len(), o);
+    let ones = |k: usize| monic(&vec![0.0; k]);
+    match focus {
+        Focus::Simulation => {
+            // G = B/(A F) with one of na, nf zero (checked by the caller)
+            let (b, den) = oe_start(y, u, o.nb, o.na + o.nf, o.nk)?;
+            let (a, f) = if o.na > 0 {
+                (den, vec![1.0])
+            } else {
+                (vec![1.0], den)
+            };
+            Ok(Polys {
+                a,
+                b,
+                c: ones(o.nc),
+                d: ones(o.nd),
+                f,
+            })
+        }
+        Focus::Prediction if o.na == 0 => {
+            let (b, f) = oe_start(y, u, o.nb, o.nf, o.nk)?;
+            let v = filter(&b, &f, u);
+            let w: Vec<f64> = y.iter().zip(&v).map(|(a, b)| a - b).collect();
+            let (c, d) = arma_start(&w, o.nc, o.nd, nl);
+            Ok(Polys {
+                a: vec![1.0],
+                b,
+                c,
+                d,
+                f,
+            })
+        }
+        Focus::Prediction if o.nf > 0 => match general_start(y, u, o, nl) {
+            Some(p) => Ok(p),
+            None => armax_path(y, u, o, nl),
+        },
+        Focus::Prediction => armax_path(y, u, o, nl),
+    }
+}
+
+/// ARMAX-type start (Hannan–Rissanen for $A, B, C$; $D$ by Hannan–Rissanen on $A y - B u$;
+/// $F = 1$).
+fn armax_path(y: &[f64], u: &[f64], o: &Orders, nl: usize) -> Result<Polys> {
+    let (a, b, mut c) = armax_start(y, u, o, nl)?;
+    let mut d = monic(&vec![0.0; o.nd]);
+    if o.nd > 0 {
+        let ay = filter(&a, &[1.0], y);
+        let bu = filter(&b, &[1.0], u);
+        let w: Vec<f64> = ay.iter().zip(&bu).map(|(a, b)| a - b).collect();
+        (c, d) = arma_start(&w, o.nc, o.nd, nl);
+    }
+    Ok(Polys {
+        a,
+        b,
+        c,
+        d,
+        f: monic(&vec![0.0; o.nf]),
+    })
+}
+
+/// Root groups of a real polynomial: real roots alone, complex roots with their conjugates.
+fn root_groups(p: &[f64]) -> Option<Vec<Vec<faer::c64>>> {
+    if p.len() <= 1 {
+        return Some(Vec::new());
+    }
+    let r = crate::linalg::roots(p).ok()?;
+    let mut out = Vec::new();
+    for z in &r {
+        let tol = 1e-8 * z.norm().max(1.0);
+        if z.im > tol {
+            out.push(vec![*z, z.conj()]);
+        } else if z.im.abs() <= tol {
+            out.push(vec![faer::c64::new(z.re, 0.0)]);
+        }
+    }
+    (out.iter().map(Vec::len).sum::<usize>() == r.len()).then_some(out)
+}
+
+/// Start for the general structure with both $A$ and $F$: $G = B/(AF)$ by SRIV with a
+/// denominator of order $n_a + n_f$, the noise denominator $\widehat{AD}$ of the output error by
+/// Hannan–Rissanen, and $A$ = the $n_a$ roots of $\widehat{AF}$ closest to roots of
+/// $\widehat{AD}$ (the factor the two share), $F$ the rest; then $C, D$ from $A y - (B/F) u$.
+/// `None` when this fails (e.g. an unstable $AF$); the caller falls back to the ARMAX start.
+fn general_start(y: &[f64], u: &[f64], o: &Orders, nl: usize) -> Option<Polys> {
+    let (b, af) = oe_start(y, u, o.nb, o.na + o.nf, o.nk).ok()?;
+    let v = filter(&b, &af, u);
+    let w: Vec<f64> = y.iter().zip(&v).map(|(a, b)| a - b).collect();
+    let (_, ad) = arma_start(&w, o.nc, o.na + o.nd, nl);
+    let groups = root_groups(&af)?;
+    let noise_roots: Vec<faer::c64> = root_groups(&ad)?.into_iter().flatten().collect();
+    if groups.len() > 16 || noise_roots.is_empty() {
+        return None;
+    }
+    let cost = |g: &[faer::c64]| {
+        noise_roots
+            .iter()
+            .map(|z| (z - g[0]).norm())
+            .fold(f64::INFINITY, f64::min)
+    };
+    let mut best: Option<(f64, u32)> = None;
+    for mask in 0u32..(1 << groups.len()) {
+        let size: usize = (0..groups.len())
+            .filter(|k| mask >> k & 1 == 1)
+            .map(|k| groups[k].len())
+            .sum();
+        if size != o.na {
+            continue;
+        }
+        let c: f64 = (0..groups.len())
+            .filter(|k| mask >> k & 1 == 1)
+            .map(|k| cost(&groups[k]))
+            .sum();
+        if best.is_none_or(|(bc, _)| c < bc) {
+            best = Some((c, mask));
+        }
+    }
+    let (_, mask) = best?;
+    let pick = |sel: bool| -> Vec<faer::c64> {
+        (0..groups.len())
+            .filter(|k| (mask >> k & 1 == 1) == sel)
+            .flat_map(|k| groups[k].clone())
+            .collect()
+    };
+    let a = crate::linalg::poly_from_roots(&pick(true));
+    let f = crate::linalg::poly_from_roots(&pick(false));
+    if a.len() != o.na + 1 || f.len() != o.nf + 1 || !is_stable(&f) {
+        return None;
+    }
+    let ay = filter(&a, &[1.0], y);
+    let vf = filter(&b, &f, u);
+    let w: Vec<f64> = ay.iter().zip(&vf).map(|(a, b)| a - b).collect();
+    let (c, d) = arma_start(&w, o.nc, o.nd, nl);
+    Some(Polys { a, b, c, d, f })
+}
+
+/// Long-model order for the Hannan–Rissanen noise start of the simulation focus.
+pub(crate) fn noise_order(n: usize, o: &Orders) -> usize {
+    long_order(n, o)
+}

@@ -1,0 +1,759 @@
+//! Levenberg–Marquardt for nonlinear least squares with Moré's diagonal scaling and trust-region
+//! control of the damping, on faer.
+//!
+//! Minimises $V(x) = \tfrac12 \lVert r(x) \rVert^2$ for residuals $r: \mathbb R^n \to \mathbb R^m$
+//! ($m \ge n$) with Jacobian $J = \partial r / \partial x$. Each iteration solves the trust-region
+//! subproblem in the scaled variables $s = D p$,
+//! $$ \min_p \lVert J p + r \rVert \quad\text{subject to}\quad \lVert D p \rVert \le \Delta, $$
+//! whose solution is $p(\lambda)$ with $(J^\top J + \lambda D^2)\, p = -J^\top r$ for the $\lambda \ge 0$
+//! that puts the step on the boundary (or $\lambda = 0$ when the Gauss–Newton step lies inside).
+//! $D = \operatorname{diag}(d_j)$ holds the largest column norms of $J$ seen so far, which makes the
+//! method invariant to the scaling of the parameters (a gain of $10^4$ next to a pole of $0.98$).
+//!
+//! # Algorithm
+//! * The QR factorisation of $[J \;\, r] = Q \begin{bmatrix} R & z \\ 0 & \rho \end{bmatrix}$ gives
+//!   $\lVert Jp + r \rVert^2 = \lVert Rp + z \rVert^2 + \rho^2$, so every later solve works on the
+//!   $n \times n$ triangle $R$ and $z = Q^\top r$ without forming $J^\top J$.
+//! * For a given $\lambda$ the step is the least-squares solution of the *scaled augmented* system
+//!   $\left[\begin{smallmatrix} R D^{-1} \\ \sqrt\lambda\, I \end{smallmatrix}\right] s \approx
+//!   \left[\begin{smallmatrix} -z \\ 0 \end{smallmatrix}\right]$, $p = D^{-1}s$,
+//!   computed by a second (small, $2n \times n$) Householder QR with factor $S_\lambda$
+//!   ($S_\lambda^\top S_\lambda = D^{-1}R^\top R D^{-1} + \lambda I$); the normal equations are never formed.
+//! * $\lambda$ is found by Moré's safeguarded Newton iteration on
+//!   $\varphi(\lambda) = \lVert s(\lambda) \rVert - \Delta$, with
+//!   $\varphi'(\lambda) = -\lVert S_\lambda^{-\top} s \rVert^2 / \lVert s \rVert$, accepting
+//!   $|\varphi| \le 0.1\Delta$; the bounds $[\lambda_l, \lambda_u]$ start from the Gauss–Newton step and
+//!   from $\lVert D^{-1} J^\top r \rVert / \Delta$.
+//! * The gain ratio $\varrho$ = actual / predicted relative reduction of $\lVert r \rVert^2$ steers the
+//!   trust region: $\varrho < 1/4$ shrinks $\Delta$ (by a factor from a quadratic fit, at most
+//!   $10\times$), $\varrho > 3/4$ (or a Gauss–Newton step) doubles $\lVert s\rVert$ as the new $\Delta$.
+//!   A step is taken when $\varrho \ge 10^{-4}$.
+//! * A trial point whose residuals are undefined (the problem returns `None`, e.g. an unstable
+//!   predictor) or not finite is rejected like a failed step and shrinks $\Delta$ tenfold, so the
+//!   iterates never leave the admissible set. When the iteration stops (other than on the
+//!   gradient test), the full Gauss–Newton step from the final point is tried once: at an
+//!   interior minimum it vanishes ($J^\top r = 0$), at a minimum pressed against the boundary it
+//!   crosses it, which [`LmReport::ended_on_boundary`] reports (the last trial being
+//!   inadmissible is used when $J$ is rank deficient or the iteration limit was reached).
+//!
+//! Stopping (the first that holds):
+//! * [`StopReason::LossChange`]: the relative reduction of $\lVert r\rVert^2$, actual and
+//!   predicted, is at most `loss_tol`;
+//! * [`StopReason::StepSize`]: the trust region lets no parameter move by more than
+//!   `step_tol` $= \tau$ relative to itself, $\Delta / d_j \le \tau\,(|x_j| + \tau)$ for every $j$
+//!   (component-wise rather than MINPACK's $\Delta \le \tau\lVert Dx\rVert$, so that a weakly
+//!   determined parameter next to strong ones, such as $C$ of data with tiny noise, is not
+//!   declared converged while it can still move);
+//! * [`StopReason::Gradient`]: the largest cosine between $r$ and a column of $J$ is at most
+//!   `gradient_tol`, or $r = 0$;
+//! * [`StopReason::MaxIterations`]: `max_iterations` accepted steps.
+//!
+//! Complexity per iteration: one Jacobian, one $O(m n^2)$ QR, a few $O(n^3)$ small QRs.
+//!
+//! # Requirements on the problem
+//! * $m \ge n$; residuals and Jacobian finite wherever the residuals are defined.
+//! * $r$ continuously differentiable on the admissible set, which must be open and contain the start.
+//! * The Jacobian must be the true derivative: a wrong Jacobian shows up as tiny or rejected steps.
+//! * Only a local minimum is found; the start decides which.
+//!
+//! # Reference
+//! J. J. Moré, "The Levenberg–Marquardt algorithm: implementation and theory", in *Numerical
+//! Analysis*, Lecture Notes in Mathematics 630, Springer, 1978, pp. 105–116 (the scaling, the
+//! $\lambda$ iteration and the trust-region update used here; also MINPACK's `lmder`).
+//!
+//! # Example
+//! ```
+//! use ambid_core::estimate::pem::lm::{minimize, LeastSquaresProblem, LmOptions, StopReason};
+//! use faer::Mat;
+//! // Rosenbrock as least squares: r = [10 (x1 - x0^2), 1 - x0], minimum at (1, 1).
+//! struct Rosenbrock;
+//! impl LeastSquaresProblem for Rosenbrock {
+//!     fn residuals(&mut self, x: &[f64]) -> Option<Vec<f64>> {
+//!         Some(vec![10.0 * (x[1] - x[0] * x[0]), 1.0 - x[0]])
+//!     }
+//!     fn jacobian(&mut self, x: &[f64]) -> Option<Mat<f64>> {
+//!         Some(faer::mat![[-20.0 * x[0], 10.0], [-1.0, 0.0]])
+//!     }
+//! }
+//! let (x, report) = minimize(&mut Rosenbrock, &[-1.2, 1.0], &LmOptions::default()).unwrap();
+//! assert!((x[0] - 1.0).abs() < 1e-10 && (x[1] - 1.0).abs() < 1e-10);
+//! assert!(report.iterations < 50);
+//! assert_ne!(report.reason, StopReason::MaxIterations);
+//! ```
+
+use crate::error::{Error, Result};
+use faer::Mat;
+
+/// A nonlinear least-squares problem $\min_x \tfrac12 \lVert r(x) \rVert^2$.
+pub trait LeastSquaresProblem {
+    /// Residuals $r(x)$, or `None` when $x$ is outside the admissible set (for example, a
+    /// parameter vector whose predictor is unstable). The length must not change between calls.
+    fn residuals(&mut self, x: &[f64]) -> Option<Vec<f64>>;
+    /// Jacobian $\partial r_i / \partial x_j$ ($m \times n$) at an admissible $x$.
+    fn jacobian(&mut self, x: &[f64]) -> Option<Mat<f64>>;
+}
+
+/// Why [`minimize`] stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum StopReason {
+    /// The actual and predicted relative reductions of the loss fell below `loss_tol`.
+    LossChange,
+    /// The trust region shrank below `step_tol` relative to the scaled parameter norm.
+    StepSize,
+    /// The residual is (numerically) orthogonal to every Jacobian column, or zero.
+    Gradient,
+    /// The iteration limit was reached before any tolerance was met.
+    MaxIterations,
+}
+
+impl StopReason {
+    /// Whether the stop means convergence (every reason except [`StopReason::MaxIterations`]).
+    pub fn converged(self) -> bool {
+        self != StopReason::MaxIterations
+    }
+}
+
+/// Options of [`minimize`]; the setters validate their argument.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LmOptions {
+    max_iterations: usize,
+    loss_tol: f64,
+    step_tol: f64,
+    gradient_tol: f64,
+    initial_radius: f64,
+}
+
+impl Default for LmOptions {
+    /// 100 iterations, `loss_tol` 1e-12, `step_tol` 1e-10, `gradient_tol` 1e-12, initial
+    /// radius factor 100.
+    fn default() -> Self {
+        Self {
+            max_iterations: 100,
+            loss_tol: 1e-12,
+            step_tol: 1e-10,
+            gradient_tol: 1e-12,
+            initial_radius: 100.0,
+        }
+    }
+}
+
+fn check_tol(name: &'static str, v: f64) -> Result<()> {
+    if !(v.is_finite() && v >= 0.0) {
+        return Err(Error::invalid(
+            name,
+            format!("a tolerance must be finite and non-negative, got {v}"),
+        ));
+    }
+    Ok(())
+}
+
+impl LmOptions {
+    /// Maximum number of accepted steps (at least 1).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for 0.
+    pub fn with_max_iterations(mut self, n: usize) -> Result<Self> {
+        if n == 0 {
+            return Err(Error::invalid(
+                "max_iterations",
+                "at least one iteration is needed",
+            ));
+        }
+        self.max_iterations = n;
+        Ok(self)
+    }
+    /// Tolerance on the relative reduction of the loss (actual and predicted).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for a negative or non-finite value.
+    pub fn with_loss_tol(mut self, tol: f64) -> Result<Self> {
+        check_tol("loss_tol", tol)?;
+        self.loss_tol = tol;
+        Ok(self)
+    }
+    /// Tolerance on the trust-region radius relative to $\lVert D x\rVert$.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for a negative or non-finite value.
+    pub fn with_step_tol(mut self, tol: f64) -> Result<Self> {
+        check_tol("step_tol", tol)?;
+        self.step_tol = tol;
+        Ok(self)
+    }
+    /// Tolerance on the largest cosine between the residual and a Jacobian column.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for a negative or non-finite value.
+    pub fn with_gradient_tol(mut self, tol: f64) -> Result<Self> {
+        check_tol("gradient_tol", tol)?;
+        self.gradient_tol = tol;
+        Ok(self)
+    }
+    /// Initial radius $\Delta_0 = $ `factor` $\cdot \lVert D x_0 \rVert$ (MINPACK's `factor`).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] unless `factor` is positive and finite.
+    pub fn with_initial_radius(mut self, factor: f64) -> Result<Self> {
+        if !(factor.is_finite() && factor > 0.0) {
+            return Err(Error::invalid(
+                "initial_radius",
+                format!("must be positive and finite, got {factor}"),
+            ));
+        }
+        self.initial_radius = factor;
+        Ok(self)
+    }
+    /// Maximum number of accepted steps.
+    pub fn max_iterations(&self) -> usize {
+        self.max_iterations
+    }
+    /// Relative loss-change tolerance.
+    pub fn loss_tol(&self) -> f64 {
+        self.loss_tol
+    }
+    /// Relative step tolerance.
+    pub fn step_tol(&self) -> f64 {
+        self.step_tol
+    }
+    /// Gradient (cosine) tolerance.
+    pub fn gradient_tol(&self) -> f64 {
+        self.gradient_tol
+    }
+}
+
+/// What [`minimize`] did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LmReport {
+    /// Accepted steps.
+    pub iterations: usize,
+    /// Residual evaluations, including the start and rejected trials.
+    pub evaluations: usize,
+    /// Why the iteration stopped.
+    pub reason: StopReason,
+    /// $\tfrac12\lVert r\rVert^2$ at the start.
+    pub initial_cost: f64,
+    /// $\tfrac12\lVert r\rVert^2$ at the returned point.
+    pub cost: f64,
+    /// Trial points rejected because the residuals were undefined (outside the admissible set).
+    pub rejected_inadmissible: usize,
+    /// The returned point is a minimum on the boundary of the admissible set (for a predictor:
+    /// the stability boundary): the Gauss–Newton step from it leaves the set.
+    pub ended_on_boundary: bool,
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+}
+
+/// Solves the upper-triangular system $U x = b$ (back substitution).
+fn solve_upper(u: &Mat<f64>, b: &[f64]) -> Vec<f64> {
+    let n = b.len();
+    let mut x = b.to_vec();
+    for i in (0..n).rev() {
+        let mut s = x[i];
+        for j in i + 1..n {
+            s -= u[(i, j)] * x[j];
+        }
+        x[i] = s / u[(i, i)];
+    }
+    x
+}
+
+/// Solves $U^\top x = b$ for upper-triangular $U$ (forward substitution).
+fn solve_upper_transposed(u: &Mat<f64>, b: &[f64]) -> Vec<f64> {
+    let n = b.len();
+    let mut x = b.to_vec();
+    for i in 0..n {
+        let mut s = x[i];
+        for j in 0..i {
+            s -= u[(j, i)] * x[j];
+        }
+        x[i] = s / u[(i, i)];
+    }
+    x
+}
+
+/// Whether the triangle is numerically nonsingular.
+fn full_rank(u: &Mat<f64>) -> bool {
+    let n = u.nrows();
+    let dmax = (0..n).map(|i| u[(i, i)].abs()).fold(0.0, f64::max);
+    dmax > 0.0 && (0..n).all(|i| u[(i, i)].abs() > dmax * 1e-14 * n as f64)
+}
+
+/// The top triangle of the QR factor of `a` (at least as many rows as columns).
+fn qr_triangle(a: &Mat<f64>) -> Mat<f64> {
+    let n = a.ncols();
+    let qr = a.qr();
+    let r = qr.thin_R();
+    Mat::from_fn(n, n, |i, j| if j >= i { r[(i, j)] } else { 0.0 })
+}
+
+/// Step in scaled variables for damping `par`: least squares of
+/// $[\tilde R; \sqrt{par} I] s \approx [-z; 0]$; returns $s$ and the triangle $S$.
+fn damped_step(rt: &Mat<f64>, z: &[f64], par: f64) -> (Vec<f64>, Mat<f64>) {
+    let n = z.len();
+    let sp = par.sqrt();
+    let aug = Mat::from_fn(2 * n, n + 1, |i, j| {
+        if j == n {
+            if i < n {
+                -z[i]
+            } else {
+                0.0
+            }
+        } else if i < n {
+            rt[(i, j)]
+        } else if i - n == j {
+            sp
+        } else {
+            0.0
+        }
+    });
+    let t = qr_triangle(&aug);
+    let s_mat = Mat::from_fn(n, n, |i, j| t[(i, j)]);
+    let rhs: Vec<f64> = (0..n).map(|i| t[(i, n)]).collect();
+    (solve_upper(&s_mat, &rhs), s_mat)
+}
+
+/// Moré's λ iteration: the scaled step $s$ with $\lVert s \rVert \approx \Delta$ (or the
+/// Gauss–Newton step when it is shorter), and the damping $\lambda$.
+fn lm_parameter(rt: &Mat<f64>, z: &[f64], delta: f64, par0: f64) -> (Vec<f64>, f64) {
+    let n = z.len();
+    let mut parl = 0.0;
+    let mut fp = f64::INFINITY;
+    let mut gn_norm = f64::NAN;
+    if full_rank(rt) {
+        let s0: Vec<f64> = solve_upper(rt, z).iter().map(|v| -v).collect();
+        let dxnorm = norm(&s0);
+        if dxnorm.is_finite() {
+            fp = dxnorm - delta;
+            if fp <= 0.1 * delta {
+                return (s0, 0.0);
+            }
+            gn_norm = dxnorm;
+            let w: Vec<f64> = s0.iter().map(|v| v / dxnorm).collect();
+            let v = solve_upper_transposed(rt, &w);
+            let vn = norm(&v);
+            if vn.is_finite() && vn > 0.0 {
+                parl = fp / (delta * vn * vn);
+            }
+        }
+    }
+    // upper bound from the gradient g = R̃ᵀ z
+    let g: Vec<f64> = (0..n)
+        .map(|j| (0..=j).map(|i| rt[(i, j)] * z[i]).sum::<f64>())
+        .collect();
+    let gnorm = norm(&g);
+    let mut paru = gnorm / delta;
+    if paru == 0.0 {
+        paru = f64::MIN_POSITIVE / delta.min(0.1);
+    }
+    let mut par = par0.max(parl).min(paru);
+    if par == 0.0 {
+        par = if gn_norm.is_finite() && gn_norm > 0.0 {
+            gnorm / gn_norm
+        } else {
+            0.001 * paru
+        };
+    }
+    let mut s = vec![0.0; n];
+    for iter in 1..=10 {
+        if par == 0.0 {
+            par = f64::MIN_POSITIVE.max(0.001 * paru);
+        }
+        let (step, smat) = damped_step(rt, z, par);
+        s = step;
+        let dxnorm = norm(&s);
+        let prev = fp;
+        fp = dxnorm - delta;
+        if fp.abs() <= 0.1 * delta || (parl == 0.0 && fp <= prev && prev < 0.0) || iter == 10 {
+            break;
+        }
+        if dxnorm == 0.0 || !dxnorm.is_finite() {
+            break;
+        }
+        let w: Vec<f64> = s.iter().map(|v| v / dxnorm).collect();
+        let v = solve_upper_transposed(&smat, &w);
+        let vn2 = v.iter().map(|x| x * x).sum::<f64>();
+        let parc = fp / (delta * vn2);
+        if fp > 0.0 {
+            parl = parl.max(par);
+        }
+        if fp < 0.0 {
+            paru = paru.min(par);
+        }
+        par = parl.max(par + parc);
+        if !par.is_finite() {
+            par = paru;
+        }
+    }
+    (s, par)
+}
+
+fn finite_residuals<P: LeastSquaresProblem + ?Sized>(
+    p: &mut P,
+    x: &[f64],
+    m: usize,
+) -> Option<Vec<f64>> {
+    let r = p.residuals(x)?;
+    (r.len() == m && r.iter().all(|v| v.is_finite())).then_some(r)
+}
+
+/// Minimises $\tfrac12\lVert r(x)\rVert^2$ from `x0` by Levenberg–Marquardt (see the module docs).
+///
+/// Returns the final point and a report. Reaching `max_iterations` is not an error: the report
+/// says so, and the point is the best one found.
+///
+/// # Errors
+/// [`Error::Numerical`] if the residuals at `x0` are undefined or not finite, or a Jacobian is
+/// missing, of the wrong size or not finite; [`Error::InvalidArgument`] if there are fewer
+/// residuals than unknowns.
+///
+/// # Example
+/// ```
+/// use ambid_core::estimate::pem::lm::{minimize, LeastSquaresProblem, LmOptions};
+/// use faer::Mat;
+/// // fit y = a e^{b t} to exact data from a = 2, b = -0.5
+/// struct Exp(Vec<f64>, Vec<f64>);
+/// impl LeastSquaresProblem for Exp {
+///     fn residuals(&mut self, x: &[f64]) -> Option<Vec<f64>> {
+///         Some(self.0.iter().zip(&self.1).map(|(t, y)| x[0] * (x[1] * t).exp() - y).collect())
+///     }
+///     fn jacobian(&mut self, x: &[f64]) -> Option<Mat<f64>> {
+///         let t = &self.0;
+///         Some(Mat::from_fn(t.len(), 2, |i, j| {
+///             let e = (x[1] * t[i]).exp();
+///             if j == 0 { e } else { x[0] * t[i] * e }
+///         }))
+///     }
+/// }
+/// let t: Vec<f64> = (0..20).map(|k| k as f64 * 0.25).collect();
+/// let y: Vec<f64> = t.iter().map(|t| 2.0 * (-0.5 * t).exp()).collect();
+/// let (x, _) = minimize(&mut Exp(t, y), &[1.0, 0.0], &LmOptions::default()).unwrap();
+/// assert!((x[0] - 2.0).abs() < 1e-10 && (x[1] + 0.5).abs() < 1e-10);
+/// ```
+pub fn minimize<P: LeastSquaresProblem + ?Sized>(
+    problem: &mut P,
+    x0: &[f64],
+    opts: &LmOptions,
+) -> Result<(Vec<f64>, LmReport)> {
+    const CTX: &str = "levenberg_marquardt";
+    let n = x0.len();
+    let mut x = x0.to_vec();
+    let mut r = problem
+        .residuals(&x)
+        .filter(|r| r.iter().all(|v| v.is_finite()))
+        .ok_or_else(|| {
+            Error::numerical(
+                CTX,
+                "the residuals at the starting point are undefined or not finite; start from an admissible point",
+            )
+        })?;
+    let m = r.len();
+    let mut fnorm = norm(&r);
+    let mut report = LmReport {
+        iterations: 0,
+        evaluations: 1,
+        reason: StopReason::Gradient,
+        initial_cost: 0.5 * fnorm * fnorm,
+        cost: 0.5 * fnorm * fnorm,
+        rejected_inadmissible: 0,
+        ended_on_boundary: false,
+    };
+    if n == 0 {
+        return Ok((x, report));
+    }
+    if m < n {
+        return Err(Error::invalid(
+            "residuals",
+            format!(
+                "{m} residuals cannot determine {n} unknowns; supply more data or fewer parameters"
+            ),
+        ));
+    }
+    let max_evals = 20 * (opts.max_iterations + 1);
+    let mut diag = vec![0.0; n];
+    let mut delta = 0.0;
+    let mut par = 0.0;
+    let mut first = true;
+    let reason = 'outer: loop {
+        let jac = problem.jacobian(&x).ok_or_else(|| {
+            Error::numerical(CTX, "the Jacobian is undefined at an admissible point")
+        })?;
+        if jac.nrows() != m || jac.ncols() != n {
+            return Err(Error::DimensionMismatch {
+                context: "levenberg_marquardt: Jacobian",
+                expected: format!("{m}×{n}"),
+                got: format!("{}×{}", jac.nrows(), jac.ncols()),
+            });
+        }
+        for j in 0..n {
+            for i in 0..m {
+                if !jac[(i, j)].is_finite() {
+                    return Err(Error::numerical(
+                        CTX,
+                        format!("Jacobian entry ({i}, {j}) is not finite"),
+                    ));
+                }
+            }
+        }
+        if fnorm == 0.0 {
+            break StopReason::Gradient;
+        }
+        // zero rows appended when m = n, so that the triangle of [J r] is (n+1)×(n+1)
+        let aug = Mat::from_fn(m.max(n + 1), n + 1, |i, j| match (i < m, j < n) {
+            (false, _) => 0.0,
+            (true, true) => jac[(i, j)],
+            (true, false) => r[i],
+        });
+        let t = qr_triangle(&aug);
+        let rmat = Mat::from_fn(n, n, |i, j| t[(i, j)]);
+        let z: Vec<f64> = (0..n).map(|i| t[(i, n)]).collect();
+        let colnorm: Vec<f64> = (0..n)
+            .map(|j| (0..=j).map(|i| rmat[(i, j)].powi(2)).sum::<f64>().sqrt())
+            .collect();
+        if first {
+            for j in 0..n {
+                diag[j] = if colnorm[j] == 0.0 { 1.0 } else { colnorm[j] };
+            }
+            let xnorm = norm(&x.iter().zip(&diag).map(|(a, b)| a * b).collect::<Vec<_>>());
+            delta = opts.initial_radius * xnorm;
+            if delta == 0.0 {
+                delta = opts.initial_radius;
+            }
+        }
+        // gradient test: cosine between r and each column of J (Jᵀr = Rᵀz)
+        let mut gnorm: f64 = 0.0;
+        for j in 0..n {
+            if colnorm[j] > 0.0 {
+                let gj: f64 = (0..=j).map(|i| rmat[(i, j)] * z[i]).sum();
+                gnorm = gnorm.max((gj / (fnorm * colnorm[j])).abs());
+            }
+        }
+        if gnorm <= opts.gradient_tol {
+            break StopReason::Gradient;
+        }
+        for j in 0..n {
+            diag[j] = diag[j].max(colnorm[j]);
+        }
+        let rt = Mat::from_fn(n, n, |i, j| rmat[(i, j)] / diag[j]);
+        loop {
+            let (s, p) = lm_parameter(&rt, &z, delta, par);
+            par = p;
+            let step: Vec<f64> = s.iter().zip(&diag).map(|(s, d)| s / d).collect();
+            let pnorm = norm(&s);
+            if first {
+                delta = delta.min(pnorm);
+            }
+            let xt: Vec<f64> = x.iter().zip(&step).map(|(a, b)| a + b).collect();
+            report.evaluations += 1;
+            let trial = finite_residuals(problem, &xt, m);
+            let admissible = trial.is_some();
+            let fnorm1 = trial.as_deref().map_or(f64::INFINITY, norm);
+            let actred = if admissible && 0.1 * fnorm1 < fnorm {
+                1.0 - (fnorm1 / fnorm).powi(2)
+            } else {
+                -1.0
+            };
+            if !admissible {
+                report.rejected_inadmissible += 1;
+            }
+            // predicted reduction from the linear model
+            let jp: Vec<f64> = (0..n)
+                .map(|i| (i..n).map(|j| rt[(i, j)] * s[j]).sum::<f64>())
+                .collect();
+            let temp1 = norm(&jp) / fnorm;
+            let temp2 = par.sqrt() * pnorm / fnorm;
+            let prered = temp1 * temp1 + 2.0 * temp2 * temp2;
+            let dirder = -(temp1 * temp1 + temp2 * temp2);
+            let ratio = if prered != 0.0 { actred / prered } else { 0.0 };
+            if ratio <= 0.25 {
+                let mut temp = if actred >= 0.0 {
+                    0.5
+                } else {
+                    0.5 * dirder / (dirder + 0.5 * actred)
+                };
+                if !admissible || 0.1 * fnorm1 >= fnorm || temp.is_nan() || temp < 0.1 {
+                    temp = 0.1;
+                }
+                delta = temp * delta.min(pnorm / 0.1);
+                par /= temp;
+            } else if par == 0.0 || ratio >= 0.75 {
+                delta = pnorm / 0.5;
+                par *= 0.5;
+            }
+            let accepted = admissible && ratio >= 1e-4;
+            if accepted {
+                if let Some(rn) = trial {
+                    x = xt;
+                    r = rn;
+                }
+                fnorm = fnorm1;
+                report.iterations += 1;
+                first = false;
+            }
+            report.ended_on_boundary = !admissible;
+            let eps = f64::EPSILON;
+            if actred.abs() <= opts.loss_tol.max(eps)
+                && prered <= opts.loss_tol.max(eps)
+                && 0.5 * ratio <= 1.0
+            {
+                break 'outer StopReason::LossChange;
+            }
+            // every parameter's largest possible move Δ/d_j is below step_tol relative to it
+            let xtol = opts.step_tol.max(eps);
+            let step_small = (0..n).all(|j| delta <= xtol * diag[j] * (x[j].abs() + xtol));
+            if step_small || delta <= f64::MIN_POSITIVE {
+                break 'outer StopReason::StepSize;
+            }
+            if report.iterations >= opts.max_iterations || report.evaluations >= max_evals {
+                break 'outer StopReason::MaxIterations;
+            }
+            if accepted {
+                break;
+            }
+        }
+    };
+    report.reason = reason;
+    report.cost = 0.5 * fnorm * fnorm;
+    report.ended_on_boundary = match reason {
+        StopReason::Gradient => false,
+        // not at a minimum: the Gauss–Newton step says nothing, keep the last trial's verdict
+        StopReason::MaxIterations => report.ended_on_boundary,
+        StopReason::LossChange | StopReason::StepSize => {
+            match gauss_newton_leaves(problem, &x, &r, m) {
+                Some(leaves) => {
+                    report.evaluations += 1;
+                    leaves
+                }
+                None => report.ended_on_boundary,
+            }
+        }
+    };
+    Ok((x, report))
+}
+
+/// Whether the full Gauss–Newton step from the final point leaves the admissible set. At an
+/// interior (local) minimum $J^\top r = 0$ and the step vanishes; at a minimum on the boundary
+/// the gradient points outwards and the step crosses it. `None` if $J$ is rank deficient.
+fn gauss_newton_leaves<P: LeastSquaresProblem + ?Sized>(
+    problem: &mut P,
+    x: &[f64],
+    r: &[f64],
+    m: usize,
+) -> Option<bool> {
+    let n = x.len();
+    let jac = problem.jacobian(x)?;
+    if jac.nrows() != m || jac.ncols() != n {
+        return None;
+    }
+    let aug = Mat::from_fn(m.max(n + 1), n + 1, |i, j| match (i < m, j < n) {
+        (false, _) => 0.0,
+        (true, true) => jac[(i, j)],
+        (true, false) => r[i],
+    });
+    let t = qr_triangle(&aug);
+    let rmat = Mat::from_fn(n, n, |i, j| t[(i, j)]);
+    if !full_rank(&rmat) {
+        return None;
+    }
+    let z: Vec<f64> = (0..n).map(|i| t[(i, n)]).collect();
+    let step = solve_upper(&rmat, &z);
+    let xt: Vec<f64> = x.iter().zip(&step).map(|(a, s)| a - s).collect();
+    if xt.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    Some(finite_residuals(problem, &xt, m).is_none())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Linear least squares: one Gauss–Newton step is exact.
+    struct Linear {
+        a: Mat<f64>,
+        b: Vec<f64>,
+    }
+    impl LeastSquaresProblem for Linear {
+        fn residuals(&mut self, x: &[f64]) -> Option<Vec<f64>> {
+            Some(
+                (0..self.a.nrows())
+                    .map(|i| (0..x.len()).map(|j| self.a[(i, j)] * x[j]).sum::<f64>() - self.b[i])
+                    .collect(),
+            )
+        }
+        fn jacobian(&mut self, _x: &[f64]) -> Option<Mat<f64>> {
+            Some(self.a.clone())
+        }
+    }
+
+    #[test]
+    fn linear_problem_matches_lstsq() {
+        let a = Mat::from_fn(30, 3, |i, j| {
+            ((i * 7 + j * 3) % 11) as f64 - 5.0 + if j == 2 { 1e3 } else { 0.0 }
+        });
+        let b: Vec<f64> = (0..30).map(|i| (i as f64).sin()).collect();
+        let bm = Mat::from_fn(30, 1, |i, _| b[i]);
+        let want = crate::linalg::lstsq(a.as_ref(), bm.as_ref()).unwrap();
+        let (x, rep) = minimize(&mut Linear { a, b }, &[0.0; 3], &LmOptions::default()).unwrap();
+        for j in 0..3 {
+            assert!(
+                (x[j] - want[(j, 0)]).abs() < 1e-10 * want[(j, 0)].abs().max(1e-3),
+                "{j}"
+            );
+        }
+        assert!(rep.iterations <= 3, "{rep:?}");
+    }
+
+    /// Powell's badly scaled function: residuals 1e4 x0 x1 - 1, e^-x0 + e^-x1 - 1.0001.
+    struct Powell;
+    impl LeastSquaresProblem for Powell {
+        fn residuals(&mut self, x: &[f64]) -> Option<Vec<f64>> {
+            Some(vec![
+                1e4 * x[0] * x[1] - 1.0,
+                (-x[0]).exp() + (-x[1]).exp() - 1.0001,
+            ])
+        }
+        fn jacobian(&mut self, x: &[f64]) -> Option<Mat<f64>> {
+            Some(faer::mat![
+                [1e4 * x[1], 1e4 * x[0]],
+                [-(-x[0]).exp(), -(-x[1]).exp()]
+            ])
+        }
+    }
+
+    #[test]
+    fn badly_scaled_powell() {
+        let (x, rep) = minimize(&mut Powell, &[0.0, 1.0], &LmOptions::default()).unwrap();
+        let r = Powell.residuals(&x).unwrap();
+        assert!(norm(&r) < 1e-12, "{x:?} {rep:?}");
+        assert!(rep.reason.converged());
+    }
+
+    /// Minimum of (x - 2)² restricted to x < 1: the method stops at the boundary.
+    struct Boundary;
+    impl LeastSquaresProblem for Boundary {
+        fn residuals(&mut self, x: &[f64]) -> Option<Vec<f64>> {
+            (x[0] < 1.0).then(|| vec![x[0] - 2.0, 0.0])
+        }
+        fn jacobian(&mut self, _x: &[f64]) -> Option<Mat<f64>> {
+            Some(faer::mat![[1.0], [0.0]])
+        }
+    }
+
+    #[test]
+    fn inadmissible_region_is_never_entered_and_boundary_is_reported() {
+        let (x, rep) = minimize(&mut Boundary, &[0.0], &LmOptions::default()).unwrap();
+        assert!(x[0] < 1.0 && x[0] > 0.999, "{x:?}");
+        assert!(rep.ended_on_boundary, "{rep:?}");
+        assert!(rep.rejected_inadmissible > 0);
+    }
+
+    #[test]
+    fn bad_start_and_options_are_errors() {
+        assert!(minimize(&mut Boundary, &[3.0], &LmOptions::default()).is_err());
+        assert!(LmOptions::default().with_loss_tol(-1.0).is_err());
+        assert!(LmOptions::default().with_max_iterations(0).is_err());
+        assert!(LmOptions::default().with_initial_radius(f64::NAN).is_err());
+    }
+}
