@@ -13,6 +13,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::{Path, PathBuf};
 
+mod cli_fit;
 mod cli_frf;
 
 #[derive(Parser)]
@@ -50,6 +51,11 @@ enum Command {
     /// The seed paper's studies: excitation amplitude and operating point.
     #[command(subcommand)]
     Study(cli_frf::StudyCmd),
+    /// Fit a parametric model (FIR, ARX by least squares; ARMAX, OE, BJ by the prediction-error
+    /// method) to time-domain data; print parameters ± std and fits; write the model JSON.
+    Fit(cli_fit::FitArgs),
+    /// ARX order scan over na × nb (× nk): loss, AIC, BIC, FPE (and validation fit); writes the grid.
+    Order(cli_fit::OrderArgs),
 }
 
 #[derive(Args)]
@@ -326,6 +332,8 @@ fn dispatch(cli: Cli) -> Result<()> {
         Command::Info(a) => info(a),
         Command::Frf(a) => cli_frf::frf(a),
         Command::Study(c) => cli_frf::study(c),
+        Command::Fit(a) => cli_fit::fit(a),
+        Command::Order(a) => cli_fit::order(a),
     }
 }
 

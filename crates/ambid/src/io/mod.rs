@@ -6,6 +6,7 @@
 
 pub mod controller;
 pub mod csv;
+pub mod model;
 
 pub use self::controller::{read_controller, ControllerModel};
 pub use self::csv::{

@@ -1,0 +1,308 @@
+//! `ambid fit` and `ambid order`: parametric models and ARX order scans from time-domain data.
+
+use ambid::io::model::{polynomial_json, write_model_json};
+use ambid::io::read_time_csv;
+use ambid_core::estimate::arx::{arx, fit_percent, ArxOrders};
+use ambid_core::estimate::order::{arx_order_scan, ArxScanSpec};
+use ambid_core::estimate::pem::{self, prediction_errors, Focus, Orders, PemOptions};
+use ambid_core::estimate::Fitted;
+use ambid_core::lti::PolyModel;
+use anyhow::{bail, Context, Result};
+use clap::{Args, ValueEnum};
+use serde_json::json;
+use std::path::{Path, PathBuf};
+
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum StructureArg {
+    Fir,
+    Arx,
+    Armax,
+    Oe,
+    Bj,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum FocusArg {
+    Prediction,
+    Simulation,
+}
+
+#[derive(Args)]
+pub struct FitArgs {
+    /// Estimation data CSV.
+    data: PathBuf,
+    /// Sample rate in Hz (when the file has no `t` column).
+    #[arg(long)]
+    fs: Option<f64>,
+    /// Input column.
+    #[arg(long, default_value = "u")]
+    input: String,
+    /// Output column.
+    #[arg(long, default_value = "y")]
+    output: String,
+    /// Model structure.
+    #[arg(long, value_enum)]
+    structure: StructureArg,
+    /// Order of A.
+    #[arg(long, default_value_t = 0)]
+    na: usize,
+    /// Number of B coefficients.
+    #[arg(long, default_value_t = 1)]
+    nb: usize,
+    /// Order of C.
+    #[arg(long, default_value_t = 0)]
+    nc: usize,
+    /// Order of D.
+    #[arg(long, default_value_t = 0)]
+    nd: usize,
+    /// Order of F.
+    #[arg(long, default_value_t = 0)]
+    nf: usize,
+    /// Input delay in samples.
+    #[arg(long, default_value_t = 1)]
+    nk: usize,
+    /// PEM criterion focus.
+    #[arg(long, value_enum, default_value_t = FocusArg::Prediction)]
+    focus: FocusArg,
+    /// Validation data CSV (same columns).
+    #[arg(long)]
+    validation: Option<PathBuf>,
+    /// Do not subtract the estimation data's means (they are subtracted from both records by
+    /// default).
+    #[arg(long)]
+    no_detrend: bool,
+    /// Output model JSON.
+    #[arg(long, default_value = "model.json")]
+    out: PathBuf,
+}
+
+fn read_io(
+    p: &Path,
+    fs: Option<f64>,
+    input: &str,
+    output: &str,
+) -> Result<(Vec<f64>, Vec<f64>, f64)> {
+    let d = read_time_csv(p, fs)?;
+    let u = d.column(input)?.to_vec();
+    let y = d.column(output)?.to_vec();
+    Ok((u, y, d.ts))
+}
+
+fn mean(x: &[f64]) -> f64 {
+    x.iter().sum::<f64>() / x.len() as f64
+}
+
+/// One-step and simulation fit (%) of a polynomial model on a record.
+fn fits(m: &PolyModel, y: &[f64], u: &[f64]) -> Result<(f64, f64)> {
+    let (eps, _) = prediction_errors(m, y, u, Focus::Prediction)?;
+    let yhat: Vec<f64> = y.iter().zip(&eps).map(|(y, e)| y - e).collect();
+    let ysim = m.simulate(u, None, None)?;
+    Ok((fit_percent(y, &yhat)?, fit_percent(y, &ysim)?))
+}
+
+pub fn fit(a: FitArgs) -> Result<()> {
+    let (mut u, mut y, ts) = read_io(&a.data, a.fs, &a.input, &a.output)?;
+    let (mu, my) = if a.no_detrend {
+        (0.0, 0.0)
+    } else {
+        (mean(&u), mean(&y))
+    };
+    u.iter_mut().for_each(|v| *v -= mu);
+    y.iter_mut().for_each(|v| *v -= my);
+    let focus = match a.focus {
+        FocusArg::Prediction => Focus::Prediction,
+        FocusArg::Simulation => Focus::Simulation,
+    };
+    let (fitted, iterations): (Fitted<PolyModel>, Option<usize>) = match a.structure {
+        StructureArg::Fir | StructureArg::Arx => {
+            let na = if a.structure == StructureArg::Fir {
+                0
+            } else {
+                a.na
+            };
+            let f = arx(&y, &[&u], &ArxOrders::siso(na, a.nb, a.nk), ts)?;
+            let model = f.model.to_poly(0)?;
+            (
+                Fitted {
+                    model,
+                    params: f.params,
+                    covariance: f.covariance,
+                    loss: f.loss,
+                    noise_variance: f.noise_variance,
+                    n_samples: f.n_samples,
+                },
+                None,
+            )
+        }
+        s => {
+            let orders = match s {
+                StructureArg::Armax => Orders::armax(a.na, a.nb, a.nc, a.nk),
+                StructureArg::Oe => Orders::oe(a.nb, a.nf, a.nk),
+                _ => Orders::bj(a.nb, a.nc, a.nd, a.nf, a.nk),
+            };
+            let structure = match s {
+                StructureArg::Armax => ambid_core::lti::Structure::Armax,
+                StructureArg::Oe => ambid_core::lti::Structure::Oe,
+                _ => ambid_core::lti::Structure::Bj,
+            };
+            let opts = PemOptions::default().with_focus(focus);
+            let (f, rep) = pem::pem(&y, &u, structure, &orders, ts, &opts)
+                .context("prediction-error estimation")?;
+            (f, Some(rep.iterations()))
+        }
+    };
+    let m = &fitted.model;
+    let std = fitted.std();
+    println!(
+        "{} model, {} parameters, {} samples{}",
+        m.structure().name(),
+        fitted.params.len(),
+        fitted.n_samples,
+        iterations.map_or(String::new(), |i| format!(", {i} LM iterations"))
+    );
+    for (k, p) in fitted.params.iter().enumerate() {
+        match &std {
+            Some(s) => println!("  θ[{k}] = {p:+.6e} ± {:.2e}", s[k]),
+            None => println!("  θ[{k}] = {p:+.6e}"),
+        }
+    }
+    println!(
+        "loss V_N = {:.4e}, noise variance {:.4e}",
+        fitted.loss, fitted.noise_variance
+    );
+    let poles = m.poles()?;
+    let unstable = poles.iter().filter(|p| p.norm() >= 1.0).count();
+    if unstable > 0 {
+        println!("note: {unstable} pole(s) on or outside the unit circle (an unstable model; simulation fits diverge)");
+    }
+    let (f1, fs_est) = fits(m, &y, &u)?;
+    println!("estimation data: 1-step fit {f1:.2} %, simulation fit {fs_est:.2} %");
+    let mut val = json!(null);
+    if let Some(p) = &a.validation {
+        let (mut uv, mut yv, tsv) = read_io(p, a.fs, &a.input, &a.output)?;
+        if ((tsv - ts) / ts).abs() > 1e-9 {
+            bail!(
+                "the validation data are sampled at {} Hz, the estimation data at {} Hz",
+                1.0 / tsv,
+                1.0 / ts
+            );
+        }
+        uv.iter_mut().for_each(|v| *v -= mu);
+        yv.iter_mut().for_each(|v| *v -= my);
+        let (v1, vs) = fits(m, &yv, &uv)?;
+        println!("validation data: 1-step fit {v1:.2} %, simulation fit {vs:.2} %");
+        val = json!({"one_step_fit_pct": v1, "simulation_fit_pct": vs});
+    }
+    let meta = json!({
+        "params": fitted.params,
+        "std": std,
+        "loss": fitted.loss,
+        "noise_variance": fitted.noise_variance,
+        "n_samples": fitted.n_samples,
+        "detrend": {"u_mean": mu, "y_mean": my},
+        "estimation_fit_pct": {"one_step": f1, "simulation": fs_est},
+        "validation": val,
+        "source": a.data.display().to_string(),
+    });
+    write_model_json(&a.out, &polynomial_json(m, &a.input, &a.output, meta))?;
+    println!("written: {}", a.out.display());
+    Ok(())
+}
+
+#[derive(Args)]
+pub struct OrderArgs {
+    /// Estimation data CSV.
+    data: PathBuf,
+    /// Sample rate in Hz (when the file has no `t` column).
+    #[arg(long)]
+    fs: Option<f64>,
+    /// Input column.
+    #[arg(long, default_value = "u")]
+    input: String,
+    /// Output column.
+    #[arg(long, default_value = "y")]
+    output: String,
+    /// Largest na (the scan runs na = 1..=na-max).
+    #[arg(long, default_value_t = 10)]
+    na_max: usize,
+    /// Largest nb (nb = 1..=nb-max).
+    #[arg(long, default_value_t = 10)]
+    nb_max: usize,
+    /// Delays to try (comma-separated).
+    #[arg(long, value_delimiter = ',', default_values_t = vec![1usize])]
+    nk: Vec<usize>,
+    /// Validation data CSV.
+    #[arg(long)]
+    validation: Option<PathBuf>,
+    /// Output CSV of the grid (one row per model).
+    #[arg(long, default_value = "order.csv")]
+    out: PathBuf,
+}
+
+pub fn order(a: OrderArgs) -> Result<()> {
+    if a.na_max == 0 || a.nb_max == 0 {
+        bail!("--na-max and --nb-max must be at least 1");
+    }
+    let (mut u, mut y, ts) = read_io(&a.data, a.fs, &a.input, &a.output)?;
+    let (mu, my) = (mean(&u), mean(&y));
+    u.iter_mut().for_each(|v| *v -= mu);
+    y.iter_mut().for_each(|v| *v -= my);
+    let val = match &a.validation {
+        Some(p) => {
+            let (mut uv, mut yv, tsv) = read_io(p, a.fs, &a.input, &a.output)?;
+            if ((tsv - ts) / ts).abs() > 1e-9 {
+                bail!(
+                    "the validation data are sampled at {} Hz, the estimation data at {} Hz",
+                    1.0 / tsv,
+                    1.0 / ts
+                );
+            }
+            uv.iter_mut().for_each(|v| *v -= mu);
+            yv.iter_mut().for_each(|v| *v -= my);
+            Some((yv, uv))
+        }
+        None => None,
+    };
+    let spec = ArxScanSpec::new(1..=a.na_max, 1..=a.nb_max, a.nk.clone());
+    let scan = arx_order_scan(
+        &y,
+        &u,
+        &spec,
+        val.as_ref().map(|(y, u)| (y.as_slice(), u.as_slice())),
+    )?;
+    let show = |label: &str, i: usize| {
+        let r = &scan.rows[i];
+        println!(
+            "{label}: ARX(na {}, nb {}, nk {}), loss {:.4e}, BIC {:.2}{}",
+            r.na,
+            r.nb,
+            r.nk,
+            r.loss,
+            r.bic,
+            r.val_fit.map_or(String::new(), |f| format!(
+                ", validation 1-step fit {f:.2} %"
+            ))
+        )
+    };
+    println!("{} models, {} samples", scan.rows.len(), scan.n_samples);
+    show("best BIC", scan.best_bic);
+    show("best AIC", scan.best_aic);
+    show("most parsimonious within BIC tolerance", scan.parsimonious);
+    if let Some(k) = scan.knee {
+        show("knee of the loss", k);
+    }
+    if let Some(b) = scan.best_val {
+        show("best on validation", b);
+    }
+    if let Some(d) = a.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(d).with_context(|| format!("cannot create {}", d.display()))?;
+    }
+    let mut w = csv::Writer::from_path(&a.out)
+        .with_context(|| format!("cannot create {}", a.out.display()))?;
+    for r in &scan.rows {
+        w.serialize(r)?;
+    }
+    w.flush()?;
+    println!("written: {}", a.out.display());
+    Ok(())
+}
