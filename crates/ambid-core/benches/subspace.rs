@@ -1,28 +1,38 @@
-//! Speed and memory of subspace identification on a record of the seed experiment's length.
+//! Speed and memory of subspace identification on a record of the seed experiment's length:
+//! order 8 on 102 300 samples (PRBS order 10 × 5 samples per bit × 20 periods) of a synthetic SISO
+//! system with three lightly damped modes and two real poles, white input, 2 % output noise.
 //!
-//! * `n4sid_order8_102300`: [`n4sid_detailed`] with the default options (CVA weighting,
-//!   $i = 30$ block rows, B and D by the simulation regression, Kalman gain from the DARE), order 8,
-//!   on 102 300 samples (PRBS order 10 × 5 samples per bit × 20 periods) of a synthetic SISO
-//!   system with three lightly damped modes and two real poles, white input, 2 % output noise.
-//! * `n4sid_order8_102300_projection`: the same with `BdMethod::Projection` (no simulation
-//!   regression): the difference is the cost of that extra pass.
+//! * `default_ladder`: [`n4sid_detailed`] with the default options (CVA weighting, horizon ladder
+//!   from 30 block rows, automatic data product, B and D by the simulation regression, Kalman gain
+//!   from the DARE);
+//! * `i30_qr`, `i120_qr`, `i120_gram`: one identification at a fixed horizon with the streaming QR
+//!   or the Gram data product (the cost of a long horizon, and why `DataProduct::Auto` switches);
+//! * `i30_projection`: as `i30_qr` without the simulation regression for B and D.
 //!
-//! Before the benches run, `main` identifies once and prints the peak resident set (`VmHWM` in
-//! `/proc/self/status`) before and after, next to the size the block-Hankel matrices would have.
+//! Before the benches run, `main` identifies once with the defaults and prints the peak resident
+//! set (`VmHWM` in `/proc/self/status`) before and after, next to the size the block-Hankel matrix
+//! of the chosen horizon would have.
 //!
 //! Run: `cargo bench -p ambid-core --bench subspace`.
 //!
-//! Measured (shared 2-core AMD EPYC VM with other builds running, load average ≈ 6; release
-//! profile, default target CPU; 2026-11-21): `n4sid_order8_102300` median 276 ms (fastest 244 ms),
-//! `n4sid_order8_102300_projection` median 235 ms (fastest 195 ms): the streaming QR of the
-//! $102\,241 \times 120$ Hankel data ($\approx 3 \cdot 10^9$ flops) dominates, the simulation
-//! regression and the predictor pass add ≈ 40 ms. Peak RSS (`VmHWM`) grows by 1.4 MB during one
-//! identification (the $1\,080 \times 120$ working matrix of the streaming QR and small buffers),
-//! against 98 MB for the block-Hankel matrix that is never formed; the record itself is 1.6 MB.
-//! For comparison, nfoursid 1.0.2 cannot run this case: its order step takes a full SVD of a
+//! Measured (shared 2-core AMD EPYC VM with other builds running, load average ≈ 4; release
+//! profile, default target CPU; medians, 2026-11-21):
+//!
+//! | bench | median | |
+//! |---|---|---|
+//! | `default_ladder` | 575 ms | climbs $i$ = 30 (QR) → 60 (Gram) → 120 (Gram, rejected: −1.7 %), keeps 60 |
+//! | `i30_qr` | 204 ms | streaming QR of the $102\,241 \times 120$ Hankel data ≈ 3·10⁹ flops dominates |
+//! | `i30_projection` | 170 ms | the simulation regression for B, D costs ≈ 35 ms |
+//! | `i120_qr` | 1.57 s | $d = 480$: the QR grows with $d^2$ |
+//! | `i120_gram` | 231 ms | the Gram route at the same horizon: 6.8× faster |
+//!
+//! Peak RSS (`VmHWM`) grows by 6.1 MB during the default identification (the $d \times d$
+//! matrices of the $i = 120$ rung, $d = 480$), independent of $N$; the block-Hankel matrix of the
+//! chosen horizon, never formed, would take 196 MB and the record itself is 1.6 MB. For
+//! comparison, nfoursid 1.0.2 cannot run this case: its order step takes a full SVD of a
 //! $102\,271 \times 102\,271$ matrix (78 GiB).
 
-use ambid_core::estimate::subspace::{n4sid_detailed, BdMethod, SubspaceOptions};
+use ambid_core::estimate::subspace::{n4sid_detailed, BdMethod, DataProduct, SubspaceOptions};
 use ambid_core::lti::StateSpace;
 use ambid_core::signal::{Distribution, NoiseSpec};
 use divan::{black_box, Bencher};
@@ -84,9 +94,11 @@ fn data() -> (Vec<f64>, Vec<f64>) {
     (y, u)
 }
 
-fn options(bd: BdMethod) -> SubspaceOptions {
+fn options(block_rows: Option<usize>, data_product: DataProduct, bd: BdMethod) -> SubspaceOptions {
     SubspaceOptions {
         order: Some(8),
+        block_rows,
+        data_product,
         bd_method: bd,
         ..SubspaceOptions::new(TS)
     }
@@ -96,18 +108,40 @@ fn col(x: &[f64]) -> MatRef<'_, f64> {
     MatRef::from_column_major_slice(x, x.len(), 1)
 }
 
-#[divan::bench(sample_count = 10)]
-fn n4sid_order8_102300(bencher: Bencher) {
+fn bench_with(bencher: Bencher, o: SubspaceOptions) {
     let (y, u) = data();
-    let o = options(BdMethod::Auto);
     bencher.bench(|| black_box(n4sid_detailed(col(&y), col(&u), &o).expect("identifiable")));
 }
 
+#[divan::bench(sample_count = 5)]
+fn default_ladder(bencher: Bencher) {
+    bench_with(bencher, options(None, DataProduct::Auto, BdMethod::Auto));
+}
+
 #[divan::bench(sample_count = 10)]
-fn n4sid_order8_102300_projection(bencher: Bencher) {
-    let (y, u) = data();
-    let o = options(BdMethod::Projection);
-    bencher.bench(|| black_box(n4sid_detailed(col(&y), col(&u), &o).expect("identifiable")));
+fn i30_qr(bencher: Bencher) {
+    bench_with(bencher, options(Some(30), DataProduct::Qr, BdMethod::Auto));
+}
+
+#[divan::bench(sample_count = 10)]
+fn i30_projection(bencher: Bencher) {
+    bench_with(
+        bencher,
+        options(Some(30), DataProduct::Qr, BdMethod::Projection),
+    );
+}
+
+#[divan::bench(sample_count = 5)]
+fn i120_qr(bencher: Bencher) {
+    bench_with(bencher, options(Some(120), DataProduct::Qr, BdMethod::Auto));
+}
+
+#[divan::bench(sample_count = 10)]
+fn i120_gram(bencher: Bencher) {
+    bench_with(
+        bencher,
+        options(Some(120), DataProduct::Gram, BdMethod::Auto),
+    );
 }
 
 /// Peak resident set size in kB (Linux), if available.
@@ -124,7 +158,7 @@ fn peak_rss_kb() -> Option<u64> {
 
 fn report_memory() {
     let (y, u) = data();
-    let o = options(BdMethod::Auto);
+    let o = options(None, DataProduct::Auto, BdMethod::Auto);
     let before = peak_rss_kb();
     let start = std::time::Instant::now();
     let r = n4sid_detailed(col(&y), col(&u), &o).expect("identifiable");
@@ -134,8 +168,10 @@ fn report_memory() {
     let d = 2 * i * 2;
     let hankel_mb = (d * (N + 1 - 2 * i) * 8) as f64 / 1e6;
     eprintln!(
-        "subspace memory: N = {N}, i = {i}, d = {d}: one identification took {took:.2?}; the block-Hankel \
-         matrix would take {hankel_mb:.0} MB, the record itself {:.1} MB",
+        "subspace memory: N = {N}, ladder {:?} chose i = {i} ({:?}), d = {d}: {took:.2?}; the \
+         block-Hankel matrix would take {hankel_mb:.0} MB, the record itself {:.1} MB",
+        r.block_rows_scan,
+        r.data_product,
         (2 * N * 8) as f64 / 1e6
     );
     match (before, after) {

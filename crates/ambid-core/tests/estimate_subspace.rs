@@ -7,7 +7,7 @@
 
 use ambid_core::c64;
 use ambid_core::estimate::subspace::{
-    n4sid, n4sid_detailed, BdMethod, SubspaceFit, SubspaceOptions, Weighting,
+    n4sid, n4sid_detailed, BdMethod, DataProduct, SubspaceFit, SubspaceOptions, Weighting,
 };
 use ambid_core::lti::StateSpace;
 use ambid_core::signal::{Distribution, NoiseSpec};
@@ -188,7 +188,7 @@ fn noise_free_fourth_order_is_exact() {
             let fe = max_rel_frf(g, &t);
             eprintln!("noise free, {w:?} {bd:?}: poles {pe:.1e}, FRF {fe:.1e}");
             assert_eq!(r.order, 4, "{w:?}: singular values {:?}", r.singular_values);
-            assert_eq!(r.block_rows, 30); // default_block_rows(10, 1)
+            eprintln!("  block rows {}, {:?}", r.block_rows, r.data_product);
             assert!(
                 pe < 1e-9 && fe < 1e-9,
                 "{w:?} {bd:?}: poles {pe:.1e}, FRF {fe:.1e}"
@@ -262,7 +262,11 @@ fn order_from_the_singular_value_gap() {
         let y0 = t.simulate_siso(&u, None).unwrap();
         let y = add(&y0, &white(n, 0.02 * rms(&y0), 22));
         for w in WEIGHTINGS {
-            let r = n4sid_detailed(col(&y), col(&u), &opts(w, BdMethod::Auto, None)).unwrap();
+            let o = SubspaceOptions {
+                block_rows: Some(30),
+                ..opts(w, BdMethod::Auto, None)
+            };
+            let r = n4sid_detailed(col(&y), col(&u), &o).unwrap();
             let sv = &r.singular_values;
             eprintln!(
                 "order {want}, {w:?}: chose {}, σ_n/σ_(n+1) = {:.1}, singular values {:?}",
@@ -316,7 +320,7 @@ fn mimo_two_inputs_two_outputs() {
             let fe = frf_err_mimo(g, &t);
             eprintln!("MIMO 2×2, D estimated {direct}, {bd:?}: order {}, i = {}, poles {pe:.1e}, FRF {fe:.1e}", r.order, r.block_rows);
             assert_eq!((g.noutputs(), g.ninputs(), r.order), (2, 2, 5));
-            assert_eq!(r.block_rows, 30);
+            eprintln!("  block rows {}, {:?}", r.block_rows, r.data_product);
             assert!(pe < 1e-8 && fe < 1e-8, "poles {pe:.1e}, FRF {fe:.1e}");
         }
     }
@@ -478,7 +482,11 @@ fn innovation_model_recovers_the_kalman_gain() {
     .unwrap();
     let hmax = h_true.iter().map(|z| z.norm()).fold(0.0, f64::max);
     for w in WEIGHTINGS {
-        let r = n4sid_detailed(col(&y), col(&u), &opts(w, BdMethod::Auto, Some(4))).unwrap();
+        let o = SubspaceOptions {
+            block_rows: Some(30),
+            ..opts(w, BdMethod::Auto, Some(4))
+        };
+        let r = n4sid_detailed(col(&y), col(&u), &o).unwrap();
         let g = &r.fitted.model;
         let kh = r.kalman_gain.clone().unwrap();
         let h = StateSpace::discrete(
@@ -518,16 +526,24 @@ fn eighth_order_three_modes_validation_fit() {
     let yv0 = t.simulate_siso(&uv, None).unwrap();
     let yv = add(&yv0, &white(n, 0.02 * ry, 54));
     for w in WEIGHTINGS {
-        for bd in [BdMethod::Projection, BdMethod::Simulation] {
+        for bd in [BdMethod::Projection, BdMethod::Auto] {
+            // the defaults climb the horizon ladder; the other combinations use i = 30
+            let default = w == Weighting::Cva && bd == BdMethod::Auto;
+            let o = SubspaceOptions {
+                block_rows: if default { None } else { Some(30) },
+                ..opts(w, bd, Some(8))
+            };
             let start = std::time::Instant::now();
-            let r = n4sid_detailed(col(&y), col(&u), &opts(w, bd, Some(8))).unwrap();
+            let r = n4sid_detailed(col(&y), col(&u), &o).unwrap();
             let took = start.elapsed();
             let yh = r.fitted.model.simulate_siso(&uv, None).unwrap();
             let (fit, fit_clean, best) =
                 (fit_pct(&yv, &yh), fit_pct(&yv0, &yh), fit_pct(&yv, &yv0));
             eprintln!(
-                "order 8, {w:?} {bd:?}: validation fit {fit:.2} % (noise-free output {fit_clean:.2} %, \
+                "order 8, {w:?} {bd:?}, i = {} ({:?}): validation fit {fit:.2} % (noise-free output {fit_clean:.2} %, \
                  the truth itself {best:.2} %), FRF max rel {:.2e}, poles {:.1e}, {took:.0?}",
+                r.block_rows,
+                r.data_product,
                 max_rel_frf(&r.fitted.model, &t),
                 pole_err(&r.fitted.model.poles().unwrap(), &t.poles().unwrap())
             );
@@ -665,4 +681,108 @@ fn errors_say_what_is_wrong() {
     )
     .unwrap_err();
     assert!(matches!(e, Error::Numerical { .. }), "{e}");
+}
+
+/// Modes at pole angles 0.03, 0.049 and 0.245 rad (like the twin's 97, 156 and 780 Hz at 20 kHz)
+/// and two real poles: strongly oversampled.
+fn oversampled() -> StateSpace {
+    let a = block_diag(&[
+        rot(0.995, 0.03),
+        rot(0.996, 0.049),
+        rot(0.998, 0.245),
+        [[0.987, 0.0], [0.0, 0.66]],
+    ]);
+    let b = column(&[1.0, 0.0, 1.0, 0.0, 0.3, 0.0, 1.0, 1.0]);
+    let c = row(&[0.02, 0.01, 0.03, -0.01, 0.01, 0.01, 0.02, 0.1]);
+    StateSpace::discrete(a, b, c, Mat::zeros(1, 1), TS).unwrap()
+}
+
+#[test]
+fn oversampled_system_climbs_to_a_long_horizon() {
+    let t = oversampled();
+    let n = 10_000;
+    let u = white(n, 1.0, 81);
+    let y0 = t.simulate_siso(&u, None).unwrap();
+    let ry = rms(&y0);
+    let y = add(&y0, &white(n, 0.02 * ry, 82));
+    let uv = white(n, 1.0, 83);
+    let yv0 = t.simulate_siso(&uv, None).unwrap();
+    let yv = add(&yv0, &white(n, 0.02 * ry, 84));
+    let best = fit_pct(&yv, &yv0);
+    let run = |block_rows: Option<usize>| {
+        let o = SubspaceOptions {
+            block_rows,
+            ..opts(Weighting::Cva, BdMethod::Auto, Some(8))
+        };
+        let r = n4sid_detailed(col(&y), col(&u), &o).unwrap();
+        let yh = r.fitted.model.simulate_siso(&uv, None).unwrap();
+        (r, fit_pct(&yv, &yh))
+    };
+    let (short, fit_short) = run(Some(30));
+    let (r, fit) = run(None);
+    eprintln!(
+        "oversampled: i = 30 fits {fit_short:.2} %; the ladder {:?} chose i = {} ({:?}): {fit:.2} % \
+         (truth {best:.2} %), FRF max rel {:.2e}",
+        r.block_rows_scan,
+        r.block_rows,
+        r.data_product,
+        max_rel_frf(&r.fitted.model, &t)
+    );
+    assert!(short.block_rows_scan.is_empty());
+    assert!(fit_short < 90.0, "a short horizon is expected to fail here");
+    assert_eq!(r.block_rows, 120);
+    assert_eq!(
+        r.block_rows_scan.iter().map(|s| s.0).collect::<Vec<_>>(),
+        vec![30, 60, 120] // 240 would leave fewer than 10 d columns
+    );
+    assert!(r.block_rows_scan.windows(2).all(|w| w[1].1 < w[0].1));
+    assert!(
+        fit > best - 0.1,
+        "validation fit {fit:.2} % against the truth's {best:.2} %"
+    );
+}
+
+#[test]
+fn gram_data_product_agrees_with_the_qr() {
+    // noise-free: exact to the bar
+    let t = fourth();
+    let u = white(3000, 1.0, 91);
+    let y = t.simulate_siso(&u, None).unwrap();
+    for w in WEIGHTINGS {
+        let o = SubspaceOptions {
+            data_product: DataProduct::Gram,
+            ..opts(w, BdMethod::Projection, None)
+        };
+        let r = n4sid_detailed(col(&y), col(&u), &o).unwrap();
+        let g = &r.fitted.model;
+        let pe = pole_err(&g.poles().unwrap(), &t.poles().unwrap());
+        let fe = max_rel_frf(g, &t);
+        eprintln!(
+            "Gram, noise free, {w:?}: order {}, poles {pe:.1e}, FRF {fe:.1e}",
+            r.order
+        );
+        assert_eq!((r.order, r.data_product), (4, DataProduct::Gram));
+        assert!(
+            pe < 1e-6 && fe < 1e-6,
+            "{w:?}: poles {pe:.1e}, FRF {fe:.1e}"
+        );
+    }
+    // noisy: the same model as the QR route
+    let t = eighth();
+    let n = 8000;
+    let u = white(n, 1.0, 92);
+    let y0 = t.simulate_siso(&u, None).unwrap();
+    let y = add(&y0, &white(n, 0.02 * rms(&y0), 93));
+    let fit = |dp| {
+        let o = SubspaceOptions {
+            data_product: dp,
+            block_rows: Some(40),
+            ..opts(Weighting::Cva, BdMethod::Auto, Some(8))
+        };
+        n4sid_detailed(col(&y), col(&u), &o).unwrap().fitted.model
+    };
+    let (q, g) = (fit(DataProduct::Qr), fit(DataProduct::Gram));
+    let diff = max_rel_frf(&g, &q);
+    eprintln!("Gram vs QR, 2 % noise: FRF max rel difference {diff:.1e}");
+    assert!(diff < 1e-6, "{diff:.1e}");
 }
