@@ -19,6 +19,8 @@ pub enum StructureArg {
     Armax,
     Oe,
     Bj,
+    /// State space by subspace identification (N4SID/CVA, order from --order or automatic).
+    Ss,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -61,6 +63,9 @@ pub struct FitArgs {
     /// Input delay in samples.
     #[arg(long, default_value_t = 1)]
     nk: usize,
+    /// State-space order (`--structure ss`; automatic from the singular values when absent).
+    #[arg(long)]
+    order: Option<usize>,
     /// PEM criterion focus.
     #[arg(long, value_enum, default_value_t = FocusArg::Prediction)]
     focus: FocusArg,
@@ -109,6 +114,9 @@ pub fn fit(a: FitArgs) -> Result<()> {
     };
     u.iter_mut().for_each(|v| *v -= mu);
     y.iter_mut().for_each(|v| *v -= my);
+    if a.structure == StructureArg::Ss {
+        return fit_ss(&a, &u, &y, ts, mu, my);
+    }
     let focus = match a.focus {
         FocusArg::Prediction => Focus::Prediction,
         FocusArg::Simulation => Focus::Simulation,
@@ -134,6 +142,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
                 None,
             )
         }
+        StructureArg::Ss => unreachable!("handled above"),
         s => {
             let orders = match s {
                 StructureArg::Armax => Orders::armax(a.na, a.nb, a.nc, a.nk),
@@ -303,6 +312,82 @@ pub fn order(a: OrderArgs) -> Result<()> {
         w.serialize(r)?;
     }
     w.flush()?;
+    println!("written: {}", a.out.display());
+    Ok(())
+}
+
+/// Subspace state-space fit: data scaled to unit RMS for the algorithm, model scaled back.
+fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Result<()> {
+    use ambid::io::model::state_space_json;
+    use ambid_core::estimate::subspace::{n4sid_detailed, SubspaceOptions};
+    use ambid_core::lti::StateSpace;
+    use faer::Mat;
+    let rms = |x: &[f64]| (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt();
+    let (su, sy) = (rms(u), rms(y));
+    if su == 0.0 || sy == 0.0 {
+        bail!("the input or the output is constant after removing its mean: nothing to identify");
+    }
+    let um = Mat::from_fn(u.len(), 1, |k, _| u[k] / su);
+    let ym = Mat::from_fn(y.len(), 1, |k, _| y[k] / sy);
+    let mut opts = SubspaceOptions::new(ts);
+    opts.order = a.order;
+    let fit = n4sid_detailed(ym.as_ref(), um.as_ref(), &opts).context("subspace identification")?;
+    let m = &fit.fitted.model;
+    let model = StateSpace::discrete(
+        m.a().to_owned(),
+        m.b() * faer::Scale(1.0 / su),
+        m.c() * faer::Scale(sy),
+        m.d() * faer::Scale(sy / su),
+        ts,
+    )?;
+    println!(
+        "state-space model of order {} (block rows {}), singular values: {}",
+        fit.order,
+        fit.block_rows,
+        fit.singular_values
+            .iter()
+            .take(12)
+            .map(|v| format!("{v:.3e}"))
+            .collect::<Vec<_>>()
+            .join(" ")
+    );
+    let unstable = model.poles()?.iter().filter(|p| p.norm() >= 1.0).count();
+    if unstable > 0 {
+        println!("note: {unstable} pole(s) on or outside the unit circle (not stabilised)");
+    }
+    let fit_on = |u: &[f64], y: &[f64]| -> Result<f64> {
+        let ys = model.simulate_siso(u, None)?;
+        Ok(fit_percent(y, &ys)?)
+    };
+    let f_est = fit_on(u, y)?;
+    println!("estimation data: simulation fit {f_est:.2} %");
+    let mut val = json!(null);
+    if let Some(p) = &a.validation {
+        let (mut uv, mut yv, tsv) = read_io(p, a.fs, &a.input, &a.output)?;
+        if ((tsv - ts) / ts).abs() > 1e-9 {
+            bail!(
+                "the validation data are sampled at {} Hz, the estimation data at {} Hz",
+                1.0 / tsv,
+                1.0 / ts
+            );
+        }
+        uv.iter_mut().for_each(|v| *v -= mu);
+        yv.iter_mut().for_each(|v| *v -= my);
+        let fv = fit_on(&uv, &yv)?;
+        println!("validation data: simulation fit {fv:.2} %");
+        val = json!({"simulation_fit_pct": fv});
+    }
+    let meta = json!({
+        "method": "subspace",
+        "order": fit.order,
+        "block_rows": fit.block_rows,
+        "singular_values": fit.singular_values,
+        "detrend": {"u_mean": mu, "y_mean": my},
+        "estimation_fit_pct": {"simulation": f_est},
+        "validation": val,
+        "source": a.data.display().to_string(),
+    });
+    write_model_json(&a.out, &state_space_json(&model, &a.input, &a.output, meta))?;
     println!("written: {}", a.out.display());
     Ok(())
 }

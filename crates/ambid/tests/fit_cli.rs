@@ -149,3 +149,49 @@ fn fit_oe_and_order_scan_run_and_errors_are_clear() {
     assert!(!o.status.success());
     assert!(text(&o).to_lowercase().contains("sample"), "{}", text(&o));
 }
+
+#[test]
+fn fit_state_space_from_twin_records() {
+    let d = std::env::temp_dir().join(format!("ambid-fit-{}-ss", std::process::id()));
+    for (seed, dir) in [("1", "e"), ("2", "v")] {
+        let o = ambid(&[
+            "simulate",
+            "--mode",
+            "linear",
+            "--periods",
+            "6",
+            "--seed",
+            seed,
+            "--out",
+            d.join(dir).to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", text(&o));
+    }
+    let out = d.join("ss.json");
+    let o = ambid(&[
+        "fit",
+        d.join("e/data.csv").to_str().unwrap(),
+        "--structure",
+        "ss",
+        "--order",
+        "8",
+        "--input",
+        "r",
+        "--output",
+        "y",
+        "--validation",
+        d.join("v/data.csv").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(m["kind"], "state_space");
+    assert_eq!(m["a"].as_array().unwrap().len(), 8);
+    let vfit = m["meta"]["validation"]["simulation_fit_pct"]
+        .as_f64()
+        .unwrap();
+    assert!(vfit > 90.0, "{vfit} % ({t})");
+}
