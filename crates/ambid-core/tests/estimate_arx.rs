@@ -577,3 +577,59 @@ fn every_error_path_is_a_clear_error() {
         }
     );
 }
+
+/// The DaISy robot arm with its README's protocol (first-half means removed, estimate on 1..512,
+/// validate on 513..1024, fits over k >= k0, simulation started from the measured first k0
+/// outputs): ARX(4,4,1) equals the reference coefficients, and the best ARX model of order <= 8
+/// reaches the README's best reference simulation fit (ARX(8,8,1), 97.13 %).
+#[test]
+fn robot_arm_reference_numbers() {
+    let path = format!(
+        "{}/../../../shared/data/real/daisy-robot-arm/robot_arm.dat",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
+    let rows: Vec<(f64, f64)> = text
+        .lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| {
+            let mut it = l.split_whitespace().map(|v| v.parse::<f64>().unwrap());
+            (it.next().unwrap(), it.next().unwrap())
+        })
+        .collect();
+    assert_eq!(rows.len(), 1024);
+    let mu = rows[..512].iter().map(|r| r.0).sum::<f64>() / 512.0;
+    let my = rows[..512].iter().map(|r| r.1).sum::<f64>() / 512.0;
+    let u: Vec<f64> = rows.iter().map(|r| r.0 - mu).collect();
+    let y: Vec<f64> = rows.iter().map(|r| r.1 - my).collect();
+    let (ue, ye, uv, yv) = (&u[..512], &y[..512], &u[512..], &y[512..]);
+    let f = arx(ye, &[ue], &ArxOrders::siso(4, 4, 1), 0.01).unwrap();
+    let want = [
+        -3.1548850975,
+        4.4340455548,
+        -3.124986255,
+        0.9803744645,
+        0.0175146255,
+        -0.0263487958,
+        0.0532257723,
+        -0.0293811148,
+    ];
+    for (g, w) in f.params.iter().zip(&want) {
+        assert!((g / w - 1.0).abs() < 1e-8, "theta {g} vs {w}");
+    }
+    let mut best = (0.0f64, 0usize);
+    for n in 1..=8 {
+        let f = arx(ye, &[ue], &ArxOrders::siso(n, n, 1), 0.01).unwrap();
+        let k0 = f.model.k0();
+        let sim = f.model.simulate(&[uv], &yv[..k0]).unwrap();
+        let fit = fit_percent(&yv[k0..], &sim[k0..]).unwrap();
+        if fit > best.0 {
+            best = (fit, n);
+        }
+    }
+    println!(
+        "robot arm: best ARX(n,n,1), n <= 8: n = {}, simulation fit {:.2} %",
+        best.1, best.0
+    );
+    assert!(best.0 >= 97.13 - 0.005, "{best:?}");
+}
