@@ -114,9 +114,6 @@ pub fn fit(a: FitArgs) -> Result<()> {
     };
     u.iter_mut().for_each(|v| *v -= mu);
     y.iter_mut().for_each(|v| *v -= my);
-    if a.structure == StructureArg::Ss {
-        return fit_ss(&a, &u, &y, ts, mu, my);
-    }
     let focus = match a.focus {
         FocusArg::Prediction => Focus::Prediction,
         FocusArg::Simulation => Focus::Simulation,
@@ -142,7 +139,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
                 None,
             )
         }
-        StructureArg::Ss => unreachable!("handled above"),
+        StructureArg::Ss => return fit_ss(&a, &u, &y, ts, mu, my),
         s => {
             let orders = match s {
                 StructureArg::Armax => Orders::armax(a.na, a.nb, a.nc, a.nk),
