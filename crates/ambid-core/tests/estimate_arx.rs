@@ -9,6 +9,8 @@
 //!
 //! Run with `-- --nocapture` to see the measured numbers.
 
+mod common;
+
 use ambid_core::estimate::arx::{arx, arx_with, fir, fit_percent, ArxModel, ArxOptions, ArxOrders};
 use ambid_core::lti::Structure;
 use ambid_core::Error;
@@ -313,20 +315,7 @@ fn a_later_window_start_is_honoured() {
 /// simulation starts from the measured first k0 outputs of the validation half.
 #[test]
 fn dryer_reference_numbers() {
-    let path = format!(
-        "{}/../../../shared/data/real/daisy-dryer/dryer.dat",
-        env!("CARGO_MANIFEST_DIR")
-    );
-    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
-    let rows: Vec<(f64, f64)> = text
-        .lines()
-        .filter(|l| !l.trim().is_empty())
-        .map(|l| {
-            let mut it = l.split_whitespace().map(|v| v.parse::<f64>().unwrap());
-            (it.next().unwrap(), it.next().unwrap())
-        })
-        .collect();
-    assert_eq!(rows.len(), 1000);
+    let rows = common::daisy("daisy-dryer", "dryer.dat", 1000);
     let mean_u = rows[..500].iter().map(|r| r.0).sum::<f64>() / 500.0;
     let mean_y = rows[..500].iter().map(|r| r.1).sum::<f64>() / 500.0;
     assert!((mean_u - 4.994).abs() < 1e-12 && (mean_y - 4.84337228).abs() < 1e-8);
@@ -584,20 +573,7 @@ fn every_error_path_is_a_clear_error() {
 /// reaches the README's best reference simulation fit (ARX(8,8,1), 97.13 %).
 #[test]
 fn robot_arm_reference_numbers() {
-    let path = format!(
-        "{}/../../../shared/data/real/daisy-robot-arm/robot_arm.dat",
-        env!("CARGO_MANIFEST_DIR")
-    );
-    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
-    let rows: Vec<(f64, f64)> = text
-        .lines()
-        .filter(|l| !l.trim().is_empty())
-        .map(|l| {
-            let mut it = l.split_whitespace().map(|v| v.parse::<f64>().unwrap());
-            (it.next().unwrap(), it.next().unwrap())
-        })
-        .collect();
-    assert_eq!(rows.len(), 1024);
+    let rows = common::daisy("daisy-robot-arm", "robot_arm.dat", 1024);
     let mu = rows[..512].iter().map(|r| r.0).sum::<f64>() / 512.0;
     let my = rows[..512].iter().map(|r| r.1).sum::<f64>() / 512.0;
     let u: Vec<f64> = rows.iter().map(|r| r.0 - mu).collect();

@@ -3,26 +3,15 @@
 //! poles it finds; OE (whose predictor simulates the plant) either returns a model or fails with a
 //! typed `Unstable` error that says what to do — never a panic, never a silently stabilised model.
 
+mod common;
+
 use ambid_core::estimate::arx::{arx, fit_percent, ArxOrders};
 use ambid_core::estimate::pem::{oe, PemOptions};
 use ambid_core::linalg::roots;
 use ambid_core::Error;
 
 fn ballbeam() -> (Vec<f64>, Vec<f64>) {
-    let path = format!(
-        "{}/../../../shared/data/real/daisy-ballbeam/ballbeam.dat",
-        env!("CARGO_MANIFEST_DIR")
-    );
-    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
-    let rows: Vec<(f64, f64)> = text
-        .lines()
-        .filter(|l| !l.trim().is_empty())
-        .map(|l| {
-            let mut it = l.split_whitespace().map(|v| v.parse::<f64>().unwrap());
-            (it.next().unwrap(), it.next().unwrap())
-        })
-        .collect();
-    assert_eq!(rows.len(), 1000);
+    let rows = common::daisy("daisy-ballbeam", "ballbeam.dat", 1000);
     let mu = rows[..500].iter().map(|r| r.0).sum::<f64>() / 500.0;
     let my = rows[..500].iter().map(|r| r.1).sum::<f64>() / 500.0;
     (

@@ -4,6 +4,8 @@
 //!
 //! Run with `-- --nocapture` to see the measured agreement.
 
+mod common;
+
 use ambid_core::estimate::arx::{arx_with, fit_percent, ArxOptions};
 use ambid_core::estimate::order::{
     arx_order_scan, ArxScanSpec, OrderScan, ScanMethod, ScanSolver, BIC_TOLERANCE,
@@ -260,17 +262,9 @@ fn rows_serialise_flat() {
 
 #[test]
 fn dryer_scan_reproduces_the_single_fit() {
-    let path = format!(
-        "{}/../../../shared/data/real/daisy-dryer/dryer.dat",
-        env!("CARGO_MANIFEST_DIR")
-    );
-    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
-    let (mut u, mut y) = (Vec::new(), Vec::new());
-    for l in text.lines().filter(|l| !l.trim().is_empty()) {
-        let v: Vec<f64> = l.split_whitespace().map(|s| s.parse().unwrap()).collect();
-        u.push(v[0] - 4.994);
-        y.push(v[1] - 4.84337228);
-    }
+    let rows = common::daisy("daisy-dryer", "dryer.dat", 1000);
+    let u: Vec<f64> = rows.iter().map(|r| r.0 - 4.994).collect();
+    let y: Vec<f64> = rows.iter().map(|r| r.1 - 4.84337228).collect();
     let spec = ArxScanSpec::new(1..=4, 1..=4, vec![2, 3, 4]);
     let scan = arx_order_scan(&y[..500], &u[..500], &spec, Some((&y[500..], &u[500..]))).unwrap();
     let w = compare_with_per_model_qr(&scan, &y[..500], &u[..500], Some((&y[500..], &u[500..])));

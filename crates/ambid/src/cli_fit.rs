@@ -93,6 +93,30 @@ fn read_io(
     Ok((u, y, d.ts))
 }
 
+/// Reads a validation record, checks its sample time against the estimation data's and removes
+/// the estimation data's means (`mu` from u, `my` from y).
+fn read_validation(
+    p: &Path,
+    fs: Option<f64>,
+    input: &str,
+    output: &str,
+    ts: f64,
+    mu: f64,
+    my: f64,
+) -> Result<(Vec<f64>, Vec<f64>)> {
+    let (mut u, mut y, tsv) = read_io(p, fs, input, output)?;
+    if ((tsv - ts) / ts).abs() > 1e-9 {
+        bail!(
+            "the validation data are sampled at {} Hz, the estimation data at {} Hz",
+            1.0 / tsv,
+            1.0 / ts
+        );
+    }
+    u.iter_mut().for_each(|v| *v -= mu);
+    y.iter_mut().for_each(|v| *v -= my);
+    Ok((u, y))
+}
+
 fn mean(x: &[f64]) -> f64 {
     x.iter().sum::<f64>() / x.len() as f64
 }
@@ -185,16 +209,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
     println!("estimation data: 1-step fit {f1:.2} %, simulation fit {fs_est:.2} %");
     let mut val = json!(null);
     if let Some(p) = &a.validation {
-        let (mut uv, mut yv, tsv) = read_io(p, a.fs, &a.input, &a.output)?;
-        if ((tsv - ts) / ts).abs() > 1e-9 {
-            bail!(
-                "the validation data are sampled at {} Hz, the estimation data at {} Hz",
-                1.0 / tsv,
-                1.0 / ts
-            );
-        }
-        uv.iter_mut().for_each(|v| *v -= mu);
-        yv.iter_mut().for_each(|v| *v -= my);
+        let (uv, yv) = read_validation(p, a.fs, &a.input, &a.output, ts, mu, my)?;
         let (v1, vs) = fits(m, &yv, &uv)?;
         println!("validation data: 1-step fit {v1:.2} %, simulation fit {vs:.2} %");
         val = json!({"one_step_fit_pct": v1, "simulation_fit_pct": vs});
@@ -255,16 +270,7 @@ pub fn order(a: OrderArgs) -> Result<()> {
     y.iter_mut().for_each(|v| *v -= my);
     let val = match &a.validation {
         Some(p) => {
-            let (mut uv, mut yv, tsv) = read_io(p, a.fs, &a.input, &a.output)?;
-            if ((tsv - ts) / ts).abs() > 1e-9 {
-                bail!(
-                    "the validation data are sampled at {} Hz, the estimation data at {} Hz",
-                    1.0 / tsv,
-                    1.0 / ts
-                );
-            }
-            uv.iter_mut().for_each(|v| *v -= mu);
-            yv.iter_mut().for_each(|v| *v -= my);
+            let (uv, yv) = read_validation(p, a.fs, &a.input, &a.output, ts, mu, my)?;
             Some((yv, uv))
         }
         None => None,
@@ -360,16 +366,7 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
     println!("estimation data: simulation fit {f_est:.2} %");
     let mut val = json!(null);
     if let Some(p) = &a.validation {
-        let (mut uv, mut yv, tsv) = read_io(p, a.fs, &a.input, &a.output)?;
-        if ((tsv - ts) / ts).abs() > 1e-9 {
-            bail!(
-                "the validation data are sampled at {} Hz, the estimation data at {} Hz",
-                1.0 / tsv,
-                1.0 / ts
-            );
-        }
-        uv.iter_mut().for_each(|v| *v -= mu);
-        yv.iter_mut().for_each(|v| *v -= my);
+        let (uv, yv) = read_validation(p, a.fs, &a.input, &a.output, ts, mu, my)?;
         let fv = fit_on(&uv, &yv)?;
         println!("validation data: simulation fit {fv:.2} %");
         val = json!({"simulation_fit_pct": fv});
