@@ -4,6 +4,8 @@
 pub mod arx;
 pub mod order;
 pub mod pem;
+mod qr_stream;
+pub mod ss_pem;
 pub mod subspace;
 
 use faer::Mat;

@@ -151,15 +151,14 @@
 //! ```
 
 mod hankel;
-mod qr_stream;
 
+use super::qr_stream::StreamingQr;
 use crate::error::{Error, Result};
 use crate::estimate::Fitted;
 use crate::linalg;
 use crate::lti::StateSpace;
 use faer::{Mat, MatRef, Side};
 use hankel::Layout;
-use qr_stream::StreamingQr;
 
 /// Weighting of the oblique projection before the SVD (see the module docs).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]

@@ -273,7 +273,7 @@ impl StateSpace {
         }
         check_mat("u", u)?;
         let n = self.order();
-        let mut x = match x0 {
+        let mut x: Vec<f64> = match x0 {
             Some(x0) if x0.len() != n => {
                 return Err(Error::DimensionMismatch {
                     context: "simulate initial state",
@@ -283,19 +283,35 @@ impl StateSpace {
             }
             Some(x0) => {
                 crate::error::check_finite("x0", x0)?;
-                Mat::from_fn(n, 1, |i, _| x0[i])
+                x0.to_vec()
             }
-            None => Mat::zeros(n, 1),
+            None => vec![0.0; n],
         };
         let (p, m) = (self.noutputs(), self.ninputs());
+        // row-major copies of the matrices: the per-sample products run over contiguous rows
+        // and allocate nothing
+        let rows = |a: &Mat<f64>| -> Vec<f64> {
+            (0..a.nrows())
+                .flat_map(|i| (0..a.ncols()).map(move |j| (i, j)))
+                .map(|(i, j)| a[(i, j)])
+                .collect()
+        };
+        let (ar, br, cr, dr) = (rows(&self.a), rows(&self.b), rows(&self.c), rows(&self.d));
+        let dot = |row: &[f64], v: &[f64]| -> f64 { row.iter().zip(v).map(|(a, b)| a * b).sum() };
         let mut y = Mat::zeros(u.nrows(), p);
+        let mut uk = vec![0.0; m];
+        let mut xn = vec![0.0; n];
         for k in 0..u.nrows() {
-            let uk = Mat::from_fn(m, 1, |i, _| u[(k, i)]);
-            let yk = &self.c * &x + &self.d * &uk;
-            for i in 0..p {
-                y[(k, i)] = yk[(i, 0)];
+            for (i, v) in uk.iter_mut().enumerate() {
+                *v = u[(k, i)];
             }
-            x = &self.a * &x + &self.b * &uk;
+            for i in 0..p {
+                y[(k, i)] = dot(&cr[i * n..(i + 1) * n], &x) + dot(&dr[i * m..(i + 1) * m], &uk);
+            }
+            for (i, v) in xn.iter_mut().enumerate() {
+                *v = dot(&ar[i * n..(i + 1) * n], &x) + dot(&br[i * m..(i + 1) * m], &uk);
+            }
+            std::mem::swap(&mut x, &mut xn);
         }
         Ok(y)
     }

@@ -82,6 +82,7 @@
 //! ```
 
 use crate::error::{Error, Result};
+use faer::reborrow::ReborrowMut;
 use faer::Mat;
 
 /// A nonlinear least-squares problem $\min_x \tfrac12 \lVert r(x) \rVert^2$.
@@ -281,6 +282,39 @@ fn full_rank(u: &Mat<f64>) -> bool {
 }
 
 /// The top triangle of the QR factor of `a` (at least as many rows as columns).
+/// The $(n+1) \times (n+1)$ triangle $\begin{bmatrix} R & z \\ 0 & \rho \end{bmatrix}$ of the QR
+/// factorisation of $[J \;\, r]$ ($m \times (n+1)$), computed in row chunks
+/// ([`StreamingQr`](crate::estimate::qr_stream::StreamingQr)) so that $[J\;r]$ is never copied
+/// whole; with fewer than $n + 1$ rows the missing rows of the triangle are zero.
+fn triangle_of(jac: &Mat<f64>, r: &[f64]) -> Mat<f64> {
+    let (m, n) = (jac.nrows(), jac.ncols());
+    let p = n + 1;
+    let mut qr = crate::estimate::qr_stream::StreamingQr::new(p, (8 * p).max(256).min(m.max(1)));
+    let c = qr.chunk_rows();
+    let mut k0 = 0;
+    while k0 < m {
+        let cc = c.min(m - k0);
+        let mut w = qr.chunk_mut(cc);
+        for j in 0..n {
+            for (dst, src) in w
+                .rb_mut()
+                .col_mut(j)
+                .iter_mut()
+                .zip(jac.col(j).subrows(k0, cc).iter())
+            {
+                *dst = *src;
+            }
+        }
+        for (dst, src) in w.rb_mut().col_mut(n).iter_mut().zip(&r[k0..k0 + cc]) {
+            *dst = *src;
+        }
+        qr.absorb(cc);
+        k0 += cc;
+    }
+    let t = qr.finish();
+    Mat::from_fn(p, p, |i, j| if j >= i { t[(i, j)] } else { 0.0 })
+}
+
 fn qr_triangle(a: &Mat<f64>) -> Mat<f64> {
     let n = a.ncols();
     let qr = a.qr();
@@ -499,13 +533,7 @@ pub fn minimize<P: LeastSquaresProblem + ?Sized>(
         if fnorm == 0.0 {
             break StopReason::Gradient;
         }
-        // zero rows appended when m = n, so that the triangle of [J r] is (n+1)×(n+1)
-        let aug = Mat::from_fn(m.max(n + 1), n + 1, |i, j| match (i < m, j < n) {
-            (false, _) => 0.0,
-            (true, true) => jac[(i, j)],
-            (true, false) => r[i],
-        });
-        let t = qr_triangle(&aug);
+        let t = triangle_of(&jac, &r);
         let rmat = Mat::from_fn(n, n, |i, j| t[(i, j)]);
         let z: Vec<f64> = (0..n).map(|i| t[(i, n)]).collect();
         let colnorm: Vec<f64> = (0..n)
@@ -646,12 +674,7 @@ fn gauss_newton_leaves<P: LeastSquaresProblem + ?Sized>(
     if jac.nrows() != m || jac.ncols() != n {
         return None;
     }
-    let aug = Mat::from_fn(m.max(n + 1), n + 1, |i, j| match (i < m, j < n) {
-        (false, _) => 0.0,
-        (true, true) => jac[(i, j)],
-        (true, false) => r[i],
-    });
-    let t = qr_triangle(&aug);
+    let t = triangle_of(&jac, r);
     let rmat = Mat::from_fn(n, n, |i, j| t[(i, j)]);
     if !full_rank(&rmat) {
         return None;

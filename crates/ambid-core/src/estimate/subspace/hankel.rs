@@ -35,8 +35,8 @@
 //! root of that threshold) are treated as exactly dependent, immaterial for measured data whose
 //! noise is far above that level.
 
-use super::qr_stream::StreamingQr;
 use crate::error::{Error, Result};
+use crate::estimate::qr_stream::StreamingQr;
 use faer::reborrow::ReborrowMut;
 use faer::{Mat, MatRef};
 use std::borrow::Cow;
@@ -160,7 +160,10 @@ pub(super) fn gram_factor(
         .collect();
     let scale: Vec<f64> = su.iter().chain(sy).copied().collect();
     let ns = m + l;
-    let dot = |a: &[f64], b: &[f64]| -> f64 { a.iter().zip(b).map(|(p, q)| p * q).sum() };
+    // first rows: lags[(a, b)][o] = S_ab(0, o)
+    let lags: Vec<Vec<f64>> = (0..ns * ns)
+        .map(|ab| lagged_sums(&x[ab / ns], &x[ab % ns], j, w))
+        .collect();
     // s[(a, b)][o1 * w + o2] = S_ab(o1, o2)
     let mut s = vec![vec![0.0; w * w]; ns * ns];
     for a in 0..ns {
@@ -168,8 +171,9 @@ pub(super) fn gram_factor(
             let t = &mut s[a * ns + b];
             let (xa, xb) = (&x[a], &x[b]);
             for o in 0..w {
-                t[o] = dot(&xa[..j], &xb[o..o + j]);
-                t[o * w] = dot(&xa[o..o + j], &xb[..j]);
+                t[o] = lags[a * ns + b][o];
+                // S_ab(o, 0) = S_ba(0, o)
+                t[o * w] = lags[b * ns + a][o];
             }
             for o1 in 0..w - 1 {
                 for o2 in 0..w - 1 {
@@ -194,11 +198,13 @@ pub(super) fn gram_factor(
         let ((a, o1), (b, o2)) = (row(r), row(q));
         s[a * ns + b][o1 * w + o2] / (jf * scale[a] * scale[b])
     });
-    // semidefinite Cholesky without pivoting, lower triangular
-    let mut lm = Mat::<f64>::zeros(d, d);
+    // semidefinite Cholesky without pivoting, computed as the upper factor U = Lᵀ stored by
+    // columns, so that every inner product runs over contiguous memory
+    let mut uf = vec![0.0; d * d];
     for k in 0..d {
         let gkk = g[(k, k)];
-        let p = gkk - (0..k).map(|t| lm[(k, t)] * lm[(k, t)]).sum::<f64>();
+        let colk = &mut uf[k * d..(k + 1) * d];
+        let p = gkk - dot(&colk[..k], &colk[..k]);
         if !p.is_finite() {
             return Err(Error::numerical(
                 "n4sid",
@@ -206,16 +212,50 @@ pub(super) fn gram_factor(
             ));
         }
         if gkk <= 0.0 || p <= GRAM_PIVOT_TOL * gkk {
+            // the row depends on the rows above: its column of L stays zero
             continue;
         }
         let piv = p.sqrt();
-        lm[(k, k)] = piv;
+        colk[k] = piv;
+        // U[k, r] for r > k: (G[k, r] − U[:k, k]·U[:k, r]) / piv
         for r in k + 1..d {
-            let v = g[(r, k)] - (0..k).map(|t| lm[(r, t)] * lm[(k, t)]).sum::<f64>();
-            lm[(r, k)] = v / piv;
+            let (left, right) = uf.split_at_mut(r * d);
+            let ck = &left[k * d..k * d + k];
+            let cr = &mut right[..d];
+            cr[k] = (g[(r, k)] - dot(ck, &cr[..k])) / piv;
         }
     }
-    Ok(lm)
+    Ok(Mat::from_fn(
+        d,
+        d,
+        |r, c| if c <= r { uf[r * d + c] } else { 0.0 },
+    ))
+}
+
+/// $\sum_{k<j} a_k b_{k+o}$ for $o = 0, \dots, w-1$, as one axpy per $k$ (contiguous in $o$, so it
+/// vectorises).
+fn lagged_sums(a: &[f64], b: &[f64], j: usize, w: usize) -> Vec<f64> {
+    let mut acc = vec![0.0; w];
+    for (k, &ak) in a[..j].iter().enumerate() {
+        for (s, &bv) in acc.iter_mut().zip(&b[k..k + w]) {
+            *s += ak * bv;
+        }
+    }
+    acc
+}
+
+/// Inner product with four partial sums (vectorisable).
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut s = [0.0; 4];
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    for (x, y) in ca.zip(cb) {
+        for t in 0..4 {
+            s[t] += x[t] * y[t];
+        }
+    }
+    let tail: f64 = ra.iter().zip(rb).map(|(x, y)| x * y).sum();
+    (s[0] + s[1]) + (s[2] + s[3]) + tail
 }
 
 /// Relative pivot below which [`gram_factor`] treats a row as dependent.

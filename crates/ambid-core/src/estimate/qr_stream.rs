@@ -15,7 +15,7 @@ use faer::linalg::qr::no_pivoting::factor::{
 use faer::{Mat, MatMut, MatRef, Par};
 
 /// Streaming QR: push rows (or fill whole chunks), read the upper-triangular $R$.
-pub(super) struct StreamingQr {
+pub(crate) struct StreamingQr {
     p: usize,
     c: usize,
     /// Top $p$ rows: $R$ (upper triangle, zeros below); next $c$ rows: the pending chunk.
