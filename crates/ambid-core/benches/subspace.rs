@@ -15,18 +15,18 @@
 //!
 //! Run: `cargo bench -p ambid-core --bench subspace`.
 //!
-//! Measured (shared 2-core AMD EPYC VM with other builds running, load average ≈ 4; release
-//! profile, default target CPU; medians, 2026-11-21):
+//! Measured (2-core AMD EPYC VM, idle; release profile, default target CPU; medians,
+//! 2026-11-21, after the Gram product was vectorised):
 //!
 //! | bench | median | |
 //! |---|---|---|
-//! | `default_ladder` | 575 ms | climbs $i$ = 30 (QR) → 60 (Gram) → 120 (Gram, rejected: −1.7 %), keeps 60 |
-//! | `i30_qr` | 204 ms | streaming QR of the $102\,241 \times 120$ Hankel data ≈ 3·10⁹ flops dominates |
-//! | `i30_projection` | 170 ms | the simulation regression for B, D costs ≈ 35 ms |
-//! | `i120_qr` | 1.57 s | $d = 480$: the QR grows with $d^2$ |
-//! | `i120_gram` | 231 ms | the Gram route at the same horizon: 6.8× faster |
+//! | `default_ladder` | 292 ms | climbs $i$ = 30 (QR) → 60 (Gram) → 120 (Gram, rejected), keeps 60 |
+//! | `i30_qr` | 185 ms | streaming QR of the $102\,241 \times 120$ Hankel data ≈ 3·10⁹ flops dominates |
+//! | `i30_projection` | 159 ms | the simulation regression for B, D costs ≈ 25 ms |
+//! | `i120_qr` | 1.40 s | $d = 480$: the QR grows with $d^2$ |
+//! | `i120_gram` | 61 ms | the Gram route at the same horizon: 23× faster |
 //!
-//! Peak RSS (`VmHWM`) grows by 6.1 MB during the default identification (the $d \times d$
+//! Peak RSS (`VmHWM`) grows by 8.3 MB during the default identification (the $d \times d$
 //! matrices of the $i = 120$ rung, $d = 480$), independent of $N$; the block-Hankel matrix of the
 //! chosen horizon, never formed, would take 196 MB and the record itself is 1.6 MB. For
 //! comparison, nfoursid 1.0.2 cannot run this case: its order step takes a full SVD of a

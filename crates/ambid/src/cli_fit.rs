@@ -19,7 +19,8 @@ pub enum StructureArg {
     Armax,
     Oe,
     Bj,
-    /// State space by subspace identification (N4SID/CVA, order from --order or automatic).
+    /// State space by subspace identification (N4SID/CVA, order from --order or automatic),
+    /// then prediction-error refinement (`--focus`; `--no-pem` skips it).
     Ss,
 }
 
@@ -66,6 +67,16 @@ pub struct FitArgs {
     /// State-space order (`--structure ss`; automatic from the singular values when absent).
     #[arg(long)]
     order: Option<usize>,
+    /// Block rows (past/future horizon) of the subspace step (`--structure ss`; automatic
+    /// horizon ladder when absent).
+    #[arg(long)]
+    block_rows: Option<usize>,
+    /// `--structure ss`: keep the subspace model, without the prediction-error refinement.
+    #[arg(long)]
+    no_pem: bool,
+    /// Maximum Levenberg–Marquardt iterations of the prediction-error step.
+    #[arg(long, default_value_t = 100)]
+    max_iterations: usize,
     /// PEM criterion focus.
     #[arg(long, value_enum, default_value_t = FocusArg::Prediction)]
     focus: FocusArg,
@@ -175,7 +186,9 @@ pub fn fit(a: FitArgs) -> Result<()> {
                 StructureArg::Oe => ambid_core::lti::Structure::Oe,
                 _ => ambid_core::lti::Structure::Bj,
             };
-            let opts = PemOptions::default().with_focus(focus);
+            let opts = PemOptions::default()
+                .with_focus(focus)
+                .with_max_iterations(a.max_iterations)?;
             let (f, rep) = pem::pem(&y, &u, structure, &orders, ts, &opts)
                 .context("prediction-error estimation")?;
             (f, Some(rep.iterations()))
@@ -322,6 +335,7 @@ pub fn order(a: OrderArgs) -> Result<()> {
 /// Subspace state-space fit: data scaled to unit RMS for the algorithm, model scaled back.
 fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Result<()> {
     use ambid::io::model::state_space_json;
+    use ambid_core::estimate::ss_pem::{refine_ss, SsPemOptions};
     use ambid_core::estimate::subspace::{n4sid_detailed, SubspaceOptions};
     use ambid_core::lti::StateSpace;
     use faer::Mat;
@@ -334,8 +348,45 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
     let ym = Mat::from_fn(y.len(), 1, |k, _| y[k] / sy);
     let mut opts = SubspaceOptions::new(ts);
     opts.order = a.order;
+    opts.block_rows = a.block_rows;
     let fit = n4sid_detailed(ym.as_ref(), um.as_ref(), &opts).context("subspace identification")?;
-    let m = &fit.fitted.model;
+    let mut scaled = fit.fitted.model.clone();
+    let mut pem_meta = json!(null);
+    if !a.no_pem {
+        let focus = match a.focus {
+            FocusArg::Prediction => Focus::Prediction,
+            FocusArg::Simulation => Focus::Simulation,
+        };
+        let o = SsPemOptions {
+            focus,
+            lm: SsPemOptions::default()
+                .lm
+                .with_max_iterations(a.max_iterations)?,
+            ..SsPemOptions::default()
+        };
+        let k = fit.kalman_gain.as_ref().map(|k| k.as_ref());
+        let p = refine_ss(ym.as_ref(), um.as_ref(), &scaled, k, &o).context(
+            "prediction-error refinement of the subspace model (use --no-pem to skip it)",
+        )?;
+        println!(
+            "prediction-error refinement ({focus:?} focus): loss {:.4e} -> {:.4e} after {} iterations ({:?}){}",
+            p.start_loss * sy * sy,
+            p.fitted.loss * sy * sy,
+            p.report.iterations,
+            p.report.reason,
+            if p.report.ended_on_boundary { "; the optimum lies on the predictor's stability boundary" } else { "" }
+        );
+        pem_meta = json!({
+            "focus": format!("{focus:?}").to_lowercase(),
+            "iterations": p.report.iterations,
+            "stop": format!("{:?}", p.report.reason),
+            "start_loss": p.start_loss * sy * sy,
+            "loss": p.fitted.loss * sy * sy,
+            "kalman_gain": p.kalman_gain.as_ref().map(|k| (0..k.nrows()).map(|i| k[(i, 0)] * sy).collect::<Vec<_>>()),
+        });
+        scaled = p.fitted.model;
+    }
+    let m = &scaled;
     let model = StateSpace::discrete(
         m.a().to_owned(),
         m.b() * faer::Scale(1.0 / su),
@@ -372,7 +423,8 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
         val = json!({"simulation_fit_pct": fv});
     }
     let meta = json!({
-        "method": "subspace",
+        "method": if a.no_pem { "subspace" } else { "subspace+pem" },
+        "pem": pem_meta,
         "order": fit.order,
         "block_rows": fit.block_rows,
         "singular_values": fit.singular_values,

@@ -175,6 +175,10 @@ fn fit_state_space_from_twin_records() {
         "ss",
         "--order",
         "8",
+        "--block-rows",
+        "120",
+        "--focus",
+        "simulation",
         "--input",
         "r",
         "--output",
@@ -186,6 +190,7 @@ fn fit_state_space_from_twin_records() {
     ]);
     let t = text(&o);
     assert!(o.status.success(), "{t}");
+    eprintln!("{t}");
     let m: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     assert_eq!(m["kind"], "state_space");
@@ -193,5 +198,11 @@ fn fit_state_space_from_twin_records() {
     let vfit = m["meta"]["validation"]["simulation_fit_pct"]
         .as_f64()
         .unwrap();
-    assert!(vfit > 90.0, "{vfit} % ({t})");
+    assert!(vfit > 95.0, "{vfit} % ({t})");
+    assert_eq!(m["meta"]["method"], "subspace+pem");
+    assert_eq!(m["meta"]["pem"]["focus"], "simulation");
+    assert!(
+        m["meta"]["pem"]["loss"].as_f64().unwrap()
+            <= m["meta"]["pem"]["start_loss"].as_f64().unwrap()
+    );
 }
