@@ -190,6 +190,10 @@ fn standard_deviations_are_honest_over_200_seeds() {
     let runs = 200;
     let n = 2000;
     let mut inside = [0usize; 6];
+    // FRF at three frequencies (cycles/sample 0.02, 0.08, 0.2): squared errors and predicted variances
+    let f = [0.02, 0.08, 0.2];
+    let g_true = truth.freq_response_siso(&f).unwrap();
+    let (mut sq_err, mut pred_var) = ([0.0; 3], [0.0; 3]);
     for seed in 0..runs {
         let u = noise(n, 1, 1.0, 100 + seed);
         let e = noise(n, 1, 0.3, 1000 + seed);
@@ -213,6 +217,21 @@ fn standard_deviations_are_honest_over_200_seeds() {
                 inside[p] += 1;
             }
         }
+        let g = fit.fitted.model.freq_response_siso(&f).unwrap();
+        let gs = fit.frequency_response_std(&f).unwrap();
+        for q in 0..3 {
+            sq_err[q] += (g[q] - g_true[q]).norm_sqr();
+            pred_var[q] += gs[q][(0, 0)].powi(2);
+        }
+    }
+    // the propagated FRF standard deviation matches the Monte Carlo spread (within 15 %)
+    for q in 0..3 {
+        let ratio = (sq_err[q] / pred_var[q]).sqrt();
+        eprintln!(
+            "f = {}: Monte Carlo RMS FRF error / predicted std = {ratio:.3}",
+            f[q]
+        );
+        assert!((0.85..=1.15).contains(&ratio), "f = {}: {ratio}", f[q]);
     }
     eprintln!("±1.96σ coverage of (α1, α2, G11, G12, G21, G22) over {runs} seeds: {inside:?}");
     for (p, &c) in inside.iter().enumerate() {

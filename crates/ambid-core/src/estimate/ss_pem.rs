@@ -763,7 +763,37 @@ impl Problem<'_> {
     fn len(&self) -> usize {
         self.y.first().map_or(0, |v| v.len())
     }
-    /// State trajectory of block `b` (`dim` rows of length N).
+    /// Runs block `b`'s dynamics $s_{k+1} = \bar A_b s_k + f_k$ from `s0` (the forcing `f(r, k)`
+    /// for state `r`; the second state is unused for a $1 \times 1$ block) and hands each
+    /// $(k, s_k)$ to `sink`.
+    fn run_block(
+        &self,
+        th: &[f64],
+        b: &Block,
+        s0: [f64; 2],
+        f: impl Fn(usize, usize) -> f64,
+        mut sink: impl FnMut(usize, f64, f64),
+    ) {
+        let (mut s1, mut s2) = (s0[0], s0[1]);
+        if b.dim == 2 {
+            let (al1, al2) = (th[b.off], th[b.off + 1]);
+            for k in 0..self.len() {
+                sink(k, s1, s2);
+                let n1 = s1 + s2 + f(0, k);
+                let n2 = -al2 * s1 + (1.0 - al1) * s2 + f(1, k);
+                s1 = n1;
+                s2 = n2;
+            }
+        } else {
+            let lam = th[b.off];
+            for k in 0..self.len() {
+                sink(k, s1, 0.0);
+                s1 = lam * s1 + f(0, k);
+            }
+        }
+    }
+    /// State trajectory of block `b` (`dim` rows of length N) driven by $G_b w$ from its
+    /// initial state.
     fn states(&self, th: &[f64], b: &Block) -> Vec<Vec<f64>> {
         let nn = self.len();
         let lay = self.lay;
@@ -777,30 +807,15 @@ impl Problem<'_> {
                 .map(|(g, w)| g * w[k])
                 .sum::<f64>()
         };
-        if b.dim == 2 {
-            let (al1, al2) = (th[b.off], th[b.off + 1]);
-            let mut x1 = vec![0.0; nn];
-            let mut x2 = vec![0.0; nn];
-            let (mut s1, mut s2) = (lay.x0_val(th, b.state), lay.x0_val(th, b.state + 1));
-            for k in 0..nn {
-                x1[k] = s1;
+        let s0 = [lay.x0_val(th, b.state), lay.x0_val(th, b.state + b.dim - 1)];
+        let mut x = vec![vec![0.0; nn]; b.dim];
+        self.run_block(th, b, s0, drive, |k, s1, s2| {
+            x[0][k] = s1;
+            if let Some(x2) = x.get_mut(1) {
                 x2[k] = s2;
-                let n1 = s1 + s2 + drive(0, k);
-                let n2 = -al2 * s1 + (1.0 - al1) * s2 + drive(1, k);
-                s1 = n1;
-                s2 = n2;
             }
-            vec![x1, x2]
-        } else {
-            let lam = th[b.off];
-            let mut x = vec![0.0; nn];
-            let mut s = lay.x0_val(th, b.state);
-            for (k, xk) in x.iter_mut().enumerate() {
-                *xk = s;
-                s = lam * s + drive(0, k);
-            }
-            vec![x]
-        }
+        });
+        x
     }
     /// Runs block `b`'s dynamics from `s0` with the forcing `f(r, k)` and writes
     /// $-C_b s_k$ into column `col` of `jac` (rows $oN + k$), without storing $s$.
@@ -814,8 +829,7 @@ impl Problem<'_> {
         col: usize,
     ) {
         let nn = self.len();
-        let l = self.lay.l;
-        let cr: Vec<[f64; 2]> = (0..l)
+        let cr: Vec<[f64; 2]> = (0..self.lay.l)
             .map(|o| {
                 let mut c = [0.0; 2];
                 for (r, cv) in c.iter_mut().enumerate().take(b.dim) {
@@ -825,25 +839,11 @@ impl Problem<'_> {
             })
             .collect();
         let mut out = jac.col_mut(col);
-        let (al1, al2, lam) = if b.dim == 2 {
-            (th[b.off], th[b.off + 1], 0.0)
-        } else {
-            (0.0, 0.0, th[b.off])
-        };
-        let (mut s1, mut s2) = (s0[0], s0[1]);
-        for k in 0..nn {
+        self.run_block(th, b, s0, f, |k, s1, s2| {
             for (o, c) in cr.iter().enumerate() {
                 out[o * nn + k] = -(c[0] * s1 + c[1] * s2);
             }
-            if b.dim == 2 {
-                let n1 = s1 + s2 + f(0, k);
-                let n2 = -al2 * s1 + (1.0 - al1) * s2 + f(1, k);
-                s1 = n1;
-                s2 = n2;
-            } else {
-                s1 = lam * s1 + f(0, k);
-            }
-        }
+        });
     }
 }
 
