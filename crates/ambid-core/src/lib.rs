@@ -15,6 +15,7 @@ pub mod frf;
 pub mod linalg;
 pub mod lti;
 pub mod signal;
+pub mod validate;
 
 pub use error::{Error, Result};
 pub use faer::c64;

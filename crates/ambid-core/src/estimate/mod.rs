@@ -2,6 +2,8 @@
 //! the prediction-error method, subspace state-space models, and order selection.
 
 pub mod arx;
+pub mod freqfit;
+pub mod freqfit_ss;
 pub mod order;
 pub mod pem;
 mod qr_stream;

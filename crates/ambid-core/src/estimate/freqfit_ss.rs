@@ -1,0 +1,1 @@
+//! State-space models fitted to frequency-response data (work in progress).

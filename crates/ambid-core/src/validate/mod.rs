@@ -1,0 +1,3 @@
+//! Model validation: pole-zero analysis.
+
+pub mod pz;

@@ -1,0 +1,1 @@
+//! Pole-zero analysis of discrete models (work in progress).
