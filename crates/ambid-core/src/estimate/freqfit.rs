@@ -274,3 +274,322 @@ pub struct FreqFit<M> {
     /// Iterations of the nonlinear refinement (0 for linear fits).
     pub iterations: usize,
 }
+
+/// Orders of a transfer-function fit $G = q^{-n_k} B(q^{-1}) / F(q^{-1})$ (MATLAB's `[nb nf nk]`):
+/// `nb` coefficients of $B$ after `nk` delays, `nf` free coefficients of the monic $F$.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TfOrders {
+    /// Coefficients of the numerator.
+    pub nb: usize,
+    /// Free coefficients of the monic denominator.
+    pub nf: usize,
+    /// Input delay in samples.
+    pub nk: usize,
+}
+
+impl TfOrders {
+    /// Number of real parameters $n_b + n_f$.
+    pub fn n_params(&self) -> usize {
+        self.nb + self.nf
+    }
+    fn check(&self) -> Result<()> {
+        if self.nb == 0 {
+            return Err(Error::invalid(
+                "nb",
+                "the numerator needs at least one coefficient (nb >= 1)",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Powers $\zeta_k^p$, $\zeta_k = z_k^{-1}$, for $p = 0..=p_{\max}$ (row `p`).
+fn zeta_powers(data: &FreqData, pmax: usize) -> Vec<Vec<c64>> {
+    let mut out = vec![vec![c64::new(1.0, 0.0); data.len()]; pmax + 1];
+    for p in 1..=pmax {
+        for k in 0..data.len() {
+            out[p][k] = out[p - 1][k] / data.z[k];
+        }
+    }
+    out
+}
+
+/// Least squares of a complex linear model: `cols[j][k]` is the coefficient of parameter `j`
+/// on line `k`, `rhs[k]` the right-hand side; line `k` weighted by `wt[k]` (multiplying both).
+/// Real and imaginary parts are stacked.
+fn complex_lstsq(cols: &[Vec<c64>], rhs: &[c64], wt: &[f64]) -> Result<Vec<f64>> {
+    let l = rhs.len();
+    let n = cols.len();
+    let a = faer::Mat::from_fn(2 * l, n, |r, j| {
+        let (k, im) = (r / 2, r % 2 == 1);
+        let v = cols[j][k] * wt[k];
+        if im {
+            v.im
+        } else {
+            v.re
+        }
+    });
+    let b = faer::Mat::from_fn(2 * l, 1, |r, _| {
+        let (k, im) = (r / 2, r % 2 == 1);
+        let v = rhs[k] * wt[k];
+        if im {
+            v.im
+        } else {
+            v.re
+        }
+    });
+    let x = crate::linalg::lstsq(a.as_ref(), b.as_ref()).map_err(|_| {
+        Error::numerical(
+            "freqfit",
+            "the frequency-domain least-squares problem is rank deficient: the band does not determine the parameters (widen it, lower the orders)",
+        )
+    })?;
+    Ok((0..n).map(|j| x[(j, 0)]).collect())
+}
+
+/// $\sum_p c_p \zeta^p$ at every line, with the coefficient list starting at power `p0`.
+fn poly_at(coef: &[f64], p0: usize, zp: &[Vec<c64>], k: usize) -> c64 {
+    coef.iter()
+        .enumerate()
+        .map(|(i, c)| zp[p0 + i][k] * *c)
+        .sum()
+}
+
+fn tf_model(b: &[f64], f: &[f64], o: &TfOrders, ts: f64) -> Result<crate::lti::TransferFunction> {
+    let mut num = vec![0.0; o.nk];
+    num.extend_from_slice(b);
+    let mut den = vec![1.0];
+    den.extend_from_slice(f);
+    crate::lti::TransferFunction::new(num, den, ts)
+}
+
+/// Solves the linearised problem $\min \sum_k v_k |F(\zeta_k) G_k - \zeta_k^{n_k} B(\zeta_k)|^2$
+/// for $(b, f)$ with line weights $v_k$ (squared inside).
+fn levy_step(
+    data: &FreqData,
+    o: &TfOrders,
+    zp: &[Vec<c64>],
+    v: &[f64],
+) -> Result<(Vec<f64>, Vec<f64>)> {
+    let l = data.len();
+    let mut cols: Vec<Vec<c64>> = Vec::with_capacity(o.n_params());
+    for j in 0..o.nb {
+        cols.push((0..l).map(|k| zp[o.nk + j][k]).collect());
+    }
+    for i in 1..=o.nf {
+        cols.push((0..l).map(|k| -zp[i][k] * data.g[k]).collect());
+    }
+    let wt: Vec<f64> = v.iter().map(|x| x.sqrt()).collect();
+    let x = complex_lstsq(&cols, &data.g, &wt)?;
+    Ok((x[..o.nb].to_vec(), x[o.nb..].to_vec()))
+}
+
+/// ARX model fitted to frequency data in Levy's linearised form (linear least squares):
+/// minimises $\sum_k w_k |A(\zeta_k) G_k - \zeta_k^{n_k} B(\zeta_k)|^2$ with $A$ monic of degree
+/// `o.nf` (the ARX $A$), $\zeta = z^{-1}$. The criterion weights the error by $|A|^2$, which
+/// over-weights high frequencies; [`oe_frd`] removes that bias.
+///
+/// # Errors
+/// [`FreqData::new`]'s errors; `nb = 0`; fewer real equations than parameters; a rank-deficient
+/// problem.
+///
+/// # Example
+/// ```
+/// use ambid_core::estimate::freqfit::{arx_frd, FreqFitOptions, TfOrders};
+/// use ambid_core::lti::{Frd, TransferFunction};
+/// let g = TransferFunction::new(vec![0.0, 0.5, 0.2], vec![1.0, -1.2, 0.5], 1e-3).unwrap();
+/// let f: Vec<f64> = (1..100).map(|k| 4.0 * k as f64).collect();
+/// let frd = Frd::new(f.clone(), g.freq_response(&f).unwrap(), None, Some(1e-3)).unwrap();
+/// let fit = arx_frd(&frd, &TfOrders { nb: 2, nf: 2, nk: 1 }, &FreqFitOptions::default()).unwrap();
+/// assert!((fit.model.den()[1] + 1.2).abs() < 1e-10 && (fit.model.num()[2] - 0.2).abs() < 1e-10);
+/// ```
+pub fn arx_frd(
+    frd: &Frd,
+    o: &TfOrders,
+    opts: &FreqFitOptions,
+) -> Result<FreqFit<crate::lti::TransferFunction>> {
+    o.check()?;
+    let data = FreqData::new(frd, opts)?;
+    data.check_params(o.n_params())?;
+    let zp = zeta_powers(&data, (o.nk + o.nb).max(o.nf + 1));
+    let (b, f) = levy_step(&data, o, &zp, &data.w)?;
+    finish_tf(&data, o, &zp, b, f, 0)
+}
+
+fn finish_tf(
+    data: &FreqData,
+    o: &TfOrders,
+    zp: &[Vec<c64>],
+    b: Vec<f64>,
+    f: Vec<f64>,
+    iterations: usize,
+) -> Result<FreqFit<crate::lti::TransferFunction>> {
+    let model = tf_model(&b, &f, o, data.ts)?;
+    let resp: Vec<c64> = (0..data.len())
+        .map(|k| {
+            let fk = c64::new(1.0, 0.0) + poly_at(&f, 1, zp, k);
+            poly_at(&b, o.nk, zp, k) / fk
+        })
+        .collect();
+    if resp.iter().any(|v| !(v.re.is_finite() && v.im.is_finite())) {
+        return Err(Error::numerical(
+            "freqfit",
+            "the fitted model has a pole on a data line (infinite response); lower the order or narrow the band",
+        ));
+    }
+    let cost = resp
+        .iter()
+        .zip(&data.g)
+        .zip(&data.w)
+        .map(|((m, g), w)| w * (m - g).norm_sqr())
+        .sum();
+    Ok(FreqFit {
+        errors: FreqErrors::of(&resp, data),
+        model,
+        n_params: o.n_params(),
+        cost,
+        iterations,
+    })
+}
+
+/// Output-error transfer function fitted to frequency data: Sanathanan–Koerner iterations
+/// (Levy's problem reweighted by $1/|F_{i-1}(\zeta_k)|^2$, `opts.sk_iterations` of them, starting
+/// from [`arx_frd`]) give the start, then Levenberg–Marquardt ([`super::pem::lm`]) minimises the
+/// weighted complex error $\sum_k w_k |\zeta_k^{n_k} B(\zeta_k)/F(\zeta_k) - G_k|^2$ with the
+/// analytic Jacobian $\partial/\partial b_j = \zeta^{n_k + j}/F$,
+/// $\partial/\partial f_i = -\zeta^{n_k + i} B / F^2$. Unstable $F$ is allowed (no
+/// stability constraint in the frequency domain); with `opts.enforce_stability` the unstable roots
+/// of $F$ are reflected into the unit circle and $B$ is refitted.
+///
+/// # Errors
+/// As [`arx_frd`]; [`Error::Numerical`] if the refinement fails.
+///
+/// # Example
+/// ```
+/// use ambid_core::estimate::freqfit::{oe_frd, FreqFitOptions, TfOrders};
+/// use ambid_core::lti::{Frd, TransferFunction};
+/// // an unstable pole at 1.02 and a lightly damped pair
+/// let den = [1.0, -2.9, 2.8676, -0.9588]; // (1 - 1.02 q^-1)(1 - 1.88 q^-1 + 0.94 q^-2)
+/// let g = TransferFunction::new(vec![0.0, 0.1, 0.05], den.to_vec(), 1e-3).unwrap();
+/// let f: Vec<f64> = (1..150).map(|k| 3.0 * k as f64).collect();
+/// let frd = Frd::new(f.clone(), g.freq_response(&f).unwrap(), None, Some(1e-3)).unwrap();
+/// let fit = oe_frd(&frd, &TfOrders { nb: 2, nf: 3, nk: 1 }, &FreqFitOptions::default()).unwrap();
+/// assert!(fit.errors.relative_rmse < 1e-9);
+/// assert!(fit.model.poles().unwrap().iter().any(|p| p.norm() > 1.0));
+/// ```
+pub fn oe_frd(
+    frd: &Frd,
+    o: &TfOrders,
+    opts: &FreqFitOptions,
+) -> Result<FreqFit<crate::lti::TransferFunction>> {
+    o.check()?;
+    let data = FreqData::new(frd, opts)?;
+    data.check_params(o.n_params())?;
+    let zp = zeta_powers(&data, (o.nk + o.nb).max(o.nf + 1) + o.nf);
+    let (mut b, mut f) = levy_step(&data, o, &zp, &data.w)?;
+    for _ in 0..opts.sk_iterations {
+        let v: Vec<f64> = (0..data.len())
+            .map(|k| {
+                let fk = c64::new(1.0, 0.0) + poly_at(&f, 1, &zp, k);
+                data.w[k] / fk.norm_sqr().max(f64::MIN_POSITIVE)
+            })
+            .collect();
+        match levy_step(&data, o, &zp, &v) {
+            Ok((nb, nf)) => {
+                b = nb;
+                f = nf;
+            }
+            Err(_) => break,
+        }
+    }
+    let mut prob = TfProblem {
+        data: &data,
+        o: *o,
+        zp: &zp,
+    };
+    let mut x0 = b.clone();
+    x0.extend_from_slice(&f);
+    let lm = super::pem::lm::LmOptions::default()
+        .with_max_iterations(opts.max_iterations.max(1))?
+        .with_loss_tol(1e-14)?;
+    let (x, report) = super::pem::lm::minimize(&mut prob, &x0, &lm)?;
+    let (mut b, mut f) = (x[..o.nb].to_vec(), x[o.nb..].to_vec());
+    if opts.enforce_stability && o.nf > 0 {
+        let mut den = vec![1.0];
+        den.extend_from_slice(&f);
+        // roots of z^nf + f1 z^(nf-1) + ... (descending powers of z)
+        let roots = crate::linalg::roots(&den)?;
+        if roots.iter().any(|r| r.norm() > 1.0) {
+            let reflected: Vec<c64> = roots
+                .iter()
+                .map(|r| {
+                    if r.norm() > 1.0 {
+                        c64::new(1.0, 0.0) / r.conj()
+                    } else {
+                        *r
+                    }
+                })
+                .collect();
+            let p = crate::linalg::poly_from_roots(&reflected);
+            f = p[1..].to_vec();
+            // refit B for the reflected F (linear)
+            let l = data.len();
+            let cols: Vec<Vec<c64>> = (0..o.nb)
+                .map(|j| {
+                    (0..l)
+                        .map(|k| zp[o.nk + j][k] / (c64::new(1.0, 0.0) + poly_at(&f, 1, &zp, k)))
+                        .collect()
+                })
+                .collect();
+            let wt: Vec<f64> = data.w.iter().map(|x| x.sqrt()).collect();
+            b = complex_lstsq(&cols, &data.g, &wt)?;
+        }
+    }
+    finish_tf(&data, o, &zp, b, f, report.iterations)
+}
+
+/// The OE criterion for the Levenberg–Marquardt solver: residuals (re, im) of
+/// $\sqrt{w_k}(\zeta^{n_k}B/F - G_k)$.
+struct TfProblem<'a> {
+    data: &'a FreqData,
+    o: TfOrders,
+    zp: &'a [Vec<c64>],
+}
+
+impl super::pem::lm::LeastSquaresProblem for TfProblem<'_> {
+    fn residuals(&mut self, x: &[f64]) -> Option<Vec<f64>> {
+        let (b, f) = x.split_at(self.o.nb);
+        let mut r = Vec::with_capacity(2 * self.data.len());
+        for k in 0..self.data.len() {
+            let fk = c64::new(1.0, 0.0) + poly_at(f, 1, self.zp, k);
+            let e =
+                (poly_at(b, self.o.nk, self.zp, k) / fk - self.data.g[k]) * self.data.w[k].sqrt();
+            r.push(e.re);
+            r.push(e.im);
+        }
+        r.iter().all(|v| v.is_finite()).then_some(r)
+    }
+    fn jacobian(&mut self, x: &[f64]) -> Option<faer::Mat<f64>> {
+        let (b, f) = x.split_at(self.o.nb);
+        let (nb, nk) = (self.o.nb, self.o.nk);
+        let l = self.data.len();
+        let mut j = faer::Mat::<f64>::zeros(2 * l, x.len());
+        for k in 0..l {
+            let sw = self.data.w[k].sqrt();
+            let fk = c64::new(1.0, 0.0) + poly_at(f, 1, self.zp, k);
+            let bk = poly_at(b, nk, self.zp, k);
+            for (p, _) in b.iter().enumerate() {
+                let d = self.zp[nk + p][k] / fk * sw;
+                j[(2 * k, p)] = d.re;
+                j[(2 * k + 1, p)] = d.im;
+            }
+            for i in 1..=f.len() {
+                let d = -(self.zp[i][k] * bk) / (fk * fk) * sw;
+                j[(2 * k, nb + i - 1)] = d.re;
+                j[(2 * k + 1, nb + i - 1)] = d.im;
+            }
+        }
+        let finite = j.col_iter().all(|c| c.iter().all(|v| v.is_finite()));
+        finite.then_some(j)
+    }
+}
