@@ -305,11 +305,10 @@ impl TfOrders {
 
 /// Powers $\zeta_k^p$, $\zeta_k = z_k^{-1}$, for $p = 0..=p_{\max}$ (row `p`).
 fn zeta_powers(data: &FreqData, pmax: usize) -> Vec<Vec<c64>> {
-    let mut out = vec![vec![c64::new(1.0, 0.0); data.len()]; pmax + 1];
+    let mut out: Vec<Vec<c64>> = vec![vec![c64::new(1.0, 0.0); data.len()]];
     for p in 1..=pmax {
-        for k in 0..data.len() {
-            out[p][k] = out[p - 1][k] / data.z[k];
-        }
+        let next: Vec<c64> = out[p - 1].iter().zip(&data.z).map(|(v, z)| v / z).collect();
+        out.push(next);
     }
     out
 }
@@ -376,8 +375,8 @@ fn levy_step(
     for j in 0..o.nb {
         cols.push((0..l).map(|k| zp[o.nk + j][k]).collect());
     }
-    for i in 1..=o.nf {
-        cols.push((0..l).map(|k| -zp[i][k] * data.g[k]).collect());
+    for zi in &zp[1..=o.nf] {
+        cols.push(zi.iter().zip(&data.g).map(|(z, g)| -z * g).collect());
     }
     let wt: Vec<f64> = v.iter().map(|x| x.sqrt()).collect();
     let x = complex_lstsq(&cols, &data.g, &wt)?;
