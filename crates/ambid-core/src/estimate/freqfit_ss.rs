@@ -37,7 +37,10 @@
 //! which maps the unit circle onto itself, the disc onto itself (an unstable pole stays unstable)
 //! and the band's geometric centre $\omega_c$ to $\zeta = j$: 10 Hz–1 kHz then covers the angles
 //! $0.2$–$2.9$ rad. A rational function of degree $n$ in $z$ is one of degree $n$ in $\zeta$, so
-//! the step is exact for noise-free data; its poles are mapped back to $z$.
+//! the step is exact for noise-free data; its poles are mapped back to $z$. On an AMB-like plant
+//! seen on 253 lines in 12–1000 Hz at 20 kHz (unit test below) the warp takes the subspace
+//! poles' error from $\sim 10^{-9}$ to $10^{-16}$ on exact data, and from $\sim 10^{-2}$ to
+//! $\sim 10^{-5}$ with 0.14 % noise.
 //!
 //! **$B$ and $D$** then follow by linear least squares of the weighted complex error (real and
 //! imaginary parts stacked) with the poles fixed. This is done in the partial-fraction basis of
@@ -73,8 +76,8 @@
 //! # Reference
 //! T. McKelvey, H. Akçay, L. Ljung, "Subspace-based multivariable system identification from
 //! frequency response data", *IEEE Transactions on Automatic Control* 41(7), 1996, pp. 960–979
-//! (the subspace step; the all-pass warping is the bilinear-map idea of its continuous-time
-//! variant applied inside the unit circle); R. Pintelon, J. Schoukens, *System Identification: A
+//! (the subspace step; the all-pass warp here is a Möbius map in the spirit of the bilinear
+//! transform the paper uses for continuous-time data); R. Pintelon, J. Schoukens, *System Identification: A
 //! Frequency Domain Approach*, 2nd ed., Wiley, 2012 (the weighted complex criterion).
 //!
 //! # Example
@@ -123,8 +126,8 @@ pub struct SsFreqOptions {
 ///
 /// # Errors
 /// * [`Error::InvalidArgument`] for order 0, a continuous [`Frd`], a bad band or weights (see
-///   [`FreqData::new`]), fewer than $n + 1/2$ lines in the band (too few equations for the
-///   parameters), or a horizon outside $[n + 1, L]$;
+///   [`FreqData::new`]), fewer real equations ($2L$) than parameters ([`FreqData::check_params`]),
+///   or a horizon outside $[n + 1, L]$;
 /// * [`Error::Numerical`] when the subspace step is degenerate (too few lines for the horizon, a
 ///   rank-deficient shift equation or numerator regression, a pole at infinity) or the
 ///   refinement fails; the message says what may help.
@@ -660,6 +663,76 @@ mod tests {
         mp.sort_by(|a, b| a.re.total_cmp(&b.re).then(a.im.total_cmp(&b.im)));
         for p in poles {
             assert!(mp.iter().any(|m| (m - p).norm() < 1e-12), "{p} in {mp:?}");
+        }
+    }
+
+    /// An AMB-like plant (unstable and stable real poles at 1.0206 and 0.9795, pairs at 125 Hz
+    /// ζ = 0.2 and 754 Hz ζ = 0.016, a real pole at 1868 Hz) at 20 kHz, seen on 253 lines in
+    /// 12–1000 Hz: the warped subspace step is far more accurate than the unwarped one ($a = 0$).
+    #[test]
+    fn warping_makes_the_subspace_step_accurate_on_a_short_arc() {
+        let ts = 5e-5;
+        let pi = std::f64::consts::PI;
+        let pair = |f: f64, z: f64| {
+            let s = c64::new(-z * 2.0 * pi * f, 2.0 * pi * f * (1.0 - z * z).sqrt());
+            (s * ts).exp()
+        };
+        let (p1, p2) = (pair(125.0, 0.2), pair(754.0, 0.016));
+        let n = 7;
+        let mut a = Mat::<f64>::zeros(n, n);
+        for (o, p) in [(0, p1), (2, p2)] {
+            a[(o, o)] = p.re;
+            a[(o, o + 1)] = p.im;
+            a[(o + 1, o)] = -p.im;
+            a[(o + 1, o + 1)] = p.re;
+        }
+        a[(4, 4)] = 1.0206;
+        a[(5, 5)] = 0.9795;
+        a[(6, 6)] = 0.55;
+        let b = Mat::from_fn(n, 1, |i, _| [1.0, 0.0, 1.0, 0.0, 1.0, 1.0, 1.0][i]);
+        let c = Mat::from_fn(1, n, |_, j| [0.02, 0.01, 0.1, -0.05, 0.01, -0.01, 0.3][j]);
+        let truth = StateSpace::discrete(a, b, c, faer::mat![[0.0]], ts).unwrap();
+        // the in-band poles (the one at 1868 Hz is weakly determined by 12–1000 Hz data)
+        let in_band = [p1, p2, c64::new(1.0206, 0.0), c64::new(0.9795, 0.0)];
+        let f: Vec<f64> = (3..256).map(|k| 3.91 * k as f64).collect();
+        let g0 = truth.freq_response_siso(&f).unwrap();
+        let pole_error = |noise: f64, warped: bool, q: usize| -> f64 {
+            let mut seed = 12345u64;
+            let mut rnd = || {
+                seed = seed
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+            };
+            let vals: Vec<c64> = g0
+                .iter()
+                .map(|g| g * (1.0 + c64::new(rnd(), rnd()) * noise * 3.4))
+                .collect();
+            let frd = Frd::new(f.clone(), vals, None, Some(ts)).unwrap();
+            let data = FreqData::new(&frd, &FreqFitOptions::default()).unwrap();
+            let mut w = Warp::new(&data).unwrap();
+            if !warped {
+                w.a = 0.0;
+            }
+            let p = subspace_poles(&data, &w, n, q).unwrap();
+            in_band
+                .iter()
+                .map(|t| p.iter().map(|x| (x - t).norm()).fold(f64::MAX, f64::min))
+                .fold(0.0, f64::max)
+        };
+        // exact data: rounding level warped, ~1e-9 unwarped
+        let (ew, eu) = (pole_error(0.0, true, 9), pole_error(0.0, false, 9));
+        assert!(
+            ew < 1e-13 && eu > 1e-11,
+            "exact: warped {ew:e}, unwarped {eu:e}"
+        );
+        // relative noise of 0.14 % RMS: ~1e-5 warped, ~1e-2 unwarped
+        for q in [9, 16] {
+            let (ew, eu) = (pole_error(1e-3, true, q), pole_error(1e-3, false, q));
+            assert!(
+                ew < 1e-4 && eu > 100.0 * ew,
+                "q = {q}: warped {ew:e}, unwarped {eu:e}"
+            );
         }
     }
 }
