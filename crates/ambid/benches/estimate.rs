@@ -8,7 +8,9 @@
 //! * `subspace_i120_pem_simulation`: the same, then [`refine_ss`] with the simulation focus
 //!   (what `ambid fit --structure ss --order 8 --block-rows 120 --focus simulation` runs);
 //! * `subspace_i120_pem_prediction_20`: the same with the prediction focus, 20 iterations;
-//! * `subspace_default_ladder`: the default horizon ladder (30 → 60 → 120 → 240).
+//! * `subspace_default_ladder`: the default horizon ladder (30 → 60 → 120 → 240);
+//! * `compare_models_3x4_on_plant_frf`: issue 5's comparison (ARX, OE, SS × orders 6–9) on the
+//!   period-averaged plant FRF (≤ 200 ms bar).
 
 use ambid::experiment::{run, Experiment};
 use ambid_core::estimate::pem::Focus;
@@ -79,4 +81,43 @@ fn subspace_i120_pem_simulation(b: Bencher) {
 #[divan::bench(sample_count = 5)]
 fn subspace_i120_pem_prediction_20(b: Bencher) {
     subspace_plus_pem(b, Focus::Prediction, 20);
+}
+
+/// Issue 5's speed bar: the full comparison (ARX, OE, SS × orders 6–9) on the period-averaged
+/// plant FRF of the seed experiment (the excited lines in 10–1000 Hz), inverse-variance weights,
+/// without the time-domain validation.
+#[divan::bench(sample_count = 10)]
+fn compare_models_3x4_on_plant_frf(b: Bencher) {
+    use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
+    use ambid_core::frf::closed_loop::{from_periodic, Channels};
+    use ambid_core::frf::periodic::{PeriodicAnalyzer, PeriodicOptions};
+    use ambid_core::validate::compare::{compare_models, CompareSpec};
+    const PERIOD: usize = 5115;
+    let rec = run(&Experiment::seed_paper(Mode::Linear, 1e-7, 1))
+        .expect("seed experiment")
+        .record;
+    let mut an = PeriodicAnalyzer::new(PERIOD).expect("analyzer");
+    let s = an
+        .analyze(
+            &[&rec.r, &rec.u, &rec.y],
+            1.0 / rec.ts,
+            &PeriodicOptions::new(PERIOD).skip(1),
+        )
+        .expect("periodic");
+    let lines: Vec<usize> = s
+        .excited_lines(0, 1e-6)
+        .expect("lines")
+        .into_iter()
+        .filter(|&k| (10.0..=1000.0).contains(&s.line_hz(k)))
+        .collect();
+    let frf = from_periodic(&s, Channels { r: 0, u: 1, y: 2 }, &lines, None).expect("frf");
+    let spec = CompareSpec {
+        fit: FreqFitOptions {
+            weights: FreqWeights::InverseVariance,
+            ..FreqFitOptions::default()
+        },
+        ..CompareSpec::default()
+    };
+    eprintln!("{} lines", frf.plant.len());
+    b.bench_local(|| black_box(compare_models(&frf.plant, &spec, None).expect("compare")));
 }

@@ -77,6 +77,16 @@ pub struct FitArgs {
     /// Maximum Levenberg–Marquardt iterations of the prediction-error step.
     #[arg(long, default_value_t = 100)]
     max_iterations: usize,
+    /// Fit to an FRF file instead of time data: the quantity to fit (e.g. `plant`, `t_ry`);
+    /// structures arx, oe, ss; needs --fs.
+    #[arg(long)]
+    quantity: Option<String>,
+    /// Band `f_min:f_max` in Hz of an FRF fit (default: every line).
+    #[arg(long, value_parser = crate::cli_frf::parse_band)]
+    band: Option<(f64, f64)>,
+    /// Weights of the lines of an FRF fit.
+    #[arg(long, value_enum, default_value_t = crate::cli_freqfit::WeightsArg::Variance)]
+    weights: crate::cli_freqfit::WeightsArg,
     /// PEM criterion focus.
     #[arg(long, value_enum, default_value_t = FocusArg::Prediction)]
     focus: FocusArg,
@@ -141,6 +151,30 @@ fn fits(m: &PolyModel, y: &[f64], u: &[f64]) -> Result<(f64, f64)> {
 }
 
 pub fn fit(a: FitArgs) -> Result<()> {
+    if let Some(q) = &a.quantity {
+        use ambid_core::validate::compare::FitStructure;
+        let (structure, order) = match a.structure {
+            StructureArg::Arx => (FitStructure::Arx, a.order.unwrap_or(a.na)),
+            StructureArg::Oe => (FitStructure::Oe, a.order.unwrap_or(a.nf)),
+            StructureArg::Ss => match a.order {
+                Some(n) => (FitStructure::Ss, n),
+                None => bail!("a state-space fit to FRF data needs --order"),
+            },
+            _ => bail!("fits to FRF data support --structure arx, oe or ss (ARX/OE of order n: n numerator and n denominator coefficients after --nk delays)"),
+        };
+        return crate::cli_freqfit::fit_frf(
+            &a.data,
+            q,
+            structure,
+            order,
+            a.nk,
+            a.fs,
+            a.band,
+            a.weights,
+            a.max_iterations,
+            &a.out,
+        );
+    }
     let (mut u, mut y, ts) = read_io(&a.data, a.fs, &a.input, &a.output)?;
     let (mu, my) = if a.no_detrend {
         (0.0, 0.0)

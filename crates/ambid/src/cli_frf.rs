@@ -15,11 +15,14 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand, ValueEnum};
 use std::path::{Path, PathBuf};
 
-/// Parses `a,b` as a frequency band in Hz.
-fn parse_band(s: &str) -> std::result::Result<(f64, f64), String> {
+/// Parses `a,b` or `a:b` as a frequency band in Hz.
+pub(crate) fn parse_band(s: &str) -> std::result::Result<(f64, f64), String> {
     let (a, b) = s
         .split_once(',')
-        .ok_or_else(|| format!("`{s}`: give a band as f_min,f_max in Hz, e.g. 10,1000"))?;
+        .or_else(|| s.split_once(':'))
+        .ok_or_else(|| {
+            format!("`{s}`: give a band as f_min,f_max (or f_min:f_max) in Hz, e.g. 10,1000")
+        })?;
     let lo: f64 = a
         .trim()
         .parse()

@@ -14,6 +14,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::{Path, PathBuf};
 
 mod cli_fit;
+mod cli_freqfit;
 mod cli_frf;
 
 #[derive(Parser)]
@@ -56,6 +57,10 @@ enum Command {
     Fit(cli_fit::FitArgs),
     /// ARX order scan over na × nb (× nk): loss, AIC, BIC, FPE (and validation fit); writes the grid.
     Order(cli_fit::OrderArgs),
+    /// Fit ARX, OE and state-space models of several orders to one FRF and compare them
+    /// (frequency errors, BIC, closed-loop validation fit with the controller, unstable poles):
+    /// the seed paper's table 1; writes the table as CSV.
+    CompareModels(cli_freqfit::CompareModelsArgs),
 }
 
 #[derive(Args)]
@@ -334,6 +339,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         Command::Study(c) => cli_frf::study(c),
         Command::Fit(a) => cli_fit::fit(a),
         Command::Order(a) => cli_fit::order(a),
+        Command::CompareModels(a) => cli_freqfit::compare(a),
     }
 }
 

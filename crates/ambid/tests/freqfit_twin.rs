@@ -216,3 +216,94 @@ fn order_7_meets_the_bar_on_other_seeds() {
         "{worst_med} {worst_p90}"
     );
 }
+
+/// Issue 5's comparison (the seed's table 1) on the twin, and the closed-loop validation bar:
+/// ARX, OE, SS × orders 6–9 fitted to the seed-1 plant FRF, validated through the loop with the
+/// twin's controller on the independent seed-2 record (first period left out: the transient).
+#[test]
+fn comparison_table_and_closed_loop_validation() {
+    use ambid_core::validate::compare::{
+        compare_models, table, CompareSpec, FitStructure, ValidationRecord,
+    };
+    let (frf, twin) = estimate(1, None);
+    let val = run(&seed_experiment(2)).unwrap();
+    let spec = CompareSpec {
+        fit: FreqFitOptions {
+            band_hz: Some((10.0, 1000.0)),
+            weights: FreqWeights::InverseVariance,
+            ..Default::default()
+        },
+        ..CompareSpec::default()
+    };
+    let rec = ValidationRecord {
+        r: &val.record.r,
+        y: &val.record.y,
+        controller: twin.controller(),
+        skip: PERIOD,
+    };
+    let rows = compare_models(&frf.plant, &spec, Some(rec)).unwrap();
+    eprintln!("{}", table(&rows));
+    let get = |s: FitStructure, n: usize| {
+        rows.iter()
+            .find(|r| r.structure == s && r.order == n)
+            .unwrap()
+    };
+    // the bar: the state-space model of order <= 10 chosen by the issue's FRF criteria (order 7)
+    // validates through the closed loop at >= 97 %
+    let ss7 = get(FitStructure::Ss, 7);
+    let vfit = ss7.validation_fit.unwrap();
+    eprintln!(
+        "SS order 7: closed-loop validation fit {vfit:.2} % (seed paper's chosen model: 88.1 %)"
+    );
+    assert!(vfit >= 97.0, "{vfit}");
+    // the exact plant in the same loop is the noise ceiling of this record
+    let exact = ambid_core::validate::closed_loop::simulate_loop(
+        twin.plant(),
+        twin.controller(),
+        &val.record.r,
+    )
+    .unwrap();
+    let n0 = PERIOD;
+    let num: f64 = val.record.y[n0..]
+        .iter()
+        .zip(&exact.y[n0..])
+        .map(|(a, b)| (a - b).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let m = val.record.y[n0..].iter().sum::<f64>() / (val.record.y.len() - n0) as f64;
+    let den: f64 = val.record.y[n0..]
+        .iter()
+        .map(|a| (a - m).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    eprintln!(
+        "exact plant in the loop: validation fit {:.2} %",
+        100.0 * (1.0 - num / den)
+    );
+    // the seed's qualitative finding: ARX worst below 200 Hz, for every order
+    for n in 6..=9 {
+        let arx = get(FitStructure::Arx, n).low_band_relative_rmse.unwrap();
+        let oe = get(FitStructure::Oe, n).low_band_relative_rmse.unwrap();
+        let ss = get(FitStructure::Ss, n).low_band_relative_rmse.unwrap();
+        assert!(
+            arx > 10.0 * oe.max(ss),
+            "order {n}: ARX {arx} OE {oe} SS {ss}"
+        );
+    }
+    // the best BIC is at order 7, where OE and SS (the same model class: strictly proper,
+    // 7 poles) reach the same optimum; SS stays usable at order 9 where OE overfits into
+    // spurious unstable poles and an unstable loop
+    let best = rows
+        .iter()
+        .filter(|r| r.bic.is_some())
+        .min_by(|a, b| a.bic.unwrap().total_cmp(&b.bic.unwrap()))
+        .unwrap();
+    eprintln!("best BIC: {} order {}", best.structure.name(), best.order);
+    assert_eq!(best.order, 7);
+    let (b_oe, b_ss) = (
+        get(FitStructure::Oe, 7).bic.unwrap(),
+        get(FitStructure::Ss, 7).bic.unwrap(),
+    );
+    assert!((b_oe - b_ss).abs() < 1e-3 * b_oe.abs(), "{b_oe} vs {b_ss}");
+    assert!(get(FitStructure::Ss, 9).validation_fit.unwrap() >= 97.0);
+}

@@ -337,14 +337,56 @@ fn complex_lstsq(cols: &[Vec<c64>], rhs: &[c64], wt: &[f64]) -> Result<Vec<f64>>
             v.re
         }
     });
-    let x = crate::linalg::lstsq(a.as_ref(), b.as_ref()).map_err(|_| {
+    // columns scaled to unit norm, then a truncated SVD: polynomial coefficients of strongly
+    // oversampled data (poles near z = 1) are nearly collinear, and the minimum-norm solution
+    // over the numerically determined directions still gives the best response on the lines
+    let scale: Vec<f64> = (0..n)
+        .map(|j| {
+            let c = a.col(j).norm_l2();
+            if c > 0.0 {
+                c
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    let an = faer::Mat::from_fn(2 * l, n, |r, j| a[(r, j)] / scale[j]);
+    let svd = an.thin_svd().map_err(|e| {
         Error::numerical(
             "freqfit",
-            "the frequency-domain least-squares problem is rank deficient: the band does not determine the parameters (widen it, lower the orders)",
+            format!("SVD of the frequency-domain problem failed: {e:?}"),
         )
     })?;
-    Ok((0..n).map(|j| x[(j, 0)]).collect())
+    let sv = svd.S().column_vector();
+    let smax = (0..sv.nrows()).map(|k| sv[k]).fold(0.0, f64::max);
+    if !(smax > 0.0 && smax.is_finite()) {
+        return Err(Error::numerical(
+            "freqfit",
+            "the frequency-domain least-squares problem is degenerate (all-zero regressors); check the data and the band",
+        ));
+    }
+    let utb = svd.U().transpose() * &b;
+    let mut y = vec![0.0; n];
+    for k in 0..sv.nrows() {
+        if sv[k] > LSTSQ_RCOND * smax {
+            let c = utb[(k, 0)] / sv[k];
+            for (j, yj) in y.iter_mut().enumerate() {
+                *yj += svd.V()[(j, k)] * c;
+            }
+        }
+    }
+    let x: Vec<f64> = y.iter().zip(&scale).map(|(v, s)| v / s).collect();
+    if x.iter().any(|v| !v.is_finite()) {
+        return Err(Error::numerical(
+            "freqfit",
+            "the frequency-domain least-squares solution is not finite; lower the orders or narrow the band",
+        ));
+    }
+    Ok(x)
 }
+
+/// Relative singular-value cut-off of the linear frequency-domain least squares.
+const LSTSQ_RCOND: f64 = 1e-14;
 
 /// $\sum_p c_p \zeta^p$ at every line, with the coefficient list starting at power `p0`.
 fn poly_at(coef: &[f64], p0: usize, zp: &[Vec<c64>], k: usize) -> c64 {

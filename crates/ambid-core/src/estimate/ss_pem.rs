@@ -30,7 +30,7 @@
 //! and the sensitivities to its two denominator coefficients are nearly collinear, the
 //! delta form's are not.
 //! The free parameters are, per block, $(\alpha_1, \alpha_2)$ (or the pole $\lambda$ of a $1 \times 1$
-//! block), all entries of $G_b = [\bar B_b \;\; K_b]$ ($[B_b]$ under the simulation focus) and the
+//! block), all entries of $G_b = [\bar B_b \;\; K_b]$ ($G_b = B_b$ under the simulation focus) and the
 //! other rows of $C_b$; then $D$ (when estimated) and the initial state. This is locally
 //! identifiable (per block $2(l + q)$ parameters for $l$ outputs and $q$ filter inputs, the
 //! dimension of a McMillan-degree-2 block with given poles), covers real and complex poles alike

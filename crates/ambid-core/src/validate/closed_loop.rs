@@ -102,9 +102,9 @@ mod tests {
             .collect();
         let out = simulate_loop(&p, &c, &r).unwrap();
         let (mut xp, mut xc) = (vec![0.0; 3], 0.0);
-        for k in 0..r.len() {
+        for (k, rk) in r.iter().enumerate() {
             let y: f64 = (0..3).map(|i| p.c()[(0, i)] * xp[i]).sum();
-            let u = r[k] - (c.c()[(0, 0)] * xc + c.d()[(0, 0)] * y);
+            let u = rk - (c.c()[(0, 0)] * xc + c.d()[(0, 0)] * y);
             assert!((y - out.y[k]).abs() < 1e-10 * (1.0 + y.abs()), "y at {k}");
             assert!((u - out.u[k]).abs() < 1e-10 * (1.0 + u.abs()), "u at {k}");
             let xn: Vec<f64> = (0..3)

@@ -271,3 +271,142 @@ mod tests {
         assert!(write_time_csv(&p, &[("a", &[1.0, 2.0]), ("b", &[1.0])]).is_err());
     }
 }
+
+/// FRF data read from a file: the frequencies and every quantity and extra column.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrfFile {
+    /// Frequencies \[Hz\].
+    pub f_hz: Vec<f64>,
+    /// Quantity names in file order (`t_ry`, `plant`, …).
+    pub quantities: Vec<String>,
+    /// Column names and values in file order (including `<q>_re`, `<q>_im`, `<q>_std`).
+    pub names: Vec<String>,
+    /// Columns, same order as `names`.
+    pub columns: Vec<Vec<f64>>,
+}
+
+impl FrfFile {
+    fn col(&self, name: &str) -> Option<&[f64]> {
+        self.names
+            .iter()
+            .position(|n| n == name)
+            .map(|k| self.columns[k].as_slice())
+    }
+
+    /// Quantity `q` as an [`Frd`](ambid_core::lti::Frd) with sample time `ts`; the variance is
+    /// `<q>_std²` unless every std is 0 (exact data), then `None`.
+    pub fn frd(&self, q: &str, ts: f64) -> Result<ambid_core::lti::Frd> {
+        let (re, im, sd) = match (
+            self.col(&format!("{q}_re")),
+            self.col(&format!("{q}_im")),
+            self.col(&format!("{q}_std")),
+        ) {
+            (Some(re), Some(im), sd) => (re, im, sd),
+            _ => bail!(
+                "the FRF file has no quantity `{q}` (columns {q}_re, {q}_im); it has: {}",
+                self.quantities.join(", ")
+            ),
+        };
+        let values = re
+            .iter()
+            .zip(im)
+            .map(|(r, i)| ambid_core::c64::new(*r, *i))
+            .collect();
+        let variance = sd
+            .filter(|s| s.iter().any(|v| *v != 0.0))
+            .map(|s| s.iter().map(|v| v * v).collect());
+        Ok(ambid_core::lti::Frd::new(
+            self.f_hz.clone(),
+            values,
+            variance,
+            Some(ts),
+        )?)
+    }
+
+    /// A real extra column such as `coh_ry`.
+    pub fn extra(&self, name: &str) -> Result<&[f64]> {
+        self.col(name).ok_or_else(|| {
+            anyhow!(
+                "the FRF file has no column `{name}`; it has: {}",
+                self.names.join(", ")
+            )
+        })
+    }
+}
+
+/// Reads an FRF CSV (`f_hz`, then `<q>_re, <q>_im, <q>_std` per quantity, then extra real
+/// columns). Every field must be a finite number and `f_hz` strictly increasing.
+pub fn read_frf_csv(path: &Path) -> Result<FrfFile> {
+    let mut rdr = ::csv::ReaderBuilder::new()
+        .trim(::csv::Trim::All)
+        .from_path(path)
+        .with_context(|| format!("cannot open {}", path.display()))?;
+    let header: Vec<String> = rdr
+        .headers()
+        .with_context(|| format!("{}: cannot read the header row", path.display()))?
+        .iter()
+        .map(str::to_string)
+        .collect();
+    if header.first().map(String::as_str) != Some("f_hz") {
+        bail!(
+            "{}: an FRF file starts with the column `f_hz` (got {:?}); see docs/formats.md",
+            path.display(),
+            header.first()
+        );
+    }
+    let mut cols: Vec<Vec<f64>> = vec![Vec::new(); header.len()];
+    for (line, rec) in rdr.records().enumerate() {
+        let rec = rec.with_context(|| format!("{}: data row {}", path.display(), line + 1))?;
+        if rec.len() != header.len() {
+            bail!(
+                "{}: data row {} has {} fields, the header has {}",
+                path.display(),
+                line + 1,
+                rec.len(),
+                header.len()
+            );
+        }
+        for (k, field) in rec.iter().enumerate() {
+            let v: f64 = field
+                .parse()
+                .ok()
+                .filter(|v: &f64| v.is_finite())
+                .ok_or_else(|| {
+                    anyhow!(
+                        "{}: data row {}, column `{}`: `{field}` is not a finite number",
+                        path.display(),
+                        line + 1,
+                        header[k]
+                    )
+                })?;
+            cols[k].push(v);
+        }
+    }
+    if cols[0].is_empty() {
+        bail!("{}: no data rows", path.display());
+    }
+    if let Some(k) = (1..cols[0].len()).find(|&k| cols[0][k] <= cols[0][k - 1]) {
+        bail!(
+            "{}: f_hz must increase strictly (row {} has {} after {})",
+            path.display(),
+            k + 1,
+            cols[0][k],
+            cols[0][k - 1]
+        );
+    }
+    let quantities = header
+        .iter()
+        .filter_map(|h| h.strip_suffix("_re"))
+        .filter(|q| header.iter().any(|h| *h == format!("{q}_im")))
+        .map(str::to_string)
+        .collect();
+    let f_hz = cols.remove(0);
+    let mut names = header;
+    names.remove(0);
+    Ok(FrfFile {
+        f_hz,
+        quantities,
+        names,
+        columns: cols,
+    })
+}

@@ -1,0 +1,241 @@
+//! `ambid fit <frf.csv> --quantity q` (parametric models fitted to FRF data) and
+//! `ambid compare-models` (the seed's table 1).
+
+use crate::cli_frf::parse_band;
+use ambid::io::csv::read_frf_csv;
+use ambid::io::model::{state_space_json, write_model_json};
+use ambid::io::{read_controller, read_time_csv};
+use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
+use ambid_core::validate::compare::{
+    compare_models, table, CompareSpec, FitStructure, ValidationRecord,
+};
+use anyhow::{bail, Context, Result};
+use clap::{Args, ValueEnum};
+use serde_json::json;
+use std::path::{Path, PathBuf};
+
+/// Weights of the FRF lines.
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum WeightsArg {
+    /// All lines alike.
+    Uniform,
+    /// Inverse variance from the file's `<q>_std` column (the default).
+    Variance,
+    /// From the coherence column (`coh_ry`).
+    Coherence,
+}
+
+/// The FRF and the fit options common to `fit --quantity` and `compare-models`.
+pub struct FrfInput {
+    pub frd: ambid_core::lti::Frd,
+    pub opts: FreqFitOptions,
+}
+
+/// Reads quantity `q` of an FRF CSV with sample rate `fs` and builds the fit options.
+pub fn frf_input(
+    path: &Path,
+    quantity: &str,
+    fs: Option<f64>,
+    band: Option<(f64, f64)>,
+    weights: WeightsArg,
+    max_iterations: usize,
+) -> Result<FrfInput> {
+    let Some(fs) = fs else {
+        bail!("FRF files carry no sample time: give the sample rate of the data with --fs (e.g. --fs 20000)");
+    };
+    if !(fs.is_finite() && fs > 0.0) {
+        bail!("--fs must be a positive sample rate in Hz, got {fs}");
+    }
+    let file = read_frf_csv(path)?;
+    let frd = file.frd(quantity, 1.0 / fs)?;
+    let weights = match weights {
+        WeightsArg::Uniform => FreqWeights::Uniform,
+        WeightsArg::Variance if frd.variance().is_some() => FreqWeights::InverseVariance,
+        WeightsArg::Variance => {
+            eprintln!("note: `{quantity}_std` is zero everywhere (exact data): uniform weights");
+            FreqWeights::Uniform
+        }
+        WeightsArg::Coherence => FreqWeights::Coherence(
+            file.extra("coh_ry")
+                .context("coherence weights need the `coh_ry` column of `ambid frf`")?
+                .to_vec(),
+        ),
+    };
+    let opts = FreqFitOptions {
+        band_hz: band,
+        weights,
+        max_iterations,
+        ..FreqFitOptions::default()
+    };
+    Ok(FrfInput { frd, opts })
+}
+
+/// Fits one structure and order to the FRF and writes the model JSON.
+#[allow(clippy::too_many_arguments)]
+pub fn fit_frf(
+    path: &Path,
+    quantity: &str,
+    structure: FitStructure,
+    order: usize,
+    nk: usize,
+    fs: Option<f64>,
+    band: Option<(f64, f64)>,
+    weights: WeightsArg,
+    max_iterations: usize,
+    out: &Path,
+) -> Result<()> {
+    let input = frf_input(path, quantity, fs, band, weights, max_iterations)?;
+    if order == 0 {
+        bail!("--order must be at least 1 for a fit to FRF data");
+    }
+    let spec = CompareSpec {
+        structures: vec![structure],
+        orders: vec![order],
+        nk,
+        fit: input.opts.clone(),
+        ..CompareSpec::default()
+    };
+    let rows = compare_models(&input.frd, &spec, None)?;
+    let row = &rows[0];
+    let Some(model) = &row.model else {
+        bail!(
+            "{} fit of order {order} failed: {}",
+            structure.name(),
+            row.note.as_deref().unwrap_or("unknown reason")
+        );
+    };
+    print!("{}", table(&rows));
+    let pz = ambid_core::validate::pz::PzAnalysis::from_state_space(
+        model,
+        &ambid_core::validate::pz::PzOptions::default(),
+    )?;
+    print!("{}", pz.table());
+    let meta = json!({
+        "method": format!("{}_frd", structure.name()),
+        "quantity": quantity,
+        "order": order,
+        "n_params": row.n_params,
+        "band_hz": input.opts.band_hz,
+        "relative_rmse": row.relative_rmse,
+        "median_relative": row.median_relative,
+        "db_rmse": row.db_rmse,
+        "bic": row.bic,
+        "unstable_poles": row.unstable_poles,
+        "source": path.display().to_string(),
+    });
+    write_model_json(out, &state_space_json(model, "u", quantity, meta))?;
+    println!("written: {}", out.display());
+    Ok(())
+}
+
+#[derive(Args)]
+pub struct CompareModelsArgs {
+    /// FRF CSV (as written by `ambid frf`).
+    frf: PathBuf,
+    /// Quantity of the FRF file to fit.
+    #[arg(long, default_value = "plant")]
+    quantity: String,
+    /// Sample rate of the data in Hz (FRF files carry none).
+    #[arg(long)]
+    fs: Option<f64>,
+    /// Structures to compare.
+    #[arg(long, value_delimiter = ',', default_value = "arx,oe,ss")]
+    structures: Vec<StructureName>,
+    /// Orders to compare.
+    #[arg(long, value_delimiter = ',', default_value = "6,7,8,9")]
+    orders: Vec<usize>,
+    /// Input delay of the ARX and OE models in samples.
+    #[arg(long, default_value_t = 1)]
+    nk: usize,
+    /// Band `f_min:f_max` in Hz (default: every line).
+    #[arg(long, value_parser = parse_band)]
+    band: Option<(f64, f64)>,
+    /// Weights of the lines.
+    #[arg(long, value_enum, default_value_t = WeightsArg::Variance)]
+    weights: WeightsArg,
+    /// Levenberg–Marquardt iteration limit of each fit.
+    #[arg(long, default_value_t = 100)]
+    max_iterations: usize,
+    /// Independent time record (columns r, y) for the closed-loop validation fit.
+    #[arg(long, requires = "controller")]
+    validation: Option<PathBuf>,
+    /// Controller file (TOML/JSON) for the closed-loop validation.
+    #[arg(long)]
+    controller: Option<PathBuf>,
+    /// Samples at the start of the validation record left out of the fit (transient).
+    #[arg(long, default_value_t = 0)]
+    skip: usize,
+    /// Output CSV of the comparison table.
+    #[arg(long, default_value = "comparison.csv")]
+    out: PathBuf,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum StructureName {
+    Arx,
+    Oe,
+    Ss,
+}
+
+impl From<StructureName> for FitStructure {
+    fn from(s: StructureName) -> Self {
+        match s {
+            StructureName::Arx => FitStructure::Arx,
+            StructureName::Oe => FitStructure::Oe,
+            StructureName::Ss => FitStructure::Ss,
+        }
+    }
+}
+
+pub fn compare(a: CompareModelsArgs) -> Result<()> {
+    let input = frf_input(
+        &a.frf,
+        &a.quantity,
+        a.fs,
+        a.band,
+        a.weights,
+        a.max_iterations,
+    )?;
+    let spec = CompareSpec {
+        structures: a.structures.iter().map(|s| (*s).into()).collect(),
+        orders: a.orders.clone(),
+        nk: a.nk,
+        fit: input.opts.clone(),
+        ..CompareSpec::default()
+    };
+    if spec.orders.contains(&0) {
+        bail!("--orders: every order must be at least 1");
+    }
+    let (rows, controller_desc) = match (&a.validation, &a.controller) {
+        (Some(v), Some(c)) => {
+            let ctrl = read_controller(c)?;
+            let ts = 1.0 / a.fs.unwrap_or(ctrl.fs_hz());
+            ctrl.check_ts(ts)?;
+            let d = read_time_csv(v, a.fs)?;
+            let (r, y) = (d.column("r")?, d.column("y")?);
+            let rec = ValidationRecord {
+                r,
+                y,
+                controller: ctrl.state_space(),
+                skip: a.skip,
+            };
+            (
+                compare_models(&input.frd, &spec, Some(rec))?,
+                Some(ctrl.description().to_string()),
+            )
+        }
+        _ => (compare_models(&input.frd, &spec, None)?, None),
+    };
+    print!("{}", table(&rows));
+    if let Some(d) = controller_desc {
+        println!("closed-loop validation with controller: {d}");
+    }
+    let mut w = ::csv::Writer::from_path(&a.out)
+        .with_context(|| format!("cannot create {}", a.out.display()))?;
+    for r in &rows {
+        w.serialize(r)?;
+    }
+    w.flush()?;
+    println!("written: {}", a.out.display());
+    Ok(())
+}

@@ -1,0 +1,174 @@
+//! `ambid fit <frf.csv> --quantity plant` and `ambid compare-models` end to end on the twin:
+//! simulate → frf → fit / compare (with the closed-loop validation on an independent record).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn ambid(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_ambid"))
+        .args(args)
+        .output()
+        .expect("the ambid binary runs")
+}
+
+fn text(o: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+const CONTROLLER: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/tests/fixtures/twin_controller.toml"
+);
+
+fn tmpdir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("ambid-freqfit-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+#[test]
+fn fit_and_compare_models_on_the_twin_plant_frf() {
+    let d = tmpdir("ok");
+    for (dir, seed) in [("e", "1"), ("v", "2")] {
+        let o = ambid(&[
+            "simulate",
+            "--mode",
+            "linear",
+            "--seed",
+            seed,
+            "--out",
+            s(&d.join(dir)),
+        ]);
+        assert!(o.status.success(), "{}", text(&o));
+    }
+    let frf = d.join("frf.csv");
+    let o = ambid(&[
+        "frf",
+        s(&d.join("e/data.csv")),
+        "--period-samples",
+        "5115",
+        "--band",
+        "10,1000",
+        "--out",
+        s(&frf),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    // one state-space fit of order 8
+    let model = d.join("plant.json");
+    let o = ambid(&[
+        "fit",
+        s(&frf),
+        "--quantity",
+        "plant",
+        "--structure",
+        "ss",
+        "--order",
+        "8",
+        "--band",
+        "10:1000",
+        "--fs",
+        "20000",
+        "--out",
+        s(&model),
+    ]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    eprintln!("{t}");
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
+    assert_eq!(m["kind"], "state_space");
+    assert!(m["meta"]["median_relative"].as_f64().unwrap() < 0.02, "{t}");
+    assert!(m["meta"]["unstable_poles"].as_u64().unwrap() >= 1, "{t}");
+    // the comparison with closed-loop validation on the independent record
+    let table = d.join("cmp.csv");
+    let o = ambid(&[
+        "compare-models",
+        s(&frf),
+        "--fs",
+        "20000",
+        "--band",
+        "10:1000",
+        "--orders",
+        "6,8",
+        "--validation",
+        s(&d.join("v/data.csv")),
+        "--controller",
+        CONTROLLER,
+        "--skip",
+        "5115",
+        "--out",
+        s(&table),
+    ]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    eprintln!("{t}");
+    let mut r = csv::Reader::from_path(&table).unwrap();
+    let h: Vec<String> = r.headers().unwrap().iter().map(String::from).collect();
+    let rows: Vec<Vec<String>> = r
+        .records()
+        .map(|x| x.unwrap().iter().map(String::from).collect())
+        .collect();
+    assert_eq!(rows.len(), 6, "3 structures × 2 orders");
+    let col = |n: &str| h.iter().position(|x| x == n).unwrap();
+    let ss8 = rows
+        .iter()
+        .find(|r| r[col("structure")] == "ss" && r[col("order")] == "8")
+        .unwrap();
+    let vfit: f64 = ss8[col("validation_fit")].parse().unwrap();
+    assert!(vfit > 90.0, "{t}");
+    // bad input: no --fs, unknown quantity, order 0
+    let o = ambid(&[
+        "fit",
+        s(&frf),
+        "--quantity",
+        "plant",
+        "--structure",
+        "ss",
+        "--order",
+        "8",
+    ]);
+    assert!(
+        !o.status.success() && text(&o).contains("--fs"),
+        "{}",
+        text(&o)
+    );
+    let o = ambid(&[
+        "fit",
+        s(&frf),
+        "--quantity",
+        "nope",
+        "--structure",
+        "oe",
+        "--order",
+        "4",
+        "--fs",
+        "20000",
+    ]);
+    assert!(
+        !o.status.success() && text(&o).contains("no quantity `nope`"),
+        "{}",
+        text(&o)
+    );
+    let o = ambid(&[
+        "fit",
+        s(&frf),
+        "--quantity",
+        "plant",
+        "--structure",
+        "oe",
+        "--order",
+        "0",
+        "--fs",
+        "20000",
+    ]);
+    assert!(!o.status.success(), "{}", text(&o));
+}
