@@ -263,3 +263,53 @@ fn bad_input_gives_typed_errors() {
     v[2] = c64::new(f64::NAN, 0.0);
     assert!(Frd::new(f.clone(), v, None, Some(TS)).is_err());
 }
+
+/// The coprime route on exact data: T = q^-1 B_t/F and S = B_s/F with a stable F of degree 4 and
+/// an unstable plant P = q^-1 B_t/B_s (a zero of S at 1.03 and a lightly damped pair): the plant is
+/// recovered to the bar, with its unstable pole.
+#[test]
+fn coprime_route_recovers_an_unstable_plant_from_t_ry_and_s() {
+    use ambid_core::estimate::freqfit::coprime_frd;
+    let (p1, p2) = (pair(0.9, 0.2), pair(0.95, 0.6));
+    let f_den = den_of(&[p1[0], p1[1], p2[0], p2[1]]);
+    let q = pair(0.985, 0.1);
+    let bs = den_of(&[c64::new(1.03, 0.0), q[0], q[1], c64::new(0.3, 0.0)]);
+    let bt = vec![0.02, -0.01, 0.005, 0.001];
+    let mut num_t = vec![0.0];
+    num_t.extend_from_slice(&bt);
+    let t = TransferFunction::new(num_t.clone(), f_den.clone(), TS).unwrap();
+    let s = TransferFunction::new(bs.clone(), f_den, TS).unwrap();
+    let plant = TransferFunction::new(num_t, bs, TS).unwrap();
+    let f = log_grid(200, 1.0, 450.0);
+    let fit = coprime_frd(
+        &frd_of(&t, &f),
+        &frd_of(&s, &f),
+        4,
+        1,
+        &FreqFitOptions::default(),
+    )
+    .unwrap();
+    let err = response_error(&fit.plant, &plant);
+    eprintln!(
+        "coprime route, exact data: plant response error {err:.2e} ({} LM iterations)",
+        fit.iterations
+    );
+    assert!(err < 1e-8, "{err:e}");
+    let p = fit.plant.poles().unwrap();
+    assert!(
+        p.iter().any(|z| (z - c64::new(1.03, 0.0)).norm() < 1e-8),
+        "{p:?}"
+    );
+    // mismatched lines are refused
+    let f2 = log_grid(150, 1.0, 450.0);
+    assert!(matches!(
+        coprime_frd(
+            &frd_of(&t, &f),
+            &frd_of(&s, &f2),
+            4,
+            1,
+            &FreqFitOptions::default()
+        ),
+        Err(Error::InvalidArgument { .. })
+    ));
+}

@@ -634,3 +634,280 @@ impl super::pem::lm::LeastSquaresProblem for TfProblem<'_> {
         finite.then_some(j)
     }
 }
+
+/// Result of [`coprime_frd`].
+#[derive(Debug, Clone)]
+pub struct CoprimeFit {
+    /// $\hat T_{ry} = q^{-n_k} B_t / F$.
+    pub t_ry: crate::lti::TransferFunction,
+    /// $\hat S = B_s / F$.
+    pub s: crate::lti::TransferFunction,
+    /// $\hat P = \hat T_{ry} / \hat S = q^{-n_k} B_t / B_s$: its poles are the zeros of $\hat S$.
+    pub plant: crate::lti::TransferFunction,
+    /// Errors of $\hat T_{ry}$ and of $\hat S$ on their lines.
+    pub errors: (FreqErrors, FreqErrors),
+    /// Weighted cost over both FRFs.
+    pub cost: f64,
+    /// Levenberg–Marquardt iterations.
+    pub iterations: usize,
+}
+
+/// The **coprime route** to an unstable plant: $T_{ry}$ and $S$ (both stable closed-loop maps,
+/// measured from $r$) fitted jointly with a common monic denominator $F$ of degree `n`,
+/// $\hat T_{ry} = q^{-n_k} B_t(q^{-1})/F$ ($n$ coefficients of $B_t$), $\hat S = B_s(q^{-1})/F$
+/// ($n + 1$ coefficients of $B_s$), then $\hat P = \hat T_{ry}/\hat S = q^{-n_k} B_t / B_s$. No
+/// controller model is needed, every fit is of a stable map, and the plant's unstable poles appear
+/// as zeros of $\hat S$. `n` is the closed-loop order (plant plus controller states). The
+/// criterion is the sum of the two weighted complex errors (each with the weights of `opts` on its
+/// own FRF), minimised as [`oe_frd`] does: Levy's linear problem, Sanathanan–Koerner iterations,
+/// then Levenberg–Marquardt.
+///
+/// # Errors
+/// As [`oe_frd`]; [`Error::InvalidArgument`] when the two FRFs have different frequencies or
+/// sample times, or `n = 0`.
+///
+/// # Example
+/// ```
+/// use ambid_core::estimate::freqfit::{coprime_frd, FreqFitOptions};
+/// use ambid_core::lti::{Frd, TransferFunction};
+/// // unstable plant P = 0.1 q^-1 / (1 - 1.05 q^-1), proportional controller 2: closed loop
+/// // 1 + PC has the root 1.05 - 0.2 = 0.85
+/// let (ts, f): (f64, Vec<f64>) = (1e-3, (1..120).map(|k| 4.0 * k as f64).collect());
+/// let t = TransferFunction::new(vec![0.0, 0.1], vec![1.0, -0.85], ts).unwrap();
+/// let s = TransferFunction::new(vec![1.0, -1.05], vec![1.0, -0.85], ts).unwrap();
+/// let frd = |g: &TransferFunction| Frd::new(f.clone(), g.freq_response(&f).unwrap(), None, Some(ts)).unwrap();
+/// let fit = coprime_frd(&frd(&t), &frd(&s), 1, 1, &FreqFitOptions::default()).unwrap();
+/// let p = fit.plant.poles().unwrap();
+/// assert!((p[0].re - 1.05).abs() < 1e-9);
+/// ```
+pub fn coprime_frd(
+    t_ry: &Frd,
+    s: &Frd,
+    n: usize,
+    nk: usize,
+    opts: &FreqFitOptions,
+) -> Result<CoprimeFit> {
+    if n == 0 {
+        return Err(Error::invalid(
+            "n",
+            "the closed-loop order must be at least 1",
+        ));
+    }
+    let dt = FreqData::new(t_ry, opts)?;
+    let ds = FreqData::new(s, opts)?;
+    if dt.f_hz != ds.f_hz || dt.ts != ds.ts {
+        return Err(Error::invalid(
+            "s",
+            "T_ry and S must be given on the same lines (same band, same weights' zero pattern) and at the same sample time",
+        ));
+    }
+    let (nbt, nbs) = (n, n + 1);
+    let np = nbt + nbs + n;
+    if 4 * dt.len() < np {
+        return Err(Error::invalid(
+            "band_hz",
+            format!("{} lines of two FRFs cannot determine {np} parameters; widen the band or lower the order", dt.len()),
+        ));
+    }
+    let zp = zeta_powers(&dt, (nk + nbt).max(nbs).max(n + 1));
+    let l = dt.len();
+    // Levy / SK: unknowns [b_t, b_s, f]; equations F T − ζ^nk B_t and F S − B_s
+    let solve = |v: &[f64]| -> Result<Vec<f64>> {
+        let mut cols: Vec<Vec<c64>> = Vec::with_capacity(np);
+        let zero = c64::new(0.0, 0.0);
+        for j in 0..nbt {
+            cols.push(
+                (0..2 * l)
+                    .map(|k| if k < l { zp[nk + j][k] } else { zero })
+                    .collect(),
+            );
+        }
+        for zj in &zp[..nbs] {
+            cols.push(
+                (0..2 * l)
+                    .map(|k| if k < l { zero } else { zj[k - l] })
+                    .collect(),
+            );
+        }
+        for zi in &zp[1..=n] {
+            cols.push(
+                (0..2 * l)
+                    .map(|k| {
+                        if k < l {
+                            -zi[k] * dt.g[k]
+                        } else {
+                            -zi[k - l] * ds.g[k - l]
+                        }
+                    })
+                    .collect(),
+            );
+        }
+        let rhs: Vec<c64> = dt.g.iter().chain(&ds.g).copied().collect();
+        let wt: Vec<f64> = (0..2 * l)
+            .map(|k| {
+                if k < l {
+                    dt.w[k] * v[k]
+                } else {
+                    ds.w[k - l] * v[k - l]
+                }
+                .sqrt()
+            })
+            .collect();
+        complex_lstsq(&cols, &rhs, &wt)
+    };
+    let mut x = solve(&vec![1.0; l])?;
+    for _ in 0..opts.sk_iterations {
+        let f = &x[nbt + nbs..];
+        let v: Vec<f64> = (0..l)
+            .map(|k| {
+                1.0 / (c64::new(1.0, 0.0) + poly_at(f, 1, &zp, k))
+                    .norm_sqr()
+                    .max(f64::MIN_POSITIVE)
+            })
+            .collect();
+        match solve(&v) {
+            Ok(nx) => x = nx,
+            Err(_) => break,
+        }
+    }
+    let mut prob = CoprimeProblem {
+        dt: &dt,
+        ds: &ds,
+        zp: &zp,
+        nbt,
+        nbs,
+        nk,
+    };
+    let lm = super::pem::lm::LmOptions::default()
+        .with_max_iterations(opts.max_iterations.max(1))?
+        .with_loss_tol(1e-14)?;
+    let (x, report) = super::pem::lm::minimize(&mut prob, &x, &lm)?;
+    let (bt, rest) = x.split_at(nbt);
+    let (bs, f) = rest.split_at(nbs);
+    let mut den = vec![1.0];
+    den.extend_from_slice(f);
+    let mut num_t = vec![0.0; nk];
+    num_t.extend_from_slice(bt);
+    let t_model = crate::lti::TransferFunction::new(num_t.clone(), den.clone(), dt.ts)?;
+    let s_model = crate::lti::TransferFunction::new(bs.to_vec(), den, dt.ts)?;
+    if bs[0] == 0.0 {
+        return Err(Error::numerical(
+            "coprime_frd",
+            "the fitted S has no direct term, so P = T_ry/S is improper; check that S is the map from r to u",
+        ));
+    }
+    let plant = crate::lti::TransferFunction::new(num_t, bs.to_vec(), dt.ts)?;
+    let rt = t_model.freq_response(&dt.f_hz)?;
+    let rs = s_model.freq_response(&ds.f_hz)?;
+    Ok(CoprimeFit {
+        errors: (FreqErrors::of(&rt, &dt), FreqErrors::of(&rs, &ds)),
+        t_ry: t_model,
+        s: s_model,
+        plant,
+        cost: report.cost * 2.0,
+        iterations: report.iterations,
+    })
+}
+
+/// Residuals of both FRFs for [`coprime_frd`].
+struct CoprimeProblem<'a> {
+    dt: &'a FreqData,
+    ds: &'a FreqData,
+    zp: &'a [Vec<c64>],
+    nbt: usize,
+    nbs: usize,
+    nk: usize,
+}
+
+impl super::pem::lm::LeastSquaresProblem for CoprimeProblem<'_> {
+    fn residuals(&mut self, x: &[f64]) -> Option<Vec<f64>> {
+        let (bt, rest) = x.split_at(self.nbt);
+        let (bs, f) = rest.split_at(self.nbs);
+        let mut r = Vec::with_capacity(4 * self.dt.len());
+        for k in 0..self.dt.len() {
+            let fk = c64::new(1.0, 0.0) + poly_at(f, 1, self.zp, k);
+            let et = (poly_at(bt, self.nk, self.zp, k) / fk - self.dt.g[k]) * self.dt.w[k].sqrt();
+            let es = (poly_at(bs, 0, self.zp, k) / fk - self.ds.g[k]) * self.ds.w[k].sqrt();
+            r.extend_from_slice(&[et.re, et.im, es.re, es.im]);
+        }
+        r.iter().all(|v| v.is_finite()).then_some(r)
+    }
+    fn jacobian(&mut self, x: &[f64]) -> Option<faer::Mat<f64>> {
+        let (bt, rest) = x.split_at(self.nbt);
+        let (bs, f) = rest.split_at(self.nbs);
+        let (nbt, nbs) = (self.nbt, self.nbs);
+        let mut j = faer::Mat::<f64>::zeros(4 * self.dt.len(), x.len());
+        for k in 0..self.dt.len() {
+            let (swt, sws) = (self.dt.w[k].sqrt(), self.ds.w[k].sqrt());
+            let fk = c64::new(1.0, 0.0) + poly_at(f, 1, self.zp, k);
+            let tk = poly_at(bt, self.nk, self.zp, k) / fk;
+            let sk = poly_at(bs, 0, self.zp, k) / fk;
+            let row = 4 * k;
+            for p in 0..nbt {
+                let d = self.zp[self.nk + p][k] / fk * swt;
+                j[(row, p)] = d.re;
+                j[(row + 1, p)] = d.im;
+            }
+            for p in 0..nbs {
+                let d = self.zp[p][k] / fk * sws;
+                j[(row + 2, nbt + p)] = d.re;
+                j[(row + 3, nbt + p)] = d.im;
+            }
+            for i in 1..=f.len() {
+                let col = nbt + nbs + i - 1;
+                let dt = -(self.zp[i][k] * tk) / fk * swt;
+                let ds = -(self.zp[i][k] * sk) / fk * sws;
+                j[(row, col)] = dt.re;
+                j[(row + 1, col)] = dt.im;
+                j[(row + 2, col)] = ds.re;
+                j[(row + 3, col)] = ds.im;
+            }
+        }
+        let finite = j.col_iter().all(|c| c.iter().all(|v| v.is_finite()));
+        finite.then_some(j)
+    }
+}
+
+/// The input delay of an OE model estimated from frequency data: [`oe_frd`] for every
+/// $n_k = 0, \dots,$ `max_nk` with the same $n_b$, $n_f$ (so the same parameter count), keeping the
+/// lowest weighted cost. Returns the delay and its fit.
+///
+/// # Errors
+/// As [`oe_frd`] when no delay gives a fit.
+///
+/// # Example
+/// ```
+/// use ambid_core::estimate::freqfit::{estimate_delay, FreqFitOptions};
+/// use ambid_core::lti::{Frd, TransferFunction};
+/// let g = TransferFunction::new(vec![0.0, 0.0, 0.0, 0.3, 0.2], vec![1.0, -0.6], 1e-3).unwrap();
+/// let f: Vec<f64> = (1..100).map(|k| 4.0 * k as f64).collect();
+/// let frd = Frd::new(f.clone(), g.freq_response(&f).unwrap(), None, Some(1e-3)).unwrap();
+/// let (nk, fit) = estimate_delay(&frd, 2, 1, 6, &FreqFitOptions::default()).unwrap();
+/// assert_eq!(nk, 3);
+/// assert!(fit.errors.relative_rmse < 1e-9);
+/// ```
+pub fn estimate_delay(
+    frd: &Frd,
+    nb: usize,
+    nf: usize,
+    max_nk: usize,
+    opts: &FreqFitOptions,
+) -> Result<(usize, FreqFit<crate::lti::TransferFunction>)> {
+    let mut best: Option<(usize, FreqFit<crate::lti::TransferFunction>)> = None;
+    let mut last_err = None;
+    for nk in 0..=max_nk {
+        match oe_frd(frd, &TfOrders { nb, nf, nk }, opts) {
+            Ok(fit) => {
+                if best.as_ref().is_none_or(|(_, b)| fit.cost < b.cost) {
+                    best = Some((nk, fit));
+                }
+            }
+            Err(e) => last_err = Some(e),
+        }
+    }
+    match (best, last_err) {
+        (Some(b), _) => Ok(b),
+        (None, Some(e)) => Err(e),
+        (None, None) => Err(Error::invalid("max_nk", "no delay was tried")),
+    }
+}

@@ -163,7 +163,7 @@ fn candidate(
         note: None,
         model: None,
     };
-    let fitted: Result<(StateSpace, usize, f64, FreqErrors)> = (|| {
+    let fitted: Result<(StateSpace, usize, f64, FreqErrors, usize)> = (|| {
         let o = TfOrders {
             nb: order,
             nf: order,
@@ -173,11 +173,11 @@ fn candidate(
         match structure {
             FitStructure::Arx => {
                 let f = arx_frd(frd, &o, &spec.fit)?;
-                Ok((tf(f.model)?, f.n_params, f.cost, f.errors))
+                Ok((tf(f.model)?, f.n_params, f.cost, f.errors, 0))
             }
             FitStructure::Oe => {
                 let f = oe_frd(frd, &o, &spec.fit)?;
-                Ok((tf(f.model)?, f.n_params, f.cost, f.errors))
+                Ok((tf(f.model)?, f.n_params, f.cost, f.errors, f.iterations))
             }
             FitStructure::Ss => {
                 let f = crate::estimate::freqfit_ss::ss_frd(
@@ -186,11 +186,11 @@ fn candidate(
                     &spec.fit,
                     &crate::estimate::freqfit_ss::SsFreqOptions::default(),
                 )?;
-                Ok((f.model, f.n_params, f.cost, f.errors))
+                Ok((f.model, f.n_params, f.cost, f.errors, f.iterations))
             }
         }
     })();
-    let (model, n_params, cost, errors) = match fitted {
+    let (model, n_params, cost, errors, iterations) = match fitted {
         Ok(v) => v,
         Err(e) => {
             row.note = Some(format!("fit failed: {e}"));
@@ -198,6 +198,11 @@ fn candidate(
         }
     };
     row.n_params = n_params;
+    if structure != FitStructure::Arx && iterations >= spec.fit.max_iterations {
+        row.note = Some(format!(
+            "the refinement stopped at its iteration limit ({iterations}): the model may not be at the optimum"
+        ));
+    }
     row.rmse = Some(errors.rmse);
     row.relative_rmse = Some(errors.relative_rmse);
     row.db_rmse = Some(errors.db_rmse);
