@@ -313,3 +313,45 @@ fn coprime_route_recovers_an_unstable_plant_from_t_ry_and_s() {
         Err(Error::InvalidArgument { .. })
     ));
 }
+
+/// Coherence weights γ²/((1 − γ²)|G|²) equal the inverse-variance weights when the coherence is
+/// the one that the H1 estimate's variance σ² = (1 − γ²)|G|²/(2 n_d γ²) implies (after both are
+/// normalised to mean 1).
+#[test]
+fn coherence_weights_match_inverse_variance_weights() {
+    use ambid_core::estimate::freqfit::FreqData;
+    let (_, g, _) = systems().remove(0);
+    let f = log_grid(80, 1.0, 450.0);
+    let v = g.freq_response(&f).unwrap();
+    let nd = 19.0;
+    let var: Vec<f64> = v
+        .iter()
+        .enumerate()
+        .map(|(k, g)| g.norm_sqr() * (0.001 + 0.0001 * k as f64))
+        .collect();
+    let coh: Vec<f64> = v
+        .iter()
+        .zip(&var)
+        .map(|(g, s2)| 1.0 / (1.0 + 2.0 * nd * s2 / g.norm_sqr()))
+        .collect();
+    let frd = Frd::new(f.clone(), v, Some(var), Some(TS)).unwrap();
+    let iv = FreqData::new(
+        &frd,
+        &FreqFitOptions {
+            weights: FreqWeights::InverseVariance,
+            ..FreqFitOptions::default()
+        },
+    )
+    .unwrap();
+    let ch = FreqData::new(
+        &frd,
+        &FreqFitOptions {
+            weights: FreqWeights::Coherence(coh),
+            ..FreqFitOptions::default()
+        },
+    )
+    .unwrap();
+    for (a, b) in iv.w.iter().zip(&ch.w) {
+        assert!((a - b).abs() < 1e-12 * a, "{a} vs {b}");
+    }
+}
