@@ -1,7 +1,8 @@
 //! Model validation: closed-loop simulation of identified plants, model comparison, pole-zero
-//! analysis, residual tests.
+//! analysis, residual tests, the ISO 14839-3 sensitivity zone.
 
 pub mod closed_loop;
 pub mod compare;
+pub mod iso;
 pub mod pz;
 pub mod residuals;
