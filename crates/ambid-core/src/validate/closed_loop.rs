@@ -331,11 +331,8 @@ mod tests {
             StateSpace::discrete(mat![[0.0]], mat![[0.0]], mat![[0.0]], mat![[1.0]], ts).unwrap();
         let t_wy = c.series(&p).unwrap().feedback(&one).unwrap();
         let y = t_wy.simulate_siso(&w, None).unwrap();
-        for k in 0..w.len() {
-            assert!(
-                (y[k] - out.y[k]).abs() < 1e-10 * (1.0 + y[k].abs()),
-                "w → y at {k}"
-            );
+        for (k, (a, b)) in y.iter().zip(&out.y).enumerate() {
+            assert!((a - b).abs() < 1e-10 * (1.0 + a.abs()), "w → y at {k}");
         }
         // an unstable loop is refused with a typed error
         let weak =
