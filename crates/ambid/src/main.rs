@@ -16,6 +16,7 @@ use std::path::{Path, PathBuf};
 mod cli_fit;
 mod cli_freqfit;
 mod cli_frf;
+mod cli_validate;
 
 #[derive(Parser)]
 #[command(
@@ -61,6 +62,10 @@ enum Command {
     /// (frequency errors, BIC, closed-loop validation fit with the controller, unstable poles):
     /// the seed paper's table 1; writes the table as CSV.
     CompareModels(cli_freqfit::CompareModelsArgs),
+    /// Validate a model on an independent record through the closed loop with the controller:
+    /// fits of displacement and current, windows, residual tests, closed-loop poles, margins and
+    /// the ISO 14839-3 zone; writes summary.json, timeseries.csv and residuals.csv.
+    Validate(cli_validate::ValidateArgs),
 }
 
 #[derive(Args)]
@@ -340,6 +345,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         Command::Fit(a) => cli_fit::fit(a),
         Command::Order(a) => cli_fit::order(a),
         Command::CompareModels(a) => cli_freqfit::compare(a),
+        Command::Validate(a) => cli_validate::validate(a),
     }
 }
 

@@ -125,6 +125,50 @@ fn fit_and_compare_models_on_the_twin_plant_frf() {
         .unwrap();
     let vfit: f64 = ss8[col("validation_fit")].parse().unwrap();
     assert!(vfit > 90.0, "{t}");
+    // validate the plant model through the loop on the independent record
+    let vdir = d.join("val");
+    let o = ambid(&[
+        "validate",
+        s(&model),
+        "--data",
+        s(&d.join("v/data.csv")),
+        "--controller",
+        CONTROLLER,
+        "--skip",
+        "5115",
+        "--frf",
+        s(&frf),
+        "--out",
+        s(&vdir),
+    ]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    eprintln!("{t}");
+    let sum: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(vdir.join("summary.json")).unwrap()).unwrap();
+    assert!(sum["fit_y_pct"].as_f64().unwrap() > 90.0, "{t}");
+    assert_eq!(sum["iso_model"]["zone"], "A", "{t}");
+    assert_eq!(sum["iso_measured"]["zone"], "A", "{t}");
+    assert!(vdir.join("timeseries.csv").exists() && vdir.join("residuals.csv").exists());
+    // a model at another sample rate is refused
+    let m10 = d.join("m10.json");
+    let mut mv: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
+    mv["ts"] = serde_json::json!(1e-4);
+    std::fs::write(&m10, mv.to_string()).unwrap();
+    let o = ambid(&[
+        "validate",
+        s(&m10),
+        "--data",
+        s(&d.join("v/data.csv")),
+        "--controller",
+        CONTROLLER,
+    ]);
+    assert!(
+        !o.status.success() && text(&o).contains("sample time"),
+        "{}",
+        text(&o)
+    );
     // bad input: no --fs, unknown quantity, order 0
     let o = ambid(&[
         "fit",

@@ -4,5 +4,6 @@
 pub mod closed_loop;
 pub mod compare;
 pub mod iso;
+pub mod margins;
 pub mod pz;
 pub mod residuals;

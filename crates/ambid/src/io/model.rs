@@ -43,3 +43,78 @@ pub fn write_model_json(path: &Path, model: &Value) -> Result<()> {
     std::fs::write(path, serde_json::to_string_pretty(model)?)
         .with_context(|| format!("cannot write {}", path.display()))
 }
+
+/// Reads a model file written by `ambid fit` (`kind = "state_space"` or `"polynomial"`) as a
+/// discrete state-space model of its deterministic part $G$ (input → output).
+pub fn read_model_json(path: &Path) -> Result<StateSpace> {
+    use anyhow::{anyhow, bail};
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let v: Value = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not valid JSON", path.display()))?;
+    let ts = v["ts"]
+        .as_f64()
+        .filter(|t| *t > 0.0)
+        .ok_or_else(|| anyhow!("{}: a discrete model needs a positive `ts`", path.display()))?;
+    let vec_of = |key: &str| -> Result<Vec<f64>> {
+        v[key]
+            .as_array()
+            .ok_or_else(|| anyhow!("{}: `{key}` must be an array of numbers", path.display()))?
+            .iter()
+            .map(|x| {
+                x.as_f64()
+                    .ok_or_else(|| anyhow!("{}: `{key}` holds a non-number", path.display()))
+            })
+            .collect()
+    };
+    let mat_of = |key: &str| -> Result<faer::Mat<f64>> {
+        let rows = v[key]
+            .as_array()
+            .ok_or_else(|| anyhow!("{}: `{key}` must be an array of rows", path.display()))?;
+        let data: Vec<Vec<f64>> = rows
+            .iter()
+            .map(|r| {
+                r.as_array()
+                    .ok_or_else(|| anyhow!("{}: `{key}` must be an array of rows", path.display()))?
+                    .iter()
+                    .map(|x| {
+                        x.as_f64().ok_or_else(|| {
+                            anyhow!("{}: `{key}` holds a non-number", path.display())
+                        })
+                    })
+                    .collect::<Result<Vec<f64>>>()
+            })
+            .collect::<Result<_>>()?;
+        let nc = data.first().map_or(0, Vec::len);
+        if data.iter().any(|r| r.len() != nc) {
+            bail!("{}: the rows of `{key}` differ in length", path.display());
+        }
+        Ok(faer::Mat::from_fn(data.len(), nc, |i, j| data[i][j]))
+    };
+    match v["kind"].as_str() {
+        Some("state_space") => {
+            Ok(
+                StateSpace::discrete(mat_of("a")?, mat_of("b")?, mat_of("c")?, mat_of("d")?, ts)
+                    .with_context(|| {
+                        format!("{}: inconsistent state-space matrices", path.display())
+                    })?,
+            )
+        }
+        Some("polynomial") => {
+            let m = PolyModel::general(
+                vec_of("a")?,
+                vec_of("b")?,
+                vec_of("c")?,
+                vec_of("d")?,
+                vec_of("f")?,
+                ts,
+            )
+            .with_context(|| format!("{}: inconsistent polynomials", path.display()))?;
+            Ok(m.g()?.to_state_space()?)
+        }
+        other => bail!(
+            "{}: unknown model kind {other:?} (expected \"state_space\" or \"polynomial\")",
+            path.display()
+        ),
+    }
+}
