@@ -138,12 +138,39 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
     let s_model: Vec<c64> = l.iter().map(|v| (c64::new(1.0, 0.0) + v).inv()).collect();
     let s_frd = ambid_core::lti::Frd::new(grid.clone(), s_model, None, Some(ts))?;
     let iso_model = sensitivity_zone(&s_frd, &IsoZones::default())?;
-    let iso_measured = match &a.frf {
-        Some(p) => Some(sensitivity_zone(
-            &read_frf_csv(p)?.frd("t_ru", ts)?,
-            &IsoZones::default(),
-        )?),
-        None => None,
+    // closed-loop consistency: the model's S and T_ry in the loop against the measured ones
+    let (iso_measured, consistency) = match &a.frf {
+        Some(p) => {
+            let file = read_frf_csv(p)?;
+            let s_meas = file.frd("t_ru", ts)?;
+            let t_meas = file.frd("t_ry", ts)?;
+            let f = s_meas.f_hz().to_vec();
+            let (gp, gc) = (model.freq_response_siso(&f)?, c.freq_response_siso(&f)?);
+            let med = |pred: &[c64], meas: &[c64]| {
+                let mut r: Vec<f64> = pred
+                    .iter()
+                    .zip(meas)
+                    .map(|(a, b)| (a - b).norm() / b.norm())
+                    .collect();
+                r.sort_by(f64::total_cmp);
+                r[r.len() / 2]
+            };
+            let s_pred: Vec<c64> = gp
+                .iter()
+                .zip(&gc)
+                .map(|(p, c)| (c64::new(1.0, 0.0) + p * c).inv())
+                .collect();
+            let t_pred: Vec<c64> = gp.iter().zip(&s_pred).map(|(p, s)| p * s).collect();
+            (
+                Some(sensitivity_zone(&s_meas, &IsoZones::default())?),
+                Some(json!({
+                    "s_median_relative_error": med(&s_pred, s_meas.values()),
+                    "t_ry_median_relative_error": med(&t_pred, t_meas.values()),
+                    "lines": f.len(),
+                })),
+            )
+        }
+        None => (None, None),
     };
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("cannot create {}", a.out.display()))?;
@@ -199,6 +226,7 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
         "margins": mg,
         "iso_model": iso_model,
         "iso_measured": iso_measured,
+        "consistency": consistency,
     });
     std::fs::write(
         a.out.join("summary.json"),
@@ -231,6 +259,14 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
         iso_model.zone,
         iso_measured.as_ref().map_or(String::new(), |m| format!(", measured max|S| {:.3} ({:?}) → zone {:?}", m.peak, m.interval, m.zone))
     );
+    if let Some(cns) = &consistency {
+        println!(
+            "closed-loop consistency: model S vs measured S median {:.3} %, T_ry {:.3} % over {} lines",
+            100.0 * cns["s_median_relative_error"].as_f64().unwrap_or(f64::NAN),
+            100.0 * cns["t_ry_median_relative_error"].as_f64().unwrap_or(f64::NAN),
+            cns["lines"]
+        );
+    }
     println!("written: {}", a.out.display());
     Ok(())
 }

@@ -150,6 +150,13 @@ fn fit_and_compare_models_on_the_twin_plant_frf() {
     assert_eq!(sum["iso_model"]["zone"], "A", "{t}");
     assert_eq!(sum["iso_measured"]["zone"], "A", "{t}");
     assert!(vdir.join("timeseries.csv").exists() && vdir.join("residuals.csv").exists());
+    assert!(
+        sum["consistency"]["s_median_relative_error"]
+            .as_f64()
+            .unwrap()
+            < 0.01,
+        "{t}"
+    );
     // a model at another sample rate is refused
     let m10 = d.join("m10.json");
     let mut mv: serde_json::Value =

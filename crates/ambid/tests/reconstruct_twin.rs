@@ -125,6 +125,29 @@ fn identified_order_7_reconstructs_and_order_5_is_located_and_rejected() {
         r7.fit_y,
         r7.fit_u
     );
+    // margins of the identified loop against the exact loop (log grid up to 9.8 kHz)
+    let grid: Vec<f64> = (0..4000)
+        .map(|k| 0.5 * (9800.0f64 / 0.5).powf(k as f64 / 3999.0))
+        .collect();
+    let lg = |p: &StateSpace| -> ambid_core::validate::margins::Margins {
+        let (gp, gc) = (
+            p.freq_response_siso(&grid).unwrap(),
+            twin.controller().freq_response_siso(&grid).unwrap(),
+        );
+        let l: Vec<ambid_core::c64> = gp.iter().zip(&gc).map(|(a, b)| a * b).collect();
+        ambid_core::validate::margins::margins(&grid, &l).unwrap()
+    };
+    let (me, mi) = (lg(twin.plant()), lg(&m7));
+    eprintln!(
+        "margins exact / order 7: phase {:.2} / {:.2} deg, lower gain {:.4} / {:.4}, upper gain {:.3} / {:.3}, max|S| {:.3} / {:.3}",
+        me.phase_margin().unwrap(), mi.phase_margin().unwrap(),
+        me.lower_gain_margin().unwrap(), mi.lower_gain_margin().unwrap(),
+        me.upper_gain_margin().unwrap(), mi.upper_gain_margin().unwrap(),
+        me.peak_sensitivity.0, mi.peak_sensitivity.0
+    );
+    assert!((me.phase_margin().unwrap() - mi.phase_margin().unwrap()).abs() < 1.0);
+    assert!((me.lower_gain_margin().unwrap() / mi.lower_gain_margin().unwrap() - 1.0).abs() < 0.02);
+    assert!((me.peak_sensitivity.0 / mi.peak_sensitivity.0 - 1.0).abs() < 0.02);
     let r5 = reconstruct(&m5, twin.controller(), &w, None, &y, &u, 20, ts).unwrap();
     let worst = r5.worst_window().unwrap();
     // a linear chirp 1–1000 Hz over 10 s: the window's frequency band
