@@ -89,28 +89,11 @@ fn subspace_i120_pem_prediction_20(b: Bencher) {
 #[divan::bench(sample_count = 10)]
 fn compare_models_3x4_on_plant_frf(b: Bencher) {
     use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
-    use ambid_core::frf::closed_loop::{from_periodic, Channels};
-    use ambid_core::frf::periodic::{PeriodicAnalyzer, PeriodicOptions};
     use ambid_core::validate::compare::{compare_models, CompareSpec};
-    const PERIOD: usize = 5115;
-    let rec = run(&Experiment::seed_paper(Mode::Linear, 1e-7, 1))
+    let frf = run(&Experiment::seed_paper(Mode::Linear, 1e-7, 1))
         .expect("seed experiment")
-        .record;
-    let mut an = PeriodicAnalyzer::new(PERIOD).expect("analyzer");
-    let s = an
-        .analyze(
-            &[&rec.r, &rec.u, &rec.y],
-            1.0 / rec.ts,
-            &PeriodicOptions::new(PERIOD).skip(1),
-        )
-        .expect("periodic");
-    let lines: Vec<usize> = s
-        .excited_lines(0, 1e-6)
-        .expect("lines")
-        .into_iter()
-        .filter(|&k| (10.0..=1000.0).contains(&s.line_hz(k)))
-        .collect();
-    let frf = from_periodic(&s, Channels { r: 0, u: 1, y: 2 }, &lines, None).expect("frf");
+        .periodic_frf((10.0, 1000.0), None)
+        .expect("frf");
     let spec = CompareSpec {
         fit: FreqFitOptions {
             weights: FreqWeights::InverseVariance,

@@ -259,6 +259,48 @@ pub fn run(exp: &Experiment) -> Result<ExperimentOutput> {
     })
 }
 
+impl ExperimentOutput {
+    /// The period-averaged closed-loop FRFs of a periodic experiment ([`from_periodic`]:
+    /// joint input–output plant, T_ry, S = T_ru, variances and coherences) on the excited lines in
+    /// `band_hz`, with the first period dropped (the transient); with `controller`, also the
+    /// indirect plant estimate.
+    ///
+    /// [`from_periodic`]: ambid_core::frf::closed_loop::from_periodic
+    ///
+    /// # Errors
+    /// A non-periodic excitation, or the errors of the periodic analysis.
+    pub fn periodic_frf(
+        &self,
+        band_hz: (f64, f64),
+        controller: Option<&ambid_core::lti::StateSpace>,
+    ) -> Result<ambid_core::frf::closed_loop::ClosedLoopFrf> {
+        use ambid_core::frf::closed_loop::{from_periodic, Channels};
+        use ambid_core::frf::periodic::{PeriodicAnalyzer, PeriodicOptions};
+        let period = self.excitation.period_samples;
+        if self.excitation.periods < 2 {
+            bail!("the excitation is not periodic (one period): use a Welch estimate instead");
+        }
+        let rec = &self.record;
+        let mut an = PeriodicAnalyzer::new(period)?;
+        let s = an.analyze(
+            &[&rec.r, &rec.u, &rec.y],
+            1.0 / rec.ts,
+            &PeriodicOptions::new(period).skip(1),
+        )?;
+        let lines: Vec<usize> = s
+            .excited_lines(0, 1e-6)?
+            .into_iter()
+            .filter(|&k| (band_hz.0..=band_hz.1).contains(&s.line_hz(k)))
+            .collect();
+        Ok(from_periodic(
+            &s,
+            Channels { r: 0, u: 1, y: 2 },
+            &lines,
+            controller,
+        )?)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

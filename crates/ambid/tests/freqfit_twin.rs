@@ -4,8 +4,7 @@
 use ambid::experiment::{run, Experiment};
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::estimate::freqfit_ss::{ss_frd, SsFreqOptions};
-use ambid_core::frf::closed_loop::{from_periodic, Channels, ClosedLoopFrf};
-use ambid_core::frf::periodic::{PeriodicAnalyzer, PeriodicOptions};
+use ambid_core::frf::closed_loop::ClosedLoopFrf;
 use ambid_core::lti::StateSpace;
 use ambid_twin::{Mode, Twin};
 
@@ -19,22 +18,7 @@ fn seed_experiment(seed: u64) -> Experiment {
 /// (as in `frf_twin.rs`).
 fn estimate(seed: u64, controller: Option<&StateSpace>) -> (ClosedLoopFrf, Twin) {
     let out = run(&seed_experiment(seed)).unwrap();
-    let rec = &out.record;
-    let mut an = PeriodicAnalyzer::new(PERIOD).unwrap();
-    let s = an
-        .analyze(
-            &[&rec.r, &rec.u, &rec.y],
-            1.0 / rec.ts,
-            &PeriodicOptions::new(PERIOD).skip(1),
-        )
-        .unwrap();
-    let lines: Vec<usize> = s
-        .excited_lines(0, 1e-6)
-        .unwrap()
-        .into_iter()
-        .filter(|&k| (10.0..=1000.0).contains(&s.line_hz(k)))
-        .collect();
-    let frf = from_periodic(&s, Channels { r: 0, u: 1, y: 2 }, &lines, controller).unwrap();
+    let frf = out.periodic_frf((10.0, 1000.0), controller).unwrap();
     (frf, out.twin)
 }
 

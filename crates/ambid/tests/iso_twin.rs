@@ -3,13 +3,9 @@
 //! controller and with detuned derivative gains.
 
 use ambid::experiment::{run, Experiment};
-use ambid_core::frf::closed_loop::{from_periodic, Channels};
-use ambid_core::frf::periodic::{PeriodicAnalyzer, PeriodicOptions};
 use ambid_core::lti::Frd;
 use ambid_core::validate::iso::{sensitivity_zone, IsoZones};
 use ambid_twin::Mode;
-
-const PERIOD: usize = 1023 * 5;
 
 /// (measured verdict, exact verdict on the same lines, exact peak on a fine grid) for `kd`.
 fn zones(
@@ -23,21 +19,7 @@ fn zones(
     exp.twin.controller.kd = kd;
     let out = run(&exp).unwrap();
     let rec = &out.record;
-    let mut an = PeriodicAnalyzer::new(PERIOD).unwrap();
-    let s = an
-        .analyze(
-            &[&rec.r, &rec.u, &rec.y],
-            1.0 / rec.ts,
-            &PeriodicOptions::new(PERIOD).skip(1),
-        )
-        .unwrap();
-    let lines: Vec<usize> = s
-        .excited_lines(0, 1e-6)
-        .unwrap()
-        .into_iter()
-        .filter(|&k| (10.0..=2000.0).contains(&s.line_hz(k)))
-        .collect();
-    let frf = from_periodic(&s, Channels { r: 0, u: 1, y: 2 }, &lines, None).unwrap();
+    let frf = out.periodic_frf((10.0, 2000.0), None).unwrap();
     let z = IsoZones::default();
     let measured = sensitivity_zone(&frf.t_ru, &z).unwrap();
     let f = frf.f_hz().to_vec();

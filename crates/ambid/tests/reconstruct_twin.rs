@@ -4,8 +4,6 @@
 use ambid::experiment::{run, Experiment};
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::estimate::freqfit_ss::{ss_frd, SsFreqOptions};
-use ambid_core::frf::closed_loop::{from_periodic, Channels};
-use ambid_core::frf::periodic::{PeriodicAnalyzer, PeriodicOptions};
 use ambid_core::lti::StateSpace;
 use ambid_core::signal::chirp::{ChirpSpec, Sweep};
 use ambid_core::validate::closed_loop::{reconstruct, simulate_loop};
@@ -45,22 +43,7 @@ fn twin_response(twin: &Twin, w: &[f64], noise: bool) -> (Vec<f64>, Vec<f64>) {
 /// The plant model of `order` fitted to the period-averaged seed-1 plant FRF (10–1000 Hz).
 fn identified(order: usize) -> (StateSpace, Twin) {
     let out = run(&Experiment::seed_paper(Mode::Linear, 0.1e-6, 1)).unwrap();
-    let rec = &out.record;
-    let mut an = PeriodicAnalyzer::new(PERIOD).unwrap();
-    let s = an
-        .analyze(
-            &[&rec.r, &rec.u, &rec.y],
-            1.0 / rec.ts,
-            &PeriodicOptions::new(PERIOD).skip(1),
-        )
-        .unwrap();
-    let lines: Vec<usize> = s
-        .excited_lines(0, 1e-6)
-        .unwrap()
-        .into_iter()
-        .filter(|&k| (10.0..=1000.0).contains(&s.line_hz(k)))
-        .collect();
-    let frf = from_periodic(&s, Channels { r: 0, u: 1, y: 2 }, &lines, None).unwrap();
+    let frf = out.periodic_frf((10.0, 1000.0), None).unwrap();
     let opts = FreqFitOptions {
         band_hz: Some((10.0, 1000.0)),
         weights: FreqWeights::InverseVariance,
