@@ -40,13 +40,18 @@ pub fn frf_input(
     weights: WeightsArg,
     max_iterations: usize,
 ) -> Result<FrfInput> {
-    let Some(fs) = fs else {
-        bail!("FRF files carry no sample time: give the sample rate of the data with --fs (e.g. --fs 20000)");
+    let file = read_frf_csv(path)?;
+    // the sample rate: --fs, else the `fs_hz` column that `ambid frf` writes
+    let fs = match (fs, file.extra("fs_hz").ok().and_then(|c| c.first().copied())) {
+        (Some(fs), _) => fs,
+        (None, Some(fs)) => fs,
+        (None, None) => bail!(
+            "this FRF file has no `fs_hz` column: give the sample rate of the data with --fs (e.g. --fs 20000)"
+        ),
     };
     if !(fs.is_finite() && fs > 0.0) {
-        bail!("--fs must be a positive sample rate in Hz, got {fs}");
+        bail!("the sample rate must be positive and finite, got {fs} Hz");
     }
-    let file = read_frf_csv(path)?;
     let frd = file.frd(quantity, 1.0 / fs)?;
     let weights = match weights {
         WeightsArg::Uniform => FreqWeights::Uniform,
@@ -135,7 +140,7 @@ pub struct CompareModelsArgs {
     /// Quantity of the FRF file to fit.
     #[arg(long, default_value = "plant")]
     quantity: String,
-    /// Sample rate of the data in Hz (FRF files carry none).
+    /// Sample rate of the data in Hz (default: the `fs_hz` column of the FRF file).
     #[arg(long)]
     fs: Option<f64>,
     /// Structures to compare.

@@ -162,11 +162,17 @@ fn write_analysis(path: &Path, a: &FrfAnalysis) -> Result<()> {
             std: ind_std.as_deref(),
         });
     }
+    // the sample rate of the data, so that fits to this FRF know their sample time
+    let fs = vec![frf.t_ry.ts().map_or(f64::NAN, |t| 1.0 / t); frf.f_hz().len()];
     write_frf_csv_with(
         path,
         frf.f_hz(),
         &q,
-        &[("coh_ry", &frf.coh_ry), ("coh_ru", &frf.coh_ru)],
+        &[
+            ("coh_ry", &frf.coh_ry),
+            ("coh_ru", &frf.coh_ru),
+            ("fs_hz", &fs),
+        ],
     )
 }
 

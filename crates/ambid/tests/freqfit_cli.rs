@@ -176,10 +176,17 @@ fn fit_and_compare_models_on_the_twin_plant_frf() {
         "{}",
         text(&o)
     );
-    // bad input: no --fs, unknown quantity, order 0
+    // bad input: a file without fs_hz and no --fs, unknown quantity, order 0
+    let bare = d.join("bare.csv");
+    let body = std::fs::read_to_string(&frf).unwrap();
+    let rows: Vec<&str> = body
+        .lines()
+        .map(|l| l.rsplit_once(',').unwrap().0)
+        .collect();
+    std::fs::write(&bare, rows.join("\n")).unwrap();
     let o = ambid(&[
         "fit",
-        s(&frf),
+        s(&bare),
         "--quantity",
         "plant",
         "--structure",
