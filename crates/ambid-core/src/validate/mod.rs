@@ -1,9 +1,10 @@
 //! Model validation: closed-loop simulation of identified plants, model comparison, pole-zero
-//! analysis, residual tests, the ISO 14839-3 sensitivity zone.
+//! analysis, residual tests, k-step prediction, the ISO 14839-3 sensitivity zone.
 
 pub mod closed_loop;
 pub mod compare;
 pub mod iso;
 pub mod margins;
+pub mod predict;
 pub mod pz;
 pub mod residuals;
