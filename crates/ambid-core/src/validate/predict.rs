@@ -97,8 +97,8 @@ pub fn predict_k(
         let s = (t + 1).saturating_sub(k);
         z.clear();
         z.extend_from_slice(&xs[s]);
-        for j in s..t {
-            step(&z, u[j], &mut tmp);
+        for &uj in &u[s..t] {
+            step(&z, uj, &mut tmp);
             std::mem::swap(&mut z, &mut tmp);
         }
         out.push(cx(&z) + d * u[t]);
