@@ -70,7 +70,11 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
     ctrl.check_ts(ts)?;
     let y = d.column(&a.output)?;
     let u = d.column(&a.current)?;
-    let r = d.column(&a.excitation).ok();
+    // an all-zero excitation column (a reference-driven record) counts as absent
+    let r = d
+        .column(&a.excitation)
+        .ok()
+        .filter(|r| r.iter().any(|v| *v != 0.0));
     let zeros = vec![0.0; y.len()];
     let w = d.column("w").unwrap_or(&zeros);
     if r.is_none() && w.iter().all(|v| *v == 0.0) {

@@ -303,6 +303,11 @@ struct SimulateArgs {
     /// Number of log-spaced truth frequencies from 1 Hz to fs/2.
     #[arg(long, default_value_t = 400)]
     truth_points: usize,
+    /// A linear chirp position reference `amplitude_m,duration_s,f0_hz,f1_hz` at bearing A (the
+    /// seed's closed-loop reconstruction uses 5e-6,10,1,1000); needs `--excitation none`, and
+    /// the record lasts the chirp's duration.
+    #[arg(long)]
+    reference_chirp: Option<String>,
     /// Output directory.
     #[arg(long, default_value = "out")]
     out: PathBuf,
@@ -616,7 +621,44 @@ fn simulate(a: SimulateArgs) -> Result<()> {
     if a.truth_points < 2 {
         bail!("--truth-points must be at least 2");
     }
-    let out = experiment::run(&exp)?;
+    let mut out = experiment::run(&exp)?;
+    if let Some(spec) = &a.reference_chirp {
+        let c: Vec<f64> = spec
+            .split(',')
+            .map(|v| v.trim().parse::<f64>())
+            .collect::<std::result::Result<_, _>>()
+            .ok()
+            .filter(|v: &Vec<f64>| v.len() == 4)
+            .with_context(|| {
+                format!("--reference-chirp `{spec}`: give amplitude_m,duration_s,f0_hz,f1_hz, e.g. 5e-6,10,1,1000")
+            })?;
+        if exp.excitation.kind != ExcitationKind::None {
+            bail!("--reference-chirp drives the loop by its position reference: use it with --excitation none");
+        }
+        let w = ambid_core::signal::ChirpSpec {
+            amplitude: c[0],
+            duration_s: c[1],
+            f0_hz: c[2],
+            f1_hz: c[3],
+            sweep: ambid_core::signal::Sweep::Linear,
+            periods: 1,
+        }
+        .generate(out.twin.ts())
+        .context("--reference-chirp amplitude_m,duration_s,f0_hz,f1_hz")?
+        .values;
+        let opts = ambid_twin::SimOptions {
+            mode: exp.mode,
+            seed: exp.seed,
+            noise: exp.noise,
+            record_b: exp.record_b,
+            w: Some(w.clone()),
+            ..ambid_twin::SimOptions::default()
+        };
+        out.record = out
+            .twin
+            .simulate(&vec![0.0; w.len()], &opts)
+            .context("simulating the closed loop with the reference")?;
+    }
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("cannot create {}", a.out.display()))?;
     let rec = &out.record;
