@@ -416,7 +416,7 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
             "stop": format!("{:?}", p.report.reason),
             "start_loss": p.start_loss * sy * sy,
             "loss": p.fitted.loss * sy * sy,
-            "kalman_gain": p.kalman_gain.as_ref().map(|k| (0..k.nrows()).map(|i| k[(i, 0)] * sy).collect::<Vec<_>>()),
+            "kalman_gain": p.kalman_gain.as_ref().map(|k| (0..k.nrows()).map(|i| k[(i, 0)] / sy).collect::<Vec<_>>()),
         });
         scaled = p.fitted.model;
     }

@@ -2,7 +2,7 @@
 //! always through the closed loop with the real controller.
 
 use ambid::io::csv::read_frf_csv;
-use ambid::io::model::read_model_json;
+use ambid::io::model::{read_kalman_gain, read_model_json};
 use ambid::io::{read_controller, read_time_csv, write_time_csv};
 use ambid_core::c64;
 use ambid_core::validate::closed_loop::reconstruct;
@@ -51,6 +51,10 @@ pub struct ValidateArgs {
     /// ISO 14839-3 zone with a confidence interval.
     #[arg(long)]
     frf: Option<PathBuf>,
+    /// Also the k-step-ahead prediction fit (needs an innovation-form model: `ambid fit
+    /// --structure ss` with the prediction focus stores K); u is the recorded plant input.
+    #[arg(long)]
+    k_step: Option<usize>,
     /// Output directory (summary.json, timeseries.csv, residuals.csv).
     #[arg(long, default_value = "validation")]
     out: PathBuf,
@@ -176,6 +180,24 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
         }
         None => (None, None),
     };
+    let k_step = match a.k_step {
+        Some(k) => {
+            let Some(kg) = read_kalman_gain(&a.model)? else {
+                bail!("--k-step needs an innovation-form model with a Kalman gain (`ambid fit --structure ss` with --focus prediction)");
+            };
+            if kg.len() != model.order() {
+                bail!(
+                    "the model's Kalman gain has {} entries for {} states",
+                    kg.len(),
+                    model.order()
+                );
+            }
+            let kmat = faer::Mat::from_fn(kg.len(), 1, |i, _| kg[i]);
+            let p = ambid_core::validate::predict::predict_k(&model, kmat.as_ref(), y, u, k)?;
+            Some((k, fit(&y[k0..], &p[k0..])))
+        }
+        None => None,
+    };
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("cannot create {}", a.out.display()))?;
     let t: Vec<f64> = (0..y.len()).map(|k| k as f64 * ts).collect();
@@ -231,6 +253,7 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
         "iso_model": iso_model,
         "iso_measured": iso_measured,
         "consistency": consistency,
+        "k_step_prediction": k_step.map(|(k, f)| json!({"k": k, "fit_y_pct": f})),
     });
     std::fs::write(
         a.out.join("summary.json"),
@@ -263,6 +286,9 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
         iso_model.zone,
         iso_measured.as_ref().map_or(String::new(), |m| format!(", measured max|S| {:.3} ({:?}) → zone {:?}", m.peak, m.interval, m.zone))
     );
+    if let Some((k, f)) = k_step {
+        println!("{k}-step-ahead prediction fit of y: {f:.2} %");
+    }
     if let Some(cns) = &consistency {
         println!(
             "closed-loop consistency: model S vs measured S median {:.3} %, T_ry {:.3} % over {} lines",

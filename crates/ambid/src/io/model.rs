@@ -118,3 +118,15 @@ pub fn read_model_json(path: &Path) -> Result<StateSpace> {
         ),
     }
 }
+
+/// The Kalman gain $K$ of an innovation-form model file (`meta.pem.kalman_gain`, written by
+/// `ambid fit --structure ss` with the prediction focus), if present.
+pub fn read_kalman_gain(path: &Path) -> Result<Option<Vec<f64>>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let v: Value = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not valid JSON", path.display()))?;
+    Ok(v["meta"]["pem"]["kalman_gain"]
+        .as_array()
+        .map(|a| a.iter().filter_map(Value::as_f64).collect()))
+}
