@@ -4,11 +4,11 @@
 //! * `reconstruct_exact_plant`: the twin's exact plant (15 states) with its controller, driven by
 //!   the 5 µm 1–1000 Hz linear chirp reference, compared with the twin's noise-free response in
 //!   20 windows ([`reconstruct`]);
-//! * `simulate_loop_order_7`: the loop alone with a 7-state plant (the size of the identified
-//!   models).
+//! * `simulate_loop_order_7`, `simulate_loop_order_10`: the loop alone with a 7- and a 10-state
+//!   plant (the sizes of the identified models).
 //!
-//! Measured (idle 2-core VM, 2026-11-21): `reconstruct_exact_plant` 22.6 ms (15 plant states),
-//! `simulate_loop_order_7` 9.2 ms.
+//! Measured (idle 2-core VM, 2026-11-21): `reconstruct_exact_plant` 23.5 ms (15 plant states),
+//! `simulate_loop_order_7` 9.6 ms, `simulate_loop_order_10` 13.4 ms.
 
 use ambid::experiment::{run, Experiment};
 use ambid_core::signal::chirp::{ChirpSpec, Sweep};
@@ -69,17 +69,16 @@ fn reconstruct_exact_plant(b: Bencher) {
     });
 }
 
-#[divan::bench(sample_count = 20)]
-fn simulate_loop_order_7(b: Bencher) {
+/// The loop alone with an `n`-state stand-in for an identified plant (the cost depends only on
+/// the state counts); its loop with the twin's controller is stable (checked before timing).
+fn loop_with_states(b: Bencher, n: usize) {
     use ambid_core::lti::StateSpace;
     let twin = run(&Experiment::seed_paper(Mode::Linear, 0.0, 1))
         .expect("twin")
         .twin;
     let ts = 1.0 / twin.fs();
     let w = chirp(ts);
-    // a 7-state stand-in for an identified plant (the cost depends only on the state counts);
-    // its loop with the twin's controller is stable (checked below)
-    let a = faer::Mat::from_fn(7, 7, |i, j| {
+    let a = faer::Mat::from_fn(n, n, |i, j| {
         if i == j {
             0.9
         } else if j == i + 1 {
@@ -90,12 +89,22 @@ fn simulate_loop_order_7(b: Bencher) {
     });
     let p = StateSpace::discrete(
         a,
-        faer::Mat::from_fn(7, 1, |_, _| 1e-7),
-        faer::Mat::from_fn(1, 7, |_, _| 1.0),
+        faer::Mat::from_fn(n, 1, |_, _| 1e-7),
+        faer::Mat::from_fn(1, n, |_, _| 1.0),
         faer::Mat::zeros(1, 1),
         ts,
     )
     .expect("model");
     simulate_loop_with(&p, twin.controller(), Some(&w), None).expect("a stable loop");
     b.bench_local(|| black_box(simulate_loop_with(&p, twin.controller(), Some(&w), None)));
+}
+
+#[divan::bench(sample_count = 20)]
+fn simulate_loop_order_7(b: Bencher) {
+    loop_with_states(b, 7);
+}
+
+#[divan::bench(sample_count = 20)]
+fn simulate_loop_order_10(b: Bencher) {
+    loop_with_states(b, 10);
 }
