@@ -48,6 +48,14 @@ use crate::error::{Error, Result};
 use faer::linalg::solvers::{Solve, SolveLstsq};
 use faer::{c64, Mat, MatRef};
 
+/// The entries of `a` row by row (a row-major copy), for per-sample loops that take inner
+/// products with rows.
+pub(crate) fn row_major(a: MatRef<'_, f64>) -> Vec<f64> {
+    (0..a.nrows())
+        .flat_map(|i| (0..a.ncols()).map(move |j| a[(i, j)]))
+        .collect()
+}
+
 /// Induced 1-norm (maximum absolute column sum).
 pub fn norm1(a: MatRef<'_, f64>) -> f64 {
     (0..a.ncols())

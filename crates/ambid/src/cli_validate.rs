@@ -5,6 +5,7 @@ use ambid::io::csv::read_frf_csv;
 use ambid::io::model::{read_kalman_gain, read_model_json};
 use ambid::io::{read_controller, read_time_csv, write_time_csv};
 use ambid_core::c64;
+use ambid_core::estimate::arx::fit_percent;
 use ambid_core::validate::closed_loop::reconstruct;
 use ambid_core::validate::iso::{sensitivity_zone, IsoZones};
 use ambid_core::validate::margins::margins;
@@ -122,18 +123,8 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
     let res = analyze(&eps, Some(input), a.lags)?;
     let rmse = (eps.iter().map(|e| e * e).sum::<f64>() / eps.len() as f64).sqrt();
     let max_err = eps.iter().map(|e| e.abs()).fold(0.0, f64::max);
-    let fit = |x: &[f64], xh: &[f64]| {
-        let m = x.iter().sum::<f64>() / x.len() as f64;
-        let den: f64 = x.iter().map(|v| (v - m).powi(2)).sum::<f64>().sqrt();
-        let num: f64 = x
-            .iter()
-            .zip(xh)
-            .map(|(p, q)| (p - q).powi(2))
-            .sum::<f64>()
-            .sqrt();
-        100.0 * (1.0 - num / den)
-    };
-    let (fit_y, fit_u) = (fit(&y[k0..], &sim.y[k0..]), fit(&u[k0..], &sim.u[k0..]));
+    let fit = |x: &[f64], xh: &[f64]| fit_percent(x, xh);
+    let (fit_y, fit_u) = (fit(&y[k0..], &sim.y[k0..])?, fit(&u[k0..], &sim.u[k0..])?);
     // margins and ISO zone of the model's loop on a log grid up to Nyquist
     let fny = 0.5 / ts;
     let grid: Vec<f64> = (0..4000)
@@ -194,7 +185,7 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
             }
             let kmat = faer::Mat::from_fn(kg.len(), 1, |i, _| kg[i]);
             let p = ambid_core::validate::predict::predict_k(&model, kmat.as_ref(), y, u, k)?;
-            Some((k, fit(&y[k0..], &p[k0..])))
+            Some((k, fit(&y[k0..], &p[k0..])?))
         }
         None => None,
     };

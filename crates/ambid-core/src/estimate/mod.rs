@@ -10,7 +10,8 @@ mod qr_stream;
 pub mod ss_pem;
 pub mod subspace;
 
-use faer::Mat;
+use crate::error::{Error, Result};
+use faer::{Mat, MatRef};
 
 /// A fitted model with its parameter uncertainty and fit statistics.
 #[derive(Debug, Clone)]
@@ -36,4 +37,34 @@ impl<M> Fitted<M> {
             .as_ref()
             .map(|p| (0..p.nrows()).map(|i| p[(i, i)].max(0.0).sqrt()).collect())
     }
+}
+
+/// Errors with [`Error::NonFinite`] (the sample number as `index`) at the first NaN or infinite
+/// sample of the `N × channels` matrix `x`.
+pub(crate) fn check_samples(what: &'static str, x: MatRef<'_, f64>) -> Result<()> {
+    for k in 0..x.nrows() {
+        for c in 0..x.ncols() {
+            if !x[(k, c)].is_finite() {
+                return Err(Error::NonFinite { what, index: k });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// RMS of each column of `x`; an identically zero (or overflowing) column is an error.
+pub(crate) fn channel_rms(what: &'static str, x: MatRef<'_, f64>) -> Result<Vec<f64>> {
+    (0..x.ncols())
+        .map(|c| {
+            let s = (x.col(c).iter().map(|v| v * v).sum::<f64>() / x.nrows() as f64).sqrt();
+            if s > 0.0 && s.is_finite() {
+                Ok(s)
+            } else {
+                Err(Error::invalid(
+                    what,
+                    format!("channel {c} is identically zero (or overflows); it carries no information, remove it"),
+                ))
+            }
+        })
+        .collect()
 }

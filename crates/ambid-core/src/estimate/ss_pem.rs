@@ -86,7 +86,7 @@
 
 use super::pem::lm::{minimize, LeastSquaresProblem, LmOptions, LmReport};
 use super::pem::Focus;
-use super::Fitted;
+use super::{channel_rms, check_samples, Fitted};
 use crate::error::{Error, Result};
 use crate::linalg;
 use crate::lti::StateSpace;
@@ -206,8 +206,10 @@ pub fn refine_ss(
             "the start model needs at least one state, input and output",
         ));
     }
-    let sy = rms("y", y)?;
-    let su = rms("u", u)?;
+    check_samples("y", y)?;
+    check_samples("u", u)?;
+    let sy = channel_rms("y", y)?;
+    let su = channel_rms("u", u)?;
     let ts = start.ts().ok_or_else(|| {
         Error::invalid(
             "start",
@@ -263,14 +265,14 @@ pub fn refine_ss(
             format!("too few samples: {nn} for {n_theta} parameters (at least {} needed); record longer or lower the order", 2 * n_theta),
         ));
     }
-    let ys = sy
+    let ys: Vec<Vec<f64>> = sy
         .iter()
         .enumerate()
-        .map(|(o, &s)| scaled_channel("y", y, o, s))
-        .collect::<Result<Vec<_>>>()?;
+        .map(|(o, &s)| scaled_channel(y, o, s))
+        .collect();
     let mut w = Vec::with_capacity(q);
     for (ch, &s) in su.iter().enumerate() {
-        w.push(scaled_channel("u", u, ch, s)?);
+        w.push(scaled_channel(u, ch, s));
     }
     if predict {
         w.extend(ys.iter().cloned());
@@ -286,7 +288,9 @@ pub fn refine_ss(
     } else {
         theta0
     };
-    let start_per_output = start_cost_per_output(&mut prob, &theta0, nn, l);
+    let start_loss = prob
+        .residuals(&theta0)
+        .map_or(f64::INFINITY, |r| physical_loss(&r, nn, &sy));
     let (theta, report) = minimize(&mut prob, &theta0, &opts.lm)?;
     let res = prob.residuals(&theta).ok_or_else(|| {
         Error::numerical(
@@ -305,24 +309,10 @@ pub fn refine_ss(
             / nn as f64
     });
     let covariance = sandwich(jac.as_ref(), lam_s.as_ref(), nn, n_theta);
-    let (abar, g, c, d, x0) = layout.matrices(&theta);
-    let kk = if predict {
-        g.subcols(m, l).to_owned()
-    } else {
-        Mat::zeros(n, l)
-    };
-    let a = &abar + &kk * &c;
-    let bbar = g.subcols(0, m).to_owned();
-    let b = &bbar + &kk * &d;
-    // unscale
-    let b = Mat::from_fn(n, m, |r, col| b[(r, col)] / su[col]);
-    let c = Mat::from_fn(l, n, |r, col| c[(r, col)] * sy[r]);
-    let d = Mat::from_fn(l, m, |r, col| d[(r, col)] * sy[r] / su[col]);
-    let kalman_gain = predict.then(|| Mat::from_fn(n, l, |r, col| kk[(r, col)] / sy[col]));
+    let (model, kalman_gain) = layout.model(&theta, predict, (&sy, &su), ts)?;
+    let x0 = layout.matrices(&theta).4;
     let lam = Mat::from_fn(l, l, |p, r| lam_s[(p, r)] * sy[p] * sy[r]);
     let loss = (0..l).map(|o| lam[(o, o)]).sum::<f64>();
-    let model = StateSpace::discrete(a, b, c, d, ts)?;
-    let start_loss = start_cost_physical(&start_per_output, &sy);
     Ok(SsPemFit {
         fitted: Fitted {
             model,
@@ -342,17 +332,15 @@ pub fn refine_ss(
     })
 }
 
-fn start_cost_per_output(prob: &mut Problem<'_>, theta: &[f64], nn: usize, l: usize) -> Vec<f64> {
-    match prob.residuals(theta) {
-        Some(r) => (0..l)
-            .map(|o| r[o * nn..(o + 1) * nn].iter().map(|v| v * v).sum::<f64>() / nn as f64)
-            .collect(),
-        None => vec![f64::INFINITY; l],
-    }
-}
-
-fn start_cost_physical(per_output: &[f64], sy: &[f64]) -> f64 {
-    per_output.iter().zip(sy).map(|(v, s)| v * s * s).sum()
+/// Loss $\sum_o s_o^2 \frac1N \sum_k r_{oN+k}^2$ in physical units of output-major scaled
+/// residuals `r` ($N$ per output, output scales `sy`).
+fn physical_loss(r: &[f64], nn: usize, sy: &[f64]) -> f64 {
+    sy.iter()
+        .enumerate()
+        .map(|(o, s)| {
+            s * s * r[o * nn..(o + 1) * nn].iter().map(|v| v * v).sum::<f64>() / nn as f64
+        })
+        .sum()
 }
 
 impl SsPemFit {
@@ -373,20 +361,12 @@ impl SsPemFit {
         let ts = self.fitted.model.ts().unwrap_or(1.0);
         let theta = &self.fitted.params;
         let (sy, su) = &self.scales;
+        let predict = self.kalman_gain.is_some();
         let resp = |th: &[f64]| -> Result<Vec<Mat<c64>>> {
-            let (abar, g, c, d, _) = self.layout.matrices(th);
-            let (n, m, l) = (abar.nrows(), su.len(), sy.len());
-            let kk = if self.kalman_gain.is_some() {
-                g.subcols(m, l).to_owned()
-            } else {
-                Mat::zeros(n, l)
-            };
-            let a = &abar + &kk * &c;
-            let b = &g.subcols(0, m).to_owned() + &kk * &d;
-            let b = Mat::from_fn(n, m, |r, col| b[(r, col)] / su[col]);
-            let c = Mat::from_fn(l, n, |r, col| c[(r, col)] * sy[r]);
-            let d = Mat::from_fn(l, m, |r, col| d[(r, col)] * sy[r] / su[col]);
-            StateSpace::discrete(a, b, c, d, ts)?.freq_response(f_hz)
+            self.layout
+                .model(th, predict, (sy, su), ts)?
+                .0
+                .freq_response(f_hz)
         };
         let base = resp(theta)?;
         let np = theta.len();
@@ -429,37 +409,9 @@ impl SsPemFit {
     }
 }
 
-/// RMS of each column; an identically zero column is an error.
-fn rms(what: &'static str, x: MatRef<'_, f64>) -> Result<Vec<f64>> {
-    (0..x.ncols())
-        .map(|c| {
-            let mut s = 0.0;
-            for k in 0..x.nrows() {
-                let v = x[(k, c)];
-                if !v.is_finite() {
-                    return Err(Error::NonFinite { what, index: k });
-                }
-                s += v * v;
-            }
-            let s = (s / x.nrows().max(1) as f64).sqrt();
-            if s > 0.0 && s.is_finite() {
-                Ok(s)
-            } else {
-                Err(Error::invalid(
-                    what,
-                    format!("channel {c} is identically zero (or overflows); it carries no information, remove it"),
-                ))
-            }
-        })
-        .collect()
-}
-
-fn scaled_channel(what: &'static str, x: MatRef<'_, f64>, c: usize, s: f64) -> Result<Vec<f64>> {
-    let v: Vec<f64> = x.col(c).iter().map(|v| v / s).collect();
-    if let Some(k) = v.iter().position(|v| !v.is_finite()) {
-        return Err(Error::NonFinite { what, index: k });
-    }
-    Ok(v)
+/// Column `c` of `x` divided by `s`.
+fn scaled_channel(x: MatRef<'_, f64>, c: usize, s: f64) -> Vec<f64> {
+    x.col(c).iter().map(|v| v / s).collect()
 }
 
 /// One block of the block-diagonal predictor.
@@ -558,6 +510,31 @@ impl Layout {
         let d = Mat::from_fn(l, m, |o, ch| self.d_val(th, o, ch));
         let x0 = (0..n).map(|s| self.x0_val(th, s)).collect();
         (a, g, c, d, x0)
+    }
+    /// The innovation model of θ in physical units: $(A, B, C, D)$ with $A = \bar A + KC$,
+    /// $B = \bar B + KD$, scaled back by the output scales `sy` and input scales `su`, and $K$
+    /// (prediction focus).
+    fn model(
+        &self,
+        th: &[f64],
+        predict: bool,
+        (sy, su): (&[f64], &[f64]),
+        ts: f64,
+    ) -> Result<(StateSpace, Option<Mat<f64>>)> {
+        let (abar, g, c, d, _) = self.matrices(th);
+        let (n, m, l) = (self.n, self.m, self.l);
+        let kk = if predict {
+            g.subcols(m, l).to_owned()
+        } else {
+            Mat::zeros(n, l)
+        };
+        let a = &abar + &kk * &c;
+        let b = &g.subcols(0, m).to_owned() + &kk * &d;
+        let b = Mat::from_fn(n, m, |r, col| b[(r, col)] / su[col]);
+        let c = Mat::from_fn(l, n, |r, col| c[(r, col)] * sy[r]);
+        let d = Mat::from_fn(l, m, |r, col| d[(r, col)] * sy[r] / su[col]);
+        let k = predict.then(|| Mat::from_fn(n, l, |r, col| kk[(r, col)] / sy[col]));
+        Ok((StateSpace::discrete(a, b, c, d, ts)?, k))
     }
     fn admissible(&self, th: &[f64]) -> bool {
         th.iter().all(|v| v.is_finite())

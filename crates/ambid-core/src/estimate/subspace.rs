@@ -153,6 +153,7 @@
 mod hankel;
 
 use super::qr_stream::StreamingQr;
+use super::{channel_rms, check_samples};
 use crate::error::{Error, Result};
 use crate::estimate::Fitted;
 use crate::linalg;
@@ -509,33 +510,6 @@ struct ScaledModel {
     k: Option<Mat<f64>>,
     sigma: Mat<f64>,
     singular_values: Vec<f64>,
-}
-
-fn check_samples(what: &'static str, x: MatRef<'_, f64>) -> Result<()> {
-    for k in 0..x.nrows() {
-        for c in 0..x.ncols() {
-            if !x[(k, c)].is_finite() {
-                return Err(Error::NonFinite { what, index: k });
-            }
-        }
-    }
-    Ok(())
-}
-
-fn channel_rms(what: &'static str, x: MatRef<'_, f64>) -> Result<Vec<f64>> {
-    (0..x.ncols())
-        .map(|c| {
-            let s = (x.col(c).iter().map(|v| v * v).sum::<f64>() / x.nrows() as f64).sqrt();
-            if s > 0.0 && s.is_finite() {
-                Ok(s)
-            } else {
-                Err(Error::invalid(
-                    what,
-                    format!("channel {c} is identically zero (or overflows); it carries no information, remove it"),
-                ))
-            }
-        })
-        .collect()
 }
 
 /// Steps 2–6 on the LQ factor of the scaled data.

@@ -290,12 +290,7 @@ impl StateSpace {
         let (p, m) = (self.noutputs(), self.ninputs());
         // row-major copies of the matrices: the per-sample products run over contiguous rows
         // and allocate nothing
-        let rows = |a: &Mat<f64>| -> Vec<f64> {
-            (0..a.nrows())
-                .flat_map(|i| (0..a.ncols()).map(move |j| (i, j)))
-                .map(|(i, j)| a[(i, j)])
-                .collect()
-        };
+        let rows = |m: &Mat<f64>| crate::linalg::row_major(m.as_ref());
         let (ar, br, cr, dr) = (rows(&self.a), rows(&self.b), rows(&self.c), rows(&self.d));
         let dot = |row: &[f64], v: &[f64]| -> f64 { row.iter().zip(v).map(|(a, b)| a * b).sum() };
         let mut y = Mat::zeros(u.nrows(), p);

@@ -23,6 +23,7 @@
 //! ```
 
 use crate::error::{Error, Result};
+use crate::estimate::arx::fit_percent;
 use crate::lti::StateSpace;
 
 /// Output and plant input of the simulated loop.
@@ -122,12 +123,7 @@ pub fn simulate_loop_with(
             "1 + D_P D_C = 0: the loop has an algebraic loop without a solution",
         ));
     }
-    let rows = |a: faer::MatRef<'_, f64>| -> Vec<f64> {
-        (0..a.nrows())
-            .flat_map(|i| (0..a.ncols()).map(move |j| (i, j)))
-            .map(|(i, j)| a[(i, j)])
-            .collect()
-    };
+    let rows = crate::linalg::row_major;
     let (np, nc) = (plant.order(), controller.order());
     let (ap, bp, cp) = (rows(plant.a()), rows(plant.b()), rows(plant.c()));
     let (ac, bc, cc) = (
@@ -241,21 +237,8 @@ pub fn reconstruct(
         ));
     }
     let sim = simulate_loop_with(plant, controller, Some(w), r)?;
-    let fit = |x: &[f64], xh: &[f64]| -> f64 {
-        let m = x.iter().sum::<f64>() / x.len() as f64;
-        let den: f64 = x.iter().map(|v| (v - m).powi(2)).sum::<f64>().sqrt();
-        let num: f64 = x
-            .iter()
-            .zip(xh)
-            .map(|(a, b)| (a - b).powi(2))
-            .sum::<f64>()
-            .sqrt();
-        if den > 0.0 {
-            100.0 * (1.0 - num / den)
-        } else {
-            f64::NAN
-        }
-    };
+    // NaN for a constant window (the fit is undefined there)
+    let fit = |x: &[f64], xh: &[f64]| fit_percent(x, xh).unwrap_or(f64::NAN);
     let len = n / n_windows;
     let windows = (0..n_windows)
         .map(|k| {

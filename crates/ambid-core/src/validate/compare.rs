@@ -19,6 +19,7 @@
 //! space has $n$ states (and no feedthrough).
 
 use crate::error::Result;
+use crate::estimate::arx::fit_percent;
 use crate::estimate::freqfit::{arx_frd, oe_frd, FreqErrors, FreqFitOptions, TfOrders};
 use crate::lti::{Frd, StateSpace, TransferFunction};
 use crate::validate::closed_loop::simulate_loop;
@@ -232,37 +233,15 @@ fn candidate(
     if let Some(v) = validation {
         match simulate_loop(&model, v.controller, v.r) {
             Ok(out) => {
-                row.validation_fit = fit_percent(
-                    &v.y[v.skip.min(v.y.len())..],
-                    &out.y[v.skip.min(out.y.len())..],
-                )
+                let n = v.y.len().min(out.y.len());
+                let k0 = v.skip.min(n);
+                row.validation_fit = fit_percent(&v.y[k0..n], &out.y[k0..n]).ok();
             }
             Err(e) => row.note = Some(format!("closed-loop validation failed: {e}")),
         }
     }
     row.model = Some(model);
     row
-}
-
-/// $100\,(1 - \lVert y - \hat y \rVert / \lVert y - \bar y \rVert)$, `None` for a constant `y`.
-fn fit_percent(y: &[f64], yhat: &[f64]) -> Option<f64> {
-    let n = y.len().min(yhat.len());
-    if n == 0 {
-        return None;
-    }
-    let mean = y[..n].iter().sum::<f64>() / n as f64;
-    let den: f64 = y[..n]
-        .iter()
-        .map(|v| (v - mean).powi(2))
-        .sum::<f64>()
-        .sqrt();
-    let num: f64 = y[..n]
-        .iter()
-        .zip(&yhat[..n])
-        .map(|(a, b)| (a - b).powi(2))
-        .sum::<f64>()
-        .sqrt();
-    (den > 0.0).then(|| 100.0 * (1.0 - num / den))
 }
 
 /// The comparison as a plain-text table (one row per candidate; `—` for missing values).
