@@ -130,61 +130,22 @@ pub fn write_frf_csv_with(
 /// empty fields in a signal column are read as missing samples (NaN) for the screening of
 /// `ambid frf`, the `t` column must be finite.
 pub fn read_time_csv(path: &Path, fs_hz: Option<f64>) -> Result<TimeData> {
-    let mut rdr = ::csv::ReaderBuilder::new()
-        .trim(::csv::Trim::All)
-        .from_path(path)
-        .with_context(|| format!("cannot open {}", path.display()))?;
-    let header: Vec<String> = rdr
-        .headers()
-        .with_context(|| format!("{}: cannot read the header row", path.display()))?
-        .iter()
-        .map(str::to_string)
-        .collect();
-    if header.is_empty() || header.iter().any(String::is_empty) {
-        bail!(
-            "{}: the header row must name every column (got {:?})",
-            path.display(),
-            header
-        );
-    }
-    let mut cols: Vec<Vec<f64>> = vec![Vec::new(); header.len()];
-    for (line, rec) in rdr.records().enumerate() {
-        let rec = rec.with_context(|| format!("{}: data row {}", path.display(), line + 1))?;
-        if rec.len() != header.len() {
-            bail!(
-                "{}: data row {} has {} fields, the header has {}",
-                path.display(),
-                line + 1,
-                rec.len(),
-                header.len()
-            );
+    let (header, cols) = read_columns(path, |column, field| {
+        // an empty field is a missing sample (NaN); NaN/inf are kept for the screening
+        let v: f64 = if field.is_empty() {
+            f64::NAN
+        } else {
+            field
+                .parse()
+                .map_err(|_| format!("`{field}` is not a number"))?
+        };
+        if !v.is_finite() && column == "t" {
+            return Err(format!(
+                "not finite ({field}); the time column must be complete"
+            ));
         }
-        for (k, field) in rec.iter().enumerate() {
-            // an empty field is a missing sample (NaN); NaN/inf are kept for the screening
-            let v: f64 = if field.is_empty() {
-                Ok(f64::NAN)
-            } else {
-                field.parse()
-            }
-            .map_err(|_| {
-                anyhow!(
-                    "{}: data row {}, column `{}`: `{field}` is not a number",
-                    path.display(),
-                    line + 1,
-                    header[k]
-                )
-            })?;
-            if !v.is_finite() && header[k] == "t" {
-                bail!(
-                    "{}: data row {}, column `{}` is not finite ({field}); the time column must be complete",
-                    path.display(),
-                    line + 1,
-                    header[k]
-                );
-            }
-            cols[k].push(v);
-        }
-    }
+        Ok(v)
+    })?;
     let n = cols[0].len();
     if n < 2 {
         bail!("{}: needs at least 2 data rows, found {n}", path.display());
@@ -223,6 +184,57 @@ pub fn read_time_csv(path: &Path, fs_hz: Option<f64>) -> Result<TimeData> {
         }
     }
     Ok(TimeData { ts, names, columns })
+}
+
+/// The header and the columns of a CSV file of numbers: every column named, every row as long as
+/// the header, each field converted by `field(column, text)` (an `Err` message is reported with
+/// the file, the row and the column).
+fn read_columns(
+    path: &Path,
+    field: impl Fn(&str, &str) -> std::result::Result<f64, String>,
+) -> Result<(Vec<String>, Vec<Vec<f64>>)> {
+    let mut rdr = ::csv::ReaderBuilder::new()
+        .trim(::csv::Trim::All)
+        .from_path(path)
+        .with_context(|| format!("cannot open {}", path.display()))?;
+    let header: Vec<String> = rdr
+        .headers()
+        .with_context(|| format!("{}: cannot read the header row", path.display()))?
+        .iter()
+        .map(str::to_string)
+        .collect();
+    if header.is_empty() || header.iter().any(String::is_empty) {
+        bail!(
+            "{}: the header row must name every column (got {:?})",
+            path.display(),
+            header
+        );
+    }
+    let mut cols: Vec<Vec<f64>> = vec![Vec::new(); header.len()];
+    for (line, rec) in rdr.records().enumerate() {
+        let rec = rec.with_context(|| format!("{}: data row {}", path.display(), line + 1))?;
+        if rec.len() != header.len() {
+            bail!(
+                "{}: data row {} has {} fields, the header has {}",
+                path.display(),
+                line + 1,
+                rec.len(),
+                header.len()
+            );
+        }
+        for (k, text) in rec.iter().enumerate() {
+            let v = field(&header[k], text).map_err(|msg| {
+                anyhow!(
+                    "{}: data row {}, column `{}`: {msg}",
+                    path.display(),
+                    line + 1,
+                    header[k]
+                )
+            })?;
+            cols[k].push(v);
+        }
+    }
+    Ok((header, cols))
 }
 
 #[cfg(test)]
@@ -337,50 +349,19 @@ impl FrfFile {
 /// Reads an FRF CSV (`f_hz`, then `<q>_re, <q>_im, <q>_std` per quantity, then extra real
 /// columns). Every field must be a finite number and `f_hz` strictly increasing.
 pub fn read_frf_csv(path: &Path) -> Result<FrfFile> {
-    let mut rdr = ::csv::ReaderBuilder::new()
-        .trim(::csv::Trim::All)
-        .from_path(path)
-        .with_context(|| format!("cannot open {}", path.display()))?;
-    let header: Vec<String> = rdr
-        .headers()
-        .with_context(|| format!("{}: cannot read the header row", path.display()))?
-        .iter()
-        .map(str::to_string)
-        .collect();
+    let (header, mut cols) = read_columns(path, |_, field| {
+        field
+            .parse()
+            .ok()
+            .filter(|v: &f64| v.is_finite())
+            .ok_or_else(|| format!("`{field}` is not a finite number"))
+    })?;
     if header.first().map(String::as_str) != Some("f_hz") {
         bail!(
             "{}: an FRF file starts with the column `f_hz` (got {:?}); see docs/formats.md",
             path.display(),
             header.first()
         );
-    }
-    let mut cols: Vec<Vec<f64>> = vec![Vec::new(); header.len()];
-    for (line, rec) in rdr.records().enumerate() {
-        let rec = rec.with_context(|| format!("{}: data row {}", path.display(), line + 1))?;
-        if rec.len() != header.len() {
-            bail!(
-                "{}: data row {} has {} fields, the header has {}",
-                path.display(),
-                line + 1,
-                rec.len(),
-                header.len()
-            );
-        }
-        for (k, field) in rec.iter().enumerate() {
-            let v: f64 = field
-                .parse()
-                .ok()
-                .filter(|v: &f64| v.is_finite())
-                .ok_or_else(|| {
-                    anyhow!(
-                        "{}: data row {}, column `{}`: `{field}` is not a finite number",
-                        path.display(),
-                        line + 1,
-                        header[k]
-                    )
-                })?;
-            cols[k].push(v);
-        }
     }
     if cols[0].is_empty() {
         bail!("{}: no data rows", path.display());
