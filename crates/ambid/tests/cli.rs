@@ -1,29 +1,8 @@
 //! End-to-end tests of the `ambid` binary: exit codes, messages and written files.
 
 use std::path::PathBuf;
-use std::process::{Command, Output};
-
-fn ambid(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ambid"))
-        .args(args)
-        .output()
-        .expect("the ambid binary runs")
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
-
-fn tmpdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("ambid-cli-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
+mod common;
+use common::{ambid, text, tmpdir};
 
 #[test]
 fn no_arguments_prints_help_and_fails() {

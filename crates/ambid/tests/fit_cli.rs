@@ -1,22 +1,8 @@
 //! `ambid fit` and `ambid order` end to end on the DaISy dryer (read from ../shared/data/real).
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn ambid(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ambid"))
-        .args(args)
-        .output()
-        .expect("the ambid binary runs")
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
+mod common;
+use common::{ambid, text, CONTROLLER};
 
 /// Writes the dryer's halves as CSV (u, y) into a temporary directory.
 fn dryer_halves(name: &str) -> (PathBuf, PathBuf, PathBuf) {
@@ -228,17 +214,13 @@ fn fit_state_space_from_twin_records() {
     ]);
     assert!(o.status.success(), "{}", text(&o));
     let vdir = d.join("val");
-    let controller = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/tests/fixtures/twin_controller.toml"
-    );
     let o = ambid(&[
         "validate",
         plant.to_str().unwrap(),
         "--data",
         d.join("v/data.csv").to_str().unwrap(),
         "--controller",
-        controller,
+        CONTROLLER,
         "--skip",
         "5115",
         "--k-step",

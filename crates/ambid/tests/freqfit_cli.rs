@@ -1,39 +1,8 @@
 //! `ambid fit <frf.csv> --quantity plant` and `ambid compare-models` end to end on the twin:
 //! simulate → frf → fit / compare (with the closed-loop validation on an independent record).
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn ambid(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ambid"))
-        .args(args)
-        .output()
-        .expect("the ambid binary runs")
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-const CONTROLLER: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/tests/fixtures/twin_controller.toml"
-);
-
-fn tmpdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("ambid-freqfit-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
+mod common;
+use common::{ambid, s, text, tmpdir, CONTROLLER};
 
 #[test]
 fn fit_and_compare_models_on_the_twin_plant_frf() {

@@ -1,34 +1,9 @@
 //! `ambid frf` and `ambid study` end to end: files written, numbers against the twin's truth,
 //! and the bad-input messages issue 3 asks for.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn ambid(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ambid"))
-        .args(args)
-        .output()
-        .expect("the ambid binary runs")
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
-
-fn tmpdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("ambid-frf-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
+use std::path::Path;
+mod common;
+use common::{ambid, s, text, tmpdir, CONTROLLER};
 
 /// Simulates the linear seed experiment into `dir` (data.csv, truth.csv).
 fn simulate(dir: &Path) {
@@ -45,11 +20,6 @@ fn read_csv(p: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
         .collect();
     (h, rows)
 }
-
-const CONTROLLER: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/tests/fixtures/twin_controller.toml"
-);
 
 #[test]
 fn frf_writes_the_closed_loop_frfs_and_they_match_the_twin() {

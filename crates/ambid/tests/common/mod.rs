@@ -1,0 +1,42 @@
+//! Helpers shared by the CLI tests: run the `ambid` binary, read its output, temporary
+//! directories and the twin's controller file.
+#![allow(dead_code)] // each test binary uses a subset
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// Runs the `ambid` binary with `args`.
+pub fn ambid(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_ambid"))
+        .args(args)
+        .output()
+        .expect("the ambid binary runs")
+}
+
+/// Standard output followed by standard error.
+pub fn text(o: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+/// A fresh, empty temporary directory for this test process and `name`.
+pub fn tmpdir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("ambid-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// A path as a command-line argument.
+pub fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// The twin's default controller as a controller file.
+pub const CONTROLLER: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/tests/fixtures/twin_controller.toml"
+);
