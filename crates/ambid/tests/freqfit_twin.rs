@@ -7,6 +7,8 @@ use ambid_core::estimate::freqfit_ss::{ss_frd, SsFreqOptions};
 use ambid_core::frf::closed_loop::ClosedLoopFrf;
 use ambid_core::lti::StateSpace;
 use ambid_twin::{Mode, Twin};
+mod common;
+use common::percentile;
 
 const PERIOD: usize = 1023 * 5;
 
@@ -20,14 +22,6 @@ fn estimate(seed: u64, controller: Option<&StateSpace>) -> (ClosedLoopFrf, Twin)
     let out = run(&seed_experiment(seed)).unwrap();
     let frf = out.periodic_frf((10.0, 1000.0), controller).unwrap();
     (frf, out.twin)
-}
-
-fn percentile(v: &[f64], p: f64) -> f64 {
-    let mut s = v.to_vec();
-    s.sort_by(|a, b| a.total_cmp(b));
-    let pos = p * (s.len() - 1) as f64;
-    let (lo, hi) = (pos.floor() as usize, pos.ceil() as usize);
-    s[lo] + (s[hi] - s[lo]) * (pos - lo as f64)
 }
 
 #[test]

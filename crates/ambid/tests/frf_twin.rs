@@ -5,6 +5,8 @@ use ambid::experiment::{run, Experiment};
 use ambid_core::frf::closed_loop::ClosedLoopFrf;
 use ambid_core::lti::StateSpace;
 use ambid_twin::{Mode, Twin, TwinConfig};
+mod common;
+use common::percentile;
 
 fn seed_config() -> TwinConfig {
     let mut cfg = TwinConfig::default();
@@ -28,14 +30,6 @@ fn rel_errors(est: &[ambid_core::c64], truth: &[ambid_core::c64]) -> Vec<f64> {
         .zip(truth)
         .map(|(e, t)| (e - t).norm() / t.norm())
         .collect()
-}
-
-fn percentile(v: &[f64], p: f64) -> f64 {
-    let mut s = v.to_vec();
-    s.sort_by(|a, b| a.total_cmp(b));
-    let pos = p * (s.len() - 1) as f64;
-    let (lo, hi) = (pos.floor() as usize, pos.ceil() as usize);
-    s[lo] + (s[hi] - s[lo]) * (pos - lo as f64)
 }
 
 #[test]

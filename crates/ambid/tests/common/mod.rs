@@ -40,3 +40,12 @@ pub const CONTROLLER: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
     "/tests/fixtures/twin_controller.toml"
 );
+
+/// The `p`-quantile of `v` (linear interpolation between order statistics, numpy's default).
+pub fn percentile(v: &[f64], p: f64) -> f64 {
+    let mut s = v.to_vec();
+    s.sort_by(|a, b| a.total_cmp(b));
+    let pos = p * (s.len() - 1) as f64;
+    let (lo, hi) = (pos.floor() as usize, pos.ceil() as usize);
+    s[lo] + (s[hi] - s[lo]) * (pos - lo as f64)
+}
