@@ -7,5 +7,6 @@ pub mod analysis;
 pub mod comparison;
 pub mod experiment;
 pub mod io;
+pub mod report;
 pub mod stepped_sine;
 pub mod study;

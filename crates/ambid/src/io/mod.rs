@@ -1,12 +1,16 @@
 //! File formats of ambid (see `docs/formats.md`; they are a public interface).
 //!
 //! * time data: CSV with a header row, one column per signal, SI units, optional `t` column;
+//!   also text without a header, NumPy, MATLAB and Parquet files through [`table`];
 //! * frequency-response data: CSV `f_hz, <q>_re, <q>_im, <q>_std, …`;
-//! * controllers: TOML or JSON, a PID description, a transfer function or a state space.
+//! * controllers: TOML or JSON, a PID description, a transfer function or a state space;
+//! * models: JSON ([`model`]) and MATLAB/NumPy exports ([`export`]).
 
 pub mod controller;
 pub mod csv;
+pub mod export;
 pub mod model;
+pub mod table;
 
 pub use self::controller::{read_controller, ControllerModel};
 pub use self::csv::{

@@ -1,0 +1,247 @@
+//! The HTML report: one self-contained offline file (inline SVG, no network, no JavaScript),
+//! built from a plain data model ([`Report`] → [`Section`] → [`Block`]) so that the workflow only
+//! describes *what* to show. Every [`Figure`] can also be written as CSV ([`Figure::to_csv`]).
+//!
+//! SKELETON: the data model is fixed; rendering is being written.
+
+/// A whole report.
+#[derive(Debug, Clone, Default)]
+pub struct Report {
+    /// Page title (also the `<title>`).
+    pub title: String,
+    /// One line under the title (data source, date, ambid version).
+    pub subtitle: String,
+    /// Sections in order; each gets an entry in the table of contents.
+    pub sections: Vec<Section>,
+}
+
+/// One section (a workflow step).
+#[derive(Debug, Clone, Default)]
+pub struct Section {
+    /// Anchor id (`[a-z0-9-]+`).
+    pub id: String,
+    /// Heading.
+    pub title: String,
+    /// Content in order.
+    pub blocks: Vec<Block>,
+}
+
+/// A piece of section content.
+#[derive(Debug, Clone)]
+pub enum Block {
+    /// A paragraph of plain text (escaped when rendered).
+    Text(String),
+    /// A highlighted note (for example "step skipped: open-loop data").
+    Note { kind: NoteKind, text: String },
+    /// A figure.
+    Figure(Figure),
+    /// A table.
+    Table(Table),
+}
+
+/// How a note is highlighted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NoteKind {
+    /// Neutral information.
+    Info,
+    /// Something the reader should look at (a bar missed, saturation, a skipped step).
+    Warning,
+    /// A verdict that passed.
+    Pass,
+    /// A verdict that failed.
+    Fail,
+}
+
+/// A table of preformatted cells.
+#[derive(Debug, Clone, Default)]
+pub struct Table {
+    /// File-safe id (`[a-z0-9_-]+`); also used to write the table as `<id>.csv`.
+    pub id: String,
+    /// Caption: what the table shows and how it was computed.
+    pub caption: String,
+    /// Column headings (with units).
+    pub header: Vec<String>,
+    /// Rows of cells; each row has `header.len()` cells.
+    pub rows: Vec<Vec<String>>,
+    /// Row to highlight (for example the chosen model), if any.
+    pub highlight: Option<usize>,
+}
+
+/// A figure: one or more panels, a title and a caption.
+#[derive(Debug, Clone, Default)]
+pub struct Figure {
+    /// File-safe id (`[a-z0-9_-]+`); the data are written as `<id>.csv`.
+    pub id: String,
+    /// Title shown above the figure.
+    pub title: String,
+    /// Caption: what was computed and with which settings.
+    pub caption: String,
+    /// Panels, laid out in a grid of `columns` columns (row-major).
+    pub panels: Vec<Panel>,
+    /// Number of panel columns (0 or 1: one panel per row).
+    pub columns: usize,
+}
+
+/// One set of axes.
+#[derive(Debug, Clone)]
+pub struct Panel {
+    /// Panel title (may be empty).
+    pub title: String,
+    /// Horizontal axis.
+    pub x: Axis,
+    /// Vertical axis.
+    pub y: Axis,
+    /// What is drawn.
+    pub content: PanelContent,
+    /// Shaded vertical spans (for example the recommended amplitude range or a frequency band).
+    pub spans: Vec<Span>,
+    /// Equal scaling of x and y (pole-zero maps).
+    pub equal_aspect: bool,
+}
+
+/// What a panel draws.
+#[derive(Debug, Clone)]
+pub enum PanelContent {
+    /// Curves, markers and bands.
+    Xy(Vec<Series>),
+    /// A colour map over a grid.
+    Heatmap(Heatmap),
+}
+
+/// An axis.
+#[derive(Debug, Clone)]
+pub struct Axis {
+    /// Label with unit, e.g. `"frequency [Hz]"`.
+    pub label: String,
+    /// Linear or logarithmic.
+    pub scale: Scale,
+    /// Fixed range; `None` fits the data (non-finite values and, on a log axis, values ≤ 0 are skipped).
+    pub range: Option<(f64, f64)>,
+}
+
+/// Axis scale.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Scale {
+    /// Linear.
+    Linear,
+    /// Base-10 logarithmic.
+    Log,
+}
+
+/// One data series in an [`PanelContent::Xy`] panel.
+#[derive(Debug, Clone)]
+pub struct Series {
+    /// Legend entry (and CSV series name).
+    pub name: String,
+    /// Abscissae.
+    pub x: Vec<f64>,
+    /// Ordinates (for a band: the upper edge).
+    pub y: Vec<f64>,
+    /// How it is drawn.
+    pub style: Style,
+    /// Palette index (series with the same index share a colour); `None` takes the next colour.
+    pub color: Option<usize>,
+}
+
+/// How a series is drawn.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Style {
+    /// Solid line.
+    Line,
+    /// Dashed line.
+    Dashed,
+    /// Markers only.
+    Markers(Marker),
+    /// Line with markers.
+    LineMarkers(Marker),
+    /// A filled band between `lower` and the series' `y` (same length as `x`).
+    Band {
+        /// Lower edge.
+        lower: Vec<f64>,
+    },
+    /// Vertical stems from 0 (correlation lags).
+    Stems,
+}
+
+/// Marker shapes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Marker {
+    /// Filled circle.
+    Dot,
+    /// Open circle (zeros).
+    Circle,
+    /// Cross `×` (poles).
+    Cross,
+    /// Square.
+    Square,
+}
+
+/// A shaded vertical span.
+#[derive(Debug, Clone)]
+pub struct Span {
+    /// Label (legend / tooltip).
+    pub label: String,
+    /// Start on the x axis.
+    pub x0: f64,
+    /// End on the x axis.
+    pub x1: f64,
+}
+
+/// A colour map: `z[j][i]` is the value at (`x[i]`, `y[j]`).
+#[derive(Debug, Clone)]
+pub struct Heatmap {
+    /// Column centres.
+    pub x: Vec<f64>,
+    /// Row centres.
+    pub y: Vec<f64>,
+    /// Values, one row per `y`; non-finite cells are drawn blank.
+    pub z: Vec<Vec<f64>>,
+    /// Colour-bar label with unit.
+    pub z_label: String,
+    /// Mark this cell (i, j) (for example the chosen order).
+    pub highlight: Option<(usize, usize)>,
+}
+
+/// Formats a number the way the report prints it (4 significant digits, plain or scientific);
+/// `summary.json` values are checked against the report through this function.
+pub fn format_number(v: f64) -> String {
+    if !v.is_finite() {
+        return format!("{v}");
+    }
+    if v == 0.0 {
+        return "0".into();
+    }
+    let a = v.abs();
+    if (1e-3..1e5).contains(&a) {
+        let digits = (3 - a.log10().floor() as i32).clamp(0, 6) as usize;
+        let s = format!("{v:.digits$}");
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s
+        }
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
+impl Report {
+    /// Renders the report as one self-contained HTML document.
+    pub fn to_html(&self) -> String {
+        String::new()
+    }
+}
+
+impl Figure {
+    /// The figure's data as CSV.
+    pub fn to_csv(&self) -> String {
+        String::new()
+    }
+}
+
+impl Table {
+    /// The table as CSV.
+    pub fn to_csv(&self) -> String {
+        String::new()
+    }
+}
