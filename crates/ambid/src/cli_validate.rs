@@ -4,13 +4,8 @@
 use ambid::io::csv::read_frf_csv;
 use ambid::io::model::{read_kalman_gain, read_model_json};
 use ambid::io::{read_controller, read_time_csv, write_time_csv};
-use ambid_core::c64;
+use ambid::validation::{consistency, validate_closed_loop, MeasuredLoop, ValidationSettings};
 use ambid_core::estimate::arx::fit_percent;
-use ambid_core::validate::closed_loop::reconstruct;
-use ambid_core::validate::iso::{sensitivity_zone, IsoZones};
-use ambid_core::validate::margins::margins;
-use ambid_core::validate::pz::{PzAnalysis, PzOptions};
-use ambid_core::validate::residuals::analyze;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use serde_json::json;
@@ -66,16 +61,9 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
     let ctrl = read_controller(&a.controller)?;
     let d = read_time_csv(&a.data, a.fs)?;
     let ts = d.ts;
-    let mts = model.ts().unwrap_or(0.0);
-    if (mts - ts).abs() > 1e-9 * ts {
-        bail!(
-            "the model's sample time {mts} s differs from the data's {ts} s: identify the model at the data's rate (or resample the data)"
-        );
-    }
     ctrl.check_ts(ts)?;
     let y = d.column(&a.output)?;
     let u = d.column(&a.current)?;
-    // an all-zero excitation column (a reference-driven record) counts as absent
     let r = d
         .column(&a.excitation)
         .ok()
@@ -85,87 +73,45 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
     if r.is_none() && w.iter().all(|v| *v == 0.0) {
         bail!("the record has neither an excitation column `{}` nor a reference `w`: nothing drives the loop", a.excitation);
     }
-    if a.skip + 4 * a.lags.max(5) >= y.len() {
-        bail!(
-            "--skip {} leaves too few samples ({}) for the residual tests with {} lags",
-            a.skip,
-            y.len().saturating_sub(a.skip),
-            a.lags
-        );
-    }
+    let settings = ValidationSettings {
+        skip: a.skip,
+        lags: a.lags,
+        windows: a.windows,
+        ..ValidationSettings::default()
+    };
     let k0 = a.skip;
     let c = ctrl.state_space();
-    // closed-loop poles first: an unstable loop is reported with its poles
-    let cl = model.feedback(c)?;
-    let pz_cl = PzAnalysis::from_state_space(&cl, &PzOptions::default())?;
-    let unstable_cl: Vec<String> = pz_cl
-        .poles
-        .iter()
-        .filter(|p| p.z.norm() >= 1.0)
-        .map(|p| format!("{:.6}{:+.6}j (|z| = {:.6})", p.z.re, p.z.im, p.z.norm()))
-        .collect();
-    if !unstable_cl.is_empty() {
-        bail!(
-            "the model does not give a stable closed loop with this controller; unstable closed-loop poles: {}. The model is wrong near crossover or the controller does not match the data",
-            unstable_cl.join(", ")
-        );
-    }
-    // simulate from the start of the record (the model starts from rest like the plant did) and
-    // measure after the skip
-    let full = reconstruct(&model, c, w, r, y, u, a.windows, ts)?;
+    let v = validate_closed_loop(&model, c, &MeasuredLoop { w, r, y, u, ts }, &settings)
+        .map_err(|e| {
+            if a.skip + 4 * a.lags.max(5) >= y.len() {
+                e.context("use a smaller --skip or fewer --lags")
+            } else {
+                e
+            }
+        })?;
+    let full = &v.reconstruction;
     let sim = &full.simulated;
-    let eps: Vec<f64> = y[k0..]
-        .iter()
-        .zip(&sim.y[k0..])
-        .map(|(a, b)| a - b)
-        .collect();
-    let input = r.map_or(&w[k0..], |r| &r[k0..]);
-    let res = analyze(&eps, Some(input), a.lags)?;
-    let rmse = (eps.iter().map(|e| e * e).sum::<f64>() / eps.len() as f64).sqrt();
-    let max_err = eps.iter().map(|e| e.abs()).fold(0.0, f64::max);
-    let fit = |x: &[f64], xh: &[f64]| fit_percent(x, xh);
-    let (fit_y, fit_u) = (fit(&y[k0..], &sim.y[k0..])?, fit(&u[k0..], &sim.u[k0..])?);
-    // margins and ISO zone of the model's loop on a log grid up to Nyquist
-    let fny = 0.5 / ts;
-    let grid: Vec<f64> = (0..4000)
-        .map(|k| 0.5 * (0.98 * fny / 0.5f64).powf(k as f64 / 3999.0))
-        .collect();
-    let gp = model.freq_response_siso(&grid)?;
-    let gc = c.freq_response_siso(&grid)?;
-    let l: Vec<c64> = gp.iter().zip(&gc).map(|(p, c)| p * c).collect();
-    let mg = margins(&grid, &l)?;
-    let s_model: Vec<c64> = l.iter().map(|v| (c64::new(1.0, 0.0) + v).inv()).collect();
-    let s_frd = ambid_core::lti::Frd::new(grid.clone(), s_model, None, Some(ts))?;
-    let iso_model = sensitivity_zone(&s_frd, &IsoZones::default())?;
-    // closed-loop consistency: the model's S and T_ry in the loop against the measured ones
+    let res = &v.residuals;
+    let (fit_y, fit_u, rmse, max_err) = (v.fit_y, v.fit_u, v.rmse_y, v.max_error_y);
+    let mg = &v.margins;
+    let iso_model = &v.iso_model;
+    let pz_cl = &v.closed_loop;
     let (iso_measured, consistency) = match &a.frf {
         Some(p) => {
             let file = read_frf_csv(p)?;
-            let s_meas = file.frd("t_ru", ts)?;
-            let t_meas = file.frd("t_ry", ts)?;
-            let f = s_meas.f_hz().to_vec();
-            let (gp, gc) = (model.freq_response_siso(&f)?, c.freq_response_siso(&f)?);
-            let med = |pred: &[c64], meas: &[c64]| {
-                let mut r: Vec<f64> = pred
-                    .iter()
-                    .zip(meas)
-                    .map(|(a, b)| (a - b).norm() / b.norm())
-                    .collect();
-                r.sort_by(f64::total_cmp);
-                r[r.len() / 2]
-            };
-            let s_pred: Vec<c64> = gp
-                .iter()
-                .zip(&gc)
-                .map(|(p, c)| (c64::new(1.0, 0.0) + p * c).inv())
-                .collect();
-            let t_pred: Vec<c64> = gp.iter().zip(&s_pred).map(|(p, s)| p * s).collect();
+            let cns = consistency(
+                &model,
+                c,
+                &file.frd("t_ru", ts)?,
+                &file.frd("t_ry", ts)?,
+                &settings.zones,
+            )?;
             (
-                Some(sensitivity_zone(&s_meas, &IsoZones::default())?),
+                Some(cns.iso_measured.clone()),
                 Some(json!({
-                    "s_median_relative_error": med(&s_pred, s_meas.values()),
-                    "t_ry_median_relative_error": med(&t_pred, t_meas.values()),
-                    "lines": f.len(),
+                    "s_median_relative_error": cns.s_median_relative_error,
+                    "t_ry_median_relative_error": cns.t_ry_median_relative_error,
+                    "lines": cns.lines,
                 })),
             )
         }
@@ -185,7 +131,7 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
             }
             let kmat = faer::Mat::from_fn(kg.len(), 1, |i, _| kg[i]);
             let p = ambid_core::validate::predict::predict_k(&model, kmat.as_ref(), y, u, k)?;
-            Some((k, fit(&y[k0..], &p[k0..])?))
+            Some((k, fit_percent(&y[k0..], &p[k0..])?))
         }
         None => None,
     };

@@ -10,3 +10,4 @@ pub mod io;
 pub mod report;
 pub mod stepped_sine;
 pub mod study;
+pub mod validation;

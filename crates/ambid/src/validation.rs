@@ -1,0 +1,252 @@
+//! Validation of an identified plant model on an independent closed-loop record, the way the
+//! seed paper does it: the model is closed with the real controller and driven by the recorded
+//! excitation (and position reference); the simulated displacement and controller output are
+//! compared with the measured ones (fit %, error, windows), the output error is tested for
+//! whiteness and independence from the excitation, and the model's closed loop gives the
+//! stability margins and the ISO 14839-3 sensitivity zone.
+//!
+//! This is the library behind `ambid validate` and the workflow's validation steps: one
+//! implementation of every number both report.
+//!
+//! The plant model is never simulated in open loop (it is unstable); a model that does not give a
+//! stable closed loop with the controller is an error that names the unstable closed-loop poles.
+
+use ambid_core::c64;
+use ambid_core::estimate::arx::fit_percent;
+use ambid_core::lti::{Frd, StateSpace};
+use ambid_core::validate::closed_loop::{reconstruct, Reconstruction};
+use ambid_core::validate::iso::{sensitivity_zone, IsoVerdict, IsoZones};
+use ambid_core::validate::margins::{margins, Margins};
+use ambid_core::validate::pz::{PzAnalysis, PzOptions};
+use ambid_core::validate::residuals::{analyze, ResidualTest};
+use anyhow::{bail, Result};
+use serde::Serialize;
+
+/// Settings of [`validate_closed_loop`].
+#[derive(Debug, Clone)]
+pub struct ValidationSettings {
+    /// Leading samples excluded from the fits and residual tests (the loop's start-up).
+    pub skip: usize,
+    /// Largest lag of the residual correlation tests.
+    pub lags: usize,
+    /// Number of time windows of the windowed fits.
+    pub windows: usize,
+    /// ISO 14839-3 zone limits.
+    pub zones: IsoZones,
+    /// Points of the logarithmic frequency grid (0.5 Hz to 0.98 × Nyquist) for the margins and
+    /// the model's sensitivity.
+    pub grid_points: usize,
+}
+
+impl Default for ValidationSettings {
+    fn default() -> Self {
+        Self {
+            skip: 0,
+            lags: 25,
+            windows: 20,
+            zones: IsoZones::default(),
+            grid_points: 4000,
+        }
+    }
+}
+
+/// A measured closed-loop record (same length for every signal).
+#[derive(Debug, Clone, Copy)]
+pub struct MeasuredLoop<'a> {
+    /// Position reference \[m\] (zeros when there is none).
+    pub w: &'a [f64],
+    /// Excitation added to the controller output \[A\], if any.
+    pub r: Option<&'a [f64]>,
+    /// Measured displacement \[m\].
+    pub y: &'a [f64],
+    /// Measured controller output \[A\].
+    pub u: &'a [f64],
+    /// Sample time \[s\].
+    pub ts: f64,
+}
+
+/// Everything [`validate_closed_loop`] computes.
+#[derive(Debug, Clone)]
+pub struct ValidationOutcome {
+    /// The closed-loop simulation and its windowed fits (whole record).
+    pub reconstruction: Reconstruction,
+    /// Fit % of the displacement after `skip`.
+    pub fit_y: f64,
+    /// Fit % of the controller output after `skip`.
+    pub fit_u: f64,
+    /// RMS output error after `skip` \[m\].
+    pub rmse_y: f64,
+    /// Largest absolute output error after `skip` \[m\].
+    pub max_error_y: f64,
+    /// Residual tests of the output error (against the excitation, or the reference without one).
+    pub residuals: ResidualTest,
+    /// Poles of the model's closed loop with the controller.
+    pub closed_loop: PzAnalysis,
+    /// Stability margins of the model's loop gain.
+    pub margins: Margins,
+    /// Frequency grid of `s_model` \[Hz\].
+    pub grid_hz: Vec<f64>,
+    /// The model's sensitivity $S = 1/(1 + P C)$ on `grid_hz`.
+    pub s_model: Vec<c64>,
+    /// ISO 14839-3 verdict of the model's sensitivity.
+    pub iso_model: IsoVerdict,
+    /// Samples in the fits and tests.
+    pub samples: usize,
+    /// Leading samples excluded.
+    pub skip: usize,
+}
+
+impl ValidationOutcome {
+    /// Output error $y - \hat y$ over the whole record.
+    pub fn error_y(&self, y: &[f64]) -> Vec<f64> {
+        y.iter()
+            .zip(&self.reconstruction.simulated.y)
+            .map(|(a, b)| a - b)
+            .collect()
+    }
+}
+
+/// Validates `model` with `controller` on the record `rec` (module docs).
+///
+/// # Errors
+/// A sample time that differs from the record's, a record with neither excitation nor reference,
+/// too few samples after `skip` for the residual tests, an unstable closed loop (with its poles),
+/// and the errors of the underlying computations.
+pub fn validate_closed_loop(
+    model: &StateSpace,
+    controller: &StateSpace,
+    rec: &MeasuredLoop<'_>,
+    s: &ValidationSettings,
+) -> Result<ValidationOutcome> {
+    let ts = rec.ts;
+    let mts = model.ts().unwrap_or(0.0);
+    if (mts - ts).abs() > 1e-9 * ts {
+        bail!(
+            "the model's sample time {mts} s differs from the data's {ts} s: identify the model at the data's rate (or resample the data)"
+        );
+    }
+    let (y, u, w) = (rec.y, rec.u, rec.w);
+    let r = rec.r.filter(|r| r.iter().any(|v| *v != 0.0));
+    if r.is_none() && w.iter().all(|v| *v == 0.0) {
+        bail!("the record has neither an excitation nor a position reference: nothing drives the loop");
+    }
+    if s.skip + 4 * s.lags.max(5) >= y.len() {
+        bail!(
+            "skipping {} samples leaves too few ({}) for the residual tests with {} lags",
+            s.skip,
+            y.len().saturating_sub(s.skip),
+            s.lags
+        );
+    }
+    let k0 = s.skip;
+    let cl = model.feedback(controller)?;
+    let closed_loop = PzAnalysis::from_state_space(&cl, &PzOptions::default())?;
+    let unstable: Vec<String> = closed_loop
+        .poles
+        .iter()
+        .filter(|p| p.z.norm() >= 1.0)
+        .map(|p| format!("{:.6}{:+.6}j (|z| = {:.6})", p.z.re, p.z.im, p.z.norm()))
+        .collect();
+    if !unstable.is_empty() {
+        bail!(
+            "the model does not give a stable closed loop with this controller; unstable closed-loop poles: {}. The model is wrong near crossover or the controller does not match the data",
+            unstable.join(", ")
+        );
+    }
+    let reconstruction = reconstruct(model, controller, w, r, y, u, s.windows, ts)?;
+    let sim = &reconstruction.simulated;
+    let eps: Vec<f64> = y[k0..]
+        .iter()
+        .zip(&sim.y[k0..])
+        .map(|(a, b)| a - b)
+        .collect();
+    let input = r.map_or(&w[k0..], |r| &r[k0..]);
+    let residuals = analyze(&eps, Some(input), s.lags)?;
+    let rmse_y = (eps.iter().map(|e| e * e).sum::<f64>() / eps.len() as f64).sqrt();
+    let max_error_y = eps.iter().map(|e| e.abs()).fold(0.0, f64::max);
+    let fit_y = fit_percent(&y[k0..], &sim.y[k0..])?;
+    let fit_u = fit_percent(&u[k0..], &sim.u[k0..])?;
+    let fny = 0.5 / ts;
+    let n = s.grid_points.max(2);
+    let grid_hz: Vec<f64> = (0..n)
+        .map(|k| 0.5 * (0.98 * fny / 0.5f64).powf(k as f64 / (n - 1) as f64))
+        .collect();
+    let gp = model.freq_response_siso(&grid_hz)?;
+    let gc = controller.freq_response_siso(&grid_hz)?;
+    let l: Vec<c64> = gp.iter().zip(&gc).map(|(p, c)| p * c).collect();
+    let margins = margins(&grid_hz, &l)?;
+    let s_model: Vec<c64> = l.iter().map(|v| (c64::new(1.0, 0.0) + v).inv()).collect();
+    let s_frd = Frd::new(grid_hz.clone(), s_model.clone(), None, Some(ts))?;
+    let iso_model = sensitivity_zone(&s_frd, &s.zones)?;
+    Ok(ValidationOutcome {
+        reconstruction,
+        fit_y,
+        fit_u,
+        rmse_y,
+        max_error_y,
+        residuals,
+        closed_loop,
+        margins,
+        grid_hz,
+        s_model,
+        iso_model,
+        samples: y.len() - k0,
+        skip: k0,
+    })
+}
+
+/// How well a model's closed loop matches measured closed-loop FRFs.
+#[derive(Debug, Clone, Serialize)]
+pub struct Consistency {
+    /// Median relative error of the model's $S$ against the measured $S = T_{ru}$.
+    pub s_median_relative_error: f64,
+    /// Median relative error of the model's $T_{ry}$ against the measured one.
+    pub t_ry_median_relative_error: f64,
+    /// Lines compared.
+    pub lines: usize,
+    /// ISO 14839-3 verdict of the measured sensitivity.
+    pub iso_measured: IsoVerdict,
+}
+
+/// Compares the model's closed loop with measured $S$ and $T_{ry}$ (same frequency lines) and
+/// gives the ISO 14839-3 zone of the measured sensitivity.
+///
+/// # Errors
+/// Measured FRFs on different lines, or the errors of the frequency responses.
+pub fn consistency(
+    model: &StateSpace,
+    controller: &StateSpace,
+    s_meas: &Frd,
+    t_meas: &Frd,
+    zones: &IsoZones,
+) -> Result<Consistency> {
+    let f = s_meas.f_hz();
+    if t_meas.f_hz() != f {
+        bail!("the measured S and T_ry must be on the same frequency lines");
+    }
+    let (gp, gc) = (
+        model.freq_response_siso(f)?,
+        controller.freq_response_siso(f)?,
+    );
+    let med = |pred: &[c64], meas: &[c64]| {
+        let mut r: Vec<f64> = pred
+            .iter()
+            .zip(meas)
+            .map(|(a, b)| (a - b).norm() / b.norm())
+            .collect();
+        r.sort_by(f64::total_cmp);
+        r.get(r.len() / 2).copied().unwrap_or(f64::NAN)
+    };
+    let s_pred: Vec<c64> = gp
+        .iter()
+        .zip(&gc)
+        .map(|(p, c)| (c64::new(1.0, 0.0) + p * c).inv())
+        .collect();
+    let t_pred: Vec<c64> = gp.iter().zip(&s_pred).map(|(p, s)| p * s).collect();
+    Ok(Consistency {
+        s_median_relative_error: med(&s_pred, s_meas.values()),
+        t_ry_median_relative_error: med(&t_pred, t_meas.values()),
+        lines: f.len(),
+        iso_measured: sensitivity_zone(s_meas, zones)?,
+    })
+}
