@@ -4,7 +4,7 @@ use ambid::io::model::{polynomial_json, write_model_json};
 use ambid::io::read_time_csv;
 use ambid_core::estimate::arx::{arx, fit_percent, ArxOrders};
 use ambid_core::estimate::order::{arx_order_scan, ArxScanSpec};
-use ambid_core::estimate::pem::{self, prediction_errors, Focus, Orders, PemOptions};
+use ambid_core::estimate::pem::{self, Focus, Orders, PemOptions};
 use ambid_core::estimate::Fitted;
 use ambid_core::lti::PolyModel;
 use anyhow::{bail, Context, Result};
@@ -143,12 +143,7 @@ fn mean(x: &[f64]) -> f64 {
 }
 
 /// One-step and simulation fit (%) of a polynomial model on a record.
-fn fits(m: &PolyModel, y: &[f64], u: &[f64]) -> Result<(f64, f64)> {
-    let (eps, _) = prediction_errors(m, y, u, Focus::Prediction)?;
-    let yhat: Vec<f64> = y.iter().zip(&eps).map(|(y, e)| y - e).collect();
-    let ysim = m.simulate(u, None, None)?;
-    Ok((fit_percent(y, &yhat)?, fit_percent(y, &ysim)?))
-}
+use ambid::fitting::poly_fits as fits;
 
 pub fn fit(a: FitArgs) -> Result<()> {
     if let Some(q) = &a.quantity {
@@ -369,65 +364,45 @@ pub fn order(a: OrderArgs) -> Result<()> {
 /// Subspace state-space fit: data scaled to unit RMS for the algorithm, model scaled back.
 fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Result<()> {
     use ambid::io::model::state_space_json;
-    use ambid_core::estimate::ss_pem::{refine_ss, SsPemOptions};
-    use ambid_core::estimate::subspace::{n4sid_detailed, SubspaceOptions};
-    use ambid_core::lti::StateSpace;
-    use faer::Mat;
-    let rms = |x: &[f64]| (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt();
-    let (su, sy) = (rms(u), rms(y));
-    if su == 0.0 || sy == 0.0 {
-        bail!("the input or the output is constant after removing its mean: nothing to identify");
-    }
-    let um = Mat::from_fn(u.len(), 1, |k, _| u[k] / su);
-    let ym = Mat::from_fn(y.len(), 1, |k, _| y[k] / sy);
-    let mut opts = SubspaceOptions::new(ts);
-    opts.order = a.order;
-    opts.block_rows = a.block_rows;
-    let fit = n4sid_detailed(ym.as_ref(), um.as_ref(), &opts).context("subspace identification")?;
-    let mut scaled = fit.fitted.model.clone();
-    let mut pem_meta = json!(null);
-    if !a.no_pem {
+    use ambid_core::estimate::ss_pem::SsPemOptions;
+    let pem = if a.no_pem {
+        None
+    } else {
         let focus = match a.focus {
             FocusArg::Prediction => Focus::Prediction,
             FocusArg::Simulation => Focus::Simulation,
         };
-        let o = SsPemOptions {
+        Some(SsPemOptions {
             focus,
             lm: SsPemOptions::default()
                 .lm
                 .with_max_iterations(a.max_iterations)?,
             ..SsPemOptions::default()
-        };
-        let k = fit.kalman_gain.as_ref().map(|k| k.as_ref());
-        let p = refine_ss(ym.as_ref(), um.as_ref(), &scaled, k, &o).context(
-            "prediction-error refinement of the subspace model (use --no-pem to skip it)",
-        )?;
+        })
+    };
+    let fit = ambid::fitting::fit_state_space(u, y, ts, a.order, a.block_rows, pem)
+        .map_err(|e| if a.no_pem { e } else { e.context("(use --no-pem to skip the refinement)") })?;
+    let mut pem_meta = json!(null);
+    if let Some(p) = &fit.pem {
         println!(
-            "prediction-error refinement ({focus:?} focus): loss {:.4e} -> {:.4e} after {} iterations ({:?}){}",
-            p.start_loss * sy * sy,
-            p.fitted.loss * sy * sy,
-            p.report.iterations,
-            p.report.reason,
-            if p.report.ended_on_boundary { "; the optimum lies on the predictor's stability boundary" } else { "" }
+            "prediction-error refinement ({:?} focus): loss {:.4e} -> {:.4e} after {} iterations ({}){}",
+            p.focus,
+            p.start_loss,
+            p.loss,
+            p.iterations,
+            p.stop,
+            if p.on_boundary { "; the optimum lies on the predictor's stability boundary" } else { "" }
         );
         pem_meta = json!({
-            "focus": format!("{focus:?}").to_lowercase(),
-            "iterations": p.report.iterations,
-            "stop": format!("{:?}", p.report.reason),
-            "start_loss": p.start_loss * sy * sy,
-            "loss": p.fitted.loss * sy * sy,
-            "kalman_gain": p.kalman_gain.as_ref().map(|k| (0..k.nrows()).map(|i| k[(i, 0)] / sy).collect::<Vec<_>>()),
+            "focus": format!("{:?}", p.focus).to_lowercase(),
+            "iterations": p.iterations,
+            "stop": p.stop,
+            "start_loss": p.start_loss,
+            "loss": p.loss,
+            "kalman_gain": p.kalman_gain,
         });
-        scaled = p.fitted.model;
     }
-    let m = &scaled;
-    let model = StateSpace::discrete(
-        m.a().to_owned(),
-        m.b() * faer::Scale(1.0 / su),
-        m.c() * faer::Scale(sy),
-        m.d() * faer::Scale(sy / su),
-        ts,
-    )?;
+    let model = fit.model.clone();
     println!(
         "state-space model of order {} (block rows {}), singular values: {}",
         fit.order,

@@ -6,6 +6,7 @@
 pub mod analysis;
 pub mod comparison;
 pub mod experiment;
+pub mod fitting;
 pub mod io;
 pub mod report;
 pub mod stepped_sine;
