@@ -12,3 +12,4 @@ pub mod report;
 pub mod stepped_sine;
 pub mod study;
 pub mod validation;
+pub mod workflow;

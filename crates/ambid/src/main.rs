@@ -16,6 +16,7 @@ use std::path::{Path, PathBuf};
 mod cli_fit;
 mod cli_freqfit;
 mod cli_frf;
+mod cli_run;
 mod cli_validate;
 
 #[derive(Parser)]
@@ -35,6 +36,12 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Run the whole seed workflow (excitation → studies → FRF → orders → models → validation →
+    /// reconstruction → ISO zone) and write the HTML report, summary.json, figure data and models.
+    /// Without a workflow file it runs on the embedded twin with the defaults.
+    Run(cli_run::RunArgs),
+    /// Write a commented example workflow file.
+    Init(cli_run::InitArgs),
     /// Design an excitation signal, write it as CSV (t, r) and print its band/duration report.
     Excite(ExciteArgs),
     /// Compare PRBS, chirp, white noise and multisine at one RMS level (the seed paper's figure 3):
@@ -331,12 +338,17 @@ fn main() {
     let cli = Cli::parse();
     if let Err(e) = dispatch(cli) {
         eprintln!("error: {e:#}");
-        std::process::exit(1);
+        let code = e
+            .downcast_ref::<ambid::workflow::Failure>()
+            .map_or(1, |f| f.class.exit_code());
+        std::process::exit(code);
     }
 }
 
 fn dispatch(cli: Cli) -> Result<()> {
     match cli.command {
+        Command::Run(a) => cli_run::run(a),
+        Command::Init(a) => cli_run::init(a),
         Command::Excite(a) => excite(a),
         Command::Compare(a) => compare(a),
         Command::Simulate(a) => simulate(a),

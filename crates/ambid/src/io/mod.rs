@@ -10,6 +10,7 @@ pub mod controller;
 pub mod csv;
 pub mod export;
 pub mod model;
+pub mod output;
 pub mod table;
 
 pub use self::controller::{read_controller, ControllerModel};

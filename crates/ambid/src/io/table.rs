@@ -85,3 +85,45 @@ pub fn read_table(path: &Path, opts: &ReadOptions) -> Result<Table, DataFileErro
         message: "not implemented yet".into(),
     })
 }
+
+// TEMPORARY minimal methods so that the workflow compiles before the readers land.
+impl ColumnRef {
+    /// `"#3"` → position 3, anything else a name.
+    pub fn parse(s: &str) -> Self {
+        match s.strip_prefix('#').and_then(|k| k.parse().ok()) {
+            Some(k) => ColumnRef::Index(k),
+            None => ColumnRef::Name(s.to_string()),
+        }
+    }
+}
+
+impl Table {
+    /// A column.
+    pub fn column(&self, c: &ColumnRef) -> Result<&[f64], DataFileError> {
+        let k = match c {
+            ColumnRef::Index(k) => k.checked_sub(1),
+            ColumnRef::Name(n) => self.names.iter().position(|x| x == n),
+        };
+        k.and_then(|k| self.columns.get(k))
+            .map(Vec::as_slice)
+            .ok_or_else(|| DataFileError::Invalid {
+                path: self.path.clone(),
+                message: format!("no column {c:?}"),
+            })
+    }
+
+    /// The sample time.
+    pub fn sample_time(&self, t: Option<&ColumnRef>, fs_hz: Option<f64>) -> Result<f64, DataFileError> {
+        match (t, fs_hz) {
+            (_, Some(fs)) => Ok(1.0 / fs),
+            (Some(c), None) => {
+                let t = self.column(c)?;
+                Ok((t[t.len() - 1] - t[0]) / (t.len() - 1) as f64)
+            }
+            _ => Err(DataFileError::Invalid {
+                path: self.path.clone(),
+                message: "give fs_hz or a time column".into(),
+            }),
+        }
+    }
+}

@@ -1,0 +1,687 @@
+//! The workflow file (`workflow.toml`): which steps to run, on which data, with which settings.
+//! Every key is optional; an unknown key is an error that names its line. `ambid init` writes a
+//! commented example ([`EXAMPLE`]) that parses to the defaults.
+
+use crate::io::table::ColumnRef;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// The steps of the seed procedure, in order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Deserialize, Serialize, PartialOrd, Ord)]
+#[serde(rename_all = "snake_case")]
+pub enum Step {
+    /// Excitation design and comparison (PRBS, chirp, noise, multisine).
+    Excitation,
+    /// Excitation-amplitude study.
+    Amplitude,
+    /// Operating-point study (bias current, air gap).
+    OperatingPoint,
+    /// Nonparametric FRF of the identification record, with quality measures.
+    Frf,
+    /// Order estimation: ARX loss/BIC over na × nb, resonance count.
+    Order,
+    /// ARX / OE / state-space fits of several orders and their comparison.
+    Models,
+    /// Pole-zero maps with near-cancellation checks.
+    PoleZero,
+    /// Time-domain validation on an independent record (with residual tests).
+    Validation,
+    /// Closed-loop reconstruction driven by a chirp position reference.
+    Reconstruction,
+    /// ISO 14839-3 sensitivity zone.
+    Iso,
+}
+
+impl Step {
+    /// Every step, in order.
+    pub const ALL: [Step; 10] = [
+        Step::Excitation,
+        Step::Amplitude,
+        Step::OperatingPoint,
+        Step::Frf,
+        Step::Order,
+        Step::Models,
+        Step::PoleZero,
+        Step::Validation,
+        Step::Reconstruction,
+        Step::Iso,
+    ];
+
+    /// The name used in the workflow file.
+    pub fn name(self) -> &'static str {
+        match self {
+            Step::Excitation => "excitation",
+            Step::Amplitude => "amplitude",
+            Step::OperatingPoint => "operating_point",
+            Step::Frf => "frf",
+            Step::Order => "order",
+            Step::Models => "models",
+            Step::PoleZero => "pole_zero",
+            Step::Validation => "validation",
+            Step::Reconstruction => "reconstruction",
+            Step::Iso => "iso",
+        }
+    }
+}
+
+/// Where the data come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum SourceKind {
+    /// The embedded AMB twin (default).
+    #[default]
+    Twin,
+    /// Recorded files (`[data]`).
+    Files,
+}
+
+/// A column given by name (`"y"`, `"#2"`) or 1-based position (`2`).
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(untagged)]
+pub enum ColumnSpec {
+    /// 1-based position.
+    Index(usize),
+    /// Name (or `#k`).
+    Name(String),
+}
+
+impl ColumnSpec {
+    /// The reader's column reference.
+    pub fn to_ref(&self) -> ColumnRef {
+        match self {
+            ColumnSpec::Index(k) => ColumnRef::Index(*k),
+            ColumnSpec::Name(s) => ColumnRef::parse(s),
+        }
+    }
+}
+
+/// The whole workflow file.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct WorkflowConfig {
+    /// Report title.
+    pub title: Option<String>,
+    /// Base seed of every random choice (noise, excitation phases).
+    pub seed: u64,
+    /// Steps to run (default: all that the data allow).
+    pub steps: Option<Vec<Step>>,
+    /// Data source: `twin` or `files`.
+    pub source: SourceKind,
+    /// The twin (source = "twin").
+    pub twin: TwinSection,
+    /// Recorded files (source = "files").
+    pub data: DataSection,
+    /// Excitation design.
+    pub excitation: ExcitationSection,
+    /// Amplitude study.
+    pub amplitude_study: AmplitudeSection,
+    /// Operating-point study.
+    pub operating_point: OperatingSection,
+    /// Nonparametric FRF.
+    pub frf: FrfSection,
+    /// Order estimation.
+    pub order: OrderSection,
+    /// Parametric models.
+    pub models: ModelsSection,
+    /// Validation.
+    pub validation: ValidationSection,
+    /// Closed-loop reconstruction.
+    pub reconstruction: ReconstructionSection,
+    /// ISO 14839-3 zone limits.
+    pub iso: IsoSection,
+}
+
+impl Default for WorkflowConfig {
+    fn default() -> Self {
+        Self {
+            title: None,
+            seed: 1,
+            steps: None,
+            source: SourceKind::Twin,
+            twin: TwinSection::default(),
+            data: DataSection::default(),
+            excitation: ExcitationSection::default(),
+            amplitude_study: AmplitudeSection::default(),
+            operating_point: OperatingSection::default(),
+            frf: FrfSection::default(),
+            order: OrderSection::default(),
+            models: ModelsSection::default(),
+            validation: ValidationSection::default(),
+            reconstruction: ReconstructionSection::default(),
+            iso: IsoSection::default(),
+        }
+    }
+}
+
+/// `[twin]`
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TwinSection {
+    /// `nonlinear` (default) or `linear` physics.
+    pub mode: String,
+    /// Sensor noise RMS \[µm\] (default: the twin's, 0.1 µm... as configured).
+    pub noise_rms_um: Option<f64>,
+    /// A twin configuration file (`ambid config` writes one), relative to the workflow file.
+    pub config: Option<PathBuf>,
+}
+
+impl Default for TwinSection {
+    fn default() -> Self {
+        Self {
+            mode: "nonlinear".into(),
+            noise_rms_um: None,
+            config: None,
+        }
+    }
+}
+
+/// `[data]`: recorded files (paths relative to the workflow file).
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DataSection {
+    /// The identification record.
+    pub identification: Option<PathBuf>,
+    /// An independent validation record (without it, the identification record is split).
+    pub validation: Option<PathBuf>,
+    /// A record without excitation under the same closed loop (output SNR).
+    pub noise: Option<PathBuf>,
+    /// A closed-loop record driven by a position reference (reconstruction).
+    pub reconstruction: Option<PathBuf>,
+    /// `.mat`/`.npz` variable to read.
+    pub variable: Option<String>,
+    /// Sample rate \[Hz\] (or give `time`).
+    pub fs_hz: Option<f64>,
+    /// Time column \[s\].
+    pub time: Option<ColumnSpec>,
+    /// Excitation added to the controller output (closed loop); absent for open-loop data.
+    pub r: Option<ColumnSpec>,
+    /// Plant input (controller output incl. excitation, or the open-loop input).
+    pub u: ColumnSpec,
+    /// Plant output (displacement).
+    pub y: ColumnSpec,
+    /// Coil current (optional).
+    pub i: Option<ColumnSpec>,
+    /// Position reference (optional).
+    pub w: Option<ColumnSpec>,
+    /// Factors that convert columns to SI units, e.g. `{ y = 1e-3 }` for mm.
+    pub scale: std::collections::BTreeMap<String, f64>,
+    /// Leading samples dropped (start-up, lift-off).
+    pub skip_samples: usize,
+    /// `mean` (default), `linear` or `none`.
+    pub detrend: String,
+    /// Fraction used for estimation when there is no validation file.
+    pub split: f64,
+    /// Samples per excitation period (periodic excitation), if known.
+    pub period_samples: Option<usize>,
+    /// Periods dropped at the start (transient).
+    pub skip_periods: usize,
+    /// The controller (TOML/JSON, see docs/formats.md); needed for the closed-loop steps.
+    pub controller: Option<PathBuf>,
+    /// Whether the data are closed-loop (default: true when `r` or `controller` is given).
+    pub closed_loop: Option<bool>,
+    /// Units of the displacement and current axes in the report (`"m"`, `"A"` by default).
+    pub y_unit: String,
+    /// Unit of the plant input.
+    pub u_unit: String,
+}
+
+impl Default for DataSection {
+    fn default() -> Self {
+        Self {
+            identification: None,
+            validation: None,
+            noise: None,
+            reconstruction: None,
+            variable: None,
+            fs_hz: None,
+            time: None,
+            r: None,
+            u: ColumnSpec::Name("u".into()),
+            y: ColumnSpec::Name("y".into()),
+            i: None,
+            w: None,
+            scale: Default::default(),
+            skip_samples: 0,
+            detrend: "mean".into(),
+            split: 0.5,
+            period_samples: None,
+            skip_periods: 1,
+            controller: None,
+            closed_loop: None,
+            y_unit: "m".into(),
+            u_unit: "A".into(),
+        }
+    }
+}
+
+/// `[excitation]`: the identification experiment (twin).
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ExcitationSection {
+    /// `prbs` (default), `chirp`, `noise` or `multisine`.
+    pub kind: String,
+    /// PRBS register order n.
+    pub prbs_order: u32,
+    /// Samples per PRBS bit.
+    pub samples_per_bit: usize,
+    /// Periods.
+    pub periods: usize,
+    /// Level in % of i_sat; `None` takes the amplitude study's recommendation (10 % without it).
+    pub amplitude_pct: Option<f64>,
+    /// Lowest frequency of chirp/multisine \[Hz\].
+    pub f_min_hz: f64,
+    /// Highest frequency of chirp/multisine \[Hz\].
+    pub f_max_hz: f64,
+    /// Level of the four-signal comparison in % of i_sat.
+    pub compare_level_pct: f64,
+}
+
+impl Default for ExcitationSection {
+    fn default() -> Self {
+        Self {
+            kind: "prbs".into(),
+            prbs_order: 10,
+            samples_per_bit: 5,
+            periods: 20,
+            amplitude_pct: None,
+            f_min_hz: 1.0,
+            f_max_hz: 2000.0,
+            compare_level_pct: 10.0,
+        }
+    }
+}
+
+/// `[amplitude_study]`
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AmplitudeSection {
+    /// Levels in % of i_sat (twin).
+    pub levels_pct: Vec<f64>,
+    /// Recorded files, one per level (source = "files").
+    pub files: Vec<LevelFile>,
+}
+
+impl Default for AmplitudeSection {
+    fn default() -> Self {
+        Self {
+            levels_pct: (1..=8).map(|k| 2.0 * k as f64).collect(),
+            files: Vec::new(),
+        }
+    }
+}
+
+/// One recorded level of an amplitude study.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct LevelFile {
+    /// Level in % of i_sat.
+    pub level_pct: f64,
+    /// The record (same columns as `[data]`).
+    pub path: PathBuf,
+}
+
+/// `[operating_point]`
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OperatingSection {
+    /// Bias-current change ± \[%\].
+    pub bias_pct: f64,
+    /// Air-gap change ± \[µm\].
+    pub air_gap_um: f64,
+}
+
+impl Default for OperatingSection {
+    fn default() -> Self {
+        Self {
+            bias_pct: 20.0,
+            air_gap_um: 10.0,
+        }
+    }
+}
+
+/// `[frf]`
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FrfSection {
+    /// Band of the estimate \[Hz\].
+    pub band_hz: Option<[f64; 2]>,
+    /// Band of the quality averages \[Hz\] (seed: 10–1000 Hz).
+    pub quality_band_hz: Option<[f64; 2]>,
+    /// `auto` (periodic when the period is known, else Welch), `periodic` or `welch`.
+    pub method: String,
+    /// Welch segment length.
+    pub nperseg: Option<usize>,
+}
+
+impl Default for FrfSection {
+    fn default() -> Self {
+        Self {
+            band_hz: None,
+            quality_band_hz: None,
+            method: "auto".into(),
+            nperseg: None,
+        }
+    }
+}
+
+/// `[order]`
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OrderSection {
+    /// Largest na of the ARX scan.
+    pub na_max: usize,
+    /// Largest nb of the ARX scan.
+    pub nb_max: usize,
+    /// Input delay of the scan.
+    pub nk: usize,
+    /// Samples of the identification record used for the scan (0: all).
+    pub max_samples: usize,
+}
+
+impl Default for OrderSection {
+    fn default() -> Self {
+        Self {
+            na_max: 12,
+            nb_max: 12,
+            nk: 1,
+            max_samples: 0,
+        }
+    }
+}
+
+/// `[models]`
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ModelsSection {
+    /// Structures: `arx`, `oe`, `ss`.
+    pub structures: Vec<String>,
+    /// Orders.
+    pub orders: Vec<usize>,
+    /// Input delay (polynomial models).
+    pub nk: usize,
+    /// Fit band \[Hz\] (FRF fits; default: the FRF band).
+    pub band_hz: Option<[f64; 2]>,
+    /// `frf` (fit to the FRF; default in closed loop with an excitation) or `time` (fit to the
+    /// time record; default otherwise).
+    pub domain: Option<String>,
+    /// FRF weights: `variance` (default), `coherence` or `uniform`.
+    pub weights: String,
+    /// Maximum iterations of the iterative fits.
+    pub max_iterations: usize,
+    /// How the model is chosen: `validation` (best validation fit), `bic` or `frf` (smallest
+    /// relative FRF error).
+    pub select: String,
+}
+
+impl Default for ModelsSection {
+    fn default() -> Self {
+        Self {
+            structures: vec!["arx".into(), "oe".into(), "ss".into()],
+            orders: vec![6, 7, 8, 9],
+            nk: 1,
+            band_hz: None,
+            domain: None,
+            weights: "variance".into(),
+            max_iterations: 100,
+            select: "validation".into(),
+        }
+    }
+}
+
+/// `[validation]`
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ValidationSection {
+    /// Excitation of the independent twin record: `noise` (default), `prbs`, `chirp`, `multisine`.
+    pub excitation: String,
+    /// Its level in % of i_sat (default: the identification level).
+    pub amplitude_pct: Option<f64>,
+    /// Leading samples excluded.
+    pub skip: usize,
+    /// Largest lag of the residual tests.
+    pub lags: usize,
+    /// Windows of the windowed fit.
+    pub windows: usize,
+}
+
+impl Default for ValidationSection {
+    fn default() -> Self {
+        Self {
+            excitation: "noise".into(),
+            amplitude_pct: None,
+            skip: 2000,
+            lags: 25,
+            windows: 20,
+        }
+    }
+}
+
+/// `[reconstruction]`: the chirp position reference (twin).
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ReconstructionSection {
+    /// Amplitude \[µm\].
+    pub amplitude_um: f64,
+    /// Duration \[s\].
+    pub duration_s: f64,
+    /// Start frequency \[Hz\].
+    pub f0_hz: f64,
+    /// End frequency \[Hz\].
+    pub f1_hz: f64,
+}
+
+impl Default for ReconstructionSection {
+    fn default() -> Self {
+        Self {
+            amplitude_um: 5.0,
+            duration_s: 2.0,
+            f0_hz: 1.0,
+            f1_hz: 1000.0,
+        }
+    }
+}
+
+/// `[iso]`: zone limits on the peak sensitivity.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct IsoSection {
+    /// A/B limit (ISO 14839-3: 3, i.e. 9.5 dB).
+    pub a: f64,
+    /// B/C limit (4, 12 dB).
+    pub b: f64,
+    /// C/D limit (5, 14 dB).
+    pub c: f64,
+}
+
+impl Default for IsoSection {
+    fn default() -> Self {
+        let z = ambid_core::validate::iso::IsoZones::default();
+        Self {
+            a: z.a,
+            b: z.b,
+            c: z.c,
+        }
+    }
+}
+
+/// A workflow file that could not be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// Cannot read the file.
+    #[error("{path}: cannot read the workflow file ({reason})")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        reason: String,
+    },
+    /// TOML syntax, an unknown key or a wrong type (the message has the line).
+    #[error("{path}: {message}")]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// The parser's message with line and column.
+        message: String,
+    },
+    /// A value that is not allowed.
+    #[error("{path}: {message}")]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong and what to do.
+        message: String,
+    },
+}
+
+impl WorkflowConfig {
+    /// Parses a workflow file's text; `path` is used in messages.
+    ///
+    /// # Errors
+    /// [`ConfigError::Parse`] with the line of the offending key or value.
+    pub fn from_toml_str(text: &str, path: &Path) -> Result<Self, ConfigError> {
+        let cfg: WorkflowConfig = toml::from_str(text).map_err(|e| {
+            let line = e
+                .span()
+                .map(|s| text[..s.start.min(text.len())].lines().count().max(1));
+            let msg = e.message().trim().to_string();
+            ConfigError::Parse {
+                path: path.to_path_buf(),
+                message: match line {
+                    Some(l) => format!("line {l}: {msg}"),
+                    None => msg,
+                },
+            }
+        })?;
+        cfg.check(path)?;
+        Ok(cfg)
+    }
+
+    /// Reads a workflow file.
+    ///
+    /// # Errors
+    /// As [`WorkflowConfig::from_toml_str`], and [`ConfigError::Read`].
+    pub fn from_path(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|e| ConfigError::Read {
+            path: path.to_path_buf(),
+            reason: e.to_string(),
+        })?;
+        Self::from_toml_str(&text, path)
+    }
+
+    fn check(&self, path: &Path) -> Result<(), ConfigError> {
+        let bad = |message: String| ConfigError::Invalid {
+            path: path.to_path_buf(),
+            message,
+        };
+        let one_of = |what: &str, v: &str, allowed: &[&str]| {
+            if allowed.contains(&v) {
+                Ok(())
+            } else {
+                Err(bad(format!(
+                    "{what} = \"{v}\" is not one of {}",
+                    allowed
+                        .iter()
+                        .map(|a| format!("\"{a}\""))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )))
+            }
+        };
+        one_of("twin.mode", &self.twin.mode, &["linear", "nonlinear"])?;
+        one_of(
+            "excitation.kind",
+            &self.excitation.kind,
+            &["prbs", "chirp", "noise", "multisine"],
+        )?;
+        one_of(
+            "validation.excitation",
+            &self.validation.excitation,
+            &["prbs", "chirp", "noise", "multisine"],
+        )?;
+        one_of("frf.method", &self.frf.method, &["auto", "periodic", "welch"])?;
+        one_of(
+            "data.detrend",
+            &self.data.detrend,
+            &["mean", "linear", "none"],
+        )?;
+        one_of(
+            "models.weights",
+            &self.models.weights,
+            &["variance", "coherence", "uniform"],
+        )?;
+        one_of(
+            "models.select",
+            &self.models.select,
+            &["validation", "bic", "frf"],
+        )?;
+        if let Some(d) = &self.models.domain {
+            one_of("models.domain", d, &["frf", "time"])?;
+        }
+        for s in &self.models.structures {
+            one_of("models.structures", s, &["arx", "oe", "ss"])?;
+        }
+        if self.models.orders.is_empty() || self.models.orders.contains(&0) {
+            return Err(bad(
+                "models.orders must list orders ≥ 1, e.g. [6, 7, 8, 9]".into(),
+            ));
+        }
+        if self.models.structures.is_empty() {
+            return Err(bad(
+                "models.structures must list at least one of \"arx\", \"oe\", \"ss\"".into(),
+            ));
+        }
+        if !(self.data.split > 0.0 && self.data.split < 1.0) {
+            return Err(bad(format!(
+                "data.split = {} must be between 0 and 1 (the estimation fraction, e.g. 0.5)",
+                self.data.split
+            )));
+        }
+        for (k, v) in &self.data.scale {
+            if !(v.is_finite() && *v != 0.0) {
+                return Err(bad(format!(
+                    "data.scale.{k} = {v} must be a finite, non-zero factor"
+                )));
+            }
+        }
+        for (what, b) in [
+            ("frf.band_hz", self.frf.band_hz),
+            ("frf.quality_band_hz", self.frf.quality_band_hz),
+            ("models.band_hz", self.models.band_hz),
+        ] {
+            if let Some([a, b]) = b {
+                if !(a.is_finite() && b.is_finite() && 0.0 <= a && a < b) {
+                    return Err(bad(format!(
+                        "{what} = [{a}, {b}] must be an increasing pair of frequencies in Hz"
+                    )));
+                }
+            }
+        }
+        if self
+            .amplitude_study
+            .levels_pct
+            .iter()
+            .any(|l| !(l.is_finite() && *l > 0.0 && *l <= 100.0))
+        {
+            return Err(bad(
+                "amplitude_study.levels_pct must be in (0, 100] % of i_sat".into(),
+            ));
+        }
+        if self.source == SourceKind::Files && self.data.identification.is_none() {
+            return Err(bad(
+                "source = \"files\" needs [data] identification = \"path/to/record.csv\"".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The steps to run, in order.
+    pub fn steps(&self) -> Vec<Step> {
+        let mut s = self.steps.clone().unwrap_or_else(|| Step::ALL.to_vec());
+        s.sort();
+        s.dedup();
+        s
+    }
+}
+
+/// The commented example written by `ambid init` (it parses to the defaults).
+pub const EXAMPLE: &str = include_str!("example.toml");

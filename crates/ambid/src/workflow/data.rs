@@ -1,0 +1,428 @@
+//! The workflow's data: the twin, or recorded files read through [`crate::io::table`].
+
+use super::config::{ColumnSpec, SourceKind, WorkflowConfig};
+use super::{computation, input, Ctx, Failure};
+use crate::experiment::{self, ExcitationKind, ExcitationPlan, Experiment};
+use crate::io::table::{read_table, ReadOptions, Table};
+use crate::io::ControllerModel;
+use crate::report::{Block, NoteKind, Section, Table as RTable};
+use ambid_core::data::{detrend, Detrend};
+use ambid_twin::{Mode, Twin, TwinConfig};
+use anyhow::{anyhow, Context};
+use std::path::Path;
+
+/// One closed- or open-loop record in SI units.
+#[derive(Debug, Clone)]
+pub struct Recording {
+    /// Sample time \[s\].
+    pub ts: f64,
+    /// Excitation at the controller output, if recorded.
+    pub r: Option<Vec<f64>>,
+    /// Plant input.
+    pub u: Vec<f64>,
+    /// Plant output.
+    pub y: Vec<f64>,
+    /// Coil current.
+    pub i: Option<Vec<f64>>,
+    /// Position reference.
+    pub w: Option<Vec<f64>>,
+    /// Closed-loop data.
+    pub closed_loop: bool,
+    /// Samples per excitation period, when periodic.
+    pub period: Option<usize>,
+    /// Where it came from.
+    pub source: String,
+    /// Fraction of saturated samples (twin).
+    pub saturated_fraction: Option<f64>,
+}
+
+impl Recording {
+    pub fn len(&self) -> usize {
+        self.y.len()
+    }
+
+    pub fn fs(&self) -> f64 {
+        1.0 / self.ts
+    }
+}
+
+/// The twin and how it is run.
+pub struct TwinSource {
+    pub cfg: TwinConfig,
+    pub mode: Mode,
+    pub noise: bool,
+    pub twin: Twin,
+}
+
+impl TwinSource {
+    /// Runs one experiment on the twin.
+    pub fn record(
+        &self,
+        plan: ExcitationPlan,
+        seed: u64,
+        what: &str,
+    ) -> Result<(Recording, experiment::ExperimentOutput), Failure> {
+        let exp = Experiment {
+            twin: self.cfg.clone(),
+            excitation: plan,
+            mode: self.mode,
+            seed,
+            noise: self.noise,
+            record_b: false,
+        };
+        let out = experiment::run(&exp)
+            .with_context(|| format!("simulating the {what} record on the twin"))
+            .map_err(computation)?;
+        let rec = &out.record;
+        let periodic = out.excitation.periods >= 2;
+        Ok((
+            Recording {
+                ts: rec.ts,
+                r: Some(rec.r.clone()),
+                u: rec.u.clone(),
+                y: rec.y.clone(),
+                i: Some(rec.i.clone()),
+                w: Some(rec.w.clone()),
+                closed_loop: true,
+                period: periodic.then_some(out.excitation.period_samples),
+                source: format!("twin, {what} record"),
+                saturated_fraction: Some(rec.meta.saturated_fraction),
+            },
+            out,
+        ))
+    }
+}
+
+pub struct Prepared {
+    pub twin: Option<TwinSource>,
+    pub ident: Option<Recording>,
+    pub valid: Option<Recording>,
+    pub controller: Option<ControllerModel>,
+}
+
+pub fn excitation_kind(name: &str) -> ExcitationKind {
+    match name {
+        "chirp" => ExcitationKind::Chirp,
+        "noise" => ExcitationKind::Noise,
+        "multisine" => ExcitationKind::Multisine,
+        _ => ExcitationKind::Prbs,
+    }
+}
+
+/// Reads the data (files) or builds the twin.
+pub fn prepare(cfg: &WorkflowConfig, base: &Path) -> Result<Prepared, Failure> {
+    match cfg.source {
+        SourceKind::Twin => {
+            let mut tc = match &cfg.twin.config {
+                Some(p) => {
+                    let path = base.join(p);
+                    let text = std::fs::read_to_string(&path)
+                        .with_context(|| format!("{}: cannot read the twin configuration", path.display()))
+                        .map_err(input)?;
+                    TwinConfig::from_toml_str(&text)
+                        .with_context(|| format!("{}: not a valid twin configuration", path.display()))
+                        .map_err(input)?
+                }
+                None => TwinConfig::default(),
+            };
+            if let Some(n) = cfg.twin.noise_rms_um {
+                tc.sensor.noise_rms_m = n * 1e-6;
+            }
+            let mode = if cfg.twin.mode == "linear" {
+                Mode::Linear
+            } else {
+                Mode::Nonlinear
+            };
+            let twin = Twin::new(tc.clone())
+                .context("building the twin")
+                .map_err(input)?;
+            let controller = ControllerModel::new(
+                twin.controller().clone(),
+                "the twin's discrete PID (exact)",
+            )
+            .map_err(computation)?;
+            Ok(Prepared {
+                twin: Some(TwinSource {
+                    noise: tc.sensor.noise_rms_m > 0.0,
+                    cfg: tc,
+                    mode,
+                    twin,
+                }),
+                ident: None,
+                valid: None,
+                controller: Some(controller),
+            })
+        }
+        SourceKind::Files => {
+            let d = &cfg.data;
+            let ident_path = d
+                .identification
+                .as_ref()
+                .ok_or_else(|| input(anyhow!("[data] identification is missing")))?;
+            let mut ident = load_file(cfg, base, ident_path, "identification")?;
+            let mut valid = match &d.validation {
+                Some(p) => Some(load_file(cfg, base, p, "validation")?),
+                None => None,
+            };
+            if valid.is_none() {
+                let n = ident.len();
+                let k = ((n as f64) * d.split).floor() as usize;
+                if k < 50 || n - k < 50 {
+                    return Err(input(anyhow!(
+                        "{}: {n} samples are too few to split into estimation and validation (split = {}); give a [data] validation file",
+                        ident.source, d.split
+                    )));
+                }
+                let (a, b) = split(&ident, k);
+                ident = a;
+                valid = Some(b);
+            }
+            // detrend: the estimation part's mean (or line) is removed from both records
+            let kind = match d.detrend.as_str() {
+                "linear" => Detrend::Linear,
+                "none" => Detrend::None,
+                _ => Detrend::Mean,
+            };
+            detrend_pair(&mut ident, valid.as_mut(), kind)?;
+            let controller = match &d.controller {
+                Some(p) => {
+                    let path = base.join(p);
+                    let c = crate::io::read_controller(&path).map_err(input)?;
+                    c.check_ts(ident.ts)
+                        .with_context(|| format!("{}", path.display()))
+                        .map_err(input)?;
+                    Some(c)
+                }
+                None => None,
+            };
+            let closed = d
+                .closed_loop
+                .unwrap_or(ident.r.is_some() || controller.is_some());
+            ident.closed_loop = closed;
+            if let Some(v) = valid.as_mut() {
+                v.closed_loop = closed;
+            }
+            Ok(Prepared {
+                twin: None,
+                ident: Some(ident),
+                valid,
+                controller,
+            })
+        }
+    }
+}
+
+fn split(rec: &Recording, k: usize) -> (Recording, Recording) {
+    let cut = |x: &Option<Vec<f64>>, a: bool| {
+        x.as_ref()
+            .map(|v| if a { v[..k].to_vec() } else { v[k..].to_vec() })
+    };
+    let part = |a: bool, what: &str| Recording {
+        ts: rec.ts,
+        r: cut(&rec.r, a),
+        u: if a { rec.u[..k].to_vec() } else { rec.u[k..].to_vec() },
+        y: if a { rec.y[..k].to_vec() } else { rec.y[k..].to_vec() },
+        i: cut(&rec.i, a),
+        w: cut(&rec.w, a),
+        closed_loop: rec.closed_loop,
+        period: rec.period,
+        source: format!("{} ({what})", rec.source),
+        saturated_fraction: None,
+    };
+    (
+        part(true, &format!("samples 1–{k}, estimation")),
+        part(false, &format!("samples {}–{}, validation", k + 1, rec.len())),
+    )
+}
+
+fn detrend_pair(a: &mut Recording, b: Option<&mut Recording>, kind: Detrend) -> Result<(), Failure> {
+    if kind == Detrend::None {
+        return Ok(());
+    }
+    let mut offsets = Vec::new();
+    for (name, x) in [("u", &mut a.u), ("y", &mut a.y)]
+        .into_iter()
+        .chain(a.i.as_mut().map(|i| ("i", i)))
+    {
+        let (d, rep) = detrend(x, kind)
+            .with_context(|| format!("{}: detrending `{name}`", a.source))
+            .map_err(input)?;
+        *x = d;
+        offsets.push((name, rep));
+    }
+    if let Some(b) = b {
+        for (name, rep) in offsets {
+            let x = match name {
+                "u" => &mut b.u,
+                "y" => &mut b.y,
+                _ => match b.i.as_mut() {
+                    Some(i) => i,
+                    None => continue,
+                },
+            };
+            if kind == Detrend::Mean {
+                x.iter_mut().for_each(|v| *v -= rep.offset);
+            } else {
+                let (d, _) = detrend(x, kind)
+                    .with_context(|| format!("{}: detrending `{name}`", b.source))
+                    .map_err(input)?;
+                *x = d;
+            }
+        }
+    }
+    Ok(())
+}
+
+pub fn load_file(cfg: &WorkflowConfig, base: &Path, rel: &Path, what: &str) -> Result<Recording, Failure> {
+    let d = &cfg.data;
+    let path = base.join(rel);
+    let opts = ReadOptions {
+        variable: d.variable.clone(),
+        ..ReadOptions::default()
+    };
+    let table = read_table(&path, &opts).map_err(input)?;
+    let ts = table
+        .sample_time(d.time.as_ref().map(ColumnSpec::to_ref).as_ref(), d.fs_hz)
+        .map_err(input)?;
+    let col = |name: &str, spec: &ColumnSpec| -> Result<Vec<f64>, Failure> {
+        let x = table.column(&spec.to_ref()).map_err(input)?;
+        let scale = d.scale.get(name).copied().unwrap_or(1.0);
+        let skip = d.skip_samples;
+        if skip + 2 >= x.len() {
+            return Err(input(anyhow!(
+                "{}: skip_samples = {skip} leaves no data ({} samples)",
+                path.display(),
+                x.len()
+            )));
+        }
+        let v: Vec<f64> = x[skip..].iter().map(|v| v * scale).collect();
+        if let Some(k) = v.iter().position(|v| !v.is_finite()) {
+            return Err(input(anyhow!(
+                "{}: column `{name}` has a non-finite value at sample {} (after skip_samples); repair or cut the record",
+                path.display(),
+                k + skip + 1
+            )));
+        }
+        Ok(v)
+    };
+    let opt = |name: &str, spec: &Option<ColumnSpec>| -> Result<Option<Vec<f64>>, Failure> {
+        spec.as_ref().map(|s| col(name, s)).transpose()
+    };
+    let rec = Recording {
+        ts,
+        r: opt("r", &d.r)?,
+        u: col("u", &d.u)?,
+        y: col("y", &d.y)?,
+        i: opt("i", &d.i)?,
+        w: opt("w", &d.w)?,
+        closed_loop: false,
+        period: d.period_samples,
+        source: format!("{} ({what})", path.display()),
+        saturated_fraction: None,
+    };
+    let _: &Table = &table;
+    Ok(rec)
+}
+
+/// The report's data section.
+pub fn describe(ctx: &mut Ctx<'_>) -> Section {
+    let mut blocks = Vec::new();
+    match ctx.cfg.source {
+        SourceKind::Twin => {
+            let t = ctx.twin.as_ref();
+            let (fs, isat, noise, mode) = t.map_or((f64::NAN, f64::NAN, f64::NAN, "?"), |t| {
+                (
+                    t.twin.fs(),
+                    t.twin.i_sat(),
+                    t.cfg.sensor.noise_rms_m,
+                    if t.mode == Mode::Linear {
+                        "linear"
+                    } else {
+                        "nonlinear"
+                    },
+                )
+            });
+            ctx.put("data.source", "twin");
+            ctx.put("data.fs_hz", fs);
+            ctx.put("data.i_sat_a", isat);
+            ctx.put("data.noise_rms_m", noise);
+            blocks.push(Block::Text(format!(
+                "Data come from ambid's embedded AMB digital twin ({mode} physics): rigid rotor on two \
+                 radial bearings with a bending mode near 780 Hz, magnet force law, amplifier lag and \
+                 saturation, sensor noise {} µm RMS, one-sample computation delay and the discrete PID \
+                 at {} Hz. The twin also knows its exact linearised plant, which the report shows as \
+                 \"truth\" wherever an estimate can be checked against it. Amplifier saturation \
+                 current i_sat = {} A.",
+                crate::report::format_number(noise * 1e6),
+                crate::report::format_number(fs),
+                crate::report::format_number(isat),
+            )));
+        }
+        SourceKind::Files => {
+            let mut rows = Vec::new();
+            for r in [ctx.ident.as_ref(), ctx.valid.as_ref()].into_iter().flatten() {
+                rows.push(vec![
+                    r.source.clone(),
+                    r.len().to_string(),
+                    crate::report::format_number(r.fs()),
+                    [
+                        r.r.as_ref().map(|_| "r"),
+                        Some("u"),
+                        Some("y"),
+                        r.i.as_ref().map(|_| "i"),
+                        r.w.as_ref().map(|_| "w"),
+                    ]
+                    .into_iter()
+                    .flatten()
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                ]);
+            }
+            if let Some(r) = ctx.ident.as_ref() {
+                let closed = r.closed_loop;
+                let (n, fs) = (r.len(), r.fs());
+                ctx.put("data.source", "files");
+                ctx.put("data.fs_hz", fs);
+                ctx.put("data.identification_samples", n as f64);
+                ctx.put("data.closed_loop", closed);
+            }
+            if let Some(v) = ctx.valid.as_ref() {
+                let n = v.len();
+                ctx.put("data.validation_samples", n as f64);
+            }
+            blocks.push(Block::Table(RTable {
+                id: "data".into(),
+                caption: format!(
+                    "Records read (after dropping {} leading samples, scaling to SI and removing the \
+                     estimation part's {}).",
+                    ctx.cfg.data.skip_samples, ctx.cfg.data.detrend
+                ),
+                header: vec![
+                    "record".into(),
+                    "samples".into(),
+                    "fs [Hz]".into(),
+                    "channels".into(),
+                ],
+                rows,
+                highlight: None,
+            }));
+            let cl = ctx.is_closed_loop();
+            let has_r = ctx.ident.as_ref().is_some_and(|r| r.r.is_some());
+            blocks.push(note_of(match (cl, has_r, ctx.controller.is_some()) {
+                (false, _, _) => (NoteKind::Info, "Open-loop data: the FRF is the H1 estimate u → y; the closed-loop steps (closed-loop validation, reconstruction, ISO zone) are skipped.".to_string()),
+                (true, false, _) => (NoteKind::Warning, "Closed-loop data without a recorded excitation r: the plant can only be estimated by the direct method (u → y), which is biased by the feedback of the noise; treat the FRF and the models with care.".to_string()),
+                (true, true, false) => (NoteKind::Info, "Closed-loop data with the excitation r: joint input-output FRF; no controller file, so the closed-loop validation steps are skipped.".to_string()),
+                (true, true, true) => (NoteKind::Info, "Closed-loop data with the excitation r and the controller: every step can run.".to_string()),
+            }));
+        }
+    }
+    Section {
+        id: "data".into(),
+        title: "Data".into(),
+        blocks,
+    }
+}
+
+fn note_of((kind, text): (NoteKind, String)) -> Block {
+    Ctx::note(kind, text)
+}

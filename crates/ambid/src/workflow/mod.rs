@@ -1,0 +1,523 @@
+//! The seed paper's identification procedure end to end (`ambid run`): excitation design and
+//! comparison → amplitude study → operating-point study → identification record → nonparametric
+//! FRF with quality measures → order estimation → ARX/OE/state-space fits and their comparison →
+//! pole-zero check → validation on an independent record with residual tests → chirp closed-loop
+//! reconstruction → ISO 14839-3 verdict.
+//!
+//! [`run`] computes everything in memory ([`Outcome`]: the report, `summary.json`, the figure
+//! data and the models); [`Outcome::write`] writes it atomically into one directory. Every number
+//! comes from the library functions the CLI commands use ([`crate::analysis`], [`crate::study`],
+//! [`crate::validation`], `ambid_core::validate::compare`, …): the workflow only composes them.
+//!
+//! On the twin the steps run from the defaults; with a workflow file ([`config`]) they run on
+//! recorded files. A step the data do not allow (closed-loop steps on open-loop data, the twin's
+//! studies on files without one record per level) is skipped with a note in the report.
+
+pub mod config;
+mod data;
+pub mod figures;
+mod steps_frf;
+mod steps_models;
+mod steps_signal;
+mod steps_validate;
+
+pub use self::config::{ConfigError, Step, WorkflowConfig};
+use self::data::Recording;
+use crate::io::output::{OutputDir, OutputError};
+use crate::report::{Block, NoteKind, Report, Section, Table};
+use ambid_core::lti::{PolyModel, StateSpace};
+use serde_json::{Map, Value};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Classes of failure, each with its own process exit code.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FailureClass {
+    /// The workflow file is unreadable or wrong (exit 2).
+    Config,
+    /// A data or controller file is missing or malformed (exit 3).
+    Input,
+    /// A computation failed on the data (exit 4).
+    Computation,
+    /// The outputs could not be written, or would overwrite without `--force` (exit 5).
+    Output,
+}
+
+impl FailureClass {
+    /// The process exit code.
+    pub fn exit_code(self) -> i32 {
+        match self {
+            FailureClass::Config => 2,
+            FailureClass::Input => 3,
+            FailureClass::Computation => 4,
+            FailureClass::Output => 5,
+        }
+    }
+}
+
+/// A workflow failure: its class and the error chain.
+#[derive(Debug)]
+pub struct Failure {
+    /// The class (exit code).
+    pub class: FailureClass,
+    /// What went wrong.
+    pub error: anyhow::Error,
+}
+
+impl std::fmt::Display for Failure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{:#}", self.error)
+    }
+}
+
+impl std::error::Error for Failure {}
+
+impl From<ConfigError> for Failure {
+    fn from(e: ConfigError) -> Self {
+        Failure {
+            class: FailureClass::Config,
+            error: e.into(),
+        }
+    }
+}
+
+impl From<OutputError> for Failure {
+    fn from(e: OutputError) -> Self {
+        Failure {
+            class: FailureClass::Output,
+            error: e.into(),
+        }
+    }
+}
+
+pub(crate) fn input(e: impl Into<anyhow::Error>) -> Failure {
+    Failure {
+        class: FailureClass::Input,
+        error: e.into(),
+    }
+}
+
+pub(crate) fn computation(e: impl Into<anyhow::Error>) -> Failure {
+    Failure {
+        class: FailureClass::Computation,
+        error: e.into(),
+    }
+}
+
+/// How much the workflow tells on stderr.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Verbosity {
+    /// Errors only.
+    Quiet,
+    /// One line per step (and a spinner on long steps when stderr is a terminal).
+    Normal,
+    /// Also the step's details.
+    Verbose,
+}
+
+/// Progress reporting on stderr.
+pub struct Progress {
+    verbosity: Verbosity,
+    spinner: Option<indicatif::ProgressBar>,
+    total: usize,
+    done: usize,
+}
+
+impl Progress {
+    /// Progress at a verbosity; spinners only when stderr is a terminal.
+    pub fn new(verbosity: Verbosity) -> Self {
+        Self {
+            verbosity,
+            spinner: None,
+            total: 0,
+            done: 0,
+        }
+    }
+
+    fn start(&mut self, what: &str) {
+        self.done += 1;
+        if self.verbosity == Verbosity::Quiet {
+            return;
+        }
+        use std::io::IsTerminal;
+        if std::io::stderr().is_terminal() {
+            let pb = indicatif::ProgressBar::new_spinner();
+            pb.set_message(format!("[{}/{}] {what}", self.done, self.total));
+            pb.enable_steady_tick(std::time::Duration::from_millis(100));
+            self.spinner = Some(pb);
+        }
+    }
+
+    fn finish(&mut self, what: &str, seconds: f64, status: &str) {
+        if let Some(pb) = self.spinner.take() {
+            pb.finish_and_clear();
+        }
+        if self.verbosity != Verbosity::Quiet {
+            eprintln!(
+                "[{}/{}] {what}: {status} ({seconds:.2} s)",
+                self.done, self.total
+            );
+        }
+    }
+
+    fn detail(&self, text: &str) {
+        if self.verbosity == Verbosity::Verbose {
+            eprintln!("      {text}");
+        }
+    }
+}
+
+/// An identified model kept for export.
+#[derive(Debug, Clone)]
+pub struct ModelOut {
+    /// File stem, e.g. `oe8`.
+    pub name: String,
+    /// The state-space form (always).
+    pub ss: StateSpace,
+    /// The polynomial form, when the model was fitted as one.
+    pub poly: Option<PolyModel>,
+    /// Metadata for the JSON (structure, order, fit figures).
+    pub meta: Value,
+}
+
+/// Time spent per step.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct StepTime {
+    /// Step name.
+    pub step: String,
+    /// Wall-clock seconds.
+    pub seconds: f64,
+    /// `done`, `skipped` (with the reason in the report).
+    pub status: String,
+}
+
+/// Everything a workflow run produced, in memory.
+pub struct Outcome {
+    /// The report.
+    pub report: Report,
+    /// Headline numbers (also written as `summary.json`; every number is also in the report).
+    pub summary: Value,
+    /// Models to export (JSON, `.m`, `.mat`, `.npz`).
+    pub models: Vec<ModelOut>,
+    /// Time per step.
+    pub timings: Vec<StepTime>,
+}
+
+/// State shared by the steps.
+pub(crate) struct Ctx<'a> {
+    pub cfg: &'a WorkflowConfig,
+    pub base: PathBuf,
+    pub sections: Vec<Section>,
+    pub summary: Map<String, Value>,
+    pub models: Vec<ModelOut>,
+    /// The twin (source = twin).
+    pub twin: Option<data::TwinSource>,
+    /// Identification record.
+    pub ident: Option<Recording>,
+    /// Validation record.
+    pub valid: Option<Recording>,
+    /// Chosen identification level (fraction of i_sat; twin).
+    pub level_frac: Option<f64>,
+    /// FRF analysis of the identification record.
+    pub frf: Option<crate::analysis::FrfAnalysis>,
+    /// Controller (closed loop).
+    pub controller: Option<crate::io::ControllerModel>,
+    /// Candidate models.
+    pub candidates: Vec<steps_models::Candidate>,
+    /// Index of the chosen candidate.
+    pub chosen: Option<usize>,
+    /// Validation outcome of the chosen model.
+    pub validation: Option<crate::validation::ValidationOutcome>,
+}
+
+impl Ctx<'_> {
+    /// Records a headline number (also shown in the report's summary table).
+    pub fn put(&mut self, key: &str, v: impl Into<Value>) {
+        insert_path(&mut self.summary, key, v.into());
+    }
+
+    pub fn section(&mut self, id: &str, title: &str, blocks: Vec<Block>) {
+        self.sections.push(Section {
+            id: id.into(),
+            title: title.into(),
+            blocks,
+        });
+    }
+
+    pub fn note(kind: NoteKind, text: impl Into<String>) -> Block {
+        Block::Note {
+            kind,
+            text: text.into(),
+        }
+    }
+
+    pub fn is_closed_loop(&self) -> bool {
+        self.ident.as_ref().is_some_and(|r| r.closed_loop)
+    }
+}
+
+fn insert_path(map: &mut Map<String, Value>, key: &str, v: Value) {
+    match key.split_once('.') {
+        Some((head, rest)) => {
+            let e = map
+                .entry(head.to_string())
+                .or_insert_with(|| Value::Object(Map::new()));
+            if !e.is_object() {
+                *e = Value::Object(Map::new());
+            }
+            if let Value::Object(m) = e {
+                insert_path(m, rest, v);
+            }
+        }
+        None => {
+            map.insert(key.to_string(), v);
+        }
+    }
+}
+
+/// Flattens `summary` into (dotted key, formatted value) rows; numbers are formatted with
+/// [`crate::report::format_number`].
+pub fn flatten_summary(v: &Value) -> Vec<(String, String)> {
+    fn walk(prefix: &str, v: &Value, out: &mut Vec<(String, String)>) {
+        match v {
+            Value::Object(m) => {
+                for (k, x) in m {
+                    let key = if prefix.is_empty() {
+                        k.clone()
+                    } else {
+                        format!("{prefix}.{k}")
+                    };
+                    walk(&key, x, out);
+                }
+            }
+            Value::Array(a) => {
+                for (i, x) in a.iter().enumerate() {
+                    walk(&format!("{prefix}[{i}]"), x, out);
+                }
+            }
+            Value::Number(n) => out.push((
+                prefix.to_string(),
+                n.as_f64()
+                    .map_or_else(|| n.to_string(), crate::report::format_number),
+            )),
+            Value::String(s) => out.push((prefix.to_string(), s.clone())),
+            Value::Bool(b) => out.push((prefix.to_string(), b.to_string())),
+            Value::Null => out.push((prefix.to_string(), "—".into())),
+        }
+    }
+    let mut out = Vec::new();
+    walk("", v, &mut out);
+    out
+}
+
+/// Runs the workflow. `base` is the directory relative paths in `cfg` are resolved against (the
+/// workflow file's directory).
+///
+/// # Errors
+/// A [`Failure`] with its class: input files missing or malformed, or a computation that failed.
+pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result<Outcome, Failure> {
+    let steps = cfg.steps();
+    progress.total = steps.len() + 1;
+    let mut timings = Vec::new();
+    let t0 = Instant::now();
+    let mut sections_prelude = Vec::new();
+    progress.start("data");
+    let prepared = data::prepare(cfg, base)?;
+    let mut ctx = Ctx {
+        cfg,
+        base: base.to_path_buf(),
+        sections: Vec::new(),
+        summary: Map::new(),
+        models: Vec::new(),
+        twin: prepared.twin,
+        ident: prepared.ident,
+        valid: prepared.valid,
+        level_frac: None,
+        frf: None,
+        controller: prepared.controller,
+        candidates: Vec::new(),
+        chosen: None,
+        validation: None,
+    };
+    sections_prelude.push(data::describe(&mut ctx));
+    let dt = t0.elapsed().as_secs_f64();
+    progress.finish("data", dt, "done");
+    timings.push(StepTime {
+        step: "data".into(),
+        seconds: dt,
+        status: "done".into(),
+    });
+    for step in steps {
+        let t = Instant::now();
+        progress.start(step.name());
+        let n_before = ctx.sections.len();
+        let status = match step {
+            Step::Excitation => steps_signal::excitation(&mut ctx),
+            Step::Amplitude => steps_signal::amplitude(&mut ctx),
+            Step::OperatingPoint => steps_signal::operating_point(&mut ctx),
+            Step::Frf => steps_frf::frf(&mut ctx),
+            Step::Order => steps_frf::order(&mut ctx),
+            Step::Models => steps_models::models(&mut ctx),
+            Step::PoleZero => steps_models::pole_zero(&mut ctx),
+            Step::Validation => steps_validate::validation(&mut ctx),
+            Step::Reconstruction => steps_validate::reconstruction(&mut ctx),
+            Step::Iso => steps_validate::iso(&mut ctx),
+        }?;
+        let dt = t.elapsed().as_secs_f64();
+        let status = match status {
+            StepStatus::Done => "done".to_string(),
+            StepStatus::Skipped(why) => {
+                if ctx.sections.len() == n_before {
+                    ctx.section(
+                        step.name(),
+                        &format!("{} (skipped)", step.name().replace('_', " ")),
+                        vec![Ctx::note(NoteKind::Warning, format!("Skipped: {why}"))],
+                    );
+                }
+                progress.detail(&why);
+                "skipped".to_string()
+            }
+        };
+        progress.finish(step.name(), dt, &status);
+        timings.push(StepTime {
+            step: step.name().into(),
+            seconds: dt,
+            status,
+        });
+    }
+    // the per-step timings are part of the summary and of the report
+    let total: f64 = timings.iter().map(|t| t.seconds).sum();
+    ctx.put("timing.total_s", total);
+    for t in &timings {
+        ctx.put(&format!("timing.{}_s", t.step), t.seconds);
+    }
+    let summary = Value::Object(ctx.summary.clone());
+    let mut sections = sections_prelude;
+    sections.append(&mut ctx.sections);
+    let rows: Vec<Vec<String>> = flatten_summary(&summary)
+        .into_iter()
+        .map(|(k, v)| vec![k, v])
+        .collect();
+    sections.push(Section {
+        id: "summary".into(),
+        title: "All headline numbers (summary.json)".into(),
+        blocks: vec![Block::Table(Table {
+            id: "summary".into(),
+            caption: "Every number written to summary.json, with its key. Units are in the key \
+                      (_pct %, _hz Hz, _s s, _db dB; otherwise SI)."
+                .into(),
+            header: vec!["key".into(), "value".into()],
+            rows,
+            highlight: None,
+        })],
+    });
+    let title = cfg.title.clone().unwrap_or_else(|| match cfg.source {
+        config::SourceKind::Twin => "ambid: closed-loop identification of the embedded AMB twin".into(),
+        config::SourceKind::Files => "ambid: closed-loop identification report".into(),
+    });
+    let report = Report {
+        title,
+        subtitle: format!(
+            "ambid {} · seed {} · {} · steps: {}",
+            env!("CARGO_PKG_VERSION"),
+            cfg.seed,
+            match cfg.source {
+                config::SourceKind::Twin => "embedded twin".to_string(),
+                config::SourceKind::Files => cfg
+                    .data
+                    .identification
+                    .as_ref()
+                    .map_or("files".into(), |p| p.display().to_string()),
+            },
+            cfg.steps()
+                .iter()
+                .map(|s| s.name())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+        sections,
+    };
+    Ok(Outcome {
+        report,
+        summary,
+        models: ctx.models,
+        timings,
+    })
+}
+
+/// What a step did.
+pub(crate) enum StepStatus {
+    Done,
+    Skipped(String),
+}
+
+impl Outcome {
+    /// Writes `report.html`, `summary.json`, `figures/<id>.csv`, `tables/<id>.csv` and
+    /// `models/<name>.{json,m,mat,npz}` into `dir`, atomically: everything goes to a temporary
+    /// directory beside `dir` that is renamed into place at the end, so a failure leaves nothing
+    /// half-written. An existing `dir` is replaced only with `force`.
+    ///
+    /// # Errors
+    /// [`FailureClass::Output`] failures.
+    pub fn write(&self, dir: &Path, force: bool) -> Result<Vec<PathBuf>, Failure> {
+        use crate::io::export::{mat_bytes, matlab_script, npz_bytes, ExportModel, ExportNames};
+        use crate::io::model::{polynomial_json, state_space_json};
+        let out = OutputDir::create(dir, force)?;
+        let output = |e: anyhow::Error| Failure {
+            class: FailureClass::Output,
+            error: e,
+        };
+        out.write("report.html", self.report.to_html().as_bytes())?;
+        out.write(
+            "summary.json",
+            serde_json::to_string_pretty(&self.summary)
+                .map_err(|e| output(e.into()))?
+                .as_bytes(),
+        )?;
+        for s in &self.report.sections {
+            for b in &s.blocks {
+                match b {
+                    Block::Figure(f) => {
+                        out.write(&format!("figures/{}.csv", f.id), f.to_csv().as_bytes())?
+                    }
+                    Block::Table(t) => {
+                        out.write(&format!("tables/{}.csv", t.id), t.to_csv().as_bytes())?
+                    }
+                    _ => {}
+                }
+            }
+        }
+        for m in &self.models {
+            let names = ExportNames {
+                name: m.name.clone(),
+                input: "u".into(),
+                output: "y".into(),
+            };
+            let (json, em) = match &m.poly {
+                Some(p) => (
+                    polynomial_json(p, "u", "y", m.meta.clone()),
+                    ExportModel::Poly(p),
+                ),
+                None => (
+                    state_space_json(&m.ss, "u", "y", m.meta.clone()),
+                    ExportModel::StateSpace(&m.ss, None),
+                ),
+            };
+            let text = serde_json::to_string_pretty(&json).map_err(|e| output(e.into()))?;
+            out.write(&format!("models/{}.json", m.name), text.as_bytes())?;
+            out.write(
+                &format!("models/{}.m", m.name),
+                matlab_script(em, &names).as_bytes(),
+            )?;
+            out.write(
+                &format!("models/{}.mat", m.name),
+                &mat_bytes(em, &names).map_err(output)?,
+            )?;
+            out.write(
+                &format!("models/{}.npz", m.name),
+                &npz_bytes(em, &names).map_err(output)?,
+            )?;
+        }
+        Ok(out.commit()?)
+    }
+}

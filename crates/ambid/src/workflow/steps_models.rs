@@ -1,0 +1,593 @@
+//! Steps 6–7: parametric models (fitted to the FRF in closed loop, or to the time record) with
+//! their comparison table and Bode overlays, and the pole-zero check.
+
+use super::figures::{bode_panels, figure, lin, log, pz_panel, series, xy, Curve};
+use super::steps_frf::{ensure_ident, ensure_valid};
+use super::{computation, Ctx, Failure, ModelOut, StepStatus};
+use crate::fitting::{fit_state_space, poly_fits};
+use crate::report::{format_number as fmt, Block, NoteKind, Style, Table};
+use ambid_core::c64;
+use ambid_core::estimate::arx::{arx, fit_percent, ArxOrders};
+use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
+use ambid_core::estimate::pem::{self, Orders, PemOptions};
+use ambid_core::estimate::ss_pem::SsPemOptions;
+use ambid_core::lti::{PolyModel, StateSpace, Structure};
+use ambid_core::validate::compare::{compare_models, CompareSpec, FitStructure, ValidationRecord};
+use ambid_core::validate::pz::{PzAnalysis, PzOptions};
+use serde_json::json;
+
+/// One fitted candidate.
+#[derive(Debug, Clone)]
+pub struct Candidate {
+    pub structure: &'static str,
+    pub order: usize,
+    pub model: Option<StateSpace>,
+    pub poly: Option<PolyModel>,
+    pub n_params: usize,
+    pub relative_rmse: Option<f64>,
+    pub median_relative: Option<f64>,
+    pub db_rmse: Option<f64>,
+    pub bic: Option<f64>,
+    pub validation_fit: Option<f64>,
+    pub unstable_poles: Option<usize>,
+    pub truth_median_relative: Option<f64>,
+    pub note: Option<String>,
+}
+
+impl Candidate {
+    pub fn label(&self) -> String {
+        format!("{} {}", self.structure.to_uppercase(), self.order)
+    }
+}
+
+fn structure_name(s: FitStructure) -> &'static str {
+    match s {
+        FitStructure::Arx => "arx",
+        FitStructure::Oe => "oe",
+        FitStructure::Ss => "ss",
+    }
+}
+
+fn median_rel(a: &[c64], b: &[c64]) -> f64 {
+    let mut e: Vec<f64> = a
+        .iter()
+        .zip(b)
+        .map(|(x, t)| (x - t).norm() / t.norm())
+        .collect();
+    e.sort_by(f64::total_cmp);
+    e.get(e.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
+/// Fit figure of a model on a record: simulation fit when the model is stable, else the one-step
+/// prediction fit where a predictor exists.
+fn time_fit(
+    structure: &str,
+    m: &StateSpace,
+    poly: Option<&PolyModel>,
+    kalman: Option<&[f64]>,
+    y: &[f64],
+    u: &[f64],
+) -> (Option<f64>, &'static str) {
+    let stable = m
+        .poles()
+        .map(|p| p.iter().all(|z| z.norm() < 1.0))
+        .unwrap_or(false);
+    if stable {
+        if let Ok(ys) = m.simulate_siso(u, None) {
+            return (fit_percent(y, &ys).ok(), "simulation");
+        }
+    }
+    match (structure, poly, kalman) {
+        ("arx", Some(p), _) => (poly_fits(p, y, u).ok().map(|f| f.0), "1-step prediction"),
+        (_, _, Some(k)) => {
+            let km = faer::Mat::from_fn(k.len(), 1, |i, _| k[i]);
+            let p = ambid_core::validate::predict::predict_k(m, km.as_ref(), y, u, 1);
+            (
+                p.ok().and_then(|p| fit_percent(y, &p).ok()),
+                "1-step prediction",
+            )
+        }
+        _ => (None, "unstable: no predictor"),
+    }
+}
+
+pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
+    ensure_ident(ctx)?;
+    ensure_valid(ctx)?;
+    let cfg = &ctx.cfg.models;
+    let Some(rec) = ctx.ident.clone() else {
+        return Ok(StepStatus::Skipped("no identification record".into()));
+    };
+    let has_r = rec.r.is_some();
+    let domain = cfg.domain.clone().unwrap_or_else(|| {
+        if has_r && rec.closed_loop && ctx.frf.is_some() {
+            "frf".into()
+        } else {
+            "time".into()
+        }
+    });
+    if domain == "frf" && ctx.frf.is_none() {
+        return Ok(StepStatus::Skipped(
+            "models.domain = \"frf\" needs the frf step".into(),
+        ));
+    }
+    let ts = rec.ts;
+    let mut cands: Vec<Candidate> = Vec::new();
+    let mut kalman: Vec<Option<Vec<f64>>> = Vec::new();
+    let truth_f = ctx.frf.as_ref().map(|a| a.frf.f_hz().to_vec());
+    let truth = match (&ctx.twin, &truth_f) {
+        (Some(t), Some(f)) => Some(t.twin.plant_frf(f).map_err(computation)?),
+        _ => None,
+    };
+    let validation_kind: String;
+    if domain == "frf" {
+        let Some(a) = &ctx.frf else {
+            return Ok(StepStatus::Skipped("no FRF".into()));
+        };
+        let frd = &a.frf.plant;
+        let weights = match cfg.weights.as_str() {
+            "uniform" => FreqWeights::Uniform,
+            "coherence" => FreqWeights::Coherence(a.frf.coh_ry.clone()),
+            _ if frd.variance().is_some() => FreqWeights::InverseVariance,
+            _ => FreqWeights::Uniform,
+        };
+        let spec = CompareSpec {
+            structures: cfg
+                .structures
+                .iter()
+                .map(|s| match s.as_str() {
+                    "arx" => FitStructure::Arx,
+                    "oe" => FitStructure::Oe,
+                    _ => FitStructure::Ss,
+                })
+                .collect(),
+            orders: cfg.orders.clone(),
+            nk: cfg.nk,
+            fit: FreqFitOptions {
+                band_hz: cfg.band_hz.map(|[a, b]| (a, b)),
+                weights,
+                max_iterations: cfg.max_iterations,
+                ..FreqFitOptions::default()
+            },
+            ..CompareSpec::default()
+        };
+        let val = ctx.valid.as_ref();
+        let vrec = match (val, &ctx.controller) {
+            (Some(v), Some(c)) if v.r.is_some() && v.closed_loop => Some(ValidationRecord {
+                r: v.r.as_deref().unwrap_or(&[]),
+                y: &v.y,
+                controller: c.state_space(),
+                skip: ctx.cfg.validation.skip.min(v.len() / 4),
+            }),
+            _ => None,
+        };
+        validation_kind = if vrec.is_some() {
+            "closed-loop simulation with the controller".into()
+        } else {
+            "none (no controller or no validation record with r)".into()
+        };
+        let rows = compare_models(frd, &spec, vrec).map_err(computation)?;
+        for r in rows {
+            let truth_med = match (&r.model, &truth, &truth_f) {
+                (Some(m), Some(t), Some(f)) => m.freq_response_siso(f).ok().map(|g| median_rel(&g, t)),
+                _ => None,
+            };
+            cands.push(Candidate {
+                structure: structure_name(r.structure),
+                order: r.order,
+                model: r.model,
+                poly: None,
+                n_params: r.n_params,
+                relative_rmse: r.relative_rmse,
+                median_relative: r.median_relative,
+                db_rmse: r.db_rmse,
+                bic: r.bic,
+                validation_fit: r.validation_fit,
+                unstable_poles: r.unstable_poles,
+                truth_median_relative: truth_med,
+                note: r.note,
+            });
+            kalman.push(None);
+        }
+    } else {
+        let Some(val) = ctx.valid.clone() else {
+            return Ok(StepStatus::Skipped("no validation record".into()));
+        };
+        let mut kinds = Vec::new();
+        for s in &cfg.structures {
+            for &n in &cfg.orders {
+                let fitted: anyhow::Result<(StateSpace, Option<PolyModel>, usize, Option<Vec<f64>>)> =
+                    (|| match s.as_str() {
+                        "arx" => {
+                            let f = arx(&rec.y, &[&rec.u], &ArxOrders::siso(n, n, cfg.nk), ts)?;
+                            let p = f.model.to_poly(0)?;
+                            Ok((p.to_state_space()?, Some(p), f.params.len(), None))
+                        }
+                        "oe" => {
+                            let opts = PemOptions::default().with_max_iterations(cfg.max_iterations)?;
+                            let (f, _) = pem::pem(
+                                &rec.y,
+                                &rec.u,
+                                Structure::Oe,
+                                &Orders::oe(n, n, cfg.nk),
+                                ts,
+                                &opts,
+                            )?;
+                            let p = f.model;
+                            Ok((p.to_state_space()?, Some(p), f.params.len(), None))
+                        }
+                        _ => {
+                            let o = SsPemOptions {
+                                lm: SsPemOptions::default()
+                                    .lm
+                                    .with_max_iterations(cfg.max_iterations)?,
+                                ..SsPemOptions::default()
+                            };
+                            let f = fit_state_space(&rec.u, &rec.y, ts, Some(n), None, Some(o))?;
+                            let np = n * n + 2 * n;
+                            let k = f.pem.and_then(|p| p.kalman_gain);
+                            Ok((f.model, None, np, k))
+                        }
+                    })();
+                let sname: &'static str = match s.as_str() {
+                    "arx" => "arx",
+                    "oe" => "oe",
+                    _ => "ss",
+                };
+                match fitted {
+                    Ok((m, poly, np, k)) => {
+                        let (fit, kind) = time_fit(sname, &m, poly.as_ref(), k.as_deref(), &val.y, &val.u);
+                        kinds.push(kind);
+                        let unstable = m.poles().ok().map(|p| p.iter().filter(|z| z.norm() >= 1.0).count());
+                        let frf_err = match (&ctx.frf, m.freq_response_siso(truth_f.as_deref().unwrap_or(&[]))) {
+                            (Some(a), Ok(g)) if !g.is_empty() => {
+                                let p = a.frf.plant.values();
+                                let num: f64 = g.iter().zip(p).map(|(a, b)| (a - b).norm_sqr()).sum();
+                                let den: f64 = p.iter().map(|b| b.norm_sqr()).sum();
+                                (Some((num / den).sqrt()), Some(median_rel(&g, p)))
+                            }
+                            _ => (None, None),
+                        };
+                        cands.push(Candidate {
+                            structure: sname,
+                            order: n,
+                            truth_median_relative: truth.as_ref().and_then(|t| {
+                                m.freq_response_siso(truth_f.as_deref()?).ok().map(|g| median_rel(&g, t))
+                            }),
+                            model: Some(m),
+                            poly,
+                            n_params: np,
+                            relative_rmse: frf_err.0,
+                            median_relative: frf_err.1,
+                            db_rmse: None,
+                            bic: None,
+                            validation_fit: fit,
+                            unstable_poles: unstable,
+                            note: (kind != "simulation").then(|| format!("validation fit: {kind}")),
+                        });
+                        kalman.push(k);
+                    }
+                    Err(e) => {
+                        cands.push(Candidate {
+                            structure: sname,
+                            order: n,
+                            model: None,
+                            poly: None,
+                            n_params: 0,
+                            relative_rmse: None,
+                            median_relative: None,
+                            db_rmse: None,
+                            bic: None,
+                            validation_fit: None,
+                            unstable_poles: None,
+                            truth_median_relative: None,
+                            note: Some(format!("{e:#}")),
+                        });
+                        kalman.push(None);
+                    }
+                }
+            }
+        }
+        kinds.sort();
+        kinds.dedup();
+        validation_kind = format!("on the validation record: {}", kinds.join(" / "));
+    }
+    // choose
+    let key = |c: &Candidate| -> Option<f64> {
+        match ctx.cfg.models.select.as_str() {
+            "bic" => c.bic,
+            "frf" => c.relative_rmse,
+            _ => c.validation_fit.map(|f| -f),
+        }
+    };
+    let chosen = cands
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| c.model.is_some())
+        .filter_map(|(i, c)| key(c).filter(|v| v.is_finite()).map(|v| (i, v)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(i, _)| i)
+        .or_else(|| cands.iter().position(|c| c.model.is_some()));
+    let opt = |v: Option<f64>, scale: f64| v.map_or("—".to_string(), |v| fmt(scale * v));
+    let rows: Vec<Vec<String>> = cands
+        .iter()
+        .map(|c| {
+            vec![
+                c.label(),
+                c.n_params.to_string(),
+                opt(c.relative_rmse, 100.0),
+                opt(c.median_relative, 100.0),
+                opt(c.db_rmse, 1.0),
+                opt(c.bic, 1.0),
+                opt(c.validation_fit, 1.0),
+                c.unstable_poles.map_or("—".into(), |u| u.to_string()),
+                opt(c.truth_median_relative, 100.0),
+                c.note.clone().unwrap_or_default(),
+            ]
+        })
+        .collect();
+    let mut jrows = Vec::new();
+    for c in &cands {
+        jrows.push(json!({
+            "model": c.label(),
+            "n_params": c.n_params as f64,
+            "relative_rmse_pct": c.relative_rmse.map(|v| 100.0 * v),
+            "median_relative_pct": c.median_relative.map(|v| 100.0 * v),
+            "db_rmse": c.db_rmse,
+            "bic": c.bic,
+            "validation_fit_pct": c.validation_fit,
+            "unstable_poles": c.unstable_poles.map(|u| u as f64),
+            "median_error_vs_truth_pct": c.truth_median_relative.map(|v| 100.0 * v),
+        }));
+    }
+    ctx.put("models.domain", domain.clone());
+    ctx.put("models.table", jrows);
+    let mut blocks = vec![Block::Text(format!(
+        "{} at orders {:?}; {}. Validation fit: {validation_kind}. Chosen by {}.",
+        if domain == "frf" {
+            "ARX (Levy), OE (Sanathanan–Koerner + Levenberg–Marquardt) and state-space (frequency-domain subspace + LM) models fitted to the plant FRF"
+        } else {
+            "ARX (least squares), OE (prediction-error method) and state-space (N4SID + prediction-error refinement) models fitted to the identification record"
+        },
+        cfg.orders,
+        if domain == "frf" {
+            format!("weights {}", cfg.weights)
+        } else {
+            "validation fit on the independent record (simulation for stable models, else the one-step prediction)".into()
+        },
+        match ctx.cfg.models.select.as_str() {
+            "bic" => "the smallest BIC",
+            "frf" => "the smallest relative FRF error",
+            _ => "the best validation fit",
+        }
+    ))];
+    blocks.push(Block::Table(Table {
+        id: "model_comparison".into(),
+        caption: "Model comparison (seed paper, table 1): parameters, errors against the measured FRF \
+                  (relative RMSE, median relative, RMS dB), BIC, validation fit, unstable poles and, on \
+                  the twin, the median relative error against the exact plant. Highlighted: the chosen model."
+            .into(),
+        header: vec![
+            "model".into(),
+            "parameters".into(),
+            "rel. RMSE [%]".into(),
+            "median rel. [%]".into(),
+            "RMS error [dB]".into(),
+            "BIC".into(),
+            "validation fit [%]".into(),
+            "unstable poles".into(),
+            "error vs truth [%]".into(),
+            "note".into(),
+        ],
+        rows,
+        highlight: chosen,
+    }));
+    if let Some(i) = chosen {
+        let c = &cands[i];
+        ctx.put("models.chosen", c.label());
+        if let Some(f) = c.validation_fit {
+            ctx.put("models.chosen_validation_fit_pct", f);
+        }
+        if let Some(e) = c.truth_median_relative {
+            ctx.put("models.chosen_error_vs_truth_pct", 100.0 * e);
+        }
+        blocks.push(Ctx::note(
+            NoteKind::Pass,
+            format!(
+                "Chosen model: {} ({} parameters{}).",
+                c.label(),
+                c.n_params,
+                c.validation_fit
+                    .map_or(String::new(), |f| format!(", validation fit {} %", fmt(f)))
+            ),
+        ));
+    } else {
+        blocks.push(Ctx::note(NoteKind::Fail, "No candidate could be fitted; see the notes in the table."));
+    }
+    // Bode overlays and error curves, one figure per structure
+    if let Some(a) = &ctx.frf {
+        let f = a.frf.f_hz().to_vec();
+        let meas = a.frf.plant.values().to_vec();
+        for s in ["arx", "oe", "ss"] {
+            let fits: Vec<(String, Vec<c64>)> = cands
+                .iter()
+                .filter(|c| c.structure == s)
+                .filter_map(|c| {
+                    let g = c.model.as_ref()?.freq_response_siso(&f).ok()?;
+                    Some((c.label(), g))
+                })
+                .collect();
+            if fits.is_empty() {
+                continue;
+            }
+            let mut curves = vec![Curve {
+                name: "measured FRF",
+                f: &f,
+                g: &meas,
+                std: None,
+                style: Style::Line,
+                color: Some(7),
+            }];
+            for (k, (name, g)) in fits.iter().enumerate() {
+                curves.push(Curve {
+                    name,
+                    f: &f,
+                    g,
+                    std: None,
+                    style: Style::Dashed,
+                    color: Some(k),
+                });
+            }
+            let mut panels = bode_panels(&curves, "|P| [dB]");
+            let err: Vec<_> = fits
+                .iter()
+                .enumerate()
+                .map(|(k, (name, g))| {
+                    let e: Vec<f64> = g
+                        .iter()
+                        .zip(&meas)
+                        .map(|(a, b)| (a - b).norm() / b.norm())
+                        .collect();
+                    series(name, &f, &e, Style::Line, Some(k))
+                })
+                .collect();
+            panels.push(xy(
+                "relative error against the measured FRF",
+                log("frequency [Hz]"),
+                log("|Ĝ − P̂| / |P̂| [-]"),
+                err,
+            ));
+            blocks.push(Block::Figure(figure(
+                &format!("bode_{s}"),
+                &format!("{} fits: Bode overlay and error curves", s.to_uppercase()),
+                format!(
+                    "The {} models of orders {:?} against the measured plant FRF, and their relative error per line.",
+                    s.to_uppercase(),
+                    cfg.orders
+                ),
+                panels,
+                1,
+            )));
+        }
+    }
+    // export every candidate
+    for (c, k) in cands.iter().zip(&kalman) {
+        if let Some(m) = &c.model {
+            ctx.models.push(ModelOut {
+                name: format!("{}{}", c.structure, c.order),
+                ss: m.clone(),
+                poly: c.poly.clone(),
+                meta: json!({
+                    "structure": c.structure,
+                    "order": c.order,
+                    "domain": domain,
+                    "n_params": c.n_params,
+                    "relative_rmse": c.relative_rmse,
+                    "bic": c.bic,
+                    "validation_fit_pct": c.validation_fit,
+                    "unstable_poles": c.unstable_poles,
+                    "pem": {"kalman_gain": k},
+                    "chosen": chosen.is_some_and(|i| cands[i].label() == c.label()),
+                }),
+            });
+        }
+    }
+    ctx.section("models", "6. Parametric models", blocks);
+    ctx.candidates = cands;
+    ctx.chosen = chosen;
+    Ok(StepStatus::Done)
+}
+
+pub fn pole_zero(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
+    let Some(ch) = ctx.chosen else {
+        return Ok(StepStatus::Skipped("no fitted model (run the models step)".into()));
+    };
+    let structure = ctx.candidates[ch].structure;
+    let mut panels = Vec::new();
+    let mut rows = Vec::new();
+    let truth_unstable: Vec<c64> = match &ctx.twin {
+        Some(t) => t.twin.plant_unstable_poles().unwrap_or_default(),
+        None => Vec::new(),
+    };
+    let opts = PzOptions::default();
+    let mut chosen_pz = None;
+    for (i, c) in ctx.candidates.iter().enumerate() {
+        if c.structure != structure {
+            continue;
+        }
+        let Some(m) = &c.model else { continue };
+        let pz = PzAnalysis::from_state_space(m, &opts).map_err(computation)?;
+        let poles: Vec<c64> = pz.poles.iter().map(|r| r.z).collect();
+        let zeros: Vec<c64> = pz.zeros.iter().map(|r| r.z).collect();
+        panels.push(pz_panel(&c.label(), &poles, &zeros, None));
+        let unstable: Vec<String> = pz
+            .poles
+            .iter()
+            .filter(|r| r.unstable)
+            .map(|r| format!("{:.5}{:+.5}j", r.z.re, r.z.im))
+            .collect();
+        let min_d = pz
+            .cancellations
+            .iter()
+            .map(|x| x.distance)
+            .fold(f64::INFINITY, f64::min);
+        rows.push(vec![
+            c.label(),
+            pz.poles.len().to_string(),
+            pz.zeros.len().to_string(),
+            if unstable.is_empty() { "none".into() } else { unstable.join(", ") },
+            pz.cancellations.len().to_string(),
+            if min_d.is_finite() { fmt(min_d) } else { "—".into() },
+        ]);
+        if i == ch {
+            chosen_pz = Some((pz.cancellations.len(), unstable.len()));
+        }
+    }
+    if let Some((nc, nu)) = chosen_pz {
+        ctx.put("pole_zero.chosen_near_cancellations", nc as f64);
+        ctx.put("pole_zero.chosen_unstable_poles", nu as f64);
+    }
+    let mut blocks = vec![Block::Figure(figure(
+        "pole_zero",
+        &format!("Pole-zero maps of the {} candidates", structure.to_uppercase()),
+        format!(
+            "Poles (×) and zeros (○) in the z-plane with the unit circle, for every order of the chosen \
+             structure. An AMB plant must keep its unstable real pole outside the unit circle{}.",
+            if truth_unstable.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    " (the twin's exact plant: {})",
+                    truth_unstable
+                        .iter()
+                        .map(|z| format!("z = {:.5}", z.re))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )
+            }
+        ),
+        panels,
+        2,
+    ))];
+    blocks.push(Block::Table(Table {
+        id: "pole_zero".into(),
+        caption: format!(
+            "Poles, zeros, unstable poles and near pole-zero cancellations (distance in the z-plane below \
+             the tolerance of PzOptions::default()); a near cancellation means the order is higher than the \
+             data support."
+        ),
+        header: vec![
+            "model".into(),
+            "poles".into(),
+            "zeros".into(),
+            "unstable poles".into(),
+            "near cancellations".into(),
+            "closest pair".into(),
+        ],
+        rows,
+        highlight: None,
+    }));
+    let _ = (lin, log);
+    ctx.section("pole-zero", "7. Pole-zero check", blocks);
+    Ok(StepStatus::Done)
+}

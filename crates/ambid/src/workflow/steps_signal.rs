@@ -1,0 +1,562 @@
+//! Steps 1–3: excitation design and comparison, amplitude study, operating-point study.
+
+use super::config::SourceKind;
+use super::data::{excitation_kind, Recording};
+use super::figures::{bode_panels, figure, lin, log, series, with_spans, xy, Curve};
+use super::{computation, input, Ctx, Failure, StepStatus};
+use crate::experiment::ExcitationPlan;
+use crate::report::{format_number as fmt, Block, NoteKind, Span, Style, Table};
+use crate::study::{
+    amplitude_from_records, amplitude_on_twin, operating_point_on_twin, AmplitudeOutcome,
+    LevelRecord, OperatingCase, Recommendation, TwinAmplitudeStudy,
+};
+use anyhow::{anyhow, Context};
+use serde_json::json;
+
+/// The identification excitation plan of the workflow file at level `frac` of i_sat.
+pub fn plan(ctx: &Ctx<'_>, frac: f64) -> ExcitationPlan {
+    let e = &ctx.cfg.excitation;
+    ExcitationPlan {
+        kind: excitation_kind(&e.kind),
+        amplitude_frac: frac,
+        prbs_order: e.prbs_order,
+        samples_per_bit: e.samples_per_bit,
+        periods: e.periods,
+        f_min_hz: e.f_min_hz,
+        f_max_hz: e.f_max_hz,
+        seed: ctx.cfg.seed,
+        ..ExcitationPlan::default()
+    }
+}
+
+pub fn excitation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
+    let (fs, level, unit, isat) = match (&ctx.twin, &ctx.ident) {
+        (Some(t), _) => {
+            let isat = t.twin.i_sat();
+            (
+                t.twin.fs(),
+                ctx.cfg.excitation.compare_level_pct / 100.0 * isat,
+                "A",
+                Some(isat),
+            )
+        }
+        (None, Some(r)) => (r.fs(), 1.0, "normalised", None),
+        (None, None) => return Ok(StepStatus::Skipped("no data source".into())),
+    };
+    let cmp = crate::comparison::compare(fs, level, ctx.cfg.seed, 400).map_err(computation)?;
+    let mut blocks = vec![Block::Text(format!(
+        "The four candidate excitations of the seed paper, each one PRBS period long ({} samples at \
+         {} Hz) and scaled to the same RMS level ({} {unit}{}): PRBS (order 10, 5 samples per bit), \
+         a linear chirp, Gaussian white noise and a Schroeder-phased multisine over the PRBS band.",
+        cmp.signals.first().map_or(0, |s| s.values.len()),
+        fmt(fs),
+        fmt(level),
+        isat.map_or(String::new(), |i| format!(
+            ", {} % of i_sat = {} A",
+            fmt(ctx.cfg.excitation.compare_level_pct),
+            fmt(i)
+        )),
+    ))];
+    let ms = 20.0;
+    let nwin = ((ms * 1e-3 * fs) as usize).max(10);
+    let mut wave = Vec::new();
+    let mut spec = Vec::new();
+    let mut acf = Vec::new();
+    let mut rows = Vec::new();
+    for (k, s) in cmp.signals.iter().enumerate() {
+        let n = s.values.len().min(nwin);
+        let t: Vec<f64> = (0..n).map(|j| 1e3 * j as f64 * cmp.ts).collect();
+        wave.push(xy(
+            s.name,
+            lin("time [ms]"),
+            lin(&format!("r [{unit}]")),
+            vec![series(s.name, &t, &s.values[..n], Style::Line, Some(k))],
+        ));
+        let (f, a): (Vec<f64>, Vec<f64>) = cmp
+            .f_hz
+            .iter()
+            .zip(&s.spectrum)
+            .skip(1)
+            .map(|(f, a)| (*f, *a))
+            .unzip();
+        spec.push(series(s.name, &f, &a, Style::Line, Some(k)));
+        let lags: Vec<f64> = (0..s.autocorr.len())
+            .map(|j| 1e3 * j as f64 * cmp.ts)
+            .collect();
+        acf.push(series(s.name, &lags, &s.autocorr, Style::Line, Some(k)));
+        let r = &s.report;
+        rows.push(vec![
+            s.name.to_string(),
+            fmt(r.f_min_hz),
+            fmt(r.f_max_hz),
+            fmt(r.resolution_hz),
+            fmt(r.duration_s),
+            fmt(r.rms),
+            fmt(r.peak),
+            fmt(r.crest_factor),
+        ]);
+        ctx.put(&format!("excitation.compare.{}.crest_factor", s.name), r.crest_factor);
+        ctx.put(&format!("excitation.compare.{}.f_max_hz", s.name), r.f_max_hz);
+    }
+    blocks.push(Block::Figure(figure(
+        "excitation_waveforms",
+        "Excitation waveforms",
+        format!("First {ms} ms of each signal at the common RMS level."),
+        wave,
+        2,
+    )));
+    blocks.push(Block::Figure(figure(
+        "excitation_spectra",
+        "Amplitude spectra",
+        "One-sided amplitude spectrum of one period of each signal (DFT of the whole period, no window)."
+            .into(),
+        vec![xy(
+            "",
+            log("frequency [Hz]"),
+            log(&format!("amplitude [{unit}]")),
+            spec,
+        )],
+        1,
+    )));
+    blocks.push(Block::Figure(figure(
+        "excitation_autocorrelation",
+        "Autocorrelation",
+        "Normalised autocorrelation of each signal (circular for the periodic PRBS and multisine) over the first 400 lags."
+            .into(),
+        vec![xy("", lin("lag [ms]"), lin("normalised autocorrelation [-]"), acf)],
+        1,
+    )));
+    blocks.push(Block::Table(Table {
+        id: "excitation_comparison".into(),
+        caption: "Usable band, resolution, duration and crest factor of the four signals (one period)."
+            .into(),
+        header: vec![
+            "signal".into(),
+            "f_min [Hz]".into(),
+            "f_max [Hz]".into(),
+            "resolution [Hz]".into(),
+            "duration [s]".into(),
+            format!("RMS [{unit}]"),
+            format!("peak [{unit}]"),
+            "crest factor [-]".into(),
+        ],
+        rows,
+        highlight: Some(0),
+    }));
+    // the identification PRBS as designed
+    if let Some(isat) = isat {
+        let frac = ctx.cfg.excitation.amplitude_pct.unwrap_or(10.0) / 100.0;
+        let p = plan(ctx, frac);
+        let ts = 1.0 / fs;
+        if let Some(spec) = p.spec(isat, ts).map_err(input)? {
+            let r = spec.report(ts).map_err(computation)?;
+            ctx.put("excitation.identification.f_min_hz", r.f_min_hz);
+            ctx.put("excitation.identification.f_max_hz", r.f_max_hz);
+            ctx.put("excitation.identification.resolution_hz", r.resolution_hz);
+            ctx.put("excitation.identification.duration_s", r.duration_s);
+            ctx.put("excitation.identification.period_samples", r.period_samples as f64);
+            ctx.put("excitation.identification.crest_factor", r.crest_factor);
+            blocks.push(Block::Table(Table {
+                id: "excitation_identification".into(),
+                caption: format!(
+                    "The identification excitation ({}{}): usable band (f_min = resolution = fs/period, \
+                     f_max where the spectrum has fallen by 3 dB), resolution and duration.",
+                    ctx.cfg.excitation.kind,
+                    if ctx.cfg.excitation.kind == "prbs" {
+                        format!(
+                            ", maximum-length sequence of order {}, {} samples per bit, {} periods",
+                            p.prbs_order, p.samples_per_bit, p.periods
+                        )
+                    } else {
+                        String::new()
+                    }
+                ),
+                header: vec![
+                    "f_min [Hz]".into(),
+                    "f_max [Hz]".into(),
+                    "resolution [Hz]".into(),
+                    "period [samples]".into(),
+                    "periods".into(),
+                    "duration [s]".into(),
+                    "crest factor [-]".into(),
+                ],
+                rows: vec![vec![
+                    fmt(r.f_min_hz),
+                    fmt(r.f_max_hz),
+                    fmt(r.resolution_hz),
+                    r.period_samples.to_string(),
+                    r.periods.to_string(),
+                    fmt(r.duration_s),
+                    fmt(r.crest_factor),
+                ]],
+                highlight: None,
+            }));
+        }
+    }
+    ctx.section("excitation", "1. Excitation design and comparison", blocks);
+    Ok(StepStatus::Done)
+}
+
+fn amplitude_figure(out: &AmplitudeOutcome) -> Block {
+    let lv: Vec<f64> = out.rows.iter().map(|r| r.level_pct).collect();
+    let spans = out
+        .recommended_pct
+        .map(|(a, b)| {
+            vec![Span {
+                label: "recommended".into(),
+                x0: a - 0.5,
+                x1: b + 0.5,
+            }]
+        })
+        .unwrap_or_default();
+    let coh = with_spans(
+        xy(
+            "coherence",
+            lin("excitation level [% of i_sat]"),
+            lin("mean coherence [-]"),
+            vec![
+                series(
+                    "γ²_ry",
+                    &lv,
+                    &out.rows.iter().map(|r| r.mean_coh_ry).collect::<Vec<_>>(),
+                    Style::LineMarkers(crate::report::Marker::Dot),
+                    Some(0),
+                ),
+                series(
+                    "γ²_ru",
+                    &lv,
+                    &out.rows.iter().map(|r| r.mean_coh_ru).collect::<Vec<_>>(),
+                    Style::LineMarkers(crate::report::Marker::Square),
+                    Some(1),
+                ),
+            ],
+        ),
+        spans.clone(),
+    );
+    let var = with_spans(
+        xy(
+            "FRF variance",
+            lin("excitation level [% of i_sat]"),
+            log("mean relative plant variance [-]"),
+            vec![series(
+                "var(P̂)/|P̂|²",
+                &lv,
+                &out.rows
+                    .iter()
+                    .map(|r| r.mean_plant_rel_var)
+                    .collect::<Vec<_>>(),
+                Style::LineMarkers(crate::report::Marker::Dot),
+                Some(2),
+            )],
+        ),
+        spans.clone(),
+    );
+    let snr: Vec<f64> = out
+        .rows
+        .iter()
+        .map(|r| r.snr_db.unwrap_or(f64::NAN))
+        .collect();
+    let snr = with_spans(
+        xy(
+            "output SNR",
+            lin("excitation level [% of i_sat]"),
+            lin("output SNR [dB]"),
+            vec![series(
+                "SNR",
+                &lv,
+                &snr,
+                Style::LineMarkers(crate::report::Marker::Dot),
+                Some(3),
+            )],
+        ),
+        spans,
+    );
+    Block::Figure(figure(
+        "amplitude_study",
+        "Excitation-amplitude study",
+        format!(
+            "Quality of the plant FRF against the excitation level (seed paper, figure 6): average \
+             coherence γ²_ry and γ²_ru, average relative FRF variance from the period-to-period spread, \
+             and the output SNR (output power with excitation over the output power of a record without \
+             excitation) over the quality band. Shaded: the recommended range. {}",
+            out.reasoning
+        ),
+        vec![coh, var, snr],
+        3,
+    ))
+}
+
+pub fn amplitude(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
+    let cfg = ctx.cfg;
+    let levels: Vec<f64> = cfg.amplitude_study.levels_pct.iter().map(|l| l / 100.0).collect();
+    let (out, source) = match (&ctx.twin, cfg.source) {
+        (Some(t), _) => {
+            let study = TwinAmplitudeStudy {
+                twin: t.cfg.clone(),
+                excitation: plan(ctx, 0.1),
+                levels: levels.clone(),
+                mode: t.mode,
+                seed: cfg.seed,
+                skip_periods: 1,
+                noise: t.noise,
+                ..TwinAmplitudeStudy::default()
+            };
+            (
+                amplitude_on_twin(&study).map_err(computation)?,
+                "the twin (one experiment per level plus one without excitation)".to_string(),
+            )
+        }
+        (None, SourceKind::Files) => {
+            if cfg.amplitude_study.files.len() < 2 {
+                return Ok(StepStatus::Skipped(
+                    "an amplitude study on recorded data needs one record per level: list them in \
+                     [amplitude_study] files = [{ level_pct = 2.0, path = \"…\" }, …]"
+                        .into(),
+                ));
+            }
+            let mut records = Vec::new();
+            let mut fs = f64::NAN;
+            let mut period = None;
+            for lf in &cfg.amplitude_study.files {
+                let rec: Recording = super::data::load_file(cfg, &ctx.base, &lf.path, "amplitude level")?;
+                let r = rec.r.clone().ok_or_else(|| {
+                    input(anyhow!(
+                        "{}: the amplitude study needs the excitation column r",
+                        rec.source
+                    ))
+                })?;
+                fs = rec.fs();
+                period = rec.period;
+                records.push(LevelRecord {
+                    level: lf.level_pct / 100.0,
+                    r,
+                    u: rec.u,
+                    y: rec.y,
+                    i: rec.i,
+                    saturated_fraction: None,
+                });
+            }
+            let noise = match &cfg.data.noise {
+                Some(p) => Some(super::data::load_file(cfg, &ctx.base, p, "noise")?.y),
+                None => None,
+            };
+            let settings = super::steps_frf::settings(ctx, period, records[0].r.len(), fs);
+            (
+                amplitude_from_records(
+                    &records,
+                    fs,
+                    noise.as_deref(),
+                    &settings,
+                    None,
+                    Recommendation::default(),
+                )
+                .map_err(computation)?,
+                format!("{} recorded files", records.len()),
+            )
+        }
+        _ => return Ok(StepStatus::Skipped("no data source".into())),
+    };
+    // the identification level: the configured one, else the studied level nearest the middle
+    // of the recommended range, else 10 %
+    let chosen_pct = match (cfg.excitation.amplitude_pct, out.recommended_pct) {
+        (Some(p), _) => p,
+        (None, Some((a, b))) => {
+            let mid = 0.5 * (a + b);
+            out.rows
+                .iter()
+                .map(|r| r.level_pct)
+                .filter(|l| (a..=b).contains(l))
+                .min_by(|x, y| (x - mid).abs().total_cmp(&(y - mid).abs()))
+                .unwrap_or(mid)
+        }
+        (None, None) => 10.0,
+    };
+    ctx.level_frac = Some(chosen_pct / 100.0);
+    let mut rows = Vec::new();
+    let mut jrows = Vec::new();
+    for r in &out.rows {
+        rows.push(vec![
+            fmt(r.level_pct),
+            fmt(r.mean_coh_ry),
+            fmt(r.mean_coh_ru),
+            fmt(r.mean_plant_rel_var),
+            r.snr_db.map_or("—".into(), fmt),
+            fmt(100.0 * r.saturated_fraction),
+            r.plant_median_rel_err.map_or("—".into(), |e| fmt(100.0 * e)),
+        ]);
+        jrows.push(json!({
+            "level_pct": r.level_pct,
+            "mean_coh_ry": r.mean_coh_ry,
+            "mean_coh_ru": r.mean_coh_ru,
+            "mean_plant_rel_var": r.mean_plant_rel_var,
+            "snr_db": r.snr_db,
+            "saturated_pct": 100.0 * r.saturated_fraction,
+            "plant_median_rel_err_pct": r.plant_median_rel_err.map(|e| 100.0 * e),
+        }));
+    }
+    ctx.put("amplitude.levels", jrows);
+    if let Some((a, b)) = out.recommended_pct {
+        ctx.put("amplitude.recommended_min_pct", a);
+        ctx.put("amplitude.recommended_max_pct", b);
+    }
+    ctx.put("amplitude.chosen_pct", chosen_pct);
+    let highlight = out
+        .rows
+        .iter()
+        .position(|r| (r.level_pct - chosen_pct).abs() < 1e-9);
+    let mut blocks = vec![
+        Block::Text(format!("Amplitude study on {source}.")),
+        amplitude_figure(&out),
+        Block::Table(Table {
+            id: "amplitude_study".into(),
+            caption: "Quality measures per level (quality band averages). The last column is the \
+                      median relative error of the plant FRF against the twin's exact linearised \
+                      plant (twin only)."
+                .into(),
+            header: vec![
+                "level [% i_sat]".into(),
+                "mean γ²_ry".into(),
+                "mean γ²_ru".into(),
+                "mean rel. variance".into(),
+                "SNR [dB]".into(),
+                "saturated [%]".into(),
+                "median error vs truth [%]".into(),
+            ],
+            rows,
+            highlight,
+        }),
+    ];
+    blocks.push(Ctx::note(
+        if out.recommended_pct.is_some() {
+            NoteKind::Pass
+        } else {
+            NoteKind::Warning
+        },
+        format!(
+            "{} Identification level used below: {} % of i_sat{}.",
+            out.reasoning,
+            fmt(chosen_pct),
+            if cfg.excitation.amplitude_pct.is_some() {
+                " (set in the workflow file)"
+            } else {
+                ""
+            }
+        ),
+    ));
+    ctx.section("amplitude", "2. Excitation-amplitude study", blocks);
+    Ok(StepStatus::Done)
+}
+
+pub fn operating_point(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
+    let Some(t) = &ctx.twin else {
+        return Ok(StepStatus::Skipped(
+            "the operating-point study runs the twin at other bias currents and air gaps; on \
+             recorded data, run the workflow once per operating point"
+                .into(),
+        ));
+    };
+    let cfg = ctx.cfg;
+    let (i0, g0) = (
+        t.cfg.operating_point.bias_current_a,
+        t.cfg.operating_point.air_gap_m,
+    );
+    let (b, g) = (cfg.operating_point.bias_pct, cfg.operating_point.air_gap_um);
+    let case = |name: String, i: f64, gap: f64| OperatingCase {
+        name,
+        bias_current_a: i,
+        air_gap_m: gap,
+    };
+    let cases = vec![
+        case("nominal".into(), i0, g0),
+        case(format!("bias-{b}%"), i0 * (1.0 - b / 100.0), g0),
+        case(format!("bias+{b}%"), i0 * (1.0 + b / 100.0), g0),
+        case(format!("gap-{g}um"), i0, g0 - g * 1e-6),
+        case(format!("gap+{g}um"), i0, g0 + g * 1e-6),
+    ];
+    let frac = ctx.level_frac.unwrap_or(0.1);
+    let band = ambid_core::frf::quality::DEFAULT_BAND;
+    let band = (band.0, 2000.0f64.min(0.45 * t.twin.fs()));
+    let out = operating_point_on_twin(
+        &t.cfg,
+        &cases,
+        &plan(ctx, frac),
+        t.mode,
+        cfg.seed + 100,
+        1,
+        band,
+    )
+    .context("operating-point study")
+    .map_err(computation)?;
+    let curves: Vec<Curve<'_>> = out
+        .cases
+        .iter()
+        .zip(&out.plants)
+        .enumerate()
+        .map(|(k, (c, p))| Curve {
+            name: &c.name,
+            f: p.f_hz(),
+            g: p.values(),
+            std: None,
+            style: if k == 0 { Style::Line } else { Style::Dashed },
+            color: Some(k),
+        })
+        .collect();
+    let fig = figure(
+        "operating_point_frf",
+        "Plant FRF at five operating points",
+        format!(
+            "Period-averaged plant FRF (joint input-output) at nominal, bias current ±{b} % and air \
+             gap ±{g} µm, each from its own experiment at {} % of i_sat, {}–{} Hz.",
+            fmt(100.0 * frac),
+            fmt(band.0),
+            fmt(band.1)
+        ),
+        bode_panels(&curves, "|P| [dB re 1 m/A]"),
+        1,
+    );
+    let mut rows = Vec::new();
+    for d in &out.deviations {
+        rows.push(vec![
+            d.case.clone(),
+            d.band.clone(),
+            format!("{}–{}", fmt(d.f_min_hz), fmt(d.f_max_hz)),
+            fmt(100.0 * d.median_rel_dev),
+            fmt(d.max_abs_db_dev),
+            fmt(d.max_abs_phase_dev_deg),
+            d.truth_median_rel_dev.map_or("—".into(), |v| fmt(100.0 * v)),
+        ]);
+        ctx.put(
+            &format!("operating_point.{}.{}_median_dev_pct", d.case, d.band),
+            100.0 * d.median_rel_dev,
+        );
+    }
+    for (c, e) in out.cases.iter().zip(&out.truth_errors) {
+        ctx.put(
+            &format!("operating_point.{}.error_vs_truth_pct", c.name),
+            100.0 * e,
+        );
+    }
+    let blocks = vec![
+        Block::Figure(fig),
+        Block::Table(Table {
+            id: "operating_point".into(),
+            caption: "Deviation of each operating point's plant FRF from nominal, per band: median \
+                      relative deviation, largest magnitude (dB) and phase deviation, and the same \
+                      median for the twin's exact plants (what the estimate should show)."
+                .into(),
+            header: vec![
+                "case".into(),
+                "band".into(),
+                "range [Hz]".into(),
+                "median deviation [%]".into(),
+                "max |Δ| [dB]".into(),
+                "max |Δφ| [deg]".into(),
+                "true median deviation [%]".into(),
+            ],
+            rows,
+            highlight: None,
+        }),
+    ];
+    ctx.section("operating-point", "3. Operating-point study", blocks);
+    Ok(StepStatus::Done)
+}

@@ -1,0 +1,591 @@
+//! Steps 8–10: validation on an independent record with residual tests, the chirp closed-loop
+//! reconstruction and the ISO 14839-3 sensitivity zone.
+
+use super::figures::{envelope, figure, lin, log, series, xy};
+use super::steps_frf::ensure_valid;
+use super::{computation, Ctx, Failure, StepStatus};
+use crate::report::{format_number as fmt, Block, NoteKind, Style, Table};
+use crate::validation::{validate_closed_loop, MeasuredLoop, ValidationOutcome, ValidationSettings};
+use ambid_core::c64;
+use ambid_core::estimate::arx::fit_percent;
+use ambid_core::lti::Frd;
+use ambid_core::validate::iso::{sensitivity_zone, IsoZones};
+use ambid_core::validate::residuals::{analyze, ResidualTest};
+use serde_json::json;
+
+fn settings(ctx: &Ctx<'_>, n: usize) -> ValidationSettings {
+    let v = &ctx.cfg.validation;
+    ValidationSettings {
+        skip: v.skip.min(n / 4),
+        lags: v.lags,
+        windows: v.windows.min(n / 4).max(1),
+        zones: zones(ctx),
+        ..ValidationSettings::default()
+    }
+}
+
+fn zones(ctx: &Ctx<'_>) -> IsoZones {
+    IsoZones {
+        a: ctx.cfg.iso.a,
+        b: ctx.cfg.iso.b,
+        c: ctx.cfg.iso.c,
+    }
+}
+
+/// Time-series figure: a zoomed window of measured and simulated, and the error over the whole record.
+fn time_figure(
+    id: &str,
+    title: &str,
+    caption: String,
+    ts: f64,
+    measured: &[(&str, &[f64], &[f64], &str)],
+) -> Block {
+    let mut panels = Vec::new();
+    for (name, meas, sim, unit) in measured {
+        let n = meas.len().min(sim.len());
+        let w0 = n / 2;
+        let w1 = (w0 + (0.05 / ts) as usize).min(n);
+        let t: Vec<f64> = (w0..w1).map(|k| k as f64 * ts).collect();
+        panels.push(xy(
+            &format!("{name}: 50 ms window"),
+            lin("time [s]"),
+            lin(&format!("{name} [{unit}]")),
+            vec![
+                series("measured", &t, &meas[w0..w1], Style::Line, Some(0)),
+                series("model in closed loop", &t, &sim[w0..w1], Style::Dashed, Some(1)),
+            ],
+        ));
+        let tt: Vec<f64> = (0..n).map(|k| k as f64 * ts).collect();
+        let e: Vec<f64> = meas[..n].iter().zip(&sim[..n]).map(|(a, b)| a - b).collect();
+        let (te, ee) = envelope(&tt, &e, 4000);
+        panels.push(xy(
+            &format!("{name}: error over the record"),
+            lin("time [s]"),
+            lin(&format!("error [{unit}]")),
+            vec![series("measured − model", &te, &ee, Style::Line, Some(3))],
+        ));
+    }
+    Block::Figure(figure(id, title, caption, panels, 2))
+}
+
+fn residual_figure(res: &ResidualTest, input: &str) -> Block {
+    let w = &res.whiteness;
+    let lags: Vec<f64> = w.lags.iter().map(|l| *l as f64).collect();
+    let bound = |x: &[f64], b: f64| {
+        vec![
+            series("+95 % bound", x, &vec![b; x.len()], Style::Dashed, Some(7)),
+            series("−95 % bound", x, &vec![-b; x.len()], Style::Dashed, Some(7)),
+        ]
+    };
+    let mut s1 = vec![series("autocorrelation", &lags, &w.values, Style::Stems, Some(0))];
+    s1.extend(bound(&lags, w.bound));
+    let mut panels = vec![xy("whiteness", lin("lag [samples]"), lin("normalised correlation [-]"), s1)];
+    if let Some(c) = &res.independence {
+        let l: Vec<f64> = c.lags.iter().map(|l| *l as f64).collect();
+        let mut s2 = vec![series(
+            &format!("cross-correlation with {input}"),
+            &l,
+            &c.values,
+            Style::Stems,
+            Some(1),
+        )];
+        s2.extend(bound(&l, c.bound));
+        panels.push(xy(
+            &format!("independence from {input}"),
+            lin("lag [samples]"),
+            lin("normalised correlation [-]"),
+            s2,
+        ));
+    }
+    Block::Figure(figure(
+        "residuals",
+        "Residual correlation tests",
+        format!(
+            "Autocorrelation of the output error (lags 1–{}) and its cross-correlation with the {input} \
+             (lags ±{}), with the 95 % bounds ±1.96/√N (N = {}). Whiteness: {} (statistic {}, 95 % \
+             threshold {}); independence: {}.",
+            w.lags.len(),
+            res.independence.as_ref().map_or(0, |c| c.lags.len() / 2),
+            res.n_samples,
+            if w.pass { "pass" } else { "fail" },
+            fmt(w.statistic),
+            fmt(w.threshold),
+            res.independence.as_ref().map_or("—".to_string(), |c| format!(
+                "{} (statistic {}, threshold {})",
+                if c.pass { "pass" } else { "fail" },
+                fmt(c.statistic),
+                fmt(c.threshold)
+            ))
+        ),
+        panels,
+        2,
+    ))
+}
+
+fn put_residuals(ctx: &mut Ctx<'_>, res: &ResidualTest) {
+    ctx.put("residuals.whiteness_statistic", res.whiteness.statistic);
+    ctx.put("residuals.whiteness_threshold", res.whiteness.threshold);
+    ctx.put("residuals.whiteness_pass", res.whiteness.pass);
+    if let Some(c) = &res.independence {
+        ctx.put("residuals.independence_statistic", c.statistic);
+        ctx.put("residuals.independence_threshold", c.threshold);
+        ctx.put("residuals.independence_pass", c.pass);
+    }
+}
+
+pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
+    ensure_valid(ctx)?;
+    let Some(ch) = ctx.chosen else {
+        return Ok(StepStatus::Skipped("no fitted model (run the models step)".into()));
+    };
+    let Some(model) = ctx.candidates[ch].model.clone() else {
+        return Ok(StepStatus::Skipped("the chosen model failed".into()));
+    };
+    let label = ctx.candidates[ch].label();
+    let Some(val) = ctx.valid.clone() else {
+        return Ok(StepStatus::Skipped("no validation record".into()));
+    };
+    let mut blocks = Vec::new();
+    let controller = ctx.controller.clone();
+    match (&controller, val.closed_loop) {
+        (Some(c), true) => {
+            let zeros = vec![0.0; val.len()];
+            let w = val.w.as_deref().unwrap_or(&zeros);
+            let s = settings(ctx, val.len());
+            let rec = MeasuredLoop {
+                w,
+                r: val.r.as_deref(),
+                y: &val.y,
+                u: &val.u,
+                ts: val.ts,
+            };
+            let v = validate_closed_loop(&model, c.state_space(), &rec, &s).map_err(computation)?;
+            ctx.put("validation.model", label.clone());
+            ctx.put("validation.fit_y_pct", v.fit_y);
+            ctx.put("validation.fit_u_pct", v.fit_u);
+            ctx.put("validation.rmse_y", v.rmse_y);
+            ctx.put("validation.max_error_y", v.max_error_y);
+            let mut rows = vec![vec![
+                label.clone(),
+                fmt(v.fit_y),
+                fmt(v.fit_u),
+                fmt(v.rmse_y),
+                fmt(v.max_error_y),
+            ]];
+            // the twin's exact plant through the same validation: the best any model can do
+            if let Some(t) = &ctx.twin {
+                if let Ok(vt) = validate_closed_loop(t.twin.plant(), c.state_space(), &rec, &s) {
+                    ctx.put("validation.exact_plant_fit_y_pct", vt.fit_y);
+                    rows.push(vec![
+                        "twin's exact linear plant".into(),
+                        fmt(vt.fit_y),
+                        fmt(vt.fit_u),
+                        fmt(vt.rmse_y),
+                        fmt(vt.max_error_y),
+                    ]);
+                }
+            }
+            blocks.push(Block::Text(format!(
+                "The chosen model {label} closed with the controller ({}) and driven by the independent \
+                 record's excitation ({} samples, first {} excluded); the simulated displacement and \
+                 controller output are compared with the measured ones.",
+                c.description(),
+                val.len(),
+                v.skip
+            )));
+            blocks.push(time_figure(
+                "validation_time",
+                "Time-domain validation",
+                format!(
+                    "Measured and simulated displacement y and controller output u on the validation record \
+                     (50 ms window in the middle, and the error over the whole record, min/max per block). \
+                     Fit y {} %, fit u {} %.",
+                    fmt(v.fit_y),
+                    fmt(v.fit_u)
+                ),
+                val.ts,
+                &[
+                    ("y", &val.y, &v.reconstruction.simulated.y, &ctx.cfg.data.y_unit),
+                    ("u", &val.u, &v.reconstruction.simulated.u, &ctx.cfg.data.u_unit),
+                ],
+            ));
+            blocks.push(Block::Table(Table {
+                id: "validation".into(),
+                caption: "Closed-loop validation figures (after the excluded start-up).".into(),
+                header: vec![
+                    "model".into(),
+                    "fit y [%]".into(),
+                    "fit u [%]".into(),
+                    "RMSE y".into(),
+                    "max |error y|".into(),
+                ],
+                rows,
+                highlight: Some(0),
+            }));
+            put_residuals(ctx, &v.residuals);
+            blocks.push(residual_figure(
+                &v.residuals,
+                if val.r.is_some() { "excitation r" } else { "reference w" },
+            ));
+            ctx.validation = Some(v);
+        }
+        (_, closed) => {
+            if closed {
+                blocks.push(Ctx::note(
+                    NoteKind::Warning,
+                    "Closed-loop data without a controller file: the model cannot be validated through \
+                     the closed loop, so it is validated like open-loop data (one-step prediction when \
+                     it is unstable). Give [data] controller = \"controller.toml\" for the closed-loop \
+                     validation.",
+                ));
+            }
+            // open loop: simulate (stable) or predict one step (unstable) on the validation record
+            let c = &ctx.candidates[ch];
+            let stable = model
+                .poles()
+                .map(|p| p.iter().all(|z| z.norm() < 1.0))
+                .unwrap_or(false);
+            let yhat = if stable {
+                model.simulate_siso(&val.u, None).map_err(computation)?
+            } else if let Some(p) = &c.poly {
+                let (eps, _) = ambid_core::estimate::pem::prediction_errors(
+                    p,
+                    &val.y,
+                    &val.u,
+                    ambid_core::estimate::pem::Focus::Prediction,
+                )
+                .map_err(computation)?;
+                val.y.iter().zip(&eps).map(|(y, e)| y - e).collect()
+            } else {
+                return Ok(StepStatus::Skipped(format!(
+                    "{label} is unstable and has no predictor: it cannot be validated in open loop"
+                )));
+            };
+            let kind = if stable { "simulation" } else { "1-step prediction" };
+            let fit = fit_percent(&val.y, &yhat).map_err(computation)?;
+            ctx.put("validation.model", label.clone());
+            ctx.put("validation.fit_y_pct", fit);
+            ctx.put("validation.kind", kind);
+            let eps: Vec<f64> = val.y.iter().zip(&yhat).map(|(a, b)| a - b).collect();
+            let res = analyze(&eps, Some(&val.u), ctx.cfg.validation.lags).map_err(computation)?;
+            blocks.push(Block::Text(format!(
+                "The chosen model {label} on the validation record ({} samples): {kind} fit {} %.",
+                val.len(),
+                fmt(fit)
+            )));
+            let empty: Vec<f64> = Vec::new();
+            let _ = &empty;
+            blocks.push(time_figure(
+                "validation_time",
+                "Time-domain validation",
+                format!("Measured output and the model's {kind} on the validation record; fit {} %.", fmt(fit)),
+                val.ts,
+                &[("y", &val.y, &yhat, &ctx.cfg.data.y_unit)],
+            ));
+            put_residuals(ctx, &res);
+            blocks.push(residual_figure(&res, "input u"));
+        }
+    }
+    ctx.section("validation", "8. Validation on an independent record", blocks);
+    Ok(StepStatus::Done)
+}
+
+pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
+    let Some(ch) = ctx.chosen else {
+        return Ok(StepStatus::Skipped("no fitted model (run the models step)".into()));
+    };
+    let Some(model) = ctx.candidates[ch].model.clone() else {
+        return Ok(StepStatus::Skipped("the chosen model failed".into()));
+    };
+    let Some(c) = ctx.controller.clone() else {
+        return Ok(StepStatus::Skipped(
+            "the closed-loop reconstruction needs the controller (open-loop data, or no [data] controller)".into(),
+        ));
+    };
+    let rc = &ctx.cfg.reconstruction;
+    let (w, y, u, ts, source) = if let Some(t) = &ctx.twin {
+        let w = ambid_core::signal::ChirpSpec {
+            amplitude: rc.amplitude_um * 1e-6,
+            duration_s: rc.duration_s,
+            f0_hz: rc.f0_hz,
+            f1_hz: rc.f1_hz,
+            sweep: ambid_core::signal::Sweep::Linear,
+            periods: 1,
+        }
+        .generate(t.twin.ts())
+        .map_err(super::input)?
+        .values;
+        let opts = ambid_twin::SimOptions {
+            mode: t.mode,
+            seed: ctx.cfg.seed + 500,
+            noise: t.noise,
+            w: Some(w.clone()),
+            ..ambid_twin::SimOptions::default()
+        };
+        let rec = t
+            .twin
+            .simulate(&vec![0.0; w.len()], &opts)
+            .map_err(computation)?;
+        (w, rec.y, rec.u, rec.ts, "the twin".to_string())
+    } else if let Some(p) = ctx.cfg.data.reconstruction.clone() {
+        let r = super::data::load_file(ctx.cfg, &ctx.base, &p, "reconstruction")?;
+        let Some(w) = r.w.clone() else {
+            return Err(super::input(anyhow::anyhow!(
+                "{}: the reconstruction record needs the position reference column ([data] w = \"…\")",
+                r.source
+            )));
+        };
+        (w, r.y, r.u, r.ts, r.source)
+    } else {
+        return Ok(StepStatus::Skipped(
+            "no chirp-reference record ([data] reconstruction = \"chirp.csv\" with a w column)".into(),
+        ));
+    };
+    let s = settings(ctx, y.len());
+    let s = ValidationSettings { skip: 0, ..s };
+    let v: ValidationOutcome = validate_closed_loop(
+        &model,
+        c.state_space(),
+        &MeasuredLoop {
+            w: &w,
+            r: None,
+            y: &y,
+            u: &u,
+            ts,
+        },
+        &s,
+    )
+    .map_err(computation)?;
+    let label = ctx.candidates[ch].label();
+    ctx.put("reconstruction.fit_y_pct", v.reconstruction.fit_y);
+    ctx.put("reconstruction.fit_u_pct", v.reconstruction.fit_u);
+    ctx.put("reconstruction.max_error_y", v.reconstruction.max_error_y);
+    let worst = v.reconstruction.worst_window().cloned();
+    if let Some(wf) = &worst {
+        ctx.put("reconstruction.worst_window_fit_y_pct", wf.fit_y);
+        ctx.put("reconstruction.worst_window_start_s", wf.t_s.0);
+    }
+    // measured vs reconstructed over the whole sweep (min/max envelopes), and a zoom on the worst window
+    let n = y.len();
+    let t: Vec<f64> = (0..n).map(|k| k as f64 * ts).collect();
+    let sim = &v.reconstruction.simulated;
+    let mut panels = Vec::new();
+    for (name, meas, rec, unit) in [
+        ("displacement y", &y, &sim.y, ctx.cfg.data.y_unit.clone()),
+        ("controller output u", &u, &sim.u, ctx.cfg.data.u_unit.clone()),
+    ] {
+        let (tm, m) = envelope(&t, meas, 3000);
+        let (tr, r) = envelope(&t, rec, 3000);
+        panels.push(xy(
+            name,
+            lin("time [s]"),
+            lin(&format!("{name} [{unit}]")),
+            vec![
+                series("measured", &tm, &m, Style::Line, Some(0)),
+                series("reconstructed", &tr, &r, Style::Dashed, Some(1)),
+            ],
+        ));
+    }
+    let win: Vec<Vec<String>> = v
+        .reconstruction
+        .windows
+        .iter()
+        .map(|w| {
+            vec![
+                format!("{}–{}", fmt(w.t_s.0), fmt(w.t_s.1)),
+                fmt(w.fit_y),
+                fmt(w.fit_u),
+                fmt(w.rms_error_y),
+            ]
+        })
+        .collect();
+    let worst_idx = worst.as_ref().and_then(|wf| {
+        v.reconstruction
+            .windows
+            .iter()
+            .position(|w| w.t_s == wf.t_s)
+    });
+    let blocks = vec![
+        Block::Text(format!(
+            "Closed-loop reconstruction (seed paper, section 4): {source} driven by a linear chirp position \
+             reference ({} µm, {}–{} Hz over {} s); the chosen model {label} closed with the real controller \
+             and driven by the same reference. Fit of the displacement {} %, of the controller output {} %.",
+            fmt(rc.amplitude_um),
+            fmt(rc.f0_hz),
+            fmt(rc.f1_hz),
+            fmt(rc.duration_s),
+            fmt(v.reconstruction.fit_y),
+            fmt(v.reconstruction.fit_u)
+        )),
+        Block::Figure(figure(
+            "reconstruction",
+            "Closed-loop reconstruction: displacement and current",
+            format!(
+                "Measured and reconstructed displacement and controller output (current reference) during \
+                 the chirp (min/max per block of the {n}-sample record). The chirp frequency rises linearly with time."
+            ),
+            panels,
+            1,
+        )),
+        Block::Table(Table {
+            id: "reconstruction_windows".into(),
+            caption: "Fit per time window of the sweep (the window's frequency range follows from the linear chirp); highlighted: the worst.".into(),
+            header: vec![
+                "window [s]".into(),
+                "fit y [%]".into(),
+                "fit u [%]".into(),
+                "RMS error y".into(),
+            ],
+            rows: win,
+            highlight: worst_idx,
+        }),
+    ];
+    ctx.section("reconstruction", "9. Closed-loop reconstruction", blocks);
+    Ok(StepStatus::Done)
+}
+
+pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
+    let z = zones(ctx);
+    let mut curves = Vec::new();
+    let mut rows = Vec::new();
+    let mut verdicts = Vec::new();
+    // measured S = T_ru from the FRF (closed loop with an excitation)
+    if let (Some(a), true) = (&ctx.frf, ctx.ident.as_ref().is_some_and(|r| r.r.is_some() && r.closed_loop)) {
+        let s = &a.frf.t_ru;
+        let v = sensitivity_zone(s, &z).map_err(computation)?;
+        curves.push(series(
+            "measured S = T_ru",
+            s.f_hz(),
+            &s.values().iter().map(|x| x.norm()).collect::<Vec<_>>(),
+            Style::Line,
+            Some(0),
+        ));
+        ctx.put("iso.measured.peak", v.peak);
+        ctx.put("iso.measured.f_peak_hz", v.f_peak_hz);
+        ctx.put("iso.measured.zone", format!("{:?}", v.zone));
+        rows.push(vec![
+            "measured S (FRF)".into(),
+            fmt(v.peak),
+            fmt(20.0 * v.peak.log10()),
+            fmt(v.f_peak_hz),
+            format!("{:?}", v.zone),
+        ]);
+        verdicts.push(v.zone);
+    }
+    if let Some(v) = ctx.validation.clone() {
+        let f = &v.grid_hz;
+        curves.push(series(
+            "model S = 1/(1+PC)",
+            f,
+            &v.s_model.iter().map(|x| x.norm()).collect::<Vec<_>>(),
+            Style::Dashed,
+            Some(1),
+        ));
+        let m = &v.iso_model;
+        ctx.put("iso.model.peak", m.peak);
+        ctx.put("iso.model.f_peak_hz", m.f_peak_hz);
+        ctx.put("iso.model.zone", format!("{:?}", m.zone));
+        if let Some(p) = v.margins.phase_margin() {
+            ctx.put("iso.model.phase_margin_deg", p);
+        }
+        rows.push(vec![
+            format!("chosen model with the controller"),
+            fmt(m.peak),
+            fmt(20.0 * m.peak.log10()),
+            fmt(m.f_peak_hz),
+            format!("{:?}", m.zone),
+        ]);
+        verdicts.push(m.zone);
+    }
+    if let Some(t) = &ctx.twin {
+        let f: Vec<f64> = (0..2000)
+            .map(|k| 1.0 * (0.49 * t.twin.fs()).powf(k as f64 / 1999.0))
+            .collect();
+        let s: Vec<c64> = t.twin.sensitivity_frf(&f).map_err(computation)?;
+        let frd = Frd::new(f.clone(), s.clone(), None, Some(t.twin.ts())).map_err(computation)?;
+        let v = sensitivity_zone(&frd, &z).map_err(computation)?;
+        curves.push(series(
+            "twin's exact S",
+            &f,
+            &s.iter().map(|x| x.norm()).collect::<Vec<_>>(),
+            Style::Dashed,
+            Some(2),
+        ));
+        ctx.put("iso.truth.peak", v.peak);
+        ctx.put("iso.truth.zone", format!("{:?}", v.zone));
+        rows.push(vec![
+            "twin's exact plant".into(),
+            fmt(v.peak),
+            fmt(20.0 * v.peak.log10()),
+            fmt(v.f_peak_hz),
+            format!("{:?}", v.zone),
+        ]);
+    }
+    if curves.is_empty() {
+        return Ok(StepStatus::Skipped(
+            "the ISO 14839-3 zone needs the measured sensitivity (closed-loop data with an excitation) or a model validated with the controller".into(),
+        ));
+    }
+    let fx: Vec<f64> = curves
+        .iter()
+        .flat_map(|s| s.x.iter().copied())
+        .filter(|f| *f > 0.0)
+        .collect();
+    let (f0, f1) = (
+        fx.iter().copied().fold(f64::INFINITY, f64::min),
+        fx.iter().copied().fold(0.0, f64::max),
+    );
+    for (k, (name, lim)) in [("A/B limit", z.a), ("B/C limit", z.b), ("C/D limit", z.c)]
+        .into_iter()
+        .enumerate()
+    {
+        curves.push(series(name, &[f0, f1], &[lim, lim], Style::Dashed, Some(4 + k)));
+    }
+    let verdict = verdicts.first().copied();
+    if let Some(v) = verdict {
+        ctx.put("iso.zone", format!("{v:?}"));
+    }
+    let blocks = vec![
+        Block::Figure(figure(
+            "iso_sensitivity",
+            "Sensitivity and ISO 14839-3 zones",
+            format!(
+                "|S| = |T_ru| against frequency with the zone limits of ISO 14839-3 (A/B {}, B/C {}, C/D {}; \
+                 peak sensitivity, linear scale).",
+                fmt(z.a),
+                fmt(z.b),
+                fmt(z.c)
+            ),
+            vec![xy("", log("frequency [Hz]"), lin("|S| [-]"), curves)],
+            1,
+        )),
+        Block::Table(Table {
+            id: "iso".into(),
+            caption: "Peak sensitivity and ISO 14839-3 zone.".into(),
+            header: vec![
+                "source".into(),
+                "max |S|".into(),
+                "max |S| [dB]".into(),
+                "at [Hz]".into(),
+                "zone".into(),
+            ],
+            rows,
+            highlight: Some(0),
+        }),
+        Ctx::note(
+            match verdict {
+                Some(ambid_core::validate::iso::Zone::A) | Some(ambid_core::validate::iso::Zone::B) => {
+                    NoteKind::Pass
+                }
+                _ => NoteKind::Fail,
+            },
+            format!(
+                "ISO 14839-3 verdict: zone {}.",
+                verdict.map_or("—".into(), |v| format!("{v:?}"))
+            ),
+        ),
+    ];
+    let _ = json!(null);
+    ctx.section("iso", "10. ISO 14839-3 stability verdict", blocks);
+    Ok(StepStatus::Done)
+}
