@@ -6,8 +6,8 @@
 //! `miMATRIX` data element per variable. Every data element is an 8-byte tag (`u32` type, `u32`
 //! byte count) followed by its data padded to a multiple of 8 bytes. A matrix holds, in order,
 //! the array flags (`miUINT32` ×2: class and flags, then 0), the dimensions (`miINT32`), the name
-//! (`miINT8`) and the real part (`miDOUBLE` column by column, or `miUINT16` UTF-16 code units for
-//! a char array).
+//! (`miINT8`) and the real part (`miDOUBLE` column by column, or for a char array `miUINT16`
+//! code units when the text is ASCII, `miUTF8` otherwise).
 
 use super::{ExportError, Result, Value, Var};
 
@@ -16,6 +16,7 @@ const MI_UINT16: u32 = 4;
 const MI_INT32: u32 = 5;
 const MI_UINT32: u32 = 6;
 const MI_DOUBLE: u32 = 9;
+const MI_UTF8: u32 = 16;
 const MI_MATRIX: u32 = 14;
 
 const MX_CHAR_CLASS: u32 = 4;
@@ -89,6 +90,18 @@ fn doubles(rows: usize, cols: usize, row_major: &[f64]) -> (u32, Vec<u8>) {
     (MI_DOUBLE, bytes)
 }
 
+/// Char data: ASCII text as `miUINT16` (the classic form every reader knows), other text as
+/// `miUTF8` (what MATLAB since R14 and `scipy.io.savemat` write; scipy would decode `miUINT16`
+/// with the system codec and garble non-ASCII characters).
+fn char_data(s: &str) -> (u32, Vec<u8>) {
+    if s.is_ascii() {
+        let bytes = s.encode_utf16().flat_map(|u| u.to_le_bytes()).collect();
+        (MI_UINT16, bytes)
+    } else {
+        (MI_UTF8, s.as_bytes().to_vec())
+    }
+}
+
 /// Encodes the variables as a complete MAT file.
 pub(super) fn encode(header_text: &str, vars: &[Var]) -> Result<Vec<u8>> {
     let mut out = header(header_text);
@@ -108,15 +121,10 @@ pub(super) fn encode(header_text: &str, vars: &[Var]) -> Result<Vec<u8>> {
             )?,
             Value::Scalar(x) => matrix_body(v.name, MX_DOUBLE_CLASS, [1, 1], doubles(1, 1, &[*x]))?,
             Value::Text(s) => {
-                let units: Vec<u16> = s.encode_utf16().collect();
-                let bytes: Vec<u8> = units.iter().flat_map(|u| u.to_le_bytes()).collect();
-                // MATLAB's '' is 0×0
-                let dims = if units.is_empty() {
-                    [0, 0]
-                } else {
-                    [1, units.len()]
-                };
-                matrix_body(v.name, MX_CHAR_CLASS, dims, (MI_UINT16, bytes))?
+                // MATLAB's char is UTF-16: the length counts UTF-16 code units; '' is 0×0
+                let units = s.encode_utf16().count();
+                let dims = if units == 0 { [0, 0] } else { [1, units] };
+                matrix_body(v.name, MX_CHAR_CLASS, dims, char_data(s))?
             }
         };
         element(&mut out, MI_MATRIX, &body, v.name)?;
@@ -211,5 +219,20 @@ mod tests {
         assert_eq!(&e[8 + 24..8 + 32], &[0; 8]); // 0×0
         assert_eq!(&e[8 + 48..8 + 56], &[4, 0, 0, 0, 0, 0, 0, 0]);
         assert_eq!(e.len(), 8 + 56);
+    }
+
+    #[test]
+    fn non_ascii_text_is_utf8_with_utf16_length() {
+        assert_eq!(char_data("ab"), (MI_UINT16, b"a\0b\0".to_vec()));
+        assert_eq!(char_data("µ"), (MI_UTF8, "µ".as_bytes().to_vec()));
+        let vars = [Var {
+            name: "s",
+            value: Value::Text("µ😀".into()),
+        }];
+        let out = encode("MATLAB 5.0 MAT-file", &vars).unwrap();
+        let m = &out[128..];
+        assert_eq!(&m[32..40], &[1, 0, 0, 0, 3, 0, 0, 0]); // 1×3 UTF-16 code units
+        assert_eq!(&m[56..64], &[16, 0, 0, 0, 6, 0, 0, 0]); // miUTF8, 6 bytes
+        assert_eq!(&m[64..70], "µ😀".as_bytes());
     }
 }
