@@ -14,7 +14,7 @@
 //! must be finite; a NaN or infinity is an [`ExportError::NonFinite`], never a silently broken
 //! file.
 //!
-//! The `.mat` writer is a small hand-written Level 5 encoder ([`mat5`] module) rather than a
+//! The `.mat` writer is a small hand-written Level 5 encoder (the `mat5` submodule) rather than a
 //! crate: it returns bytes without a temporary file, reports every error, and its output is
 //! byte-for-byte reproducible (no creation date in the header).
 
