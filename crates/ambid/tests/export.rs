@@ -503,3 +503,36 @@ fn exports_are_reproducible() {
     assert_eq!(npz_bytes(m, &n).unwrap(), npz_bytes(m, &n).unwrap());
     assert_eq!(matlab_script(m, &n).unwrap(), matlab_script(m, &n).unwrap());
 }
+
+#[test]
+fn static_gain_exports_empty_matrices() {
+    // n = 0: a pure gain y = 2 u
+    let ss = StateSpace::discrete(
+        faer::Mat::zeros(0, 0),
+        faer::Mat::zeros(0, 1),
+        faer::Mat::zeros(1, 0),
+        mat![[2.0]],
+        1e-3,
+    )
+    .unwrap();
+    let model = ExportModel::StateSpace(&ss, Some(&[]));
+    let vars = read_mat(&mat_bytes(model, &ss_names()).unwrap());
+    assert_eq!(vars["A"].dims, [0, 0]);
+    assert_eq!(vars["B"].dims, [0, 1]);
+    assert_eq!(vars["C"].dims, [1, 0]);
+    assert_eq!(vars["K"].dims, [0, 1]);
+    assert_eq!(vars["D"].numbers, bits(&[2.0]));
+    let text = matlab_script(model, &ss_names()).unwrap();
+    assert!(
+        text.contains(
+            "\nA = zeros(0, 0);\nB = zeros(0, 1);\nC = zeros(1, 0);\nD = [2];\nK = zeros(0, 1);\n"
+        ),
+        "{text}"
+    );
+    assert!(text.contains("idss(A, B, C, D, K, zeros(0, 1), Ts,"));
+    let bytes = npz_bytes(model, &ss_names()).unwrap();
+    let mut npz = npyz::npz::NpzArchive::new(std::io::Cursor::new(bytes)).unwrap();
+    let b = npz.by_name("B").unwrap().unwrap();
+    assert_eq!(b.shape(), &[0, 1]);
+    assert!(b.into_vec::<f64>().unwrap().is_empty());
+}
