@@ -14,9 +14,10 @@
 //! must be finite; a NaN or infinity is an [`ExportError::NonFinite`], never a silently broken
 //! file.
 //!
-//! The `.mat` writer is a small hand-written Level 5 encoder (the `mat5` submodule) rather than a
-//! crate: it returns bytes without a temporary file, reports every error, and its output is
-//! byte-for-byte reproducible (no creation date in the header).
+//! The `.mat` writer is a small hand-written Level 5 encoder (the `mat5` submodule) rather than
+//! the `matrw` crate (0.1.4), which writes only to a path, discards write errors and stamps the
+//! creation time: this one returns bytes, reports every error, and its output is byte-for-byte
+//! reproducible. Its output is checked against `scipy.io` in `tests/export.rs`.
 
 mod mat5;
 mod npz;
@@ -321,6 +322,10 @@ pub fn sanitize_identifier(text: &str) -> String {
 /// coefficients. Every number is printed with 17 significant digits (`%.17g`), so it is read
 /// back bit for bit.
 ///
+/// # Errors
+/// [`ExportError::NonFinite`] for a NaN or infinite coefficient, [`ExportError::KalmanGainLength`]
+/// for a `K` that is not n·ny long.
+///
 /// # Example
 /// ```
 /// use ambid::io::export::{matlab_script, ExportModel, ExportNames};
@@ -342,6 +347,10 @@ pub fn matlab_script(model: ExportModel<'_>, names: &ExportNames) -> Result<Stri
 /// (polynomials as 1×n row vectors, scalars as 1×1) and char row vectors for the text, readable
 /// by MATLAB's `load`, Octave and `scipy.io.loadmat`.
 ///
+/// # Errors
+/// [`ExportError::NonFinite`] for a NaN or infinite coefficient, [`ExportError::KalmanGainLength`]
+/// for a `K` that is not n·ny long, [`ExportError::TooLarge`] for a variable beyond the format's 4 GiB.
+///
 /// ```
 /// use ambid::io::export::{mat_bytes, ExportModel, ExportNames};
 /// use ambid_core::lti::PolyModel;
@@ -359,6 +368,10 @@ pub fn mat_bytes(model: ExportModel<'_>, names: &ExportNames) -> Result<Vec<u8>>
 /// The model as a NumPy `.npz` archive: float64 arrays (2-D matrices, 1-D polynomials, 0-d
 /// scalars) and 0-d unicode (`<U`) arrays for the text, readable by `numpy.load` without
 /// `allow_pickle`.
+///
+/// # Errors
+/// [`ExportError::NonFinite`] for a NaN or infinite coefficient, [`ExportError::KalmanGainLength`]
+/// for a `K` that is not n·ny long, [`ExportError::Npz`] when the archive cannot be written.
 ///
 /// ```
 /// use ambid::io::export::{npz_bytes, ExportModel, ExportNames};
