@@ -507,15 +507,17 @@ impl Outcome {
             out.write(&format!("models/{}.json", m.name), text.as_bytes())?;
             out.write(
                 &format!("models/{}.m", m.name),
-                matlab_script(em, &names).as_bytes(),
+                matlab_script(em, &names)
+                    .map_err(|e| output(e.into()))?
+                    .as_bytes(),
             )?;
             out.write(
                 &format!("models/{}.mat", m.name),
-                &mat_bytes(em, &names).map_err(output)?,
+                &mat_bytes(em, &names).map_err(|e| output(e.into()))?,
             )?;
             out.write(
                 &format!("models/{}.npz", m.name),
-                &npz_bytes(em, &names).map_err(output)?,
+                &npz_bytes(em, &names).map_err(|e| output(e.into()))?,
             )?;
         }
         Ok(out.commit()?)

@@ -1,0 +1,538 @@
+//! Model exports (`ambid::io::export`) checked by readers that are not ambid's writer:
+//!
+//! * `tests/fixtures/check_export.py` (scipy.io.loadmat, numpy.load, Python's float()) on the
+//!   exports of a polynomial and a 3-state innovations model, against their JSON form — run when
+//!   `python3 -c 'import scipy'` works, skipped with a note otherwise;
+//! * reference `.mat` files written by scipy (`tests/fixtures/export/make_scipy_mat.py`), decoded
+//!   with the small Level 5 reader below together with ambid's bytes: same variables, classes,
+//!   dimensions and bit-identical values;
+//! * the numbers of the MATLAB script parsed back bit for bit, and the script run in Octave when
+//!   `octave` is installed (skipped otherwise).
+
+mod common;
+
+use ambid::io::export::{
+    mat_bytes, matlab_script, npz_bytes, ExportError, ExportModel, ExportNames,
+};
+use ambid::io::model::{polynomial_json, state_space_json};
+use ambid_core::lti::{PolyModel, StateSpace};
+use faer::mat;
+use serde_json::json;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// The polynomial model of `fixtures/export/make_scipy_mat.py` (`POLY`).
+fn poly_model() -> PolyModel {
+    PolyModel::general(
+        vec![1.0, -1.5, 0.7],
+        vec![0.0, 0.0, 0.5, 0.1],
+        vec![1.0, 0.3],
+        vec![1.0, -0.2],
+        vec![1.0, -0.8, 0.1],
+        5e-5,
+    )
+    .unwrap()
+}
+
+fn poly_names() -> ExportNames {
+    ExportNames {
+        name: "bearing A plant".into(),
+        input: "u".into(),
+        output: "bearing A's y (µm)".into(),
+    }
+}
+
+/// The state-space model of `fixtures/export/make_scipy_mat.py` (`SS`).
+fn ss_model() -> (StateSpace, Vec<f64>) {
+    let ss = StateSpace::discrete(
+        mat![[0.9, 0.1, 0.0], [-0.1, 0.8, 0.05], [0.0, 0.02, 0.7]],
+        mat![[1.0], [0.5], [-0.25]],
+        mat![[1.0, 0.0, 0.3]],
+        mat![[0.0]],
+        1.0 / 3.0e4,
+    )
+    .unwrap();
+    (ss, vec![0.2, -0.1, 0.05])
+}
+
+fn ss_names() -> ExportNames {
+    ExportNames {
+        name: "ss3".into(),
+        input: "i_ref".into(),
+        output: "y".into(),
+    }
+}
+
+fn fixture(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures")
+        .join(name)
+}
+
+/// Writes `stem.{json,mat,npz,m}` into `dir`.
+fn write_all(
+    dir: &Path,
+    stem: &str,
+    model: ExportModel<'_>,
+    names: &ExportNames,
+    json: serde_json::Value,
+) {
+    std::fs::write(
+        dir.join(format!("{stem}.json")),
+        serde_json::to_string_pretty(&json).unwrap(),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join(format!("{stem}.mat")),
+        mat_bytes(model, names).unwrap(),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join(format!("{stem}.npz")),
+        npz_bytes(model, names).unwrap(),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join(format!("{stem}.m")),
+        matlab_script(model, names).unwrap(),
+    )
+    .unwrap();
+}
+
+fn python_has_scipy() -> bool {
+    Command::new("python3")
+        .args(["-c", "import scipy, numpy"])
+        .output()
+        .map(|o| o.status.success())
+        .unwrap_or(false)
+}
+
+#[test]
+fn scipy_and_numpy_read_the_exports() {
+    let dir = common::tmpdir("export-check");
+    let poly = poly_model();
+    let pn = poly_names();
+    let meta = json!({"export_model_name": "bearing_A_plant"});
+    write_all(
+        &dir,
+        "poly",
+        ExportModel::Poly(&poly),
+        &pn,
+        polynomial_json(&poly, &pn.input, &pn.output, meta),
+    );
+    let (ss, k) = ss_model();
+    let sn = ss_names();
+    let meta = json!({"export_model_name": "ss3", "pem": {"kalman_gain": k}});
+    write_all(
+        &dir,
+        "ss3",
+        ExportModel::StateSpace(&ss, Some(&k)),
+        &sn,
+        state_space_json(&ss, &sn.input, &sn.output, meta),
+    );
+    if !python_has_scipy() {
+        eprintln!("SKIP: python3 with scipy and numpy not available; check_export.py not run");
+        return;
+    }
+    let out = Command::new("python3")
+        .arg(fixture("check_export.py"))
+        .arg(&dir)
+        .output()
+        .unwrap();
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    println!("{text}");
+    assert!(out.status.success(), "check_export.py failed:\n{text}");
+    assert!(text.contains("check_export: OK"), "{text}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// One decoded MAT variable: class, dimensions and the values column by column (numbers) or
+/// the text (char arrays).
+#[derive(Debug, PartialEq)]
+struct MatVar {
+    class: u8,
+    dims: Vec<usize>,
+    numbers: Vec<u64>,
+    text: Option<String>,
+}
+
+fn u32_at(b: &[u8], i: usize) -> u32 {
+    u32::from_le_bytes(b[i..i + 4].try_into().unwrap())
+}
+
+/// Splits a little-endian sequence of Level 5 data elements into (type, data), handling the
+/// small (≤ 4 bytes, packed into the tag) and the normal format.
+fn elements(mut b: &[u8]) -> Vec<(u32, &[u8])> {
+    let mut out = Vec::new();
+    while b.len() >= 8 {
+        let first = u32_at(b, 0);
+        if first >> 16 != 0 {
+            let (ty, n) = (first & 0xffff, (first >> 16) as usize);
+            out.push((ty, &b[4..4 + n]));
+            b = &b[8..];
+        } else {
+            let n = u32_at(b, 4) as usize;
+            out.push((first, &b[8..8 + n]));
+            b = &b[(8 + n).div_ceil(8) * 8..];
+        }
+    }
+    assert!(b.is_empty(), "trailing bytes");
+    out
+}
+
+/// A minimal Level 5 reader for uncompressed real double and char matrices.
+fn read_mat(bytes: &[u8]) -> BTreeMap<String, MatVar> {
+    assert!(bytes.starts_with(b"MATLAB 5.0 MAT-file"));
+    assert_eq!(&bytes[124..128], &[0x00, 0x01, b'I', b'M']);
+    let mut vars = BTreeMap::new();
+    for (ty, body) in elements(&bytes[128..]) {
+        assert_eq!(ty, 14, "only miMATRIX (uncompressed) expected");
+        let sub = elements(body);
+        assert_eq!(sub.len(), 4, "flags, dims, name, real part");
+        assert_eq!(sub[0].0, 6);
+        let class = sub[0].1[0];
+        assert_eq!(sub[0].1[1], 0, "no complex/global/logical flags");
+        assert_eq!(sub[1].0, 5);
+        let dims: Vec<usize> = sub[1]
+            .1
+            .chunks(4)
+            .map(|c| i32::from_le_bytes(c.try_into().unwrap()) as usize)
+            .collect();
+        assert_eq!(sub[2].0, 1);
+        let name = String::from_utf8(sub[2].1.to_vec()).unwrap();
+        let (ty, data) = sub[3];
+        let (numbers, text) = match (class, ty) {
+            (6, 9) => (
+                data.chunks(8)
+                    .map(|c| u64::from_le_bytes(c.try_into().unwrap()))
+                    .collect(),
+                None,
+            ),
+            (4, 4) | (4, 17) => {
+                let units: Vec<u16> = data
+                    .chunks(2)
+                    .map(|c| u16::from_le_bytes([c[0], c[1]]))
+                    .collect();
+                (vec![], Some(String::from_utf16(&units).unwrap()))
+            }
+            (4, 16) => (vec![], Some(String::from_utf8(data.to_vec()).unwrap())),
+            other => panic!("{name}: unexpected class/type {other:?}"),
+        };
+        vars.insert(
+            name,
+            MatVar {
+                class,
+                dims,
+                numbers,
+                text,
+            },
+        );
+    }
+    vars
+}
+
+fn bits(v: &[f64]) -> Vec<u64> {
+    v.iter().map(|x| x.to_bits()).collect()
+}
+
+#[test]
+fn mat_matches_scipy_savemat() {
+    let poly = poly_model();
+    let ours = read_mat(&mat_bytes(ExportModel::Poly(&poly), &poly_names()).unwrap());
+    let scipy = read_mat(&std::fs::read(fixture("export/poly_scipy.mat")).unwrap());
+    // the reader itself against the literal values (so it cannot agree with us by mistake)
+    assert_eq!(scipy["A"].numbers, bits(&[1.0, -1.5, 0.7]));
+    assert_eq!(scipy["A"].dims, [1, 3]);
+    assert_eq!(scipy["nk"].numbers, bits(&[2.0]));
+    assert_eq!(
+        scipy["output_name"].text.as_deref(),
+        Some("bearing A's y (µm)")
+    );
+    assert_eq!(ours, scipy);
+
+    let (ss, k) = ss_model();
+    let ours = read_mat(&mat_bytes(ExportModel::StateSpace(&ss, Some(&k)), &ss_names()).unwrap());
+    let scipy = read_mat(&std::fs::read(fixture("export/ss_scipy.mat")).unwrap());
+    assert_eq!(scipy["A"].dims, [3, 3]);
+    // column-major: first column of A
+    assert_eq!(scipy["A"].numbers[..3], bits(&[0.9, -0.1, 0.0]));
+    assert_eq!(scipy["K"].dims, [3, 1]);
+    assert_eq!(scipy["Ts"].numbers, bits(&[1.0 / 3.0e4]));
+    assert_eq!(ours, scipy);
+}
+
+/// Numeric assignments `X = …;` of an ambid MATLAB script: name → (rows, values row by row).
+fn script_numbers(text: &str) -> BTreeMap<String, (usize, Vec<f64>)> {
+    let mut out = BTreeMap::new();
+    let mut lines = text.lines();
+    while let Some(line) = lines.next() {
+        let Some((name, rhs)) = line.split_once(" = ") else {
+            continue;
+        };
+        if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+            continue;
+        }
+        let mut rhs = rhs.to_string();
+        if rhs == "[" {
+            for l in lines.by_ref() {
+                rhs.push_str(l);
+                if l == "];" {
+                    break;
+                }
+            }
+        }
+        let rhs = rhs.trim_end_matches(';');
+        if let Some(dims) = rhs.strip_prefix("zeros(") {
+            let rows: usize = dims.split(',').next().unwrap().trim().parse().unwrap();
+            out.insert(name.to_string(), (rows, vec![]));
+        } else if let Some(body) = rhs.strip_prefix('[') {
+            let body = body.trim_end_matches(']');
+            let rows: Vec<&str> = body.split(';').collect();
+            let values = rows
+                .iter()
+                .flat_map(|r| r.split(','))
+                .map(|x| x.trim().parse::<f64>().unwrap())
+                .collect();
+            out.insert(name.to_string(), (rows.len(), values));
+        } else {
+            out.insert(name.to_string(), (1, vec![rhs.parse::<f64>().unwrap()]));
+        }
+    }
+    out
+}
+
+fn row_major(m: faer::MatRef<'_, f64>) -> Vec<f64> {
+    (0..m.nrows())
+        .flat_map(|i| (0..m.ncols()).map(move |j| m[(i, j)]))
+        .collect()
+}
+
+#[test]
+fn matlab_script_numbers_round_trip_bit_for_bit() {
+    let poly = poly_model();
+    let text = matlab_script(ExportModel::Poly(&poly), &poly_names()).unwrap();
+    let got = script_numbers(&text);
+    let want: BTreeMap<String, (usize, Vec<f64>)> = [
+        ("A", poly.a().to_vec()),
+        ("B", poly.b().to_vec()),
+        ("C", poly.c().to_vec()),
+        ("D", poly.d().to_vec()),
+        ("F", poly.f().to_vec()),
+        ("Ts", vec![poly.ts()]),
+        ("nk", vec![2.0]),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), (1, v)))
+    .collect();
+    assert_eq!(
+        got.keys().collect::<Vec<_>>(),
+        want.keys().collect::<Vec<_>>()
+    );
+    for (name, (rows, values)) in &want {
+        assert_eq!(got[name].0, *rows, "{name}");
+        assert_eq!(bits(&got[name].1), bits(values), "{name}");
+    }
+    // the exact coefficient strings (C's %.17g)
+    assert!(
+        text.contains("\nA = [1, -1.5, 0.69999999999999996];\n"),
+        "{text}"
+    );
+    assert!(text.contains("\nB = [0, 0, 0.5, 0.10000000000000001];\n"));
+    assert!(text.contains("\nTs = 5.0000000000000002e-05;\n"));
+    assert!(text.contains(
+        "  bearing_A_plant = idpoly(A, B, C, D, F, 1, Ts, 'InputName', 'u', 'OutputName', char(["
+    ));
+    assert!(text.contains("  bearing_A_plant = tf(B, conv(A, F), Ts, 'Variable', 'z^-1', "));
+    assert!(text.contains(&format!("ambid {}", env!("CARGO_PKG_VERSION"))));
+    assert!(text.contains("nb = 2 (after the delay)") && text.contains("nk = 2"));
+
+    let (ss, k) = ss_model();
+    let text = matlab_script(ExportModel::StateSpace(&ss, Some(&k)), &ss_names()).unwrap();
+    let got = script_numbers(&text);
+    assert_eq!(got["A"].0, 3);
+    assert_eq!(bits(&got["A"].1), bits(&row_major(ss.a())));
+    assert_eq!(got["B"].0, 3);
+    assert_eq!(bits(&got["B"].1), bits(&row_major(ss.b())));
+    assert_eq!(bits(&got["C"].1), bits(&row_major(ss.c())));
+    assert_eq!(bits(&got["D"].1), bits(&row_major(ss.d())));
+    assert_eq!((got["K"].0, bits(&got["K"].1)), (3, bits(&k)));
+    assert_eq!(bits(&got["Ts"].1), bits(&[1.0 / 3.0e4]));
+    assert_eq!(got.len(), 6);
+    assert!(text.contains(
+        "  ss3 = idss(A, B, C, D, K, zeros(3, 1), Ts, 'InputName', 'i_ref', 'OutputName', 'y');"
+    ));
+    assert!(text.contains("  ss3 = ss(A, B, C, D, Ts, 'InputName', 'i_ref', 'OutputName', 'y');"));
+
+    // without K: idss gets a zero gain and no K variable is defined
+    let text = matlab_script(ExportModel::StateSpace(&ss, None), &ss_names()).unwrap();
+    assert!(!script_numbers(&text).contains_key("K"));
+    assert!(text.contains("idss(A, B, C, D, zeros(3, 1), zeros(3, 1), Ts,"));
+}
+
+/// A script file, its model and names, and the variables to print (column-major values).
+type OctaveCase<'a> = (
+    &'a str,
+    ExportModel<'a>,
+    ExportNames,
+    Vec<(&'a str, Vec<f64>)>,
+);
+
+#[test]
+fn octave_runs_the_script() {
+    let has_octave = Command::new("which")
+        .arg("octave")
+        .output()
+        .map(|o| o.status.success())
+        .unwrap_or(false);
+    if !has_octave {
+        eprintln!("SKIP: octave not installed; the MATLAB script is not run");
+        return;
+    }
+    let dir = common::tmpdir("export-octave");
+    let poly = poly_model();
+    let (ss, k) = ss_model();
+    let cases: [OctaveCase<'_>; 2] = [
+        (
+            "poly_model.m",
+            ExportModel::Poly(&poly),
+            poly_names(),
+            vec![
+                ("A", vec![1.0, -1.5, 0.7]),
+                ("B", vec![0.0, 0.0, 0.5, 0.1]),
+                ("F", vec![1.0, -0.8, 0.1]),
+                ("Ts", vec![5e-5]),
+            ],
+        ),
+        (
+            "ss_model.m",
+            ExportModel::StateSpace(&ss, Some(&k)),
+            ss_names(),
+            vec![
+                // column-major, as Octave's A(:)
+                ("A", vec![0.9, -0.1, 0.0, 0.1, 0.8, 0.02, 0.0, 0.05, 0.7]),
+                ("K", k.clone()),
+                ("Ts", vec![1.0 / 3.0e4]),
+            ],
+        ),
+    ];
+    for (file, model, names, want) in cases {
+        let path = dir.join(file);
+        std::fs::write(&path, matlab_script(model, &names).unwrap()).unwrap();
+        let prints: String = want
+            .iter()
+            .map(|(v, _)| format!("printf('{v}'); printf(' %.17g', {v}(:)); printf('\\n');"))
+            .collect();
+        let out = Command::new("octave")
+            .args(["--no-gui", "--quiet", "--eval"])
+            .arg(format!("run('{}'); {prints}", path.display()))
+            .output()
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success(),
+            "octave failed on {file}: {stdout}{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        for (v, values) in want {
+            let line = stdout
+                .lines()
+                .find(|l| l.split_whitespace().next() == Some(v))
+                .unwrap_or_else(|| panic!("{v} not printed: {stdout}"));
+            let got: Vec<f64> = line
+                .split_whitespace()
+                .skip(1)
+                .map(|x| x.parse().unwrap())
+                .collect();
+            assert_eq!(bits(&got), bits(&values), "{file}: {v}");
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_input_is_an_error_not_a_panic() {
+    let (ss, _) = ss_model();
+    let names = ss_names();
+    for k in [vec![0.1, f64::NAN, 0.0], vec![f64::NEG_INFINITY, 0.0, 0.0]] {
+        let model = ExportModel::StateSpace(&ss, Some(&k));
+        for result in [
+            mat_bytes(model, &names).map(|_| ()),
+            npz_bytes(model, &names).map(|_| ()),
+            matlab_script(model, &names).map(|_| ()),
+        ] {
+            let err = result.unwrap_err();
+            assert!(
+                matches!(err, ExportError::NonFinite { what: "K", .. }),
+                "{err}"
+            );
+            assert!(err.to_string().contains("not finite"), "{err}");
+        }
+    }
+    let short = [0.1];
+    let err = mat_bytes(ExportModel::StateSpace(&ss, Some(&short)), &names).unwrap_err();
+    assert!(
+        err.to_string().contains("K must be n×ny = 3 entries"),
+        "{err}"
+    );
+    // names with anything in them still give a valid identifier and a loadable file
+    let odd = ExportNames {
+        name: "\n'; delete('*'); %".into(),
+        input: "a\nb'".into(),
+        output: String::new(),
+    };
+    let text = matlab_script(ExportModel::StateSpace(&ss, None), &odd).unwrap();
+    assert!(text.contains("\n  m____delete________ = idss("), "{text}");
+    assert!(text.contains("'InputName', char([97, 10, 98, 39]), 'OutputName', ''"));
+    let vars = read_mat(&mat_bytes(ExportModel::StateSpace(&ss, None), &odd).unwrap());
+    assert_eq!(vars["input_name"].text.as_deref(), Some("a\nb'"));
+    assert_eq!(vars["output_name"].dims, [0, 0]);
+    assert!(!vars.contains_key("K"));
+}
+
+#[test]
+fn exports_are_reproducible() {
+    let poly = poly_model();
+    let m = ExportModel::Poly(&poly);
+    let n = poly_names();
+    assert_eq!(mat_bytes(m, &n).unwrap(), mat_bytes(m, &n).unwrap());
+    assert_eq!(npz_bytes(m, &n).unwrap(), npz_bytes(m, &n).unwrap());
+    assert_eq!(matlab_script(m, &n).unwrap(), matlab_script(m, &n).unwrap());
+}
+
+#[test]
+fn static_gain_exports_empty_matrices() {
+    // n = 0: a pure gain y = 2 u
+    let ss = StateSpace::discrete(
+        faer::Mat::zeros(0, 0),
+        faer::Mat::zeros(0, 1),
+        faer::Mat::zeros(1, 0),
+        mat![[2.0]],
+        1e-3,
+    )
+    .unwrap();
+    let model = ExportModel::StateSpace(&ss, Some(&[]));
+    let vars = read_mat(&mat_bytes(model, &ss_names()).unwrap());
+    assert_eq!(vars["A"].dims, [0, 0]);
+    assert_eq!(vars["B"].dims, [0, 1]);
+    assert_eq!(vars["C"].dims, [1, 0]);
+    assert_eq!(vars["K"].dims, [0, 1]);
+    assert_eq!(vars["D"].numbers, bits(&[2.0]));
+    let text = matlab_script(model, &ss_names()).unwrap();
+    assert!(
+        text.contains(
+            "\nA = zeros(0, 0);\nB = zeros(0, 1);\nC = zeros(1, 0);\nD = [2];\nK = zeros(0, 1);\n"
+        ),
+        "{text}"
+    );
+    assert!(text.contains("idss(A, B, C, D, K, zeros(0, 1), Ts,"));
+    let bytes = npz_bytes(model, &ss_names()).unwrap();
+    let mut npz = npyz::npz::NpzArchive::new(std::io::Cursor::new(bytes)).unwrap();
+    let b = npz.by_name("B").unwrap().unwrap();
+    assert_eq!(b.shape(), &[0, 1]);
+    assert!(b.into_vec::<f64>().unwrap().is_empty());
+}
