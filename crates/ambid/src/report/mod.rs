@@ -1,8 +1,24 @@
 //! The HTML report: one self-contained offline file (inline SVG, no network, no JavaScript),
 //! built from a plain data model ([`Report`] → [`Section`] → [`Block`]) so that the workflow only
-//! describes *what* to show. Every [`Figure`] can also be written as CSV ([`Figure::to_csv`]).
+//! describes *what* to show. Every [`Figure`] can also be written as CSV ([`Figure::to_csv`]),
+//! every [`Table`] too ([`Table::to_csv`]).
 //!
-//! SKELETON: the data model is fixed; rendering is being written.
+//! Figures are drawn by a small built-in SVG plotter (one `<svg>` per [`Panel`], text as SVG
+//! `<text>`, so no fonts are needed at render time). Long series are decimated for drawing
+//! (min/max per pixel column, so peaks survive); the CSV keeps every point.
+//! [`browser_check`] loads a written report in headless Chromium to check that it renders.
+//! See `docs/report.md` for what a report contains and the CSV formats.
+
+mod browser;
+mod csv_out;
+mod demo;
+mod geom;
+mod html;
+mod svg;
+mod ticks;
+
+pub use browser::{browser_check, BrowserCheck, BrowserCounts, CHROMIUM};
+pub use demo::demo_report;
 
 /// A whole report.
 #[derive(Debug, Clone, Default)]
@@ -32,7 +48,12 @@ pub enum Block {
     /// A paragraph of plain text (escaped when rendered).
     Text(String),
     /// A highlighted note (for example "step skipped: open-loop data").
-    Note { kind: NoteKind, text: String },
+    Note {
+        /// How the note is highlighted.
+        kind: NoteKind,
+        /// The note's text (escaped when rendered).
+        text: String,
+    },
     /// A figure.
     Figure(Figure),
     /// A table.
@@ -226,22 +247,72 @@ pub fn format_number(v: f64) -> String {
 }
 
 impl Report {
-    /// Renders the report as one self-contained HTML document.
+    /// Renders the report as one self-contained HTML5 document: inline CSS, a header, a table of
+    /// contents, and each section's blocks; figures as inline SVG. No JavaScript and no
+    /// external resources, so the file opens offline. All text is HTML-escaped.
+    ///
+    /// ```
+    /// use ambid::report::{Axis, Block, Figure, Panel, PanelContent, Report, Scale, Section,
+    ///     Series, Style};
+    ///
+    /// let f: Vec<f64> = (1..=100).map(|k| k as f64).collect();
+    /// let mag: Vec<f64> = f.iter().map(|f| 1.0 / (1.0 + (f / 20.0).powi(2))).collect();
+    /// let report = Report {
+    ///     title: "Identification <demo>".into(),
+    ///     subtitle: "synthetic data".into(),
+    ///     sections: vec![Section {
+    ///         id: "frf".into(),
+    ///         title: "Frequency response".into(),
+    ///         blocks: vec![
+    ///             Block::Text("A first-order low-pass.".into()),
+    ///             Block::Figure(Figure {
+    ///                 id: "frf-mag".into(),
+    ///                 title: "Magnitude".into(),
+    ///                 caption: "|G(jω)| of the model.".into(),
+    ///                 panels: vec![Panel {
+    ///                     title: String::new(),
+    ///                     x: Axis { label: "frequency [Hz]".into(), scale: Scale::Log, range: None },
+    ///                     y: Axis { label: "magnitude [-]".into(), scale: Scale::Log, range: None },
+    ///                     content: PanelContent::Xy(vec![Series {
+    ///                         name: "model".into(),
+    ///                         x: f.clone(),
+    ///                         y: mag,
+    ///                         style: Style::Line,
+    ///                         color: None,
+    ///                     }]),
+    ///                     spans: vec![],
+    ///                     equal_aspect: false,
+    ///                 }],
+    ///                 columns: 1,
+    ///             }),
+    ///         ],
+    ///     }],
+    /// };
+    /// let html = report.to_html();
+    /// assert!(html.starts_with("<!DOCTYPE html>"));
+    /// assert!(html.contains("Identification &lt;demo&gt;"));
+    /// assert!(html.contains("<svg") && html.contains("<figcaption>"));
+    /// assert!(!html.contains("<script"));
+    /// ```
     pub fn to_html(&self) -> String {
-        String::new()
+        html::render(self)
     }
 }
 
 impl Figure {
-    /// The figure's data as CSV.
+    /// The figure's data as CSV, long format, every point at full precision (numbers parse back
+    /// to the identical `f64`). Columns: `panel,series,x,y,lower` when all panels are x-y
+    /// (`lower` filled only for [`Style::Band`]), `panel,x,y,z` when all are heatmaps, and the
+    /// union `panel,series,x,y,z,lower` when the figure mixes both (unused cells empty).
+    /// `panel` is the 0-based index into [`Figure::panels`].
     pub fn to_csv(&self) -> String {
-        String::new()
+        csv_out::figure_csv(self)
     }
 }
 
 impl Table {
-    /// The table as CSV.
+    /// The table as CSV: the header row, then the rows, quoted where needed.
     pub fn to_csv(&self) -> String {
-        String::new()
+        csv_out::table_csv(self)
     }
 }
