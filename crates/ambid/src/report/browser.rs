@@ -2,9 +2,16 @@
 //!
 //! [`browser_check`] loads the HTML file twice: once to take a full-page screenshot and once to
 //! dump the rendered DOM, both with console logging on. It counts the `<svg>` elements of the
-//! rendered DOM and those that are empty (no drawn element, or zero width/height), and collects
-//! console errors and failed resource loads. When Chromium is not installed it returns
-//! [`BrowserCheck::Unavailable`] instead of failing, so tests can skip.
+//! rendered DOM and those that are empty (no drawn element, or zero width/height), lists
+//! references to external resources in the rendered DOM, and collects console messages.
+//! When Chromium is not installed it returns [`BrowserCheck::Unavailable`] instead of failing,
+//! so tests can skip.
+//!
+//! Console messages: headless Chromium logs page console messages as `INFO:CONSOLE` lines
+//! whatever their level (a `console.error` looks like a `console.log`), and does not log failed
+//! resource loads of a `file://` page at all. A report has no script, so *every* console line
+//! (uncaught errors, CSP or parse complaints) counts as an error; failed loads are caught
+//! statically instead, by the external-reference scan of the rendered DOM.
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -14,6 +21,10 @@ use std::time::{Duration, Instant};
 
 /// Where Chromium is looked for (overridden by the environment variable `AMBID_CHROMIUM`).
 pub const CHROMIUM: &str = "/usr/bin/chromium";
+
+/// A screenshot of at most this many bytes counts as trivial: a blank white 1280×8000 page is
+/// about 46 kB as PNG (Chromium 156), a report with only its header about 65 kB.
+pub const MIN_SCREENSHOT_BYTES: u64 = 55_000;
 
 /// How long one Chromium run may take before it is killed.
 const TIMEOUT: Duration = Duration::from_secs(90);
@@ -38,8 +49,12 @@ pub struct BrowserCounts {
     /// `<svg>` elements without any drawn element (path, line, polyline, polygon, rect, circle,
     /// ellipse, text outside `<defs>`) or with a zero or missing width/height attribute.
     pub empty_svgs: usize,
-    /// Console error messages and failed resource loads, one log line each.
+    /// Console messages (any level: a report has no script) and failed resource loads, one
+    /// log line each.
     pub console_errors: Vec<String>,
+    /// References to resources outside the document in the rendered DOM (`src`, `href` or
+    /// `url(…)` not pointing at a `#fragment`, `<script>`, `<link>`, `@import`, …).
+    pub external_refs: Vec<String>,
     /// Size of the full-page screenshot (PNG) in bytes; 0 when none was written.
     pub screenshot_bytes: u64,
     /// Size of the rendered DOM in bytes.
@@ -56,7 +71,8 @@ impl BrowserCheck {
     }
 
     /// What is wrong with the rendered page (empty when it looks fine, or when nothing was
-    /// checked): no SVG, empty SVGs, console errors, a missing or tiny screenshot.
+    /// checked): no SVG, empty SVGs, console messages, external resources, a missing or tiny
+    /// screenshot.
     pub fn problems(&self) -> Vec<String> {
         let Some(c) = self.counts() else {
             return Vec::new();
@@ -74,7 +90,10 @@ impl BrowserCheck {
         for e in &c.console_errors {
             p.push(format!("console: {e}"));
         }
-        if c.screenshot_bytes < 10_000 {
+        for e in &c.external_refs {
+            p.push(format!("external resource: {e}"));
+        }
+        if c.screenshot_bytes <= MIN_SCREENSHOT_BYTES {
             p.push(format!(
                 "screenshot missing or trivial ({} bytes)",
                 c.screenshot_bytes
@@ -136,9 +155,14 @@ pub fn browser_check(html_path: &Path) -> Result<BrowserCheck, String> {
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let mut console_errors = console_errors_in(&run_a.stderr, &name);
-    for e in console_errors_in(&run_b.stderr, &name) {
-        if !console_errors.contains(&e) {
+    // Both runs log the same messages; keep each message once (ignoring the pid/time prefix).
+    let mut console_errors: Vec<String> = Vec::new();
+    for e in console_errors_in(&run_a.stderr, &name)
+        .into_iter()
+        .chain(console_errors_in(&run_b.stderr, &name))
+    {
+        let key = |l: &str| l.split_once("] ").map(|(_, m)| m.to_string());
+        if !console_errors.iter().any(|k| key(k) == key(&e)) {
             console_errors.push(e);
         }
     }
@@ -146,6 +170,7 @@ pub fn browser_check(html_path: &Path) -> Result<BrowserCheck, String> {
         svgs,
         empty_svgs,
         console_errors,
+        external_refs: external_refs(&run_b.stdout),
         screenshot_bytes,
         dom_bytes: run_b.stdout.len(),
     }))
@@ -254,24 +279,51 @@ fn file_url(path: &Path) -> String {
     url
 }
 
-/// Console error lines in Chromium's log: console messages at error level, uncaught
-/// exceptions, failed or refused resource loads, and any error line naming the page.
+/// Error lines in Chromium's log: every page console message (see the module documentation),
+/// failed or refused resource loads, and any error-level line naming the page.
 pub(crate) fn console_errors_in(stderr: &str, file_name: &str) -> Vec<String> {
     stderr
         .lines()
         .filter(|l| {
-            let console = l.contains("CONSOLE");
-            let error_level = l.contains(":ERROR:") || l.contains("ERROR:CONSOLE");
+            let console = l.contains(":CONSOLE");
             let load = l.contains("Failed to load resource")
                 || l.contains("Not allowed to load local resource")
                 || l.contains("Refused to")
                 || l.contains("net::ERR_");
-            (console && (error_level || l.contains("Uncaught") || load))
-                || load
-                || (error_level && !file_name.is_empty() && l.contains(file_name))
+            let error_about_page =
+                l.contains(":ERROR:") && !file_name.is_empty() && l.contains(file_name);
+            console || load || error_about_page
         })
         .map(|l| l.trim().to_string())
         .collect()
+}
+
+/// References to resources outside the document in a DOM dump.
+pub(crate) fn external_refs(dom: &str) -> Vec<String> {
+    let lower = dom.to_ascii_lowercase();
+    let mut out = Vec::new();
+    for tag in [
+        "<script", "<link", "<iframe", "<object", "<embed", "@import",
+    ] {
+        let mut rest = lower.as_str();
+        while let Some(i) = rest.find(tag) {
+            let snippet: String = rest[i..].chars().take(80).collect();
+            out.push(snippet);
+            rest = &rest[i + tag.len()..];
+        }
+    }
+    for key in [" src=", " href=", " xlink:href=", "url("] {
+        let mut rest = lower.as_str();
+        while let Some(i) = rest.find(key) {
+            let value = rest[i + key.len()..].trim_start_matches(['"', '\'', ' ']);
+            if !value.starts_with('#') {
+                let snippet: String = rest[i..].chars().take(80).collect();
+                out.push(snippet.trim().to_string());
+            }
+            rest = &rest[i + key.len()..];
+        }
+    }
+    out
 }
 
 /// Counts `<svg>` elements in a DOM dump and those that are empty.
@@ -364,13 +416,22 @@ mod tests {
     #[test]
     fn console_lines() {
         let log = "\
-[1:2:1121/1.0:INFO:CONSOLE(3)] \"hello\", source: file:///tmp/r.html (3)
-[1:2:1121/1.0:ERROR:CONSOLE(3)] \"Uncaught ReferenceError: foo\", source: file:///tmp/r.html (3)
+[1:2:1121/1.0:INFO:CONSOLE:1] \"Uncaught ReferenceError: foo\", source: file:///tmp/r.html (1)
 [1:2:1121/1.0:INFO:CONSOLE(0)] \"Failed to load resource: net::ERR_FILE_NOT_FOUND\", source: file:///tmp/x.png (0)
-[1:2:1121/1.0:ERROR:bus.cc(407)] Failed to connect to the bus
+[1:2:1121/1.0:ERROR:dbus/bus.cc:405] Failed to connect to the bus
+[1:2:1121/1.0:WARNING:sandbox/policy/linux/sandbox_linux.cc:405] InitializeSandbox()
+[1:2:1121/1.0:ERROR:net/x.cc:1] could not read /tmp/r.html
 ";
         let e = console_errors_in(log, "r.html");
-        assert_eq!(e.len(), 2, "{e:?}");
+        assert_eq!(e.len(), 3, "{e:?}");
+    }
+
+    #[test]
+    fn external_references() {
+        let ok = r##"<svg xmlns="http://www.w3.org/2000/svg"><g clip-path="url(#c1)"><rect fill="url(#g)"/></g></svg><a href="#frf">x</a>"##;
+        assert!(external_refs(ok).is_empty(), "{:?}", external_refs(ok));
+        let bad = r#"<link rel="stylesheet" href="x.css"><img src="a.png"><div style="background:url('b.png')"></div>"#;
+        assert_eq!(external_refs(bad).len(), 4, "{:?}", external_refs(bad));
     }
 
     #[test]

@@ -33,7 +33,12 @@ impl AxisMap {
         } else {
             0.5
         };
-        (self.p0 + t * (self.p1 - self.p0)).clamp(-PX_LIMIT, PX_LIMIT)
+        let p = self.p0 + t * (self.p1 - self.p0);
+        if p.is_nan() {
+            self.p0
+        } else {
+            p.clamp(-PX_LIMIT, PX_LIMIT)
+        }
     }
 
     /// Pixel of a data value, `None` when it cannot be drawn on this axis.
