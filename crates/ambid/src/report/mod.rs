@@ -517,7 +517,7 @@ mod tests {
         let d = paths_with_stroke(&html, svg::PALETTE[0]);
         assert_eq!(d.len(), 1);
         let ys: Vec<f64> = d[0]
-            .split(|c: char| c == 'M' || c == 'L' || c == ' ')
+            .split(['M', 'L', ' '])
             .filter(|t| !t.is_empty())
             .skip(1)
             .step_by(2)

@@ -288,7 +288,10 @@ pub(crate) fn panel_svg(panel: &Panel, columns: usize, uid: &str, out: &mut Stri
     let (xr, yr, has_data, x_int, y_int) = match &panel.content {
         PanelContent::Xy(s) => {
             let (xr, yr, has) = xy_ranges(panel, s);
-            (xr, yr, has, false, false)
+            // Integer abscissae (orders, lags): integer ticks.
+            let x_int = s.iter().any(|s| !s.x.is_empty())
+                && s.iter().all(|s| integer_centres(&s.x) || s.x.is_empty());
+            (xr, yr, has, x_int, false)
         }
         PanelContent::Heatmap(h) => {
             let (xr, yr, has) = heatmap_ranges(panel, h);
@@ -767,13 +770,26 @@ fn series_svg(out: &mut String, s: &Series, color: &str, mx: &AxisMap, my: &Axis
             );
         }
     };
-    let markers = |out: &mut String, m: Marker| {
+    // Markers closer than half a pixel to an already drawn one are drawn once. On a decimated
+    // line (LineMarkers) markers go on the kept points only.
+    let markers = |out: &mut String, m: Marker, on_line: bool| {
         let mut d = String::new();
         let mut seen: HashSet<(i64, i64)> = HashSet::new();
-        for (&xv, &yv) in x.iter().zip(y) {
-            if let (Some(px), Some(py)) = (mx.px(xv), my.px(yv)) {
-                if seen.insert(((px * 2.0).round() as i64, (py * 2.0).round() as i64)) {
-                    marker_path(&mut d, m, px, py);
+        let mut put = |d: &mut String, px: f64, py: f64| {
+            if seen.insert(((px * 2.0).round() as i64, (py * 2.0).round() as i64)) {
+                marker_path(d, m, px, py);
+            }
+        };
+        if on_line && decimate {
+            for run in runs(x, y, mx, my) {
+                for (px, py) in decimate_minmax(&run) {
+                    put(&mut d, px, py);
+                }
+            }
+        } else {
+            for (&xv, &yv) in x.iter().zip(y) {
+                if let (Some(px), Some(py)) = (mx.px(xv), my.px(yv)) {
+                    put(&mut d, px, py);
                 }
             }
         }
@@ -788,10 +804,10 @@ fn series_svg(out: &mut String, s: &Series, color: &str, mx: &AxisMap, my: &Axis
     match &s.style {
         Style::Line => line(out, ""),
         Style::Dashed => line(out, " stroke-dasharray=\"6 4\""),
-        Style::Markers(m) => markers(out, *m),
+        Style::Markers(m) => markers(out, *m, false),
         Style::LineMarkers(m) => {
             line(out, "");
-            markers(out, *m);
+            markers(out, *m, true);
         }
         Style::Band { lower } => {
             let m = n.min(lower.len());
