@@ -8,7 +8,7 @@ use std::fmt::Write;
 
 use super::geom::{band_runs, decimate_band, decimate_minmax, runs, AxisMap};
 use super::html::escape;
-use super::ticks::{fixed_range, sane_range, text_width_em, ticks_for, to_axis};
+use super::ticks::{fixed_range, linear_ticks, sane_range, text_width_em, ticks_for, to_axis};
 use super::ticks::{TickLabel, Ticks};
 use super::{format_number, Axis, Heatmap, Marker, Panel, PanelContent, Scale, Series, Style};
 
@@ -351,6 +351,22 @@ pub(crate) fn panel_svg(panel: &Panel, columns: usize, uid: &str, out: &mut Stri
         yt = ticks_for(panel.y.scale, yr.0, yr.1, y_target(ph), y_int);
     }
     let x_target = ((pw / 85.0).round() as usize).clamp(2, 10);
+    // A fitted linear x range ending just short of a tick (0 … 0.9998 s) is widened to it.
+    if panel.x.scale == Scale::Linear
+        && fixed_range(panel.x.scale, panel.x.range).is_none()
+        && !panel.equal_aspect
+    {
+        let (_, step) = linear_ticks(xr.0, xr.1, x_target, x_int);
+        let span = xr.1 - xr.0;
+        let lo = (xr.0 / step).floor() * step;
+        let hi = (xr.1 / step).ceil() * step;
+        if lo.is_finite() && xr.0 - lo <= 0.03 * span {
+            xr.0 = lo;
+        }
+        if hi.is_finite() && hi - xr.1 <= 0.03 * span {
+            xr.1 = hi;
+        }
+    }
     let xt = ticks_for(panel.x.scale, xr.0, xr.1, x_target, x_int);
 
     let axis_bottom = top + ph;
