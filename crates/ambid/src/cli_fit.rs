@@ -380,8 +380,14 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
             ..SsPemOptions::default()
         })
     };
-    let fit = ambid::fitting::fit_state_space(u, y, ts, a.order, a.block_rows, pem)
-        .map_err(|e| if a.no_pem { e } else { e.context("(use --no-pem to skip the refinement)") })?;
+    let fit =
+        ambid::fitting::fit_state_space(u, y, ts, a.order, a.block_rows, pem).map_err(|e| {
+            if a.no_pem {
+                e
+            } else {
+                e.context("(use --no-pem to skip the refinement)")
+            }
+        })?;
     let mut pem_meta = json!(null);
     if let Some(p) = &fit.pem {
         println!(

@@ -114,10 +114,13 @@ pub fn init(a: InitArgs) -> Result<()> {
         .map_or_else(|| PathBuf::from("."), Path::to_path_buf);
     let tmp = parent.join(format!(
         ".{}.tmp-{}",
-        a.path.file_name().map_or("workflow".into(), |s| s.to_string_lossy()),
+        a.path
+            .file_name()
+            .map_or("workflow".into(), |s| s.to_string_lossy()),
         std::process::id()
     ));
-    let write = std::fs::write(&tmp, workflow::config::EXAMPLE).and_then(|_| std::fs::rename(&tmp, &a.path));
+    let write = std::fs::write(&tmp, workflow::config::EXAMPLE)
+        .and_then(|_| std::fs::rename(&tmp, &a.path));
     if let Err(e) = write {
         let _ = std::fs::remove_file(&tmp);
         return Err(Failure {

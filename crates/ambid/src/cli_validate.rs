@@ -81,14 +81,15 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
     };
     let k0 = a.skip;
     let c = ctrl.state_space();
-    let v = validate_closed_loop(&model, c, &MeasuredLoop { w, r, y, u, ts }, &settings)
-        .map_err(|e| {
+    let v = validate_closed_loop(&model, c, &MeasuredLoop { w, r, y, u, ts }, &settings).map_err(
+        |e| {
             if a.skip + 4 * a.lags.max(5) >= y.len() {
                 e.context("use a smaller --skip or fewer --lags")
             } else {
                 e
             }
-        })?;
+        },
+    )?;
     let full = &v.reconstruction;
     let sim = &full.simulated;
     let res = &v.residuals;

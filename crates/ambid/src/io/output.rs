@@ -207,7 +207,10 @@ mod tests {
         let root = tmp("names");
         let o = OutputDir::create(&root.join("r"), false).unwrap();
         for bad in ["../x", "/etc/x", "a/../../x"] {
-            assert!(matches!(o.write(bad, b""), Err(OutputError::BadName(_))), "{bad}");
+            assert!(
+                matches!(o.write(bad, b""), Err(OutputError::BadName(_))),
+                "{bad}"
+            );
         }
         drop(o);
         let _ = std::fs::remove_dir_all(&root);

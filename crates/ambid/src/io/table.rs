@@ -113,7 +113,11 @@ impl Table {
     }
 
     /// The sample time.
-    pub fn sample_time(&self, t: Option<&ColumnRef>, fs_hz: Option<f64>) -> Result<f64, DataFileError> {
+    pub fn sample_time(
+        &self,
+        t: Option<&ColumnRef>,
+        fs_hz: Option<f64>,
+    ) -> Result<f64, DataFileError> {
         match (t, fs_hz) {
             (_, Some(fs)) => Ok(1.0 / fs),
             (Some(c), None) => {

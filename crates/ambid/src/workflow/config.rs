@@ -540,9 +540,13 @@ impl WorkflowConfig {
     /// [`ConfigError::Parse`] with the line of the offending key or value.
     pub fn from_toml_str(text: &str, path: &Path) -> Result<Self, ConfigError> {
         let cfg: WorkflowConfig = toml::from_str(text).map_err(|e| {
-            let line = e
-                .span()
-                .map(|s| text[..s.start.min(text.len())].lines().count().max(1));
+            let line = e.span().map(|s| {
+                text.as_bytes()[..s.start.min(text.len())]
+                    .iter()
+                    .filter(|b| **b == b'\n')
+                    .count()
+                    + 1
+            });
             let msg = e.message().trim().to_string();
             ConfigError::Parse {
                 path: path.to_path_buf(),
@@ -598,7 +602,11 @@ impl WorkflowConfig {
             &self.validation.excitation,
             &["prbs", "chirp", "noise", "multisine"],
         )?;
-        one_of("frf.method", &self.frf.method, &["auto", "periodic", "welch"])?;
+        one_of(
+            "frf.method",
+            &self.frf.method,
+            &["auto", "periodic", "welch"],
+        )?;
         one_of(
             "data.detrend",
             &self.data.detrend,
@@ -622,7 +630,7 @@ impl WorkflowConfig {
         }
         if self.models.orders.is_empty() || self.models.orders.contains(&0) {
             return Err(bad(
-                "models.orders must list orders ≥ 1, e.g. [6, 7, 8, 9]".into(),
+                "models.orders must list orders ≥ 1, e.g. [6, 7, 8, 9]".into()
             ));
         }
         if self.models.structures.is_empty() {

@@ -117,10 +117,14 @@ pub fn prepare(cfg: &WorkflowConfig, base: &Path) -> Result<Prepared, Failure> {
                 Some(p) => {
                     let path = base.join(p);
                     let text = std::fs::read_to_string(&path)
-                        .with_context(|| format!("{}: cannot read the twin configuration", path.display()))
+                        .with_context(|| {
+                            format!("{}: cannot read the twin configuration", path.display())
+                        })
                         .map_err(input)?;
                     TwinConfig::from_toml_str(&text)
-                        .with_context(|| format!("{}: not a valid twin configuration", path.display()))
+                        .with_context(|| {
+                            format!("{}: not a valid twin configuration", path.display())
+                        })
                         .map_err(input)?
                 }
                 None => TwinConfig::default(),
@@ -136,11 +140,9 @@ pub fn prepare(cfg: &WorkflowConfig, base: &Path) -> Result<Prepared, Failure> {
             let twin = Twin::new(tc.clone())
                 .context("building the twin")
                 .map_err(input)?;
-            let controller = ControllerModel::new(
-                twin.controller().clone(),
-                "the twin's discrete PID (exact)",
-            )
-            .map_err(computation)?;
+            let controller =
+                ControllerModel::new(twin.controller().clone(), "the twin's discrete PID (exact)")
+                    .map_err(computation)?;
             Ok(Prepared {
                 twin: Some(TwinSource {
                     noise: tc.sensor.noise_rms_m > 0.0,
@@ -220,8 +222,16 @@ fn split(rec: &Recording, k: usize) -> (Recording, Recording) {
     let part = |a: bool, what: &str| Recording {
         ts: rec.ts,
         r: cut(&rec.r, a),
-        u: if a { rec.u[..k].to_vec() } else { rec.u[k..].to_vec() },
-        y: if a { rec.y[..k].to_vec() } else { rec.y[k..].to_vec() },
+        u: if a {
+            rec.u[..k].to_vec()
+        } else {
+            rec.u[k..].to_vec()
+        },
+        y: if a {
+            rec.y[..k].to_vec()
+        } else {
+            rec.y[k..].to_vec()
+        },
         i: cut(&rec.i, a),
         w: cut(&rec.w, a),
         closed_loop: rec.closed_loop,
@@ -231,11 +241,18 @@ fn split(rec: &Recording, k: usize) -> (Recording, Recording) {
     };
     (
         part(true, &format!("samples 1–{k}, estimation")),
-        part(false, &format!("samples {}–{}, validation", k + 1, rec.len())),
+        part(
+            false,
+            &format!("samples {}–{}, validation", k + 1, rec.len()),
+        ),
     )
 }
 
-fn detrend_pair(a: &mut Recording, b: Option<&mut Recording>, kind: Detrend) -> Result<(), Failure> {
+fn detrend_pair(
+    a: &mut Recording,
+    b: Option<&mut Recording>,
+    kind: Detrend,
+) -> Result<(), Failure> {
     if kind == Detrend::None {
         return Ok(());
     }
@@ -273,7 +290,12 @@ fn detrend_pair(a: &mut Recording, b: Option<&mut Recording>, kind: Detrend) -> 
     Ok(())
 }
 
-pub fn load_file(cfg: &WorkflowConfig, base: &Path, rel: &Path, what: &str) -> Result<Recording, Failure> {
+pub fn load_file(
+    cfg: &WorkflowConfig,
+    base: &Path,
+    rel: &Path,
+    what: &str,
+) -> Result<Recording, Failure> {
     let d = &cfg.data;
     let path = base.join(rel);
     let opts = ReadOptions {
@@ -360,7 +382,10 @@ pub fn describe(ctx: &mut Ctx<'_>) -> Section {
         }
         SourceKind::Files => {
             let mut rows = Vec::new();
-            for r in [ctx.ident.as_ref(), ctx.valid.as_ref()].into_iter().flatten() {
+            for r in [ctx.ident.as_ref(), ctx.valid.as_ref()]
+                .into_iter()
+                .flatten()
+            {
                 rows.push(vec![
                     r.source.clone(),
                     r.len().to_string(),

@@ -51,7 +51,13 @@ pub fn with_spans(mut p: Panel, spans: Vec<Span>) -> Panel {
 }
 
 /// A figure.
-pub fn figure(id: &str, title: &str, caption: String, panels: Vec<Panel>, columns: usize) -> Figure {
+pub fn figure(
+    id: &str,
+    title: &str,
+    caption: String,
+    panels: Vec<Panel>,
+    columns: usize,
+) -> Figure {
     Figure {
         id: id.into(),
         title: title.into(),
@@ -80,6 +86,11 @@ pub fn phase_deg(v: &[c64]) -> Vec<f64> {
             } else if d < -180.0 {
                 offset += 360.0 * ((-d + 180.0) / 360.0).floor();
             }
+        }
+        if k == 0 && p > 90.0 {
+            // start in (−270°, 90°]: a negative DC gain reads −180° whatever the sign of its
+            // rounding-level imaginary part, so curves of one plant line up
+            offset = -360.0;
         }
         let q = p + offset;
         out.push(q);
@@ -118,7 +129,7 @@ pub fn bode_panels(curves: &[Curve<'_>], mag_label: &str) -> Vec<Panel> {
             let lo: Vec<f64> =
                 c.g.iter()
                     .zip(s)
-                    .map(|(z, s)| 20.0 * (z.norm() - 1.96 * s).max(1e-3 * z.norm()).log10())
+                    .map(|(z, s)| 20.0 * (z.norm() - 1.96 * s).max(0.1 * z.norm()).log10())
                     .collect();
             mag.push(Series {
                 name: format!("{} 95 % band", c.name),
@@ -129,7 +140,13 @@ pub fn bode_panels(curves: &[Curve<'_>], mag_label: &str) -> Vec<Panel> {
             });
         }
         mag.push(series(c.name, c.f, &db(c.g), c.style.clone(), c.color));
-        ph.push(series(c.name, c.f, &phase_deg(c.g), c.style.clone(), c.color));
+        ph.push(series(
+            c.name,
+            c.f,
+            &phase_deg(c.g),
+            c.style.clone(),
+            c.color,
+        ));
     }
     vec![
         xy("magnitude", log("frequency [Hz]"), lin(mag_label), mag),
@@ -186,7 +203,10 @@ pub fn envelope(t: &[f64], x: &[f64], max_points: usize) -> (Vec<f64>, Vec<f64>)
         return (t[..n].to_vec(), x[..n].to_vec());
     }
     let size = n.div_ceil(blocks);
-    let (mut to, mut xo) = (Vec::with_capacity(2 * blocks), Vec::with_capacity(2 * blocks));
+    let (mut to, mut xo) = (
+        Vec::with_capacity(2 * blocks),
+        Vec::with_capacity(2 * blocks),
+    );
     let mut k = 0;
     while k < n {
         let end = (k + size).min(n);
@@ -199,7 +219,11 @@ pub fn envelope(t: &[f64], x: &[f64], max_points: usize) -> (Vec<f64>, Vec<f64>)
                 imax = j;
             }
         }
-        let (a, b) = if imin <= imax { (imin, imax) } else { (imax, imin) };
+        let (a, b) = if imin <= imax {
+            (imin, imax)
+        } else {
+            (imax, imin)
+        };
         to.push(t[a]);
         xo.push(x[a]);
         if b != a {

@@ -412,7 +412,9 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
         })],
     });
     let title = cfg.title.clone().unwrap_or_else(|| match cfg.source {
-        config::SourceKind::Twin => "ambid: closed-loop identification of the embedded AMB twin".into(),
+        config::SourceKind::Twin => {
+            "ambid: closed-loop identification of the embedded AMB twin".into()
+        }
         config::SourceKind::Files => "ambid: closed-loop identification report".into(),
     });
     let report = Report {

@@ -6,7 +6,9 @@ use super::steps_signal::plan;
 use super::{computation, Ctx, Failure, StepStatus};
 use crate::analysis::{analyze, FrfSettings, Record};
 use crate::experiment::{ExcitationKind, ExcitationPlan};
-use crate::report::{format_number as fmt, Block, Heatmap, NoteKind, Panel, PanelContent, Style, Table};
+use crate::report::{
+    format_number as fmt, Block, Heatmap, NoteKind, Panel, PanelContent, Style, Table,
+};
 use ambid_core::estimate::order::{arx_order_scan, ArxScanSpec};
 use ambid_core::frf::resonance::{find_resonances, order_from_peaks, ResonanceOptions};
 
@@ -193,12 +195,23 @@ pub fn frf(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     } else {
         "H1 estimate u → y (open loop)"
     };
-    let mut panels = bode_panels(&curves, &format!("|P| [dB re 1 {}/{}]", ctx.cfg.data.y_unit, ctx.cfg.data.u_unit));
+    let mut panels = bode_panels(
+        &curves,
+        &format!(
+            "|P| [dB re 1 {}/{}]",
+            ctx.cfg.data.y_unit, ctx.cfg.data.u_unit
+        ),
+    );
     let mut coh = vec![series("γ²_ry", &f, &a.frf.coh_ry, Style::Line, Some(0))];
     if has_r {
         coh.push(series("γ²_ru", &f, &a.frf.coh_ru, Style::Line, Some(3)));
     }
-    panels.push(xy("coherence", log("frequency [Hz]"), lin("coherence [-]"), coh));
+    panels.push(xy(
+        "coherence",
+        log("frequency [Hz]"),
+        lin("coherence [-]"),
+        coh,
+    ));
     let mut blocks = vec![
         Block::Text(format!(
             "Nonparametric plant FRF of the identification record ({} samples, {} Hz) by {method}; {how}. \
@@ -223,18 +236,30 @@ pub fn frf(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     ];
     let q = &a.quality;
     let mut qrows = vec![
-        vec!["quality band [Hz]".to_string(), format!("{}–{}", fmt(q.band.0), fmt(q.band.1))],
+        vec![
+            "quality band [Hz]".to_string(),
+            format!("{}–{}", fmt(q.band.0), fmt(q.band.1)),
+        ],
         vec!["lines in band".into(), q.lines.to_string()],
         vec!["mean coherence γ²_ry".into(), fmt(q.mean_coherence_ry)],
     ];
     ctx.put("frf.lines", f.len() as f64);
     ctx.put("frf.mean_coh_ry", q.mean_coherence_ry);
     if has_r {
-        qrows.push(vec!["mean coherence γ²_ru".into(), fmt(q.mean_coherence_ru)]);
+        qrows.push(vec![
+            "mean coherence γ²_ru".into(),
+            fmt(q.mean_coherence_ru),
+        ]);
         ctx.put("frf.mean_coh_ru", q.mean_coherence_ru);
     }
-    qrows.push(vec!["mean plant variance".into(), fmt(q.mean_plant_variance)]);
-    qrows.push(vec!["mean relative plant variance".into(), fmt(q.mean_plant_rel_variance)]);
+    qrows.push(vec![
+        "mean plant variance".into(),
+        fmt(q.mean_plant_variance),
+    ]);
+    qrows.push(vec![
+        "mean relative plant variance".into(),
+        fmt(q.mean_plant_rel_variance),
+    ]);
     ctx.put("frf.mean_plant_variance", q.mean_plant_variance);
     ctx.put("frf.mean_plant_rel_variance", q.mean_plant_rel_variance);
     if let Some(snr) = q.output_snr_db {
@@ -258,8 +283,14 @@ pub fn frf(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                 .map_or(f64::NAN, |v| 100.0 * v)
         };
         let (med, p90) = (pick(0.5), pick(0.9));
-        qrows.push(vec!["median error vs exact plant, quality band [%]".into(), fmt(med)]);
-        qrows.push(vec!["90th percentile error vs exact plant, quality band [%]".into(), fmt(p90)]);
+        qrows.push(vec![
+            "median error vs exact plant, quality band [%]".into(),
+            fmt(med),
+        ]);
+        qrows.push(vec![
+            "90th percentile error vs exact plant, quality band [%]".into(),
+            fmt(p90),
+        ]);
         ctx.put("frf.plant_median_error_vs_truth_pct", med);
         ctx.put("frf.plant_p90_error_vs_truth_pct", p90);
     }
@@ -272,18 +303,24 @@ pub fn frf(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     }));
     for (name, r) in &a.abnormal {
         if r.nonfinite.len() + r.spikes.len() + r.stuck_runs.len() > 0 {
-            blocks.push(Ctx::note(NoteKind::Warning, format!("channel {name}: {}", r.summary())));
+            blocks.push(Ctx::note(
+                NoteKind::Warning,
+                format!("channel {name}: {}", r.summary()),
+            ));
         }
     }
     for (name, r) in &a.saturation {
         if r.count > 0 {
-            blocks.push(Ctx::note(NoteKind::Warning, format!("channel {name}: {}", r.summary())));
+            blocks.push(Ctx::note(
+                NoteKind::Warning,
+                format!("channel {name}: {}", r.summary()),
+            ));
         }
     }
     for w in &a.warnings {
         blocks.push(Ctx::note(NoteKind::Warning, w.clone()));
     }
-    ctx.section("frf", "4. Nonparametric FRF", blocks);
+    ctx.section("frf", "Nonparametric FRF", blocks);
     ctx.frf = Some(a);
     Ok(StepStatus::Done)
 }
@@ -296,7 +333,11 @@ pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     };
     let o = &ctx.cfg.order;
     let cut = |r: &Recording| -> (Vec<f64>, Vec<f64>) {
-        let n = if o.max_samples > 0 { o.max_samples.min(r.len()) } else { r.len() };
+        let n = if o.max_samples > 0 {
+            o.max_samples.min(r.len())
+        } else {
+            r.len()
+        };
         (r.y[..n].to_vec(), r.u[..n].to_vec())
     };
     let (y, u) = cut(&rec);
@@ -329,6 +370,7 @@ pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         spans: Vec::new(),
         equal_aspect: false,
     };
+    let on_edge = best.na == na.len() || best.nb == nb.len();
     ctx.put("order.arx_best_bic.na", best.na as f64);
     ctx.put("order.arx_best_bic.nb", best.nb as f64);
     ctx.put("order.arx_best_bic.nk", best.nk as f64);
@@ -358,6 +400,17 @@ pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         ],
         2,
     ))];
+    if on_edge {
+        blocks.push(Ctx::note(
+            NoteKind::Info,
+            format!(
+                "The smallest BIC lies on the edge of the grid (na = {}, nb = {}): on long records the \
+                 ARX loss keeps falling with order because ARX must also model the noise; the ARX orders \
+                 bound the plant order from above only. Extend [order] na_max / nb_max to see the minimum.",
+                best.na, best.nb
+            ),
+        ));
+    }
     // resonance count on the plant FRF
     if let Some(a) = &ctx.frf {
         let plant = &a.frf.plant;
@@ -404,6 +457,6 @@ pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             highlight: None,
         }));
     }
-    ctx.section("order", "5. Order estimation", blocks);
+    ctx.section("order", "Order estimation", blocks);
     Ok(StepStatus::Done)
 }

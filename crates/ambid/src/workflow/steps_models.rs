@@ -169,7 +169,9 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         let rows = compare_models(frd, &spec, vrec).map_err(computation)?;
         for r in rows {
             let truth_med = match (&r.model, &truth, &truth_f) {
-                (Some(m), Some(t), Some(f)) => m.freq_response_siso(f).ok().map(|g| median_rel(&g, t)),
+                (Some(m), Some(t), Some(f)) => {
+                    m.freq_response_siso(f).ok().map(|g| median_rel(&g, t))
+                }
                 _ => None,
             };
             cands.push(Candidate {
@@ -196,39 +198,43 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         let mut kinds = Vec::new();
         for s in &cfg.structures {
             for &n in &cfg.orders {
-                let fitted: anyhow::Result<(StateSpace, Option<PolyModel>, usize, Option<Vec<f64>>)> =
-                    (|| match s.as_str() {
-                        "arx" => {
-                            let f = arx(&rec.y, &[&rec.u], &ArxOrders::siso(n, n, cfg.nk), ts)?;
-                            let p = f.model.to_poly(0)?;
-                            Ok((p.to_state_space()?, Some(p), f.params.len(), None))
-                        }
-                        "oe" => {
-                            let opts = PemOptions::default().with_max_iterations(cfg.max_iterations)?;
-                            let (f, _) = pem::pem(
-                                &rec.y,
-                                &rec.u,
-                                Structure::Oe,
-                                &Orders::oe(n, n, cfg.nk),
-                                ts,
-                                &opts,
-                            )?;
-                            let p = f.model;
-                            Ok((p.to_state_space()?, Some(p), f.params.len(), None))
-                        }
-                        _ => {
-                            let o = SsPemOptions {
-                                lm: SsPemOptions::default()
-                                    .lm
-                                    .with_max_iterations(cfg.max_iterations)?,
-                                ..SsPemOptions::default()
-                            };
-                            let f = fit_state_space(&rec.u, &rec.y, ts, Some(n), None, Some(o))?;
-                            let np = n * n + 2 * n;
-                            let k = f.pem.and_then(|p| p.kalman_gain);
-                            Ok((f.model, None, np, k))
-                        }
-                    })();
+                let fitted: anyhow::Result<(
+                    StateSpace,
+                    Option<PolyModel>,
+                    usize,
+                    Option<Vec<f64>>,
+                )> = (|| match s.as_str() {
+                    "arx" => {
+                        let f = arx(&rec.y, &[&rec.u], &ArxOrders::siso(n, n, cfg.nk), ts)?;
+                        let p = f.model.to_poly(0)?;
+                        Ok((p.to_state_space()?, Some(p), f.params.len(), None))
+                    }
+                    "oe" => {
+                        let opts = PemOptions::default().with_max_iterations(cfg.max_iterations)?;
+                        let (f, _) = pem::pem(
+                            &rec.y,
+                            &rec.u,
+                            Structure::Oe,
+                            &Orders::oe(n, n, cfg.nk),
+                            ts,
+                            &opts,
+                        )?;
+                        let p = f.model;
+                        Ok((p.to_state_space()?, Some(p), f.params.len(), None))
+                    }
+                    _ => {
+                        let o = SsPemOptions {
+                            lm: SsPemOptions::default()
+                                .lm
+                                .with_max_iterations(cfg.max_iterations)?,
+                            ..SsPemOptions::default()
+                        };
+                        let f = fit_state_space(&rec.u, &rec.y, ts, Some(n), None, Some(o))?;
+                        let np = n * n + 2 * n;
+                        let k = f.pem.and_then(|p| p.kalman_gain);
+                        Ok((f.model, None, np, k))
+                    }
+                })();
                 let sname: &'static str = match s.as_str() {
                     "arx" => "arx",
                     "oe" => "oe",
@@ -236,13 +242,21 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                 };
                 match fitted {
                     Ok((m, poly, np, k)) => {
-                        let (fit, kind) = time_fit(sname, &m, poly.as_ref(), k.as_deref(), &val.y, &val.u);
+                        let (fit, kind) =
+                            time_fit(sname, &m, poly.as_ref(), k.as_deref(), &val.y, &val.u);
                         kinds.push(kind);
-                        let unstable = m.poles().ok().map(|p| p.iter().filter(|z| z.norm() >= 1.0).count());
-                        let frf_err = match (&ctx.frf, m.freq_response_siso(truth_f.as_deref().unwrap_or(&[]))) {
+                        let unstable = m
+                            .poles()
+                            .ok()
+                            .map(|p| p.iter().filter(|z| z.norm() >= 1.0).count());
+                        let frf_err = match (
+                            &ctx.frf,
+                            m.freq_response_siso(truth_f.as_deref().unwrap_or(&[])),
+                        ) {
                             (Some(a), Ok(g)) if !g.is_empty() => {
                                 let p = a.frf.plant.values();
-                                let num: f64 = g.iter().zip(p).map(|(a, b)| (a - b).norm_sqr()).sum();
+                                let num: f64 =
+                                    g.iter().zip(p).map(|(a, b)| (a - b).norm_sqr()).sum();
                                 let den: f64 = p.iter().map(|b| b.norm_sqr()).sum();
                                 (Some((num / den).sqrt()), Some(median_rel(&g, p)))
                             }
@@ -252,7 +266,9 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                             structure: sname,
                             order: n,
                             truth_median_relative: truth.as_ref().and_then(|t| {
-                                m.freq_response_siso(truth_f.as_deref()?).ok().map(|g| median_rel(&g, t))
+                                m.freq_response_siso(truth_f.as_deref()?)
+                                    .ok()
+                                    .map(|g| median_rel(&g, t))
                             }),
                             model: Some(m),
                             poly,
@@ -402,7 +418,10 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             ),
         ));
     } else {
-        blocks.push(Ctx::note(NoteKind::Fail, "No candidate could be fitted; see the notes in the table."));
+        blocks.push(Ctx::note(
+            NoteKind::Fail,
+            "No candidate could be fitted; see the notes in the table.",
+        ));
     }
     // Bode overlays and error curves, one figure per structure
     if let Some(a) = &ctx.frf {
@@ -492,7 +511,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             });
         }
     }
-    ctx.section("models", "6. Parametric models", blocks);
+    ctx.section("models", "Parametric models", blocks);
     ctx.candidates = cands;
     ctx.chosen = chosen;
     Ok(StepStatus::Done)
@@ -500,7 +519,9 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
 
 pub fn pole_zero(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     let Some(ch) = ctx.chosen else {
-        return Ok(StepStatus::Skipped("no fitted model (run the models step)".into()));
+        return Ok(StepStatus::Skipped(
+            "no fitted model (run the models step)".into(),
+        ));
     };
     let structure = ctx.candidates[ch].structure;
     let mut panels = Vec::new();
@@ -535,9 +556,17 @@ pub fn pole_zero(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             c.label(),
             pz.poles.len().to_string(),
             pz.zeros.len().to_string(),
-            if unstable.is_empty() { "none".into() } else { unstable.join(", ") },
+            if unstable.is_empty() {
+                "none".into()
+            } else {
+                unstable.join(", ")
+            },
             pz.cancellations.len().to_string(),
-            if min_d.is_finite() { fmt(min_d) } else { "—".into() },
+            if min_d.is_finite() {
+                fmt(min_d)
+            } else {
+                "—".into()
+            },
         ]);
         if i == ch {
             chosen_pz = Some((pz.cancellations.len(), unstable.len()));
@@ -588,6 +617,6 @@ pub fn pole_zero(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         highlight: None,
     }));
     let _ = (lin, log);
-    ctx.section("pole-zero", "7. Pole-zero check", blocks);
+    ctx.section("pole-zero", "Pole-zero check", blocks);
     Ok(StepStatus::Done)
 }

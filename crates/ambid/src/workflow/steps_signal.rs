@@ -95,8 +95,14 @@ pub fn excitation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             fmt(r.peak),
             fmt(r.crest_factor),
         ]);
-        ctx.put(&format!("excitation.compare.{}.crest_factor", s.name), r.crest_factor);
-        ctx.put(&format!("excitation.compare.{}.f_max_hz", s.name), r.f_max_hz);
+        ctx.put(
+            &format!("excitation.compare.{}.crest_factor", s.name),
+            r.crest_factor,
+        );
+        ctx.put(
+            &format!("excitation.compare.{}.f_max_hz", s.name),
+            r.f_max_hz,
+        );
     }
     blocks.push(Block::Figure(figure(
         "excitation_waveforms",
@@ -110,12 +116,23 @@ pub fn excitation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         "Amplitude spectra",
         "One-sided amplitude spectrum of one period of each signal (DFT of the whole period, no window)."
             .into(),
-        vec![xy(
-            "",
-            log("frequency [Hz]"),
-            log(&format!("amplitude [{unit}]")),
-            spec,
-        )],
+        {
+            // the multisine and the PRBS have (numerically) empty lines: show four decades
+            let top = spec
+                .iter()
+                .flat_map(|s| s.y.iter().copied())
+                .fold(0.0f64, f64::max);
+            let mut p = xy(
+                "",
+                log("frequency [Hz]"),
+                log(&format!("amplitude [{unit}]")),
+                spec,
+            );
+            if top > 0.0 {
+                p.y.range = Some((top * 1e-4, top * 2.0));
+            }
+            vec![p]
+        },
         1,
     )));
     blocks.push(Block::Figure(figure(
@@ -128,8 +145,9 @@ pub fn excitation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     )));
     blocks.push(Block::Table(Table {
         id: "excitation_comparison".into(),
-        caption: "Usable band, resolution, duration and crest factor of the four signals (one period)."
-            .into(),
+        caption:
+            "Usable band, resolution, duration and crest factor of the four signals (one period)."
+                .into(),
         header: vec![
             "signal".into(),
             "f_min [Hz]".into(),
@@ -154,7 +172,10 @@ pub fn excitation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             ctx.put("excitation.identification.f_max_hz", r.f_max_hz);
             ctx.put("excitation.identification.resolution_hz", r.resolution_hz);
             ctx.put("excitation.identification.duration_s", r.duration_s);
-            ctx.put("excitation.identification.period_samples", r.period_samples as f64);
+            ctx.put(
+                "excitation.identification.period_samples",
+                r.period_samples as f64,
+            );
             ctx.put("excitation.identification.crest_factor", r.crest_factor);
             blocks.push(Block::Table(Table {
                 id: "excitation_identification".into(),
@@ -193,7 +214,7 @@ pub fn excitation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             }));
         }
     }
-    ctx.section("excitation", "1. Excitation design and comparison", blocks);
+    ctx.section("excitation", "Excitation design and comparison", blocks);
     Ok(StepStatus::Done)
 }
 
@@ -288,7 +309,12 @@ fn amplitude_figure(out: &AmplitudeOutcome) -> Block {
 
 pub fn amplitude(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     let cfg = ctx.cfg;
-    let levels: Vec<f64> = cfg.amplitude_study.levels_pct.iter().map(|l| l / 100.0).collect();
+    let levels: Vec<f64> = cfg
+        .amplitude_study
+        .levels_pct
+        .iter()
+        .map(|l| l / 100.0)
+        .collect();
     let (out, source) = match (&ctx.twin, cfg.source) {
         (Some(t), _) => {
             let study = TwinAmplitudeStudy {
@@ -318,7 +344,8 @@ pub fn amplitude(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             let mut fs = f64::NAN;
             let mut period = None;
             for lf in &cfg.amplitude_study.files {
-                let rec: Recording = super::data::load_file(cfg, &ctx.base, &lf.path, "amplitude level")?;
+                let rec: Recording =
+                    super::data::load_file(cfg, &ctx.base, &lf.path, "amplitude level")?;
                 let r = rec.r.clone().ok_or_else(|| {
                     input(anyhow!(
                         "{}: the amplitude study needs the excitation column r",
@@ -382,7 +409,8 @@ pub fn amplitude(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             fmt(r.mean_plant_rel_var),
             r.snr_db.map_or("—".into(), fmt),
             fmt(100.0 * r.saturated_fraction),
-            r.plant_median_rel_err.map_or("—".into(), |e| fmt(100.0 * e)),
+            r.plant_median_rel_err
+                .map_or("—".into(), |e| fmt(100.0 * e)),
         ]);
         jrows.push(json!({
             "level_pct": r.level_pct,
@@ -443,7 +471,7 @@ pub fn amplitude(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             }
         ),
     ));
-    ctx.section("amplitude", "2. Excitation-amplitude study", blocks);
+    ctx.section("amplitude", "Excitation-amplitude study", blocks);
     Ok(StepStatus::Done)
 }
 
@@ -523,7 +551,8 @@ pub fn operating_point(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             fmt(100.0 * d.median_rel_dev),
             fmt(d.max_abs_db_dev),
             fmt(d.max_abs_phase_dev_deg),
-            d.truth_median_rel_dev.map_or("—".into(), |v| fmt(100.0 * v)),
+            d.truth_median_rel_dev
+                .map_or("—".into(), |v| fmt(100.0 * v)),
         ]);
         ctx.put(
             &format!("operating_point.{}.{}_median_dev_pct", d.case, d.band),
@@ -540,10 +569,11 @@ pub fn operating_point(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         Block::Figure(fig),
         Block::Table(Table {
             id: "operating_point".into(),
-            caption: "Deviation of each operating point's plant FRF from nominal, per band: median \
+            caption:
+                "Deviation of each operating point's plant FRF from nominal, per band: median \
                       relative deviation, largest magnitude (dB) and phase deviation, and the same \
                       median for the twin's exact plants (what the estimate should show)."
-                .into(),
+                    .into(),
             header: vec![
                 "case".into(),
                 "band".into(),
@@ -557,6 +587,6 @@ pub fn operating_point(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             highlight: None,
         }),
     ];
-    ctx.section("operating-point", "3. Operating-point study", blocks);
+    ctx.section("operating-point", "Operating-point study", blocks);
     Ok(StepStatus::Done)
 }

@@ -5,7 +5,9 @@ use super::figures::{envelope, figure, lin, log, series, xy};
 use super::steps_frf::ensure_valid;
 use super::{computation, Ctx, Failure, StepStatus};
 use crate::report::{format_number as fmt, Block, NoteKind, Style, Table};
-use crate::validation::{validate_closed_loop, MeasuredLoop, ValidationOutcome, ValidationSettings};
+use crate::validation::{
+    validate_closed_loop, MeasuredLoop, ValidationOutcome, ValidationSettings,
+};
 use ambid_core::c64;
 use ambid_core::estimate::arx::fit_percent;
 use ambid_core::lti::Frd;
@@ -52,11 +54,21 @@ fn time_figure(
             lin(&format!("{name} [{unit}]")),
             vec![
                 series("measured", &t, &meas[w0..w1], Style::Line, Some(0)),
-                series("model in closed loop", &t, &sim[w0..w1], Style::Dashed, Some(1)),
+                series(
+                    "model in closed loop",
+                    &t,
+                    &sim[w0..w1],
+                    Style::Dashed,
+                    Some(1),
+                ),
             ],
         ));
         let tt: Vec<f64> = (0..n).map(|k| k as f64 * ts).collect();
-        let e: Vec<f64> = meas[..n].iter().zip(&sim[..n]).map(|(a, b)| a - b).collect();
+        let e: Vec<f64> = meas[..n]
+            .iter()
+            .zip(&sim[..n])
+            .map(|(a, b)| a - b)
+            .collect();
         let (te, ee) = envelope(&tt, &e, 4000);
         panels.push(xy(
             &format!("{name}: error over the record"),
@@ -77,9 +89,20 @@ fn residual_figure(res: &ResidualTest, input: &str) -> Block {
             series("−95 % bound", x, &vec![-b; x.len()], Style::Dashed, Some(7)),
         ]
     };
-    let mut s1 = vec![series("autocorrelation", &lags, &w.values, Style::Stems, Some(0))];
+    let mut s1 = vec![series(
+        "autocorrelation",
+        &lags,
+        &w.values,
+        Style::Stems,
+        Some(0),
+    )];
     s1.extend(bound(&lags, w.bound));
-    let mut panels = vec![xy("whiteness", lin("lag [samples]"), lin("normalised correlation [-]"), s1)];
+    let mut panels = vec![xy(
+        "whiteness",
+        lin("lag [samples]"),
+        lin("normalised correlation [-]"),
+        s1,
+    )];
     if let Some(c) = &res.independence {
         let l: Vec<f64> = c.lags.iter().map(|l| *l as f64).collect();
         let mut s2 = vec![series(
@@ -136,7 +159,9 @@ fn put_residuals(ctx: &mut Ctx<'_>, res: &ResidualTest) {
 pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     ensure_valid(ctx)?;
     let Some(ch) = ctx.chosen else {
-        return Ok(StepStatus::Skipped("no fitted model (run the models step)".into()));
+        return Ok(StepStatus::Skipped(
+            "no fitted model (run the models step)".into(),
+        ));
     };
     let Some(model) = ctx.candidates[ch].model.clone() else {
         return Ok(StepStatus::Skipped("the chosen model failed".into()));
@@ -225,7 +250,11 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             put_residuals(ctx, &v.residuals);
             blocks.push(residual_figure(
                 &v.residuals,
-                if val.r.is_some() { "excitation r" } else { "reference w" },
+                if val.r.is_some() {
+                    "excitation r"
+                } else {
+                    "reference w"
+                },
             ));
             ctx.validation = Some(v);
         }
@@ -261,7 +290,11 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                     "{label} is unstable and has no predictor: it cannot be validated in open loop"
                 )));
             };
-            let kind = if stable { "simulation" } else { "1-step prediction" };
+            let kind = if stable {
+                "simulation"
+            } else {
+                "1-step prediction"
+            };
             let fit = fit_percent(&val.y, &yhat).map_err(computation)?;
             ctx.put("validation.model", label.clone());
             ctx.put("validation.fit_y_pct", fit);
@@ -278,7 +311,10 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             blocks.push(time_figure(
                 "validation_time",
                 "Time-domain validation",
-                format!("Measured output and the model's {kind} on the validation record; fit {} %.", fmt(fit)),
+                format!(
+                    "Measured output and the model's {kind} on the validation record; fit {} %.",
+                    fmt(fit)
+                ),
                 val.ts,
                 &[("y", &val.y, &yhat, &ctx.cfg.data.y_unit)],
             ));
@@ -286,13 +322,15 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             blocks.push(residual_figure(&res, "input u"));
         }
     }
-    ctx.section("validation", "8. Validation on an independent record", blocks);
+    ctx.section("validation", "Validation on an independent record", blocks);
     Ok(StepStatus::Done)
 }
 
 pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     let Some(ch) = ctx.chosen else {
-        return Ok(StepStatus::Skipped("no fitted model (run the models step)".into()));
+        return Ok(StepStatus::Skipped(
+            "no fitted model (run the models step)".into(),
+        ));
     };
     let Some(model) = ctx.candidates[ch].model.clone() else {
         return Ok(StepStatus::Skipped("the chosen model failed".into()));
@@ -338,7 +376,8 @@ pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         (w, r.y, r.u, r.ts, r.source)
     } else {
         return Ok(StepStatus::Skipped(
-            "no chirp-reference record ([data] reconstruction = \"chirp.csv\" with a w column)".into(),
+            "no chirp-reference record ([data] reconstruction = \"chirp.csv\" with a w column)"
+                .into(),
         ));
     };
     let s = settings(ctx, y.len());
@@ -372,7 +411,12 @@ pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     let mut panels = Vec::new();
     for (name, meas, rec, unit) in [
         ("displacement y", &y, &sim.y, ctx.cfg.data.y_unit.clone()),
-        ("controller output u", &u, &sim.u, ctx.cfg.data.u_unit.clone()),
+        (
+            "controller output u",
+            &u,
+            &sim.u,
+            ctx.cfg.data.u_unit.clone(),
+        ),
     ] {
         let (tm, m) = envelope(&t, meas, 3000);
         let (tr, r) = envelope(&t, rec, 3000);
@@ -440,7 +484,7 @@ pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             highlight: worst_idx,
         }),
     ];
-    ctx.section("reconstruction", "9. Closed-loop reconstruction", blocks);
+    ctx.section("reconstruction", "Closed-loop reconstruction", blocks);
     Ok(StepStatus::Done)
 }
 
@@ -450,7 +494,12 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     let mut rows = Vec::new();
     let mut verdicts = Vec::new();
     // measured S = T_ru from the FRF (closed loop with an excitation)
-    if let (Some(a), true) = (&ctx.frf, ctx.ident.as_ref().is_some_and(|r| r.r.is_some() && r.closed_loop)) {
+    if let (Some(a), true) = (
+        &ctx.frf,
+        ctx.ident
+            .as_ref()
+            .is_some_and(|r| r.r.is_some() && r.closed_loop),
+    ) {
         let s = &a.frf.t_ru;
         let v = sensitivity_zone(s, &z).map_err(computation)?;
         curves.push(series(
@@ -539,7 +588,13 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         .into_iter()
         .enumerate()
     {
-        curves.push(series(name, &[f0, f1], &[lim, lim], Style::Dashed, Some(4 + k)));
+        curves.push(series(
+            name,
+            &[f0, f1],
+            &[lim, lim],
+            Style::Dashed,
+            Some(4 + k),
+        ));
     }
     let verdict = verdicts.first().copied();
     if let Some(v) = verdict {
@@ -586,6 +641,6 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         ),
     ];
     let _ = json!(null);
-    ctx.section("iso", "10. ISO 14839-3 stability verdict", blocks);
+    ctx.section("iso", "ISO 14839-3 stability verdict", blocks);
     Ok(StepStatus::Done)
 }
