@@ -62,8 +62,58 @@ pub(super) fn read_npz(path: &Path, opts: &ReadOptions) -> Result<Table, DataFil
     assemble(path, vars, opts.variable.as_deref())
 }
 
+/// Reads the `.npy` preamble (magic, version, header length, header text) and checks that the
+/// shape's element count does not overflow (npyz multiplies the dimensions unchecked). Returns
+/// the bytes read, to be put back in front of the stream.
+fn check_preamble<R: Read>(reader: &mut R) -> Result<Vec<u8>, String> {
+    let not_npy = || format!("is not a readable .npy array (bad header); {RESAVE}");
+    let mut pre = [0u8; 10];
+    reader.read_exact(&mut pre).map_err(|_| not_npy())?;
+    let [0x93, b'N', b'U', b'M', b'P', b'Y', major, _, l0, l1] = pre else {
+        return Err(not_npy());
+    };
+    let mut out = pre.to_vec();
+    let len = match major {
+        1 => usize::from(u16::from_le_bytes([l0, l1])),
+        2 | 3 => {
+            let mut more = [0u8; 2];
+            reader.read_exact(&mut more).map_err(|_| not_npy())?;
+            out.extend_from_slice(&more);
+            u32::from_le_bytes([l0, l1, more[0], more[1]]) as usize
+        }
+        _ => return Err(not_npy()),
+    };
+    if len > 1 << 20 {
+        return Err(not_npy());
+    }
+    let mut header = vec![0u8; len];
+    reader.read_exact(&mut header).map_err(|_| not_npy())?;
+    let text = String::from_utf8_lossy(&header);
+    if let Some(tuple) = text
+        .split_once("'shape'")
+        .and_then(|(_, rest)| rest.split_once('('))
+        .and_then(|(_, rest)| rest.split_once(')'))
+        .map(|(tuple, _)| tuple)
+    {
+        let mut total: Option<u64> = Some(1);
+        for d in tuple.split(',').map(str::trim).filter(|d| !d.is_empty()) {
+            let d: u64 = d.trim_end_matches('L').parse().map_err(|_| not_npy())?;
+            total = total.and_then(|t| t.checked_mul(d));
+        }
+        if total.is_none() {
+            return Err(format!(
+                "claims a shape ({tuple}) with more elements than can exist; the file is damaged; {RESAVE}"
+            ));
+        }
+    }
+    out.extend_from_slice(&header);
+    Ok(out)
+}
+
 /// Reads one `.npy` stream of at most `size` bytes into a variable.
-fn read_array<R: Read>(reader: R, name: String, size: u64) -> Result<Var, String> {
+fn read_array<R: Read>(mut reader: R, name: String, size: u64) -> Result<Var, String> {
+    let pre = check_preamble(&mut reader)?;
+    let reader = std::io::Cursor::new(pre).chain(reader);
     let npy = NpyFile::new(reader)
         .map_err(|e| format!("is not a readable .npy array ({e}); {RESAVE}"))?;
     let shape: Vec<usize> = npy
