@@ -13,7 +13,18 @@ use super::{DataFileError, ReadOptions, Table};
 /// Rows read per call.
 const BATCH: usize = 8192;
 
-pub(super) fn read(path: &Path, _opts: &ReadOptions) -> Result<Table, DataFileError> {
+pub(super) fn read(path: &Path, opts: &ReadOptions) -> Result<Table, DataFileError> {
+    // The parquet crate asserts on some damaged metadata; such a panic becomes an error here
+    // (the checks in `read_checked` avoid the known ones, this is the backstop).
+    std::panic::catch_unwind(|| read_checked(path, opts)).unwrap_or_else(|_| {
+        Err(DataFileError::invalid(
+            path,
+            "the Parquet reader failed on this file, which looks damaged; write it again or export the data to CSV",
+        ))
+    })
+}
+
+fn read_checked(path: &Path, _opts: &ReadOptions) -> Result<Table, DataFileError> {
     let file = std::fs::File::open(path).map_err(|e| DataFileError::open(path, &e))?;
     let fail = |e: ::parquet::errors::ParquetError| {
         DataFileError::invalid(
@@ -54,6 +65,18 @@ pub(super) fn read(path: &Path, _opts: &ReadOptions) -> Result<Table, DataFileEr
     let mut columns: Vec<Vec<f64>> = vec![Vec::new(); wanted.len()];
     for g in 0..reader.num_row_groups() {
         let group = reader.get_row_group(g).map_err(fail)?;
+        // `get_column_reader` asserts that these are not negative.
+        let damaged = group.metadata().columns().iter().any(|c| {
+            c.data_page_offset() < 0
+                || c.dictionary_page_offset().is_some_and(|o| o < 0)
+                || c.compressed_size() < 0
+        });
+        if damaged {
+            return Err(DataFileError::invalid(
+                path,
+                format!("row group {} has negative offsets or sizes: the file is damaged; write it again or export the data to CSV", g + 1),
+            ));
+        }
         for ((leaf, _), out) in wanted.iter().zip(columns.iter_mut()) {
             let max_def = schema.column(*leaf).max_def_level();
             let col = group.get_column_reader(*leaf).map_err(fail)?;
