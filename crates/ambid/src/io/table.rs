@@ -497,7 +497,7 @@ fn read_parquet(path: &Path, _opts: &ReadOptions) -> Result<Table, DataFileError
 
 /// Final checks shared by all readers: at least one column and one row, equal lengths.
 fn check_table(table: Table) -> Result<Table, DataFileError> {
-    if table.columns.is_empty() || table.len() == 0 {
+    if table.columns.is_empty() || table.is_empty() {
         return Err(DataFileError::no_data(
             &table.path,
             "no data rows; check that this is the right file",

@@ -41,6 +41,9 @@ impl Var {
     }
 }
 
+/// A named column.
+type Column = (String, Vec<f64>);
+
 fn shape_text(shape: &[usize]) -> String {
     if shape.is_empty() {
         return "scalar".into();
@@ -60,7 +63,7 @@ fn columns_of(
     shape: &[usize],
     order: Order,
     data: &[f64],
-) -> Result<Vec<(String, Vec<f64>)>, (bool, String)> {
+) -> Result<Vec<Column>, (bool, String)> {
     let total = shape.iter().try_fold(1usize, |a, &d| a.checked_mul(d));
     if total != Some(data.len()) {
         return Err((

@@ -137,7 +137,7 @@ fn read_array<R: Read>(mut reader: R, name: String, size: u64) -> Result<Var, St
     };
     let item = ts.size_field();
     // A damaged header must not make us allocate more than the file can hold.
-    let claimed = npy.len().checked_mul(item).unwrap_or(u64::MAX);
+    let claimed = npy.len().saturating_mul(item);
     if claimed > size {
         return Err(format!(
             "claims {} values of {item} bytes but the data are only {size} bytes; the file is truncated or damaged; {RESAVE}",
