@@ -415,6 +415,64 @@ mod tests {
         element(MI_MATRIX, &m)
     }
 
+    /// Big-endian element; `small` uses the small-element form (≤ 4 bytes inside the tag).
+    fn be_element(kind: u32, data: &[u8], small: bool) -> Vec<u8> {
+        let mut v = if small {
+            assert!(data.len() <= 4);
+            let mut v = ((data.len() as u32) << 16 | kind).to_be_bytes().to_vec();
+            v.extend_from_slice(data);
+            v
+        } else {
+            let mut v = kind.to_be_bytes().to_vec();
+            v.extend_from_slice(&(data.len() as u32).to_be_bytes());
+            v.extend_from_slice(data);
+            v
+        };
+        while v.len() % 8 != 0 {
+            v.push(0);
+        }
+        v
+    }
+
+    #[test]
+    fn reads_big_endian_small_elements_and_compressed_variables() {
+        use std::io::Write;
+        let mut m = be_element(MI_UINT32, &[0, 0, 0, MX_DOUBLE, 0, 0, 0, 0], false);
+        m.extend(be_element(MI_INT32, &[0, 0, 0, 4, 0, 0, 0, 1], false));
+        m.extend(be_element(MI_INT8, b"yb", true));
+        let vals: Vec<u8> = [-3i16, 0, 7, 300]
+            .iter()
+            .flat_map(|x| x.to_be_bytes())
+            .collect();
+        m.extend(be_element(MI_INT16, &vals, false));
+        let var = be_element(MI_MATRIX, &m, false);
+        let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+        z.write_all(&var).unwrap();
+        let packed = z.finish().unwrap();
+        let mut f = b"MATLAB 5.0 MAT-file, big endian".to_vec();
+        f.resize(124, b' ');
+        f.extend_from_slice(&[0x01, 0x00, b'M', b'I']);
+        f.extend_from_slice(&var);
+        // compressed elements are not padded
+        f.extend_from_slice(&MI_COMPRESSED.to_be_bytes());
+        f.extend_from_slice(&(packed.len() as u32).to_be_bytes());
+        f.extend_from_slice(&packed);
+        let vars = parse(&f).unwrap();
+        assert_eq!(vars.len(), 2);
+        for v in &vars {
+            match v {
+                Var::Numeric {
+                    name, shape, data, ..
+                } => {
+                    assert_eq!(name, "yb");
+                    assert_eq!(shape, &[4, 1]);
+                    assert_eq!(data, &[-3.0, 0.0, 7.0, 300.0]);
+                }
+                v => panic!("{v:?}"),
+            }
+        }
+    }
+
     #[test]
     fn reads_double_and_integer_stored_double() {
         let vals: Vec<u8> = [1.5f64, -2.0, 3.25]
