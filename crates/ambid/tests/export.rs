@@ -531,8 +531,10 @@ fn static_gain_exports_empty_matrices() {
     );
     assert!(text.contains("idss(A, B, C, D, K, zeros(0, 1), Ts,"));
     let bytes = npz_bytes(model, &ss_names()).unwrap();
-    let mut npz = npyz::npz::NpzArchive::new(std::io::Cursor::new(bytes)).unwrap();
-    let b = npz.by_name("B").unwrap().unwrap();
+    let mut zip = zip::ZipArchive::new(std::io::Cursor::new(bytes)).unwrap();
+    let mut buf = Vec::new();
+    std::io::Read::read_to_end(&mut zip.by_name("B.npy").unwrap(), &mut buf).unwrap();
+    let b = npyz::NpyFile::new(std::io::Cursor::new(buf)).unwrap();
     assert_eq!(b.shape(), &[0, 1]);
     assert!(b.into_vec::<f64>().unwrap().is_empty());
 }

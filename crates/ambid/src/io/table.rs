@@ -1,8 +1,18 @@
 //! Reading recorded data files into named numeric columns: CSV and whitespace-separated text,
 //! NumPy `.npy`/`.npz`, MATLAB `.mat` (v5) and Parquet (cargo feature `parquet`).
 //!
-//! SKELETON: the interface is fixed; the readers are being written.
+//! [`read_table`] is the one entry point; it picks the reader from [`ReadOptions::format`] or the
+//! file extension and returns a [`Table`] of equally long `f64` columns. The rules (delimiter and
+//! header detection, column naming, errors) are described in `docs/data-files.md`.
 
+mod arrays;
+mod mat;
+mod npy;
+#[cfg(feature = "parquet")]
+mod parquet;
+mod text;
+
+use std::fmt;
 use std::path::{Path, PathBuf};
 
 /// File formats [`read_table`] understands.
@@ -20,12 +30,99 @@ pub enum Format {
     Parquet,
 }
 
+impl Format {
+    /// The format a file extension stands for (case-insensitive, without the dot): `csv`, `txt`,
+    /// `dat`, `tsv` → [`Format::Text`], `npy`, `npz`, `mat`, `parquet`/`pq`. `None` otherwise.
+    ///
+    /// ```
+    /// use ambid::io::table::Format;
+    /// assert_eq!(Format::from_extension("CSV"), Some(Format::Text));
+    /// assert_eq!(Format::from_extension("mat"), Some(Format::Mat));
+    /// assert_eq!(Format::from_extension("xlsx"), None);
+    /// ```
+    pub fn from_extension(ext: &str) -> Option<Format> {
+        match ext.to_ascii_lowercase().as_str() {
+            "csv" | "txt" | "dat" | "tsv" => Some(Format::Text),
+            "npy" => Some(Format::Npy),
+            "npz" => Some(Format::Npz),
+            "mat" => Some(Format::Mat),
+            "parquet" | "pq" => Some(Format::Parquet),
+            _ => None,
+        }
+    }
+
+    /// The format of a file: from its extension, else from its first bytes (NumPy, zip, MATLAB
+    /// and Parquet signatures; anything else is read as text).
+    fn detect(path: &Path) -> Result<Format, DataFileError> {
+        if let Some(f) = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .and_then(Format::from_extension)
+        {
+            return Ok(f);
+        }
+        let mut start = [0u8; 8];
+        let n = {
+            use std::io::Read;
+            let mut file = std::fs::File::open(path).map_err(|e| DataFileError::open(path, &e))?;
+            let mut n = 0;
+            while n < start.len() {
+                match file.read(&mut start[n..]) {
+                    Ok(0) => break,
+                    Ok(k) => n += k,
+                    Err(e) => return Err(DataFileError::open(path, &e)),
+                }
+            }
+            n
+        };
+        let start = &start[..n];
+        Ok(if start.starts_with(b"\x93NUMPY") {
+            Format::Npy
+        } else if start.starts_with(b"PK\x03\x04") || start.starts_with(b"PK\x05\x06") {
+            Format::Npz
+        } else if start.starts_with(b"MATLAB") {
+            Format::Mat
+        } else if start.starts_with(b"PAR1") {
+            Format::Parquet
+        } else {
+            Format::Text
+        })
+    }
+}
+
+impl fmt::Display for Format {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Format::Text => "text",
+            Format::Npy => "npy",
+            Format::Npz => "npz",
+            Format::Mat => "mat",
+            Format::Parquet => "parquet",
+        })
+    }
+}
+
+impl std::str::FromStr for Format {
+    type Err = String;
+
+    /// Parses `text` (also `csv`, `txt`, `dat`, `tsv`), `npy`, `npz`, `mat`, `parquet`.
+    fn from_str(s: &str) -> Result<Format, String> {
+        if s.eq_ignore_ascii_case("text") {
+            return Ok(Format::Text);
+        }
+        Format::from_extension(s).ok_or_else(|| {
+            format!("unknown data-file format `{s}`; use one of text, csv, npy, npz, mat, parquet")
+        })
+    }
+}
+
 /// How to read a file. Everything is optional; the defaults detect.
 #[derive(Debug, Clone, Default)]
 pub struct ReadOptions {
     /// Format; `None` decides from the extension (`.csv`, `.txt`, `.dat`, `.tsv` → text).
     pub format: Option<Format>,
-    /// Text: the delimiter; `None` detects it from the first data lines.
+    /// Text: the delimiter; `None` detects it from the first data lines. `' '` means runs of
+    /// whitespace.
     pub delimiter: Option<char>,
     /// Text: whether the first non-comment line is a header; `None` detects it (non-numeric cells).
     pub header: Option<bool>,
@@ -42,6 +139,40 @@ pub enum ColumnRef {
     Index(usize),
 }
 
+impl ColumnRef {
+    /// `"#3"` → `Index(3)`; anything else (also `"#x"`) → `Name`, with surrounding whitespace
+    /// removed.
+    ///
+    /// ```
+    /// use ambid::io::table::ColumnRef;
+    /// assert_eq!(ColumnRef::parse("#3"), ColumnRef::Index(3));
+    /// assert_eq!(ColumnRef::parse("y_mm"), ColumnRef::Name("y_mm".into()));
+    /// assert_eq!(ColumnRef::parse("#3").to_string(), "#3");
+    /// ```
+    pub fn parse(s: &str) -> ColumnRef {
+        let s = s.trim();
+        if let Some(k) = s.strip_prefix('#').and_then(|d| d.parse::<usize>().ok()) {
+            return ColumnRef::Index(k);
+        }
+        ColumnRef::Name(s.to_string())
+    }
+}
+
+impl fmt::Display for ColumnRef {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ColumnRef::Name(n) => f.write_str(n),
+            ColumnRef::Index(k) => write!(f, "#{k}"),
+        }
+    }
+}
+
+impl From<&str> for ColumnRef {
+    fn from(s: &str) -> ColumnRef {
+        ColumnRef::parse(s)
+    }
+}
+
 /// Named numeric columns read from one file. Without a header, text columns are named
 /// `col1`, `col2`, …; a 2-D `.mat`/`.npz`/`.npy` variable `v` with k columns gives `v1` … `vk`
 /// (a 1-D variable keeps its name `v`).
@@ -53,6 +184,146 @@ pub struct Table {
     pub names: Vec<String>,
     /// Columns (all of the same length).
     pub columns: Vec<Vec<f64>>,
+}
+
+impl Table {
+    /// Number of rows (samples); 0 for a table without columns.
+    pub fn len(&self) -> usize {
+        self.columns.first().map_or(0, Vec::len)
+    }
+
+    /// Whether the table has no rows.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Position (0-based) of a column; the error lists the available names.
+    pub fn index_of(&self, c: &ColumnRef) -> Result<usize, DataFileError> {
+        let found = match c {
+            ColumnRef::Name(n) => self.names.iter().position(|m| m == n),
+            ColumnRef::Index(k) => k.checked_sub(1).filter(|&i| i < self.columns.len()),
+        };
+        found.ok_or_else(|| DataFileError::MissingColumn {
+            path: self.path.clone(),
+            wanted: c.to_string(),
+            available: self.available_names(),
+        })
+    }
+
+    /// The values of a column; a missing column is an error listing the available names.
+    pub fn column(&self, c: &ColumnRef) -> Result<&[f64], DataFileError> {
+        let i = self.index_of(c)?;
+        self.columns
+            .get(i)
+            .map(Vec::as_slice)
+            .ok_or_else(|| DataFileError::MissingColumn {
+                path: self.path.clone(),
+                wanted: c.to_string(),
+                available: self.available_names(),
+            })
+    }
+
+    fn available_names(&self) -> String {
+        if self.names.is_empty() {
+            return "(none)".into();
+        }
+        self.names
+            .iter()
+            .enumerate()
+            .map(|(i, n)| format!("`{n}` (#{})", i + 1))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+
+    /// The sample time in seconds: from the time column `t` (checked to be strictly increasing
+    /// and uniform: every sample within 1e-6·Ts of the straight line from the first to the last
+    /// time), else `1/fs_hz`. With both given, the time column is checked and must agree with
+    /// `fs_hz` to 1e-6 relative. With neither, an error asks for one.
+    pub fn sample_time(
+        &self,
+        t: Option<&ColumnRef>,
+        fs_hz: Option<f64>,
+    ) -> Result<f64, DataFileError> {
+        let err = |message: String| DataFileError::SampleTime {
+            path: self.path.clone(),
+            message,
+        };
+        if let Some(fs) = fs_hz {
+            if !(fs.is_finite() && fs > 0.0) {
+                return Err(err(format!(
+                    "the sampling frequency fs = {fs} Hz is not a positive number; give fs in Hz, e.g. fs = 1000"
+                )));
+            }
+        }
+        let from_t = match t {
+            None => None,
+            Some(c) => Some(uniform_step(self.column(c)?, c).map_err(err)?),
+        };
+        match (from_t, fs_hz) {
+            (Some(ts), Some(fs)) => {
+                let ts_fs = 1.0 / fs;
+                if ((ts - ts_fs) / ts_fs).abs() > 1e-6 {
+                    return Err(err(format!(
+                        "the time column gives Ts = {ts:e} s but fs = {fs} Hz gives Ts = {ts_fs:e} s; give only one of them, or correct fs"
+                    )));
+                }
+                Ok(ts)
+            }
+            (Some(ts), None) => Ok(ts),
+            (None, Some(fs)) => Ok(1.0 / fs),
+            (None, None) => Err(err(
+                "no sample time: give the sampling frequency `fs` (Hz) or a time column `t`".into(),
+            )),
+        }
+    }
+}
+
+/// Sample time of a time column: strictly increasing and uniform to 1e-6 relative to Ts.
+fn uniform_step(t: &[f64], c: &ColumnRef) -> Result<f64, String> {
+    let n = t.len();
+    let (Some(&first), Some(&last)) = (t.first(), t.last()) else {
+        return Err(format!("the time column `{c}` is empty; give fs instead"));
+    };
+    if n < 2 {
+        return Err(format!(
+            "the time column `{c}` has only one sample, so it gives no sample time; give fs instead"
+        ));
+    }
+    if let Some(i) = t.iter().position(|v| !v.is_finite()) {
+        return Err(format!(
+            "the time column `{c}` has the non-finite value {} in row {}; fix the time column or give fs instead",
+            t[i],
+            i + 1
+        ));
+    }
+    if let Some(k) = t.windows(2).position(|w| w[1] <= w[0]) {
+        return Err(format!(
+            "the time column `{c}` is not strictly increasing: row {} has t = {} after t = {} in row {}; sort the data or give fs instead",
+            k + 2,
+            t[k + 1],
+            t[k],
+            k + 1
+        ));
+    }
+    let ts = (last - first) / (n - 1) as f64;
+    let tol = 1e-6 * ts;
+    let mut worst = (0usize, 0.0f64);
+    for (i, &v) in t.iter().enumerate() {
+        let dev = (v - (first + i as f64 * ts)).abs();
+        if dev > worst.1 {
+            worst = (i, dev);
+        }
+    }
+    if worst.1 > tol {
+        return Err(format!(
+            "the time column `{c}` is not uniformly sampled: row {} has t = {}, {:.3e} s ({:.2e}·Ts) off the uniform grid with Ts = {ts:e} s (allowed 1e-6·Ts); resample the data to a uniform grid or give fs if the time stamps are only rounded",
+            worst.0 + 1,
+            t[worst.0],
+            worst.1,
+            worst.1 / ts
+        ));
+    }
+    Ok(ts)
 }
 
 /// Why a data file could not be read. Every message names the file and what to do.
@@ -75,59 +346,295 @@ pub enum DataFileError {
         /// What is wrong and what to do.
         message: String,
     },
+    /// The file holds no data (empty, only comments, only a header, or no numeric variables).
+    #[error("{path}: {message}")]
+    NoData {
+        /// The file.
+        path: PathBuf,
+        /// What was found and what to do.
+        message: String,
+    },
+    /// A text row with a different number of fields than the header (or the first data row).
+    #[error("{path}: line {line} has {fields} fields, {reference} has {expected}; every row needs the same number of fields (check for a missing or extra delimiter, or give the delimiter explicitly)")]
+    RaggedRow {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number in the file.
+        line: usize,
+        /// Number of fields found on that line.
+        fields: usize,
+        /// Number of fields expected.
+        expected: usize,
+        /// What the expectation comes from: "the header" or "line 3 (the first data line)".
+        reference: String,
+    },
+    /// A text cell that is not a number.
+    #[error("{path}: line {line}, column `{column}`: cannot read `{cell}` as a number; fix the cell, or comment the line out with `#`")]
+    NotANumber {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number in the file.
+        line: usize,
+        /// Column name (header name or `colK`).
+        column: String,
+        /// The cell's text.
+        cell: String,
+    },
+    /// A column asked for is not in the file.
+    #[error("{path}: no column `{wanted}`; the file has {available}; use one of these names or `#k` for the k-th column")]
+    MissingColumn {
+        /// The file.
+        path: PathBuf,
+        /// The column asked for.
+        wanted: String,
+        /// The available columns, listed.
+        available: String,
+    },
+    /// Variables (or columns) of different lengths.
+    #[error("{path}: the signals have different lengths ({lengths}); all signals must have the same number of samples: select one variable with `variable`, or save signals of equal length")]
+    LengthMismatch {
+        /// The file.
+        path: PathBuf,
+        /// `name: length` for every variable.
+        lengths: String,
+    },
+    /// A MATLAB v7.3 (HDF5) file.
+    #[error("{path}: this is a MATLAB v7.3 MAT-file (HDF5), which ambid does not read; save it in MATLAB with `save(filename, 'var', '-v7')` or export the signals to CSV")]
+    MatV73 {
+        /// The file.
+        path: PathBuf,
+    },
+    /// A Parquet file, but ambid was built without the `parquet` feature.
+    #[error("{path}: reading Parquet files needs ambid built with the cargo feature `parquet`; rebuild with `cargo build --release --features parquet` (or `cargo install ... --features parquet`), or export the data to CSV")]
+    ParquetDisabled {
+        /// The file.
+        path: PathBuf,
+    },
+    /// No usable sample time (missing, non-uniform or non-increasing time column, bad `fs`).
+    #[error("{path}: {message}")]
+    SampleTime {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong and what to do.
+        message: String,
+    },
 }
 
-/// Reads a data file.
+impl DataFileError {
+    fn open(path: &Path, e: &std::io::Error) -> DataFileError {
+        DataFileError::Open {
+            path: path.to_path_buf(),
+            reason: e.to_string(),
+        }
+    }
+
+    fn invalid(path: &Path, message: impl Into<String>) -> DataFileError {
+        DataFileError::Invalid {
+            path: path.to_path_buf(),
+            message: message.into(),
+        }
+    }
+
+    fn no_data(path: &Path, message: impl Into<String>) -> DataFileError {
+        DataFileError::NoData {
+            path: path.to_path_buf(),
+            message: message.into(),
+        }
+    }
+}
+
+/// Reads a data file into named numeric columns.
+///
+/// The format comes from `opts.format`, else from the extension, else from the file's first
+/// bytes. Text is parsed with detected (or given) delimiter and header; `.npy`, `.npz` and `.mat`
+/// variables become columns (`v`, or `v1`…`vk` for a 2-D variable with k signals); Parquet reads
+/// the numeric columns. All columns of the result have the same length, at least 1.
+///
+/// ```
+/// use ambid::io::table::{read_table, ColumnRef, ReadOptions};
+///
+/// let dir = std::env::temp_dir().join(format!("ambid-doc-table-{}", std::process::id()));
+/// std::fs::create_dir_all(&dir)?;
+/// let path = dir.join("run.csv");
+/// std::fs::write(&path, "# step test\nt,u,y\n0.000,1,0.5\n0.001,1,0.7\n0.002,0,NaN\n")?;
+///
+/// let table = read_table(&path, &ReadOptions::default())?;
+/// assert_eq!(table.names, ["t", "u", "y"]);
+/// assert_eq!(table.len(), 3);
+/// assert_eq!(table.column(&ColumnRef::parse("u"))?, &[1.0, 1.0, 0.0]);
+/// assert!(table.column(&ColumnRef::parse("#3"))?[2].is_nan());
+/// let ts = table.sample_time(Some(&ColumnRef::parse("t")), None)?;
+/// assert!((ts - 0.001).abs() < 1e-12);
+/// # std::fs::remove_dir_all(&dir)?;
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub fn read_table(path: &Path, opts: &ReadOptions) -> Result<Table, DataFileError> {
-    let _ = opts;
-    Err(DataFileError::Invalid {
+    let format = match opts.format {
+        Some(f) => f,
+        None => Format::detect(path)?,
+    };
+    let table = match format {
+        Format::Text => text::read(path, opts)?,
+        Format::Npy => npy::read_npy(path, opts)?,
+        Format::Npz => npy::read_npz(path, opts)?,
+        Format::Mat => mat::read(path, opts)?,
+        Format::Parquet => read_parquet(path, opts)?,
+    };
+    check_table(table)
+}
+
+#[cfg(feature = "parquet")]
+fn read_parquet(path: &Path, opts: &ReadOptions) -> Result<Table, DataFileError> {
+    parquet::read(path, opts)
+}
+
+#[cfg(not(feature = "parquet"))]
+fn read_parquet(path: &Path, _opts: &ReadOptions) -> Result<Table, DataFileError> {
+    Err(DataFileError::ParquetDisabled {
         path: path.to_path_buf(),
-        message: "not implemented yet".into(),
     })
 }
 
-// TEMPORARY minimal methods so that the workflow compiles before the readers land.
-impl ColumnRef {
-    /// `"#3"` → position 3, anything else a name.
-    pub fn parse(s: &str) -> Self {
-        match s.strip_prefix('#').and_then(|k| k.parse().ok()) {
-            Some(k) => ColumnRef::Index(k),
-            None => ColumnRef::Name(s.to_string()),
-        }
+/// Final checks shared by all readers: at least one column and one row, equal lengths.
+fn check_table(table: Table) -> Result<Table, DataFileError> {
+    if table.columns.is_empty() || table.is_empty() {
+        return Err(DataFileError::no_data(
+            &table.path,
+            "no data rows; check that this is the right file",
+        ));
     }
+    let n = table.len();
+    if table.columns.iter().any(|c| c.len() != n) || table.names.len() != table.columns.len() {
+        let lengths = table
+            .names
+            .iter()
+            .zip(&table.columns)
+            .map(|(name, c)| format!("{name}: {}", c.len()))
+            .collect::<Vec<_>>()
+            .join(", ");
+        return Err(DataFileError::LengthMismatch {
+            path: table.path.clone(),
+            lengths,
+        });
+    }
+    Ok(table)
 }
 
-impl Table {
-    /// A column.
-    pub fn column(&self, c: &ColumnRef) -> Result<&[f64], DataFileError> {
-        let k = match c {
-            ColumnRef::Index(k) => k.checked_sub(1),
-            ColumnRef::Name(n) => self.names.iter().position(|x| x == n),
-        };
-        k.and_then(|k| self.columns.get(k))
-            .map(Vec::as_slice)
-            .ok_or_else(|| DataFileError::Invalid {
-                path: self.path.clone(),
-                message: format!("no column {c:?}"),
-            })
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn table(names: &[&str], columns: Vec<Vec<f64>>) -> Table {
+        Table {
+            path: PathBuf::from("mem.csv"),
+            names: names.iter().map(|s| s.to_string()).collect(),
+            columns,
+        }
     }
 
-    /// The sample time.
-    pub fn sample_time(
-        &self,
-        t: Option<&ColumnRef>,
-        fs_hz: Option<f64>,
-    ) -> Result<f64, DataFileError> {
-        match (t, fs_hz) {
-            (_, Some(fs)) => Ok(1.0 / fs),
-            (Some(c), None) => {
-                let t = self.column(c)?;
-                Ok((t[t.len() - 1] - t[0]) / (t.len() - 1) as f64)
-            }
-            _ => Err(DataFileError::Invalid {
-                path: self.path.clone(),
-                message: "give fs_hz or a time column".into(),
-            }),
+    #[test]
+    fn column_ref_parse_and_display() {
+        assert_eq!(ColumnRef::parse("#3"), ColumnRef::Index(3));
+        assert_eq!(ColumnRef::parse(" #12 "), ColumnRef::Index(12));
+        assert_eq!(ColumnRef::parse("#x"), ColumnRef::Name("#x".into()));
+        assert_eq!(ColumnRef::parse("y"), ColumnRef::Name("y".into()));
+        assert_eq!(ColumnRef::Index(2).to_string(), "#2");
+        assert_eq!(ColumnRef::Name("u_V".into()).to_string(), "u_V");
+    }
+
+    #[test]
+    fn format_from_str_and_extension() {
+        assert_eq!("csv".parse::<Format>(), Ok(Format::Text));
+        assert_eq!("TEXT".parse::<Format>(), Ok(Format::Text));
+        assert_eq!("pq".parse::<Format>(), Ok(Format::Parquet));
+        assert!("xlsx".parse::<Format>().is_err());
+        assert_eq!(Format::from_extension("Dat"), Some(Format::Text));
+    }
+
+    #[test]
+    fn column_lookup_and_missing_column_lists_names() {
+        let t = table(&["t", "u"], vec![vec![0.0, 1.0], vec![2.0, 3.0]]);
+        assert_eq!(t.len(), 2);
+        assert_eq!(t.column(&ColumnRef::parse("u")).unwrap(), &[2.0, 3.0]);
+        assert_eq!(t.column(&ColumnRef::Index(1)).unwrap(), &[0.0, 1.0]);
+        let e = t.column(&ColumnRef::parse("y")).unwrap_err().to_string();
+        assert!(e.contains("mem.csv") && e.contains("no column `y`"), "{e}");
+        assert!(e.contains("`t` (#1), `u` (#2)"), "{e}");
+        let e = t.column(&ColumnRef::Index(3)).unwrap_err().to_string();
+        assert!(e.contains("no column `#3`"), "{e}");
+        assert!(t.column(&ColumnRef::Index(0)).is_err());
+    }
+
+    #[test]
+    fn sample_time_from_t_or_fs() {
+        let t: Vec<f64> = (0..1000).map(|k| k as f64 * 1e-3).collect();
+        let tab = table(&["t"], vec![t]);
+        let c = ColumnRef::parse("t");
+        assert!((tab.sample_time(Some(&c), None).unwrap() - 1e-3).abs() < 1e-15);
+        assert!((tab.sample_time(Some(&c), Some(1000.0)).unwrap() - 1e-3).abs() < 1e-15);
+        assert_eq!(tab.sample_time(None, Some(250.0)).unwrap(), 0.004);
+        let e = tab.sample_time(None, None).unwrap_err().to_string();
+        assert!(e.contains("`fs`") && e.contains("`t`"), "{e}");
+        let e = tab
+            .sample_time(Some(&c), Some(500.0))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("fs = 500"), "{e}");
+        assert!(tab.sample_time(None, Some(0.0)).is_err());
+        assert!(tab.sample_time(None, Some(f64::NAN)).is_err());
+    }
+
+    #[test]
+    fn sample_time_rejects_bad_time_columns() {
+        let c = ColumnRef::parse("t");
+        let tab = table(&["t"], vec![vec![0.0, 0.1, 0.2, 0.2, 0.4]]);
+        let e = tab.sample_time(Some(&c), None).unwrap_err().to_string();
+        assert!(
+            e.contains("not strictly increasing") && e.contains("row 4"),
+            "{e}"
+        );
+        let tab = table(&["t"], vec![vec![0.0, 0.1, 0.25, 0.3, 0.4]]);
+        let e = tab.sample_time(Some(&c), None).unwrap_err().to_string();
+        assert!(
+            e.contains("not uniformly sampled") && e.contains("row 3"),
+            "{e}"
+        );
+        let tab = table(&["t"], vec![vec![0.0, f64::NAN, 0.2]]);
+        assert!(tab.sample_time(Some(&c), None).is_err());
+        let tab = table(&["t"], vec![vec![0.0]]);
+        assert!(tab.sample_time(Some(&c), None).is_err());
+        // rounding far below 1e-6 Ts is fine
+        let t: Vec<f64> = (0..100)
+            .map(|k| (k as f64 * 0.1 * 1e9).round() / 1e9)
+            .collect();
+        let tab = table(&["t"], vec![t]);
+        assert!(tab.sample_time(Some(&c), None).is_ok());
+    }
+
+    #[test]
+    fn check_table_reports_lengths() {
+        let t = table(&["a", "b"], vec![vec![1.0; 5], vec![1.0; 4]]);
+        let e = check_table(t).unwrap_err().to_string();
+        assert!(e.contains("a: 5, b: 4"), "{e}");
+        let t = table(&[], vec![]);
+        assert!(matches!(check_table(t), Err(DataFileError::NoData { .. })));
+    }
+
+    #[test]
+    fn parquet_without_feature_says_how_to_enable_it() {
+        if cfg!(feature = "parquet") {
+            return;
         }
+        let opts = ReadOptions {
+            format: Some(Format::Parquet),
+            ..ReadOptions::default()
+        };
+        let e = read_table(Path::new("x.parquet"), &opts)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("x.parquet") && e.contains("--features parquet"),
+            "{e}"
+        );
     }
 }

@@ -1,0 +1,515 @@
+//! Delimited text: CSV, semicolon- or tab-separated, or columns separated by runs of whitespace.
+//!
+//! * Blank lines and lines starting with `#` or `%` (after leading whitespace) are skipped.
+//! * Delimiter (unless given): the first of tab, `;`, `,`, whitespace that splits the first data
+//!   lines into the same number (≥ 2) of fields.
+//! * Header (unless told): the first line is a header if one of its cells is not a number.
+//! * Cells may be quoted (`"V1"`); empty cells are NaN. A trailing delimiter on every line (an
+//!   extra empty last column without a header name) is ignored.
+//! * Numbers: anything Rust's `f64` parser accepts (`1e-3`, `NaN`, `nan`, `Inf`, `-inf`), also
+//!   Fortran exponents (`1.0D-3`).
+
+use std::borrow::Cow;
+use std::path::Path;
+
+use super::{DataFileError, ReadOptions, Table};
+
+/// How a line is split into fields.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Delim {
+    /// A single character (`,`, `;`, tab, …).
+    Char(char),
+    /// Runs of spaces and tabs.
+    Whitespace,
+    /// The whole line is one field (single-column files).
+    None,
+}
+
+/// How many lines the delimiter detection looks at.
+const SNIFF_LINES: usize = 20;
+
+pub(super) fn read(path: &Path, opts: &ReadOptions) -> Result<Table, DataFileError> {
+    let bytes = std::fs::read(path).map_err(|e| DataFileError::open(path, &e))?;
+    parse(path, &bytes, opts)
+}
+
+/// Parses text `bytes` read from `path` (kept separate from I/O for tests).
+fn parse<'a>(path: &Path, bytes: &'a [u8], opts: &ReadOptions) -> Result<Table, DataFileError> {
+    let text = match std::str::from_utf8(bytes) {
+        Ok(t) => t,
+        Err(e) => {
+            let line = 1 + bytes
+                .get(..e.valid_up_to())
+                .map_or(0, |b| b.iter().filter(|&&c| c == b'\n').count());
+            return Err(DataFileError::invalid(
+                path,
+                format!(
+                    "line {line} is not UTF-8 text; if this is a binary file give its format (npy, npz, mat, parquet) or fix the file's extension"
+                ),
+            ));
+        }
+    };
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    // (1-based line number, line without the line ending) of every content line.
+    let lines: Vec<(usize, &str)> = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| (i + 1, l.strip_suffix('\r').unwrap_or(l)))
+        .filter(|(_, l)| {
+            let t = l.trim();
+            !(t.is_empty() || t.starts_with('#') || t.starts_with('%'))
+        })
+        .collect();
+    let Some(&(first_no, first_line)) = lines.first() else {
+        return Err(DataFileError::no_data(
+            path,
+            if text.trim().is_empty() {
+                "the file is empty; check that this is the right file".to_string()
+            } else {
+                "the file has only comment and blank lines, no data; check that this is the right file"
+                    .to_string()
+            },
+        ));
+    };
+
+    let delim = match opts.delimiter {
+        Some(' ') => Delim::Whitespace,
+        Some(c) => Delim::Char(c),
+        None => detect_delimiter(&lines),
+    };
+    let split_at = |no: usize, line: &'a str| split_line(path, no, line, delim);
+
+    let first = split_at(first_no, first_line)?;
+    let has_header = match opts.header {
+        Some(h) => h,
+        None => first
+            .iter()
+            .any(|c| !c.is_empty() && parse_number(c).is_none()),
+    };
+    let (mut names, data_lines, reference) = if has_header {
+        let names: Vec<String> = first.iter().map(|c| c.to_string()).collect();
+        (
+            Some(names),
+            lines.get(1..).unwrap_or(&[]),
+            "the header".to_string(),
+        )
+    } else {
+        (
+            None,
+            &lines[..],
+            format!("line {first_no} (the first data line)"),
+        )
+    };
+    let Some(&(ref_no, ref_line)) = data_lines.first() else {
+        return Err(DataFileError::no_data(
+            path,
+            format!("there are no data rows after the header on line {first_no}; check that this is the right file"),
+        ));
+    };
+    let width = match &names {
+        Some(n) => n.len(),
+        None => split_at(ref_no, ref_line)?.len(),
+    };
+    let column_name = |names: &Option<Vec<String>>, j: usize| -> String {
+        names
+            .as_ref()
+            .and_then(|n| n.get(j))
+            .filter(|s| !s.is_empty())
+            .cloned()
+            .unwrap_or_else(|| format!("col{}", j + 1))
+    };
+
+    let mut columns: Vec<Vec<f64>> = vec![Vec::with_capacity(data_lines.len()); width];
+    // Whether every cell of a column is empty so far.
+    let mut all_empty = vec![true; width];
+    for &(no, line) in data_lines {
+        let mut cells = split_at(no, line)?;
+        // Tolerate one extra trailing empty field (a trailing delimiter).
+        if cells.len() == width + 1 && cells.last().is_some_and(|c| c.is_empty()) {
+            cells.pop();
+        }
+        if cells.len() != width {
+            return Err(DataFileError::RaggedRow {
+                path: path.to_path_buf(),
+                line: no,
+                fields: cells.len(),
+                expected: width,
+                reference: reference.clone(),
+            });
+        }
+        for (j, cell) in cells.iter().enumerate() {
+            let v = if cell.is_empty() {
+                f64::NAN
+            } else {
+                match parse_number(cell) {
+                    Some(v) => {
+                        if let Some(e) = all_empty.get_mut(j) {
+                            *e = false;
+                        }
+                        v
+                    }
+                    None => {
+                        return Err(DataFileError::NotANumber {
+                            path: path.to_path_buf(),
+                            line: no,
+                            column: column_name(&names, j),
+                            cell: cell.to_string(),
+                        })
+                    }
+                }
+            };
+            if let Some(c) = columns.get_mut(j) {
+                c.push(v);
+            }
+        }
+    }
+
+    // A trailing delimiter on every line gives a last column without name and without values.
+    let unnamed_last = names
+        .as_ref()
+        .is_none_or(|n| n.last().is_some_and(|s| s.is_empty()));
+    if width > 1 && unnamed_last && all_empty.last() == Some(&true) {
+        columns.pop();
+        if let Some(n) = names.as_mut() {
+            n.pop();
+        }
+    }
+    let names = unique_names((0..columns.len()).map(|j| column_name(&names, j)).collect());
+    Ok(Table {
+        path: path.to_path_buf(),
+        names,
+        columns,
+    })
+}
+
+/// [`split`] with the error naming the file and line.
+fn split_line<'a>(
+    path: &Path,
+    no: usize,
+    line: &'a str,
+    delim: Delim,
+) -> Result<Vec<Cow<'a, str>>, DataFileError> {
+    split(line, delim).map_err(|m| DataFileError::invalid(path, format!("line {no}: {m}")))
+}
+
+/// Makes duplicate names unique by appending `_2`, `_3`, ….
+fn unique_names(names: Vec<String>) -> Vec<String> {
+    let mut out: Vec<String> = Vec::with_capacity(names.len());
+    for n in names {
+        let mut candidate = n.clone();
+        let mut k = 2;
+        while out.contains(&candidate) {
+            candidate = format!("{n}_{k}");
+            k += 1;
+        }
+        out.push(candidate);
+    }
+    out
+}
+
+/// Reads one cell as a number (`None` if it is not one).
+fn parse_number(cell: &str) -> Option<f64> {
+    let s = cell.trim();
+    if let Ok(v) = s.parse::<f64>() {
+        return Some(v);
+    }
+    // Fortran-style exponent: 1.0D-03.
+    if s.contains(['d', 'D']) && s.bytes().any(|b| b.is_ascii_digit()) {
+        return s.replace(['d', 'D'], "e").parse::<f64>().ok();
+    }
+    None
+}
+
+/// The delimiter that gives the same number (≥ 2) of fields on the first data lines; tried in
+/// the order tab, `;`, `,`, whitespace. If none does on all lines, the first line (a header may
+/// be spelt differently) is left out; if still none, a file whose lines are single fields is
+/// one column, and otherwise the candidate with the most fields on the second line is taken
+/// (the row check then reports the offending line).
+fn detect_delimiter(lines: &[(usize, &str)]) -> Delim {
+    let candidates = [
+        Delim::Char('\t'),
+        Delim::Char(';'),
+        Delim::Char(','),
+        Delim::Whitespace,
+    ];
+    let sample: Vec<&str> = lines.iter().take(SNIFF_LINES).map(|(_, l)| *l).collect();
+    let consistent = |d: Delim, ls: &[&str]| -> bool {
+        let mut counts = ls.iter().map(|l| split(l, d).map(|f| f.len()).unwrap_or(0));
+        match counts.next() {
+            Some(n) if n >= 2 => counts.all(|m| m == n),
+            _ => false,
+        }
+    };
+    for ls in [&sample[..], sample.get(1..).unwrap_or(&[])] {
+        if ls.is_empty() {
+            continue;
+        }
+        if let Some(d) = candidates.iter().copied().find(|&d| consistent(d, ls)) {
+            return d;
+        }
+    }
+    let probe = sample.get(1).or(sample.first()).copied().unwrap_or("");
+    let (best, n) = candidates
+        .iter()
+        .map(|&d| (d, split(probe, d).map(|f| f.len()).unwrap_or(0)))
+        .fold((Delim::None, 1), |acc, x| if x.1 > acc.1 { x } else { acc });
+    if n >= 2 {
+        best
+    } else {
+        Delim::None
+    }
+}
+
+/// Splits a line into trimmed, unquoted fields. Double quotes group a field (`""` inside
+/// quotes is a quote).
+fn split(line: &str, delim: Delim) -> Result<Vec<Cow<'_, str>>, String> {
+    match delim {
+        Delim::None => Ok(vec![unquote(line.trim())?]),
+        Delim::Whitespace => {
+            let mut out = Vec::new();
+            let mut rest = line.trim();
+            while !rest.is_empty() {
+                let end = if rest.starts_with('"') {
+                    closing_quote(rest)?
+                } else {
+                    rest.find(char::is_whitespace).unwrap_or(rest.len())
+                };
+                let (field, tail) = rest.split_at(end);
+                out.push(unquote(field)?);
+                rest = tail.trim_start();
+            }
+            Ok(out)
+        }
+        Delim::Char(c) => {
+            // Tab-separated lines keep their tabs (an empty last cell is a cell).
+            let line = if c == '\t' {
+                line.trim_matches(|ch: char| ch.is_whitespace() && ch != '\t')
+            } else {
+                line.trim()
+            };
+            let mut out = Vec::new();
+            let mut rest = line;
+            loop {
+                let lead = rest.len() - rest.trim_start_matches([' ', '\t']).len();
+                let body = rest.get(lead..).unwrap_or("");
+                let end = if body.starts_with('"') && c != '"' {
+                    let q = closing_quote(body)?;
+                    lead + q
+                        + body
+                            .get(q..)
+                            .and_then(|t| t.find(c))
+                            .unwrap_or(body.len() - q)
+                } else {
+                    rest.find(c).unwrap_or(rest.len())
+                };
+                let (field, tail) = rest.split_at(end);
+                out.push(unquote(field.trim())?);
+                match tail.strip_prefix(c) {
+                    Some(t) => rest = t,
+                    None => break,
+                }
+            }
+            Ok(out)
+        }
+    }
+}
+
+/// Byte index just after the closing quote of a field starting with `"`.
+fn closing_quote(s: &str) -> Result<usize, String> {
+    let mut chars = s.char_indices().skip(1).peekable();
+    while let Some((i, ch)) = chars.next() {
+        if ch == '"' {
+            if chars.peek().is_some_and(|&(_, n)| n == '"') {
+                chars.next();
+                continue;
+            }
+            return Ok(i + 1);
+        }
+    }
+    Err("a quoted field is not closed (missing `\"`); close the quote or remove it".into())
+}
+
+/// Removes surrounding double quotes (and unescapes `""`), or returns the field as it is.
+fn unquote(field: &str) -> Result<Cow<'_, str>, String> {
+    match field.strip_prefix('"') {
+        None => Ok(Cow::Borrowed(field)),
+        Some(inner) => {
+            let end = closing_quote(field)?;
+            if end != field.len() {
+                return Err(format!(
+                    "text after a closing quote in `{field}`; quote the whole field or remove the quotes"
+                ));
+            }
+            let inner = inner.strip_suffix('"').unwrap_or(inner);
+            Ok(Cow::Owned(inner.replace("\"\"", "\"").trim().to_string()))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn read_str(s: &str) -> Result<Table, DataFileError> {
+        parse(Path::new("mem.csv"), s.as_bytes(), &ReadOptions::default())
+    }
+
+    #[test]
+    fn csv_with_header_comments_crlf_and_special_numbers() {
+        let t = read_str(
+            "% recorded 2024\r\n# another comment\r\n\r\n\"t\", \"u\" ,y\r\n0,1e-3,NaN\r\n1, -inf ,Inf\r\n2,+3.5,nan\r\n",
+        )
+        .unwrap();
+        assert_eq!(t.names, ["t", "u", "y"]);
+        assert_eq!(t.columns[0], [0.0, 1.0, 2.0]);
+        assert_eq!(t.columns[1][0], 1e-3);
+        assert_eq!(t.columns[1][1], f64::NEG_INFINITY);
+        assert_eq!(t.columns[1][2], 3.5);
+        assert!(t.columns[2][0].is_nan() && t.columns[2][2].is_nan());
+        assert_eq!(t.columns[2][1], f64::INFINITY);
+    }
+
+    #[test]
+    fn delimiters_are_detected() {
+        let t = read_str("a;b\n1,5;2\n3;4\n").unwrap_err().to_string();
+        assert!(t.contains("line 2, column `a`: cannot read `1,5`"), "{t}");
+        let t = read_str("a;b\n1;2\n3;4\n").unwrap();
+        assert_eq!(t.columns, vec![vec![1.0, 3.0], vec![2.0, 4.0]]);
+        let t = read_str("1\t2\t3\n4\t5\t6\n").unwrap();
+        assert_eq!(t.names, ["col1", "col2", "col3"]);
+        assert_eq!(t.columns[2], [3.0, 6.0]);
+        let t = read_str("   1.0e+00    -2   \n  3 4\n").unwrap();
+        assert_eq!(t.columns, vec![vec![1.0, 3.0], vec![-2.0, 4.0]]);
+        // header with spaces in names, data separated by whitespace runs
+        let t = read_str("\"time s\"  \"y m\"\n0 1\n1 2\n").unwrap();
+        assert_eq!(t.names, ["time s", "y m"]);
+        // single column, header with a space
+        let t = read_str("my signal\n1\n2\n").unwrap();
+        assert_eq!(t.names, ["my signal"]);
+        assert_eq!(t.columns, vec![vec![1.0, 2.0]]);
+        // given delimiter
+        let opts = ReadOptions {
+            delimiter: Some('|'),
+            ..ReadOptions::default()
+        };
+        let t = parse(Path::new("p.txt"), b"a|b\n1|2\n", &opts).unwrap();
+        assert_eq!(t.names, ["a", "b"]);
+    }
+
+    #[test]
+    fn trailing_delimiters_and_empty_cells() {
+        // nonlinearbenchmark style: quoted header, trailing comma, constant only in row 1
+        let t = read_str("\"u\",\"y\",\"Ts\",\n1,2,4,\n3,4,,\n").unwrap();
+        assert_eq!(t.names, ["u", "y", "Ts"]);
+        assert_eq!(t.columns[2][0], 4.0);
+        assert!(t.columns[2][1].is_nan());
+        // DaISy style: spaces and a trailing tab, no header
+        let t = read_str("   1.0e+00\t  2.0e+00\t\n   3.0e+00\t  4.0e+00\t\n").unwrap();
+        assert_eq!(t.names, ["col1", "col2"]);
+        assert_eq!(t.columns, vec![vec![1.0, 3.0], vec![2.0, 4.0]]);
+        // a row with one extra trailing delimiter is fine
+        let t = read_str("a,b\n1,2,\n3,4\n").unwrap();
+        assert_eq!(t.columns, vec![vec![1.0, 3.0], vec![2.0, 4.0]]);
+    }
+
+    #[test]
+    fn header_option_and_duplicate_names() {
+        let opts = ReadOptions {
+            header: Some(true),
+            ..ReadOptions::default()
+        };
+        let t = parse(Path::new("h.csv"), b"1,2\n3,4\n", &opts).unwrap();
+        assert_eq!(t.names, ["1", "2"]);
+        assert_eq!(t.len(), 1);
+        let t = read_str("x,x,,y\n1,2,3,4\n").unwrap();
+        assert_eq!(t.names, ["x", "x_2", "col3", "y"]);
+        let t = read_str("1.0D-03,2d0\n").unwrap();
+        assert_eq!(t.columns, vec![vec![1e-3], vec![2.0]]);
+    }
+
+    #[test]
+    fn errors_carry_file_line_numbers() {
+        let e = read_str("# c\nt,u,y\n0,1,2\n\n1,2\n").unwrap_err();
+        match &e {
+            DataFileError::RaggedRow {
+                line,
+                fields,
+                expected,
+                ..
+            } => assert_eq!((*line, *fields, *expected), (5, 2, 3)),
+            other => panic!("{other:?}"),
+        }
+        let m = e.to_string();
+        assert!(
+            m.starts_with("mem.csv: line 5 has 2 fields, the header has 3"),
+            "{m}"
+        );
+        let e = read_str("1 2 3\n% c\n4 5\n").unwrap_err().to_string();
+        assert!(
+            e.contains("line 3 has 2 fields, line 1 (the first data line) has 3"),
+            "{e}"
+        );
+        let e = read_str("t,u,y\n0,1,2\n1,2,abc\n").unwrap_err();
+        assert!(matches!(e, DataFileError::NotANumber { line: 3, .. }));
+        let e = e.to_string();
+        assert!(
+            e.contains("line 3, column `y`: cannot read `abc` as a number"),
+            "{e}"
+        );
+        let e = read_str("").unwrap_err();
+        assert!(matches!(e, DataFileError::NoData { .. }), "{e}");
+        assert!(e.to_string().contains("empty"));
+        let e = read_str("# only\n% comments\n\n").unwrap_err().to_string();
+        assert!(e.contains("only comment"), "{e}");
+        let e = read_str("t,u\n# nothing\n").unwrap_err().to_string();
+        assert!(e.contains("no data rows after the header on line 1"), "{e}");
+        let e = read_str("t,\"u\n1,2\n").unwrap_err().to_string();
+        assert!(e.contains("line 1") && e.contains("not closed"), "{e}");
+        let e = parse(
+            Path::new("b.csv"),
+            b"a,b\n1,2\n\xff\xfe,3\n",
+            &ReadOptions::default(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("line 3 is not UTF-8"), "{e}");
+    }
+
+    #[test]
+    fn splitter_never_panics_on_odd_lines() {
+        let odd = [
+            "",
+            "\"",
+            "\"\"",
+            ",,,",
+            "\"a\"\"b\",c",
+            " \" x \" , y",
+            "\t\t",
+            "é,ü;ß\tø",
+            "\"a\"b",
+            "a\"b,c",
+            "\u{feff}1,2",
+            ";;\"",
+            "  \"  ",
+        ];
+        for l in odd {
+            for d in [
+                Delim::Char(','),
+                Delim::Char(';'),
+                Delim::Char('\t'),
+                Delim::Char('"'),
+                Delim::Whitespace,
+                Delim::None,
+            ] {
+                let _ = split(l, d);
+            }
+            let _ = read_str(l);
+            let _ = read_str(&format!("{l}\n{l}\n"));
+        }
+        assert_eq!(
+            split("\"a\"\"b\",c", Delim::Char(',')).unwrap(),
+            ["a\"b", "c"]
+        );
+        assert_eq!(split("\"x,y\",2", Delim::Char(',')).unwrap(), ["x,y", "2"]);
+    }
+}
