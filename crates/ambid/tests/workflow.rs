@@ -227,7 +227,8 @@ fn the_workflow_runs_on_the_open_loop_robot_arm_and_skips_the_closed_loop_steps(
         assert_eq!(status(step), "done", "{step}");
     }
     // the README's numpy baseline: ARX(8,8,1) simulation fit 97.13 % and ARX(6,6,1) 94.74 %
-    // on the second half (its simulation starts from the measured outputs, ours from rest)
+    // on the second half (its simulation starts from the measured outputs, ours from the
+    // least-squares initial state, as MATLAB compare does)
     let f8 = num(table_row(sm, "ARX 8"), "validation_fit_pct");
     let f6 = num(table_row(sm, "ARX 6"), "validation_fit_pct");
     println!(

@@ -254,6 +254,67 @@ impl StateSpace {
         Ok(y.col_as_slice(0).to_vec())
     }
 
+    /// The initial state that best explains a measured SISO response (MATLAB `compare`'s
+    /// default, `InitialCondition = 'e'`): the least-squares solution of
+    ///
+    /// $$ y_k - y^{(0)}_k = C A^k x_0, \qquad k = 0, \dots, N-1, $$
+    ///
+    /// where $y^{(0)}$ is the response to `u` from rest. Meant for stable models (for an
+    /// unstable one the rows $C A^k$ grow without bound and the estimate is ill-conditioned).
+    ///
+    /// # Errors
+    /// A non-SISO or continuous model, `u` and `y` of different lengths or shorter than the order,
+    /// non-finite samples.
+    ///
+    /// # Example
+    /// ```
+    /// use ambid_core::lti::StateSpace;
+    /// use faer::mat;
+    /// let m = StateSpace::discrete(mat![[0.9]], mat![[1.0]], mat![[1.0]], mat![[0.0]], 1.0).unwrap();
+    /// let u = vec![0.0; 20];
+    /// let y = m.simulate_siso(&u, Some(&[2.0])).unwrap();
+    /// let x0 = m.estimate_initial_state(&u, &y).unwrap();
+    /// assert!((x0[0] - 2.0).abs() < 1e-12);
+    /// ```
+    pub fn estimate_initial_state(&self, u: &[f64], y: &[f64]) -> Result<Vec<f64>> {
+        self.require_siso("estimate_initial_state")?;
+        let n = self.order();
+        if u.len() != y.len() {
+            return Err(Error::DimensionMismatch {
+                context: "estimate_initial_state: u and y",
+                expected: format!("{} samples", u.len()),
+                got: format!("{} samples", y.len()),
+            });
+        }
+        if y.len() < n.max(1) {
+            return Err(Error::invalid(
+                "y",
+                format!("{} samples cannot determine {n} initial states", y.len()),
+            ));
+        }
+        crate::error::check_finite("y", y)?;
+        if n == 0 {
+            return Ok(Vec::new());
+        }
+        let y0 = self.simulate_siso(u, None)?;
+        let a = self.a();
+        let mut obs = Mat::<f64>::zeros(y.len(), n);
+        let mut row: Vec<f64> = (0..n).map(|j| self.c()[(0, j)]).collect();
+        let mut next = vec![0.0; n];
+        for k in 0..y.len() {
+            for j in 0..n {
+                obs[(k, j)] = row[j];
+            }
+            for (j, v) in next.iter_mut().enumerate() {
+                *v = (0..n).map(|i| row[i] * a[(i, j)]).sum();
+            }
+            std::mem::swap(&mut row, &mut next);
+        }
+        let r = Mat::from_fn(y.len(), 1, |k, _| y[k] - y0[k]);
+        let x0 = crate::linalg::lstsq(obs.as_ref(), r.as_ref())?;
+        Ok((0..n).map(|i| x0[(i, 0)]).collect())
+    }
+
     /// Simulates a discrete model from initial state `x0` (zeros if `None`): `u` is `N × m`
     /// (one row per sample), the result `N × p`.
     ///

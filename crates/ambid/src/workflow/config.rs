@@ -209,6 +209,10 @@ pub struct DataSection {
     pub skip_samples: usize,
     /// `mean` (default), `linear` or `none`.
     pub detrend: String,
+    /// Whose trend is removed: `estimation` (default: the estimation part's, from both parts),
+    /// `record` (the whole identification record's, before splitting) or `each` (every record
+    /// its own).
+    pub detrend_scope: String,
     /// Fraction used for estimation when there is no validation file.
     pub split: f64,
     /// Samples per excitation period (periodic excitation), if known.
@@ -243,6 +247,7 @@ impl Default for DataSection {
             scale: Default::default(),
             skip_samples: 0,
             detrend: "mean".into(),
+            detrend_scope: "estimation".into(),
             split: 0.5,
             period_samples: None,
             skip_periods: 1,
@@ -611,6 +616,11 @@ impl WorkflowConfig {
             "data.detrend",
             &self.data.detrend,
             &["mean", "linear", "none"],
+        )?;
+        one_of(
+            "data.detrend_scope",
+            &self.data.detrend_scope,
+            &["estimation", "record", "each"],
         )?;
         one_of(
             "models.weights",

@@ -166,6 +166,15 @@ pub fn prepare(cfg: &WorkflowConfig, base: &Path) -> Result<Prepared, Failure> {
                 Some(p) => Some(load_file(cfg, base, p, "validation")?),
                 None => None,
             };
+            let kind = match d.detrend.as_str() {
+                "linear" => Detrend::Linear,
+                "none" => Detrend::None,
+                _ => Detrend::Mean,
+            };
+            if d.detrend_scope == "record" {
+                // the whole identification record (before any split), like MATLAB's detrend(data)
+                detrend_pair(&mut ident, None, kind)?;
+            }
             if valid.is_none() {
                 let n = ident.len();
                 let k = ((n as f64) * d.split).floor() as usize;
@@ -179,13 +188,22 @@ pub fn prepare(cfg: &WorkflowConfig, base: &Path) -> Result<Prepared, Failure> {
                 ident = a;
                 valid = Some(b);
             }
-            // detrend: the estimation part's mean (or line) is removed from both records
-            let kind = match d.detrend.as_str() {
-                "linear" => Detrend::Linear,
-                "none" => Detrend::None,
-                _ => Detrend::Mean,
-            };
-            detrend_pair(&mut ident, valid.as_mut(), kind)?;
+            match d.detrend_scope.as_str() {
+                // the estimation part's mean (or line) is removed from both records
+                "estimation" => detrend_pair(&mut ident, valid.as_mut(), kind)?,
+                // each record by its own
+                "each" => {
+                    detrend_pair(&mut ident, None, kind)?;
+                    if let Some(v) = valid.as_mut() {
+                        detrend_pair(v, None, kind)?;
+                    }
+                }
+                _ => {
+                    if let Some(v) = valid.as_mut().filter(|_| d.validation.is_some()) {
+                        detrend_pair(v, None, kind)?;
+                    }
+                }
+            }
             let controller = match &d.controller {
                 Some(p) => {
                     let path = base.join(p);

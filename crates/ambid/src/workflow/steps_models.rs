@@ -16,6 +16,9 @@ use ambid_core::validate::compare::{compare_models, CompareSpec, FitStructure, V
 use ambid_core::validate::pz::{PzAnalysis, PzOptions};
 use serde_json::json;
 
+/// A time-domain fit: the model, its polynomial form, its parameter count and its Kalman gain.
+type TimeFit = (StateSpace, Option<PolyModel>, usize, Option<Vec<f64>>);
+
 /// One fitted candidate.
 #[derive(Debug, Clone)]
 pub struct Candidate {
@@ -58,6 +61,17 @@ fn median_rel(a: &[c64], b: &[c64]) -> f64 {
     e.get(e.len() / 2).copied().unwrap_or(f64::NAN)
 }
 
+/// Open-loop simulation of a stable model from the initial state that best explains the
+/// record (least squares, as MATLAB's `compare` does by default).
+pub fn simulate_from_estimated_state(
+    m: &StateSpace,
+    u: &[f64],
+    y: &[f64],
+) -> ambid_core::Result<Vec<f64>> {
+    let x0 = m.estimate_initial_state(u, y)?;
+    m.simulate_siso(u, Some(&x0))
+}
+
 /// Fit figure of a model on a record: simulation fit when the model is stable, else the one-step
 /// prediction fit where a predictor exists.
 fn time_fit(
@@ -73,7 +87,7 @@ fn time_fit(
         .map(|p| p.iter().all(|z| z.norm() < 1.0))
         .unwrap_or(false);
     if stable {
-        if let Ok(ys) = m.simulate_siso(u, None) {
+        if let Ok(ys) = simulate_from_estimated_state(m, u, y) {
             return (fit_percent(y, &ys).ok(), "simulation");
         }
     }
@@ -198,16 +212,11 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         let mut kinds = Vec::new();
         for s in &cfg.structures {
             for &n in &cfg.orders {
-                let fitted: anyhow::Result<(
-                    StateSpace,
-                    Option<PolyModel>,
-                    usize,
-                    Option<Vec<f64>>,
-                )> = (|| match s.as_str() {
+                let fitted: anyhow::Result<TimeFit> = (|| match s.as_str() {
                     "arx" => {
                         let f = arx(&rec.y, &[&rec.u], &ArxOrders::siso(n, n, cfg.nk), ts)?;
                         let p = f.model.to_poly(0)?;
-                        Ok((p.to_state_space()?, Some(p), f.params.len(), None))
+                        Ok((p.g()?.to_state_space()?, Some(p), f.params.len(), None))
                     }
                     "oe" => {
                         let opts = PemOptions::default().with_max_iterations(cfg.max_iterations)?;
@@ -220,7 +229,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                             &opts,
                         )?;
                         let p = f.model;
-                        Ok((p.to_state_space()?, Some(p), f.params.len(), None))
+                        Ok((p.g()?.to_state_space()?, Some(p), f.params.len(), None))
                     }
                     _ => {
                         let o = SsPemOptions {
@@ -369,7 +378,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         if domain == "frf" {
             format!("weights {}", cfg.weights)
         } else {
-            "validation fit on the independent record (simulation for stable models, else the one-step prediction)".into()
+            "validation fit on the independent record (simulation from the least-squares initial state for stable models, as MATLAB compare does; else the one-step prediction)".into()
         },
         match ctx.cfg.models.select.as_str() {
             "bic" => "the smallest BIC",
@@ -600,11 +609,10 @@ pub fn pole_zero(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     ))];
     blocks.push(Block::Table(Table {
         id: "pole_zero".into(),
-        caption: format!(
-            "Poles, zeros, unstable poles and near pole-zero cancellations (distance in the z-plane below \
+        caption: "Poles, zeros, unstable poles and near pole-zero cancellations (distance in the z-plane below \
              the tolerance of PzOptions::default()); a near cancellation means the order is higher than the \
              data support."
-        ),
+            .into(),
         header: vec![
             "model".into(),
             "poles".into(),

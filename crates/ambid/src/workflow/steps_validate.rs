@@ -275,7 +275,8 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                 .map(|p| p.iter().all(|z| z.norm() < 1.0))
                 .unwrap_or(false);
             let yhat = if stable {
-                model.simulate_siso(&val.u, None).map_err(computation)?
+                super::steps_models::simulate_from_estimated_state(&model, &val.u, &val.y)
+                    .map_err(computation)?
             } else if let Some(p) = &c.poly {
                 let (eps, _) = ambid_core::estimate::pem::prediction_errors(
                     p,
