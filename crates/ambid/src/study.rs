@@ -366,6 +366,116 @@ pub struct OperatingPointOutcome {
     pub truth_errors: Vec<f64>,
 }
 
+/// Deviation of every case's plant FRF from the first (nominal) one per band of
+/// [`DEVIATION_BANDS`]: median relative deviation, largest magnitude (dB) and phase deviation, and,
+/// with `truths` (one response per case on the same lines), the same median for the truths.
+///
+/// # Errors
+/// Fewer than two cases, cases on different frequency lines, or `truths` of the wrong shape.
+pub fn band_deviations(
+    names: &[String],
+    plants: &[Frd],
+    truths: Option<&[Vec<ambid_core::c64>]>,
+) -> Result<Vec<BandDeviation>> {
+    if plants.len() < 2 || names.len() != plants.len() {
+        bail!("an operating-point comparison needs the nominal case and at least one other, each named");
+    }
+    let nom = &plants[0];
+    let f = nom.f_hz();
+    for (n, p) in names.iter().zip(plants) {
+        if p.f_hz() != f {
+            bail!(
+                "operating point `{n}` has other frequency lines than nominal; use the same excitation \
+                 (and period) for every case"
+            );
+        }
+    }
+    if let Some(t) = truths {
+        if t.len() != plants.len() || t.iter().any(|v| v.len() != f.len()) {
+            bail!("one true response per case, on the plants' lines, is needed");
+        }
+    }
+    let mut deviations = Vec::new();
+    for (j, name) in names.iter().enumerate().skip(1) {
+        for &(bname, lo, hi) in &DEVIATION_BANDS {
+            let idx: Vec<usize> = (0..f.len()).filter(|&k| f[k] >= lo && f[k] <= hi).collect();
+            if idx.is_empty() {
+                continue;
+            }
+            let p = plants[j].values();
+            let pn = nom.values();
+            let rel = idx
+                .iter()
+                .map(|&k| (p[k] - pn[k]).norm() / pn[k].norm())
+                .collect();
+            let db = idx
+                .iter()
+                .map(|&k| (20.0 * (p[k].norm() / pn[k].norm()).log10()).abs())
+                .fold(0.0, f64::max);
+            let ph = idx
+                .iter()
+                .map(|&k| (p[k] / pn[k]).arg().to_degrees().abs())
+                .fold(0.0, f64::max);
+            let trel = truths.map(|t| {
+                median(
+                    idx.iter()
+                        .map(|&k| (t[j][k] - t[0][k]).norm() / t[0][k].norm())
+                        .collect(),
+                )
+            });
+            deviations.push(BandDeviation {
+                case: name.clone(),
+                band: bname.into(),
+                f_min_hz: lo,
+                f_max_hz: hi,
+                median_rel_dev: median(rel),
+                max_abs_db_dev: db,
+                max_abs_phase_dev_deg: ph,
+                truth_median_rel_dev: trel,
+            });
+        }
+    }
+    Ok(deviations)
+}
+
+/// The operating-point study on recorded experiments, one per case (the first is nominal): the
+/// plant FRF of each by [`analyze`] with `settings`, and their deviations from nominal
+/// ([`band_deviations`]). The cases' bias current and air gap are not known from files: they are
+/// NaN in the outcome, and `truth_errors` is empty.
+///
+/// # Errors
+/// Fewer than two records, and the errors of [`analyze`] and [`band_deviations`].
+pub fn operating_point_from_records(
+    names: &[String],
+    records: &[Record<'_>],
+    settings: &FrfSettings,
+) -> Result<OperatingPointOutcome> {
+    if records.len() < 2 || names.len() != records.len() {
+        bail!(
+            "an operating-point study needs the nominal record and at least one other, each named"
+        );
+    }
+    let mut plants = Vec::with_capacity(records.len());
+    for (n, r) in names.iter().zip(records) {
+        let a = analyze(r, settings, None).with_context(|| format!("operating point `{n}`"))?;
+        plants.push(a.frf.plant);
+    }
+    let deviations = band_deviations(names, &plants, None)?;
+    Ok(OperatingPointOutcome {
+        cases: names
+            .iter()
+            .map(|n| OperatingCase {
+                name: n.clone(),
+                bias_current_a: f64::NAN,
+                air_gap_m: f64::NAN,
+            })
+            .collect(),
+        plants,
+        deviations,
+        truth_errors: Vec::new(),
+    })
+}
+
 fn median(mut v: Vec<f64>) -> f64 {
     if v.is_empty() {
         return f64::NAN;
@@ -440,45 +550,8 @@ pub fn operating_point_on_twin(
         plants.push(a.frf.plant);
         truths.push(truth);
     }
-    let nom = &plants[0];
-    let f = nom.f_hz();
-    let mut deviations = Vec::new();
-    for (j, case) in cases.iter().enumerate().skip(1) {
-        for &(bname, lo, hi) in &DEVIATION_BANDS {
-            let idx: Vec<usize> = (0..f.len()).filter(|&k| f[k] >= lo && f[k] <= hi).collect();
-            if idx.is_empty() {
-                continue;
-            }
-            let p = plants[j].values();
-            let pn = nom.values();
-            let rel = idx
-                .iter()
-                .map(|&k| (p[k] - pn[k]).norm() / pn[k].norm())
-                .collect();
-            let db = idx
-                .iter()
-                .map(|&k| (20.0 * (p[k].norm() / pn[k].norm()).log10()).abs())
-                .fold(0.0, f64::max);
-            let ph = idx
-                .iter()
-                .map(|&k| (p[k] / pn[k]).arg().to_degrees().abs())
-                .fold(0.0, f64::max);
-            let trel = idx
-                .iter()
-                .map(|&k| (truths[j][k] - truths[0][k]).norm() / truths[0][k].norm())
-                .collect();
-            deviations.push(BandDeviation {
-                case: case.name.clone(),
-                band: bname.into(),
-                f_min_hz: lo,
-                f_max_hz: hi,
-                median_rel_dev: median(rel),
-                max_abs_db_dev: db,
-                max_abs_phase_dev_deg: ph,
-                truth_median_rel_dev: Some(median(trel)),
-            });
-        }
-    }
+    let names: Vec<String> = cases.iter().map(|c| c.name.clone()).collect();
+    let deviations = band_deviations(&names, &plants, Some(&truths))?;
     Ok(OperatingPointOutcome {
         cases: cases.to_vec(),
         plants,

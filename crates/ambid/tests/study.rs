@@ -118,3 +118,65 @@ fn operating_point_study_on_the_twin() {
     };
     assert!(low("bias+20%") > 2.0 * low("gap+10um"));
 }
+
+/// From recorded files the study gives exactly what the twin run gives for the same records: the
+/// same experiments (same seeds), analysed by `operating_point_from_records`, reproduce the twin
+/// study's deviations bit for bit (without the truth columns, which files cannot have).
+#[test]
+fn operating_point_study_from_records_matches_the_twin_run() {
+    use ambid::analysis::{FrfSettings, Record};
+    use ambid::experiment::{run, Experiment};
+    use ambid::study::operating_point_from_records;
+    let nominal = TwinConfig::default();
+    let cases: Vec<_> = seed_cases(&nominal).into_iter().take(3).collect();
+    let plan = ExcitationPlan::default();
+    let twin = operating_point_on_twin(&nominal, &cases, &plan, Mode::Linear, 5, 1, (10.0, 2000.0))
+        .unwrap();
+    let outs: Vec<_> = cases
+        .iter()
+        .enumerate()
+        .map(|(j, c)| {
+            let mut cfg = nominal.clone();
+            cfg.operating_point.bias_current_a = c.bias_current_a;
+            cfg.operating_point.air_gap_m = c.air_gap_m;
+            run(&Experiment {
+                twin: cfg,
+                excitation: plan.clone(),
+                mode: Mode::Linear,
+                seed: 5 + j as u64,
+                noise: true,
+                record_b: false,
+            })
+            .unwrap()
+        })
+        .collect();
+    let records: Vec<Record<'_>> = outs
+        .iter()
+        .map(|o| Record {
+            r: &o.record.r,
+            u: &o.record.u,
+            y: &o.record.y,
+            i: Some(&o.record.i),
+            fs: o.twin.fs(),
+        })
+        .collect();
+    let mut settings = FrfSettings::periodic(outs[0].excitation.period_samples, 1);
+    settings.band = (10.0, 2000.0);
+    settings.quality_band = (10.0, 2000.0);
+    settings.i_sat = Some(outs[0].twin.i_sat());
+    let names: Vec<String> = cases.iter().map(|c| c.name.clone()).collect();
+    let files = operating_point_from_records(&names, &records, &settings).unwrap();
+    assert_eq!(files.deviations.len(), twin.deviations.len());
+    for (a, b) in files.deviations.iter().zip(&twin.deviations) {
+        assert_eq!(
+            (a.case.as_str(), a.band.as_str()),
+            (b.case.as_str(), b.band.as_str())
+        );
+        assert_eq!(a.median_rel_dev, b.median_rel_dev);
+        assert_eq!(a.max_abs_db_dev, b.max_abs_db_dev);
+        assert!(a.truth_median_rel_dev.is_none());
+    }
+    assert!(files.truth_errors.is_empty());
+    // bad input: one record only
+    assert!(operating_point_from_records(&names[..1], &records[..1], &settings).is_err());
+}

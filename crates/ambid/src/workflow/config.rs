@@ -329,10 +329,12 @@ pub struct LevelFile {
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct OperatingSection {
-    /// Bias-current change ± \[%\].
+    /// Bias-current change ± \[%\] (twin).
     pub bias_pct: f64,
-    /// Air-gap change ± \[µm\].
+    /// Air-gap change ± \[µm\] (twin).
     pub air_gap_um: f64,
+    /// Recorded files, one per operating point, the nominal one first (source = "files").
+    pub files: Vec<CaseFile>,
 }
 
 impl Default for OperatingSection {
@@ -340,8 +342,19 @@ impl Default for OperatingSection {
         Self {
             bias_pct: 20.0,
             air_gap_um: 10.0,
+            files: Vec::new(),
         }
     }
+}
+
+/// One recorded operating point.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct CaseFile {
+    /// Label, e.g. `"bias-20%"`.
+    pub name: String,
+    /// The record (same columns as `[data]`).
+    pub path: PathBuf,
 }
 
 /// `[frf]`

@@ -476,14 +476,47 @@ pub fn amplitude(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
 }
 
 pub fn operating_point(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
-    let Some(t) = &ctx.twin else {
-        return Ok(StepStatus::Skipped(
-            "the operating-point study runs the twin at other bias currents and air gaps; on \
-             recorded data, run the workflow once per operating point"
-                .into(),
-        ));
-    };
     let cfg = ctx.cfg;
+    if ctx.twin.is_none() {
+        let files = &cfg.operating_point.files;
+        if files.len() < 2 {
+            return Ok(StepStatus::Skipped(
+                "an operating-point study on recorded data needs one record per operating point, \
+                 the nominal one first: [operating_point] files = [{ name = \"nominal\", path = \"…\" }, …]"
+                    .into(),
+            ));
+        }
+        let mut recs = Vec::new();
+        for f in files {
+            recs.push(super::data::load_file(cfg, &ctx.base, &f.path, &f.name)?);
+        }
+        let records: Vec<crate::analysis::Record<'_>> = recs
+            .iter()
+            .map(|r| crate::analysis::Record {
+                r: r.r.as_deref().unwrap_or(&r.u),
+                u: &r.u,
+                y: &r.y,
+                i: r.i.as_deref(),
+                fs: r.fs(),
+            })
+            .collect();
+        let settings = super::steps_frf::settings(ctx, recs[0].period, recs[0].len(), recs[0].fs());
+        let names: Vec<String> = files.iter().map(|f| f.name.clone()).collect();
+        let out = crate::study::operating_point_from_records(&names, &records, &settings)
+            .map_err(computation)?;
+        let caption = format!(
+            "Plant FRF of each recorded operating point ({}), {}–{} Hz.",
+            names.join(", "),
+            fmt(settings.band.0),
+            fmt(settings.band.1)
+        );
+        let blocks = operating_point_blocks(ctx, &out, caption);
+        ctx.section("operating-point", "Operating-point study", blocks);
+        return Ok(StepStatus::Done);
+    }
+    let Some(t) = &ctx.twin else {
+        return Ok(StepStatus::Skipped("no data source".into()));
+    };
     let (i0, g0) = (
         t.cfg.operating_point.bias_current_a,
         t.cfg.operating_point.air_gap_m,
@@ -515,6 +548,23 @@ pub fn operating_point(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     )
     .context("operating-point study")
     .map_err(computation)?;
+    let caption = format!(
+        "Period-averaged plant FRF (joint input-output) at nominal, bias current ±{b} % and air \
+         gap ±{g} µm, each from its own experiment at {} % of i_sat, {}–{} Hz.",
+        fmt(100.0 * frac),
+        fmt(band.0),
+        fmt(band.1)
+    );
+    let blocks = operating_point_blocks(ctx, &out, caption);
+    ctx.section("operating-point", "Operating-point study", blocks);
+    Ok(StepStatus::Done)
+}
+
+fn operating_point_blocks(
+    ctx: &mut Ctx<'_>,
+    out: &crate::study::OperatingPointOutcome,
+    caption: String,
+) -> Vec<Block> {
     let curves: Vec<Curve<'_>> = out
         .cases
         .iter()
@@ -532,13 +582,7 @@ pub fn operating_point(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     let fig = figure(
         "operating_point_frf",
         "Plant FRF at five operating points",
-        format!(
-            "Period-averaged plant FRF (joint input-output) at nominal, bias current ±{b} % and air \
-             gap ±{g} µm, each from its own experiment at {} % of i_sat, {}–{} Hz.",
-            fmt(100.0 * frac),
-            fmt(band.0),
-            fmt(band.1)
-        ),
+        caption,
         bode_panels(&curves, "|P| [dB re 1 m/A]"),
         1,
     );
@@ -565,7 +609,7 @@ pub fn operating_point(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             100.0 * e,
         );
     }
-    let blocks = vec![
+    vec![
         Block::Figure(fig),
         Block::Table(Table {
             id: "operating_point".into(),
@@ -586,7 +630,5 @@ pub fn operating_point(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             rows,
             highlight: None,
         }),
-    ];
-    ctx.section("operating-point", "Operating-point study", blocks);
-    Ok(StepStatus::Done)
+    ]
 }
