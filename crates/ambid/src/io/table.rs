@@ -236,9 +236,10 @@ impl Table {
     }
 
     /// The sample time in seconds: from the time column `t` (checked to be strictly increasing
-    /// and uniform: every sample within 1e-6·Ts of the straight line from the first to the last
-    /// time), else `1/fs_hz`. With both given, the time column is checked and must agree with
-    /// `fs_hz` to 1e-6 relative. With neither, an error asks for one.
+    /// and uniform: every sample within 1e-3·Ts of the straight line from the first to the last
+    /// time — time stamps written with few digits stay usable, real jitter is refused), else
+    /// `1/fs_hz`. With both given, the time column is checked and must agree with `fs_hz` to 1e-4
+    /// relative. With neither, an error asks for one.
     pub fn sample_time(
         &self,
         t: Option<&ColumnRef>,
@@ -262,7 +263,7 @@ impl Table {
         match (from_t, fs_hz) {
             (Some(ts), Some(fs)) => {
                 let ts_fs = 1.0 / fs;
-                if ((ts - ts_fs) / ts_fs).abs() > 1e-6 {
+                if ((ts - ts_fs) / ts_fs).abs() > 1e-4 {
                     return Err(err(format!(
                         "the time column gives Ts = {ts:e} s but fs = {fs} Hz gives Ts = {ts_fs:e} s; give only one of them, or correct fs"
                     )));
@@ -278,7 +279,7 @@ impl Table {
     }
 }
 
-/// Sample time of a time column: strictly increasing and uniform to 1e-6 relative to Ts.
+/// Sample time of a time column: strictly increasing and uniform to 1e-3·Ts.
 fn uniform_step(t: &[f64], c: &ColumnRef) -> Result<f64, String> {
     let n = t.len();
     let (Some(&first), Some(&last)) = (t.first(), t.last()) else {
@@ -306,7 +307,7 @@ fn uniform_step(t: &[f64], c: &ColumnRef) -> Result<f64, String> {
         ));
     }
     let ts = (last - first) / (n - 1) as f64;
-    let tol = 1e-6 * ts;
+    let tol = 1e-3 * ts;
     let mut worst = (0usize, 0.0f64);
     for (i, &v) in t.iter().enumerate() {
         let dev = (v - (first + i as f64 * ts)).abs();
@@ -316,7 +317,7 @@ fn uniform_step(t: &[f64], c: &ColumnRef) -> Result<f64, String> {
     }
     if worst.1 > tol {
         return Err(format!(
-            "the time column `{c}` is not uniformly sampled: row {} has t = {}, {:.3e} s ({:.2e}·Ts) off the uniform grid with Ts = {ts:e} s (allowed 1e-6·Ts); resample the data to a uniform grid or give fs if the time stamps are only rounded",
+            "the time column `{c}` is not uniformly sampled: row {} has t = {}, {:.3e} s ({:.2e}·Ts) off the uniform grid with Ts = {ts:e} s (allowed 1e-3·Ts); resample the data to a uniform grid or give fs if the time stamps are only rounded",
             worst.0 + 1,
             t[worst.0],
             worst.1,
@@ -603,7 +604,7 @@ mod tests {
         assert!(tab.sample_time(Some(&c), None).is_err());
         let tab = table(&["t"], vec![vec![0.0]]);
         assert!(tab.sample_time(Some(&c), None).is_err());
-        // rounding far below 1e-6 Ts is fine
+        // rounding below 1e-3 Ts is fine
         let t: Vec<f64> = (0..100)
             .map(|k| (k as f64 * 0.1 * 1e9).round() / 1e9)
             .collect();
