@@ -313,6 +313,21 @@ pub fn flatten_summary(v: &Value) -> Vec<(String, String)> {
 /// Runs the workflow. `base` is the directory relative paths in `cfg` are resolved against (the
 /// workflow file's directory).
 ///
+/// # Example
+/// ```
+/// use ambid::workflow::{run, Progress, Step, Verbosity, WorkflowConfig};
+/// use std::path::Path;
+/// // the excitation comparison alone, on the twin (the default source)
+/// let cfg = WorkflowConfig {
+///     steps: Some(vec![Step::Excitation]),
+///     ..WorkflowConfig::default()
+/// };
+/// let out = run(&cfg, Path::new("."), &mut Progress::new(Verbosity::Quiet)).unwrap();
+/// let crest = out.summary["excitation"]["compare"]["prbs"]["crest_factor"].as_f64().unwrap();
+/// assert!((crest - 1.0).abs() < 1e-9); // a PRBS is ±A: crest factor 1
+/// assert!(out.report.to_html().contains("Excitation design and comparison"));
+/// ```
+///
 /// # Errors
 /// A [`Failure`] with its class: input files missing or malformed, or a computation that failed.
 pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result<Outcome, Failure> {
