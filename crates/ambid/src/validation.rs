@@ -195,6 +195,17 @@ pub fn validate_closed_loop(
     })
 }
 
+/// The median over lines of $|\hat G_k - G_k| / |G_k|$ (NaN for no lines).
+pub fn median_relative_error(estimate: &[c64], reference: &[c64]) -> f64 {
+    let mut r: Vec<f64> = estimate
+        .iter()
+        .zip(reference)
+        .map(|(a, b)| (a - b).norm() / b.norm())
+        .collect();
+    r.sort_by(f64::total_cmp);
+    r.get(r.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
 /// How well a model's closed loop matches measured closed-loop FRFs.
 #[derive(Debug, Clone, Serialize)]
 pub struct Consistency {
@@ -228,15 +239,7 @@ pub fn consistency(
         model.freq_response_siso(f)?,
         controller.freq_response_siso(f)?,
     );
-    let med = |pred: &[c64], meas: &[c64]| {
-        let mut r: Vec<f64> = pred
-            .iter()
-            .zip(meas)
-            .map(|(a, b)| (a - b).norm() / b.norm())
-            .collect();
-        r.sort_by(f64::total_cmp);
-        r.get(r.len() / 2).copied().unwrap_or(f64::NAN)
-    };
+    let med = median_relative_error;
     let s_pred: Vec<c64> = gp
         .iter()
         .zip(&gc)

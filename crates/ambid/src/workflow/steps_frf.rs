@@ -79,18 +79,10 @@ pub fn ensure_valid(ctx: &mut Ctx<'_>) -> Result<(), Failure> {
         .map(|p| p / 100.0)
         .or(ctx.level_frac)
         .unwrap_or(0.1);
-    let v = &ctx.cfg.validation;
-    let e = &ctx.cfg.excitation;
     let p = ExcitationPlan {
-        kind: super::data::excitation_kind(&v.excitation),
-        amplitude_frac: frac,
-        prbs_order: e.prbs_order,
-        samples_per_bit: e.samples_per_bit,
-        periods: e.periods,
-        f_min_hz: e.f_min_hz,
-        f_max_hz: e.f_max_hz,
+        kind: super::data::excitation_kind(&ctx.cfg.validation.excitation),
         seed: ctx.cfg.seed + 7,
-        ..ExcitationPlan::default()
+        ..plan(ctx, frac)
     };
     if let Some(t) = &ctx.twin {
         let (rec, _) = t.record(p, ctx.cfg.seed + 300, "validation")?;

@@ -51,15 +51,7 @@ fn structure_name(s: FitStructure) -> &'static str {
     }
 }
 
-fn median_rel(a: &[c64], b: &[c64]) -> f64 {
-    let mut e: Vec<f64> = a
-        .iter()
-        .zip(b)
-        .map(|(x, t)| (x - t).norm() / t.norm())
-        .collect();
-    e.sort_by(f64::total_cmp);
-    e.get(e.len() / 2).copied().unwrap_or(f64::NAN)
-}
+use crate::validation::median_relative_error as median_rel;
 
 /// Open-loop simulation of a stable model from the initial state that best explains the
 /// record (least squares, as MATLAB's `compare` does by default).
