@@ -259,6 +259,9 @@ fn the_workflow_runs_on_the_matlab_maglev_file() {
     println!("maglev: ARX 3 one-step fit {f3:.2} %");
     assert!((f3 - 97.10).abs() < 0.3, "ARX 3 {f3}");
     assert_eq!(num(row, "unstable_poles"), 1.0);
+    // the chosen (unstable) model is validated by its one-step predictor on the second half
+    assert_eq!(sm["validation"]["kind"], "1-step prediction");
+    assert!(num(sm, "validation.fit_y_pct") >= f3 - 0.5);
     assert_summary_in_report(&out);
 }
 

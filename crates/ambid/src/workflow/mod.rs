@@ -176,6 +176,8 @@ pub struct ModelOut {
     pub ss: StateSpace,
     /// The polynomial form, when the model was fitted as one.
     pub poly: Option<PolyModel>,
+    /// Kalman gain of the innovations form, when the model has one (exported with it).
+    pub kalman: Option<Vec<f64>>,
     /// Metadata for the JSON (structure, order, fit figures).
     pub meta: Value,
 }
@@ -517,7 +519,7 @@ impl Outcome {
                 ),
                 None => (
                     state_space_json(&m.ss, "u", "y", m.meta.clone()),
-                    ExportModel::StateSpace(&m.ss, None),
+                    ExportModel::StateSpace(&m.ss, m.kalman.as_deref()),
                 ),
             };
             let text = serde_json::to_string_pretty(&json).map_err(|e| output(e.into()))?;

@@ -4,7 +4,7 @@
 use super::figures::{bode_panels, figure, lin, log, pz_panel, series, xy, Curve};
 use super::steps_frf::{ensure_ident, ensure_valid};
 use super::{computation, Ctx, Failure, ModelOut, StepStatus};
-use crate::fitting::{fit_state_space, poly_fits};
+use crate::fitting::fit_state_space;
 use crate::report::{format_number as fmt, Block, NoteKind, Style, Table};
 use ambid_core::c64;
 use ambid_core::estimate::arx::{arx, fit_percent, ArxOrders};
@@ -35,6 +35,8 @@ pub struct Candidate {
     pub unstable_poles: Option<usize>,
     pub truth_median_relative: Option<f64>,
     pub note: Option<String>,
+    /// Kalman gain of the innovations form (time-domain state-space fits).
+    pub kalman: Option<Vec<f64>>,
 }
 
 impl Candidate {
@@ -64,36 +66,47 @@ pub fn simulate_from_estimated_state(
     m.simulate_siso(u, Some(&x0))
 }
 
-/// Fit figure of a model on a record: simulation fit when the model is stable, else the one-step
-/// prediction fit where a predictor exists.
-fn time_fit(
-    structure: &str,
+/// How a model is compared with an open-loop (or controller-less) record.
+pub const SIMULATION: &str = "simulation from the least-squares initial state";
+/// The fallback for unstable models that have a predictor.
+pub const ONE_STEP: &str = "1-step prediction";
+
+/// The model's response on a record: the simulation from the least-squares initial state when
+/// the model is stable (MATLAB `compare`'s default), else the one-step prediction where a
+/// predictor exists (ARX's, or the innovations form with its Kalman gain); `None` otherwise.
+pub fn open_loop_response(
+    c: &Candidate,
     m: &StateSpace,
-    poly: Option<&PolyModel>,
-    kalman: Option<&[f64]>,
     y: &[f64],
     u: &[f64],
-) -> (Option<f64>, &'static str) {
+) -> Option<(Vec<f64>, &'static str)> {
     let stable = m
         .poles()
         .map(|p| p.iter().all(|z| z.norm() < 1.0))
         .unwrap_or(false);
     if stable {
         if let Ok(ys) = simulate_from_estimated_state(m, u, y) {
-            return (fit_percent(y, &ys).ok(), "simulation");
+            return Some((ys, SIMULATION));
         }
     }
-    match (structure, poly, kalman) {
-        ("arx", Some(p), _) => (poly_fits(p, y, u).ok().map(|f| f.0), "1-step prediction"),
+    match (c.structure, &c.poly, &c.kalman) {
+        ("arx", Some(p), _) => {
+            let (eps, _) = ambid_core::estimate::pem::prediction_errors(
+                p,
+                y,
+                u,
+                ambid_core::estimate::pem::Focus::Prediction,
+            )
+            .ok()?;
+            Some((y.iter().zip(&eps).map(|(y, e)| y - e).collect(), ONE_STEP))
+        }
         (_, _, Some(k)) => {
             let km = faer::Mat::from_fn(k.len(), 1, |i, _| k[i]);
-            let p = ambid_core::validate::predict::predict_k(m, km.as_ref(), y, u, 1);
-            (
-                p.ok().and_then(|p| fit_percent(y, &p).ok()),
-                "1-step prediction",
-            )
+            ambid_core::validate::predict::predict_k(m, km.as_ref(), y, u, 1)
+                .ok()
+                .map(|p| (p, ONE_STEP))
         }
-        _ => (None, "unstable: no predictor"),
+        _ => None,
     }
 }
 
@@ -119,7 +132,6 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     }
     let ts = rec.ts;
     let mut cands: Vec<Candidate> = Vec::new();
-    let mut kalman: Vec<Option<Vec<f64>>> = Vec::new();
     let truth_f = ctx.frf.as_ref().map(|a| a.frf.f_hz().to_vec());
     let truth = match (&ctx.twin, &truth_f) {
         (Some(t), Some(f)) => Some(t.twin.plant_frf(f).map_err(computation)?),
@@ -194,8 +206,8 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                 unstable_poles: r.unstable_poles,
                 truth_median_relative: truth_med,
                 note: r.note,
+                kalman: None,
             });
-            kalman.push(None);
         }
     } else {
         let Some(val) = ctx.valid.clone() else {
@@ -243,8 +255,26 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                 };
                 match fitted {
                     Ok((m, poly, np, k)) => {
-                        let (fit, kind) =
-                            time_fit(sname, &m, poly.as_ref(), k.as_deref(), &val.y, &val.u);
+                        let mut c = Candidate {
+                            structure: sname,
+                            order: n,
+                            model: None,
+                            poly,
+                            n_params: np,
+                            relative_rmse: None,
+                            median_relative: None,
+                            db_rmse: None,
+                            bic: None,
+                            validation_fit: None,
+                            unstable_poles: None,
+                            truth_median_relative: None,
+                            note: None,
+                            kalman: k,
+                        };
+                        let (fit, kind) = match open_loop_response(&c, &m, &val.y, &val.u) {
+                            Some((yhat, kind)) => (fit_percent(&val.y, &yhat).ok(), kind),
+                            None => (None, "unstable without a predictor: no fit"),
+                        };
                         kinds.push(kind);
                         let unstable = m
                             .poles()
@@ -263,26 +293,18 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                             }
                             _ => (None, None),
                         };
-                        cands.push(Candidate {
-                            structure: sname,
-                            order: n,
-                            truth_median_relative: truth.as_ref().and_then(|t| {
-                                m.freq_response_siso(truth_f.as_deref()?)
-                                    .ok()
-                                    .map(|g| median_rel(&g, t))
-                            }),
-                            model: Some(m),
-                            poly,
-                            n_params: np,
-                            relative_rmse: frf_err.0,
-                            median_relative: frf_err.1,
-                            db_rmse: None,
-                            bic: None,
-                            validation_fit: fit,
-                            unstable_poles: unstable,
-                            note: (kind != "simulation").then(|| format!("validation fit: {kind}")),
+                        c.truth_median_relative = truth.as_ref().and_then(|t| {
+                            m.freq_response_siso(truth_f.as_deref()?)
+                                .ok()
+                                .map(|g| median_rel(&g, t))
                         });
-                        kalman.push(k);
+                        c.model = Some(m);
+                        c.relative_rmse = frf_err.0;
+                        c.median_relative = frf_err.1;
+                        c.validation_fit = fit;
+                        c.unstable_poles = unstable;
+                        c.note = (kind != SIMULATION).then(|| format!("validation fit: {kind}"));
+                        cands.push(c);
                     }
                     Err(e) => {
                         cands.push(Candidate {
@@ -299,8 +321,8 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                             unstable_poles: None,
                             truth_median_relative: None,
                             note: Some(format!("{e:#}")),
+                            kalman: None,
                         });
-                        kalman.push(None);
                     }
                 }
             }
@@ -491,12 +513,14 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         }
     }
     // export every candidate
-    for (c, k) in cands.iter().zip(&kalman) {
+    for c in &cands {
+        let k = &c.kalman;
         if let Some(m) = &c.model {
             ctx.models.push(ModelOut {
                 name: format!("{}{}", c.structure, c.order),
                 ss: m.clone(),
                 poly: c.poly.clone(),
+                kalman: c.kalman.clone(),
                 meta: json!({
                     "structure": c.structure,
                     "order": c.order,

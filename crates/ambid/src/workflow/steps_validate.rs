@@ -270,31 +270,12 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             }
             // open loop: simulate (stable) or predict one step (unstable) on the validation record
             let c = &ctx.candidates[ch];
-            let stable = model
-                .poles()
-                .map(|p| p.iter().all(|z| z.norm() < 1.0))
-                .unwrap_or(false);
-            let yhat = if stable {
-                super::steps_models::simulate_from_estimated_state(&model, &val.u, &val.y)
-                    .map_err(computation)?
-            } else if let Some(p) = &c.poly {
-                let (eps, _) = ambid_core::estimate::pem::prediction_errors(
-                    p,
-                    &val.y,
-                    &val.u,
-                    ambid_core::estimate::pem::Focus::Prediction,
-                )
-                .map_err(computation)?;
-                val.y.iter().zip(&eps).map(|(y, e)| y - e).collect()
-            } else {
+            let Some((yhat, kind)) =
+                super::steps_models::open_loop_response(c, &model, &val.y, &val.u)
+            else {
                 return Ok(StepStatus::Skipped(format!(
                     "{label} is unstable and has no predictor: it cannot be validated in open loop"
                 )));
-            };
-            let kind = if stable {
-                "simulation"
-            } else {
-                "1-step prediction"
             };
             let fit = fit_percent(&val.y, &yhat).map_err(computation)?;
             ctx.put("validation.model", label.clone());
