@@ -321,3 +321,33 @@ fn bad_input_gives_typed_errors() {
         Err(Error::InvalidArgument { name: "fs", .. })
     ));
 }
+
+#[test]
+fn odd_record_lengths_and_band_edges_are_handled() {
+    // FIR y(t) = u(t) − 0.3 u(t−2) with a pre-record history: exact up to the polynomial error,
+    // on every line 1..⌊N/2⌋ including the shifted windows at both ends
+    let (n, fs) = (4095usize, 100.0);
+    let u = white(n, 31);
+    let y: Vec<f64> = (0..n)
+        .map(|t| u[t] - 0.3 * if t >= 2 { u[t - 2] } else { 1.0 })
+        .collect();
+    let est = lpm(&u, &[&y], fs, (0.0, fs), &LpmOptions::default()).unwrap();
+    assert_eq!(est.lines().len(), n / 2);
+    assert_eq!(est.lines()[0], 1);
+    assert_eq!(*est.lines().last().unwrap(), n / 2);
+    let g = est.frf(0).unwrap();
+    let worst = g
+        .f_hz()
+        .iter()
+        .zip(g.values())
+        .map(|(f, v)| {
+            let z2 = c64::cis(-4.0 * std::f64::consts::PI * f / fs);
+            (v - (1.0 - z2 * 0.3)).norm()
+        })
+        .fold(0.0f64, f64::max);
+    eprintln!(
+        "odd N, FIR: worst absolute error {worst:.2e} over {} lines",
+        g.len()
+    );
+    assert!(worst < 1e-6, "{worst}");
+}
