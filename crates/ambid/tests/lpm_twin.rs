@@ -150,10 +150,6 @@ fn lpm_plant_accuracy_vs_period_averaging_and_welch() {
         m_lpm < 3.5 * m_per,
         "LPM {m_lpm} vs period averaging {m_per}"
     );
-    assert!(
-        welch.iter().all(|w| w.1 < m_lpm),
-        "Welch beats LPM per bin here"
-    );
 }
 
 #[test]

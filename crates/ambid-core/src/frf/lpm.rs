@@ -35,7 +35,7 @@
 //! two-sided power spectral density times $f_s$). The variances stored in the returned [`Frd`]s are
 //! $\mathrm E|\hat G - G|^2$, as everywhere in `ambid`; with $q$ complex degrees of freedom the
 //! level-$\alpha$ confidence disc has the radius factor of
-//! [`band_radius_factor`](super::closed_loop::band_radius_factor)`(α, q)`.
+//! [`band_radius_factor`]`(α, q)`.
 //!
 //! # Closed loop
 //! [`lpm_closed_loop`] takes the excitation $r$ as the input and $[y, u]$ as the two outputs
