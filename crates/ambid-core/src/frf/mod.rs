@@ -1,6 +1,7 @@
 //! Nonparametric frequency-response estimation from (closed-loop) data.
 
 pub mod closed_loop;
+pub mod lpm;
 pub mod periodic;
 pub mod quality;
 pub mod resonance;

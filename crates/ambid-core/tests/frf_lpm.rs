@@ -1,0 +1,353 @@
+//! The Local Polynomial Method against independent truth: the exact response of known discrete
+//! systems (noise-free, with transients), FdiTools' LPM on a committed fixture, and the typed
+//! errors of bad input.
+
+use ambid_core::c64;
+use ambid_core::frf::lpm::{lpm, lpm_closed_loop, LpmOptions};
+use ambid_core::lti::TransferFunction;
+use ambid_core::Error;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+
+fn white(n: usize, seed: u64) -> Vec<f64> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    (0..n).map(|_| StandardNormal.sample(&mut rng)).collect()
+}
+
+fn percentile(x: &[f64], p: f64) -> f64 {
+    let mut v = x.to_vec();
+    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    v[((v.len() - 1) as f64 * p).round() as usize]
+}
+
+/// Lightly damped resonance (poles 0.995 e^{±j 0.3}) in series with a first-order lag (pole 0.9).
+fn system(ts: f64) -> TransferFunction {
+    let (rho, th) = (0.995f64, 0.3f64);
+    let a2 = [1.0, -2.0 * rho * th.cos(), rho * rho];
+    let den = [
+        a2[0],
+        a2[1] - 0.9 * a2[0],
+        a2[2] - 0.9 * a2[1],
+        -0.9 * a2[2],
+    ];
+    TransferFunction::new(vec![0.0, 0.02, 0.01], den.to_vec(), ts).unwrap()
+}
+
+/// DFT lines 0..=N/2 of a real record, unnormalised, by the naive sum (oracle-free ETFE).
+fn etfe(u: &[f64], y: &[f64], lines: &[usize]) -> Vec<c64> {
+    let n = u.len();
+    lines
+        .iter()
+        .map(|&k| {
+            let (mut su, mut sy) = (c64::new(0.0, 0.0), c64::new(0.0, 0.0));
+            for t in 0..n {
+                let z = c64::cis(-2.0 * std::f64::consts::PI * ((k * t) % n) as f64 / n as f64);
+                su += z * u[t];
+                sy += z * y[t];
+            }
+            sy / su
+        })
+        .collect()
+}
+
+#[test]
+fn noise_free_lpm_removes_the_transient_that_the_etfe_leaks() {
+    let (n, fs) = (1usize << 15, 1000.0);
+    let tf = system(1.0 / fs);
+    let ss = tf.to_state_space().unwrap();
+    let u = white(n, 7);
+    let x0: Vec<f64> = (0..ss.order()).map(|i| 3.0 * (i as f64 + 1.0)).collect();
+    for (label, x0) in [
+        ("zero initial state", None),
+        ("non-zero initial state", Some(&x0)),
+    ] {
+        let y = ss.simulate_siso(&u, x0.map(|v| v.as_slice())).unwrap();
+        let est = lpm(&u, &[&y], fs, (1.0, 499.0), &LpmOptions::default()).unwrap();
+        let g = est.frf(0).unwrap();
+        let truth = tf.freq_response(g.f_hz()).unwrap();
+        let err: Vec<f64> = g
+            .values()
+            .iter()
+            .zip(&truth)
+            .map(|(e, t)| (e - t).norm() / t.norm())
+            .collect();
+        // ETFE on every 37th line (the naive DFT is O(N) per line)
+        let sub: Vec<usize> = (0..est.lines().len()).step_by(37).collect();
+        let lines: Vec<usize> = sub.iter().map(|&i| est.lines()[i]).collect();
+        let e_etfe: Vec<f64> = etfe(&u, &y, &lines)
+            .iter()
+            .zip(sub.iter().map(|&i| truth[i]))
+            .map(|(e, t)| (e - t).norm() / t.norm())
+            .collect();
+        let e_lpm_sub: Vec<f64> = sub.iter().map(|&i| err[i]).collect();
+        let (med, p99, worst) = (
+            percentile(&err, 0.5),
+            percentile(&err, 0.99),
+            percentile(&err, 1.0),
+        );
+        let med_etfe = percentile(&e_etfe, 0.5);
+        eprintln!(
+            "{label}: LPM relative error median {med:.2e}, p99 {p99:.2e}, worst {worst:.2e} over {} lines; \
+             ETFE median {med_etfe:.2e} (LPM on the same lines {:.2e})",
+            err.len(),
+            percentile(&e_lpm_sub, 0.5)
+        );
+        assert!(med < 1e-6, "{label}: LPM median {med}");
+        assert!(p99 < 1e-4, "{label}: LPM p99 {p99}");
+        assert!(
+            med_etfe > 1e3 * percentile(&e_lpm_sub, 0.5),
+            "{label}: ETFE {med_etfe} vs LPM"
+        );
+        // the noise-free residual variance is tiny compared with |G|²
+        let v = g.variance().unwrap();
+        let rel_sd = percentile(
+            &v.iter()
+                .zip(&truth)
+                .map(|(v, t)| v.sqrt() / t.norm())
+                .collect::<Vec<_>>(),
+            0.5,
+        );
+        assert!(rel_sd < 1e-6, "{label}: relative std {rel_sd}");
+    }
+}
+
+#[test]
+fn noise_variance_and_simo_covariance_are_calibrated() {
+    // y0 = G u + e0, y1 = 0.5 e0 + e1 (correlated noise): Ĉ_V must match the true line covariance
+    let (n, fs) = (1usize << 14, 1000.0);
+    let tf = system(1.0 / fs);
+    let u = white(n, 11);
+    let e0 = white(n, 12);
+    let e1 = white(n, 13);
+    let (s0, s1) = (0.05, 0.02);
+    let gy = tf.simulate(&u).unwrap();
+    let y0: Vec<f64> = gy.iter().zip(&e0).map(|(g, e)| g + s0 * e).collect();
+    let y1: Vec<f64> = e0
+        .iter()
+        .zip(&e1)
+        .map(|(a, b)| 0.5 * s0 * a + s1 * b)
+        .collect();
+    let est = lpm(&u, &[&y0, &y1], fs, (1.0, 499.0), &LpmOptions::default()).unwrap();
+    let mean = |v: Vec<c64>| v.iter().sum::<c64>() / v.len() as f64;
+    let c00 = mean(est.noise_cov(0, 0).unwrap()).re;
+    let c11 = mean(est.noise_cov(1, 1).unwrap()).re;
+    let c01 = mean(est.noise_cov(0, 1).unwrap());
+    let (t00, t11, t01) = (s0 * s0, 0.25 * s0 * s0 + s1 * s1, 0.5 * s0 * s0);
+    eprintln!("Ĉ_V averaged over lines: {c00:.4e} (true {t00:.4e}), {c11:.4e} ({t11:.4e}), {c01:.4e} ({t01:.4e})");
+    assert!((c00 / t00 - 1.0).abs() < 0.03);
+    assert!((c11 / t11 - 1.0).abs() < 0.03);
+    assert!((c01.re / t01 - 1.0).abs() < 0.05 && c01.im.abs() < 0.05 * t01);
+    // |Ĝ − G|²/σ̂² averages to ≈ 1 · q/(q − 1) (σ̂² has q complex dof), and 95 % disc coverage
+    let g = est.frf(0).unwrap();
+    let truth = tf.freq_response(g.f_hz()).unwrap();
+    let sd = g.std().unwrap();
+    let factor = est.band_factor(0.95).unwrap();
+    let inside = g
+        .values()
+        .iter()
+        .zip(&truth)
+        .zip(&sd)
+        .filter(|((e, t), s)| (*e - *t).norm() <= factor * **s)
+        .count() as f64
+        / g.len() as f64;
+    eprintln!(
+        "95 % coverage of G over {} lines: {:.2} %",
+        g.len(),
+        100.0 * inside
+    );
+    assert!((0.93..=0.97).contains(&inside), "{inside}");
+}
+
+#[derive(serde::Deserialize)]
+struct Fixture {
+    fs: f64,
+    order: usize,
+    halfwidth: usize,
+    u: Vec<f64>,
+    y: Vec<Vec<f64>>,
+    f_hz: Vec<f64>,
+    g_re: Vec<Vec<f64>>,
+    g_im: Vec<Vec<f64>>,
+    g_std: Vec<Vec<f64>>,
+    t_re_unnormalised: Vec<Vec<f64>>,
+    t_im_unnormalised: Vec<Vec<f64>>,
+}
+
+#[test]
+fn matches_fditools_lpm_on_the_committed_fixture() {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/fixtures/lpm/fditools_simo.json"
+    );
+    let fx: Fixture = serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let opts = LpmOptions::new()
+        .with_degree(fx.order)
+        .unwrap()
+        .with_half_width(fx.halfwidth)
+        .unwrap();
+    let ys: Vec<&[f64]> = fx.y.iter().map(|v| v.as_slice()).collect();
+    // all lines 1..N/2
+    let est = lpm(&fx.u, &ys, fx.fs, (0.0, fx.fs / 2.0), &opts).unwrap();
+    assert_eq!(est.f_hz().len(), fx.f_hz.len());
+    for (a, b) in est.f_hz().iter().zip(&fx.f_hz) {
+        assert!((a - b).abs() < 1e-9);
+    }
+    let sqrt_n = (fx.u.len() as f64).sqrt();
+    let (mut worst_g, mut worst_s, mut worst_t) = (0.0f64, 0.0f64, 0.0f64);
+    for o in 0..2 {
+        let g = est.frf(o).unwrap();
+        let sd = g.std().unwrap();
+        let t = est.transient(o).unwrap();
+        for l in 0..g.len() {
+            let gf = c64::new(fx.g_re[o][l], fx.g_im[o][l]);
+            worst_g = worst_g.max((g.values()[l] - gf).norm() / gf.norm());
+            worst_s = worst_s.max((sd[l] - fx.g_std[o][l]).abs() / fx.g_std[o][l]);
+            let tf = c64::new(fx.t_re_unnormalised[o][l], fx.t_im_unnormalised[o][l]) / sqrt_n;
+            worst_t = worst_t.max((t[l] - tf).norm() / tf.norm().max(1e-3));
+        }
+    }
+    eprintln!(
+        "vs FdiTools: worst relative difference G {worst_g:.2e}, std {worst_s:.2e}, transient {worst_t:.2e}"
+    );
+    assert!(worst_g < 1e-8 && worst_s < 1e-8 && worst_t < 1e-8);
+}
+
+#[test]
+fn closed_loop_plant_is_exact_for_noise_free_dynamic_loops() {
+    // P = system, C = 0.005 static (loop gain ≈ 0.5 at the resonance): u = r − 0.005 y, y = P u
+    let (n, fs) = (1usize << 14, 1000.0);
+    let tf = system(1.0 / fs);
+    let r = white(n, 21);
+    let (num, den) = (tf.num().to_vec(), tf.den().to_vec());
+    let mut u = vec![0.0; n];
+    let mut y = vec![0.0; n];
+    for t in 0..n {
+        // y[t] depends on u up to t−1 (num[0] = 0)
+        let mut acc = 0.0;
+        for (i, b) in num.iter().enumerate().skip(1) {
+            if t >= i {
+                acc += b * u[t - i];
+            }
+        }
+        for (i, a) in den.iter().enumerate().skip(1) {
+            if t >= i {
+                acc -= a * y[t - i];
+            }
+        }
+        y[t] = acc;
+        u[t] = r[t] - 0.005 * y[t];
+    }
+    let cl = lpm_closed_loop(&r, &u, &y, fs, (5.0, 450.0), &LpmOptions::default()).unwrap();
+    let truth = tf.freq_response(cl.f_hz()).unwrap();
+    let err: Vec<f64> = cl
+        .plant
+        .values()
+        .iter()
+        .zip(&truth)
+        .map(|(e, t)| (e - t).norm() / t.norm())
+        .collect();
+    let s_err: Vec<f64> = cl
+        .t_ru
+        .values()
+        .iter()
+        .zip(&truth)
+        .map(|(s, p)| (s - 1.0 / (1.0 + 0.005 * p)).norm() / (1.0 / (1.0 + 0.005 * p)).norm())
+        .collect();
+    eprintln!(
+        "closed loop, noise-free: plant median {:.2e}, S median {:.2e}",
+        percentile(&err, 0.5),
+        percentile(&s_err, 0.5)
+    );
+    assert!(percentile(&err, 0.5) < 1e-6 && percentile(&s_err, 0.5) < 1e-6);
+}
+
+#[test]
+fn bad_input_gives_typed_errors() {
+    let u = white(256, 1);
+    let y = u.clone();
+    let o = LpmOptions::default();
+    let band = (1.0, 400.0);
+    assert!(matches!(
+        lpm(&u, &[&y[..200]], 1000.0, band, &o),
+        Err(Error::DimensionMismatch { .. })
+    ));
+    let mut bad = y.clone();
+    bad[17] = f64::NAN;
+    assert!(matches!(
+        lpm(&u, &[&bad], 1000.0, band, &o),
+        Err(Error::NonFinite { index: 17, .. })
+    ));
+    // too few lines for the window: 16 samples → 8 lines < 9
+    assert!(matches!(
+        lpm(&u[..16], &[&y[..16]], 1000.0, band, &o),
+        Err(Error::InvalidArgument { name: "u", .. })
+    ));
+    // q < 1
+    assert!(matches!(
+        LpmOptions::new().with_half_width(2),
+        Err(Error::InvalidArgument {
+            name: "half_width",
+            ..
+        })
+    ));
+    // band outside the lines
+    assert!(matches!(
+        lpm(&u, &[&y], 1000.0, (600.0, 900.0), &o),
+        Err(Error::InvalidArgument { name: "band", .. })
+    ));
+    assert!(matches!(
+        lpm(&u, &[&y], 1000.0, (f64::NAN, 900.0), &o),
+        Err(Error::InvalidArgument { name: "band", .. })
+    ));
+    // no excitation power
+    let zero = vec![0.0; 256];
+    assert!(matches!(
+        lpm(&zero, &[&y], 1000.0, band, &o),
+        Err(Error::InvalidArgument { name: "u", .. })
+    ));
+    // excitation confined to lines far from the band: the windows there see no power
+    let mut sine_only = vec![0.0; 256];
+    for (t, v) in sine_only.iter_mut().enumerate() {
+        *v = (2.0 * std::f64::consts::PI * 100.0 * t as f64 / 256.0).cos();
+    }
+    assert!(lpm(&sine_only, &[&y], 1000.0, (1.0, 20.0), &o).is_err());
+    assert!(matches!(
+        lpm(&u, &[], 1000.0, band, &o),
+        Err(Error::InvalidArgument { .. })
+    ));
+    assert!(matches!(
+        lpm(&u, &[&y], 0.0, band, &o),
+        Err(Error::InvalidArgument { name: "fs", .. })
+    ));
+}
+
+#[test]
+fn odd_record_lengths_and_band_edges_are_handled() {
+    // FIR y(t) = u(t) − 0.3 u(t−2) with a pre-record history: exact up to the polynomial error,
+    // on every line 1..⌊N/2⌋ including the shifted windows at both ends
+    let (n, fs) = (4095usize, 100.0);
+    let u = white(n, 31);
+    let y: Vec<f64> = (0..n)
+        .map(|t| u[t] - 0.3 * if t >= 2 { u[t - 2] } else { 1.0 })
+        .collect();
+    let est = lpm(&u, &[&y], fs, (0.0, fs), &LpmOptions::default()).unwrap();
+    assert_eq!(est.lines().len(), n / 2);
+    assert_eq!(est.lines()[0], 1);
+    assert_eq!(*est.lines().last().unwrap(), n / 2);
+    let g = est.frf(0).unwrap();
+    let worst = g
+        .f_hz()
+        .iter()
+        .zip(g.values())
+        .map(|(f, v)| {
+            let z2 = c64::cis(-4.0 * std::f64::consts::PI * f / fs);
+            (v - (1.0 - z2 * 0.3)).norm()
+        })
+        .fold(0.0f64, f64::max);
+    eprintln!(
+        "odd N, FIR: worst absolute error {worst:.2e} over {} lines",
+        g.len()
+    );
+    assert!(worst < 1e-6, "{worst}");
+}
