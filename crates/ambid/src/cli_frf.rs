@@ -114,8 +114,28 @@ pub struct FrfArgs {
     #[arg(long)]
     no_screen: bool,
     /// Output FRF CSV.
+    /// Estimator: `auto` (period averaging with --period-samples, else Welch) or `lpm` (the Local
+    /// Polynomial Method on one non-periodic record: T_ry, S and the plant with their
+    /// variances, leakage and transients removed; no coherence).
+    #[arg(long, value_enum, default_value_t = MethodArg::Auto)]
+    method: MethodArg,
+    /// LPM: polynomial degree R.
+    #[arg(long, default_value_t = 2)]
+    lpm_degree: usize,
+    /// LPM: half width n of the local window (2n + 1 lines); default: `LpmOptions::default()`.
+    #[arg(long)]
+    lpm_half_width: Option<usize>,
     #[arg(long, default_value = "frf.csv")]
     out: PathBuf,
+}
+
+/// FRF estimator choice.
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum MethodArg {
+    /// Period averaging (with --period-samples) or Welch.
+    Auto,
+    /// Local Polynomial Method.
+    Lpm,
 }
 
 fn ensure_parent(p: &Path) -> Result<()> {
@@ -234,6 +254,9 @@ pub fn frf(a: FrfArgs) -> Result<()> {
     let y = data.column(&a.output)?;
     let i = data.column(&a.current).ok();
     let fs = 1.0 / data.ts;
+    if a.method == MethodArg::Lpm {
+        return frf_lpm(&a, r, u, y, fs);
+    }
     let method = match a.period_samples {
         Some(p) => FrfMethod::Periodic {
             period_samples: p,
@@ -323,6 +346,75 @@ pub fn frf(a: FrfArgs) -> Result<()> {
         }
     }
     write_analysis(&a.out, &res)?;
+    println!("written: {}", a.out.display());
+    Ok(())
+}
+
+/// `ambid frf --method lpm`: the Local Polynomial Method on the whole record.
+fn frf_lpm(a: &FrfArgs, r: &[f64], u: &[f64], y: &[f64], fs: f64) -> Result<()> {
+    use ambid_core::frf::lpm::{lpm_closed_loop, LpmOptions};
+    let mut opts = LpmOptions::default().with_degree(a.lpm_degree)?;
+    if let Some(n) = a.lpm_half_width {
+        opts = opts.with_half_width(n)?;
+    }
+    let band = a.band.unwrap_or((1.0, 0.5 * fs));
+    let cl = lpm_closed_loop(r, u, y, fs, band, &opts)?;
+    let f = cl.f_hz().to_vec();
+    println!(
+        "LPM: degree {}, window {} lines, {} degrees of freedom, {} lines in {:.1}–{:.1} Hz",
+        opts.degree(),
+        opts.window(),
+        cl.dof(),
+        f.len(),
+        f.first().copied().unwrap_or(f64::NAN),
+        f.last().copied().unwrap_or(f64::NAN)
+    );
+    let q: Vec<(f64, f64)> = f
+        .iter()
+        .zip(cl.plant.values())
+        .zip(cl.plant.std().unwrap_or_default())
+        .filter(|((f, _), _)| **f >= a.quality_band.0 && **f <= a.quality_band.1)
+        .map(|((_, p), s)| (s / p.norm(), s))
+        .collect();
+    if !q.is_empty() {
+        let mut rel: Vec<f64> = q.iter().map(|x| x.0).collect();
+        rel.sort_by(f64::total_cmp);
+        println!(
+            "plant relative standard deviation over {}–{} Hz: median {:.3e} ({} lines)",
+            a.quality_band.0,
+            a.quality_band.1,
+            rel[rel.len() / 2],
+            rel.len()
+        );
+    }
+    ensure_parent(&a.out)?;
+    let stds: Vec<Option<Vec<f64>>> = [&cl.t_ry, &cl.t_ru, &cl.plant]
+        .iter()
+        .map(|x| x.std())
+        .collect();
+    let fs_col = vec![fs; f.len()];
+    write_frf_csv_with(
+        &a.out,
+        &f,
+        &[
+            FrfColumn {
+                name: "t_ry",
+                values: cl.t_ry.values(),
+                std: stds[0].as_deref(),
+            },
+            FrfColumn {
+                name: "t_ru",
+                values: cl.t_ru.values(),
+                std: stds[1].as_deref(),
+            },
+            FrfColumn {
+                name: "plant",
+                values: cl.plant.values(),
+                std: stds[2].as_deref(),
+            },
+        ],
+        &[("fs_hz", &fs_col)],
+    )?;
     println!("written: {}", a.out.display());
     Ok(())
 }

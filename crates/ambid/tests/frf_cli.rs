@@ -232,3 +232,74 @@ fn studies_write_their_figures() {
     let o = ambid(&["study", "amplitude", "--levels", "4,200"]);
     assert!(!o.status.success() && text(&o).contains("(0, 100]"));
 }
+
+/// `ambid frf --method lpm` on one non-periodic record (white-noise excitation): the plant
+/// against the twin's exact plant, and a window that leaves no degrees of freedom is refused.
+#[test]
+fn frf_by_the_local_polynomial_method_matches_the_twin() {
+    let d = tmpdir("frf-lpm");
+    let o = ambid(&[
+        "simulate",
+        "--mode",
+        "linear",
+        "--excitation",
+        "noise",
+        "--out",
+        s(&d),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let data = d.join("data.csv");
+    let out = d.join("frf.csv");
+    let o = ambid(&[
+        "frf",
+        s(&data),
+        "--method",
+        "lpm",
+        "--band",
+        "10,1000",
+        "--out",
+        s(&out),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let frf = ambid::io::csv::read_frf_csv(&out).unwrap();
+    let est = frf.frd("plant", 5e-5).unwrap();
+    let twin = ambid_twin::Twin::new(ambid_twin::TwinConfig::default()).unwrap();
+    let truth = twin.plant_frf(est.f_hz()).unwrap();
+    let med = ambid::validation::median_relative_error(est.values(), &truth);
+    println!(
+        "LPM plant: median error {:.3} % over {} lines",
+        100.0 * med,
+        est.f_hz().len()
+    );
+    // default twin noise (0.2 µm): the error is what the written standard deviations say
+    assert!(med < 0.05, "{med}");
+    let sd = est.std().unwrap();
+    let inside = est
+        .values()
+        .iter()
+        .zip(&truth)
+        .zip(&sd)
+        .filter(|((e, t), s)| (*e - *t).norm() <= 2.0 * **s)
+        .count() as f64
+        / sd.len() as f64;
+    println!("truth inside ±2σ on {:.1} % of the lines", 100.0 * inside);
+    assert!((0.9..0.99).contains(&inside), "{inside}");
+    assert_eq!(frf.extra("fs_hz").unwrap()[0], 20_000.0);
+    // degree 4 needs (R + 1)(m + 1) = 10 parameters: a 7-line window leaves none
+    let o = ambid(&[
+        "frf",
+        s(&data),
+        "--method",
+        "lpm",
+        "--lpm-degree",
+        "4",
+        "--lpm-half-width",
+        "3",
+        "--out",
+        s(&d.join("bad.csv")),
+    ]);
+    assert!(!o.status.success());
+    println!("{}", text(&o));
+    assert!(!d.join("bad.csv").exists());
+    let _ = std::fs::remove_dir_all(&d);
+}
