@@ -172,7 +172,7 @@ pub struct LevelBla {
     pub nl_rel: f64,
     /// Standard error of `nl_rel`.
     pub nl_rel_se: f64,
-    /// `noise_rel + nl_rel`.
+    /// `noise_rel + max(nl_rel, 0)` (a negative NL estimate is noise, not a gain).
     pub sum_rel: f64,
     /// Even detection lines of y over their noise level \[dB\].
     pub even_db: f64,
@@ -223,7 +223,7 @@ pub fn level_figures(run: &LevelRun, rms_frac: f64, band_hz: (f64, f64)) -> Resu
         noise_rel: m * s.noise_rel,
         nl_rel: s.nl_rel,
         nl_rel_se: s.nl_rel_se,
-        sum_rel: m * s.noise_rel + s.nl_rel,
+        sum_rel: m * s.noise_rel + s.nl_rel.max(0.0),
         even_db: bla.detection.even.ratio_db,
         odd_db: bla.detection.odd.ratio_db,
         bla_vs_linear_rel: err,
@@ -231,8 +231,12 @@ pub fn level_figures(run: &LevelRun, rms_frac: f64, band_hz: (f64, f64)) -> Resu
     })
 }
 
+/// Largest fraction of clipped samples for a level to be recommended.
+pub const MAX_SATURATED: f64 = 0.01;
+
 /// Runs the BLA at every RMS level (fractions of i_sat) and recommends the level where noise plus
-/// NL variance of one experiment is smallest.
+/// NL variance of one experiment (`sum_rel`) is smallest among the levels that clip on at most
+/// [`MAX_SATURATED`] of the samples.
 ///
 /// # Errors
 /// No level, or the errors of [`run_level`].
@@ -245,7 +249,18 @@ pub fn amplitude_study(plan: &BlaPlan, levels: &[f64]) -> Result<BlaStudy> {
         let run = run_level(plan, l).with_context(|| format!("level {l}"))?;
         rows.push(level_figures(&run, l, plan.summary_band_hz)?);
     }
-    let best = rows
+    // levels that clip on more than MAX_SATURATED of the samples are not recommended (unless all do)
+    let ok: Vec<&LevelBla> = rows
+        .iter()
+        .filter(|r| r.saturated_fraction <= MAX_SATURATED)
+        .collect();
+    let candidates: Vec<&LevelBla> = if ok.is_empty() {
+        rows.iter().collect()
+    } else {
+        ok
+    };
+    let excluded = rows.len() - candidates.len();
+    let best = *candidates
         .iter()
         .min_by(|a, b| a.sum_rel.total_cmp(&b.sum_rel))
         .context("no level")?;
@@ -258,9 +273,9 @@ pub fn amplitude_study(plan: &BlaPlan, levels: &[f64]) -> Result<BlaStudy> {
         "noise still dominates there"
     };
     let reasoning = format!(
-        "noise + NL variance of one {P}-period experiment (relative to |G_BLA|², band mean) is smallest \
+        "{excluded_txt}noise + NL variance of one {P}-period experiment (relative to |G_BLA|², band mean) is smallest \
          at {recommended_pct:.1} % of i_sat RMS ({:.2e} = noise {:.2e} + NL {:.2e}; {dominant}). Below it \
-         the noise share grows as 1/level²; above it the stochastic NL distortion grows faster than the \
+         the noise share grows as 1/level²; above it the stochastic NL distortion (and clipping) grows faster than the \
          noise falls. NL variance significant (> 3 standard errors) from {}. The BLA's systematic \
          drift from the linearised plant is not in the sum (see bla_vs_linear_rel: {:.1} % at the \
          recommended level).{}",
@@ -278,6 +293,15 @@ pub fn amplitude_study(plan: &BlaPlan, levels: &[f64]) -> Result<BlaStudy> {
             String::new()
         },
         P = plan.periods,
+        excluded_txt = if excluded > 0 {
+            format!(
+                "{excluded} level(s) with a current limit active on more than {:.0} % of the samples \
+                 left out; among the others the ",
+                100.0 * MAX_SATURATED
+            )
+        } else {
+            "The ".to_string()
+        },
     );
     Ok(BlaStudy {
         rows,
