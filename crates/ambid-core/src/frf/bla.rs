@@ -184,12 +184,18 @@ impl BlaEstimate {
         let m = self.realisations as f64;
         let p = self.periods as f64;
         let (mut n, mut sn, mut snl, mut sse, mut st) = (0usize, 0.0, 0.0, 0.0, 0.0);
-        for i in 0..self.lines.len() {
-            let f = self.f_hz[i];
+        let rows = self
+            .f_hz
+            .iter()
+            .zip(&self.values)
+            .zip(&self.var_total)
+            .zip(&self.var_noise)
+            .zip(&self.var_nl);
+        for ((((&f, g), &vt), &vn), &vnl) in rows {
             if !(f >= f_min_hz && f <= f_max_hz) {
                 continue;
             }
-            let g2 = self.values[i].norm_sqr();
+            let g2 = g.norm_sqr();
             if g2 <= 0.0 || !g2.is_finite() {
                 return Err(Error::invalid(
                     "band",
@@ -197,11 +203,10 @@ impl BlaEstimate {
                 ));
             }
             n += 1;
-            sn += self.var_noise[i] / g2;
-            snl += self.var_nl[i] / g2;
-            st += self.var_total[i] / g2;
-            let vt = self.var_total[i] / g2;
-            let vn = self.var_noise[i] / g2;
+            let (vt, vn) = (vt / g2, vn / g2);
+            sn += vn;
+            snl += vnl / g2;
+            st += vt;
             sse += m * m * (vt * vt / (m - 1.0) + vn * vn / (m * (p - 1.0)));
         }
         if n == 0 {
