@@ -82,3 +82,70 @@ fn nl_variance_is_zero_on_the_linear_twin() {
         }
     }
 }
+
+/// `ambid bla`: the study CSV (one row per level, one recommended) and the per-line CSV.
+#[test]
+fn cli_writes_the_study_and_the_lines() {
+    let dir = std::env::temp_dir().join(format!("ambid-bla-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let exe = env!("CARGO_BIN_EXE_ambid");
+    let study = dir.join("bla.csv");
+    let out = std::process::Command::new(exe)
+        .args([
+            "bla",
+            "--levels",
+            "4,16",
+            "--realisations",
+            "3",
+            "--periods",
+            "2",
+            "--out",
+        ])
+        .arg(&study)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&study).unwrap();
+    let rows: Vec<&str> = text.lines().collect();
+    assert!(rows[0].starts_with("level_pct,lines,noise_rel,nl_rel"));
+    assert_eq!(rows.len(), 3);
+    assert_eq!(rows[1..].iter().filter(|r| r.ends_with(",1")).count(), 1);
+    let lines = dir.join("lines.csv");
+    let out = std::process::Command::new(exe)
+        .args([
+            "bla",
+            "--level",
+            "10",
+            "--realisations",
+            "3",
+            "--periods",
+            "2",
+            "--mode",
+            "linear",
+            "--out",
+        ])
+        .arg(&lines)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&lines).unwrap();
+    assert!(text.starts_with("f_hz,bla_re,bla_im,bla_std,noise_std,nl_std,var_nl\n"));
+    assert!(text.lines().count() > 20);
+    // M = 1 is refused with a clear message
+    let out = std::process::Command::new(exe)
+        .args(["bla", "--level", "10", "--realisations", "1", "--out"])
+        .arg(&lines)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("at least 2"));
+    std::fs::remove_dir_all(&dir).ok();
+}
