@@ -4,6 +4,7 @@
 //! ([`experiment`]) and the excitation comparison ([`comparison`]). The `ambid` binary is a thin command-line layer over these.
 
 pub mod analysis;
+pub mod bla;
 pub mod comparison;
 pub mod experiment;
 pub mod fitting;

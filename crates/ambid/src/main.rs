@@ -13,6 +13,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::{Path, PathBuf};
 
+mod cli_bla;
 mod cli_fit;
 mod cli_freqfit;
 mod cli_frf;
@@ -73,6 +74,10 @@ enum Command {
     /// fits of displacement and current, windows, residual tests, closed-loop poles, margins and
     /// the ISO 14839-3 zone; writes summary.json, timeseries.csv and residuals.csv.
     Validate(cli_validate::ValidateArgs),
+    /// Robust Best Linear Approximation of the plant on the twin (M random-phase multisines × P
+    /// periods): noise and nonlinear variance per RMS level and the recommended level, or with
+    /// --level the per-line BLA with its total, noise and nonlinear standard deviations.
+    Bla(cli_bla::BlaArgs),
 }
 
 #[derive(Args)]
@@ -363,6 +368,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         Command::Order(a) => cli_fit::order(a),
         Command::CompareModels(a) => cli_freqfit::compare(a),
         Command::Validate(a) => cli_validate::validate(a),
+        Command::Bla(a) => cli_bla::bla(a),
     }
 }
 
