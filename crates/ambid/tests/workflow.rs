@@ -66,6 +66,11 @@ fn the_default_workflow_on_the_twin_recovers_the_truth_and_reports_every_number(
         (2.0..=16.0).contains(&lo) && lo <= chosen && chosen <= hi,
         "{lo} {chosen} {hi}"
     );
+    // the robust BLA at the same levels: one row per level and a recommended level among them
+    let bla = sm["bla"]["levels"].as_array().unwrap();
+    assert_eq!(bla.len(), 8);
+    let rec = num(sm, "bla.recommended_pct");
+    assert!(bla.iter().any(|r| num(r, "level_pct") == rec), "{rec}");
     // the nonparametric plant against the twin's exact linearised plant (nonlinear twin: the
     // estimate also carries the force law's distortion)
     let e_frf = num(sm, "frf.plant_median_error_vs_truth_pct");

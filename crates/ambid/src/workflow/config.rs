@@ -14,6 +14,8 @@ pub enum Step {
     Excitation,
     /// Excitation-amplitude study.
     Amplitude,
+    /// Robust best linear approximation: noise and nonlinear-distortion variance against level.
+    Bla,
     /// Operating-point study (bias current, air gap).
     OperatingPoint,
     /// Nonparametric FRF of the identification record, with quality measures.
@@ -34,9 +36,10 @@ pub enum Step {
 
 impl Step {
     /// Every step, in order.
-    pub const ALL: [Step; 10] = [
+    pub const ALL: [Step; 11] = [
         Step::Excitation,
         Step::Amplitude,
+        Step::Bla,
         Step::OperatingPoint,
         Step::Frf,
         Step::Order,
@@ -52,6 +55,7 @@ impl Step {
         match self {
             Step::Excitation => "excitation",
             Step::Amplitude => "amplitude",
+            Step::Bla => "bla",
             Step::OperatingPoint => "operating_point",
             Step::Frf => "frf",
             Step::Order => "order",
@@ -115,6 +119,8 @@ pub struct WorkflowConfig {
     pub excitation: ExcitationSection,
     /// Amplitude study.
     pub amplitude_study: AmplitudeSection,
+    /// Robust BLA study.
+    pub bla: BlaSection,
     /// Operating-point study.
     pub operating_point: OperatingSection,
     /// Nonparametric FRF.
@@ -142,6 +148,7 @@ impl Default for WorkflowConfig {
             data: DataSection::default(),
             excitation: ExcitationSection::default(),
             amplitude_study: AmplitudeSection::default(),
+            bla: BlaSection::default(),
             operating_point: OperatingSection::default(),
             frf: FrfSection::default(),
             order: OrderSection::default(),
@@ -311,6 +318,25 @@ impl Default for AmplitudeSection {
         Self {
             levels_pct: (1..=8).map(|k| 2.0 * k as f64).collect(),
             files: Vec::new(),
+        }
+    }
+}
+
+/// `[bla]`: the robust BLA study (twin) at the amplitude study's levels (RMS, % of i_sat).
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct BlaSection {
+    /// Random-phase multisine realisations M.
+    pub realisations: usize,
+    /// Periods P per realisation (after one settling period).
+    pub periods: usize,
+}
+
+impl Default for BlaSection {
+    fn default() -> Self {
+        Self {
+            realisations: 8,
+            periods: 4,
         }
     }
 }
@@ -650,6 +676,13 @@ impl WorkflowConfig {
         }
         for s in &self.models.structures {
             one_of("models.structures", s, &["arx", "oe", "ss"])?;
+        }
+        if self.bla.realisations < 2 || self.bla.periods < 2 {
+            return Err(bad(format!(
+                "bla.realisations = {} and bla.periods = {} must both be at least 2 (the noise and the \
+                 nonlinear variance need a spread over periods and over realisations)",
+                self.bla.realisations, self.bla.periods
+            )));
         }
         if self.models.orders.is_empty() || self.models.orders.contains(&0) {
             return Err(bad(

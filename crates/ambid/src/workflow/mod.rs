@@ -220,6 +220,8 @@ pub(crate) struct Ctx<'a> {
     pub valid: Option<Recording>,
     /// Chosen identification level (fraction of i_sat; twin).
     pub level_frac: Option<f64>,
+    /// The seed-style amplitude study's (level %, mean relative plant variance), for the BLA step.
+    pub seed_study: Option<Vec<(f64, f64)>>,
     /// FRF analysis of the identification record.
     pub frf: Option<crate::analysis::FrfAnalysis>,
     /// Controller (closed loop).
@@ -350,6 +352,7 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
         ident: prepared.ident,
         valid: prepared.valid,
         level_frac: None,
+        seed_study: None,
         frf: None,
         controller: prepared.controller,
         candidates: Vec::new(),
@@ -371,6 +374,7 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
         let status = match step {
             Step::Excitation => steps_signal::excitation(&mut ctx),
             Step::Amplitude => steps_signal::amplitude(&mut ctx),
+            Step::Bla => steps_signal::bla(&mut ctx),
             Step::OperatingPoint => steps_signal::operating_point(&mut ctx),
             Step::Frf => steps_frf::frf(&mut ctx),
             Step::Order => steps_frf::order(&mut ctx),
