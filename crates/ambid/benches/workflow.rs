@@ -1,7 +1,7 @@
 //! Speed of the whole seed workflow on the twin (issue 7's bar: `ambid run` in ≤ 10 s, release).
 //! Run: `cargo bench -p ambid --bench workflow`.
 //!
-//! * `default_workflow`: [`workflow::run`] with the defaults (all ten steps, computed in memory);
+//! * `default_workflow`: [`workflow::run`] with the defaults (all eleven steps, computed in memory);
 //! * `render_and_write`: the report's HTML, the figure and table CSVs and the model exports of
 //!   that outcome written into a fresh directory ([`Outcome::write`]).
 //!

@@ -1,5 +1,5 @@
 //! The seed paper's identification procedure end to end (`ambid run`): excitation design and
-//! comparison → amplitude study → operating-point study → identification record → nonparametric
+//! comparison → amplitude study → robust BLA → operating-point study → identification record → nonparametric
 //! FRF with quality measures → order estimation → ARX/OE/state-space fits and their comparison →
 //! pole-zero check → validation on an independent record with residual tests → chirp closed-loop
 //! reconstruction → ISO 14839-3 verdict.
