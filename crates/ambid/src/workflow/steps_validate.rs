@@ -470,6 +470,17 @@ pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     Ok(StepStatus::Done)
 }
 
+/// One row of the ISO table: peak |S| (linear and dB), where, and the zone.
+fn iso_row(source: &str, v: &ambid_core::validate::iso::IsoVerdict) -> Vec<String> {
+    vec![
+        source.to_string(),
+        fmt(v.peak),
+        fmt(20.0 * v.peak.log10()),
+        fmt(v.f_peak_hz),
+        format!("{:?}", v.zone),
+    ]
+}
+
 pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     let z = zones(ctx);
     let mut curves = Vec::new();
@@ -494,38 +505,32 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         ctx.put("iso.measured.peak", v.peak);
         ctx.put("iso.measured.f_peak_hz", v.f_peak_hz);
         ctx.put("iso.measured.zone", format!("{:?}", v.zone));
-        rows.push(vec![
-            "measured S (FRF)".into(),
-            fmt(v.peak),
-            fmt(20.0 * v.peak.log10()),
-            fmt(v.f_peak_hz),
-            format!("{:?}", v.zone),
-        ]);
+        rows.push(iso_row("measured S (FRF)", &v));
         verdicts.push(v.zone);
     }
-    if let Some(v) = ctx.validation.clone() {
-        let f = &v.grid_hz;
-        curves.push(series(
-            "model S = 1/(1+PC)",
-            f,
-            &v.s_model.iter().map(|x| x.norm()).collect::<Vec<_>>(),
-            Style::Dashed,
-            Some(1),
-        ));
-        let m = &v.iso_model;
+    let model_s = ctx.validation.as_ref().map(|v| {
+        (
+            series(
+                "model S = 1/(1+PC)",
+                &v.grid_hz,
+                &v.s_model.iter().map(|x| x.norm()).collect::<Vec<_>>(),
+                Style::Dashed,
+                Some(1),
+            ),
+            v.iso_model.clone(),
+            v.margins.phase_margin(),
+        )
+    });
+    if let Some((curve, m, pm)) = model_s {
+        curves.push(curve);
+        let m = &m;
         ctx.put("iso.model.peak", m.peak);
         ctx.put("iso.model.f_peak_hz", m.f_peak_hz);
         ctx.put("iso.model.zone", format!("{:?}", m.zone));
-        if let Some(p) = v.margins.phase_margin() {
+        if let Some(p) = pm {
             ctx.put("iso.model.phase_margin_deg", p);
         }
-        rows.push(vec![
-            format!("chosen model with the controller"),
-            fmt(m.peak),
-            fmt(20.0 * m.peak.log10()),
-            fmt(m.f_peak_hz),
-            format!("{:?}", m.zone),
-        ]);
+        rows.push(iso_row("chosen model with the controller", m));
         verdicts.push(m.zone);
     }
     if let Some(t) = &ctx.twin {
@@ -544,13 +549,7 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         ));
         ctx.put("iso.truth.peak", v.peak);
         ctx.put("iso.truth.zone", format!("{:?}", v.zone));
-        rows.push(vec![
-            "twin's exact plant".into(),
-            fmt(v.peak),
-            fmt(20.0 * v.peak.log10()),
-            fmt(v.f_peak_hz),
-            format!("{:?}", v.zone),
-        ]);
+        rows.push(iso_row("twin's exact plant", &v));
     }
     if curves.is_empty() {
         return Ok(StepStatus::Skipped(
