@@ -1,7 +1,12 @@
-//! The robust Best Linear Approximation on the twin: $M$ random-phase multisine realisations of
-//! $P$ periods each, injected at the controller output of bearing A, and the BLA of the plant
+//! The robust Best Linear Approximation of the plant: $M$ random-phase multisine realisations of
+//! $P$ periods each, injected at the controller output, and the BLA of the plant
 //! ($T_{ry}/T_{ru}$ per realisation, [`ambid_core::frf::bla`]) with its noise and stochastic
 //! nonlinear variances; and the amplitude study built on it.
+//!
+//! The experiments come from the twin ([`BlaPlan`], [`run_level`], [`amplitude_study`], checked
+//! against the twin's linearised plant) or from recorded files ([`RecordedLevel`],
+//! [`bla_of_level`], [`amplitude_study_from_records`]); both end in the same figures
+//! ([`figures_of`]) and the same recommendation ([`recommend`]).
 //!
 //! # Amplitude study
 //! For each RMS level (fraction of `i_sat`) the BLA is estimated and, averaged over the excited
@@ -27,6 +32,7 @@
 //! println!("{}", study.reasoning);
 //! ```
 
+use ambid_core::c64;
 use ambid_core::frf::bla::{random_phase_period, robust_bla, Bla, Record};
 use ambid_core::frf::periodic::PeriodicOptions;
 use ambid_core::signal::{Grid, MultisineSpec, Phases};
@@ -158,6 +164,157 @@ pub fn run_level(plan: &BlaPlan, rms_frac: f64) -> Result<LevelRun> {
     })
 }
 
+/// One recorded realisation of a robust-BLA experiment: a random-phase multisine applied for a
+/// whole number of periods (the leading transient periods included).
+#[derive(Debug, Clone)]
+pub struct Realisation {
+    /// The excitation $r$ added to the controller output (closed loop); `None` for open-loop
+    /// data, where `u` is the excitation.
+    pub r: Option<Vec<f64>>,
+    /// Plant input (controller output including $r$).
+    pub u: Vec<f64>,
+    /// Plant output.
+    pub y: Vec<f64>,
+    /// Fraction of samples at an amplifier/current limit, if known.
+    pub saturated_fraction: Option<f64>,
+    /// Where it came from (for error messages).
+    pub source: String,
+}
+
+/// The realisations recorded at one excitation level.
+#[derive(Debug, Clone)]
+pub struct RecordedLevel {
+    /// RMS level \[% of i_sat\] (a label: the data are used as recorded).
+    pub level_pct: f64,
+    /// $M \ge 2$ realisations, same length and period.
+    pub realisations: Vec<Realisation>,
+}
+
+/// How recorded BLA experiments are cut.
+#[derive(Debug, Clone, Copy)]
+pub struct RecordedPlan {
+    /// Sample rate \[Hz\].
+    pub fs: f64,
+    /// Samples per multisine period $N$.
+    pub period_samples: usize,
+    /// Leading periods dropped as transient (at least $P \ge 2$ must remain).
+    pub skip_periods: usize,
+    /// Band of the study's averages \[Hz\].
+    pub summary_band_hz: (f64, f64),
+}
+
+/// The robust BLA of one recorded level: closed loop ($r$ recorded: the plant as
+/// $T_{ry}/T_{ru}$ per realisation) or open loop ($u \to y$).
+///
+/// # Errors
+/// Fewer than 2 realisations, a level mixing closed- and open-loop records, and the errors of
+/// [`robust_bla`] (records of different lengths, not a whole number of periods, fewer than 2
+/// periods left after the skipped ones, no line excited in every realisation, non-finite
+/// samples), each naming the level and the fix.
+pub fn bla_of_level(level: &RecordedLevel, plan: &RecordedPlan) -> Result<Bla> {
+    let m = level.realisations.len();
+    if m < 2 {
+        bail!(
+            "level {} %: the robust BLA needs at least 2 realisations (independent random-phase \
+             multisines), got {m}; record more realisations at this level",
+            level.level_pct
+        );
+    }
+    let closed = level.realisations.iter().filter(|x| x.r.is_some()).count();
+    if closed != 0 && closed != m {
+        bail!(
+            "level {} %: {closed} of {m} realisations have the excitation r and the others do not; \
+             give r for all (closed loop) or for none (open loop)",
+            level.level_pct
+        );
+    }
+    let recs: Vec<Record> = level
+        .realisations
+        .iter()
+        .map(|x| match &x.r {
+            Some(r) => Record::closed_loop(r, &x.u, &x.y),
+            None => Record::open_loop(&x.u, &x.y),
+        })
+        .collect();
+    let opts = PeriodicOptions::new(plan.period_samples).skip(plan.skip_periods);
+    robust_bla(&recs, plan.fs, &opts).with_context(|| {
+        let names: Vec<&str> = level
+            .realisations
+            .iter()
+            .map(|x| x.source.as_str())
+            .collect();
+        format!(
+            "robust BLA of level {} % ({})",
+            level.level_pct,
+            names.join(", ")
+        )
+    })
+}
+
+/// The BLA amplitude study on recorded data: one [`RecordedLevel`] per level, figures over the
+/// plan's band (no truth, so `bla_vs_linear_rel` is `None`) and the recommendation of
+/// [`recommend`].
+///
+/// # Example
+/// Two levels of an open-loop static gain of 2 with a small output disturbance: no nonlinear
+/// distortion, and the higher level has the smaller relative noise.
+/// ```
+/// use ambid::bla::{amplitude_study_from_records, Realisation, RecordedLevel, RecordedPlan};
+/// use ambid_core::frf::bla::random_phase_period;
+/// let (n, periods) = (64usize, 4usize);
+/// let bins: Vec<usize> = (1..20).step_by(2).collect();
+/// let level = |pct: f64| RecordedLevel {
+///     level_pct: pct,
+///     realisations: (0..4u64)
+///         .map(|m| {
+///             let p = random_phase_period(&bins, n, pct / 100.0, m).unwrap();
+///             let u: Vec<f64> = (0..periods * n).map(|t| p[t % n]).collect();
+///             // a deterministic "noise" that differs from period to period
+///             let y = u.iter().enumerate().map(|(t, v)| 2.0 * v + 1e-3 * ((t * t + 7 * m as usize) as f64).sin()).collect();
+///             Realisation { r: None, u, y, saturated_fraction: None, source: format!("m{m}") }
+///         })
+///         .collect(),
+/// };
+/// let plan = RecordedPlan { fs: 64.0, period_samples: n, skip_periods: 1, summary_band_hz: (0.5, 20.0) };
+/// let study = amplitude_study_from_records(&[level(5.0), level(20.0)], &plan).unwrap();
+/// assert!(study.rows[1].noise_rel < study.rows[0].noise_rel);
+/// assert!(study.rows.iter().all(|r| r.bla_vs_linear_rel.is_none()));
+/// ```
+///
+/// # Errors
+/// No level, a level outside (0, 100] %, or the errors of [`bla_of_level`].
+pub fn amplitude_study_from_records(
+    levels: &[RecordedLevel],
+    plan: &RecordedPlan,
+) -> Result<BlaStudy> {
+    if levels.is_empty() {
+        bail!("give at least one level of recorded realisations");
+    }
+    let mut rows = Vec::with_capacity(levels.len());
+    for level in levels {
+        if !(level.level_pct.is_finite() && level.level_pct > 0.0 && level.level_pct <= 100.0) {
+            bail!(
+                "a level must be in (0, 100] % of i_sat, got {}",
+                level.level_pct
+            );
+        }
+        let bla = bla_of_level(level, plan)?;
+        let sat = level
+            .realisations
+            .iter()
+            .filter_map(|x| x.saturated_fraction)
+            .fold(0.0, f64::max);
+        rows.push(figures_of(
+            &bla,
+            level.level_pct,
+            plan.summary_band_hz,
+            sat,
+            None,
+        )?);
+    }
+    recommend(rows)
+}
+
 /// Figures of one level of the amplitude study (see the [module docs](self)), averaged over the
 /// summary band.
 #[derive(Debug, Clone, Serialize)]
@@ -166,6 +323,10 @@ pub struct LevelBla {
     pub level_pct: f64,
     /// Excited lines averaged.
     pub lines: usize,
+    /// Realisations $M$.
+    pub realisations: usize,
+    /// Analysed periods per realisation $P$.
+    pub periods: usize,
     /// Band mean of the relative noise variance of one realisation.
     pub noise_rel: f64,
     /// Band mean of the relative NL variance of one realisation.
@@ -178,8 +339,9 @@ pub struct LevelBla {
     pub even_db: f64,
     /// Odd detection lines of y over their noise level \[dB\].
     pub odd_db: f64,
-    /// RMS relative difference of the BLA from the twin's linearised plant over the band.
-    pub bla_vs_linear_rel: f64,
+    /// RMS relative difference of the BLA from the linearised plant over the band, when the
+    /// plant is known (the twin); `None` on recorded data.
+    pub bla_vs_linear_rel: Option<f64>,
     /// Largest fraction of samples with a limit active (clipping makes even the linear twin
     /// nonlinear).
     pub saturated_fraction: f64,
@@ -196,39 +358,74 @@ pub struct BlaStudy {
     pub reasoning: String,
 }
 
-/// The figures of one level from its BLA.
+/// The true plant FRF at given frequencies \[Hz\] (the twin's linearised plant).
+pub type PlantTruth<'a> = dyn Fn(&[f64]) -> Result<Vec<c64>> + 'a;
+
+/// The figures of one level from its BLA (summary band `band_hz`), with the RMS relative
+/// difference from a known linear plant when `truth` (the plant FRF at given frequencies) is
+/// given.
 ///
 /// # Errors
-/// A BLA that vanishes on a line, or the twin's truth failing.
-pub fn level_figures(run: &LevelRun, rms_frac: f64, band_hz: (f64, f64)) -> Result<LevelBla> {
-    let (twin, bla) = (&run.twin, &run.bla);
+/// A BLA that vanishes on a line, no excited line in the band, or `truth` failing.
+pub fn figures_of(
+    bla: &Bla,
+    level_pct: f64,
+    band_hz: (f64, f64),
+    saturated_fraction: f64,
+    truth: Option<&PlantTruth<'_>>,
+) -> Result<LevelBla> {
     let g = &bla.g;
     let s = g.band_summary(band_hz.0, band_hz.1)?;
     let m = g.realisations as f64;
-    let in_band: Vec<usize> = (0..g.f_hz.len())
-        .filter(|&i| g.f_hz[i] >= band_hz.0 && g.f_hz[i] <= band_hz.1)
-        .collect();
-    let f: Vec<f64> = in_band.iter().map(|&i| g.f_hz[i]).collect();
-    let truth = twin.plant_frf(&f)?;
-    let err = (in_band
-        .iter()
-        .zip(&truth)
-        .map(|(&i, b)| (g.values[i] - b).norm_sqr() / b.norm_sqr())
-        .sum::<f64>()
-        / truth.len().max(1) as f64)
-        .sqrt();
+    let bla_vs_linear_rel = match truth {
+        Some(truth) => {
+            let in_band: Vec<usize> = (0..g.f_hz.len())
+                .filter(|&i| g.f_hz[i] >= band_hz.0 && g.f_hz[i] <= band_hz.1)
+                .collect();
+            let f: Vec<f64> = in_band.iter().map(|&i| g.f_hz[i]).collect();
+            let t = truth(&f)?;
+            Some(
+                (in_band
+                    .iter()
+                    .zip(&t)
+                    .map(|(&i, b)| (g.values[i] - b).norm_sqr() / b.norm_sqr())
+                    .sum::<f64>()
+                    / t.len().max(1) as f64)
+                    .sqrt(),
+            )
+        }
+        None => None,
+    };
     Ok(LevelBla {
-        level_pct: 100.0 * rms_frac,
+        level_pct,
         lines: s.lines,
+        realisations: g.realisations,
+        periods: g.periods,
         noise_rel: m * s.noise_rel,
         nl_rel: s.nl_rel,
         nl_rel_se: s.nl_rel_se,
         sum_rel: m * s.noise_rel + s.nl_rel.max(0.0),
         even_db: bla.detection.even.ratio_db,
         odd_db: bla.detection.odd.ratio_db,
-        bla_vs_linear_rel: err,
-        saturated_fraction: run.saturated_fraction,
+        bla_vs_linear_rel,
+        saturated_fraction,
     })
+}
+
+/// The figures of one twin level (see [`figures_of`]), checked against the twin's linearised
+/// plant.
+///
+/// # Errors
+/// As [`figures_of`].
+pub fn level_figures(run: &LevelRun, rms_frac: f64, band_hz: (f64, f64)) -> Result<LevelBla> {
+    let truth = |f: &[f64]| -> Result<Vec<c64>> { Ok(run.twin.plant_frf(f)?) };
+    figures_of(
+        &run.bla,
+        100.0 * rms_frac,
+        band_hz,
+        run.saturated_fraction,
+        Some(&truth),
+    )
 }
 
 /// Largest fraction of clipped samples for a level to be recommended.
@@ -249,6 +446,16 @@ pub fn amplitude_study(plan: &BlaPlan, levels: &[f64]) -> Result<BlaStudy> {
         let run = run_level(plan, l).with_context(|| format!("level {l}"))?;
         rows.push(level_figures(&run, l, plan.summary_band_hz)?);
     }
+    recommend(rows)
+}
+
+/// Recommends, among the study's rows, the level where noise plus NL variance of one experiment
+/// (`sum_rel`) is smallest, leaving out levels that clip on more than [`MAX_SATURATED`] of the
+/// samples (unless all do), and says why.
+///
+/// # Errors
+/// No row.
+pub fn recommend(rows: Vec<LevelBla>) -> Result<BlaStudy> {
     // levels that clip on more than MAX_SATURATED of the samples are not recommended (unless all do)
     let ok: Vec<&LevelBla> = rows
         .iter()
@@ -276,14 +483,16 @@ pub fn amplitude_study(plan: &BlaPlan, levels: &[f64]) -> Result<BlaStudy> {
         "{excluded_txt}noise + NL variance of one {P}-period experiment (relative to |G_BLA|², band mean) is smallest \
          at {recommended_pct:.1} % of i_sat RMS ({:.2e} = noise {:.2e} + NL {:.2e}; {dominant}). Below it \
          the noise share grows as 1/level²; above it the stochastic NL distortion (and clipping) grows faster than the \
-         noise falls. NL variance significant (> 3 standard errors) from {}. The BLA's systematic \
-         drift from the linearised plant is not in the sum (see bla_vs_linear_rel: {:.1} % at the \
-         recommended level).{}",
+         noise falls. NL variance significant (> 3 standard errors) from {}.{}{}",
         best.sum_rel,
         best.noise_rel,
         best.nl_rel,
         first_nl.map_or("no level of the list".to_string(), |p| format!("{p:.1} %")),
-        100.0 * best.bla_vs_linear_rel,
+        best.bla_vs_linear_rel.map_or(String::new(), |e| format!(
+            " The BLA's systematic drift from the linearised plant is not in the sum \
+             (bla_vs_linear_rel: {:.1} % at the recommended level).",
+            100.0 * e
+        )),
         if best.saturated_fraction > 0.0 {
             format!(
                 " Caution: a current limit was active on {:.2} % of the samples at that level.",
@@ -292,7 +501,7 @@ pub fn amplitude_study(plan: &BlaPlan, levels: &[f64]) -> Result<BlaStudy> {
         } else {
             String::new()
         },
-        P = plan.periods,
+        P = best.periods,
         excluded_txt = if excluded > 0 {
             format!(
                 "{excluded} level(s) with a current limit active on more than {:.0} % of the samples \

@@ -1,13 +1,38 @@
-//! `ambid bla`: the robust Best Linear Approximation of the plant on the twin — an amplitude
-//! study (noise and nonlinear variance per RMS level and the recommended level) or, with
-//! `--level`, the per-line BLA at one level.
+//! `ambid bla`: the robust Best Linear Approximation of the plant, on the twin or from recorded
+//! realisations (`--record PCT:PATH`, repeated) — an amplitude study (noise and nonlinear
+//! variance per RMS level and the recommended level) or, with `--level` (twin) or a single
+//! recorded level, the per-line BLA.
 
-use ambid::bla::{amplitude_study, level_figures, run_level, BlaPlan};
+use ambid::bla::{
+    amplitude_study, amplitude_study_from_records, bla_of_level, figures_of, level_figures,
+    run_level, BlaPlan, BlaStudy, Realisation, RecordedLevel, RecordedPlan,
+};
+use ambid::io::table::{read_table, ColumnRef, ReadOptions};
+use ambid_core::data::{check_saturation, SaturationOptions};
+use ambid_core::frf::bla::Bla;
 use ambid_twin::Mode;
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::fmt::Write as _;
 use std::path::PathBuf;
+
+/// Parses `PCT:PATH` (a level in % of i_sat and a recorded realisation).
+fn parse_record(s: &str) -> std::result::Result<(f64, PathBuf), String> {
+    let (l, p) = s.split_once(':').ok_or_else(|| {
+        format!("`{s}`: give a recorded realisation as LEVEL_PCT:PATH, e.g. 4:bla04_m1.csv")
+    })?;
+    let level: f64 = l
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{l}` is not a level in % of i_sat (in `{s}`)"))?;
+    if !(level.is_finite() && level > 0.0 && level <= 100.0) {
+        return Err(format!("`{s}`: the level must be in (0, 100] %"));
+    }
+    if p.is_empty() {
+        return Err(format!("`{s}`: the path is empty"));
+    }
+    Ok((level, PathBuf::from(p)))
+}
 
 #[derive(Args)]
 pub struct BlaArgs {
@@ -29,13 +54,111 @@ pub struct BlaArgs {
     /// Seed of the grid, the phases and the noise.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// A recorded realisation instead of the twin, as LEVEL_PCT:PATH (repeat it: M ≥ 2 per
+    /// level, each a random-phase multisine over a whole number of periods; CSV/text, .npy,
+    /// .npz or .mat). With one level the per-line BLA is written, with several the study.
+    #[arg(long = "record", value_parser = parse_record, value_name = "PCT:PATH")]
+    records: Vec<(f64, PathBuf)>,
+    /// Recorded data: samples per multisine period.
+    #[arg(long)]
+    period_samples: Option<usize>,
+    /// Recorded data: leading periods dropped as transient.
+    #[arg(long, default_value_t = 1)]
+    skip_periods: usize,
+    /// Recorded data: sample rate in Hz (when the files have no `t` column).
+    #[arg(long)]
+    fs: Option<f64>,
+    /// Recorded data: column of the excitation r (closed loop); `none` for open-loop data (u
+    /// is then the excitation). Names, or `#k` for the k-th column.
+    #[arg(long, default_value = "r")]
+    excitation: String,
+    /// Recorded data: column of the plant input u.
+    #[arg(long, default_value = "u")]
+    input: String,
+    /// Recorded data: column of the plant output y.
+    #[arg(long, default_value = "y")]
+    output: String,
+    /// Recorded data: saturation current in A; u (and the column `i`, if present) are checked
+    /// against it and levels clipping on more than 1 % of the samples are not recommended.
+    #[arg(long)]
+    i_sat: Option<f64>,
+    /// Band of the study's averages, Hz (default 20–1000 on the twin, 10–1000 on files).
+    #[arg(long, value_parser = crate::cli_frf::parse_band)]
+    band: Option<(f64, f64)>,
     /// Output CSV.
     #[arg(long, default_value = "bla.csv")]
     out: PathBuf,
 }
 
+/// Reads the recorded realisations, grouped by level (ascending).
+fn recorded_levels(a: &BlaArgs) -> Result<(Vec<RecordedLevel>, f64)> {
+    let mut levels: Vec<RecordedLevel> = Vec::new();
+    let mut fs: Option<f64> = None;
+    let none = a.excitation.eq_ignore_ascii_case("none");
+    for (level, path) in &a.records {
+        let t = read_table(path, &ReadOptions::default())?;
+        let has_t = t.names.iter().any(|n| n == "t");
+        let ts = t.sample_time(has_t.then(|| ColumnRef::parse("t")).as_ref(), a.fs)?;
+        match fs {
+            None => fs = Some(1.0 / ts),
+            Some(f) if (f * ts - 1.0).abs() > 1e-6 => bail!(
+                "{}: sampled at {} Hz, the first realisation at {f} Hz; all realisations must share the \
+                 sample rate",
+                path.display(),
+                1.0 / ts
+            ),
+            Some(_) => {}
+        }
+        let col =
+            |name: &str| -> Result<Vec<f64>> { Ok(t.column(&ColumnRef::parse(name))?.to_vec()) };
+        let u = col(&a.input)?;
+        let saturated_fraction = match a.i_sat {
+            Some(lim) => {
+                let mut frac = check_saturation(&u, Some(lim), &SaturationOptions::default())
+                    .with_context(|| format!("{}: saturation check of u", path.display()))?
+                    .fraction;
+                if let Ok(i) = t.column(&ColumnRef::parse("i")) {
+                    frac = frac.max(
+                        check_saturation(i, Some(lim), &SaturationOptions::default())
+                            .with_context(|| format!("{}: saturation check of i", path.display()))?
+                            .fraction,
+                    );
+                }
+                Some(frac)
+            }
+            None => None,
+        };
+        let x = Realisation {
+            r: if none {
+                None
+            } else {
+                Some(col(&a.excitation)?)
+            },
+            u,
+            y: col(&a.output)?,
+            saturated_fraction,
+            source: path.display().to_string(),
+        };
+        match levels
+            .iter_mut()
+            .find(|l| (l.level_pct - level).abs() < 1e-9)
+        {
+            Some(l) => l.realisations.push(x),
+            None => levels.push(RecordedLevel {
+                level_pct: *level,
+                realisations: vec![x],
+            }),
+        }
+    }
+    levels.sort_by(|x, y| x.level_pct.total_cmp(&y.level_pct));
+    Ok((levels, fs.context("no recorded realisation")?))
+}
+
 pub fn bla(a: BlaArgs) -> Result<()> {
-    let plan = BlaPlan {
+    if !a.records.is_empty() {
+        return bla_from_files(&a);
+    }
+    let mut plan = BlaPlan {
         mode: match a.mode {
             crate::ModeArg::Linear => Mode::Linear,
             crate::ModeArg::Nonlinear => Mode::Nonlinear,
@@ -45,64 +168,113 @@ pub fn bla(a: BlaArgs) -> Result<()> {
         seed: a.seed,
         ..BlaPlan::default()
     };
-    let mut csv = String::new();
+    if let Some(b) = a.band {
+        plan.summary_band_hz = b;
+    }
     if let Some(level) = a.level {
         let run = run_level(&plan, level / 100.0)?;
-        let g = &run.bla.g;
-        csv.push_str("f_hz,bla_re,bla_im,bla_std,noise_std,nl_std,var_nl\n");
-        let (st, sn, snl) = (g.std_total(), g.std_noise(), g.std_nl());
-        for i in 0..g.f_hz.len() {
-            writeln!(
-                csv,
-                "{},{:e},{:e},{:e},{:e},{:e},{:e}",
-                g.f_hz[i], g.values[i].re, g.values[i].im, st[i], sn[i], snl[i], g.var_nl[i]
-            )?;
-        }
         let f = level_figures(&run, level / 100.0, plan.summary_band_hz)?;
-        println!(
-            "BLA at {level} % of i_sat RMS, M = {}, P = {}: {} lines; over {:?} Hz noise {:.2e}, NL {:.2e} ± {:.1e} \
-             (relative, one realisation); detection lines: even {:.1} dB, odd {:.1} dB over noise; limits active on {:.2} % of samples",
-            plan.realisations,
-            plan.periods,
-            g.f_hz.len(),
-            plan.summary_band_hz,
-            f.noise_rel,
-            f.nl_rel,
-            f.nl_rel_se,
-            f.even_db,
-            f.odd_db,
-            100.0 * f.saturated_fraction
-        );
+        let csv = per_line_csv(&run.bla)?;
+        print_level(&f, plan.summary_band_hz, run.bla.g.f_hz.len());
+        write(&a.out, &csv)
     } else {
         let levels: Vec<f64> = a.levels.iter().map(|l| l / 100.0).collect();
         let s = amplitude_study(&plan, &levels)?;
-        csv.push_str(
-            "level_pct,lines,noise_rel,nl_rel,nl_rel_se,sum_rel,even_db,odd_db,bla_vs_linear_rel,saturated_fraction,recommended\n",
-        );
-        for r in &s.rows {
-            writeln!(
-                csv,
-                "{},{},{:e},{:e},{:e},{:e},{:.2},{:.2},{:e},{:e},{}",
-                r.level_pct,
-                r.lines,
-                r.noise_rel,
-                r.nl_rel,
-                r.nl_rel_se,
-                r.sum_rel,
-                r.even_db,
-                r.odd_db,
-                r.bla_vs_linear_rel,
-                r.saturated_fraction,
-                u8::from(r.level_pct == s.recommended_pct)
-            )?;
-            println!(
-                "{:5.1} %: noise {:.2e}, NL {:.2e} ± {:.1e}, sum {:.2e}, even {:.1} dB, odd {:.1} dB",
-                r.level_pct, r.noise_rel, r.nl_rel, r.nl_rel_se, r.sum_rel, r.even_db, r.odd_db
-            );
-        }
-        println!("recommended {:.1} %: {}", s.recommended_pct, s.reasoning);
+        write(&a.out, &study_csv(&s)?)
     }
-    std::fs::write(&a.out, csv).with_context(|| format!("writing {}", a.out.display()))?;
-    println!("wrote {}", a.out.display());
+}
+
+fn bla_from_files(a: &BlaArgs) -> Result<()> {
+    let Some(n) = a.period_samples else {
+        bail!("recorded BLA realisations need the multisine period: pass --period-samples N");
+    };
+    let (levels, fs) = recorded_levels(a)?;
+    let plan = RecordedPlan {
+        fs,
+        period_samples: n,
+        skip_periods: a.skip_periods,
+        summary_band_hz: a.band.unwrap_or((10.0, 1000.0)),
+    };
+    if let [level] = levels.as_slice() {
+        let bla = bla_of_level(level, &plan)?;
+        let sat = level
+            .realisations
+            .iter()
+            .filter_map(|x| x.saturated_fraction)
+            .fold(0.0, f64::max);
+        let f = figures_of(&bla, level.level_pct, plan.summary_band_hz, sat, None)?;
+        print_level(&f, plan.summary_band_hz, bla.g.f_hz.len());
+        write(&a.out, &per_line_csv(&bla)?)
+    } else {
+        let s = amplitude_study_from_records(&levels, &plan)?;
+        write(&a.out, &study_csv(&s)?)
+    }
+}
+
+fn write(path: &std::path::Path, csv: &str) -> Result<()> {
+    std::fs::write(path, csv).with_context(|| format!("writing {}", path.display()))?;
+    println!("wrote {}", path.display());
     Ok(())
+}
+
+fn per_line_csv(bla: &Bla) -> Result<String> {
+    let g = &bla.g;
+    let mut csv = String::from("f_hz,bla_re,bla_im,bla_std,noise_std,nl_std,var_nl\n");
+    let (st, sn, snl) = (g.std_total(), g.std_noise(), g.std_nl());
+    for i in 0..g.f_hz.len() {
+        writeln!(
+            csv,
+            "{},{:e},{:e},{:e},{:e},{:e},{:e}",
+            g.f_hz[i], g.values[i].re, g.values[i].im, st[i], sn[i], snl[i], g.var_nl[i]
+        )?;
+    }
+    Ok(csv)
+}
+
+fn print_level(f: &ambid::bla::LevelBla, band: (f64, f64), lines: usize) {
+    println!(
+        "BLA at {} % of i_sat RMS, M = {}, P = {}: {lines} lines; over {band:?} Hz noise {:.2e}, NL {:.2e} ± {:.1e} \
+         (relative, one realisation); detection lines: even {:.1} dB, odd {:.1} dB over noise; limits active on {:.2} % of samples",
+        f.level_pct,
+        f.realisations,
+        f.periods,
+        f.noise_rel,
+        f.nl_rel,
+        f.nl_rel_se,
+        f.even_db,
+        f.odd_db,
+        100.0 * f.saturated_fraction
+    );
+}
+
+fn study_csv(s: &BlaStudy) -> Result<String> {
+    let mut csv = String::from(
+        "level_pct,realisations,periods,lines,noise_rel,nl_rel,nl_rel_se,sum_rel,even_db,odd_db,bla_vs_linear_rel,saturated_fraction,recommended\n",
+    );
+    for r in &s.rows {
+        writeln!(
+            csv,
+            "{},{},{},{},{:e},{:e},{:e},{:e},{:.2},{:.2},{},{:e},{}",
+            r.level_pct,
+            r.realisations,
+            r.periods,
+            r.lines,
+            r.noise_rel,
+            r.nl_rel,
+            r.nl_rel_se,
+            r.sum_rel,
+            r.even_db,
+            r.odd_db,
+            r.bla_vs_linear_rel
+                .map_or(String::new(), |e| format!("{e:e}")),
+            r.saturated_fraction,
+            u8::from(r.level_pct == s.recommended_pct)
+        )?;
+        println!(
+            "{:5.1} %: noise {:.2e}, NL {:.2e} ± {:.1e}, sum {:.2e}, even {:.1} dB, odd {:.1} dB",
+            r.level_pct, r.noise_rel, r.nl_rel, r.nl_rel_se, r.sum_rel, r.even_db, r.odd_db
+        );
+    }
+    println!("recommended {:.1} %: {}", s.recommended_pct, s.reasoning);
+    Ok(csv)
 }

@@ -113,7 +113,6 @@ pub struct FrfArgs {
     /// Do not screen for NaN/Inf, spikes and stuck samples.
     #[arg(long)]
     no_screen: bool,
-    /// Output FRF CSV.
     /// Estimator: `auto` (period averaging with --period-samples, else Welch) or `lpm` (the Local
     /// Polynomial Method on one non-periodic record: T_ry, S and the plant with their
     /// variances, leakage and transients removed; no coherence).
@@ -125,6 +124,7 @@ pub struct FrfArgs {
     /// LPM: half width n of the local window (2n + 1 lines); default: `LpmOptions::default()`.
     #[arg(long)]
     lpm_half_width: Option<usize>,
+    /// Output FRF CSV.
     #[arg(long, default_value = "frf.csv")]
     out: PathBuf,
 }

@@ -242,6 +242,51 @@ pub struct ExperimentOutput {
 pub fn run(exp: &Experiment) -> Result<ExperimentOutput> {
     let twin = Twin::new(exp.twin.clone()).context("building the AMB twin")?;
     let excitation = exp.excitation.generate(twin.i_sat(), twin.ts())?;
+    simulate_with(twin, exp, excitation)
+}
+
+/// Runs the experiment on the twin with a given excitation `r` \[A\] (e.g. read from a file)
+/// instead of `exp.excitation`; `ts` is its sample time when known, which must be the twin's.
+///
+/// # Errors
+/// An empty or non-finite excitation, a sample time other than the twin's, or simulation errors.
+pub fn run_with_excitation(
+    exp: &Experiment,
+    r: Vec<f64>,
+    ts: Option<f64>,
+) -> Result<ExperimentOutput> {
+    let twin = Twin::new(exp.twin.clone()).context("building the AMB twin")?;
+    if r.is_empty() {
+        bail!("the excitation is empty");
+    }
+    if let Some(k) = r.iter().position(|v| !v.is_finite()) {
+        bail!(
+            "excitation sample {k} is not finite ({}); repair or regenerate the excitation",
+            r[k]
+        );
+    }
+    if let Some(ts) = ts {
+        if (ts / twin.ts() - 1.0).abs() > 1e-6 {
+            bail!(
+                "the excitation is sampled at {} Hz but the twin's controller runs at {} Hz; \
+                 regenerate it at the twin's rate (e.g. `ambid excite … --fs {}`)",
+                1.0 / ts,
+                twin.fs(),
+                twin.fs()
+            );
+        }
+    }
+    let n = r.len();
+    let excitation = Excitation {
+        values: r,
+        ts: twin.ts(),
+        period_samples: n,
+        periods: 1,
+    };
+    simulate_with(twin, exp, excitation)
+}
+
+fn simulate_with(twin: Twin, exp: &Experiment, excitation: Excitation) -> Result<ExperimentOutput> {
     let opts = SimOptions {
         mode: exp.mode,
         seed: exp.seed,

@@ -74,9 +74,10 @@ enum Command {
     /// fits of displacement and current, windows, residual tests, closed-loop poles, margins and
     /// the ISO 14839-3 zone; writes summary.json, timeseries.csv and residuals.csv.
     Validate(cli_validate::ValidateArgs),
-    /// Robust Best Linear Approximation of the plant on the twin (M random-phase multisines × P
-    /// periods): noise and nonlinear variance per RMS level and the recommended level, or with
-    /// --level the per-line BLA with its total, noise and nonlinear standard deviations.
+    /// Robust Best Linear Approximation of the plant (M random-phase multisines × P periods) on
+    /// the twin or from recorded realisations (--record PCT:PATH): noise and nonlinear variance
+    /// per RMS level and the recommended level, or for one level the per-line BLA with its total,
+    /// noise and nonlinear standard deviations.
     Bla(cli_bla::BlaArgs),
 }
 
@@ -198,6 +199,11 @@ enum SignalCmd {
         /// Random seed (random phases, random-odd grid).
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// Write M random-phase realisations for the robust BLA (`ambid bla --record`): the
+        /// same grid (from --seed), phases from seed + 1 … seed + M, as `<out>_m1.csv` …
+        /// `<out>_mM.csv`. Needs --phases random and --out.
+        #[arg(long)]
+        realisations: Option<usize>,
     },
 }
 
@@ -320,6 +326,11 @@ struct SimulateArgs {
     /// the record lasts the chirp's duration.
     #[arg(long)]
     reference_chirp: Option<String>,
+    /// Inject the excitation read from this file (column `r`; a `t` column, if present, must
+    /// match the twin's 20 kHz) instead of designing one, e.g. one realisation written by
+    /// `ambid excite multisine --phases random --realisations M`.
+    #[arg(long, conflicts_with_all = ["excitation", "reference_chirp"])]
+    excitation_file: Option<PathBuf>,
     /// Output directory.
     #[arg(long, default_value = "out")]
     out: PathBuf,
@@ -384,6 +395,10 @@ fn excite(a: ExciteArgs) -> Result<()> {
         SignalCmd::Prbs { order, .. } if (2..=31).contains(order) => Some((1u64 << order) - 1),
         _ => None,
     };
+    let realisations = match &a.signal {
+        SignalCmd::Multisine { realisations, .. } => *realisations,
+        _ => None,
+    };
     let spec = match a.signal {
         SignalCmd::Prbs {
             order,
@@ -442,6 +457,7 @@ fn excite(a: ExciteArgs) -> Result<()> {
             grid,
             phases,
             seed,
+            realisations: _,
         } => ExcitationSpec::Multisine(MultisineSpec {
             f_min_hz: f_min,
             f_max_hz: f_max,
@@ -463,9 +479,13 @@ fn excite(a: ExciteArgs) -> Result<()> {
     let report = spec.report(ts)?;
     if a.out.is_some() || a.spectrum.is_some() || a.autocorr.is_some() {
         let e = spec.generate(ts)?;
-        if let Some(out) = &a.out {
-            ensure_parent(out)?;
-            write_time_csv(out, &[("t", &e.times()), ("r", &e.values)])?;
+        match (&a.out, realisations) {
+            (Some(out), Some(m)) => write_realisations(&spec, ts, m, out)?,
+            (Some(out), None) => {
+                ensure_parent(out)?;
+                write_time_csv(out, &[("t", &e.times()), ("r", &e.values)])?;
+            }
+            _ => {}
         }
         // one period of a periodic signal (the whole record otherwise)
         let period = e.period(0).unwrap_or(&e.values);
@@ -496,9 +516,47 @@ fn excite(a: ExciteArgs) -> Result<()> {
             100.0 * report.rms / a.i_sat,
             a.i_sat
         );
-        if let Some(out) = &a.out {
+        if let (Some(out), None) = (&a.out, realisations) {
             println!("written: {}", out.display());
         }
+    }
+    Ok(())
+}
+
+/// Writes `m` random-phase realisations of a multisine (same grid, phases from seed + 1 …
+/// seed + m, the convention of `ambid::bla::run_level`) next to `out` as `<stem>_m<k>.<ext>`.
+fn write_realisations(spec: &ExcitationSpec, ts: f64, m: usize, out: &Path) -> Result<()> {
+    let ExcitationSpec::Multisine(ms) = spec else {
+        bail!("--realisations applies to a multisine");
+    };
+    if ms.phases != Phases::Random {
+        bail!("--realisations needs --phases random (Schroeder phases are the same every time)");
+    }
+    if m < 2 {
+        bail!("--realisations must be at least 2 (the robust BLA needs M ≥ 2), got {m}");
+    }
+    let bins = ms.bins(ts)?;
+    let n = ms.period_samples;
+    let stem = out.file_stem().map_or_else(
+        || "realisation".into(),
+        |s| s.to_string_lossy().into_owned(),
+    );
+    let ext = out
+        .extension()
+        .map_or_else(|| "csv".into(), |s| s.to_string_lossy().into_owned());
+    ensure_parent(out)?;
+    for k in 0..m {
+        let period = ambid_core::frf::bla::random_phase_period(
+            &bins,
+            n,
+            ms.rms,
+            ms.seed.wrapping_add(1 + k as u64),
+        )?;
+        let r: Vec<f64> = (0..ms.periods * n).map(|t| period[t % n]).collect();
+        let t: Vec<f64> = (0..r.len()).map(|j| j as f64 * ts).collect();
+        let path = out.with_file_name(format!("{stem}_m{}.{ext}", k + 1));
+        write_time_csv(&path, &[("t", &t), ("r", &r)])?;
+        println!("written: {}", path.display());
     }
     Ok(())
 }
@@ -639,7 +697,20 @@ fn simulate(a: SimulateArgs) -> Result<()> {
     if a.truth_points < 2 {
         bail!("--truth-points must be at least 2");
     }
-    let mut out = experiment::run(&exp)?;
+    let mut out = match &a.excitation_file {
+        Some(p) => {
+            let t = ambid::io::table::read_table(p, &Default::default())?;
+            let r = t.column(&"r".into())?.to_vec();
+            let ts = if t.names.iter().any(|n| n == "t") {
+                Some(t.sample_time(Some(&"t".into()), None)?)
+            } else {
+                None
+            };
+            experiment::run_with_excitation(&exp, r, ts)
+                .with_context(|| format!("--excitation-file {}", p.display()))?
+        }
+        None => experiment::run(&exp)?,
+    };
     if let Some(spec) = &a.reference_chirp {
         let c: Vec<f64> = spec
             .split(',')
@@ -723,7 +794,10 @@ fn simulate(a: SimulateArgs) -> Result<()> {
         ],
     )?;
     let meta = serde_json::json!({
-        "excitation": exp.excitation,
+        "excitation": match &a.excitation_file {
+            Some(p) => serde_json::json!({ "file": p.display().to_string() }),
+            None => serde_json::json!(exp.excitation),
+        },
         "excitation_samples": out.excitation.values.len(),
         "period_samples": out.excitation.period_samples,
         "periods": out.excitation.periods,

@@ -24,7 +24,7 @@ fn print(study: &ambid::bla::BlaStudy, name: &str) {
             r.nl_rel_se,
             r.even_db,
             r.odd_db,
-            r.bla_vs_linear_rel,
+            r.bla_vs_linear_rel.unwrap_or(f64::NAN),
             r.saturated_fraction
         );
     }
@@ -111,7 +111,7 @@ fn cli_writes_the_study_and_the_lines() {
     );
     let text = std::fs::read_to_string(&study).unwrap();
     let rows: Vec<&str> = text.lines().collect();
-    assert!(rows[0].starts_with("level_pct,lines,noise_rel,nl_rel"));
+    assert!(rows[0].starts_with("level_pct,realisations,periods,lines,noise_rel,nl_rel"));
     assert_eq!(rows.len(), 3);
     assert_eq!(rows[1..].iter().filter(|r| r.ends_with(",1")).count(), 1);
     let lines = dir.join("lines.csv");

@@ -322,14 +322,19 @@ impl Default for AmplitudeSection {
     }
 }
 
-/// `[bla]`: the robust BLA study (twin) at the amplitude study's levels (RMS, % of i_sat).
+/// `[bla]`: the robust BLA study, on the twin at the amplitude study's levels (RMS, % of i_sat),
+/// or from recorded realisations.
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct BlaSection {
-    /// Random-phase multisine realisations M.
+    /// Random-phase multisine realisations M (twin).
     pub realisations: usize,
-    /// Periods P per realisation (after one settling period).
+    /// Periods P per realisation after one settling period (twin).
     pub periods: usize,
+    /// Recorded realisations (source = "files"): one entry per record, several per level; each
+    /// a whole number of periods of `[data] period_samples`, the first `[data] skip_periods`
+    /// dropped.
+    pub files: Vec<LevelFile>,
 }
 
 impl Default for BlaSection {
@@ -337,6 +342,7 @@ impl Default for BlaSection {
         Self {
             realisations: 8,
             periods: 4,
+            files: Vec::new(),
         }
     }
 }

@@ -640,30 +640,125 @@ fn operating_point_blocks(
 }
 
 pub fn bla(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
-    let Some(t) = &ctx.twin else {
-        return Ok(StepStatus::Skipped(
-            "the robust BLA needs M random-phase multisine experiments of P periods each; the \
-             workflow runs them on the twin (`ambid bla` documents the experiment to record)"
-                .into(),
-        ));
-    };
     let cfg = ctx.cfg;
-    let plan = crate::bla::BlaPlan {
-        twin: t.cfg.clone(),
-        mode: t.mode,
-        noise: t.noise,
-        realisations: cfg.bla.realisations,
-        periods: cfg.bla.periods,
-        seed: cfg.seed + 600,
-        ..crate::bla::BlaPlan::default()
+    let (study, intro) = match (&ctx.twin, cfg.source) {
+        (Some(t), _) => {
+            let plan = crate::bla::BlaPlan {
+                twin: t.cfg.clone(),
+                mode: t.mode,
+                noise: t.noise,
+                realisations: cfg.bla.realisations,
+                periods: cfg.bla.periods,
+                seed: cfg.seed + 600,
+                ..crate::bla::BlaPlan::default()
+            };
+            let levels: Vec<f64> = cfg
+                .amplitude_study
+                .levels_pct
+                .iter()
+                .map(|l| l / 100.0)
+                .collect();
+            let study = crate::bla::amplitude_study(&plan, &levels).map_err(computation)?;
+            let intro = format!(
+                "Robust best linear approximation (Pintelon & Schoukens) on the twin: at each RMS level, \
+                 {} random-phase random-odd multisines of {} periods (one more period settles the loop), \
+                 20–2000 Hz; the plant's BLA referenced to r, its noise variance from the period spread and \
+                 the stochastic nonlinear-distortion variance from the spread over realisations, both \
+                 relative to |G|² and averaged over {}–{} Hz; and the power at the non-excited (detection) \
+                 lines over the noise floor. This answers directly what the seed-style study (coherence, FRF \
+                 variance, SNR) infers.",
+                plan.realisations,
+                plan.periods,
+                fmt(plan.summary_band_hz.0),
+                fmt(plan.summary_band_hz.1)
+            );
+            (study, intro)
+        }
+        (None, SourceKind::Files) => {
+            if cfg.bla.files.is_empty() {
+                return Ok(StepStatus::Skipped(
+                    "the robust BLA on recorded data needs M ≥ 2 random-phase multisine records per level \
+                     (whole periods, the same period length): list them in [bla] files = \
+                     [{ level_pct = 4.0, path = \"…\" }, …] (several entries per level) and give \
+                     [data] period_samples"
+                        .into(),
+                ));
+            }
+            let Some(n) = cfg.data.period_samples else {
+                return Err(input(anyhow!(
+                    "[bla] files are given but the multisine period is not: set [data] period_samples"
+                )));
+            };
+            let mut levels: Vec<crate::bla::RecordedLevel> = Vec::new();
+            let mut fs = f64::NAN;
+            for lf in &cfg.bla.files {
+                let rec: Recording =
+                    super::data::load_file(cfg, &ctx.base, &lf.path, "BLA realisation")?;
+                if fs.is_nan() {
+                    fs = rec.fs();
+                } else if (rec.fs() - fs).abs() > 1e-9 * fs {
+                    return Err(input(anyhow!(
+                        "{}: sampled at {} Hz, the first BLA file at {} Hz; all realisations must share \
+                         the sample rate",
+                        rec.source,
+                        rec.fs(),
+                        fs
+                    )));
+                }
+                let x = crate::bla::Realisation {
+                    r: rec.r,
+                    u: rec.u,
+                    y: rec.y,
+                    saturated_fraction: rec.saturated_fraction,
+                    source: rec.source,
+                };
+                match levels
+                    .iter_mut()
+                    .find(|l| (l.level_pct - lf.level_pct).abs() < 1e-9)
+                {
+                    Some(l) => l.realisations.push(x),
+                    None => levels.push(crate::bla::RecordedLevel {
+                        level_pct: lf.level_pct,
+                        realisations: vec![x],
+                    }),
+                }
+            }
+            levels.sort_by(|a, b| a.level_pct.total_cmp(&b.level_pct));
+            let band = cfg.frf.quality_band_hz.unwrap_or([10.0, 1000.0]);
+            let plan = crate::bla::RecordedPlan {
+                fs,
+                period_samples: n,
+                skip_periods: cfg.data.skip_periods,
+                summary_band_hz: (band[0], band[1]),
+            };
+            let study = crate::bla::amplitude_study_from_records(&levels, &plan).map_err(input)?;
+            let m: Vec<String> = levels
+                .iter()
+                .map(|l| format!("{} at {} %", l.realisations.len(), fmt(l.level_pct)))
+                .collect();
+            let intro = format!(
+                "Robust best linear approximation (Pintelon & Schoukens) from {} recorded random-phase \
+                 multisine realisations ({}), periods of {n} samples, {} leading period(s) dropped: the \
+                 plant's BLA{}, its noise variance from the period spread and the stochastic \
+                 nonlinear-distortion variance from the spread over realisations, both relative to |G|² \
+                 and averaged over {}–{} Hz; and the power at the non-excited (detection) lines over the \
+                 noise floor. The current limit is not known for recorded data, so clipping is not \
+                 checked here.",
+                cfg.bla.files.len(),
+                m.join(", "),
+                cfg.data.skip_periods,
+                if levels[0].realisations[0].r.is_some() {
+                    " referenced to r"
+                } else {
+                    " (open loop, u → y)"
+                },
+                fmt(band[0]),
+                fmt(band[1])
+            );
+            (study, intro)
+        }
+        _ => return Ok(StepStatus::Skipped("no data source".into())),
     };
-    let levels: Vec<f64> = cfg
-        .amplitude_study
-        .levels_pct
-        .iter()
-        .map(|l| l / 100.0)
-        .collect();
-    let study = crate::bla::amplitude_study(&plan, &levels).map_err(computation)?;
     let lv: Vec<f64> = study.rows.iter().map(|r| r.level_pct).collect();
     let col = |f: fn(&crate::bla::LevelBla) -> f64| study.rows.iter().map(f).collect::<Vec<f64>>();
     let spans = vec![Span {
@@ -741,7 +836,7 @@ pub fn bla(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             fmt(r.sum_rel),
             fmt(r.even_db),
             fmt(r.odd_db),
-            fmt(100.0 * r.bla_vs_linear_rel),
+            r.bla_vs_linear_rel.map_or("—".into(), |e| fmt(100.0 * e)),
             fmt(100.0 * r.saturated_fraction),
         ]);
         jrows.push(json!({
@@ -751,7 +846,7 @@ pub fn bla(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             "nl_rel_se": r.nl_rel_se,
             "even_db": r.even_db,
             "odd_db": r.odd_db,
-            "bla_vs_linear_pct": 100.0 * r.bla_vs_linear_rel,
+            "bla_vs_linear_pct": r.bla_vs_linear_rel.map(|e| 100.0 * e),
             "saturated_pct": 100.0 * r.saturated_fraction,
         }));
     }
@@ -762,19 +857,7 @@ pub fn bla(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         .iter()
         .position(|r| (r.level_pct - study.recommended_pct).abs() < 1e-9);
     let blocks = vec![
-        Block::Text(format!(
-            "Robust best linear approximation (Pintelon & Schoukens) on the twin: at each RMS level, \
-             {} random-phase random-odd multisines of {} periods (one more period settles the loop), \
-             20–2000 Hz; the plant's BLA referenced to r, its noise variance from the period spread and \
-             the stochastic nonlinear-distortion variance from the spread over realisations, both \
-             relative to |G|² and averaged over {}–{} Hz; and the power at the non-excited (detection) \
-             lines over the noise floor. This answers directly what the seed-style study (coherence, FRF \
-             variance, SNR) infers.",
-            plan.realisations,
-            plan.periods,
-            fmt(plan.summary_band_hz.0),
-            fmt(plan.summary_band_hz.1)
-        )),
+        Block::Text(intro),
         Block::Figure(figure(
             "bla_study",
             "Noise and nonlinear distortion against level (robust BLA)",
@@ -791,8 +874,9 @@ pub fn bla(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         Block::Table(Table {
             id: "bla_study".into(),
             caption: "Robust BLA per level: relative noise and nonlinear variance (± standard error), their \
-                      sum, detection-line power over the noise floor, the BLA's median difference from the \
-                      twin's linearised plant and the fraction of clipped samples."
+                      sum, detection-line power over the noise floor, the BLA's RMS relative difference from \
+                      the twin's linearised plant (twin only) and the fraction of clipped samples (twin \
+                      only)."
                 .into(),
             header: vec![
                 "level [% i_sat RMS]".into(),
