@@ -5,11 +5,14 @@
 //! * `lpm_simo2_1e5`: one input, two outputs (the closed-loop form r → [y, u]);
 //! * `lpm_closed_loop_1e5`: [`lpm_closed_loop`] (the SIMO fit plus T_ry, S, the plant and
 //!   their variances as `Frd`s);
+//! * `lrm_closed_loop_1e5`: the Local Rational Method ([`ambid_core::frf::lrm`], degrees
+//!   (2, 2, 2), n = 6) in the same closed-loop form;
 //! * `fft_1e5`: one realfft forward transform of the 10⁵-sample record, for reference.
 //!
 //! Run: `cargo bench -p ambid-core --bench lpm`. Measured numbers are in docs/lpm.md.
 
 use ambid_core::frf::lpm::{lpm, lpm_closed_loop, LpmOptions};
+use ambid_core::frf::lrm::{lrm_closed_loop, LrmOptions};
 use divan::{black_box, Bencher};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -79,5 +82,22 @@ fn fft_1e5(bencher: Bencher) {
         input.copy_from_slice(&u);
         fft.process(&mut input, &mut out).unwrap();
         black_box(&out);
+    });
+}
+
+#[divan::bench(sample_count = 10)]
+fn lrm_closed_loop_1e5(bencher: Bencher) {
+    let (u, y, v) = data();
+    let o = LrmOptions::default();
+    bencher.bench_local(|| {
+        lrm_closed_loop(
+            black_box(&u),
+            black_box(&v),
+            black_box(&y),
+            FS,
+            (1.0, FS / 2.0),
+            &o,
+        )
+        .unwrap()
     });
 }

@@ -113,16 +113,21 @@ pub struct FrfArgs {
     /// Do not screen for NaN/Inf, spikes and stuck samples.
     #[arg(long)]
     no_screen: bool,
-    /// Estimator: `auto` (period averaging with --period-samples, else Welch) or `lpm` (the Local
+    /// Estimator: `auto` (period averaging with --period-samples, else Welch), `lpm` (the Local
     /// Polynomial Method on one non-periodic record: T_ry, S and the plant with their
-    /// variances, leakage and transients removed; no coherence).
+    /// variances, leakage and transients removed; no coherence) or `lrm` (the Local Rational
+    /// Method: like `lpm`, better on lightly damped modes narrower than the window).
     #[arg(long, value_enum, default_value_t = MethodArg::Auto)]
     method: MethodArg,
     /// LPM: polynomial degree R.
     #[arg(long, default_value_t = 2)]
     lpm_degree: usize,
-    /// LPM: half width n of the local window (2n + 1 lines); default: `LpmOptions::default()`.
-    #[arg(long)]
+    /// LRM: degrees of numerator, denominator and transient, `Rn,Rd,Rm`.
+    #[arg(long, value_delimiter = ',', num_args = 3, default_values_t = [2usize, 2, 2])]
+    lrm_degrees: Vec<usize>,
+    /// LPM/LRM: half width n of the local window (2n + 1 lines); default: the smallest window
+    /// with 3 (LPM) or 5 (LRM) degrees of freedom.
+    #[arg(long, alias = "half-width")]
     lpm_half_width: Option<usize>,
     /// Output FRF CSV.
     #[arg(long, default_value = "frf.csv")]
@@ -136,6 +141,8 @@ pub enum MethodArg {
     Auto,
     /// Local Polynomial Method.
     Lpm,
+    /// Local Rational Method.
+    Lrm,
 }
 
 fn ensure_parent(p: &Path) -> Result<()> {
@@ -254,8 +261,8 @@ pub fn frf(a: FrfArgs) -> Result<()> {
     let y = data.column(&a.output)?;
     let i = data.column(&a.current).ok();
     let fs = 1.0 / data.ts;
-    if a.method == MethodArg::Lpm {
-        return frf_lpm(&a, r, u, y, fs);
+    if matches!(a.method, MethodArg::Lpm | MethodArg::Lrm) {
+        return frf_local(&a, r, u, y, fs);
     }
     let method = match a.period_samples {
         Some(p) => FrfMethod::Periodic {
@@ -350,21 +357,62 @@ pub fn frf(a: FrfArgs) -> Result<()> {
     Ok(())
 }
 
-/// `ambid frf --method lpm`: the Local Polynomial Method on the whole record.
-fn frf_lpm(a: &FrfArgs, r: &[f64], u: &[f64], y: &[f64], fs: f64) -> Result<()> {
+/// `ambid frf --method lpm|lrm`: the Local Polynomial or Rational Method on the whole record.
+fn frf_local(a: &FrfArgs, r: &[f64], u: &[f64], y: &[f64], fs: f64) -> Result<()> {
     use ambid_core::frf::lpm::{lpm_closed_loop, LpmOptions};
-    let mut opts = LpmOptions::default().with_degree(a.lpm_degree)?;
-    if let Some(n) = a.lpm_half_width {
-        opts = opts.with_half_width(n)?;
-    }
+    use ambid_core::frf::lrm::{lrm_closed_loop, LrmOptions};
     let band = a.band.unwrap_or((1.0, 0.5 * fs));
-    let cl = lpm_closed_loop(r, u, y, fs, band, &opts)?;
-    let f = cl.f_hz().to_vec();
+    struct Local {
+        t_ry: ambid_core::lti::Frd,
+        t_ru: ambid_core::lti::Frd,
+        plant: ambid_core::lti::Frd,
+    }
+    let (cl, what) = if a.method == MethodArg::Lrm {
+        let [rn, rd, rm] = <[usize; 3]>::try_from(a.lrm_degrees.as_slice()).map_err(|_| {
+            anyhow::anyhow!("--lrm-degrees takes three degrees Rn,Rd,Rm, e.g. 2,2,2")
+        })?;
+        let mut opts = LrmOptions::default().with_degrees(rn, rd, rm)?;
+        if let Some(n) = a.lpm_half_width {
+            opts = opts.with_half_width(n)?;
+        }
+        let c = lrm_closed_loop(r, u, y, fs, band, &opts)?;
+        let what = format!(
+            "LRM: degrees (Rn, Rd, Rm) = ({rn}, {rd}, {rm}), window {} lines, {} degrees of freedom",
+            opts.window(),
+            c.dof()
+        );
+        (
+            Local {
+                t_ry: c.t_ry,
+                t_ru: c.t_ru,
+                plant: c.plant,
+            },
+            what,
+        )
+    } else {
+        let mut opts = LpmOptions::default().with_degree(a.lpm_degree)?;
+        if let Some(n) = a.lpm_half_width {
+            opts = opts.with_half_width(n)?;
+        }
+        let c = lpm_closed_loop(r, u, y, fs, band, &opts)?;
+        let what = format!(
+            "LPM: degree {}, window {} lines, {} degrees of freedom",
+            opts.degree(),
+            opts.window(),
+            c.dof()
+        );
+        (
+            Local {
+                t_ry: c.t_ry,
+                t_ru: c.t_ru,
+                plant: c.plant,
+            },
+            what,
+        )
+    };
+    let f = cl.plant.f_hz().to_vec();
     println!(
-        "LPM: degree {}, window {} lines, {} degrees of freedom, {} lines in {:.1}–{:.1} Hz",
-        opts.degree(),
-        opts.window(),
-        cl.dof(),
+        "{what}, {} lines in {:.1}–{:.1} Hz",
         f.len(),
         f.first().copied().unwrap_or(f64::NAN),
         f.last().copied().unwrap_or(f64::NAN)

@@ -301,5 +301,38 @@ fn frf_by_the_local_polynomial_method_matches_the_twin() {
     assert!(!o.status.success());
     println!("{}", text(&o));
     assert!(!d.join("bad.csv").exists());
+    // the Local Rational Method on the same record
+    let out_lrm = d.join("frf_lrm.csv");
+    let o = ambid(&[
+        "frf",
+        s(&data),
+        "--method",
+        "lrm",
+        "--band",
+        "10,1000",
+        "--out",
+        s(&out_lrm),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    println!("{}", text(&o));
+    assert!(text(&o).contains("LRM: degrees (Rn, Rd, Rm) = (2, 2, 2)"));
+    let frf = ambid::io::csv::read_frf_csv(&out_lrm).unwrap();
+    let est = frf.frd("plant", 5e-5).unwrap();
+    let truth = twin.plant_frf(est.f_hz()).unwrap();
+    let med_lrm = ambid::validation::median_relative_error(est.values(), &truth);
+    println!("LRM plant: median error {:.3} %", 100.0 * med_lrm);
+    assert!(med_lrm < 0.05, "{med_lrm}");
+    let o = ambid(&[
+        "frf",
+        s(&data),
+        "--method",
+        "lrm",
+        "--lrm-degrees",
+        "2,0,2",
+        "--out",
+        s(&d.join("bad.csv")),
+    ]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("denominator degree"), "{}", text(&o));
     let _ = std::fs::remove_dir_all(&d);
 }

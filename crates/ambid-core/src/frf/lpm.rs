@@ -348,77 +348,20 @@ impl LpmClosedLoop {
 /// * [`Error::Numerical`]: a rank-deficient local regressor (the input is locally a polynomial in
 ///   the line index, e.g. a single sine).
 pub fn lpm(u: &[f64], ys: &[&[f64]], fs: f64, band: (f64, f64), opts: &LpmOptions) -> Result<Lpm> {
-    if ys.is_empty() {
-        return Err(Error::invalid("ys", "no output channel given"));
-    }
-    if !(fs.is_finite() && fs > 0.0) {
-        return Err(Error::invalid(
-            "fs",
-            format!("the sampling frequency must be positive and finite, got {fs}"),
-        ));
-    }
-    let n = u.len();
-    for (o, y) in ys.iter().enumerate() {
-        if y.len() != n {
-            return Err(Error::DimensionMismatch {
-                context: "LPM: output length vs input length",
-                expected: n.to_string(),
-                got: format!("{} (output {o})", y.len()),
-            });
-        }
-    }
-    check_finite("u", u)?;
-    for y in ys {
-        check_finite("y", y)?;
-    }
     let q = opts.dof()?;
     let (half, w) = (opts.half_width(), opts.window());
-    let n_lines = n / 2;
-    if n_lines < w {
-        return Err(Error::invalid(
-            "u",
-            format!(
-                "the record of {n} samples has {n_lines} DFT lines, fewer than the window of {w} lines; \
-                 record longer or use a smaller degree/half width"
-            ),
-        ));
-    }
-    if !(band.0.is_finite() && band.1.is_finite() && band.0 <= band.1) {
-        return Err(Error::invalid(
-            "band",
-            format!("need finite f_min ≤ f_max, got [{}, {}]", band.0, band.1),
-        ));
-    }
-    let df = fs / n as f64;
-    let lines: Vec<usize> = (1..=n_lines)
-        .filter(|&k| {
-            let f = k as f64 * df;
-            f >= band.0 && f <= band.1
-        })
-        .collect();
-    if lines.is_empty() {
-        return Err(Error::invalid(
-            "band",
-            format!(
-                "no DFT line in {}–{} Hz: the lines are {df} Hz apart from {df} Hz to {} Hz",
-                band.0,
-                band.1,
-                n_lines as f64 * df
-            ),
-        ));
-    }
-    if u.iter().all(|v| *v == 0.0) {
-        return Err(Error::invalid(
-            "u",
-            "the input is identically zero: there is no excitation power",
-        ));
-    }
-    let uf = dft(u)?;
-    let yf: Vec<Vec<c64>> = ys.iter().map(|y| dft(y)).collect::<Result<_>>()?;
+    let Prepared {
+        uf,
+        yf,
+        lines,
+        df,
+        n_lines,
+        mean_power,
+        n,
+    } = prepare(u, ys, fs, band, w)?;
     let yref: Vec<&[c64]> = yf.iter().map(|v| v.as_slice()).collect();
     // a window whose input power is below 1e-14 of an average window's (−140 dB) holds only
     // leakage and round-off: not excited
-    let mean_power = uf.iter().skip(1).map(|z| z.norm_sqr()).sum::<f64>() / n_lines as f64;
     let mut fit = Fitter::new(opts.degree(), half, ys.len(), 1e-14 * w as f64 * mean_power);
     let p = ys.len();
     let nl = lines.len();
@@ -504,20 +447,37 @@ pub fn lpm_closed_loop(
     let t_ry = fit.frf(0)?;
     let t_ru = fit.frf(1)?;
     let cov = fit.frf_cov(0, 1)?;
+    let plant = ratio_plant(&t_ry, &t_ru, &cov, fit.ts, "LPM closed loop")?;
+    Ok(LpmClosedLoop {
+        t_ry,
+        t_ru,
+        plant,
+        cov_ry_ru: cov,
+        fit,
+    })
+}
+
+/// The plant $P = T_{ry}/T_{ru}$ with the first-order variance including the cross covariance
+/// `cov` $=\mathrm E[\delta T_{ry}\overline{\delta T_{ru}}]$ (see the [module docs](self)).
+pub(super) fn ratio_plant(
+    t_ry: &Frd,
+    t_ru: &Frd,
+    cov: &[c64],
+    ts: f64,
+    what: &'static str,
+) -> Result<Frd> {
+    let f_hz = t_ry.f_hz();
     let (vy, vu) = (
         t_ry.variance().unwrap_or(&[]),
         t_ru.variance().unwrap_or(&[]),
     );
-    let mut pv = Vec::with_capacity(fit.f_hz.len());
-    let mut pvar = Vec::with_capacity(fit.f_hz.len());
+    let mut pv = Vec::with_capacity(f_hz.len());
+    let mut pvar = Vec::with_capacity(f_hz.len());
     for (l, (&ty, &tu)) in t_ry.values().iter().zip(t_ru.values()).enumerate() {
         if tu.norm_sqr() == 0.0 {
             return Err(Error::numerical(
-                "LPM closed loop",
-                format!(
-                    "T_ru = 0 at {} Hz; the plant is undefined there",
-                    fit.f_hz[l]
-                ),
+                what,
+                format!("T_ru = 0 at {} Hz; the plant is undefined there", f_hz[l]),
             ));
         }
         let a = c64::new(1.0, 0.0) / tu;
@@ -532,13 +492,104 @@ pub fn lpm_closed_loop(
         pv.push(pk);
         pvar.push(v.max(0.0));
     }
-    let plant = Frd::new(fit.f_hz.clone(), pv, Some(pvar), Some(fit.ts))?;
-    Ok(LpmClosedLoop {
-        t_ry,
-        t_ru,
-        plant,
-        cov_ry_ru: cov,
-        fit,
+    Frd::new(f_hz.to_vec(), pv, Some(pvar), Some(ts))
+}
+
+/// Checked inputs of a local (polynomial or rational) method: the DFTs and the band's lines.
+pub(super) struct Prepared {
+    pub uf: Vec<c64>,
+    pub yf: Vec<Vec<c64>>,
+    pub lines: Vec<usize>,
+    pub df: f64,
+    pub n_lines: usize,
+    /// mean $|U(k)|^2$ over lines $1..=\lfloor N/2\rfloor$
+    pub mean_power: f64,
+    /// record length $N$
+    pub n: usize,
+}
+
+/// Checks the channels, the band and the window length `w`, and transforms the record.
+pub(super) fn prepare(
+    u: &[f64],
+    ys: &[&[f64]],
+    fs: f64,
+    band: (f64, f64),
+    w: usize,
+) -> Result<Prepared> {
+    if ys.is_empty() {
+        return Err(Error::invalid("ys", "no output channel given"));
+    }
+    if !(fs.is_finite() && fs > 0.0) {
+        return Err(Error::invalid(
+            "fs",
+            format!("the sampling frequency must be positive and finite, got {fs}"),
+        ));
+    }
+    let n = u.len();
+    for (o, y) in ys.iter().enumerate() {
+        if y.len() != n {
+            return Err(Error::DimensionMismatch {
+                context: "LPM/LRM: output length vs input length",
+                expected: n.to_string(),
+                got: format!("{} (output {o})", y.len()),
+            });
+        }
+    }
+    check_finite("u", u)?;
+    for y in ys {
+        check_finite("y", y)?;
+    }
+    let n_lines = n / 2;
+    if n_lines < w {
+        return Err(Error::invalid(
+            "u",
+            format!(
+                "the record of {n} samples has {n_lines} DFT lines, fewer than the window of {w} lines; \
+                 record longer or use a smaller degree/half width"
+            ),
+        ));
+    }
+    if !(band.0.is_finite() && band.1.is_finite() && band.0 <= band.1) {
+        return Err(Error::invalid(
+            "band",
+            format!("need finite f_min ≤ f_max, got [{}, {}]", band.0, band.1),
+        ));
+    }
+    let df = fs / n as f64;
+    let lines: Vec<usize> = (1..=n_lines)
+        .filter(|&k| {
+            let f = k as f64 * df;
+            f >= band.0 && f <= band.1
+        })
+        .collect();
+    if lines.is_empty() {
+        return Err(Error::invalid(
+            "band",
+            format!(
+                "no DFT line in {}–{} Hz: the lines are {df} Hz apart from {df} Hz to {} Hz",
+                band.0,
+                band.1,
+                n_lines as f64 * df
+            ),
+        ));
+    }
+    if u.iter().all(|v| *v == 0.0) {
+        return Err(Error::invalid(
+            "u",
+            "the input is identically zero: there is no excitation power",
+        ));
+    }
+    let uf = dft(u)?;
+    let yf: Vec<Vec<c64>> = ys.iter().map(|y| dft(y)).collect::<Result<_>>()?;
+    let mean_power = uf.iter().skip(1).map(|z| z.norm_sqr()).sum::<f64>() / n_lines as f64;
+    Ok(Prepared {
+        uf,
+        yf,
+        lines,
+        df,
+        n_lines,
+        mean_power,
+        n,
     })
 }
 

@@ -3,6 +3,7 @@
 pub mod bla;
 pub mod closed_loop;
 pub mod lpm;
+pub mod lrm;
 pub mod periodic;
 pub mod quality;
 pub mod resonance;
