@@ -123,7 +123,7 @@ pub struct FrfArgs {
     #[arg(long, default_value_t = 2)]
     lpm_degree: usize,
     /// LRM: degrees of numerator, denominator and transient, `Rn,Rd,Rm`.
-    #[arg(long, value_delimiter = ',', num_args = 3, default_values_t = [2usize, 2, 2])]
+    #[arg(long, value_delimiter = ',', default_values_t = [2usize, 2, 2])]
     lrm_degrees: Vec<usize>,
     /// LPM/LRM: half width n of the local window (2n + 1 lines); default: the smallest window
     /// with 3 (LPM) or 5 (LRM) degrees of freedom.
