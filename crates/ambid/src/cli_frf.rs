@@ -362,12 +362,8 @@ fn frf_local(a: &FrfArgs, r: &[f64], u: &[f64], y: &[f64], fs: f64) -> Result<()
     use ambid_core::frf::lpm::{lpm_closed_loop, LpmOptions};
     use ambid_core::frf::lrm::{lrm_closed_loop, LrmOptions};
     let band = a.band.unwrap_or((1.0, 0.5 * fs));
-    struct Local {
-        t_ry: ambid_core::lti::Frd,
-        t_ru: ambid_core::lti::Frd,
-        plant: ambid_core::lti::Frd,
-    }
-    let (cl, what) = if a.method == MethodArg::Lrm {
+    // the three FRFs of either local method, and a description
+    let (t_ry, t_ru, plant, what) = if a.method == MethodArg::Lrm {
         let [rn, rd, rm] = <[usize; 3]>::try_from(a.lrm_degrees.as_slice()).map_err(|_| {
             anyhow::anyhow!("--lrm-degrees takes three degrees Rn,Rd,Rm, e.g. 2,2,2")
         })?;
@@ -381,14 +377,7 @@ fn frf_local(a: &FrfArgs, r: &[f64], u: &[f64], y: &[f64], fs: f64) -> Result<()
             opts.window(),
             c.dof()
         );
-        (
-            Local {
-                t_ry: c.t_ry,
-                t_ru: c.t_ru,
-                plant: c.plant,
-            },
-            what,
-        )
+        (c.t_ry, c.t_ru, c.plant, what)
     } else {
         let mut opts = LpmOptions::default().with_degree(a.lpm_degree)?;
         if let Some(n) = a.lpm_half_width {
@@ -401,16 +390,9 @@ fn frf_local(a: &FrfArgs, r: &[f64], u: &[f64], y: &[f64], fs: f64) -> Result<()
             opts.window(),
             c.dof()
         );
-        (
-            Local {
-                t_ry: c.t_ry,
-                t_ru: c.t_ru,
-                plant: c.plant,
-            },
-            what,
-        )
+        (c.t_ry, c.t_ru, c.plant, what)
     };
-    let f = cl.plant.f_hz().to_vec();
+    let f = plant.f_hz().to_vec();
     println!(
         "{what}, {} lines in {:.1}–{:.1} Hz",
         f.len(),
@@ -419,8 +401,8 @@ fn frf_local(a: &FrfArgs, r: &[f64], u: &[f64], y: &[f64], fs: f64) -> Result<()
     );
     let q: Vec<(f64, f64)> = f
         .iter()
-        .zip(cl.plant.values())
-        .zip(cl.plant.std().unwrap_or_default())
+        .zip(plant.values())
+        .zip(plant.std().unwrap_or_default())
         .filter(|((f, _), _)| **f >= a.quality_band.0 && **f <= a.quality_band.1)
         .map(|((_, p), s)| (s / p.norm(), s))
         .collect();
@@ -436,10 +418,7 @@ fn frf_local(a: &FrfArgs, r: &[f64], u: &[f64], y: &[f64], fs: f64) -> Result<()
         );
     }
     ensure_parent(&a.out)?;
-    let stds: Vec<Option<Vec<f64>>> = [&cl.t_ry, &cl.t_ru, &cl.plant]
-        .iter()
-        .map(|x| x.std())
-        .collect();
+    let stds: Vec<Option<Vec<f64>>> = [&t_ry, &t_ru, &plant].iter().map(|x| x.std()).collect();
     let fs_col = vec![fs; f.len()];
     write_frf_csv_with(
         &a.out,
@@ -447,17 +426,17 @@ fn frf_local(a: &FrfArgs, r: &[f64], u: &[f64], y: &[f64], fs: f64) -> Result<()
         &[
             FrfColumn {
                 name: "t_ry",
-                values: cl.t_ry.values(),
+                values: t_ry.values(),
                 std: stds[0].as_deref(),
             },
             FrfColumn {
                 name: "t_ru",
-                values: cl.t_ru.values(),
+                values: t_ru.values(),
                 std: stds[1].as_deref(),
             },
             FrfColumn {
                 name: "plant",
-                values: cl.plant.values(),
+                values: plant.values(),
                 std: stds[2].as_deref(),
             },
         ],

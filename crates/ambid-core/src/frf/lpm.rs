@@ -303,9 +303,22 @@ impl Lpm {
     }
 }
 
-/// Closed-loop FRFs by the LPM with $r$ as the input and $[y, u]$ as outputs.
+/// A local fit (LPM or LRM) with residual degrees of freedom.
+pub trait LocalFit {
+    /// Residual degrees of freedom $q$ of the noise covariance estimates.
+    fn dof(&self) -> usize;
+}
+
+impl LocalFit for Lpm {
+    fn dof(&self) -> usize {
+        self.dof
+    }
+}
+
+/// Closed-loop FRFs by a local method (the LPM here, the [LRM](super::lrm) too) with $r$ as the
+/// input and $[y, u]$ as outputs.
 #[derive(Debug, Clone, PartialEq)]
-pub struct LpmClosedLoop {
+pub struct LocalClosedLoop<F> {
     /// $T_{ry}$ with its variance.
     pub t_ry: Frd,
     /// $S = T_{ru}$ with its variance.
@@ -315,24 +328,47 @@ pub struct LpmClosedLoop {
     /// $\mathrm E[\delta T_{ry}\,\overline{\delta T_{ru}}]$ per line.
     pub cov_ry_ru: Vec<c64>,
     /// The underlying SIMO fit (output 0 is $y$, output 1 is $u$): transients, noise covariances.
-    pub fit: Lpm,
+    pub fit: F,
 }
 
-impl LpmClosedLoop {
+/// Closed-loop FRFs by the LPM.
+pub type LpmClosedLoop = LocalClosedLoop<Lpm>;
+
+impl<F: LocalFit> LocalClosedLoop<F> {
     /// Frequencies \[Hz\].
     pub fn f_hz(&self) -> &[f64] {
         self.plant.f_hz()
     }
     /// Residual degrees of freedom $q$.
     pub fn dof(&self) -> usize {
-        self.fit.dof
+        self.fit.dof()
     }
     /// Radius factor of the level-`level` confidence disc.
     ///
     /// # Errors
     /// As [`band_radius_factor`].
     pub fn band_factor(&self, level: f64) -> Result<f64> {
-        self.fit.band_factor(level)
+        band_radius_factor(level, self.fit.dof() as f64)
+    }
+
+    /// Assembles the closed-loop result from the SIMO fit's $T_{ry}$, $T_{ru}$ and their cross
+    /// covariance (plant by [`ratio_plant`]).
+    pub(super) fn assemble(
+        fit: F,
+        t_ry: Frd,
+        t_ru: Frd,
+        cov: Vec<c64>,
+        ts: f64,
+        what: &'static str,
+    ) -> Result<Self> {
+        let plant = ratio_plant(&t_ry, &t_ru, &cov, ts, what)?;
+        Ok(Self {
+            t_ry,
+            t_ru,
+            plant,
+            cov_ry_ru: cov,
+            fit,
+        })
     }
 }
 
@@ -444,17 +480,8 @@ pub fn lpm_closed_loop(
     opts: &LpmOptions,
 ) -> Result<LpmClosedLoop> {
     let fit = lpm(r, &[y, u], fs, band, opts)?;
-    let t_ry = fit.frf(0)?;
-    let t_ru = fit.frf(1)?;
-    let cov = fit.frf_cov(0, 1)?;
-    let plant = ratio_plant(&t_ry, &t_ru, &cov, fit.ts, "LPM closed loop")?;
-    Ok(LpmClosedLoop {
-        t_ry,
-        t_ru,
-        plant,
-        cov_ry_ru: cov,
-        fit,
-    })
+    let (t_ry, t_ru, cov, ts) = (fit.frf(0)?, fit.frf(1)?, fit.frf_cov(0, 1)?, fit.ts);
+    LocalClosedLoop::assemble(fit, t_ry, t_ru, cov, ts, "LPM closed loop")
 }
 
 /// The plant $P = T_{ry}/T_{ru}$ with the first-order variance including the cross covariance

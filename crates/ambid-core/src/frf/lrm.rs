@@ -79,7 +79,7 @@
 //! ```
 
 use super::closed_loop::band_radius_factor;
-use super::lpm::{prepare, ratio_plant, Prepared};
+use super::lpm::{prepare, LocalClosedLoop, LocalFit, Prepared};
 use crate::error::{Error, Result};
 use crate::lti::Frd;
 use faer::c64;
@@ -318,38 +318,14 @@ impl Lrm {
     }
 }
 
-/// Closed-loop FRFs by the LRM with $r$ as the input and $[y, u]$ as outputs.
-#[derive(Debug, Clone, PartialEq)]
-pub struct LrmClosedLoop {
-    /// $T_{ry}$ with its variance.
-    pub t_ry: Frd,
-    /// $S = T_{ru}$ with its variance.
-    pub t_ru: Frd,
-    /// The plant $P = T_{ry}/T_{ru}$ with the first-order variance (cross covariance included).
-    pub plant: Frd,
-    /// $\mathrm E[\delta T_{ry}\,\overline{\delta T_{ru}}]$ per line.
-    pub cov_ry_ru: Vec<c64>,
-    /// The underlying fit (output 0 is $y$, output 1 is $u$).
-    pub fit: Lrm,
+impl LocalFit for Lrm {
+    fn dof(&self) -> usize {
+        self.dof
+    }
 }
 
-impl LrmClosedLoop {
-    /// Frequencies \[Hz\].
-    pub fn f_hz(&self) -> &[f64] {
-        self.plant.f_hz()
-    }
-    /// Nominal residual degrees of freedom $q$.
-    pub fn dof(&self) -> usize {
-        self.fit.dof
-    }
-    /// Radius factor of the level-`level` confidence disc.
-    ///
-    /// # Errors
-    /// As [`band_radius_factor`].
-    pub fn band_factor(&self, level: f64) -> Result<f64> {
-        self.fit.band_factor(level)
-    }
-}
+/// Closed-loop FRFs by the LRM (`fit` is the [`Lrm`]).
+pub type LrmClosedLoop = LocalClosedLoop<Lrm>;
 
 /// The LRM of outputs `ys` on input `u` (equal lengths, finite), sampled at `fs` Hz, on the DFT
 /// lines in `band` Hz.
@@ -561,17 +537,8 @@ pub fn lrm_closed_loop(
     opts: &LrmOptions,
 ) -> Result<LrmClosedLoop> {
     let fit = lrm(r, &[y, u], fs, band, opts)?;
-    let t_ry = fit.frf(0)?;
-    let t_ru = fit.frf(1)?;
-    let cov = fit.frf_cov(0, 1)?;
-    let plant = ratio_plant(&t_ry, &t_ru, &cov, fit.ts, "LRM closed loop")?;
-    Ok(LrmClosedLoop {
-        t_ry,
-        t_ru,
-        plant,
-        cov_ry_ru: cov,
-        fit,
-    })
+    let (t_ry, t_ru, cov, ts) = (fit.frf(0)?, fit.frf(1)?, fit.frf_cov(0, 1)?, fit.ts);
+    LocalClosedLoop::assemble(fit, t_ry, t_ru, cov, ts, "LRM closed loop")
 }
 
 /// Outcome of one small least-squares solve.
