@@ -17,7 +17,7 @@
 //!             ARX order scan na = 1..A × nb = 1..B, BIC choice
 //!   n4sid     --data F --order n [--block-rows i] [--pem none|simulation] [--fs Hz]
 //!             subspace identification (N4SID/CVA), optionally refined by state-space PEM
-//!   oe        --data F --nb B --nf F [--nk 1] [--fs Hz]
+//!   oe        --data F --nb B --nf F [--nk 1] [--max-iterations 100] [--fs Hz]
 //!             output-error model by the prediction-error method
 //!   freqresp  --model M.json --nfreq K
 //!             frequency response of a discrete state-space model (JSON with a, b, c, d as
@@ -309,7 +309,7 @@ fn subspace(o: &Opts, warmup: usize, reps: usize) -> Result<(Vec<f64>, Value)> {
 fn oe(o: &Opts, warmup: usize, reps: usize) -> Result<(Vec<f64>, Value)> {
     let (u, y, ts) = io_columns(o)?;
     let (nb, nf, nk): (usize, usize, usize) = (o.num("nb")?, o.num("nf")?, o.num_or("nk", 1)?);
-    let opts = PemOptions::default();
+    let opts = PemOptions::default().with_max_iterations(o.num_or("max-iterations", 100)?)?;
     let (times, (fit, iterations)) = timed(warmup, reps, || {
         let (f, rep) = pem::oe(&y, &u, nb, nf, nk, ts, &opts)?;
         Ok((f, rep.iterations()))
