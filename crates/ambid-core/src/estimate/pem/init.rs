@@ -271,6 +271,53 @@ pub(crate) fn oe_start(
     Ok((b, f))
 }
 
+/// An alternative OE start from a subspace model: $F$ = the denominator of an N4SID model of
+/// order $n_f$ identified from $u$ delayed by $n_k - 1$ samples (a pole just outside the unit
+/// circle, radius below [`SRIV_MAX_RADIUS`], is moved radially inside as for SRIV), then $B$
+/// by least squares of $y$ on the lagged $u/F$ (linear in $B$ once $F$ is fixed). `None` when
+/// $n_k = 0$, the subspace step fails, or its $F$ is clearly unstable.
+pub(crate) fn subspace_oe_start(
+    y: &[f64],
+    u: &[f64],
+    nb: usize,
+    nf: usize,
+    nk: usize,
+    ts: f64,
+) -> Option<(Vec<f64>, Vec<f64>)> {
+    use crate::estimate::subspace::{n4sid, SubspaceOptions};
+    use crate::lti::TransferFunction;
+    if nk == 0 || nf == 0 {
+        return None;
+    }
+    let n = y.len();
+    let shift = nk - 1;
+    let ym = Mat::from_fn(n - shift, 1, |i, _| y[i + shift]);
+    let um = Mat::from_fn(n - shift, 1, |i, _| u[i]);
+    let opts = SubspaceOptions {
+        order: Some(nf),
+        ..SubspaceOptions::new(ts)
+    };
+    let ss = n4sid(ym.as_ref(), um.as_ref(), &opts).ok()?;
+    let tf = TransferFunction::from_state_space(&ss.model).ok()?;
+    let den = tf.den();
+    if den.len() != nf + 1 || den[0] == 0.0 {
+        return None;
+    }
+    let mut f: Vec<f64> = den.iter().map(|c| c / den[0]).collect();
+    if !is_stable(&f) {
+        let r = max_root(&f);
+        if r.is_nan() || r >= SRIV_MAX_RADIUS {
+            return None;
+        }
+        f = scale_radius(f, SRIV_CONTRACTED / r);
+    }
+    let uf = filter(&[1.0], &f, u);
+    let t0 = nk + nb - 1;
+    let cols: Vec<Col<'_>> = (0..nb).map(|j| (uf.as_slice(), nk + j, 1.0)).collect();
+    let th = regress(&design(t0, n, &cols), &y[t0..], "OE start").ok()?;
+    Some((with_delay(nk, &th), f))
+}
+
 /// $A, B, C$ of an ARMAX model by Hannan–Rissanen: innovations from a long ARX model, then
 /// least squares of $y(t) - \hat e(t)$ on $[-y(t-i), u(t-n_k-j), \hat e(t-k)]$.
 fn armax_start(
