@@ -183,14 +183,70 @@ impl LpmOptions {
     }
 }
 
+/// The estimated lines of a local fit (LPM or LRM) and access to its line-major per-output
+/// storage (`v[l * p + o]` per output, `v[(l * p + o1) * p + o2]` per pair of outputs).
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct LineGrid {
+    pub f_hz: Vec<f64>,
+    pub lines: Vec<usize>,
+    pub record_len: usize,
+    pub ts: f64,
+    pub n_out: usize,
+}
+
+impl LineGrid {
+    /// The lines `lines` of a record of `record_len` samples at `fs` Hz, with `n_out` outputs.
+    pub fn new(lines: Vec<usize>, record_len: usize, fs: f64, n_out: usize) -> Self {
+        let df = fs / record_len as f64;
+        Self {
+            f_hz: lines.iter().map(|&k| k as f64 * df).collect(),
+            lines,
+            record_len,
+            ts: 1.0 / fs,
+            n_out,
+        }
+    }
+
+    pub fn check_output(&self, o: usize) -> Result<()> {
+        if o >= self.n_out {
+            return Err(Error::invalid(
+                "output",
+                format!(
+                    "output {o} requested but the fit has {} output(s)",
+                    self.n_out
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// `v[l * p + o]` for every line.
+    pub fn of_output<T: Copy>(&self, v: &[T], o: usize) -> Result<Vec<T>> {
+        self.check_output(o)?;
+        let p = self.n_out;
+        Ok((0..self.lines.len()).map(|l| v[l * p + o]).collect())
+    }
+
+    /// `v[(l * p + o1) * p + o2]` for every line.
+    pub fn of_pair<T: Copy>(&self, v: &[T], o1: usize, o2: usize) -> Result<Vec<T>> {
+        self.check_output(o1)?;
+        self.check_output(o2)?;
+        let p = self.n_out;
+        Ok((0..self.lines.len())
+            .map(|l| v[(l * p + o1) * p + o2])
+            .collect())
+    }
+
+    /// An [`Frd`] on these lines.
+    pub fn frd(&self, values: Vec<c64>, variance: Vec<f64>) -> Result<Frd> {
+        Frd::new(self.f_hz.clone(), values, Some(variance), Some(self.ts))
+    }
+}
+
 /// The LPM fit of one input and $p$ outputs on the lines of a band; see the [module docs](self).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Lpm {
-    f_hz: Vec<f64>,
-    lines: Vec<usize>,
-    record_len: usize,
-    ts: f64,
-    n_out: usize,
+    grid: LineGrid,
     degree: usize,
     half_width: usize,
     dof: usize,
@@ -206,19 +262,19 @@ pub struct Lpm {
 impl Lpm {
     /// Frequencies of the estimated lines \[Hz\].
     pub fn f_hz(&self) -> &[f64] {
-        &self.f_hz
+        &self.grid.f_hz
     }
     /// DFT line indices $k$ of the estimates ($f_k = k f_s/N$).
     pub fn lines(&self) -> &[usize] {
-        &self.lines
+        &self.grid.lines
     }
     /// Record length $N$.
     pub fn record_len(&self) -> usize {
-        self.record_len
+        self.grid.record_len
     }
     /// Number of outputs $p$.
     pub fn n_outputs(&self) -> usize {
-        self.n_out
+        self.grid.n_out
     }
     /// Polynomial degree $R$ used.
     pub fn degree(&self) -> usize {
@@ -233,31 +289,20 @@ impl Lpm {
         self.dof
     }
 
-    fn check_output(&self, o: usize) -> Result<()> {
-        if o >= self.n_out {
-            return Err(Error::invalid(
-                "output",
-                format!(
-                    "output {o} requested but the fit has {} output(s)",
-                    self.n_out
-                ),
-            ));
-        }
-        Ok(())
-    }
-
     /// $\hat G_o(k)$ with its variance $[(K^{\mathsf H}K)^{-1}]_{00}\,\hat C_{V,oo}$.
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] for an output index out of range.
     pub fn frf(&self, o: usize) -> Result<Frd> {
-        self.check_output(o)?;
-        let p = self.n_out;
-        let vals = (0..self.lines.len()).map(|l| self.g[l * p + o]).collect();
-        let var = (0..self.lines.len())
-            .map(|l| self.c00[l] * self.noise_cov[(l * p + o) * p + o].re)
+        let vals = self.grid.of_output(&self.g, o)?;
+        let var = self
+            .grid
+            .of_pair(&self.noise_cov, o, o)?
+            .iter()
+            .zip(&self.c00)
+            .map(|(c, k)| k * c.re)
             .collect();
-        Frd::new(self.f_hz.clone(), vals, Some(var), Some(self.ts))
+        self.grid.frd(vals, var)
     }
 
     /// The estimated transient $\hat T_o(k)$ (DFT scaling of the [module docs](self)).
@@ -265,11 +310,7 @@ impl Lpm {
     /// # Errors
     /// [`Error::InvalidArgument`] for an output index out of range.
     pub fn transient(&self, o: usize) -> Result<Vec<c64>> {
-        self.check_output(o)?;
-        let p = self.n_out;
-        Ok((0..self.lines.len())
-            .map(|l| self.transient[l * p + o])
-            .collect())
+        self.grid.of_output(&self.transient, o)
     }
 
     /// Noise covariance $\hat C_V(k)_{o_1 o_2} = \mathrm E[V_{o_1}(k)\overline{V_{o_2}(k)}]$ per line.
@@ -277,12 +318,7 @@ impl Lpm {
     /// # Errors
     /// [`Error::InvalidArgument`] for an output index out of range.
     pub fn noise_cov(&self, o1: usize, o2: usize) -> Result<Vec<c64>> {
-        self.check_output(o1)?;
-        self.check_output(o2)?;
-        let p = self.n_out;
-        Ok((0..self.lines.len())
-            .map(|l| self.noise_cov[(l * p + o1) * p + o2])
-            .collect())
+        self.grid.of_pair(&self.noise_cov, o1, o2)
     }
 
     /// Covariance $\mathrm E[\delta\hat G_{o_1}(k)\,\overline{\delta\hat G_{o_2}(k)}]$ per line.
@@ -436,11 +472,7 @@ pub fn lpm(u: &[f64], ys: &[&[f64]], fs: f64, band: (f64, f64), opts: &LpmOption
         cv[l * p * p..(l + 1) * p * p].copy_from_slice(&fit.cov_out);
     }
     Ok(Lpm {
-        f_hz: lines.iter().map(|&k| k as f64 * df).collect(),
-        lines,
-        record_len: n,
-        ts: 1.0 / fs,
-        n_out: p,
+        grid: LineGrid::new(lines, n, fs, p),
         degree: opts.degree(),
         half_width: half,
         dof: q,
@@ -480,7 +512,7 @@ pub fn lpm_closed_loop(
     opts: &LpmOptions,
 ) -> Result<LpmClosedLoop> {
     let fit = lpm(r, &[y, u], fs, band, opts)?;
-    let (t_ry, t_ru, cov, ts) = (fit.frf(0)?, fit.frf(1)?, fit.frf_cov(0, 1)?, fit.ts);
+    let (t_ry, t_ru, cov, ts) = (fit.frf(0)?, fit.frf(1)?, fit.frf_cov(0, 1)?, fit.grid.ts);
     LocalClosedLoop::assemble(fit, t_ry, t_ru, cov, ts, "LPM closed loop")
 }
 

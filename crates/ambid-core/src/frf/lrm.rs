@@ -79,7 +79,7 @@
 //! ```
 
 use super::closed_loop::band_radius_factor;
-use super::lpm::{prepare, LocalClosedLoop, LocalFit, Prepared};
+use super::lpm::{prepare, LineGrid, LocalClosedLoop, LocalFit, Prepared};
 use crate::error::{Error, Result};
 use crate::lti::Frd;
 use faer::c64;
@@ -192,11 +192,7 @@ impl LrmOptions {
 /// The LRM fit of one input and $p$ outputs on the lines of a band; see the [module docs](self).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Lrm {
-    f_hz: Vec<f64>,
-    lines: Vec<usize>,
-    record_len: usize,
-    ts: f64,
-    n_out: usize,
+    grid: LineGrid,
     options: LrmOptions,
     dof: usize,
     /// line-major, `g[l * p + o]`
@@ -213,19 +209,19 @@ pub struct Lrm {
 impl Lrm {
     /// Frequencies of the estimated lines \[Hz\].
     pub fn f_hz(&self) -> &[f64] {
-        &self.f_hz
+        &self.grid.f_hz
     }
     /// DFT line indices $k$.
     pub fn lines(&self) -> &[usize] {
-        &self.lines
+        &self.grid.lines
     }
     /// Record length $N$.
     pub fn record_len(&self) -> usize {
-        self.record_len
+        self.grid.record_len
     }
     /// Number of outputs $p$.
     pub fn n_outputs(&self) -> usize {
-        self.n_out
+        self.grid.n_out
     }
     /// The options used.
     pub fn options(&self) -> LrmOptions {
@@ -241,40 +237,19 @@ impl Lrm {
         &self.reduced
     }
 
-    fn check_output(&self, o: usize) -> Result<()> {
-        if o >= self.n_out {
-            return Err(Error::invalid(
-                "output",
-                format!(
-                    "output {o} requested but the fit has {} output(s)",
-                    self.n_out
-                ),
-            ));
-        }
-        Ok(())
-    }
-
-    fn per_line(&self, v: &[c64], o1: usize, o2: usize) -> Vec<c64> {
-        let p = self.n_out;
-        (0..self.lines.len())
-            .map(|l| v[(l * p + o1) * p + o2])
-            .collect()
-    }
-
     /// $\hat G_o(k)$ with its variance.
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] for an output index out of range.
     pub fn frf(&self, o: usize) -> Result<Frd> {
-        self.check_output(o)?;
-        let p = self.n_out;
-        let vals = (0..self.lines.len()).map(|l| self.g[l * p + o]).collect();
+        let vals = self.grid.of_output(&self.g, o)?;
         let var = self
-            .per_line(&self.frf_cov, o, o)
+            .grid
+            .of_pair(&self.frf_cov, o, o)?
             .iter()
             .map(|c| c.re.max(0.0))
             .collect();
-        Frd::new(self.f_hz.clone(), vals, Some(var), Some(self.ts))
+        self.grid.frd(vals, var)
     }
 
     /// The estimated transient $\hat T_o(k)$.
@@ -282,11 +257,7 @@ impl Lrm {
     /// # Errors
     /// [`Error::InvalidArgument`] for an output index out of range.
     pub fn transient(&self, o: usize) -> Result<Vec<c64>> {
-        self.check_output(o)?;
-        let p = self.n_out;
-        Ok((0..self.lines.len())
-            .map(|l| self.transient[l * p + o])
-            .collect())
+        self.grid.of_output(&self.transient, o)
     }
 
     /// Noise covariance $\hat C_V(k)_{o_1 o_2}$ per line.
@@ -294,9 +265,7 @@ impl Lrm {
     /// # Errors
     /// [`Error::InvalidArgument`] for an output index out of range.
     pub fn noise_cov(&self, o1: usize, o2: usize) -> Result<Vec<c64>> {
-        self.check_output(o1)?;
-        self.check_output(o2)?;
-        Ok(self.per_line(&self.noise_cov, o1, o2))
+        self.grid.of_pair(&self.noise_cov, o1, o2)
     }
 
     /// Covariance $\mathrm E[\delta\hat G_{o_1}\overline{\delta\hat G_{o_2}}]$ per line.
@@ -304,9 +273,7 @@ impl Lrm {
     /// # Errors
     /// [`Error::InvalidArgument`] for an output index out of range.
     pub fn frf_cov(&self, o1: usize, o2: usize) -> Result<Vec<c64>> {
-        self.check_output(o1)?;
-        self.check_output(o2)?;
-        Ok(self.per_line(&self.frf_cov, o1, o2))
+        self.grid.of_pair(&self.frf_cov, o1, o2)
     }
 
     /// Radius factor of the level-`level` confidence disc for $q$ degrees of freedom.
@@ -494,11 +461,7 @@ pub fn lrm(u: &[f64], ys: &[&[f64]], fs: f64, band: (f64, f64), opts: &LrmOption
         }
     }
     Ok(Lrm {
-        f_hz: lines.iter().map(|&k| k as f64 * df).collect(),
-        lines,
-        record_len: n,
-        ts: 1.0 / fs,
-        n_out: p,
+        grid: LineGrid::new(lines, n, fs, p),
         options: *opts,
         dof: q,
         g,
@@ -537,7 +500,7 @@ pub fn lrm_closed_loop(
     opts: &LrmOptions,
 ) -> Result<LrmClosedLoop> {
     let fit = lrm(r, &[y, u], fs, band, opts)?;
-    let (t_ry, t_ru, cov, ts) = (fit.frf(0)?, fit.frf(1)?, fit.frf_cov(0, 1)?, fit.ts);
+    let (t_ry, t_ru, cov, ts) = (fit.frf(0)?, fit.frf(1)?, fit.frf_cov(0, 1)?, fit.grid.ts);
     LocalClosedLoop::assemble(fit, t_ry, t_ru, cov, ts, "LRM closed loop")
 }
 
