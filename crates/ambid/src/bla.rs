@@ -190,6 +190,28 @@ pub struct RecordedLevel {
     pub realisations: Vec<Realisation>,
 }
 
+impl RecordedLevel {
+    /// Groups realisations tagged with their level \[% of i_sat\] into levels (realisations in
+    /// their given order), ascending by level.
+    pub fn group(tagged: impl IntoIterator<Item = (f64, Realisation)>) -> Vec<RecordedLevel> {
+        let mut levels: Vec<RecordedLevel> = Vec::new();
+        for (level_pct, x) in tagged {
+            match levels
+                .iter_mut()
+                .find(|l| (l.level_pct - level_pct).abs() < 1e-9)
+            {
+                Some(l) => l.realisations.push(x),
+                None => levels.push(RecordedLevel {
+                    level_pct,
+                    realisations: vec![x],
+                }),
+            }
+        }
+        levels.sort_by(|a, b| a.level_pct.total_cmp(&b.level_pct));
+        levels
+    }
+}
+
 /// How recorded BLA experiments are cut.
 #[derive(Debug, Clone, Copy)]
 pub struct RecordedPlan {

@@ -92,7 +92,7 @@ pub struct BlaArgs {
 
 /// Reads the recorded realisations, grouped by level (ascending).
 fn recorded_levels(a: &BlaArgs) -> Result<(Vec<RecordedLevel>, f64)> {
-    let mut levels: Vec<RecordedLevel> = Vec::new();
+    let mut tagged = Vec::with_capacity(a.records.len());
     let mut fs: Option<f64> = None;
     let none = a.excitation.eq_ignore_ascii_case("none");
     for (level, path) in &a.records {
@@ -139,19 +139,10 @@ fn recorded_levels(a: &BlaArgs) -> Result<(Vec<RecordedLevel>, f64)> {
             saturated_fraction,
             source: path.display().to_string(),
         };
-        match levels
-            .iter_mut()
-            .find(|l| (l.level_pct - level).abs() < 1e-9)
-        {
-            Some(l) => l.realisations.push(x),
-            None => levels.push(RecordedLevel {
-                level_pct: *level,
-                realisations: vec![x],
-            }),
-        }
+        tagged.push((*level, x));
     }
-    levels.sort_by(|x, y| x.level_pct.total_cmp(&y.level_pct));
-    Ok((levels, fs.context("no recorded realisation")?))
+    let fs = fs.context("no recorded realisation")?;
+    Ok((RecordedLevel::group(tagged), fs))
 }
 
 pub fn bla(a: BlaArgs) -> Result<()> {

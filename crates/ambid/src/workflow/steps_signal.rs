@@ -689,7 +689,7 @@ pub fn bla(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                     "[bla] files are given but the multisine period is not: set [data] period_samples"
                 )));
             };
-            let mut levels: Vec<crate::bla::RecordedLevel> = Vec::new();
+            let mut tagged = Vec::with_capacity(cfg.bla.files.len());
             let mut fs = f64::NAN;
             for lf in &cfg.bla.files {
                 let rec: Recording =
@@ -712,18 +712,9 @@ pub fn bla(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                     saturated_fraction: rec.saturated_fraction,
                     source: rec.source,
                 };
-                match levels
-                    .iter_mut()
-                    .find(|l| (l.level_pct - lf.level_pct).abs() < 1e-9)
-                {
-                    Some(l) => l.realisations.push(x),
-                    None => levels.push(crate::bla::RecordedLevel {
-                        level_pct: lf.level_pct,
-                        realisations: vec![x],
-                    }),
-                }
+                tagged.push((lf.level_pct, x));
             }
-            levels.sort_by(|a, b| a.level_pct.total_cmp(&b.level_pct));
+            let levels = crate::bla::RecordedLevel::group(tagged);
             let band = cfg.frf.quality_band_hz.unwrap_or([10.0, 1000.0]);
             let plan = crate::bla::RecordedPlan {
                 fs,
