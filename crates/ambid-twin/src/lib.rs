@@ -66,6 +66,7 @@
 pub mod config;
 pub mod error;
 pub mod model;
+pub mod rig;
 pub mod sim;
 mod twin;
 
@@ -76,5 +77,6 @@ pub use config::{
 pub use error::{Result, TwinError};
 pub use faer::c64;
 pub use model::{LinearParams, UnstablePolePrediction};
+pub use rig::random_rig;
 pub use sim::{Channels, SimMeta, SimOptions, SimRecord};
 pub use twin::{ClosedLoopMode, Twin, LIGHTLY_DAMPED};

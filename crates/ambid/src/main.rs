@@ -48,10 +48,12 @@ enum Command {
     /// Compare PRBS, chirp, white noise and multisine at one RMS level (the seed paper's figure 3):
     /// print their statistics, write their waveforms, spectra and autocorrelations.
     Compare(CompareArgs),
-    /// Run the embedded AMB twin in closed loop and write data.csv, truth.csv and meta.json.
+    /// Run the embedded AMB twin in closed loop and write data.csv, truth.csv, meta.json and
+    /// controller.toml (the rig's controller, for `frf --controller` and `validate`).
     Simulate(SimulateArgs),
-    /// Print the twin's default configuration as TOML (edit it and pass it with --config).
-    Config,
+    /// Print the twin's default configuration (or a random rig's, with --rig-seed) as TOML (edit
+    /// it and pass it with --config).
+    Config(RigArgs),
     /// Print the twin's linearised facts: closed-loop modes, peak sensitivity, unstable plant poles.
     Info(TwinArgs),
     /// Nonparametric closed-loop FRFs from recorded data (T_ry, S, plant by the joint and, with a
@@ -259,10 +261,22 @@ struct CompareArgs {
 }
 
 #[derive(Args)]
+struct RigArgs {
+    /// A random rig of the twin's test family instead of the nominal one: rotor, magnets, bias
+    /// and gap, amplifier and sensor bandwidths, bending mode, controller gains and noise drawn
+    /// ±15–30 % from this seed, accepted only when the loop is stable with max|S| ≤ 4
+    /// (`ambid_twin::rig`).
+    #[arg(long)]
+    rig_seed: Option<u64>,
+}
+
+#[derive(Args)]
 struct TwinArgs {
     /// Twin configuration (TOML); defaults to the nominal rig (see `ambid config`).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "rig_seed")]
     config: Option<PathBuf>,
+    #[command(flatten)]
+    rig: RigArgs,
     /// Bias current i0 in A (overrides the configuration).
     #[arg(long, allow_negative_numbers = true)]
     bias: Option<f64>,
@@ -368,8 +382,12 @@ fn dispatch(cli: Cli) -> Result<()> {
         Command::Excite(a) => excite(a),
         Command::Compare(a) => compare(a),
         Command::Simulate(a) => simulate(a),
-        Command::Config => {
-            print!("{}", TwinConfig::default().to_toml_string()?);
+        Command::Config(a) => {
+            let cfg = match a.rig_seed {
+                Some(seed) => ambid_twin::random_rig(seed)?,
+                None => TwinConfig::default(),
+            };
+            print!("{}", cfg.to_toml_string()?);
             Ok(())
         }
         Command::Info(a) => info(a),
@@ -623,7 +641,10 @@ fn twin_config(a: &TwinArgs) -> Result<TwinConfig> {
                 .with_context(|| format!("cannot read {}", p.display()))?;
             TwinConfig::from_toml_str(&s).with_context(|| format!("in {}", p.display()))?
         }
-        None => TwinConfig::default(),
+        None => match a.rig.rig_seed {
+            Some(seed) => ambid_twin::random_rig(seed)?,
+            None => TwinConfig::default(),
+        },
     };
     if let Some(b) = a.bias {
         cfg.operating_point.bias_current_a = b;
@@ -806,6 +827,12 @@ fn simulate(a: SimulateArgs) -> Result<()> {
     });
     let meta_path = a.out.join("meta.json");
     std::fs::write(&meta_path, serde_json::to_string_pretty(&meta)?)?;
+    let ctrl_path = a.out.join("controller.toml");
+    std::fs::write(
+        &ctrl_path,
+        ambid::io::controller::controller_toml_from_twin(&exp.twin),
+    )
+    .with_context(|| format!("cannot write {}", ctrl_path.display()))?;
     println!(
         "simulated {} samples ({:.3} s at {} Hz), {:?} mode",
         rec.t.len(),
@@ -821,7 +848,7 @@ fn simulate(a: SimulateArgs) -> Result<()> {
             100.0 * sat
         );
     }
-    for p in [&data_path, &truth_path, &meta_path] {
+    for p in [&data_path, &truth_path, &meta_path, &ctrl_path] {
         println!("written: {}", p.display());
     }
     Ok(())
