@@ -1,0 +1,309 @@
+//! Whole-process timings of the `ambid` commands with their defaults, as a user runs them.
+//!
+//! `cargo bench -p ambid --bench cli` builds the release binary, simulates the seed experiment
+//! (PRBS n = 10, 5 samples per bit, 20 periods = 102 300 samples at 20 kHz, 10 % of i_sat) and an
+//! independent validation record (seed 2, 12 %) on the nominal rig and on random rigs of the
+//! twin's test family, then times every command as a whole process (start-up, file reading,
+//! computation, writing): the median of `AMBID_BENCH_REPS` runs (default 5). It prints a Markdown
+//! table for docs/benchmarks.md. A command that fails is reported as failed with its message.
+//!
+//! Options by environment: `AMBID_BENCH_RIGS=nominal,3,7` (default `nominal,3`),
+//! `AMBID_BENCH_REPS=5`, `AMBID_BENCH_FILTER=fit` (only commands whose label contains it).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+const EXE: &str = env!("CARGO_BIN_EXE_ambid");
+
+fn run(args: &[&str]) -> Result<f64, String> {
+    let t = Instant::now();
+    let out = Command::new(EXE)
+        .args(args)
+        .output()
+        .map_err(|e| format!("cannot start {EXE}: {e}"))?;
+    let dt = t.elapsed().as_secs_f64();
+    if !out.status.success() {
+        let err = String::from_utf8_lossy(&out.stderr);
+        return Err(err.lines().take(3).collect::<Vec<_>>().join(" / "));
+    }
+    Ok(dt)
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn s(p: &Path) -> String {
+    p.display().to_string()
+}
+
+fn main() {
+    let reps: usize = std::env::var("AMBID_BENCH_REPS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(5)
+        .max(1);
+    let rigs = std::env::var("AMBID_BENCH_RIGS").unwrap_or_else(|_| "nominal,3".into());
+    let filter = std::env::var("AMBID_BENCH_FILTER").unwrap_or_default();
+    let root: PathBuf =
+        std::env::temp_dir().join(format!("ambid-bench-cli-{}", std::process::id()));
+    println!("| rig | command | median [s] | runs |");
+    println!("|---|---|---|---|");
+    for rig in rigs.split(',').map(str::trim).filter(|r| !r.is_empty()) {
+        let dir = root.join(rig);
+        let (ident, valid) = (dir.join("ident"), dir.join("valid"));
+        let rig_args: Vec<String> = if rig == "nominal" {
+            vec![]
+        } else {
+            vec!["--rig-seed".into(), rig.into()]
+        };
+        let rig_args: Vec<&str> = rig_args.iter().map(String::as_str).collect();
+        let ident_s = s(&ident);
+        let valid_s = s(&valid);
+        let mut sim: Vec<&str> = vec!["simulate", "--mode", "linear", "--out", &ident_s];
+        sim.extend(&rig_args);
+        let mut sim_v: Vec<&str> = vec![
+            "simulate",
+            "--mode",
+            "linear",
+            "--seed",
+            "2",
+            "--amplitude",
+            "0.12",
+            "--out",
+            &valid_s,
+        ];
+        sim_v.extend(&rig_args);
+        if let Err(e) = run(&sim).and_then(|_| run(&sim_v)) {
+            println!("| {rig} | simulate | failed: {e} | |");
+            continue;
+        }
+        let data = s(&ident.join("data.csv"));
+        let vdata = s(&valid.join("data.csv"));
+        let ctrl = s(&ident.join("controller.toml"));
+        let o = |f: &str| s(&dir.join(f));
+        let (frf, frf_w, ss8, plant) = (
+            o("frf.csv"),
+            o("frf_welch.csv"),
+            o("ss8.json"),
+            o("plant.json"),
+        );
+        let cases: Vec<(&str, Vec<String>)> = vec![
+            ("simulate (seed experiment, nonlinear default)", {
+                let mut v: Vec<String> = ["simulate", "--out"]
+                    .iter()
+                    .map(|x| x.to_string())
+                    .collect();
+                v.push(o("sim_nl"));
+                v.extend(rig_args.iter().map(|x| x.to_string()));
+                v
+            }),
+            (
+                "frf --period-samples 5115 --skip-periods 1 --controller",
+                vec![
+                    "frf".into(),
+                    data.clone(),
+                    "--period-samples".into(),
+                    "5115".into(),
+                    "--skip-periods".into(),
+                    "1".into(),
+                    "--controller".into(),
+                    ctrl.clone(),
+                    "--out".into(),
+                    frf.clone(),
+                ],
+            ),
+            (
+                "frf (defaults: Welch)",
+                vec!["frf".into(), data.clone(), "--out".into(), frf_w.clone()],
+            ),
+            (
+                "fit --structure ss --order 8 --input r --output y",
+                vec![
+                    "fit",
+                    &data,
+                    "--structure",
+                    "ss",
+                    "--order",
+                    "8",
+                    "--input",
+                    "r",
+                    "--output",
+                    "y",
+                    "--out",
+                    &ss8,
+                ]
+                .into_iter()
+                .map(String::from)
+                .collect(),
+            ),
+            (
+                "fit --structure arx --na 8 --nb 8",
+                vec![
+                    "fit",
+                    &data,
+                    "--structure",
+                    "arx",
+                    "--na",
+                    "8",
+                    "--nb",
+                    "8",
+                    "--out",
+                    &o("arx.json"),
+                ]
+                .into_iter()
+                .map(String::from)
+                .collect(),
+            ),
+            (
+                "fit --structure oe --nb 8 --nf 8 --input r --output y",
+                vec![
+                    "fit",
+                    &data,
+                    "--structure",
+                    "oe",
+                    "--nb",
+                    "8",
+                    "--nf",
+                    "8",
+                    "--input",
+                    "r",
+                    "--output",
+                    "y",
+                    "--out",
+                    &o("oe.json"),
+                ]
+                .into_iter()
+                .map(String::from)
+                .collect(),
+            ),
+            (
+                "fit --structure armax --na 4 --nb 4 --nc 4",
+                vec![
+                    "fit",
+                    &data,
+                    "--structure",
+                    "armax",
+                    "--na",
+                    "4",
+                    "--nb",
+                    "4",
+                    "--nc",
+                    "4",
+                    "--out",
+                    &o("armax.json"),
+                ]
+                .into_iter()
+                .map(String::from)
+                .collect(),
+            ),
+            (
+                "fit --structure bj --nb 4 --nc 2 --nd 2 --nf 4 --input r --output y",
+                vec![
+                    "fit",
+                    &data,
+                    "--structure",
+                    "bj",
+                    "--nb",
+                    "4",
+                    "--nc",
+                    "2",
+                    "--nd",
+                    "2",
+                    "--nf",
+                    "4",
+                    "--input",
+                    "r",
+                    "--output",
+                    "y",
+                    "--out",
+                    &o("bj.json"),
+                ]
+                .into_iter()
+                .map(String::from)
+                .collect(),
+            ),
+            (
+                "order (ARX scan, defaults)",
+                vec!["order".into(), data.clone(), "--out".into(), o("order.csv")],
+            ),
+            (
+                "fit frf.csv --quantity plant --structure ss --order 8",
+                vec![
+                    "fit",
+                    &frf,
+                    "--quantity",
+                    "plant",
+                    "--structure",
+                    "ss",
+                    "--order",
+                    "8",
+                    "--fs",
+                    "20000",
+                    "--out",
+                    &plant,
+                ]
+                .into_iter()
+                .map(String::from)
+                .collect(),
+            ),
+            (
+                "compare-models frf.csv (defaults)",
+                vec![
+                    "compare-models".into(),
+                    frf.clone(),
+                    "--fs".into(),
+                    "20000".into(),
+                    "--out".into(),
+                    o("comparison.csv"),
+                ],
+            ),
+            (
+                "validate plant.json --data valid --controller",
+                vec![
+                    "validate".into(),
+                    plant.clone(),
+                    "--data".into(),
+                    vdata.clone(),
+                    "--controller".into(),
+                    ctrl.clone(),
+                    "--out".into(),
+                    o("validation"),
+                ],
+            ),
+        ];
+        for (label, args) in cases {
+            if !filter.is_empty() && !label.contains(filter.as_str()) {
+                continue;
+            }
+            let args: Vec<&str> = args.iter().map(String::as_str).collect();
+            let mut times = Vec::with_capacity(reps);
+            let mut failure = None;
+            for _ in 0..reps {
+                match run(&args) {
+                    Ok(t) => times.push(t),
+                    Err(e) => {
+                        failure = Some(e);
+                        break;
+                    }
+                }
+            }
+            match failure {
+                Some(e) => println!("| {rig} | `{label}` | failed: {e} | |"),
+                None => println!("| {rig} | `{label}` | {:.3} | {reps} |", median(times)),
+            }
+        }
+    }
+    if filter.is_empty() || filter == "run" {
+        let rep = s(&root.join("report"));
+        match run(&["run", "--out", rep.as_str(), "--force", "-q"]) {
+            Ok(t) => println!(
+                "| nominal | `run` (the whole workflow on the twin, defaults) | {t:.3} | 1 |"
+            ),
+            Err(e) => println!("| nominal | `run` | failed: {e} | |"),
+        }
+    }
+    let _ = std::fs::remove_dir_all(&root);
+}
