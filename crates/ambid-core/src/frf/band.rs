@@ -55,6 +55,7 @@
 
 use crate::error::{Error, Result};
 use crate::lti::Frd;
+use crate::validate::iso::{sensitivity_zone, IsoVerdict, IsoZones};
 
 /// The thresholds of the band rule (module docs); the defaults are the documented rule.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -226,6 +227,69 @@ pub fn reliable_lines(s: &Frd, band: (f64, f64), rule: &BandRule) -> Result<(Vec
     }
 }
 
+/// The ISO 14839-3 verdict of a measured sensitivity searched by the band rule, and how.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct IsoSearch {
+    /// The verdict over the searched lines (peak, its 95 % interval, zone and zone range).
+    pub verdict: IsoVerdict,
+    /// The band searched \[Hz\].
+    pub band: (f64, f64),
+    /// Lines searched.
+    pub lines: usize,
+    /// Whether the reliability filter was applied (`false`: every line of the band was searched
+    /// because `s` has no variance or no line passed; say so to the user).
+    pub reliable: bool,
+}
+
+impl IsoSearch {
+    /// One sentence: peak, interval, where, zone, and which lines were searched.
+    pub fn describe(&self) -> String {
+        let v = &self.verdict;
+        let ci = v.interval.map_or(String::new(), |(lo, hi)| {
+            format!(" (95 % interval {lo:.3}–{hi:.3})")
+        });
+        let range = if v.zone_range.0 != v.zone_range.1 {
+            format!(", uncertain: zones {:?}–{:?}", v.zone_range.0, v.zone_range.1)
+        } else {
+            String::new()
+        };
+        format!(
+            "max|S| {:.3}{ci} at {:.1} Hz → zone {:?}{range}; searched {} lines in {:.1}–{:.1} Hz{}",
+            v.peak,
+            v.f_peak_hz,
+            v.zone,
+            self.lines,
+            self.band.0,
+            self.band.1,
+            if self.reliable {
+                " whose 95 % interval is within ±10 % of |S|".to_string()
+            } else {
+                " (no variance, or no line known to ±10 %: every line of the band searched)".to_string()
+            }
+        )
+    }
+}
+
+/// The ISO 14839-3 zone of a measured sensitivity `s` over its [`reliable_lines`] inside `band`.
+///
+/// # Errors
+/// As [`reliable_lines`] and [`sensitivity_zone`].
+pub fn iso_search(
+    s: &Frd,
+    band: (f64, f64),
+    rule: &BandRule,
+    zones: &IsoZones,
+) -> Result<IsoSearch> {
+    let (idx, reliable) = reliable_lines(s, band, rule)?;
+    let sub = select_lines(s, &idx)?;
+    Ok(IsoSearch {
+        verdict: sensitivity_zone(&sub, zones)?,
+        band,
+        lines: idx.len(),
+        reliable,
+    })
+}
+
 /// `s` restricted to the lines `idx` (increasing), with their variances.
 ///
 /// # Errors
@@ -311,6 +375,11 @@ mod tests {
         assert_eq!(idx, vec![0, 1, 2]);
         let sub = select_lines(&s, &idx).unwrap();
         assert_eq!(sub.f_hz(), &[10.0, 20.0, 30.0]);
+        // the zone: 3.5 at 20 Hz (B), not the noise line's 8 (D)
+        let v = iso_search(&s, (0.0, 100.0), &BandRule::default(), &IsoZones::default()).unwrap();
+        assert_eq!(v.verdict.zone, crate::validate::iso::Zone::B);
+        assert_eq!((v.verdict.peak, v.verdict.f_peak_hz, v.lines), (3.5, 20.0, 3));
+        assert!(v.describe().contains("zone B"), "{}", v.describe());
         // outside the band nothing; without variances everything in the band
         assert!(reliable_lines(&s, (50.0, 60.0), &BandRule::default()).is_err());
         let s2 = Frd::new(s.f_hz().to_vec(), s.values().to_vec(), None, None).unwrap();

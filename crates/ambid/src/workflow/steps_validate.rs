@@ -230,8 +230,8 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                 ),
                 val.ts,
                 &[
-                    ("y", &val.y, &v.reconstruction.simulated.y, &ctx.cfg.data.y_unit),
-                    ("u", &val.u, &v.reconstruction.simulated.u, &ctx.cfg.data.u_unit),
+                    ("y", &val.y, &v.reconstruction.simulated.y, &super::data::y_unit(ctx)),
+                    ("u", &val.u, &v.reconstruction.simulated.u, &super::data::u_unit(ctx)),
                 ],
             ));
             blocks.push(Block::Table(Table {
@@ -298,7 +298,7 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                     fmt(fit)
                 ),
                 val.ts,
-                &[("y", &val.y, &yhat, &ctx.cfg.data.y_unit)],
+                &[("y", &val.y, &yhat, &super::data::y_unit(ctx))],
             ));
             put_residuals(ctx, &res);
             blocks.push(residual_figure(&res, "input u"));
@@ -392,12 +392,12 @@ pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     let sim = &v.reconstruction.simulated;
     let mut panels = Vec::new();
     for (name, meas, rec, unit) in [
-        ("displacement y", &y, &sim.y, ctx.cfg.data.y_unit.clone()),
+        ("displacement y", &y, &sim.y, super::data::y_unit(ctx)),
         (
             "controller output u",
             &u,
             &sim.u,
-            ctx.cfg.data.u_unit.clone(),
+            super::data::u_unit(ctx),
         ),
     ] {
         let (tm, m) = envelope(&t, meas, 3000);
@@ -486,6 +486,7 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     let mut curves = Vec::new();
     let mut rows = Vec::new();
     let mut verdicts = Vec::new();
+    let mut iso_notes: Vec<String> = Vec::new();
     // measured S = T_ru from the FRF (closed loop with an excitation)
     if let (Some(a), true) = (
         &ctx.frf,
@@ -494,7 +495,15 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             .is_some_and(|r| r.r.is_some() && r.closed_loop),
     ) {
         let s = &a.frf.t_ru;
-        let v = sensitivity_zone(s, &z).map_err(computation)?;
+        // the peak over the lines of the FRF band where S is known to ±10 % (docs/validation.md)
+        let search = ambid_core::frf::band::iso_search(
+            s,
+            a.bands.band,
+            &ambid_core::frf::band::BandRule::default(),
+            &z,
+        )
+        .map_err(computation)?;
+        let v = search.verdict.clone();
         curves.push(series(
             "measured S = T_ru",
             s.f_hz(),
@@ -505,6 +514,14 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         ctx.put("iso.measured.peak", v.peak);
         ctx.put("iso.measured.f_peak_hz", v.f_peak_hz);
         ctx.put("iso.measured.zone", format!("{:?}", v.zone));
+        if let Some((lo, hi)) = v.interval {
+            ctx.put("iso.measured.peak_ci_lo", lo);
+            ctx.put("iso.measured.peak_ci_hi", hi);
+        }
+        ctx.put("iso.measured.search_lo_hz", search.band.0);
+        ctx.put("iso.measured.search_hi_hz", search.band.1);
+        ctx.put("iso.measured.search_lines", search.lines as f64);
+        iso_notes.push(format!("Measured: {}.", search.describe()));
         rows.push(iso_row("measured S (FRF)", &v));
         verdicts.push(v.zone);
     }
@@ -622,6 +639,10 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         ),
     ];
     let _ = json!(null);
+    let mut blocks = blocks;
+    for n in iso_notes {
+        blocks.push(Ctx::note(NoteKind::Info, n));
+    }
     ctx.section("iso", "ISO 14839-3 stability verdict", blocks);
     Ok(StepStatus::Done)
 }
