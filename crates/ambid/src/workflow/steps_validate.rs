@@ -173,6 +173,17 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     let mut blocks = Vec::new();
     let controller = ctx.controller.clone();
     match (&controller, val.closed_loop) {
+        (Some(_), true)
+            if !val.r.as_ref().is_some_and(|r| r.iter().any(|v| *v != 0.0))
+                && !val.w.as_ref().is_some_and(|w| w.iter().any(|v| *v != 0.0)) =>
+        {
+            // a record without excitation is a failure of this step, not of the whole report
+            return Ok(StepStatus::Skipped(format!(
+                "the validation record {} has neither an excitation r nor a position reference w \
+                 (or they are zero): nothing drives the loop. Name the columns in [data] r / w.",
+                val.source
+            )));
+        }
         (Some(c), true) => {
             let zeros = vec![0.0; val.len()];
             let w = val.w.as_deref().unwrap_or(&zeros);
