@@ -12,17 +12,17 @@
 //! * **Excited band** $[f_\text{lo}, f_\text{hi}]$: the lowest and the highest line $k \ge k_0$
 //!   with $P_k \ge P_\max\,10^{-\Delta_e/10}$, $\Delta_e$ = [`BandRule::excited_db`] = 10 dB,
 //!   $P_\max = \max_{k\ge k_0} P_k$. A PRBS of $N_b$ samples per bit has the spectrum
-//!   $\propto \operatorname{sinc}^2(f N_b/f_s)$ with nulls at multiples of $f_s/N_b$; it is
-//!   10 dB down at $0.74\,f_s/N_b$ and its highest side lobe peaks at −13.3 dB, so 10 dB keeps
-//!   the main lobe and never a side lobe (where the estimate of the seed experiment failed at 4 and
-//!   8 kHz). A multisine or chirp falls by far more than 10 dB at its band edge, so the band is
+//!   $\propto |\sin(\pi f N_b/f_s) / (N_b \sin(\pi f/f_s))|^2$ (≈ $\operatorname{sinc}^2$) with
+//!   nulls at multiples of $f_s/N_b$; for $N_b = 5$ it is 10 dB down at $0.7465\,f_s/N_b$ and its
+//!   highest side lobe peaks at −12.0 dB (−13.3 dB for large $N_b$), so 10 dB keeps the main lobe
+//!   and never a side lobe (where the estimate of the seed experiment failed at 4 and 8 kHz). A multisine or chirp falls by far more than 10 dB at its band edge, so the band is
 //!   its design band; a multisine's non-excited lines inside the band are skipped by the
 //!   estimators anyway. $k_0$ excludes DC and the lines a window's leakage of the mean spoils:
 //!   $k_0 = 1$ for period-synchronous data (no leakage), $k_0 = 2$ for Welch with a Hann
 //!   window (its main lobe is ±2 bins wide, so bin 1 holds the DC leakage).
 //! * **Quality band**: the part of the excited band where the excitation is within
 //!   $\Delta_q$ = [`BandRule::quality_db`] = 3 dB of its maximum (its half-power bandwidth;
-//!   $0.443\,f_s/N_b$ for a PRBS, the whole design band of a flat multisine). There the
+//!   $0.450\,f_s/N_b$ for a PRBS with $N_b = 5$, the whole design band of a flat multisine). There the
 //!   coherence and the variance averages measure the experiment, not the excitation's roll-off.
 //! * **ISO |S| search** ([`reliable_lines`]): the lines of a measured $\hat S$ inside the
 //!   excited band whose 95 % interval half-width $1.96\,\sigma_k/\sqrt2$ is at most
@@ -33,7 +33,7 @@
 //!   band are searched and the caller must say so.
 //!
 //! Evidence (docs/frf.md): on the nominal twin and on random rigs 1–20 (seed experiment) the
-//! excited band is 3.9 Hz – 2.9 kHz and contains every rig's true $\max|S|$ frequency, the
+//! excited band is 3.9 Hz – 2.98 kHz (quality band to 1.80 kHz) and contains every rig's true $\max|S|$ frequency, the
 //! measured peak agrees with the truth within its interval and the zone is right; on the F-16
 //! GVT multisine (2–15 Hz at 400 Hz) the band is its design band and the resonances are the
 //! 3.5–9.2 Hz modes; on Silverbox's Schroeder multisine the band ends at its ~200 Hz design edge.
@@ -41,16 +41,18 @@
 //! # Example
 //! ```
 //! use ambid_core::frf::band::{excitation_bands, BandRule};
-//! // a PRBS-like sinc² spectrum, N_b = 5 samples per bit at 20 kHz, lines every 10 Hz
-//! let f: Vec<f64> = (0..1000).map(|k| 10.0 * k as f64).collect();
+//! // a PRBS spectrum, N_b = 5 samples per bit at 20 kHz, lines every 10 Hz up to Nyquist
+//! let f: Vec<f64> = (0..=1000).map(|k| 10.0 * k as f64).collect();
 //! let p: Vec<f64> = f.iter().map(|&f| {
-//!     let x = std::f64::consts::PI * f * 5.0 / 20_000.0;
-//!     if x == 0.0 { 1.0 } else { (x.sin() / x).powi(2) }
+//!     let x = std::f64::consts::PI * f / 20_000.0;
+//!     if x == 0.0 { 1.0 } else { ((5.0 * x).sin() / (5.0 * x.sin())).powi(2) }
 //! }).collect();
 //! let b = excitation_bands(&f, &p, 1, &BandRule::default()).unwrap();
 //! assert_eq!(b.excited.0, 10.0);
-//! assert!((b.excited.1 - 2960.0).abs() <= 10.0); // sinc² is 10 dB down at 0.74 f_s/N_b
-//! assert!((b.quality.1 - 1770.0).abs() <= 10.0); // and 3 dB down at 0.443 f_s/N_b
+//! assert_eq!(b.excited.1, 2980.0); // 10 dB down at 0.7465 f_s/N_b = 2986 Hz
+//! assert_eq!(b.quality.1, 1800.0); // 3 dB down at 0.4501 f_s/N_b = 1800.4 Hz
+//! // the side lobes (−12 dB, beyond the null at f_s/N_b = 4 kHz) are not excited lines
+//! assert!(b.excited.1 < 4000.0);
 //! ```
 
 use crate::error::{Error, Result};
