@@ -357,10 +357,7 @@ pub fn analyze(
         Some(q) => (q, BandOrigin::User),
         None => {
             // the derived quality band inside the FRF band, on the FRF's lines
-            let (a, b) = (
-                derived.quality.0.max(band.0),
-                derived.quality.1.min(band.1),
-            );
+            let (a, b) = (derived.quality.0.max(band.0), derived.quality.1.min(band.1));
             if a < b && f.iter().any(|x| (a..=b).contains(x)) {
                 ((a, b), BandOrigin::Excitation)
             } else {

@@ -8,9 +8,7 @@ use ambid::study::{
     amplitude_from_records, amplitude_on_twin, operating_point_on_twin, seed_cases, seed_levels,
     LevelRecord, Recommendation, TwinAmplitudeStudy,
 };
-use ambid_core::frf::resonance::{
-    find_resonances_reliable, order_from_peaks, ResonanceOptions,
-};
+use ambid_core::frf::resonance::{find_resonances_reliable, order_from_peaks, ResonanceOptions};
 use ambid_core::frf::window::Window;
 use ambid_twin::{Mode, TwinConfig};
 use anyhow::{bail, Context, Result};

@@ -13,9 +13,9 @@
 
 use ambid_core::c64;
 use ambid_core::estimate::arx::fit_percent;
+use ambid_core::frf::band::{iso_search, BandRule, IsoSearch};
 use ambid_core::lti::{Frd, StateSpace};
 use ambid_core::validate::closed_loop::{reconstruct, Reconstruction};
-use ambid_core::frf::band::{iso_search, BandRule, IsoSearch};
 use ambid_core::validate::iso::{sensitivity_zone, IsoVerdict, IsoZones};
 use ambid_core::validate::margins::{margins, Margins};
 use ambid_core::validate::pz::{PzAnalysis, PzOptions};
@@ -246,7 +246,10 @@ pub fn consistency(
     let med = median_relative_error;
     // the measured FRF's lines are its band (ambid frf writes the excited band); within it the
     // peak is searched on the lines known to ±10 %
-    let band = (f.first().copied().unwrap_or(0.0), f.last().copied().unwrap_or(0.0));
+    let band = (
+        f.first().copied().unwrap_or(0.0),
+        f.last().copied().unwrap_or(0.0),
+    );
     let search = iso_search(s_meas, band, &BandRule::default(), zones)?;
     let s_pred: Vec<c64> = gp
         .iter()

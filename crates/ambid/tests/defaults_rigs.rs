@@ -64,10 +64,7 @@ fn the_file_workflow_gives_every_random_rig_its_true_iso_zone_in_a_band_from_the
     let base = tmpdir("rigs");
     let mut worst_dev: f64 = 0.0;
     for rig in 1..=20u64 {
-        let (id, va) = (
-            base.join(format!("r{rig}")),
-            base.join(format!("r{rig}v")),
-        );
+        let (id, va) = (base.join(format!("r{rig}")), base.join(format!("r{rig}v")));
         // a different noise realisation per rig; the validation record as a user would record it
         let seed = (100 + rig).to_string();
         simulate(&id, rig, &["--seed", &seed]);
@@ -116,13 +113,26 @@ fn the_file_workflow_gives_every_random_rig_its_true_iso_zone_in_a_band_from_the
             sm["iso"]["measured"]["zone"]
         );
         assert_eq!(sm["frf"]["band_origin"], "excitation");
-        assert_eq!(sm["iso"]["measured"]["zone"], zone_true.as_str(), "rig {rig}");
+        assert_eq!(
+            sm["iso"]["measured"]["zone"],
+            zone_true.as_str(),
+            "rig {rig}"
+        );
         // the band from the excitation: the PRBS main lobe (no side lobe past fs/Nb = 4 kHz) and
         // the true peak inside both bands
         assert!(lo > 0.0 && hi < 4000.0, "rig {rig}: band {lo}–{hi}");
-        assert!(lo <= f_true && f_true <= hi, "rig {rig}: f_peak {f_true} outside {lo}–{hi}");
-        assert!(qlo <= f_true && f_true <= qhi, "rig {rig}: f_peak {f_true} outside {qlo}–{qhi}");
-        assert!((f_peak - f_true).abs() <= df, "rig {rig}: {f_peak} vs {f_true}");
+        assert!(
+            lo <= f_true && f_true <= hi,
+            "rig {rig}: f_peak {f_true} outside {lo}–{hi}"
+        );
+        assert!(
+            qlo <= f_true && f_true <= qhi,
+            "rig {rig}: f_peak {f_true} outside {qlo}–{qhi}"
+        );
+        assert!(
+            (f_peak - f_true).abs() <= df,
+            "rig {rig}: {f_peak} vs {f_true}"
+        );
         // the measured peak within its stated 95 % interval of the truth on the lines (with
         // 1 % for the upward bias of a maximum over noisy lines)
         let dev = (on_lines - peak).abs() / (ci_hi - ci_lo).max(1e-12) * 2.0;
@@ -154,7 +164,10 @@ fn the_nominal_twin_path_uses_the_same_rule() {
     // PRBS Nb = 5 at 20 kHz, bits held for 5 samples: |sin(πf Nb/fs)/(Nb sin(πf/fs))|², 10 dB
     // down at 0.7465 fs/Nb = 2986 Hz, 3 dB at 0.4501 fs/Nb = 1800 Hz (lines 3.91 Hz apart)
     let df = 20_000.0 / 5115.0;
-    assert!((lo - df).abs() < 1e-9 && (qlo - df).abs() < 1e-9, "{lo} {qlo}");
+    assert!(
+        (lo - df).abs() < 1e-9 && (qlo - df).abs() < 1e-9,
+        "{lo} {qlo}"
+    );
     assert!(hi <= 2986.2 && hi > 2986.2 - df, "{hi}");
     assert!(qhi <= 1800.4 && qhi > 1800.4 - df, "{qhi}");
     assert!(lo <= f_true && f_true <= qhi);
@@ -162,7 +175,10 @@ fn the_nominal_twin_path_uses_the_same_rule() {
     assert_eq!(sm["iso"]["measured"]["zone"], zone_true.as_str());
     assert_eq!(sm["iso"]["truth"]["zone"], zone_true.as_str());
     let peak = num(sm, "iso.measured.peak");
-    assert!((peak - peak_true).abs() < 0.02 * peak_true, "{peak} vs {peak_true}");
+    assert!(
+        (peak - peak_true).abs() < 0.02 * peak_true,
+        "{peak} vs {peak_true}"
+    );
     // the twin's units
     assert!(out.report.to_html().contains("m/A"));
 }
@@ -184,7 +200,10 @@ fn f16_resonances_are_its_modes_in_the_multisine_band() {
     let sm = &out.summary;
     // the multisine's design band 2–15 Hz, not 0–200 Hz
     let (lo, hi) = (num(sm, "frf.band_lo_hz"), num(sm, "frf.band_hi_hz"));
-    assert!((lo - 2.0).abs() < 0.05 && (hi - 15.0).abs() < 0.05, "{lo}–{hi}");
+    assert!(
+        (lo - 2.0).abs() < 0.05 && (hi - 15.0).abs() < 0.05,
+        "{lo}–{hi}"
+    );
     let n = num(sm, "order.resonances");
     assert!((3.0..=10.0).contains(&n), "{n} resonances");
     // every peak a mode of the README's reference FRF (3.5–9.2 Hz), the dominant 7.3 Hz among them

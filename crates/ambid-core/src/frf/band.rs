@@ -157,7 +157,10 @@ pub fn excitation_bands(
     if let Some(k) = power.iter().position(|p| !(p.is_finite() && *p >= 0.0)) {
         return Err(Error::invalid(
             "power",
-            format!("line {k} has power {}; powers must be finite and ≥ 0", power[k]),
+            format!(
+                "line {k} has power {}; powers must be finite and ≥ 0",
+                power[k]
+            ),
         ));
     }
     let idx = first_line..f_hz.len();
@@ -251,7 +254,10 @@ impl IsoSearch {
             format!(" (95 % interval {lo:.3}–{hi:.3})")
         });
         let range = if v.zone_range.0 != v.zone_range.1 {
-            format!(", uncertain: zones {:?}–{:?}", v.zone_range.0, v.zone_range.1)
+            format!(
+                ", uncertain: zones {:?}–{:?}",
+                v.zone_range.0, v.zone_range.1
+            )
         } else {
             String::new()
         };
@@ -348,8 +354,9 @@ mod tests {
             .to_string();
         assert!(e.contains("no power"), "{e}");
         assert!(excitation_bands(&f, &p[..3], 1, &BandRule::default()).is_err());
-        assert!(excitation_bands(&f, &[1.0, f64::NAN, 1.0, 1.0, 1.0], 1, &BandRule::default())
-            .is_err());
+        assert!(
+            excitation_bands(&f, &[1.0, f64::NAN, 1.0, 1.0, 1.0], 1, &BandRule::default()).is_err()
+        );
         let bad = BandRule {
             quality_db: 20.0,
             ..BandRule::default()
@@ -380,7 +387,10 @@ mod tests {
         // the zone: 3.5 at 20 Hz (B), not the noise line's 8 (D)
         let v = iso_search(&s, (0.0, 100.0), &BandRule::default(), &IsoZones::default()).unwrap();
         assert_eq!(v.verdict.zone, crate::validate::iso::Zone::B);
-        assert_eq!((v.verdict.peak, v.verdict.f_peak_hz, v.lines), (3.5, 20.0, 3));
+        assert_eq!(
+            (v.verdict.peak, v.verdict.f_peak_hz, v.lines),
+            (3.5, 20.0, 3)
+        );
         assert!(v.describe().contains("zone B"), "{}", v.describe());
         // outside the band nothing; without variances everything in the band
         assert!(reliable_lines(&s, (50.0, 60.0), &BandRule::default()).is_err());

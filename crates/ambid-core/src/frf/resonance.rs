@@ -219,7 +219,10 @@ pub fn find_resonances_reliable(
     let sd = frd.std();
     let (qf, qg): (Vec<f64>, Vec<c64>) = (0..f.len())
         .filter(|&k| f[k] >= opts.band.0 && f[k] <= opts.band.1)
-        .filter(|&k| sd.as_ref().is_none_or(|s| s[k] <= max_rel_std * g[k].norm()))
+        .filter(|&k| {
+            sd.as_ref()
+                .is_none_or(|s| s[k] <= max_rel_std * g[k].norm())
+        })
         .map(|k| (f[k], g[k]))
         .unzip();
     if qf.len() < 3 {
@@ -302,8 +305,7 @@ mod tests {
         let frd = Frd::new(f.clone(), g.clone(), Some(var), None).unwrap();
         let all = find_resonances(&f, &g, &ResonanceOptions::default()).unwrap();
         assert!(all.len() > 100, "{}", all.len());
-        let (p, n) =
-            find_resonances_reliable(&frd, &ResonanceOptions::default(), 0.1).unwrap();
+        let (p, n) = find_resonances_reliable(&frd, &ResonanceOptions::default(), 0.1).unwrap();
         assert_eq!(n, 300);
         assert_eq!(p.len(), 1, "{p:?}");
         assert!((p[0].f_hz - 100.0).abs() < 1.0);
@@ -312,7 +314,9 @@ mod tests {
             band: (500.0, 600.0),
             ..ResonanceOptions::default()
         };
-        let e = find_resonances_reliable(&frd, &narrow, 0.1).unwrap_err().to_string();
+        let e = find_resonances_reliable(&frd, &narrow, 0.1)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("only 0 line"), "{e}");
     }
 }

@@ -327,7 +327,11 @@ pub fn load_file(
     let table = read_table(&path, &opts).map_err(input)?;
     // a channel not named in [data] is taken from a column with exactly its name, when there is one
     let mut notes = Vec::new();
-    let has = |name: &str| table.index_of(&ColumnSpec::Name(name.into()).to_ref()).is_ok();
+    let has = |name: &str| {
+        table
+            .index_of(&ColumnSpec::Name(name.into()).to_ref())
+            .is_ok()
+    };
     let mut auto = |name: &str, spec: &Option<ColumnSpec>| -> Option<ColumnSpec> {
         match spec {
             Some(s) => Some(s.clone()),

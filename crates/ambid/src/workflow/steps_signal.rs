@@ -513,11 +513,13 @@ pub fn operating_point(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         let caption = format!(
             "Plant FRF of each recorded operating point ({}), {}.",
             names.join(", "),
-            settings.band.map_or("band derived from the excitation".into(), |b| format!(
-                "{}–{} Hz",
-                fmt(b.0),
-                fmt(b.1)
-            ))
+            settings
+                .band
+                .map_or("band derived from the excitation".into(), |b| format!(
+                    "{}–{} Hz",
+                    fmt(b.0),
+                    fmt(b.1)
+                ))
         );
         let blocks = operating_point_blocks(ctx, &out, caption);
         ctx.section("operating-point", "Operating-point study", blocks);

@@ -404,12 +404,7 @@ pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     let mut panels = Vec::new();
     for (name, meas, rec, unit) in [
         ("displacement y", &y, &sim.y, super::data::y_unit(ctx)),
-        (
-            "controller output u",
-            &u,
-            &sim.u,
-            super::data::u_unit(ctx),
-        ),
+        ("controller output u", &u, &sim.u, super::data::u_unit(ctx)),
     ] {
         let (tm, m) = envelope(&t, meas, 3000);
         let (tr, r) = envelope(&t, rec, 3000);
