@@ -214,7 +214,7 @@ fn write_analysis(path: &Path, a: &FrfAnalysis) -> Result<()> {
 fn print_quality(a: &FrfAnalysis) {
     let q = &a.quality;
     println!(
-        "quality over {}–{} Hz ({} lines): mean coherence γ²_ry {:.4}, γ²_ru {:.4}; \
+        "quality over {:.1}–{:.1} Hz ({} lines): mean coherence γ²_ry {:.4}, γ²_ru {:.4}; \
          single-period plant variance {:.3e} (relative {:.3e})",
         q.band.0,
         q.band.1,
@@ -352,7 +352,7 @@ pub fn frf(a: FrfArgs) -> Result<()> {
     match find_resonances_reliable(&res.frf.plant, &opts, 0.1) {
         Ok((peaks, n)) => {
             println!(
-                "plant resonance peaks in {}–{} Hz (≥ 3 dB prominence, {n} lines with relative std ≤ 10 %): {} → order estimate ≥ {}",
+                "plant resonance peaks in {:.1}–{:.1} Hz (≥ 3 dB prominence, {n} lines with relative std ≤ 10 %): {} → order estimate ≥ {}",
                 qb.0,
                 qb.1,
                 peaks.len(),

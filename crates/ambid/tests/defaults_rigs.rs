@@ -141,6 +141,20 @@ fn the_file_workflow_gives_every_random_rig_its_true_iso_zone_in_a_band_from_the
             on_lines >= ci_lo - 0.01 * peak && on_lines <= ci_hi + 0.01 * peak,
             "rig {rig}: truth on the lines {on_lines} outside [{ci_lo}, {ci_hi}]"
         );
+        // a user who does not know the period: Welch, same rule on the PSD of r
+        let welch = wf.replace("period_samples = 5115\n", "");
+        let out = run(&welch, &base);
+        let sm = &out.summary;
+        let (lo, hi) = (num(sm, "frf.band_lo_hz"), num(sm, "frf.band_hi_hz"));
+        println!(
+            "        Welch: band {lo:.1}–{hi:.0} Hz, max|S| {:.3} [{:.3}, {:.3}] at {:.1} Hz",
+            num(sm, "iso.measured.peak"),
+            num(sm, "iso.measured.peak_ci_lo"),
+            num(sm, "iso.measured.peak_ci_hi"),
+            num(sm, "iso.measured.f_peak_hz")
+        );
+        assert_eq!(sm["iso"]["measured"]["zone"], zone_true.as_str(), "rig {rig} (Welch)");
+        assert!(lo <= f_true && f_true <= hi && hi < 4000.0, "rig {rig} (Welch): {lo}–{hi}");
     }
     println!("largest |truth − peak| in half-widths: {worst_dev:.2}");
 }
