@@ -153,8 +153,15 @@ fn the_file_workflow_gives_every_random_rig_its_true_iso_zone_in_a_band_from_the
             num(sm, "iso.measured.peak_ci_hi"),
             num(sm, "iso.measured.f_peak_hz")
         );
-        assert_eq!(sm["iso"]["measured"]["zone"], zone_true.as_str(), "rig {rig} (Welch)");
-        assert!(lo <= f_true && f_true <= hi && hi < 4000.0, "rig {rig} (Welch): {lo}–{hi}");
+        assert_eq!(
+            sm["iso"]["measured"]["zone"],
+            zone_true.as_str(),
+            "rig {rig} (Welch)"
+        );
+        assert!(
+            lo <= f_true && f_true <= hi && hi < 4000.0,
+            "rig {rig} (Welch): {lo}–{hi}"
+        );
     }
     println!("largest |truth − peak| in half-widths: {worst_dev:.2}");
 }

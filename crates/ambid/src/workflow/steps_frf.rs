@@ -421,6 +421,7 @@ pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         ));
     }
     // resonance count on the plant FRF
+    let closed = ctx.is_closed_loop();
     if let Some(a) = &ctx.frf {
         let plant = &a.frf.plant;
         let opts = ResonanceOptions {
@@ -459,12 +460,19 @@ pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                 "Resonance peaks of the plant FRF in the quality band {}–{} Hz ({searched} lines with \
                  relative standard deviation ≤ 10 %, prominence ≥ {} dB), with the half-power \
                  bandwidth and the damping ratio it implies. Two states per lightly damped mode give {n} \
-                 states for the peaks; the rigid-body (unstable) pair adds two more, so orders near {} \
-                 are the candidates (seed paper, section 3.4).",
+                 states for the peaks; {}",
                 fmt(opts.band.0),
                 fmt(opts.band.1),
                 fmt(opts.min_prominence_db),
-                n + 2
+                if closed {
+                    format!(
+                        "in an AMB loop the rigid-body (unstable) pair adds two more, so orders near {} \
+                         are the candidates (seed paper, section 3.4).",
+                        n + 2
+                    )
+                } else {
+                    "actuator, sensor and delay dynamics may add one or two more.".to_string()
+                }
             ),
             header: vec![
                 "f [Hz]".into(),
