@@ -5,9 +5,10 @@ use ambid_core::data::{
     check_saturation, repair_abnormal, AbnormalOptions, AbnormalReport, SaturationOptions,
     SaturationReport,
 };
+use ambid_core::frf::band::{excitation_bands, BandRule, ExcitationBands};
 use ambid_core::frf::closed_loop::{from_periodic, from_welch, Channels, ClosedLoopFrf};
 use ambid_core::frf::periodic::{PeriodicAnalyzer, PeriodicOptions, PeriodicSpectra};
-use ambid_core::frf::quality::{assess, output_snr_db, Quality, DEFAULT_BAND};
+use ambid_core::frf::quality::{assess, output_snr_db, Quality};
 use ambid_core::frf::welch::{welch_spectra, WelchOptions};
 use ambid_core::frf::window::Window;
 use ambid_core::lti::StateSpace;
@@ -41,10 +42,14 @@ pub enum FrfMethod {
 pub struct FrfSettings {
     /// Spectral method.
     pub method: FrfMethod,
-    /// Band of the returned FRF \[Hz\].
-    pub band: (f64, f64),
-    /// Band of the quality averages \[Hz\] (default 10–1000 Hz).
-    pub quality_band: (f64, f64),
+    /// Band of the returned FRF \[Hz\]; `None` (default): the excited band derived from the
+    /// excitation ([`ambid_core::frf::band`]).
+    pub band: Option<(f64, f64)>,
+    /// Band of the quality averages \[Hz\]; `None` (default): the derived quality band (the
+    /// excitation's half-power band) inside the FRF band.
+    pub quality_band: Option<(f64, f64)>,
+    /// Thresholds of the derived bands (default: the documented rule).
+    pub band_rule: BandRule,
     /// Lines whose excitation amplitude (periodic) or power (Welch) is below this fraction of
     /// the largest are not used.
     pub rel_threshold: f64,
@@ -59,8 +64,8 @@ pub struct FrfSettings {
 }
 
 impl FrfSettings {
-    /// Period averaging with `period_samples`, skipping `skip_periods`; FRF and quality over the
-    /// seed band 10–1000 Hz.
+    /// Period averaging with `period_samples`, skipping `skip_periods`; FRF and quality bands
+    /// derived from the excitation.
     pub fn periodic(period_samples: usize, skip_periods: usize) -> Self {
         Self::with_method(FrfMethod::Periodic {
             period_samples,
@@ -81,13 +86,68 @@ impl FrfSettings {
     fn with_method(method: FrfMethod) -> Self {
         Self {
             method,
-            band: DEFAULT_BAND,
-            quality_band: DEFAULT_BAND,
+            band: None,
+            quality_band: None,
+            band_rule: BandRule::default(),
             rel_threshold: 1e-6,
             controller: None,
             i_sat: None,
             screen: true,
         }
+    }
+}
+
+/// Where a band came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BandOrigin {
+    /// Given by the user.
+    User,
+    /// Derived from the excitation by the band rule.
+    Excitation,
+    /// The FRF band (the derived quality band has no line inside the given FRF band).
+    FrfBand,
+}
+
+/// The bands an analysis used, and the ones derived from the excitation.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct UsedBands {
+    /// Band of the FRF \[Hz\].
+    pub band: (f64, f64),
+    /// Where it came from.
+    pub band_origin: BandOrigin,
+    /// Band of the quality averages \[Hz\].
+    pub quality_band: (f64, f64),
+    /// Where it came from.
+    pub quality_origin: BandOrigin,
+    /// The bands derived from the excitation (always computed).
+    pub derived: ExcitationBands,
+}
+
+impl UsedBands {
+    /// One line for reports and CLI output: which bands were used and why.
+    pub fn describe(&self) -> String {
+        let why = |o: BandOrigin| match o {
+            BandOrigin::User => "given",
+            BandOrigin::Excitation => "derived from the excitation",
+            BandOrigin::FrfBand => "the given FRF band",
+        };
+        format!(
+            "FRF band {:.4}–{:.4} Hz ({}), quality band {:.4}–{:.4} Hz ({}); the excitation has {} lines within {} dB of its strongest in {:.4}–{:.4} Hz and is within {} dB of it in {:.4}–{:.4} Hz",
+            self.band.0,
+            self.band.1,
+            why(self.band_origin),
+            self.quality_band.0,
+            self.quality_band.1,
+            why(self.quality_origin),
+            self.derived.excited_lines,
+            self.derived.thresholds_db.0,
+            self.derived.excited.0,
+            self.derived.excited.1,
+            self.derived.thresholds_db.1,
+            self.derived.quality.0,
+            self.derived.quality.1,
+        )
     }
 }
 
@@ -98,6 +158,8 @@ pub struct FrfAnalysis {
     pub frf: ClosedLoopFrf,
     /// Coherence, variance and (if given a noise record) SNR over the quality band.
     pub quality: Quality,
+    /// The bands used and the ones derived from the excitation.
+    pub bands: UsedBands,
     /// Period spectra (periodic method).
     pub spectra: Option<PeriodicSpectra>,
     /// Abnormal-sample screening per channel (`y`, `u − r`), when enabled.
@@ -197,8 +259,13 @@ pub fn analyze(
     };
 
     let ch = Channels { r: 0, u: 1, y: 2 };
-    let (lo, hi) = settings.band;
-    let (frf, spectra) = match &settings.method {
+    let pick = |derived: ExcitationBands| -> (f64, f64, BandOrigin) {
+        match settings.band {
+            Some((a, b)) => (a, b, BandOrigin::User),
+            None => (derived.excited.0, derived.excited.1, BandOrigin::Excitation),
+        }
+    };
+    let (frf, spectra, derived, band_origin) = match &settings.method {
         FrfMethod::Periodic {
             period_samples,
             skip_periods,
@@ -211,6 +278,11 @@ pub fn analyze(
                     &PeriodicOptions::new(*period_samples).skip(*skip_periods),
                 )
                 .context("period-synchronous averaging")?;
+            let f_lines: Vec<f64> = (0..s.n_lines()).map(|k| s.line_hz(k)).collect();
+            let power: Vec<f64> = s.mean(0).iter().map(|v| v.norm_sqr()).collect();
+            let derived = excitation_bands(&f_lines, &power, 1, &settings.band_rule)
+                .context("the band of the excitation")?;
+            let (lo, hi, origin) = pick(derived);
             if s.periods() < 2 {
                 bail!(
                     "only {} period is left after skipping {skip_periods}: at least 2 are needed for a \
@@ -231,7 +303,7 @@ pub fn analyze(
                 );
             }
             let frf = from_periodic(&s, ch, &lines, settings.controller.as_ref())?;
-            (frf, Some(s))
+            (frf, Some(s), derived, origin)
         }
         FrfMethod::Welch {
             nperseg,
@@ -257,23 +329,55 @@ pub fn analyze(
                     cs.n_segments()
                 );
             }
+            let derived = excitation_bands(
+                cs.f_hz(),
+                &cs.psd(0)?,
+                2.min(cs.f_hz().len() - 1),
+                &settings.band_rule,
+            )
+            .context("the band of the excitation")?;
+            let (lo, hi, origin) = pick(derived);
             let frf = from_welch(
                 &cs,
                 ch,
-                settings.band,
+                (lo, hi),
                 settings.rel_threshold,
                 settings.controller.as_ref(),
             )?;
-            (frf, None)
+            (frf, None, derived, origin)
         }
     };
     let snr = y_noise.map(|yn| output_snr_db(&y, yn)).transpose()?;
-    let quality = assess(&frf, settings.quality_band, snr).context(
+    let f = frf.f_hz();
+    let band = match settings.band {
+        Some(b) => b,
+        None => derived.excited,
+    };
+    let (quality_band, quality_origin) = match settings.quality_band {
+        Some(q) => (q, BandOrigin::User),
+        None => {
+            // the derived quality band inside the FRF band, on the FRF's lines
+            let (a, b) = (derived.quality.0.max(band.0), derived.quality.1.min(band.1));
+            if a < b && f.iter().any(|x| (a..=b).contains(x)) {
+                ((a, b), BandOrigin::Excitation)
+            } else {
+                (band, BandOrigin::FrfBand)
+            }
+        }
+    };
+    let quality = assess(&frf, quality_band, snr).context(
         "quality measures (the quality band must overlap the FRF band; see --quality-band)",
     )?;
     Ok(FrfAnalysis {
         frf,
         quality,
+        bands: UsedBands {
+            band,
+            band_origin,
+            quality_band,
+            quality_origin,
+            derived,
+        },
         spectra,
         abnormal,
         saturation,

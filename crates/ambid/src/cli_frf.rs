@@ -8,7 +8,7 @@ use ambid::study::{
     amplitude_from_records, amplitude_on_twin, operating_point_on_twin, seed_cases, seed_levels,
     LevelRecord, Recommendation, TwinAmplitudeStudy,
 };
-use ambid_core::frf::resonance::{find_resonances, order_from_peaks, ResonanceOptions};
+use ambid_core::frf::resonance::{find_resonances_reliable, order_from_peaks, ResonanceOptions};
 use ambid_core::frf::window::Window;
 use ambid_twin::{Mode, TwinConfig};
 use anyhow::{bail, Context, Result};
@@ -98,12 +98,20 @@ pub struct FrfArgs {
     /// Leading samples dropped as transient (Welch).
     #[arg(long, default_value_t = 0)]
     skip_samples: usize,
-    /// Band of the written FRF, Hz (f_min,f_max; default 1 Hz to fs/2).
+    /// Band of the written FRF, Hz (f_min,f_max; default: derived from the excitation, the
+    /// lines within 10 dB of its strongest; docs/frf.md).
     #[arg(long, value_parser = parse_band)]
     band: Option<(f64, f64)>,
-    /// Band of the quality averages, Hz.
-    #[arg(long, value_parser = parse_band, default_value = "10,1000")]
-    quality_band: (f64, f64),
+    /// Band of the quality averages and the resonance search, Hz (default: derived from the
+    /// excitation, where it is within 3 dB of its strongest line).
+    #[arg(long, value_parser = parse_band)]
+    quality_band: Option<(f64, f64)>,
+    /// Unit of the output column (for printed magnitudes; default: not given).
+    #[arg(long)]
+    y_unit: Option<String>,
+    /// Unit of the input column (for printed magnitudes; default: not given).
+    #[arg(long)]
+    u_unit: Option<String>,
     /// Saturation current of u and i in A (otherwise flat tops are looked for).
     #[arg(long)]
     i_sat: Option<f64>,
@@ -206,7 +214,7 @@ fn write_analysis(path: &Path, a: &FrfAnalysis) -> Result<()> {
 fn print_quality(a: &FrfAnalysis) {
     let q = &a.quality;
     println!(
-        "quality over {}–{} Hz ({} lines): mean coherence γ²_ry {:.4}, γ²_ru {:.4}; \
+        "quality over {:.1}–{:.1} Hz ({} lines): mean coherence γ²_ry {:.4}, γ²_ru {:.4}; \
          single-period plant variance {:.3e} (relative {:.3e})",
         q.band.0,
         q.band.1,
@@ -248,6 +256,16 @@ fn print_quality(a: &FrfAnalysis) {
     }
 }
 
+/// The unit of a plant magnitude from the declared units of y and u.
+pub(crate) fn plant_unit(y: Option<&str>, u: Option<&str>) -> String {
+    match (y, u) {
+        (Some(y), Some(u)) => format!("{y}/{u}"),
+        (Some(y), None) => format!("{y}/(unit of u not given)"),
+        (None, Some(u)) => format!("(unit of y not given)/{u}"),
+        (None, None) => "(unit not given)".into(),
+    }
+}
+
 pub fn frf(a: FrfArgs) -> Result<()> {
     let data = read_time_csv(&a.data, a.fs)?;
     if let Some(fs) = a.fs {
@@ -286,8 +304,9 @@ pub fn frf(a: FrfArgs) -> Result<()> {
     };
     let settings = FrfSettings {
         method,
-        band: a.band.unwrap_or((1.0, 0.5 * fs)),
+        band: a.band,
         quality_band: a.quality_band,
+        band_rule: Default::default(),
         rel_threshold: 1e-6,
         controller,
         i_sat: a.i_sat,
@@ -320,37 +339,36 @@ pub fn frf(a: FrfArgs) -> Result<()> {
             res.frf.f_hz().len()
         ),
     }
+    println!("bands: {}", res.bands.describe());
     print_quality(&res);
     // resonance peaks of the plant in the quality band, on lines whose relative standard
     // deviation is below 10 % (noise ripple must not count as a mode)
-    let (qf, qg): (Vec<f64>, Vec<_>) = {
-        let f = res.frf.f_hz();
-        let v = res.frf.plant.values();
-        let sd = res.frf.plant.std();
-        (0..f.len())
-            .filter(|&k| f[k] >= a.quality_band.0 && f[k] <= a.quality_band.1)
-            .filter(|&k| sd.as_ref().is_none_or(|s| s[k] <= 0.1 * v[k].norm()))
-            .map(|k| (f[k], v[k]))
-            .unzip()
+    let qb = res.quality.band;
+    let opts = ResonanceOptions {
+        band: qb,
+        ..ResonanceOptions::default()
     };
-    if qf.len() >= 3 {
-        let peaks = find_resonances(&qf, &qg, &ResonanceOptions::default())?;
-        println!(
-            "plant resonance peaks in {}–{} Hz (≥ 3 dB prominence): {} → order estimate ≥ {}",
-            a.quality_band.0,
-            a.quality_band.1,
-            peaks.len(),
-            order_from_peaks(&peaks)
-        );
-        for p in &peaks {
-            match p.damping {
-                Some(z) => println!(
-                    "  {:8.1} Hz  |P| {:.3e} m/A  ζ ≈ {z:.3}",
-                    p.f_hz, p.magnitude
-                ),
-                None => println!("  {:8.1} Hz  |P| {:.3e} m/A", p.f_hz, p.magnitude),
+    let unit = plant_unit(a.y_unit.as_deref(), a.u_unit.as_deref());
+    match find_resonances_reliable(&res.frf.plant, &opts, 0.1) {
+        Ok((peaks, n)) => {
+            println!(
+                "plant resonance peaks in {:.1}–{:.1} Hz (≥ 3 dB prominence, {n} lines with relative std ≤ 10 %): {} → order estimate ≥ {}",
+                qb.0,
+                qb.1,
+                peaks.len(),
+                order_from_peaks(&peaks)
+            );
+            for p in &peaks {
+                match p.damping {
+                    Some(z) => println!(
+                        "  {:8.2} Hz  |P| {:.3e} {unit}  ζ ≈ {z:.3}",
+                        p.f_hz, p.magnitude
+                    ),
+                    None => println!("  {:8.2} Hz  |P| {:.3e} {unit}", p.f_hz, p.magnitude),
+                }
             }
         }
+        Err(e) => println!("plant resonance peaks: not searched ({e})"),
     }
     write_analysis(&a.out, &res)?;
     println!("written: {}", a.out.display());
@@ -393,6 +411,7 @@ fn frf_local(a: &FrfArgs, r: &[f64], u: &[f64], y: &[f64], fs: f64) -> Result<()
         (c.t_ry, c.t_ru, c.plant, what)
     };
     let f = plant.f_hz().to_vec();
+    let qb = a.quality_band.unwrap_or(band);
     println!(
         "{what}, {} lines in {:.1}–{:.1} Hz",
         f.len(),
@@ -403,7 +422,7 @@ fn frf_local(a: &FrfArgs, r: &[f64], u: &[f64], y: &[f64], fs: f64) -> Result<()
         .iter()
         .zip(plant.values())
         .zip(plant.std().unwrap_or_default())
-        .filter(|((f, _), _)| **f >= a.quality_band.0 && **f <= a.quality_band.1)
+        .filter(|((f, _), _)| **f >= qb.0 && **f <= qb.1)
         .map(|((_, p), s)| (s / p.norm(), s))
         .collect();
     if !q.is_empty() {
@@ -411,8 +430,8 @@ fn frf_local(a: &FrfArgs, r: &[f64], u: &[f64], y: &[f64], fs: f64) -> Result<()
         rel.sort_by(f64::total_cmp);
         println!(
             "plant relative standard deviation over {}–{} Hz: median {:.3e} ({} lines)",
-            a.quality_band.0,
-            a.quality_band.1,
+            qb.0,
+            qb.1,
             rel[rel.len() / 2],
             rel.len()
         );
@@ -609,8 +628,8 @@ fn amplitude(a: AmplitudeArgs) -> Result<()> {
             None => None,
         };
         let mut settings = FrfSettings::periodic(a.period_samples, a.skip_periods);
-        settings.band = a.band;
-        settings.quality_band = a.band;
+        settings.band = Some(a.band);
+        settings.quality_band = Some(a.band);
         amplitude_from_records(
             &records,
             fs,

@@ -97,7 +97,7 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
     let mg = &v.margins;
     let iso_model = &v.iso_model;
     let pz_cl = &v.closed_loop;
-    let (iso_measured, consistency) = match &a.frf {
+    let (iso_measured, iso_how, consistency) = match &a.frf {
         Some(p) => {
             let file = read_frf_csv(p)?;
             let cns = consistency(
@@ -109,6 +109,7 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
             )?;
             (
                 Some(cns.iso_measured.clone()),
+                Some(cns.iso_search.describe()),
                 Some(json!({
                     "s_median_relative_error": cns.s_median_relative_error,
                     "t_ry_median_relative_error": cns.t_ry_median_relative_error,
@@ -116,7 +117,7 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
                 })),
             )
         }
-        None => (None, None),
+        None => (None, None, None),
     };
     let k_step = match a.k_step {
         Some(k) => {
@@ -190,6 +191,7 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
         "margins": mg,
         "iso_model": iso_model,
         "iso_measured": iso_measured,
+        "iso_measured_search": iso_how,
         "consistency": consistency,
         "k_step_prediction": k_step.map(|(k, f)| json!({"k": k, "fit_y_pct": f})),
     });
@@ -222,8 +224,14 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
         iso_model.peak,
         iso_model.f_peak_hz,
         iso_model.zone,
-        iso_measured.as_ref().map_or(String::new(), |m| format!(", measured max|S| {:.3} ({:?}) → zone {:?}", m.peak, m.interval, m.zone))
+        iso_measured.as_ref().map_or(String::new(), |m| {
+            let ci = m.interval.map_or(String::new(), |(lo, hi)| format!(" (95 % interval {lo:.3}–{hi:.3})"));
+            format!(", measured max|S| {:.3}{ci} at {:.1} Hz → zone {:?}", m.peak, m.f_peak_hz, m.zone)
+        })
     );
+    if let Some(h) = &iso_how {
+        println!("measured sensitivity: {h}");
+    }
     if let Some((k, f)) = k_step {
         println!("{k}-step-ahead prediction fit of y: {f:.2} %");
     }

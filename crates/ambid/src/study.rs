@@ -279,8 +279,8 @@ pub fn amplitude_on_twin(study: &TwinAmplitudeStudy) -> Result<AmplitudeOutcome>
     };
     let twin = twin.context("no level given")?;
     let mut settings = FrfSettings::periodic(period, study.skip_periods);
-    settings.band = study.band;
-    settings.quality_band = study.band;
+    settings.band = Some(study.band);
+    settings.quality_band = Some(study.band);
     settings.i_sat = Some(twin.i_sat());
     let truth = |f: &[f64]| -> Result<Vec<ambid_core::c64>> { Ok(twin.plant_frf(f)?) };
     amplitude_from_records(
@@ -514,8 +514,8 @@ pub fn operating_point_on_twin(
         })
         .with_context(|| format!("operating point `{}`", case.name))?;
         let mut settings = FrfSettings::periodic(out.excitation.period_samples, skip_periods);
-        settings.band = band;
-        settings.quality_band = band;
+        settings.band = Some(band);
+        settings.quality_band = Some(band);
         settings.i_sat = Some(out.twin.i_sat());
         let rec = &out.record;
         let record = Record {

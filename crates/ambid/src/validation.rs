@@ -13,6 +13,7 @@
 
 use ambid_core::c64;
 use ambid_core::estimate::arx::fit_percent;
+use ambid_core::frf::band::{iso_search, BandRule, IsoSearch};
 use ambid_core::lti::{Frd, StateSpace};
 use ambid_core::validate::closed_loop::{reconstruct, Reconstruction};
 use ambid_core::validate::iso::{sensitivity_zone, IsoVerdict, IsoZones};
@@ -215,12 +216,15 @@ pub struct Consistency {
     pub t_ry_median_relative_error: f64,
     /// Lines compared.
     pub lines: usize,
-    /// ISO 14839-3 verdict of the measured sensitivity.
+    /// ISO 14839-3 verdict of the measured sensitivity, over its lines known to ±10 %
+    /// ([`ambid_core::frf::band::iso_search`]).
     pub iso_measured: IsoVerdict,
+    /// How the measured peak was searched (band, lines, whether the reliability filter applied).
+    pub iso_search: IsoSearch,
 }
 
 /// Compares the model's closed loop with measured $S$ and $T_{ry}$ (same frequency lines) and
-/// gives the ISO 14839-3 zone of the measured sensitivity.
+/// gives the ISO 14839-3 zone of the measured sensitivity (peak over the lines known to ±10 %).
 ///
 /// # Errors
 /// Measured FRFs on different lines, or the errors of the frequency responses.
@@ -240,6 +244,13 @@ pub fn consistency(
         controller.freq_response_siso(f)?,
     );
     let med = median_relative_error;
+    // the measured FRF's lines are its band (ambid frf writes the excited band); within it the
+    // peak is searched on the lines known to ±10 %
+    let band = (
+        f.first().copied().unwrap_or(0.0),
+        f.last().copied().unwrap_or(0.0),
+    );
+    let search = iso_search(s_meas, band, &BandRule::default(), zones)?;
     let s_pred: Vec<c64> = gp
         .iter()
         .zip(&gc)
@@ -250,6 +261,7 @@ pub fn consistency(
         s_median_relative_error: med(&s_pred, s_meas.values()),
         t_ry_median_relative_error: med(&t_pred, t_meas.values()),
         lines: f.len(),
-        iso_measured: sensitivity_zone(s_meas, zones)?,
+        iso_measured: search.verdict.clone(),
+        iso_search: search,
     })
 }

@@ -27,8 +27,8 @@ fn bad_inputs_are_named() {
         fs: 1000.0,
     };
     let mut ok = FrfSettings::periodic(100, 1);
-    ok.band = (1.0, 500.0);
-    ok.quality_band = (1.0, 500.0);
+    ok.band = Some((1.0, 500.0));
+    ok.quality_band = Some((1.0, 500.0));
     // a binary u would look flat-topped to the limit detector; give the known limit
     ok.i_sat = Some(2.0);
     let a = analyze(&rec, &ok, None).unwrap();

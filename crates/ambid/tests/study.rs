@@ -161,8 +161,8 @@ fn operating_point_study_from_records_matches_the_twin_run() {
         })
         .collect();
     let mut settings = FrfSettings::periodic(outs[0].excitation.period_samples, 1);
-    settings.band = (10.0, 2000.0);
-    settings.quality_band = (10.0, 2000.0);
+    settings.band = Some((10.0, 2000.0));
+    settings.quality_band = Some((10.0, 2000.0));
     settings.i_sat = Some(outs[0].twin.i_sat());
     let names: Vec<String> = cases.iter().map(|c| c.name.clone()).collect();
     let files = operating_point_from_records(&names, &records, &settings).unwrap();

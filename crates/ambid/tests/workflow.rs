@@ -73,7 +73,9 @@ fn the_default_workflow_on_the_twin_recovers_the_truth_and_reports_every_number(
     assert!(bla.iter().any(|r| num(r, "level_pct") == rec), "{rec}");
     // the nonparametric plant against the twin's exact linearised plant (nonlinear twin: the
     // estimate also carries the force law's distortion)
-    let e_frf = num(sm, "frf.plant_median_error_vs_truth_pct");
+    // (issue 16: the quality band is derived from the excitation now, 3.9–1800 Hz here; the
+    // seed paper's bar is stated over 10–1000 Hz, so the check reads that figure)
+    let e_frf = num(sm, "frf.plant_median_error_vs_truth_10_1000_pct");
     assert!(e_frf < 3.0, "FRF median error vs truth {e_frf} %");
     // the chosen parametric model against the exact plant, and through the closed loop
     let e_model = num(sm, "models.chosen_error_vs_truth_pct");

@@ -1,5 +1,6 @@
 //! Nonparametric frequency-response estimation from (closed-loop) data.
 
+pub mod band;
 pub mod bla;
 pub mod closed_loop;
 pub mod lpm;

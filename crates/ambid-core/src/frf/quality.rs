@@ -3,7 +3,9 @@
 //! output-side signal-to-noise ratio.
 //!
 //! * **Average coherence** $\bar\gamma^2 = \frac{1}{K}\sum_{k} \gamma^2_{ry}(f_k)$ over the
-//!   lines in the band (default 10–1000 Hz), resonance regions included.
+//!   lines in the band, resonance regions included. The band is the caller's: ambid's analyses
+//!   derive it from the excitation ([`super::band`], the lines within 3 dB of the strongest),
+//!   never from a fixed rig's numbers.
 //! * **FRF variance across periods**: the variance of a single-period estimate
 //!   $\sigma^2_{1}(f_k) = P\,\sigma^2_{\bar G}(f_k)$ (the spread of the $P$ per-period FRFs), averaged
 //!   over the band; reported absolute (units of $|G|^2$) and relative to $|\hat G|^2$.
@@ -26,7 +28,8 @@ use super::periodic::PeriodicSpectra;
 use crate::error::{check_finite, Error, Result};
 use crate::lti::Frd;
 
-/// The seed's default band for the averages \[Hz\].
+/// The seed paper's band for the averages on its nominal rig \[Hz\]. Not a default for data:
+/// derive the band from the excitation with [`super::band::excitation_bands`].
 pub const DEFAULT_BAND: (f64, f64) = (10.0, 1000.0);
 
 /// The three quality measures of one experiment (see the [module docs](self)).

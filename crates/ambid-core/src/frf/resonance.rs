@@ -34,6 +34,7 @@
 //! ```
 
 use crate::error::{check_finite, Error, Result};
+use crate::lti::Frd;
 use faer::c64;
 
 /// Options of [`find_resonances`].
@@ -191,6 +192,55 @@ pub fn find_resonances(f_hz: &[f64], g: &[c64], opts: &ResonanceOptions) -> Resu
     Ok(out)
 }
 
+/// [`find_resonances`] on the lines of a measured FRF that are known well enough to show a
+/// mode: inside `opts.band` and with standard deviation at most `max_rel_std` $\cdot|\hat G_k|$
+/// (all lines when the FRF has no variance). On a noisy estimate every ripple of the noise is a
+/// local maximum, and over a wide band the 3 dB prominence test alone lets hundreds of them
+/// through (524–559 "resonances" over 0–10 kHz on PRBS files, 72 on Silverbox); a line whose
+/// relative standard deviation is 10 % moves by at most ±1.7 dB (95 %), below the 3 dB
+/// prominence, so with `max_rel_std = 0.1` a peak that passes is a property of the system.
+/// Returns the peaks and the number of lines searched.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] for `max_rel_std ≤ 0` or fewer than 3 reliable lines in the band
+/// (the message says how many), and as [`find_resonances`].
+pub fn find_resonances_reliable(
+    frd: &Frd,
+    opts: &ResonanceOptions,
+    max_rel_std: f64,
+) -> Result<(Vec<Resonance>, usize)> {
+    if !(max_rel_std.is_finite() && max_rel_std > 0.0) {
+        return Err(Error::invalid(
+            "max_rel_std",
+            format!("must be positive, got {max_rel_std}"),
+        ));
+    }
+    let (f, g) = (frd.f_hz(), frd.values());
+    let sd = frd.std();
+    let (qf, qg): (Vec<f64>, Vec<c64>) = (0..f.len())
+        .filter(|&k| f[k] >= opts.band.0 && f[k] <= opts.band.1)
+        .filter(|&k| {
+            sd.as_ref()
+                .is_none_or(|s| s[k] <= max_rel_std * g[k].norm())
+        })
+        .map(|k| (f[k], g[k]))
+        .unzip();
+    if qf.len() < 3 {
+        return Err(Error::invalid(
+            "band",
+            format!(
+                "only {} line(s) in {}–{} Hz have a relative standard deviation ≤ {}; at least 3 are needed to find a peak (record more periods or a stronger excitation)",
+                qf.len(),
+                opts.band.0,
+                opts.band.1,
+                max_rel_std
+            ),
+        ));
+    }
+    let n = qf.len();
+    Ok((find_resonances(&qf, &qg, opts)?, n))
+}
+
 /// The order suggested by the peaks: two states per lightly damped mode.
 pub fn order_from_peaks(peaks: &[Resonance]) -> usize {
     2 * peaks.len()
@@ -238,5 +288,35 @@ mod tests {
             .is_empty());
         assert!(find_resonances(&f[..2], &g[..2], &ResonanceOptions::default()).is_err());
         assert!(find_resonances(&f, &g[..5], &ResonanceOptions::default()).is_err());
+    }
+
+    #[test]
+    fn noisy_lines_do_not_make_resonances() {
+        // one mode at 100 Hz; above 300 Hz a noisy estimate (±30 % ripple, σ = 30 %)
+        let f: Vec<f64> = (1..2000).map(|k| k as f64).collect();
+        let mut g: Vec<c64> = f.iter().map(|&x| mode(x, 100.0, 0.02, 1.0)).collect();
+        let mut var = vec![0.0; f.len()];
+        for k in 0..f.len() {
+            let rel = if f[k] > 300.0 { 0.3 } else { 0.01 };
+            let ripple = if k % 4 < 2 { 1.0 + rel } else { 1.0 - rel };
+            var[k] = (rel * g[k].norm()).powi(2);
+            g[k] *= ripple * if f[k] > 300.0 { 1.0 } else { 1.0 / ripple };
+        }
+        let frd = Frd::new(f.clone(), g.clone(), Some(var), None).unwrap();
+        let all = find_resonances(&f, &g, &ResonanceOptions::default()).unwrap();
+        assert!(all.len() > 100, "{}", all.len());
+        let (p, n) = find_resonances_reliable(&frd, &ResonanceOptions::default(), 0.1).unwrap();
+        assert_eq!(n, 300);
+        assert_eq!(p.len(), 1, "{p:?}");
+        assert!((p[0].f_hz - 100.0).abs() < 1.0);
+        assert!(find_resonances_reliable(&frd, &ResonanceOptions::default(), 0.0).is_err());
+        let narrow = ResonanceOptions {
+            band: (500.0, 600.0),
+            ..ResonanceOptions::default()
+        };
+        let e = find_resonances_reliable(&frd, &narrow, 0.1)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("only 0 line"), "{e}");
     }
 }

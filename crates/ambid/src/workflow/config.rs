@@ -198,17 +198,18 @@ pub struct DataSection {
     pub variable: Option<String>,
     /// Sample rate \[Hz\] (or give `time`).
     pub fs_hz: Option<f64>,
-    /// Time column \[s\].
+    /// Time column \[s\] (not given: a column named `t`, if the file has one and `fs_hz` is not given).
     pub time: Option<ColumnSpec>,
-    /// Excitation added to the controller output (closed loop); absent for open-loop data.
+    /// Excitation added to the controller output (closed loop); not given: a column named `r`
+    /// if the file has one, otherwise none (open-loop data).
     pub r: Option<ColumnSpec>,
     /// Plant input (controller output incl. excitation, or the open-loop input).
     pub u: ColumnSpec,
     /// Plant output (displacement).
     pub y: ColumnSpec,
-    /// Coil current (optional).
+    /// Coil current (optional; not given: a column named `i`, if any).
     pub i: Option<ColumnSpec>,
-    /// Position reference (optional).
+    /// Position reference (optional; not given: a column named `w`, if any).
     pub w: Option<ColumnSpec>,
     /// Factors that convert columns to SI units, e.g. `{ y = 1e-3 }` for mm.
     pub scale: std::collections::BTreeMap<String, f64>,
@@ -230,10 +231,11 @@ pub struct DataSection {
     pub controller: Option<PathBuf>,
     /// Whether the data are closed-loop (default: true when `r` or `controller` is given).
     pub closed_loop: Option<bool>,
-    /// Units of the displacement and current axes in the report (`"m"`, `"A"` by default).
-    pub y_unit: String,
-    /// Unit of the plant input.
-    pub u_unit: String,
+    /// Unit of the plant output in the report (e.g. `"m"`); not given: the report says "unit not
+    /// given" (the twin's data are in m).
+    pub y_unit: Option<String>,
+    /// Unit of the plant input (e.g. `"A"`); not given: "unit not given" (the twin's: A).
+    pub u_unit: Option<String>,
 }
 
 impl Default for DataSection {
@@ -260,8 +262,8 @@ impl Default for DataSection {
             skip_periods: 1,
             controller: None,
             closed_loop: None,
-            y_unit: "m".into(),
-            u_unit: "A".into(),
+            y_unit: None,
+            u_unit: None,
         }
     }
 }

@@ -34,6 +34,8 @@ pub struct Recording {
     pub source: String,
     /// Fraction of saturated samples (twin).
     pub saturated_fraction: Option<f64>,
+    /// Notes on how the record was read (e.g. columns taken by their names).
+    pub notes: Vec<String>,
 }
 
 impl Recording {
@@ -87,6 +89,7 @@ impl TwinSource {
                 period: periodic.then_some(out.excitation.period_samples),
                 source: format!("twin, {what} record"),
                 saturated_fraction: Some(rec.meta.saturated_fraction),
+                notes: Vec::new(),
             },
             out,
         ))
@@ -256,6 +259,7 @@ fn split(rec: &Recording, k: usize) -> (Recording, Recording) {
         period: rec.period,
         source: format!("{} ({what})", rec.source),
         saturated_fraction: None,
+        notes: rec.notes.clone(),
     };
     (
         part(true, &format!("samples 1–{k}, estimation")),
@@ -321,8 +325,44 @@ pub fn load_file(
         ..ReadOptions::default()
     };
     let table = read_table(&path, &opts).map_err(input)?;
+    // a channel not named in [data] is taken from a column with exactly its name, when there is one
+    let mut notes = Vec::new();
+    let has = |name: &str| {
+        table
+            .index_of(&ColumnSpec::Name(name.into()).to_ref())
+            .is_ok()
+    };
+    let mut auto = |name: &str, spec: &Option<ColumnSpec>| -> Option<ColumnSpec> {
+        match spec {
+            Some(s) => Some(s.clone()),
+            None if has(name) => {
+                notes.push(name.to_string());
+                Some(ColumnSpec::Name(name.into()))
+            }
+            None => None,
+        }
+    };
+    let time = if d.fs_hz.is_none() {
+        auto("t", &d.time)
+    } else {
+        d.time.clone()
+    };
+    let (r_spec, i_spec, w_spec) = (auto("r", &d.r), auto("i", &d.i), auto("w", &d.w));
+    let notes = if notes.is_empty() {
+        Vec::new()
+    } else {
+        vec![format!(
+            "{}: column(s) {} taken by name (not named in [data]); name them (or set [data] closed_loop) to change this",
+            path.display(),
+            notes
+                .iter()
+                .map(|n| format!("`{n}`"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        )]
+    };
     let ts = table
-        .sample_time(d.time.as_ref().map(ColumnSpec::to_ref).as_ref(), d.fs_hz)
+        .sample_time(time.as_ref().map(ColumnSpec::to_ref).as_ref(), d.fs_hz)
         .map_err(input)?;
     let col = |name: &str, spec: &ColumnSpec| -> Result<Vec<f64>, Failure> {
         let x = table.column(&spec.to_ref()).map_err(input)?;
@@ -350,15 +390,16 @@ pub fn load_file(
     };
     let rec = Recording {
         ts,
-        r: opt("r", &d.r)?,
+        r: opt("r", &r_spec)?,
         u: col("u", &d.u)?,
         y: col("y", &d.y)?,
-        i: opt("i", &d.i)?,
-        w: opt("w", &d.w)?,
+        i: opt("i", &i_spec)?,
+        w: opt("w", &w_spec)?,
         closed_loop: false,
         period: d.period_samples,
         source: format!("{} ({what})", path.display()),
         saturated_fraction: None,
+        notes,
     };
     let _: &Table = &table;
     Ok(rec)
@@ -449,6 +490,22 @@ pub fn describe(ctx: &mut Ctx<'_>) -> Section {
                 rows,
                 highlight: None,
             }));
+            let notes: Vec<String> = [ctx.ident.as_ref(), ctx.valid.as_ref()]
+                .into_iter()
+                .flatten()
+                .flat_map(|r| r.notes.iter().cloned())
+                .collect();
+            for n in notes {
+                blocks.push(Ctx::note(NoteKind::Info, n));
+            }
+            let (yu, uu) = units(ctx);
+            blocks.push(Ctx::note(
+                NoteKind::Info,
+                format!(
+                    "Units: y in {yu}, u in {uu} ([data] y_unit / u_unit); plant magnitudes in {}.",
+                    plant_unit(ctx)
+                ),
+            ));
             let cl = ctx.is_closed_loop();
             let has_r = ctx.ident.as_ref().is_some_and(|r| r.r.is_some());
             blocks.push(note_of(match (cl, has_r, ctx.controller.is_some()) {
@@ -463,6 +520,37 @@ pub fn describe(ctx: &mut Ctx<'_>) -> Section {
         id: "data".into(),
         title: "Data".into(),
         blocks,
+    }
+}
+
+/// The units of y and u: the twin's m and A, or the declared `[data] y_unit` / `u_unit`, or
+/// "unit not given".
+pub fn units(ctx: &Ctx<'_>) -> (String, String) {
+    if ctx.twin.is_some() {
+        return ("m".into(), "A".into());
+    }
+    let d = &ctx.cfg.data;
+    let given = |u: &Option<String>| u.clone().unwrap_or_else(|| "unit not given".into());
+    (given(&d.y_unit), given(&d.u_unit))
+}
+
+/// The unit of y (see [`units`]).
+pub fn y_unit(ctx: &Ctx<'_>) -> String {
+    units(ctx).0
+}
+
+/// The unit of u (see [`units`]).
+pub fn u_unit(ctx: &Ctx<'_>) -> String {
+    units(ctx).1
+}
+
+/// The unit of a plant magnitude |y/u|: `m/A`, or "unit not given" when either is unknown.
+pub fn plant_unit(ctx: &Ctx<'_>) -> String {
+    let d = &ctx.cfg.data;
+    match (&ctx.twin, &d.y_unit, &d.u_unit) {
+        (Some(_), _, _) => "m/A".into(),
+        (None, Some(y), Some(u)) => format!("{y}/{u}"),
+        _ => "unit not given".into(),
     }
 }
 

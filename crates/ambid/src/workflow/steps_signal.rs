@@ -511,10 +511,15 @@ pub fn operating_point(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         let out = crate::study::operating_point_from_records(&names, &records, &settings)
             .map_err(computation)?;
         let caption = format!(
-            "Plant FRF of each recorded operating point ({}), {}–{} Hz.",
+            "Plant FRF of each recorded operating point ({}), {}.",
             names.join(", "),
-            fmt(settings.band.0),
-            fmt(settings.band.1)
+            settings
+                .band
+                .map_or("band derived from the excitation".into(), |b| format!(
+                    "{}–{} Hz",
+                    fmt(b.0),
+                    fmt(b.1)
+                ))
         );
         let blocks = operating_point_blocks(ctx, &out, caption);
         ctx.section("operating-point", "Operating-point study", blocks);

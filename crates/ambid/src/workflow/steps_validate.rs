@@ -173,6 +173,17 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     let mut blocks = Vec::new();
     let controller = ctx.controller.clone();
     match (&controller, val.closed_loop) {
+        (Some(_), true)
+            if !val.r.as_ref().is_some_and(|r| r.iter().any(|v| *v != 0.0))
+                && !val.w.as_ref().is_some_and(|w| w.iter().any(|v| *v != 0.0)) =>
+        {
+            // a record without excitation is a failure of this step, not of the whole report
+            return Ok(StepStatus::Skipped(format!(
+                "the validation record {} has neither an excitation r nor a position reference w \
+                 (or they are zero): nothing drives the loop. Name the columns in [data] r / w.",
+                val.source
+            )));
+        }
         (Some(c), true) => {
             let zeros = vec![0.0; val.len()];
             let w = val.w.as_deref().unwrap_or(&zeros);
@@ -230,8 +241,8 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                 ),
                 val.ts,
                 &[
-                    ("y", &val.y, &v.reconstruction.simulated.y, &ctx.cfg.data.y_unit),
-                    ("u", &val.u, &v.reconstruction.simulated.u, &ctx.cfg.data.u_unit),
+                    ("y", &val.y, &v.reconstruction.simulated.y, &super::data::y_unit(ctx)),
+                    ("u", &val.u, &v.reconstruction.simulated.u, &super::data::u_unit(ctx)),
                 ],
             ));
             blocks.push(Block::Table(Table {
@@ -298,7 +309,7 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                     fmt(fit)
                 ),
                 val.ts,
-                &[("y", &val.y, &yhat, &ctx.cfg.data.y_unit)],
+                &[("y", &val.y, &yhat, &super::data::y_unit(ctx))],
             ));
             put_residuals(ctx, &res);
             blocks.push(residual_figure(&res, "input u"));
@@ -392,13 +403,8 @@ pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     let sim = &v.reconstruction.simulated;
     let mut panels = Vec::new();
     for (name, meas, rec, unit) in [
-        ("displacement y", &y, &sim.y, ctx.cfg.data.y_unit.clone()),
-        (
-            "controller output u",
-            &u,
-            &sim.u,
-            ctx.cfg.data.u_unit.clone(),
-        ),
+        ("displacement y", &y, &sim.y, super::data::y_unit(ctx)),
+        ("controller output u", &u, &sim.u, super::data::u_unit(ctx)),
     ] {
         let (tm, m) = envelope(&t, meas, 3000);
         let (tr, r) = envelope(&t, rec, 3000);
@@ -486,6 +492,7 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     let mut curves = Vec::new();
     let mut rows = Vec::new();
     let mut verdicts = Vec::new();
+    let mut iso_notes: Vec<String> = Vec::new();
     // measured S = T_ru from the FRF (closed loop with an excitation)
     if let (Some(a), true) = (
         &ctx.frf,
@@ -494,7 +501,15 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             .is_some_and(|r| r.r.is_some() && r.closed_loop),
     ) {
         let s = &a.frf.t_ru;
-        let v = sensitivity_zone(s, &z).map_err(computation)?;
+        // the peak over the lines of the FRF band where S is known to ±10 % (docs/validation.md)
+        let search = ambid_core::frf::band::iso_search(
+            s,
+            a.bands.band,
+            &ambid_core::frf::band::BandRule::default(),
+            &z,
+        )
+        .map_err(computation)?;
+        let v = search.verdict.clone();
         curves.push(series(
             "measured S = T_ru",
             s.f_hz(),
@@ -505,6 +520,14 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         ctx.put("iso.measured.peak", v.peak);
         ctx.put("iso.measured.f_peak_hz", v.f_peak_hz);
         ctx.put("iso.measured.zone", format!("{:?}", v.zone));
+        if let Some((lo, hi)) = v.interval {
+            ctx.put("iso.measured.peak_ci_lo", lo);
+            ctx.put("iso.measured.peak_ci_hi", hi);
+        }
+        ctx.put("iso.measured.search_lo_hz", search.band.0);
+        ctx.put("iso.measured.search_hi_hz", search.band.1);
+        ctx.put("iso.measured.search_lines", search.lines as f64);
+        iso_notes.push(format!("Measured: {}.", search.describe()));
         rows.push(iso_row("measured S (FRF)", &v));
         verdicts.push(v.zone);
     }
@@ -622,6 +645,10 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         ),
     ];
     let _ = json!(null);
+    let mut blocks = blocks;
+    for n in iso_notes {
+        blocks.push(Ctx::note(NoteKind::Info, n));
+    }
     ctx.section("iso", "ISO 14839-3 stability verdict", blocks);
     Ok(StepStatus::Done)
 }
