@@ -2,11 +2,12 @@
 
 use ambid::io::model::{polynomial_json, write_model_json};
 use ambid::io::read_time_csv;
-use ambid_core::estimate::arx::{arx, fit_percent, ArxOrders};
+use ambid_core::estimate::arx::{arx, ArxOrders};
 use ambid_core::estimate::order::{arx_order_scan, ArxScanSpec};
 use ambid_core::estimate::pem::{self, Focus, Orders, PemOptions};
 use ambid_core::estimate::Fitted;
 use ambid_core::lti::PolyModel;
+use ambid_core::validate::predict::InitialState;
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use serde_json::json;
@@ -28,6 +29,37 @@ pub enum StructureArg {
 pub enum FocusArg {
     Prediction,
     Simulation,
+}
+
+/// Initial state of the validation filters (MATLAB `compare`'s `InitialCondition`).
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum X0Arg {
+    /// From rest (samples before the record taken as zero).
+    Zero,
+    /// The state that best explains the record (least squares of the free response).
+    Estimate,
+}
+
+impl X0Arg {
+    fn core(self) -> InitialState {
+        match self {
+            Self::Zero => InitialState::Zero,
+            Self::Estimate => InitialState::Estimate,
+        }
+    }
+}
+
+/// Whether the data were measured in open or closed loop.
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum LoopArg {
+    /// Closed if the file has an `r` column and the input is not `r` (ambid's closed-loop
+    /// record `t, w, r, u, i, y`), open otherwise.
+    Auto,
+    /// Open-loop data: an unstable starting estimate is an artefact and is stabilised.
+    Open,
+    /// Closed-loop data (an AMB plant): instability of u → y is real; OE/BJ and the simulation
+    /// focus refuse an unstable start.
+    Closed,
 }
 
 #[derive(Args)]
@@ -97,9 +129,48 @@ pub struct FitArgs {
     /// default).
     #[arg(long)]
     no_detrend: bool,
+    /// Initial state of the fit measures (estimation and validation): `estimate` (the state
+    /// that best explains each record, MATLAB `compare`'s default) or `zero`.
+    #[arg(long, value_enum, default_value_t = X0Arg::Estimate)]
+    x0: X0Arg,
+    /// Samples at the start of each record left out of the fit measures.
+    #[arg(long, default_value_t = 0)]
+    skip: usize,
+    /// Open- or closed-loop data (decides whether an unstable starting estimate is stabilised;
+    /// see docs/estimation.md).
+    #[arg(long = "loop", value_enum, default_value_t = LoopArg::Auto)]
+    loop_kind: LoopArg,
     /// Output model JSON.
     #[arg(long, default_value = "model.json")]
     out: PathBuf,
+}
+
+/// Open-loop data per `--loop` (module docs of [`LoopArg`]).
+fn is_open_loop(a: &FitArgs) -> Result<bool> {
+    Ok(match a.loop_kind {
+        LoopArg::Open => true,
+        LoopArg::Closed => false,
+        LoopArg::Auto => {
+            let d = read_time_csv(&a.data, a.fs)?;
+            !(d.names.iter().any(|n| n == "r") && a.input != "r")
+        }
+    })
+}
+
+/// Whether an estimator error is about the data's dynamics (instability, numerics), so that a
+/// fallback model can still be written, rather than about bad input.
+fn is_model_problem(e: &ambid_core::Error) -> bool {
+    matches!(
+        e,
+        ambid_core::Error::Unstable { .. } | ambid_core::Error::Numerical { .. }
+    )
+}
+
+fn fmt_fit(f: Option<f64>) -> String {
+    f.map_or_else(
+        || "— (the model output diverges: unstable model)".to_string(),
+        |v| format!("{v:.2} %"),
+    )
 }
 
 fn read_io(
@@ -182,6 +253,8 @@ pub fn fit(a: FitArgs) -> Result<()> {
         FocusArg::Prediction => Focus::Prediction,
         FocusArg::Simulation => Focus::Simulation,
     };
+    let mut problems: Vec<String> = Vec::new();
+    let mut fallback = false;
     let (fitted, iterations): (Fitted<PolyModel>, Option<usize>) = match a.structure {
         StructureArg::Fir | StructureArg::Arx => {
             let na = if a.structure == StructureArg::Fir {
@@ -215,12 +288,52 @@ pub fn fit(a: FitArgs) -> Result<()> {
                 StructureArg::Oe => ambid_core::lti::Structure::Oe,
                 _ => ambid_core::lti::Structure::Bj,
             };
+            let open_loop = is_open_loop(&a)?;
             let opts = PemOptions::default()
                 .with_focus(focus)
-                .with_max_iterations(a.max_iterations)?;
-            let (f, rep) = pem::pem(&y, &u, structure, &orders, ts, &opts)
-                .context("prediction-error estimation")?;
-            (f, Some(rep.iterations()))
+                .with_max_iterations(a.max_iterations)?
+                .with_open_loop(open_loop);
+            match pem::pem(&y, &u, structure, &orders, ts, &opts) {
+                Ok((f, rep)) => {
+                    problems.extend(rep.warnings.iter().cloned());
+                    if !rep.reason().converged() {
+                        problems.push(format!(
+                            "the iteration stopped at its limit ({} iterations, {:?}): raise --max-iterations",
+                            rep.iterations(),
+                            rep.reason()
+                        ));
+                    }
+                    (f, Some(rep.iterations()))
+                }
+                Err(e) if is_model_problem(&e) => {
+                    // a model is always written: the ARX model of the same orders, with the
+                    // problem named (closed-loop advice only for closed-loop data)
+                    let na = orders.na + orders.nf;
+                    problems.push(format!("{} estimation failed: {e}", structure.name()));
+                    problems.push(format!(
+                        "written instead: the least-squares ARX({na}, {}, {}) model",
+                        a.nb, a.nk
+                    ));
+                    if open_loop {
+                        problems.push("the data were taken as open-loop (--loop); for data measured around an unstable plant in closed loop use --loop closed".to_string());
+                    }
+                    fallback = true;
+                    let f = arx(&y, &[&u], &ArxOrders::siso(na, a.nb, a.nk), ts)?;
+                    let model = f.model.to_poly(0)?;
+                    (
+                        Fitted {
+                            model,
+                            params: f.params,
+                            covariance: f.covariance,
+                            loss: f.loss,
+                            noise_variance: f.noise_variance,
+                            n_samples: f.n_samples,
+                        },
+                        None,
+                    )
+                }
+                Err(e) => return Err(anyhow::Error::new(e).context("prediction-error estimation")),
+            }
         }
     };
     let m = &fitted.model;
@@ -245,16 +358,26 @@ pub fn fit(a: FitArgs) -> Result<()> {
     let poles = m.poles()?;
     let unstable = poles.iter().filter(|p| p.norm() >= 1.0).count();
     if unstable > 0 {
-        println!("note: {unstable} pole(s) on or outside the unit circle (an unstable model; simulation fits diverge)");
+        problems.push(format!("{unstable} pole(s) on or outside the unit circle (an unstable model: its simulation diverges; judge it by the 1-step fit)"));
     }
-    let (f1, fs_est) = fits(m, &y, &u)?;
-    println!("estimation data: 1-step fit {f1:.2} %, simulation fit {fs_est:.2} %");
+    let (x0, skip) = (a.x0.core(), a.skip);
+    let (f1, fs_est) = fits(m, &y, &u, x0, skip)?;
+    println!(
+        "estimation data: 1-step fit {}, simulation fit {} (initial state: {}{})",
+        fmt_fit(f1),
+        fmt_fit(fs_est),
+        x0.name(),
+        if skip > 0 { format!(", first {skip} samples skipped") } else { String::new() }
+    );
     let mut val = json!(null);
     if let Some(p) = &a.validation {
         let (uv, yv) = read_validation(p, a.fs, &a.input, &a.output, ts, mu, my)?;
-        let (v1, vs) = fits(m, &yv, &uv)?;
-        println!("validation data: 1-step fit {v1:.2} %, simulation fit {vs:.2} %");
+        let (v1, vs) = fits(m, &yv, &uv, x0, skip)?;
+        println!("validation data: 1-step fit {}, simulation fit {}", fmt_fit(v1), fmt_fit(vs));
         val = json!({"one_step_fit_pct": v1, "simulation_fit_pct": vs});
+    }
+    for p in &problems {
+        println!("warning: {p}");
     }
     let meta = json!({
         "params": fitted.params,
@@ -265,6 +388,10 @@ pub fn fit(a: FitArgs) -> Result<()> {
         "detrend": {"u_mean": mu, "y_mean": my},
         "estimation_fit_pct": {"one_step": f1, "simulation": fs_est},
         "validation": val,
+        "initial_state": x0.name(),
+        "skip": skip,
+        "fallback": fallback,
+        "problems": problems,
         "source": a.data.display().to_string(),
     });
     write_model_json(&a.out, &polynomial_json(m, &a.input, &a.output, meta))?;
@@ -362,6 +489,10 @@ pub fn order(a: OrderArgs) -> Result<()> {
 }
 
 /// Subspace state-space fit: data scaled to unit RMS for the algorithm, model scaled back.
+/// A refinement that fails (an unstable start under the simulation focus) is retried, for
+/// open-loop data, from the subspace model with its poles beyond |z| = 0.99 moved onto 0.99
+/// ([`stabilised_refine`]); if that fails too, the subspace model is written with the problem
+/// named. A model file is always written.
 fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Result<()> {
     use ambid::io::model::state_space_json;
     use ambid_core::estimate::ss_pem::SsPemOptions;
@@ -380,14 +511,48 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
             ..SsPemOptions::default()
         })
     };
-    let fit =
-        ambid::fitting::fit_state_space(u, y, ts, a.order, a.block_rows, pem).map_err(|e| {
-            if a.no_pem {
-                e
+    let open_loop = is_open_loop(a)?;
+    let mut problems: Vec<String> = Vec::new();
+    let mut method = if a.no_pem { "subspace" } else { "subspace+pem" };
+    let fit = match ambid::fitting::fit_state_space(u, y, ts, a.order, a.block_rows, pem) {
+        Ok(f) => f,
+        Err(e) => {
+            let Some(opts) = pem else { return Err(e) };
+            // the refinement failed: a model is still written
+            let first = format!("{e:#}");
+            let sub = ambid::fitting::fit_state_space(u, y, ts, a.order, a.block_rows, None)
+                .map_err(|_| e.context("(use --no-pem to skip the refinement)"))?;
+            let retry = if open_loop {
+                Some(stabilised_refine(u, y, ts, &sub.model, &opts))
             } else {
-                e.context("(use --no-pem to skip the refinement)")
+                None
+            };
+            match retry {
+                Some(Ok((model, summary))) => {
+                    problems.push(format!(
+                        "the refinement from the subspace model failed ({first}); it was restarted from the subspace model with its poles beyond |z| = 0.99 moved onto 0.99 (open-loop data; the start only)"
+                    ));
+                    method = "subspace+stabilised start+pem";
+                    ambid::fitting::SsIdentified {
+                        model,
+                        pem: Some(summary),
+                        ..sub
+                    }
+                }
+                other => {
+                    problems.push(format!("the prediction-error refinement failed: {first}"));
+                    if let Some(Err(e2)) = other {
+                        problems.push(format!("from a stabilised start it failed too: {e2:#}"));
+                    } else {
+                        problems.push("closed-loop data (--loop): an unstable u → y start is taken as real; the simulation focus cannot fit an unstable system, use the prediction focus".to_string());
+                    }
+                    problems.push("written instead: the subspace model without refinement".to_string());
+                    method = "subspace (refinement failed)";
+                    sub
+                }
             }
-        })?;
+        }
+    };
     let mut pem_meta = json!(null);
     if let Some(p) = &fit.pem {
         println!(
@@ -406,6 +571,7 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
             "start_loss": p.start_loss,
             "loss": p.loss,
             "kalman_gain": p.kalman_gain,
+            "x0": p.x0,
         });
     }
     let model = fit.model.clone();
@@ -422,23 +588,31 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
     );
     let unstable = model.poles()?.iter().filter(|p| p.norm() >= 1.0).count();
     if unstable > 0 {
-        println!("note: {unstable} pole(s) on or outside the unit circle (not stabilised)");
+        problems.push(format!("{unstable} pole(s) on or outside the unit circle (not stabilised): the simulation diverges"));
     }
-    let fit_on = |u: &[f64], y: &[f64]| -> Result<f64> {
-        let ys = model.simulate_siso(u, None)?;
-        Ok(fit_percent(y, &ys)?)
+    let (x0, skip) = (a.x0.core(), a.skip);
+    let fit_on = |u: &[f64], y: &[f64]| -> Result<Option<f64>> {
+        let (ys, _) = ambid_core::validate::predict::ss_simulate(&model, y, u, x0)?;
+        Ok(ambid_core::validate::predict::fit_from(y, &ys, skip))
     };
     let f_est = fit_on(u, y)?;
-    println!("estimation data: simulation fit {f_est:.2} %");
+    println!(
+        "estimation data: simulation fit {} (initial state: {})",
+        fmt_fit(f_est),
+        x0.name()
+    );
     let mut val = json!(null);
     if let Some(p) = &a.validation {
         let (uv, yv) = read_validation(p, a.fs, &a.input, &a.output, ts, mu, my)?;
         let fv = fit_on(&uv, &yv)?;
-        println!("validation data: simulation fit {fv:.2} %");
+        println!("validation data: simulation fit {}", fmt_fit(fv));
         val = json!({"simulation_fit_pct": fv});
     }
+    for p in &problems {
+        println!("warning: {p}");
+    }
     let meta = json!({
-        "method": if a.no_pem { "subspace" } else { "subspace+pem" },
+        "method": method,
         "pem": pem_meta,
         "order": fit.order,
         "block_rows": fit.block_rows,
@@ -446,9 +620,73 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
         "detrend": {"u_mean": mu, "y_mean": my},
         "estimation_fit_pct": {"simulation": f_est},
         "validation": val,
+        "initial_state": x0.name(),
+        "skip": skip,
+        "problems": problems,
         "source": a.data.display().to_string(),
     });
-    write_model_json(&a.out, &state_space_json(&model, &a.input, &a.output, meta))?;
+    let mut j = state_space_json(&model, &a.input, &a.output, meta);
+    if let Some(x) = fit.pem.as_ref().and_then(|p| p.x0.clone()) {
+        // the initial state the refinement estimated on the estimation record
+        j["x0"] = json!(x);
+    }
+    write_model_json(&a.out, &j)?;
     println!("written: {}", a.out.display());
     Ok(())
+}
+
+/// Prediction-error refinement of the subspace model `sub` (data units) from a stabilised
+/// start: on unit-RMS data, the start's poles beyond $|z| = 0.99$ are moved radially onto 0.99
+/// ([`ambid_core::estimate::pem::stabilise_start_polynomial`] on its denominator), then the
+/// refinement moves every pole freely. SISO; open-loop data only.
+fn stabilised_refine(
+    u: &[f64],
+    y: &[f64],
+    ts: f64,
+    sub: &ambid_core::lti::StateSpace,
+    opts: &ambid_core::estimate::ss_pem::SsPemOptions,
+) -> Result<(ambid_core::lti::StateSpace, ambid::fitting::PemSummary)> {
+    use ambid_core::lti::{StateSpace, TransferFunction};
+    use faer::{Mat, Scale};
+    let rms = |x: &[f64]| (x.iter().map(|v| v * v).sum::<f64>() / x.len().max(1) as f64).sqrt();
+    let (su, sy) = (rms(u), rms(y));
+    let scaled = StateSpace::discrete(
+        sub.a().to_owned(),
+        sub.b() * Scale(su),
+        sub.c() * Scale(1.0 / sy),
+        sub.d() * Scale(su / sy),
+        ts,
+    )?;
+    let tf = TransferFunction::from_state_space(&scaled)?;
+    let d0 = tf.den()[0];
+    let den: Vec<f64> = tf.den().iter().map(|c| c / d0).collect();
+    let num: Vec<f64> = tf.num().iter().map(|c| c / d0).collect();
+    let den = ambid_core::estimate::pem::stabilise_start_polynomial(&den)
+        .context("cannot stabilise the start: its poles could not be computed")?;
+    let start = TransferFunction::new(num, den, ts)?.to_state_space()?;
+    let um = Mat::from_fn(u.len(), 1, |k, _| u[k] / su);
+    let ym = Mat::from_fn(y.len(), 1, |k, _| y[k] / sy);
+    let p = ambid_core::estimate::ss_pem::refine_ss(ym.as_ref(), um.as_ref(), &start, None, opts)?;
+    let m = &p.fitted.model;
+    let model = StateSpace::discrete(
+        m.a().to_owned(),
+        m.b() * Scale(1.0 / su),
+        m.c() * Scale(sy),
+        m.d() * Scale(sy / su),
+        ts,
+    )?;
+    let summary = ambid::fitting::PemSummary {
+        focus: opts.focus,
+        iterations: p.report.iterations,
+        stop: format!("{:?}", p.report.reason),
+        start_loss: p.start_loss * sy * sy,
+        loss: p.fitted.loss * sy * sy,
+        kalman_gain: p
+            .kalman_gain
+            .as_ref()
+            .map(|k| (0..k.nrows()).map(|i| k[(i, 0)] / sy).collect()),
+        on_boundary: p.report.ended_on_boundary,
+        x0: Some(p.x0.clone()),
+    };
+    Ok((model, summary))
 }

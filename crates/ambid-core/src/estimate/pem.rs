@@ -880,6 +880,22 @@ pub fn prediction_errors(
     })
 }
 
+/// Moves every root of the monic polynomial `p` (ascending powers of $q^{-1}$) that lies beyond
+/// $|z| = 0.99$ radially onto $|z| = 0.99$, keeping its angle; the other roots stay. Meant for
+/// *starting values* on open-loop data ([`PemOptions::with_open_loop`]), never for an estimate.
+/// `None` if the roots cannot be computed.
+///
+/// # Example
+/// ```
+/// use ambid_core::estimate::pem::stabilise_start_polynomial;
+/// // (1 − 1.01 q⁻¹)(1 − 0.5 q⁻¹): the root at 1.01 moves to 0.99, the one at 0.5 stays
+/// let p = stabilise_start_polynomial(&[1.0, -1.51, 0.505]).unwrap();
+/// assert!((p[1] + 1.49).abs() < 1e-12 && (p[2] - 0.495).abs() < 1e-12);
+/// ```
+pub fn stabilise_start_polynomial(p: &[f64]) -> Option<Vec<f64>> {
+    init::stabilise(p)
+}
+
 /// Whether every root of the monic polynomial `p` (ascending powers of $q^{-1}$) lies strictly
 /// inside the unit circle (Schur–Cohn test).
 pub(crate) fn denominator_is_stable(p: &[f64]) -> bool {
