@@ -106,6 +106,10 @@ pub struct FitArgs {
     /// `--structure ss`: keep the subspace model, without the prediction-error refinement.
     #[arg(long)]
     no_pem: bool,
+    /// `--structure ss`: estimate a feed-through D (default D = 0, a strictly proper model);
+    /// D is estimated by the prediction-error refinement, so not with --no-pem.
+    #[arg(long)]
+    feedthrough: bool,
     /// Maximum Levenberg–Marquardt iterations of the prediction-error step.
     #[arg(long, default_value_t = 100)]
     max_iterations: usize,
@@ -171,6 +175,15 @@ fn fmt_fit(f: Option<f64>) -> String {
         || "— (the model output diverges: unstable model)".to_string(),
         |v| format!("{v:.2} %"),
     )
+}
+
+/// RMS of the model error from a fit % over the samples from `skip` on:
+/// $\lVert y - \hat y\rVert / \sqrt{N} = (1 - \mathrm{fit}/100)\,\lVert y - \bar y\rVert / \sqrt{N}$.
+fn rms_error(fit: Option<f64>, y: &[f64], skip: usize) -> Option<f64> {
+    let y = y.get(skip..).filter(|y| !y.is_empty())?;
+    let m = y.iter().sum::<f64>() / y.len() as f64;
+    let sd = (y.iter().map(|v| (v - m).powi(2)).sum::<f64>() / y.len() as f64).sqrt();
+    fit.map(|f| (1.0 - f / 100.0) * sd)
 }
 
 fn read_io(
@@ -374,7 +387,12 @@ pub fn fit(a: FitArgs) -> Result<()> {
         let (uv, yv) = read_validation(p, a.fs, &a.input, &a.output, ts, mu, my)?;
         let (v1, vs) = fits(m, &yv, &uv, x0, skip)?;
         println!("validation data: 1-step fit {}, simulation fit {}", fmt_fit(v1), fmt_fit(vs));
-        val = json!({"one_step_fit_pct": v1, "simulation_fit_pct": vs});
+        val = json!({
+            "one_step_fit_pct": v1,
+            "simulation_fit_pct": vs,
+            "one_step_rms": rms_error(v1, &yv, skip),
+            "simulation_rms": rms_error(vs, &yv, skip),
+        });
     }
     for p in &problems {
         println!("warning: {p}");
@@ -496,6 +514,9 @@ pub fn order(a: OrderArgs) -> Result<()> {
 fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Result<()> {
     use ambid::io::model::state_space_json;
     use ambid_core::estimate::ss_pem::SsPemOptions;
+    if a.no_pem && a.feedthrough {
+        bail!("--feedthrough needs the prediction-error refinement (it estimates D); drop --no-pem");
+    }
     let pem = if a.no_pem {
         None
     } else {
@@ -508,6 +529,7 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
             lm: SsPemOptions::default()
                 .lm
                 .with_max_iterations(a.max_iterations)?,
+            feedthrough: a.feedthrough,
             ..SsPemOptions::default()
         })
     };
@@ -606,7 +628,7 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
         let (uv, yv) = read_validation(p, a.fs, &a.input, &a.output, ts, mu, my)?;
         let fv = fit_on(&uv, &yv)?;
         println!("validation data: simulation fit {}", fmt_fit(fv));
-        val = json!({"simulation_fit_pct": fv});
+        val = json!({"simulation_fit_pct": fv, "simulation_rms": rms_error(fv, &yv, skip)});
     }
     for p in &problems {
         println!("warning: {p}");
@@ -637,8 +659,9 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
 
 /// Prediction-error refinement of the subspace model `sub` (data units) from a stabilised
 /// start: on unit-RMS data, the start's poles beyond $|z| = 0.99$ are moved radially onto 0.99
-/// ([`ambid_core::estimate::pem::stabilise_start_polynomial`] on its denominator), then the
-/// refinement moves every pole freely. SISO; open-loop data only.
+/// ([`ambid_core::estimate::pem::stabilise_start_polynomial`] on its denominator); if that
+/// refinement fails (a companion form of high order is ill-conditioned), $A$ is scaled by
+/// $0.99 / \max|\lambda|$. The refinement then moves every pole freely. SISO; open-loop data only.
 fn stabilised_refine(
     u: &[f64],
     y: &[f64],
@@ -657,16 +680,42 @@ fn stabilised_refine(
         sub.d() * Scale(su / sy),
         ts,
     )?;
-    let tf = TransferFunction::from_state_space(&scaled)?;
-    let d0 = tf.den()[0];
-    let den: Vec<f64> = tf.den().iter().map(|c| c / d0).collect();
-    let num: Vec<f64> = tf.num().iter().map(|c| c / d0).collect();
-    let den = ambid_core::estimate::pem::stabilise_start_polynomial(&den)
-        .context("cannot stabilise the start: its poles could not be computed")?;
-    let start = TransferFunction::new(num, den, ts)?.to_state_space()?;
     let um = Mat::from_fn(u.len(), 1, |k, _| u[k] / su);
     let ym = Mat::from_fn(y.len(), 1, |k, _| y[k] / sy);
-    let p = ambid_core::estimate::ss_pem::refine_ss(ym.as_ref(), um.as_ref(), &start, None, opts)?;
+    let refine = |start: &StateSpace| {
+        ambid_core::estimate::ss_pem::refine_ss(ym.as_ref(), um.as_ref(), start, None, opts)
+    };
+    // first: only the poles beyond 0.99 moved (transfer-function route; fine for low orders)
+    let per_pole = (|| -> Result<_> {
+        let tf = TransferFunction::from_state_space(&scaled)?;
+        let d0 = tf.den()[0];
+        let den: Vec<f64> = tf.den().iter().map(|c| c / d0).collect();
+        let num: Vec<f64> = tf.num().iter().map(|c| c / d0).collect();
+        let den = ambid_core::estimate::pem::stabilise_start_polynomial(&den)
+            .context("cannot stabilise the start: its poles could not be computed")?;
+        let start = TransferFunction::new(num, den, ts)?.to_state_space()?;
+        Ok(refine(&start)?)
+    })();
+    let p = match per_pole {
+        Ok(p) => p,
+        Err(_) => {
+            // then: A scaled by 0.99 / max|λ| (every pole moved radially by the same factor;
+            // no companion form, so it also works at high orders)
+            let r = scaled
+                .poles()?
+                .iter()
+                .fold(0.0f64, |m, z| m.max(z.norm()));
+            let rho = if r > 0.99 { 0.99 / r } else { 1.0 };
+            let start = StateSpace::discrete(
+                scaled.a() * Scale(rho),
+                scaled.b().to_owned(),
+                scaled.c().to_owned(),
+                scaled.d().to_owned(),
+                ts,
+            )?;
+            refine(&start)?
+        }
+    };
     let m = &p.fitted.model;
     let model = StateSpace::discrete(
         m.a().to_owned(),

@@ -282,7 +282,11 @@ pub(crate) fn oe_start(
             None if open_loop => {
                 let r = max_root(&f);
                 f = stabilise(&f).ok_or_else(|| unstable_start(r))?;
-                b = b_given_f(y, u, &f, nb, nk)?;
+                // B given the stabilised F; a smooth input can leave that regression rank
+                // deficient, then the ARX B is kept for the start
+                if let Ok(bs) = b_given_f(y, u, &f, nb, nk) {
+                    b = bs;
+                }
                 stabilised = Some(r);
             }
             None => return Err(unstable_start(max_root(&f))),
