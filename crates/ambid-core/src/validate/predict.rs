@@ -153,7 +153,9 @@ fn conv(p: &[f64], q: &[f64]) -> Vec<f64> {
 /// from rest, because its free response has no meaningful least-squares fit; its output then
 /// diverges and the fit measure says so.
 ///
-/// Returns the output and the initial state used. Work $O(N n (n + m))$.
+/// States that the record cannot tell apart are resolved by a ridge of $10^{-9}$ times the
+/// largest column norm (their minimum-norm combination); if the solve still fails the filter
+/// starts from rest. Returns the output and the initial state used. Work $O(N n (n + m))$.
 ///
 /// # Errors
 /// [`Error::DimensionMismatch`] if the signals differ in length or `nums` and `inputs` in count;
@@ -243,8 +245,27 @@ pub fn filter_with_initial_state(
         }
         row[0] = first;
     }
-    let r = faer::Mat::from_fn(nt, 1, |t, _| y[t] - out[t]);
-    let s0 = crate::linalg::lstsq(obs.as_ref(), r.as_ref())?;
+    // a tiny ridge (1e-9 of the largest column norm) keeps the solve defined when states are
+    // indistinguishable on this record (smooth data, nearly cancelling poles): their
+    // combination is then the minimum-norm one, which leaves the response unchanged
+    let cmax = (0..n)
+        .map(|k| (0..nt).map(|t| obs[(t, k)].powi(2)).sum::<f64>().sqrt())
+        .fold(0.0f64, f64::max);
+    let ridge = 1e-9 * cmax;
+    let aug = faer::Mat::from_fn(nt + n, n, |t, k| {
+        if t < nt {
+            obs[(t, k)]
+        } else if t - nt == k {
+            ridge
+        } else {
+            0.0
+        }
+    });
+    let r = faer::Mat::from_fn(nt + n, 1, |t, _| if t < nt { y[t] - out[t] } else { 0.0 });
+    let s0 = match crate::linalg::lstsq(aug.as_ref(), r.as_ref()) {
+        Ok(s) => s,
+        Err(_) => return Ok((out, vec![0.0; n])),
+    };
     let s0: Vec<f64> = (0..n).map(|k| s0[(k, 0)]).collect();
     if s0.iter().any(|v| !v.is_finite()) {
         return Ok((out, vec![0.0; n]));
