@@ -380,13 +380,21 @@ pub fn fit(a: FitArgs) -> Result<()> {
         fmt_fit(f1),
         fmt_fit(fs_est),
         x0.name(),
-        if skip > 0 { format!(", first {skip} samples skipped") } else { String::new() }
+        if skip > 0 {
+            format!(", first {skip} samples skipped")
+        } else {
+            String::new()
+        }
     );
     let mut val = json!(null);
     if let Some(p) = &a.validation {
         let (uv, yv) = read_validation(p, a.fs, &a.input, &a.output, ts, mu, my)?;
         let (v1, vs) = fits(m, &yv, &uv, x0, skip)?;
-        println!("validation data: 1-step fit {}, simulation fit {}", fmt_fit(v1), fmt_fit(vs));
+        println!(
+            "validation data: 1-step fit {}, simulation fit {}",
+            fmt_fit(v1),
+            fmt_fit(vs)
+        );
         val = json!({
             "one_step_fit_pct": v1,
             "simulation_fit_pct": vs,
@@ -515,7 +523,9 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
     use ambid::io::model::state_space_json;
     use ambid_core::estimate::ss_pem::SsPemOptions;
     if a.no_pem && a.feedthrough {
-        bail!("--feedthrough needs the prediction-error refinement (it estimates D); drop --no-pem");
+        bail!(
+            "--feedthrough needs the prediction-error refinement (it estimates D); drop --no-pem"
+        );
     }
     let pem = if a.no_pem {
         None
@@ -568,7 +578,8 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
                     } else {
                         problems.push("closed-loop data (--loop): an unstable u → y start is taken as real; the simulation focus cannot fit an unstable system, use the prediction focus".to_string());
                     }
-                    problems.push("written instead: the subspace model without refinement".to_string());
+                    problems
+                        .push("written instead: the subspace model without refinement".to_string());
                     method = "subspace (refinement failed)";
                     sub
                 }
@@ -701,10 +712,7 @@ fn stabilised_refine(
         Err(_) => {
             // then: A scaled by 0.99 / max|λ| (every pole moved radially by the same factor;
             // no companion form, so it also works at high orders)
-            let r = scaled
-                .poles()?
-                .iter()
-                .fold(0.0f64, |m, z| m.max(z.norm()));
+            let r = scaled.poles()?.iter().fold(0.0f64, |m, z| m.max(z.norm()));
             let rho = if r > 0.99 { 0.99 / r } else { 1.0 };
             let start = StateSpace::discrete(
                 scaled.a() * Scale(rho),

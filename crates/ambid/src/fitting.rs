@@ -3,10 +3,10 @@
 //! model scaled back) and the fit figures of a polynomial model.
 
 use ambid_core::estimate::pem::Focus;
-use ambid_core::validate::predict::{fit_from, poly_one_step, poly_simulate, InitialState};
 use ambid_core::estimate::ss_pem::{refine_ss, SsPemOptions};
 use ambid_core::estimate::subspace::{n4sid_detailed, SubspaceOptions};
 use ambid_core::lti::{PolyModel, StateSpace};
+use ambid_core::validate::predict::{fit_from, poly_one_step, poly_simulate, InitialState};
 use anyhow::{bail, Context, Result};
 use faer::Mat;
 

@@ -34,10 +34,7 @@ fn daisy(dir: &Path, rel: &str, split: usize) -> (PathBuf, PathBuf) {
         .lines()
         .filter(|l| !l.trim().is_empty())
         .map(|l| {
-            let v: Vec<f64> = l
-                .split_whitespace()
-                .map(|x| x.parse().unwrap())
-                .collect();
+            let v: Vec<f64> = l.split_whitespace().map(|x| x.parse().unwrap()).collect();
             (v[0], v[1])
         })
         .collect();
@@ -66,7 +63,16 @@ fn bench_cols(rel: &str, cols: &[usize]) -> Vec<Vec<f64>> {
 
 /// Runs `ambid fit` and returns the model JSON (the run must succeed and write it).
 fn fit(e: &Path, v: &Path, fs: &str, args: &[&str], out: &Path) -> serde_json::Value {
-    let mut a = vec!["fit", s(e), "--fs", fs, "--validation", s(v), "--out", s(out)];
+    let mut a = vec![
+        "fit",
+        s(e),
+        "--fs",
+        fs,
+        "--validation",
+        s(v),
+        "--out",
+        s(out),
+    ];
     a.extend_from_slice(args);
     let o = ambid(&a);
     assert!(o.status.success(), "{a:?}: {}", text(&o));
@@ -90,13 +96,76 @@ fn arx_meets_the_readme_baselines_with_the_estimated_initial_state() {
     let m = d.join("m.json");
     // (file, split, fs, na, nb, nk, 1-step reference, simulation reference)
     let cases: [(&str, usize, &str, &str, &str, &str, f64, Option<f64>); 7] = [
-        ("daisy-dryer/dryer.dat", 500, "12.5", "2", "2", "3", 95.04, Some(85.57)),
-        ("daisy-dryer/dryer.dat", 500, "12.5", "4", "4", "3", 95.22, Some(85.78)),
-        ("daisy-robot-arm/robot_arm.dat", 512, "100", "4", "4", "1", 98.12, Some(14.86)),
-        ("daisy-robot-arm/robot_arm.dat", 512, "100", "8", "8", "1", 99.91, Some(97.13)),
-        ("daisy-flutter/flutter.dat", 512, "1", "2", "2", "1", 91.32, Some(21.58)),
-        ("daisy-flutter/flutter.dat", 512, "1", "8", "8", "1", 99.98, None),
-        ("daisy-ballbeam/ballbeam.dat", 500, "10", "2", "2", "1", 96.71, None),
+        (
+            "daisy-dryer/dryer.dat",
+            500,
+            "12.5",
+            "2",
+            "2",
+            "3",
+            95.04,
+            Some(85.57),
+        ),
+        (
+            "daisy-dryer/dryer.dat",
+            500,
+            "12.5",
+            "4",
+            "4",
+            "3",
+            95.22,
+            Some(85.78),
+        ),
+        (
+            "daisy-robot-arm/robot_arm.dat",
+            512,
+            "100",
+            "4",
+            "4",
+            "1",
+            98.12,
+            Some(14.86),
+        ),
+        (
+            "daisy-robot-arm/robot_arm.dat",
+            512,
+            "100",
+            "8",
+            "8",
+            "1",
+            99.91,
+            Some(97.13),
+        ),
+        (
+            "daisy-flutter/flutter.dat",
+            512,
+            "1",
+            "2",
+            "2",
+            "1",
+            91.32,
+            Some(21.58),
+        ),
+        (
+            "daisy-flutter/flutter.dat",
+            512,
+            "1",
+            "8",
+            "8",
+            "1",
+            99.98,
+            None,
+        ),
+        (
+            "daisy-ballbeam/ballbeam.dat",
+            500,
+            "10",
+            "2",
+            "2",
+            "1",
+            96.71,
+            None,
+        ),
     ];
     for (file, split, fs, na, nb, nk, one, sim) in cases {
         let (e, v) = daisy(&d, file, split);
@@ -109,10 +178,16 @@ fn arx_meets_the_readme_baselines_with_the_estimated_initial_state() {
         );
         let f1 = val(&j, "one_step_fit_pct");
         // the README rounds to 0.01 %
-        assert!(f1 >= one - 0.005, "{file} ARX({na},{nb},{nk}): 1-step {f1} < {one}");
+        assert!(
+            f1 >= one - 0.005,
+            "{file} ARX({na},{nb},{nk}): 1-step {f1} < {one}"
+        );
         if let Some(r) = sim {
             let fs_ = val(&j, "simulation_fit_pct");
-            assert!(fs_ >= r - 0.005, "{file} ARX({na},{nb},{nk}): sim {fs_} < {r}");
+            assert!(
+                fs_ >= r - 0.005,
+                "{file} ARX({na},{nb},{nk}): sim {fs_} < {r}"
+            );
         }
     }
     // the zero initial state reproduces the old figure: the estimate is what closes the gap
@@ -121,7 +196,16 @@ fn arx_meets_the_readme_baselines_with_the_estimated_initial_state() {
         &e,
         &v,
         "1",
-        &["--structure", "arx", "--na", "8", "--nb", "8", "--x0", "zero"],
+        &[
+            "--structure",
+            "arx",
+            "--na",
+            "8",
+            "--nb",
+            "8",
+            "--x0",
+            "zero",
+        ],
         &m,
     );
     assert!(val(&j, "one_step_fit_pct") < 0.0, "{j}");
@@ -130,7 +214,18 @@ fn arx_meets_the_readme_baselines_with_the_estimated_initial_state() {
         &e,
         &v,
         "1",
-        &["--structure", "arx", "--na", "8", "--nb", "8", "--x0", "zero", "--skip", "8"],
+        &[
+            "--structure",
+            "arx",
+            "--na",
+            "8",
+            "--nb",
+            "8",
+            "--x0",
+            "zero",
+            "--skip",
+            "8",
+        ],
         &m,
     );
     assert!(val(&j, "one_step_fit_pct") >= 99.975, "{j}");
@@ -300,7 +395,10 @@ fn f16_high_order_state_space_is_always_written() {
     assert!(j["meta"]["problems"].is_array(), "{j}");
     let fit = &j["meta"]["validation"]["simulation_fit_pct"];
     // a diverging simulation is reported (null or a finite figure), never an abort
-    assert!(fit.is_null() || fit.as_f64().is_some_and(f64::is_finite), "{j}");
+    assert!(
+        fit.is_null() || fit.as_f64().is_some_and(f64::is_finite),
+        "{j}"
+    );
 }
 
 /// `--feedthrough`: the robot arm's output is an acceleration, which responds to the torque
@@ -326,8 +424,18 @@ fn feedthrough_is_estimated_on_request() {
         "{j0} {j1}"
     );
     let o = ambid(&[
-        "fit", s(&e), "--fs", "100", "--structure", "ss", "--order", "6", "--no-pem",
-        "--feedthrough", "--out", s(&m),
+        "fit",
+        s(&e),
+        "--fs",
+        "100",
+        "--structure",
+        "ss",
+        "--order",
+        "6",
+        "--no-pem",
+        "--feedthrough",
+        "--out",
+        s(&m),
     ]);
     assert!(!o.status.success() && text(&o).contains("--feedthrough"));
 }

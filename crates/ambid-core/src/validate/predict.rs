@@ -107,7 +107,9 @@ pub fn predict_k(
 }
 
 /// How a validation starts the model's filters (MATLAB `compare`'s `InitialCondition`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum InitialState {
     /// From rest: every sample before $t = 0$ taken as zero.
@@ -193,7 +195,10 @@ pub fn filter_with_initial_state(
         });
     }
     if den.first().copied() != Some(1.0) {
-        return Err(Error::invalid("den", "the denominator must be monic (d_0 = 1)"));
+        return Err(Error::invalid(
+            "den",
+            "the denominator must be monic (d_0 = 1)",
+        ));
     }
     let nt = y.len();
     for x in inputs {
@@ -223,7 +228,11 @@ pub fn filter_with_initial_state(
         out[t] = yt;
         for j in 0..n {
             let next = if j + 1 < n { st[j + 1] } else { 0.0 };
-            let drive: f64 = nums.iter().zip(inputs).map(|(p, x)| at(p, j + 1) * x[t]).sum();
+            let drive: f64 = nums
+                .iter()
+                .zip(inputs)
+                .map(|(p, x)| at(p, j + 1) * x[t])
+                .sum();
             st[j] = next + drive - at(den, j + 1) * yt;
         }
     }
@@ -362,7 +371,12 @@ pub fn fit_from(y: &[f64], yhat: &[f64], skip: usize) -> Option<f64> {
     }
     let mean = y.iter().sum::<f64>() / y.len() as f64;
     let spread = y.iter().map(|v| (v - mean).powi(2)).sum::<f64>().sqrt();
-    let err = y.iter().zip(yh).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
+    let err = y
+        .iter()
+        .zip(yh)
+        .map(|(a, b)| (a - b).powi(2))
+        .sum::<f64>()
+        .sqrt();
     (spread > 0.0 && err.is_finite()).then(|| 100.0 * (1.0 - err / spread))
 }
 
@@ -432,7 +446,11 @@ mod tests {
         assert!(s.iter().zip(&y).all(|(a, b)| (a - b).abs() < 1e-8));
         let p0 = poly_one_step(&m, &y, &u, InitialState::Zero).unwrap();
         assert!((p0[0] - y[0]).abs() > 1.0);
-        assert!(p0.iter().zip(&y).skip(2).all(|(a, b)| (a - b).abs() < 1e-12));
+        assert!(p0
+            .iter()
+            .zip(&y)
+            .skip(2)
+            .all(|(a, b)| (a - b).abs() < 1e-12));
         assert_eq!(fit_from(&y, &p, 0).map(|f| f > 99.999), Some(true));
         // SS from the same model: the estimated state reproduces the record
         // observer canonical form of B/A: A = [[1.5, 1], [−0.7, 0]], B = [1, 0.5]ᵀ, C = [1, 0]
@@ -445,6 +463,9 @@ mod tests {
         )
         .unwrap();
         let (ys, x0) = ss_simulate(&ss, &y, &u, InitialState::Estimate).unwrap();
-        assert!(ys.iter().zip(&y).all(|(a, b)| (a - b).abs() < 1e-7), "{x0:?}");
+        assert!(
+            ys.iter().zip(&y).all(|(a, b)| (a - b).abs() < 1e-7),
+            "{x0:?}"
+        );
     }
 }
