@@ -69,10 +69,11 @@ pub struct FitArgs {
     /// Sample rate in Hz (when the file has no `t` column).
     #[arg(long)]
     fs: Option<f64>,
-    /// Input column.
+    /// Input column; several, comma-separated (`u1,u2`), for a MIMO state-space model
+    /// (`--structure ss`).
     #[arg(long, default_value = "u")]
     input: String,
-    /// Output column.
+    /// Output column; several, comma-separated (`y1,y2`), for a MIMO state-space model.
     #[arg(long, default_value = "y")]
     output: String,
     /// Model structure.
@@ -253,6 +254,18 @@ pub fn fit(a: FitArgs) -> Result<()> {
             a.max_iterations,
             &a.out,
         );
+    }
+    let split = |s: &str| -> Vec<String> { s.split(',').map(|c| c.trim().to_string()).collect() };
+    let (ins, outs) = (split(&a.input), split(&a.output));
+    if ins.len() > 1 || outs.len() > 1 {
+        if a.structure != StructureArg::Ss {
+            bail!(
+                "several inputs or outputs ({} → {}) need --structure ss, the multi-input multi-output path; the polynomial structures are single-input single-output: fit one output (and input) at a time",
+                a.input,
+                a.output
+            );
+        }
+        return fit_ss_mimo(&a, &ins, &outs);
     }
     let (mut u, mut y, ts) = read_io(&a.data, a.fs, &a.input, &a.output)?;
     let (mu, my) = if a.no_detrend {
@@ -746,4 +759,185 @@ fn stabilised_refine(
         x0: Some(p.x0.clone()),
     };
     Ok((model, summary))
+}
+
+/// The named columns of a time-data file, each with the estimation means `means` removed
+/// (`None`: its own means, returned).
+fn columns(
+    p: &Path,
+    fs: Option<f64>,
+    names: &[String],
+    means: Option<&[f64]>,
+    detrend: bool,
+) -> Result<(Vec<Vec<f64>>, Vec<f64>, f64)> {
+    let d = read_time_csv(p, fs)?;
+    let mut cols: Vec<Vec<f64>> = names
+        .iter()
+        .map(|n| Ok(d.column(n)?.to_vec()))
+        .collect::<Result<_>>()?;
+    let m: Vec<f64> = match means {
+        Some(m) => m.to_vec(),
+        None if detrend => cols.iter().map(|c| mean(c)).collect(),
+        None => vec![0.0; cols.len()],
+    };
+    for (c, mv) in cols.iter_mut().zip(&m) {
+        c.iter_mut().for_each(|v| *v -= mv);
+    }
+    Ok((cols, m, d.ts))
+}
+
+/// Multi-input multi-output state space (`--input u1,u2 --output y1,y2 --structure ss`): every
+/// column scaled to unit RMS, subspace identification, the prediction-error refinement (a
+/// refinement that fails leaves the subspace model, with the problem named), model scaled back;
+/// simulation fit per output from the estimated initial state.
+fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
+    use ambid::io::model::state_space_json;
+    use ambid_core::estimate::ss_pem::{refine_ss, SsPemOptions};
+    use ambid_core::estimate::subspace::{n4sid_detailed, SubspaceOptions};
+    use ambid_core::lti::StateSpace;
+    use ambid_core::validate::predict::{fit_from, ss_simulate_mimo};
+    use faer::Mat;
+    let (u, mu, ts) = columns(&a.data, a.fs, ins, None, !a.no_detrend)?;
+    let (y, my, _) = columns(&a.data, a.fs, outs, None, !a.no_detrend)?;
+    let rms = |x: &[f64]| (x.iter().map(|v| v * v).sum::<f64>() / x.len().max(1) as f64).sqrt();
+    let su: Vec<f64> = u.iter().map(|c| rms(c)).collect();
+    let sy: Vec<f64> = y.iter().map(|c| rms(c)).collect();
+    if su.iter().chain(&sy).any(|v| *v == 0.0) {
+        bail!("an input or output column is constant after removing its mean: nothing to identify");
+    }
+    let nt = u[0].len();
+    let (m, l) = (u.len(), y.len());
+    let um = Mat::from_fn(nt, m, |k, i| u[i][k] / su[i]);
+    let ym = Mat::from_fn(nt, l, |k, j| y[j][k] / sy[j]);
+    let mut opts = SubspaceOptions::new(ts);
+    opts.order = a.order;
+    opts.block_rows = a.block_rows;
+    let sub = n4sid_detailed(ym.as_ref(), um.as_ref(), &opts).context("subspace identification")?;
+    let mut scaled = sub.fitted.model.clone();
+    let mut problems: Vec<String> = Vec::new();
+    let mut method = "subspace";
+    let mut pem_meta = json!(null);
+    let mut x0_est: Option<Vec<f64>> = None;
+    if a.feedthrough && a.no_pem {
+        bail!(
+            "--feedthrough needs the prediction-error refinement (it estimates D); drop --no-pem"
+        );
+    }
+    if !a.no_pem {
+        let o = SsPemOptions {
+            focus: match a.focus {
+                FocusArg::Prediction => Focus::Prediction,
+                FocusArg::Simulation => Focus::Simulation,
+            },
+            lm: SsPemOptions::default()
+                .lm
+                .with_max_iterations(a.max_iterations)?,
+            feedthrough: a.feedthrough,
+            ..SsPemOptions::default()
+        };
+        let k = match o.focus {
+            Focus::Prediction => sub.kalman_gain.as_ref().map(|k| k.as_ref()),
+            Focus::Simulation => None,
+        };
+        match refine_ss(ym.as_ref(), um.as_ref(), &scaled, k, &o) {
+            Ok(p) => {
+                pem_meta = json!({
+                    "focus": format!("{:?}", o.focus).to_lowercase(),
+                    "iterations": p.report.iterations,
+                    "stop": format!("{:?}", p.report.reason),
+                    "x0": p.x0,
+                });
+                x0_est = Some(p.x0.clone());
+                scaled = p.fitted.model;
+                method = "subspace+pem";
+            }
+            Err(e) => {
+                problems.push(format!("the prediction-error refinement failed: {e}"));
+                problems.push("written instead: the subspace model without refinement".into());
+                method = "subspace (refinement failed)";
+            }
+        }
+    }
+    let sm = &scaled;
+    let n = sm.order();
+    let model = StateSpace::discrete(
+        Mat::from_fn(n, n, |i, j| sm.a()[(i, j)]),
+        Mat::from_fn(n, m, |i, k| sm.b()[(i, k)] / su[k]),
+        Mat::from_fn(l, n, |j, i| sm.c()[(j, i)] * sy[j]),
+        Mat::from_fn(l, m, |j, k| sm.d()[(j, k)] * sy[j] / su[k]),
+        ts,
+    )?;
+    let unstable = model.poles()?.iter().filter(|p| p.norm() >= 1.0).count();
+    if unstable > 0 {
+        problems.push(format!("{unstable} pole(s) on or outside the unit circle (not stabilised): the simulation diverges"));
+    }
+    let (x0, skip) = (a.x0.core(), a.skip);
+    let fits_on = |u: &[Vec<f64>], y: &[Vec<f64>]| -> Result<Vec<Option<f64>>> {
+        let n = u[0].len();
+        let um = Mat::from_fn(n, u.len(), |k, i| u[i][k]);
+        let ymat = Mat::from_fn(n, y.len(), |k, j| y[j][k]);
+        let (ys, _) = ss_simulate_mimo(&model, ymat.as_ref(), um.as_ref(), x0)?;
+        Ok((0..y.len())
+            .map(|j| {
+                let yh: Vec<f64> = (0..n).map(|k| ys[(k, j)]).collect();
+                fit_from(&y[j], &yh, skip)
+            })
+            .collect())
+    };
+    let show = |f: &[Option<f64>]| {
+        outs.iter()
+            .zip(f)
+            .map(|(o, v)| format!("{o} {}", fmt_fit(*v)))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    println!(
+        "state-space model of order {} ({} inputs, {} outputs; block rows {}), {method}",
+        n, m, l, sub.block_rows
+    );
+    let f_est = fits_on(&u, &y)?;
+    println!(
+        "estimation data: simulation fit {} (initial state: {})",
+        show(&f_est),
+        x0.name()
+    );
+    let mut val = json!(null);
+    if let Some(p) = &a.validation {
+        let (uv, _, tsv) = columns(p, a.fs, ins, Some(&mu), true)?;
+        let (yv, _, _) = columns(p, a.fs, outs, Some(&my), true)?;
+        if ((tsv - ts) / ts).abs() > 1e-9 {
+            bail!(
+                "the validation data are sampled at {} Hz, the estimation data at {} Hz",
+                1.0 / tsv,
+                1.0 / ts
+            );
+        }
+        let fv = fits_on(&uv, &yv)?;
+        println!("validation data: simulation fit {}", show(&fv));
+        val = json!({"simulation_fit_pct": fv});
+    }
+    for p in &problems {
+        println!("warning: {p}");
+    }
+    let meta = json!({
+        "method": method,
+        "pem": pem_meta,
+        "order": n,
+        "block_rows": sub.block_rows,
+        "singular_values": sub.singular_values,
+        "detrend": {"u_mean": mu, "y_mean": my},
+        "estimation_fit_pct": {"simulation": f_est},
+        "validation": val,
+        "initial_state": x0.name(),
+        "skip": skip,
+        "problems": problems,
+        "source": a.data.display().to_string(),
+    });
+    let mut j = state_space_json(&model, &ins.join(","), &outs.join(","), meta);
+    if let Some(x) = x0_est {
+        j["x0"] = json!(x);
+    }
+    write_model_json(&a.out, &j)?;
+    println!("written: {}", a.out.display());
+    Ok(())
 }

@@ -349,6 +349,52 @@ pub fn ss_simulate(
     Ok((m.simulate_siso(u, Some(&x0))?, x0))
 }
 
+/// Simulation of a (MIMO) state-space model on `u` ($N \times m$) from rest or from the initial
+/// state that best explains `y` ($N \times l$): the least-squares solution of
+/// $y_t - y^{(0)}_t = C A^t x_0$ stacked over every output and sample (stable models only; an
+/// unstable model starts from rest). Returns the $N \times l$ output and the state used.
+///
+/// # Errors
+/// [`Error::DimensionMismatch`] for records of different lengths or widths; the errors of the
+/// simulation.
+pub fn ss_simulate_mimo(
+    m: &StateSpace,
+    y: MatRef<'_, f64>,
+    u: MatRef<'_, f64>,
+    ic: InitialState,
+) -> Result<(faer::Mat<f64>, Vec<f64>)> {
+    let (nt, l, n) = (u.nrows(), m.noutputs(), m.order());
+    if y.nrows() != nt || y.ncols() != l {
+        return Err(Error::DimensionMismatch {
+            context: "ss_simulate_mimo: y",
+            expected: format!("{nt} × {l}"),
+            got: format!("{} × {}", y.nrows(), y.ncols()),
+        });
+    }
+    let y0 = m.simulate(u, None)?;
+    if ic == InitialState::Zero || n == 0 || !m.is_stable()? || nt * l < n {
+        return Ok((y0, vec![0.0; n]));
+    }
+    let a = m.a();
+    let c = m.c();
+    let mut obs = faer::Mat::<f64>::zeros(nt * l, n);
+    let mut ca = c.to_owned();
+    for t in 0..nt {
+        for j in 0..l {
+            for k in 0..n {
+                obs[(t * l + j, k)] = ca[(j, k)];
+            }
+        }
+        ca = &ca * a;
+    }
+    let r = faer::Mat::from_fn(nt * l, 1, |i, _| y[(i / l, i % l)] - y0[(i / l, i % l)]);
+    let x0 = match crate::linalg::lstsq(obs.as_ref(), r.as_ref()) {
+        Ok(x) if (0..n).all(|k| x[(k, 0)].is_finite()) => (0..n).map(|k| x[(k, 0)]).collect(),
+        _ => vec![0.0; n],
+    };
+    Ok((m.simulate(u, Some(&x0))?, x0))
+}
+
 /// Fit \[%\] $100\,(1 - \lVert y - \hat y\rVert / \lVert y - \bar y\rVert)$ over the samples from
 /// `skip` on (the mean over the same samples); `None` if the model output is not finite there
 /// (a diverging simulation), the range is empty or $y$ is constant on it.
