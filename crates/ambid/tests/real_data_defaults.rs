@@ -86,6 +86,18 @@ fn val(m: &serde_json::Value, key: &str) -> f64 {
         .unwrap_or_else(|| panic!("no finite validation `{key}`: {m}"))
 }
 
+/// (file, split, fs, na, nb, nk, 1-step reference %, simulation reference %)
+type Case = (
+    &'static str,
+    usize,
+    &'static str,
+    &'static str,
+    &'static str,
+    &'static str,
+    f64,
+    Option<f64>,
+);
+
 /// The READMEs' numpy ARX baselines (first-half means removed, half/half split, simulation and
 /// prediction started from measured outputs) are matched or beaten with the default initial
 /// state (estimated on each record, MATLAB `compare`'s default); ARX(8,8,1) on flutter, whose
@@ -94,8 +106,7 @@ fn val(m: &serde_json::Value, key: &str) -> f64 {
 fn arx_meets_the_readme_baselines_with_the_estimated_initial_state() {
     let d = tmpdir("real-arx");
     let m = d.join("m.json");
-    // (file, split, fs, na, nb, nk, 1-step reference, simulation reference)
-    let cases: [(&str, usize, &str, &str, &str, &str, f64, Option<f64>); 7] = [
+    let cases: [Case; 7] = [
         (
             "daisy-dryer/dryer.dat",
             500,
@@ -251,7 +262,8 @@ fn cascaded_tanks_oe_beats_the_bla_and_the_arx_baselines() {
         &d.join("m.json"),
     );
     let rms = val(&j, "simulation_rms");
-    assert!(rms < 0.757 && rms < 0.638, "test RMS {rms} V");
+    // below the BLA (0.757 V) and below the best ARX baseline (0.638 V), the stricter bar
+    assert!(rms < 0.638, "test RMS {rms} V");
 }
 
 /// EMPS (u = vir, y = qm; DATA_EMPS for estimation, DATA_EMPS_PULSES for the test): OE of every

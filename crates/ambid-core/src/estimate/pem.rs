@@ -975,7 +975,17 @@ fn inverse_gram(j: &Mat<f64>, cols: &[usize]) -> Option<Mat<f64>> {
     }))
 }
 
-fn boundary_error(p: &Polys, focus: Focus, context: &'static str) -> Error {
+/// The advice at the end of an "unstable system" message: the closed-loop route for
+/// closed-loop data (the default), the integrator / ARX route for data declared open-loop.
+pub(crate) fn unstable_advice(open_loop: bool) -> &'static str {
+    if open_loop {
+        "On open-loop data this usually means an integrator or a pole on the unit circle: fit ARX/ARMAX (prediction focus), or a model of the differenced output; if the data were in fact measured in closed loop around an unstable plant, declare them so (--loop closed) and identify the stable closed-loop map T_ry from the excitation r"
+    } else {
+        "Identify the stable closed-loop map T_ry from the excitation r (then P = T_ry / (1 - C T_ry)), or fit ARX/ARMAX with the prediction focus, whose predictor stays stable for an unstable A"
+    }
+}
+
+fn boundary_error(p: &Polys, focus: Focus, context: &'static str, open_loop: bool) -> Error {
     let rc = max_root(&p.c);
     let rf = max_root(&p.f);
     let ra = max_root(&p.a);
@@ -994,7 +1004,8 @@ fn boundary_error(p: &Polys, focus: Focus, context: &'static str) -> Error {
         Error::Unstable {
             context,
             reason: format!(
-                "the best fit pushes a pole of {den_name} onto the unit circle (largest |z| = {rden:.6}) and the output-error predictor needs it stable: the system from u to y looks unstable, which an OE/BJ model (or the simulation focus) cannot describe. Identify the stable closed-loop map T_ry from the excitation r (then P = T_ry / (1 - C T_ry)), or fit ARX/ARMAX with the prediction focus, whose predictor stays stable for an unstable A"
+                "the best fit pushes a pole of {den_name} onto the unit circle (largest |z| = {rden:.6}) and the output-error predictor needs it stable: the system from u to y looks unstable, which an OE/BJ model (or the simulation focus) cannot describe. {}",
+                unstable_advice(open_loop)
             ),
         }
     }
@@ -1084,7 +1095,7 @@ fn run(
             let (x, rep) = lm::minimize(&mut crit, &theta0, &opts.lm)?;
             let th = crit.full(&x);
             if rep.ended_on_boundary {
-                let e = boundary_error(&Polys::from_theta(o, &th), focus, CTX);
+                let e = boundary_error(&Polys::from_theta(o, &th), focus, CTX, opts.open_loop);
                 if !opts.open_loop {
                     return Err(e);
                 }
@@ -1106,7 +1117,7 @@ fn run(
             let (x, rep) = lm::minimize(&mut crit, &x0, &opts.lm)?;
             let mut th = crit.full(&x);
             if rep.ended_on_boundary {
-                let e = boundary_error(&Polys::from_theta(o, &th), focus, CTX);
+                let e = boundary_error(&Polys::from_theta(o, &th), focus, CTX, opts.open_loop);
                 if !opts.open_loop {
                     return Err(e);
                 }
@@ -1140,7 +1151,12 @@ fn run(
                 let (x, rep2) = lm::minimize(&mut crit, &x0, &opts.lm)?;
                 th = crit.full(&x);
                 if rep2.ended_on_boundary {
-                    let e = boundary_error(&Polys::from_theta(o, &th), Focus::Prediction, CTX);
+                    let e = boundary_error(
+                        &Polys::from_theta(o, &th),
+                        Focus::Prediction,
+                        CTX,
+                        opts.open_loop,
+                    );
                     if !opts.open_loop {
                         return Err(e);
                     }
