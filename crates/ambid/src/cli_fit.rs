@@ -281,6 +281,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
     };
     let mut problems: Vec<String> = Vec::new();
     let mut fallback = false;
+    let open_loop = is_open_loop(&a)?;
     let (fitted, iterations): (Fitted<PolyModel>, Option<usize>) = match a.structure {
         StructureArg::Fir | StructureArg::Arx => {
             let na = if a.structure == StructureArg::Fir {
@@ -314,7 +315,6 @@ pub fn fit(a: FitArgs) -> Result<()> {
                 StructureArg::Oe => ambid_core::lti::Structure::Oe,
                 _ => ambid_core::lti::Structure::Bj,
             };
-            let open_loop = is_open_loop(&a)?;
             let opts = PemOptions::default()
                 .with_focus(focus)
                 .with_max_iterations(a.max_iterations)?
@@ -430,6 +430,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
         "initial_state": x0.name(),
         "skip": skip,
         "fallback": fallback,
+        "loop": if open_loop { "open" } else { "closed" },
         "problems": problems,
         "source": a.data.display().to_string(),
     });
@@ -659,6 +660,7 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
     }
     let meta = json!({
         "method": method,
+        "loop": if open_loop { "open" } else { "closed" },
         "pem": pem_meta,
         "order": fit.order,
         "block_rows": fit.block_rows,

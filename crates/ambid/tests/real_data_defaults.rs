@@ -302,6 +302,31 @@ fn emps_oe_orders_are_never_refused_and_beat_the_black_box_figure() {
     let f = val(&j, "simulation_fit_pct");
     assert!(1.0 - f / 100.0 < 0.746, "fit {f} %");
     assert!(f > 75.0, "fit {f} %");
+    assert_eq!(j["meta"]["loop"], "open");
+    assert_eq!(j["meta"]["fallback"], false);
+    // declared closed-loop, the same unstable start is refused as before (the AMB rule), the
+    // ARX model of the same orders is written instead with the closed-loop advice
+    let j = fit(
+        &e,
+        &v,
+        "1000",
+        &[
+            "--structure",
+            "oe",
+            "--nb",
+            "2",
+            "--nf",
+            "2",
+            "--nk",
+            "2",
+            "--loop",
+            "closed",
+        ],
+        &m,
+    );
+    assert_eq!(j["meta"]["loop"], "closed");
+    assert_eq!(j["meta"]["fallback"], true);
+    assert!(j["meta"]["problems"].to_string().contains("T_ry"), "{j}");
     for n in 1..=6 {
         let n = n.to_string();
         let j = fit(
@@ -527,4 +552,45 @@ fn cd_player_two_by_two_state_space() {
         "{}",
         text(&o)
     );
+}
+
+/// `--loop auto` takes ambid's own closed-loop record (t, w, r, u, i, y) with input u as closed
+/// loop, and the same file with input r (T_ry, stable) as open loop.
+#[test]
+fn loop_auto_detects_the_closed_loop_record() {
+    let d = tmpdir("real-loop");
+    let o = ambid(&[
+        "simulate",
+        "--rig-seed",
+        "3",
+        "--periods",
+        "2",
+        "--mode",
+        "linear",
+        "--out",
+        s(&d),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let data = d.join("data.csv");
+    for (input, want) in [("u", "closed"), ("r", "open")] {
+        let m = d.join(format!("m-{input}.json"));
+        let o = ambid(&[
+            "fit",
+            s(&data),
+            "--structure",
+            "oe",
+            "--nb",
+            "2",
+            "--nf",
+            "2",
+            "--input",
+            input,
+            "--out",
+            s(&m),
+        ]);
+        assert!(o.status.success(), "{}", text(&o));
+        let j: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&m).unwrap()).unwrap();
+        assert_eq!(j["meta"]["loop"], want, "input {input}");
+    }
 }
