@@ -2,11 +2,12 @@
 
 use ambid::io::model::{polynomial_json, write_model_json};
 use ambid::io::read_time_csv;
-use ambid_core::estimate::arx::{arx, fit_percent, ArxOrders};
+use ambid_core::estimate::arx::{arx, ArxOrders};
 use ambid_core::estimate::order::{arx_order_scan, ArxScanSpec};
 use ambid_core::estimate::pem::{self, Focus, Orders, PemOptions};
 use ambid_core::estimate::Fitted;
 use ambid_core::lti::PolyModel;
+use ambid_core::validate::predict::InitialState;
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use serde_json::json;
@@ -30,6 +31,37 @@ pub enum FocusArg {
     Simulation,
 }
 
+/// Initial state of the validation filters (MATLAB `compare`'s `InitialCondition`).
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum X0Arg {
+    /// From rest (samples before the record taken as zero).
+    Zero,
+    /// The state that best explains the record (least squares of the free response).
+    Estimate,
+}
+
+impl X0Arg {
+    fn core(self) -> InitialState {
+        match self {
+            Self::Zero => InitialState::Zero,
+            Self::Estimate => InitialState::Estimate,
+        }
+    }
+}
+
+/// Whether the data were measured in open or closed loop.
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum LoopArg {
+    /// Closed if the file has an `r` column and the input is not `r` (ambid's closed-loop
+    /// record `t, w, r, u, i, y`), open otherwise.
+    Auto,
+    /// Open-loop data: an unstable starting estimate is an artefact and is stabilised.
+    Open,
+    /// Closed-loop data (an AMB plant): instability of u → y is real; OE/BJ and the simulation
+    /// focus refuse an unstable start.
+    Closed,
+}
+
 #[derive(Args)]
 pub struct FitArgs {
     /// Estimation data CSV.
@@ -37,10 +69,11 @@ pub struct FitArgs {
     /// Sample rate in Hz (when the file has no `t` column).
     #[arg(long)]
     fs: Option<f64>,
-    /// Input column.
+    /// Input column; several, comma-separated (`u1,u2`), for a MIMO state-space model
+    /// (`--structure ss`).
     #[arg(long, default_value = "u")]
     input: String,
-    /// Output column.
+    /// Output column; several, comma-separated (`y1,y2`), for a MIMO state-space model.
     #[arg(long, default_value = "y")]
     output: String,
     /// Model structure.
@@ -74,6 +107,10 @@ pub struct FitArgs {
     /// `--structure ss`: keep the subspace model, without the prediction-error refinement.
     #[arg(long)]
     no_pem: bool,
+    /// `--structure ss`: estimate a feed-through D (default D = 0, a strictly proper model);
+    /// D is estimated by the prediction-error refinement, so not with --no-pem.
+    #[arg(long)]
+    feedthrough: bool,
     /// Maximum Levenberg–Marquardt iterations of the prediction-error step.
     #[arg(long, default_value_t = 100)]
     max_iterations: usize,
@@ -97,9 +134,57 @@ pub struct FitArgs {
     /// default).
     #[arg(long)]
     no_detrend: bool,
+    /// Initial state of the fit measures (estimation and validation): `estimate` (the state
+    /// that best explains each record, MATLAB `compare`'s default) or `zero`.
+    #[arg(long, value_enum, default_value_t = X0Arg::Estimate)]
+    x0: X0Arg,
+    /// Samples at the start of each record left out of the fit measures.
+    #[arg(long, default_value_t = 0)]
+    skip: usize,
+    /// Open- or closed-loop data (decides whether an unstable starting estimate is stabilised;
+    /// see docs/estimation.md).
+    #[arg(long = "loop", value_enum, default_value_t = LoopArg::Auto)]
+    loop_kind: LoopArg,
     /// Output model JSON.
     #[arg(long, default_value = "model.json")]
     out: PathBuf,
+}
+
+/// Open-loop data per `--loop` (module docs of [`LoopArg`]).
+fn is_open_loop(a: &FitArgs) -> Result<bool> {
+    Ok(match a.loop_kind {
+        LoopArg::Open => true,
+        LoopArg::Closed => false,
+        LoopArg::Auto => {
+            let d = read_time_csv(&a.data, a.fs)?;
+            !(d.names.iter().any(|n| n == "r") && a.input != "r")
+        }
+    })
+}
+
+/// Whether an estimator error is about the data's dynamics (instability, numerics), so that a
+/// fallback model can still be written, rather than about bad input.
+fn is_model_problem(e: &ambid_core::Error) -> bool {
+    matches!(
+        e,
+        ambid_core::Error::Unstable { .. } | ambid_core::Error::Numerical { .. }
+    )
+}
+
+fn fmt_fit(f: Option<f64>) -> String {
+    f.map_or_else(
+        || "— (the model output diverges: unstable model)".to_string(),
+        |v| format!("{v:.2} %"),
+    )
+}
+
+/// RMS of the model error from a fit % over the samples from `skip` on:
+/// $\lVert y - \hat y\rVert / \sqrt{N} = (1 - \mathrm{fit}/100)\,\lVert y - \bar y\rVert / \sqrt{N}$.
+fn rms_error(fit: Option<f64>, y: &[f64], skip: usize) -> Option<f64> {
+    let y = y.get(skip..).filter(|y| !y.is_empty())?;
+    let m = y.iter().sum::<f64>() / y.len() as f64;
+    let sd = (y.iter().map(|v| (v - m).powi(2)).sum::<f64>() / y.len() as f64).sqrt();
+    fit.map(|f| (1.0 - f / 100.0) * sd)
 }
 
 fn read_io(
@@ -170,6 +255,18 @@ pub fn fit(a: FitArgs) -> Result<()> {
             &a.out,
         );
     }
+    let split = |s: &str| -> Vec<String> { s.split(',').map(|c| c.trim().to_string()).collect() };
+    let (ins, outs) = (split(&a.input), split(&a.output));
+    if ins.len() > 1 || outs.len() > 1 {
+        if a.structure != StructureArg::Ss {
+            bail!(
+                "several inputs or outputs ({} → {}) need --structure ss, the multi-input multi-output path; the polynomial structures are single-input single-output: fit one output (and input) at a time",
+                a.input,
+                a.output
+            );
+        }
+        return fit_ss_mimo(&a, &ins, &outs);
+    }
     let (mut u, mut y, ts) = read_io(&a.data, a.fs, &a.input, &a.output)?;
     let (mu, my) = if a.no_detrend {
         (0.0, 0.0)
@@ -182,6 +279,9 @@ pub fn fit(a: FitArgs) -> Result<()> {
         FocusArg::Prediction => Focus::Prediction,
         FocusArg::Simulation => Focus::Simulation,
     };
+    let mut problems: Vec<String> = Vec::new();
+    let mut fallback = false;
+    let open_loop = is_open_loop(&a)?;
     let (fitted, iterations): (Fitted<PolyModel>, Option<usize>) = match a.structure {
         StructureArg::Fir | StructureArg::Arx => {
             let na = if a.structure == StructureArg::Fir {
@@ -217,10 +317,49 @@ pub fn fit(a: FitArgs) -> Result<()> {
             };
             let opts = PemOptions::default()
                 .with_focus(focus)
-                .with_max_iterations(a.max_iterations)?;
-            let (f, rep) = pem::pem(&y, &u, structure, &orders, ts, &opts)
-                .context("prediction-error estimation")?;
-            (f, Some(rep.iterations()))
+                .with_max_iterations(a.max_iterations)?
+                .with_open_loop(open_loop);
+            match pem::pem(&y, &u, structure, &orders, ts, &opts) {
+                Ok((f, rep)) => {
+                    problems.extend(rep.warnings.iter().cloned());
+                    if !rep.reason().converged() {
+                        problems.push(format!(
+                            "the iteration stopped at its limit ({} iterations, {:?}): raise --max-iterations",
+                            rep.iterations(),
+                            rep.reason()
+                        ));
+                    }
+                    (f, Some(rep.iterations()))
+                }
+                Err(e) if is_model_problem(&e) => {
+                    // a model is always written: the ARX model of the same orders, with the
+                    // problem named (closed-loop advice only for closed-loop data)
+                    let na = orders.na + orders.nf;
+                    problems.push(format!("{} estimation failed: {e}", structure.name()));
+                    problems.push(format!(
+                        "written instead: the least-squares ARX({na}, {}, {}) model",
+                        a.nb, a.nk
+                    ));
+                    if open_loop {
+                        problems.push("the data were taken as open-loop (--loop); for data measured around an unstable plant in closed loop use --loop closed".to_string());
+                    }
+                    fallback = true;
+                    let f = arx(&y, &[&u], &ArxOrders::siso(na, a.nb, a.nk), ts)?;
+                    let model = f.model.to_poly(0)?;
+                    (
+                        Fitted {
+                            model,
+                            params: f.params,
+                            covariance: f.covariance,
+                            loss: f.loss,
+                            noise_variance: f.noise_variance,
+                            n_samples: f.n_samples,
+                        },
+                        None,
+                    )
+                }
+                Err(e) => return Err(anyhow::Error::new(e).context("prediction-error estimation")),
+            }
         }
     };
     let m = &fitted.model;
@@ -245,16 +384,39 @@ pub fn fit(a: FitArgs) -> Result<()> {
     let poles = m.poles()?;
     let unstable = poles.iter().filter(|p| p.norm() >= 1.0).count();
     if unstable > 0 {
-        println!("note: {unstable} pole(s) on or outside the unit circle (an unstable model; simulation fits diverge)");
+        problems.push(format!("{unstable} pole(s) on or outside the unit circle (an unstable model: its simulation diverges; judge it by the 1-step fit)"));
     }
-    let (f1, fs_est) = fits(m, &y, &u)?;
-    println!("estimation data: 1-step fit {f1:.2} %, simulation fit {fs_est:.2} %");
+    let (x0, skip) = (a.x0.core(), a.skip);
+    let (f1, fs_est) = fits(m, &y, &u, x0, skip)?;
+    println!(
+        "estimation data: 1-step fit {}, simulation fit {} (initial state: {}{})",
+        fmt_fit(f1),
+        fmt_fit(fs_est),
+        x0.name(),
+        if skip > 0 {
+            format!(", first {skip} samples skipped")
+        } else {
+            String::new()
+        }
+    );
     let mut val = json!(null);
     if let Some(p) = &a.validation {
         let (uv, yv) = read_validation(p, a.fs, &a.input, &a.output, ts, mu, my)?;
-        let (v1, vs) = fits(m, &yv, &uv)?;
-        println!("validation data: 1-step fit {v1:.2} %, simulation fit {vs:.2} %");
-        val = json!({"one_step_fit_pct": v1, "simulation_fit_pct": vs});
+        let (v1, vs) = fits(m, &yv, &uv, x0, skip)?;
+        println!(
+            "validation data: 1-step fit {}, simulation fit {}",
+            fmt_fit(v1),
+            fmt_fit(vs)
+        );
+        val = json!({
+            "one_step_fit_pct": v1,
+            "simulation_fit_pct": vs,
+            "one_step_rms": rms_error(v1, &yv, skip),
+            "simulation_rms": rms_error(vs, &yv, skip),
+        });
+    }
+    for p in &problems {
+        println!("warning: {p}");
     }
     let meta = json!({
         "params": fitted.params,
@@ -265,6 +427,11 @@ pub fn fit(a: FitArgs) -> Result<()> {
         "detrend": {"u_mean": mu, "y_mean": my},
         "estimation_fit_pct": {"one_step": f1, "simulation": fs_est},
         "validation": val,
+        "initial_state": x0.name(),
+        "skip": skip,
+        "fallback": fallback,
+        "loop": if open_loop { "open" } else { "closed" },
+        "problems": problems,
         "source": a.data.display().to_string(),
     });
     write_model_json(&a.out, &polynomial_json(m, &a.input, &a.output, meta))?;
@@ -362,9 +529,18 @@ pub fn order(a: OrderArgs) -> Result<()> {
 }
 
 /// Subspace state-space fit: data scaled to unit RMS for the algorithm, model scaled back.
+/// A refinement that fails (an unstable start under the simulation focus) is retried, for
+/// open-loop data, from the subspace model with its poles beyond |z| = 0.99 moved onto 0.99
+/// ([`stabilised_refine`]); if that fails too, the subspace model is written with the problem
+/// named. A model file is always written.
 fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Result<()> {
     use ambid::io::model::state_space_json;
     use ambid_core::estimate::ss_pem::SsPemOptions;
+    if a.no_pem && a.feedthrough {
+        bail!(
+            "--feedthrough needs the prediction-error refinement (it estimates D); drop --no-pem"
+        );
+    }
     let pem = if a.no_pem {
         None
     } else {
@@ -377,17 +553,53 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
             lm: SsPemOptions::default()
                 .lm
                 .with_max_iterations(a.max_iterations)?,
+            feedthrough: a.feedthrough,
             ..SsPemOptions::default()
         })
     };
-    let fit =
-        ambid::fitting::fit_state_space(u, y, ts, a.order, a.block_rows, pem).map_err(|e| {
-            if a.no_pem {
-                e
+    let open_loop = is_open_loop(a)?;
+    let mut problems: Vec<String> = Vec::new();
+    let mut method = if a.no_pem { "subspace" } else { "subspace+pem" };
+    let fit = match ambid::fitting::fit_state_space(u, y, ts, a.order, a.block_rows, pem) {
+        Ok(f) => f,
+        Err(e) => {
+            let Some(opts) = pem else { return Err(e) };
+            // the refinement failed: a model is still written
+            let first = format!("{e:#}");
+            let sub = ambid::fitting::fit_state_space(u, y, ts, a.order, a.block_rows, None)
+                .map_err(|_| e.context("(use --no-pem to skip the refinement)"))?;
+            let retry = if open_loop {
+                Some(stabilised_refine(u, y, ts, &sub.model, &opts))
             } else {
-                e.context("(use --no-pem to skip the refinement)")
+                None
+            };
+            match retry {
+                Some(Ok((model, summary))) => {
+                    problems.push(format!(
+                        "the refinement from the subspace model failed ({first}); it was restarted from the subspace model with its poles beyond |z| = 0.99 moved onto 0.99 (open-loop data; the start only)"
+                    ));
+                    method = "subspace+stabilised start+pem";
+                    ambid::fitting::SsIdentified {
+                        model,
+                        pem: Some(summary),
+                        ..sub
+                    }
+                }
+                other => {
+                    problems.push(format!("the prediction-error refinement failed: {first}"));
+                    if let Some(Err(e2)) = other {
+                        problems.push(format!("from a stabilised start it failed too: {e2:#}"));
+                    } else {
+                        problems.push("closed-loop data (--loop): an unstable u → y start is taken as real; the simulation focus cannot fit an unstable system, use the prediction focus".to_string());
+                    }
+                    problems
+                        .push("written instead: the subspace model without refinement".to_string());
+                    method = "subspace (refinement failed)";
+                    sub
+                }
             }
-        })?;
+        }
+    };
     let mut pem_meta = json!(null);
     if let Some(p) = &fit.pem {
         println!(
@@ -406,6 +618,7 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
             "start_loss": p.start_loss,
             "loss": p.loss,
             "kalman_gain": p.kalman_gain,
+            "x0": p.x0,
         });
     }
     let model = fit.model.clone();
@@ -422,23 +635,32 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
     );
     let unstable = model.poles()?.iter().filter(|p| p.norm() >= 1.0).count();
     if unstable > 0 {
-        println!("note: {unstable} pole(s) on or outside the unit circle (not stabilised)");
+        problems.push(format!("{unstable} pole(s) on or outside the unit circle (not stabilised): the simulation diverges"));
     }
-    let fit_on = |u: &[f64], y: &[f64]| -> Result<f64> {
-        let ys = model.simulate_siso(u, None)?;
-        Ok(fit_percent(y, &ys)?)
+    let (x0, skip) = (a.x0.core(), a.skip);
+    let fit_on = |u: &[f64], y: &[f64]| -> Result<Option<f64>> {
+        let (ys, _) = ambid_core::validate::predict::ss_simulate(&model, y, u, x0)?;
+        Ok(ambid_core::validate::predict::fit_from(y, &ys, skip))
     };
     let f_est = fit_on(u, y)?;
-    println!("estimation data: simulation fit {f_est:.2} %");
+    println!(
+        "estimation data: simulation fit {} (initial state: {})",
+        fmt_fit(f_est),
+        x0.name()
+    );
     let mut val = json!(null);
     if let Some(p) = &a.validation {
         let (uv, yv) = read_validation(p, a.fs, &a.input, &a.output, ts, mu, my)?;
         let fv = fit_on(&uv, &yv)?;
-        println!("validation data: simulation fit {fv:.2} %");
-        val = json!({"simulation_fit_pct": fv});
+        println!("validation data: simulation fit {}", fmt_fit(fv));
+        val = json!({"simulation_fit_pct": fv, "simulation_rms": rms_error(fv, &yv, skip)});
+    }
+    for p in &problems {
+        println!("warning: {p}");
     }
     let meta = json!({
-        "method": if a.no_pem { "subspace" } else { "subspace+pem" },
+        "method": method,
+        "loop": if open_loop { "open" } else { "closed" },
         "pem": pem_meta,
         "order": fit.order,
         "block_rows": fit.block_rows,
@@ -446,9 +668,278 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
         "detrend": {"u_mean": mu, "y_mean": my},
         "estimation_fit_pct": {"simulation": f_est},
         "validation": val,
+        "initial_state": x0.name(),
+        "skip": skip,
+        "problems": problems,
         "source": a.data.display().to_string(),
     });
-    write_model_json(&a.out, &state_space_json(&model, &a.input, &a.output, meta))?;
+    let mut j = state_space_json(&model, &a.input, &a.output, meta);
+    if let Some(x) = fit.pem.as_ref().and_then(|p| p.x0.clone()) {
+        // the initial state the refinement estimated on the estimation record
+        j["x0"] = json!(x);
+    }
+    write_model_json(&a.out, &j)?;
+    println!("written: {}", a.out.display());
+    Ok(())
+}
+
+/// Prediction-error refinement of the subspace model `sub` (data units) from a stabilised
+/// start: on unit-RMS data, the start's poles beyond $|z| = 0.99$ are moved radially onto 0.99
+/// ([`ambid_core::estimate::pem::stabilise_start_polynomial`] on its denominator); if that
+/// refinement fails (a companion form of high order is ill-conditioned), $A$ is scaled by
+/// $0.99 / \max|\lambda|$. The refinement then moves every pole freely. SISO; open-loop data only.
+fn stabilised_refine(
+    u: &[f64],
+    y: &[f64],
+    ts: f64,
+    sub: &ambid_core::lti::StateSpace,
+    opts: &ambid_core::estimate::ss_pem::SsPemOptions,
+) -> Result<(ambid_core::lti::StateSpace, ambid::fitting::PemSummary)> {
+    use ambid_core::lti::{StateSpace, TransferFunction};
+    use faer::{Mat, Scale};
+    let rms = |x: &[f64]| (x.iter().map(|v| v * v).sum::<f64>() / x.len().max(1) as f64).sqrt();
+    let (su, sy) = (rms(u), rms(y));
+    let scaled = StateSpace::discrete(
+        sub.a().to_owned(),
+        sub.b() * Scale(su),
+        sub.c() * Scale(1.0 / sy),
+        sub.d() * Scale(su / sy),
+        ts,
+    )?;
+    let um = Mat::from_fn(u.len(), 1, |k, _| u[k] / su);
+    let ym = Mat::from_fn(y.len(), 1, |k, _| y[k] / sy);
+    let refine = |start: &StateSpace| {
+        ambid_core::estimate::ss_pem::refine_ss(ym.as_ref(), um.as_ref(), start, None, opts)
+    };
+    // first: only the poles beyond 0.99 moved (transfer-function route; fine for low orders)
+    let per_pole = (|| -> Result<_> {
+        let tf = TransferFunction::from_state_space(&scaled)?;
+        let d0 = tf.den()[0];
+        let den: Vec<f64> = tf.den().iter().map(|c| c / d0).collect();
+        let num: Vec<f64> = tf.num().iter().map(|c| c / d0).collect();
+        let den = ambid_core::estimate::pem::stabilise_start_polynomial(&den)
+            .context("cannot stabilise the start: its poles could not be computed")?;
+        let start = TransferFunction::new(num, den, ts)?.to_state_space()?;
+        Ok(refine(&start)?)
+    })();
+    let p = match per_pole {
+        Ok(p) => p,
+        Err(_) => {
+            // then: A scaled by 0.99 / max|λ| (every pole moved radially by the same factor;
+            // no companion form, so it also works at high orders)
+            let r = scaled.poles()?.iter().fold(0.0f64, |m, z| m.max(z.norm()));
+            let rho = if r > 0.99 { 0.99 / r } else { 1.0 };
+            let start = StateSpace::discrete(
+                scaled.a() * Scale(rho),
+                scaled.b().to_owned(),
+                scaled.c().to_owned(),
+                scaled.d().to_owned(),
+                ts,
+            )?;
+            refine(&start)?
+        }
+    };
+    let m = &p.fitted.model;
+    let model = StateSpace::discrete(
+        m.a().to_owned(),
+        m.b() * Scale(1.0 / su),
+        m.c() * Scale(sy),
+        m.d() * Scale(sy / su),
+        ts,
+    )?;
+    let summary = ambid::fitting::PemSummary {
+        focus: opts.focus,
+        iterations: p.report.iterations,
+        stop: format!("{:?}", p.report.reason),
+        start_loss: p.start_loss * sy * sy,
+        loss: p.fitted.loss * sy * sy,
+        kalman_gain: p
+            .kalman_gain
+            .as_ref()
+            .map(|k| (0..k.nrows()).map(|i| k[(i, 0)] / sy).collect()),
+        on_boundary: p.report.ended_on_boundary,
+        x0: Some(p.x0.clone()),
+    };
+    Ok((model, summary))
+}
+
+/// The named columns of a time-data file, each with the estimation means `means` removed
+/// (`None`: its own means, returned).
+fn columns(
+    p: &Path,
+    fs: Option<f64>,
+    names: &[String],
+    means: Option<&[f64]>,
+    detrend: bool,
+) -> Result<(Vec<Vec<f64>>, Vec<f64>, f64)> {
+    let d = read_time_csv(p, fs)?;
+    let mut cols: Vec<Vec<f64>> = names
+        .iter()
+        .map(|n| Ok(d.column(n)?.to_vec()))
+        .collect::<Result<_>>()?;
+    let m: Vec<f64> = match means {
+        Some(m) => m.to_vec(),
+        None if detrend => cols.iter().map(|c| mean(c)).collect(),
+        None => vec![0.0; cols.len()],
+    };
+    for (c, mv) in cols.iter_mut().zip(&m) {
+        c.iter_mut().for_each(|v| *v -= mv);
+    }
+    Ok((cols, m, d.ts))
+}
+
+/// Multi-input multi-output state space (`--input u1,u2 --output y1,y2 --structure ss`): every
+/// column scaled to unit RMS, subspace identification, the prediction-error refinement (a
+/// refinement that fails leaves the subspace model, with the problem named), model scaled back;
+/// simulation fit per output from the estimated initial state.
+fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
+    use ambid::io::model::state_space_json;
+    use ambid_core::estimate::ss_pem::{refine_ss, SsPemOptions};
+    use ambid_core::estimate::subspace::{n4sid_detailed, SubspaceOptions};
+    use ambid_core::lti::StateSpace;
+    use ambid_core::validate::predict::{fit_from, ss_simulate_mimo};
+    use faer::Mat;
+    let (u, mu, ts) = columns(&a.data, a.fs, ins, None, !a.no_detrend)?;
+    let (y, my, _) = columns(&a.data, a.fs, outs, None, !a.no_detrend)?;
+    let rms = |x: &[f64]| (x.iter().map(|v| v * v).sum::<f64>() / x.len().max(1) as f64).sqrt();
+    let su: Vec<f64> = u.iter().map(|c| rms(c)).collect();
+    let sy: Vec<f64> = y.iter().map(|c| rms(c)).collect();
+    if su.iter().chain(&sy).any(|v| *v == 0.0) {
+        bail!("an input or output column is constant after removing its mean: nothing to identify");
+    }
+    let nt = u[0].len();
+    let (m, l) = (u.len(), y.len());
+    let um = Mat::from_fn(nt, m, |k, i| u[i][k] / su[i]);
+    let ym = Mat::from_fn(nt, l, |k, j| y[j][k] / sy[j]);
+    let mut opts = SubspaceOptions::new(ts);
+    opts.order = a.order;
+    opts.block_rows = a.block_rows;
+    let sub = n4sid_detailed(ym.as_ref(), um.as_ref(), &opts).context("subspace identification")?;
+    let mut scaled = sub.fitted.model.clone();
+    let mut problems: Vec<String> = Vec::new();
+    let mut method = "subspace";
+    let mut pem_meta = json!(null);
+    let mut x0_est: Option<Vec<f64>> = None;
+    if a.feedthrough && a.no_pem {
+        bail!(
+            "--feedthrough needs the prediction-error refinement (it estimates D); drop --no-pem"
+        );
+    }
+    if !a.no_pem {
+        let o = SsPemOptions {
+            focus: match a.focus {
+                FocusArg::Prediction => Focus::Prediction,
+                FocusArg::Simulation => Focus::Simulation,
+            },
+            lm: SsPemOptions::default()
+                .lm
+                .with_max_iterations(a.max_iterations)?,
+            feedthrough: a.feedthrough,
+            ..SsPemOptions::default()
+        };
+        let k = match o.focus {
+            Focus::Prediction => sub.kalman_gain.as_ref().map(|k| k.as_ref()),
+            Focus::Simulation => None,
+        };
+        match refine_ss(ym.as_ref(), um.as_ref(), &scaled, k, &o) {
+            Ok(p) => {
+                pem_meta = json!({
+                    "focus": format!("{:?}", o.focus).to_lowercase(),
+                    "iterations": p.report.iterations,
+                    "stop": format!("{:?}", p.report.reason),
+                    "x0": p.x0,
+                });
+                x0_est = Some(p.x0.clone());
+                scaled = p.fitted.model;
+                method = "subspace+pem";
+            }
+            Err(e) => {
+                problems.push(format!("the prediction-error refinement failed: {e}"));
+                problems.push("written instead: the subspace model without refinement".into());
+                method = "subspace (refinement failed)";
+            }
+        }
+    }
+    let sm = &scaled;
+    let n = sm.order();
+    let model = StateSpace::discrete(
+        Mat::from_fn(n, n, |i, j| sm.a()[(i, j)]),
+        Mat::from_fn(n, m, |i, k| sm.b()[(i, k)] / su[k]),
+        Mat::from_fn(l, n, |j, i| sm.c()[(j, i)] * sy[j]),
+        Mat::from_fn(l, m, |j, k| sm.d()[(j, k)] * sy[j] / su[k]),
+        ts,
+    )?;
+    let unstable = model.poles()?.iter().filter(|p| p.norm() >= 1.0).count();
+    if unstable > 0 {
+        problems.push(format!("{unstable} pole(s) on or outside the unit circle (not stabilised): the simulation diverges"));
+    }
+    let (x0, skip) = (a.x0.core(), a.skip);
+    let fits_on = |u: &[Vec<f64>], y: &[Vec<f64>]| -> Result<Vec<Option<f64>>> {
+        let n = u[0].len();
+        let um = Mat::from_fn(n, u.len(), |k, i| u[i][k]);
+        let ymat = Mat::from_fn(n, y.len(), |k, j| y[j][k]);
+        let (ys, _) = ss_simulate_mimo(&model, ymat.as_ref(), um.as_ref(), x0)?;
+        Ok((0..y.len())
+            .map(|j| {
+                let yh: Vec<f64> = (0..n).map(|k| ys[(k, j)]).collect();
+                fit_from(&y[j], &yh, skip)
+            })
+            .collect())
+    };
+    let show = |f: &[Option<f64>]| {
+        outs.iter()
+            .zip(f)
+            .map(|(o, v)| format!("{o} {}", fmt_fit(*v)))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    println!(
+        "state-space model of order {} ({} inputs, {} outputs; block rows {}), {method}",
+        n, m, l, sub.block_rows
+    );
+    let f_est = fits_on(&u, &y)?;
+    println!(
+        "estimation data: simulation fit {} (initial state: {})",
+        show(&f_est),
+        x0.name()
+    );
+    let mut val = json!(null);
+    if let Some(p) = &a.validation {
+        let (uv, _, tsv) = columns(p, a.fs, ins, Some(&mu), true)?;
+        let (yv, _, _) = columns(p, a.fs, outs, Some(&my), true)?;
+        if ((tsv - ts) / ts).abs() > 1e-9 {
+            bail!(
+                "the validation data are sampled at {} Hz, the estimation data at {} Hz",
+                1.0 / tsv,
+                1.0 / ts
+            );
+        }
+        let fv = fits_on(&uv, &yv)?;
+        println!("validation data: simulation fit {}", show(&fv));
+        val = json!({"simulation_fit_pct": fv});
+    }
+    for p in &problems {
+        println!("warning: {p}");
+    }
+    let meta = json!({
+        "method": method,
+        "pem": pem_meta,
+        "order": n,
+        "block_rows": sub.block_rows,
+        "singular_values": sub.singular_values,
+        "detrend": {"u_mean": mu, "y_mean": my},
+        "estimation_fit_pct": {"simulation": f_est},
+        "validation": val,
+        "initial_state": x0.name(),
+        "skip": skip,
+        "problems": problems,
+        "source": a.data.display().to_string(),
+    });
+    let mut j = state_space_json(&model, &ins.join(","), &outs.join(","), meta);
+    if let Some(x) = x0_est {
+        j["x0"] = json!(x);
+    }
+    write_model_json(&a.out, &j)?;
     println!("written: {}", a.out.display());
     Ok(())
 }

@@ -2,11 +2,11 @@
 //! (data scaled to unit RMS, subspace identification, optional prediction-error refinement,
 //! model scaled back) and the fit figures of a polynomial model.
 
-use ambid_core::estimate::arx::fit_percent;
-use ambid_core::estimate::pem::{prediction_errors, Focus};
+use ambid_core::estimate::pem::Focus;
 use ambid_core::estimate::ss_pem::{refine_ss, SsPemOptions};
 use ambid_core::estimate::subspace::{n4sid_detailed, SubspaceOptions};
 use ambid_core::lti::{PolyModel, StateSpace};
+use ambid_core::validate::predict::{fit_from, poly_one_step, poly_simulate, InitialState};
 use anyhow::{bail, Context, Result};
 use faer::Mat;
 
@@ -27,6 +27,8 @@ pub struct PemSummary {
     pub kalman_gain: Option<Vec<f64>>,
     /// The optimum lies on the predictor's stability boundary.
     pub on_boundary: bool,
+    /// Initial state estimated by the refinement on the estimation record (model coordinates).
+    pub x0: Option<Vec<f64>>,
 }
 
 /// A state-space model identified from time data.
@@ -86,6 +88,7 @@ pub fn fit_state_space(
                 .as_ref()
                 .map(|k| (0..k.nrows()).map(|i| k[(i, 0)] / sy).collect()),
             on_boundary: p.report.ended_on_boundary,
+            x0: Some(p.x0.clone()),
         });
         scaled = p.fitted.model;
     }
@@ -106,13 +109,21 @@ pub fn fit_state_space(
     })
 }
 
-/// One-step-ahead prediction fit % and simulation fit % of a polynomial model on `(y, u)`.
+/// One-step-ahead prediction fit % and simulation fit % of a polynomial model on `(y, u)`,
+/// both from the initial state `x0` (estimated on the record by default, MATLAB `compare`'s
+/// convention; see [`ambid_core::validate::predict`]) and scored from sample `skip` on. `None`
+/// for a fit whose model output diverges (an unstable predictor or simulation).
 ///
 /// # Errors
-/// The errors of the predictor, the simulation and [`fit_percent`].
-pub fn poly_fits(m: &PolyModel, y: &[f64], u: &[f64]) -> Result<(f64, f64)> {
-    let (eps, _) = prediction_errors(m, y, u, Focus::Prediction)?;
-    let yhat: Vec<f64> = y.iter().zip(&eps).map(|(y, e)| y - e).collect();
-    let ysim = m.simulate(u, None, None)?;
-    Ok((fit_percent(y, &yhat)?, fit_percent(y, &ysim)?))
+/// The errors of the predictor and the simulation on bad data.
+pub fn poly_fits(
+    m: &PolyModel,
+    y: &[f64],
+    u: &[f64],
+    x0: InitialState,
+    skip: usize,
+) -> Result<(Option<f64>, Option<f64>)> {
+    let yhat = poly_one_step(m, y, u, x0)?;
+    let ysim = poly_simulate(m, y, u, x0)?;
+    Ok((fit_from(y, &yhat, skip), fit_from(y, &ysim, skip)))
 }

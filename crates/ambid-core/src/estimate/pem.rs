@@ -61,6 +61,17 @@
 //! OE/BJ model cannot describe an unstable plant, so identify the stable closed-loop map
 //! $T_{ry}$ from the excitation $r$, or use ARX/ARMAX (stable predictor for unstable $A$).
 //!
+//! # Open-loop data
+//! That refusal is right for an AMB plant measured in closed loop, where $u \to y$ is really
+//! unstable. On open-loop data an unstable *start* is usually an artefact (an integrator such as
+//! EMPS's position, estimated at $|z| = 1.00003$; a lightly damped mode of the flutter data put
+//! at $|z| = 1.003$ by a coloured input): with [`PemOptions::with_open_loop`] the start's roots
+//! beyond $|z| = 0.99$ are moved radially onto $0.99$ (same angle), $B$ is re-estimated given
+//! that $F$, and the iteration moves every pole freely; an optimum on the stability boundary is
+//! returned with a warning ([`PemReport::warnings`]) instead of an error. Poles of the
+//! *estimate* are never moved. Simulation-focus OE of a truly unstable system stays
+//! ill-posed either way.
+//!
 //! # Initialisation
 //! The start decides which local minimum is found, so it comes from consistent non-iterative
 //! estimators (each a few least-squares problems):
@@ -198,6 +209,7 @@ pub enum Focus {
 pub struct PemOptions {
     focus: Focus,
     lm: LmOptions,
+    open_loop: bool,
 }
 
 impl PemOptions {
@@ -245,6 +257,26 @@ impl PemOptions {
     pub fn with_gradient_tol(mut self, tol: f64) -> Result<Self> {
         self.lm = self.lm.with_gradient_tol(tol)?;
         Ok(self)
+    }
+    /// Declares the data open-loop (default `false`: the strict behaviour that suits an AMB
+    /// plant in closed loop, where an unstable $u \to y$ estimate is real).
+    ///
+    /// With `true`, a start whose denominator ($F$; $A F$ under the simulation focus) is
+    /// unstable after both least squares and IV (an integrator, a lightly damped mode estimated
+    /// just outside the unit circle, a coloured input) is *stabilised*: its roots beyond
+    /// $|z| = 0.99$ are moved radially onto $|z| = 0.99$ and $B$ is re-estimated given that $F$.
+    /// Only the start is changed; the iteration then moves every pole freely within the
+    /// stability region of the predictor. An iteration that ends pressed against that boundary
+    /// returns its model with a warning in [`PemReport::warnings`] instead of an error. Never use
+    /// it for an open-loop unstable plant measured in closed loop: there the instability is real
+    /// and an output-error model of $u \to y$ is ill-posed.
+    pub fn with_open_loop(mut self, open_loop: bool) -> Self {
+        self.open_loop = open_loop;
+        self
+    }
+    /// Whether the data are declared open-loop ([`Self::with_open_loop`]).
+    pub fn open_loop(&self) -> bool {
+        self.open_loop
     }
     /// The criterion.
     pub fn focus(&self) -> Focus {
@@ -384,6 +416,13 @@ pub struct PemReport {
     pub lm: LmReport,
     /// Under [`Focus::Simulation`] with noise polynomials: the second run that fits $C, D$.
     pub noise_lm: Option<LmReport>,
+    /// Open-loop data only ([`PemOptions::with_open_loop`]): the largest root radius of the
+    /// unstable least-squares/IV denominator whose roots were moved onto $|z| = 0.99$ for the
+    /// start; `None` when the start needed no stabilisation.
+    pub stabilised_start: Option<f64>,
+    /// Problems of the returned model that did not stop the estimate (open-loop data): for
+    /// example an optimum on the predictor's stability boundary.
+    pub warnings: Vec<String>,
 }
 
 impl PemReport {
@@ -656,11 +695,23 @@ pub fn pem(
 ) -> Result<(Fitted<PolyModel>, PemReport)> {
     check_orders(structure, orders, opts.focus)?;
     check_data(y, u, orders, ts)?;
-    let start = init::start(y, u, orders, opts.focus)?;
-    if structure == Structure::Oe && orders.nf >= 2 {
-        return oe_with_fallback(y, u, orders, ts, opts, start);
+    let (start, stabilised) = init::start(y, u, orders, opts.focus, opts.open_loop)?;
+    let (fit, mut rep) = if structure == Structure::Oe && orders.nf >= 2 {
+        oe_with_fallback(y, u, orders, ts, opts, start)?
+    } else {
+        run(y, u, structure, orders, ts, opts, start)?
+    };
+    if let Some(r) = stabilised {
+        rep.stabilised_start = Some(r);
+        rep.warnings.insert(
+            0,
+            format!(
+                "the least-squares and IV starts had a pole outside the unit circle (largest |z| = {r:.6}); it was moved onto |z| = {} for the start only (open-loop data), then the iteration moved the poles freely",
+                init::STABILISED_RADIUS
+            ),
+        );
     }
-    run(y, u, structure, orders, ts, opts, start)
+    Ok((fit, rep))
 }
 
 /// Levenberg–Marquardt iterations after which an OE fit that has not converged from the SRIV
@@ -829,6 +880,28 @@ pub fn prediction_errors(
     })
 }
 
+/// Moves every root of the monic polynomial `p` (ascending powers of $q^{-1}$) that lies beyond
+/// $|z| = 0.99$ radially onto $|z| = 0.99$, keeping its angle; the other roots stay. Meant for
+/// *starting values* on open-loop data ([`PemOptions::with_open_loop`]), never for an estimate.
+/// `None` if the roots cannot be computed.
+///
+/// # Example
+/// ```
+/// use ambid_core::estimate::pem::stabilise_start_polynomial;
+/// // (1 − 1.01 q⁻¹)(1 − 0.5 q⁻¹): the root at 1.01 moves to 0.99, the one at 0.5 stays
+/// let p = stabilise_start_polynomial(&[1.0, -1.51, 0.505]).unwrap();
+/// assert!((p[1] + 1.49).abs() < 1e-12 && (p[2] - 0.495).abs() < 1e-12);
+/// ```
+pub fn stabilise_start_polynomial(p: &[f64]) -> Option<Vec<f64>> {
+    init::stabilise(p)
+}
+
+/// Whether every root of the monic polynomial `p` (ascending powers of $q^{-1}$) lies strictly
+/// inside the unit circle (Schur–Cohn test).
+pub(crate) fn denominator_is_stable(p: &[f64]) -> bool {
+    predictor::is_stable(p)
+}
+
 /// The criterion restricted to the free parameters `free` of $\theta$.
 struct Criterion<'a> {
     y: &'a [f64],
@@ -902,7 +975,17 @@ fn inverse_gram(j: &Mat<f64>, cols: &[usize]) -> Option<Mat<f64>> {
     }))
 }
 
-fn boundary_error(p: &Polys, focus: Focus, context: &'static str) -> Error {
+/// The advice at the end of an "unstable system" message: the closed-loop route for
+/// closed-loop data (the default), the integrator / ARX route for data declared open-loop.
+pub(crate) fn unstable_advice(open_loop: bool) -> &'static str {
+    if open_loop {
+        "On open-loop data this usually means an integrator or a pole on the unit circle: fit ARX/ARMAX (prediction focus), or a model of the differenced output; if the data were in fact measured in closed loop around an unstable plant, declare them so (--loop closed) and identify the stable closed-loop map T_ry from the excitation r"
+    } else {
+        "Identify the stable closed-loop map T_ry from the excitation r (then P = T_ry / (1 - C T_ry)), or fit ARX/ARMAX with the prediction focus, whose predictor stays stable for an unstable A"
+    }
+}
+
+fn boundary_error(p: &Polys, focus: Focus, context: &'static str, open_loop: bool) -> Error {
     let rc = max_root(&p.c);
     let rf = max_root(&p.f);
     let ra = max_root(&p.a);
@@ -921,7 +1004,8 @@ fn boundary_error(p: &Polys, focus: Focus, context: &'static str) -> Error {
         Error::Unstable {
             context,
             reason: format!(
-                "the best fit pushes a pole of {den_name} onto the unit circle (largest |z| = {rden:.6}) and the output-error predictor needs it stable: the system from u to y looks unstable, which an OE/BJ model (or the simulation focus) cannot describe. Identify the stable closed-loop map T_ry from the excitation r (then P = T_ry / (1 - C T_ry)), or fit ARX/ARMAX with the prediction focus, whose predictor stays stable for an unstable A"
+                "the best fit pushes a pole of {den_name} onto the unit circle (largest |z| = {rden:.6}) and the output-error predictor needs it stable: the system from u to y looks unstable, which an OE/BJ model (or the simulation focus) cannot describe. {}",
+                unstable_advice(open_loop)
             ),
         }
     }
@@ -963,6 +1047,29 @@ fn run(
     const CTX: &str = "pem";
     let focus = opts.focus;
     let n = y.len();
+    let mut warnings = Vec::new();
+    let mut start = start;
+    if !predictor::predictor_stable(&start, focus) && opts.open_loop {
+        // open-loop data: stabilise the start only (module docs), then iterate freely
+        let r = max_root(&start.f).max(max_root(&start.a));
+        if let Some(f) = init::stabilise(&start.f) {
+            start.f = f;
+        }
+        if focus == Focus::Simulation {
+            if let Some(a) = init::stabilise(&start.a) {
+                start.a = a;
+            }
+        }
+        if predictor::predictor_stable(&start, focus) {
+            warnings.push(format!(
+                "the starting model had a pole outside the unit circle (largest |z| = {r:.6}); it was moved onto |z| = {} for the start only (open-loop data)",
+                init::STABILISED_RADIUS
+            ));
+        }
+    }
+    if !predictor::predictor_stable(&start, focus) {
+        return Err(start_error(&start, focus));
+    }
     let theta0 = start.theta(o);
     let start_model = PolyModel::new(
         structure,
@@ -973,9 +1080,6 @@ fn run(
         start.f.clone(),
         ts,
     )?;
-    if !predictor::predictor_stable(&start, focus) {
-        return Err(start_error(&start, focus));
-    }
     let [ra, rb, rc, rd, rf] = blocks(o);
     let (theta, lm_main, noise_lm, cov) = match focus {
         Focus::Prediction => {
@@ -991,7 +1095,11 @@ fn run(
             let (x, rep) = lm::minimize(&mut crit, &theta0, &opts.lm)?;
             let th = crit.full(&x);
             if rep.ended_on_boundary {
-                return Err(boundary_error(&Polys::from_theta(o, &th), focus, CTX));
+                let e = boundary_error(&Polys::from_theta(o, &th), focus, CTX, opts.open_loop);
+                if !opts.open_loop {
+                    return Err(e);
+                }
+                warnings.push(e.to_string());
             }
             (th, rep, None, None)
         }
@@ -1009,7 +1117,11 @@ fn run(
             let (x, rep) = lm::minimize(&mut crit, &x0, &opts.lm)?;
             let mut th = crit.full(&x);
             if rep.ended_on_boundary {
-                return Err(boundary_error(&Polys::from_theta(o, &th), focus, CTX));
+                let e = boundary_error(&Polys::from_theta(o, &th), focus, CTX, opts.open_loop);
+                if !opts.open_loop {
+                    return Err(e);
+                }
+                warnings.push(e.to_string());
             }
             // the G block of the covariance is formed after the noise model is known
             let (_, psi) =
@@ -1039,11 +1151,16 @@ fn run(
                 let (x, rep2) = lm::minimize(&mut crit, &x0, &opts.lm)?;
                 th = crit.full(&x);
                 if rep2.ended_on_boundary {
-                    return Err(boundary_error(
+                    let e = boundary_error(
                         &Polys::from_theta(o, &th),
                         Focus::Prediction,
                         CTX,
-                    ));
+                        opts.open_loop,
+                    );
+                    if !opts.open_loop {
+                        return Err(e);
+                    }
+                    warnings.push(e.to_string());
                 }
                 noise_rep = Some(rep2);
             }
@@ -1079,6 +1196,8 @@ fn run(
             start: start_model,
             lm: lm_main,
             noise_lm,
+            stabilised_start: None,
+            warnings,
         },
     ))
 }

@@ -460,6 +460,9 @@ pub struct ModelsSection {
     pub weights: String,
     /// Maximum iterations of the iterative fits.
     pub max_iterations: usize,
+    /// Criterion of the time-domain OE and state-space fits: `prediction` (default) or
+    /// `simulation` (as `ambid fit --focus`).
+    pub focus: String,
     /// How the model is chosen: `validation` (best validation fit), `bic` or `frf` (smallest
     /// relative FRF error).
     pub select: String,
@@ -475,6 +478,7 @@ impl Default for ModelsSection {
             domain: None,
             weights: "variance".into(),
             max_iterations: 100,
+            focus: "prediction".into(),
             select: "validation".into(),
         }
     }
@@ -678,6 +682,11 @@ impl WorkflowConfig {
             "models.select",
             &self.models.select,
             &["validation", "bic", "frf"],
+        )?;
+        one_of(
+            "models.focus",
+            &self.models.focus,
+            &["prediction", "simulation"],
         )?;
         if let Some(d) = &self.models.domain {
             one_of("models.domain", d, &["frf", "time"])?;

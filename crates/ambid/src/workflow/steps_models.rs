@@ -214,6 +214,11 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             return Ok(StepStatus::Skipped("no validation record".into()));
         };
         let mut kinds = Vec::new();
+        let focus = if cfg.focus == "simulation" {
+            ambid_core::estimate::pem::Focus::Simulation
+        } else {
+            ambid_core::estimate::pem::Focus::Prediction
+        };
         for s in &cfg.structures {
             for &n in &cfg.orders {
                 let fitted: anyhow::Result<TimeFit> = (|| match s.as_str() {
@@ -223,7 +228,12 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                         Ok((p.g()?.to_state_space()?, Some(p), f.params.len(), None))
                     }
                     "oe" => {
-                        let opts = PemOptions::default().with_max_iterations(cfg.max_iterations)?;
+                        // open-loop records (no excitation r): an unstable start is an
+                        // artefact and is stabilised; closed-loop ones keep the strict rule
+                        let opts = PemOptions::default()
+                            .with_max_iterations(cfg.max_iterations)?
+                            .with_focus(focus)
+                            .with_open_loop(!(has_r && rec.closed_loop));
                         let (f, _) = pem::pem(
                             &rec.y,
                             &rec.u,
@@ -237,6 +247,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                     }
                     _ => {
                         let o = SsPemOptions {
+                            focus,
                             lm: SsPemOptions::default()
                                 .lm
                                 .with_max_iterations(cfg.max_iterations)?,

@@ -138,6 +138,48 @@ fn contract(p: Vec<f64>) -> Vec<f64> {
     p
 }
 
+/// Radius to which an unstable open-loop start is moved (see [`stabilise`]).
+pub(crate) const STABILISED_RADIUS: f64 = 0.99;
+
+/// Moves every root of the monic $p$ with $|z| > $ [`STABILISED_RADIUS`] radially onto that
+/// radius (same angle: a lightly damped or integrating pole keeps its frequency), leaving the
+/// others where they are. Used only on a *start* for open-loop data
+/// ([`super::PemOptions::with_open_loop`]); the iteration then moves the poles freely.
+/// `None` if the roots cannot be computed.
+pub(crate) fn stabilise(p: &[f64]) -> Option<Vec<f64>> {
+    if p.len() <= 1 {
+        return Some(p.to_vec());
+    }
+    let r = crate::linalg::roots(p).ok()?;
+    if r.iter().any(|z| !z.re.is_finite() || !z.im.is_finite()) {
+        return None;
+    }
+    let moved: Vec<faer::c64> = r
+        .iter()
+        .map(|z| {
+            let m = z.norm();
+            if m > STABILISED_RADIUS {
+                *z * (STABILISED_RADIUS / m)
+            } else {
+                *z
+            }
+        })
+        .collect();
+    let q = crate::linalg::poly_from_roots(&moved);
+    (q.len() == p.len() && is_stable(&q)).then_some(q)
+}
+
+/// $B$ (with `nk` leading zeros, `nb` coefficients) by least squares of $y$ on the lagged $u/F$
+/// for a fixed stable $F$ (linear in $B$).
+fn b_given_f(y: &[f64], u: &[f64], f: &[f64], nb: usize, nk: usize) -> Result<Vec<f64>> {
+    let n = y.len();
+    let uf = filter(&[1.0], f, u);
+    let t0 = nk + nb - 1;
+    let cols: Vec<Col<'_>> = (0..nb).map(|j| (uf.as_slice(), nk + j, 1.0)).collect();
+    let th = regress(&design(t0, n, &cols), &y[t0..], "OE start")?;
+    Ok(with_delay(nk, &th))
+}
+
 /// Order of the long ARX / AR models of the Hannan–Rissanen step.
 fn long_order(n: usize, o: &Orders) -> usize {
     let want = (3 * (o.na + o.nc + o.nd + o.nf)).max(20);
@@ -193,19 +235,25 @@ pub(crate) fn unstable_start(radius: f64) -> Error {
 /// $F$ that lands just outside the unit circle (radius below 1.02) is moved radially to 0.9995
 /// as the next prefilter and start; the returned start may carry such a pole, never the
 /// estimate (the iteration moves it, and fails if the optimum lies on the boundary).
+///
+/// With `open_loop`, an ARX and IV estimate that are both unstable (an integrator, a lightly
+/// damped mode estimated just outside the circle, a coloured input) do not end the start: the
+/// ARX $F$ is [`stabilise`]d, $B$ re-estimated given it, and SRIV goes on from there; the third
+/// value is then the largest root radius of the unstable estimate (`None` otherwise).
 pub(crate) fn oe_start(
     y: &[f64],
     u: &[f64],
     nb: usize,
     nf: usize,
     nk: usize,
-) -> Result<(Vec<f64>, Vec<f64>)> {
+    open_loop: bool,
+) -> Result<(Vec<f64>, Vec<f64>, Option<f64>)> {
     let n = y.len();
     if nf == 0 {
         let t0 = nk + nb - 1;
         let cols: Vec<Col<'_>> = (0..nb).map(|j| (u, nk + j, 1.0)).collect();
         let th = regress(&design(t0, n, &cols), &y[t0..], "FIR")?;
-        return Ok((with_delay(nk, &th), vec![1.0]));
+        return Ok((with_delay(nk, &th), vec![1.0], None));
     }
     let t0 = nf.max(nk + nb - 1);
     let mut cols: Vec<Col<'_>> = (1..=nf).map(|i| (y, i, -1.0)).collect();
@@ -213,22 +261,35 @@ pub(crate) fn oe_start(
     let th = regress(&design(t0, n, &cols), &y[t0..], "ARX")?;
     let mut f = monic(&th[..nf]);
     let mut b = with_delay(nk, &th[nf..]);
+    let mut stabilised = None;
     if !is_stable(&f) {
         // basic IV with further delayed inputs as instruments (consistent in open loop)
         let t1 = nk + nb + nf - 1;
-        if n <= t1 + 2 * (nb + nf) {
-            return Err(unstable_start(max_root(&f)));
-        }
-        let phi = design(t1, n, &cols);
-        let mut zc: Vec<Col<'_>> = (0..nf).map(|i| (u, nk + nb + i, 1.0)).collect();
-        zc.extend((0..nb).map(|j| (u, nk + j, 1.0)));
-        let z = design(t1, n, &zc);
-        match iv_solve(&phi, &z, &y[t1..]) {
-            Some(th) if is_stable(&monic(&th[..nf])) => {
+        let iv = if n <= t1 + 2 * (nb + nf) {
+            None
+        } else {
+            let phi = design(t1, n, &cols);
+            let mut zc: Vec<Col<'_>> = (0..nf).map(|i| (u, nk + nb + i, 1.0)).collect();
+            zc.extend((0..nb).map(|j| (u, nk + j, 1.0)));
+            let z = design(t1, n, &zc);
+            iv_solve(&phi, &z, &y[t1..]).filter(|th| is_stable(&monic(&th[..nf])))
+        };
+        match iv {
+            Some(th) => {
                 f = monic(&th[..nf]);
                 b = with_delay(nk, &th[nf..]);
             }
-            _ => return Err(unstable_start(max_root(&f))),
+            None if open_loop => {
+                let r = max_root(&f);
+                f = stabilise(&f).ok_or_else(|| unstable_start(r))?;
+                // B given the stabilised F; a smooth input can leave that regression rank
+                // deficient, then the ARX B is kept for the start
+                if let Ok(bs) = b_given_f(y, u, &f, nb, nk) {
+                    b = bs;
+                }
+                stabilised = Some(r);
+            }
+            None => return Err(unstable_start(max_root(&f))),
         }
     }
     // SRIV: prefilter by 1/F, instruments from the noise-free simulated output
@@ -268,7 +329,7 @@ pub(crate) fn oe_start(
             break;
         }
     }
-    Ok((b, f))
+    Ok((b, f, stabilised))
 }
 
 /// An alternative OE start from a subspace model: $F$ = the denominator of an N4SID model of
@@ -398,44 +459,59 @@ pub(crate) fn arma_start(w: &[f64], nc: usize, nd: usize, nl: usize) -> (Vec<f64
 }
 
 /// Starting polynomials for `orders` under `focus` (see the module docs of `pem`).
-pub(crate) fn start(y: &[f64], u: &[f64], o: &Orders, focus: Focus) -> Result<Polys> {
+///
+/// The second value is the largest root radius of an unstable least-squares/IV denominator
+/// that was stabilised for an open-loop start (see [`oe_start`]), `None` if none was.
+pub(crate) fn start(
+    y: &[f64],
+    u: &[f64],
+    o: &Orders,
+    focus: Focus,
+    open_loop: bool,
+) -> Result<(Polys, Option<f64>)> {
     let nl = long_order(y.len(), o);
     let ones = |k: usize| monic(&vec![0.0; k]);
     match focus {
         Focus::Simulation => {
             // G = B/(A F) with one of na, nf zero (checked by the caller)
-            let (b, den) = oe_start(y, u, o.nb, o.na + o.nf, o.nk)?;
+            let (b, den, st) = oe_start(y, u, o.nb, o.na + o.nf, o.nk, open_loop)?;
             let (a, f) = if o.na > 0 {
                 (den, vec![1.0])
             } else {
                 (vec![1.0], den)
             };
-            Ok(Polys {
-                a,
-                b,
-                c: ones(o.nc),
-                d: ones(o.nd),
-                f,
-            })
+            Ok((
+                Polys {
+                    a,
+                    b,
+                    c: ones(o.nc),
+                    d: ones(o.nd),
+                    f,
+                },
+                st,
+            ))
         }
         Focus::Prediction if o.na == 0 => {
-            let (b, f) = oe_start(y, u, o.nb, o.nf, o.nk)?;
+            let (b, f, st) = oe_start(y, u, o.nb, o.nf, o.nk, open_loop)?;
             let v = filter(&b, &f, u);
             let w: Vec<f64> = y.iter().zip(&v).map(|(a, b)| a - b).collect();
             let (c, d) = arma_start(&w, o.nc, o.nd, nl);
-            Ok(Polys {
-                a: vec![1.0],
-                b,
-                c,
-                d,
-                f,
-            })
+            Ok((
+                Polys {
+                    a: vec![1.0],
+                    b,
+                    c,
+                    d,
+                    f,
+                },
+                st,
+            ))
         }
         Focus::Prediction if o.nf > 0 => match general_start(y, u, o, nl) {
-            Some(p) => Ok(p),
-            None => armax_path(y, u, o, nl),
+            Some(p) => Ok((p, None)),
+            None => Ok((armax_path(y, u, o, nl)?, None)),
         },
-        Focus::Prediction => armax_path(y, u, o, nl),
+        Focus::Prediction => Ok((armax_path(y, u, o, nl)?, None)),
     }
 }
 
@@ -483,7 +559,7 @@ fn root_groups(p: &[f64]) -> Option<Vec<Vec<faer::c64>>> {
 /// $\widehat{AD}$ (the factor the two share), $F$ the rest; then $C, D$ from $A y - (B/F) u$.
 /// `None` when this fails (e.g. an unstable $AF$); the caller falls back to the ARMAX start.
 fn general_start(y: &[f64], u: &[f64], o: &Orders, nl: usize) -> Option<Polys> {
-    let (b, af) = oe_start(y, u, o.nb, o.na + o.nf, o.nk).ok()?;
+    let (b, af, _) = oe_start(y, u, o.nb, o.na + o.nf, o.nk, false).ok()?;
     let v = filter(&b, &af, u);
     let w: Vec<f64> = y.iter().zip(&v).map(|(a, b)| a - b).collect();
     let (_, ad) = arma_start(&w, o.nc, o.na + o.nd, nl);
