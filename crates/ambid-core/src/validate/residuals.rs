@@ -71,6 +71,7 @@
 //! assert!(oe.whiteness.is_none() && oe.independence.is_some());
 //! ```
 
+use crate::c64;
 use crate::error::{check_finite, Error, Result};
 
 /// One correlation test.
@@ -436,17 +437,38 @@ fn centred(what: &'static str, x: &[f64]) -> Result<Vec<f64>> {
     Ok(c)
 }
 
-/// $\hat R_x(k)$ for $k = 0..=m$ (divided by $N$; 0 beyond the record).
+/// $\hat R_x(k)$ for $k = 0..=m$ (divided by $N$; 0 beyond the record). Direct sums for few
+/// lags, an FFT of the zero-padded record (length $\ge N + m$, no wrap-around) for many.
 fn autocov(x: &[f64], m: usize) -> Vec<f64> {
     let n = x.len();
+    let nf = n as f64;
+    if m <= 64 {
+        return (0..=m)
+            .map(|k| {
+                if k >= n {
+                    0.0
+                } else {
+                    x[k..].iter().zip(x).map(|(a, b)| a * b).sum::<f64>() / nf
+                }
+            })
+            .collect();
+    }
+    let len = (n + m + 1).next_power_of_two();
+    let mut planner = rustfft::FftPlanner::new();
+    let (fwd, inv) = (planner.plan_fft_forward(len), planner.plan_fft_inverse(len));
+    let mut buf: Vec<c64> = x
+        .iter()
+        .map(|v| c64::new(*v, 0.0))
+        .chain(std::iter::repeat(c64::new(0.0, 0.0)))
+        .take(len)
+        .collect();
+    fwd.process(&mut buf);
+    for v in buf.iter_mut() {
+        *v = c64::new(v.norm_sqr(), 0.0);
+    }
+    inv.process(&mut buf);
     (0..=m)
-        .map(|k| {
-            if k >= n {
-                0.0
-            } else {
-                x[k..].iter().zip(x).map(|(a, b)| a * b).sum::<f64>() / n as f64
-            }
-        })
+        .map(|k| if k >= n { 0.0 } else { buf[k].re / (len as f64 * nf) })
         .collect()
 }
 
@@ -520,5 +542,17 @@ mod tests {
         assert_eq!(covariance_lags(102_300, 25), 1280);
         assert_eq!(covariance_lags(2000, 25), 179);
         assert_eq!(covariance_lags(100, 25), 25);
+    }
+
+    /// The FFT autocovariance equals the direct sums.
+    #[test]
+    fn fft_autocovariance_matches_the_sums() {
+        let x: Vec<f64> = (0..1000).map(|k| ((k * k) % 17) as f64 - 8.0 + (0.1 * k as f64).sin()).collect();
+        let fast = autocov(&x, 300);
+        for (k, f) in fast.iter().enumerate() {
+            let direct = x[k..].iter().zip(&x).map(|(a, b)| a * b).sum::<f64>() / 1000.0;
+            assert!((f - direct).abs() < 1e-10 * (1.0 + direct.abs()), "{k}: {f} {direct}");
+        }
+        assert_eq!(autocov(&x[..10], 70)[50], 0.0);
     }
 }
