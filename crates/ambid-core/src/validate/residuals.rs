@@ -36,10 +36,11 @@
 //!   Parzen window $w$ (its transform is non-negative, so $\hat\Sigma$ is positive semidefinite,
 //!   and its bias is $O(K^{-2})$). The form is taken in the directions in which the input has
 //!   power: the eigenvectors $W$ of the input's own lag covariance $(\hat R_u(i-j))_{ij}$ with
-//!   eigenvalues above $2(2M+1)/N$ of the largest ($x \to W^\top x$, $\hat\Sigma \to W^\top
+//!   eigenvalues above $4/N$ of the largest ($x \to W^\top x$, $\hat\Sigma \to W^\top
 //!   \hat\Sigma W$). An input with fewer spectral lines than lags (e.g. one sine) has a singular
-//!   $\Sigma$, which the biased estimates blur by end effects of relative size $(2M+1)/N$; the
-//!   degrees of freedom are the dimension kept ($2M+1$ for a PRBS or noise input).
+//!   $\Sigma$, which the biased estimates blur by end effects of relative size $O(1/N)$; the
+//!   degrees of freedom are the dimension kept (51 for a PRBS or noise input with $M = 25$, 4 for
+//!   one sine).
 //!   **Rule for $K$**: $K = \min(\max(\lceil 4\sqrt N\,\rceil, 2M),\ \lfloor N/4 \rfloor)$ — it
 //!   grows with the record (consistency needs $K \to \infty$, $K/N \to 0$), and it must exceed
 //!   the lags over which $R_\varepsilon(k) R_u(k)$ is non-negligible: for a PRBS with $B$ samples
@@ -213,7 +214,7 @@ fn analyze_with(
                 .map(|ij| sigma[(ij / p).abs_diff(ij % p)])
                 .collect();
             // the directions in which the input has power: eigenvectors of its own lag covariance
-            // (end effects of the biased estimates blur a singular one by ~(2M+1)/N)
+            // (end effects of the biased estimates blur a singular one by O(1/N))
             let tu: Vec<f64> = (0..p * p).map(|ij| ru[(ij / p).abs_diff(ij % p)]).collect();
             let (w, r) = dominant_subspace(&tu, p, 4.0 / nf);
             let (statistic, rank) = restricted_form(&cov, &x, &w, p, r);
