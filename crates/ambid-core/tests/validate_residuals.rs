@@ -175,19 +175,37 @@ fn a_wrong_model_fails_and_bad_input_is_refused() {
     let r = held_binary(N, 5, &mut rng);
     let v = resonant(&gauss(N, &mut rng), 0.97, 0.1 * std::f64::consts::PI, 0.5);
     let leak: Vec<f64> = v.iter().zip(&r).map(|(a, b)| a + 0.3 * b).collect();
-    let c = analyze_output_error(&leak, &r, M).unwrap().independence.unwrap();
-    eprintln!("leak: Q {} threshold {} dof {}", c.statistic, c.threshold, c.dof);
+    let c = analyze_output_error(&leak, &r, M)
+        .unwrap()
+        .independence
+        .unwrap();
+    eprintln!(
+        "leak: Q {} threshold {} dof {}",
+        c.statistic, c.threshold, c.dof
+    );
     assert!(!c.pass);
     // a single sine input (rank-2 Σ, the test is conservative there): the true model passes, a
     // model that lets 15 % of the sine through fails
     let s: Vec<f64> = (0..N).map(|k| (0.3 * k as f64).sin()).collect();
     let v = gauss(N, &mut rng);
-    let c = analyze_output_error(&v, &s, M).unwrap().independence.unwrap();
-    eprintln!("sine: Q {} threshold {} dof {}", c.statistic, c.threshold, c.dof);
+    let c = analyze_output_error(&v, &s, M)
+        .unwrap()
+        .independence
+        .unwrap();
+    eprintln!(
+        "sine: Q {} threshold {} dof {}",
+        c.statistic, c.threshold, c.dof
+    );
     assert!(c.pass, "{} {}", c.statistic, c.threshold);
     let leak: Vec<f64> = v.iter().zip(&s).map(|(a, b)| a + 0.15 * b).collect();
-    let c = analyze_output_error(&leak, &s, M).unwrap().independence.unwrap();
-    eprintln!("sine leak: Q {} threshold {} dof {}", c.statistic, c.threshold, c.dof);
+    let c = analyze_output_error(&leak, &s, M)
+        .unwrap()
+        .independence
+        .unwrap();
+    eprintln!(
+        "sine leak: Q {} threshold {} dof {}",
+        c.statistic, c.threshold, c.dof
+    );
     assert!(!c.pass, "{} {}", c.statistic, c.threshold);
     // bad input
     assert!(matches!(

@@ -5,7 +5,8 @@ use ambid::io::csv::read_frf_csv;
 use ambid::io::model::{read_kalman_gain, read_model_json};
 use ambid::io::{read_controller, read_time_csv, write_time_csv};
 use ambid::validation::{
-    consistency, residual_summary, validate_closed_loop, MeasuredLoop, ValidationSettings,
+    consistency, innovation_residuals, innovation_summary, residual_summary, validate_closed_loop,
+    MeasuredLoop, ValidationSettings,
 };
 use ambid_core::estimate::arx::fit_percent;
 use anyhow::{bail, Context, Result};
@@ -120,6 +121,17 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
         }
         None => (None, None),
     };
+    // an innovation-form model has a noise model: its 1-step prediction errors are tested for
+    // whiteness and independence (validation::innovation_residuals)
+    let innovations = match read_kalman_gain(&a.model)? {
+        Some(kg) => Some(innovation_residuals(
+            &model,
+            &kg,
+            &MeasuredLoop { w, r, y, u, ts },
+            &settings,
+        )?),
+        None => None,
+    };
     let k_step = match a.k_step {
         Some(k) => {
             let Some(kg) = read_kalman_gain(&a.model)? else {
@@ -195,6 +207,8 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
         "iso_measured": iso_measured,
         "consistency": consistency,
         "k_step_prediction": k_step.map(|(k, f)| json!({"k": k, "fit_y_pct": f})),
+        "innovation_residuals": innovations.as_ref().map(|(t, input)| json!({"tested_against": input, "tests": t})),
+        "residuals_tested_against": v.residual_input,
     });
     std::fs::write(
         a.out.join("summary.json"),
@@ -218,6 +232,9 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
         iso_model.zone,
         iso_measured.as_ref().map_or(String::new(), |m| format!(", measured max|S| {:.3} ({:?}) → zone {:?}", m.peak, m.interval, m.zone))
     );
+    if let Some((t, input)) = &innovations {
+        println!("{}", innovation_summary(t, input));
+    }
     if let Some((k, f)) = k_step {
         println!("{k}-step-ahead prediction fit of y: {f:.2} %");
     }
@@ -232,4 +249,3 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
     println!("written: {}", a.out.display());
     Ok(())
 }
-

@@ -28,7 +28,7 @@ use ambid_core::validate::closed_loop::{reconstruct, Reconstruction};
 use ambid_core::validate::iso::{sensitivity_zone, IsoVerdict, IsoZones};
 use ambid_core::validate::margins::{margins, Margins};
 use ambid_core::validate::pz::{PzAnalysis, PzOptions};
-use ambid_core::validate::residuals::{analyze_output_error, ResidualTest};
+use ambid_core::validate::residuals::{analyze, analyze_output_error, ResidualTest};
 use anyhow::{bail, Result};
 use serde::Serialize;
 
@@ -214,7 +214,11 @@ pub fn validate_closed_loop(
 /// its `residual_input`): what was tested, against what, the statistic, and why whiteness is not
 /// tested. Used by `ambid validate` and the workflow report.
 pub fn residual_summary(res: &ResidualTest, input: &str) -> String {
-    let name = if input == "r" { "excitation r" } else { "reference w" };
+    let name = if input == "r" {
+        "excitation r"
+    } else {
+        "reference w"
+    };
     let ind = res.independence.as_ref().map_or_else(
         || "not computed".to_string(),
         |c| {
@@ -232,6 +236,69 @@ pub fn residual_summary(res: &ResidualTest, input: &str) -> String {
     );
     format!(
         "residuals: output error y − ŷ independent of the {name}: {ind}; whiteness not tested (the loop's output error is S·v, coloured even for the true plant)"
+    )
+}
+
+/// Residual tests of an **innovation-form** model (Kalman gain `k_gain`, $n$ entries): its own
+/// 1-step predictor $\hat y(t|t-1)$ from the measured $y$ and $u$ (valid in closed loop, the
+/// direct method) leaves, for the true model, the white innovations $e$, independent of the
+/// excitation. So both tests apply: whiteness (Ljung–Box) and independence from `r` (or `w`
+/// without an excitation), after `s.skip` samples (the predictor's start-up from zero state
+/// should be inside it). Returns the test and the signal name (`"r"`/`"w"`).
+///
+/// # Errors
+/// A gain of the wrong length, a record with neither excitation nor reference, and the errors of
+/// the predictor and the tests.
+pub fn innovation_residuals(
+    model: &StateSpace,
+    k_gain: &[f64],
+    rec: &MeasuredLoop<'_>,
+    s: &ValidationSettings,
+) -> Result<(ResidualTest, &'static str)> {
+    if k_gain.len() != model.order() {
+        bail!(
+            "the model's Kalman gain has {} entries for {} states",
+            k_gain.len(),
+            model.order()
+        );
+    }
+    let r = rec.r.filter(|r| r.iter().any(|v| *v != 0.0));
+    let (x, name) = match r {
+        Some(r) => (r, "r"),
+        None if rec.w.iter().any(|v| *v != 0.0) => (rec.w, "w"),
+        None => bail!("the record has neither an excitation nor a position reference"),
+    };
+    let km = faer::Mat::from_fn(k_gain.len(), 1, |i, _| k_gain[i]);
+    let yhat = ambid_core::validate::predict::predict_k(model, km.as_ref(), rec.y, rec.u, 1)?;
+    let k0 = s.skip.min(rec.y.len());
+    let eps: Vec<f64> = rec.y[k0..]
+        .iter()
+        .zip(&yhat[k0..])
+        .map(|(a, b)| a - b)
+        .collect();
+    Ok((analyze(&eps, Some(&x[k0..]), s.lags)?, name))
+}
+
+/// The one-line verdict of [`innovation_residuals`].
+pub fn innovation_summary(res: &ResidualTest, input: &str) -> String {
+    let v = |c: Option<&ambid_core::validate::residuals::CorrelationTest>| {
+        c.map_or_else(
+            || "not computed".to_string(),
+            |c| {
+                format!(
+                    "{} (Q {:.1} vs 95 % threshold {:.1}, χ²({}))",
+                    if c.pass { "pass" } else { "FAIL" },
+                    c.statistic,
+                    c.threshold,
+                    c.dof
+                )
+            },
+        )
+    };
+    format!(
+        "innovations (1-step prediction errors of the model's Kalman predictor): white {}; independent of {input} {}",
+        v(res.whiteness.as_ref()),
+        v(res.independence.as_ref())
     )
 }
 

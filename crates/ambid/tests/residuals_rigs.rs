@@ -10,7 +10,10 @@
 //! Records: the seed experiment's PRBS (n = 10, 5 samples per bit, 10 % of i_sat) on the linear
 //! twin with sensor noise, 4 periods (20 460 samples) per run so that 24 rigs × 10 noise seeds
 //! fit the test-time budget; the statistic's level does not depend on the record length (it is
-//! calibrated for any N, `ambid-core/tests/validate_residuals.rs`).
+//! calibrated for any N, `ambid-core/tests/validate_residuals.rs`). With the environment variable
+//! `AMBID_RESIDUALS_FULL_LENGTH=1` the same test runs the seed experiment's full length (20
+//! periods, 102 300 samples) on 20 rigs × 4 other noise seeds (15 s in release-like test
+//! profile; not part of CI's budget).
 
 use ambid::experiment::{run, ExcitationPlan, Experiment};
 use ambid::validation::{validate_closed_loop, MeasuredLoop, ValidationSettings};
@@ -18,8 +21,14 @@ use ambid_core::lti::StateSpace;
 use ambid_core::validate::residuals::{analyze, chi2_95};
 use ambid_twin::{random_rig, Mode};
 
-const RIGS: u64 = 24;
-const NOISE_SEEDS: u64 = 10;
+/// (rigs, noise seeds per rig, PRBS periods per record, noise-seed offset)
+fn plan() -> (u64, u64, usize, u64) {
+    if std::env::var_os("AMBID_RESIDUALS_FULL_LENGTH").is_some() {
+        (20, 4, 20, 7000)
+    } else {
+        (24, 10, 4, 0)
+    }
+}
 
 fn scaled(p: &StateSpace, g: f64) -> StateSpace {
     StateSpace::new(
@@ -34,20 +43,21 @@ fn scaled(p: &StateSpace, g: f64) -> StateSpace {
 
 #[test]
 fn exact_plant_passes_at_the_95_percent_level_and_a_wrong_gain_fails() {
+    let (rigs, noise_seeds, periods, offset) = plan();
     let settings = ValidationSettings::default();
     let (mut runs, mut pass, mut white_pass, mut naive_pass) = (0, 0, 0, 0);
     let (mut wrong_runs, mut wrong_fail, mut small_fail) = (0, 0, 0);
-    for rig in 0..RIGS {
+    for rig in 0..rigs {
         let cfg = random_rig(rig).unwrap();
-        for seed in 0..NOISE_SEEDS {
+        for seed in 0..noise_seeds {
             let exp = Experiment {
                 twin: cfg.clone(),
                 excitation: ExcitationPlan {
-                    periods: 4,
+                    periods,
                     ..ExcitationPlan::default()
                 },
                 mode: Mode::Linear,
-                seed: 1000 * rig + seed,
+                seed: offset + 1000 * rig + seed,
                 noise: true,
                 record_b: false,
             };
@@ -87,13 +97,101 @@ fn exact_plant_passes_at_the_95_percent_level_and_a_wrong_gain_fails() {
     }
     let rate = pass as f64 / runs as f64;
     eprintln!(
-        "exact plant on {RIGS} rigs × {NOISE_SEEDS} noise seeds: independence from r passes {pass}/{runs} ({:.1} %); \
+        "exact plant on {rigs} rigs × {noise_seeds} noise seeds, {} samples each: independence from r passes {pass}/{runs} ({:.1} %); \
          whiteness of the output error passes {white_pass}/{runs}; white-case χ² of the cross-correlation passes {naive_pass}/{runs}; \
          10 % gain error fails {wrong_fail}/{wrong_runs}, 2 % gain error fails {small_fail}/{wrong_runs}",
+        periods * 5115,
         100.0 * rate
     );
     assert!((0.90..=0.98).contains(&rate), "{pass}/{runs}");
     assert_eq!(wrong_fail, wrong_runs);
     // the whiteness test the report used to apply rejects the exact plant almost always
     assert!(white_pass * 10 < runs, "{white_pass}/{runs}");
+}
+
+/// An innovation-form model (a Kalman gain: a noise model) is tested on its own 1-step
+/// prediction errors, which for the true model are the white innovations: whiteness and
+/// independence from r both pass at the 95 % level (200 seeds of an unstable first-order plant
+/// x⁺ = 1.01 x + u + 0.6 e, y = x + e, in closed loop with u = −0.6 y + r); a wrong noise model
+/// (K = 0.2) fails whiteness, a wrong plant gain fails independence.
+#[test]
+fn innovation_form_models_are_tested_for_whiteness_and_independence() {
+    use ambid::validation::innovation_residuals;
+    use ambid_core::signal::{Distribution, NoiseSpec};
+    use faer::Mat;
+    // seeded Gaussian white noise (ChaCha8 inside NoiseSpec)
+    let gauss = |n: usize, seed: u64| {
+        NoiseSpec {
+            distribution: Distribution::Gaussian,
+            rms: 1.0,
+            n_samples: n,
+            band_hz: None,
+            seed,
+        }
+        .generate(1.0)
+        .unwrap()
+        .values
+    };
+    let (a, b, k, kp, n) = (1.01, 1.0, 0.6, 0.6, 4000);
+    let ss = |b: f64| {
+        StateSpace::new(
+            Mat::from_fn(1, 1, |_, _| a),
+            Mat::from_fn(1, 1, |_, _| b),
+            Mat::from_fn(1, 1, |_, _| 1.0),
+            Mat::zeros(1, 1),
+            Some(1.0),
+        )
+        .unwrap()
+    };
+    let (truth, wrong_gain) = (ss(b), ss(1.3 * b));
+    let settings = ValidationSettings::default();
+    let seeds = 200;
+    let (mut white, mut indep, mut wrong_k_white, mut wrong_b_indep) = (0, 0, 0, 0);
+    for seed in 0..seeds {
+        // a random binary excitation held 5 samples, and the innovations e
+        let bits = gauss(n / 5 + 1, 2 * seed);
+        let r: Vec<f64> = (0..n).map(|t| bits[t / 5].signum()).collect();
+        let noise = gauss(n, 2 * seed + 1);
+        let (mut x, mut y, mut u) = (0.0, vec![0.0; n], vec![0.0; n]);
+        for t in 0..n {
+            let e = noise[t];
+            y[t] = x + e;
+            u[t] = -kp * y[t] + r[t];
+            x = a * x + b * u[t] + k * e;
+        }
+        let w = vec![0.0; n];
+        let rec = MeasuredLoop {
+            w: &w,
+            r: Some(&r),
+            y: &y,
+            u: &u,
+            ts: 1.0,
+        };
+        let (t, input) = innovation_residuals(&truth, &[k], &rec, &settings).unwrap();
+        assert_eq!(input, "r");
+        white += usize::from(t.whiteness.unwrap().pass);
+        indep += usize::from(t.independence.unwrap().pass);
+        let (t, _) = innovation_residuals(&truth, &[0.2], &rec, &settings).unwrap();
+        wrong_k_white += usize::from(!t.whiteness.unwrap().pass);
+        let (t, _) = innovation_residuals(&wrong_gain, &[k], &rec, &settings).unwrap();
+        wrong_b_indep += usize::from(!t.independence.unwrap().pass);
+    }
+    eprintln!(
+        "innovation model, {seeds} seeds: true model white {white}, independent of r {indep}; \
+         K = 0.2 fails whiteness {wrong_k_white}; 30 % gain error fails independence {wrong_b_indep}"
+    );
+    for p in [white, indep] {
+        assert!((180..=196).contains(&p), "{p}");
+    }
+    assert_eq!(wrong_k_white, seeds as usize);
+    assert_eq!(wrong_b_indep, seeds as usize);
+    // a gain of the wrong size is refused
+    let rec = MeasuredLoop {
+        w: &[0.0; 200],
+        r: Some(&[1.0; 200]),
+        y: &[0.0; 200],
+        u: &[0.0; 200],
+        ts: 1.0,
+    };
+    assert!(innovation_residuals(&truth, &[0.1, 0.2], &rec, &settings).is_err());
 }

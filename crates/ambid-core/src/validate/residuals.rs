@@ -329,7 +329,9 @@ fn jacobi_eigen(a: &[f64], p: usize) -> (Vec<f64>, Vec<f64>) {
 fn dominant_subspace(a: &[f64], p: usize, rtol: f64) -> (Vec<f64>, usize) {
     let (l, v) = jacobi_eigen(a, p);
     let lmax = l.iter().copied().fold(0.0, f64::max);
-    let keep: Vec<usize> = (0..p).filter(|&i| l[i] > rtol * lmax && l[i] > 0.0).collect();
+    let keep: Vec<usize> = (0..p)
+        .filter(|&i| l[i] > rtol * lmax && l[i] > 0.0)
+        .collect();
     let r = keep.len();
     let mut w = vec![0.0; p * r];
     for (c, &i) in keep.iter().enumerate() {
@@ -469,7 +471,13 @@ fn autocov(x: &[f64], m: usize) -> Vec<f64> {
     }
     inv.process(&mut buf);
     (0..=m)
-        .map(|k| if k >= n { 0.0 } else { buf[k].re / (len as f64 * nf) })
+        .map(|k| {
+            if k >= n {
+                0.0
+            } else {
+                buf[k].re / (len as f64 * nf)
+            }
+        })
         .collect()
 }
 
@@ -548,11 +556,16 @@ mod tests {
     /// The FFT autocovariance equals the direct sums.
     #[test]
     fn fft_autocovariance_matches_the_sums() {
-        let x: Vec<f64> = (0..1000).map(|k| ((k * k) % 17) as f64 - 8.0 + (0.1 * k as f64).sin()).collect();
+        let x: Vec<f64> = (0..1000)
+            .map(|k| ((k * k) % 17) as f64 - 8.0 + (0.1 * k as f64).sin())
+            .collect();
         let fast = autocov(&x, 300);
         for (k, f) in fast.iter().enumerate() {
             let direct = x[k..].iter().zip(&x).map(|(a, b)| a * b).sum::<f64>() / 1000.0;
-            assert!((f - direct).abs() < 1e-10 * (1.0 + direct.abs()), "{k}: {f} {direct}");
+            assert!(
+                (f - direct).abs() < 1e-10 * (1.0 + direct.abs()),
+                "{k}: {f} {direct}"
+            );
         }
         assert_eq!(autocov(&x[..10], 70)[50], 0.0);
     }
