@@ -12,7 +12,7 @@ use ambid_core::c64;
 use ambid_core::estimate::arx::fit_percent;
 use ambid_core::lti::Frd;
 use ambid_core::validate::iso::{sensitivity_zone, IsoZones};
-use ambid_core::validate::residuals::{analyze, ResidualTest};
+use ambid_core::validate::residuals::{analyze, analyze_output_error, ResidualTest};
 use serde_json::json;
 
 fn settings(ctx: &Ctx<'_>, n: usize) -> ValidationSettings {
@@ -80,29 +80,33 @@ fn time_figure(
     Block::Figure(figure(id, title, caption, panels, 2))
 }
 
-fn residual_figure(res: &ResidualTest, input: &str) -> Block {
-    let w = &res.whiteness;
-    let lags: Vec<f64> = w.lags.iter().map(|l| *l as f64).collect();
+/// The residual figure: `error` names the residual, `no_white` says why whiteness is not tested
+/// when it is not.
+fn residual_figure(res: &ResidualTest, input: &str, error: &str, no_white: &str) -> Block {
     let bound = |x: &[f64], b: f64| {
         vec![
             series("+95 % bound", x, &vec![b; x.len()], Style::Dashed, Some(7)),
             series("−95 % bound", x, &vec![-b; x.len()], Style::Dashed, Some(7)),
         ]
     };
-    let mut s1 = vec![series(
-        "autocorrelation",
-        &lags,
-        &w.values,
-        Style::Stems,
-        Some(0),
-    )];
-    s1.extend(bound(&lags, w.bound));
-    let mut panels = vec![xy(
-        "whiteness",
-        lin("lag [samples]"),
-        lin("normalised correlation [-]"),
-        s1,
-    )];
+    let mut panels = Vec::new();
+    if let Some(w) = &res.whiteness {
+        let lags: Vec<f64> = w.lags.iter().map(|l| *l as f64).collect();
+        let mut s1 = vec![series(
+            "autocorrelation",
+            &lags,
+            &w.values,
+            Style::Stems,
+            Some(0),
+        )];
+        s1.extend(bound(&lags, w.bound));
+        panels.push(xy(
+            "whiteness",
+            lin("lag [samples]"),
+            lin("normalised correlation [-]"),
+            s1,
+        ));
+    }
     if let Some(c) = &res.independence {
         let l: Vec<f64> = c.lags.iter().map(|l| *l as f64).collect();
         let mut s2 = vec![series(
@@ -114,31 +118,45 @@ fn residual_figure(res: &ResidualTest, input: &str) -> Block {
         )];
         s2.extend(bound(&l, c.bound));
         panels.push(xy(
-            &format!("independence from {input}"),
+            &format!("{error} independent of {input}"),
             lin("lag [samples]"),
             lin("normalised correlation [-]"),
             s2,
         ));
     }
+    let verdict = |c: &ambid_core::validate::residuals::CorrelationTest| {
+        format!(
+            "{} (Q = {}, 95 % threshold {} of χ²({}))",
+            if c.pass { "pass" } else { "fail" },
+            fmt(c.statistic),
+            fmt(c.threshold),
+            c.dof
+        )
+    };
+    let ind = res.independence.as_ref().map_or_else(
+        || "not computed".to_string(),
+        |c| {
+            format!(
+                "lags ±{}, with the per-lag 95 % bound of coloured signals ±1.96·√(σ̂(0)/(R̂ε(0)R̂r(0)))/√N \
+                 (N = {}); the verdict is one portmanteau test N xᵀΣ̂⁺x of all lags together, Σ̂ from \
+                 the error's and the {input}'s autocovariances (Parzen window, K = {} lags): {}",
+                c.lags.len() / 2,
+                res.n_samples,
+                c.covariance_lags,
+                verdict(c)
+            )
+        },
+    );
+    let white = res.whiteness.as_ref().map_or_else(
+        || format!("Whiteness is not tested: {no_white}."),
+        |w| format!("Whiteness: {}.", verdict(w)),
+    );
     Block::Figure(figure(
         "residuals",
-        "Residual correlation tests",
+        "Residual tests",
         format!(
-            "Autocorrelation of the output error (lags 1–{}) and its cross-correlation with the {input} \
-             (lags ±{}), with the 95 % bounds ±1.96/√N (N = {}). Whiteness: {} (statistic {}, 95 % \
-             threshold {}); independence: {}.",
-            w.lags.len(),
-            res.independence.as_ref().map_or(0, |c| c.lags.len() / 2),
-            res.n_samples,
-            if w.pass { "pass" } else { "fail" },
-            fmt(w.statistic),
-            fmt(w.threshold),
-            res.independence.as_ref().map_or("—".to_string(), |c| format!(
-                "{} (statistic {}, threshold {})",
-                if c.pass { "pass" } else { "fail" },
-                fmt(c.statistic),
-                fmt(c.threshold)
-            ))
+            "Cross-correlation of the {error} with the {input} ({ind}). The true model passes each test \
+             in 95 % of records. {white}"
         ),
         panels,
         2,
@@ -146,12 +164,15 @@ fn residual_figure(res: &ResidualTest, input: &str) -> Block {
 }
 
 fn put_residuals(ctx: &mut Ctx<'_>, res: &ResidualTest) {
-    ctx.put("residuals.whiteness_statistic", res.whiteness.statistic);
-    ctx.put("residuals.whiteness_threshold", res.whiteness.threshold);
-    ctx.put("residuals.whiteness_pass", res.whiteness.pass);
+    if let Some(w) = &res.whiteness {
+        ctx.put("residuals.whiteness_statistic", w.statistic);
+        ctx.put("residuals.whiteness_threshold", w.threshold);
+        ctx.put("residuals.whiteness_pass", w.pass);
+    }
     if let Some(c) = &res.independence {
         ctx.put("residuals.independence_statistic", c.statistic);
         ctx.put("residuals.independence_threshold", c.threshold);
+        ctx.put("residuals.independence_dof", c.dof);
         ctx.put("residuals.independence_pass", c.pass);
     }
 }
@@ -261,11 +282,13 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             put_residuals(ctx, &v.residuals);
             blocks.push(residual_figure(
                 &v.residuals,
-                if val.r.is_some() {
+                if v.residual_input == "r" {
                     "excitation r"
                 } else {
                     "reference w"
                 },
+                "closed-loop output error y − ŷ",
+                "the output error of the model simulated in closed loop is the sensor noise through the loop, S·v, coloured even for the true plant (and correlated with u, so u is not the test signal)",
             ));
             ctx.validation = Some(v);
         }
@@ -293,7 +316,26 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             ctx.put("validation.fit_y_pct", fit);
             ctx.put("validation.kind", kind);
             let eps: Vec<f64> = val.y.iter().zip(&yhat).map(|(a, b)| a - b).collect();
-            let res = analyze(&eps, Some(&val.u), ctx.cfg.validation.lags).map_err(computation)?;
+            // the quantity that should be white / independent (docs/validation.md): a one-step
+            // prediction error of a model with a noise model is white and independent of the
+            // input; a simulation error (no noise model) is only independent of it. In closed loop
+            // the test signal is the excitation r (or reference w), never u (it contains −C v).
+            let test_signal: Option<(&[f64], &str)> = if closed {
+                match (val.r.as_deref(), val.w.as_deref()) {
+                    (Some(r), _) if r.iter().any(|v| *v != 0.0) => Some((r, "excitation r")),
+                    (_, Some(w)) if w.iter().any(|v| *v != 0.0) => Some((w, "reference w")),
+                    _ => None,
+                }
+            } else {
+                Some((&val.u, "input u"))
+            };
+            let lags = ctx.cfg.validation.lags;
+            let one_step = kind == super::steps_models::ONE_STEP;
+            let res = match (one_step, test_signal) {
+                (true, t) => Some((analyze(&eps, t.map(|t| t.0), lags), t.map_or("—", |t| t.1))),
+                (false, Some((x, name))) => Some((analyze_output_error(&eps, x, lags), name)),
+                (false, None) => None,
+            };
             blocks.push(Block::Text(format!(
                 "The chosen model {label} on the validation record ({} samples): {kind} fit {} %.",
                 val.len(),
@@ -311,8 +353,24 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                 val.ts,
                 &[("y", &val.y, &yhat, &super::data::y_unit(ctx))],
             ));
-            put_residuals(ctx, &res);
-            blocks.push(residual_figure(&res, "input u"));
+            match res {
+                Some((res, signal)) => {
+                    let res = res.map_err(computation)?;
+                    put_residuals(ctx, &res);
+                    blocks.push(residual_figure(
+                        &res,
+                        signal,
+                        if one_step { "1-step prediction error" } else { "simulation error" },
+                        "the simulation error of a model is the noise as it reaches the output, coloured unless the noise is white, whatever the model",
+                    ));
+                }
+                None => blocks.push(Ctx::note(
+                    NoteKind::Warning,
+                    "No residual test: the simulation error of closed-loop data can only be tested against \
+                     an excitation r or a reference w (not u, which contains the fed-back noise), and the \
+                     record has neither.",
+                )),
+            }
         }
     }
     ctx.section("validation", "Validation on an independent record", blocks);
