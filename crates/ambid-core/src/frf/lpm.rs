@@ -1,5 +1,5 @@
 //! The Local Polynomial Method (LPM): frequency responses, transients and noise covariances from
-//! one non-periodic record.
+//! one record — non-periodic, or periodic with whole periods (the periodic LPM, see [`lpm`]).
 //!
 //! # Model
 //! The whole record of $N$ samples is transformed once, without a window,
@@ -58,7 +58,9 @@
 //! (≈ 0.5–0.8 µs per line; the FFTs are < 2 %); see `benches/lpm.rs` and `docs/lpm.md`.
 //!
 //! # Requirements
-//! * the input must excite every window (a window where $\sum |U|^2 = 0$ is an error);
+//! * the input must excite the band: lines whose window holds less than [`EXCITED_FRACTION`]
+//!   of the input's average line power are left out ([`Lpm::excluded_lines`]), and a band
+//!   without any excited line is an error;
 //! * $G$ and $T$ must be smooth on the scale of the window, $2n+1$ lines of $f_s/N$: the
 //!   polynomial approximation error (bias) grows like $(w/B)^{R+1}$ where $B$ is the 3 dB width
 //!   of the sharpest resonance in lines; with lightly damped modes use long records;
@@ -124,8 +126,8 @@ impl Default for LpmOptions {
 }
 
 /// Candidate degrees and half widths of [`LpmOptions::auto`]: $R \in \{1, 2\}$ and
-/// $n \in \{R + 2, 6, 8, 11, 16, 22, 32\}$ (windows of $2R + 5$ to 65 lines, geometric steps of
-/// ≈ 1.4).
+/// $n \in \{R + 2, 6, 8, 11, 16, 22, 32, 45, 64\}$ (windows of $2R + 5$ to 129 lines, geometric
+/// steps of ≈ 1.4).
 pub const AUTO_CANDIDATES: [(usize, usize); 18] = [
     (1, 3),
     (1, 6),
