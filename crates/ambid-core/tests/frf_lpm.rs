@@ -383,7 +383,11 @@ fn periodic_input_uses_the_periodic_lpm() {
         // this random periodic signal has less than 1 % of its average line power (about 1 % of
         // the lines for a Gaussian spectrum)
         assert_eq!(est.lines().len() + est.excluded_lines().len(), 255);
-        assert!(est.excluded_lines().len() <= 6, "{:?}", est.excluded_lines());
+        assert!(
+            est.excluded_lines().len() <= 6,
+            "{:?}",
+            est.excluded_lines()
+        );
         // naive DFT oracle: the excluded lines are those below 1 % of the mean power of the
         // multiples of 8 (lines 8..=2048)
         let power = |k: usize| {
@@ -467,9 +471,17 @@ fn lines_without_input_power_are_left_out() {
     assert_eq!(est.periods(), None);
     let df = fs / u.len() as f64;
     let f_in: Vec<f64> = est.lines().iter().map(|&k| k as f64 * df).collect();
-    let f_out: Vec<f64> = est.excluded_lines().iter().map(|&k| k as f64 * df).collect();
+    let f_out: Vec<f64> = est
+        .excluded_lines()
+        .iter()
+        .map(|&k| k as f64 * df)
+        .collect();
     // kept: about 100–300 Hz (the window's reach around the edges); left out: the rest
-    assert!(f_in.iter().all(|f| (90.0..=310.0).contains(f)), "{:?}", f_in.first());
+    assert!(
+        f_in.iter().all(|f| (90.0..=310.0).contains(f)),
+        "{:?}",
+        f_in.first()
+    );
     assert!(f_out.iter().all(|f| !(110.0..=290.0).contains(f)));
     assert!(f_out.iter().any(|f| *f < 50.0) && f_out.iter().any(|f| *f > 400.0));
     assert_eq!(

@@ -371,7 +371,7 @@ fn print_excluded(excluded: &[usize], step: usize, df: f64) {
         .map(|(a, b)| format!("{:.1}–{:.1} Hz", *a as f64 * df, *b as f64 * df))
         .collect();
     println!(
-        "left out: {} lines of the band where r has less than {} % of its average line power: {}{}",
+        "left out: {} lines of the band where r has less than {} % of its average line power, in {}{}",
         excluded.len(),
         100.0 * ambid_core::frf::lpm::EXCITED_FRACTION,
         shown.join(", "),
@@ -379,12 +379,13 @@ fn print_excluded(excluded: &[usize], step: usize, df: f64) {
     );
 }
 
-/// Runs of consecutive lines (`step` apart) as `(first, last)`.
+/// Runs of lines `step` apart as `(first, last)`, bridging gaps of up to 20 steps (so that a
+/// ragged excitation edge reads as one range).
 fn line_ranges(lines: &[usize], step: usize) -> Vec<(usize, usize)> {
     let mut out: Vec<(usize, usize)> = Vec::new();
     for &k in lines {
         match out.last_mut() {
-            Some(r) if k == r.1 + step => r.1 = k,
+            Some(r) if k <= r.1 + 20 * step => r.1 = k,
             _ => out.push((k, k)),
         }
     }

@@ -156,8 +156,34 @@ impl LpmOptions {
     }
 
     /// A window chosen from the data: among [`AUTO_CANDIDATES`] the $(R, n)$ with the smallest
-    /// estimated error of $\hat G$ (see [`lpm`]). For a periodic record the transient window is
-    /// set by the number of periods (see [`lpm`]) with $R = 2$.
+    /// leave-one-out error (see [`lpm`]). For a periodic record the transient window is set by
+    /// the number of periods (see [`lpm`]) with $R = 2$.
+    ///
+    /// # Example
+    /// ```
+    /// use ambid_core::frf::lpm::{lpm, LpmOptions};
+    /// use rand::{RngExt, SeedableRng};
+    /// use rand_chacha::ChaCha8Rng;
+    /// let mut rng = ChaCha8Rng::seed_from_u64(3);
+    /// let fs = 1000.0;
+    /// let truth = |f: f64| 1.0 + ambid_core::c64::cis(-2.0 * std::f64::consts::PI * f / fs) * 0.5;
+    /// // y(t) = u(t) + 0.5 u(t−1), started from rest
+    /// let fir = |u: &[f64]| -> Vec<f64> {
+    ///     (0..u.len()).map(|t| u[t] + 0.5 * if t > 0 { u[t - 1] } else { 0.0 }).collect()
+    /// };
+    /// // a non-periodic record: the window is chosen from the data
+    /// let u: Vec<f64> = (0..8192).map(|_| rng.random_range(-1.0..1.0)).collect();
+    /// let est = lpm(&u, &[&fir(&u)], fs, (5.0, 450.0), &LpmOptions::auto()).unwrap();
+    /// assert!(est.window_chosen() && est.periods().is_none());
+    /// let g = est.frf(0).unwrap();
+    /// assert!(g.f_hz().iter().zip(g.values()).all(|(f, v)| (v - truth(*f)).norm() < 1e-6));
+    /// // 4 periods of 1024 samples: the periodic LPM on every 4th line
+    /// let one: Vec<f64> = (0..1024).map(|_| rng.random_range(-1.0..1.0)).collect();
+    /// let u: Vec<f64> = (0..4096).map(|t| one[t % 1024]).collect();
+    /// let est = lpm(&u, &[&fir(&u)], fs, (5.0, 450.0), &LpmOptions::auto()).unwrap();
+    /// assert_eq!(est.periods(), Some(4));
+    /// assert!(est.lines().iter().all(|k| k % 4 == 0));
+    /// ```
     pub fn auto() -> Self {
         Self {
             degree: 2,
@@ -1383,5 +1409,38 @@ mod tests {
             1
         );
         assert!(LpmOptions::new().with_degree(9).is_err());
+        let a = LpmOptions::auto();
+        assert!(a.is_auto() && !LpmOptions::default().is_auto());
+        assert!(!a.with_degree(1).unwrap().is_auto());
+        assert!(!a.with_half_width(10).unwrap().is_auto());
+    }
+
+    #[test]
+    fn periods_are_detected_from_the_line_pattern() {
+        let z = c64::new(0.0, 0.0);
+        let mut uf = vec![z; 65];
+        for k in (6..=64).step_by(6) {
+            uf[k] = c64::new(1.0, -0.5);
+        }
+        assert_eq!(detect_periods(&uf, 64), Some(6));
+        // round-off on the other lines does not count, leakage does
+        uf[7] = c64::new(1e-7, 0.0);
+        assert_eq!(detect_periods(&uf, 64), Some(6));
+        uf[7] = c64::new(1e-3, 0.0);
+        assert_eq!(detect_periods(&uf, 64), None);
+        assert_eq!(detect_periods(&vec![z; 65], 64), None);
+    }
+
+    #[test]
+    fn small_inverse_matches_the_identity() {
+        let a = [4.0, 1.0, 0.5, 1.0, 3.0, 0.2, 0.5, 0.2, 2.0];
+        let inv = small_spd_inverse(&a, 3).unwrap();
+        for i in 0..3 {
+            for j in 0..3 {
+                let v: f64 = (0..3).map(|k| a[i * 3 + k] * inv[k * 3 + j]).sum();
+                assert!((v - if i == j { 1.0 } else { 0.0 }).abs() < 1e-14);
+            }
+        }
+        assert!(small_spd_inverse(&[1.0, 1.0, 1.0, 1.0], 2).is_none());
     }
 }
