@@ -719,7 +719,7 @@ fn choose_window(prep: &Prepared, p: usize) -> Result<(usize, usize)> {
             }
             let j = k - window_lo(k, n, prep.n_lines);
             let h = fit.center_leverage(prep.uf[k]);
-            if !(h < 1.0 - 1e-9) {
+            if h.is_nan() || h >= 1.0 - 1e-9 {
                 continue;
             }
             for o in 0..p {
@@ -1104,12 +1104,12 @@ pub(super) fn prepare(
 /// periodic input (the lines in between carry only round-off).
 pub(super) fn detect_periods(uf: &[c64], n_lines: usize) -> Option<usize> {
     let pmax = (1..=n_lines).map(|k| uf[k].norm_sqr()).fold(0.0, f64::max);
-    if !(pmax > 0.0) {
+    if pmax.is_nan() || pmax <= 0.0 {
         return None;
     }
     let mut g = 0usize;
-    for k in 1..=n_lines {
-        if uf[k].norm_sqr() > 1e-10 * pmax {
+    for (k, z) in uf.iter().enumerate().take(n_lines + 1).skip(1) {
+        if z.norm_sqr() > 1e-10 * pmax {
             g = gcd(g, k);
             if g == 1 {
                 return None;
