@@ -80,7 +80,8 @@ pub struct FrfArgs {
     /// Controller file (TOML/JSON: pid, tf or ss) for the indirect plant estimate.
     #[arg(long)]
     controller: Option<PathBuf>,
-    /// Samples per excitation period: selects period-synchronous averaging (otherwise Welch).
+    /// Samples per excitation period: selects period-synchronous averaging (otherwise Welch);
+    /// with `--method lpm|lrm`, cuts the record to whole periods.
     #[arg(long)]
     period_samples: Option<usize>,
     /// Leading periods dropped as transient (period averaging).
@@ -397,6 +398,28 @@ fn frf_local(a: &FrfArgs, r: &[f64], u: &[f64], y: &[f64], fs: f64) -> Result<()
     use ambid_core::frf::lpm::{lpm_closed_loop, LpmOptions};
     use ambid_core::frf::lrm::{lrm_closed_loop, LrmOptions};
     let band = a.band.unwrap_or((1.0, 0.5 * fs));
+    // with --period-samples: whole periods only (the LPM detects periodic inputs from the line
+    // pattern, which needs a whole number of periods)
+    let (r, u, y) = match a.period_samples {
+        Some(p) if p > 0 => {
+            let m = r.len() / p * p;
+            if m < 2 * p {
+                bail!(
+                    "--period-samples {p}: the record of {} samples holds fewer than two periods",
+                    r.len()
+                );
+            }
+            if m < r.len() {
+                println!(
+                    "--period-samples {p}: using the first {} whole periods ({m} of {} samples)",
+                    m / p,
+                    r.len()
+                );
+            }
+            (&r[..m], &u[..m], &y[..m])
+        }
+        _ => (r, u, y),
+    };
     // the three FRFs of either local method, and a description
     let (t_ry, t_ru, plant, what) = if a.method == MethodArg::Lrm {
         let [rn, rd, rm] = <[usize; 3]>::try_from(a.lrm_degrees.as_slice()).map_err(|_| {
@@ -427,6 +450,18 @@ fn frf_local(a: &FrfArgs, r: &[f64], u: &[f64], y: &[f64], fs: f64) -> Result<()
         };
         let c = lpm_closed_loop(r, u, y, fs, band, &opts)?;
         let fit = &c.fit;
+        if let Some(p) = a.period_samples.filter(|&p| p > 0) {
+            if fit.periods() != Some(r.len() / p) {
+                eprintln!(
+                    "warning: --period-samples {p} given, but r is not periodic with that period over \
+                     the record's {} whole periods (line pattern: {}); the LPM for non-periodic data \
+                     was used",
+                    r.len() / p,
+                    fit.periods()
+                        .map_or("no period".to_string(), |q| format!("{q} periods"))
+                );
+            }
+        }
         let what = match fit.periods() {
             Some(p) => format!(
                 "LPM for periodic data: r holds {p} periods of {} samples; FRFs on the excited lines \

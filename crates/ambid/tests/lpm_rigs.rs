@@ -360,4 +360,58 @@ fn cli_lpm_on_a_periodic_record_of_a_random_rig() {
         "{t}"
     );
     assert!(!d.join("lrm.csv").exists());
+    // a record that is not a whole number of periods (the first 100 000 samples): the line
+    // pattern shows no period, the LPM for non-periodic data runs; with --period-samples the
+    // record is cut to 19 whole periods and the periodic LPM runs
+    let cut = d.join("cut.csv");
+    let all = std::fs::read_to_string(&data).unwrap();
+    let head: Vec<&str> = all.lines().take(100_001).collect();
+    std::fs::write(&cut, head.join("\n") + "\n").unwrap();
+    let median_on = |path: &std::path::Path| {
+        let frf = ambid::io::csv::read_frf_csv(path).unwrap();
+        let est = frf.frd("plant", 5e-5).unwrap();
+        let (f, v): (Vec<f64>, Vec<c64>) = est
+            .f_hz()
+            .iter()
+            .zip(est.values())
+            .filter(|(f, _)| (10.0..=1000.0).contains(*f))
+            .map(|(f, v)| (*f, *v))
+            .unzip();
+        ambid::validation::median_relative_error(&v, &twin.plant_frf(&f).unwrap())
+    };
+    let o = ambid(&[
+        "frf",
+        s(&cut),
+        "--method",
+        "lpm",
+        "--out",
+        s(&d.join("c1.csv")),
+    ]);
+    let t = text(&o);
+    println!("{t}");
+    assert!(o.status.success(), "{t}");
+    assert!(t.contains("chosen from the record"), "{t}");
+    let med_np = median_on(&d.join("c1.csv"));
+    let o = ambid(&[
+        "frf",
+        s(&cut),
+        "--method",
+        "lpm",
+        "--period-samples",
+        "5115",
+        "--out",
+        s(&d.join("c2.csv")),
+    ]);
+    let t = text(&o);
+    println!("{t}");
+    assert!(o.status.success(), "{t}");
+    assert!(t.contains("using the first 19 whole periods (97185 of 100000 samples)"));
+    assert!(t.contains("r holds 19 periods of 5115 samples"));
+    let med_p = median_on(&d.join("c2.csv"));
+    println!(
+        "100 000 samples of the periodic record: non-periodic LPM {:.3} %, cut to 19 periods {:.3} %",
+        100.0 * med_np,
+        100.0 * med_p
+    );
+    assert!(med_p < 0.05, "{med_p}");
 }
