@@ -528,7 +528,9 @@ pub const EXCITED_FRACTION: f64 = 1e-2;
 ///   [`EXCITED_FRACTION`] of its average line power are left out and listed in
 ///   [`Lpm::excluded_lines`] (not an error unless no line is left).
 /// * **Periodic input** (detected: every DFT line with more than $10^{-10}$ of the largest line
-///   power is a multiple of some $P \ge 2$, i.e. the record holds $P$ whole periods): the
+///   power is a multiple of some $P \ge 2$, i.e. the record holds $P$ whole periods; or, for a
+///   measured input with noise, $P$ is the largest divisor of $N$ with less than
+///   [`PERIODIC_OFF_FRACTION`] = $10^{-3}$ of the input power off the multiples of $P$): the
 ///   non-excited lines carry only transient and noise, so the *periodic LPM* is used
 ///   (Pintelon et al. 2011, "Part II"): around each excited line $k$ a polynomial of degree $R$
 ///   (2 in [`LpmOptions::auto`]) is fitted to the $m = \max(2(P-1),\, 2(R+1)+6)$ nearest
@@ -1085,7 +1087,7 @@ pub(super) fn prepare(
     let uf = dft(u)?;
     let yf: Vec<Vec<c64>> = ys.iter().map(|y| dft(y)).collect::<Result<_>>()?;
     let mean_power = uf.iter().skip(1).map(|z| z.norm_sqr()).sum::<f64>() / n_lines as f64;
-    let periods = detect_periods(&uf, n_lines);
+    let periods = detect_periods(&uf, n_lines, n);
     Ok(Prepared {
         uf,
         yf,
@@ -1099,24 +1101,45 @@ pub(super) fn prepare(
     })
 }
 
-/// `Some(P)` when every line $1..\lfloor N/2\rfloor$ of `uf` with more than $10^{-10}$ of the
-/// largest line power is a multiple of $P \ge 2$: the record then holds $P$ whole periods of a
-/// periodic input (the lines in between carry only round-off).
-pub(super) fn detect_periods(uf: &[c64], n_lines: usize) -> Option<usize> {
-    let pmax = (1..=n_lines).map(|k| uf[k].norm_sqr()).fold(0.0, f64::max);
+/// Fraction of a measured input's power (lines $1..\lfloor N/2\rfloor$) that may lie off the
+/// multiples of $P$ for the record to count as $P$ periods of a periodic input with measurement
+/// noise (−30 dB); see [`lpm`].
+pub const PERIODIC_OFF_FRACTION: f64 = 1e-3;
+
+/// `Some(P)` when the record of `n` samples holds $P \ge 2$ periods of a periodic input: every
+/// line $1..\lfloor N/2\rfloor$ of `uf` with more than $10^{-10}$ of the largest line power is a
+/// multiple of $P$ (a generated signal: the lines in between carry only round-off), or else,
+/// for a measured (noisy) input, $P$ is the largest divisor of $N$ for which the lines that are
+/// not multiples of $P$ hold less than [`PERIODIC_OFF_FRACTION`] of the power.
+pub(super) fn detect_periods(uf: &[c64], n_lines: usize, n: usize) -> Option<usize> {
+    let pw: Vec<f64> = (0..=n_lines).map(|k| uf[k].norm_sqr()).collect();
+    let pmax = pw[1..].iter().copied().fold(0.0, f64::max);
     if pmax.is_nan() || pmax <= 0.0 {
         return None;
     }
     let mut g = 0usize;
-    for (k, z) in uf.iter().enumerate().take(n_lines + 1).skip(1) {
-        if z.norm_sqr() > 1e-10 * pmax {
+    for (k, &v) in pw.iter().enumerate().skip(1) {
+        if v > 1e-10 * pmax {
             g = gcd(g, k);
             if g == 1 {
-                return None;
+                break;
             }
         }
     }
-    (g >= 2).then_some(g)
+    if g >= 2 {
+        return Some(g);
+    }
+    let total: f64 = pw[1..].iter().sum();
+    (2..=n_lines / 2).rev().filter(|p| n % p == 0).find(|&p| {
+        let off: f64 = pw
+            .iter()
+            .enumerate()
+            .skip(1)
+            .filter(|(k, _)| k % p != 0)
+            .map(|(_, v)| v)
+            .sum();
+        off < PERIODIC_OFF_FRACTION * total
+    })
 }
 
 fn gcd(a: usize, b: usize) -> usize {
@@ -1422,13 +1445,31 @@ mod tests {
         for k in (6..=64).step_by(6) {
             uf[k] = c64::new(1.0, -0.5);
         }
-        assert_eq!(detect_periods(&uf, 64), Some(6));
-        // round-off on the other lines does not count, leakage does
+        assert_eq!(detect_periods(&uf, 64, 128), Some(6));
+        // round-off on the other lines does not count
         uf[7] = c64::new(1e-7, 0.0);
-        assert_eq!(detect_periods(&uf, 64), Some(6));
-        uf[7] = c64::new(1e-3, 0.0);
-        assert_eq!(detect_periods(&uf, 64), None);
-        assert_eq!(detect_periods(&vec![z; 65], 64), None);
+        assert_eq!(detect_periods(&uf, 64, 128), Some(6));
+        // noise below −30 dB: periodic with the largest divisor of N = 120 that fits (6)
+        uf[7] = c64::new(1e-2, 0.0);
+        assert_eq!(detect_periods(&uf, 60, 120), Some(6));
+        // with N = 128 (6 does not divide it) the largest fit is 2 periods of 64 samples: all
+        // the power but the noise is on even lines
+        assert_eq!(detect_periods(&uf, 64, 128), Some(2));
+        // more power off the multiples: not periodic
+        uf[7] = c64::new(0.5, 0.0);
+        assert_eq!(detect_periods(&uf, 60, 120), None);
+        assert_eq!(detect_periods(&vec![z; 65], 64, 128), None);
+        // white noise is not periodic
+        let mut rng = 1u64;
+        let noise: Vec<c64> = (0..=512)
+            .map(|_| {
+                rng = rng
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                c64::new((rng >> 11) as f64 / (1u64 << 53) as f64 - 0.5, 0.1)
+            })
+            .collect();
+        assert_eq!(detect_periods(&noise, 512, 1024), None);
     }
 
     #[test]
