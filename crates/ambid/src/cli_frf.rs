@@ -80,7 +80,8 @@ pub struct FrfArgs {
     /// Controller file (TOML/JSON: pid, tf or ss) for the indirect plant estimate.
     #[arg(long)]
     controller: Option<PathBuf>,
-    /// Samples per excitation period: selects period-synchronous averaging (otherwise Welch).
+    /// Samples per excitation period: selects period-synchronous averaging (otherwise Welch);
+    /// with `--method lpm|lrm`, cuts the record to whole periods.
     #[arg(long)]
     period_samples: Option<usize>,
     /// Leading periods dropped as transient (period averaging).
@@ -127,14 +128,15 @@ pub struct FrfArgs {
     /// Method: like `lpm`, better on lightly damped modes narrower than the window).
     #[arg(long, value_enum, default_value_t = MethodArg::Auto)]
     method: MethodArg,
-    /// LPM: polynomial degree R.
-    #[arg(long, default_value_t = 2)]
-    lpm_degree: usize,
+    /// LPM: polynomial degree R (default: R and the window chosen from the record by
+    /// leave-one-out cross-validation, see docs/lpm.md; 2 when only --lpm-half-width is given).
+    #[arg(long)]
+    lpm_degree: Option<usize>,
     /// LRM: degrees of numerator, denominator and transient, `Rn,Rd,Rm`.
     #[arg(long, value_delimiter = ',', default_values_t = [2usize, 2, 2])]
     lrm_degrees: Vec<usize>,
-    /// LPM/LRM: half width n of the local window (2n + 1 lines); default: the smallest window
-    /// with 3 (LPM) or 5 (LRM) degrees of freedom.
+    /// LPM/LRM: half width n of the local window (2n + 1 lines); default: chosen from the record
+    /// (LPM, see --lpm-degree), the smallest window with 5 degrees of freedom (LRM).
     #[arg(long, alias = "half-width")]
     lpm_half_width: Option<usize>,
     /// Output FRF CSV.
@@ -375,11 +377,67 @@ pub fn frf(a: FrfArgs) -> Result<()> {
     Ok(())
 }
 
+/// Reports the band's lines a local method left out for lack of excitation (`step` apart when
+/// consecutive, `df` Hz per line).
+fn print_excluded(excluded: &[usize], step: usize, df: f64) {
+    if excluded.is_empty() {
+        return;
+    }
+    let ranges = line_ranges(excluded, step);
+    let shown: Vec<String> = ranges
+        .iter()
+        .take(6)
+        .map(|(a, b)| format!("{:.1}–{:.1} Hz", *a as f64 * df, *b as f64 * df))
+        .collect();
+    println!(
+        "left out: {} lines of the band where r has less than {} % of its average line power, in {}{}",
+        excluded.len(),
+        100.0 * ambid_core::frf::lpm::EXCITED_FRACTION,
+        shown.join(", "),
+        if ranges.len() > 6 { ", …" } else { "" }
+    );
+}
+
+/// Runs of lines `step` apart as `(first, last)`, bridging gaps of up to 20 steps (so that a
+/// ragged excitation edge reads as one range).
+fn line_ranges(lines: &[usize], step: usize) -> Vec<(usize, usize)> {
+    let mut out: Vec<(usize, usize)> = Vec::new();
+    for &k in lines {
+        match out.last_mut() {
+            Some(r) if k <= r.1 + 20 * step => r.1 = k,
+            _ => out.push((k, k)),
+        }
+    }
+    out
+}
+
 /// `ambid frf --method lpm|lrm`: the Local Polynomial or Rational Method on the whole record.
 fn frf_local(a: &FrfArgs, r: &[f64], u: &[f64], y: &[f64], fs: f64) -> Result<()> {
     use ambid_core::frf::lpm::{lpm_closed_loop, LpmOptions};
     use ambid_core::frf::lrm::{lrm_closed_loop, LrmOptions};
     let band = a.band.unwrap_or((1.0, 0.5 * fs));
+    // with --period-samples: whole periods only (the LPM detects periodic inputs from the line
+    // pattern, which needs a whole number of periods)
+    let (r, u, y) = match a.period_samples {
+        Some(p) if p > 0 => {
+            let m = r.len() / p * p;
+            if m < 2 * p {
+                bail!(
+                    "--period-samples {p}: the record of {} samples holds fewer than two periods",
+                    r.len()
+                );
+            }
+            if m < r.len() {
+                println!(
+                    "--period-samples {p}: using the first {} whole periods ({m} of {} samples)",
+                    m / p,
+                    r.len()
+                );
+            }
+            (&r[..m], &u[..m], &y[..m])
+        }
+        _ => (r, u, y),
+    };
     // the three FRFs of either local method, and a description
     let (t_ry, t_ru, plant, what) = if a.method == MethodArg::Lrm {
         let [rn, rd, rm] = <[usize; 3]>::try_from(a.lrm_degrees.as_slice()).map_err(|_| {
@@ -395,18 +453,59 @@ fn frf_local(a: &FrfArgs, r: &[f64], u: &[f64], y: &[f64], fs: f64) -> Result<()
             opts.window(),
             c.dof()
         );
+        print_excluded(c.fit.excluded_lines(), 1, fs / c.fit.record_len() as f64);
         (c.t_ry, c.t_ru, c.plant, what)
     } else {
-        let mut opts = LpmOptions::default().with_degree(a.lpm_degree)?;
-        if let Some(n) = a.lpm_half_width {
-            opts = opts.with_half_width(n)?;
-        }
+        let opts = match (a.lpm_degree, a.lpm_half_width) {
+            (None, None) => LpmOptions::auto(),
+            (deg, half) => {
+                let mut o = LpmOptions::default().with_degree(deg.unwrap_or(2))?;
+                if let Some(n) = half {
+                    o = o.with_half_width(n)?;
+                }
+                o
+            }
+        };
         let c = lpm_closed_loop(r, u, y, fs, band, &opts)?;
-        let what = format!(
-            "LPM: degree {}, window {} lines, {} degrees of freedom",
-            opts.degree(),
-            opts.window(),
-            c.dof()
+        let fit = &c.fit;
+        if let Some(p) = a.period_samples.filter(|&p| p > 0) {
+            if fit.periods() != Some(r.len() / p) {
+                eprintln!(
+                    "warning: --period-samples {p} given, but r is not periodic with that period over \
+                     the record's {} whole periods (line pattern: {}); the LPM for non-periodic data \
+                     was used",
+                    r.len() / p,
+                    fit.periods()
+                        .map_or("no period".to_string(), |q| format!("{q} periods"))
+                );
+            }
+        }
+        let what = match fit.periods() {
+            Some(p) => format!(
+                "LPM for periodic data: r holds {p} periods of {} samples; FRFs on the excited lines \
+                 (every {p}-th), transient and noise from the non-excited lines (degree {}, {} lines, \
+                 {} degrees of freedom)",
+                fit.record_len() / p,
+                fit.degree(),
+                fit.dof() + fit.degree() + 1,
+                fit.dof()
+            ),
+            None => format!(
+                "LPM: degree {}, window {} lines{}, {} degrees of freedom",
+                fit.degree(),
+                2 * fit.half_width() + 1,
+                if fit.window_chosen() {
+                    " (chosen from the record by leave-one-out cross-validation)"
+                } else {
+                    ""
+                },
+                fit.dof()
+            ),
+        };
+        print_excluded(
+            fit.excluded_lines(),
+            fit.periods().unwrap_or(1),
+            fs / fit.record_len() as f64,
         );
         (c.t_ry, c.t_ru, c.plant, what)
     };

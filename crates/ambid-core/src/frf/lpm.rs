@@ -1,5 +1,5 @@
 //! The Local Polynomial Method (LPM): frequency responses, transients and noise covariances from
-//! one non-periodic record.
+//! one record — non-periodic, or periodic with whole periods (the periodic LPM, see [`lpm`]).
 //!
 //! # Model
 //! The whole record of $N$ samples is transformed once, without a window,
@@ -58,7 +58,9 @@
 //! (≈ 0.5–0.8 µs per line; the FFTs are < 2 %); see `benches/lpm.rs` and `docs/lpm.md`.
 //!
 //! # Requirements
-//! * the input must excite every window (a window where $\sum |U|^2 = 0$ is an error);
+//! * the input must excite the band: lines whose window holds less than [`EXCITED_FRACTION`]
+//!   of the input's average line power are left out ([`Lpm::excluded_lines`]), and a band
+//!   without any excited line is an error;
 //! * $G$ and $T$ must be smooth on the scale of the window, $2n+1$ lines of $f_s/N$: the
 //!   polynomial approximation error (bias) grows like $(w/B)^{R+1}$ where $B$ is the 3 dB width
 //!   of the sharpest resonance in lines; with lightly damped modes use long records;
@@ -97,11 +99,18 @@ use crate::lti::Frd;
 use faer::c64;
 use realfft::RealFftPlanner;
 
-/// Degree $R$ and half width $n$ of the local polynomial model.
+/// Degree $R$ and half width $n$ of the local polynomial model, fixed or chosen from the data.
+///
+/// [`LpmOptions::default`] is the fixed smallest window ($R = 2$, $n = 4$, $q = 3$), meant for
+/// short records and sharp features. [`LpmOptions::auto`] chooses $(R, n)$ from the record (its
+/// length, its signal-to-noise ratio and how fast the response changes): the rule is in
+/// [`lpm`]'s docs and `docs/lpm.md`. `ambid frf --method lpm` uses `auto` unless a degree or half
+/// width is given.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct LpmOptions {
     degree: usize,
     half_width: Option<usize>,
+    auto: bool,
 }
 
 impl Default for LpmOptions {
@@ -111,9 +120,34 @@ impl Default for LpmOptions {
         Self {
             degree: 2,
             half_width: None,
+            auto: false,
         }
     }
 }
+
+/// Candidate degrees and half widths of [`LpmOptions::auto`]: $R \in \{1, 2\}$ and
+/// $n \in \{R + 2, 6, 8, 11, 16, 22, 32, 45, 64\}$ (windows of $2R + 5$ to 129 lines, geometric
+/// steps of ≈ 1.4).
+pub const AUTO_CANDIDATES: [(usize, usize); 18] = [
+    (1, 3),
+    (1, 6),
+    (1, 8),
+    (1, 11),
+    (1, 16),
+    (1, 22),
+    (1, 32),
+    (1, 45),
+    (1, 64),
+    (2, 4),
+    (2, 6),
+    (2, 8),
+    (2, 11),
+    (2, 16),
+    (2, 22),
+    (2, 32),
+    (2, 45),
+    (2, 64),
+];
 
 impl LpmOptions {
     /// The default options ($R = 2$, $n = 4$).
@@ -121,7 +155,50 @@ impl LpmOptions {
         Self::default()
     }
 
-    /// Sets the polynomial degree $R$ of $G$ and $T$ (the half width follows it unless set).
+    /// A window chosen from the data: among [`AUTO_CANDIDATES`] the $(R, n)$ with the smallest
+    /// leave-one-out error (see [`lpm`]). For a periodic record the transient window is set by
+    /// the number of periods (see [`lpm`]) with $R = 2$.
+    ///
+    /// # Example
+    /// ```
+    /// use ambid_core::frf::lpm::{lpm, LpmOptions};
+    /// use rand::{RngExt, SeedableRng};
+    /// use rand_chacha::ChaCha8Rng;
+    /// let mut rng = ChaCha8Rng::seed_from_u64(3);
+    /// let fs = 1000.0;
+    /// let truth = |f: f64| 1.0 + ambid_core::c64::cis(-2.0 * std::f64::consts::PI * f / fs) * 0.5;
+    /// // y(t) = u(t) + 0.5 u(t−1), started from rest
+    /// let fir = |u: &[f64]| -> Vec<f64> {
+    ///     (0..u.len()).map(|t| u[t] + 0.5 * if t > 0 { u[t - 1] } else { 0.0 }).collect()
+    /// };
+    /// // a non-periodic record: the window is chosen from the data
+    /// let u: Vec<f64> = (0..8192).map(|_| rng.random_range(-1.0..1.0)).collect();
+    /// let est = lpm(&u, &[&fir(&u)], fs, (5.0, 450.0), &LpmOptions::auto()).unwrap();
+    /// assert!(est.window_chosen() && est.periods().is_none());
+    /// let g = est.frf(0).unwrap();
+    /// assert!(g.f_hz().iter().zip(g.values()).all(|(f, v)| (v - truth(*f)).norm() < 1e-6));
+    /// // 4 periods of 1024 samples: the periodic LPM on every 4th line
+    /// let one: Vec<f64> = (0..1024).map(|_| rng.random_range(-1.0..1.0)).collect();
+    /// let u: Vec<f64> = (0..4096).map(|t| one[t % 1024]).collect();
+    /// let est = lpm(&u, &[&fir(&u)], fs, (5.0, 450.0), &LpmOptions::auto()).unwrap();
+    /// assert_eq!(est.periods(), Some(4));
+    /// assert!(est.lines().iter().all(|k| k % 4 == 0));
+    /// ```
+    pub fn auto() -> Self {
+        Self {
+            degree: 2,
+            half_width: None,
+            auto: true,
+        }
+    }
+
+    /// Whether the window is chosen from the data ([`LpmOptions::auto`]).
+    pub fn is_auto(&self) -> bool {
+        self.auto
+    }
+
+    /// Sets the polynomial degree $R$ of $G$ and $T$ (the half width follows it unless set); the
+    /// window is then fixed (not [`auto`](Self::auto)).
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] for $R > 8$ (the local fit would need windows of ≥ 21 lines and
@@ -134,16 +211,19 @@ impl LpmOptions {
             ));
         }
         self.degree = degree;
+        self.auto = false;
         Ok(self)
     }
 
-    /// Sets the half width $n$ (window of $2n+1$ lines).
+    /// Sets the half width $n$ (window of $2n+1$ lines); the window is then fixed (not
+    /// [`auto`](Self::auto)).
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] when the window leaves no degree of freedom,
     /// $q = 2n + 1 - 2(R+1) < 1$ (set the degree first).
     pub fn with_half_width(mut self, half_width: usize) -> Result<Self> {
         self.half_width = Some(half_width);
+        self.auto = false;
         self.dof().map(|_| self)
     }
 
@@ -257,6 +337,12 @@ pub struct Lpm {
     noise_cov: Vec<c64>,
     /// $[(K^H K)^{-1}]_{00}$ per line
     c00: Vec<f64>,
+    /// lines of the band left out: too little input power
+    excluded: Vec<usize>,
+    /// number of periods of a periodic input (periodic LPM), else `None`
+    periods: Option<usize>,
+    /// the window was chosen from the data
+    auto: bool,
 }
 
 impl Lpm {
@@ -287,6 +373,22 @@ impl Lpm {
     /// Residual degrees of freedom $q$ (complex) of the noise covariance estimates.
     pub fn dof(&self) -> usize {
         self.dof
+    }
+    /// Lines of the requested band that were left out because the input has too little power
+    /// there (below [`EXCITED_FRACTION`] of its average; see [`lpm`]). For a periodic input this
+    /// includes only the band's multiples of the number of periods that carry no power, not the
+    /// non-excited lines between them.
+    pub fn excluded_lines(&self) -> &[usize] {
+        &self.excluded
+    }
+    /// `Some(P)` when the input was found periodic with $P$ periods in the record and the
+    /// periodic LPM was used (estimates on the excited lines $k = P, 2P, \dots$ only).
+    pub fn periods(&self) -> Option<usize> {
+        self.periods
+    }
+    /// Whether $(R, n)$ were chosen from the data ([`LpmOptions::auto`]).
+    pub fn window_chosen(&self) -> bool {
+        self.auto
     }
 
     /// $\hat G_o(k)$ with its variance $[(K^{\mathsf H}K)^{-1}]_{00}\,\hat C_{V,oo}$.
@@ -408,79 +510,417 @@ impl<F: LocalFit> LocalClosedLoop<F> {
     }
 }
 
+/// Fraction of the average input line power below which a line counts as not excited (−20 dB).
+///
+/// Non-periodic input: a line is estimated when the mean $|U|^2$ over its window is at least
+/// this fraction of the mean $|U(k)|^2$ over all lines $1..\lfloor N/2\rfloor$. Periodic input
+/// with $P$ periods: an excited line $k = lP$ is estimated when $|U(k)|^2$ is at least this
+/// fraction of the mean over all multiples of $P$. Lines below it are left out and reported
+/// ([`Lpm::excluded_lines`]); at −20 dB the FRF error there would be ten times the record's
+/// typical one (e.g. the nulls of a PRBS at multiples of $f_s/N_b$, or above a chirp's end).
+pub const EXCITED_FRACTION: f64 = 1e-2;
+
 /// The LPM of outputs `ys` on input `u` (equal lengths, finite), sampled at `fs` Hz, on the DFT
 /// lines in `band` = $[f_{\min}, f_{\max}]$ Hz.
+///
+/// # Lines, periodic inputs and the window
+/// * **Excited lines only**: lines of the band where the input has less than
+///   [`EXCITED_FRACTION`] of its average line power are left out and listed in
+///   [`Lpm::excluded_lines`] (not an error unless no line is left).
+/// * **Periodic input** (detected: every DFT line with more than $10^{-10}$ of the largest line
+///   power is a multiple of some $P \ge 2$, i.e. the record holds $P$ whole periods; or, for a
+///   measured input with noise, $P$ is the largest divisor of $N$ with less than
+///   [`PERIODIC_OFF_FRACTION`] = $10^{-3}$ of the input power off the multiples of $P$): the
+///   non-excited lines carry only transient and noise, so the *periodic LPM* is used
+///   (Pintelon et al. 2011, "Part II"): around each excited line $k$ a polynomial of degree $R$
+///   (2 in [`LpmOptions::auto`]) is fitted to the $m = \max(2(P-1),\, 2(R+1)+6)$ nearest
+///   non-excited lines of every output; its value at $k$ is the transient $\hat T(k)$ and its
+///   residuals give $\hat C_V$ with $q = m - (R + 1)$; then
+///   $\hat G(k) = (Y(k) - \hat T(k))/U(k)$ with
+///   $\operatorname{Cov}\hat G = (1 + [(A^{\mathsf T}A)^{-1}]_{00})\,\hat C_V/|U(k)|^2$.
+///   Only the excited lines in the band are returned ([`Lpm::periods`] is `Some(P)`).
+/// * **Automatic window** ([`LpmOptions::auto`], non-periodic input): every $(R, n)$ of
+///   [`AUTO_CANDIDATES`] is fitted on up to 1500 lines spread over the excited band, and the
+///   one with the smallest mean of $\ln\big([(K^{\mathsf H}K)^{-1}]_{00}\hat C_{V,oo}\big) -
+///   (\psi(q) - \ln q)$ over lines and outputs is used ($\psi$ the digamma function; the term
+///   removes the bias of the log of a $q$-degree-of-freedom variance estimate). This is the
+///   estimated variance of $\hat G$: it falls with the window length (more lines, less noise)
+///   until the polynomial no longer follows $G$ and $T$, when the residuals — and so
+///   $\hat C_V$ — grow with the model error. The choice therefore follows the record length
+///   (lines per hertz), the SNR and the sharpness of the response.
 ///
 /// # Errors
 /// * [`Error::InvalidArgument`]: no output, `fs` not positive and finite, options with $q < 1$,
 ///   fewer lines in the record than the window needs, a band without a DFT line in
-///   $1..\lfloor N/2\rfloor$, or an input without power in some window of the band;
+///   $1..\lfloor N/2\rfloor$, or no excited line in the band;
 /// * [`Error::DimensionMismatch`]: channels of different lengths;
 /// * [`Error::NonFinite`]: a NaN or infinite sample;
-/// * [`Error::Numerical`]: a rank-deficient local regressor (the input is locally a polynomial in
-///   the line index, e.g. a single sine).
+/// * [`Error::Numerical`]: every local regressor of the band is rank deficient (the input is
+///   locally a polynomial in the line index, e.g. a single sine).
 pub fn lpm(u: &[f64], ys: &[&[f64]], fs: f64, band: (f64, f64), opts: &LpmOptions) -> Result<Lpm> {
-    let q = opts.dof()?;
-    let (half, w) = (opts.half_width(), opts.window());
-    let Prepared {
-        uf,
-        yf,
-        lines,
-        df,
-        n_lines,
-        mean_power,
-        n,
-    } = prepare(u, ys, fs, band, w)?;
-    let yref: Vec<&[c64]> = yf.iter().map(|v| v.as_slice()).collect();
-    // a window whose input power is below 1e-14 of an average window's (−140 dB) holds only
-    // leakage and round-off: not excited
-    let mut fit = Fitter::new(opts.degree(), half, ys.len(), 1e-14 * w as f64 * mean_power);
+    lpm_named(u, ys, fs, band, opts, "u")
+}
+
+/// [`lpm`] with the input's name for the error messages (`r` in closed loop).
+fn lpm_named(
+    u: &[f64],
+    ys: &[&[f64]],
+    fs: f64,
+    band: (f64, f64),
+    opts: &LpmOptions,
+    input: &'static str,
+) -> Result<Lpm> {
+    opts.dof()?;
+    let min_w = if opts.is_auto() {
+        AUTO_CANDIDATES
+            .iter()
+            .map(|c| 2 * c.1 + 1)
+            .min()
+            .unwrap_or(7)
+    } else {
+        opts.window()
+    };
+    let prep = prepare(u, ys, fs, band, min_w, input)?;
     let p = ys.len();
-    let nl = lines.len();
-    let mut g = vec![c64::new(0.0, 0.0); nl * p];
-    let mut tr = vec![c64::new(0.0, 0.0); nl * p];
-    let mut cv = vec![c64::new(0.0, 0.0); nl * p * p];
-    let mut c00 = vec![0.0; nl];
-    for (l, &k) in lines.iter().enumerate() {
-        let res = fit.fit_line(&uf, &yref, k, n_lines);
-        match res {
-            Ok(c) => c00[l] = c,
-            Err(LineFailure::NoPower) => {
-                return Err(Error::invalid(
-                    "u",
-                    format!(
-                        "the input has no power in the window around line {k} ({:.4} Hz); restrict the band \
-                         to where the excitation has power",
-                        k as f64 * df
-                    ),
-                ))
+    if let Some(periods) = prep.periods {
+        return lpm_periodic(
+            &prep,
+            p,
+            opts.degree(),
+            periods,
+            band,
+            input,
+            opts.is_auto(),
+        );
+    }
+    let (degree, half) = if opts.is_auto() {
+        choose_window(&prep, p)?
+    } else {
+        (opts.degree(), opts.half_width())
+    };
+    let w = 2 * half + 1;
+    let q = w - 2 * (degree + 1);
+    let (kept, mut excluded) = split_excited(&prep, half);
+    if kept.is_empty() {
+        return Err(no_power_error(band, input));
+    }
+    let yref: Vec<&[c64]> = prep.yf.iter().map(|v| v.as_slice()).collect();
+    let mut fit = Fitter::new(degree, half, p, 1e-14 * w as f64 * prep.mean_power);
+    let nl = kept.len();
+    let mut lines = Vec::with_capacity(nl);
+    let mut g = Vec::with_capacity(nl * p);
+    let mut tr = Vec::with_capacity(nl * p);
+    let mut cv = Vec::with_capacity(nl * p * p);
+    let mut c00 = Vec::with_capacity(nl);
+    let mut first_rank_deficient = None;
+    for &k in &kept {
+        match fit.fit_line(&prep.uf, &yref, k, prep.n_lines) {
+            Ok(c) => {
+                lines.push(k);
+                c00.push(c);
+                g.extend_from_slice(&fit.g_out);
+                tr.extend_from_slice(&fit.t_out);
+                cv.extend_from_slice(&fit.cov_out);
             }
-            Err(LineFailure::RankDeficient) => {
-                return Err(Error::numerical(
-                    "LPM",
-                    format!(
-                        "the local regressor around line {k} ({:.4} Hz) is rank deficient: the input spectrum \
-                         is locally polynomial (e.g. a single sine or a sparse multisine); use a broadband \
-                         excitation or a smaller degree",
-                        k as f64 * df
-                    ),
-                ))
+            Err(_) => {
+                first_rank_deficient.get_or_insert(k);
+                excluded.push(k);
             }
         }
-        g[l * p..(l + 1) * p].copy_from_slice(&fit.g_out);
-        tr[l * p..(l + 1) * p].copy_from_slice(&fit.t_out);
-        cv[l * p * p..(l + 1) * p * p].copy_from_slice(&fit.cov_out);
     }
+    if lines.is_empty() {
+        let k = first_rank_deficient.unwrap_or(kept[0]);
+        return Err(Error::numerical(
+            "LPM",
+            format!(
+                "the local regressor is rank deficient on every line of the band (first at line {k}, \
+                 {:.4} Hz): the input {input} is locally a polynomial in the line index (e.g. a single \
+                 sine or a sparse multisine); use a broadband excitation or a smaller degree",
+                k as f64 * prep.df
+            ),
+        ));
+    }
+    excluded.sort_unstable();
     Ok(Lpm {
-        grid: LineGrid::new(lines, n, fs, p),
-        degree: opts.degree(),
+        grid: LineGrid::new(lines, prep.n, fs, p),
+        degree,
         half_width: half,
         dof: q,
         g,
         transient: tr,
         noise_cov: cv,
         c00,
+        excluded,
+        periods: None,
+        auto: opts.is_auto(),
     })
+}
+
+/// The error for a band without an excited line (non-periodic input).
+pub(super) fn no_power_error(band: (f64, f64), input: &'static str) -> Error {
+    Error::invalid(
+        input,
+        format!(
+            "the input {input} has no power in {}–{} Hz: on every line there its local power is below \
+             {} % of its average line power; set the band to where {input} is excited",
+            band.0,
+            band.1,
+            100.0 * EXCITED_FRACTION
+        ),
+    )
+}
+
+/// First line of the window of `w = 2 half + 1` lines around `k`, inside `1..=n_lines`.
+fn window_lo(k: usize, half: usize, n_lines: usize) -> usize {
+    let w = 2 * half + 1;
+    if k < 1 + half {
+        1
+    } else if k + half > n_lines {
+        n_lines + 1 - w
+    } else {
+        k - half
+    }
+}
+
+/// The band's lines whose window mean input power reaches [`EXCITED_FRACTION`] of the average
+/// line power, and the others.
+pub(super) fn split_excited(prep: &Prepared, half: usize) -> (Vec<usize>, Vec<usize>) {
+    let w = 2 * half + 1;
+    let thr = EXCITED_FRACTION * prep.mean_power * w as f64;
+    // prefix sums of |U|² for the window sums
+    let mut cum = vec![0.0; prep.n_lines + 2];
+    for k in 1..=prep.n_lines {
+        cum[k + 1] = cum[k] + prep.uf[k].norm_sqr();
+    }
+    prep.lines.iter().partition(|&&k| {
+        let lo = window_lo(k, half, prep.n_lines);
+        cum[lo + w] - cum[lo] >= thr
+    })
+}
+
+/// The automatic $(R, n)$ of [`lpm`] (non-periodic input): the smallest mean log leave-one-out
+/// error of the line itself.
+fn choose_window(prep: &Prepared, p: usize) -> Result<(usize, usize)> {
+    let (kept, _) = split_excited(prep, 4.min(prep.n_lines.saturating_sub(1) / 2));
+    if kept.is_empty() {
+        return Ok((2, 4));
+    }
+    let stride = kept.len().div_ceil(AUTO_LINES).max(1);
+    let yref: Vec<&[c64]> = prep.yf.iter().map(|v| v.as_slice()).collect();
+    let mut best: Option<(f64, usize, usize)> = None;
+    for &(r, n) in AUTO_CANDIDATES.iter() {
+        let w = 2 * n + 1;
+        if w > prep.n_lines {
+            continue;
+        }
+        let mut fit = Fitter::new(r, n, p, 1e-14 * w as f64 * prep.mean_power);
+        let (mut sum, mut cnt) = (0.0, 0usize);
+        for &k in kept.iter().step_by(stride) {
+            if fit.fit_line(&prep.uf, &yref, k, prep.n_lines).is_err() {
+                continue;
+            }
+            let j = k - window_lo(k, n, prep.n_lines);
+            let h = fit.center_leverage(prep.uf[k]);
+            if h.is_nan() || h >= 1.0 - 1e-9 {
+                continue;
+            }
+            for o in 0..p {
+                let e = fit.res[j * p + o].norm_sqr() / ((1.0 - h) * (1.0 - h));
+                if e > 0.0 && e.is_finite() {
+                    sum += e.ln();
+                    cnt += 1;
+                }
+            }
+        }
+        if cnt == 0 {
+            continue;
+        }
+        let j = sum / cnt as f64;
+        if best.is_none_or(|b| j < b.0) {
+            best = Some((j, r, n));
+        }
+    }
+    Ok(best.map_or((2, 4), |b| (b.1, b.2)))
+}
+
+/// Lines scored per candidate window by [`LpmOptions::auto`] (spread evenly over the excited
+/// band).
+const AUTO_LINES: usize = 4000;
+
+/// The periodic LPM of [`lpm`] on the excited lines (multiples of `periods`) of the band.
+fn lpm_periodic(
+    prep: &Prepared,
+    p: usize,
+    degree: usize,
+    periods: usize,
+    band: (f64, f64),
+    input: &'static str,
+    auto: bool,
+) -> Result<Lpm> {
+    let pp = periods;
+    let n_lines = prep.n_lines;
+    let candidates: Vec<usize> = prep.lines.iter().copied().filter(|k| k % pp == 0).collect();
+    let mults = n_lines / pp;
+    let ref_power =
+        (1..=mults).map(|l| prep.uf[l * pp].norm_sqr()).sum::<f64>() / mults.max(1) as f64;
+    let (kept, excluded): (Vec<usize>, Vec<usize>) = candidates
+        .iter()
+        .partition(|&&k| prep.uf[k].norm_sqr() >= EXCITED_FRACTION * ref_power);
+    let period_samples = prep.n / pp;
+    if kept.is_empty() {
+        return Err(Error::invalid(
+            input,
+            format!(
+                "the input {input} is periodic ({pp} periods of {period_samples} samples): it is excited \
+                 only on every {pp}-th DFT line ({:.4} Hz apart) and none of those in {}–{} Hz has power; \
+                 widen the band, or use period averaging (`--period-samples {period_samples}`)",
+                pp as f64 * prep.df,
+                band.0,
+                band.1
+            ),
+        ));
+    }
+    let r1 = degree + 1;
+    let m = (2 * (pp - 1)).max(2 * r1 + 6);
+    if n_lines - mults < m {
+        return Err(Error::invalid(
+            input,
+            format!(
+                "the input {input} is periodic ({pp} periods of {period_samples} samples), but the record \
+                 has only {} non-excited lines, fewer than the {m} the periodic LPM needs for the noise; \
+                 use period averaging (`--period-samples {period_samples}`)",
+                n_lines - mults
+            ),
+        ));
+    }
+    let q = m - r1;
+    let zero = c64::new(0.0, 0.0);
+    let nl = kept.len();
+    let (mut g, mut tr, mut cv, mut c00) = (
+        Vec::with_capacity(nl * p),
+        Vec::with_capacity(nl * p),
+        Vec::with_capacity(nl * p * p),
+        Vec::with_capacity(nl),
+    );
+    let mut offs: Vec<isize> = Vec::with_capacity(m + 1);
+    let mut xs = vec![0.0; m];
+    let mut mat = vec![0.0; r1 * r1];
+    let mut theta = vec![zero; r1];
+    let mut res = vec![zero; m * p];
+    for &k in &kept {
+        // the m nearest non-excited lines inside 1..=n_lines
+        offs.clear();
+        let mut d = 1usize;
+        while offs.len() < m && d <= n_lines {
+            if d % pp != 0 {
+                if k > d {
+                    offs.push(-(d as isize));
+                }
+                if k + d <= n_lines && offs.len() < m {
+                    offs.push(d as isize);
+                }
+            }
+            d += 1;
+        }
+        let dmax = offs.iter().map(|o| o.unsigned_abs()).max().unwrap_or(1) as f64;
+        for (x, o) in xs.iter_mut().zip(&offs) {
+            *x = *o as f64 / dmax;
+        }
+        // normal matrix A^T A of the powers x^s, s = 0..R, and its inverse
+        for a in 0..r1 {
+            for b in 0..r1 {
+                mat[a * r1 + b] = xs.iter().map(|x| x.powi((a + b) as i32)).sum();
+            }
+        }
+        let inv = small_spd_inverse(&mat, r1).ok_or_else(|| {
+            Error::numerical(
+                "periodic LPM",
+                format!("the transient fit around line {k} is singular; use a smaller degree"),
+            )
+        })?;
+        let ct = inv[0];
+        let uk = prep.uf[k];
+        for (o, yo) in prep.yf.iter().enumerate() {
+            for (a, t) in theta.iter_mut().enumerate() {
+                *t = (0..r1)
+                    .map(|b| {
+                        let rb: c64 = offs
+                            .iter()
+                            .zip(&xs)
+                            .map(|(off, x)| yo[(k as isize + off) as usize] * x.powi(b as i32))
+                            .sum();
+                        rb * inv[a * r1 + b]
+                    })
+                    .sum();
+            }
+            for (j, (off, x)) in offs.iter().zip(&xs).enumerate() {
+                let fitted: c64 = (0..r1).map(|a| theta[a] * x.powi(a as i32)).sum();
+                res[j * p + o] = yo[(k as isize + off) as usize] - fitted;
+            }
+            tr.push(theta[0]);
+            g.push((yo[k] - theta[0]) / uk);
+        }
+        for o1 in 0..p {
+            for o2 in 0..p {
+                let s: c64 = (0..m)
+                    .map(|j| res[j * p + o1] * res[j * p + o2].conj())
+                    .sum();
+                cv.push(s / q as f64);
+            }
+        }
+        c00.push((1.0 + ct) / uk.norm_sqr());
+    }
+    Ok(Lpm {
+        grid: LineGrid::new(kept, prep.n, prep.fs, p),
+        degree,
+        half_width: m / 2,
+        dof: q,
+        g,
+        transient: tr,
+        noise_cov: cv,
+        c00,
+        excluded,
+        periods: Some(pp),
+        auto,
+    })
+}
+
+/// The inverse of a small symmetric positive definite matrix (Gauss–Jordan with partial
+/// pivoting), or `None` when it is singular.
+fn small_spd_inverse(a: &[f64], n: usize) -> Option<Vec<f64>> {
+    let mut m = a.to_vec();
+    let mut inv = vec![0.0; n * n];
+    for i in 0..n {
+        inv[i * n + i] = 1.0;
+    }
+    let scale = (0..n).map(|i| a[i * n + i].abs()).fold(0.0, f64::max);
+    for c in 0..n {
+        let piv = (c..n).max_by(|&i, &j| m[i * n + c].abs().total_cmp(&m[j * n + c].abs()))?;
+        if m[piv * n + c].abs() <= 1e-13 * scale {
+            return None;
+        }
+        for j in 0..n {
+            m.swap(c * n + j, piv * n + j);
+            inv.swap(c * n + j, piv * n + j);
+        }
+        let d = m[c * n + c];
+        for j in 0..n {
+            m[c * n + j] /= d;
+            inv[c * n + j] /= d;
+        }
+        for i in 0..n {
+            if i != c {
+                let f = m[i * n + c];
+                if f != 0.0 {
+                    for j in 0..n {
+                        m[i * n + j] -= f * m[c * n + j];
+                        inv[i * n + j] -= f * inv[c * n + j];
+                    }
+                }
+            }
+        }
+    }
+    Some(inv)
 }
 
 /// Closed-loop FRFs by the LPM: $r$ (the excitation) as input, $[y, u]$ as outputs; see the
@@ -511,7 +951,7 @@ pub fn lpm_closed_loop(
     band: (f64, f64),
     opts: &LpmOptions,
 ) -> Result<LpmClosedLoop> {
-    let fit = lpm(r, &[y, u], fs, band, opts)?;
+    let fit = lpm_named(r, &[y, u], fs, band, opts, "r")?;
     let (t_ry, t_ru, cov, ts) = (fit.frf(0)?, fit.frf(1)?, fit.frf_cov(0, 1)?, fit.grid.ts);
     LocalClosedLoop::assemble(fit, t_ry, t_ru, cov, ts, "LPM closed loop")
 }
@@ -565,15 +1005,21 @@ pub(super) struct Prepared {
     pub mean_power: f64,
     /// record length $N$
     pub n: usize,
+    /// sampling frequency \[Hz\]
+    pub fs: f64,
+    /// `Some(P)` when the input holds $P \ge 2$ whole periods (see [`detect_periods`])
+    pub periods: Option<usize>,
 }
 
-/// Checks the channels, the band and the window length `w`, and transforms the record.
+/// Checks the channels, the band and the window length `w`, and transforms the record; `input`
+/// names the input in the messages.
 pub(super) fn prepare(
     u: &[f64],
     ys: &[&[f64]],
     fs: f64,
     band: (f64, f64),
     w: usize,
+    input: &'static str,
 ) -> Result<Prepared> {
     if ys.is_empty() {
         return Err(Error::invalid("ys", "no output channel given"));
@@ -594,14 +1040,14 @@ pub(super) fn prepare(
             });
         }
     }
-    check_finite("u", u)?;
+    check_finite(input, u)?;
     for y in ys {
         check_finite("y", y)?;
     }
     let n_lines = n / 2;
     if n_lines < w {
         return Err(Error::invalid(
-            "u",
+            input,
             format!(
                 "the record of {n} samples has {n_lines} DFT lines, fewer than the window of {w} lines; \
                  record longer or use a smaller degree/half width"
@@ -634,13 +1080,14 @@ pub(super) fn prepare(
     }
     if u.iter().all(|v| *v == 0.0) {
         return Err(Error::invalid(
-            "u",
-            "the input is identically zero: there is no excitation power",
+            input,
+            format!("the input {input} is identically zero: there is no excitation power"),
         ));
     }
     let uf = dft(u)?;
     let yf: Vec<Vec<c64>> = ys.iter().map(|y| dft(y)).collect::<Result<_>>()?;
     let mean_power = uf.iter().skip(1).map(|z| z.norm_sqr()).sum::<f64>() / n_lines as f64;
+    let periods = detect_periods(&uf, n_lines, n);
     Ok(Prepared {
         uf,
         yf,
@@ -649,7 +1096,58 @@ pub(super) fn prepare(
         n_lines,
         mean_power,
         n,
+        fs,
+        periods,
     })
+}
+
+/// Fraction of a measured input's power (lines $1..\lfloor N/2\rfloor$) that may lie off the
+/// multiples of $P$ for the record to count as $P$ periods of a periodic input with measurement
+/// noise (−30 dB); see [`lpm`].
+pub const PERIODIC_OFF_FRACTION: f64 = 1e-3;
+
+/// `Some(P)` when the record of `n` samples holds $P \ge 2$ periods of a periodic input: every
+/// line $1..\lfloor N/2\rfloor$ of `uf` with more than $10^{-10}$ of the largest line power is a
+/// multiple of $P$ (a generated signal: the lines in between carry only round-off), or else,
+/// for a measured (noisy) input, $P$ is the largest divisor of $N$ for which the lines that are
+/// not multiples of $P$ hold less than [`PERIODIC_OFF_FRACTION`] of the power.
+pub(super) fn detect_periods(uf: &[c64], n_lines: usize, n: usize) -> Option<usize> {
+    let pw: Vec<f64> = (0..=n_lines).map(|k| uf[k].norm_sqr()).collect();
+    let pmax = pw[1..].iter().copied().fold(0.0, f64::max);
+    if pmax.is_nan() || pmax <= 0.0 {
+        return None;
+    }
+    let mut g = 0usize;
+    for (k, &v) in pw.iter().enumerate().skip(1) {
+        if v > 1e-10 * pmax {
+            g = gcd(g, k);
+            if g == 1 {
+                break;
+            }
+        }
+    }
+    if g >= 2 {
+        return Some(g);
+    }
+    let total: f64 = pw[1..].iter().sum();
+    (2..=n_lines / 2).rev().filter(|p| n % p == 0).find(|&p| {
+        let off: f64 = pw
+            .iter()
+            .enumerate()
+            .skip(1)
+            .filter(|(k, _)| k % p != 0)
+            .map(|(_, v)| v)
+            .sum();
+        off < PERIODIC_OFF_FRACTION * total
+    })
+}
+
+fn gcd(a: usize, b: usize) -> usize {
+    if b == 0 {
+        a
+    } else {
+        gcd(b, a % b)
+    }
 }
 
 /// DFT lines $0..=\lfloor N/2 \rfloor$ of a real record, scaled by $1/\sqrt N$.
@@ -889,6 +1387,28 @@ impl Fitter {
         }
         Ok(c00)
     }
+
+    /// Leverage $h = K_0 (K^{\mathsf H}K)^{-1} K_0^{\mathsf H}$ of the window row at the line
+    /// itself ($x = 0$, input `uk`) in the last successful [`fit_line`](Self::fit_line).
+    fn center_leverage(&mut self, uk: c64) -> f64 {
+        let (np, r1) = (self.np, self.r1);
+        let mut h = 0.0;
+        for i in 0..np {
+            let mut v = if i == 0 {
+                uk.conj() * self.d[0]
+            } else if i == r1 {
+                c64::new(self.d[r1], 0.0)
+            } else {
+                c64::new(0.0, 0.0)
+            };
+            for kk in 0..i {
+                v -= self.h[i * np + kk] * self.z0[kk];
+            }
+            self.z0[i] = v / self.h[i * np + i].re;
+            h += self.z0[i].norm_sqr();
+        }
+        h
+    }
 }
 
 #[cfg(test)]
@@ -912,5 +1432,56 @@ mod tests {
             1
         );
         assert!(LpmOptions::new().with_degree(9).is_err());
+        let a = LpmOptions::auto();
+        assert!(a.is_auto() && !LpmOptions::default().is_auto());
+        assert!(!a.with_degree(1).unwrap().is_auto());
+        assert!(!a.with_half_width(10).unwrap().is_auto());
+    }
+
+    #[test]
+    fn periods_are_detected_from_the_line_pattern() {
+        let z = c64::new(0.0, 0.0);
+        let mut uf = vec![z; 65];
+        for k in (6..=64).step_by(6) {
+            uf[k] = c64::new(1.0, -0.5);
+        }
+        assert_eq!(detect_periods(&uf, 64, 128), Some(6));
+        // round-off on the other lines does not count
+        uf[7] = c64::new(1e-7, 0.0);
+        assert_eq!(detect_periods(&uf, 64, 128), Some(6));
+        // noise below −30 dB: periodic with the largest divisor of N = 120 that fits (6)
+        uf[7] = c64::new(1e-2, 0.0);
+        assert_eq!(detect_periods(&uf, 60, 120), Some(6));
+        // with N = 128 (6 does not divide it) the largest fit is 2 periods of 64 samples: all
+        // the power but the noise is on even lines
+        assert_eq!(detect_periods(&uf, 64, 128), Some(2));
+        // more power off the multiples: not periodic
+        uf[7] = c64::new(0.5, 0.0);
+        assert_eq!(detect_periods(&uf, 60, 120), None);
+        assert_eq!(detect_periods(&vec![z; 65], 64, 128), None);
+        // white noise is not periodic
+        let mut rng = 1u64;
+        let noise: Vec<c64> = (0..=512)
+            .map(|_| {
+                rng = rng
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                c64::new((rng >> 11) as f64 / (1u64 << 53) as f64 - 0.5, 0.1)
+            })
+            .collect();
+        assert_eq!(detect_periods(&noise, 512, 1024), None);
+    }
+
+    #[test]
+    fn small_inverse_matches_the_identity() {
+        let a = [4.0, 1.0, 0.5, 1.0, 3.0, 0.2, 0.5, 0.2, 2.0];
+        let inv = small_spd_inverse(&a, 3).unwrap();
+        for i in 0..3 {
+            for j in 0..3 {
+                let v: f64 = (0..3).map(|k| a[i * 3 + k] * inv[k * 3 + j]).sum();
+                assert!((v - if i == j { 1.0 } else { 0.0 }).abs() < 1e-14);
+            }
+        }
+        assert!(small_spd_inverse(&[1.0, 1.0, 1.0, 1.0], 2).is_none());
     }
 }

@@ -79,7 +79,9 @@
 //! ```
 
 use super::closed_loop::band_radius_factor;
-use super::lpm::{prepare, LineGrid, LocalClosedLoop, LocalFit, Prepared};
+use super::lpm::{
+    no_power_error, prepare, split_excited, LineGrid, LocalClosedLoop, LocalFit, Prepared,
+};
 use crate::error::{Error, Result};
 use crate::lti::Frd;
 use faer::c64;
@@ -204,6 +206,8 @@ pub struct Lrm {
     noise_cov: Vec<c64>,
     /// lines where a denominator column was dropped (locally polynomial response), per output
     reduced: Vec<usize>,
+    /// lines of the band left out: too little input power
+    excluded: Vec<usize>,
 }
 
 impl Lrm {
@@ -235,6 +239,12 @@ impl Lrm {
     /// (a locally polynomial response).
     pub fn reduced_lines(&self) -> &[usize] {
         &self.reduced
+    }
+    /// Lines of the requested band left out because the input has too little power there (below
+    /// [`EXCITED_FRACTION`](super::lpm::EXCITED_FRACTION) of its average line power over the window, as for the
+    /// [LPM](super::lpm::lpm)).
+    pub fn excluded_lines(&self) -> &[usize] {
+        &self.excluded
     }
 
     /// $\hat G_o(k)$ with its variance.
@@ -302,17 +312,45 @@ pub type LrmClosedLoop = LocalClosedLoop<Lrm>;
 /// channels of different lengths, non-finite samples, a window without input power; and
 /// [`Error::Numerical`] where the input part of the local regressor is rank deficient.
 pub fn lrm(u: &[f64], ys: &[&[f64]], fs: f64, band: (f64, f64), opts: &LrmOptions) -> Result<Lrm> {
+    lrm_named(u, ys, fs, band, opts, "u")
+}
+
+/// [`lrm`] with the input's name for the messages (`r` in closed loop).
+fn lrm_named(
+    u: &[f64],
+    ys: &[&[f64]],
+    fs: f64,
+    band: (f64, f64),
+    opts: &LrmOptions,
+    input: &'static str,
+) -> Result<Lrm> {
     let q = opts.dof()?;
     let (half, w) = (opts.half_width(), opts.window());
+    let prep = prepare(u, ys, fs, band, w, input)?;
+    if let Some(pp) = prep.periods {
+        let ps = prep.n / pp;
+        return Err(Error::invalid(
+            input,
+            format!(
+                "the input {input} is periodic ({pp} periods of {ps} samples): it has power only on every \
+                 {pp}-th DFT line, and the LRM needs a non-periodic (broadband) record; use the periodic \
+                 LPM (`--method lpm`) or period averaging (`--period-samples {ps}`)"
+            ),
+        ));
+    }
+    let (lines, excluded) = split_excited(&prep, half);
+    if lines.is_empty() {
+        return Err(no_power_error(band, input));
+    }
     let Prepared {
         uf,
         yf,
-        lines,
         df,
         n_lines,
         mean_power,
         n,
-    } = prepare(u, ys, fs, band, w)?;
+        ..
+    } = prep;
     let p = ys.len();
     let nl = lines.len();
     let (rn, rd, rm) = opts.degrees();
@@ -346,9 +384,9 @@ pub fn lrm(u: &[f64], ys: &[&[f64]], fs: f64, band: (f64, f64), opts: &LrmOption
         let uw = &uf[lo..lo + w];
         if uw.iter().map(|z| z.norm_sqr()).sum::<f64>() <= min_power {
             return Err(Error::invalid(
-                "u",
+                input,
                 format!(
-                    "the input has no power in the window around line {k} ({:.4} Hz); restrict the band \
+                    "the input {input} has no power in the window around line {k} ({:.4} Hz); restrict the band \
                      to where the excitation has power",
                     k as f64 * df
                 ),
@@ -469,6 +507,7 @@ pub fn lrm(u: &[f64], ys: &[&[f64]], fs: f64, band: (f64, f64), opts: &LrmOption
         frf_cov,
         noise_cov,
         reduced,
+        excluded,
     })
 }
 
@@ -499,7 +538,7 @@ pub fn lrm_closed_loop(
     band: (f64, f64),
     opts: &LrmOptions,
 ) -> Result<LrmClosedLoop> {
-    let fit = lrm(r, &[y, u], fs, band, opts)?;
+    let fit = lrm_named(r, &[y, u], fs, band, opts, "r")?;
     let (t_ry, t_ru, cov, ts) = (fit.frf(0)?, fit.frf(1)?, fit.frf_cov(0, 1)?, fit.grid.ts);
     LocalClosedLoop::assemble(fit, t_ry, t_ru, cov, ts, "LRM closed loop")
 }
