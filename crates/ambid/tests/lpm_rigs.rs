@@ -101,9 +101,8 @@ fn welch_default(out: &ExperimentOutput) -> (Vec<f64>, Vec<c64>) {
         i: None,
         fs: 1.0 / rec.ts,
     };
-    // as `ambid frf` runs it on a file: nperseg = N/8, the band 1 Hz–fs/2
-    let mut settings = FrfSettings::welch(rec.r.len() / 8);
-    settings.band = (1.0, 0.5 / rec.ts);
+    // as `ambid frf` runs it on a file: nperseg = N/8, the band derived from the excitation
+    let settings = FrfSettings::welch(rec.r.len() / 8);
     let a = analyze(&record, &settings, None).unwrap();
     (a.frf.f_hz().to_vec(), a.frf.plant.values().to_vec())
 }
