@@ -87,9 +87,10 @@ pub struct FitArgs {
     /// Weights of the lines of an FRF fit.
     #[arg(long, value_enum, default_value_t = crate::cli_freqfit::WeightsArg::Variance)]
     weights: crate::cli_freqfit::WeightsArg,
-    /// PEM criterion focus.
-    #[arg(long, value_enum, default_value_t = FocusArg::Prediction)]
-    focus: FocusArg,
+    /// PEM criterion focus (default: prediction for the polynomial structures; for `ss`,
+    /// simulation when the subspace model is stable, else prediction).
+    #[arg(long, value_enum)]
+    focus: Option<FocusArg>,
     /// Validation data CSV (same columns).
     #[arg(long)]
     validation: Option<PathBuf>,
@@ -179,8 +180,8 @@ pub fn fit(a: FitArgs) -> Result<()> {
     u.iter_mut().for_each(|v| *v -= mu);
     y.iter_mut().for_each(|v| *v -= my);
     let focus = match a.focus {
-        FocusArg::Prediction => Focus::Prediction,
-        FocusArg::Simulation => Focus::Simulation,
+        None | Some(FocusArg::Prediction) => Focus::Prediction,
+        Some(FocusArg::Simulation) => Focus::Simulation,
     };
     let (fitted, iterations): (Fitted<PolyModel>, Option<usize>) = match a.structure {
         StructureArg::Fir | StructureArg::Arx => {
@@ -363,31 +364,27 @@ pub fn order(a: OrderArgs) -> Result<()> {
 
 /// Subspace state-space fit: data scaled to unit RMS for the algorithm, model scaled back.
 fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Result<()> {
+    use ambid::fitting::{SsFitOptions, SsFocus};
     use ambid::io::model::state_space_json;
-    use ambid_core::estimate::ss_pem::SsPemOptions;
-    let pem = if a.no_pem {
-        None
-    } else {
-        let focus = match a.focus {
-            FocusArg::Prediction => Focus::Prediction,
-            FocusArg::Simulation => Focus::Simulation,
-        };
-        Some(SsPemOptions {
-            focus,
-            lm: SsPemOptions::default()
-                .lm
-                .with_max_iterations(a.max_iterations)?,
-            ..SsPemOptions::default()
-        })
+    use ambid_core::estimate::subspace::HorizonCriterion;
+    let opts = SsFitOptions {
+        order: a.order,
+        block_rows: a.block_rows,
+        focus: match (a.no_pem, a.focus) {
+            (true, _) => SsFocus::None,
+            (false, None) => SsFocus::Auto,
+            (false, Some(FocusArg::Prediction)) => SsFocus::Prediction,
+            (false, Some(FocusArg::Simulation)) => SsFocus::Simulation,
+        },
+        max_iterations: a.max_iterations,
     };
-    let fit =
-        ambid::fitting::fit_state_space(u, y, ts, a.order, a.block_rows, pem).map_err(|e| {
-            if a.no_pem {
-                e
-            } else {
-                e.context("(use --no-pem to skip the refinement)")
-            }
-        })?;
+    let fit = ambid::fitting::identify_state_space(u, y, ts, &opts).map_err(|e| {
+        if a.no_pem {
+            e
+        } else {
+            e.context("(use --no-pem to skip the refinement)")
+        }
+    })?;
     let mut pem_meta = json!(null);
     if let Some(p) = &fit.pem {
         println!(
@@ -409,10 +406,25 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
         });
     }
     let model = fit.model.clone();
+    let criterion = fit.block_rows_criterion.map(|c| match c {
+        HorizonCriterion::Simulation => "simulation error",
+        HorizonCriterion::Prediction => "one-step prediction error",
+    });
+    let horizon = match criterion {
+        Some(c) => format!(
+            "block rows {}, chosen by the {c} of {}",
+            fit.block_rows,
+            fit.block_rows_scan
+                .iter()
+                .map(|(i, v)| format!("{i}: {v:.3e}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+        None => format!("block rows {}", fit.block_rows),
+    };
     println!(
-        "state-space model of order {} (block rows {}), singular values: {}",
+        "state-space model of order {} ({horizon}), singular values: {}",
         fit.order,
-        fit.block_rows,
         fit.singular_values
             .iter()
             .take(12)
@@ -442,6 +454,8 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
         "pem": pem_meta,
         "order": fit.order,
         "block_rows": fit.block_rows,
+        "block_rows_scan": fit.block_rows_scan,
+        "block_rows_criterion": criterion,
         "singular_values": fit.singular_values,
         "detrend": {"u_mean": mu, "y_mean": my},
         "estimation_fit_pct": {"simulation": f_est},
