@@ -11,8 +11,10 @@
 //! model's validation fit within 0.5 point of the truth's, and the PEM refinement converged
 //! (stopped on a tolerance, not on its iteration limit).
 //!
-//! CI runs [`RIGS`] rigs (the test profile's time budget); the 40-rig sweep is
-//! `cargo run --release -p ambid --example ss_rig_sweep -- 1 40` (docs/estimation.md).
+//! CI runs [`RIGS`] rigs in-process (≈ 0.8 s of CPU per rig in the test profile) and one more rig
+//! through the `ambid` binary itself (`simulate --rig-seed`, then `fit` with its defaults); the
+//! 40-rig sweep is `cargo run --release -p ambid --example ss_rig_sweep -- 1 40`
+//! (docs/estimation.md).
 
 use ambid::experiment::{run, Experiment, ExperimentOutput};
 use ambid::fitting::{identify_state_space, SsFitOptions};
@@ -22,7 +24,7 @@ use ambid_twin::Mode;
 use faer::Mat;
 
 /// Rig seeds tested here (the first ones of the documented 40-rig sweep).
-const RIGS: u64 = 10;
+const RIGS: u64 = 20;
 
 fn experiment(rig: u64, noise_seed: u64, amplitude: f64, periods: usize) -> ExperimentOutput {
     let mut e = Experiment::seed_paper(Mode::Linear, 1e-7, noise_seed);
@@ -31,6 +33,14 @@ fn experiment(rig: u64, noise_seed: u64, amplitude: f64, periods: usize) -> Expe
     e.excitation.amplitude_frac = amplitude;
     e.excitation.periods = periods;
     run(&e).unwrap()
+}
+
+/// Fit % of the exact closed loop of `twin` (from rest, w = 0) on `(r, y)`.
+fn truth_fit(twin: &ambid_twin::Twin, r: &[f64], y: &[f64]) -> f64 {
+    let rw = Mat::from_fn(r.len(), 2, |k, c| if c == 0 { r[k] } else { 0.0 });
+    let yt = twin.closed_loop().simulate(rw.as_ref(), None).unwrap();
+    let yt: Vec<f64> = (0..yt.nrows()).map(|k| yt[(k, 0)]).collect();
+    fit_percent(y, &yt).unwrap()
 }
 
 fn mean(x: &[f64]) -> f64 {
@@ -91,4 +101,81 @@ fn ss8_defaults_reach_the_true_systems_validation_fit_on_random_rigs() {
         worst = worst.max(f_truth - f_model);
     }
     eprintln!("largest gap over {RIGS} rigs: {worst:.3} points");
+}
+
+/// The same bar through the binary: `ambid simulate --rig-seed 21` (estimation, and an
+/// independent validation record), then `ambid fit … --structure ss --order 8 --input r --output y
+/// --validation …` with every other option at its default.
+#[test]
+fn fit_cli_defaults_on_a_random_rig() {
+    use std::process::Command;
+    let exe = env!("CARGO_BIN_EXE_ambid");
+    let d = std::env::temp_dir().join(format!("ambid-ss-rigs-{}", std::process::id()));
+    for (dir, seed, amplitude) in [("e", "1021", "0.10"), ("v", "2021", "0.12")] {
+        let o = Command::new(exe)
+            .args([
+                "simulate",
+                "--rig-seed",
+                "21",
+                "--mode",
+                "linear",
+                "--seed",
+                seed,
+            ])
+            .args([
+                "--amplitude",
+                amplitude,
+                "--out",
+                d.join(dir).to_str().unwrap(),
+            ])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let out = d.join("ss.json");
+    let o = Command::new(exe)
+        .args(["fit", d.join("e/data.csv").to_str().unwrap()])
+        .args([
+            "--structure",
+            "ss",
+            "--order",
+            "8",
+            "--input",
+            "r",
+            "--output",
+            "y",
+        ])
+        .args(["--validation", d.join("v/data.csv").to_str().unwrap()])
+        .args(["--out", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(o.status.success(), "{text}");
+    eprintln!("{text}");
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let f_model = m["meta"]["validation"]["simulation_fit_pct"]
+        .as_f64()
+        .unwrap();
+    // the truth on the validation file's own columns
+    let v = ambid::io::read_time_csv(&d.join("v/data.csv"), None).unwrap();
+    let twin = ambid_twin::Twin::new(ambid_twin::random_rig(21).unwrap()).unwrap();
+    let f_truth = truth_fit(&twin, v.column("r").unwrap(), v.column("y").unwrap());
+    eprintln!("rig 21 through the CLI: {f_model:.3} % against the truth's {f_truth:.3} %");
+    assert!(f_model >= f_truth - 0.5, "{f_model} vs {f_truth}");
+    assert_eq!(m["meta"]["pem"]["focus"], "simulation");
+    assert_ne!(m["meta"]["pem"]["stop"], "MaxIterations");
+    assert_eq!(m["meta"]["block_rows_criterion"], "simulation error");
+    let scan = m["meta"]["block_rows_scan"].as_array().unwrap();
+    assert_eq!(
+        scan.len(),
+        4,
+        "30, 60, 120, 240 on 102 300 samples: {scan:?}"
+    );
+    assert!(scan.iter().any(|s| s[0] == m["meta"]["block_rows"]));
+    let _ = std::fs::remove_dir_all(&d);
 }
