@@ -114,11 +114,16 @@ impl Default for SsFitOptions {
 /// # Example
 /// ```
 /// use ambid::fitting::{identify_state_space, SsFitOptions, SsFocus};
-/// // y_k = 0.9 y_{k-1} + u_{k-1} + small noise
-/// let u: Vec<f64> = (0..4000).map(|k| if (k * 7919 % 61) < 30 { 1.0 } else { -1.0 }).collect();
+/// // y_k = 0.9 y_{k-1} + u_{k-1} + small noise, u a random binary signal
+/// let mut s = 1u64;
+/// let mut draw = || {
+///     s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+///     (s >> 11) as f64 / (1u64 << 53) as f64
+/// };
+/// let u: Vec<f64> = (0..4000).map(|_| if draw() < 0.5 { -1.0 } else { 1.0 }).collect();
 /// let mut y = vec![0.0; u.len()];
 /// for k in 1..u.len() {
-///     y[k] = 0.9 * y[k - 1] + u[k - 1] + 1e-3 * (((k * 104_729) % 1000) as f64 / 500.0 - 1.0);
+///     y[k] = 0.9 * y[k - 1] + u[k - 1] + 1e-3 * (draw() - 0.5);
 /// }
 /// let o = SsFitOptions { order: Some(1), ..SsFitOptions::default() };
 /// let fit = identify_state_space(&u, &y, 1.0, &o).unwrap();

@@ -95,7 +95,7 @@
 //!   on $i$, so in-sample values compare fairly. The criterion matters: at 20 kHz the one-step
 //!   predictor follows $y$ so closely that its loss barely tells a good deterministic model from a
 //!   poor one (the former ladder, which stopped when the prediction loss fell by less than 2 %,
-//!   stayed at $i = 30$ on half of the twin's random rigs with validation fits 12–38 points below
+//!   stayed at $i = 30$ on half of the rigs of issue 16, with validation fits 12–38 points below
 //!   the truth's), while the simulation error of the same rungs falls by a factor 10–100 from
 //!   $i = 30$ to $i = 120$ on those rigs. The tried horizons and criterion values are returned in
 //!   [`SubspaceFit::block_rows_scan`], the criterion in [`SubspaceFit::block_rows_criterion`].
@@ -333,9 +333,9 @@ pub struct SubspaceFit {
     /// What the automatic horizon minimised (`None` when `block_rows` was given).
     pub block_rows_criterion: Option<HorizonCriterion>,
     /// Normalised simulation error of the model:
-    /// $rac1N \sum_k \sum_o (y_{o,k} - \hat y_{o,k})^2 / s_o^2$ with $\hat y$ simulated from the
+    /// $\frac1N \sum_k \sum_o (y_{o,k} - \hat y_{o,k})^2 / s_o^2$ with $\hat y$ simulated from the
     /// best initial state and $s_o$ the RMS of output $o$ (for one output and zero-mean data,
-    /// $(1 - 	ext{fit}/100)^2$ up to the initial state's effect). Available when $B$ and $D$
+    /// $(1 - \text{fit}/100)^2$ up to the initial state's effect). Available when $B$ and $D$
     /// came from the simulation regression (a stable $A$ and [`BdMethod::Auto`] or
     /// [`BdMethod::Simulation`]), otherwise `None`.
     pub simulation_nmse: Option<f64>,
@@ -345,8 +345,9 @@ pub struct SubspaceFit {
 /// "Choices and their reasons").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum HorizonCriterion {
-    /// [`SubspaceFit::simulation_nmse`]: the deterministic model's output error; used when the
-    /// shortest horizon gives a stable model whose $B$, $D$ came from the simulation regression.
+    /// [`SubspaceFit::simulation_nmse`]: the deterministic model's output error; used when at
+    /// least half of the horizons tried give a stable model (whose $B$, $D$ came from the
+    /// simulation regression).
     Simulation,
     /// The one-step-ahead prediction loss relative to the output power; used otherwise (an
     /// unstable system, or [`BdMethod::Projection`]).
