@@ -239,6 +239,11 @@ pub struct SubspaceOptions {
     pub bd_method: BdMethod,
     /// Computation of the data product; default [`DataProduct::Auto`].
     pub data_product: DataProduct,
+    /// Criterion of the automatic horizon (when `block_rows` is `None`): `None` (the default)
+    /// decides from the rungs' stability as in the module docs; `Some(c)` forces `c`
+    /// ([`HorizonCriterion::Prediction`] reproduces the choice of the former ladder on data
+    /// where the prediction loss stops falling).
+    pub horizon_criterion: Option<HorizonCriterion>,
 }
 
 impl SubspaceOptions {
@@ -263,6 +268,7 @@ impl SubspaceOptions {
             feedthrough: false,
             bd_method: BdMethod::default(),
             data_product: DataProduct::default(),
+            horizon_criterion: None,
         }
     }
 
@@ -442,10 +448,10 @@ pub fn n4sid_detailed(
     }
     // a stable system: most rungs stable (and simulated); then their output error decides
     let simulated = rungs.iter().filter(|f| f.simulation_nmse.is_some()).count();
-    let criterion = if 2 * simulated >= rungs.len() {
-        HorizonCriterion::Simulation
-    } else {
-        HorizonCriterion::Prediction
+    let criterion = match opts.horizon_criterion {
+        Some(c) => c,
+        None if 2 * simulated >= rungs.len() => HorizonCriterion::Simulation,
+        None => HorizonCriterion::Prediction,
     };
     let value = |f: &SubspaceFit| match criterion {
         HorizonCriterion::Simulation => f.simulation_nmse.unwrap_or(f64::INFINITY),
