@@ -124,9 +124,10 @@ pub struct FitArgs {
     /// Weights of the lines of an FRF fit.
     #[arg(long, value_enum, default_value_t = crate::cli_freqfit::WeightsArg::Variance)]
     weights: crate::cli_freqfit::WeightsArg,
-    /// PEM criterion focus.
-    #[arg(long, value_enum, default_value_t = FocusArg::Prediction)]
-    focus: FocusArg,
+    /// PEM criterion focus (default: prediction for the polynomial structures; for `ss`,
+    /// simulation when the subspace model is stable, else prediction).
+    #[arg(long, value_enum)]
+    focus: Option<FocusArg>,
     /// Validation data CSV (same columns).
     #[arg(long)]
     validation: Option<PathBuf>,
@@ -276,8 +277,8 @@ pub fn fit(a: FitArgs) -> Result<()> {
     u.iter_mut().for_each(|v| *v -= mu);
     y.iter_mut().for_each(|v| *v -= my);
     let focus = match a.focus {
-        FocusArg::Prediction => Focus::Prediction,
-        FocusArg::Simulation => Focus::Simulation,
+        None | Some(FocusArg::Prediction) => Focus::Prediction,
+        Some(FocusArg::Simulation) => Focus::Simulation,
     };
     let mut problems: Vec<String> = Vec::new();
     let mut fallback = false;
@@ -534,42 +535,58 @@ pub fn order(a: OrderArgs) -> Result<()> {
 /// ([`stabilised_refine`]); if that fails too, the subspace model is written with the problem
 /// named. A model file is always written.
 fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Result<()> {
+    use ambid::fitting::{SsFitOptions, SsFocus};
     use ambid::io::model::state_space_json;
     use ambid_core::estimate::ss_pem::SsPemOptions;
+    use ambid_core::estimate::subspace::HorizonCriterion;
     if a.no_pem && a.feedthrough {
         bail!(
             "--feedthrough needs the prediction-error refinement (it estimates D); drop --no-pem"
         );
     }
-    let pem = if a.no_pem {
-        None
-    } else {
-        let focus = match a.focus {
-            FocusArg::Prediction => Focus::Prediction,
-            FocusArg::Simulation => Focus::Simulation,
-        };
-        Some(SsPemOptions {
-            focus,
-            lm: SsPemOptions::default()
-                .lm
-                .with_max_iterations(a.max_iterations)?,
-            feedthrough: a.feedthrough,
-            ..SsPemOptions::default()
-        })
+    let opts = SsFitOptions {
+        order: a.order,
+        block_rows: a.block_rows,
+        focus: match (a.no_pem, a.focus) {
+            (true, _) => SsFocus::None,
+            (false, None) => SsFocus::Auto,
+            (false, Some(FocusArg::Prediction)) => SsFocus::Prediction,
+            (false, Some(FocusArg::Simulation)) => SsFocus::Simulation,
+        },
+        max_iterations: a.max_iterations,
+        feedthrough: a.feedthrough,
     };
     let open_loop = is_open_loop(a)?;
     let mut problems: Vec<String> = Vec::new();
     let mut method = if a.no_pem { "subspace" } else { "subspace+pem" };
-    let fit = match ambid::fitting::fit_state_space(u, y, ts, a.order, a.block_rows, pem) {
+    let fit = match ambid::fitting::identify_state_space(u, y, ts, &opts) {
         Ok(f) => f,
+        Err(e) if a.no_pem => return Err(e),
         Err(e) => {
-            let Some(opts) = pem else { return Err(e) };
             // the refinement failed: a model is still written
             let first = format!("{e:#}");
-            let sub = ambid::fitting::fit_state_space(u, y, ts, a.order, a.block_rows, None)
+            let sub_opts = SsFitOptions {
+                focus: SsFocus::None,
+                ..opts
+            };
+            let sub = ambid::fitting::identify_state_space(u, y, ts, &sub_opts)
                 .map_err(|_| e.context("(use --no-pem to skip the refinement)"))?;
             let retry = if open_loop {
-                Some(stabilised_refine(u, y, ts, &sub.model, &opts))
+                // from a stabilised start the model can be simulated: the simulation focus unless
+                // the prediction focus was asked for
+                let focus = match opts.focus {
+                    SsFocus::Prediction => Focus::Prediction,
+                    _ => Focus::Simulation,
+                };
+                let pem = SsPemOptions {
+                    focus,
+                    lm: SsPemOptions::default()
+                        .lm
+                        .with_max_iterations(a.max_iterations)?,
+                    feedthrough: a.feedthrough,
+                    ..SsPemOptions::default()
+                };
+                Some(stabilised_refine(u, y, ts, &sub.model, &pem))
             } else {
                 None
             };
@@ -622,10 +639,25 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
         });
     }
     let model = fit.model.clone();
+    let criterion = fit.block_rows_criterion.map(|c| match c {
+        HorizonCriterion::Simulation => "simulation error",
+        HorizonCriterion::Prediction => "one-step prediction error",
+    });
+    let horizon = match criterion {
+        Some(c) => format!(
+            "block rows {}, chosen by the {c} of {}",
+            fit.block_rows,
+            fit.block_rows_scan
+                .iter()
+                .map(|(i, v)| format!("{i}: {v:.3e}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+        None => format!("block rows {}", fit.block_rows),
+    };
     println!(
-        "state-space model of order {} (block rows {}), singular values: {}",
+        "state-space model of order {} ({horizon}), singular values: {}",
         fit.order,
-        fit.block_rows,
         fit.singular_values
             .iter()
             .take(12)
@@ -664,6 +696,8 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
         "pem": pem_meta,
         "order": fit.order,
         "block_rows": fit.block_rows,
+        "block_rows_scan": fit.block_rows_scan,
+        "block_rows_criterion": criterion,
         "singular_values": fit.singular_values,
         "detrend": {"u_mean": mu, "y_mean": my},
         "estimation_fit_pct": {"simulation": f_est},
@@ -827,9 +861,12 @@ fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
     }
     if !a.no_pem {
         let o = SsPemOptions {
+            // the single-output rule (`SsFocus::Auto`): simulation for a stable subspace model
             focus: match a.focus {
-                FocusArg::Prediction => Focus::Prediction,
-                FocusArg::Simulation => Focus::Simulation,
+                Some(FocusArg::Prediction) => Focus::Prediction,
+                Some(FocusArg::Simulation) => Focus::Simulation,
+                None if scaled.is_stable()? => Focus::Simulation,
+                None => Focus::Prediction,
             },
             lm: SsPemOptions::default()
                 .lm
