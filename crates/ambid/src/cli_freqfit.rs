@@ -7,7 +7,8 @@ use ambid::io::model::{state_space_json, write_model_json};
 use ambid::io::{read_controller, read_time_csv};
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::validate::compare::{
-    compare_models, table, CompareSpec, FitStructure, ValidationRecord,
+    choose, compare_models, supported_unstable_poles, table, CompareSpec, FitStructure,
+    ValidationRecord,
 };
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
@@ -170,6 +171,10 @@ pub struct CompareModelsArgs {
     /// Samples at the start of the validation record left out of the fit (transient).
     #[arg(long, default_value_t = 0)]
     skip: usize,
+    /// Number of unstable plant poles to fit (default: the Nyquist count of the measured loop
+    /// with --controller; unconstrained without a controller).
+    #[arg(long)]
+    unstable_poles: Option<usize>,
     /// Output CSV of the comparison table.
     #[arg(long, default_value = "comparison.csv")]
     out: PathBuf,
@@ -201,7 +206,7 @@ pub fn compare(a: CompareModelsArgs) -> Result<()> {
         a.weights,
         a.max_iterations,
     )?;
-    let spec = CompareSpec {
+    let mut spec = CompareSpec {
         structures: a.structures.iter().map(|s| (*s).into()).collect(),
         orders: a.orders.clone(),
         nk: a.nk,
@@ -211,11 +216,26 @@ pub fn compare(a: CompareModelsArgs) -> Result<()> {
     if spec.orders.contains(&0) {
         bail!("--orders: every order must be at least 1");
     }
-    let (rows, controller_desc) = match (&a.validation, &a.controller) {
-        (Some(v), Some(c)) => {
+    let ctrl = match &a.controller {
+        Some(c) => {
             let ctrl = read_controller(c)?;
-            let ts = 1.0 / a.fs.unwrap_or(ctrl.fs_hz());
+            let ts = input.frd.ts().unwrap_or(1.0 / ctrl.fs_hz());
             ctrl.check_ts(ts)?;
+            Some(ctrl)
+        }
+        None => None,
+    };
+    let (n_u, how) = supported_unstable_poles(
+        &input.frd,
+        ctrl.as_ref().map(|c| c.state_space()),
+        input.opts.band_hz,
+        a.unstable_poles,
+    );
+    println!("unstable plant poles: {how}");
+    spec.unstable_poles = n_u;
+    spec.controller = ctrl.as_ref().map(|c| c.state_space().clone());
+    let (rows, controller_desc) = match (&a.validation, &ctrl) {
+        (Some(v), Some(ctrl)) => {
             let d = read_time_csv(v, a.fs)?;
             let (r, y) = (d.column("r")?, d.column("y")?);
             let rec = ValidationRecord {
@@ -234,6 +254,19 @@ pub fn compare(a: CompareModelsArgs) -> Result<()> {
     print!("{}", table(&rows));
     if let Some(d) = controller_desc {
         println!("closed-loop validation with controller: {d}");
+    }
+    match choose(&rows) {
+        Some(i) => println!(
+            "chosen: {} {} (the best {} among the valid rows)",
+            rows[i].structure.name(),
+            rows[i].order,
+            if rows[i].validation_fit.is_some() {
+                "validation fit"
+            } else {
+                "BIC"
+            }
+        ),
+        None => println!("chosen: none (no row is valid; see the notes)"),
     }
     let mut w = ::csv::Writer::from_path(&a.out)
         .with_context(|| format!("cannot create {}", a.out.display()))?;
