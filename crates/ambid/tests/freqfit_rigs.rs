@@ -41,6 +41,7 @@ fn explore() {
             fit: FreqFitOptions {
                 band_hz: Some((10.0, 1000.0)),
                 weights: FreqWeights::InverseVariance,
+                max_iterations: std::env::var("MAXIT").ok().and_then(|v| v.parse().ok()).unwrap_or(100),
                 ..Default::default()
             },
             ..CompareSpec::default()
