@@ -88,6 +88,23 @@ fn fit_and_compare_models_on_the_twin_plant_frf() {
         .collect();
     assert_eq!(rows.len(), 6, "3 structures × 2 orders");
     let col = |n: &str| h.iter().position(|x| x == n).unwrap();
+    // the fits are held to the plant's one unstable pole, found from the measured loop, and the
+    // chosen row is a valid one
+    assert!(
+        t.contains("unstable plant poles: 1 (Nyquist count of the measured loop"),
+        "{t}"
+    );
+    for r in &rows {
+        let u: usize = r[col("unstable_poles")].parse().unwrap();
+        assert!(u <= 1, "{t}");
+    }
+    let chosen = t.lines().find(|l| l.starts_with("chosen: ")).unwrap();
+    let c: Vec<&str> = chosen.split_whitespace().collect();
+    let crow = rows
+        .iter()
+        .find(|r| r[col("structure")] == c[1] && r[col("order")] == c[2])
+        .unwrap();
+    assert_eq!(crow[col("valid")], "true", "{t}");
     let ss8 = rows
         .iter()
         .find(|r| r[col("structure")] == "ss" && r[col("order")] == "8")

@@ -48,8 +48,8 @@ fn frf_fits_keep_the_plants_unstable_poles_on_random_rigs() {
         let truth = twin.plant_frf(&f).unwrap();
         let n_true = twin.plant_unstable_poles().unwrap().len();
         // the count from the data equals the truth's
-        let n_u = unstable_poles_from_loop(&frf.plant, twin.controller(), Some((10.0, 1000.0)))
-            .unwrap();
+        let n_u =
+            unstable_poles_from_loop(&frf.plant, twin.controller(), Some((10.0, 1000.0))).unwrap();
         assert_eq!(n_u, n_true, "rig {rig}: Nyquist count");
         let spec = CompareSpec {
             orders: vec![6, 7, 8, 9, 10],
@@ -111,7 +111,9 @@ fn frf_fits_keep_the_plants_unstable_poles_on_random_rigs() {
         let by_bic = choose(&no_val).unwrap();
         for (i, store) in [(by_val, &mut chosen_val), (by_bic, &mut chosen_bic)] {
             let r = &default_rows[i];
-            assert!(r.valid && r.unstable_poles == Some(n_true) && r.closed_loop_stable == Some(true));
+            assert!(
+                r.valid && r.unstable_poles == Some(n_true) && r.closed_loop_stable == Some(true)
+            );
             let e = err_of(r);
             store.push(e);
             // 0.5 %, or where the rig's FRF is too noisy for it, 1/5 of the FRF's own error

@@ -6,7 +6,9 @@
 //! $$ V = \sum_{k=1}^{L} w_k \,\bigl| \hat G(z_k) - G_k \bigr|^2, \qquad z_k = e^{j\omega_k T}, $$
 //! over the $n$-th order models $\hat G(z) = C (zI - A)^{-1} B + D$ ($D = 0$ unless
 //! [`SsFreqOptions::feedthrough`]). Unstable models are admitted (an AMB plant is open-loop
-//! unstable) unless [`FreqFitOptions::enforce_stability`] asks for a stable one.
+//! unstable); [`FreqFitOptions::max_unstable_poles`] holds the fit to at most that many poles on
+//! or outside the unit circle (the number the data support), and
+//! [`FreqFitOptions::enforce_stability`] asks for a stable one.
 //!
 //! # 1. Subspace start
 //! The frequency-domain subspace method of McKelvey, Akçay and Ljung (1996). With
@@ -46,7 +48,11 @@
 //! imaginary parts stacked) with the poles fixed. This is done in the partial-fraction basis of
 //! the refinement below, which spans the same models as $C(zI - A)^{-1}B + D$ with free $B$, $D$.
 //! With [`FreqFitOptions::enforce_stability`] the unstable poles are first reflected,
-//! $z \mapsto 1/\bar z$, and the numerators refitted.
+//! $z \mapsto 1/\bar z$, and the numerators refitted. With
+//! [`FreqFitOptions::max_unstable_poles`] $= m$ and more than $m$ unstable subspace poles, the start
+//! keeps the unstable real poles and pairs (at most $m$ poles, as many as allowed) whose choice
+//! gives the smallest cost after refitting the numerators, and mirrors the others; this moves
+//! only the start of the constrained refinement below.
 //!
 //! # 2. Refinement
 //! The model is a sum of second-order sections (a complex pair, or two real poles sorted and
@@ -62,9 +68,12 @@
 //! $\partial \hat G / \partial \alpha_{b,1} = -N_b \delta / P_b^2$,
 //! $\partial \hat G / \partial \alpha_{b,2} = -N_b / P_b^2$. The residuals are the real and imaginary
 //! parts of $\sqrt{w_k}\,(\hat G(z_k) - G_k)$; [`minimize`] runs at most
-//! [`FreqFitOptions::max_iterations`] steps (0 skips the refinement). No constraint is imposed
-//! unless a stable model is asked for; then a trial with a pole on or outside the unit circle is
-//! inadmissible.
+//! [`FreqFitOptions::max_iterations`] steps (0 skips the refinement; [`FreqFit::converged`] says
+//! whether it met a convergence test). No constraint is imposed unless a number of unstable poles
+//! is given (or a stable model asked for); then a trial with more poles on or outside the unit
+//! circle than allowed (counted per section from the roots of its quadratic) is inadmissible,
+//! and Levenberg–Marquardt shortens the step: the result is the best model in the admissible
+//! set, never a reflected one.
 //!
 //! # Result
 //! The returned [`StateSpace`] is the block-diagonal delta-companion realisation of the sections:

@@ -28,7 +28,9 @@
 //! $$ n_u(P) = W - n_u(C), \qquad W = \frac{\theta(\pi) - \theta(0)}{\pi}, \quad
 //! \theta = \arg\bigl(1 + \hat P C\bigr) \text{ tracked continuously}, $$
 //! ([`unstable_poles_from_loop`]) with $\hat P$ the measured plant FRF on the band's lines and
-//! $C$ the controller's exact model. Outside the band the rule needs two assumptions, which
+//! $C$ the controller's exact model; lines whose phase the data do not determine (relative
+//! standard deviation above 1/2, e.g. at the nulls of a PRBS spectrum) are skipped. Outside the
+//! band the rule needs two assumptions, which
 //! it checks where it can: **above** the band $|L| < 1$ (the loop has rolled off; checked on
 //! the top line, else the count is refused), so $1 + L$ stays in the right half-plane and
 //! $\theta(\pi)$ is the multiple of $2\pi$ nearest $\theta(f_{\max})$; **below** the band $P$
@@ -396,12 +398,23 @@ pub fn unstable_poles_from_loop(
         return Err(Error::invalid("controller", "the controller must be SISO"));
     }
     let (lo, hi) = band_hz.unwrap_or((f64::NEG_INFINITY, f64::INFINITY));
+    // lines whose phase the data determine: with a variance, a relative standard deviation of at
+    // most 1/2 (lines without excitation, e.g. at the nulls of a PRBS spectrum, are skipped)
+    let determined = |k: usize| {
+        plant.variance().is_none_or(|v| {
+            let g = plant.values()[k].norm();
+            v[k].sqrt() <= 0.5 * g
+        })
+    };
     let mut lines: Vec<(f64, crate::c64)> = plant
         .f_hz()
         .iter()
         .zip(plant.values())
-        .filter(|(f, g)| **f > 0.0 && **f >= lo && **f <= hi && g.norm().is_finite())
-        .map(|(f, g)| (*f, *g))
+        .enumerate()
+        .filter(|(k, (f, g))| {
+            **f > 0.0 && **f >= lo && **f <= hi && g.norm().is_finite() && determined(*k)
+        })
+        .map(|(_, (f, g))| (*f, *g))
         .collect();
     lines.sort_by(|a, b| a.0.total_cmp(&b.0));
     if lines.len() < 2 {
