@@ -330,7 +330,9 @@ pub(crate) fn constrained_start(
     let build = |mask: usize| -> Vec<c64> {
         let keep = |p: &c64| {
             units.iter().enumerate().any(|(u, &(i, _))| {
-                mask & (1 << u) != 0 && (poles[i] == *p || poles[i].conj() == *p)
+                let tol = 1e-12 * (1.0 + p.norm());
+                mask & (1 << u) != 0
+                    && ((poles[i] - *p).norm() <= tol || (poles[i].conj() - *p).norm() <= tol)
             })
         };
         poles

@@ -28,8 +28,11 @@
 //! $$ n_u(P) = W - n_u(C), \qquad W = \frac{\theta(\pi) - \theta(0)}{\pi}, \quad
 //! \theta = \arg\bigl(1 + \hat P C\bigr) \text{ tracked continuously}, $$
 //! ([`unstable_poles_from_loop`]) with $\hat P$ the measured plant FRF on the band's lines and
-//! $C$ the controller's exact model; lines whose phase the data do not determine (relative
-//! standard deviation above 1/2, e.g. at the nulls of a PRBS spectrum) are skipped. Outside the
+//! $C$ the controller's exact model. Lines where the data do not determine the phase of
+//! $1 + \hat P C$ (its standard deviation $|C|\sigma_P$ above half its modulus) are skipped, and the
+//! first run of three such lines ends the data used: without excitation (above a PRBS's band,
+//! at its nulls) a closed-loop estimate drifts to $-1/C$, so $1 + \hat P C$ to 0 with a random
+//! phase, and the top of the data is where the count then needs $|L| < 1$. Outside the
 //! band the rule needs two assumptions, which
 //! it checks where it can: **above** the band $|L| < 1$ (the loop has rolled off; checked on
 //! the top line, else the count is refused), so $1 + L$ stays in the right half-plane and
@@ -398,35 +401,44 @@ pub fn unstable_poles_from_loop(
         return Err(Error::invalid("controller", "the controller must be SISO"));
     }
     let (lo, hi) = band_hz.unwrap_or((f64::NEG_INFINITY, f64::INFINITY));
-    // lines whose phase the data determine: with a variance, a relative standard deviation of at
-    // most 1/2 (lines without excitation, e.g. at the nulls of a PRBS spectrum, are skipped)
-    let determined = |k: usize| {
-        plant.variance().is_none_or(|v| {
-            let g = plant.values()[k].norm();
-            v[k].sqrt() <= 0.5 * g
-        })
-    };
-    let mut lines: Vec<(f64, crate::c64)> = plant
+    let one = crate::c64::new(1.0, 0.0);
+    let mut lines: Vec<(f64, crate::c64, f64)> = plant
         .f_hz()
         .iter()
         .zip(plant.values())
         .enumerate()
-        .filter(|(k, (f, g))| {
-            **f > 0.0 && **f >= lo && **f <= hi && g.norm().is_finite() && determined(*k)
-        })
-        .map(|(_, (f, g))| (*f, *g))
+        .filter(|(_, (f, g))| **f > 0.0 && **f >= lo && **f <= hi && g.norm().is_finite())
+        .map(|(k, (f, g))| (*f, *g, plant.variance().map_or(0.0, |v| v[k])))
         .collect();
     lines.sort_by(|a, b| a.0.total_cmp(&b.0));
-    if lines.len() < 2 {
+    // the lines where the data determine the phase of 1 + PC: its standard deviation |C| σ_P at
+    // most half its modulus (this drops lines without excitation, where a closed-loop estimate
+    // tends to P̂ = −1/C and 1 + P̂C to 0 with a random phase)
+    let f_all: Vec<f64> = lines.iter().map(|l| l.0).collect();
+    let c_all = controller.freq_response_siso(&f_all)?;
+    // isolated undetermined lines are skipped; the first run of 3 ends the data used (the
+    // excitation has run out: above it the estimate drifts to −1/C before the phase is lost)
+    let mut kept: Vec<(f64, crate::c64, crate::c64)> = Vec::new();
+    let mut run = 0;
+    for (l, c) in lines.iter().zip(&c_all) {
+        if l.2.sqrt() * c.norm() <= 0.5 * (one + l.1 * *c).norm() {
+            run = 0;
+            kept.push((l.0, l.1, l.1 * c));
+        } else {
+            run += 1;
+            if run == 3 && !kept.is_empty() {
+                break;
+            }
+        }
+    }
+    let f: Vec<f64> = kept.iter().map(|k| k.0).collect();
+    let loop_in_band: Vec<crate::c64> = kept.iter().map(|k| k.2).collect();
+    if f.len() < 2 {
         return Err(Error::invalid(
             "band_hz",
-            "the unstable-pole count needs at least 2 lines of the plant FRF in the band",
+            "the unstable-pole count needs at least 2 lines of the plant FRF in the band whose phase the data determine",
         ));
     }
-    let f: Vec<f64> = lines.iter().map(|l| l.0).collect();
-    let c = controller.freq_response_siso(&f)?;
-    let one = crate::c64::new(1.0, 0.0);
-    let loop_in_band: Vec<crate::c64> = lines.iter().zip(&c).map(|(l, c)| l.1 * c).collect();
     // θ on the band, tracked upwards
     let unwrap = |prev: f64, z: crate::c64| {
         let a = z.arg();
@@ -449,7 +461,7 @@ pub fn unstable_poles_from_loop(
     }
     let theta_pi = 2.0 * PI * (theta / (2.0 * PI)).round();
     // below the band: P constant at its lowest line, C exact, on a log grid down to f_lo·1e-6
-    let p0 = lines[0].1;
+    let p0 = kept[0].1;
     let n_grid = 400;
     let f_low: Vec<f64> = (1..=n_grid)
         .map(|k| f[0] * 10f64.powf(-6.0 * k as f64 / n_grid as f64))
