@@ -88,17 +88,35 @@ pub fn fit_frf(
     band: Option<(f64, f64)>,
     weights: WeightsArg,
     max_iterations: usize,
+    (controller, unstable_poles): (Option<&Path>, Option<usize>),
     out: &Path,
 ) -> Result<()> {
     let input = frf_input(path, quantity, fs, band, weights, max_iterations)?;
     if order == 0 {
         bail!("--order must be at least 1 for a fit to FRF data");
     }
+    let ctrl = match controller {
+        Some(c) => {
+            let ctrl = read_controller(c)?;
+            ctrl.check_ts(input.frd.ts().unwrap_or(1.0 / ctrl.fs_hz()))?;
+            Some(ctrl)
+        }
+        None => None,
+    };
+    let (n_u, how) = supported_unstable_poles(
+        &input.frd,
+        ctrl.as_ref().map(|c| c.state_space()),
+        input.opts.band_hz,
+        unstable_poles,
+    );
+    println!("unstable plant poles: {how}");
     let spec = CompareSpec {
         structures: vec![structure],
         orders: vec![order],
         nk,
         fit: input.opts.clone(),
+        unstable_poles: n_u,
+        controller: ctrl.as_ref().map(|c| c.state_space().clone()),
         ..CompareSpec::default()
     };
     let rows = compare_models(&input.frd, &spec, None)?;
@@ -111,6 +129,12 @@ pub fn fit_frf(
         );
     };
     print!("{}", table(&rows));
+    if !row.valid {
+        eprintln!(
+            "warning: the model is written but is not valid: {}",
+            row.note.as_deref().unwrap_or("see the table")
+        );
+    }
     let pz = ambid_core::validate::pz::PzAnalysis::from_state_space(
         model,
         &ambid_core::validate::pz::PzOptions::default(),
@@ -127,6 +151,9 @@ pub fn fit_frf(
         "db_rmse": row.db_rmse,
         "bic": row.bic,
         "unstable_poles": row.unstable_poles,
+        "unstable_poles_supported": n_u,
+        "valid": row.valid,
+        "converged": row.converged,
         "source": path.display().to_string(),
     });
     write_model_json(out, &state_space_json(model, "u", quantity, meta))?;
