@@ -124,6 +124,14 @@ pub struct FitArgs {
     /// Weights of the lines of an FRF fit.
     #[arg(long, value_enum, default_value_t = crate::cli_freqfit::WeightsArg::Variance)]
     weights: crate::cli_freqfit::WeightsArg,
+    /// FRF fit: the controller of the loop the FRF was measured in (TOML/JSON): the fit is held
+    /// to the plant's number of unstable poles from the measured loop's Nyquist count, and a
+    /// model that does not close a stable loop with it is reported.
+    #[arg(long)]
+    controller: Option<PathBuf>,
+    /// FRF fit: the number of unstable plant poles (instead of the Nyquist count).
+    #[arg(long)]
+    unstable_poles: Option<usize>,
     /// PEM criterion focus (default: prediction for the polynomial structures; for `ss`,
     /// simulation when the subspace model is stable, else prediction).
     #[arg(long, value_enum)]
@@ -253,6 +261,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
             a.band,
             a.weights,
             a.max_iterations,
+            (a.controller.as_deref(), a.unstable_poles),
             &a.out,
         );
     }

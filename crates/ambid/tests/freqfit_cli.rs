@@ -57,6 +57,52 @@ fn fit_and_compare_models_on_the_twin_plant_frf() {
     assert_eq!(m["kind"], "state_space");
     assert!(m["meta"]["median_relative"].as_f64().unwrap() < 0.02, "{t}");
     assert!(m["meta"]["unstable_poles"].as_u64().unwrap() >= 1, "{t}");
+    // with the controller: held to the measured loop's one unstable pole, valid; held to a count
+    // the data contradict (0), the model is still written, with 0 unstable poles and visibly
+    // worse (never silently stabilised)
+    let cases: [(&[&str], u64); 2] = [
+        (&["--controller", CONTROLLER], 1),
+        (&["--controller", CONTROLLER, "--unstable-poles", "0"], 0),
+    ];
+    let held = d.join("held.json");
+    let mut medians = Vec::new();
+    for (extra, n_u) in cases {
+        let mut args = vec![
+            "fit",
+            s(&frf),
+            "--quantity",
+            "plant",
+            "--structure",
+            "ss",
+            "--order",
+            "10",
+            "--band",
+            "10:1000",
+            "--out",
+            s(&held),
+        ];
+        args.extend_from_slice(extra);
+        let o = ambid(&args);
+        let t = text(&o);
+        assert!(o.status.success(), "{t}");
+        eprintln!("{t}");
+        let m: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&held).unwrap()).unwrap();
+        assert_eq!(m["meta"]["unstable_poles_supported"], n_u, "{t}");
+        assert_eq!(m["meta"]["unstable_poles"], n_u, "{t}");
+        let valid = m["meta"]["valid"].as_bool().unwrap();
+        assert!(valid || n_u == 0, "{t}");
+        assert_eq!(
+            t.contains("warning: the model is written but is not valid"),
+            !valid,
+            "{t}"
+        );
+        medians.push(m["meta"]["median_relative"].as_f64().unwrap());
+    }
+    assert!(
+        medians[0] < 0.02 && medians[1] > 10.0 * medians[0],
+        "{medians:?}"
+    );
     // the comparison with closed-loop validation on the independent record
     let table = d.join("cmp.csv");
     let o = ambid(&[
@@ -88,6 +134,23 @@ fn fit_and_compare_models_on_the_twin_plant_frf() {
         .collect();
     assert_eq!(rows.len(), 6, "3 structures × 2 orders");
     let col = |n: &str| h.iter().position(|x| x == n).unwrap();
+    // the fits are held to the plant's one unstable pole, found from the measured loop, and the
+    // chosen row is a valid one
+    assert!(
+        t.contains("unstable plant poles: 1 (Nyquist count of the measured loop"),
+        "{t}"
+    );
+    for r in &rows {
+        let u: usize = r[col("unstable_poles")].parse().unwrap();
+        assert!(u <= 1, "{t}");
+    }
+    let chosen = t.lines().find(|l| l.starts_with("chosen: ")).unwrap();
+    let c: Vec<&str> = chosen.split_whitespace().collect();
+    let crow = rows
+        .iter()
+        .find(|r| r[col("structure")] == c[1] && r[col("order")] == c[2])
+        .unwrap();
+    assert_eq!(crow[col("valid")], "true", "{t}");
     let ss8 = rows
         .iter()
         .find(|r| r[col("structure")] == "ss" && r[col("order")] == "8")

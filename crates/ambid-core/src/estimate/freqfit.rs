@@ -46,6 +46,16 @@ pub struct FreqFitOptions {
     /// Reflect unstable poles into the unit circle after the fit (only when asked; default
     /// `false`: unstable plants stay unstable).
     pub enforce_stability: bool,
+    /// At most this many poles on or outside the unit circle (default `None`: unconstrained).
+    ///
+    /// The constraint is part of the fit, not a repair: the start keeps the unstable poles that
+    /// explain the data best (the others of the *start* are mirrored, $z \mapsto 1/\bar z$, and
+    /// the linear parameters refitted) and the nonlinear refinement rejects every step that would
+    /// leave the admissible set, so the result is the best model with at most this many
+    /// unstable poles. Set it to the number of unstable poles the data support, e.g.
+    /// [`crate::validate::compare::unstable_poles_from_loop`] (the Nyquist count of the
+    /// measured loop).
+    pub max_unstable_poles: Option<usize>,
 }
 
 impl Default for FreqFitOptions {
@@ -56,6 +66,7 @@ impl Default for FreqFitOptions {
             max_iterations: 100,
             sk_iterations: 20,
             enforce_stability: false,
+            max_unstable_poles: None,
         }
     }
 }
@@ -273,6 +284,87 @@ pub struct FreqFit<M> {
     pub errors: FreqErrors,
     /// Iterations of the nonlinear refinement (0 for linear fits).
     pub iterations: usize,
+    /// Whether the refinement met a convergence test (always `true` for linear fits; `false`
+    /// when it stopped at [`FreqFitOptions::max_iterations`]).
+    pub converged: bool,
+}
+
+/// Number of `roots` on or outside the unit circle.
+pub(crate) fn count_unstable(roots: &[c64]) -> usize {
+    roots.iter().filter(|z| z.norm() >= 1.0).count()
+}
+
+/// The start of a fit constrained to at most `limit` unstable poles
+/// ([`FreqFitOptions::max_unstable_poles`]): among the unstable `poles`, the real poles and
+/// conjugate pairs kept unstable are the admissible choice of largest count with the smallest
+/// `cost` (the weighted cost after refitting the linear parameters); the others are mirrored into
+/// the unit circle, $z \mapsto 1/\bar z$ (poles on the circle are pulled just inside). This only
+/// moves the *start*; the refinement that follows is constrained, not repaired. Returns `poles`
+/// unchanged when they already meet the limit.
+pub(crate) fn constrained_start(
+    poles: &[c64],
+    limit: usize,
+    mut cost: impl FnMut(&[c64]) -> Option<f64>,
+) -> Vec<c64> {
+    if count_unstable(poles) <= limit {
+        return poles.to_vec();
+    }
+    let mirror = |p: c64| {
+        let r = p.norm();
+        let mut out = if r > 1.0 { p / (r * r) } else { p };
+        if out.norm() >= 1.0 - 1e-9 {
+            out *= (1.0 - 1e-6) / out.norm();
+        }
+        out
+    };
+    // the unstable units: a real pole (weight 1) or the upper member of a pair (weight 2)
+    let mut units: Vec<(usize, usize)> = poles
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.norm() >= 1.0 && p.im >= 0.0)
+        .map(|(i, p)| (i, if p.im > 0.0 { 2 } else { 1 }))
+        .collect();
+    // enumerating subsets: keep the 10 closest to the unit circle as candidates
+    units.sort_by(|a, b| poles[a.0].norm().total_cmp(&poles[b.0].norm()));
+    units.truncate(10);
+    let build = |mask: usize| -> Vec<c64> {
+        let keep = |p: &c64| {
+            units.iter().enumerate().any(|(u, &(i, _))| {
+                let tol = 1e-12 * (1.0 + p.norm());
+                mask & (1 << u) != 0
+                    && ((poles[i] - *p).norm() <= tol || (poles[i].conj() - *p).norm() <= tol)
+            })
+        };
+        poles
+            .iter()
+            .map(|p| {
+                if p.norm() >= 1.0 && !keep(p) {
+                    mirror(*p)
+                } else {
+                    *p
+                }
+            })
+            .collect()
+    };
+    let mut best: Option<(usize, f64, usize)> = None;
+    for mask in 0..(1usize << units.len()) {
+        let count: usize = units
+            .iter()
+            .enumerate()
+            .filter(|(u, _)| mask & (1 << u) != 0)
+            .map(|(_, &(_, w))| w)
+            .sum();
+        if count > limit || best.is_some_and(|b| b.0 > count) {
+            continue;
+        }
+        let Some(c) = cost(&build(mask)).filter(|c| c.is_finite()) else {
+            continue;
+        };
+        if best.is_none_or(|b| count > b.0 || c < b.1) {
+            best = Some((count, c, mask));
+        }
+    }
+    build(best.map_or(0, |b| b.2))
 }
 
 /// Orders of a transfer-function fit $G = q^{-n_k} B(q^{-1}) / F(q^{-1})$ (MATLAB's `[nb nf nk]`):
@@ -454,7 +546,150 @@ pub fn arx_frd(
     data.check_params(o.n_params())?;
     let zp = zeta_powers(&data, (o.nk + o.nb).max(o.nf + 1));
     let (b, f) = levy_step(&data, o, &zp, &data.w)?;
-    finish_tf(&data, o, &zp, b, f, 0)
+    let limit = unstable_limit(opts);
+    match limit {
+        Some(lim) if unstable_roots_of(&f)? > lim => {
+            // the constrained equation-error problem: start from the admissible denominator
+            // that explains the data best, then Levenberg–Marquardt on Levy's residuals with
+            // every step that leaves the admissible set rejected
+            let f0 = admissible_denominator(&data, o, &zp, &f, lim)?;
+            let b0 = refit_numerator(&data, o, &zp, &f0)?;
+            let mut x0 = b0;
+            x0.extend_from_slice(&f0);
+            let mut prob = LevyProblem {
+                data: &data,
+                o: *o,
+                zp: &zp,
+                limit: lim,
+            };
+            let lm = super::pem::lm::LmOptions::default()
+                .with_max_iterations(opts.max_iterations.max(1))?
+                .with_loss_tol(1e-14)?;
+            let (x, report) = super::pem::lm::minimize(&mut prob, &x0, &lm)?;
+            let (b, f) = (x[..o.nb].to_vec(), x[o.nb..].to_vec());
+            finish_tf(
+                &data,
+                o,
+                &zp,
+                b,
+                f,
+                (report.iterations, report.reason.converged()),
+            )
+        }
+        _ => finish_tf(&data, o, &zp, b, f, (0, true)),
+    }
+}
+
+/// The unstable-pole limit of the options: 0 with `enforce_stability`, else
+/// `max_unstable_poles`.
+fn unstable_limit(opts: &FreqFitOptions) -> Option<usize> {
+    if opts.enforce_stability {
+        Some(0)
+    } else {
+        opts.max_unstable_poles
+    }
+}
+
+/// Number of roots of $1 + f_1 \zeta + \dots$ (a denominator in $\zeta = z^{-1}$) on or
+/// outside the unit circle in $z$.
+fn unstable_roots_of(f: &[f64]) -> Result<usize> {
+    if f.iter().all(|v| *v == 0.0) {
+        return Ok(0);
+    }
+    let mut den = vec![1.0];
+    den.extend_from_slice(f);
+    Ok(count_unstable(&crate::linalg::roots(&den)?))
+}
+
+/// $B$ by weighted linear least squares of the output error with the denominator $F$ fixed.
+fn refit_numerator(data: &FreqData, o: &TfOrders, zp: &[Vec<c64>], f: &[f64]) -> Result<Vec<f64>> {
+    let l = data.len();
+    let cols: Vec<Vec<c64>> = (0..o.nb)
+        .map(|j| {
+            (0..l)
+                .map(|k| zp[o.nk + j][k] / (c64::new(1.0, 0.0) + poly_at(f, 1, zp, k)))
+                .collect()
+        })
+        .collect();
+    let wt: Vec<f64> = data.w.iter().map(|x| x.sqrt()).collect();
+    complex_lstsq(&cols, &data.g, &wt)
+}
+
+/// The weighted output-error cost of $(B, F)$.
+fn oe_cost(data: &FreqData, o: &TfOrders, zp: &[Vec<c64>], b: &[f64], f: &[f64]) -> f64 {
+    (0..data.len())
+        .map(|k| {
+            let fk = c64::new(1.0, 0.0) + poly_at(f, 1, zp, k);
+            data.w[k] * (poly_at(b, o.nk, zp, k) / fk - data.g[k]).norm_sqr()
+        })
+        .sum()
+}
+
+/// The start denominator with at most `limit` unstable roots ([`constrained_start`], scored by
+/// the output-error cost with $B$ refitted).
+fn admissible_denominator(
+    data: &FreqData,
+    o: &TfOrders,
+    zp: &[Vec<c64>],
+    f: &[f64],
+    limit: usize,
+) -> Result<Vec<f64>> {
+    let mut den = vec![1.0];
+    den.extend_from_slice(f);
+    let roots = crate::linalg::roots(&den)?;
+    let to_f = |r: &[c64]| crate::linalg::poly_from_roots(r)[1..].to_vec();
+    let start = constrained_start(&roots, limit, |r| {
+        let f = to_f(r);
+        let b = refit_numerator(data, o, zp, &f).ok()?;
+        Some(oe_cost(data, o, zp, &b, &f))
+    });
+    Ok(to_f(&start))
+}
+
+/// Levy's equation-error residuals $\sqrt{w_k}\,(F(\zeta_k) G_k - \zeta_k^{n_k} B(\zeta_k))$
+/// (re, im) with the denominator constrained to at most `limit` unstable roots.
+struct LevyProblem<'a> {
+    data: &'a FreqData,
+    o: TfOrders,
+    zp: &'a [Vec<c64>],
+    limit: usize,
+}
+
+impl super::pem::lm::LeastSquaresProblem for LevyProblem<'_> {
+    fn residuals(&mut self, x: &[f64]) -> Option<Vec<f64>> {
+        let (b, f) = x.split_at(self.o.nb);
+        if unstable_roots_of(f).ok()? > self.limit {
+            return None;
+        }
+        let mut r = Vec::with_capacity(2 * self.data.len());
+        for k in 0..self.data.len() {
+            let fk = c64::new(1.0, 0.0) + poly_at(f, 1, self.zp, k);
+            let e =
+                (fk * self.data.g[k] - poly_at(b, self.o.nk, self.zp, k)) * self.data.w[k].sqrt();
+            r.push(e.re);
+            r.push(e.im);
+        }
+        r.iter().all(|v| v.is_finite()).then_some(r)
+    }
+    fn jacobian(&mut self, x: &[f64]) -> Option<faer::Mat<f64>> {
+        let (nb, nk) = (self.o.nb, self.o.nk);
+        let l = self.data.len();
+        let mut j = faer::Mat::<f64>::zeros(2 * l, x.len());
+        for k in 0..l {
+            let sw = self.data.w[k].sqrt();
+            for p in 0..nb {
+                let d = -self.zp[nk + p][k] * sw;
+                j[(2 * k, p)] = d.re;
+                j[(2 * k + 1, p)] = d.im;
+            }
+            for i in 1..=self.o.nf {
+                let d = self.zp[i][k] * self.data.g[k] * sw;
+                j[(2 * k, nb + i - 1)] = d.re;
+                j[(2 * k + 1, nb + i - 1)] = d.im;
+            }
+        }
+        Some(j)
+    }
 }
 
 fn finish_tf(
@@ -463,7 +698,7 @@ fn finish_tf(
     zp: &[Vec<c64>],
     b: Vec<f64>,
     f: Vec<f64>,
-    iterations: usize,
+    (iterations, converged): (usize, bool),
 ) -> Result<FreqFit<crate::lti::TransferFunction>> {
     let model = tf_model(&b, &f, o, data.ts)?;
     let resp: Vec<c64> = (0..data.len())
@@ -490,6 +725,7 @@ fn finish_tf(
         n_params: o.n_params(),
         cost,
         iterations,
+        converged,
     })
 }
 
@@ -543,10 +779,20 @@ pub fn oe_frd(
             Err(_) => break,
         }
     }
+    // with a limit on the unstable poles (not the explicit reflection of `enforce_stability`):
+    // an admissible start and a constrained refinement
+    let limit = opts.max_unstable_poles.filter(|_| !opts.enforce_stability);
+    if let Some(lim) = limit {
+        if unstable_roots_of(&f)? > lim {
+            f = admissible_denominator(&data, o, &zp, &f, lim)?;
+            b = refit_numerator(&data, o, &zp, &f)?;
+        }
+    }
     let mut prob = TfProblem {
         data: &data,
         o: *o,
         zp: &zp,
+        limit,
     };
     let mut x0 = b.clone();
     x0.extend_from_slice(&f);
@@ -586,7 +832,14 @@ pub fn oe_frd(
             b = complex_lstsq(&cols, &data.g, &wt)?;
         }
     }
-    finish_tf(&data, o, &zp, b, f, report.iterations)
+    finish_tf(
+        &data,
+        o,
+        &zp,
+        b,
+        f,
+        (report.iterations, report.reason.converged()),
+    )
 }
 
 /// The OE criterion for the Levenberg–Marquardt solver: residuals (re, im) of
@@ -595,11 +848,18 @@ struct TfProblem<'a> {
     data: &'a FreqData,
     o: TfOrders,
     zp: &'a [Vec<c64>],
+    /// At most this many unstable roots of $F$ (steps beyond are inadmissible).
+    limit: Option<usize>,
 }
 
 impl super::pem::lm::LeastSquaresProblem for TfProblem<'_> {
     fn residuals(&mut self, x: &[f64]) -> Option<Vec<f64>> {
         let (b, f) = x.split_at(self.o.nb);
+        if let Some(lim) = self.limit {
+            if unstable_roots_of(f).ok()? > lim {
+                return None;
+            }
+        }
         let mut r = Vec::with_capacity(2 * self.data.len());
         for k in 0..self.data.len() {
             let fk = c64::new(1.0, 0.0) + poly_at(f, 1, self.zp, k);

@@ -6,7 +6,9 @@
 //! $$ V = \sum_{k=1}^{L} w_k \,\bigl| \hat G(z_k) - G_k \bigr|^2, \qquad z_k = e^{j\omega_k T}, $$
 //! over the $n$-th order models $\hat G(z) = C (zI - A)^{-1} B + D$ ($D = 0$ unless
 //! [`SsFreqOptions::feedthrough`]). Unstable models are admitted (an AMB plant is open-loop
-//! unstable) unless [`FreqFitOptions::enforce_stability`] asks for a stable one.
+//! unstable); [`FreqFitOptions::max_unstable_poles`] holds the fit to at most that many poles on
+//! or outside the unit circle (the number the data support), and
+//! [`FreqFitOptions::enforce_stability`] asks for a stable one.
 //!
 //! # 1. Subspace start
 //! The frequency-domain subspace method of McKelvey, Akçay and Ljung (1996). With
@@ -46,7 +48,11 @@
 //! imaginary parts stacked) with the poles fixed. This is done in the partial-fraction basis of
 //! the refinement below, which spans the same models as $C(zI - A)^{-1}B + D$ with free $B$, $D$.
 //! With [`FreqFitOptions::enforce_stability`] the unstable poles are first reflected,
-//! $z \mapsto 1/\bar z$, and the numerators refitted.
+//! $z \mapsto 1/\bar z$, and the numerators refitted. With
+//! [`FreqFitOptions::max_unstable_poles`] $= m$ and more than $m$ unstable subspace poles, the start
+//! keeps the unstable real poles and pairs (at most $m$ poles, as many as allowed) whose choice
+//! gives the smallest cost after refitting the numerators, and mirrors the others; this moves
+//! only the start of the constrained refinement below.
 //!
 //! # 2. Refinement
 //! The model is a sum of second-order sections (a complex pair, or two real poles sorted and
@@ -62,9 +68,12 @@
 //! $\partial \hat G / \partial \alpha_{b,1} = -N_b \delta / P_b^2$,
 //! $\partial \hat G / \partial \alpha_{b,2} = -N_b / P_b^2$. The residuals are the real and imaginary
 //! parts of $\sqrt{w_k}\,(\hat G(z_k) - G_k)$; [`minimize`] runs at most
-//! [`FreqFitOptions::max_iterations`] steps (0 skips the refinement). No constraint is imposed
-//! unless a stable model is asked for; then a trial with a pole on or outside the unit circle is
-//! inadmissible.
+//! [`FreqFitOptions::max_iterations`] steps (0 skips the refinement; [`FreqFit::converged`] says
+//! whether it met a convergence test). No constraint is imposed unless a number of unstable poles
+//! is given (or a stable model asked for); then a trial with more poles on or outside the unit
+//! circle than allowed (counted per section from the roots of its quadratic) is inadmissible,
+//! and Levenberg–Marquardt shortens the step: the result is the best model in the admissible
+//! set, never a reflected one.
 //!
 //! # Result
 //! The returned [`StateSpace`] is the block-diagonal delta-companion realisation of the sections:
@@ -98,7 +107,7 @@
 //! assert!(p.iter().all(|z| (z.norm() - 0.99).abs() < 1e-9));
 //! ```
 
-use super::freqfit::{FreqData, FreqErrors, FreqFit, FreqFitOptions};
+use super::freqfit::{constrained_start, FreqData, FreqErrors, FreqFit, FreqFitOptions};
 use super::pem::lm::{minimize, LeastSquaresProblem, LmOptions};
 use crate::error::{Error, Result};
 use crate::linalg;
@@ -175,28 +184,35 @@ pub fn ss_frd(
 
     // 1. subspace poles, mapped back to z; blocks in delta form
     let mut poles = subspace_poles(&data, &warp, order, q)?;
-    if opts.enforce_stability {
+    let limit = if opts.enforce_stability {
         for p in &mut poles {
             *p = reflect(*p);
         }
+        Some(0)
+    } else {
+        opts.max_unstable_poles
+    };
+    let mut prob = Problem::new(&data, &warp, &poles, ss_opts.feedthrough, limit)?;
+    if let Some(lim) = limit {
+        // an admissible start: the unstable subspace poles that explain the data best are kept
+        poles = constrained_start(&poles, lim, |p| {
+            let mut th = prob.denominators_from_poles(p);
+            prob.fit_numerators(&mut th).ok()?;
+            let r = prob.residuals(&th)?;
+            Some(r.iter().map(|x| x * x).sum())
+        });
     }
-    let mut prob = Problem::new(
-        &data,
-        &warp,
-        &poles,
-        ss_opts.feedthrough,
-        opts.enforce_stability,
-    )?;
     let mut theta = prob.denominators_from_poles(&poles);
     prob.fit_numerators(&mut theta)?;
 
     // 2. refinement
-    let mut iterations = 0;
+    let (mut iterations, mut converged) = (0, true);
     if opts.max_iterations > 0 {
         let lm = LmOptions::default().with_max_iterations(opts.max_iterations)?;
         let (th, report) = minimize(&mut prob, &theta, &lm)?;
         theta = th;
         iterations = report.iterations;
+        converged = report.reason.converged();
     }
     if theta.iter().any(|v| !v.is_finite()) {
         return Err(Error::numerical(
@@ -220,6 +236,7 @@ pub fn ss_frd(
         cost,
         errors,
         iterations,
+        converged,
     })
 }
 
@@ -371,7 +388,8 @@ struct Problem<'a> {
     /// Section orders (2 or 1).
     sections: Vec<usize>,
     feedthrough: bool,
-    stable_only: bool,
+    /// At most this many poles on or outside the unit circle (`None`: unconstrained).
+    limit: Option<usize>,
     h: f64,
 }
 
@@ -381,7 +399,7 @@ impl<'a> Problem<'a> {
         warp: &Warp,
         poles: &[c64],
         feedthrough: bool,
-        stable_only: bool,
+        limit: Option<usize>,
     ) -> Result<Self> {
         let n_pairs = poles.iter().filter(|p| p.im > 0.0).count();
         let n_real = poles.iter().filter(|p| p.im == 0.0).count();
@@ -401,7 +419,7 @@ impl<'a> Problem<'a> {
             sw: data.w.iter().map(|w| w.sqrt()).collect(),
             sections,
             feedthrough,
-            stable_only,
+            limit,
             h: warp.h,
         })
     }
@@ -480,30 +498,38 @@ impl<'a> Problem<'a> {
         g
     }
 
-    /// Whether every section is stable (only checked when a stable model is asked for).
+    /// Whether the sections have at most `limit` poles on or outside the unit circle (always
+    /// `true` without a limit).
     fn admissible(&self, th: &[f64]) -> bool {
-        if !self.stable_only {
+        let Some(limit) = self.limit else {
             return true;
-        }
+        };
         let h = self.h;
         let mut i = 0;
+        let mut count = 0;
         for &s in &self.sections {
             if s == 2 {
                 // z² + a1 z + a2 with a1 = hα1 − 2, a2 = 1 − hα1 + h²α2
                 let a1 = h * th[i] - 2.0;
                 let a2 = 1.0 - h * th[i] + h * h * th[i + 1];
-                if !(a2.abs() < 1.0 && a1.abs() < 1.0 + a2) {
-                    return false;
+                let disc = a1 * a1 - 4.0 * a2;
+                if disc < 0.0 {
+                    // a complex pair, |z|² = a2
+                    if a2 >= 1.0 {
+                        count += 2;
+                    }
+                } else {
+                    let sq = disc.sqrt();
+                    count += usize::from((-a1 + sq).abs() >= 2.0);
+                    count += usize::from((-a1 - sq).abs() >= 2.0);
                 }
                 i += 4;
             } else {
-                if (1.0 + h * th[i]).abs() >= 1.0 {
-                    return false;
-                }
+                count += usize::from((1.0 + h * th[i]).abs() >= 1.0);
                 i += 2;
             }
         }
-        true
+        count <= limit
     }
 
     /// Numerators and D by weighted linear least squares with the denominators of `th` fixed.
@@ -632,7 +658,7 @@ mod tests {
             c64::new(0.5, 0.0),
             c64::new(0.7, 0.0),
         ];
-        let mut prob = Problem::new(&data, &warp, &poles, true, false).unwrap();
+        let mut prob = Problem::new(&data, &warp, &poles, true, None).unwrap();
         let mut th = prob.denominators_from_poles(&poles);
         prob.fit_numerators(&mut th).unwrap();
         let j = prob.jacobian(&th).unwrap();

@@ -17,8 +17,41 @@
 //!
 //! Orders: ARX and OE of order $n$ have $n_b = n$, $n_f = n$ and the given delay $n_k$; the state
 //! space has $n$ states (and no feedthrough).
+//!
+//! # Unstable poles: how many the data support, and validity
+//! The FRF was measured in a stable closed loop $u = C(w - y) + r$. By the argument principle
+//! (discrete Nyquist criterion) the counter-clockwise winding number $W$ of $1 + L(e^{j\omega})$,
+//! $L = PC$, around the origin for $\omega$ from $-\pi$ to $\pi$ equals the number of poles of
+//! $L$ outside the unit circle minus the number of unstable closed-loop poles (zero). Poles of
+//! $C$ on the unit circle (the PID's integrator at $z = 1$) are counted as stable by a small
+//! indentation outside the circle. So
+//! $$ n_u(P) = W - n_u(C), \qquad W = \frac{\theta(\pi) - \theta(0)}{\pi}, \quad
+//! \theta = \arg\bigl(1 + \hat P C\bigr) \text{ tracked continuously}, $$
+//! ([`unstable_poles_from_loop`]) with $\hat P$ the measured plant FRF on the band's lines and
+//! $C$ the controller's exact model. Lines where the data do not determine the phase of
+//! $1 + \hat P C$ (its standard deviation $|C|\sigma_P$ above half its modulus) are skipped, and the
+//! first run of three such lines ends the data used: without excitation (above a PRBS's band,
+//! at its nulls) a closed-loop estimate drifts to $-1/C$, so $1 + \hat P C$ to 0 with a random
+//! phase, and the top of the data is where the count then needs $|L| < 1$. Outside the
+//! band the rule needs two assumptions, which
+//! it checks where it can: **above** the band $|L| < 1$ (the loop has rolled off; checked on
+//! the top line, else the count is refused), so $1 + L$ stays in the right half-plane and
+//! $\theta(\pi)$ is the multiple of $2\pi$ nearest $\theta(f_{\max})$; **below** the band $P$
+//! is taken constant at its lowest line while $C$ is exact (for an AMB the plant is flat and
+//! real below its unstable pole, and the loop gain is large, so the phase of $1 + L$ follows
+//! $C$); each pole of $C$ at $z = 1$ adds $\pi/2$ for the indentation, and $\theta(0)$ must come
+//! out within $\pi/4$ of a multiple of $\pi$ (else the count is refused). The count is
+//! therefore only as good as the band: the band must reach below the plant's unstable
+//! frequencies and up to where the loop gain is below 1 (10–1000 Hz on the AMB rigs).
+//!
+//! With that count (or one given by the user), [`CompareSpec::unstable_poles`] constrains every
+//! fit ([`FreqFitOptions::max_unstable_poles`]: a constrained refinement, never a reflection of
+//! the result) and a row is **valid** ([`CompareRow::valid`]) when the fit succeeded, has exactly
+//! that many unstable poles, and, with a controller, closes a stable loop; a row that is not
+//! valid stays in the table with the reason in its note. [`choose`] picks among the valid rows
+//! the best validation fit when there is one, else the smallest BIC.
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::estimate::arx::fit_percent;
 use crate::estimate::freqfit::{arx_frd, oe_frd, FreqErrors, FreqFitOptions, TfOrders};
 use crate::lti::{Frd, StateSpace, TransferFunction};
@@ -60,6 +93,13 @@ pub struct CompareSpec {
     pub fit: FreqFitOptions,
     /// Upper edge of the low band scored separately \[Hz\] (default 200).
     pub low_band_hz: f64,
+    /// The number of unstable plant poles the data support (e.g. from
+    /// [`unstable_poles_from_loop`]): every fit is constrained to at most this many and a row
+    /// with another number is not valid. `None` (default): unconstrained, not checked.
+    pub unstable_poles: Option<usize>,
+    /// The controller of the loop the FRF was measured in: a row whose model does not close a
+    /// stable loop with it is not valid. `None` (default): not checked.
+    pub controller: Option<StateSpace>,
 }
 
 impl Default for CompareSpec {
@@ -70,6 +110,8 @@ impl Default for CompareSpec {
             nk: 1,
             fit: FreqFitOptions::default(),
             low_band_hz: 200.0,
+            unstable_poles: None,
+            controller: None,
         }
     }
 }
@@ -112,7 +154,15 @@ pub struct CompareRow {
     pub validation_fit: Option<f64>,
     /// Unstable poles of the model.
     pub unstable_poles: Option<usize>,
-    /// Why a fit or the validation failed.
+    /// Whether the refinement converged (`None` when the fit failed).
+    pub converged: Option<bool>,
+    /// Whether the model closes a stable loop with [`CompareSpec::controller`] (`None` without
+    /// a controller or a model).
+    pub closed_loop_stable: Option<bool>,
+    /// A model that may be chosen: fitted, with the supported number of unstable poles and a
+    /// stable closed loop (module docs).
+    pub valid: bool,
+    /// Why a fit or the validation failed, or why the row is not valid.
     pub note: Option<String>,
     /// The fitted model as a state-space realisation (not serialised).
     #[serde(skip)]
@@ -161,10 +211,19 @@ fn candidate(
         bic: None,
         validation_fit: None,
         unstable_poles: None,
+        converged: None,
+        closed_loop_stable: None,
+        valid: false,
         note: None,
         model: None,
     };
-    let fitted: Result<(StateSpace, usize, f64, FreqErrors, usize)> = (|| {
+    let mut notes: Vec<String> = Vec::new();
+    let mut fit_opts = spec.fit.clone();
+    if fit_opts.max_unstable_poles.is_none() {
+        fit_opts.max_unstable_poles = spec.unstable_poles;
+    }
+    let fit_opts = &fit_opts;
+    let fitted: Result<(StateSpace, usize, f64, FreqErrors, bool)> = (|| {
         let o = TfOrders {
             nb: order,
             nf: order,
@@ -173,25 +232,25 @@ fn candidate(
         let tf = |t: TransferFunction| t.to_state_space();
         match structure {
             FitStructure::Arx => {
-                let f = arx_frd(frd, &o, &spec.fit)?;
-                Ok((tf(f.model)?, f.n_params, f.cost, f.errors, 0))
+                let f = arx_frd(frd, &o, fit_opts)?;
+                Ok((tf(f.model)?, f.n_params, f.cost, f.errors, f.converged))
             }
             FitStructure::Oe => {
-                let f = oe_frd(frd, &o, &spec.fit)?;
-                Ok((tf(f.model)?, f.n_params, f.cost, f.errors, f.iterations))
+                let f = oe_frd(frd, &o, fit_opts)?;
+                Ok((tf(f.model)?, f.n_params, f.cost, f.errors, f.converged))
             }
             FitStructure::Ss => {
                 let f = crate::estimate::freqfit_ss::ss_frd(
                     frd,
                     order,
-                    &spec.fit,
+                    fit_opts,
                     &crate::estimate::freqfit_ss::SsFreqOptions::default(),
                 )?;
-                Ok((f.model, f.n_params, f.cost, f.errors, f.iterations))
+                Ok((f.model, f.n_params, f.cost, f.errors, f.converged))
             }
         }
     })();
-    let (model, n_params, cost, errors, iterations) = match fitted {
+    let (model, n_params, cost, errors, converged) = match fitted {
         Ok(v) => v,
         Err(e) => {
             row.note = Some(format!("fit failed: {e}"));
@@ -199,9 +258,11 @@ fn candidate(
         }
     };
     row.n_params = n_params;
-    if structure != FitStructure::Arx && iterations >= spec.fit.max_iterations {
-        row.note = Some(format!(
-            "the refinement stopped at its iteration limit ({iterations}): the model may not be at the optimum"
+    row.converged = Some(converged);
+    if !converged {
+        notes.push(format!(
+            "the refinement stopped at its iteration limit ({}) before converging: the model may not be at the optimum",
+            spec.fit.max_iterations
         ));
     }
     row.rmse = Some(errors.rmse);
@@ -224,12 +285,19 @@ fn candidate(
                     Some((low.iter().sum::<f64>() / low.len() as f64).sqrt());
             }
         }
-        Err(e) => row.note = Some(format!("frequency response failed: {e}")),
+        Err(e) => notes.push(format!("frequency response failed: {e}")),
     }
     row.unstable_poles = model
         .poles()
         .ok()
         .map(|p| p.iter().filter(|z| z.norm() > 1.0).count());
+    let controller = spec
+        .controller
+        .as_ref()
+        .or(validation.map(|v| v.controller));
+    if let Some(c) = controller {
+        row.closed_loop_stable = Some(closed_loop_stable(&model, c));
+    }
     if let Some(v) = validation {
         match simulate_loop(&model, v.controller, v.r) {
             Ok(out) => {
@@ -237,11 +305,197 @@ fn candidate(
                 let k0 = v.skip.min(n);
                 row.validation_fit = fit_percent(&v.y[k0..n], &out.y[k0..n]).ok();
             }
-            Err(e) => row.note = Some(format!("closed-loop validation failed: {e}")),
+            Err(e) => notes.push(format!("closed-loop validation failed: {e}")),
         }
+    }
+    let mut valid = row.unstable_poles.is_some();
+    if let (Some(want), Some(got)) = (spec.unstable_poles, row.unstable_poles) {
+        if got != want {
+            valid = false;
+            notes.push(format!(
+                "not valid: {got} unstable poles, the data support {want}"
+            ));
+        }
+    }
+    if row.closed_loop_stable == Some(false) {
+        valid = false;
+        notes.push("not valid: the loop with the controller is unstable".into());
+    }
+    row.valid = valid;
+    if !notes.is_empty() {
+        row.note = Some(notes.join("; "));
     }
     row.model = Some(model);
     row
+}
+
+/// Whether the SISO `plant` closes a stable loop $u = C(w - y) + r$ with `controller` (every
+/// closed-loop pole strictly inside the unit circle); `false` when the loop cannot be formed.
+pub fn closed_loop_stable(plant: &StateSpace, controller: &StateSpace) -> bool {
+    plant
+        .feedback(controller)
+        .and_then(|cl| cl.poles())
+        .is_ok_and(|p| p.iter().all(|z| z.norm() < 1.0))
+}
+
+/// The row chosen by the comparison (module docs): among the [valid](CompareRow::valid) rows,
+/// the best validation fit when any valid row has one, else the smallest BIC; `None` when no
+/// row is valid.
+pub fn choose(rows: &[CompareRow]) -> Option<usize> {
+    let valid = || rows.iter().enumerate().filter(|(_, r)| r.valid);
+    let by = |key: &dyn Fn(&CompareRow) -> Option<f64>| {
+        valid()
+            .filter_map(|(i, r)| key(r).filter(|v| v.is_finite()).map(|v| (i, v)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(i, _)| i)
+    };
+    by(&|r| r.validation_fit.map(|f| -f)).or_else(|| by(&|r| r.bic))
+}
+
+/// The number of unstable poles of the plant supported by a measured plant FRF and the
+/// controller of the (stable) loop it was measured in: the discrete Nyquist count of the
+/// module docs, $n_u(P) = W - n_u(C)$, over the lines of `plant` in `band_hz` (all lines when
+/// `None`).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] when the FRF has fewer than 2 lines in the band, no sample time,
+/// or another sample time than the controller, or a non-SISO controller;
+/// [`Error::Numerical`] when the count cannot be made: the loop gain is 1 or more on the top
+/// line (the band must reach where the loop has rolled off), the phase at DC is not near a
+/// multiple of $\pi$, or the winding number is not an integer (too coarse a grid, or a loop
+/// that is not stable); the message says what to do.
+///
+/// # Example
+/// ```
+/// use ambid_core::lti::{Frd, StateSpace};
+/// use ambid_core::validate::compare::unstable_poles_from_loop;
+/// use faer::mat;
+/// // P = 0.1/(z - 1.05) (one unstable pole), C = 2: closed-loop pole 1.05 - 0.2 = 0.85
+/// let ts = 1e-3;
+/// let p = StateSpace::discrete(mat![[1.05]], mat![[1.0]], mat![[0.1]], mat![[0.0]], ts).unwrap();
+/// let c = StateSpace::discrete(mat![[0.0]], mat![[0.0]], mat![[0.0]], mat![[2.0]], ts).unwrap();
+/// let f: Vec<f64> = (1..400).map(|k| k as f64).collect();
+/// let frd = Frd::from_model(&p, &f).unwrap();
+/// assert_eq!(unstable_poles_from_loop(&frd, &c, None).unwrap(), 1);
+/// ```
+pub fn unstable_poles_from_loop(
+    plant: &Frd,
+    controller: &StateSpace,
+    band_hz: Option<(f64, f64)>,
+) -> Result<usize> {
+    use std::f64::consts::PI;
+    const CTX: &str = "unstable_poles_from_loop";
+    let ts = plant
+        .ts()
+        .ok_or_else(|| Error::invalid("plant", "the FRF has no sample time (continuous data)"))?;
+    match controller.ts() {
+        Some(tc) if (tc / ts - 1.0).abs() <= 1e-9 => {}
+        _ => {
+            return Err(Error::invalid(
+                "controller",
+                "the controller must be discrete with the FRF's sample time",
+            ))
+        }
+    }
+    if controller.ninputs() != 1 || controller.noutputs() != 1 {
+        return Err(Error::invalid("controller", "the controller must be SISO"));
+    }
+    let (lo, hi) = band_hz.unwrap_or((f64::NEG_INFINITY, f64::INFINITY));
+    let one = crate::c64::new(1.0, 0.0);
+    let mut lines: Vec<(f64, crate::c64, f64)> = plant
+        .f_hz()
+        .iter()
+        .zip(plant.values())
+        .enumerate()
+        .filter(|(_, (f, g))| **f > 0.0 && **f >= lo && **f <= hi && g.norm().is_finite())
+        .map(|(k, (f, g))| (*f, *g, plant.variance().map_or(0.0, |v| v[k])))
+        .collect();
+    lines.sort_by(|a, b| a.0.total_cmp(&b.0));
+    // the lines where the data determine the phase of 1 + PC: its standard deviation |C| σ_P at
+    // most half its modulus (this drops lines without excitation, where a closed-loop estimate
+    // tends to P̂ = −1/C and 1 + P̂C to 0 with a random phase)
+    let f_all: Vec<f64> = lines.iter().map(|l| l.0).collect();
+    let c_all = controller.freq_response_siso(&f_all)?;
+    // isolated undetermined lines are skipped; the first run of 3 ends the data used (the
+    // excitation has run out: above it the estimate drifts to −1/C before the phase is lost)
+    let mut kept: Vec<(f64, crate::c64, crate::c64)> = Vec::new();
+    let mut run = 0;
+    for (l, c) in lines.iter().zip(&c_all) {
+        if l.2.sqrt() * c.norm() <= 0.5 * (one + l.1 * *c).norm() {
+            run = 0;
+            kept.push((l.0, l.1, l.1 * c));
+        } else {
+            run += 1;
+            if run == 3 && !kept.is_empty() {
+                break;
+            }
+        }
+    }
+    let f: Vec<f64> = kept.iter().map(|k| k.0).collect();
+    let loop_in_band: Vec<crate::c64> = kept.iter().map(|k| k.2).collect();
+    if f.len() < 2 {
+        return Err(Error::invalid(
+            "band_hz",
+            "the unstable-pole count needs at least 2 lines of the plant FRF in the band whose phase the data determine",
+        ));
+    }
+    // θ on the band, tracked upwards
+    let unwrap = |prev: f64, z: crate::c64| {
+        let a = z.arg();
+        prev + (a - prev + PI).rem_euclid(2.0 * PI) - PI
+    };
+    let mut theta = (one + loop_in_band[0]).arg();
+    let theta_lo = theta;
+    for l in &loop_in_band[1..] {
+        theta = unwrap(theta, one + l);
+    }
+    let top = loop_in_band[loop_in_band.len() - 1].norm();
+    if top >= 1.0 {
+        return Err(Error::numerical(
+            CTX,
+            format!(
+                "the loop gain |PC| is {top:.3} (>= 1) on the top line ({:.1} Hz): the count needs a band that reaches where the loop has rolled off; widen the band or give the number of unstable poles",
+                f[f.len() - 1]
+            ),
+        ));
+    }
+    let theta_pi = 2.0 * PI * (theta / (2.0 * PI)).round();
+    // below the band: P constant at its lowest line, C exact, on a log grid down to f_lo·1e-6
+    let p0 = kept[0].1;
+    let n_grid = 400;
+    let f_low: Vec<f64> = (1..=n_grid)
+        .map(|k| f[0] * 10f64.powf(-6.0 * k as f64 / n_grid as f64))
+        .collect();
+    let c_low = controller.freq_response_siso(&f_low)?;
+    let mut th = theta_lo;
+    for cl in &c_low {
+        th = unwrap(th, one + p0 * cl);
+    }
+    let poles = controller.poles()?;
+    let at_one = poles.iter().filter(|z| (*z - one).norm() < 1e-9).count();
+    let c_unstable = poles
+        .iter()
+        .filter(|z| z.norm() > 1.0 && (*z - one).norm() >= 1e-9)
+        .count();
+    let theta_0_raw = th + at_one as f64 * PI / 2.0;
+    let theta_0 = PI * (theta_0_raw / PI).round();
+    if (theta_0_raw - theta_0).abs() > PI / 4.0 {
+        return Err(Error::numerical(
+            CTX,
+            "the phase of 1 + PC towards DC is not near a multiple of pi (the low-frequency loop is not as assumed); give the number of unstable poles",
+        ));
+    }
+    let w = ((theta_pi - theta_0) / PI).round() as i64;
+    let n = w - c_unstable as i64;
+    if n < 0 {
+        return Err(Error::numerical(
+            CTX,
+            format!(
+                "the Nyquist count is negative ({n}): the measured loop is not consistent with a stable closed loop and this controller; check the controller file and the band, or give the number of unstable poles"
+            ),
+        ));
+    }
+    Ok(n as usize)
 }
 
 /// The comparison as a plain-text table (one row per candidate; `—` for missing values).
@@ -269,4 +523,31 @@ pub fn table(rows: &[CompareRow]) -> String {
         ));
     }
     s
+}
+
+/// The number of unstable plant poles the fits are held to, and how it was found: `given` when
+/// the user set it, else the Nyquist count of the measured loop with the controller
+/// ([`unstable_poles_from_loop`]), else `None` (unconstrained, with the reason).
+pub fn supported_unstable_poles(
+    frd: &Frd,
+    controller: Option<&StateSpace>,
+    band: Option<(f64, f64)>,
+    given: Option<usize>,
+) -> (Option<usize>, String) {
+    if let Some(n) = given {
+        return (Some(n), format!("{n} (given)"));
+    }
+    let Some(c) = controller else {
+        return (
+            None,
+            "not constrained (no controller: give the controller for the Nyquist count of the measured loop, or the number)".into(),
+        );
+    };
+    match unstable_poles_from_loop(frd, c, band) {
+        Ok(n) => (
+            Some(n),
+            format!("{n} (Nyquist count of the measured loop with the controller)"),
+        ),
+        Err(e) => (None, format!("not constrained: {e}")),
+    }
 }

@@ -466,6 +466,9 @@ pub struct ModelsSection {
     /// How the model is chosen: `validation` (best validation fit), `bic` or `frf` (smallest
     /// relative FRF error).
     pub select: String,
+    /// Number of unstable plant poles of FRF fits (default: the Nyquist count of the measured
+    /// loop with the controller; unconstrained without a controller).
+    pub unstable_poles: Option<usize>,
 }
 
 impl Default for ModelsSection {
@@ -480,6 +483,7 @@ impl Default for ModelsSection {
             max_iterations: 100,
             focus: "prediction".into(),
             select: "validation".into(),
+            unstable_poles: None,
         }
     }
 }

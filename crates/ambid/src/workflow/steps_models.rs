@@ -12,7 +12,9 @@ use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::estimate::pem::{self, Orders, PemOptions};
 use ambid_core::estimate::ss_pem::SsPemOptions;
 use ambid_core::lti::{PolyModel, StateSpace, Structure};
-use ambid_core::validate::compare::{compare_models, CompareSpec, FitStructure, ValidationRecord};
+use ambid_core::validate::compare::{
+    compare_models, supported_unstable_poles, CompareSpec, FitStructure, ValidationRecord,
+};
 use ambid_core::validate::pz::{PzAnalysis, PzOptions};
 use serde_json::json;
 
@@ -34,6 +36,9 @@ pub struct Candidate {
     pub validation_fit: Option<f64>,
     pub unstable_poles: Option<usize>,
     pub truth_median_relative: Option<f64>,
+    /// May be chosen (FRF fits: the supported number of unstable poles and a stable loop with
+    /// the controller, see [`ambid_core::validate::compare`]; time fits: fitted).
+    pub valid: bool,
     pub note: Option<String>,
     /// Kalman gain of the innovations form (time-domain state-space fits).
     pub kalman: Option<Vec<f64>>,
@@ -138,6 +143,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         _ => None,
     };
     let validation_kind: String;
+    let mut unstable_how: Option<(Option<usize>, String)> = None;
     if domain == "frf" {
         let Some(a) = &ctx.frf else {
             return Ok(StepStatus::Skipped("no FRF".into()));
@@ -168,6 +174,14 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                 ..FreqFitOptions::default()
             },
             ..CompareSpec::default()
+        };
+        let ctrl = ctx.controller.as_ref().map(|c| c.state_space());
+        let (n_u, how) = supported_unstable_poles(frd, ctrl, spec.fit.band_hz, cfg.unstable_poles);
+        unstable_how = Some((n_u, how));
+        let spec = CompareSpec {
+            unstable_poles: n_u,
+            controller: ctrl.cloned(),
+            ..spec
         };
         let val = ctx.valid.as_ref();
         let vrec = match (val, &ctx.controller) {
@@ -205,6 +219,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                 validation_fit: r.validation_fit,
                 unstable_poles: r.unstable_poles,
                 truth_median_relative: truth_med,
+                valid: r.valid,
                 note: r.note,
                 kalman: None,
             });
@@ -279,6 +294,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                             validation_fit: None,
                             unstable_poles: None,
                             truth_median_relative: None,
+                            valid: true,
                             note: None,
                             kalman: k,
                         };
@@ -331,6 +347,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                             validation_fit: None,
                             unstable_poles: None,
                             truth_median_relative: None,
+                            valid: false,
                             note: Some(format!("{e:#}")),
                             kalman: None,
                         });
@@ -350,13 +367,20 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             _ => c.validation_fit.map(|f| -f),
         }
     };
-    let chosen = cands
-        .iter()
-        .enumerate()
-        .filter(|(_, c)| c.model.is_some())
-        .filter_map(|(i, c)| key(c).filter(|v| v.is_finite()).map(|v| (i, v)))
-        .min_by(|a, b| a.1.total_cmp(&b.1))
-        .map(|(i, _)| i)
+    // the best valid candidate by the configured key (BIC when no valid candidate has the key,
+    // e.g. no validation fit); only when none is valid, the best of the others, reported as such
+    let best = |only_valid: bool, key: &dyn Fn(&Candidate) -> Option<f64>| {
+        cands
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| c.model.is_some() && (c.valid || !only_valid))
+            .filter_map(|(i, c)| key(c).filter(|v| v.is_finite()).map(|v| (i, v)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(i, _)| i)
+    };
+    let chosen_valid = best(true, &key).or_else(|| best(true, &|c: &Candidate| c.bic));
+    let chosen = chosen_valid
+        .or_else(|| best(false, &key))
         .or_else(|| cands.iter().position(|c| c.model.is_some()));
     let opt = |v: Option<f64>, scale: f64| v.map_or("—".to_string(), |v| fmt(scale * v));
     let rows: Vec<Vec<String>> = cands
@@ -387,13 +411,17 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             "bic": c.bic,
             "validation_fit_pct": c.validation_fit,
             "unstable_poles": c.unstable_poles.map(|u| u as f64),
+            "valid": c.valid,
             "median_error_vs_truth_pct": c.truth_median_relative.map(|v| 100.0 * v),
         }));
     }
     ctx.put("models.domain", domain.clone());
+    if let Some((n_u, _)) = &unstable_how {
+        ctx.put("models.unstable_poles_supported", n_u.map(|n| n as f64));
+    }
     ctx.put("models.table", jrows);
     let mut blocks = vec![Block::Text(format!(
-        "{} at orders {:?}; {}. Validation fit: {validation_kind}. Chosen by {}.",
+        "{} at orders {:?}; {}. Validation fit: {validation_kind}. Chosen by {} among the valid models{}.",
         if domain == "frf" {
             "ARX (Levy), OE (Sanathanan–Koerner + Levenberg–Marquardt) and state-space (frequency-domain subspace + LM) models fitted to the plant FRF"
         } else {
@@ -409,7 +437,10 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             "bic" => "the smallest BIC",
             "frf" => "the smallest relative FRF error",
             _ => "the best validation fit",
-        }
+        },
+        unstable_how.as_ref().map_or(String::new(), |(_, h)| format!(
+            " (right number of unstable poles and a stable loop with the controller; unstable plant poles: {h})"
+        ))
     ))];
     blocks.push(Block::Table(Table {
         id: "model_comparison".into(),
@@ -432,6 +463,15 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         rows,
         highlight: chosen,
     }));
+    if let (Some(i), None) = (chosen, chosen_valid) {
+        blocks.push(Ctx::note(
+            NoteKind::Fail,
+            format!(
+                "No candidate is valid (see the notes in the table); {} is shown as the best of the invalid ones.",
+                cands[i].label()
+            ),
+        ));
+    }
     if let Some(i) = chosen {
         let c = &cands[i];
         ctx.put("models.chosen", c.label());
