@@ -508,14 +508,17 @@ fn lines_without_input_power_are_left_out() {
 #[test]
 fn periodic_lpm_on_the_f16_record_matches_period_averaging() {
     let base = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    let Some(path) = ["../../../shared", "../../../../shared"]
-        .iter()
-        .map(|d| {
-            base.join(d)
-                .join("data/real/f16-gvt/F16Data_FullMSine_Level1.csv")
-        })
+    let Some(path) = base
+        .ancestors()
+        .map(|d| d.join("shared/data/real/f16-gvt/F16Data_FullMSine_Level1.csv"))
         .find(|p| p.exists())
     else {
+        // CI always has ../shared beside the clone: a skip there would hide a broken path
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "F-16 data not found above {}",
+            base.display()
+        );
         println!("F-16 data not found next to the repository: skipped");
         return;
     };

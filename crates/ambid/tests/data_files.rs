@@ -2,6 +2,7 @@
 //! by `tests/fixtures/make_data_files.py`), the real measured data sets in `shared/data/real/`
 //! (skipped with a note when absent), and error messages with exact line numbers.
 
+mod common;
 use std::path::{Path, PathBuf};
 
 use ambid::io::table::{read_table, ColumnRef, DataFileError, Format, ReadOptions, Table};
@@ -11,18 +12,7 @@ fn fixtures() -> PathBuf {
 }
 
 fn real(rel: &str) -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/data/real")
-        .join(rel);
-    if p.exists() {
-        Some(p)
-    } else {
-        println!(
-            "note: {} is absent; skipping this real-data check",
-            p.display()
-        );
-        None
-    }
+    common::real_data(rel)
 }
 
 fn read(p: &Path) -> Table {

@@ -26,19 +26,9 @@ fn run(text: &str, base: &Path) -> Outcome {
     workflow::run(&cfg, base, &mut progress).unwrap_or_else(|e| panic!("workflow failed: {e}"))
 }
 
-/// A file of ../shared/data/real (or of `$AMBID_REAL_DATA`, e.g. from a git worktree).
+/// A file of ../shared/data/real (see `common::real_data`).
 fn real(rel: &str) -> Option<PathBuf> {
-    let dir = std::env::var_os("AMBID_REAL_DATA").map_or_else(
-        || Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/real"),
-        PathBuf::from,
-    );
-    let p = dir.join(rel);
-    if p.exists() {
-        Some(p)
-    } else {
-        println!("skipped: {} is not present", p.display());
-        None
-    }
+    common::real_data(rel)
 }
 
 /// `ambid simulate --rig-seed` for the seed experiment (linear twin) into `dir`.

@@ -10,12 +10,8 @@ use common::{ambid, s, text, tmpdir};
 /// A file of the shared real data sets: `shared/data/real/<rel>` in the first ancestor of the
 /// crate that has it (the workspace's sibling `../shared`, also from a git worktree).
 fn real(rel: &str) -> String {
-    let here = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let p = here
-        .ancestors()
-        .map(|a| a.join("shared/data/real").join(rel))
-        .find(|p| p.exists())
-        .unwrap_or_else(|| panic!("shared/data/real/{rel} not found above {}", here.display()));
+    let p = common::real_data(rel)
+        .unwrap_or_else(|| panic!("shared/data/real/{rel} is needed for this check"));
     std::fs::read_to_string(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
 

@@ -181,13 +181,7 @@ fn walk(d: &Path) -> usize {
 }
 
 fn shared(rel: &str) -> Option<PathBuf> {
-    let p = root().join("../shared/data/real").join(rel);
-    if p.exists() {
-        Some(p)
-    } else {
-        println!("skipped: {} is not present", p.display());
-        None
-    }
+    common::real_data(rel)
 }
 
 fn example(name: &str) -> (WorkflowConfig, PathBuf) {

@@ -49,3 +49,25 @@ pub fn percentile(v: &[f64], p: f64) -> f64 {
     let (lo, hi) = (pos.floor() as usize, pos.ceil() as usize);
     s[lo] + (s[hi] - s[lo]) * (pos - lo as f64)
 }
+
+/// A file of the real data sets, `shared/data/real/<rel>`, in the first ancestor of this crate
+/// that has it (the workspace's sibling `../shared`, also from a git worktree). When it is absent
+/// the check is skipped with a printed note, except under CI (`CI` set), where missing data is a
+/// failure: CI always has `shared/` beside the clone, so a skip there would hide a broken path.
+#[allow(dead_code)]
+pub fn real_data(rel: &str) -> Option<PathBuf> {
+    let here = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let found = here
+        .ancestors()
+        .map(|a| a.join("shared/data/real").join(rel))
+        .find(|p| p.exists());
+    if found.is_none() {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "shared/data/real/{rel} not found above {} (CI must have ../shared)",
+            here.display()
+        );
+        println!("skipped: shared/data/real/{rel} is not present");
+    }
+    found
+}
