@@ -460,8 +460,11 @@ pub struct ModelsSection {
     pub weights: String,
     /// Maximum iterations of the iterative fits.
     pub max_iterations: usize,
-    /// Criterion of the time-domain OE and state-space fits: `prediction` (default) or
-    /// `simulation` (as `ambid fit --focus`).
+    /// Criterion of the time-domain state-space fits: `auto` (default: as `ambid fit
+    /// --structure ss`, the simulation focus for a stable subspace model, else prediction; on
+    /// closed-loop records, whose time-domain fits go from u to y, always prediction, since output
+    /// error from a feedback signal is biased), `prediction` or `simulation`. The polynomial OE
+    /// fits use the prediction criterion unless `simulation` is given.
     pub focus: String,
     /// How the model is chosen: `validation` (best validation fit), `bic` or `frf` (smallest
     /// relative FRF error).
@@ -481,7 +484,7 @@ impl Default for ModelsSection {
             domain: None,
             weights: "variance".into(),
             max_iterations: 100,
-            focus: "prediction".into(),
+            focus: "auto".into(),
             select: "validation".into(),
             unstable_poles: None,
         }
@@ -690,7 +693,7 @@ impl WorkflowConfig {
         one_of(
             "models.focus",
             &self.models.focus,
-            &["prediction", "simulation"],
+            &["auto", "prediction", "simulation"],
         )?;
         if let Some(d) = &self.models.domain {
             one_of("models.domain", d, &["frf", "time"])?;

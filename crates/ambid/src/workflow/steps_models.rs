@@ -4,13 +4,12 @@
 use super::figures::{bode_panels, figure, lin, log, pz_panel, series, xy, Curve};
 use super::steps_frf::{ensure_ident, ensure_valid};
 use super::{computation, Ctx, Failure, ModelOut, StepStatus};
-use crate::fitting::fit_state_space;
+use crate::fitting::{identify_state_space, SsFitOptions, SsFocus};
 use crate::report::{format_number as fmt, Block, NoteKind, Style, Table};
 use ambid_core::c64;
 use ambid_core::estimate::arx::{arx, fit_percent, ArxOrders};
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::estimate::pem::{self, Orders, PemOptions};
-use ambid_core::estimate::ss_pem::SsPemOptions;
 use ambid_core::lti::{PolyModel, StateSpace, Structure};
 use ambid_core::validate::compare::{
     compare_models, supported_unstable_poles, CompareSpec, FitStructure, ValidationRecord,
@@ -234,6 +233,15 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         } else {
             ambid_core::estimate::pem::Focus::Prediction
         };
+        // state space: `auto` is `ambid fit`'s rule on open-loop records; a closed-loop record's
+        // time-domain fit goes from u to y (direct method), where only the prediction criterion
+        // (a noise model) is consistent
+        let ss_focus = match cfg.focus.as_str() {
+            "simulation" => SsFocus::Simulation,
+            "prediction" => SsFocus::Prediction,
+            _ if rec.closed_loop => SsFocus::Prediction,
+            _ => SsFocus::Auto,
+        };
         for s in &cfg.structures {
             for &n in &cfg.orders {
                 let fitted: anyhow::Result<TimeFit> = (|| match s.as_str() {
@@ -261,14 +269,13 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                         Ok((p.g()?.to_state_space()?, Some(p), f.params.len(), None))
                     }
                     _ => {
-                        let o = SsPemOptions {
-                            focus,
-                            lm: SsPemOptions::default()
-                                .lm
-                                .with_max_iterations(cfg.max_iterations)?,
-                            ..SsPemOptions::default()
+                        let o = SsFitOptions {
+                            order: Some(n),
+                            focus: ss_focus,
+                            max_iterations: cfg.max_iterations,
+                            ..SsFitOptions::default()
                         };
-                        let f = fit_state_space(&rec.u, &rec.y, ts, Some(n), None, Some(o))?;
+                        let f = identify_state_space(&rec.u, &rec.y, ts, &o)?;
                         let np = n * n + 2 * n;
                         let k = f.pem.and_then(|p| p.kalman_gain);
                         Ok((f.model, None, np, k))
