@@ -435,9 +435,6 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         }));
     }
     ctx.put("models.domain", domain.clone());
-    if let Some(b) = &band_how {
-        ctx.put("models.band", b.clone());
-    }
     if let Some((n_u, _)) = &unstable_how {
         ctx.put("models.unstable_poles_supported", n_u.map(|n| n as f64));
     }
