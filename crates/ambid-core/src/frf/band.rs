@@ -545,4 +545,44 @@ mod tests {
         assert!(!filtered);
         assert_eq!(idx, vec![1, 2, 3]);
     }
+
+    #[test]
+    fn the_fit_band_is_the_span_of_reliable_runs() {
+        // |q| = 2 on 20 lines; σ_k such that the 95 % half-width is 2 % (reliable) or 40 %
+        let f: Vec<f64> = (1..=20).map(f64::from).collect();
+        let q = vec![c64::new(0.0, 2.0); 20];
+        let sigma = |h: f64| (h * 2.0 / 1.959_963_984_540_054) * 2f64.sqrt();
+        // noisy 1–2, reliable 3–9, two noisy lines 10–11 (an antiresonance), reliable 12–15,
+        // noisy 16–20 except a lone reliable line at 18 (by chance)
+        let var: Vec<f64> = f
+            .iter()
+            .map(|&f| {
+                let ok = (3.0..=9.0).contains(&f) || (12.0..=15.0).contains(&f) || f == 18.0;
+                sigma(if ok { 0.02 } else { 0.4 }).powi(2)
+            })
+            .collect();
+        let frd = Frd::new(f.clone(), q.clone(), Some(var), Some(1e-3)).unwrap();
+        let b = fit_band(&frd, FIT_REL_HALFWIDTH).unwrap();
+        assert_eq!(b.band, (3.0, 15.0));
+        assert_eq!((b.lines, b.reliable_lines, b.total_lines), (13, 11, 20));
+        assert!(b.from_variance);
+        assert!(
+            b.describe().contains("band 3.0–15.0 Hz derived"),
+            "{}",
+            b.describe()
+        );
+        // a looser threshold takes every line
+        let b = fit_band(&frd, 0.5).unwrap();
+        assert_eq!(b.band, (1.0, 20.0));
+        // no variance, or no run of 3 reliable lines: every line, and it says so
+        let exact = Frd::new(f.clone(), q.clone(), None, Some(1e-3)).unwrap();
+        let b = fit_band(&exact, FIT_REL_HALFWIDTH).unwrap();
+        assert_eq!((b.band, b.from_variance), ((1.0, 20.0), false));
+        assert!(b.describe().contains("every line"), "{}", b.describe());
+        let noisy = Frd::new(f, q, Some(vec![sigma(0.4).powi(2); 20]), Some(1e-3)).unwrap();
+        assert!(!fit_band(&noisy, FIT_REL_HALFWIDTH).unwrap().from_variance);
+        // a malformed threshold is an error
+        assert!(fit_band(&noisy, 0.0).is_err());
+        assert!(fit_band(&noisy, f64::NAN).is_err());
+    }
 }
