@@ -129,7 +129,7 @@ fn the_derived_fit_band_holds_on_random_rigs() {
         let rows = compare_models(
             frd,
             &spec(all.clone(), vec![6, 7, 8, 9], fb.band),
-            Some(vrec.clone()),
+            Some(vrec),
         )
         .unwrap();
         let rows_x = compare_models(
