@@ -162,6 +162,7 @@ pub fn fit_frf(
         "order": order,
         "n_params": row.n_params,
         "band_hz": input.opts.band_hz,
+        "band_origin": if input.explicit_band.is_some() { "given (--band)" } else { "derived from the FRF's standard deviations (ambid_core::frf::band::fit_band)" },
         "relative_rmse": row.relative_rmse,
         "median_relative": row.median_relative,
         "db_rmse": row.db_rmse,

@@ -395,6 +395,10 @@ fn the_fit_band_and_sample_rate_come_from_the_frf_file() {
         .collect();
     // the file runs to the PRBS's 10 dB edge (~3 kHz); the reliable plant lines end near 1.1 kHz
     assert!(band[0] < 10.0 && band[1] > 800.0 && band[1] < 2000.0, "{t}");
+    assert!(m["meta"]["band_origin"]
+        .as_str()
+        .unwrap()
+        .starts_with("derived"));
     // over every line of the file this median error was 15.2 % (the noise above ~1.2 kHz)
     let med = m["meta"]["median_relative"].as_f64().unwrap();
     assert!(med < 0.05, "{t}");
