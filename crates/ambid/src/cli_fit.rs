@@ -120,7 +120,7 @@ pub struct FitArgs {
     #[arg(long)]
     quantity: Option<String>,
     /// Band `f_min:f_max` in Hz of an FRF fit (default: derived from the file, from the first to
-    /// the last run of 3 lines whose 95 % interval is within ±10 % of the value; printed).
+    /// the last run of 3 lines whose 95 % interval is within ±20 % of the value; printed).
     #[arg(long, value_parser = crate::cli_frf::parse_band)]
     band: Option<(f64, f64)>,
     /// Weights of the lines of an FRF fit.

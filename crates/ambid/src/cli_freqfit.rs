@@ -198,7 +198,7 @@ pub struct CompareModelsArgs {
     #[arg(long, default_value_t = 1)]
     nk: usize,
     /// Band `f_min:f_max` in Hz (default: derived from the file, from the first to the last run
-    /// of 3 lines whose 95 % interval is within ±10 % of the value; printed).
+    /// of 3 lines whose 95 % interval is within ±20 % of the value; printed).
     #[arg(long, value_parser = parse_band)]
     band: Option<(f64, f64)>,
     /// Weights of the lines.

@@ -3,14 +3,14 @@
 //! of the twin (`ambid_twin::random_rig`, linear twin, the seed experiment with each rig's own
 //! noise): the FRF is what `ambid frf --period-samples 5115 --skip-periods 1 --controller …`
 //! computes with its defaults (the excited band, up to ~3 kHz), and nothing about the nominal
-//! rig's 10–1000 Hz is given. Against each rig's exact plant (`Twin::plant_frf`) over 10–1000 Hz:
+//! rig's 10–1000 Hz is given. Two noise realisations per rig. Against each rig's exact plant (`Twin::plant_frf`) over 10–1000 Hz:
 //! the default comparison's chosen model is within 0.5 % median (or 1/5 of the FRF's own error
 //! where the FRF is too noisy for it, the rule of `freqfit_rigs`; on a rig where the same
 //! comparison over the nominal 10–1000 Hz misses that rule too, within 1.25 times its error),
 //! the median over the rigs is within 0.5 %, and the order-8 state-space
 //! fit over the derived band is within a factor 1.5 (+0.05 %) of the fit over the explicit
 //! 10–1000 Hz, and the median error it reports against the FRF measures the FRF's noise on
-//! the band (≤ 10 %, ≤ 1.25 × the FRF's own error there).
+//! the band (≤ the rule's 20 %, ≤ 1.25 × the FRF's own error there).
 
 use ambid::analysis::{analyze, FrfSettings, Record};
 use ambid::experiment::{run, ExcitationPlan, Experiment};
@@ -47,9 +47,11 @@ fn the_derived_fit_band_holds_on_random_rigs() {
     let amp = ExcitationPlan::default().amplitude_frac;
     let (mut chosen, mut ratios, mut bands) = (Vec::new(), Vec::new(), Vec::new());
     let mut by_rule = 0;
-    for rig in 1..=20u64 {
-        let out = run(&experiment(rig, 300 + rig, amp)).unwrap();
-        let val = run(&experiment(rig, 400 + rig, 1.2 * amp)).unwrap();
+    // two noise realisations per rig (identification seeds 301–320 and 501–520, validation
+    // records 401–420 and 601–620)
+    for (rig, seed) in (1..=20u64).flat_map(|k| [(k, 300 + k), (k, 500 + k)]) {
+        let out = run(&experiment(rig, seed, amp)).unwrap();
+        let val = run(&experiment(rig, seed + 100, 1.2 * amp)).unwrap();
         let twin = &out.twin;
         let ctrl = twin.controller();
         let rec = &out.record;
@@ -72,12 +74,12 @@ fn the_derived_fit_band_holds_on_random_rigs() {
         .unwrap();
         let frd = &an.frf.plant;
         let fb = fit_band(frd, FIT_REL_HALFWIDTH).unwrap();
-        assert!(fb.from_variance, "rig {rig}: {}", fb.describe());
+        assert!(fb.from_variance, "rig {rig} seed {seed}: {}", fb.describe());
         // the derived band is narrower than the file (which runs to the PRBS's 10 dB edge)
         let f_all = frd.f_hz();
         assert!(
             fb.band.1 < 0.8 * f_all[f_all.len() - 1],
-            "rig {rig}: {}",
+            "rig {rig} seed {seed}: {}",
             fb.describe()
         );
         bands.push(fb.band);
@@ -104,7 +106,7 @@ fn the_derived_fit_band_holds_on_random_rigs() {
         assert_eq!(
             n_u,
             Some(twin.plant_unstable_poles().unwrap().len()),
-            "rig {rig}: {how}"
+            "rig {rig} seed {seed}: {how}"
         );
         let spec = |structures: Vec<FitStructure>, orders: Vec<usize>, band| CompareSpec {
             structures,
@@ -139,7 +141,7 @@ fn the_derived_fit_band_holds_on_random_rigs() {
         )
         .unwrap();
         let e_x = model_err(&rows_x[choose(&rows_x).unwrap()]);
-        let i = choose(&rows).unwrap_or_else(|| panic!("rig {rig}: no valid row"));
+        let i = choose(&rows).unwrap_or_else(|| panic!("rig {rig} seed {seed}: no valid row"));
         let e = model_err(&rows[i]);
         // 0.5 %, or 1/5 of the FRF's own error where the FRF is too noisy for 0.5 % (the rule
         // of freqfit_rigs); where the same comparison over the nominal 10–1000 Hz misses that
@@ -151,7 +153,7 @@ fn the_derived_fit_band_holds_on_random_rigs() {
         }
         assert!(
             rule || (!rule_x && e <= 1.25 * e_x),
-            "rig {rig}: chosen {} {} over {} has median error {e} (FRF's own {frf_err}; over 10–1000 Hz {e_x})",
+            "rig {rig} seed {seed}: chosen {} {} over {} has median error {e} (FRF's own {frf_err}; over 10–1000 Hz {e_x})",
             rows[i].structure.name(),
             rows[i].order,
             fb.describe()
@@ -165,7 +167,7 @@ fn the_derived_fit_band_holds_on_random_rigs() {
         };
         let (e_def, e_exp) = (ss(fb.band), ss((10.0, 1000.0)));
         // the figure `fit` prints (median relative error against the FRF on the band) measures
-        // the FRF's noise on the derived band, not unexcited lines: within the rule's ±10 % and
+        // the FRF's noise on the derived band, not unexcited lines: within the rule's ±20 % and
         // within 1.25 times the FRF's own error against the truth on the same lines (over every
         // line of the file it was 7–58 % on these rigs)
         let reported = {
@@ -186,16 +188,16 @@ fn the_derived_fit_band_holds_on_random_rigs() {
         );
         assert!(
             reported <= FIT_REL_HALFWIDTH && reported <= 1.25 * frf_err_band + 1e-3,
-            "rig {rig}: SS(8) reports a median error {reported} on the derived band, the FRF's own error there is {frf_err_band}"
+            "rig {rig} seed {seed}: SS(8) reports a median error {reported} on the derived band, the FRF's own error there is {frf_err_band}"
         );
         assert!(
             e_def <= 1.5 * e_exp + 5e-4,
-            "rig {rig}: SS(8) over the derived {} has median error {e_def}, over 10–1000 Hz {e_exp}",
+            "rig {rig} seed {seed}: SS(8) over the derived {} has median error {e_def}, over 10–1000 Hz {e_exp}",
             fb.describe()
         );
         ratios.push(e_def / e_exp);
         eprintln!(
-            "rig {rig}: derived band {:.1}–{:.1} Hz; FRF error {:.2} % (on the derived band {:.2} %, SS(8) reports {:.2} %); chosen {} {} {:.3} % (10–1000 Hz: {:.3} %); SS(8) {:.3} % (10–1000 Hz: {:.3} %)",
+            "rig {rig} seed {seed}: derived band {:.1}–{:.1} Hz; FRF error {:.2} % (on the derived band {:.2} %, SS(8) reports {:.2} %); chosen {} {} {:.3} % (10–1000 Hz: {:.3} %); SS(8) {:.3} % (10–1000 Hz: {:.3} %)",
             fb.band.0,
             fb.band.1,
             100.0 * frf_err,
@@ -214,7 +216,7 @@ fn the_derived_fit_band_holds_on_random_rigs() {
         .iter()
         .fold((f64::MAX, 0.0f64), |a, b| (a.0.min(b.1), a.1.max(b.1)));
     eprintln!(
-        "derived upper band edge {lo:.0}–{hi:.0} Hz; chosen model's median plant error over the rigs {:.3} % (within 0.5 % on {within} / 20, within the FRF-noise rule on {by_rule} / 20); SS(8) derived/explicit error ratio median {:.2}, max {:.2}; {:.1} s",
+        "derived upper band edge {lo:.0}–{hi:.0} Hz; chosen model's median plant error over the rigs {:.3} % (within 0.5 % on {within} / 40, within the FRF-noise rule on {by_rule} / 40); SS(8) derived/explicit error ratio median {:.2}, max {:.2}; {:.1} s",
         100.0 * median(chosen.clone()),
         median(ratios.clone()),
         ratios.iter().fold(0.0f64, |a, b| a.max(*b)),
