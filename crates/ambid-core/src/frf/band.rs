@@ -31,6 +31,9 @@
 //!   largest of many such lines is not a noise peak. The peak is then reported with its own
 //!   interval (see [`crate::validate::iso`]). When no line qualifies, all lines of the excited
 //!   band are searched and the caller must say so.
+//! * **FRF-fit band** ([`fit_band`]): for a parametric fit to a measured FRF (a file, without
+//!   the excitation), from the FRF's own variances: the span of the runs of lines whose 95 %
+//!   half-width is within [`FIT_REL_HALFWIDTH`] = 20 % of the value.
 //!
 //! Evidence (docs/frf.md): on the nominal twin and on random rigs 1–20 (seed experiment) the
 //! excited band is 3.9 Hz – 2.98 kHz (quality band to 1.80 kHz) and contains every rig's true $\max|S|$ frequency, the
