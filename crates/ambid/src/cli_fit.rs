@@ -115,10 +115,12 @@ pub struct FitArgs {
     #[arg(long, default_value_t = 100)]
     max_iterations: usize,
     /// Fit to an FRF file instead of time data: the quantity to fit (e.g. `plant`, `t_ry`);
-    /// structures arx, oe, ss; needs --fs.
+    /// structures arx, oe, ss; the sample rate from the file's `fs_hz` column (written by `ambid
+    /// frf`), else --fs.
     #[arg(long)]
     quantity: Option<String>,
-    /// Band `f_min:f_max` in Hz of an FRF fit (default: every line).
+    /// Band `f_min:f_max` in Hz of an FRF fit (default: derived from the file, from the first to
+    /// the last run of 3 lines whose 95 % interval is within ±20 % of the value; printed).
     #[arg(long, value_parser = crate::cli_frf::parse_band)]
     band: Option<(f64, f64)>,
     /// Weights of the lines of an FRF fit.

@@ -340,3 +340,118 @@ fn chirp_reconstruction_through_the_cli() {
         text(&o)
     );
 }
+
+/// `fit frf.csv` and `compare-models` without `--band` or `--fs` on the FRF that `ambid frf`
+/// writes with its defaults (the excited band, up to ~3 kHz): the band comes from the file's
+/// standard deviations and is printed, the sample rate from its `fs_hz` column; an FRF file
+/// without `fs_hz` asks for `--fs`.
+#[test]
+fn the_fit_band_and_sample_rate_come_from_the_frf_file() {
+    let d = tmpdir("band");
+    let o = ambid(&["simulate", "--mode", "linear", "--out", s(&d.join("e"))]);
+    assert!(o.status.success(), "{}", text(&o));
+    let (frf, ctrl) = (d.join("frf.csv"), d.join("e/controller.toml"));
+    let o = ambid(&[
+        "frf",
+        s(&d.join("e/data.csv")),
+        "--period-samples",
+        "5115",
+        "--skip-periods",
+        "1",
+        "--controller",
+        s(&ctrl),
+        "--out",
+        s(&frf),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let model = d.join("p.json");
+    let o = ambid(&[
+        "fit",
+        s(&frf),
+        "--quantity",
+        "plant",
+        "--structure",
+        "ss",
+        "--order",
+        "8",
+        "--controller",
+        s(&ctrl),
+        "--out",
+        s(&model),
+    ]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    assert!(
+        t.contains("derived from the FRF's standard deviations"),
+        "{t}"
+    );
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
+    let band: Vec<f64> = m["meta"]["band_hz"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    // the file runs to the PRBS's 10 dB edge (~3 kHz); the reliable plant lines end near 1.1 kHz
+    assert!(band[0] < 10.0 && band[1] > 800.0 && band[1] < 2000.0, "{t}");
+    assert!(m["meta"]["band_origin"]
+        .as_str()
+        .unwrap()
+        .starts_with("derived"));
+    // over every line of the file this median error was 15.2 % (the noise above ~1.2 kHz)
+    let med = m["meta"]["median_relative"].as_f64().unwrap();
+    assert!(med < 0.05, "{t}");
+    assert_eq!(m["meta"]["valid"], true, "{t}");
+    assert!((m["ts"].as_f64().unwrap() - 5e-5).abs() < 1e-12, "{t}");
+    // compare-models: the same derived band, printed
+    let o = ambid(&[
+        "compare-models",
+        s(&frf),
+        "--orders",
+        "8",
+        "--structures",
+        "ss,oe",
+        "--controller",
+        s(&ctrl),
+        "--out",
+        s(&d.join("cmp.csv")),
+    ]);
+    let t = text(&o);
+    assert!(o.status.success(), "{t}");
+    assert!(
+        t.contains(&format!("band {:.1}–{:.1} Hz derived", band[0], band[1])),
+        "{t}"
+    );
+    assert!(t.contains("chosen: "), "{t}");
+    assert!(!t.contains("chosen: none"), "{t}");
+    // an FRF file without the fs_hz column: a clear request for --fs
+    let raw = std::fs::read_to_string(&frf).unwrap();
+    let stripped: String = raw
+        .lines()
+        .map(|l| l.rsplit_once(',').unwrap().0.to_string() + "\n")
+        .collect();
+    assert!(raw.lines().next().unwrap().ends_with(",fs_hz"));
+    let nofs = d.join("nofs.csv");
+    std::fs::write(&nofs, stripped).unwrap();
+    let args = [
+        "fit",
+        s(&nofs),
+        "--quantity",
+        "plant",
+        "--structure",
+        "ss",
+        "--order",
+        "8",
+        "--out",
+        s(&model),
+    ];
+    let o = ambid(&args);
+    let t = text(&o);
+    assert!(!o.status.success(), "{t}");
+    assert!(t.contains("--fs"), "{t}");
+    let mut with_fs = args.to_vec();
+    with_fs.extend_from_slice(&["--fs", "20000"]);
+    let o = ambid(&with_fs);
+    assert!(o.status.success(), "{}", text(&o));
+}

@@ -31,6 +31,9 @@
 //!   largest of many such lines is not a noise peak. The peak is then reported with its own
 //!   interval (see [`crate::validate::iso`]). When no line qualifies, all lines of the excited
 //!   band are searched and the caller must say so.
+//! * **FRF-fit band** ([`fit_band`]): for a parametric fit to a measured FRF (a file, without
+//!   the excitation), from the FRF's own variances: the span of the runs of lines whose 95 %
+//!   half-width is within [`FIT_REL_HALFWIDTH`] = 20 % of the value.
 //!
 //! Evidence (docs/frf.md): on the nominal twin and on random rigs 1–20 (seed experiment) the
 //! excited band is 3.9 Hz – 2.98 kHz (quality band to 1.80 kHz) and contains every rig's true $\max|S|$ frequency, the
@@ -298,6 +301,155 @@ pub fn iso_search(
     })
 }
 
+/// The default reliability threshold of [`fit_band`]: a line is measured reliably when the 95 %
+/// half-width of the FRF there is at most 20 % of its modulus (±1.6 dB, ±12°). Twice the ISO
+/// search's ±10 % ([`BandRule::iso_rel_halfwidth`]), which must decide a zone from single lines:
+/// a fit combines hundreds of lines, each weighted by its inverse variance, so a line still helps
+/// at ±20 %; at ±10 % the band of a noisy rig ended below its bending mode (evidence in
+/// [`fit_band`]).
+pub const FIT_REL_HALFWIDTH: f64 = 0.2;
+
+/// Consecutive reliable lines that open and close a [`fit_band`] (a lone line that passes by
+/// chance among noisy ones does not stretch the band).
+pub const FIT_EDGE_RUN: usize = 3;
+
+/// The band over which a parametric model is fitted to a measured FRF, derived from the FRF
+/// itself by [`fit_band`].
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct FitBand {
+    /// Lowest and highest line of the band \[Hz\].
+    pub band: (f64, f64),
+    /// Lines of the FRF inside the band.
+    pub lines: usize,
+    /// Of those, the lines that pass the reliability test.
+    pub reliable_lines: usize,
+    /// Lines of the whole FRF.
+    pub total_lines: usize,
+    /// The threshold used (largest 95 % half-width relative to the modulus).
+    pub max_rel_halfwidth: f64,
+    /// Whether the band was derived from the variances (`false`: the FRF has no variance, or no
+    /// run of reliable lines, and the band is every line; say so).
+    pub from_variance: bool,
+}
+
+impl FitBand {
+    /// One sentence saying which band was derived and from what (for CLI output and reports).
+    pub fn describe(&self) -> String {
+        if self.from_variance {
+            format!(
+                "band {:.1}–{:.1} Hz derived from the FRF's standard deviations: from the first to the last run of {FIT_EDGE_RUN} lines whose 95 % interval is within ±{:.0} % of the value ({} of {} lines in the band reliable, {} lines in the file); give --band to override",
+                self.band.0,
+                self.band.1,
+                100.0 * self.max_rel_halfwidth,
+                self.reliable_lines,
+                self.lines,
+                self.total_lines
+            )
+        } else {
+            format!(
+                "band {:.1}–{:.1} Hz: every line of the file ({} lines), because the FRF has no standard deviations or no run of {FIT_EDGE_RUN} lines known to ±{:.0} %; give --band to restrict it",
+                self.band.0,
+                self.band.1,
+                self.total_lines,
+                100.0 * self.max_rel_halfwidth
+            )
+        }
+    }
+}
+
+/// The fit band of a measured FRF `q`: where the data measure it reliably.
+///
+/// A line $k$ is **reliable** when the 95 % half-width of $\hat q_k$ is at most
+/// `max_rel_halfwidth` ([`FIT_REL_HALFWIDTH`] = 20 %) of its modulus,
+/// $$ 1.96\,\sqrt{\sigma_k^2/2} \le h\,|\hat q_k| , $$
+/// with $\sigma_k^2$ the variance of the complex estimate (the file's `<q>_std` squared). The
+/// band runs from the first line that opens a run of [`FIT_EDGE_RUN`] = 3 consecutive reliable
+/// lines to the last line that closes one; unreliable lines inside it stay (an antiresonance,
+/// where $|\hat q|$ is small, is part of the dynamics, and the inverse-variance weights of the fit
+/// already discount it), a lone line that passes by chance among noisy ones does not stretch it.
+///
+/// Why: a PRBS (or any excitation) leaves lines where $\hat q$ is a ratio of noise terms (above
+/// its main lobe, near its nulls); a fit or an error figure over them measures the noise, not the
+/// model. Evidence (docs/estimation.md; `cargo test -p ambid --test freqfit_band_rigs`): on 20
+/// random rigs with two noise seeds each (seed experiment) the derived plant band is 3.9 Hz to
+/// 0.9–1.7 kHz, and the models fitted over it are as close to the exact plant over 10–1000 Hz as
+/// those fitted over the nominal 10–1000 Hz; with ±10 % instead, one rig's band ended at 790 Hz,
+/// below its bending mode, and its chosen model was 3× worse.
+///
+/// When `q` has no variance (exact data) or no run of reliable lines exists, the band is every
+/// line and [`FitBand::from_variance`] is `false`.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] for a threshold that is not positive and finite or an FRF without
+/// lines.
+///
+/// # Example
+/// ```
+/// use ambid_core::frf::band::{fit_band, FIT_REL_HALFWIDTH};
+/// use ambid_core::lti::Frd;
+/// use faer::c64;
+/// // |q| = 1; σ grows with frequency: reliable below 50 Hz, except one antiresonance line
+/// let f: Vec<f64> = (1..=100).map(|k| k as f64).collect();
+/// let q = vec![c64::new(1.0, 0.0); 100];
+/// let var: Vec<f64> = f.iter().map(|&f| {
+///     let s = if f == 20.0 { 0.2 } else if f <= 50.0 { 0.01 } else { 0.5 };
+///     s * s
+/// }).collect();
+/// let frd = Frd::new(f, q, Some(var), Some(1e-3)).unwrap();
+/// let b = fit_band(&frd, FIT_REL_HALFWIDTH).unwrap();
+/// assert_eq!(b.band, (1.0, 50.0));
+/// assert_eq!((b.lines, b.reliable_lines), (50, 49));
+/// ```
+pub fn fit_band(q: &Frd, max_rel_halfwidth: f64) -> Result<FitBand> {
+    if !(max_rel_halfwidth.is_finite() && max_rel_halfwidth > 0.0) {
+        return Err(Error::invalid(
+            "max_rel_halfwidth",
+            format!("must be positive and finite, got {max_rel_halfwidth}"),
+        ));
+    }
+    let f = q.f_hz();
+    let n = f.len();
+    if n == 0 {
+        return Err(Error::invalid("frf", "the FRF has no lines"));
+    }
+    let all = |from_variance| FitBand {
+        band: (f[0], f[n - 1]),
+        lines: n,
+        reliable_lines: 0,
+        total_lines: n,
+        max_rel_halfwidth,
+        from_variance,
+    };
+    let Some(var) = q.variance() else {
+        return Ok(all(false));
+    };
+    let z = 1.959_963_984_540_054;
+    let ok: Vec<bool> = (0..n)
+        .map(|k| {
+            let m = q.values()[k].norm();
+            m.is_finite()
+                && var[k].is_finite()
+                && z * (var[k] / 2.0).sqrt() <= max_rel_halfwidth * m
+        })
+        .collect();
+    let run = FIT_EDGE_RUN.min(n);
+    let starts: Vec<usize> = (0..=n - run)
+        .filter(|&k| ok[k..k + run].iter().all(|b| *b))
+        .collect();
+    let (Some(&lo), Some(&hi)) = (starts.first(), starts.last()) else {
+        return Ok(all(false));
+    };
+    let hi = hi + run - 1;
+    Ok(FitBand {
+        band: (f[lo], f[hi]),
+        lines: hi - lo + 1,
+        reliable_lines: ok[lo..=hi].iter().filter(|b| **b).count(),
+        total_lines: n,
+        max_rel_halfwidth,
+        from_variance: true,
+    })
+}
+
 /// `s` restricted to the lines `idx` (increasing), with their variances.
 ///
 /// # Errors
@@ -398,5 +550,45 @@ mod tests {
         let (idx, filtered) = reliable_lines(&s2, (15.0, 45.0), &BandRule::default()).unwrap();
         assert!(!filtered);
         assert_eq!(idx, vec![1, 2, 3]);
+    }
+
+    #[test]
+    fn the_fit_band_is_the_span_of_reliable_runs() {
+        // |q| = 2 on 20 lines; σ_k such that the 95 % half-width is 2 % (reliable) or 40 %
+        let f: Vec<f64> = (1..=20).map(f64::from).collect();
+        let q = vec![c64::new(0.0, 2.0); 20];
+        let sigma = |h: f64| (h * 2.0 / 1.959_963_984_540_054) * 2f64.sqrt();
+        // noisy 1–2, reliable 3–9, two noisy lines 10–11 (an antiresonance), reliable 12–15,
+        // noisy 16–20 except a lone reliable line at 18 (by chance)
+        let var: Vec<f64> = f
+            .iter()
+            .map(|&f| {
+                let ok = (3.0..=9.0).contains(&f) || (12.0..=15.0).contains(&f) || f == 18.0;
+                sigma(if ok { 0.02 } else { 0.4 }).powi(2)
+            })
+            .collect();
+        let frd = Frd::new(f.clone(), q.clone(), Some(var), Some(1e-3)).unwrap();
+        let b = fit_band(&frd, FIT_REL_HALFWIDTH).unwrap();
+        assert_eq!(b.band, (3.0, 15.0));
+        assert_eq!((b.lines, b.reliable_lines, b.total_lines), (13, 11, 20));
+        assert!(b.from_variance);
+        assert!(
+            b.describe().contains("band 3.0–15.0 Hz derived"),
+            "{}",
+            b.describe()
+        );
+        // a looser threshold takes every line
+        let b = fit_band(&frd, 0.5).unwrap();
+        assert_eq!(b.band, (1.0, 20.0));
+        // no variance, or no run of 3 reliable lines: every line, and it says so
+        let exact = Frd::new(f.clone(), q.clone(), None, Some(1e-3)).unwrap();
+        let b = fit_band(&exact, FIT_REL_HALFWIDTH).unwrap();
+        assert_eq!((b.band, b.from_variance), ((1.0, 20.0), false));
+        assert!(b.describe().contains("every line"), "{}", b.describe());
+        let noisy = Frd::new(f, q, Some(vec![sigma(0.4).powi(2); 20]), Some(1e-3)).unwrap();
+        assert!(!fit_band(&noisy, FIT_REL_HALFWIDTH).unwrap().from_variance);
+        // a malformed threshold is an error
+        assert!(fit_band(&noisy, 0.0).is_err());
+        assert!(fit_band(&noisy, f64::NAN).is_err());
     }
 }

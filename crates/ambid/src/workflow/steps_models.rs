@@ -10,6 +10,7 @@ use ambid_core::c64;
 use ambid_core::estimate::arx::{arx, fit_percent, ArxOrders};
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::estimate::pem::{self, Orders, PemOptions};
+use ambid_core::frf::band::{fit_band, FIT_REL_HALFWIDTH};
 use ambid_core::lti::{PolyModel, StateSpace, Structure};
 use ambid_core::validate::compare::{
     compare_models, supported_unstable_poles, CompareSpec, FitStructure, ValidationRecord,
@@ -143,11 +144,29 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     };
     let validation_kind: String;
     let mut unstable_how: Option<(Option<usize>, String)> = None;
+    let mut band_how: Option<String> = None;
     if domain == "frf" {
         let Some(a) = &ctx.frf else {
             return Ok(StepStatus::Skipped("no FRF".into()));
         };
         let frd = &a.frf.plant;
+        // the fit band: [models] band_hz, else where the plant FRF is measured reliably (the
+        // rule of `ambid fit frf.csv` and `compare-models`, ambid_core::frf::band::fit_band)
+        let explicit_band = cfg.band_hz.map(|[a, b]| (a, b));
+        let fit_band_hz = match explicit_band {
+            Some(b) => {
+                band_how = Some(format!(
+                    "band {:.1}–{:.1} Hz from [models] band_hz",
+                    b.0, b.1
+                ));
+                b
+            }
+            None => {
+                let d = fit_band(frd, FIT_REL_HALFWIDTH).map_err(computation)?;
+                band_how = Some(d.describe().replace("give --band", "set [models] band_hz"));
+                d.band
+            }
+        };
         let weights = match cfg.weights.as_str() {
             "uniform" => FreqWeights::Uniform,
             "coherence" => FreqWeights::Coherence(a.frf.coh_ry.clone()),
@@ -167,7 +186,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             orders: cfg.orders.clone(),
             nk: cfg.nk,
             fit: FreqFitOptions {
-                band_hz: cfg.band_hz.map(|[a, b]| (a, b)),
+                band_hz: Some(fit_band_hz),
                 weights,
                 max_iterations: cfg.max_iterations,
                 ..FreqFitOptions::default()
@@ -175,7 +194,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             ..CompareSpec::default()
         };
         let ctrl = ctx.controller.as_ref().map(|c| c.state_space());
-        let (n_u, how) = supported_unstable_poles(frd, ctrl, spec.fit.band_hz, cfg.unstable_poles);
+        let (n_u, how) = supported_unstable_poles(frd, ctrl, explicit_band, cfg.unstable_poles);
         unstable_how = Some((n_u, how));
         let spec = CompareSpec {
             unstable_poles: n_u,
@@ -436,7 +455,11 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         },
         cfg.orders,
         if domain == "frf" {
-            format!("weights {}", cfg.weights)
+            format!(
+                "weights {}; {}",
+                cfg.weights,
+                band_how.as_deref().unwrap_or("every line")
+            )
         } else {
             "validation fit on the independent record (simulation from the least-squares initial state for stable models, as MATLAB compare does; else the one-step prediction)".into()
         },
