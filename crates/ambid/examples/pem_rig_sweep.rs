@@ -10,7 +10,8 @@
 //! loop, simulated on the validation r from rest).
 //!
 //! Run: `cargo run --release -p ambid --example pem_rig_sweep -- [first_seed] [count] [samples]`
-//! (`samples` truncates both records; default: the full 102 300).
+//! (`samples` truncates both records; default: the full 102 300). `PEM_LOSS_TOL=τ` replaces the
+//! statistical loss tolerance by τ.
 //!
 //! Prints one line per rig and structure (iterations, stop reason, fit, truth's fit, gap, run
 //! time) and a summary per structure.
@@ -49,6 +50,11 @@ fn main() -> Result<()> {
         ("armax 4/4/4", Structure::Armax, Orders::armax(4, 4, 4, 1)),
         ("bj 4/2/2/4", Structure::Bj, Orders::bj(4, 2, 2, 4, 1)),
     ];
+    // PEM_LOSS_TOL=τ: a fixed loss tolerance instead of the statistical default
+    let opts = match std::env::var("PEM_LOSS_TOL") {
+        Ok(t) => PemOptions::default().with_loss_tol(t.parse()?)?,
+        Err(_) => PemOptions::default(),
+    };
     let mut gaps = vec![Vec::new(); cases.len()];
     let mut unconverged = vec![0; cases.len()];
     let mut times = vec![Vec::new(); cases.len()];
@@ -68,7 +74,7 @@ fn main() -> Result<()> {
         let f_truth = fit_percent(&val.record.y[..n], &yt)?;
         for (c, (name, s, o)) in cases.iter().enumerate() {
             let t0 = Instant::now();
-            let r = pem(&y, &u, *s, o, est.twin.ts(), &PemOptions::default());
+            let r = pem(&y, &u, *s, o, est.twin.ts(), &opts);
             let secs = t0.elapsed().as_secs_f64();
             times[c].push(secs);
             match r {

@@ -106,12 +106,6 @@
 //!   twin's $T_{ry}$, OE(8, 8, 1) on the seed record) the iteration from SRIV alone was still
 //!   moving after 400 iterations (fit 95.8 % against the truth's ≈ 98 %).
 //!
-//! # Stopping
-//! By default the iteration stops when the actual and predicted relative reductions of the loss
-//! fall below [`statistical_loss_tol`] $= 0.01/N$: the estimate is then within about a tenth of a
-//! standard deviation of the exact minimiser, whatever $N$ ([`PemOptions::with_loss_tol`] sets
-//! another tolerance).
-//!
 //! A long-ARX residual was chosen over a matched-order ARX residual because it is consistent
 //! for the innovations whatever the true structure; the SRIV step was chosen over plain IV
 //! because its prefiltering makes it nearly efficient for OE, which shortens the iteration.
@@ -219,9 +213,6 @@ pub struct PemOptions {
     focus: Focus,
     lm: LmOptions,
     open_loop: bool,
-    /// `true` once the caller set the loss tolerance ([`Self::with_loss_tol`], [`Self::with_lm`]);
-    /// otherwise the statistical default [`statistical_loss_tol`] applies.
-    loss_tol_set: bool,
 }
 
 impl PemOptions {
@@ -233,7 +224,6 @@ impl PemOptions {
     /// Sets all Levenberg–Marquardt options at once.
     pub fn with_lm(mut self, lm: LmOptions) -> Self {
         self.lm = lm;
-        self.loss_tol_set = true;
         self
     }
     /// Maximum number of Levenberg–Marquardt steps (default 100).
@@ -244,31 +234,16 @@ impl PemOptions {
         self.lm = self.lm.with_max_iterations(n)?;
         Ok(self)
     }
-    /// Relative loss-change tolerance. Stopping at a relative change $\tau$ leaves the estimate
-    /// within about $\sqrt{N\tau}$ standard deviations of the exact minimiser. Default: the
-    /// statistical rule [`statistical_loss_tol`] ($\tau = 0.01/N$, a tenth of a standard
-    /// deviation, but not below $10^{-12}$); set 0 to iterate to machine precision when the exact
-    /// optimum matters.
+    /// Relative loss-change tolerance (default 1e-12). Stopping at a relative change $\tau$
+    /// leaves the estimate within about $\sqrt{N\tau}$ standard deviations of the exact
+    /// minimiser (5e-5 σ for N = 2000): statistically irrelevant, but set 0 to iterate to
+    /// machine precision when the exact optimum matters.
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] for a negative or non-finite value.
     pub fn with_loss_tol(mut self, tol: f64) -> Result<Self> {
         self.lm = self.lm.with_loss_tol(tol)?;
-        self.loss_tol_set = true;
         Ok(self)
-    }
-    /// The options with the loss tolerance for `n` samples: the caller's, or the statistical
-    /// default ([`statistical_loss_tol`]).
-    fn for_samples(&self, n: usize) -> Result<Self> {
-        if self.loss_tol_set {
-            return Ok(*self);
-        }
-        Ok(Self {
-            lm: self
-                .lm
-                .with_loss_tol(statistical_loss_tol(n).max(self.lm.loss_tol()))?,
-            ..*self
-        })
     }
     /// Relative step tolerance (default 1e-10).
     ///
@@ -314,28 +289,6 @@ impl PemOptions {
     pub fn lm(&self) -> &LmOptions {
         &self.lm
     }
-}
-
-/// The default relative loss tolerance for $N$ samples: $\tau = \kappa^2/N$ with $\kappa = 0.1$.
-///
-/// The iteration stops when the actual and the predicted relative reduction of the loss are
-/// both below $\tau$. Near the minimum the loss exceeds its minimum by
-/// $\tfrac12\,\delta^\top J^\top J\,\delta$ for the parameter error $\delta$, and
-/// $\hat\lambda (J^\top J)^{-1}$ is the parameter covariance with $\hat\lambda \approx 2V/N$,
-/// so a relative reduction $\tau$ corresponds to a parameter error of about $\sqrt{N\tau}$
-/// standard deviations: $\kappa = 0.1$, a tenth of the estimate's own uncertainty, whatever the
-/// record length. A tighter tolerance buys nothing statistically and, on ill-conditioned
-/// parameterisations (high-order polynomials with poles clustered near $z = 1$), many slow
-/// iterations.
-///
-/// # Example
-/// ```
-/// use ambid_core::estimate::pem::statistical_loss_tol;
-/// assert!((statistical_loss_tol(100_000) - 1e-7).abs() < 1e-20);
-/// ```
-pub fn statistical_loss_tol(n: usize) -> f64 {
-    const KAPPA: f64 = 0.1;
-    KAPPA * KAPPA / n.max(1) as f64
 }
 
 /// Polynomial orders in MATLAB's `[na nb nc nd nf nk]` sense: `nb` coefficients of $B$ after
@@ -745,7 +698,6 @@ pub fn pem(
 ) -> Result<(Fitted<PolyModel>, PemReport)> {
     check_orders(structure, orders, opts.focus)?;
     check_data(y, u, orders, ts)?;
-    let opts = &opts.for_samples(y.len())?;
     let (start, stabilised) = init::start(y, u, orders, opts.focus, opts.open_loop)?;
     let (fit, mut rep) = if structure == Structure::Oe && orders.nf >= 2 {
         oe_with_fallback(y, u, orders, ts, opts, start)?
@@ -779,7 +731,7 @@ fn oe_with_fallback(
     opts: &PemOptions,
     start: Polys,
 ) -> Result<(Fitted<PolyModel>, PemReport)> {
-    let alt = init::subspace_oe_start(y, u, o.nb, o.nf, o.nk, ts, opts.lm.loss_tol())
+    let alt = init::subspace_oe_start(y, u, o.nb, o.nf, o.nk, ts)
         .and_then(|(b, f)| PolyModel::oe(b, f, ts).ok())
         .map(|m| Polys::from_model(&m));
     let Some(alt) = alt else {
@@ -832,7 +784,6 @@ pub fn refine(
     let o = Orders::of(start);
     check_orders(start.structure(), &o, opts.focus)?;
     check_data(y, u, &o, start.ts())?;
-    let opts = &opts.for_samples(y.len())?;
     let p = Polys::from_model(start);
     run(y, u, start.structure(), &o, start.ts(), opts, p)
 }

@@ -343,8 +343,7 @@ pub(crate) fn oe_start(
 /// Why: the polynomial coefficients of an 8th-order $F$ with poles clustered near $z = 1$ (a
 /// closed loop sampled at 20 kHz) are so ill-conditioned that Levenberg–Marquardt in them crawls
 /// (on the twin's seed record OE(8, 8, 1) from SRIV was still moving after 400 iterations), while
-/// the state-space refinement converges in tens. `loss_tol` is the relative loss tolerance of that
-/// refinement. `None` when $n_k = 0$, the subspace or refinement step fails, or $F$ is clearly
+/// the state-space refinement converges in a few. `None` when $n_k = 0$, the subspace or refinement step fails, or $F$ is clearly
 /// unstable.
 pub(crate) fn subspace_oe_start(
     y: &[f64],
@@ -353,7 +352,6 @@ pub(crate) fn subspace_oe_start(
     nf: usize,
     nk: usize,
     ts: f64,
-    loss_tol: f64,
 ) -> Option<(Vec<f64>, Vec<f64>)> {
     use crate::estimate::ss_pem::{refine_ss, SsPemOptions};
     use crate::estimate::subspace::{n4sid, SubspaceOptions};
@@ -380,7 +378,6 @@ pub(crate) fn subspace_oe_start(
     if model.is_stable().ok()? {
         let popts = SsPemOptions {
             focus: Focus::Simulation,
-            lm: SsPemOptions::default().lm.with_loss_tol(loss_tol).ok()?,
             ..SsPemOptions::default()
         };
         if let Ok(p) = refine_ss(ym.as_ref(), um.as_ref(), &model, None, &popts) {
