@@ -61,7 +61,9 @@ fn main() -> Result<()> {
     for rig in first..first + count {
         let est = experiment(rig, 1000 + rig, 0.10)?;
         let val = experiment(rig, 2000 + rig, 0.12)?;
-        let n = samples.unwrap_or(est.record.r.len()).min(est.record.r.len());
+        let n = samples
+            .unwrap_or(est.record.r.len())
+            .min(est.record.r.len());
         let (mu, my) = (mean(&est.record.r[..n]), mean(&est.record.y[..n]));
         let u: Vec<f64> = est.record.r[..n].iter().map(|v| v - mu).collect();
         let y: Vec<f64> = est.record.y[..n].iter().map(|v| v - my).collect();

@@ -400,7 +400,7 @@ pub(crate) fn subspace_oe_start(
         f = scale_radius(f, SRIV_CONTRACTED / r);
     }
     let num = tf.num();
-    if nb == nf && num.len() == nf + 1 && num[0] == 0.0 && f.as_slice() == &den[..] {
+    if nb == nf && num.len() == nf + 1 && num[0] == 0.0 && f.as_slice() == den {
         // the model's own numerator (B from least squares given F is ill-conditioned when 1/F
         // is a steep low-pass: its lagged columns are nearly collinear)
         let b: Vec<f64> = num[1..].iter().map(|c| c / den[0] * sy / su).collect();

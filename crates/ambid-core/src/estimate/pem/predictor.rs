@@ -147,10 +147,17 @@ impl Dd {
 fn filter_dd(num: &[f64], den: &[f64], x: &[f64]) -> Vec<Dd> {
     let n = x.len();
     let mut y = vec![Dd::default(); n];
+    // the zero coefficients (B's leading delays) cost a double-double product each otherwise
+    let nz: Vec<(usize, f64)> = num
+        .iter()
+        .enumerate()
+        .filter(|(_, b)| **b != 0.0)
+        .map(|(k, b)| (k, *b))
+        .collect();
     for t in 0..n {
         let mut s = Dd::default();
-        for (k, bk) in num.iter().enumerate().take(t + 1) {
-            let (p, e) = two_prod(*bk, x[t - k]);
+        for &(k, bk) in nz.iter().take_while(|(k, _)| *k <= t) {
+            let (p, e) = two_prod(bk, x[t - k]);
             s = s.add(Dd { hi: p, lo: e });
         }
         for (k, ak) in den.iter().enumerate().skip(1).take(t) {
