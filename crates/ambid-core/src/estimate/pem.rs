@@ -99,7 +99,8 @@
 //! * OE with $n_f \ge 2$ (and $n_k \ge 1$): a second start from a state-space model (N4SID of
 //!   order $n_f$ on $u$ delayed by $n_k - 1$, refined by the state-space prediction-error method
 //!   under the simulation focus — the OE criterion in a well-conditioned parameterisation —, its
-//!   denominator as $F$, then $B$ by least squares given $F$); the iteration goes on from
+//!   denominator as $F$ and its numerator as $B$ when $n_b = n_f$, otherwise $B$ by least squares
+//!   given $F$); the iteration goes on from
 //!   whichever start has the smaller loss, with the whole budget (the other start if that
 //!   iteration fails). The polynomial coefficients of an 8th-order $F$ with poles clustered near
 //!   $z = 1$ are extremely ill-conditioned: on a lightly damped closed loop sampled at 20 kHz (the
