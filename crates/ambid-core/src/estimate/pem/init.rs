@@ -332,11 +332,19 @@ pub(crate) fn oe_start(
     Ok((b, f, stabilised))
 }
 
-/// An alternative OE start from a subspace model: $F$ = the denominator of an N4SID model of
-/// order $n_f$ identified from $u$ delayed by $n_k - 1$ samples (a pole just outside the unit
-/// circle, radius below [`SRIV_MAX_RADIUS`], is moved radially inside as for SRIV), then $B$
-/// by least squares of $y$ on the lagged $u/F$ (linear in $B$ once $F$ is fixed). `None` when
-/// $n_k = 0$, the subspace step fails, or its $F$ is clearly unstable.
+/// An OE start from a state-space model: N4SID of order $n_f$ (default horizon rule) on the
+/// mean-free, unit-RMS $u$ (delayed by $n_k - 1$ samples) and $y$, refined by the state-space
+/// prediction-error method under the simulation focus ([`refine_ss`](crate::estimate::ss_pem::refine_ss),
+/// initial state estimated), whose criterion is the OE criterion in a well-conditioned
+/// parameterisation; then $F$ = the refined model's denominator (a pole just outside the unit
+/// circle, radius below [`SRIV_MAX_RADIUS`], is moved radially inside as for SRIV) and $B$ by
+/// least squares of $y$ on the lagged $u/F$ (linear in $B$ once $F$ is fixed).
+///
+/// Why: the polynomial coefficients of an 8th-order $F$ with poles clustered near $z = 1$ (a
+/// closed loop sampled at 20 kHz) are so ill-conditioned that Levenberg–Marquardt in them crawls
+/// (on the twin's seed record OE(8, 8, 1) from SRIV was still moving after 400 iterations), while
+/// the state-space refinement converges in a few. `None` when $n_k = 0$, the subspace or refinement step fails, or $F$ is clearly
+/// unstable.
 pub(crate) fn subspace_oe_start(
     y: &[f64],
     u: &[f64],
@@ -345,27 +353,40 @@ pub(crate) fn subspace_oe_start(
     nk: usize,
     ts: f64,
 ) -> Option<(Vec<f64>, Vec<f64>)> {
-    use crate::estimate::subspace::{n4sid, HorizonCriterion, SubspaceOptions};
+    use crate::estimate::ss_pem::{refine_ss, SsPemOptions};
+    use crate::estimate::subspace::{n4sid, SubspaceOptions};
     use crate::lti::TransferFunction;
     if nk == 0 || nf == 0 {
         return None;
     }
     let n = y.len();
     let shift = nk - 1;
-    let ym = Mat::from_fn(n - shift, 1, |i, _| y[i + shift]);
-    let um = Mat::from_fn(n - shift, 1, |i, _| u[i]);
-    // the horizon by the one-step prediction loss, as before the simulation-error default
-    // (issue 16): on the twin's one-period T_ry record the simulation error picks i = 120, and
-    // the OE fallback from this start then stayed at loss 1.6 instead of the optimum 0.665,
-    // although OE refined from that model's own B/F, or from its F with B by least squares,
-    // converged in 3–6 iterations; why this function's start fails there is not yet known
+    let m = n - shift;
+    let rms = |x: &[f64]| (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt();
+    let (su, sy) = (rms(&u[..m]), rms(&y[shift..]));
+    if !(su > 0.0 && sy > 0.0 && su.is_finite() && sy.is_finite()) {
+        return None;
+    }
+    let ym = Mat::from_fn(m, 1, |i, _| y[i + shift] / sy);
+    let um = Mat::from_fn(m, 1, |i, _| u[i] / su);
     let opts = SubspaceOptions {
         order: Some(nf),
-        horizon_criterion: Some(HorizonCriterion::Prediction),
         ..SubspaceOptions::new(ts)
     };
     let ss = n4sid(ym.as_ref(), um.as_ref(), &opts).ok()?;
-    let tf = TransferFunction::from_state_space(&ss.model).ok()?;
+    let mut model = ss.model;
+    if model.is_stable().ok()? {
+        let popts = SsPemOptions {
+            focus: Focus::Simulation,
+            ..SsPemOptions::default()
+        };
+        if let Ok(p) = refine_ss(ym.as_ref(), um.as_ref(), &model, None, &popts) {
+            if p.fitted.model.is_stable().unwrap_or(false) {
+                model = p.fitted.model;
+            }
+        }
+    }
+    let tf = TransferFunction::from_state_space(&model).ok()?;
     let den = tf.den();
     if den.len() != nf + 1 || den[0] == 0.0 {
         return None;
@@ -377,6 +398,13 @@ pub(crate) fn subspace_oe_start(
             return None;
         }
         f = scale_radius(f, SRIV_CONTRACTED / r);
+    }
+    let num = tf.num();
+    if nb == nf && num.len() == nf + 1 && num[0] == 0.0 && f.as_slice() == den {
+        // the model's own numerator (B from least squares given F is ill-conditioned when 1/F
+        // is a steep low-pass: its lagged columns are nearly collinear)
+        let b: Vec<f64> = num[1..].iter().map(|c| c / den[0] * sy / su).collect();
+        return Some((with_delay(nk, &b), f));
     }
     let uf = filter(&[1.0], &f, u);
     let t0 = nk + nb - 1;
