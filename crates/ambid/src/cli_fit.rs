@@ -234,6 +234,27 @@ fn read_validation(
     Ok((u, y))
 }
 
+/// The least-squares ARX(na, nb, nk) model of `u → y` as a polynomial [`Fitted`] (the FIR and
+/// ARX structures, and the model written when an ARMAX/OE/BJ estimate fails).
+fn arx_fitted(
+    y: &[f64],
+    u: &[f64],
+    na: usize,
+    nb: usize,
+    nk: usize,
+    ts: f64,
+) -> Result<Fitted<PolyModel>> {
+    let f = arx(y, &[u], &ArxOrders::siso(na, nb, nk), ts)?;
+    Ok(Fitted {
+        model: f.model.to_poly(0)?,
+        params: f.params,
+        covariance: f.covariance,
+        loss: f.loss,
+        noise_variance: f.noise_variance,
+        n_samples: f.n_samples,
+    })
+}
+
 fn mean(x: &[f64]) -> f64 {
     x.iter().sum::<f64>() / x.len() as f64
 }
@@ -301,19 +322,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
             } else {
                 a.na
             };
-            let f = arx(&y, &[&u], &ArxOrders::siso(na, a.nb, a.nk), ts)?;
-            let model = f.model.to_poly(0)?;
-            (
-                Fitted {
-                    model,
-                    params: f.params,
-                    covariance: f.covariance,
-                    loss: f.loss,
-                    noise_variance: f.noise_variance,
-                    n_samples: f.n_samples,
-                },
-                None,
-            )
+            (arx_fitted(&y, &u, na, a.nb, a.nk, ts)?, None)
         }
         StructureArg::Ss => return fit_ss(&a, &u, &y, ts, mu, my),
         s => {
@@ -356,19 +365,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
                         problems.push("the data were taken as open-loop (--loop); for data measured around an unstable plant in closed loop use --loop closed".to_string());
                     }
                     fallback = true;
-                    let f = arx(&y, &[&u], &ArxOrders::siso(na, a.nb, a.nk), ts)?;
-                    let model = f.model.to_poly(0)?;
-                    (
-                        Fitted {
-                            model,
-                            params: f.params,
-                            covariance: f.covariance,
-                            loss: f.loss,
-                            noise_variance: f.noise_variance,
-                            n_samples: f.n_samples,
-                        },
-                        None,
-                    )
+                    (arx_fitted(&y, &u, na, a.nb, a.nk, ts)?, None)
                 }
                 Err(e) => return Err(anyhow::Error::new(e).context("prediction-error estimation")),
             }
