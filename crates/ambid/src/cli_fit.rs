@@ -789,19 +789,7 @@ fn stabilised_refine(
         m.d() * Scale(sy / su),
         ts,
     )?;
-    let summary = ambid::fitting::PemSummary {
-        focus: opts.focus,
-        iterations: p.report.iterations,
-        stop: format!("{:?}", p.report.reason),
-        start_loss: p.start_loss * sy * sy,
-        loss: p.fitted.loss * sy * sy,
-        kalman_gain: p
-            .kalman_gain
-            .as_ref()
-            .map(|k| (0..k.nrows()).map(|i| k[(i, 0)] / sy).collect()),
-        on_boundary: p.report.ended_on_boundary,
-        x0: Some(p.x0.clone()),
-    };
+    let summary = ambid::fitting::PemSummary::of_refinement(&p, opts.focus, sy);
     Ok((model, summary))
 }
 

@@ -31,6 +31,30 @@ pub struct PemSummary {
     pub x0: Option<Vec<f64>>,
 }
 
+impl PemSummary {
+    /// The summary of a state-space refinement run on data whose output was divided by `sy`
+    /// (losses and the Kalman gain are given back in the data's units).
+    pub fn of_refinement(
+        p: &ambid_core::estimate::ss_pem::SsPemFit,
+        focus: Focus,
+        sy: f64,
+    ) -> PemSummary {
+        PemSummary {
+            focus,
+            iterations: p.report.iterations,
+            stop: format!("{:?}", p.report.reason),
+            start_loss: p.start_loss * sy * sy,
+            loss: p.fitted.loss * sy * sy,
+            kalman_gain: p
+                .kalman_gain
+                .as_ref()
+                .map(|k| (0..k.nrows()).map(|i| k[(i, 0)] / sy).collect()),
+            on_boundary: p.report.ended_on_boundary,
+            x0: Some(p.x0.clone()),
+        }
+    }
+}
+
 /// A state-space model identified from time data.
 #[derive(Debug, Clone)]
 pub struct SsIdentified {
@@ -213,19 +237,7 @@ fn fit_scaled(
         let k = fit.kalman_gain.as_ref().map(|k| k.as_ref());
         let p = refine_ss(ym.as_ref(), um.as_ref(), &scaled, k, &o)
             .context("prediction-error refinement of the subspace model")?;
-        summary = Some(PemSummary {
-            focus: o.focus,
-            iterations: p.report.iterations,
-            stop: format!("{:?}", p.report.reason),
-            start_loss: p.start_loss * sy * sy,
-            loss: p.fitted.loss * sy * sy,
-            kalman_gain: p
-                .kalman_gain
-                .as_ref()
-                .map(|k| (0..k.nrows()).map(|i| k[(i, 0)] / sy).collect()),
-            on_boundary: p.report.ended_on_boundary,
-            x0: Some(p.x0.clone()),
-        });
+        summary = Some(PemSummary::of_refinement(&p, o.focus, sy));
         scaled = p.fitted.model;
     }
     let m = &scaled;
