@@ -12,34 +12,17 @@
 //! 10–1000 Hz, and the median error it reports against the FRF measures the FRF's noise on
 //! the band (≤ the rule's 20 %, ≤ 1.25 × the FRF's own error there).
 
+mod common;
+use common::{median, rig_experiment};
+
 use ambid::analysis::{analyze, FrfSettings, Record};
-use ambid::experiment::{run, ExcitationPlan, Experiment};
+use ambid::experiment::{run, ExcitationPlan};
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::frf::band::{fit_band, FIT_REL_HALFWIDTH};
 use ambid_core::validate::compare::{
     choose, compare_models, supported_unstable_poles, CompareRow, CompareSpec, FitStructure,
     ValidationRecord,
 };
-use ambid_twin::{random_rig, Mode};
-
-fn experiment(rig: u64, seed: u64, amplitude: f64) -> Experiment {
-    Experiment {
-        twin: random_rig(rig).unwrap(),
-        excitation: ExcitationPlan {
-            amplitude_frac: amplitude,
-            ..ExcitationPlan::default()
-        },
-        mode: Mode::Linear,
-        seed,
-        noise: true,
-        record_b: false,
-    }
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
 
 #[test]
 fn the_derived_fit_band_holds_on_random_rigs() {
@@ -50,8 +33,8 @@ fn the_derived_fit_band_holds_on_random_rigs() {
     // two noise realisations per rig (identification seeds 301–320 and 501–520, validation
     // records 401–420 and 601–620)
     for (rig, seed) in (1..=20u64).flat_map(|k| [(k, 300 + k), (k, 500 + k)]) {
-        let out = run(&experiment(rig, seed, amp)).unwrap();
-        let val = run(&experiment(rig, seed + 100, 1.2 * amp)).unwrap();
+        let out = run(&rig_experiment(rig, seed, amp)).unwrap();
+        let val = run(&rig_experiment(rig, seed + 100, 1.2 * amp)).unwrap();
         let twin = &out.twin;
         let ctrl = twin.controller();
         let rec = &out.record;

@@ -5,33 +5,16 @@
 //! rig, no fit (ARX, OE, SS at orders 6–10) carries more unstable poles than the plant, and the
 //! chosen model of the default comparison (orders 6–9) is valid and close to the exact plant.
 
-use ambid::experiment::{run, ExcitationPlan, Experiment};
+mod common;
+use common::{median, rig_experiment};
+
+use ambid::experiment::{run, ExcitationPlan};
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::validate::compare::{
     choose, compare_models, unstable_poles_from_loop, CompareRow, CompareSpec, ValidationRecord,
 };
-use ambid_twin::{random_rig, Mode};
 
 const PERIOD: usize = 1023 * 5;
-
-fn experiment(rig: u64, seed: u64, amplitude: f64) -> Experiment {
-    Experiment {
-        twin: random_rig(rig).unwrap(),
-        excitation: ExcitationPlan {
-            amplitude_frac: amplitude,
-            ..ExcitationPlan::default()
-        },
-        mode: Mode::Linear,
-        seed,
-        noise: true,
-        record_b: false,
-    }
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
 
 #[test]
 fn frf_fits_keep_the_plants_unstable_poles_on_random_rigs() {
@@ -40,8 +23,8 @@ fn frf_fits_keep_the_plants_unstable_poles_on_random_rigs() {
     let mut fits = 0;
     for rig in 1..=20u64 {
         let default_amp = ExcitationPlan::default().amplitude_frac;
-        let out = run(&experiment(rig, 100 + rig, default_amp)).unwrap();
-        let val = run(&experiment(rig, 200 + rig, 1.2 * default_amp)).unwrap();
+        let out = run(&rig_experiment(rig, 100 + rig, default_amp)).unwrap();
+        let val = run(&rig_experiment(rig, 200 + rig, 1.2 * default_amp)).unwrap();
         let frf = out.periodic_frf((10.0, 1000.0), None).unwrap();
         let f = frf.f_hz().to_vec();
         let twin = &out.twin;

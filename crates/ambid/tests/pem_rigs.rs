@@ -14,36 +14,23 @@
 //! The full sweep with timings: `cargo run --release -p ambid --example pem_rig_sweep -- 1 20`
 //! (docs/estimation.md).
 
-use ambid::experiment::{run, Experiment, ExperimentOutput};
+mod common;
+use common::{exact_loop_fit, mean, seed_record_on_rig};
+
 use ambid_core::estimate::arx::fit_percent;
 use ambid_core::estimate::pem::{pem, Orders, PemOptions};
 use ambid_core::lti::Structure;
-use ambid_twin::Mode;
-use faer::Mat;
 
 /// Rig seeds tested here.
 const RIGS: u64 = 20;
-
-fn experiment(rig: u64, noise_seed: u64, amplitude: f64, periods: usize) -> ExperimentOutput {
-    let mut e = Experiment::seed_paper(Mode::Linear, 1e-7, noise_seed);
-    e.twin = ambid_twin::random_rig(rig).unwrap();
-    e.noise = true;
-    e.excitation.amplitude_frac = amplitude;
-    e.excitation.periods = periods;
-    run(&e).unwrap()
-}
-
-fn mean(x: &[f64]) -> f64 {
-    x.iter().sum::<f64>() / x.len() as f64
-}
 
 #[test]
 fn oe88_defaults_converge_and_reach_the_true_systems_fit_on_random_rigs() {
     let mut worst: f64 = f64::NEG_INFINITY;
     let mut failures = Vec::new();
     for rig in 1..=RIGS {
-        let est = experiment(rig, 1000 + rig, 0.10, 20);
-        let val = experiment(rig, 2000 + rig, 0.12, 4);
+        let est = seed_record_on_rig(rig, 1000 + rig, 0.10, 20);
+        let val = seed_record_on_rig(rig, 2000 + rig, 0.12, 4);
         assert_eq!(est.record.r.len(), 102_300);
         let (mu, my) = (mean(&est.record.r), mean(&est.record.y));
         let u: Vec<f64> = est.record.r.iter().map(|v| v - mu).collect();
@@ -60,17 +47,8 @@ fn oe88_defaults_converge_and_reach_the_true_systems_fit_on_random_rigs() {
         )
         .unwrap();
         let f_model = fit_percent(&yv, &fit.model.simulate(&uv, None, None).unwrap()).unwrap();
-        // the truth: the closed loop (inputs r, w; outputs y, u) from rest with w = 0
-        let rw = Mat::from_fn(val.record.r.len(), 2, |k, c| {
-            if c == 0 {
-                val.record.r[k]
-            } else {
-                0.0
-            }
-        });
-        let yt = val.twin.closed_loop().simulate(rw.as_ref(), None).unwrap();
-        let yt: Vec<f64> = (0..yt.nrows()).map(|k| yt[(k, 0)]).collect();
-        let f_truth = fit_percent(&val.record.y, &yt).unwrap();
+        // the truth: the exact closed loop from rest, w = 0
+        let f_truth = exact_loop_fit(&val.twin, &val.record.r, &val.record.y);
         let gap = f_truth - f_model;
         worst = worst.max(gap);
         eprintln!(

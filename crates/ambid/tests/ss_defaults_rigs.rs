@@ -16,45 +16,24 @@
 //! 40-rig sweep is `cargo run --release -p ambid --example ss_rig_sweep -- 1 40`
 //! (docs/estimation.md).
 
-use ambid::experiment::{run, Experiment, ExperimentOutput};
+mod common;
+use common::{exact_loop_fit, mean, seed_record_on_rig};
+
 use ambid::fitting::{identify_state_space, SsFitOptions};
 use ambid_core::estimate::arx::fit_percent;
 use ambid_core::estimate::pem::Focus;
-use ambid_twin::Mode;
-use faer::Mat;
 
 /// Rig seeds tested here (the first ones of the documented 40-rig sweep).
 const RIGS: u64 = 20;
-
-fn experiment(rig: u64, noise_seed: u64, amplitude: f64, periods: usize) -> ExperimentOutput {
-    let mut e = Experiment::seed_paper(Mode::Linear, 1e-7, noise_seed);
-    e.twin = ambid_twin::random_rig(rig).unwrap();
-    e.noise = true;
-    e.excitation.amplitude_frac = amplitude;
-    e.excitation.periods = periods;
-    run(&e).unwrap()
-}
-
-/// Fit % of the exact closed loop of `twin` (from rest, w = 0) on `(r, y)`.
-fn truth_fit(twin: &ambid_twin::Twin, r: &[f64], y: &[f64]) -> f64 {
-    let rw = Mat::from_fn(r.len(), 2, |k, c| if c == 0 { r[k] } else { 0.0 });
-    let yt = twin.closed_loop().simulate(rw.as_ref(), None).unwrap();
-    let yt: Vec<f64> = (0..yt.nrows()).map(|k| yt[(k, 0)]).collect();
-    fit_percent(y, &yt).unwrap()
-}
-
-fn mean(x: &[f64]) -> f64 {
-    x.iter().sum::<f64>() / x.len() as f64
-}
 
 #[test]
 fn ss8_defaults_reach_the_true_systems_validation_fit_on_random_rigs() {
     let mut worst: f64 = f64::NEG_INFINITY;
     for rig in 1..=RIGS {
-        let est = experiment(rig, 1000 + rig, 0.10, 20);
+        let est = seed_record_on_rig(rig, 1000 + rig, 0.10, 20);
         // a shorter validation record (4 periods) keeps the test time down; it is independent
         // (other noise, other level) and long enough for a fit to 0.01 point
-        let val = experiment(rig, 2000 + rig, 0.12, 4);
+        let val = seed_record_on_rig(rig, 2000 + rig, 0.12, 4);
         assert_eq!(est.record.r.len(), 102_300);
         let (mu, my) = (mean(&est.record.r), mean(&est.record.y));
         let u: Vec<f64> = est.record.r.iter().map(|v| v - mu).collect();
@@ -67,17 +46,8 @@ fn ss8_defaults_reach_the_true_systems_validation_fit_on_random_rigs() {
         };
         let fit = identify_state_space(&u, &y, est.twin.ts(), &o).unwrap();
         let f_model = fit_percent(&yv, &fit.model.simulate_siso(&uv, None).unwrap()).unwrap();
-        // the truth: the closed loop (inputs r, w; outputs y, u) from rest with w = 0
-        let rw = Mat::from_fn(val.record.r.len(), 2, |k, c| {
-            if c == 0 {
-                val.record.r[k]
-            } else {
-                0.0
-            }
-        });
-        let yt = val.twin.closed_loop().simulate(rw.as_ref(), None).unwrap();
-        let yt: Vec<f64> = (0..yt.nrows()).map(|k| yt[(k, 0)]).collect();
-        let f_truth = fit_percent(&val.record.y, &yt).unwrap();
+        // the truth: the exact closed loop from rest, w = 0
+        let f_truth = exact_loop_fit(&val.twin, &val.record.r, &val.record.y);
         let pem = fit.pem.as_ref().unwrap();
         eprintln!(
             "rig {rig}: block rows {} of {:?} ({:?}), PEM {:?} {} iterations ({}), validation fit {f_model:.3} % vs the truth's {f_truth:.3} %",
@@ -164,7 +134,7 @@ fn fit_cli_defaults_on_a_random_rig() {
     // the truth on the validation file's own columns
     let v = ambid::io::read_time_csv(&d.join("v/data.csv"), None).unwrap();
     let twin = ambid_twin::Twin::new(ambid_twin::random_rig(21).unwrap()).unwrap();
-    let f_truth = truth_fit(&twin, v.column("r").unwrap(), v.column("y").unwrap());
+    let f_truth = exact_loop_fit(&twin, v.column("r").unwrap(), v.column("y").unwrap());
     eprintln!("rig 21 through the CLI: {f_model:.3} % against the truth's {f_truth:.3} %");
     assert!(f_model >= f_truth - 0.5, "{f_model} vs {f_truth}");
     assert_eq!(m["meta"]["pem"]["focus"], "simulation");

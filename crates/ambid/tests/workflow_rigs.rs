@@ -18,7 +18,7 @@ mod common;
 use ambid::workflow::{self, Progress, Verbosity, WorkflowConfig};
 use ambid_core::validate::iso::IsoZones;
 use ambid_twin::{random_rig, Twin};
-use common::{ambid, s, text, tmpdir};
+use common::{ambid, median, s, text, tmpdir};
 use std::path::Path;
 
 fn simulate(dir: &Path, rig: u64, extra: &[&str]) {
@@ -78,11 +78,6 @@ fn measured_frf_error(dir: &Path, twin: &Twin) -> (f64, Vec<f64>) {
                 .collect(),
         );
     (e, f)
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
 }
 
 #[test]

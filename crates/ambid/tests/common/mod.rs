@@ -71,3 +71,56 @@ pub fn real_data(rel: &str) -> Option<PathBuf> {
     }
     found
 }
+
+/// The upper median (`v[n/2]` of the sorted values), as the rig sweeps report it.
+pub fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Arithmetic mean.
+pub fn mean(x: &[f64]) -> f64 {
+    x.iter().sum::<f64>() / x.len() as f64
+}
+
+/// The seed experiment (default excitation plan at `amplitude` of i_sat) on the linear twin of
+/// random rig `rig`, sensor noise on with seed `seed`.
+pub fn rig_experiment(rig: u64, seed: u64, amplitude: f64) -> ambid::experiment::Experiment {
+    ambid::experiment::Experiment {
+        twin: ambid_twin::random_rig(rig).unwrap(),
+        excitation: ambid::experiment::ExcitationPlan {
+            amplitude_frac: amplitude,
+            ..ambid::experiment::ExcitationPlan::default()
+        },
+        mode: ambid_twin::Mode::Linear,
+        seed,
+        noise: true,
+        record_b: false,
+    }
+}
+
+/// The seed paper's experiment on the linear twin of random rig `rig` (noise seed `noise_seed`,
+/// `amplitude` of i_sat, `periods` PRBS periods), simulated.
+pub fn seed_record_on_rig(
+    rig: u64,
+    noise_seed: u64,
+    amplitude: f64,
+    periods: usize,
+) -> ambid::experiment::ExperimentOutput {
+    let mut e =
+        ambid::experiment::Experiment::seed_paper(ambid_twin::Mode::Linear, 1e-7, noise_seed);
+    e.twin = ambid_twin::random_rig(rig).unwrap();
+    e.noise = true;
+    e.excitation.amplitude_frac = amplitude;
+    e.excitation.periods = periods;
+    ambid::experiment::run(&e).unwrap()
+}
+
+/// Fit % of the exact closed loop of `twin` (inputs r and w = 0, from rest) on `(r, y)`: the
+/// ceiling a model of r → y can reach on that record.
+pub fn exact_loop_fit(twin: &ambid_twin::Twin, r: &[f64], y: &[f64]) -> f64 {
+    let rw = faer::Mat::from_fn(r.len(), 2, |k, c| if c == 0 { r[k] } else { 0.0 });
+    let yt = twin.closed_loop().simulate(rw.as_ref(), None).unwrap();
+    let yt: Vec<f64> = (0..yt.nrows()).map(|k| yt[(k, 0)]).collect();
+    ambid_core::estimate::arx::fit_percent(y, &yt).unwrap()
+}
