@@ -185,6 +185,10 @@ pub struct Record<'a> {
     pub fs: f64,
 }
 
+/// The shortest record [`analyze`] accepts: the shortest Welch segment of the workflow's
+/// default segment rule (`n/8` clamped to 64 … 8192 samples).
+pub const MIN_FRF_SAMPLES: usize = 64;
+
 /// Runs the FRF analysis. `y_noise` (a record without excitation under the same loop) enables
 /// the output SNR.
 pub fn analyze(
@@ -193,6 +197,12 @@ pub fn analyze(
     y_noise: Option<&[f64]>,
 ) -> Result<FrfAnalysis> {
     let n = rec.r.len();
+    if n < MIN_FRF_SAMPLES {
+        return Err(crate::workflow::input(anyhow::anyhow!(
+            "the record has {n} samples, too few for an FRF: at least {MIN_FRF_SAMPLES} are needed (the shortest Welch segment the defaults use); record longer"
+        ))
+        .into());
+    }
     for (name, x) in [("u", rec.u), ("y", rec.y)]
         .into_iter()
         .chain(rec.i.map(|i| ("i", i)))

@@ -11,7 +11,7 @@ use ambid::io::table::{read_table, ColumnRef, ReadOptions};
 use ambid_core::data::{check_saturation, SaturationOptions};
 use ambid_core::frf::bla::Bla;
 use ambid_twin::Mode;
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use clap::Args;
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -101,12 +101,12 @@ fn recorded_levels(a: &BlaArgs) -> Result<(Vec<RecordedLevel>, f64)> {
         let ts = t.sample_time(has_t.then(|| ColumnRef::parse("t")).as_ref(), a.fs)?;
         match fs {
             None => fs = Some(1.0 / ts),
-            Some(f) if (f * ts - 1.0).abs() > 1e-6 => bail!(
+            Some(f) if (f * ts - 1.0).abs() > 1e-6 => return Err(ambid::workflow::input(anyhow::anyhow!(
                 "{}: sampled at {} Hz, the first realisation at {f} Hz; all realisations must share the \
                  sample rate",
                 path.display(),
                 1.0 / ts
-            ),
+            )).into()),
             Some(_) => {}
         }
         let col =
@@ -177,7 +177,10 @@ pub fn bla(a: BlaArgs) -> Result<()> {
 
 fn bla_from_files(a: &BlaArgs) -> Result<()> {
     let Some(n) = a.period_samples else {
-        bail!("recorded BLA realisations need the multisine period: pass --period-samples N");
+        return Err(ambid::workflow::usage(anyhow::anyhow!(
+            "recorded BLA realisations need the multisine period: pass --period-samples N"
+        ))
+        .into());
     };
     let (levels, fs) = recorded_levels(a)?;
     let plan = RecordedPlan {

@@ -8,7 +8,7 @@ use ambid_core::estimate::pem::{self, Focus, Orders, PemOptions};
 use ambid_core::estimate::Fitted;
 use ambid_core::lti::PolyModel;
 use ambid_core::validate::predict::InitialState;
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
 use serde_json::json;
 use std::path::{Path, PathBuf};
@@ -223,11 +223,12 @@ fn read_validation(
 ) -> Result<(Vec<f64>, Vec<f64>)> {
     let (mut u, mut y, tsv) = read_io(p, fs, input, output)?;
     if ((tsv - ts) / ts).abs() > 1e-9 {
-        bail!(
+        return Err(ambid::workflow::input(anyhow::anyhow!(
             "the validation data are sampled at {} Hz, the estimation data at {} Hz",
             1.0 / tsv,
             1.0 / ts
-        );
+        ))
+        .into());
     }
     u.iter_mut().for_each(|v| *v -= mu);
     y.iter_mut().for_each(|v| *v -= my);
@@ -270,9 +271,9 @@ pub fn fit(a: FitArgs) -> Result<()> {
             StructureArg::Oe => (FitStructure::Oe, a.order.unwrap_or(a.nf)),
             StructureArg::Ss => match a.order {
                 Some(n) => (FitStructure::Ss, n),
-                None => bail!("a state-space fit to FRF data needs --order"),
+                None => return Err(ambid::workflow::usage(anyhow::anyhow!("a state-space fit to FRF data needs --order")).into()),
             },
-            _ => bail!("fits to FRF data support --structure arx, oe or ss (ARX/OE of order n: n numerator and n denominator coefficients after --nk delays)"),
+            _ => return Err(ambid::workflow::usage(anyhow::anyhow!("fits to FRF data support --structure arx, oe or ss (ARX/OE of order n: n numerator and n denominator coefficients after --nk delays)")).into()),
         };
         return crate::cli_freqfit::fit_frf(
             &a.data,
@@ -292,11 +293,11 @@ pub fn fit(a: FitArgs) -> Result<()> {
     let (ins, outs) = (split(&a.input), split(&a.output));
     if ins.len() > 1 || outs.len() > 1 {
         if a.structure != StructureArg::Ss {
-            bail!(
+            return Err(ambid::workflow::usage(anyhow::anyhow!(
                 "several inputs or outputs ({} → {}) need --structure ss, the multi-input multi-output path; the polynomial structures are single-input single-output: fit one output (and input) at a time",
                 a.input,
                 a.output
-            );
+            )).into());
         }
         return fit_ss_mimo(&a, &ins, &outs);
     }
@@ -480,7 +481,10 @@ pub struct OrderArgs {
 
 pub fn order(a: OrderArgs) -> Result<()> {
     if a.na_max == 0 || a.nb_max == 0 {
-        bail!("--na-max and --nb-max must be at least 1");
+        return Err(ambid::workflow::usage(anyhow::anyhow!(
+            "--na-max and --nb-max must be at least 1"
+        ))
+        .into());
     }
     let (mut u, mut y, ts) = read_io(&a.data, a.fs, &a.input, &a.output)?;
     let (mu, my) = (mean(&u), mean(&y));
@@ -548,9 +552,10 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
     use ambid_core::estimate::ss_pem::SsPemOptions;
     use ambid_core::estimate::subspace::HorizonCriterion;
     if a.no_pem && a.feedthrough {
-        bail!(
+        return Err(ambid::workflow::usage(anyhow::anyhow!(
             "--feedthrough needs the prediction-error refinement (it estimates D); drop --no-pem"
-        );
+        ))
+        .into());
     }
     let opts = SsFitOptions {
         order: a.order,
@@ -835,7 +840,10 @@ fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
     let su: Vec<f64> = u.iter().map(|c| rms(c)).collect();
     let sy: Vec<f64> = y.iter().map(|c| rms(c)).collect();
     if su.iter().chain(&sy).any(|v| *v == 0.0) {
-        bail!("an input or output column is constant after removing its mean: nothing to identify");
+        return Err(ambid::workflow::input(anyhow::anyhow!(
+            "an input or output column is constant after removing its mean: nothing to identify"
+        ))
+        .into());
     }
     let nt = u[0].len();
     let (m, l) = (u.len(), y.len());
@@ -851,9 +859,10 @@ fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
     let mut pem_meta = json!(null);
     let mut x0_est: Option<Vec<f64>> = None;
     if a.feedthrough && a.no_pem {
-        bail!(
+        return Err(ambid::workflow::usage(anyhow::anyhow!(
             "--feedthrough needs the prediction-error refinement (it estimates D); drop --no-pem"
-        );
+        ))
+        .into());
     }
     if !a.no_pem {
         let o = SsPemOptions {
@@ -941,11 +950,12 @@ fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
         let (uv, _, tsv) = columns(p, a.fs, ins, Some(&mu), true)?;
         let (yv, _, _) = columns(p, a.fs, outs, Some(&my), true)?;
         if ((tsv - ts) / ts).abs() > 1e-9 {
-            bail!(
+            return Err(ambid::workflow::input(anyhow::anyhow!(
                 "the validation data are sampled at {} Hz, the estimation data at {} Hz",
                 1.0 / tsv,
                 1.0 / ts
-            );
+            ))
+            .into());
         }
         let fv = fits_on(&uv, &yv)?;
         println!("validation data: simulation fit {}", show(&fv));

@@ -11,7 +11,7 @@ use ambid_core::validate::compare::{
     choose, compare_models, supported_unstable_poles, table, CompareSpec, FitStructure,
     ValidationRecord,
 };
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
 use serde_json::json;
 use std::path::{Path, PathBuf};
@@ -49,12 +49,15 @@ pub fn frf_input(
     let fs = match (fs, file.extra("fs_hz").ok().and_then(|c| c.first().copied())) {
         (Some(fs), _) => fs,
         (None, Some(fs)) => fs,
-        (None, None) => bail!(
+        (None, None) => return Err(ambid::workflow::usage(anyhow::anyhow!(
             "this FRF file has no `fs_hz` column: give the sample rate of the data with --fs (e.g. --fs 20000)"
-        ),
+        )).into()),
     };
     if !(fs.is_finite() && fs > 0.0) {
-        bail!("the sample rate must be positive and finite, got {fs} Hz");
+        return Err(ambid::workflow::usage(anyhow::anyhow!(
+            "the sample rate must be positive and finite, got {fs:e} Hz"
+        ))
+        .into());
     }
     let frd = file.frd(quantity, 1.0 / fs)?;
     // the band: --band, else where the file measures the quantity reliably (band::fit_band)
@@ -109,7 +112,10 @@ pub fn fit_frf(
 ) -> Result<()> {
     let input = frf_input(path, quantity, fs, band, weights, max_iterations)?;
     if order == 0 {
-        bail!("--order must be at least 1 for a fit to FRF data");
+        return Err(ambid::workflow::usage(anyhow::anyhow!(
+            "--order must be at least 1 for a fit to FRF data"
+        ))
+        .into());
     }
     let ctrl = match controller {
         Some(c) => {
@@ -138,11 +144,12 @@ pub fn fit_frf(
     let rows = compare_models(&input.frd, &spec, None)?;
     let row = &rows[0];
     let Some(model) = &row.model else {
-        bail!(
+        return Err(ambid::workflow::computation(anyhow::anyhow!(
             "{} fit of order {order} failed: {}",
             structure.name(),
             row.note.as_deref().unwrap_or("unknown reason")
-        );
+        ))
+        .into());
     };
     print!("{}", table(&rows));
     if !row.valid {
@@ -261,7 +268,10 @@ pub fn compare(a: CompareModelsArgs) -> Result<()> {
         ..CompareSpec::default()
     };
     if spec.orders.contains(&0) {
-        bail!("--orders: every order must be at least 1");
+        return Err(ambid::workflow::usage(anyhow::anyhow!(
+            "--orders: every order must be at least 1"
+        ))
+        .into());
     }
     let ctrl = match &a.controller {
         Some(c) => {

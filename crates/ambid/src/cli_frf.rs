@@ -11,7 +11,7 @@ use ambid::study::{
 use ambid_core::frf::resonance::{find_resonances_reliable, order_from_peaks, ResonanceOptions};
 use ambid_core::frf::window::Window;
 use ambid_twin::{Mode, TwinConfig};
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use clap::{Args, Subcommand, ValueEnum};
 use std::path::{Path, PathBuf};
 
@@ -273,13 +273,24 @@ pub fn frf(a: FrfArgs) -> Result<()> {
     if let Some(fs) = a.fs {
         let file_fs = 1.0 / data.ts;
         if ((file_fs - fs) / fs).abs() > 1e-6 {
-            bail!("--fs {fs} Hz disagrees with the file's `t` column ({file_fs} Hz)");
+            return Err(ambid::workflow::usage(anyhow::anyhow!(
+                "--fs {fs:e} Hz disagrees with the file's `t` column ({file_fs:e} Hz)"
+            ))
+            .into());
         }
     }
-    let r = data.column(&a.excitation)?;
-    let u = data.column(&a.input)?;
-    let y = data.column(&a.output)?;
-    let i = data.column(&a.current).ok();
+    // missing samples are kept for the screening; without it every sample must be a number
+    let col = |name: &str| {
+        if a.no_screen {
+            data.column(name)
+        } else {
+            data.column_raw(name)
+        }
+    };
+    let r = col(&a.excitation)?;
+    let u = col(&a.input)?;
+    let y = col(&a.output)?;
+    let i = data.column_raw(&a.current).ok();
     let fs = 1.0 / data.ts;
     if matches!(a.method, MethodArg::Lpm | MethodArg::Lrm) {
         return frf_local(&a, r, u, y, fs);
@@ -317,7 +328,7 @@ pub fn frf(a: FrfArgs) -> Result<()> {
     let noise = match &a.noise {
         Some(p) => {
             let d = read_time_csv(p, a.fs.or(Some(fs)))?;
-            Some(d.column(&a.output)?.to_vec())
+            Some(d.column_raw(&a.output)?.to_vec())
         }
         None => None,
     };
@@ -422,10 +433,11 @@ fn frf_local(a: &FrfArgs, r: &[f64], u: &[f64], y: &[f64], fs: f64) -> Result<()
         Some(p) if p > 0 => {
             let m = r.len() / p * p;
             if m < 2 * p {
-                bail!(
+                return Err(ambid::workflow::usage(anyhow::anyhow!(
                     "--period-samples {p}: the record of {} samples holds fewer than two periods",
                     r.len()
-                );
+                ))
+                .into());
             }
             if m < r.len() {
                 println!(
@@ -682,7 +694,10 @@ fn amplitude(a: AmplitudeArgs) -> Result<()> {
         .iter()
         .find(|l| !(l.is_finite() && **l > 0.0 && **l <= 100.0))
     {
-        bail!("--levels must be in (0, 100] % of i_sat, got {l}");
+        return Err(ambid::workflow::usage(anyhow::anyhow!(
+            "--levels must be in (0, 100] % of i_sat, got {l:e}"
+        ))
+        .into());
     }
     let out = if a.files.is_empty() {
         let study = TwinAmplitudeStudy {
@@ -701,11 +716,12 @@ fn amplitude(a: AmplitudeArgs) -> Result<()> {
         amplitude_on_twin(&study)?
     } else {
         if a.files.len() != a.levels.len() {
-            bail!(
+            return Err(ambid::workflow::usage(anyhow::anyhow!(
                 "{} files for {} levels: pass one file per level, in the order of --levels",
                 a.files.len(),
                 a.levels.len()
-            );
+            ))
+            .into());
         }
         let mut records = Vec::new();
         let mut fs = None;

@@ -9,7 +9,7 @@ use ambid::validation::{
     MeasuredLoop, ValidationSettings,
 };
 use ambid_core::estimate::arx::fit_percent;
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use clap::Args;
 use serde_json::json;
 use std::path::PathBuf;
@@ -74,7 +74,7 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
     let zeros = vec![0.0; y.len()];
     let w = d.column("w").unwrap_or(&zeros);
     if r.is_none() && w.iter().all(|v| *v == 0.0) {
-        bail!("the record has neither an excitation column `{}` nor a reference `w`: nothing drives the loop", a.excitation);
+        return Err(ambid::workflow::input(anyhow::anyhow!("the record has neither an excitation column `{}` nor a reference `w`: nothing drives the loop", a.excitation)).into());
     }
     let settings = ValidationSettings {
         skip: a.skip,
@@ -136,14 +136,15 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
     let k_step = match a.k_step {
         Some(k) => {
             let Some(kg) = read_kalman_gain(&a.model)? else {
-                bail!("--k-step needs an innovation-form model with a Kalman gain (`ambid fit --structure ss` with --focus prediction)");
+                return Err(ambid::workflow::usage(anyhow::anyhow!("--k-step needs an innovation-form model with a Kalman gain (`ambid fit --structure ss` with --focus prediction)")).into());
             };
             if kg.len() != model.order() {
-                bail!(
+                return Err(ambid::workflow::input(anyhow::anyhow!(
                     "the model's Kalman gain has {} entries for {} states",
                     kg.len(),
                     model.order()
-                );
+                ))
+                .into());
             }
             let kmat = faer::Mat::from_fn(kg.len(), 1, |i, _| kg[i]);
             let p = ambid_core::validate::predict::predict_k(&model, kmat.as_ref(), y, u, k)?;

@@ -368,9 +368,8 @@ fn main() {
     let cli = Cli::parse();
     if let Err(e) = dispatch(cli) {
         eprintln!("error: {e:#}");
-        let code = e
-            .downcast_ref::<ambid::workflow::Failure>()
-            .map_or(1, |f| f.class.exit_code());
+        // one rule for every command (docs/workflow.md, "Exit codes")
+        let code = ambid::workflow::exit_code(&e);
         std::process::exit(code);
     }
 }
@@ -403,10 +402,18 @@ fn dispatch(cli: Cli) -> Result<()> {
 
 fn excite(a: ExciteArgs) -> Result<()> {
     if !(a.fs.is_finite() && a.fs > 0.0) {
-        bail!("--fs must be a positive sample rate in Hz, got {}", a.fs);
+        return Err(ambid::workflow::usage(anyhow::anyhow!(
+            "--fs must be a positive sample rate in Hz, got {:e}",
+            a.fs
+        ))
+        .into());
     }
     if !(a.i_sat.is_finite() && a.i_sat > 0.0) {
-        bail!("--i-sat must be a positive current in A, got {}", a.i_sat);
+        return Err(ambid::workflow::usage(anyhow::anyhow!(
+            "--i-sat must be a positive current in A, got {:e}",
+            a.i_sat
+        ))
+        .into());
     }
     let ts = 1.0 / a.fs;
     let prbs_bits = match &a.signal {
@@ -545,13 +552,22 @@ fn excite(a: ExciteArgs) -> Result<()> {
 /// seed + m, the convention of `ambid::bla::run_level`) next to `out` as `<stem>_m<k>.<ext>`.
 fn write_realisations(spec: &ExcitationSpec, ts: f64, m: usize, out: &Path) -> Result<()> {
     let ExcitationSpec::Multisine(ms) = spec else {
-        bail!("--realisations applies to a multisine");
+        return Err(ambid::workflow::usage(anyhow::anyhow!(
+            "--realisations applies to a multisine"
+        ))
+        .into());
     };
     if ms.phases != Phases::Random {
-        bail!("--realisations needs --phases random (Schroeder phases are the same every time)");
+        return Err(ambid::workflow::usage(anyhow::anyhow!(
+            "--realisations needs --phases random (Schroeder phases are the same every time)"
+        ))
+        .into());
     }
     if m < 2 {
-        bail!("--realisations must be at least 2 (the robust BLA needs M ≥ 2), got {m}");
+        return Err(ambid::workflow::usage(anyhow::anyhow!(
+            "--realisations must be at least 2 (the robust BLA needs M ≥ 2), got {m}"
+        ))
+        .into());
     }
     let bins = ms.bins(ts)?;
     let n = ms.period_samples;

@@ -64,7 +64,7 @@ fn check_period(period_samples: Option<usize>) -> Result<()> {
         return Err(Error::invalid(
             "period_samples",
             "a period of 0 samples is meaningless; pass the excitation's period length in \
-             samples, or None for non-periodic data",
+             samples (`--period-samples`, `[data] period_samples`), or leave it unset for non-periodic data",
         ));
     }
     Ok(())

@@ -282,7 +282,7 @@ impl SubspaceOptions {
         if self.order == Some(0) {
             return Err(Error::invalid(
                 "order",
-                "the model order must be at least 1; use None to choose it from the singular values",
+                "the model order must be at least 1; leave it unset (`ambid fit`: omit --order) to choose it from the singular values",
             ));
         }
         if self.max_order == 0 {
@@ -295,7 +295,7 @@ impl SubspaceOptions {
             if i < 2 {
                 return Err(Error::invalid(
                     "block_rows",
-                    format!("at least 2 block rows are needed (past and future horizon), got {i}; use None for the default"),
+                    format!("at least 2 block rows are needed (past and future horizon), got {i}; leave them unset (`ambid fit`: omit --block-rows) for the automatic horizon"),
                 ));
             }
         }

@@ -263,6 +263,10 @@ impl ControllerModel {
 /// c.check_ts(5e-5).unwrap();
 /// ```
 pub fn read_controller(path: &Path) -> Result<ControllerModel> {
+    read_controller_inner(path).map_err(|e| crate::workflow::input(e).into())
+}
+
+fn read_controller_inner(path: &Path) -> Result<ControllerModel> {
     let format = ControllerFormat::from_path(path)?;
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("cannot read controller file {}", path.display()))?;
@@ -467,7 +471,7 @@ fn tf_model(t: TfFile) -> Result<ControllerModel> {
     let ts = sample_time(t.ts, t.fs_hz)?;
     for (key, p) in [("num", &t.num), ("den", &t.den)] {
         if let Some(i) = p.iter().position(|x| !x.is_finite()) {
-            bail!("`{key}[{i}]` must be a finite number, got {}", p[i]);
+            bail!("`{key}[{i}]` must be a finite number, got {:e}", p[i]);
         }
     }
     if t.num.iter().all(|b| *b == 0.0) {
@@ -503,7 +507,10 @@ fn shape(key: &str, m: &[Vec<f64>]) -> Result<(usize, Option<usize>)> {
             );
         }
         if let Some(j) = row.iter().position(|x| !x.is_finite()) {
-            bail!("`{key}[{i}][{j}]` must be a finite number, got {}", row[j]);
+            bail!(
+                "`{key}[{i}][{j}]` must be a finite number, got {:e}",
+                row[j]
+            );
         }
     }
     Ok((m.len(), cols))

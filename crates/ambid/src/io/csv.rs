@@ -7,13 +7,16 @@
 //! FRF data: `f_hz, <q>_re, <q>_im, <q>_std, …` per quantity `q`, plus optional real columns such
 //! as `coh_ry`.
 
+use super::table::{read_table, ColumnRef, DataFileError, Format, ReadOptions};
 use anyhow::{anyhow, bail, Context, Result};
 use num_complex::Complex64;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Time-domain data read from a file: named columns of equal length and the sample time.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TimeData {
+    /// The file the data were read from (named in messages).
+    pub path: PathBuf,
     /// Sample time in seconds.
     pub ts: f64,
     /// Column names in file order (without `t`).
@@ -22,24 +25,60 @@ pub struct TimeData {
     pub columns: Vec<Vec<f64>>,
 }
 
+/// The largest magnitude a signal sample may have: sums of squares of up to 2²⁸ samples of
+/// this size stay far below `f64::MAX` (≈ 1.8·10³⁰⁸), so a larger (finite) value is refused at
+/// the reader instead of overflowing to ±inf inside a computation.
+pub const MAX_SAMPLE_MAGNITUDE: f64 = 1e100;
+
 impl TimeData {
-    /// The column called `name`, or an error listing the available columns.
+    /// The column called `name` with every sample finite: an error names the file, the column
+    /// and the 1-based data row (rows after the header; comment and blank lines are not
+    /// counted) of the first NaN, ±inf or missing value, or lists the available columns.
     pub fn column(&self, name: &str) -> Result<&[f64]> {
+        let x = self.column_raw(name)?;
+        if let Some(k) = x.iter().position(|v| !v.is_finite()) {
+            return Err(DataFileError::Invalid {
+                path: self.path.clone(),
+                message: format!(
+                    "column `{name}`, data row {} (counted after the header, without comment lines): the value is {}; every sample must be a number for this command: repair or cut the record (`ambid frf` screens and repairs missing samples)",
+                    k + 1,
+                    if x[k].is_nan() { "missing or NaN".to_string() } else { format!("{}", x[k]) }
+                ),
+            }
+            .into());
+        }
+        Ok(x)
+    }
+
+    /// The column called `name` as read, missing samples as NaN (for the screening of
+    /// `ambid frf`), or an error listing the available columns.
+    pub fn column_raw(&self, name: &str) -> Result<&[f64]> {
         self.names
             .iter()
             .position(|n| n == name)
             .map(|k| self.columns[k].as_slice())
             .ok_or_else(|| {
-                anyhow!(
-                    "unknown column `{name}`; the file has columns: {}",
-                    self.names.join(", ")
-                )
+                anyhow!(DataFileError::MissingColumn {
+                    path: self.path.clone(),
+                    wanted: name.to_string(),
+                    available: self
+                        .names
+                        .iter()
+                        .map(|n| format!("`{n}`"))
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                })
             })
     }
 }
 
-/// Writes equal-length columns with a header row. Errors on unequal lengths.
+/// Writes equal-length columns with a header row. Errors on unequal lengths. Every error is an
+/// output failure (exit 5, [`crate::workflow::exit_code`]).
 pub fn write_time_csv(path: &Path, columns: &[(&str, &[f64])]) -> Result<()> {
+    write_time_csv_inner(path, columns).map_err(|e| crate::workflow::output(e).into())
+}
+
+fn write_time_csv_inner(path: &Path, columns: &[(&str, &[f64])]) -> Result<()> {
     let n = columns.first().map_or(0, |c| c.1.len());
     if let Some((name, c)) = columns.iter().find(|c| c.1.len() != n) {
         bail!(
@@ -77,7 +116,17 @@ pub fn write_frf_csv(path: &Path, f_hz: &[f64], quantities: &[FrfColumn<'_>]) ->
 }
 
 /// Writes an FRF CSV with extra real columns after the quantities (e.g. `coh_ry`, `coh_ru`).
+/// Every error is an output failure (exit 5).
 pub fn write_frf_csv_with(
+    path: &Path,
+    f_hz: &[f64],
+    quantities: &[FrfColumn<'_>],
+    extras: &[(&str, &[f64])],
+) -> Result<()> {
+    write_frf_inner(path, f_hz, quantities, extras).map_err(|e| crate::workflow::output(e).into())
+}
+
+fn write_frf_inner(
     path: &Path,
     f_hz: &[f64],
     quantities: &[FrfColumn<'_>],
@@ -125,116 +174,77 @@ pub fn write_frf_csv_with(
     Ok(())
 }
 
-/// Reads a time-data CSV. The sample time comes from the `t` column when present (it must be
-/// uniformly spaced), otherwise from `fs_hz`. Every value must parse as a number; `NaN`, `inf` and
-/// empty fields in a signal column are read as missing samples (NaN) for the screening of
-/// `ambid frf`, the `t` column must be finite.
+/// Reads a time-data CSV (any delimited text file in the one text dialect of
+/// [`crate::io::table`], see `docs/data-files.md`: `#`/`%` comment lines, detected delimiter,
+/// quoted cells). The first line must be a header naming every column, each name once. The
+/// sample time comes from the `t` column when present (it must be strictly increasing and
+/// uniform), otherwise from `fs_hz`. `NaN`, `inf` and empty fields in a signal column are read as
+/// missing samples (NaN): [`TimeData::column`] refuses them with the file, row and column,
+/// [`TimeData::column_raw`] keeps them for the screening of `ambid frf`; the `t` column must be
+/// finite. A finite value beyond ±[`MAX_SAMPLE_MAGNITUDE`] is refused.
 pub fn read_time_csv(path: &Path, fs_hz: Option<f64>) -> Result<TimeData> {
-    let (header, cols) = read_columns(path, |column, field| {
-        // an empty field is a missing sample (NaN); NaN/inf are kept for the screening
-        let v: f64 = if field.is_empty() {
-            f64::NAN
-        } else {
-            field
-                .parse()
-                .map_err(|_| format!("`{field}` is not a number"))?
-        };
-        if !v.is_finite() && column == "t" {
-            return Err(format!(
-                "not finite ({field}); the time column must be complete"
-            ));
-        }
-        Ok(v)
-    })?;
-    let n = cols[0].len();
+    let table = read_text(path)?;
+    let n = table.len();
     if n < 2 {
-        bail!("{}: needs at least 2 data rows, found {n}", path.display());
-    }
-    let t_idx = header.iter().position(|h| h == "t");
-    let ts = match (t_idx, fs_hz) {
-        (Some(k), _) => {
-            let t = &cols[k];
-            let ts = (t[n - 1] - t[0]) / (n - 1) as f64;
-            if ts.is_nan() || ts <= 0.0 {
-                bail!("{}: the `t` column must increase", path.display());
-            }
-            if let Some(j) = (1..n).find(|&j| ((t[j] - t[j - 1]) - ts).abs() > 1e-6 * ts) {
-                bail!(
-                    "{}: the `t` column is not uniformly sampled (step at row {} is {} s, mean step {ts} s)",
-                    path.display(),
-                    j + 1,
-                    t[j] - t[j - 1]
-                );
-            }
-            ts
+        return Err(DataFileError::NoData {
+            path: path.to_path_buf(),
+            message: format!("needs at least 2 data rows, found {n}"),
         }
-        (None, Some(fs)) if fs.is_finite() && fs > 0.0 => 1.0 / fs,
-        (None, Some(fs)) => bail!("sample rate must be positive and finite, got {fs}"),
-        (None, None) => bail!(
-            "{}: no `t` column; give the sample rate (--fs) to read this file",
-            path.display()
-        ),
+        .into());
+    }
+    let t_idx = table.names.iter().position(|h| h == "t");
+    let ts = match (t_idx, fs_hz) {
+        (Some(_), _) => table.sample_time(Some(&ColumnRef::Name("t".into())), None)?,
+        (None, Some(fs)) => table.sample_time(None, Some(fs))?,
+        (None, None) => {
+            return Err(DataFileError::SampleTime {
+                path: path.to_path_buf(),
+                message: "no `t` column; give the sample rate (--fs) to read this file".into(),
+            }
+            .into())
+        }
     };
     let mut names = Vec::new();
     let mut columns = Vec::new();
-    for (k, (h, c)) in header.into_iter().zip(cols).enumerate() {
+    for (k, (h, c)) in table.names.into_iter().zip(table.columns).enumerate() {
         if Some(k) != t_idx {
+            if let Some(j) = c
+                .iter()
+                .position(|v| v.is_finite() && v.abs() > MAX_SAMPLE_MAGNITUDE)
+            {
+                return Err(DataFileError::Invalid {
+                    path: path.to_path_buf(),
+                    message: format!(
+                        "column `{h}`, data row {} (counted after the header, without comment lines): {:.6e} is beyond ±{MAX_SAMPLE_MAGNITUDE:e}, where sums of squares overflow; check the units of the column",
+                        j + 1,
+                        c[j]
+                    ),
+                }
+                .into());
+            }
             names.push(h);
             columns.push(c);
         }
     }
-    Ok(TimeData { ts, names, columns })
+    Ok(TimeData {
+        path: path.to_path_buf(),
+        ts,
+        names,
+        columns,
+    })
 }
 
-/// The header and the columns of a CSV file of numbers: every column named, every row as long as
-/// the header, each field converted by `field(column, text)` (an `Err` message is reported with
-/// the file, the row and the column).
-fn read_columns(
-    path: &Path,
-    field: impl Fn(&str, &str) -> std::result::Result<f64, String>,
-) -> Result<(Vec<String>, Vec<Vec<f64>>)> {
-    let mut rdr = ::csv::ReaderBuilder::new()
-        .trim(::csv::Trim::All)
-        .from_path(path)
-        .with_context(|| format!("cannot open {}", path.display()))?;
-    let header: Vec<String> = rdr
-        .headers()
-        .with_context(|| format!("{}: cannot read the header row", path.display()))?
-        .iter()
-        .map(str::to_string)
-        .collect();
-    if header.is_empty() || header.iter().any(String::is_empty) {
-        bail!(
-            "{}: the header row must name every column (got {:?})",
-            path.display(),
-            header
-        );
-    }
-    let mut cols: Vec<Vec<f64>> = vec![Vec::new(); header.len()];
-    for (line, rec) in rdr.records().enumerate() {
-        let rec = rec.with_context(|| format!("{}: data row {}", path.display(), line + 1))?;
-        if rec.len() != header.len() {
-            bail!(
-                "{}: data row {} has {} fields, the header has {}",
-                path.display(),
-                line + 1,
-                rec.len(),
-                header.len()
-            );
-        }
-        for (k, text) in rec.iter().enumerate() {
-            let v = field(&header[k], text).map_err(|msg| {
-                anyhow!(
-                    "{}: data row {}, column `{}`: {msg}",
-                    path.display(),
-                    line + 1,
-                    header[k]
-                )
-            })?;
-            cols[k].push(v);
-        }
-    }
-    Ok((header, cols))
+/// A text file read in the one dialect, with a header row.
+fn read_text(path: &Path) -> Result<crate::io::table::Table> {
+    let table = read_table(
+        path,
+        &ReadOptions {
+            format: Some(Format::Text),
+            header: Some(true),
+            ..ReadOptions::default()
+        },
+    )?;
+    Ok(table)
 }
 
 #[cfg(test)]
@@ -258,7 +268,7 @@ mod tests {
         assert_eq!(d.column("y").unwrap(), y.as_slice());
         assert!((d.ts - 5e-5).abs() < 1e-18);
         let e = d.column("x").unwrap_err().to_string();
-        assert!(e.contains("unknown column `x`") && e.contains("y"), "{e}");
+        assert!(e.contains("no column `x`") && e.contains("`y`"), "{e}");
     }
 
     #[test]
@@ -274,10 +284,28 @@ mod tests {
         // missing or non-finite samples in a signal column are kept (as NaN) for the screening
         std::fs::write(&p, "t,y\n0,1\n0.1,NaN\n0.2,\n").unwrap();
         let d = read_time_csv(&p, None).unwrap();
-        assert!(d.column("y").unwrap()[1].is_nan() && d.column("y").unwrap()[2].is_nan());
+        let y = d.column_raw("y").unwrap();
+        assert!(y[1].is_nan() && y[2].is_nan());
+        // … and named with their row and column where a command needs every sample
+        let e = d.column("y").unwrap_err().to_string();
+        assert!(e.contains("column `y`, data row 2"), "{e}");
         std::fs::write(&p, "t,y\n0,1\nNaN,2\n").unwrap();
         let e = read_time_csv(&p, None).unwrap_err().to_string();
-        assert!(e.contains("not finite"), "{e}");
+        assert!(e.contains("non-finite value NaN in row 2"), "{e}");
+        // comment lines are comments, as in every reader (one dialect)
+        std::fs::write(&p, "# recorded\nt,y\n0,1\n% note\n0.1,2\n").unwrap();
+        assert_eq!(
+            read_time_csv(&p, None).unwrap().column("y").unwrap(),
+            [1.0, 2.0]
+        );
+        // a header naming a column twice is refused
+        std::fs::write(&p, "t,y,y\n0,1,2\n0.1,2,3\n").unwrap();
+        let e = read_time_csv(&p, None).unwrap_err().to_string();
+        assert!(e.contains("`y` twice"), "{e}");
+        // a finite value that would overflow sums of squares is refused with row and column
+        std::fs::write(&p, "t,y\n0,1\n0.1,1e308\n").unwrap();
+        let e = read_time_csv(&p, None).unwrap_err().to_string();
+        assert!(e.contains("column `y`, data row 2") && e.len() < 400, "{e}");
         std::fs::write(&p, "t,y\n0,1\n0.1,2,3\n").unwrap();
         assert!(read_time_csv(&p, None).is_err());
         assert!(write_time_csv(&p, &[("a", &[1.0, 2.0]), ("b", &[1.0])]).is_err());
@@ -347,28 +375,35 @@ impl FrfFile {
 }
 
 /// Reads an FRF CSV (`f_hz`, then `<q>_re, <q>_im, <q>_std` per quantity, then extra real
-/// columns). Every field must be a finite number and `f_hz` strictly increasing.
+/// columns), in the one text dialect of [`crate::io::table`]. Every field must be a finite
+/// number and `f_hz` strictly increasing.
 pub fn read_frf_csv(path: &Path) -> Result<FrfFile> {
-    let (header, mut cols) = read_columns(path, |_, field| {
-        field
-            .parse()
-            .ok()
-            .filter(|v: &f64| v.is_finite())
-            .ok_or_else(|| format!("`{field}` is not a finite number"))
-    })?;
+    let table = read_text(path)?;
+    let (header, mut cols) = (table.names, table.columns);
     if header.first().map(String::as_str) != Some("f_hz") {
         bail!(
-            "{}: an FRF file starts with the column `f_hz` (got {:?}); see docs/formats.md",
+            "{}: an FRF file starts with the column `f_hz` (got {}); see docs/formats.md",
             path.display(),
-            header.first()
+            header
+                .first()
+                .map_or("no column".to_string(), |h| format!("`{h}`"))
         );
     }
-    if cols[0].is_empty() {
-        bail!("{}: no data rows", path.display());
+    for (h, c) in header.iter().zip(&cols) {
+        if let Some(k) = c.iter().position(|v| !v.is_finite()) {
+            return Err(DataFileError::Invalid {
+                path: path.to_path_buf(),
+                message: format!(
+                    "column `{h}`, data row {}: the value is missing or not finite; every field of an FRF file must be a finite number",
+                    k + 1
+                ),
+            }
+            .into());
+        }
     }
     if let Some(k) = (1..cols[0].len()).find(|&k| cols[0][k] <= cols[0][k - 1]) {
         bail!(
-            "{}: f_hz must increase strictly (row {} has {} after {})",
+            "{}: f_hz must increase strictly (data row {} has {:.6e} after {:.6e})",
             path.display(),
             k + 1,
             cols[0][k],

@@ -721,13 +721,14 @@ impl WorkflowConfig {
         if !(self.data.split > 0.0 && self.data.split < 1.0) {
             return Err(bad(format!(
                 "data.split = {} must be between 0 and 1 (the estimation fraction, e.g. 0.5)",
-                self.data.split
+                fmt_num(self.data.split)
             )));
         }
         for (k, v) in &self.data.scale {
             if !(v.is_finite() && *v != 0.0) {
                 return Err(bad(format!(
-                    "data.scale.{k} = {v} must be a finite, non-zero factor"
+                    "data.scale.{k} = {} must be a finite, non-zero factor",
+                    fmt_num(*v)
                 )));
             }
         }
@@ -744,20 +745,214 @@ impl WorkflowConfig {
                 }
             }
         }
-        if self
+        if let Some(l) = self
             .amplitude_study
             .levels_pct
             .iter()
-            .any(|l| !(l.is_finite() && *l > 0.0 && *l <= 100.0))
+            .find(|l| !(l.is_finite() && **l > 0.0 && **l <= 100.0))
+        {
+            return Err(bad(format!(
+                "amplitude_study.levels_pct has {}, but every level must be in (0, 100] % of i_sat, e.g. levels_pct = [2, 4, 6, 8]",
+                fmt_num(*l)
+            )));
+        }
+        if self.amplitude_study.levels_pct.is_empty()
+            && self.source == SourceKind::Twin
+            && self
+                .steps()
+                .iter()
+                .any(|s| matches!(s, Step::Amplitude | Step::Bla))
         {
             return Err(bad(
-                "amplitude_study.levels_pct must be in (0, 100] % of i_sat".into(),
+                "amplitude_study.levels_pct = [] lists no level; give at least one level in % of i_sat (e.g. levels_pct = [2, 4, 6, 8]), or remove the key for the default 2 … 16 %, or leave \"amplitude\" out of `steps`".into(),
             ));
         }
+        self.check_values(path)?;
         if self.source == SourceKind::Files && self.data.identification.is_none() {
             return Err(bad(
                 "source = \"files\" needs [data] identification = \"path/to/record.csv\"".into(),
             ));
+        }
+        Ok(())
+    }
+
+    /// The checks of numeric values that [`WorkflowConfig::check`] does not cover: every value a
+    /// step would later refuse (or divide by) is refused here, before any step runs, with the key
+    /// and what to write instead.
+    fn check_values(&self, path: &Path) -> Result<(), ConfigError> {
+        let bad = |message: String| ConfigError::Invalid {
+            path: path.to_path_buf(),
+            message,
+        };
+        if let Some(p) = self.data.period_samples {
+            if p < 2 {
+                return Err(bad(format!(
+                    "data.period_samples = {p} must be at least 2 (the samples per excitation period, e.g. 5115 for the seed PRBS with n = 10 and 5 samples per bit); remove the key if the excitation is not periodic"
+                )));
+            }
+        }
+        if let Some(n) = self.frf.nperseg {
+            if n < MIN_NPERSEG {
+                return Err(bad(format!(
+                    "frf.nperseg = {n} is too short: a Welch segment needs at least {MIN_NPERSEG} samples; give e.g. nperseg = 4096, or remove the key to derive it from the record length"
+                )));
+            }
+        }
+        let iso = &self.iso;
+        if !(iso.a.is_finite()
+            && iso.b.is_finite()
+            && iso.c.is_finite()
+            && 1.0 < iso.a
+            && iso.a < iso.b
+            && iso.b < iso.c)
+        {
+            return Err(bad(format!(
+                "[iso] a = {}, b = {}, c = {} must increase above 1 (peak-sensitivity limits A/B < B/C < C/D; ISO 14839-3: a = 3, b = 4, c = 5)",
+                fmt_num(iso.a),
+                fmt_num(iso.b),
+                fmt_num(iso.c)
+            )));
+        }
+        if let Some(&o) = self.models.orders.iter().find(|&&o| o > MAX_MODEL_ORDER) {
+            return Err(bad(format!(
+                "models.orders has {o}, above the largest order ambid fits, {MAX_MODEL_ORDER}; give orders such as [6, 7, 8, 9] (two states per rotor mode in the band)"
+            )));
+        }
+        for (key, v) in [
+            ("order.na_max", self.order.na_max),
+            ("order.nb_max", self.order.nb_max),
+        ] {
+            if v == 0 || v > MAX_MODEL_ORDER {
+                return Err(bad(format!(
+                    "{key} = {v} must be between 1 and {MAX_MODEL_ORDER}, e.g. 12"
+                )));
+            }
+        }
+        let ex = &self.excitation;
+        if !(ex.f_min_hz.is_finite()
+            && ex.f_max_hz.is_finite()
+            && 0.0 < ex.f_min_hz
+            && ex.f_min_hz < ex.f_max_hz)
+        {
+            return Err(bad(format!(
+                "excitation.f_min_hz = {} and f_max_hz = {} must be an increasing pair of positive frequencies in Hz, e.g. 1 and 2000",
+                fmt_num(ex.f_min_hz),
+                fmt_num(ex.f_max_hz)
+            )));
+        }
+        if !(2..=MAX_PRBS_ORDER).contains(&ex.prbs_order) {
+            return Err(bad(format!(
+                "excitation.prbs_order = {} must be between 2 and {MAX_PRBS_ORDER} (period 2^n − 1 bits), e.g. 10",
+                ex.prbs_order
+            )));
+        }
+        for (key, v) in [
+            ("excitation.samples_per_bit", ex.samples_per_bit),
+            ("excitation.periods", ex.periods),
+            ("validation.windows", self.validation.windows),
+            ("validation.lags", self.validation.lags),
+        ] {
+            if v == 0 {
+                return Err(bad(format!("{key} = 0 must be at least 1")));
+            }
+        }
+        for (key, v) in [
+            ("excitation.amplitude_pct", ex.amplitude_pct),
+            ("validation.amplitude_pct", self.validation.amplitude_pct),
+            ("excitation.compare_level_pct", Some(ex.compare_level_pct)),
+        ] {
+            if let Some(v) = v {
+                if !(v.is_finite() && v > 0.0 && v <= 100.0) {
+                    return Err(bad(format!(
+                        "{key} = {} must be in (0, 100] % of i_sat, e.g. 10",
+                        fmt_num(v)
+                    )));
+                }
+            }
+        }
+        let rc = &self.reconstruction;
+        if !(rc.f0_hz.is_finite() && rc.f1_hz.is_finite() && 0.0 < rc.f0_hz && rc.f0_hz < rc.f1_hz)
+        {
+            return Err(bad(format!(
+                "reconstruction.f0_hz = {} and f1_hz = {} must be an increasing pair of positive frequencies in Hz, e.g. 1 and 1000",
+                fmt_num(rc.f0_hz),
+                fmt_num(rc.f1_hz)
+            )));
+        }
+        for (key, v) in [
+            ("reconstruction.duration_s", rc.duration_s),
+            ("reconstruction.amplitude_um", rc.amplitude_um),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(bad(format!(
+                    "{key} = {} must be a positive number",
+                    fmt_num(v)
+                )));
+            }
+        }
+        if let Some(v) = self.data.fs_hz {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(bad(format!(
+                    "data.fs_hz = {} must be a positive sample rate in Hz, e.g. 20000, or remove it and give a time column",
+                    fmt_num(v)
+                )));
+            }
+        }
+        for (l, f) in self
+            .amplitude_study
+            .files
+            .iter()
+            .map(|f| (f.level_pct, "amplitude_study.files"))
+            .chain(self.bla.files.iter().map(|f| (f.level_pct, "bla.files")))
+        {
+            if !(l.is_finite() && l > 0.0 && l <= 100.0) {
+                return Err(bad(format!(
+                    "{f}: level_pct = {} must be in (0, 100] % of i_sat",
+                    fmt_num(l)
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// Checks against the records once they are read, before any step runs: an explicitly
+    /// periodic FRF needs at least two periods of `[data] period_samples` in the estimation
+    /// record, `frf.nperseg` must fit in it, and every model order must leave at least
+    /// [`SAMPLES_PER_PARAMETER`] samples per parameter. `n` is the estimation record's length.
+    ///
+    /// # Errors
+    /// [`ConfigError::Invalid`] naming the key and the value to write instead.
+    pub fn check_record(&self, path: &Path, n: usize) -> Result<(), ConfigError> {
+        let bad = |message: String| ConfigError::Invalid {
+            path: path.to_path_buf(),
+            message,
+        };
+        if let Some(p) = self.data.period_samples {
+            let need = p.saturating_mul(2);
+            if self.frf.method == "periodic" && n < need {
+                return Err(bad(format!(
+                    "frf.method = \"periodic\" with data.period_samples = {p} needs at least 2 periods ({need} samples), but the estimation record has {n} samples; correct period_samples, or set frf.method = \"welch\""
+                )));
+            }
+        }
+        if let Some(k) = self.frf.nperseg {
+            if k > n {
+                return Err(bad(format!(
+                    "frf.nperseg = {k} is longer than the estimation record ({n} samples); give at most {n}, or remove the key to derive it from the record length"
+                )));
+            }
+        }
+        let cap = n / SAMPLES_PER_PARAMETER;
+        if let Some(&o) = self
+            .models
+            .orders
+            .iter()
+            .find(|&&o| parameters_of_order(o) > cap)
+        {
+            return Err(bad(format!(
+                "models.orders has {o}: a model of order {o} has about {} parameters, but the estimation record ({n} samples) supports at most {cap} ({SAMPLES_PER_PARAMETER} samples per parameter); give smaller orders or a longer record",
+                parameters_of_order(o)
+            )));
         }
         Ok(())
     }
@@ -768,6 +963,45 @@ impl WorkflowConfig {
         s.sort();
         s.dedup();
         s
+    }
+}
+
+/// The shortest Welch segment `frf.nperseg` accepts: a segment of fewer samples resolves
+/// fewer than 4 frequency lines.
+pub const MIN_NPERSEG: usize = 8;
+
+/// The largest model order (`models.orders`, `order.na_max`, `order.nb_max`) a workflow accepts:
+/// an AMB rotor needs two states per mode in the band, and 100 states is 50 modes, far more than
+/// any measured band holds; above it the fits and the pole-zero analysis grow as order³.
+pub const MAX_MODEL_ORDER: usize = 100;
+
+/// The largest PRBS register order of the twin's excitation (a period of 2²⁰ − 1 bits).
+pub const MAX_PRBS_ORDER: u32 = 20;
+
+/// Samples the estimation record must hold per model parameter (rule of thumb of system
+/// identification: the parameter variance is ∝ parameters / samples, and with fewer than ten
+/// samples per parameter the estimate is dominated by noise).
+pub const SAMPLES_PER_PARAMETER: usize = 10;
+
+/// The parameter count of a model of order `n` as the workflow fits it: `na = nb = n`
+/// polynomial coefficients (ARX, OE), and for a state-space model of order `n` the
+/// observable canonical form's `2n + 1`.
+pub fn parameters_of_order(n: usize) -> usize {
+    n.saturating_mul(2).saturating_add(1)
+}
+
+/// A number in a message: compact (`{:.6}` significant style) whatever its size.
+pub(crate) fn fmt_num(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let a = v.abs();
+    if (1e-4..1e6).contains(&a) {
+        let s = format!("{v:.6}");
+        let s = s.trim_end_matches('0').trim_end_matches('.');
+        s.to_string()
+    } else {
+        format!("{v:.6e}")
     }
 }
 

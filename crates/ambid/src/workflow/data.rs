@@ -312,6 +312,11 @@ fn detrend_pair(
     Ok(())
 }
 
+/// How a column spec is written in the workflow file (`y`, `#3`).
+fn spec_name(spec: &ColumnSpec) -> String {
+    spec.to_ref().to_string()
+}
+
 pub fn load_file(
     cfg: &WorkflowConfig,
     base: &Path,
@@ -378,9 +383,21 @@ pub fn load_file(
         let v: Vec<f64> = x[skip..].iter().map(|v| v * scale).collect();
         if let Some(k) = v.iter().position(|v| !v.is_finite()) {
             return Err(input(anyhow!(
-                "{}: column `{name}` has a non-finite value at sample {} (after skip_samples); repair or cut the record",
+                "{}: column `{}` (`{name}`), data row {} (counted after the header, without comment lines): the value is {}; repair the sample, or cut the record with [data] skip_samples",
                 path.display(),
-                k + skip + 1
+                spec_name(spec),
+                k + skip + 1,
+                if x[k + skip].is_nan() { "missing or NaN".to_string() } else { format!("{}", x[k + skip]) }
+            )));
+        }
+        let max = crate::io::csv::MAX_SAMPLE_MAGNITUDE;
+        if let Some(k) = v.iter().position(|v| v.abs() > max) {
+            return Err(input(anyhow!(
+                "{}: column `{}` (`{name}`), data row {}: {:.6e} is beyond ±{max:e}, where sums of squares overflow; check the column's units or [data] scale",
+                path.display(),
+                spec_name(spec),
+                k + skip + 1,
+                v[k]
             )));
         }
         Ok(v)

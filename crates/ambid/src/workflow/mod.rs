@@ -30,12 +30,17 @@ use serde_json::{Map, Value};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-/// Classes of failure, each with its own process exit code.
+/// Classes of failure, each with its own process exit code; the one rule of every `ambid`
+/// command (`docs/workflow.md`, "Exit codes"): 0 success, 1 an error of no class below,
+/// 2 usage (the workflow file or a command-line option value), 3 input data, 4 computation,
+/// 5 output. [`exit_code`] finds the class of any command's error.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FailureClass {
-    /// The workflow file is unreadable or wrong (exit 2).
+    /// The workflow file is unreadable or wrong, or a command-line option value (or a
+    /// combination of options) is refused (exit 2, as clap's own usage errors).
     Config,
-    /// A data or controller file is missing or malformed (exit 3).
+    /// A data, controller or model file is missing, unreadable, malformed, holds NaN where a
+    /// number is needed, or is too short (exit 3).
     Input,
     /// A computation failed on the data (exit 4).
     Computation,
@@ -90,18 +95,82 @@ impl From<OutputError> for Failure {
     }
 }
 
-pub(crate) fn input(e: impl Into<anyhow::Error>) -> Failure {
+/// An input-data failure (exit 3): a file that is missing, unreadable or malformed.
+pub fn input(e: impl Into<anyhow::Error>) -> Failure {
     Failure {
         class: FailureClass::Input,
         error: e.into(),
     }
 }
 
-pub(crate) fn computation(e: impl Into<anyhow::Error>) -> Failure {
+/// A computation failure (exit 4).
+pub fn computation(e: impl Into<anyhow::Error>) -> Failure {
     Failure {
         class: FailureClass::Computation,
         error: e.into(),
     }
+}
+
+/// A usage failure (exit 2): a command-line option value or combination that is refused.
+pub fn usage(e: impl Into<anyhow::Error>) -> Failure {
+    Failure {
+        class: FailureClass::Config,
+        error: e.into(),
+    }
+}
+
+/// An output failure (exit 5): a file or directory that cannot be written.
+pub fn output(e: impl Into<anyhow::Error>) -> Failure {
+    Failure {
+        class: FailureClass::Output,
+        error: e.into(),
+    }
+}
+
+/// The process exit code of a command's error: the class of the outermost classified error in
+/// its chain — a [`Failure`], a [`ConfigError`] (2), a data-file error (3), an
+/// [`OutputError`] (5), an invalid argument refused by `ambid_core` (2), a non-finite sample
+/// found by `ambid_core` or `ambid_twin` (3), a twin configuration that does not parse (3), or
+/// another `ambid_core`/`ambid_twin` error (4) — and 1 when nothing in the chain has a class.
+///
+/// ```
+/// use ambid::workflow::{exit_code, usage};
+/// let e: anyhow::Error = usage(anyhow::anyhow!("--order must be at least 1")).into();
+/// assert_eq!(exit_code(&e.context("fit")), 2);
+/// assert_eq!(exit_code(&anyhow::anyhow!("something else")), 1);
+/// ```
+pub fn exit_code(e: &anyhow::Error) -> i32 {
+    for c in e.chain() {
+        if let Some(f) = c.downcast_ref::<Failure>() {
+            return f.class.exit_code();
+        }
+        if c.is::<ConfigError>() {
+            return FailureClass::Config.exit_code();
+        }
+        if c.is::<crate::io::table::DataFileError>() {
+            return FailureClass::Input.exit_code();
+        }
+        if c.is::<OutputError>() {
+            return FailureClass::Output.exit_code();
+        }
+        if let Some(ce) = c.downcast_ref::<ambid_core::Error>() {
+            return match ce {
+                ambid_core::Error::NonFinite { .. } => FailureClass::Input.exit_code(),
+                // an argument (an option's value) the computation refuses; the message names it
+                ambid_core::Error::InvalidArgument { .. } => FailureClass::Config.exit_code(),
+                _ => FailureClass::Computation.exit_code(),
+            };
+        }
+        if let Some(te) = c.downcast_ref::<ambid_twin::TwinError>() {
+            return match te {
+                ambid_twin::TwinError::Toml(_) | ambid_twin::TwinError::NonFinite { .. } => {
+                    FailureClass::Input.exit_code()
+                }
+                _ => FailureClass::Computation.exit_code(),
+            };
+        }
+    }
+    1
 }
 
 /// How much the workflow tells on stderr.
@@ -342,6 +411,24 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
     let mut sections_prelude = Vec::new();
     progress.start("data");
     let prepared = data::prepare(cfg, base)?;
+    // the values that depend on the records are checked before any step runs, too
+    let mut fallback_note = None;
+    if let Some(rec) = prepared.ident.as_ref() {
+        cfg.check_record(Path::new("workflow file"), rec.len())?;
+        if let Some(p) = cfg.data.period_samples {
+            if cfg.frf.method == "auto" && rec.len() / p < 2 {
+                fallback_note = Some(Ctx::note(
+                    NoteKind::Warning,
+                    format!(
+                        "[data] period_samples = {p}, but the estimation record has {} samples, fewer than 2 periods: \
+                         the FRF uses Welch averaging instead of period averaging (frf.method = \"auto\"). \
+                         Correct period_samples, or set frf.method = \"welch\" to silence this warning.",
+                        rec.len()
+                    ),
+                ));
+            }
+        }
+    }
     let mut ctx = Ctx {
         cfg,
         base: base.to_path_buf(),
@@ -359,7 +446,9 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
         chosen: None,
         validation: None,
     };
-    sections_prelude.push(data::describe(&mut ctx));
+    let mut data_section = data::describe(&mut ctx);
+    data_section.blocks.extend(fallback_note);
+    sections_prelude.push(data_section);
     let dt = t0.elapsed().as_secs_f64();
     progress.finish("data", dt, "done");
     timings.push(StepTime {

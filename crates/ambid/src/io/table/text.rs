@@ -28,79 +28,144 @@ enum Delim {
 /// How many lines the delimiter detection looks at.
 const SNIFF_LINES: usize = 20;
 
+/// The longest line the reader accepts (a text data file has lines of a few hundred bytes; a
+/// file without line breaks, such as `/dev/zero` or a binary file, is refused at this length
+/// instead of being read whole).
+pub const MAX_LINE_BYTES: usize = 1 << 20;
+
 pub(super) fn read(path: &Path, opts: &ReadOptions) -> Result<Table, DataFileError> {
-    let bytes = std::fs::read(path).map_err(|e| DataFileError::open(path, &e))?;
-    parse(path, &bytes, opts)
+    let file = std::fs::File::open(path).map_err(|e| DataFileError::open(path, &e))?;
+    parse(path, std::io::BufReader::new(file), opts)
 }
 
-/// Parses text `bytes` read from `path` (kept separate from I/O for tests).
-fn parse<'a>(path: &Path, bytes: &'a [u8], opts: &ReadOptions) -> Result<Table, DataFileError> {
-    let text = match std::str::from_utf8(bytes) {
-        Ok(t) => t,
-        Err(e) => {
-            let line = 1 + bytes
-                .get(..e.valid_up_to())
-                .map_or(0, |b| b.iter().filter(|&&c| c == b'\n').count());
-            return Err(DataFileError::invalid(
-                path,
-                format!(
-                    "line {line} is not UTF-8 text; if this is a binary file give its format (npy, npz, mat, parquet) or fix the file's extension"
-                ),
-            ));
+/// Content lines of a text file, read one at a time: (1-based line number, line without the
+/// line ending); blank and comment lines are skipped.
+struct Lines<'p, R> {
+    path: &'p Path,
+    rdr: R,
+    no: usize,
+    buf: Vec<u8>,
+    /// Whether any non-blank line (also a comment) was seen.
+    any_text: bool,
+}
+
+impl<R: std::io::BufRead> Lines<'_, R> {
+    fn next_line(&mut self) -> Result<Option<(usize, String)>, DataFileError> {
+        use std::io::{BufRead, Read};
+        loop {
+            self.buf.clear();
+            let n = (&mut self.rdr)
+                .take(MAX_LINE_BYTES as u64 + 1)
+                .read_until(b'\n', &mut self.buf)
+                .map_err(|e| DataFileError::open(self.path, &e))?;
+            if n == 0 {
+                return Ok(None);
+            }
+            self.no += 1;
+            if self.buf.len() > MAX_LINE_BYTES && self.buf.last() != Some(&b'\n') {
+                return Err(DataFileError::invalid(
+                    self.path,
+                    format!(
+                        "line {} is longer than {} MiB; this is not a text data file (if it is a binary file, give its format: npy, npz, mat, parquet)",
+                        self.no,
+                        MAX_LINE_BYTES >> 20
+                    ),
+                ));
+            }
+            let raw = self.buf.strip_suffix(b"\n").unwrap_or(&self.buf);
+            let raw = raw.strip_suffix(b"\r").unwrap_or(raw);
+            let text = std::str::from_utf8(raw).map_err(|_| {
+                DataFileError::invalid(
+                    self.path,
+                    format!(
+                        "line {} is not UTF-8 text; if this is a binary file give its format (npy, npz, mat, parquet) or fix the file's extension",
+                        self.no
+                    ),
+                )
+            })?;
+            let text = if self.no == 1 {
+                text.strip_prefix('\u{feff}').unwrap_or(text)
+            } else {
+                text
+            };
+            let t = text.trim();
+            if !t.is_empty() {
+                self.any_text = true;
+            }
+            if t.is_empty() || t.starts_with('#') || t.starts_with('%') {
+                continue;
+            }
+            return Ok(Some((self.no, text.to_string())));
         }
+    }
+}
+
+/// Parses the text read from `rdr` (the file `path`, named in messages), one line at a time.
+fn parse<R: std::io::BufRead>(
+    path: &Path,
+    rdr: R,
+    opts: &ReadOptions,
+) -> Result<Table, DataFileError> {
+    let mut src = Lines {
+        path,
+        rdr,
+        no: 0,
+        buf: Vec::new(),
+        any_text: false,
     };
-    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-    // (1-based line number, line without the line ending) of every content line.
-    let lines: Vec<(usize, &str)> = text
-        .lines()
-        .enumerate()
-        .map(|(i, l)| (i + 1, l.strip_suffix('\r').unwrap_or(l)))
-        .filter(|(_, l)| {
-            let t = l.trim();
-            !(t.is_empty() || t.starts_with('#') || t.starts_with('%'))
-        })
-        .collect();
-    let Some(&(first_no, first_line)) = lines.first() else {
+    // the first lines decide the delimiter and the header; the rest is read as it comes
+    let mut head: Vec<(usize, String)> = Vec::new();
+    while head.len() < SNIFF_LINES {
+        match src.next_line()? {
+            Some(l) => head.push(l),
+            None => break,
+        }
+    }
+    let Some((first_no, first_line)) = head.first().cloned() else {
         return Err(DataFileError::no_data(
             path,
-            if text.trim().is_empty() {
-                "the file is empty; check that this is the right file".to_string()
-            } else {
+            if src.any_text {
                 "the file has only comment and blank lines, no data; check that this is the right file"
                     .to_string()
+            } else {
+                "the file is empty; check that this is the right file".to_string()
             },
         ));
     };
+    let lines: Vec<(usize, &str)> = head.iter().map(|(n, l)| (*n, l.as_str())).collect();
 
     let delim = match opts.delimiter {
         Some(' ') => Delim::Whitespace,
         Some(c) => Delim::Char(c),
         None => detect_delimiter(&lines),
     };
-    let split_at = |no: usize, line: &'a str| split_line(path, no, line, delim);
+    let split_at = |no: usize, line: &str| -> Result<Vec<String>, DataFileError> {
+        Ok(split_line(path, no, line, delim)?
+            .into_iter()
+            .map(Cow::into_owned)
+            .collect())
+    };
 
-    let first = split_at(first_no, first_line)?;
+    let first = split_at(first_no, &first_line)?;
     let has_header = match opts.header {
         Some(h) => h,
         None => first
             .iter()
             .any(|c| !c.is_empty() && parse_number(c).is_none()),
     };
-    let (mut names, data_lines, reference) = if has_header {
+    let (mut names, skip_head, reference) = if has_header {
         let names: Vec<String> = first.iter().map(|c| c.to_string()).collect();
-        (
-            Some(names),
-            lines.get(1..).unwrap_or(&[]),
-            "the header".to_string(),
-        )
+        if let Some(m) = duplicate_names(&names) {
+            return Err(DataFileError::invalid(
+                path,
+                format!("line {first_no}: {m}"),
+            ));
+        }
+        (Some(names), 1, "the header".to_string())
     } else {
-        (
-            None,
-            &lines[..],
-            format!("line {first_no} (the first data line)"),
-        )
+        (None, 0, format!("line {first_no} (the first data line)"))
     };
-    let Some(&(ref_no, ref_line)) = data_lines.first() else {
+    let Some((ref_no, ref_line)) = head.get(skip_head).cloned() else {
         return Err(DataFileError::no_data(
             path,
             format!("there are no data rows after the header on line {first_no}; check that this is the right file"),
@@ -108,7 +173,7 @@ fn parse<'a>(path: &Path, bytes: &'a [u8], opts: &ReadOptions) -> Result<Table, 
     };
     let width = match &names {
         Some(n) => n.len(),
-        None => split_at(ref_no, ref_line)?.len(),
+        None => split_at(ref_no, &ref_line)?.len(),
     };
     let column_name = |names: &Option<Vec<String>>, j: usize| -> String {
         names
@@ -119,11 +184,19 @@ fn parse<'a>(path: &Path, bytes: &'a [u8], opts: &ReadOptions) -> Result<Table, 
             .unwrap_or_else(|| format!("col{}", j + 1))
     };
 
-    let mut columns: Vec<Vec<f64>> = vec![Vec::with_capacity(data_lines.len()); width];
+    let mut columns: Vec<Vec<f64>> = vec![Vec::new(); width];
     // Whether every cell of a column is empty so far.
     let mut all_empty = vec![true; width];
-    for &(no, line) in data_lines {
-        let mut cells = split_at(no, line)?;
+    let mut head_rest = head.into_iter().skip(skip_head);
+    loop {
+        let (no, line) = match head_rest.next() {
+            Some(l) => l,
+            None => match src.next_line()? {
+                Some(l) => l,
+                None => break,
+            },
+        };
+        let mut cells = split_line(path, no, &line, delim)?;
         // Tolerate one extra trailing empty field (a trailing delimiter).
         if cells.len() == width + 1 && cells.last().is_some_and(|c| c.is_empty()) {
             cells.pop();
@@ -192,7 +265,25 @@ fn split_line<'a>(
     split(line, delim).map_err(|m| DataFileError::invalid(path, format!("line {no}: {m}")))
 }
 
-/// Makes duplicate names unique by appending `_2`, `_3`, ….
+/// A header that names a column twice: which name, at which positions, and what to do.
+fn duplicate_names(names: &[String]) -> Option<String> {
+    for (j, n) in names.iter().enumerate() {
+        if n.is_empty() {
+            continue;
+        }
+        if let Some(k) = names[j + 1..].iter().position(|m| m == n) {
+            return Some(format!(
+                "the header names column `{n}` twice (columns {} and {}), so `{n}` would be ambiguous; rename one of them",
+                j + 1,
+                j + k + 2
+            ));
+        }
+    }
+    None
+}
+
+/// Makes duplicate names unique by appending `_2`, `_3`, … (a generated `colK` may meet a
+/// header name `colK`).
 fn unique_names(names: Vec<String>) -> Vec<String> {
     let mut out: Vec<String> = Vec::with_capacity(names.len());
     for n in names {
@@ -392,7 +483,7 @@ mod tests {
             delimiter: Some('|'),
             ..ReadOptions::default()
         };
-        let t = parse(Path::new("p.txt"), b"a|b\n1|2\n", &opts).unwrap();
+        let t = parse(Path::new("p.txt"), &b"a|b\n1|2\n"[..], &opts).unwrap();
         assert_eq!(t.names, ["a", "b"]);
     }
 
@@ -418,11 +509,18 @@ mod tests {
             header: Some(true),
             ..ReadOptions::default()
         };
-        let t = parse(Path::new("h.csv"), b"1,2\n3,4\n", &opts).unwrap();
+        let t = parse(Path::new("h.csv"), &b"1,2\n3,4\n"[..], &opts).unwrap();
         assert_eq!(t.names, ["1", "2"]);
         assert_eq!(t.len(), 1);
-        let t = read_str("x,x,,y\n1,2,3,4\n").unwrap();
-        assert_eq!(t.names, ["x", "x_2", "col3", "y"]);
+        // a header naming a column twice is refused (it used to be renamed `x_2`, and a lookup
+        // of `x` silently took the first); an unnamed column is `colK`
+        let e = read_str("x,x,,y\n1,2,3,4\n").unwrap_err().to_string();
+        assert!(
+            e.contains("line 1: the header names column `x` twice (columns 1 and 2)"),
+            "{e}"
+        );
+        let t = read_str("x,w,,y\n1,2,3,4\n").unwrap();
+        assert_eq!(t.names, ["x", "w", "col3", "y"]);
         let t = read_str("1.0D-03,2d0\n").unwrap();
         assert_eq!(t.columns, vec![vec![1e-3], vec![2.0]]);
     }
@@ -467,7 +565,7 @@ mod tests {
         assert!(e.contains("line 1") && e.contains("not closed"), "{e}");
         let e = parse(
             Path::new("b.csv"),
-            b"a,b\n1,2\n\xff\xfe,3\n",
+            &b"a,b\n1,2\n\xff\xfe,3\n"[..],
             &ReadOptions::default(),
         )
         .unwrap_err()
