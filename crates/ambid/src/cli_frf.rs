@@ -333,7 +333,8 @@ pub fn frf(a: FrfArgs) -> Result<()> {
         None => None,
     };
     let rec = Record { r, u, y, i, fs };
-    let res = analyze(&rec, &settings, noise.as_deref())?;
+    let res = analyze(&rec, &settings, noise.as_deref())
+        .with_context(|| format!("{}", a.data.display()))?;
     for w in &res.warnings {
         eprintln!("warning: {w}");
     }
@@ -733,7 +734,7 @@ fn amplitude(a: AmplitudeArgs) -> Result<()> {
                 r: d.column("r")?.to_vec(),
                 u: d.column("u")?.to_vec(),
                 y: d.column("y")?.to_vec(),
-                i: d.column("i").ok().map(|v| v.to_vec()),
+                i: d.optional_column("i")?.map(<[f64]>::to_vec),
                 saturated_fraction: None,
             });
         }

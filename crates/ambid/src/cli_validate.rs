@@ -68,11 +68,10 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
     let y = d.column(&a.output)?;
     let u = d.column(&a.current)?;
     let r = d
-        .column(&a.excitation)
-        .ok()
+        .optional_column(&a.excitation)?
         .filter(|r| r.iter().any(|v| *v != 0.0));
     let zeros = vec![0.0; y.len()];
-    let w = d.column("w").unwrap_or(&zeros);
+    let w = d.optional_column("w")?.unwrap_or(&zeros);
     if r.is_none() && w.iter().all(|v| *v == 0.0) {
         return Err(ambid::workflow::input(anyhow::anyhow!("the record has neither an excitation column `{}` nor a reference `w`: nothing drives the loop", a.excitation)).into());
     }

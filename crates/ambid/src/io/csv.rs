@@ -50,6 +50,16 @@ impl TimeData {
         Ok(x)
     }
 
+    /// The column called `name` if the file has one, with every sample finite (as
+    /// [`TimeData::column`]: a NaN is an error, not a reason to drop the column).
+    pub fn optional_column(&self, name: &str) -> Result<Option<&[f64]>> {
+        if self.names.iter().any(|n| n == name) {
+            self.column(name).map(Some)
+        } else {
+            Ok(None)
+        }
+    }
+
     /// The column called `name` as read, missing samples as NaN (for the screening of
     /// `ambid frf`), or an error listing the available columns.
     pub fn column_raw(&self, name: &str) -> Result<&[f64]> {
@@ -58,15 +68,12 @@ impl TimeData {
             .position(|n| n == name)
             .map(|k| self.columns[k].as_slice())
             .ok_or_else(|| {
-                anyhow!(DataFileError::MissingColumn {
+                anyhow!(DataFileError::Invalid {
                     path: self.path.clone(),
-                    wanted: name.to_string(),
-                    available: self
-                        .names
-                        .iter()
-                        .map(|n| format!("`{n}`"))
-                        .collect::<Vec<_>>()
-                        .join(", "),
+                    message: format!(
+                        "unknown column `{name}`; the file has columns: {}",
+                        self.names.join(", ")
+                    ),
                 })
             })
     }
@@ -268,7 +275,7 @@ mod tests {
         assert_eq!(d.column("y").unwrap(), y.as_slice());
         assert!((d.ts - 5e-5).abs() < 1e-18);
         let e = d.column("x").unwrap_err().to_string();
-        assert!(e.contains("no column `x`") && e.contains("`y`"), "{e}");
+        assert!(e.contains("unknown column `x`") && e.contains("y"), "{e}");
     }
 
     #[test]
@@ -276,7 +283,10 @@ mod tests {
         let p = tmp("bad.csv");
         std::fs::write(&p, "t,y\n0,1\n0.1,abc\n").unwrap();
         let e = read_time_csv(&p, None).unwrap_err().to_string();
-        assert!(e.contains("not a number"), "{e}");
+        assert!(
+            e.contains("line 3, column `y`: cannot read `abc` as a number"),
+            "{e}"
+        );
         std::fs::write(&p, "y\n1\n2\n").unwrap();
         let e = read_time_csv(&p, None).unwrap_err().to_string();
         assert!(e.contains("--fs"), "{e}");

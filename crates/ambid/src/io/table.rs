@@ -252,7 +252,8 @@ impl Table {
         if let Some(fs) = fs_hz {
             if !(fs.is_finite() && fs > 0.0) {
                 return Err(err(format!(
-                    "the sampling frequency fs = {fs:e} Hz is not a positive number; give fs in Hz, e.g. fs = 1000"
+                    "the sampling frequency fs = {} Hz is not a positive number; give fs in Hz, e.g. fs = 1000",
+                    num(fs)
                 )));
             }
         }
@@ -265,7 +266,8 @@ impl Table {
                 let ts_fs = 1.0 / fs;
                 if ((ts - ts_fs) / ts_fs).abs() > 1e-4 {
                     return Err(err(format!(
-                        "the time column gives Ts = {ts:e} s but fs = {fs:e} Hz gives Ts = {ts_fs:e} s; give only one of them, or correct fs"
+                        "the time column gives Ts = {ts:e} s but fs = {} Hz gives Ts = {ts_fs:e} s; give only one of them, or correct fs",
+                        num(fs)
                     )));
                 }
                 Ok(ts)
@@ -278,6 +280,8 @@ impl Table {
         }
     }
 }
+
+use crate::workflow::config::fmt_num as num;
 
 /// Sample time of a time column: strictly increasing and uniform to 1e-3·Ts.
 fn uniform_step(t: &[f64], c: &ColumnRef) -> Result<f64, String> {
@@ -299,10 +303,10 @@ fn uniform_step(t: &[f64], c: &ColumnRef) -> Result<f64, String> {
     }
     if let Some(k) = t.windows(2).position(|w| w[1] <= w[0]) {
         return Err(format!(
-            "the time column `{c}` is not strictly increasing: row {} has t = {:e} after t = {:e} in row {}; sort the data or give fs instead",
+            "the time column `{c}` is not strictly increasing: row {} has t = {} after t = {} in row {}; sort the data or give fs instead",
             k + 2,
-            t[k + 1],
-            t[k],
+            num(t[k + 1]),
+            num(t[k]),
             k + 1
         ));
     }
@@ -317,9 +321,9 @@ fn uniform_step(t: &[f64], c: &ColumnRef) -> Result<f64, String> {
     }
     if worst.1 > tol {
         return Err(format!(
-            "the time column `{c}` is not uniformly sampled: row {} has t = {:e}, {:.3e} s ({:.2e}·Ts) off the uniform grid with Ts = {ts:e} s (allowed 1e-3·Ts); resample the data to a uniform grid or give fs if the time stamps are only rounded",
+            "the time column `{c}` is not uniformly sampled: row {} has t = {}, {:.3e} s ({:.2e}·Ts) off the uniform grid with Ts = {ts:e} s (allowed 1e-3·Ts); resample the data to a uniform grid or give fs if the time stamps are only rounded",
             worst.0 + 1,
-            t[worst.0],
+            num(t[worst.0]),
             worst.1,
             worst.1 / ts
         ));
