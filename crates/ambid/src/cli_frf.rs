@@ -295,6 +295,14 @@ pub fn frf(a: FrfArgs) -> Result<()> {
     if matches!(a.method, MethodArg::Lpm | MethodArg::Lrm) {
         return frf_local(&a, r, u, y, fs);
     }
+    if let Some(k) = a.nperseg.filter(|&k| k > r.len()) {
+        return Err(ambid::workflow::usage(anyhow::anyhow!(
+            "--nperseg {k} is longer than the record ({} samples); give at most {}, or leave it out to derive it from the record length",
+            r.len(),
+            r.len()
+        ))
+        .into());
+    }
     let method = match a.period_samples {
         Some(p) => FrfMethod::Periodic {
             period_samples: p,

@@ -75,16 +75,17 @@ impl ExcitationPlan {
     /// excitation.
     pub fn spec(&self, i_sat: f64, ts: f64) -> Result<Option<ExcitationSpec>> {
         if !(self.amplitude_frac.is_finite() && self.amplitude_frac >= 0.0) {
-            bail!(
+            return Err(crate::workflow::usage(anyhow::anyhow!(
                 "excitation amplitude must be a finite, non-negative fraction of i_sat, got {}",
                 self.amplitude_frac
-            );
+            ))
+            .into());
         }
         if self.amplitude_frac > 1.0 {
-            bail!(
+            return Err(crate::workflow::usage(anyhow::anyhow!(
                 "excitation amplitude {} exceeds i_sat (1.0 = 100 %); the amplifier would saturate permanently",
                 self.amplitude_frac
-            );
+            )).into());
         }
         let amp = self.amplitude_frac * i_sat;
         let period_samples = (self.period_s / ts).round() as usize;

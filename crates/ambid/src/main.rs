@@ -367,7 +367,10 @@ fn main() {
     }));
     let cli = Cli::parse();
     if let Err(e) = dispatch(cli) {
-        eprintln!("error: {e:#}");
+        eprintln!(
+            "error: {}",
+            ambid::workflow::compact_numbers(&format!("{e:#}"))
+        );
         // one rule for every command (docs/workflow.md, "Exit codes")
         let code = ambid::workflow::exit_code(&e);
         std::process::exit(code);

@@ -365,6 +365,29 @@ fn short_records_and_option_values_name_what_the_user_can_set() {
     assert!(e.len() < 400, "a {} byte message: {e}", e.len());
     let o = ambid(d.path(), &["excite", "prbs", "--fs", "0"], 10);
     expect(&o, 2, &["--fs must be a positive sample rate"]);
+    // a library message that prints a huge value with `{}` is compacted too (it was 301 digits)
+    let o = ambid(d.path(), &["excite", "chirp", "--f0", "1e300"], 10);
+    let e = expect(&o, 2, &["f0_hz", "1.000000e300"]);
+    assert!(e.len() < 300, "a {} byte message: {e}", e.len());
+    let o = ambid(
+        d.path(),
+        &["simulate", "--amplitude", "1e300", "--out", "sim"],
+        10,
+    );
+    let e = expect(&o, 2, &["excitation amplitude 1.000000e300 exceeds i_sat"]);
+    assert!(e.len() < 300, "a {} byte message: {e}", e.len());
+    assert!(!d.path().join("sim").exists());
+    // a Welch segment longer than the record is refused before anything is allocated for it
+    let o = ambid(
+        d.path(),
+        &["frf", "rec.csv", "--nperseg", "100000000000000"],
+        10,
+    );
+    expect(
+        &o,
+        2,
+        &["--nperseg 100000000000000 is longer than the record (2000 samples)"],
+    );
 }
 
 #[test]

@@ -227,6 +227,11 @@ impl ControllerModel {
     /// assert!(msg.contains("ts = 1e-4 s") && msg.contains("5e-5 s (fs 20 kHz)"), "{msg}");
     /// ```
     pub fn check_ts(&self, data_ts: f64) -> Result<()> {
+        self.check_ts_inner(data_ts)
+            .map_err(|e| crate::workflow::input(e).into())
+    }
+
+    fn check_ts_inner(&self, data_ts: f64) -> Result<()> {
         if !(data_ts.is_finite() && data_ts > 0.0) {
             bail!("the data's sample time must be positive and finite, got {data_ts}");
         }

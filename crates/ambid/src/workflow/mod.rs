@@ -173,6 +173,59 @@ pub fn exit_code(e: &anyhow::Error) -> i32 {
     1
 }
 
+/// A message with every over-long decimal number (more than [`MAX_MESSAGE_DIGITS`] digits,
+/// e.g. a user's `1e300` printed by `{}` as 301 digits) rewritten compactly as `1.000000e300`;
+/// everything else is kept. `main` prints every error through it, so no message of any command
+/// grows with the size of a number in the input.
+///
+/// ```
+/// use ambid::workflow::compact_numbers;
+/// let huge = format!("got {} Hz at row 12", 1e300);
+/// assert_eq!(compact_numbers(&huge), "got 1.000000e300 Hz at row 12");
+/// assert_eq!(compact_numbers("fs = 20000.5 Hz, t = -0.000050"), "fs = 20000.5 Hz, t = -0.000050");
+/// ```
+pub fn compact_numbers(s: &str) -> String {
+    let b = s.as_bytes();
+    let mut out = String::with_capacity(s.len());
+    let mut i = 0;
+    let mut copied = 0;
+    while i < b.len() {
+        // a number starts at a digit not preceded by a letter, digit, `_` or `.`
+        let starts = b[i].is_ascii_digit()
+            && (i == 0
+                || !(b[i - 1].is_ascii_alphanumeric() || b[i - 1] == b'_' || b[i - 1] == b'.'));
+        if !starts {
+            i += 1;
+            continue;
+        }
+        let mut j = i;
+        while j < b.len() && b[j].is_ascii_digit() {
+            j += 1;
+        }
+        if j + 1 < b.len() && b[j] == b'.' && b[j + 1].is_ascii_digit() {
+            j += 1;
+            while j < b.len() && b[j].is_ascii_digit() {
+                j += 1;
+            }
+        }
+        let digits = b[i..j].iter().filter(|c| c.is_ascii_digit()).count();
+        if digits > MAX_MESSAGE_DIGITS {
+            if let Ok(v) = s[i..j].parse::<f64>() {
+                out.push_str(&s[copied..i]);
+                out.push_str(&format!("{v:.6e}"));
+                copied = j;
+            }
+        }
+        i = j;
+    }
+    out.push_str(&s[copied..]);
+    out
+}
+
+/// The most digits a number in a message keeps as written (see [`compact_numbers`]); 24 keeps
+/// every `f64` printed with its 17 significant digits and a few leading zeros.
+pub const MAX_MESSAGE_DIGITS: usize = 24;
+
 /// How much the workflow tells on stderr.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Verbosity {
