@@ -70,10 +70,17 @@ impl TimeData {
             .ok_or_else(|| {
                 anyhow!(DataFileError::Invalid {
                     path: self.path.clone(),
-                    message: format!(
-                        "unknown column `{name}`; the file has columns: {}",
-                        self.names.join(", ")
-                    ),
+                    message: if self.names.iter().enumerate().all(|(j, n)| *n == format!("col{}", j + 1)) {
+                        format!(
+                            "unknown column `{name}`; the file has no header row, so its columns are {}: add a header row naming them (e.g. `t,r,u,y`), or select these names",
+                            self.names.join(", ")
+                        )
+                    } else {
+                        format!(
+                            "unknown column `{name}`; the file has columns: {}",
+                            self.names.join(", ")
+                        )
+                    },
                 })
             })
     }
@@ -183,7 +190,8 @@ fn write_frf_inner(
 
 /// Reads a time-data CSV (any delimited text file in the one text dialect of
 /// [`crate::io::table`], see `docs/data-files.md`: `#`/`%` comment lines, detected delimiter,
-/// quoted cells). The first line must be a header naming every column, each name once. The
+/// quoted cells, a header row detected; without one the columns are `col1`, `col2`, …). A
+/// header names every column once. The
 /// sample time comes from the `t` column when present (it must be strictly increasing and
 /// uniform), otherwise from `fs_hz`. `NaN`, `inf` and empty fields in a signal column are read as
 /// missing samples (NaN): [`TimeData::column`] refuses them with the file, row and column,
@@ -241,13 +249,13 @@ pub fn read_time_csv(path: &Path, fs_hz: Option<f64>) -> Result<TimeData> {
     })
 }
 
-/// A text file read in the one dialect, with a header row.
+/// A text file read in the one dialect (header detected: without one the columns are `col1`,
+/// `col2`, …).
 fn read_text(path: &Path) -> Result<crate::io::table::Table> {
     let table = read_table(
         path,
         &ReadOptions {
             format: Some(Format::Text),
-            header: Some(true),
             ..ReadOptions::default()
         },
     )?;
