@@ -70,6 +70,12 @@ pub fn run(a: RunArgs) -> Result<()> {
             v.push(step);
         }
         cfg.steps = Some(v);
+        // the file's values are checked again against the steps that will run
+        let path = a
+            .workflow
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("--steps"));
+        cfg.check(&path).map_err(Failure::from)?;
     }
     // refuse to overwrite before spending any time
     OutputDir::check(&a.out, a.force).map_err(Failure::from)?;

@@ -187,6 +187,27 @@ fn workflow_values_are_refused_before_any_step() {
     let o = ambid(d.path(), &["run", "wf.toml", "--out", "out", "--quiet"], 10);
     expect(&o, 2, &["amplitude_study.levels_pct = []"]);
     assert!(!d.path().join("out").exists());
+    // … also when `--steps` asks for the step the file did not list
+    std::fs::write(
+        d.path().join("wf.toml"),
+        "steps = [\"excitation\"]\n[amplitude_study]\nlevels_pct = []\n",
+    )
+    .unwrap();
+    let o = ambid(
+        d.path(),
+        &[
+            "run",
+            "wf.toml",
+            "--steps",
+            "amplitude",
+            "--out",
+            "out",
+            "--quiet",
+        ],
+        10,
+    );
+    expect(&o, 2, &["amplitude_study.levels_pct = []"]);
+    assert!(!d.path().join("out").exists());
 }
 
 #[test]
@@ -327,6 +348,15 @@ fn one_text_dialect_for_every_reader() {
     assert!(!e.contains("got []"), "{e}");
     let o = ambid(d.path(), &["frf", "empty.csv", "--fs", "1000"], 10);
     expect(&o, 3, &["empty.csv", "the file is empty"]);
+    // a file without line breaks (a binary file, `/dev/zero`) is refused at the first
+    // over-long line, not read whole
+    std::fs::write(d.path().join("noline.csv"), vec![b'0'; (1 << 20) + 10]).unwrap();
+    let o = ambid(d.path(), &["frf", "noline.csv", "--fs", "1000"], 10);
+    expect(&o, 3, &["noline.csv", "line 1 is longer than 1 MiB"]);
+    if Path::new("/dev/zero").exists() {
+        let o = ambid(d.path(), &["frf", "/dev/zero", "--fs", "1000"], 10);
+        expect(&o, 3, &["/dev/zero", "line 1 is longer than 1 MiB"]);
+    }
 }
 
 #[test]
@@ -345,6 +375,15 @@ fn short_records_and_option_values_name_what_the_user_can_set() {
         "{e}"
     );
     assert!(!d.path().join("frf.csv").exists());
+    // the workflow says the same before any step runs (with a validation file, no split)
+    std::fs::write(
+        d.path().join("wf.toml"),
+        "source = \"files\"\nsteps = [\"frf\"]\n[data]\nidentification = \"short.csv\"\nvalidation = \"short.csv\"\n",
+    )
+    .unwrap();
+    let o = ambid(d.path(), &["run", "wf.toml", "--out", "out", "--quiet"], 10);
+    expect(&o, 3, &["short.csv", "10 samples are too few for an FRF"]);
+    assert!(!d.path().join("out").exists());
     // no Rust-isms: an order of 0 names the option to leave out
     write_csv(
         &d.path().join("rec.csv"),

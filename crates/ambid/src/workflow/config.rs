@@ -635,7 +635,13 @@ impl WorkflowConfig {
         Self::from_toml_str(&text, path)
     }
 
-    fn check(&self, path: &Path) -> Result<(), ConfigError> {
+    /// Checks every value of the file on its own (the values that need the records:
+    /// [`WorkflowConfig::check_record`]); [`WorkflowConfig::from_toml_str`] calls it, and
+    /// `ambid run` again after `--steps` replaced the file's steps.
+    ///
+    /// # Errors
+    /// [`ConfigError::Invalid`] naming the key and what to write instead.
+    pub fn check(&self, path: &Path) -> Result<(), ConfigError> {
         let bad = |message: String| ConfigError::Invalid {
             path: path.to_path_buf(),
             message,
@@ -917,7 +923,8 @@ impl WorkflowConfig {
 
     /// Checks against the records once they are read, before any step runs: an explicitly
     /// periodic FRF needs at least two periods of `[data] period_samples` in the estimation
-    /// record, `frf.nperseg` must fit in it, and every model order must leave at least
+    /// record, `frf.nperseg` must fit in it, and (when the models step runs) every model order
+    /// must leave at least
     /// [`SAMPLES_PER_PARAMETER`] samples per parameter. `n` is the estimation record's length.
     ///
     /// # Errors
@@ -943,11 +950,12 @@ impl WorkflowConfig {
             }
         }
         let cap = n / SAMPLES_PER_PARAMETER;
+        let fits = self.steps().contains(&Step::Models);
         if let Some(&o) = self
             .models
             .orders
             .iter()
-            .find(|&&o| parameters_of_order(o) > cap)
+            .find(|&&o| fits && parameters_of_order(o) > cap)
         {
             return Err(bad(format!(
                 "models.orders has {o}: a model of order {o} has about {} parameters, but the estimation record ({n} samples) supports at most {cap} ({SAMPLES_PER_PARAMETER} samples per parameter); give smaller orders or a longer record",

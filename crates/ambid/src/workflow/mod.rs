@@ -467,6 +467,14 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
     // the values that depend on the records are checked before any step runs, too
     let mut fallback_note = None;
     if let Some(rec) = prepared.ident.as_ref() {
+        if steps.contains(&Step::Frf) && rec.len() < crate::analysis::MIN_FRF_SAMPLES {
+            return Err(input(anyhow::anyhow!(
+                "{}: {} samples are too few for an FRF: at least {} are needed (the shortest Welch segment the defaults use); give a longer record",
+                rec.source,
+                rec.len(),
+                crate::analysis::MIN_FRF_SAMPLES
+            )));
+        }
         cfg.check_record(Path::new("workflow file"), rec.len())?;
         if let Some(p) = cfg.data.period_samples {
             if cfg.frf.method == "auto" && rec.len() / p < 2 {
