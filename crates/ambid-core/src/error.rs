@@ -30,7 +30,7 @@ pub enum Error {
         got: String,
     },
     /// A NaN or infinite value was found where finite data are required.
-    #[error("non-finite value (NaN or ±inf) in `{what}` at sample {} (1-based); repair the sample or cut the record there (`ambid frf` screens and repairs missing samples)", .index + 1)]
+    #[error("non-finite value (NaN or ±inf) in `{what}` at sample {} (1-based); repair the sample or cut the record there", .index + 1)]
     NonFinite {
         /// Which input holds the value.
         what: &'static str,

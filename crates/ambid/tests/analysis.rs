@@ -78,5 +78,7 @@ fn bad_inputs_are_named() {
     let mut rn = r.clone();
     rn[10] = f64::NAN;
     let m = msg(&Record { r: &rn, ..rec }, &ok);
-    assert!(m.contains("non-finite") && m.contains("10"), "{m}");
+    // named as the 1-based sample number (index 10 is sample 11; issue 17: 0-based indices
+    // in messages were misleading)
+    assert!(m.contains("non-finite") && m.contains("sample 11"), "{m}");
 }

@@ -265,6 +265,9 @@ fn a_nan_or_an_overflowing_value_is_named_by_file_row_and_column() {
         assert!(e.len() < 600, "{what}: a {} byte message", e.len());
         assert!(!d.path().join("model.json").exists());
     }
+    // `ambid frf` keeps the missing sample for its screening, repairs it and names it 1-based
+    let o = ambid(d.path(), &["frf", "nan.csv", "--out", "f.csv"], 20);
+    expect(&o, 0, &["1 non-finite (at sample 500)"]);
     // the workflow reader says the same
     let d = tmp();
     workflow(d.path(), 2000, "", "");

@@ -209,7 +209,8 @@ pub struct AbnormalReport {
 
 fn list(ix: &[usize]) -> String {
     const SHOWN: usize = 5;
-    let mut s: Vec<String> = ix.iter().take(SHOWN).map(usize::to_string).collect();
+    // 1-based sample numbers, as a user counts the rows of a record
+    let mut s: Vec<String> = ix.iter().take(SHOWN).map(|i| (i + 1).to_string()).collect();
     if ix.len() > SHOWN {
         s.push("…".into());
     }
@@ -229,14 +230,15 @@ impl AbnormalReport {
         self.nonfinite.is_empty() && self.spikes.is_empty() && self.stuck_runs.is_empty()
     }
 
-    /// What was found and changed, in one line (the first indices of each kind are listed).
+    /// What was found and changed, in one line (the first samples of each kind are listed, as
+    /// 1-based sample numbers: index `i` of the slice is sample `i + 1`).
     ///
     /// # Example
     /// ```
     /// use ambid_core::data::{repair_abnormal, AbnormalOptions};
     /// let (_, rep) = repair_abnormal(&[0.0, 1.0, f64::NAN, 3.0], &AbnormalOptions { hampel: None,
     ///     ..AbnormalOptions::default() }).unwrap();
-    /// assert_eq!(rep.summary(), "4 samples: 1 non-finite (at 2); 1 sample repaired by linear interpolation");
+    /// assert_eq!(rep.summary(), "4 samples: 1 non-finite (at sample 3); 1 sample repaired by linear interpolation");
     /// ```
     pub fn summary(&self) -> String {
         let plural =
@@ -247,15 +249,17 @@ impl AbnormalReport {
         let mut parts = Vec::new();
         if !self.nonfinite.is_empty() {
             parts.push(format!(
-                "{} non-finite (at {})",
+                "{} non-finite (at sample{} {})",
                 self.nonfinite.len(),
+                if self.nonfinite.len() == 1 { "" } else { "s" },
                 list(&self.nonfinite)
             ));
         }
         if !self.spikes.is_empty() {
             parts.push(format!(
-                "{} (at {})",
+                "{} (at sample{} {})",
                 plural(self.spikes.len(), "spike", "spikes"),
+                if self.spikes.len() == 1 { "" } else { "s" },
                 list(&self.spikes)
             ));
         }
@@ -264,7 +268,7 @@ impl AbnormalReport {
                 .stuck_runs
                 .iter()
                 .take(3)
-                .map(|(s, l)| format!("{l} samples from {s}"))
+                .map(|(s, l)| format!("{l} samples from sample {}", s + 1))
                 .collect();
             let more = if self.stuck_runs.len() > 3 {
                 ", …"
@@ -285,7 +289,7 @@ impl AbnormalReport {
             );
         }
         if !self.stuck_runs.is_empty() {
-            s += "; stuck runs are not repaired: check the sensor and cut them out (IoData::slice)";
+            s += "; stuck runs are not repaired: check the sensor and cut them out of the record";
         }
         s
     }
@@ -617,8 +621,8 @@ pub fn repair_abnormal(x: &[f64], opts: &AbnormalOptions) -> Result<(Vec<f64>, A
         Repair::Fail => Err(Error::invalid(
             "x",
             format!(
-                "abnormal samples found ({}); repair them (Repair::Interpolate) or cut them out \
-                 (IoData::slice)",
+                "abnormal samples found ({}); repair them by interpolation or cut them out of the \
+                 record",
                 report.summary()
             ),
         )),
@@ -998,7 +1002,7 @@ mod tests {
             ..base
         };
         let e = repair_abnormal(&x, &fail).unwrap_err().to_string();
-        assert!(e.contains("1 non-finite (at 2)"), "{e}");
+        assert!(e.contains("1 non-finite (at sample 3)"), "{e}");
         let (y, rep) = repair_abnormal(&[0.0, 1.0, 2.0], &fail).unwrap();
         assert_eq!(y, vec![0.0, 1.0, 2.0]);
         assert_eq!(rep.summary(), "3 samples: clean");
@@ -1015,9 +1019,15 @@ mod tests {
             repaired: 7,
         };
         let s = rep.summary();
-        assert!(s.contains("6 non-finite (at 1, 2, 3, 4, 5, …)"), "{s}");
-        assert!(s.contains("1 spike (at 9)"), "{s}");
-        assert!(s.contains("1 stuck run (30 samples from 100)"), "{s}");
+        assert!(
+            s.contains("6 non-finite (at samples 2, 3, 4, 5, 6, …)"),
+            "{s}"
+        );
+        assert!(s.contains("1 spike (at sample 10)"), "{s}");
+        assert!(
+            s.contains("1 stuck run (30 samples from sample 101)"),
+            "{s}"
+        );
         assert!(s.contains("7 samples repaired"), "{s}");
         assert!(s.contains("not repaired"), "{s}");
         assert_eq!(rep.to_string(), s);

@@ -116,22 +116,23 @@ impl SaturationReport {
             })
     }
 
-    /// What was found, in one line.
+    /// What was found, in one line (samples numbered from 1).
     ///
     /// # Example
     /// ```
     /// use ambid_core::data::{check_saturation, SaturationOptions};
     /// let rep = check_saturation(&[0.0, 1.0, 1.0, 0.0], Some(1.0), &SaturationOptions::default()).unwrap();
     /// assert_eq!(rep.summary(), "2 of 4 samples (50.0 %) at the given limit ±1, in 1 run \
-    ///     (longest 2 samples from 1)");
+    ///     (longest 2 samples from sample 2)");
     /// ```
     pub fn summary(&self) -> String {
         let pct = percent(self.fraction);
         let runs = match self.longest_run() {
             Some((s, l)) => format!(
-                "in {} run{} (longest {l} samples from {s})",
+                "in {} run{} (longest {l} samples from sample {})",
                 self.runs.len(),
-                if self.runs.len() == 1 { "" } else { "s" }
+                if self.runs.len() == 1 { "" } else { "s" },
+                s + 1
             ),
             None => String::new(),
         };
