@@ -37,7 +37,7 @@ pub enum TwinError {
         hint: String,
     },
     /// A non-finite value in an input signal.
-    #[error("non-finite value (NaN or ±inf) in `{what}` at sample {} (1-based); repair the signal before simulating", .index + 1)]
+    #[error("non-finite value (NaN or ±inf) in `{what}` at index {index} (sample {}, counted from 1); repair the signal before simulating", .index + 1)]
     NonFinite {
         /// Which signal holds the value.
         what: &'static str,
