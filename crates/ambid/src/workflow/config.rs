@@ -998,7 +998,8 @@ pub fn parameters_of_order(n: usize) -> usize {
     n.saturating_mul(2).saturating_add(1)
 }
 
-/// A number in a message: compact (`{:.6}` significant style) whatever its size.
+/// A number in a message, compact whatever its size: up to 6 decimals without trailing zeros
+/// for magnitudes in [1e-4, 1e6) (`0.5`, `20000`), else `{:.6e}` (`1.000000e300`).
 pub(crate) fn fmt_num(v: f64) -> String {
     if v == 0.0 || !v.is_finite() {
         return format!("{v}");
