@@ -41,7 +41,7 @@ pub enum X0Arg {
 }
 
 impl X0Arg {
-    fn core(self) -> InitialState {
+    pub fn core(self) -> InitialState {
         match self {
             Self::Zero => InitialState::Zero,
             Self::Estimate => InitialState::Estimate,

@@ -54,6 +54,11 @@ pub struct ValidateArgs {
     /// --structure ss` with the prediction focus stores K); u is the recorded plant input.
     #[arg(long)]
     k_step: Option<usize>,
+    /// How the simulated loop and the predictors start: from the initial state that best explains
+    /// the record (the loop was running before the first sample; MATLAB `compare`'s default) or
+    /// from rest.
+    #[arg(long, value_enum, default_value_t = crate::cli_fit::X0Arg::Estimate)]
+    x0: crate::cli_fit::X0Arg,
     /// Output directory (summary.json, timeseries.csv, residuals.csv).
     #[arg(long, default_value = "validation")]
     out: PathBuf,
@@ -80,6 +85,7 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
         skip: a.skip,
         lags: a.lags,
         windows: a.windows,
+        initial_state: a.x0.core(),
         ..ValidationSettings::default()
     };
     let k0 = a.skip;
@@ -146,7 +152,14 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
                 );
             }
             let kmat = faer::Mat::from_fn(kg.len(), 1, |i, _| kg[i]);
-            let p = ambid_core::validate::predict::predict_k(&model, kmat.as_ref(), y, u, k)?;
+            let (p, _) = ambid_core::validate::predict::predict_k_with(
+                &model,
+                kmat.as_ref(),
+                y,
+                u,
+                k,
+                settings.initial_state,
+            )?;
             Some((k, fit_percent(&y[k0..], &p[k0..])?))
         }
         None => None,
@@ -198,6 +211,8 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
         "data": a.data.display().to_string(),
         "controller": ctrl.description(),
         "samples_measured": y.len() - k0,
+        "initial_state": settings.initial_state.name(),
+        "initial_state_values": full.initial_state,
         "fit_y_pct": fit_y, "fit_u_pct": fit_u, "rmse_y": rmse, "max_error_y": max_err,
         "windows": full.windows,
         "worst_window": worst,
@@ -216,7 +231,7 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
         a.out.join("summary.json"),
         serde_json::to_string_pretty(&summary)?,
     )?;
-    println!("closed-loop validation on {} samples (first {k0} skipped): fit y {fit_y:.2} %, fit u {fit_u:.2} %, RMSE y {rmse:.3e}, max |error| {max_err:.3e}", y.len() - k0);
+    println!("closed-loop validation on {} samples (first {k0} skipped, loop started from the {} initial state): fit y {fit_y:.2} %, fit u {fit_u:.2} %, RMSE y {rmse:.3e}, max |error| {max_err:.3e}", y.len() - k0, if settings.initial_state == ambid_core::validate::predict::InitialState::Estimate { "estimated" } else { "zero" });
     if let Some(wf) = worst {
         println!(
             "worst window {:.3}–{:.3} s: fit y {:.1} %",
