@@ -255,8 +255,7 @@ impl Loop {
 /// $\hat y = y^{(0)} + \Psi_y x_0$, $\hat u = u^{(0)} + \Psi_u x_0$, where $y^{(0)}, u^{(0)}$
 /// are the responses from rest and the columns of $\Psi$ the free responses to unit initial
 /// states. $x_0$ minimises
-/// $$ \frac{\lVert y - y^{(0)} - \Psi_y x_0 \rVert^2}{\lVert y \rVert^2}
-///  + \frac{\lVert u - u^{(0)} - \Psi_u x_0 \rVert^2}{\lVert u \rVert^2}, $$
+/// $$ \frac{\lVert y - y^{(0)} - \Psi_y x_0 \rVert^2}{\lVert y \rVert^2} + \frac{\lVert u - u^{(0)} - \Psi_u x_0 \rVert^2}{\lVert u \rVert^2}, $$
 /// both signals weighted by their own energy (they have different units). The free responses
 /// decay with the closed loop's spectral radius $\rho < 1$; they are computed over
 /// $H = \min(N, \lceil \ln 10^{-12} / \ln \rho \rceil)$ samples, beyond which they are below
