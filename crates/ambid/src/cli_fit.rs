@@ -156,9 +156,22 @@ pub struct FitArgs {
     /// see docs/estimation.md).
     #[arg(long = "loop", value_enum, default_value_t = LoopArg::Auto)]
     loop_kind: LoopArg,
+    /// Several outputs with `--structure arx|fir`: `full` (each output on the past of every
+    /// output, MATLAB's multi-output ARX) or `diagonal` (one MISO ARX per output).
+    #[arg(long, value_enum, default_value_t = CouplingArg::Full)]
+    output_coupling: CouplingArg,
     /// Output model JSON.
     #[arg(long, default_value = "model.json")]
     out: PathBuf,
+}
+
+/// How the outputs of a multi-output ARX enter each other's equations.
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum CouplingArg {
+    /// Full A_k matrices.
+    Full,
+    /// Diagonal A_k: one MISO ARX per output.
+    Diagonal,
 }
 
 /// Open-loop data per `--loop` (module docs of [`LoopArg`]).
@@ -291,14 +304,15 @@ pub fn fit(a: FitArgs) -> Result<()> {
     let split = |s: &str| -> Vec<String> { s.split(',').map(|c| c.trim().to_string()).collect() };
     let (ins, outs) = (split(&a.input), split(&a.output));
     if ins.len() > 1 || outs.len() > 1 {
-        if a.structure != StructureArg::Ss {
-            bail!(
-                "several inputs or outputs ({} → {}) need --structure ss, the multi-input multi-output path; the polynomial structures are single-input single-output: fit one output (and input) at a time",
+        return match a.structure {
+            StructureArg::Ss => fit_ss_mimo(&a, &ins, &outs),
+            StructureArg::Arx | StructureArg::Fir => fit_arx_mimo(&a, &ins, &outs),
+            _ => bail!(
+                "several inputs or outputs ({} → {}) need --structure ss, arx or fir (the multi-input multi-output paths); armax, oe and bj are single-input single-output here: fit one output (and input) at a time",
                 a.input,
                 a.output
-            );
-        }
-        return fit_ss_mimo(&a, &ins, &outs);
+            ),
+        };
     }
     let (mut u, mut y, ts) = read_io(&a.data, a.fs, &a.input, &a.output)?;
     let (mu, my) = if a.no_detrend {
@@ -823,7 +837,6 @@ fn columns(
 /// refinement that fails leaves the subspace model, with the problem named), model scaled back;
 /// simulation fit per output from the estimated initial state.
 fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
-    use ambid::io::model::state_space_json;
     use ambid_core::estimate::ss_pem::{refine_ss, SsPemOptions};
     use ambid_core::estimate::subspace::{n4sid_detailed, SubspaceOptions};
     use ambid_core::lti::StateSpace;
@@ -902,6 +915,146 @@ fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
         Mat::from_fn(l, m, |j, k| sm.d()[(j, k)] * sy[j] / su[k]),
         ts,
     )?;
+    let head = format!(
+        "state-space model of order {} ({} inputs, {} outputs; block rows {}), {method}",
+        n, m, l, sub.block_rows
+    );
+    let meta = json!({
+        "method": method,
+        "pem": pem_meta,
+        "order": n,
+        "block_rows": sub.block_rows,
+        "singular_values": sub.singular_values,
+    });
+    finish_mimo(
+        a,
+        ins,
+        outs,
+        MimoFit {
+            model,
+            means: (mu, my),
+            ts,
+            head,
+            meta,
+            problems,
+            x0_est,
+            one_step: None,
+            model_lag: 0,
+            data: (u, y),
+        },
+    )
+}
+
+/// Multi-input multi-output ARX/FIR (`--input u1,u2 --output y1,y2 --structure arx|fir`):
+/// [`ambid_core::estimate::arx_mimo`] with common orders, full output coupling by default,
+/// realised in state space for the simulation fits and the model file.
+fn fit_arx_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
+    use ambid_core::estimate::arx_mimo::{arx_mimo, OutputCoupling};
+    let (u, mu, ts) = columns(&a.data, a.fs, ins, None, !a.no_detrend)?;
+    let (y, my, _) = columns(&a.data, a.fs, outs, None, !a.no_detrend)?;
+    let na = if a.structure == StructureArg::Fir {
+        0
+    } else {
+        a.na
+    };
+    let coupling = match a.output_coupling {
+        CouplingArg::Full => OutputCoupling::Full,
+        CouplingArg::Diagonal => OutputCoupling::Diagonal,
+    };
+    let yr: Vec<&[f64]> = y.iter().map(Vec::as_slice).collect();
+    let ur: Vec<&[f64]> = u.iter().map(Vec::as_slice).collect();
+    let m = arx_mimo(&yr, &ur, na, a.nb, a.nk, coupling, ts).context("multi-output ARX")?;
+    let model = m.to_state_space()?;
+    let lag = na.max(a.nk + a.nb - 1);
+    let head = format!(
+        "{} {} × {} (na {na}, nb {}, nk {}, output coupling {}), realised in state space of order {}",
+        if na == 0 { "FIR" } else { "ARX" },
+        outs.len(),
+        ins.len(),
+        a.nb,
+        a.nk,
+        match coupling {
+            OutputCoupling::Full => "full",
+            OutputCoupling::Diagonal => "diagonal",
+        },
+        model.order()
+    );
+    let meta = json!({
+        "method": if na == 0 { "fir" } else { "arx" },
+        "orders": {"na": na, "nb": a.nb, "nk": a.nk},
+        "output_coupling": match coupling { OutputCoupling::Full => "full", OutputCoupling::Diagonal => "diagonal" },
+        "loss": m.loss,
+        "samples": m.n_samples,
+    });
+    let one_step: OneStep = Box::new(move |y: &[Vec<f64>], u: &[Vec<f64>]| {
+        let yr: Vec<&[f64]> = y.iter().map(Vec::as_slice).collect();
+        let ur: Vec<&[f64]> = u.iter().map(Vec::as_slice).collect();
+        Ok(m.predict(&yr, &ur)?)
+    });
+    finish_mimo(
+        a,
+        ins,
+        outs,
+        MimoFit {
+            model,
+            means: (mu, my),
+            ts,
+            head,
+            meta,
+            problems: Vec::new(),
+            x0_est: None,
+            one_step: Some(one_step),
+            model_lag: lag,
+            data: (u, y),
+        },
+    )
+}
+
+/// One-step predictor of a MIMO model: outputs from the measured outputs and inputs.
+type OneStep = Box<dyn Fn(&[Vec<f64>], &[Vec<f64>]) -> Result<Vec<Vec<f64>>>>;
+
+/// A multi-input multi-output model ready for its fit measures and the model file.
+struct MimoFit {
+    /// The model in the data's units.
+    model: ambid_core::lti::StateSpace,
+    /// Input and output means removed from the estimation data.
+    means: (Vec<f64>, Vec<f64>),
+    ts: f64,
+    /// First line printed.
+    head: String,
+    /// Method-specific metadata (merged into the model file's `meta`).
+    meta: serde_json::Value,
+    problems: Vec<String>,
+    /// The initial state the estimator found, stored in the model file.
+    x0_est: Option<Vec<f64>>,
+    /// One-step predictor `(y, u) → ŷ`, for the structures with one, and the samples its
+    /// start-up needs (left out of its fit).
+    one_step: Option<OneStep>,
+    model_lag: usize,
+    /// The estimation record (inputs, outputs), means removed.
+    data: (Vec<Vec<f64>>, Vec<Vec<f64>>),
+}
+
+/// Fit measures of a MIMO model on the estimation and validation records (simulation from the
+/// `--x0` initial state, and the one-step prediction where the structure has one), printed and
+/// written with the model.
+fn finish_mimo(a: &FitArgs, ins: &[String], outs: &[String], f: MimoFit) -> Result<()> {
+    use ambid::io::model::state_space_json;
+    use ambid_core::validate::predict::{fit_from, ss_simulate_mimo};
+    use faer::Mat;
+    let MimoFit {
+        model,
+        means: (mu, my),
+        ts,
+        head,
+        meta: extra,
+        mut problems,
+        x0_est,
+        one_step,
+        model_lag,
+        data,
+    } = f;
+    let (u, y) = (&data.0, &data.1);
     let unstable = model.poles()?.iter().filter(|p| p.norm() >= 1.0).count();
     if unstable > 0 {
         problems.push(format!("{unstable} pole(s) on or outside the unit circle (not stabilised): the simulation diverges"));
@@ -919,6 +1072,16 @@ fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
             })
             .collect())
     };
+    let predict_on = |u: &[Vec<f64>], y: &[Vec<f64>]| -> Result<Option<Vec<Option<f64>>>> {
+        let Some(p) = &one_step else { return Ok(None) };
+        let yh = p(y, u)?;
+        Ok(Some(
+            y.iter()
+                .zip(&yh)
+                .map(|(yj, hj)| fit_from(yj, hj, skip.max(model_lag)))
+                .collect(),
+        ))
+    };
     let show = |f: &[Option<f64>]| {
         outs.iter()
             .zip(f)
@@ -926,15 +1089,17 @@ fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
             .collect::<Vec<_>>()
             .join(", ")
     };
+    println!("{head}");
+    let f_est = fits_on(u, y)?;
+    let p_est = predict_on(u, y)?;
     println!(
-        "state-space model of order {} ({} inputs, {} outputs; block rows {}), {method}",
-        n, m, l, sub.block_rows
-    );
-    let f_est = fits_on(&u, &y)?;
-    println!(
-        "estimation data: simulation fit {} (initial state: {})",
+        "estimation data: simulation fit {} (initial state: {}){}",
         show(&f_est),
-        x0.name()
+        x0.name(),
+        p_est.as_ref().map_or(String::new(), |p| format!(
+            "; 1-step prediction fit {}",
+            show(p)
+        ))
     );
     let mut val = json!(null);
     if let Some(p) = &a.validation {
@@ -948,20 +1113,23 @@ fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
             );
         }
         let fv = fits_on(&uv, &yv)?;
-        println!("validation data: simulation fit {}", show(&fv));
-        val = json!({"simulation_fit_pct": fv});
+        let pv = predict_on(&uv, &yv)?;
+        println!(
+            "validation data: simulation fit {}{}",
+            show(&fv),
+            pv.as_ref().map_or(String::new(), |p| format!(
+                "; 1-step prediction fit {}",
+                show(p)
+            ))
+        );
+        val = json!({"simulation_fit_pct": fv, "one_step_fit_pct": pv});
     }
     for p in &problems {
         println!("warning: {p}");
     }
     let meta = json!({
-        "method": method,
-        "pem": pem_meta,
-        "order": n,
-        "block_rows": sub.block_rows,
-        "singular_values": sub.singular_values,
         "detrend": {"u_mean": mu, "y_mean": my},
-        "estimation_fit_pct": {"simulation": f_est},
+        "estimation_fit_pct": {"simulation": f_est, "one_step": p_est},
         "validation": val,
         "initial_state": x0.name(),
         "skip": skip,
@@ -971,6 +1139,11 @@ fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
     let mut j = state_space_json(&model, &ins.join(","), &outs.join(","), meta);
     if let Some(x) = x0_est {
         j["x0"] = json!(x);
+    }
+    if let (Some(m), Some(e)) = (j["meta"].as_object_mut(), extra.as_object()) {
+        for (k, v) in e {
+            m.insert(k.clone(), v.clone());
+        }
     }
     write_model_json(&a.out, &j)?;
     println!("written: {}", a.out.display());

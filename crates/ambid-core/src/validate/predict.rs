@@ -443,8 +443,8 @@ pub fn ss_simulate(
 
 /// Simulation of a (MIMO) state-space model on `u` ($N \times m$) from rest or from the initial
 /// state that best explains `y` ($N \times l$): the least-squares solution of
-/// $y_t - y^{(0)}_t = C A^t x_0$ stacked over every output and sample (stable models only; an
-/// unstable model starts from rest). Returns the $N \times l$ output and the state used.
+/// $y_t - y^{(0)}_t = C A^t x_0$ stacked over every output and sample, of minimum norm (stable
+/// models only; an unstable model starts from rest). Returns the $N \times l$ output and the state used.
 ///
 /// # Errors
 /// [`Error::DimensionMismatch`] for records of different lengths or widths; the errors of the
@@ -480,8 +480,10 @@ pub fn ss_simulate_mimo(
         ca = &ca * a;
     }
     let r = faer::Mat::from_fn(nt * l, 1, |i, _| y[(i / l, i % l)] - y0[(i / l, i % l)]);
-    let x0 = match crate::linalg::lstsq(obs.as_ref(), r.as_ref()) {
-        Ok(x) if (0..n).all(|k| x[(k, 0)].is_finite()) => (0..n).map(|k| x[(k, 0)]).collect(),
+    // minimum norm: a non-minimal realisation (e.g. a multi-output ARX's shift register) has
+    // states the record cannot tell apart
+    let x0 = match crate::linalg::lstsq_min_norm(obs.as_ref(), r.as_ref(), 1e-10) {
+        Ok(x) if x.iter().all(|v| v.is_finite()) => x,
         _ => vec![0.0; n],
     };
     Ok((m.simulate(u, Some(&x0))?, x0))
