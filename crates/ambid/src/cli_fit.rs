@@ -840,7 +840,6 @@ fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
     use ambid_core::estimate::ss_pem::{refine_ss, SsPemOptions};
     use ambid_core::estimate::subspace::{n4sid_detailed, SubspaceOptions};
     use ambid_core::lti::StateSpace;
-    use ambid_core::validate::predict::{fit_from, ss_simulate_mimo};
     use faer::Mat;
     let (u, mu, ts) = columns(&a.data, a.fs, ins, None, !a.no_detrend)?;
     let (y, my, _) = columns(&a.data, a.fs, outs, None, !a.no_detrend)?;
