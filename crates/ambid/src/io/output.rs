@@ -75,15 +75,20 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> OutputError + '_ {
 
 /// The operating system's reason, with what it means for the destination's directory.
 fn reason(e: &std::io::Error, dest: &Path) -> String {
+    const EROFS: i32 = 30;
     let dir = parent_of(dest);
-    match e.kind() {
-        std::io::ErrorKind::PermissionDenied => {
-            format!("{e}: {} is not a writable directory", dir.display())
-        }
-        std::io::ErrorKind::NotFound if !dir.is_dir() => {
-            format!("{e}: {} is not a directory", dir.display())
-        }
-        _ => e.to_string(),
+    let unwritable = e.kind() == std::io::ErrorKind::PermissionDenied
+        || e.raw_os_error() == Some(EROFS)
+        || (e.kind() == std::io::ErrorKind::NotFound && dir.is_dir());
+    if unwritable {
+        format!("{} is not a writable directory ({e})", dir.display())
+    } else if e.kind() == std::io::ErrorKind::NotFound {
+        format!(
+            "{} does not exist or is not a directory ({e})",
+            dir.display()
+        )
+    } else {
+        e.to_string()
     }
 }
 
