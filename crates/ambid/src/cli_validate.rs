@@ -3,7 +3,7 @@
 
 use ambid::io::csv::read_frf_csv;
 use ambid::io::model::{read_kalman_gain, read_model_json};
-use ambid::io::{read_controller, read_time_csv, time_csv_bytes, OutputSet};
+use ambid::io::{read_controller, read_time_csv, time_csv_to, OutputSet};
 use ambid::validation::{
     consistency, innovation_residuals, innovation_summary, residual_summary, validate_closed_loop,
     MeasuredLoop, ValidationSettings,
@@ -163,15 +163,19 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
     let mut set = OutputSet::new(a.force);
     let t: Vec<f64> = (0..y.len()).map(|k| k as f64 * ts).collect();
     let e_full: Vec<f64> = y.iter().zip(&sim.y).map(|(a, b)| a - b).collect();
-    let timeseries = time_csv_bytes(&[
-        ("t", &t),
-        ("y", y),
-        ("y_sim", &sim.y),
-        ("error", &e_full),
-        ("u", u),
-        ("u_sim", &sim.u),
-    ])?;
-    set.write(&a.out.join(VALIDATE_FILES[0]), &timeseries)?;
+    set.write_with(&a.out.join(VALIDATE_FILES[0]), |w| {
+        time_csv_to(
+            w,
+            &[
+                ("t", &t),
+                ("y", y),
+                ("y_sim", &sim.y),
+                ("error", &e_full),
+                ("u", u),
+                ("u_sim", &sim.u),
+            ],
+        )
+    })?;
     let ind = res.independence.as_ref();
     let mut wtr = ::csv::Writer::from_writer(Vec::new());
     wtr.write_record([

@@ -3,7 +3,7 @@
 
 use ambid::comparison::Compared;
 use ambid::experiment::{self, ExcitationKind, ExcitationPlan, Experiment};
-use ambid::io::{frf_csv_bytes, time_csv_bytes, FrfColumn, OutputSet};
+use ambid::io::{frf_csv_bytes, time_csv_bytes, time_csv_to, FrfColumn, OutputSet};
 use ambid_core::signal::{
     amplitude_spectrum, autocorrelation, ChirpSpec, Distribution, ExcitationSpec, Grid,
     MultisineSpec, NoiseSpec, Phases, PrbsSpec, Sweep,
@@ -517,10 +517,8 @@ fn excite(a: ExciteArgs) -> Result<()> {
                 realisation_files = write_realisations(&mut set, &spec, ts, m, out)?;
             }
             (Some(out), None) => {
-                set.write(
-                    out,
-                    &time_csv_bytes(&[("t", &e.times()), ("r", &e.values)])?,
-                )?;
+                let t = e.times();
+                set.write_with(out, |w| time_csv_to(w, &[("t", &t), ("r", &e.values)]))?;
             }
             _ => {}
         }
@@ -601,7 +599,7 @@ fn write_realisations(
         let r: Vec<f64> = (0..ms.periods * n).map(|t| period[t % n]).collect();
         let t: Vec<f64> = (0..r.len()).map(|j| j as f64 * ts).collect();
         let path = out.with_file_name(format!("{stem}_m{}.{ext}", k + 1));
-        set.write(&path, &time_csv_bytes(&[("t", &t), ("r", &r)])?)?;
+        set.write_with(&path, |w| time_csv_to(w, &[("t", &t), ("r", &r)]))?;
         paths.push(path);
     }
     Ok(paths)
@@ -821,7 +819,7 @@ fn simulate(a: SimulateArgs) -> Result<()> {
         cols.extend([("u_b", &b.u[..]), ("i_b", &b.i[..]), ("y_b", &b.y[..])]);
     }
     let mut set = OutputSet::new(a.force);
-    set.write(&data_path, &time_csv_bytes(&cols)?)?;
+    set.write_with(&data_path, |w| time_csv_to(w, &cols))?;
     let grid = experiment::log_grid(1.0, 0.5 * out.twin.fs() * 0.999, a.truth_points);
     let truth = experiment::truth(&out.twin, &grid)?;
     let truth_bytes = frf_csv_bytes(

@@ -15,7 +15,7 @@ pub mod table;
 
 pub use self::controller::{read_controller, ControllerModel};
 pub use self::csv::{
-    frf_csv_bytes, read_time_csv, time_csv_bytes, write_frf_csv, write_frf_csv_with,
+    frf_csv_bytes, read_time_csv, time_csv_bytes, time_csv_to, write_frf_csv, write_frf_csv_with,
     write_time_csv, FrfColumn, TimeData,
 };
 pub use self::output::{OutputError, OutputSet};

@@ -241,10 +241,8 @@ pub fn check_replaceable(dest: &Path, inputs: &[&Path]) -> Result<(), OutputErro
 #[derive(Debug)]
 struct Staged {
     dest: PathBuf,
-    /// The temporary sibling, or `None` for a special file written in place at commit.
+    /// The temporary sibling, or `None` for a special file (already written in place).
     tmp: Option<PathBuf>,
-    /// The bytes of a special file (written at commit).
-    bytes: Vec<u8>,
 }
 
 /// A set of output files written atomically (see the module docs): [`write`](Self::write)
@@ -305,6 +303,19 @@ impl OutputSet {
     /// [`OutputError::Exists`] without `force`, [`OutputError::IsDirectory`],
     /// [`OutputError::Duplicate`], or the file system's errors naming `dest`.
     pub fn write(&mut self, dest: &Path, bytes: &[u8]) -> Result<(), OutputError> {
+        self.write_with(dest, |w| w.write_all(bytes))
+    }
+
+    /// Stages the file `dest` whose bytes `fill` writes (streamed to the temporary through a
+    /// buffer: large outputs are never held in memory). A special file (device, FIFO) is
+    /// written in place at once. Errors as [`write`](Self::write).
+    ///
+    /// # Errors
+    /// As [`write`](Self::write); an error returned by `fill` names `dest`.
+    pub fn write_with<F>(&mut self, dest: &Path, fill: F) -> Result<(), OutputError>
+    where
+        F: FnOnce(&mut dyn std::io::Write) -> std::io::Result<()>,
+    {
         Self::check(dest, self.force)?;
         if self.staged.iter().any(|s| same_path(&s.dest, dest)) {
             return Err(OutputError::Duplicate(dest.to_path_buf()));
@@ -313,9 +324,12 @@ impl OutputSet {
             self.staged.push(Staged {
                 dest: dest.to_path_buf(),
                 tmp: None,
-                bytes: bytes.to_vec(),
             });
-            return Ok(());
+            let f = std::fs::OpenOptions::new()
+                .write(true)
+                .open(dest)
+                .map_err(io(dest))?;
+            return stream(f, fill, false).map_err(io(dest));
         }
         if let Some(top) = create_dirs(&parent_of(dest))? {
             self.created.push(top);
@@ -326,13 +340,12 @@ impl OutputSet {
         self.staged.push(Staged {
             dest: dest.to_path_buf(),
             tmp: Some(tmp.clone()),
-            bytes: Vec::new(),
         });
-        write_new(&tmp, bytes).map_err(io(dest))
+        let f = std::fs::File::create(&tmp).map_err(io(dest))?;
+        stream(f, fill, true).map_err(io(dest))
     }
 
-    /// Writes the special files in place, then renames every staged file into place; returns
-    /// the destinations.
+    /// Renames every staged file into place; returns the destinations.
     ///
     /// # Errors
     /// A destination that appeared meanwhile (without `force`), or the file system's errors
@@ -341,11 +354,6 @@ impl OutputSet {
         for s in &self.staged {
             if s.tmp.is_some() {
                 Self::check(&s.dest, self.force)?;
-            }
-        }
-        for s in &self.staged {
-            if s.tmp.is_none() {
-                write_in_place(&s.dest, &s.bytes).map_err(io(&s.dest))?;
             }
         }
         let mut done = Vec::new();
@@ -393,11 +401,20 @@ fn write_new(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     f.sync_all()
 }
 
-fn write_in_place(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+/// Streams `fill` into `f` through a buffer; `sync` flushes to the disk as well (regular files,
+/// before their rename).
+fn stream<F>(f: std::fs::File, fill: F, sync: bool) -> std::io::Result<()>
+where
+    F: FnOnce(&mut dyn std::io::Write) -> std::io::Result<()>,
+{
     use std::io::Write;
-    let mut f = std::fs::OpenOptions::new().write(true).open(path)?;
-    f.write_all(bytes)?;
-    f.flush()
+    let mut w = std::io::BufWriter::with_capacity(1 << 16, f);
+    fill(&mut w)?;
+    w.flush()?;
+    if sync {
+        w.get_ref().sync_all()?;
+    }
+    Ok(())
 }
 
 impl Drop for OutputSet {
@@ -608,6 +625,14 @@ mod tests {
             o.write("a/b.txt", b"x").unwrap();
         }
         assert!(!dest.exists());
+        // the parent directory the output created is removed too: nothing is left
+        assert!(!root.exists());
+        // and in an existing parent, nothing but what was there
+        std::fs::create_dir_all(&root).unwrap();
+        {
+            let o = OutputDir::create(&dest, false).unwrap();
+            o.write("a/b.txt", b"x").unwrap();
+        }
         assert_eq!(std::fs::read_dir(&root).unwrap().count(), 0);
         let o = OutputDir::create(&dest, false).unwrap();
         o.write("a/b.txt", b"x").unwrap();
