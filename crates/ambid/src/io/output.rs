@@ -12,7 +12,10 @@
 //!   file and the option otherwise).
 //! - A destination that is a special file (a character device or a FIFO such as `/dev/null`,
 //!   `/dev/stdout`) is written in place, never replaced; it needs no `--force`. It is written
-//!   after every regular file was staged and before any is renamed into place.
+//!   when staged, before any regular file of the set is renamed into place, so a failure there
+//!   (`/dev/full`) leaves no regular output either.
+//! - Outputs are streamed into their temporaries ([`OutputSet::write_with`]): a long record is
+//!   never held as text in memory.
 //! - A directory that would be replaced with `--force` must not be `/`, the home directory, the
 //!   current directory or one of its ancestors, nor contain an input file
 //!   ([`OutputError::Dangerous`]): replacing a directory deletes it.
