@@ -46,8 +46,13 @@ struct Out {
 }
 
 fn spawn(args: &[&str], cwd: &Path) -> Child {
+    spawn_env(args, cwd, &[])
+}
+
+fn spawn_env(args: &[&str], cwd: &Path, env: &[(&str, &Path)]) -> Child {
     Command::new(env!("CARGO_BIN_EXE_ambid"))
         .args(args)
+        .envs(env.iter().map(|(k, v)| (*k, *v)))
         .current_dir(cwd)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -57,8 +62,13 @@ fn spawn(args: &[&str], cwd: &Path) -> Child {
 
 /// Runs `ambid args` in `cwd`, failing the test after `limit_s` seconds.
 fn ambid_in(cwd: &Path, args: &[&str], limit_s: f64) -> Out {
+    ambid_env(cwd, args, &[], limit_s)
+}
+
+/// [`ambid_in`] with extra environment variables.
+fn ambid_env(cwd: &Path, args: &[&str], env: &[(&str, &Path)], limit_s: f64) -> Out {
     let t0 = Instant::now();
-    let mut child = spawn(args, cwd);
+    let mut child = spawn_env(args, cwd, env);
     loop {
         if child.try_wait().expect("try_wait").is_some() {
             break;
@@ -375,6 +385,26 @@ fn run_refuses_to_replace_the_current_directory_its_ancestors_and_its_inputs() {
             o.stderr
         );
     }
+    // the home directory (HOME pointed at a directory of this test)
+    let home = d.path().join("home");
+    std::fs::create_dir(&home).unwrap();
+    let o = ambid_env(
+        &work,
+        &[
+            "run",
+            "--steps",
+            "excitation",
+            "--quiet",
+            "--out",
+            home.to_str().unwrap(),
+            "--force",
+        ],
+        &[("HOME", &home)],
+        20.0,
+    );
+    assert_eq!(o.code, 5, "{}", o.stderr);
+    assert!(o.stderr.contains("the home directory"), "{}", o.stderr);
+    std::fs::remove_dir(&home).unwrap();
     // a directory holding the workflow file
     ok(&ambid_in(&work, &["init", "in/wf.toml"], 10.0));
     let o = ambid_in(
