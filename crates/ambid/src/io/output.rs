@@ -351,8 +351,10 @@ impl OutputSet {
     /// Renames every staged file into place; returns the destinations.
     ///
     /// # Errors
-    /// A destination that appeared meanwhile (without `force`), or the file system's errors
-    /// naming the destination; then nothing of the set is left (special files excepted).
+    /// A destination that appeared meanwhile (without `force`): then nothing of the set is
+    /// left (special files excepted). A rename the file system refuses (it renames within one
+    /// directory, so only a concurrent change of that directory can cause it) is named with
+    /// its destination; the files renamed before it stay, the others are removed.
     pub fn commit(mut self) -> Result<Vec<PathBuf>, OutputError> {
         for s in &self.staged {
             if s.tmp.is_some() {
