@@ -1,7 +1,9 @@
 //! `ambid fit` and `ambid order`: parametric models and ARX order scans from time-domain data.
 
-use ambid::io::model::{polynomial_json, write_model_json};
+use ambid::io::model::{model_json_bytes, polynomial_json};
+use ambid::io::output::write_file;
 use ambid::io::read_time_csv;
+use ambid::io::OutputSet;
 use ambid_core::estimate::arx::{arx, ArxOrders};
 use ambid_core::estimate::order::{arx_order_scan, ArxScanSpec};
 use ambid_core::estimate::pem::{self, Focus, Orders, PemOptions};
@@ -163,6 +165,9 @@ pub struct FitArgs {
     /// Output model JSON.
     #[arg(long, default_value = "model.json")]
     out: PathBuf,
+    /// Replace the output file if it exists.
+    #[arg(long)]
+    force: bool,
 }
 
 /// How the outputs of a multi-output ARX enter each other's equations.
@@ -276,6 +281,7 @@ fn mean(x: &[f64]) -> f64 {
 use ambid::fitting::poly_fits as fits;
 
 pub fn fit(a: FitArgs) -> Result<()> {
+    OutputSet::check(&a.out, a.force)?;
     if let Some(q) = &a.quantity {
         use ambid_core::validate::compare::FitStructure;
         let (structure, order) = match a.structure {
@@ -298,7 +304,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
             a.weights,
             a.max_iterations,
             (a.controller.as_deref(), a.unstable_poles),
-            &a.out,
+            (&a.out, a.force),
         );
     }
     let split = |s: &str| -> Vec<String> { s.split(',').map(|c| c.trim().to_string()).collect() };
@@ -457,7 +463,11 @@ pub fn fit(a: FitArgs) -> Result<()> {
         "problems": problems,
         "source": a.data.display().to_string(),
     });
-    write_model_json(&a.out, &polynomial_json(m, &a.input, &a.output, meta))?;
+    write_file(
+        &a.out,
+        &model_json_bytes(&polynomial_json(m, &a.input, &a.output, meta))?,
+        a.force,
+    )?;
     println!("written: {}", a.out.display());
     Ok(())
 }
@@ -490,9 +500,13 @@ pub struct OrderArgs {
     /// Output CSV of the grid (one row per model).
     #[arg(long, default_value = "order.csv")]
     out: PathBuf,
+    /// Replace the output file if it exists.
+    #[arg(long)]
+    force: bool,
 }
 
 pub fn order(a: OrderArgs) -> Result<()> {
+    OutputSet::check(&a.out, a.force)?;
     if a.na_max == 0 || a.nb_max == 0 {
         bail!("--na-max and --nb-max must be at least 1");
     }
@@ -538,15 +552,14 @@ pub fn order(a: OrderArgs) -> Result<()> {
     if let Some(b) = scan.best_val {
         show("best on validation", b);
     }
-    if let Some(d) = a.out.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(d).with_context(|| format!("cannot create {}", d.display()))?;
-    }
-    let mut w = csv::Writer::from_path(&a.out)
-        .with_context(|| format!("cannot create {}", a.out.display()))?;
+    let mut w = csv::Writer::from_writer(Vec::new());
     for r in &scan.rows {
         w.serialize(r)?;
     }
-    w.flush()?;
+    let bytes = w
+        .into_inner()
+        .map_err(|e| anyhow::anyhow!("{}", e.error()))?;
+    write_file(&a.out, &bytes, a.force)?;
     println!("written: {}", a.out.display());
     Ok(())
 }
@@ -734,7 +747,7 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
         // the initial state the refinement estimated on the estimation record
         j["x0"] = json!(x);
     }
-    write_model_json(&a.out, &j)?;
+    write_file(&a.out, &model_json_bytes(&j)?, a.force)?;
     println!("written: {}", a.out.display());
     Ok(())
 }
@@ -1144,7 +1157,7 @@ fn finish_mimo(a: &FitArgs, ins: &[String], outs: &[String], f: MimoFit) -> Resu
             m.insert(k.clone(), v.clone());
         }
     }
-    write_model_json(&a.out, &j)?;
+    write_file(&a.out, &model_json_bytes(&j)?, a.force)?;
     println!("written: {}", a.out.display());
     Ok(())
 }

@@ -3,13 +3,13 @@
 
 use ambid::io::csv::read_frf_csv;
 use ambid::io::model::{read_kalman_gain, read_model_json};
-use ambid::io::{read_controller, read_time_csv, write_time_csv};
+use ambid::io::{read_controller, read_time_csv, time_csv_to, OutputSet};
 use ambid::validation::{
     consistency, innovation_residuals, innovation_summary, residual_summary, validate_closed_loop,
     MeasuredLoop, ValidationSettings,
 };
 use ambid_core::estimate::arx::fit_percent;
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::Args;
 use serde_json::json;
 use std::path::PathBuf;
@@ -62,9 +62,18 @@ pub struct ValidateArgs {
     /// Output directory (summary.json, timeseries.csv, residuals.csv).
     #[arg(long, default_value = "validation")]
     out: PathBuf,
+    /// Replace those files if they exist (other files in the directory are left alone).
+    #[arg(long)]
+    force: bool,
 }
 
+/// The files `validate` writes into `--out`.
+const VALIDATE_FILES: [&str; 3] = ["timeseries.csv", "residuals.csv", "summary.json"];
+
 pub fn validate(a: ValidateArgs) -> Result<()> {
+    for f in VALIDATE_FILES {
+        OutputSet::check(&a.out.join(f), a.force)?;
+    }
     let model = read_model_json(&a.model)?;
     let ctrl = read_controller(&a.controller)?;
     let d = read_time_csv(&a.data, a.fs)?;
@@ -164,23 +173,24 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
         }
         None => None,
     };
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("cannot create {}", a.out.display()))?;
+    let mut set = OutputSet::new(a.force);
     let t: Vec<f64> = (0..y.len()).map(|k| k as f64 * ts).collect();
     let e_full: Vec<f64> = y.iter().zip(&sim.y).map(|(a, b)| a - b).collect();
-    write_time_csv(
-        &a.out.join("timeseries.csv"),
-        &[
-            ("t", &t),
-            ("y", y),
-            ("y_sim", &sim.y),
-            ("error", &e_full),
-            ("u", u),
-            ("u_sim", &sim.u),
-        ],
-    )?;
+    set.write_with(&a.out.join(VALIDATE_FILES[0]), |w| {
+        time_csv_to(
+            w,
+            &[
+                ("t", &t),
+                ("y", y),
+                ("y_sim", &sim.y),
+                ("error", &e_full),
+                ("u", u),
+                ("u_sim", &sim.u),
+            ],
+        )
+    })?;
     let ind = res.independence.as_ref();
-    let mut wtr = ::csv::Writer::from_path(a.out.join("residuals.csv"))?;
+    let mut wtr = ::csv::Writer::from_writer(Vec::new());
     wtr.write_record([
         "lag",
         "autocorrelation",
@@ -204,7 +214,10 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
             ind.map_or(String::new(), |c| c.bound.to_string()),
         ])?;
     }
-    wtr.flush()?;
+    let residuals = wtr
+        .into_inner()
+        .map_err(|e| anyhow::anyhow!("{}", e.error()))?;
+    set.write(&a.out.join(VALIDATE_FILES[1]), &residuals)?;
     let worst = full.worst_window();
     let summary = json!({
         "model": a.model.display().to_string(),
@@ -227,10 +240,11 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
         "innovation_residuals": innovations.as_ref().map(|(t, input)| json!({"tested_against": input, "tests": t})),
         "residuals_tested_against": v.residual_input,
     });
-    std::fs::write(
-        a.out.join("summary.json"),
-        serde_json::to_string_pretty(&summary)?,
+    set.write(
+        &a.out.join(VALIDATE_FILES[2]),
+        serde_json::to_string_pretty(&summary)?.as_bytes(),
     )?;
+    set.commit()?;
     println!("closed-loop validation on {} samples (first {k0} skipped, loop started from the {} initial state): fit y {fit_y:.2} %, fit u {fit_u:.2} %, RMSE y {rmse:.3e}, max |error| {max_err:.3e}", y.len() - k0, if settings.initial_state == ambid_core::validate::predict::InitialState::Estimate { "estimated" } else { "zero" });
     if let Some(wf) = worst {
         println!(

@@ -68,6 +68,7 @@ fn fit(e: &Path, v: &Path, fs: &str, args: &[&str], out: &Path) -> serde_json::V
         s(v),
         "--out",
         s(out),
+        "--force",
     ];
     a.extend_from_slice(args);
     let o = ambid(&a);
@@ -421,6 +422,7 @@ fn f16_high_order_state_space_is_always_written() {
         s(&v),
         "--out",
         s(&m),
+        "--force",
     ]);
     assert!(o.status.success(), "{}", text(&o));
     let j: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&m).unwrap()).unwrap();
@@ -469,6 +471,7 @@ fn feedthrough_is_estimated_on_request() {
         "--feedthrough",
         "--out",
         s(&m),
+        "--force",
     ]);
     assert!(!o.status.success() && text(&o).contains("--feedthrough"));
 }
@@ -611,6 +614,7 @@ fn cd_player_two_by_two_state_space() {
         "2",
         "--out",
         s(&d.join("oe.json")),
+        "--force",
     ]);
     assert!(
         !o.status.success() && text(&o).contains("--structure ss, arx or fir"),

@@ -35,13 +35,18 @@ pub fn state_space_json(m: &StateSpace, input: &str, output: &str, meta: Value) 
     })
 }
 
-/// Writes a model object as pretty JSON.
+/// Writes a model object as pretty JSON, replacing the file atomically (commands stage
+/// [`model_json_bytes`] in an [`OutputSet`](crate::io::output::OutputSet) instead).
 pub fn write_model_json(path: &Path, model: &Value) -> Result<()> {
-    if let Some(d) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(d).with_context(|| format!("cannot create {}", d.display()))?;
-    }
-    std::fs::write(path, serde_json::to_string_pretty(model)?)
-        .with_context(|| format!("cannot write {}", path.display()))
+    let mut set = crate::io::output::OutputSet::new(true);
+    set.write(path, &model_json_bytes(model)?)?;
+    set.commit()?;
+    Ok(())
+}
+
+/// The pretty JSON text of a model object.
+pub fn model_json_bytes(model: &Value) -> Result<Vec<u8>> {
+    Ok(serde_json::to_string_pretty(model)?.into_bytes())
 }
 
 /// Reads a model file written by `ambid fit` (`kind = "state_space"` or `"polynomial"`) as a
