@@ -288,7 +288,9 @@ pub fn frf(a: FrfArgs) -> Result<()> {
             skip_periods: a.skip_periods,
         },
         None => FrfMethod::Welch {
-            nperseg: a.nperseg.unwrap_or((r.len() / 8).max(256)),
+            nperseg: a
+                .nperseg
+                .unwrap_or_else(|| ambid::analysis::FrfSettings::default_nperseg(r.len())),
             noverlap: a.noverlap,
             window: a.window.into(),
             skip_samples: a.skip_samples,
