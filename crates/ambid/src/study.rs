@@ -208,8 +208,13 @@ pub struct TwinAmplitudeStudy {
     pub seed: u64,
     /// Leading periods skipped.
     pub skip_periods: usize,
-    /// Band of the averages \[Hz\].
-    pub band: (f64, f64),
+    /// Band of the FRF and of the averages \[Hz\]; `None`: both derived from the excitation
+    /// (`ambid_core::frf::band`). Default: the seed paper's study band 10–1000 Hz, because the
+    /// study compares averages over one band across levels and the excitation's band (to ≈ 3 kHz
+    /// for the seed PRBS) holds lines where the plant is below the noise at every level, whose
+    /// variance then dominates the averages (no level qualifies). Records from files default to
+    /// the derived band (`ambid study amplitude --files`, the workflow).
+    pub band: Option<(f64, f64)>,
     /// Sensor noise on (off: no noise-only record, no SNR).
     pub noise: bool,
 }
@@ -223,7 +228,7 @@ impl Default for TwinAmplitudeStudy {
             mode: Mode::Nonlinear,
             seed: 1,
             skip_periods: 1,
-            band: ambid_core::frf::quality::DEFAULT_BAND,
+            band: Some(ambid_core::frf::quality::DEFAULT_BAND),
             noise: true,
         }
     }
@@ -279,8 +284,8 @@ pub fn amplitude_on_twin(study: &TwinAmplitudeStudy) -> Result<AmplitudeOutcome>
     };
     let twin = twin.context("no level given")?;
     let mut settings = FrfSettings::periodic(period, study.skip_periods);
-    settings.band = Some(study.band);
-    settings.quality_band = Some(study.band);
+    settings.band = study.band;
+    settings.quality_band = study.band;
     settings.i_sat = Some(twin.i_sat());
     let truth = |f: &[f64]| -> Result<Vec<ambid_core::c64>> { Ok(twin.plant_frf(f)?) };
     amplitude_from_records(
@@ -522,7 +527,8 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
-/// Runs the seed experiment at each operating point on the twin and compares with nominal.
+/// Runs the seed experiment at each operating point on the twin and compares with nominal; the
+/// FRF band `band`, or (`None`) the one derived from the excitation.
 pub fn operating_point_on_twin(
     nominal: &TwinConfig,
     cases: &[OperatingCase],
@@ -530,7 +536,7 @@ pub fn operating_point_on_twin(
     mode: Mode,
     seed: u64,
     skip_periods: usize,
-    band: (f64, f64),
+    band: Option<(f64, f64)>,
 ) -> Result<OperatingPointOutcome> {
     if cases.len() < 2 {
         bail!("an operating-point study needs the nominal case and at least one other");
@@ -552,8 +558,8 @@ pub fn operating_point_on_twin(
         })
         .with_context(|| format!("operating point `{}`", case.name))?;
         let mut settings = FrfSettings::periodic(out.excitation.period_samples, skip_periods);
-        settings.band = Some(band);
-        settings.quality_band = Some(band);
+        settings.band = band;
+        settings.quality_band = band;
         settings.i_sat = Some(out.twin.i_sat());
         let rec = &out.record;
         let record = Record {

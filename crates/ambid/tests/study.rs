@@ -84,7 +84,7 @@ fn operating_point_study_on_the_twin() {
         Mode::Nonlinear,
         1,
         1,
-        (10.0, 2000.0),
+        Some((10.0, 2000.0)),
     )
     .unwrap();
     for d in &out.deviations {
@@ -131,8 +131,16 @@ fn operating_point_study_from_records_matches_the_twin_run() {
     let nominal = TwinConfig::default();
     let cases: Vec<_> = seed_cases(&nominal).into_iter().take(3).collect();
     let plan = ExcitationPlan::default();
-    let twin = operating_point_on_twin(&nominal, &cases, &plan, Mode::Linear, 5, 1, (10.0, 2000.0))
-        .unwrap();
+    let twin = operating_point_on_twin(
+        &nominal,
+        &cases,
+        &plan,
+        Mode::Linear,
+        5,
+        1,
+        Some((10.0, 2000.0)),
+    )
+    .unwrap();
     let outs: Vec<_> = cases
         .iter()
         .enumerate()
