@@ -330,7 +330,6 @@ pub fn amplitude(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                     .band_hz
                     .map(|[a, b]| (a, b))
                     .or(TwinAmplitudeStudy::default().band),
-                ..TwinAmplitudeStudy::default()
             };
             (
                 amplitude_on_twin(&study).map_err(computation)?,
