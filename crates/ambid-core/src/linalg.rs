@@ -316,6 +316,60 @@ pub fn lstsq(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> Result<Mat<f64>> {
     Ok(x)
 }
 
+/// Minimum-norm least-squares solution of $\min_x \lVert A x - b \rVert$ for a possibly
+/// rank-deficient $A$ (one right-hand side): the truncated-SVD solution
+/// $x = \sum_{\sigma_k > \tau \sigma_1} v_k\, u_k^{\mathsf T} b / \sigma_k$ with the relative
+/// tolerance $\tau$ = `rtol`. The directions of $x$ the data cannot see are set to zero (e.g.
+/// the unobservable states of an initial-state estimate).
+///
+/// # Example
+/// ```
+/// use ambid_core::linalg::lstsq_min_norm;
+/// // two equal columns: the minimum-norm solution splits the weight equally
+/// let a = faer::mat![[1.0, 1.0], [2.0, 2.0]];
+/// let b = faer::mat![[2.0], [4.0]];
+/// let x = lstsq_min_norm(a.as_ref(), b.as_ref(), 1e-12).unwrap();
+/// assert!((x[0] - 1.0).abs() < 1e-12 && (x[1] - 1.0).abs() < 1e-12);
+/// ```
+///
+/// # Errors
+/// [`Error::DimensionMismatch`] for a `b` that is not one column of `A`'s rows; [`Error::NonFinite`];
+/// [`Error::Numerical`] if the SVD fails.
+pub fn lstsq_min_norm(a: MatRef<'_, f64>, b: MatRef<'_, f64>, rtol: f64) -> Result<Vec<f64>> {
+    if a.nrows() != b.nrows() || b.ncols() != 1 {
+        return Err(Error::DimensionMismatch {
+            context: "lstsq_min_norm",
+            expected: format!("{} × 1 right-hand side", a.nrows()),
+            got: format!("{} × {}", b.nrows(), b.ncols()),
+        });
+    }
+    check_finite_mat("lstsq_min_norm", a)?;
+    check_finite_mat("lstsq_min_norm", b)?;
+    let n = a.ncols();
+    if a.nrows() == 0 || n == 0 {
+        return Ok(vec![0.0; n]);
+    }
+    let svd = a
+        .thin_svd()
+        .map_err(|e| Error::numerical("lstsq_min_norm", format!("SVD failed: {e:?}")))?;
+    let sv = svd.S().column_vector();
+    let smax = (0..sv.nrows()).map(|k| sv[k]).fold(0.0, f64::max);
+    let mut x = vec![0.0; n];
+    if smax == 0.0 {
+        return Ok(x);
+    }
+    let utb = svd.U().transpose() * b;
+    for k in 0..sv.nrows() {
+        if sv[k] > rtol * smax {
+            let c = utb[(k, 0)] / sv[k];
+            for (j, xj) in x.iter_mut().enumerate() {
+                *xj += svd.V()[(j, k)] * c;
+            }
+        }
+    }
+    Ok(x)
+}
+
 /// Solves the square real system $A X = B$ by LU with partial pivoting.
 pub fn solve(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> Result<Mat<f64>> {
     check_square("solve", a)?;

@@ -88,6 +88,9 @@ pub struct BlaArgs {
     /// Output CSV.
     #[arg(long, default_value = "bla.csv")]
     out: PathBuf,
+    /// Replace the output file if it exists.
+    #[arg(long)]
+    force: bool,
 }
 
 /// Reads the recorded realisations, grouped by level (ascending).
@@ -146,6 +149,7 @@ fn recorded_levels(a: &BlaArgs) -> Result<(Vec<RecordedLevel>, f64)> {
 }
 
 pub fn bla(a: BlaArgs) -> Result<()> {
+    ambid::io::OutputSet::check(&a.out, a.force)?;
     if !a.records.is_empty() {
         return bla_from_files(&a);
     }
@@ -167,11 +171,11 @@ pub fn bla(a: BlaArgs) -> Result<()> {
         let f = level_figures(&run, level / 100.0, plan.summary_band_hz)?;
         let csv = per_line_csv(&run.bla)?;
         print_level(&f, plan.summary_band_hz, run.bla.g.f_hz.len());
-        write(&a.out, &csv)
+        write(&a.out, &csv, a.force)
     } else {
         let levels: Vec<f64> = a.levels.iter().map(|l| l / 100.0).collect();
         let s = amplitude_study(&plan, &levels)?;
-        write(&a.out, &study_csv(&s)?)
+        write(&a.out, &study_csv(&s)?, a.force)
     }
 }
 
@@ -198,15 +202,15 @@ fn bla_from_files(a: &BlaArgs) -> Result<()> {
             .fold(0.0, f64::max);
         let f = figures_of(&bla, level.level_pct, plan.summary_band_hz, sat, None)?;
         print_level(&f, plan.summary_band_hz, bla.g.f_hz.len());
-        write(&a.out, &per_line_csv(&bla)?)
+        write(&a.out, &per_line_csv(&bla)?, a.force)
     } else {
         let s = amplitude_study_from_records(&levels, &plan)?;
-        write(&a.out, &study_csv(&s)?)
+        write(&a.out, &study_csv(&s)?, a.force)
     }
 }
 
-fn write(path: &std::path::Path, csv: &str) -> Result<()> {
-    std::fs::write(path, csv).with_context(|| format!("writing {}", path.display()))?;
+fn write(path: &std::path::Path, csv: &str, force: bool) -> Result<()> {
+    ambid::io::output::write_file(path, csv.as_bytes(), force)?;
     println!("wrote {}", path.display());
     Ok(())
 }

@@ -1,7 +1,9 @@
 //! `ambid fit` and `ambid order`: parametric models and ARX order scans from time-domain data.
 
-use ambid::io::model::{polynomial_json, write_model_json};
+use ambid::io::model::{model_json_bytes, polynomial_json};
+use ambid::io::output::write_file;
 use ambid::io::read_time_csv;
+use ambid::io::OutputSet;
 use ambid_core::estimate::arx::{arx, ArxOrders};
 use ambid_core::estimate::order::{arx_order_scan, ArxScanSpec};
 use ambid_core::estimate::pem::{self, Focus, Orders, PemOptions};
@@ -41,7 +43,7 @@ pub enum X0Arg {
 }
 
 impl X0Arg {
-    fn core(self) -> InitialState {
+    pub fn core(self) -> InitialState {
         match self {
             Self::Zero => InitialState::Zero,
             Self::Estimate => InitialState::Estimate,
@@ -156,9 +158,25 @@ pub struct FitArgs {
     /// see docs/estimation.md).
     #[arg(long = "loop", value_enum, default_value_t = LoopArg::Auto)]
     loop_kind: LoopArg,
+    /// Several outputs with `--structure arx|fir`: `full` (each output on the past of every
+    /// output, MATLAB's multi-output ARX) or `diagonal` (one MISO ARX per output).
+    #[arg(long, value_enum, default_value_t = CouplingArg::Full)]
+    output_coupling: CouplingArg,
     /// Output model JSON.
     #[arg(long, default_value = "model.json")]
     out: PathBuf,
+    /// Replace the output file if it exists.
+    #[arg(long)]
+    force: bool,
+}
+
+/// How the outputs of a multi-output ARX enter each other's equations.
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum CouplingArg {
+    /// Full A_k matrices.
+    Full,
+    /// Diagonal A_k: one MISO ARX per output.
+    Diagonal,
 }
 
 /// Open-loop data per `--loop` (module docs of [`LoopArg`]).
@@ -264,6 +282,7 @@ fn mean(x: &[f64]) -> f64 {
 use ambid::fitting::poly_fits as fits;
 
 pub fn fit(a: FitArgs) -> Result<()> {
+    OutputSet::check(&a.out, a.force)?;
     if let Some(q) = &a.quantity {
         use ambid_core::validate::compare::FitStructure;
         let (structure, order) = match a.structure {
@@ -286,20 +305,22 @@ pub fn fit(a: FitArgs) -> Result<()> {
             a.weights,
             a.max_iterations,
             (a.controller.as_deref(), a.unstable_poles),
-            &a.out,
+            (&a.out, a.force),
         );
     }
     let split = |s: &str| -> Vec<String> { s.split(',').map(|c| c.trim().to_string()).collect() };
     let (ins, outs) = (split(&a.input), split(&a.output));
     if ins.len() > 1 || outs.len() > 1 {
-        if a.structure != StructureArg::Ss {
-            return Err(ambid::workflow::usage(anyhow::anyhow!(
-                "several inputs or outputs ({} → {}) need --structure ss, the multi-input multi-output path; the polynomial structures are single-input single-output: fit one output (and input) at a time",
+        return match a.structure {
+            StructureArg::Ss => fit_ss_mimo(&a, &ins, &outs),
+            StructureArg::Arx | StructureArg::Fir => fit_arx_mimo(&a, &ins, &outs),
+            _ => Err(ambid::workflow::usage(anyhow::anyhow!(
+                "several inputs or outputs ({} → {}) need --structure ss, arx or fir (the multi-input multi-output paths); armax, oe and bj are single-input single-output here: fit one output (and input) at a time",
                 a.input,
                 a.output
-            )).into());
-        }
-        return fit_ss_mimo(&a, &ins, &outs);
+            ))
+            .into()),
+        };
     }
     let (mut u, mut y, ts) = read_io(&a.data, a.fs, &a.input, &a.output)?;
     let (mu, my) = if a.no_detrend {
@@ -444,7 +465,11 @@ pub fn fit(a: FitArgs) -> Result<()> {
         "problems": problems,
         "source": a.data.display().to_string(),
     });
-    write_model_json(&a.out, &polynomial_json(m, &a.input, &a.output, meta))?;
+    write_file(
+        &a.out,
+        &model_json_bytes(&polynomial_json(m, &a.input, &a.output, meta))?,
+        a.force,
+    )?;
     println!("written: {}", a.out.display());
     Ok(())
 }
@@ -477,9 +502,13 @@ pub struct OrderArgs {
     /// Output CSV of the grid (one row per model).
     #[arg(long, default_value = "order.csv")]
     out: PathBuf,
+    /// Replace the output file if it exists.
+    #[arg(long)]
+    force: bool,
 }
 
 pub fn order(a: OrderArgs) -> Result<()> {
+    OutputSet::check(&a.out, a.force)?;
     if a.na_max == 0 || a.nb_max == 0 {
         return Err(ambid::workflow::usage(anyhow::anyhow!(
             "--na-max and --nb-max must be at least 1"
@@ -528,15 +557,14 @@ pub fn order(a: OrderArgs) -> Result<()> {
     if let Some(b) = scan.best_val {
         show("best on validation", b);
     }
-    if let Some(d) = a.out.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(d).with_context(|| format!("cannot create {}", d.display()))?;
-    }
-    let mut w = csv::Writer::from_path(&a.out)
-        .with_context(|| format!("cannot create {}", a.out.display()))?;
+    let mut w = csv::Writer::from_writer(Vec::new());
     for r in &scan.rows {
         w.serialize(r)?;
     }
-    w.flush()?;
+    let bytes = w
+        .into_inner()
+        .map_err(|e| anyhow::anyhow!("{}", e.error()))?;
+    write_file(&a.out, &bytes, a.force)?;
     println!("written: {}", a.out.display());
     Ok(())
 }
@@ -725,7 +753,7 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
         // the initial state the refinement estimated on the estimation record
         j["x0"] = json!(x);
     }
-    write_model_json(&a.out, &j)?;
+    write_file(&a.out, &model_json_bytes(&j)?, a.force)?;
     println!("written: {}", a.out.display());
     Ok(())
 }
@@ -828,11 +856,9 @@ fn columns(
 /// refinement that fails leaves the subspace model, with the problem named), model scaled back;
 /// simulation fit per output from the estimated initial state.
 fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
-    use ambid::io::model::state_space_json;
     use ambid_core::estimate::ss_pem::{refine_ss, SsPemOptions};
     use ambid_core::estimate::subspace::{n4sid_detailed, SubspaceOptions};
     use ambid_core::lti::StateSpace;
-    use ambid_core::validate::predict::{fit_from, ss_simulate_mimo};
     use faer::Mat;
     let (u, mu, ts) = columns(&a.data, a.fs, ins, None, !a.no_detrend)?;
     let (y, my, _) = columns(&a.data, a.fs, outs, None, !a.no_detrend)?;
@@ -911,6 +937,146 @@ fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
         Mat::from_fn(l, m, |j, k| sm.d()[(j, k)] * sy[j] / su[k]),
         ts,
     )?;
+    let head = format!(
+        "state-space model of order {} ({} inputs, {} outputs; block rows {}), {method}",
+        n, m, l, sub.block_rows
+    );
+    let meta = json!({
+        "method": method,
+        "pem": pem_meta,
+        "order": n,
+        "block_rows": sub.block_rows,
+        "singular_values": sub.singular_values,
+    });
+    finish_mimo(
+        a,
+        ins,
+        outs,
+        MimoFit {
+            model,
+            means: (mu, my),
+            ts,
+            head,
+            meta,
+            problems,
+            x0_est,
+            one_step: None,
+            model_lag: 0,
+            data: (u, y),
+        },
+    )
+}
+
+/// Multi-input multi-output ARX/FIR (`--input u1,u2 --output y1,y2 --structure arx|fir`):
+/// [`ambid_core::estimate::arx_mimo`] with common orders, full output coupling by default,
+/// realised in state space for the simulation fits and the model file.
+fn fit_arx_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
+    use ambid_core::estimate::arx_mimo::{arx_mimo, OutputCoupling};
+    let (u, mu, ts) = columns(&a.data, a.fs, ins, None, !a.no_detrend)?;
+    let (y, my, _) = columns(&a.data, a.fs, outs, None, !a.no_detrend)?;
+    let na = if a.structure == StructureArg::Fir {
+        0
+    } else {
+        a.na
+    };
+    let coupling = match a.output_coupling {
+        CouplingArg::Full => OutputCoupling::Full,
+        CouplingArg::Diagonal => OutputCoupling::Diagonal,
+    };
+    let yr: Vec<&[f64]> = y.iter().map(Vec::as_slice).collect();
+    let ur: Vec<&[f64]> = u.iter().map(Vec::as_slice).collect();
+    let m = arx_mimo(&yr, &ur, na, a.nb, a.nk, coupling, ts).context("multi-output ARX")?;
+    let model = m.to_state_space()?;
+    let lag = na.max(a.nk + a.nb - 1);
+    let head = format!(
+        "{} {} × {} (na {na}, nb {}, nk {}, output coupling {}), realised in state space of order {}",
+        if na == 0 { "FIR" } else { "ARX" },
+        outs.len(),
+        ins.len(),
+        a.nb,
+        a.nk,
+        match coupling {
+            OutputCoupling::Full => "full",
+            OutputCoupling::Diagonal => "diagonal",
+        },
+        model.order()
+    );
+    let meta = json!({
+        "method": if na == 0 { "fir" } else { "arx" },
+        "orders": {"na": na, "nb": a.nb, "nk": a.nk},
+        "output_coupling": match coupling { OutputCoupling::Full => "full", OutputCoupling::Diagonal => "diagonal" },
+        "loss": m.loss,
+        "samples": m.n_samples,
+    });
+    let one_step: OneStep = Box::new(move |y: &[Vec<f64>], u: &[Vec<f64>]| {
+        let yr: Vec<&[f64]> = y.iter().map(Vec::as_slice).collect();
+        let ur: Vec<&[f64]> = u.iter().map(Vec::as_slice).collect();
+        Ok(m.predict(&yr, &ur)?)
+    });
+    finish_mimo(
+        a,
+        ins,
+        outs,
+        MimoFit {
+            model,
+            means: (mu, my),
+            ts,
+            head,
+            meta,
+            problems: Vec::new(),
+            x0_est: None,
+            one_step: Some(one_step),
+            model_lag: lag,
+            data: (u, y),
+        },
+    )
+}
+
+/// One-step predictor of a MIMO model: outputs from the measured outputs and inputs.
+type OneStep = Box<dyn Fn(&[Vec<f64>], &[Vec<f64>]) -> Result<Vec<Vec<f64>>>>;
+
+/// A multi-input multi-output model ready for its fit measures and the model file.
+struct MimoFit {
+    /// The model in the data's units.
+    model: ambid_core::lti::StateSpace,
+    /// Input and output means removed from the estimation data.
+    means: (Vec<f64>, Vec<f64>),
+    ts: f64,
+    /// First line printed.
+    head: String,
+    /// Method-specific metadata (merged into the model file's `meta`).
+    meta: serde_json::Value,
+    problems: Vec<String>,
+    /// The initial state the estimator found, stored in the model file.
+    x0_est: Option<Vec<f64>>,
+    /// One-step predictor `(y, u) → ŷ`, for the structures with one, and the samples its
+    /// start-up needs (left out of its fit).
+    one_step: Option<OneStep>,
+    model_lag: usize,
+    /// The estimation record (inputs, outputs), means removed.
+    data: (Vec<Vec<f64>>, Vec<Vec<f64>>),
+}
+
+/// Fit measures of a MIMO model on the estimation and validation records (simulation from the
+/// `--x0` initial state, and the one-step prediction where the structure has one), printed and
+/// written with the model.
+fn finish_mimo(a: &FitArgs, ins: &[String], outs: &[String], f: MimoFit) -> Result<()> {
+    use ambid::io::model::state_space_json;
+    use ambid_core::validate::predict::{fit_from, ss_simulate_mimo};
+    use faer::Mat;
+    let MimoFit {
+        model,
+        means: (mu, my),
+        ts,
+        head,
+        meta: extra,
+        mut problems,
+        x0_est,
+        one_step,
+        model_lag,
+        data,
+    } = f;
+    let (u, y) = (&data.0, &data.1);
     let unstable = model.poles()?.iter().filter(|p| p.norm() >= 1.0).count();
     if unstable > 0 {
         problems.push(format!("{unstable} pole(s) on or outside the unit circle (not stabilised): the simulation diverges"));
@@ -928,6 +1094,16 @@ fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
             })
             .collect())
     };
+    let predict_on = |u: &[Vec<f64>], y: &[Vec<f64>]| -> Result<Option<Vec<Option<f64>>>> {
+        let Some(p) = &one_step else { return Ok(None) };
+        let yh = p(y, u)?;
+        Ok(Some(
+            y.iter()
+                .zip(&yh)
+                .map(|(yj, hj)| fit_from(yj, hj, skip.max(model_lag)))
+                .collect(),
+        ))
+    };
     let show = |f: &[Option<f64>]| {
         outs.iter()
             .zip(f)
@@ -935,15 +1111,17 @@ fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
             .collect::<Vec<_>>()
             .join(", ")
     };
+    println!("{head}");
+    let f_est = fits_on(u, y)?;
+    let p_est = predict_on(u, y)?;
     println!(
-        "state-space model of order {} ({} inputs, {} outputs; block rows {}), {method}",
-        n, m, l, sub.block_rows
-    );
-    let f_est = fits_on(&u, &y)?;
-    println!(
-        "estimation data: simulation fit {} (initial state: {})",
+        "estimation data: simulation fit {} (initial state: {}){}",
         show(&f_est),
-        x0.name()
+        x0.name(),
+        p_est.as_ref().map_or(String::new(), |p| format!(
+            "; 1-step prediction fit {}",
+            show(p)
+        ))
     );
     let mut val = json!(null);
     if let Some(p) = &a.validation {
@@ -958,20 +1136,23 @@ fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
             .into());
         }
         let fv = fits_on(&uv, &yv)?;
-        println!("validation data: simulation fit {}", show(&fv));
-        val = json!({"simulation_fit_pct": fv});
+        let pv = predict_on(&uv, &yv)?;
+        println!(
+            "validation data: simulation fit {}{}",
+            show(&fv),
+            pv.as_ref().map_or(String::new(), |p| format!(
+                "; 1-step prediction fit {}",
+                show(p)
+            ))
+        );
+        val = json!({"simulation_fit_pct": fv, "one_step_fit_pct": pv});
     }
     for p in &problems {
         println!("warning: {p}");
     }
     let meta = json!({
-        "method": method,
-        "pem": pem_meta,
-        "order": n,
-        "block_rows": sub.block_rows,
-        "singular_values": sub.singular_values,
         "detrend": {"u_mean": mu, "y_mean": my},
-        "estimation_fit_pct": {"simulation": f_est},
+        "estimation_fit_pct": {"simulation": f_est, "one_step": p_est},
         "validation": val,
         "initial_state": x0.name(),
         "skip": skip,
@@ -982,7 +1163,12 @@ fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
     if let Some(x) = x0_est {
         j["x0"] = json!(x);
     }
-    write_model_json(&a.out, &j)?;
+    if let (Some(m), Some(e)) = (j["meta"].as_object_mut(), extra.as_object()) {
+        for (k, v) in e {
+            m.insert(k.clone(), v.clone());
+        }
+    }
+    write_file(&a.out, &model_json_bytes(&j)?, a.force)?;
     println!("written: {}", a.out.display());
     Ok(())
 }

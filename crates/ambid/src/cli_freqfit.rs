@@ -3,7 +3,9 @@
 
 use crate::cli_frf::parse_band;
 use ambid::io::csv::read_frf_csv;
-use ambid::io::model::{state_space_json, write_model_json};
+use ambid::io::model::{model_json_bytes, state_space_json};
+use ambid::io::output::write_file;
+use ambid::io::OutputSet;
 use ambid::io::{read_controller, read_time_csv};
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::frf::band::{fit_band, FIT_REL_HALFWIDTH};
@@ -108,8 +110,9 @@ pub fn fit_frf(
     weights: WeightsArg,
     max_iterations: usize,
     (controller, unstable_poles): (Option<&Path>, Option<usize>),
-    out: &Path,
+    (out, force): (&Path, bool),
 ) -> Result<()> {
+    OutputSet::check(out, force)?;
     let input = frf_input(path, quantity, fs, band, weights, max_iterations)?;
     if order == 0 {
         return Err(ambid::workflow::usage(anyhow::anyhow!(
@@ -180,7 +183,11 @@ pub fn fit_frf(
         "converged": row.converged,
         "source": path.display().to_string(),
     });
-    write_model_json(out, &state_space_json(model, "u", quantity, meta))?;
+    write_file(
+        out,
+        &model_json_bytes(&state_space_json(model, "u", quantity, meta))?,
+        force,
+    )?;
     println!("written: {}", out.display());
     Ok(())
 }
@@ -232,6 +239,9 @@ pub struct CompareModelsArgs {
     /// Output CSV of the comparison table.
     #[arg(long, default_value = "comparison.csv")]
     out: PathBuf,
+    /// Replace the output file if it exists.
+    #[arg(long)]
+    force: bool,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -252,6 +262,7 @@ impl From<StructureName> for FitStructure {
 }
 
 pub fn compare(a: CompareModelsArgs) -> Result<()> {
+    OutputSet::check(&a.out, a.force)?;
     let input = frf_input(
         &a.frf,
         &a.quantity,
@@ -325,12 +336,14 @@ pub fn compare(a: CompareModelsArgs) -> Result<()> {
         ),
         None => println!("chosen: none (no row is valid; see the notes)"),
     }
-    let mut w = ::csv::Writer::from_path(&a.out)
-        .with_context(|| format!("cannot create {}", a.out.display()))?;
+    let mut w = ::csv::Writer::from_writer(Vec::new());
     for r in &rows {
         w.serialize(r)?;
     }
-    w.flush()?;
+    let bytes = w
+        .into_inner()
+        .map_err(|e| anyhow::anyhow!("{}", e.error()))?;
+    write_file(&a.out, &bytes, a.force)?;
     println!("written: {}", a.out.display());
     Ok(())
 }

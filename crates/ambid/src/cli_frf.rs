@@ -3,7 +3,8 @@
 
 use ambid::analysis::{analyze, FrfAnalysis, FrfMethod, FrfSettings, Record};
 use ambid::experiment::ExcitationPlan;
-use ambid::io::{read_controller, read_time_csv, write_frf_csv_with, FrfColumn};
+use ambid::io::output::write_file;
+use ambid::io::{frf_csv_bytes, read_controller, read_time_csv, FrfColumn, OutputSet};
 use ambid::study::{
     amplitude_from_records, amplitude_on_twin, operating_point_on_twin, seed_cases, seed_levels,
     LevelRecord, Recommendation, TwinAmplitudeStudy,
@@ -142,6 +143,9 @@ pub struct FrfArgs {
     /// Output FRF CSV.
     #[arg(long, default_value = "frf.csv")]
     out: PathBuf,
+    /// Replace the output file if it exists.
+    #[arg(long)]
+    force: bool,
 }
 
 /// FRF estimator choice.
@@ -155,15 +159,7 @@ pub enum MethodArg {
     Lrm,
 }
 
-fn ensure_parent(p: &Path) -> Result<()> {
-    if let Some(d) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(d).with_context(|| format!("cannot create {}", d.display()))?;
-    }
-    Ok(())
-}
-
-fn write_analysis(path: &Path, a: &FrfAnalysis) -> Result<()> {
-    ensure_parent(path)?;
+fn write_analysis(path: &Path, a: &FrfAnalysis, force: bool) -> Result<()> {
     let frf = &a.frf;
     let stds: Vec<Option<Vec<f64>>> = [&frf.t_ry, &frf.t_ru, &frf.plant, &frf.controller]
         .iter()
@@ -201,8 +197,7 @@ fn write_analysis(path: &Path, a: &FrfAnalysis) -> Result<()> {
     }
     // the sample rate of the data, so that fits to this FRF know their sample time
     let fs = vec![frf.t_ry.ts().map_or(f64::NAN, |t| 1.0 / t); frf.f_hz().len()];
-    write_frf_csv_with(
-        path,
+    let bytes = frf_csv_bytes(
         frf.f_hz(),
         &q,
         &[
@@ -210,7 +205,9 @@ fn write_analysis(path: &Path, a: &FrfAnalysis) -> Result<()> {
             ("coh_ru", &frf.coh_ru),
             ("fs_hz", &fs),
         ],
-    )
+    )?;
+    write_file(path, &bytes, force)?;
+    Ok(())
 }
 
 fn print_quality(a: &FrfAnalysis) {
@@ -269,6 +266,7 @@ pub(crate) fn plant_unit(y: Option<&str>, u: Option<&str>) -> String {
 }
 
 pub fn frf(a: FrfArgs) -> Result<()> {
+    OutputSet::check(&a.out, a.force)?;
     let data = read_time_csv(&a.data, a.fs)?;
     if let Some(fs) = a.fs {
         let file_fs = 1.0 / data.ts;
@@ -309,7 +307,9 @@ pub fn frf(a: FrfArgs) -> Result<()> {
             skip_periods: a.skip_periods,
         },
         None => FrfMethod::Welch {
-            nperseg: a.nperseg.unwrap_or((r.len() / 8).max(256)),
+            nperseg: a
+                .nperseg
+                .unwrap_or_else(|| ambid::analysis::FrfSettings::default_nperseg(r.len())),
             noverlap: a.noverlap,
             window: a.window.into(),
             skip_samples: a.skip_samples,
@@ -392,7 +392,7 @@ pub fn frf(a: FrfArgs) -> Result<()> {
         }
         Err(e) => println!("plant resonance peaks: not searched ({e})"),
     }
-    write_analysis(&a.out, &res)?;
+    write_analysis(&a.out, &res, a.force)?;
     println!("written: {}", a.out.display());
     Ok(())
 }
@@ -556,11 +556,9 @@ fn frf_local(a: &FrfArgs, r: &[f64], u: &[f64], y: &[f64], fs: f64) -> Result<()
             rel.len()
         );
     }
-    ensure_parent(&a.out)?;
     let stds: Vec<Option<Vec<f64>>> = [&t_ry, &t_ru, &plant].iter().map(|x| x.std()).collect();
     let fs_col = vec![fs; f.len()];
-    write_frf_csv_with(
-        &a.out,
+    let bytes = frf_csv_bytes(
         &f,
         &[
             FrfColumn {
@@ -581,6 +579,7 @@ fn frf_local(a: &FrfArgs, r: &[f64], u: &[f64], y: &[f64], fs: f64) -> Result<()
         ],
         &[("fs_hz", &fs_col)],
     )?;
+    write_file(&a.out, &bytes, a.force)?;
     println!("written: {}", a.out.display());
     Ok(())
 }
@@ -628,12 +627,17 @@ pub struct AmplitudeArgs {
     /// Noise seed (twin mode).
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Band of the averages, Hz.
-    #[arg(long, value_parser = parse_band, default_value = "10,1000")]
-    band: (f64, f64),
+    /// Band of the FRFs and of the averages, Hz (default: on the twin the seed paper's 10–1000
+    /// Hz; with --files derived from the excitation, the lines within 10 dB of its strongest for
+    /// the FRF and 3 dB for the averages; docs/frf.md).
+    #[arg(long, value_parser = parse_band)]
+    band: Option<(f64, f64)>,
     /// Output CSV of the figures.
     #[arg(long, default_value = "amplitude_study.csv")]
     out: PathBuf,
+    /// Replace the output file if it exists.
+    #[arg(long)]
+    force: bool,
 }
 
 #[derive(Args)]
@@ -650,15 +654,19 @@ pub struct OperatingPointArgs {
     /// Noise seed.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Band of the FRFs, Hz.
-    #[arg(long, value_parser = parse_band, default_value = "10,2000")]
-    band: (f64, f64),
+    /// Band of the FRFs, Hz (default 10–2000 Hz, the seed's: the excitation's own band reaches
+    /// ≈ 3 kHz, where the twin's plant is below the sensor noise).
+    #[arg(long, value_parser = parse_band)]
+    band: Option<(f64, f64)>,
     /// Output CSV of the deviations per case and band.
     #[arg(long, default_value = "operating_point_study.csv")]
     out: PathBuf,
     /// Output CSV of the plant FRF magnitudes of all cases (f_hz, then |P| and phase per case).
     #[arg(long, default_value = "operating_point_frf.csv")]
     frf_out: PathBuf,
+    /// Replace the output files if they exist.
+    #[arg(long)]
+    force: bool,
 }
 
 fn load_config(p: &Option<PathBuf>) -> Result<TwinConfig> {
@@ -672,15 +680,12 @@ fn load_config(p: &Option<PathBuf>) -> Result<TwinConfig> {
     }
 }
 
-fn write_rows<T: serde::Serialize>(path: &Path, rows: &[T]) -> Result<()> {
-    ensure_parent(path)?;
-    let mut w = csv::Writer::from_path(path)
-        .with_context(|| format!("cannot create {}", path.display()))?;
+fn rows_csv<T: serde::Serialize>(rows: &[T]) -> Result<Vec<u8>> {
+    let mut w = csv::Writer::from_writer(Vec::new());
     for r in rows {
         w.serialize(r)?;
     }
-    w.flush()?;
-    Ok(())
+    w.into_inner().map_err(|e| anyhow::anyhow!("{}", e.error()))
 }
 
 pub fn study(cmd: StudyCmd) -> Result<()> {
@@ -698,6 +703,7 @@ fn mode(m: crate::ModeArg) -> Mode {
 }
 
 fn amplitude(a: AmplitudeArgs) -> Result<()> {
+    OutputSet::check(&a.out, a.force)?;
     if let Some(l) = a
         .levels
         .iter()
@@ -719,7 +725,7 @@ fn amplitude(a: AmplitudeArgs) -> Result<()> {
             mode: mode(a.mode),
             seed: a.seed,
             skip_periods: a.skip_periods,
-            band: a.band,
+            band: a.band.or(Some(ambid_core::frf::quality::DEFAULT_BAND)),
             noise: true,
         };
         amplitude_on_twin(&study)?
@@ -752,8 +758,8 @@ fn amplitude(a: AmplitudeArgs) -> Result<()> {
             None => None,
         };
         let mut settings = FrfSettings::periodic(a.period_samples, a.skip_periods);
-        settings.band = Some(a.band);
-        settings.quality_band = Some(a.band);
+        settings.band = a.band;
+        settings.quality_band = a.band;
         amplitude_from_records(
             &records,
             fs,
@@ -784,12 +790,14 @@ fn amplitude(a: AmplitudeArgs) -> Result<()> {
         None => println!("no level recommended"),
     }
     println!("({})", out.reasoning);
-    write_rows(&a.out, &out.rows)?;
+    write_file(&a.out, &rows_csv(&out.rows)?, a.force)?;
     println!("written: {}", a.out.display());
     Ok(())
 }
 
 fn operating_point(a: OperatingPointArgs) -> Result<()> {
+    OutputSet::check(&a.out, a.force)?;
+    OutputSet::check(&a.frf_out, a.force)?;
     let nominal = load_config(&a.config)?;
     let cases = seed_cases(&nominal);
     let out = operating_point_on_twin(
@@ -802,7 +810,7 @@ fn operating_point(a: OperatingPointArgs) -> Result<()> {
         mode(a.mode),
         a.seed,
         1,
-        a.band,
+        Some(a.band.unwrap_or((10.0, 2000.0))),
     )?;
     println!(
         "{:>10} {:>10} {:>14} {:>14} {:>10}",
@@ -819,11 +827,10 @@ fn operating_point(a: OperatingPointArgs) -> Result<()> {
             d.max_abs_db_dev
         );
     }
-    write_rows(&a.out, &out.deviations)?;
+    let mut set = OutputSet::new(a.force);
+    set.write(&a.out, &rows_csv(&out.deviations)?)?;
     // overlay file
-    ensure_parent(&a.frf_out)?;
-    let mut w = csv::Writer::from_path(&a.frf_out)
-        .with_context(|| format!("cannot create {}", a.frf_out.display()))?;
+    let mut w = csv::Writer::from_writer(Vec::new());
     let mut header = vec!["f_hz".to_string()];
     for c in &out.cases {
         header.push(format!("{}_mag", c.name));
@@ -839,7 +846,11 @@ fn operating_point(a: OperatingPointArgs) -> Result<()> {
         }
         w.write_record(&row)?;
     }
-    w.flush()?;
+    let overlay = w
+        .into_inner()
+        .map_err(|e| anyhow::anyhow!("{}", e.error()))?;
+    set.write(&a.frf_out, &overlay)?;
+    set.commit()?;
     println!("written: {}, {}", a.out.display(), a.frf_out.display());
     Ok(())
 }

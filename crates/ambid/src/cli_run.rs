@@ -1,6 +1,6 @@
 //! `ambid run` and `ambid init`: the seed workflow end to end.
 
-use ambid::io::output::OutputDir;
+use ambid::io::output::{write_file, OutputDir};
 use ambid::workflow::{self, Failure, FailureClass, Progress, Step, Verbosity, WorkflowConfig};
 use anyhow::Result;
 use clap::Args;
@@ -14,7 +14,8 @@ pub struct RunArgs {
     /// Output directory (report.html, summary.json, figures/, tables/, models/).
     #[arg(long, default_value = "ambid-report")]
     out: PathBuf,
-    /// Replace the output directory if it exists.
+    /// Replace the output directory if it exists (never `/`, the home or current directory,
+    /// an ancestor of it, or a directory holding an input file).
     #[arg(long)]
     force: bool,
     /// Run only these steps (comma-separated; overrides the file's `steps`).
@@ -33,7 +34,7 @@ pub struct InitArgs {
     /// Where to write the example workflow file.
     #[arg(default_value = "workflow.toml")]
     path: PathBuf,
-    /// Overwrite an existing file.
+    /// Replace an existing file.
     #[arg(long)]
     force: bool,
 }
@@ -77,8 +78,27 @@ pub fn run(a: RunArgs) -> Result<()> {
             .unwrap_or_else(|| PathBuf::from("--steps"));
         cfg.check(&path).map_err(Failure::from)?;
     }
-    // refuse to overwrite before spending any time
-    OutputDir::check(&a.out, a.force).map_err(Failure::from)?;
+    // refuse to overwrite (or to delete a directory holding our inputs) before spending any time
+    let inputs: Vec<PathBuf> = a
+        .workflow
+        .iter()
+        .cloned()
+        .chain(
+            [
+                &cfg.twin.config,
+                &cfg.data.identification,
+                &cfg.data.validation,
+                &cfg.data.noise,
+                &cfg.data.reconstruction,
+                &cfg.data.controller,
+            ]
+            .into_iter()
+            .flatten()
+            .map(|p| base.join(p)),
+        )
+        .collect();
+    let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
+    OutputDir::check_with_inputs(&a.out, a.force, &inputs).map_err(Failure::from)?;
     let verbosity = if a.quiet {
         Verbosity::Quiet
     } else if a.verbose {
@@ -103,38 +123,7 @@ pub fn run(a: RunArgs) -> Result<()> {
 }
 
 pub fn init(a: InitArgs) -> Result<()> {
-    if a.path.exists() && !a.force {
-        return Err(Failure {
-            class: FailureClass::Output,
-            error: anyhow::anyhow!(
-                "{} already exists: choose another path, or pass --force to overwrite it",
-                a.path.display()
-            ),
-        }
-        .into());
-    }
-    let parent = a
-        .path
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .map_or_else(|| PathBuf::from("."), Path::to_path_buf);
-    let tmp = parent.join(format!(
-        ".{}.tmp-{}",
-        a.path
-            .file_name()
-            .map_or("workflow".into(), |s| s.to_string_lossy()),
-        std::process::id()
-    ));
-    let write = std::fs::write(&tmp, workflow::config::EXAMPLE)
-        .and_then(|_| std::fs::rename(&tmp, &a.path));
-    if let Err(e) = write {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(Failure {
-            class: FailureClass::Output,
-            error: anyhow::anyhow!("{}: {e}", a.path.display()),
-        }
-        .into());
-    }
+    write_file(&a.path, workflow::config::EXAMPLE.as_bytes(), a.force).map_err(Failure::from)?;
     println!(
         "written: {} (edit it, then `ambid run {}`)",
         a.path.display(),

@@ -3,13 +3,13 @@
 
 use ambid::io::csv::read_frf_csv;
 use ambid::io::model::{read_kalman_gain, read_model_json};
-use ambid::io::{read_controller, read_time_csv, write_time_csv};
+use ambid::io::{read_controller, read_time_csv, time_csv_to, OutputSet};
 use ambid::validation::{
     consistency, innovation_residuals, innovation_summary, residual_summary, validate_closed_loop,
     MeasuredLoop, ValidationSettings,
 };
 use ambid_core::estimate::arx::fit_percent;
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Args;
 use serde_json::json;
 use std::path::PathBuf;
@@ -54,12 +54,26 @@ pub struct ValidateArgs {
     /// --structure ss` with the prediction focus stores K); u is the recorded plant input.
     #[arg(long)]
     k_step: Option<usize>,
+    /// How the simulated loop and the predictors start: from the initial state that best explains
+    /// the record (the loop was running before the first sample; MATLAB `compare`'s default) or
+    /// from rest.
+    #[arg(long, value_enum, default_value_t = crate::cli_fit::X0Arg::Estimate)]
+    x0: crate::cli_fit::X0Arg,
     /// Output directory (summary.json, timeseries.csv, residuals.csv).
     #[arg(long, default_value = "validation")]
     out: PathBuf,
+    /// Replace those files if they exist (other files in the directory are left alone).
+    #[arg(long)]
+    force: bool,
 }
 
+/// The files `validate` writes into `--out`.
+const VALIDATE_FILES: [&str; 3] = ["timeseries.csv", "residuals.csv", "summary.json"];
+
 pub fn validate(a: ValidateArgs) -> Result<()> {
+    for f in VALIDATE_FILES {
+        OutputSet::check(&a.out.join(f), a.force)?;
+    }
     let model = read_model_json(&a.model)?;
     let ctrl = read_controller(&a.controller)?;
     let d = read_time_csv(&a.data, a.fs)?;
@@ -79,6 +93,7 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
         skip: a.skip,
         lags: a.lags,
         windows: a.windows,
+        initial_state: a.x0.core(),
         ..ValidationSettings::default()
     };
     let k0 = a.skip;
@@ -146,28 +161,36 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
                 .into());
             }
             let kmat = faer::Mat::from_fn(kg.len(), 1, |i, _| kg[i]);
-            let p = ambid_core::validate::predict::predict_k(&model, kmat.as_ref(), y, u, k)?;
+            let (p, _) = ambid_core::validate::predict::predict_k_with(
+                &model,
+                kmat.as_ref(),
+                y,
+                u,
+                k,
+                settings.initial_state,
+            )?;
             Some((k, fit_percent(&y[k0..], &p[k0..])?))
         }
         None => None,
     };
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("cannot create {}", a.out.display()))?;
+    let mut set = OutputSet::new(a.force);
     let t: Vec<f64> = (0..y.len()).map(|k| k as f64 * ts).collect();
     let e_full: Vec<f64> = y.iter().zip(&sim.y).map(|(a, b)| a - b).collect();
-    write_time_csv(
-        &a.out.join("timeseries.csv"),
-        &[
-            ("t", &t),
-            ("y", y),
-            ("y_sim", &sim.y),
-            ("error", &e_full),
-            ("u", u),
-            ("u_sim", &sim.u),
-        ],
-    )?;
+    set.write_with(&a.out.join(VALIDATE_FILES[0]), |w| {
+        time_csv_to(
+            w,
+            &[
+                ("t", &t),
+                ("y", y),
+                ("y_sim", &sim.y),
+                ("error", &e_full),
+                ("u", u),
+                ("u_sim", &sim.u),
+            ],
+        )
+    })?;
     let ind = res.independence.as_ref();
-    let mut wtr = ::csv::Writer::from_path(a.out.join("residuals.csv"))?;
+    let mut wtr = ::csv::Writer::from_writer(Vec::new());
     wtr.write_record([
         "lag",
         "autocorrelation",
@@ -191,13 +214,18 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
             ind.map_or(String::new(), |c| c.bound.to_string()),
         ])?;
     }
-    wtr.flush()?;
+    let residuals = wtr
+        .into_inner()
+        .map_err(|e| anyhow::anyhow!("{}", e.error()))?;
+    set.write(&a.out.join(VALIDATE_FILES[1]), &residuals)?;
     let worst = full.worst_window();
     let summary = json!({
         "model": a.model.display().to_string(),
         "data": a.data.display().to_string(),
         "controller": ctrl.description(),
         "samples_measured": y.len() - k0,
+        "initial_state": settings.initial_state.name(),
+        "initial_state_values": full.initial_state,
         "fit_y_pct": fit_y, "fit_u_pct": fit_u, "rmse_y": rmse, "max_error_y": max_err,
         "windows": full.windows,
         "worst_window": worst,
@@ -212,11 +240,12 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
         "innovation_residuals": innovations.as_ref().map(|(t, input)| json!({"tested_against": input, "tests": t})),
         "residuals_tested_against": v.residual_input,
     });
-    std::fs::write(
-        a.out.join("summary.json"),
-        serde_json::to_string_pretty(&summary)?,
+    set.write(
+        &a.out.join(VALIDATE_FILES[2]),
+        serde_json::to_string_pretty(&summary)?.as_bytes(),
     )?;
-    println!("closed-loop validation on {} samples (first {k0} skipped): fit y {fit_y:.2} %, fit u {fit_u:.2} %, RMSE y {rmse:.3e}, max |error| {max_err:.3e}", y.len() - k0);
+    set.commit()?;
+    println!("closed-loop validation on {} samples (first {k0} skipped, loop started from the {} initial state): fit y {fit_y:.2} %, fit u {fit_u:.2} %, RMSE y {rmse:.3e}, max |error| {max_err:.3e}", y.len() - k0, if settings.initial_state == ambid_core::validate::predict::InitialState::Estimate { "estimated" } else { "zero" });
     if let Some(wf) = worst {
         println!(
             "worst window {:.3}–{:.3} s: fit y {:.1} %",

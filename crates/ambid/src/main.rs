@@ -3,7 +3,7 @@
 
 use ambid::comparison::Compared;
 use ambid::experiment::{self, ExcitationKind, ExcitationPlan, Experiment};
-use ambid::io::{write_frf_csv, write_time_csv, FrfColumn};
+use ambid::io::{frf_csv_bytes, time_csv_bytes, time_csv_to, FrfColumn, OutputSet};
 use ambid_core::signal::{
     amplitude_spectrum, autocorrelation, ChirpSpec, Distribution, ExcitationSpec, Grid,
     MultisineSpec, NoiseSpec, Phases, PrbsSpec, Sweep,
@@ -111,6 +111,9 @@ struct ExciteArgs {
     /// periodic signals) to this CSV.
     #[arg(long, global = true)]
     autocorr: Option<PathBuf>,
+    /// Replace output files that exist (all outputs are written as one set, or none).
+    #[arg(long, global = true)]
+    force: bool,
 }
 
 #[derive(Subcommand)]
@@ -258,6 +261,9 @@ struct CompareArgs {
     /// Output directory for waveforms.csv, spectra.csv, autocorr.csv and comparison.json.
     #[arg(long, default_value = "out/excitation")]
     out: PathBuf,
+    /// Replace those files if they exist (other files in the directory are left alone).
+    #[arg(long)]
+    force: bool,
 }
 
 #[derive(Args)]
@@ -345,9 +351,12 @@ struct SimulateArgs {
     /// `ambid excite multisine --phases random --realisations M`.
     #[arg(long, conflicts_with_all = ["excitation", "reference_chirp"])]
     excitation_file: Option<PathBuf>,
-    /// Output directory.
+    /// Output directory (data.csv, truth.csv, meta.json, controller.toml).
     #[arg(long, default_value = "out")]
     out: PathBuf,
+    /// Replace those files if they exist (other files in the directory are left alone).
+    #[arg(long)]
+    force: bool,
 }
 
 fn main() {
@@ -505,13 +514,21 @@ fn excite(a: ExciteArgs) -> Result<()> {
         }),
     };
     let report = spec.report(ts)?;
+    // refuse to overwrite before any work
+    for p in [&a.out, &a.spectrum, &a.autocorr].into_iter().flatten() {
+        OutputSet::check(p, a.force)?;
+    }
+    let mut set = OutputSet::new(a.force);
+    let mut realisation_files = Vec::new();
     if a.out.is_some() || a.spectrum.is_some() || a.autocorr.is_some() {
         let e = spec.generate(ts)?;
         match (&a.out, realisations) {
-            (Some(out), Some(m)) => write_realisations(&spec, ts, m, out)?,
+            (Some(out), Some(m)) => {
+                realisation_files = write_realisations(&mut set, &spec, ts, m, out)?;
+            }
             (Some(out), None) => {
-                ensure_parent(out)?;
-                write_time_csv(out, &[("t", &e.times()), ("r", &e.values)])?;
+                let t = e.times();
+                set.write_with(out, |w| time_csv_to(w, &[("t", &t), ("r", &e.values)]))?;
             }
             _ => {}
         }
@@ -519,17 +536,19 @@ fn excite(a: ExciteArgs) -> Result<()> {
         let period = e.period(0).unwrap_or(&e.values);
         if let Some(path) = &a.spectrum {
             let (f, amp) = amplitude_spectrum(period, ts)?;
-            ensure_parent(path)?;
-            write_time_csv(path, &[("f_hz", &f), ("amplitude", &amp)])?;
+            set.write(path, &time_csv_bytes(&[("f_hz", &f), ("amplitude", &amp)])?)?;
         }
         if let Some(path) = &a.autocorr {
             let max_lag = (period.len() - 1).min(MAX_AUTOCORR_LAG);
             let circular = e.periods > 1 || e.period_samples < e.values.len();
             let rho = autocorrelation(period, max_lag, circular)?;
             let lag: Vec<f64> = (0..rho.len()).map(|k| k as f64 * ts).collect();
-            ensure_parent(path)?;
-            write_time_csv(path, &[("lag_s", &lag), ("r", &rho)])?;
+            set.write(path, &time_csv_bytes(&[("lag_s", &lag), ("r", &rho)])?)?;
         }
+    }
+    set.commit()?;
+    for p in &realisation_files {
+        println!("written: {}", p.display());
     }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -552,8 +571,15 @@ fn excite(a: ExciteArgs) -> Result<()> {
 }
 
 /// Writes `m` random-phase realisations of a multisine (same grid, phases from seed + 1 …
-/// seed + m, the convention of `ambid::bla::run_level`) next to `out` as `<stem>_m<k>.<ext>`.
-fn write_realisations(spec: &ExcitationSpec, ts: f64, m: usize, out: &Path) -> Result<()> {
+/// seed + m, the convention of `ambid::bla::run_level`) next to `out` as `<stem>_m<k>.<ext>`,
+/// staged in `set`; returns their paths.
+fn write_realisations(
+    set: &mut OutputSet,
+    spec: &ExcitationSpec,
+    ts: f64,
+    m: usize,
+    out: &Path,
+) -> Result<Vec<PathBuf>> {
     let ExcitationSpec::Multisine(ms) = spec else {
         return Err(ambid::workflow::usage(anyhow::anyhow!(
             "--realisations applies to a multisine"
@@ -581,7 +607,7 @@ fn write_realisations(spec: &ExcitationSpec, ts: f64, m: usize, out: &Path) -> R
     let ext = out
         .extension()
         .map_or_else(|| "csv".into(), |s| s.to_string_lossy().into_owned());
-    ensure_parent(out)?;
+    let mut paths = Vec::with_capacity(m);
     for k in 0..m {
         let period = ambid_core::frf::bla::random_phase_period(
             &bins,
@@ -592,42 +618,52 @@ fn write_realisations(spec: &ExcitationSpec, ts: f64, m: usize, out: &Path) -> R
         let r: Vec<f64> = (0..ms.periods * n).map(|t| period[t % n]).collect();
         let t: Vec<f64> = (0..r.len()).map(|j| j as f64 * ts).collect();
         let path = out.with_file_name(format!("{stem}_m{}.{ext}", k + 1));
-        write_time_csv(&path, &[("t", &t), ("r", &r)])?;
-        println!("written: {}", path.display());
+        set.write_with(&path, |w| time_csv_to(w, &[("t", &t), ("r", &r)]))?;
+        paths.push(path);
     }
-    Ok(())
+    Ok(paths)
 }
 
 /// Longest autocorrelation lag written by `excite --autocorr` (samples).
 const MAX_AUTOCORR_LAG: usize = 20_000;
 
 fn compare(a: CompareArgs) -> Result<()> {
+    let names = [
+        "waveforms.csv",
+        "spectra.csv",
+        "autocorr.csv",
+        "comparison.json",
+    ];
+    for n in names {
+        OutputSet::check(&a.out.join(n), a.force)?;
+    }
     let c = ambid::comparison::compare(a.fs, a.level, a.seed, a.max_lag)?;
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("cannot create {}", a.out.display()))?;
+    let mut set = OutputSet::new(a.force);
     let t: Vec<f64> = (0..c.signals[0].values.len())
         .map(|k| k as f64 * c.ts)
         .collect();
     let lag: Vec<f64> = (0..c.signals[0].autocorr.len())
         .map(|k| k as f64 * c.ts)
         .collect();
-    let write = |file: &str, first: (&str, &[f64]), pick: fn(&Compared) -> &[f64]| {
+    let mut write = |file: &str, first: (&str, &[f64]), pick: fn(&Compared) -> &[f64]| {
         let mut cols: Vec<(&str, &[f64])> = vec![first];
         cols.extend(c.signals.iter().map(|s| (s.name, pick(s))));
-        write_time_csv(&a.out.join(file), &cols)
+        set.write(&a.out.join(file), &time_csv_bytes(&cols)?)
+            .map_err(anyhow::Error::from)
     };
-    write("waveforms.csv", ("t", &t), |s| &s.values)?;
-    write("spectra.csv", ("f_hz", &c.f_hz), |s| &s.spectrum)?;
-    write("autocorr.csv", ("lag_s", &lag), |s| &s.autocorr)?;
+    write(names[0], ("t", &t), |s| &s.values)?;
+    write(names[1], ("f_hz", &c.f_hz), |s| &s.spectrum)?;
+    write(names[2], ("lag_s", &lag), |s| &s.autocorr)?;
     let table: serde_json::Map<String, serde_json::Value> = c
         .signals
         .iter()
         .map(|s| Ok((s.name.to_string(), serde_json::to_value(&s.report)?)))
         .collect::<Result<_>>()?;
-    std::fs::write(
-        a.out.join("comparison.json"),
-        serde_json::to_string_pretty(&table)?,
+    set.write(
+        &a.out.join(names[3]),
+        serde_json::to_string_pretty(&table)?.as_bytes(),
     )?;
+    set.commit()?;
     println!(
         "{:<10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>7}",
         "signal", "f_min Hz", "f_max Hz", "Δf Hz", "rms A", "peak A", "crest"
@@ -643,13 +679,6 @@ fn compare(a: CompareArgs) -> Result<()> {
         "written: {}/{{waveforms,spectra,autocorr}}.csv, comparison.json",
         a.out.display()
     );
-    Ok(())
-}
-
-fn ensure_parent(p: &Path) -> Result<()> {
-    if let Some(d) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(d).with_context(|| format!("cannot create {}", d.display()))?;
-    }
     Ok(())
 }
 
@@ -706,6 +735,14 @@ fn info(a: TwinArgs) -> Result<()> {
 }
 
 fn simulate(a: SimulateArgs) -> Result<()> {
+    let data_path = a.out.join("data.csv");
+    let truth_path = a.out.join("truth.csv");
+    let meta_path = a.out.join("meta.json");
+    let ctrl_path = a.out.join("controller.toml");
+    // refuse to overwrite before any work
+    for p in [&data_path, &truth_path, &meta_path, &ctrl_path] {
+        OutputSet::check(p, a.force)?;
+    }
     let mut cfg = twin_config(&a.twin)?;
     if let Some(integ) = a.integrator {
         cfg.simulation.integrator = match integ {
@@ -788,8 +825,6 @@ fn simulate(a: SimulateArgs) -> Result<()> {
             .simulate(&vec![0.0; w.len()], &opts)
             .context("simulating the closed loop with the reference")?;
     }
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("cannot create {}", a.out.display()))?;
     let rec = &out.record;
     let mut cols: Vec<(&str, &[f64])> = vec![
         ("t", &rec.t),
@@ -802,13 +837,11 @@ fn simulate(a: SimulateArgs) -> Result<()> {
     if let Some(b) = &rec.b {
         cols.extend([("u_b", &b.u[..]), ("i_b", &b.i[..]), ("y_b", &b.y[..])]);
     }
-    let data_path = a.out.join("data.csv");
-    write_time_csv(&data_path, &cols)?;
+    let mut set = OutputSet::new(a.force);
+    set.write_with(&data_path, |w| time_csv_to(w, &cols))?;
     let grid = experiment::log_grid(1.0, 0.5 * out.twin.fs() * 0.999, a.truth_points);
     let truth = experiment::truth(&out.twin, &grid)?;
-    let truth_path = a.out.join("truth.csv");
-    write_frf_csv(
-        &truth_path,
+    let truth_bytes = frf_csv_bytes(
         &truth.f_hz,
         &[
             FrfColumn {
@@ -832,7 +865,9 @@ fn simulate(a: SimulateArgs) -> Result<()> {
                 std: None,
             },
         ],
+        &[],
     )?;
+    set.write(&truth_path, &truth_bytes)?;
     let meta = serde_json::json!({
         "excitation": match &a.excitation_file {
             Some(p) => serde_json::json!({ "file": p.display().to_string() }),
@@ -844,14 +879,12 @@ fn simulate(a: SimulateArgs) -> Result<()> {
         "simulation": rec.meta,
         "twin": exp.twin,
     });
-    let meta_path = a.out.join("meta.json");
-    std::fs::write(&meta_path, serde_json::to_string_pretty(&meta)?)?;
-    let ctrl_path = a.out.join("controller.toml");
-    std::fs::write(
+    set.write(&meta_path, serde_json::to_string_pretty(&meta)?.as_bytes())?;
+    set.write(
         &ctrl_path,
-        ambid::io::controller::controller_toml_from_twin(&exp.twin),
-    )
-    .with_context(|| format!("cannot write {}", ctrl_path.display()))?;
+        ambid::io::controller::controller_toml_from_twin(&exp.twin).as_bytes(),
+    )?;
+    set.commit()?;
     println!(
         "simulated {} samples ({:.3} s at {} Hz), {:?} mode",
         rec.t.len(),

@@ -208,8 +208,13 @@ pub struct TwinAmplitudeStudy {
     pub seed: u64,
     /// Leading periods skipped.
     pub skip_periods: usize,
-    /// Band of the averages \[Hz\].
-    pub band: (f64, f64),
+    /// Band of the FRF and of the averages \[Hz\]; `None`: both derived from the excitation
+    /// (`ambid_core::frf::band`). Default: the seed paper's study band 10–1000 Hz, because the
+    /// study compares averages over one band across levels and the excitation's band (to ≈ 3 kHz
+    /// for the seed PRBS) holds lines where the plant is below the noise at every level, whose
+    /// variance then dominates the averages (no level qualifies). Records from files default to
+    /// the derived band (`ambid study amplitude --files`, the workflow).
+    pub band: Option<(f64, f64)>,
     /// Sensor noise on (off: no noise-only record, no SNR).
     pub noise: bool,
 }
@@ -223,7 +228,7 @@ impl Default for TwinAmplitudeStudy {
             mode: Mode::Nonlinear,
             seed: 1,
             skip_periods: 1,
-            band: ambid_core::frf::quality::DEFAULT_BAND,
+            band: Some(ambid_core::frf::quality::DEFAULT_BAND),
             noise: true,
         }
     }
@@ -279,8 +284,8 @@ pub fn amplitude_on_twin(study: &TwinAmplitudeStudy) -> Result<AmplitudeOutcome>
     };
     let twin = twin.context("no level given")?;
     let mut settings = FrfSettings::periodic(period, study.skip_periods);
-    settings.band = Some(study.band);
-    settings.quality_band = Some(study.band);
+    settings.band = study.band;
+    settings.quality_band = study.band;
     settings.i_sat = Some(twin.i_sat());
     let truth = |f: &[f64]| -> Result<Vec<ambid_core::c64>> { Ok(twin.plant_frf(f)?) };
     amplitude_from_records(
@@ -324,13 +329,49 @@ pub fn seed_cases(nominal: &TwinConfig) -> Vec<OperatingCase> {
     ]
 }
 
-/// Frequency bands of the deviation summary \[Hz\]: low frequency, resonance region, high
-/// frequency.
-pub const DEVIATION_BANDS: [(&str, f64, f64); 3] = [
-    ("low", 10.0, 80.0),
-    ("resonance", 80.0, 900.0),
-    ("high", 900.0, 2000.0),
-];
+/// The bands of the deviation summary \[Hz\], derived from the **nominal** plant estimate (no
+/// rig's numbers): `low` from the first line to the corner $f_c$ where $|P|$ has fallen 6 dB below
+/// its low-frequency level (the median of the lowest 5 % of the lines: where the plant's flat,
+/// stiffness-like part, $\approx k_i/k_x$ for a single unstable mass, gives way to the mass line;
+/// changes of $k_i$ and $k_x$ show below it), `resonance` from $f_c$ to 1.2 × the highest resonance peak found on the
+/// lines known to ±10 % ([`ambid_core::frf::resonance::find_resonances_reliable`]), `high` from
+/// there to the last line. Without a peak the resonance region is dropped (`low` and `high`);
+/// without a 6 dB fall, one band `all`.
+pub fn deviation_bands(nominal: &Frd) -> Vec<(String, f64, f64)> {
+    use ambid_core::frf::resonance::{find_resonances_reliable, ResonanceOptions};
+    let (f, g) = (nominal.f_hz(), nominal.values());
+    let (Some(&f0), Some(&f1)) = (f.first(), f.last()) else {
+        return Vec::new();
+    };
+    let n_low = (f.len() / 20).max(1);
+    let low_level = median(g[..n_low].iter().map(|v| v.norm()).collect());
+    let corner = (0..f.len())
+        .find(|&k| g[k].norm() <= 0.5 * low_level)
+        .map(|k| f[k]);
+    let top_peak = find_resonances_reliable(nominal, &ResonanceOptions::default(), 0.1)
+        .ok()
+        .and_then(|(peaks, _)| {
+            peaks
+                .iter()
+                .map(|p| p.f_hz)
+                .filter(|&fp| corner.is_none_or(|c| fp > c))
+                .fold(None, |m: Option<f64>, x| Some(m.map_or(x, |m| m.max(x))))
+        });
+    let Some(fc) = corner else {
+        return vec![("all".into(), f0, f1)];
+    };
+    let mut bands = vec![("low".to_string(), f0, fc)];
+    match top_peak.map(|p| (1.2 * p).min(f1)) {
+        Some(fh) if fh > fc => {
+            bands.push(("resonance".into(), fc, fh));
+            if fh < f1 {
+                bands.push(("high".into(), fh, f1));
+            }
+        }
+        _ => bands.push(("high".into(), fc, f1)),
+    }
+    bands
+}
 
 /// Deviation of one case's plant FRF from the nominal one in one band.
 #[derive(Debug, Clone, Serialize)]
@@ -367,7 +408,7 @@ pub struct OperatingPointOutcome {
 }
 
 /// Deviation of every case's plant FRF from the first (nominal) one per band of
-/// [`DEVIATION_BANDS`]: median relative deviation, largest magnitude (dB) and phase deviation, and,
+/// [`deviation_bands`] (of the nominal estimate): median relative deviation, largest magnitude (dB) and phase deviation, and,
 /// with `truths` (one response per case on the same lines), the same median for the truths.
 ///
 /// # Errors
@@ -396,8 +437,10 @@ pub fn band_deviations(
         }
     }
     let mut deviations = Vec::new();
+    let bands = deviation_bands(nom);
     for (j, name) in names.iter().enumerate().skip(1) {
-        for &(bname, lo, hi) in &DEVIATION_BANDS {
+        for (bname, lo, hi) in &bands {
+            let (lo, hi) = (*lo, *hi);
             let idx: Vec<usize> = (0..f.len()).filter(|&k| f[k] >= lo && f[k] <= hi).collect();
             if idx.is_empty() {
                 continue;
@@ -425,7 +468,7 @@ pub fn band_deviations(
             });
             deviations.push(BandDeviation {
                 case: name.clone(),
-                band: bname.into(),
+                band: bname.clone(),
                 f_min_hz: lo,
                 f_max_hz: hi,
                 median_rel_dev: median(rel),
@@ -484,7 +527,8 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
-/// Runs the seed experiment at each operating point on the twin and compares with nominal.
+/// Runs the seed experiment at each operating point on the twin and compares with nominal; the
+/// FRF band `band`, or (`None`) the one derived from the excitation.
 pub fn operating_point_on_twin(
     nominal: &TwinConfig,
     cases: &[OperatingCase],
@@ -492,7 +536,7 @@ pub fn operating_point_on_twin(
     mode: Mode,
     seed: u64,
     skip_periods: usize,
-    band: (f64, f64),
+    band: Option<(f64, f64)>,
 ) -> Result<OperatingPointOutcome> {
     if cases.len() < 2 {
         bail!("an operating-point study needs the nominal case and at least one other");
@@ -514,8 +558,8 @@ pub fn operating_point_on_twin(
         })
         .with_context(|| format!("operating point `{}`", case.name))?;
         let mut settings = FrfSettings::periodic(out.excitation.period_samples, skip_periods);
-        settings.band = Some(band);
-        settings.quality_band = Some(band);
+        settings.band = band;
+        settings.quality_band = band;
         settings.i_sat = Some(out.twin.i_sat());
         let rec = &out.record;
         let record = Record {

@@ -25,9 +25,10 @@ use ambid_core::c64;
 use ambid_core::estimate::arx::fit_percent;
 use ambid_core::frf::band::{iso_search, BandRule, IsoSearch};
 use ambid_core::lti::{Frd, StateSpace};
-use ambid_core::validate::closed_loop::{reconstruct, Reconstruction};
+use ambid_core::validate::closed_loop::{reconstruct_with, Reconstruction};
 use ambid_core::validate::iso::{sensitivity_zone, IsoVerdict, IsoZones};
 use ambid_core::validate::margins::{margins, Margins};
+use ambid_core::validate::predict::InitialState;
 use ambid_core::validate::pz::{PzAnalysis, PzOptions};
 use ambid_core::validate::residuals::{analyze, analyze_output_error, ResidualTest};
 use anyhow::{bail, Result};
@@ -47,6 +48,10 @@ pub struct ValidationSettings {
     /// Points of the logarithmic frequency grid (0.5 Hz to 0.98 × Nyquist) for the margins and
     /// the model's sensitivity.
     pub grid_points: usize,
+    /// How the simulated loop (and an innovation model's predictor) starts: from the initial
+    /// state that best explains the record (default, MATLAB `compare`'s; the loop was running
+    /// before the first sample) or from rest.
+    pub initial_state: InitialState,
 }
 
 impl Default for ValidationSettings {
@@ -57,6 +62,7 @@ impl Default for ValidationSettings {
             windows: 20,
             zones: IsoZones::default(),
             grid_points: 4000,
+            initial_state: InitialState::Estimate,
         }
     }
 }
@@ -167,7 +173,17 @@ pub fn validate_closed_loop(
             unstable.join(", ")
         );
     }
-    let reconstruction = reconstruct(model, controller, w, r, y, u, s.windows, ts)?;
+    let reconstruction = reconstruct_with(
+        model,
+        controller,
+        w,
+        r,
+        y,
+        u,
+        s.windows,
+        ts,
+        s.initial_state,
+    )?;
     let sim = &reconstruction.simulated;
     let eps: Vec<f64> = y[k0..]
         .iter()
@@ -270,7 +286,14 @@ pub fn innovation_residuals(
         None => bail!("the record has neither an excitation nor a position reference"),
     };
     let km = faer::Mat::from_fn(k_gain.len(), 1, |i, _| k_gain[i]);
-    let yhat = ambid_core::validate::predict::predict_k(model, km.as_ref(), rec.y, rec.u, 1)?;
+    let (yhat, _) = ambid_core::validate::predict::predict_k_with(
+        model,
+        km.as_ref(),
+        rec.y,
+        rec.u,
+        1,
+        s.initial_state,
+    )?;
     let k0 = s.skip.min(rec.y.len());
     let eps: Vec<f64> = rec.y[k0..]
         .iter()

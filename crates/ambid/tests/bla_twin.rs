@@ -141,7 +141,15 @@ fn cli_writes_the_study_and_the_lines() {
     assert!(text.lines().count() > 20);
     // M = 1 is refused with a clear message
     let out = std::process::Command::new(exe)
-        .args(["bla", "--level", "10", "--realisations", "1", "--out"])
+        .args([
+            "bla",
+            "--level",
+            "10",
+            "--realisations",
+            "1",
+            "--force",
+            "--out",
+        ])
         .arg(&lines)
         .output()
         .unwrap();

@@ -184,6 +184,7 @@ fn large_excitation_warns_about_saturation_or_stops_at_touchdown() {
         "2",
         "--out",
         d.to_str().unwrap(),
+        "--force",
     ]);
     assert!(!o.status.success());
     assert!(text(&o).contains("touched down"), "{}", text(&o));

@@ -53,6 +53,7 @@ fn the_file_workflow_gives_every_random_rig_its_true_iso_zone_in_a_band_from_the
     let zones = IsoZones::default();
     let base = tmpdir("rigs");
     let mut worst_dev: f64 = 0.0;
+    let mut welch_errors = Vec::new();
     for rig in 1..=20u64 {
         let (id, va) = (base.join(format!("r{rig}")), base.join(format!("r{rig}v")));
         // a different noise realisation per rig; the validation record as a user would record it
@@ -152,8 +153,69 @@ fn the_file_workflow_gives_every_random_rig_its_true_iso_zone_in_a_band_from_the
             lo <= f_true && f_true <= hi && hi < 4000.0,
             "rig {rig} (Welch): {lo}–{hi}"
         );
+        // `ambid frf` with every default (Welch, its default segment, the band from the
+        // excitation): the plant against the rig's truth on the lines it writes
+        let wcsv = base.join(format!("r{rig}-welch.csv"));
+        let o = ambid(&["frf", s(&id.join("data.csv")), "--out", s(&wcsv)]);
+        assert!(o.status.success(), "{}", text(&o));
+        let body = std::fs::read_to_string(&wcsv).unwrap();
+        let mut lines = body.lines();
+        let head: Vec<&str> = lines.next().unwrap().split(',').collect();
+        let col = |n: &str| head.iter().position(|c| *c == n).unwrap();
+        let (cf, cr, ci, cs) = (
+            col("f_hz"),
+            col("plant_re"),
+            col("plant_im"),
+            col("plant_std"),
+        );
+        let rows: Vec<Vec<f64>> = lines
+            .map(|l| {
+                l.split(',')
+                    .map(|x| x.parse().unwrap_or(f64::NAN))
+                    .collect()
+            })
+            .collect();
+        let f: Vec<f64> = rows.iter().map(|r| r[cf]).collect();
+        let truth = twin.plant_frf(&f).unwrap();
+        // the stated uncertainty holds: the truth inside the 95 % circle (radius √5.99 σ of a
+        // circular complex Gaussian) on ≈ 95 % of the lines
+        let inside = rows
+            .iter()
+            .zip(&truth)
+            .filter(|(r, t)| {
+                ((r[cr] - t.re).powi(2) + (r[ci] - t.im).powi(2)).sqrt() <= 5.99f64.sqrt() * r[cs]
+            })
+            .count() as f64
+            / rows.len() as f64;
+        // and the lines known to ±10 % (σ ≤ 5 % of |P|) are accurate
+        let mut rel: Vec<f64> = rows
+            .iter()
+            .zip(&truth)
+            .filter(|(r, t)| r[cs] <= 0.05 * t.norm())
+            .map(|(r, t)| ((r[cr] - t.re).powi(2) + (r[ci] - t.im).powi(2)).sqrt() / t.norm())
+            .collect();
+        rel.sort_by(f64::total_cmp);
+        let med = rel[rel.len() / 2];
+        welch_errors.push(inside);
+        println!(
+            "        frf (CLI defaults, Welch): {} lines {:.1}–{:.0} Hz, truth inside the 95 % interval on {:.1} %; {} lines known to ±10 %: median plant error {:.3} %",
+            rows.len(),
+            f[0],
+            f[f.len() - 1],
+            100.0 * inside,
+            rel.len(),
+            100.0 * med
+        );
+        assert!(inside > 0.85, "rig {rig}: CLI Welch coverage {inside}");
+        assert!(med < 0.03, "rig {rig}: CLI Welch plant error {med}");
     }
     println!("largest |truth − peak| in half-widths: {worst_dev:.2}");
+    welch_errors.sort_by(f64::total_cmp);
+    println!(
+        "CLI Welch: truth inside the 95 % interval on {:.1} % (worst rig) … {:.1} % (median rig) of the lines",
+        100.0 * welch_errors[0],
+        100.0 * welch_errors[welch_errors.len() / 2]
+    );
 }
 
 #[test]

@@ -80,6 +80,7 @@ fn fit_and_compare_models_on_the_twin_plant_frf() {
             "10:1000",
             "--out",
             s(&held),
+            "--force",
         ];
         args.extend_from_slice(extra);
         let o = ambid(&args);
@@ -202,6 +203,8 @@ fn fit_and_compare_models_on_the_twin_plant_frf() {
         s(&d.join("v/data.csv")),
         "--controller",
         CONTROLLER,
+        "--out",
+        s(&d.join("m10-validation")),
     ]);
     assert!(
         !o.status.success() && text(&o).contains("sample time"),
@@ -225,6 +228,8 @@ fn fit_and_compare_models_on_the_twin_plant_frf() {
         "ss",
         "--order",
         "8",
+        "--out",
+        s(&d.join("never.json")),
     ]);
     assert!(
         !o.status.success() && text(&o).contains("--fs"),
@@ -242,6 +247,8 @@ fn fit_and_compare_models_on_the_twin_plant_frf() {
         "4",
         "--fs",
         "20000",
+        "--out",
+        s(&d.join("never.json")),
     ]);
     assert!(
         !o.status.success() && text(&o).contains("no quantity `nope`"),
@@ -259,6 +266,8 @@ fn fit_and_compare_models_on_the_twin_plant_frf() {
         "0",
         "--fs",
         "20000",
+        "--out",
+        s(&d.join("never.json")),
     ]);
     assert!(!o.status.success(), "{}", text(&o));
 }
@@ -445,6 +454,7 @@ fn the_fit_band_and_sample_rate_come_from_the_frf_file() {
         "8",
         "--out",
         s(&model),
+        "--force",
     ];
     let o = ambid(&args);
     let t = text(&o);

@@ -507,5 +507,5 @@ fn every_command_follows_one_exit_code_rule() {
         ],
         20,
     );
-    expect(&o, 5, &["/proc/nope/m.json"]);
+    expect(&o, 5, &["/proc/nope"]);
 }

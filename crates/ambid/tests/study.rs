@@ -1,5 +1,6 @@
 //! The amplitude and operating-point studies on the twin.
 
+mod common;
 use ambid::experiment::ExcitationPlan;
 use ambid::study::{amplitude_on_twin, operating_point_on_twin, seed_cases, TwinAmplitudeStudy};
 use ambid_twin::{Mode, TwinConfig};
@@ -83,7 +84,7 @@ fn operating_point_study_on_the_twin() {
         Mode::Nonlinear,
         1,
         1,
-        (10.0, 2000.0),
+        Some((10.0, 2000.0)),
     )
     .unwrap();
     for d in &out.deviations {
@@ -130,8 +131,16 @@ fn operating_point_study_from_records_matches_the_twin_run() {
     let nominal = TwinConfig::default();
     let cases: Vec<_> = seed_cases(&nominal).into_iter().take(3).collect();
     let plan = ExcitationPlan::default();
-    let twin = operating_point_on_twin(&nominal, &cases, &plan, Mode::Linear, 5, 1, (10.0, 2000.0))
-        .unwrap();
+    let twin = operating_point_on_twin(
+        &nominal,
+        &cases,
+        &plan,
+        Mode::Linear,
+        5,
+        1,
+        Some((10.0, 2000.0)),
+    )
+    .unwrap();
     let outs: Vec<_> = cases
         .iter()
         .enumerate()
@@ -179,4 +188,59 @@ fn operating_point_study_from_records_matches_the_twin_run() {
     assert!(files.truth_errors.is_empty());
     // bad input: one record only
     assert!(operating_point_from_records(&names[..1], &records[..1], &settings).is_err());
+}
+
+/// The deviation bands come from the nominal estimate, not from the nominal rig's numbers: on 20
+/// random rigs (seed experiment, linear twin, 4 periods) the `low` band ends within ±15 % of the
+/// −6 dB corner of the rig's **true** plant on the same lines, and the `resonance` band holds the
+/// rig's bending-mode frequency.
+#[test]
+fn deviation_bands_follow_each_random_rig() {
+    use ambid::analysis::{analyze, FrfSettings, Record};
+    for rig in 0..20u64 {
+        let out = common::seed_record_on_rig(rig, 40 + rig, 0.1, 4);
+        let twin = &out.twin;
+        let rec = &out.record;
+        let a = analyze(
+            &Record {
+                r: &rec.r,
+                u: &rec.u,
+                y: &rec.y,
+                i: None,
+                fs: twin.fs(),
+            },
+            &FrfSettings::periodic(out.excitation.period_samples, 1),
+            None,
+        )
+        .unwrap();
+        let bands = ambid::study::deviation_bands(&a.frf.plant);
+        // naive oracle: the first line where the true |P| is half its median over the lowest 5 %
+        let f = a.frf.plant.f_hz();
+        let truth: Vec<f64> = twin
+            .plant_frf(f)
+            .unwrap()
+            .iter()
+            .map(|v| v.norm())
+            .collect();
+        let mut lowest = truth[..(f.len() / 20).max(1)].to_vec();
+        lowest.sort_by(f64::total_cmp);
+        let level = lowest[lowest.len() / 2];
+        let fc_true = f[truth.iter().position(|m| *m <= 0.5 * level).unwrap()];
+        let f_bend = ambid_twin::random_rig(rig).unwrap().rotor.bending_freq_hz;
+        let names: Vec<&str> = bands.iter().map(|b| b.0.as_str()).collect();
+        println!(
+            "rig {rig:2}: true corner {fc_true:.1} Hz, bending {f_bend:.0} Hz; bands {bands:.1?}"
+        );
+        assert_eq!(names, ["low", "resonance", "high"], "rig {rig}");
+        let fc = bands[0].2;
+        assert!(
+            (fc - fc_true).abs() <= 0.15 * fc_true,
+            "rig {rig}: corner {fc} vs true {fc_true}"
+        );
+        assert!(
+            bands[1].1 < f_bend && f_bend < bands[1].2,
+            "rig {rig}: bending {f_bend} outside {:?}",
+            bands[1]
+        );
+    }
 }

@@ -424,7 +424,7 @@ quality_band_hz = [10.0, 1000.0]
         ambid_twin::Mode::Linear,
         1,
         1,
-        (10.0, 2000.0),
+        Some((10.0, 2000.0)),
     )
     .unwrap();
     let truth = twin

@@ -2,6 +2,7 @@
 //! the prediction-error method, subspace state-space models, and order selection.
 
 pub mod arx;
+pub mod arx_mimo;
 pub mod freqfit;
 pub mod freqfit_ss;
 pub mod order;

@@ -5,7 +5,8 @@
 //! The excitation $r$ is injected at the controller output, as in the experiment:
 //! $$ u_k = r_k - (C * y)_k, \qquad y_k = (P * u)_k, $$
 //! so $y = T_{ry} r$ with $T_{ry} = P/(1 + PC)$ and $u = S r$ with $S = 1/(1 + PC)$. The closed
-//! loop is formed as a state-space model ([`StateSpace::feedback`]) and simulated from rest; $u$
+//! loop is formed as a state-space model ([`StateSpace::feedback`]) and simulated from rest, or
+//! from the initial state that best explains the record ([`estimate_loop_initial_state`]); $u$
 //! follows from $u = r - C y$. A closed loop that the model makes unstable is reported, not
 //! simulated (its response would diverge): it means the model is wrong near the loop's crossover.
 //!
@@ -25,6 +26,7 @@
 use crate::error::{Error, Result};
 use crate::estimate::arx::fit_percent;
 use crate::lti::StateSpace;
+use crate::validate::predict::InitialState;
 
 /// Output and plant input of the simulated loop.
 #[derive(Debug, Clone, PartialEq)]
@@ -67,6 +69,49 @@ pub fn simulate_loop_with(
     w: Option<&[f64]>,
     r: Option<&[f64]>,
 ) -> Result<LoopResponse> {
+    simulate_loop_from(plant, controller, w, r, None)
+}
+
+/// [`simulate_loop_with`] from the stacked initial state `x0` = (plant states, controller
+/// states) instead of rest (`None`), e.g. the one of [`estimate_loop_initial_state`].
+///
+/// # Errors
+/// As [`simulate_loop_with`]; [`Error::InvalidArgument`] for an `x0` whose length is not the
+/// sum of the two orders.
+pub fn simulate_loop_from(
+    plant: &StateSpace,
+    controller: &StateSpace,
+    w: Option<&[f64]>,
+    r: Option<&[f64]>,
+    x0: Option<&[f64]>,
+) -> Result<LoopResponse> {
+    let n = check_inputs(plant, controller, w, r)?;
+    if let Some(x) = x0 {
+        let nx = plant.order() + controller.order();
+        if x.len() != nx {
+            return Err(Error::invalid(
+                "x0",
+                format!(
+                    "the loop has {nx} states ({} of the plant, {} of the controller), the initial state {}",
+                    plant.order(),
+                    controller.order(),
+                    x.len()
+                ),
+            ));
+        }
+        crate::error::check_finite("x0", x)?;
+    }
+    let lp = Loop::new(plant, controller)?;
+    Ok(lp.run(n, w, r, x0))
+}
+
+/// SISO models and consistent, finite inputs; returns the number of samples.
+fn check_inputs(
+    plant: &StateSpace,
+    controller: &StateSpace,
+    w: Option<&[f64]>,
+    r: Option<&[f64]>,
+) -> Result<usize> {
     for (name, m) in [("plant", plant), ("controller", controller)] {
         if m.ninputs() != 1 || m.noutputs() != 1 {
             return Err(Error::invalid(
@@ -104,57 +149,187 @@ pub fn simulate_loop_with(
             crate::error::check_finite(what, x)?;
         }
     }
-    let t_ry = plant.feedback(controller)?;
-    let rho = t_ry.poles()?.iter().map(|p| p.norm()).fold(0.0, f64::max);
-    if rho >= 1.0 {
-        return Err(Error::Unstable {
-            context: "closed-loop simulation",
-            reason: format!(
-                "the model with this controller gives an unstable closed loop (largest |pole| {rho:.6}); the model is wrong near the loop's crossover, or the controller does not match the data"
-            ),
+    Ok(n)
+}
+
+/// The loop of [`simulate_loop_with`] checked and prepared once: row-major matrices, the
+/// algebraic-loop denominator and the closed loop's spectral radius.
+struct Loop {
+    np: usize,
+    nc: usize,
+    ap: Vec<f64>,
+    bp: Vec<f64>,
+    cp: Vec<f64>,
+    dp: f64,
+    ac: Vec<f64>,
+    bc: Vec<f64>,
+    cc: Vec<f64>,
+    dc: f64,
+    den: f64,
+    rho: f64,
+}
+
+impl Loop {
+    fn new(plant: &StateSpace, controller: &StateSpace) -> Result<Self> {
+        let t_ry = plant.feedback(controller)?;
+        let rho = t_ry.poles()?.iter().map(|p| p.norm()).fold(0.0, f64::max);
+        if rho >= 1.0 {
+            return Err(Error::Unstable {
+                context: "closed-loop simulation",
+                reason: format!(
+                    "the model with this controller gives an unstable closed loop (largest |pole| {rho:.6}); the model is wrong near the loop's crossover, or the controller does not match the data"
+                ),
+            });
+        }
+        let dp = plant.d()[(0, 0)];
+        let dc = controller.d()[(0, 0)];
+        let den = 1.0 + dp * dc;
+        if den.abs() < 1e-12 {
+            return Err(Error::invalid(
+                "controller",
+                "1 + D_P D_C = 0: the loop has an algebraic loop without a solution",
+            ));
+        }
+        let rows = crate::linalg::row_major;
+        Ok(Self {
+            np: plant.order(),
+            nc: controller.order(),
+            ap: rows(plant.a()),
+            bp: rows(plant.b()),
+            cp: rows(plant.c()),
+            dp,
+            ac: rows(controller.a()),
+            bc: rows(controller.b()),
+            cc: rows(controller.c()),
+            dc,
+            den,
+            rho,
+        })
+    }
+
+    /// `n` samples from the stacked initial state `x0` = (plant states, controller states), or
+    /// from rest.
+    fn run(
+        &self,
+        n: usize,
+        w: Option<&[f64]>,
+        r: Option<&[f64]>,
+        x0: Option<&[f64]>,
+    ) -> LoopResponse {
+        let (np, nc) = (self.np, self.nc);
+        let (ap, bp, cp, dp) = (&self.ap, &self.bp, &self.cp, self.dp);
+        let (ac, bc, cc, dc) = (&self.ac, &self.bc, &self.cc, self.dc);
+        let den = self.den;
+        let dot = |a: &[f64], b: &[f64]| -> f64 { a.iter().zip(b).map(|(x, y)| x * y).sum() };
+        let (mut xp, mut xc) = match x0 {
+            Some(x) => (x[..np].to_vec(), x[np..np + nc].to_vec()),
+            None => (vec![0.0; np], vec![0.0; nc]),
+        };
+        let (mut xpn, mut xcn) = (vec![0.0; np], vec![0.0; nc]);
+        let (mut yv, mut uv) = (Vec::with_capacity(n), Vec::with_capacity(n));
+        for k in 0..n {
+            let wk = w.map_or(0.0, |w| w[k]);
+            let rk = r.map_or(0.0, |r| r[k]);
+            // u = Cc xc + Dc (w − Cp xp − Dp u) + r
+            let ypart = dot(cp, &xp);
+            let u = (dot(cc, &xc) + dc * (wk - ypart) + rk) / den;
+            let y = ypart + dp * u;
+            let e = wk - y;
+            for i in 0..np {
+                xpn[i] = dot(&ap[i * np..(i + 1) * np], &xp) + bp[i] * u;
+            }
+            for i in 0..nc {
+                xcn[i] = dot(&ac[i * nc..(i + 1) * nc], &xc) + bc[i] * e;
+            }
+            std::mem::swap(&mut xp, &mut xpn);
+            std::mem::swap(&mut xc, &mut xcn);
+            yv.push(y);
+            uv.push(u);
+        }
+        LoopResponse { y: yv, u: uv }
+    }
+}
+
+/// The initial state of the loop (plant states, then controller states) that best explains the
+/// measured `y_meas` and `u_meas`: the loop's response is affine in its initial state $x_0$,
+/// $\hat y = y^{(0)} + \Psi_y x_0$, $\hat u = u^{(0)} + \Psi_u x_0$, where $y^{(0)}, u^{(0)}$
+/// are the responses from rest and the columns of $\Psi$ the free responses to unit initial
+/// states. $x_0$ minimises
+/// $$ \frac{\lVert y - y^{(0)} - \Psi_y x_0 \rVert^2}{\lVert y \rVert^2} + \frac{\lVert u - u^{(0)} - \Psi_u x_0 \rVert^2}{\lVert u \rVert^2}, $$
+/// both signals weighted by their own energy (they have different units). The free responses
+/// decay with the closed loop's spectral radius $\rho < 1$; they are computed over
+/// $H = \min(N, \lceil \ln 10^{-12} / \ln \rho \rceil)$ samples, beyond which they are below
+/// $10^{-12}$ of their start. This is MATLAB `compare`'s default (`InitialCondition` =
+/// `'e'`) applied to the closed loop, which is what a record taken in steady operation needs:
+/// the loop was running before the first sample.
+///
+/// # Errors
+/// As [`simulate_loop_with`]; [`Error::DimensionMismatch`] for measured signals of another length.
+pub fn estimate_loop_initial_state(
+    plant: &StateSpace,
+    controller: &StateSpace,
+    w: Option<&[f64]>,
+    r: Option<&[f64]>,
+    y_meas: &[f64],
+    u_meas: &[f64],
+) -> Result<Vec<f64>> {
+    let n = check_inputs(plant, controller, w, r)?;
+    if y_meas.len() != n || u_meas.len() != n {
+        return Err(Error::DimensionMismatch {
+            context: "estimate_loop_initial_state: measured signals and loop inputs",
+            expected: format!("{n} samples"),
+            got: format!("y_meas {}, u_meas {} samples", y_meas.len(), u_meas.len()),
         });
     }
-    let dp = plant.d()[(0, 0)];
-    let dc = controller.d()[(0, 0)];
-    let den = 1.0 + dp * dc;
-    if den.abs() < 1e-12 {
-        return Err(Error::invalid(
-            "controller",
-            "1 + D_P D_C = 0: the loop has an algebraic loop without a solution",
-        ));
+    crate::error::check_finite("y_meas", y_meas)?;
+    crate::error::check_finite("u_meas", u_meas)?;
+    let lp = Loop::new(plant, controller)?;
+    let nx = lp.np + lp.nc;
+    if nx == 0 || n < nx {
+        return Ok(vec![0.0; nx]);
     }
-    let rows = crate::linalg::row_major;
-    let (np, nc) = (plant.order(), controller.order());
-    let (ap, bp, cp) = (rows(plant.a()), rows(plant.b()), rows(plant.c()));
-    let (ac, bc, cc) = (
-        rows(controller.a()),
-        rows(controller.b()),
-        rows(controller.c()),
-    );
-    let dot = |a: &[f64], b: &[f64]| -> f64 { a.iter().zip(b).map(|(x, y)| x * y).sum() };
-    let (mut xp, mut xc) = (vec![0.0; np], vec![0.0; nc]);
-    let (mut xpn, mut xcn) = (vec![0.0; np], vec![0.0; nc]);
-    let (mut yv, mut uv) = (Vec::with_capacity(n), Vec::with_capacity(n));
-    for k in 0..n {
-        let wk = w.map_or(0.0, |w| w[k]);
-        let rk = r.map_or(0.0, |r| r[k]);
-        // u = Cc xc + Dc (w − Cp xp − Dp u) + r
-        let ypart = dot(&cp, &xp);
-        let u = (dot(&cc, &xc) + dc * (wk - ypart) + rk) / den;
-        let y = ypart + dp * u;
-        let e = wk - y;
-        for i in 0..np {
-            xpn[i] = dot(&ap[i * np..(i + 1) * np], &xp) + bp[i] * u;
+    let horizon = if lp.rho > 0.0 {
+        ((1e-12f64).ln() / lp.rho.ln()).ceil().max(nx as f64)
+    } else {
+        nx as f64
+    };
+    let h = n.min(horizon as usize);
+    let rest = lp.run(n, w, r, None);
+    let energy = |x: &[f64]| {
+        x.iter()
+            .map(|v| v * v)
+            .sum::<f64>()
+            .sqrt()
+            .max(f64::MIN_POSITIVE)
+    };
+    let (sy, su) = (1.0 / energy(y_meas), 1.0 / energy(u_meas));
+    let mut psi = faer::Mat::<f64>::zeros(2 * h, nx);
+    let mut unit = vec![0.0; nx];
+    for j in 0..nx {
+        unit.iter_mut().for_each(|v| *v = 0.0);
+        unit[j] = 1.0;
+        let free = lp.run(h, None, None, Some(&unit));
+        for t in 0..h {
+            psi[(2 * t, j)] = sy * free.y[t];
+            psi[(2 * t + 1, j)] = su * free.u[t];
         }
-        for i in 0..nc {
-            xcn[i] = dot(&ac[i * nc..(i + 1) * nc], &xc) + bc[i] * e;
-        }
-        std::mem::swap(&mut xp, &mut xpn);
-        std::mem::swap(&mut xc, &mut xcn);
-        yv.push(y);
-        uv.push(u);
     }
-    Ok(LoopResponse { y: yv, u: uv })
+    let rhs = faer::Mat::from_fn(2 * h, 1, |i, _| {
+        let t = i / 2;
+        if i % 2 == 0 {
+            sy * (y_meas[t] - rest.y[t])
+        } else {
+            su * (u_meas[t] - rest.u[t])
+        }
+    });
+    // minimum norm: states the record cannot see (uncontrollable and unobservable modes of the
+    // loop, e.g. a plant model's decoupled states) stay at zero
+    let x0 = crate::linalg::lstsq_min_norm(psi.as_ref(), rhs.as_ref(), 1e-10)?;
+    if x0.iter().all(|v| v.is_finite()) {
+        Ok(x0)
+    } else {
+        Ok(vec![0.0; nx])
+    }
 }
 
 /// Fit of a simulated signal to a measured one in one time window.
@@ -184,6 +359,9 @@ pub struct Reconstruction {
     pub max_error_y: f64,
     /// Fits per window.
     pub windows: Vec<WindowFit>,
+    /// The loop's initial state the simulation started from (plant states, then controller
+    /// states): zeros from rest, or [`estimate_loop_initial_state`]'s.
+    pub initial_state: Vec<f64>,
 }
 
 impl Reconstruction {
@@ -217,6 +395,37 @@ pub fn reconstruct(
     n_windows: usize,
     ts: f64,
 ) -> Result<Reconstruction> {
+    reconstruct_with(
+        plant,
+        controller,
+        w,
+        r,
+        y_meas,
+        u_meas,
+        n_windows,
+        ts,
+        InitialState::Zero,
+    )
+}
+
+/// [`reconstruct`] starting from rest ([`InitialState::Zero`]) or from the loop's initial
+/// state that best explains the record ([`InitialState::Estimate`],
+/// [`estimate_loop_initial_state`]), for records taken while the loop was already running.
+///
+/// # Errors
+/// As [`reconstruct`] and [`estimate_loop_initial_state`].
+#[allow(clippy::too_many_arguments)]
+pub fn reconstruct_with(
+    plant: &StateSpace,
+    controller: &StateSpace,
+    w: &[f64],
+    r: Option<&[f64]>,
+    y_meas: &[f64],
+    u_meas: &[f64],
+    n_windows: usize,
+    ts: f64,
+    ic: InitialState,
+) -> Result<Reconstruction> {
     let n = w.len();
     for (what, x) in [("y_meas", y_meas), ("u_meas", u_meas)] {
         if x.len() != n {
@@ -236,7 +445,13 @@ pub fn reconstruct(
             ),
         ));
     }
-    let sim = simulate_loop_with(plant, controller, Some(w), r)?;
+    let x0 = match ic {
+        InitialState::Zero => vec![0.0; plant.order() + controller.order()],
+        InitialState::Estimate => {
+            estimate_loop_initial_state(plant, controller, Some(w), r, y_meas, u_meas)?
+        }
+    };
+    let sim = simulate_loop_from(plant, controller, Some(w), r, Some(&x0))?;
     // NaN for a constant window (the fit is undefined there)
     let fit = |x: &[f64], xh: &[f64]| fit_percent(x, xh).unwrap_or(f64::NAN);
     let len = n / n_windows;
@@ -266,6 +481,7 @@ pub fn reconstruct(
             .fold(0.0, f64::max),
         windows,
         simulated: sim,
+        initial_state: x0,
     })
 }
 
@@ -324,5 +540,70 @@ mod tests {
             simulate_loop(&p, &weak, &r),
             Err(Error::Unstable { .. })
         ));
+    }
+
+    /// A record that starts while the loop is running (a nonzero initial state of plant and
+    /// controller, from a naive sample-by-sample loop): the estimate recovers the state to
+    /// rounding, the reconstruction from it is exact, and the one from rest is not.
+    #[test]
+    fn initial_state_of_a_running_loop_is_recovered() {
+        let ts = 1e-3;
+        let p = StateSpace::discrete(
+            mat![[1.02, 0.0, 0.0], [0.0, 0.9, 0.3], [0.0, -0.3, 0.9]],
+            mat![[1.0], [0.0], [0.5]],
+            mat![[0.4, 1.0, 0.2]],
+            mat![[0.0]],
+            ts,
+        )
+        .unwrap();
+        let c =
+            StateSpace::discrete(mat![[0.5]], mat![[1.0]], mat![[0.1]], mat![[0.3]], ts).unwrap();
+        let r: Vec<f64> = (0..400)
+            .map(|k| ((k * 37 % 11) as f64 - 5.0) / 5.0)
+            .collect();
+        let truth = [0.7, -1.3, 0.4, 2.0];
+        // naive oracle: the loop by hand from the initial state
+        let (mut xp, mut xc) = (truth[..3].to_vec(), truth[3]);
+        let (mut y, mut u) = (Vec::new(), Vec::new());
+        for rk in &r {
+            let yk: f64 = (0..3).map(|i| p.c()[(0, i)] * xp[i]).sum();
+            let uk = rk - (c.c()[(0, 0)] * xc + c.d()[(0, 0)] * yk);
+            xp = (0..3)
+                .map(|i| (0..3).map(|j| p.a()[(i, j)] * xp[j]).sum::<f64>() + p.b()[(i, 0)] * uk)
+                .collect();
+            xc = c.a()[(0, 0)] * xc + c.b()[(0, 0)] * yk;
+            y.push(yk);
+            u.push(uk);
+        }
+        let x0 = estimate_loop_initial_state(&p, &c, None, Some(&r), &y, &u).unwrap();
+        // the loop's controller is driven by e = w − y, the oracle's by y: its state has the
+        // opposite sign
+        let expected = [truth[0], truth[1], truth[2], -truth[3]];
+        for (a, b) in x0.iter().zip(&expected) {
+            assert!((a - b).abs() < 1e-8, "x0 {x0:?} vs {expected:?}");
+        }
+        let zeros = vec![0.0; r.len()];
+        let est = reconstruct_with(
+            &p,
+            &c,
+            &zeros,
+            Some(&r),
+            &y,
+            &u,
+            4,
+            ts,
+            InitialState::Estimate,
+        )
+        .unwrap();
+        assert!(
+            est.fit_y > 100.0 - 1e-6,
+            "fit from the estimate {}",
+            est.fit_y
+        );
+        let rest = reconstruct(&p, &c, &zeros, Some(&r), &y, &u, 4, ts).unwrap();
+        assert!(rest.fit_y < 99.0, "fit from rest {}", rest.fit_y);
+        assert_eq!(rest.initial_state, vec![0.0; 4]);
+        // a wrong-length state is refused
+        assert!(simulate_loop_from(&p, &c, None, Some(&r), Some(&[1.0])).is_err());
     }
 }

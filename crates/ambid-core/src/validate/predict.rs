@@ -41,7 +41,33 @@ pub fn predict_k(
     u: &[f64],
     k: usize,
 ) -> Result<Vec<f64>> {
+    predict_k_from(model, k_gain, y, u, k, None)
+}
+
+/// [`predict_k`] with the predictor started from $\hat x_{0|-1} = x_0$ (`None`: zero).
+///
+/// # Errors
+/// As [`predict_k`]; [`Error::InvalidArgument`] for an `x0` that is not $n$ finite numbers.
+pub fn predict_k_from(
+    model: &StateSpace,
+    k_gain: MatRef<'_, f64>,
+    y: &[f64],
+    u: &[f64],
+    k: usize,
+    x0: Option<&[f64]>,
+) -> Result<Vec<f64>> {
     let n = model.order();
+    if let Some(x) = x0 {
+        if x.len() != n || x.iter().any(|v| !v.is_finite()) {
+            return Err(Error::invalid(
+                "x0",
+                format!(
+                    "the initial state must be {n} finite numbers, got {}",
+                    x.len()
+                ),
+            ));
+        }
+    }
     if model.ninputs() != 1 || model.noutputs() != 1 {
         return Err(Error::invalid(
             "model",
@@ -81,7 +107,7 @@ pub fn predict_k(
     let cx = |x: &[f64]| (0..n).map(|j| c[(0, j)] * x[j]).sum::<f64>();
     // one-step predictor states x̂(t|t−1), t = 0..N
     let mut xs: Vec<Vec<f64>> = Vec::with_capacity(y.len() + 1);
-    xs.push(vec![0.0; n]);
+    xs.push(x0.map_or_else(|| vec![0.0; n], <[f64]>::to_vec));
     let mut tmp = Vec::with_capacity(n);
     for t in 0..y.len() {
         let x = &xs[t];
@@ -104,6 +130,72 @@ pub fn predict_k(
         out.push(cx(&z) + d * u[t]);
     }
     Ok(out)
+}
+
+/// [`predict_k`] from rest ([`InitialState::Zero`]) or from the predictor's initial state
+/// that best explains the record ([`InitialState::Estimate`]); returns the prediction and the
+/// state used. The prediction is affine in $x_0 = \hat x_{0|-1}$: with
+/// $\Phi = A - K C$ its free part is
+/// $$ \hat y^{\mathrm{free}}_{t|t-k} = \begin{cases} C A^{t} x_0, & t < k - 1,\\
+///  C A^{k-1} \Phi^{\,t-k+1} x_0, & t \ge k - 1, \end{cases} $$
+/// so $x_0$ is the least-squares solution of $y_t - \hat y^{(0)}_{t|t-k} = \psi_t x_0$ over the
+/// record (rows $\psi_t$ computed recursively, $O(N n^2)$). An unstable predictor ($\Phi$ with
+/// an eigenvalue on or outside the unit circle) starts from rest.
+///
+/// # Errors
+/// As [`predict_k`].
+pub fn predict_k_with(
+    model: &StateSpace,
+    k_gain: MatRef<'_, f64>,
+    y: &[f64],
+    u: &[f64],
+    k: usize,
+    ic: InitialState,
+) -> Result<(Vec<f64>, Vec<f64>)> {
+    let n = model.order();
+    let rest = predict_k_from(model, k_gain, y, u, k, None)?;
+    let nt = y.len();
+    if ic == InitialState::Zero || n == 0 || nt < n {
+        return Ok((rest, vec![0.0; n]));
+    }
+    let (a, c) = (model.a(), model.c());
+    let phi = faer::Mat::<f64>::from_fn(n, n, |i, j| a[(i, j)] - k_gain[(i, 0)] * c[(0, j)]);
+    let phi_model = StateSpace::discrete(
+        phi.clone(),
+        faer::Mat::zeros(n, 1),
+        faer::Mat::zeros(1, n),
+        faer::Mat::zeros(1, 1),
+        model.ts().unwrap_or(1.0),
+    )?;
+    if !phi_model.is_stable()? {
+        return Ok((rest, vec![0.0; n]));
+    }
+    // ψ_t for t < k − 1: C A^t; then C A^{k−1} Φ^{t−k+1}
+    let times = |row: &[f64], m: MatRef<'_, f64>| -> Vec<f64> {
+        (0..n)
+            .map(|j| (0..n).map(|i| row[i] * m[(i, j)]).sum())
+            .collect()
+    };
+    let mut psi = faer::Mat::<f64>::zeros(nt, n);
+    let mut row: Vec<f64> = (0..n).map(|j| c[(0, j)]).collect();
+    for t in 0..nt {
+        for j in 0..n {
+            psi[(t, j)] = row[j];
+        }
+        row = if t + 1 < k {
+            times(&row, a)
+        } else {
+            times(&row, phi.as_ref())
+        };
+    }
+    let rhs = faer::Mat::from_fn(nt, 1, |t, _| y[t] - rest[t]);
+    // minimum norm: predictor states the record cannot see stay at zero
+    let x0 = match crate::linalg::lstsq_min_norm(psi.as_ref(), rhs.as_ref(), 1e-10) {
+        Ok(x) if x.iter().all(|v| v.is_finite()) => x,
+        _ => return Ok((rest, vec![0.0; n])),
+    };
+    let p = predict_k_from(model, k_gain, y, u, k, Some(&x0))?;
+    Ok((p, x0))
 }
 
 /// How a validation starts the model's filters (MATLAB `compare`'s `InitialCondition`).
@@ -351,8 +443,8 @@ pub fn ss_simulate(
 
 /// Simulation of a (MIMO) state-space model on `u` ($N \times m$) from rest or from the initial
 /// state that best explains `y` ($N \times l$): the least-squares solution of
-/// $y_t - y^{(0)}_t = C A^t x_0$ stacked over every output and sample (stable models only; an
-/// unstable model starts from rest). Returns the $N \times l$ output and the state used.
+/// $y_t - y^{(0)}_t = C A^t x_0$ stacked over every output and sample, of minimum norm (stable
+/// models only; an unstable model starts from rest). Returns the $N \times l$ output and the state used.
 ///
 /// # Errors
 /// [`Error::DimensionMismatch`] for records of different lengths or widths; the errors of the
@@ -388,8 +480,10 @@ pub fn ss_simulate_mimo(
         ca = &ca * a;
     }
     let r = faer::Mat::from_fn(nt * l, 1, |i, _| y[(i / l, i % l)] - y0[(i / l, i % l)]);
-    let x0 = match crate::linalg::lstsq(obs.as_ref(), r.as_ref()) {
-        Ok(x) if (0..n).all(|k| x[(k, 0)].is_finite()) => (0..n).map(|k| x[(k, 0)]).collect(),
+    // minimum norm: a non-minimal realisation (e.g. a multi-output ARX's shift register) has
+    // states the record cannot tell apart
+    let x0 = match crate::linalg::lstsq_min_norm(obs.as_ref(), r.as_ref(), 1e-10) {
+        Ok(x) if x.iter().all(|v| v.is_finite()) => x,
         _ => vec![0.0; n],
     };
     Ok((m.simulate(u, Some(&x0))?, x0))
@@ -513,5 +607,42 @@ mod tests {
             ys.iter().zip(&y).all(|(a, b)| (a - b).abs() < 1e-7),
             "{x0:?}"
         );
+    }
+
+    /// Data of the innovation model with e = 0 started from x0 ≠ 0: the predictor from x0 is exact
+    /// for every k; the estimate recovers x0 (so the fit is 100 %) while the predictor from rest
+    /// is not exact at the start.
+    #[test]
+    fn k_step_initial_state_is_recovered() {
+        let m = StateSpace::discrete(
+            mat![[0.95, 0.2, 0.0], [-0.2, 0.95, 0.1], [0.0, 0.0, 0.7]],
+            mat![[1.0], [0.5], [0.3]],
+            mat![[1.0, 0.3, -0.4]],
+            mat![[0.0]],
+            1e-3,
+        )
+        .unwrap();
+        let kg = mat![[0.3], [0.1], [0.05]];
+        let u: Vec<f64> = (0..300)
+            .map(|k| ((k * 13 % 7) as f64 - 3.0) / 3.0)
+            .collect();
+        let truth = [1.5, -0.8, 2.0];
+        let y = m.simulate_siso(&u, Some(&truth)).unwrap();
+        for k in [1, 3, 10] {
+            let exact = predict_k_from(&m, kg.as_ref(), &y, &u, k, Some(&truth)).unwrap();
+            assert!(
+                exact.iter().zip(&y).all(|(a, b)| (a - b).abs() < 1e-9),
+                "k = {k}"
+            );
+            let (p, x0) =
+                predict_k_with(&m, kg.as_ref(), &y, &u, k, InitialState::Estimate).unwrap();
+            for (a, b) in x0.iter().zip(&truth) {
+                assert!((a - b).abs() < 1e-7, "k = {k}: {x0:?}");
+            }
+            assert!(fit_from(&y, &p, 0).unwrap() > 100.0 - 1e-6, "k = {k}");
+            let (p0, z) = predict_k_with(&m, kg.as_ref(), &y, &u, k, InitialState::Zero).unwrap();
+            assert_eq!(z, vec![0.0; 3]);
+            assert!(fit_from(&y, &p0, 0).unwrap() < 99.0, "k = {k}");
+        }
     }
 }

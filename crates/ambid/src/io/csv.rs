@@ -8,7 +8,7 @@
 //! as `coh_ry`.
 
 use super::table::{read_table, ColumnRef, DataFileError, Format, ReadOptions};
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, bail, Result};
 use num_complex::Complex64;
 use std::path::{Path, PathBuf};
 
@@ -86,31 +86,55 @@ impl TimeData {
     }
 }
 
-/// Writes equal-length columns with a header row. Errors on unequal lengths. Every error is an
-/// output failure (exit 5, [`crate::workflow::exit_code`]).
+/// Writes equal-length columns with a header row. Errors on unequal lengths. The file is
+/// replaced atomically (written beside it, then renamed); commands use [`time_csv_bytes`] with
+/// an [`OutputSet`](crate::io::output::OutputSet) instead, to write all their outputs as a set.
 pub fn write_time_csv(path: &Path, columns: &[(&str, &[f64])]) -> Result<()> {
-    write_time_csv_inner(path, columns).map_err(|e| crate::workflow::output(e).into())
+    let mut set = crate::io::output::OutputSet::new(true);
+    set.write_with(path, |w| time_csv_to(w, columns))?;
+    set.commit()?;
+    Ok(())
 }
 
-fn write_time_csv_inner(path: &Path, columns: &[(&str, &[f64])]) -> Result<()> {
+/// The CSV text of [`write_time_csv`]. Errors on unequal lengths.
+pub fn time_csv_bytes(columns: &[(&str, &[f64])]) -> Result<Vec<u8>> {
+    let mut v = Vec::new();
+    time_csv_to(&mut v, columns)?;
+    Ok(v)
+}
+
+/// Streams the CSV text of [`write_time_csv`] into `w` (for
+/// [`OutputSet::write_with`](crate::io::output::OutputSet::write_with): a long record is never
+/// held as text in memory). Unequal lengths are an [`std::io::ErrorKind::InvalidInput`] error.
+pub fn time_csv_to(w: &mut dyn std::io::Write, columns: &[(&str, &[f64])]) -> std::io::Result<()> {
     let n = columns.first().map_or(0, |c| c.1.len());
     if let Some((name, c)) = columns.iter().find(|c| c.1.len() != n) {
-        bail!(
-            "column `{name}` has {} samples but the first column has {n}",
-            c.len()
-        );
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            format!(
+                "column `{name}` has {} samples but the first column has {n}",
+                c.len()
+            ),
+        ));
     }
-    let mut w = ::csv::Writer::from_path(path)
-        .with_context(|| format!("cannot create {}", path.display()))?;
-    w.write_record(columns.iter().map(|c| c.0))?;
+    let mut w = ::csv::Writer::from_writer(w);
+    w.write_record(columns.iter().map(|c| c.0))
+        .map_err(csv_io)?;
     let mut row = Vec::with_capacity(columns.len());
     for k in 0..n {
         row.clear();
         row.extend(columns.iter().map(|c| format!("{:.17e}", c.1[k])));
-        w.write_record(&row)?;
+        w.write_record(&row).map_err(csv_io)?;
     }
-    w.flush()?;
-    Ok(())
+    w.flush()
+}
+
+/// A CSV writer's error as the I/O error it wraps.
+fn csv_io(e: ::csv::Error) -> std::io::Error {
+    match e.into_kind() {
+        ::csv::ErrorKind::Io(e) => e,
+        k => std::io::Error::other(format!("{k:?}")),
+    }
 }
 
 /// One complex FRF quantity for [`write_frf_csv`]: name (e.g. `t_ry`), values, optional standard
@@ -129,23 +153,27 @@ pub fn write_frf_csv(path: &Path, f_hz: &[f64], quantities: &[FrfColumn<'_>]) ->
     write_frf_csv_with(path, f_hz, quantities, &[])
 }
 
-/// Writes an FRF CSV with extra real columns after the quantities (e.g. `coh_ry`, `coh_ru`).
-/// Every error is an output failure (exit 5).
+/// Writes an FRF CSV with extra real columns after the quantities (e.g. `coh_ry`, `coh_ru`),
+/// replacing the file atomically (see [`write_time_csv`]).
 pub fn write_frf_csv_with(
     path: &Path,
     f_hz: &[f64],
     quantities: &[FrfColumn<'_>],
     extras: &[(&str, &[f64])],
 ) -> Result<()> {
-    write_frf_inner(path, f_hz, quantities, extras).map_err(|e| crate::workflow::output(e).into())
+    let bytes = frf_csv_bytes(f_hz, quantities, extras)?;
+    let mut set = crate::io::output::OutputSet::new(true);
+    set.write(path, &bytes)?;
+    set.commit()?;
+    Ok(())
 }
 
-fn write_frf_inner(
-    path: &Path,
+/// The CSV text of [`write_frf_csv_with`].
+pub fn frf_csv_bytes(
     f_hz: &[f64],
     quantities: &[FrfColumn<'_>],
     extras: &[(&str, &[f64])],
-) -> Result<()> {
+) -> Result<Vec<u8>> {
     if let Some((name, v)) = extras.iter().find(|e| e.1.len() != f_hz.len()) {
         bail!(
             "FRF column `{name}` has {} values but there are {} frequencies",
@@ -163,8 +191,7 @@ fn write_frf_inner(
             );
         }
     }
-    let mut w = ::csv::Writer::from_path(path)
-        .with_context(|| format!("cannot create {}", path.display()))?;
+    let mut w = ::csv::Writer::from_writer(Vec::new());
     let mut header = vec!["f_hz".to_string()];
     for q in quantities {
         for s in ["re", "im", "std"] {
@@ -184,8 +211,7 @@ fn write_frf_inner(
         row.extend(extras.iter().map(|e| format!("{:.17e}", e.1[k])));
         w.write_record(&row)?;
     }
-    w.flush()?;
-    Ok(())
+    w.into_inner().map_err(|e| anyhow!("{}", e.error()))
 }
 
 /// Reads a time-data CSV (any delimited text file in the one text dialect of

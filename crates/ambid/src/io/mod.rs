@@ -15,5 +15,7 @@ pub mod table;
 
 pub use self::controller::{read_controller, ControllerModel};
 pub use self::csv::{
-    read_time_csv, write_frf_csv, write_frf_csv_with, write_time_csv, FrfColumn, TimeData,
+    frf_csv_bytes, read_time_csv, time_csv_bytes, time_csv_to, write_frf_csv, write_frf_csv_with,
+    write_time_csv, FrfColumn, TimeData,
 };
+pub use self::output::{OutputError, OutputSet};

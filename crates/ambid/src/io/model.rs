@@ -35,23 +35,18 @@ pub fn state_space_json(m: &StateSpace, input: &str, output: &str, meta: Value) 
     })
 }
 
-/// Writes a model object as pretty JSON. Every error is an output failure (exit 5).
+/// Writes a model object as pretty JSON, replacing the file atomically (commands stage
+/// [`model_json_bytes`] in an [`OutputSet`](crate::io::output::OutputSet) instead).
 pub fn write_model_json(path: &Path, model: &Value) -> Result<()> {
-    write_model_inner(path, model).map_err(|e| crate::workflow::output(e).into())
+    let mut set = crate::io::output::OutputSet::new(true);
+    set.write(path, &model_json_bytes(model)?)?;
+    set.commit()?;
+    Ok(())
 }
 
-fn write_model_inner(path: &Path, model: &Value) -> Result<()> {
-    if let Some(d) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(d).with_context(|| {
-            format!(
-                "cannot create the directory {} for {}",
-                d.display(),
-                path.display()
-            )
-        })?;
-    }
-    std::fs::write(path, serde_json::to_string_pretty(model)?)
-        .with_context(|| format!("cannot write {}", path.display()))
+/// The pretty JSON text of a model object.
+pub fn model_json_bytes(model: &Value) -> Result<Vec<u8>> {
+    Ok(serde_json::to_string_pretty(model)?.into_bytes())
 }
 
 /// Reads a model file written by `ambid fit` (`kind = "state_space"` or `"polynomial"`) as a

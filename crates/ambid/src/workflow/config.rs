@@ -505,6 +505,9 @@ pub struct ValidationSection {
     pub lags: usize,
     /// Windows of the windowed fit.
     pub windows: usize,
+    /// How the simulated loop starts: `"estimate"` (default; the initial state that best explains
+    /// the record) or `"zero"` (from rest).
+    pub x0: ambid_core::validate::predict::InitialState,
 }
 
 impl Default for ValidationSection {
@@ -515,6 +518,7 @@ impl Default for ValidationSection {
             skip: 2000,
             lags: 25,
             windows: 20,
+            x0: ambid_core::validate::predict::InitialState::Estimate,
         }
     }
 }

@@ -60,6 +60,13 @@ impl FailureClass {
     }
 }
 
+/// The only fields of `ambid run`'s outputs that differ between two runs of the same workflow:
+/// the wall-clock step timings, `summary.json`'s object `"timing"` (keys `timing.<step>_s`,
+/// `timing.total_s`), which appear again as the `timing.*` rows of the summary table in
+/// `report.html` and `tables/summary.csv`. Every other byte of every output is reproduced
+/// exactly (docs/workflow.md, "Outputs").
+pub const TIMING_KEY: &str = "timing";
+
 /// A workflow failure: its class and the error chain.
 #[derive(Debug)]
 pub struct Failure {
@@ -558,9 +565,9 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
     }
     // the per-step timings are part of the summary and of the report
     let total: f64 = timings.iter().map(|t| t.seconds).sum();
-    ctx.put("timing.total_s", total);
+    ctx.put(&format!("{TIMING_KEY}.total_s"), total);
     for t in &timings {
-        ctx.put(&format!("timing.{}_s", t.step), t.seconds);
+        ctx.put(&format!("{TIMING_KEY}.{}_s", t.step), t.seconds);
     }
     let summary = Value::Object(ctx.summary.clone());
     let mut sections = sections_prelude;

@@ -23,10 +23,9 @@ pub fn settings(ctx: &Ctx<'_>, period: Option<usize>, n: usize, fs: f64) -> FrfS
     let mut s = match periodic {
         Some(p) => FrfSettings::periodic(p, ctx.cfg.data.skip_periods.min(n / p - 1)),
         None => {
-            let nper = cfg.nperseg.unwrap_or_else(|| {
-                let target = (n / 8).clamp(64, 8192);
-                1usize << (usize::BITS - 1 - target.leading_zeros())
-            });
+            let nper = cfg
+                .nperseg
+                .unwrap_or_else(|| FrfSettings::default_nperseg(n));
             FrfSettings::welch(nper.min(n))
         }
     };

@@ -325,7 +325,11 @@ pub fn amplitude(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                 seed: cfg.seed,
                 skip_periods: 1,
                 noise: t.noise,
-                ..TwinAmplitudeStudy::default()
+                band: cfg
+                    .frf
+                    .band_hz
+                    .map(|[a, b]| (a, b))
+                    .or(TwinAmplitudeStudy::default().band),
             };
             (
                 amplitude_on_twin(&study).map_err(computation)?,
@@ -546,8 +550,13 @@ pub fn operating_point(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         case(format!("gap+{g}um"), i0, g0 + g * 1e-6),
     ];
     let frac = ctx.level_frac.unwrap_or(0.1);
-    let band = ambid_core::frf::quality::DEFAULT_BAND;
-    let band = (band.0, 2000.0f64.min(0.45 * t.twin.fs()));
+    // the FRF band of every case: [frf] band_hz if given, else the seed's 10–2000 Hz (the
+    // excitation's own band reaches ≈ 3 kHz, where the twin's plant is below the sensor noise)
+    let band = Some(
+        cfg.frf
+            .band_hz
+            .map_or((10.0, 2000.0f64.min(0.45 * t.twin.fs())), |[a, b]| (a, b)),
+    );
     let out = operating_point_on_twin(
         &t.cfg,
         &cases,
@@ -561,10 +570,15 @@ pub fn operating_point(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     .map_err(computation)?;
     let caption = format!(
         "Period-averaged plant FRF (joint input-output) at nominal, bias current ±{b} % and air \
-         gap ±{g} µm, each from its own experiment at {} % of i_sat, {}–{} Hz.",
+         gap ±{g} µm, each from its own experiment at {} % of i_sat, {}–{} Hz (band {}).",
         fmt(100.0 * frac),
-        fmt(band.0),
-        fmt(band.1)
+        fmt(out.plants[0].f_hz().first().copied().unwrap_or(f64::NAN)),
+        fmt(out.plants[0].f_hz().last().copied().unwrap_or(f64::NAN)),
+        if cfg.frf.band_hz.is_some() {
+            "given by [frf] band_hz"
+        } else {
+            "the seed's"
+        }
     );
     let blocks = operating_point_blocks(ctx, &out, caption);
     ctx.section("operating-point", "Operating-point study", blocks);

@@ -22,6 +22,7 @@ fn settings(ctx: &Ctx<'_>, n: usize) -> ValidationSettings {
         lags: v.lags,
         windows: v.windows.min(n / 4).max(1),
         zones: zones(ctx),
+        initial_state: v.x0,
         ..ValidationSettings::default()
     }
 }
