@@ -12,10 +12,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// Exit codes an output failure may have. The one-rule dispatch of the workflow/messages part
-/// of issue 17 maps `OutputError` to 5 (docs/workflow.md); until then, commands other than
-/// `run`/`init` exit 1. Never 0, never 101.
-const OUTPUT_EXIT: &[i32] = &[5, 1];
+/// The exit code of an output failure, for every command (docs/workflow.md, "Exit codes").
+const OUTPUT_EXIT: &[i32] = &[5];
 
 /// A fresh directory under the system's temporary directory, removed when dropped.
 struct TempDir(PathBuf);
