@@ -3,6 +3,7 @@
 
 use ambid::analysis::{analyze, FrfAnalysis, FrfMethod, FrfSettings, Record};
 use ambid::experiment::ExcitationPlan;
+use ambid::frf_stream::{analyze_csv, StreamColumns};
 use ambid::io::{read_controller, read_time_csv, write_frf_csv_with, FrfColumn};
 use ambid::study::{
     amplitude_from_records, amplitude_on_twin, operating_point_on_twin, seed_cases, seed_levels,
@@ -269,6 +270,27 @@ pub(crate) fn plant_unit(y: Option<&str>, u: Option<&str>) -> String {
 }
 
 pub fn frf(a: FrfArgs) -> Result<()> {
+    let res = if a.method == MethodArg::Auto && a.noise.is_none() {
+        // Welch and period averaging stream the file: memory for one block, segment or period
+        let cols = StreamColumns {
+            r: &a.excitation,
+            u: &a.input,
+            y: &a.output,
+            i: Some(&a.current),
+        };
+        analyze_csv(&a.data, &cols, a.fs, |n, ts| frf_settings(&a, n, ts))?
+    } else {
+        match frf_in_memory(&a)? {
+            Some(res) => res,
+            None => return Ok(()),
+        }
+    };
+    report_and_write(&a, &res)
+}
+
+/// The FRF with the whole record in memory (LPM/LRM, or a noise record for the SNR). `None`
+/// when a local method wrote its output itself.
+fn frf_in_memory(a: &FrfArgs) -> Result<Option<FrfAnalysis>> {
     let data = read_time_csv(&a.data, a.fs)?;
     if let Some(fs) = a.fs {
         let file_fs = 1.0 / data.ts;
@@ -282,38 +304,10 @@ pub fn frf(a: FrfArgs) -> Result<()> {
     let i = data.column(&a.current).ok();
     let fs = 1.0 / data.ts;
     if matches!(a.method, MethodArg::Lpm | MethodArg::Lrm) {
-        return frf_local(&a, r, u, y, fs);
+        frf_local(a, r, u, y, fs)?;
+        return Ok(None);
     }
-    let method = match a.period_samples {
-        Some(p) => FrfMethod::Periodic {
-            period_samples: p,
-            skip_periods: a.skip_periods,
-        },
-        None => FrfMethod::Welch {
-            nperseg: a.nperseg.unwrap_or((r.len() / 8).max(256)),
-            noverlap: a.noverlap,
-            window: a.window.into(),
-            skip_samples: a.skip_samples,
-        },
-    };
-    let controller = match &a.controller {
-        Some(p) => {
-            let c = read_controller(p)?;
-            c.check_ts(data.ts)?;
-            Some(c.state_space().clone())
-        }
-        None => None,
-    };
-    let settings = FrfSettings {
-        method,
-        band: a.band,
-        quality_band: a.quality_band,
-        band_rule: Default::default(),
-        rel_threshold: 1e-6,
-        controller,
-        i_sat: a.i_sat,
-        screen: !a.no_screen,
-    };
+    let settings = frf_settings(a, r.len(), data.ts)?;
     let noise = match &a.noise {
         Some(p) => {
             let d = read_time_csv(p, a.fs.or(Some(fs)))?;
@@ -322,7 +316,45 @@ pub fn frf(a: FrfArgs) -> Result<()> {
         None => None,
     };
     let rec = Record { r, u, y, i, fs };
-    let res = analyze(&rec, &settings, noise.as_deref())?;
+    Ok(Some(analyze(&rec, &settings, noise.as_deref())?))
+}
+
+/// The settings of `a` for a record of `n` samples at sample time `ts` (reads the controller).
+fn frf_settings(a: &FrfArgs, n: usize, ts: f64) -> Result<FrfSettings> {
+    let method = match a.period_samples {
+        Some(p) => FrfMethod::Periodic {
+            period_samples: p,
+            skip_periods: a.skip_periods,
+        },
+        None => FrfMethod::Welch {
+            nperseg: a.nperseg.unwrap_or((n / 8).max(256)),
+            noverlap: a.noverlap,
+            window: a.window.into(),
+            skip_samples: a.skip_samples,
+        },
+    };
+    let controller = match &a.controller {
+        Some(p) => {
+            let c = read_controller(p)?;
+            c.check_ts(ts)?;
+            Some(c.state_space().clone())
+        }
+        None => None,
+    };
+    Ok(FrfSettings {
+        method,
+        band: a.band,
+        quality_band: a.quality_band,
+        band_rule: Default::default(),
+        rel_threshold: 1e-6,
+        controller,
+        i_sat: a.i_sat,
+        screen: !a.no_screen,
+    })
+}
+
+/// Prints the summary of `res` and writes the FRF file.
+fn report_and_write(a: &FrfArgs, res: &FrfAnalysis) -> Result<()> {
     for w in &res.warnings {
         eprintln!("warning: {w}");
     }
@@ -342,7 +374,7 @@ pub fn frf(a: FrfArgs) -> Result<()> {
         ),
     }
     println!("bands: {}", res.bands.describe());
-    print_quality(&res);
+    print_quality(res);
     // resonance peaks of the plant in the quality band, on lines whose relative standard
     // deviation is below 10 % (noise ripple must not count as a mode)
     let qb = res.quality.band;
@@ -372,7 +404,7 @@ pub fn frf(a: FrfArgs) -> Result<()> {
         }
         Err(e) => println!("plant resonance peaks: not searched ({e})"),
     }
-    write_analysis(&a.out, &res)?;
+    write_analysis(&a.out, res)?;
     println!("written: {}", a.out.display());
     Ok(())
 }

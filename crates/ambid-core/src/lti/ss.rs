@@ -47,6 +47,54 @@ fn check_mat(what: &'static str, m: MatRef<'_, f64>) -> Result<()> {
     Ok(())
 }
 
+/// Largest controllable and observable part whose zeros [`StateSpace::zeros`] computes: the
+/// QZ iteration on the $(n+m) \times (n+m)$ Rosenbrock pencil costs $O(n^3)$ with a large
+/// constant and can stall on highly structured pencils (a 400-state pencil with one
+/// controllable mode ran for more than 590 s before the reduction existed). 300 states take
+/// about a second on one core.
+pub const ZEROS_MAX_ORDER: usize = 300;
+
+/// Orthonormal basis (as columns) of $\operatorname{span}\{B, AB, A^2B, \dots\}$: Arnoldi with
+/// classical Gram–Schmidt applied twice, candidates processed first-in first-out (the columns
+/// of $B$, then $A$ times each accepted vector). See [`StateSpace::minimal_part`] for the
+/// tolerances.
+fn krylov_basis(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> Mat<f64> {
+    let n = a.nrows();
+    let fro = |m: MatRef<'_, f64>| m.norm_l2();
+    let tol_a = 10.0 * n as f64 * f64::EPSILON * fro(a);
+    let tol_b = 10.0 * n as f64 * f64::EPSILON * fro(b);
+    let mut basis: Vec<Vec<f64>> = Vec::new();
+    let mut queue: std::collections::VecDeque<(Vec<f64>, f64)> = (0..b.ncols())
+        .map(|j| ((0..n).map(|i| b[(i, j)]).collect(), tol_b))
+        .collect();
+    while let Some((mut w, tol)) = queue.pop_front() {
+        if basis.len() == n {
+            break;
+        }
+        for _ in 0..2 {
+            for q in &basis {
+                let h: f64 = q.iter().zip(&w).map(|(x, y)| x * y).sum();
+                for (wi, qi) in w.iter_mut().zip(q) {
+                    *wi -= h * qi;
+                }
+            }
+        }
+        let norm = w.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if !(norm > tol) || !norm.is_finite() {
+            continue;
+        }
+        for x in w.iter_mut() {
+            *x /= norm;
+        }
+        let aw: Vec<f64> = (0..n)
+            .map(|i| (0..n).map(|k| a[(i, k)] * w[k]).sum())
+            .collect();
+        queue.push_back((aw, tol_a));
+        basis.push(w);
+    }
+    Mat::from_fn(n, basis.len(), |i, j| basis[j][i])
+}
+
 impl StateSpace {
     /// Builds a model after checking dimensions, finiteness and the sample time.
     pub fn new(
@@ -439,15 +487,40 @@ impl StateSpace {
     }
 
     /// Transmission zeros of a square model ($p = m$): the finite generalized eigenvalues of the
-    /// Rosenbrock system pencil
-    /// $$ \begin{bmatrix} A & B \\ C & D \end{bmatrix} - \lambda
+    /// Rosenbrock system pencil of its controllable and observable part
+    /// $(A_r, B_r, C_r, D)$ ([`minimal_part`](Self::minimal_part)),
+    /// $$ \begin{bmatrix} A_r & B_r \\ C_r & D \end{bmatrix} - \lambda
     ///    \begin{bmatrix} I & 0 \\ 0 & 0 \end{bmatrix}. $$
     /// Infinite eigenvalues ($|\beta| \le 10^{-9} |\alpha|$, relative to the pencil scale) are
-    /// dropped. For a SISO model these are the roots of the transfer-function numerator.
-    /// A degenerate pencil (e.g. an input that reaches no state and no output) has no well
-    /// defined zeros; the result is then meaningless.
+    /// dropped. For a SISO model these are the roots of the transfer-function numerator after
+    /// exact pole-zero cancellations are removed: modes that the input cannot reach or the
+    /// output cannot see (input/output decoupling zeros) are not transmission zeros. A model
+    /// that is already minimal is used as it is (bit-for-bit the full pencil).
+    ///
+    /// The reduction is $O(n^3)$ with orthogonal transformations only. The QZ step is bounded:
+    /// a minimal part of more than [`ZEROS_MAX_ORDER`] states is an
+    /// [`Error::InvalidArgument`] naming the limit (the QZ iteration on larger, highly
+    /// structured pencils can run for minutes).
+    ///
+    /// ```
+    /// use ambid_core::lti::StateSpace;
+    /// use faer::{mat, Mat};
+    /// // 400 identical modes seen through one input and one output: one controllable mode,
+    /// // G(z) = 400/(z - 0.5), no finite zero
+    /// let n = 400;
+    /// let g = StateSpace::discrete(
+    ///     Mat::from_fn(n, n, |i, j| if i == j { 0.5 } else { 0.0 }),
+    ///     Mat::from_fn(n, 1, |_, _| 1.0),
+    ///     Mat::from_fn(1, n, |_, _| 1.0),
+    ///     mat![[0.0]],
+    ///     1e-3,
+    /// )
+    /// .unwrap();
+    /// assert_eq!(g.minimal_part().unwrap().order(), 1);
+    /// assert!(g.zeros().unwrap().is_empty());
+    /// ```
     pub fn zeros(&self) -> Result<Vec<c64>> {
-        let (n, m, p) = (self.order(), self.ninputs(), self.noutputs());
+        let (m, p) = (self.ninputs(), self.noutputs());
         if m != p {
             return Err(Error::DimensionMismatch {
                 context: "zeros (square systems only)",
@@ -455,6 +528,24 @@ impl StateSpace {
                 got: p.to_string(),
             });
         }
+        let r = self.minimal_part()?;
+        let n = r.order();
+        if n > ZEROS_MAX_ORDER {
+            return Err(Error::invalid(
+                "model order",
+                format!(
+                    "the zeros of a model whose controllable and observable part has {n} states \
+                     are not computed (limit ZEROS_MAX_ORDER = {ZEROS_MAX_ORDER} states): reduce \
+                     the model first (a lower order or balanced truncation)"
+                ),
+            ));
+        }
+        r.pencil_zeros()
+    }
+
+    /// The finite eigenvalues of the full Rosenbrock pencil (no reduction).
+    fn pencil_zeros(&self) -> Result<Vec<c64>> {
+        let (n, m) = (self.order(), self.ninputs());
         let big = Mat::from_fn(n + m, n + m, |i, j| match (i < n, j < n) {
             (true, true) => self.a[(i, j)],
             (true, false) => self.b[(i, j - n)],
@@ -468,6 +559,39 @@ impl StateSpace {
             .filter(|(al, be)| be.norm() > 1e-9 * al.norm() && be.norm() > 0.0)
             .map(|(al, be)| al / be)
             .collect())
+    }
+
+    /// The controllable and observable part of the model (a Kalman decomposition by
+    /// orthogonal projections): $V$ is an orthonormal basis of the controllable subspace
+    /// $\operatorname{span}\{B, AB, A^2B, \dots\}$ and $W$ one of the observable subspace of
+    /// $(V^{\mathsf T}AV, C V)$; the result is
+    /// $(W^{\mathsf T}V^{\mathsf T}AVW,\; W^{\mathsf T}V^{\mathsf T}B,\; CVW,\; D)$, with the same
+    /// transfer function. The bases are built by Arnoldi with Gram–Schmidt applied twice; a
+    /// new direction is kept when its component orthogonal to the basis exceeds
+    /// $10\,n\,\varepsilon\,\lVert A\rVert_F$ (for $A$ times a basis vector) or
+    /// $10\,n\,\varepsilon\,\lVert B\rVert_F$ (for a column of $B$): only exact (rounding-level)
+    /// uncontrollable or unobservable modes are removed. A model that is already minimal is
+    /// returned unchanged. $O(n^3)$.
+    pub fn minimal_part(&self) -> Result<StateSpace> {
+        let n = self.order();
+        let v = krylov_basis(self.a.as_ref(), self.b.as_ref());
+        let (a1, b1, c1) = if v.ncols() == n {
+            (self.a.clone(), self.b.clone(), self.c.clone())
+        } else {
+            let av = &self.a * &v;
+            (v.transpose() * &av, v.transpose() * &self.b, &self.c * &v)
+        };
+        let w = krylov_basis(a1.transpose(), c1.transpose());
+        if v.ncols() == n && w.ncols() == n {
+            return Ok(self.clone());
+        }
+        let (a2, b2, c2) = if w.ncols() == a1.nrows() {
+            (a1, b1, c1)
+        } else {
+            let aw = &a1 * &w;
+            (w.transpose() * &aw, w.transpose() * &b1, &c1 * &w)
+        };
+        StateSpace::new(a2, b2, c2, self.d.clone(), self.ts)
     }
 
     fn require_continuous(&self, context: &str) -> Result<()> {
@@ -886,5 +1010,114 @@ impl HessLu {
             x[i] = z;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lti::TransferFunction;
+    use rand::{Rng, SeedableRng};
+
+    /// Sorted by (re, im) for comparison.
+    fn sorted(mut v: Vec<c64>) -> Vec<c64> {
+        v.sort_by(|a, b| a.re.total_cmp(&b.re).then(a.im.total_cmp(&b.im)));
+        v
+    }
+
+    fn close(a: &[c64], b: &[c64], tol: f64) -> bool {
+        a.len() == b.len() && a.iter().zip(b).all(|(x, y)| (x - y).norm() <= tol)
+    }
+
+    /// A minimal 3-state model, augmented by an uncontrollable mode (0.7) and an unobservable
+    /// one (-0.4), in random non-orthogonal coordinates: the reduction finds the 3 states, the
+    /// zeros are those of the minimal model, while the full pencil also returns the two
+    /// decoupling zeros.
+    #[test]
+    fn minimal_part_zeros_match_the_minimal_model_and_drop_decoupling_zeros() {
+        // (1 - 0.3 q^-1)(1 + 0.5 q^-1) / ((1 - 0.9 q^-1)(1 - 1.2 q^-1)(1 + 0.2 q^-1)):
+        // zeros 0.3, -0.5 and the origin (numerator of degree 2 over 3 poles)
+        let num = [1.0, 0.2, -0.15];
+        let den = TransferFunction::new(vec![1.0], vec![1.0, -2.1, 1.08], 1e-3)
+            .unwrap()
+            .series(&TransferFunction::new(vec![1.0], vec![1.0, 0.2], 1e-3).unwrap())
+            .unwrap()
+            .den()
+            .to_vec();
+        let g = TransferFunction::new(num.to_vec(), den, 1e-3)
+            .unwrap()
+            .to_state_space()
+            .unwrap();
+        assert_eq!(g.order(), 3);
+        let n = 5;
+        let a = Mat::from_fn(n, n, |i, j| match (i < 3, j < 3) {
+            (true, true) => g.a()[(i, j)],
+            _ if i == 3 && j == 3 => 0.7,
+            _ if i == 4 && j == 4 => -0.4,
+            // the uncontrollable state feeds the others, the others feed the unobservable one
+            _ if i < 3 && j == 3 => 0.3,
+            _ if i == 4 && j < 3 => 0.25,
+            _ => 0.0,
+        });
+        let b = Mat::from_fn(n, 1, |i, _| match i {
+            0..=2 => g.b()[(i, 0)],
+            4 => 1.0,
+            _ => 0.0,
+        });
+        let c = Mat::from_fn(1, n, |_, j| match j {
+            0..=2 => g.c()[(0, j)],
+            3 => 0.8,
+            _ => 0.0,
+        });
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
+        let t = Mat::from_fn(n, n, |i, j| {
+            (if i == j { 1.0 } else { 0.0 }) + 0.3 * rng.random_range(-1.0..1.0)
+        });
+        let ti = linalg::solve(t.as_ref(), Mat::<f64>::identity(n, n).as_ref()).unwrap();
+        let big =
+            StateSpace::discrete(&ti * &a * &t, &ti * &b, &c * &t, g.d().to_owned(), 1e-3).unwrap();
+        let r = big.minimal_part().unwrap();
+        assert_eq!(r.order(), 3);
+        let f = [10.0, 123.0, 400.0];
+        let (h1, h2) = (
+            g.freq_response_siso(&f).unwrap(),
+            r.freq_response_siso(&f).unwrap(),
+        );
+        for (x, y) in h1.iter().zip(&h2) {
+            assert!((x - y).norm() <= 1e-10 * x.norm(), "{x} vs {y}");
+        }
+        let want = sorted(g.pencil_zeros().unwrap());
+        assert_eq!(want.len(), 3);
+        let got = sorted(big.zeros().unwrap());
+        assert!(close(&got, &want, 1e-9), "{got:?} vs {want:?}");
+        let full = sorted(big.pencil_zeros().unwrap());
+        let mut with_decoupling = want.clone();
+        with_decoupling.extend([c64::new(0.7, 0.0), c64::new(-0.4, 0.0)]);
+        assert!(
+            close(&full, &sorted(with_decoupling), 1e-8),
+            "full pencil {full:?}"
+        );
+        // a minimal model is used as it is
+        assert_eq!(g.minimal_part().unwrap(), g);
+    }
+
+    #[test]
+    fn zeros_refuse_a_minimal_part_above_the_limit_with_the_limit_named() {
+        // a chain of distinct modes, fully controllable and observable
+        let n = ZEROS_MAX_ORDER + 1;
+        let a = Mat::from_fn(n, n, |i, j| {
+            if i == j {
+                0.9 * (i as f64 / n as f64) - 0.45
+            } else if i == j + 1 {
+                1.0
+            } else {
+                0.0
+            }
+        });
+        let b = Mat::from_fn(n, 1, |i, _| if i == 0 { 1.0 } else { 0.0 });
+        let c = Mat::from_fn(1, n, |_, j| if j == n - 1 { 1.0 } else { 0.0 });
+        let g = StateSpace::discrete(a, b, c, Mat::zeros(1, 1), 1e-3).unwrap();
+        let msg = g.zeros().unwrap_err().to_string();
+        assert!(msg.contains("ZEROS_MAX_ORDER = 300"), "{msg}");
     }
 }

@@ -6,6 +6,7 @@
 //! header detection, column naming, errors) are described in `docs/data-files.md`.
 
 mod arrays;
+pub use arrays::MAX_DECODED_BYTES;
 mod mat;
 mod npy;
 #[cfg(feature = "parquet")]
