@@ -95,6 +95,54 @@ fn krylov_basis(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> Mat<f64> {
     Mat::from_fn(n, basis.len(), |i, j| basis[j][i])
 }
 
+/// An orthonormal basis of the orthogonal complement of the orthonormal columns `v` ($n \times r$,
+/// result $n \times (n - r)$): the last $n - r$ columns of the Householder $Q$ of `v`.
+fn complement(v: MatRef<'_, f64>) -> Mat<f64> {
+    let (n, r) = (v.nrows(), v.ncols());
+    let mut w = v.to_owned();
+    // Householder vectors (unit norm, zero above the diagonal); a zero vector is no reflection
+    let mut hs: Vec<Vec<f64>> = Vec::with_capacity(r);
+    for k in 0..r {
+        let x: Vec<f64> = (k..n).map(|i| w[(i, k)]).collect();
+        let norm = x.iter().map(|t| t * t).sum::<f64>().sqrt();
+        let mut h = vec![0.0; n];
+        if norm > 0.0 {
+            let alpha = if x[0] >= 0.0 { -norm } else { norm };
+            for (i, xi) in x.iter().enumerate() {
+                h[k + i] = *xi;
+            }
+            h[k] -= alpha;
+            let hn = h.iter().map(|t| t * t).sum::<f64>().sqrt();
+            if hn > 0.0 {
+                for t in h.iter_mut() {
+                    *t /= hn;
+                }
+            }
+        }
+        // apply (I - 2 h hᵀ) to the remaining columns
+        for j in k..r {
+            let d: f64 = (k..n).map(|i| h[i] * w[(i, j)]).sum();
+            for i in k..n {
+                w[(i, j)] -= 2.0 * d * h[i];
+            }
+        }
+        hs.push(h);
+    }
+    // Q e_j for j = r..n: apply the reflectors in reverse order to the unit vectors
+    let mut q = Mat::from_fn(n, n - r, |i, j| if i == r + j { 1.0 } else { 0.0 });
+    for h in hs.iter().rev() {
+        for j in 0..n - r {
+            let d: f64 = (0..n).map(|i| h[i] * q[(i, j)]).sum();
+            if d != 0.0 {
+                for i in 0..n {
+                    q[(i, j)] -= 2.0 * d * h[i];
+                }
+            }
+        }
+    }
+    q
+}
+
 impl StateSpace {
     /// Builds a model after checking dimensions, finiteness and the sample time.
     pub fn new(
@@ -486,27 +534,32 @@ impl StateSpace {
             .collect())
     }
 
-    /// Transmission zeros of a square model ($p = m$): the finite generalized eigenvalues of the
-    /// Rosenbrock system pencil of its controllable and observable part
-    /// $(A_r, B_r, C_r, D)$ ([`minimal_part`](Self::minimal_part)),
-    /// $$ \begin{bmatrix} A_r & B_r \\ C_r & D \end{bmatrix} - \lambda
-    ///    \begin{bmatrix} I & 0 \\ 0 & 0 \end{bmatrix}. $$
-    /// Infinite eigenvalues ($|\beta| \le 10^{-9} |\alpha|$, relative to the pencil scale) are
-    /// dropped. For a SISO model these are the roots of the transfer-function numerator after
-    /// exact pole-zero cancellations are removed: modes that the input cannot reach or the
-    /// output cannot see (input/output decoupling zeros) are not transmission zeros. A model
-    /// that is already minimal is used as it is (bit-for-bit the full pencil).
+    /// Invariant zeros of a square model ($p = m$): the finite generalized eigenvalues of the
+    /// Rosenbrock system pencil
+    /// $$ \begin{bmatrix} A & B \\ C & D \end{bmatrix} - \lambda
+    ///    \begin{bmatrix} I & 0 \\ 0 & 0 \end{bmatrix}, $$
+    /// as `control.zeros` / the scipy pencil give them. For a SISO model these are the roots of
+    /// the transfer-function numerator before any cancellation.
     ///
-    /// The reduction is $O(n^3)$ with orthogonal transformations only. The QZ step is bounded:
-    /// a minimal part of more than [`ZEROS_MAX_ORDER`] states is an
-    /// [`Error::InvalidArgument`] naming the limit (the QZ iteration on larger, highly
-    /// structured pencils can run for minutes).
+    /// They are computed without running QZ on the whole pencil: in the orthogonal Kalman
+    /// decomposition of [`minimal_part`](Self::minimal_part) the pencil is block triangular,
+    /// so its finite eigenvalues are those of the pencil of the controllable and observable
+    /// part (the transmission zeros) together with the eigenvalues of the uncontrollable part
+    /// and of the unobservable part of the controllable one (the decoupling zeros, by a plain
+    /// eigenvalue routine). Infinite eigenvalues ($|\beta| \le 10^{-9} |\alpha|$, relative to
+    /// the pencil scale) are dropped. A model that is already minimal gives bit-for-bit the
+    /// full pencil's result. A degenerate pencil (e.g. an input that reaches no state and no
+    /// output) has no well defined zeros; the result is then meaningless.
+    ///
+    /// Bounded: the reduction and the eigenvalues are $O(n^3)$; the QZ step is refused with an
+    /// [`Error::InvalidArgument`] naming [`ZEROS_MAX_ORDER`] when the controllable and observable
+    /// part has more states (QZ on large, highly structured pencils ran for minutes).
     ///
     /// ```
     /// use ambid_core::lti::StateSpace;
     /// use faer::{mat, Mat};
     /// // 400 identical modes seen through one input and one output: one controllable mode,
-    /// // G(z) = 400/(z - 0.5), no finite zero
+    /// // G(z) = 400/(z - 0.5); the other 399 modes are decoupling zeros at 0.5
     /// let n = 400;
     /// let g = StateSpace::discrete(
     ///     Mat::from_fn(n, n, |i, j| if i == j { 0.5 } else { 0.0 }),
@@ -516,8 +569,12 @@ impl StateSpace {
     ///     1e-3,
     /// )
     /// .unwrap();
-    /// assert_eq!(g.minimal_part().unwrap().order(), 1);
-    /// assert!(g.zeros().unwrap().is_empty());
+    /// let m = g.minimal_part().unwrap();
+    /// assert_eq!(m.order(), 1);
+    /// assert!(m.zeros().unwrap().is_empty()); // no transmission zero
+    /// let z = g.zeros().unwrap();
+    /// assert_eq!(z.len(), 399);
+    /// assert!(z.iter().all(|z| (z.re - 0.5).abs() < 1e-12 && z.im.abs() < 1e-12));
     /// ```
     pub fn zeros(&self) -> Result<Vec<c64>> {
         let (m, p) = (self.ninputs(), self.noutputs());
@@ -528,7 +585,7 @@ impl StateSpace {
                 got: p.to_string(),
             });
         }
-        let r = self.minimal_part()?;
+        let (r, decoupling) = self.kalman_split()?;
         let n = r.order();
         if n > ZEROS_MAX_ORDER {
             return Err(Error::invalid(
@@ -540,7 +597,9 @@ impl StateSpace {
                 ),
             ));
         }
-        r.pencil_zeros()
+        let mut z = r.pencil_zeros()?;
+        z.extend(decoupling);
+        Ok(z)
     }
 
     /// The finite eigenvalues of the full Rosenbrock pencil (no reduction).
@@ -573,25 +632,42 @@ impl StateSpace {
     /// uncontrollable or unobservable modes are removed. A model that is already minimal is
     /// returned unchanged. $O(n^3)$.
     pub fn minimal_part(&self) -> Result<StateSpace> {
+        Ok(self.kalman_split()?.0)
+    }
+
+    /// [`minimal_part`](Self::minimal_part) and the eigenvalues of the parts it removed (the
+    /// uncontrollable part $V_\perp^{\mathsf T} A V_\perp$, then the unobservable part of the
+    /// controllable one).
+    fn kalman_split(&self) -> Result<(StateSpace, Vec<c64>)> {
         let n = self.order();
+        let mut removed = Vec::new();
         let v = krylov_basis(self.a.as_ref(), self.b.as_ref());
         let (a1, b1, c1) = if v.ncols() == n {
             (self.a.clone(), self.b.clone(), self.c.clone())
         } else {
+            let vc = complement(v.as_ref());
+            let au = vc.transpose() * (&self.a * &vc);
+            removed.extend(linalg::eigenvalues(au.as_ref())?);
             let av = &self.a * &v;
             (v.transpose() * &av, v.transpose() * &self.b, &self.c * &v)
         };
         let w = krylov_basis(a1.transpose(), c1.transpose());
         if v.ncols() == n && w.ncols() == n {
-            return Ok(self.clone());
+            return Ok((self.clone(), removed));
         }
         let (a2, b2, c2) = if w.ncols() == a1.nrows() {
             (a1, b1, c1)
         } else {
+            let wc = complement(w.as_ref());
+            let auo = wc.transpose() * (&a1 * &wc);
+            removed.extend(linalg::eigenvalues(auo.as_ref())?);
             let aw = &a1 * &w;
             (w.transpose() * &aw, w.transpose() * &b1, &c1 * &w)
         };
-        StateSpace::new(a2, b2, c2, self.d.clone(), self.ts)
+        Ok((
+            StateSpace::new(a2, b2, c2, self.d.clone(), self.ts)?,
+            removed,
+        ))
     }
 
     fn require_continuous(&self, context: &str) -> Result<()> {
@@ -1017,7 +1093,7 @@ impl HessLu {
 mod tests {
     use super::*;
     use crate::lti::TransferFunction;
-    use rand::{Rng, SeedableRng};
+    use rand::{RngExt, SeedableRng};
 
     /// Sorted by (re, im) for comparison.
     fn sorted(mut v: Vec<c64>) -> Vec<c64> {
@@ -1030,11 +1106,11 @@ mod tests {
     }
 
     /// A minimal 3-state model, augmented by an uncontrollable mode (0.7) and an unobservable
-    /// one (-0.4), in random non-orthogonal coordinates: the reduction finds the 3 states, the
-    /// zeros are those of the minimal model, while the full pencil also returns the two
-    /// decoupling zeros.
+    /// one (-0.4), in random non-orthogonal coordinates: the reduction finds the 3 states with
+    /// the zeros of the minimal model, and `zeros` (minimal part plus decoupling zeros) equals
+    /// the full pencil's QZ.
     #[test]
-    fn minimal_part_zeros_match_the_minimal_model_and_drop_decoupling_zeros() {
+    fn zeros_by_kalman_split_equal_the_full_pencil_on_a_non_minimal_model() {
         // (1 - 0.3 q^-1)(1 + 0.5 q^-1) / ((1 - 0.9 q^-1)(1 - 1.2 q^-1)(1 + 0.2 q^-1)):
         // zeros 0.3, -0.5 and the origin (numerator of degree 2 over 3 poles)
         let num = [1.0, 0.2, -0.15];
@@ -1088,15 +1164,18 @@ mod tests {
         }
         let want = sorted(g.pencil_zeros().unwrap());
         assert_eq!(want.len(), 3);
-        let got = sorted(big.zeros().unwrap());
+        // transmission zeros: those of the minimal part
+        let got = sorted(r.zeros().unwrap());
         assert!(close(&got, &want, 1e-9), "{got:?} vs {want:?}");
+        // invariant zeros: the full pencil's, i.e. with the decoupling zeros 0.7 and -0.4
         let full = sorted(big.pencil_zeros().unwrap());
         let mut with_decoupling = want.clone();
         with_decoupling.extend([c64::new(0.7, 0.0), c64::new(-0.4, 0.0)]);
-        assert!(
-            close(&full, &sorted(with_decoupling), 1e-8),
-            "full pencil {full:?}"
-        );
+        let with_decoupling = sorted(with_decoupling);
+        assert!(close(&full, &with_decoupling, 1e-8), "full pencil {full:?}");
+        let split = sorted(big.zeros().unwrap());
+        assert!(close(&split, &with_decoupling, 1e-9), "{split:?}");
+        assert!(close(&split, &full, 1e-8));
         // a minimal model is used as it is
         assert_eq!(g.minimal_part().unwrap(), g);
     }
