@@ -125,7 +125,7 @@ impl RowStream {
             .map(|w| {
                 self.names.iter().position(|n| n == w).ok_or_else(|| {
                     anyhow!(
-                        "{}: no column `{w}` (the columns are: {})",
+                        "{}: unknown column `{w}`; the file has columns: {}",
                         self.path.display(),
                         self.names.join(", ")
                     )
