@@ -181,6 +181,34 @@ fn merge(a: &mut AbnormalReport, b: AbnormalReport, off: usize) {
 /// Those of reading the file (named with the line and column), a non-uniform or missing time
 /// base, a non-finite excitation, `u` or `i` (named with the line), and those of
 /// [`analyze_spectra`].
+///
+/// # Example
+/// ```
+/// use ambid::analysis::{analyze, FrfSettings, Record};
+/// use ambid::experiment::{run, Experiment};
+/// use ambid::frf_stream::{analyze_csv, StreamColumns};
+/// use ambid::io::{read_time_csv, write_time_csv};
+/// let mut exp = Experiment::seed_paper(ambid_twin::Mode::Linear, 1e-7, 1);
+/// exp.excitation.periods = 3;
+/// let rec = run(&exp).unwrap().record;
+/// let dir = std::env::temp_dir().join(format!("ambid-frfstream-doc-{}", std::process::id()));
+/// std::fs::create_dir_all(&dir).unwrap();
+/// let p = dir.join("data.csv");
+/// write_time_csv(&p, &[("t", &rec.t), ("r", &rec.r), ("u", &rec.u), ("y", &rec.y)]).unwrap();
+/// let cols = StreamColumns { r: "r", u: "u", y: "y", i: None };
+/// let streamed = analyze_csv(&p, &cols, None, |_n, _ts| Ok(FrfSettings::periodic(5115, 1)))
+///     .unwrap();
+/// let d = read_time_csv(&p, None).unwrap();
+/// let whole = Record {
+///     r: d.column("r").unwrap(),
+///     u: d.column("u").unwrap(),
+///     y: d.column("y").unwrap(),
+///     i: None,
+///     fs: 1.0 / d.ts,
+/// };
+/// let in_memory = analyze(&whole, &FrfSettings::periodic(5115, 1), None).unwrap();
+/// assert_eq!(streamed.frf, in_memory.frf); // bit for bit
+/// ```
 pub fn analyze_csv(
     path: &Path,
     cols: &StreamColumns<'_>,

@@ -390,6 +390,8 @@ impl PeriodSums {
         Ok(())
     }
 
+    // parallel per-line arrays, indexed alike
+    #[allow(clippy::needless_range_loop)]
     fn finish(
         &self,
         an: &mut PeriodicAnalyzer,

@@ -80,7 +80,7 @@ fn krylov_basis(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> Mat<f64> {
             }
         }
         let norm = w.iter().map(|x| x * x).sum::<f64>().sqrt();
-        if !(norm > tol) || !norm.is_finite() {
+        if !norm.is_finite() || norm <= tol {
             continue;
         }
         for x in w.iter_mut() {

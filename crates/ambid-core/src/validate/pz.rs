@@ -372,7 +372,10 @@ impl PzAnalysis {
         let poles = m.poles()?;
         match m.zeros() {
             Ok(zeros) => Self::from_roots(&poles, &zeros, ts, opts),
-            Err(Error::InvalidArgument { name, reason }) if name == "model order" => {
+            Err(Error::InvalidArgument {
+                name: "model order",
+                reason,
+            }) => {
                 let mut pz = Self::from_roots(&poles, &[], ts, opts)?;
                 pz.zeros_skipped = Some(reason);
                 Ok(pz)

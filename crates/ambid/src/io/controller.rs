@@ -223,7 +223,9 @@ impl ControllerModel {
         self.source.as_deref()
     }
 
-    /// The controller's frequency response $C(e^{j2\pi f T_s})$ at each frequency (Hz).
+    /// The controller's frequency response $C(e^{j2\pi f T_s})$ at each frequency (Hz): for a
+    /// `tf` file by Horner's rule in $q^{-1}$ on its coefficients ($O(\text{taps})$ per
+    /// frequency), otherwise from the state-space model.
     ///
     /// # Errors
     /// A non-finite frequency, or a frequency on a pole (DC for a controller with an

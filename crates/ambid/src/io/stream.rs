@@ -69,15 +69,12 @@ impl RowStream {
             fields: Vec::new(),
             row_lines: Vec::new(),
         };
-        let header = loop {
-            match s.next_line()? {
-                None => bail!(
-                    "{}: no header row: the file is empty or holds only comments; the first \
-                     line must name the columns, e.g. t,r,u,y",
-                    path.display()
-                ),
-                Some(l) => break l,
-            }
+        let Some(header) = s.next_line()? else {
+            bail!(
+                "{}: no header row: the file is empty or holds only comments; the first line \
+                 must name the columns, e.g. t,r,u,y",
+                path.display()
+            );
         };
         s.comma = header.contains(',');
         let names: Vec<String> = split(&header, s.comma)
