@@ -9,7 +9,7 @@ use ambid_core::frf::band::{excitation_bands, BandRule, ExcitationBands};
 use ambid_core::frf::closed_loop::{from_periodic, from_welch, Channels, ClosedLoopFrf};
 use ambid_core::frf::periodic::{PeriodicAnalyzer, PeriodicOptions, PeriodicSpectra};
 use ambid_core::frf::quality::{assess, output_snr_db, Quality};
-use ambid_core::frf::welch::{welch_spectra, WelchOptions};
+use ambid_core::frf::welch::{welch_spectra, CrossSpectra, WelchOptions};
 use ambid_core::frf::window::Window;
 use ambid_core::lti::StateSpace;
 use anyhow::{bail, Context, Result};
@@ -289,14 +289,7 @@ pub fn analyze(
         (rec.u.to_vec(), rec.y.to_vec())
     };
 
-    let ch = Channels { r: 0, u: 1, y: 2 };
-    let pick = |derived: ExcitationBands| -> (f64, f64, BandOrigin) {
-        match settings.band {
-            Some((a, b)) => (a, b, BandOrigin::User),
-            None => (derived.excited.0, derived.excited.1, BandOrigin::Excitation),
-        }
-    };
-    let (frf, spectra, derived, band_origin) = match &settings.method {
+    let spectra = match &settings.method {
         FrfMethod::Periodic {
             period_samples,
             skip_periods,
@@ -309,6 +302,93 @@ pub fn analyze(
                     &PeriodicOptions::new(*period_samples).skip(*skip_periods),
                 )
                 .context("period-synchronous averaging")?;
+            Spectra::Periodic(s)
+        }
+        FrfMethod::Welch {
+            nperseg,
+            noverlap,
+            window,
+            skip_samples,
+        } => {
+            if *skip_samples >= n {
+                bail!("--skip-samples {skip_samples} drops the whole record of {n} samples");
+            }
+            let mut opts = WelchOptions::new(rec.fs, *nperseg);
+            opts.window = *window;
+            if let Some(o) = noverlap {
+                opts.noverlap = *o;
+            }
+            let k0 = *skip_samples;
+            let cs = welch_spectra(&[&rec.r[k0..], &u[k0..], &y[k0..]], &opts)
+                .context("Welch spectra")?;
+            Spectra::Welch(cs)
+        }
+    };
+    let snr = y_noise.map(|yn| output_snr_db(&y, yn)).transpose()?;
+    analyze_spectra(
+        spectra,
+        settings,
+        Checks {
+            snr,
+            abnormal,
+            saturation,
+            warnings,
+        },
+    )
+}
+
+/// Spectra of the record `(r, u, y)` (channels 0, 1, 2), computed by [`analyze`] or by a caller
+/// that streams the record (`ambid frf`).
+#[derive(Debug, Clone)]
+pub enum Spectra {
+    /// Period-synchronous averages ([`FrfMethod::Periodic`]).
+    Periodic(PeriodicSpectra),
+    /// Welch cross spectra ([`FrfMethod::Welch`]).
+    Welch(CrossSpectra),
+}
+
+/// What the checks of the samples found, for [`analyze_spectra`].
+#[derive(Debug, Clone, Default)]
+pub struct Checks {
+    /// Output SNR \[dB\] from a noise record, if one was given.
+    pub snr: Option<f64>,
+    /// Abnormal-sample screening per channel.
+    pub abnormal: Vec<(String, AbnormalReport)>,
+    /// Saturation check per channel.
+    pub saturation: Vec<(String, SaturationReport)>,
+    /// Warnings so far.
+    pub warnings: Vec<String>,
+}
+
+/// The second half of [`analyze`]: bands, closed-loop FRFs (with the indirect estimate and the
+/// controller check when `settings.controller` is given) and quality from the spectra of
+/// `(r, u, y)` as channels 0, 1, 2 (the method in `settings` must be the one the spectra were
+/// computed by).
+///
+/// # Errors
+/// Fewer than 2 periods or Welch segments; no excited line in the band; the errors of the
+/// FRF and quality computations.
+pub fn analyze_spectra(
+    spectra: Spectra,
+    settings: &FrfSettings,
+    checks: Checks,
+) -> Result<FrfAnalysis> {
+    let Checks {
+        snr,
+        abnormal,
+        saturation,
+        mut warnings,
+    } = checks;
+    let ch = Channels { r: 0, u: 1, y: 2 };
+    let pick = |derived: ExcitationBands| -> (f64, f64, BandOrigin) {
+        match settings.band {
+            Some((a, b)) => (a, b, BandOrigin::User),
+            None => (derived.excited.0, derived.excited.1, BandOrigin::Excitation),
+        }
+    };
+    let (frf, spectra, derived, band_origin) = match spectra {
+        Spectra::Periodic(s) => {
+            let skip_periods = s.skipped_periods();
             let f_lines: Vec<f64> = (0..s.n_lines()).map(|k| s.line_hz(k)).collect();
             let power: Vec<f64> = s.mean(0).iter().map(|v| v.norm_sqr()).collect();
             let derived = excitation_bands(&f_lines, &power, 1, &settings.band_rule)
@@ -336,23 +416,7 @@ pub fn analyze(
             let frf = from_periodic(&s, ch, &lines, settings.controller.as_ref())?;
             (frf, Some(s), derived, origin)
         }
-        FrfMethod::Welch {
-            nperseg,
-            noverlap,
-            window,
-            skip_samples,
-        } => {
-            if *skip_samples >= n {
-                bail!("--skip-samples {skip_samples} drops the whole record of {n} samples");
-            }
-            let mut opts = WelchOptions::new(rec.fs, *nperseg);
-            opts.window = *window;
-            if let Some(o) = noverlap {
-                opts.noverlap = *o;
-            }
-            let k0 = *skip_samples;
-            let cs = welch_spectra(&[&rec.r[k0..], &u[k0..], &y[k0..]], &opts)
-                .context("Welch spectra")?;
+        Spectra::Welch(cs) => {
             if cs.n_segments() < 2 {
                 bail!(
                     "only {} Welch segment fits in the record; at least 2 are needed for a variance: \
@@ -378,7 +442,6 @@ pub fn analyze(
             (frf, None, derived, origin)
         }
     };
-    let snr = y_noise.map(|yn| output_snr_db(&y, yn)).transpose()?;
     let f = frf.f_hz();
     let band = match settings.band {
         Some(b) => b,
@@ -396,6 +459,11 @@ pub fn analyze(
             }
         }
     };
+    if let Some(c) = &settings.controller {
+        if let Some(w) = controller_mismatch(&frf, c, quality_band)? {
+            warnings.push(w);
+        }
+    }
     let quality = assess(&frf, quality_band, snr).context(
         "quality measures (the quality band must overlap the FRF band; see --quality-band)",
     )?;
@@ -414,4 +482,73 @@ pub fn analyze(
         saturation,
         warnings,
     })
+}
+
+/// Relative controller mismatch above which [`controller_mismatch`] warns (on top of three
+/// times the noise of the data's controller estimate).
+pub const CONTROLLER_MISMATCH_TOL: f64 = 0.05;
+
+/// Checks that a given controller `c` is the one the data were measured with, before its
+/// indirect estimate is trusted. On the lines of `band`, compares the file's
+/// $C(e^{j\omega T_s})$ with the controller measured in the loop,
+/// $\hat C = (r - u)/y$ ([`ClosedLoopFrf::controller`], valid with $w = 0$):
+/// $d_k = |C_k - \hat C_k| / |\hat C_k|$ and its noise $\sigma_k / |\hat C_k|$. The
+/// controller does not match when the median of $d_k$ exceeds three times the median relative
+/// noise plus [`CONTROLLER_MISMATCH_TOL`] (5 %: a 5 % controller error already biases the
+/// indirect plant by about as much near crossover). A controller that does not match was not
+/// running when the data were measured, so nothing says it stabilises the measured plant; the
+/// joint estimate $P = T_{ry}/T_{ru}$ needs no controller model and is the one to trust.
+/// Returns the warning, or `None` when the controller matches (or no line of `band` has a
+/// usable estimate).
+///
+/// # Errors
+/// The controller's frequency response (a frequency on one of its poles).
+pub fn controller_mismatch(
+    frf: &ClosedLoopFrf,
+    c: &StateSpace,
+    band: (f64, f64),
+) -> Result<Option<String>> {
+    let f = frf.f_hz();
+    let idx: Vec<usize> = (0..f.len())
+        .filter(|&k| f[k] >= band.0 && f[k] <= band.1)
+        .collect();
+    let fk: Vec<f64> = idx.iter().map(|&k| f[k]).collect();
+    let cf = c.freq_response_siso(&fk)?;
+    let data = frf.controller.values();
+    let var = frf.controller.variance();
+    let mut d = Vec::new();
+    let mut s = Vec::new();
+    for (j, &k) in idx.iter().enumerate() {
+        let m = data[k].norm();
+        let dk = (cf[j] - data[k]).norm() / m;
+        if m > 0.0 && dk.is_finite() {
+            d.push(dk);
+            s.push(var.map_or(0.0, |v| v[k].max(0.0).sqrt() / m));
+        }
+    }
+    if d.is_empty() {
+        return Ok(None);
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let (md, ms) = (median(&mut d), median(&mut s));
+    let limit = 3.0 * ms + CONTROLLER_MISMATCH_TOL;
+    if md <= limit {
+        return Ok(None);
+    }
+    Ok(Some(format!(
+        "the controller given does not match the controller the data were measured with: \
+         |C - C_data|/|C_data| has median {:.1} % on {} lines in {:.1}-{:.1} Hz (noise allows \
+         {:.1} %), where C_data = (r - u)/y from the record. Its indirect estimate \
+         (plant_indirect) is biased and this controller may not even stabilise the measured \
+         plant: trust the joint estimate P = T_ry/T_ru (column plant), which needs no \
+         controller model, or give the controller that ran during the measurement",
+        100.0 * md,
+        d.len(),
+        band.0,
+        band.1,
+        100.0 * limit
+    )))
 }

@@ -3,6 +3,7 @@
 
 use ambid::analysis::{analyze, FrfAnalysis, FrfMethod, FrfSettings, Record};
 use ambid::experiment::ExcitationPlan;
+use ambid::frf_stream::{analyze_csv, StreamColumns};
 use ambid::io::output::write_file;
 use ambid::io::{frf_csv_bytes, read_controller, read_time_csv, FrfColumn, OutputSet};
 use ambid::study::{
@@ -267,6 +268,27 @@ pub(crate) fn plant_unit(y: Option<&str>, u: Option<&str>) -> String {
 
 pub fn frf(a: FrfArgs) -> Result<()> {
     OutputSet::check(&a.out, a.force)?;
+    let res = if a.method == MethodArg::Auto && a.noise.is_none() {
+        // Welch and period averaging stream the file: memory for one block, segment or period
+        let cols = StreamColumns {
+            r: &a.excitation,
+            u: &a.input,
+            y: &a.output,
+            i: Some(&a.current),
+        };
+        analyze_csv(&a.data, &cols, a.fs, |n, ts| frf_settings(&a, n, ts))?
+    } else {
+        match frf_in_memory(&a)? {
+            Some(res) => res,
+            None => return Ok(()),
+        }
+    };
+    report_and_write(&a, &res)
+}
+
+/// The FRF with the whole record in memory (LPM/LRM, or a noise record for the SNR). `None`
+/// when a local method wrote its output itself.
+fn frf_in_memory(a: &FrfArgs) -> Result<Option<FrfAnalysis>> {
     let data = read_time_csv(&a.data, a.fs)?;
     if let Some(fs) = a.fs {
         let file_fs = 1.0 / data.ts;
@@ -291,13 +313,29 @@ pub fn frf(a: FrfArgs) -> Result<()> {
     let i = data.column_raw(&a.current).ok();
     let fs = 1.0 / data.ts;
     if matches!(a.method, MethodArg::Lpm | MethodArg::Lrm) {
-        return frf_local(&a, r, u, y, fs);
+        frf_local(a, r, u, y, fs)?;
+        return Ok(None);
     }
-    if let Some(k) = a.nperseg.filter(|&k| k > r.len()) {
+    let settings = frf_settings(a, r.len(), data.ts)?;
+    let noise = match &a.noise {
+        Some(p) => {
+            let d = read_time_csv(p, a.fs.or(Some(fs)))?;
+            Some(d.column_raw(&a.output)?.to_vec())
+        }
+        None => None,
+    };
+    let rec = Record { r, u, y, i, fs };
+    Ok(Some(
+        analyze(&rec, &settings, noise.as_deref())
+            .with_context(|| format!("{}", a.data.display()))?,
+    ))
+}
+
+/// The settings of `a` for a record of `n` samples at sample time `ts` (reads the controller).
+fn frf_settings(a: &FrfArgs, n: usize, ts: f64) -> Result<FrfSettings> {
+    if let Some(k) = a.nperseg.filter(|&k| k > n) {
         return Err(ambid::workflow::usage(anyhow::anyhow!(
-            "--nperseg {k} is longer than the record ({} samples); give at most {}, or leave it out to derive it from the record length",
-            r.len(),
-            r.len()
+            "--nperseg {k} is longer than the record ({n} samples); give at most {n}, or leave it out to derive it from the record length"
         ))
         .into());
     }
@@ -307,9 +345,7 @@ pub fn frf(a: FrfArgs) -> Result<()> {
             skip_periods: a.skip_periods,
         },
         None => FrfMethod::Welch {
-            nperseg: a
-                .nperseg
-                .unwrap_or_else(|| ambid::analysis::FrfSettings::default_nperseg(r.len())),
+            nperseg: a.nperseg.unwrap_or_else(|| FrfSettings::default_nperseg(n)),
             noverlap: a.noverlap,
             window: a.window.into(),
             skip_samples: a.skip_samples,
@@ -318,12 +354,12 @@ pub fn frf(a: FrfArgs) -> Result<()> {
     let controller = match &a.controller {
         Some(p) => {
             let c = read_controller(p)?;
-            c.check_ts(data.ts)?;
+            c.check_ts(ts)?;
             Some(c.state_space().clone())
         }
         None => None,
     };
-    let settings = FrfSettings {
+    Ok(FrfSettings {
         method,
         band: a.band,
         quality_band: a.quality_band,
@@ -332,17 +368,11 @@ pub fn frf(a: FrfArgs) -> Result<()> {
         controller,
         i_sat: a.i_sat,
         screen: !a.no_screen,
-    };
-    let noise = match &a.noise {
-        Some(p) => {
-            let d = read_time_csv(p, a.fs.or(Some(fs)))?;
-            Some(d.column_raw(&a.output)?.to_vec())
-        }
-        None => None,
-    };
-    let rec = Record { r, u, y, i, fs };
-    let res = analyze(&rec, &settings, noise.as_deref())
-        .with_context(|| format!("{}", a.data.display()))?;
+    })
+}
+
+/// Prints the summary of `res` and writes the FRF file.
+fn report_and_write(a: &FrfArgs, res: &FrfAnalysis) -> Result<()> {
     for w in &res.warnings {
         eprintln!("warning: {w}");
     }
@@ -362,7 +392,7 @@ pub fn frf(a: FrfArgs) -> Result<()> {
         ),
     }
     println!("bands: {}", res.bands.describe());
-    print_quality(&res);
+    print_quality(res);
     // resonance peaks of the plant in the quality band, on lines whose relative standard
     // deviation is below 10 % (noise ripple must not count as a mode)
     let qb = res.quality.band;
@@ -392,7 +422,7 @@ pub fn frf(a: FrfArgs) -> Result<()> {
         }
         Err(e) => println!("plant resonance peaks: not searched ({e})"),
     }
-    write_analysis(&a.out, &res, a.force)?;
+    write_analysis(&a.out, res, a.force)?;
     println!("written: {}", a.out.display());
     Ok(())
 }

@@ -246,6 +246,15 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
     )?;
     set.commit()?;
     println!("closed-loop validation on {} samples (first {k0} skipped, loop started from the {} initial state): fit y {fit_y:.2} %, fit u {fit_u:.2} %, RMSE y {rmse:.3e}, max |error| {max_err:.3e}", y.len() - k0, if settings.initial_state == ambid_core::validate::predict::InitialState::Estimate { "estimated" } else { "zero" });
+    let nx = model.order() + c.order();
+    if settings.initial_state == ambid_core::validate::predict::InitialState::Estimate
+        && nx > ambid_core::validate::closed_loop::MAX_X0_LOOP_STATES
+    {
+        println!(
+            "note: the loop has {nx} states, more than the {} whose initial state is estimated: it started from rest (use --skip to leave out the start)",
+            ambid_core::validate::closed_loop::MAX_X0_LOOP_STATES
+        );
+    }
     if let Some(wf) = worst {
         println!(
             "worst window {:.3}–{:.3} s: fit y {:.1} %",

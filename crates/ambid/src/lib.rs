@@ -8,6 +8,7 @@ pub mod bla;
 pub mod comparison;
 pub mod experiment;
 pub mod fitting;
+pub mod frf_stream;
 pub mod io;
 pub mod report;
 pub mod stepped_sine;

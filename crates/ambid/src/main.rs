@@ -338,7 +338,7 @@ struct SimulateArgs {
     /// Also record bearing B (columns u_b, i_b, y_b).
     #[arg(long)]
     record_b: bool,
-    /// Number of log-spaced truth frequencies from 1 Hz to fs/2.
+    /// Number of log-spaced truth frequencies from 1 Hz to fs/2 (at most 1000000).
     #[arg(long, default_value_t = 400)]
     truth_points: usize,
     /// A linear chirp position reference `amplitude_m,duration_s,f0_hz,f1_hz` at bearing A (the
@@ -734,6 +734,15 @@ fn info(a: TwinArgs) -> Result<()> {
     Ok(())
 }
 
+/// Largest `simulate --truth-points`: checked before anything is simulated or written (each
+/// point costs a few hundred bytes in memory and a row of truth.csv; 10⁹ points aborted
+/// allocating 8 GB after data.csv was written).
+const MAX_TRUTH_POINTS: usize = 1_000_000;
+
+/// Longest record `simulate --excitation-file` simulates: 2²³ samples (7 min at 20 kHz, about
+/// 0.5 GB for the record and what is written from it; 1.34·10⁸ samples aborted at 7.1 GiB).
+const MAX_SIM_SAMPLES: usize = 1 << 23;
+
 fn simulate(a: SimulateArgs) -> Result<()> {
     let data_path = a.out.join("data.csv");
     let truth_path = a.out.join("truth.csv");
@@ -774,10 +783,29 @@ fn simulate(a: SimulateArgs) -> Result<()> {
     if a.truth_points < 2 {
         bail!("--truth-points must be at least 2");
     }
+    if a.truth_points > MAX_TRUTH_POINTS {
+        bail!(
+            "--truth-points {} is more than the limit {MAX_TRUTH_POINTS}: truth.csv would hold \
+             {} rows of exact FRFs (a log grid of 10^4 points already resolves every mode of \
+             the twin); give at most {MAX_TRUTH_POINTS}",
+            a.truth_points,
+            a.truth_points
+        );
+    }
     let mut out = match &a.excitation_file {
         Some(p) => {
             let t = ambid::io::table::read_table(p, &Default::default())?;
             let r = t.column(&"r".into())?.to_vec();
+            if r.len() > MAX_SIM_SAMPLES {
+                bail!(
+                    "--excitation-file {}: {} samples, more than the limit of {MAX_SIM_SAMPLES} \
+                     samples a simulation may record (MAX_SIM_SAMPLES: the twin keeps about 60 \
+                     bytes per sample for the record and its outputs); use a shorter excitation \
+                     (fewer periods) and simulate it in several runs with different --seed",
+                    p.display(),
+                    r.len()
+                );
+            }
             let ts = if t.names.iter().any(|n| n == "t") {
                 Some(t.sample_time(Some(&"t".into()), None)?)
             } else {

@@ -217,10 +217,6 @@ impl PeriodicAnalyzer {
         }
         let p_used = total_periods - opts.skip_periods;
         let start = opts.skip_periods * n;
-        let lines = n / 2 + 1;
-        let nc = channels.len();
-        let zero = c64::new(0.0, 0.0);
-
         let exact: Vec<bool> = channels
             .iter()
             .map(|x| {
@@ -228,153 +224,13 @@ impl PeriodicAnalyzer {
                 (1..p_used).all(|p| &x[start + p * n..start + (p + 1) * n] == first)
             })
             .collect();
-        let mut mean = vec![vec![zero; lines]; nc];
-        let mut cov = vec![vec![zero; lines]; nc * (nc + 1) / 2];
-
-        // Exactly periodic channels: one transform, zero (co)variance.
-        for c in (0..nc).filter(|&c| exact[c]) {
-            self.transform_pair(&channels[c][start..start + n], None, start)?;
-            mean[c].copy_from_slice(&self.buf[..lines]);
+        let mut sums = PeriodSums::new(n, &exact);
+        for p in 0..p_used {
+            let off = start + p * n;
+            let period: Vec<&[f64]> = channels.iter().map(|x| &x[off..off + n]).collect();
+            sums.add(self, &period, off)?;
         }
-
-        // Noisy channels, packed two per complex FFT.
-        let noisy: Vec<usize> = (0..nc).filter(|&c| !exact[c]).collect();
-        if noisy.len() == 2 {
-            // the common case (u and y): split, deviate and accumulate in one pass per period
-            let (ia, ib) = (noisy[0], noisy[1]);
-            let (ca, cb) = (channels[ia], channels[ib]);
-            let mut ref_a = vec![zero; lines];
-            let mut ref_b = vec![zero; lines];
-            let (mut s1a, mut s1b) = (vec![zero; lines], vec![zero; lines]);
-            let (mut saa, mut sbb) = (vec![0.0f64; lines], vec![0.0f64; lines]);
-            let mut sab = vec![zero; lines];
-            for p in 0..p_used {
-                let off = start + p * n;
-                self.transform_pair(&ca[off..off + n], Some(&cb[off..off + n]), off)?;
-                let z = &self.buf;
-                // A_k = (Z_k + conj Z_{N−k})/2, B_k = (Z_k − conj Z_{N−k})/(2j); Z_N ≡ Z_0
-                let first = p == 0;
-                for k in 0..lines {
-                    let zk = z[k];
-                    let zc = if k == 0 { z[0] } else { z[n - k] }.conj();
-                    let d = zk - zc;
-                    let a = (zk + zc) * 0.5;
-                    let b = c64::new(d.im * 0.5, -d.re * 0.5);
-                    if first {
-                        ref_a[k] = a;
-                        ref_b[k] = b;
-                    } else {
-                        let (da, db) = (a - ref_a[k], b - ref_b[k]);
-                        s1a[k] += da;
-                        s1b[k] += db;
-                        saa[k] += da.norm_sqr();
-                        sbb[k] += db.norm_sqr();
-                        sab[k] += da * db.conj();
-                    }
-                }
-            }
-            let pf = p_used as f64;
-            for k in 0..lines {
-                mean[ia][k] = ref_a[k] + s1a[k] / pf;
-                mean[ib][k] = ref_b[k] + s1b[k] / pf;
-            }
-            if p_used > 1 {
-                let denom = pf - 1.0;
-                let (paa, pbb, pab) = (
-                    pair_index(nc, ia, ia),
-                    pair_index(nc, ib, ib),
-                    pair_index(nc, ia, ib),
-                );
-                for k in 0..lines {
-                    let va = (saa[k] - s1a[k].norm_sqr() / pf) / denom;
-                    let vb = (sbb[k] - s1b[k].norm_sqr() / pf) / denom;
-                    cov[paa][k] = c64::new(va.max(0.0), 0.0);
-                    cov[pbb][k] = c64::new(vb.max(0.0), 0.0);
-                    cov[pab][k] = (sab[k] - s1a[k] * s1b[k].conj() / pf) / denom;
-                }
-            }
-        } else if !noisy.is_empty() {
-            let nn = noisy.len();
-            // spectra of the current period and of the reference (first) period
-            let mut cur = vec![vec![zero; lines]; nn];
-            let mut refp = vec![vec![zero; lines]; nn];
-            let mut s1 = vec![vec![zero; lines]; nn];
-            let mut s2 = vec![vec![zero; lines]; nn * (nn + 1) / 2];
-            for p in 0..p_used {
-                let off = start + p * n;
-                for pair in (0..nn).step_by(2) {
-                    let a = channels[noisy[pair]];
-                    let b = noisy.get(pair + 1).map(|&c| channels[c]);
-                    self.transform_pair(&a[off..off + n], b.map(|b| &b[off..off + n]), off)?;
-                    split_pair(&self.buf, n, lines, &mut cur, pair, b.is_some());
-                }
-                if p == 0 {
-                    for (r, c) in refp.iter_mut().zip(&cur) {
-                        r.copy_from_slice(c);
-                    }
-                    continue;
-                }
-                // deviations from the reference period
-                for a in 0..nn {
-                    for k in 0..lines {
-                        cur[a][k] -= refp[a][k];
-                        s1[a][k] += cur[a][k];
-                    }
-                }
-                for a in 0..nn {
-                    for b in a..nn {
-                        let acc = &mut s2[pair_index(nn, a, b)];
-                        let (da, db) = (&cur[a], &cur[b]);
-                        for k in 0..lines {
-                            acc[k] += da[k] * db[k].conj();
-                        }
-                    }
-                }
-            }
-            let pf = p_used as f64;
-            for a in 0..nn {
-                for k in 0..lines {
-                    mean[noisy[a]][k] = refp[a][k] + s1[a][k] / pf;
-                }
-            }
-            if p_used > 1 {
-                let denom = pf - 1.0;
-                for a in 0..nn {
-                    for b in a..nn {
-                        let (ia, ib) = (noisy[a], noisy[b]);
-                        let (lo, hi, swap) = if ia <= ib {
-                            (ia, ib, false)
-                        } else {
-                            (ib, ia, true)
-                        };
-                        let out = &mut cov[pair_index(nc, lo, hi)];
-                        let acc = &s2[pair_index(nn, a, b)];
-                        for k in 0..lines {
-                            // Σ d_a d_b* − (Σ d_a)(Σ d_b)*/P, d = X − X_ref
-                            let v = (acc[k] - s1[a][k] * s1[b][k].conj() / pf) / denom;
-                            out[k] = if swap { v.conj() } else { v };
-                        }
-                        if a == b {
-                            for v in out.iter_mut() {
-                                *v = c64::new(v.re.max(0.0), 0.0);
-                            }
-                        }
-                    }
-                }
-            }
-        }
-
-        Ok(PeriodicSpectra {
-            fs,
-            period_samples: n,
-            periods: p_used,
-            skipped: opts.skip_periods,
-            dropped_tail: tail,
-            n_channels: nc,
-            mean,
-            cov,
-            exact_periodic: exact,
-        })
+        sums.finish(self, fs, opts.skip_periods, tail)
     }
 
     /// Packs `a + j b` into the buffer and transforms it. The finiteness check rides along the
@@ -409,6 +265,397 @@ impl PeriodicAnalyzer {
         self.fft
             .process_with_scratch(&mut self.buf, &mut self.scratch);
         Ok(())
+    }
+}
+
+/// Running sums of the analysed periods, shared by [`PeriodicAnalyzer::analyze`] and
+/// [`PeriodicAccumulator`] so that both give bit-identical spectra.
+#[derive(Debug, Clone)]
+struct PeriodSums {
+    n: usize,
+    lines: usize,
+    nc: usize,
+    exact: Vec<bool>,
+    noisy: Vec<usize>,
+    /// The first analysed period of every exactly periodic channel (transformed at the end).
+    first_exact: Vec<Vec<f64>>,
+    /// Position of the first analysed period in the record.
+    first_off: usize,
+    periods: usize,
+    /// Spectra of the reference (first analysed) period and of the current one, noisy channels.
+    refp: Vec<Vec<c64>>,
+    cur: Vec<Vec<c64>>,
+    s1: Vec<Vec<c64>>,
+    /// Two noisy channels: Σ|d_a|², Σ|d_b|², Σ d_a d_b*.
+    saa: Vec<f64>,
+    sbb: Vec<f64>,
+    sab: Vec<c64>,
+    /// Otherwise: Σ d_a d_b* for every pair a ≤ b of noisy channels.
+    s2: Vec<Vec<c64>>,
+}
+
+impl PeriodSums {
+    fn new(n: usize, exact: &[bool]) -> Self {
+        let lines = n / 2 + 1;
+        let zero = c64::new(0.0, 0.0);
+        let noisy: Vec<usize> = (0..exact.len()).filter(|&c| !exact[c]).collect();
+        let nn = noisy.len();
+        let two = nn == 2;
+        Self {
+            n,
+            lines,
+            nc: exact.len(),
+            exact: exact.to_vec(),
+            first_exact: exact.iter().map(|_| Vec::new()).collect(),
+            first_off: 0,
+            periods: 0,
+            refp: vec![vec![zero; lines]; nn],
+            cur: vec![vec![zero; if two { 0 } else { lines }]; nn],
+            s1: vec![vec![zero; lines]; nn],
+            saa: vec![0.0; if two { lines } else { 0 }],
+            sbb: vec![0.0; if two { lines } else { 0 }],
+            sab: vec![zero; if two { lines } else { 0 }],
+            s2: vec![vec![zero; lines]; if two { 0 } else { nn * (nn + 1) / 2 }],
+            noisy,
+        }
+    }
+
+    /// Adds one period (`period[c]` holds `n` samples of channel `c`); `off` is its position in
+    /// the record, for error messages.
+    fn add(&mut self, an: &mut PeriodicAnalyzer, period: &[&[f64]], off: usize) -> Result<()> {
+        let (n, lines) = (self.n, self.lines);
+        let first = self.periods == 0;
+        if first {
+            self.first_off = off;
+            for c in (0..self.nc).filter(|&c| self.exact[c]) {
+                self.first_exact[c] = period[c].to_vec();
+            }
+        }
+        if self.noisy.len() == 2 {
+            // the common case (u and y): split, deviate and accumulate in one pass per period
+            let (ia, ib) = (self.noisy[0], self.noisy[1]);
+            an.transform_pair(period[ia], Some(period[ib]), off)?;
+            let z = &an.buf;
+            // A_k = (Z_k + conj Z_{N−k})/2, B_k = (Z_k − conj Z_{N−k})/(2j); Z_N ≡ Z_0
+            for k in 0..lines {
+                let zk = z[k];
+                let zc = if k == 0 { z[0] } else { z[n - k] }.conj();
+                let d = zk - zc;
+                let a = (zk + zc) * 0.5;
+                let b = c64::new(d.im * 0.5, -d.re * 0.5);
+                if first {
+                    self.refp[0][k] = a;
+                    self.refp[1][k] = b;
+                } else {
+                    let (da, db) = (a - self.refp[0][k], b - self.refp[1][k]);
+                    self.s1[0][k] += da;
+                    self.s1[1][k] += db;
+                    self.saa[k] += da.norm_sqr();
+                    self.sbb[k] += db.norm_sqr();
+                    self.sab[k] += da * db.conj();
+                }
+            }
+        } else if !self.noisy.is_empty() {
+            let nn = self.noisy.len();
+            for pair in (0..nn).step_by(2) {
+                let a = period[self.noisy[pair]];
+                let b = self.noisy.get(pair + 1).map(|&c| period[c]);
+                an.transform_pair(a, b, off)?;
+                split_pair(&an.buf, n, lines, &mut self.cur, pair, b.is_some());
+            }
+            if first {
+                for (r, c) in self.refp.iter_mut().zip(&self.cur) {
+                    r.copy_from_slice(c);
+                }
+            } else {
+                // deviations from the reference period
+                for a in 0..nn {
+                    for k in 0..lines {
+                        self.cur[a][k] -= self.refp[a][k];
+                        self.s1[a][k] += self.cur[a][k];
+                    }
+                }
+                for a in 0..nn {
+                    for b in a..nn {
+                        let acc = &mut self.s2[pair_index(nn, a, b)];
+                        let (da, db) = (&self.cur[a], &self.cur[b]);
+                        for k in 0..lines {
+                            acc[k] += da[k] * db[k].conj();
+                        }
+                    }
+                }
+            }
+        }
+        self.periods += 1;
+        Ok(())
+    }
+
+    // parallel per-line arrays, indexed alike
+    #[allow(clippy::needless_range_loop)]
+    fn finish(
+        &self,
+        an: &mut PeriodicAnalyzer,
+        fs: f64,
+        skipped: usize,
+        tail: usize,
+    ) -> Result<PeriodicSpectra> {
+        let (lines, nc) = (self.lines, self.nc);
+        let zero = c64::new(0.0, 0.0);
+        let p_used = self.periods;
+        let mut mean = vec![vec![zero; lines]; nc];
+        let mut cov = vec![vec![zero; lines]; nc * (nc + 1) / 2];
+        // Exactly periodic channels: one transform, zero (co)variance.
+        for c in (0..nc).filter(|&c| self.exact[c]) {
+            an.transform_pair(&self.first_exact[c], None, self.first_off)?;
+            mean[c].copy_from_slice(&an.buf[..lines]);
+        }
+        let pf = p_used as f64;
+        let nn = self.noisy.len();
+        if nn == 2 {
+            let (ia, ib) = (self.noisy[0], self.noisy[1]);
+            for k in 0..lines {
+                mean[ia][k] = self.refp[0][k] + self.s1[0][k] / pf;
+                mean[ib][k] = self.refp[1][k] + self.s1[1][k] / pf;
+            }
+            if p_used > 1 {
+                let denom = pf - 1.0;
+                let (paa, pbb, pab) = (
+                    pair_index(nc, ia, ia),
+                    pair_index(nc, ib, ib),
+                    pair_index(nc, ia, ib),
+                );
+                for k in 0..lines {
+                    let va = (self.saa[k] - self.s1[0][k].norm_sqr() / pf) / denom;
+                    let vb = (self.sbb[k] - self.s1[1][k].norm_sqr() / pf) / denom;
+                    cov[paa][k] = c64::new(va.max(0.0), 0.0);
+                    cov[pbb][k] = c64::new(vb.max(0.0), 0.0);
+                    cov[pab][k] = (self.sab[k] - self.s1[0][k] * self.s1[1][k].conj() / pf) / denom;
+                }
+            }
+        } else if nn > 0 {
+            for a in 0..nn {
+                for k in 0..lines {
+                    mean[self.noisy[a]][k] = self.refp[a][k] + self.s1[a][k] / pf;
+                }
+            }
+            if p_used > 1 {
+                let denom = pf - 1.0;
+                for a in 0..nn {
+                    for b in a..nn {
+                        let (ia, ib) = (self.noisy[a], self.noisy[b]);
+                        let (lo, hi, swap) = if ia <= ib {
+                            (ia, ib, false)
+                        } else {
+                            (ib, ia, true)
+                        };
+                        let out = &mut cov[pair_index(nc, lo, hi)];
+                        let acc = &self.s2[pair_index(nn, a, b)];
+                        for k in 0..lines {
+                            // Σ d_a d_b* − (Σ d_a)(Σ d_b)*/P, d = X − X_ref
+                            let v = (acc[k] - self.s1[a][k] * self.s1[b][k].conj() / pf) / denom;
+                            out[k] = if swap { v.conj() } else { v };
+                        }
+                        if a == b {
+                            for v in out.iter_mut() {
+                                *v = c64::new(v.re.max(0.0), 0.0);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        Ok(PeriodicSpectra {
+            fs,
+            period_samples: self.n,
+            periods: p_used,
+            skipped,
+            dropped_tail: tail,
+            n_channels: nc,
+            mean,
+            cov,
+            exact_periodic: self.exact.clone(),
+        })
+    }
+}
+
+/// Period-synchronous averaging fed one chunk at a time: holds one period of every channel
+/// and the running sums ($O(C^2 N)$ numbers), never the record, and gives the same
+/// [`PeriodicSpectra`], bit for bit, as [`PeriodicAnalyzer::analyze`] on the whole record.
+///
+/// `analyze` transforms a channel whose analysed periods are all bit-identical once (zero
+/// variance) and pairs the others in complex FFTs; a stream cannot know that before its end,
+/// so the caller says which channels are exactly periodic (`exact`, e.g. from a first pass
+/// over the file); every period of such a channel is compared with the first analysed one,
+/// and [`finish`](Self::finish) is an error if one differs.
+///
+/// # Example
+/// ```
+/// use ambid_core::frf::periodic::{PeriodicAccumulator, PeriodicAnalyzer, PeriodicOptions};
+/// let n = 64;
+/// let x: Vec<f64> = (0..4 * n).map(|k| ((k % n) as f64 * 0.3).sin()).collect();
+/// let y: Vec<f64> = (0..4 * n).map(|k| 0.5 * x[k] + 1e-3 * ((k * 7919) % 13) as f64).collect();
+/// let u: Vec<f64> = (0..4 * n).map(|k| x[k] - y[k]).collect();
+/// let opts = PeriodicOptions::new(n).skip(1);
+/// let whole = PeriodicAnalyzer::new(n).unwrap().analyze(&[&x, &u, &y], 1e3, &opts).unwrap();
+/// let mut acc = PeriodicAccumulator::new(3, &opts, vec![true, false, false]).unwrap();
+/// for k in (0..4 * n).step_by(50) {
+///     let e = (k + 50).min(4 * n);
+///     acc.push(&[&x[k..e], &u[k..e], &y[k..e]]).unwrap();
+/// }
+/// assert_eq!(acc.finish(1e3).unwrap(), whole);
+/// ```
+#[derive(Debug)]
+pub struct PeriodicAccumulator {
+    an: PeriodicAnalyzer,
+    opts: PeriodicOptions,
+    sums: PeriodSums,
+    /// Channel-major buffer of the period being filled.
+    buf: Vec<f64>,
+    filled: usize,
+    n_samples: usize,
+    /// The first exactly-periodic channel found to differ, with the period's offset.
+    broken: Option<(usize, usize)>,
+}
+
+impl PeriodicAccumulator {
+    /// An empty accumulator for `n_channels` channels cut as `opts` says; `exact[c]` declares
+    /// channel `c` exactly periodic.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for `period_samples < 2`, no channel or an `exact` of another
+    /// length.
+    pub fn new(n_channels: usize, opts: &PeriodicOptions, exact: Vec<bool>) -> Result<Self> {
+        let an = PeriodicAnalyzer::new(opts.period_samples)?;
+        if n_channels == 0 {
+            return Err(Error::invalid("channels", "no channel to analyse"));
+        }
+        if exact.len() != n_channels {
+            return Err(Error::invalid(
+                "exact",
+                format!(
+                    "one flag per channel is needed: {} flags for {n_channels} channels",
+                    exact.len()
+                ),
+            ));
+        }
+        let n = opts.period_samples;
+        Ok(Self {
+            an,
+            opts: *opts,
+            sums: PeriodSums::new(n, &exact),
+            buf: vec![0.0; n_channels * n],
+            filled: 0,
+            n_samples: 0,
+            broken: None,
+        })
+    }
+
+    /// Appends the next samples of every channel (all the same length, any length).
+    ///
+    /// # Errors
+    /// [`Error::DimensionMismatch`] for a wrong number of slices or slices of different
+    /// lengths; [`Error::NonFinite`] for a NaN or infinite sample of an analysed period (its
+    /// index counted from the start of the record).
+    pub fn push<S: AsRef<[f64]>>(&mut self, chunk: &[S]) -> Result<()> {
+        let nc = self.sums.nc;
+        if chunk.len() != nc {
+            return Err(Error::DimensionMismatch {
+                context: "PeriodicAccumulator::push (one slice per channel)",
+                expected: format!("{nc} channels"),
+                got: format!("{} slices", chunk.len()),
+            });
+        }
+        let len = chunk[0].as_ref().len();
+        if let Some(c) = chunk.iter().position(|x| x.as_ref().len() != len) {
+            return Err(Error::DimensionMismatch {
+                context: "PeriodicAccumulator::push (every channel's chunk the same length)",
+                expected: format!("{len} samples (channel 0)"),
+                got: format!("{} samples in channel {c}", chunk[c].as_ref().len()),
+            });
+        }
+        let n = self.opts.period_samples;
+        let mut pos = 0;
+        while pos < len {
+            let take = (len - pos).min(n - self.filled);
+            for (c, x) in chunk.iter().enumerate() {
+                self.buf[c * n + self.filled..c * n + self.filled + take]
+                    .copy_from_slice(&x.as_ref()[pos..pos + take]);
+            }
+            self.filled += take;
+            pos += take;
+            self.n_samples += take;
+            if self.filled == n {
+                self.filled = 0;
+                let index = self.n_samples / n - 1;
+                if index >= self.opts.skip_periods {
+                    let off = index * n;
+                    let period: Vec<&[f64]> = self.buf.chunks(n).collect();
+                    if self.sums.periods > 0 && self.broken.is_none() {
+                        self.broken = (0..nc)
+                            .find(|&c| {
+                                self.sums.exact[c] && period[c] != &self.sums.first_exact[c][..]
+                            })
+                            .map(|c| (c, off));
+                    }
+                    self.sums.add(&mut self.an, &period, off)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Samples pushed so far.
+    pub fn n_samples(&self) -> usize {
+        self.n_samples
+    }
+
+    /// The spectra of the whole periods pushed, as [`PeriodicAnalyzer::analyze`] gives them
+    /// for the same record, `fs` and options.
+    ///
+    /// # Errors
+    /// As `analyze`: `fs` not positive, a strict record that is not a whole number of periods,
+    /// no period left after the skipped ones; and a channel declared exactly periodic whose
+    /// periods differ.
+    pub fn finish(&mut self, fs: f64) -> Result<PeriodicSpectra> {
+        if !(fs.is_finite() && fs > 0.0) {
+            return Err(Error::invalid(
+                "fs",
+                format!("the sampling frequency must be positive and finite, got {fs}"),
+            ));
+        }
+        let n = self.opts.period_samples;
+        let (len, total_periods, tail) = (self.n_samples, self.n_samples / n, self.filled);
+        if self.opts.strict && tail != 0 {
+            return Err(Error::invalid(
+                "period_samples",
+                format!(
+                    "the record has {len} samples, which is not an integer number of periods of {n} samples \
+                     ({total_periods} periods and {tail} samples); pass the right period length or trim the \
+                     record to a multiple of it (or allow an incomplete tail)"
+                ),
+            ));
+        }
+        if total_periods <= self.opts.skip_periods {
+            return Err(Error::invalid(
+                "skip_periods",
+                format!(
+                    "the record holds {total_periods} whole period(s) of {n} samples and {} are to be skipped; \
+                     record more periods or skip fewer",
+                    self.opts.skip_periods
+                ),
+            ));
+        }
+        if let Some((c, off)) = self.broken {
+            return Err(Error::invalid(
+                "exact",
+                format!(
+                    "channel {c} was declared exactly periodic but the period at sample {off} \
+                     differs from the first analysed one; declare it noisy"
+                ),
+            ));
+        }
+        self.sums
+            .finish(&mut self.an, fs, self.opts.skip_periods, tail)
     }
 }
 

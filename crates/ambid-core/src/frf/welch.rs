@@ -229,8 +229,8 @@ impl WelchOptions {
             .collect()
     }
 
-    /// The error for a record too short to hold one segment.
-    fn too_short(&self, n_samples: usize) -> Error {
+    /// The error for a record of `n_samples` too short to hold one segment.
+    pub fn too_short(&self, n_samples: usize) -> Error {
         Error::invalid(
             "nperseg",
             format!(

@@ -22,5 +22,5 @@ pub use frd::Frd;
 pub use interconnect::FeedbackSign;
 pub use pid::{Discretisation, PidSpec};
 pub use poly::{PolyModel, Structure};
-pub use ss::StateSpace;
+pub use ss::{StateSpace, ZEROS_MAX_ORDER};
 pub use tf::TransferFunction;

@@ -47,6 +47,102 @@ fn check_mat(what: &'static str, m: MatRef<'_, f64>) -> Result<()> {
     Ok(())
 }
 
+/// Largest controllable and observable part whose zeros [`StateSpace::zeros`] computes: the
+/// QZ iteration on the $(n+m) \times (n+m)$ Rosenbrock pencil costs $O(n^3)$ with a large
+/// constant and can stall on highly structured pencils (a 400-state pencil with one
+/// controllable mode ran for more than 590 s before the reduction existed). 300 states take
+/// about a second on one core.
+pub const ZEROS_MAX_ORDER: usize = 300;
+
+/// Orthonormal basis (as columns) of $\operatorname{span}\{B, AB, A^2B, \dots\}$: Arnoldi with
+/// classical Gram–Schmidt applied twice, candidates processed first-in first-out (the columns
+/// of $B$, then $A$ times each accepted vector). See [`StateSpace::minimal_part`] for the
+/// tolerances.
+fn krylov_basis(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> Mat<f64> {
+    let n = a.nrows();
+    let fro = |m: MatRef<'_, f64>| m.norm_l2();
+    let tol_a = 10.0 * n as f64 * f64::EPSILON * fro(a);
+    let tol_b = 10.0 * n as f64 * f64::EPSILON * fro(b);
+    let mut basis: Vec<Vec<f64>> = Vec::new();
+    let mut queue: std::collections::VecDeque<(Vec<f64>, f64)> = (0..b.ncols())
+        .map(|j| ((0..n).map(|i| b[(i, j)]).collect(), tol_b))
+        .collect();
+    while let Some((mut w, tol)) = queue.pop_front() {
+        if basis.len() == n {
+            break;
+        }
+        for _ in 0..2 {
+            for q in &basis {
+                let h: f64 = q.iter().zip(&w).map(|(x, y)| x * y).sum();
+                for (wi, qi) in w.iter_mut().zip(q) {
+                    *wi -= h * qi;
+                }
+            }
+        }
+        let norm = w.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if !norm.is_finite() || norm <= tol {
+            continue;
+        }
+        for x in w.iter_mut() {
+            *x /= norm;
+        }
+        let aw: Vec<f64> = (0..n)
+            .map(|i| (0..n).map(|k| a[(i, k)] * w[k]).sum())
+            .collect();
+        queue.push_back((aw, tol_a));
+        basis.push(w);
+    }
+    Mat::from_fn(n, basis.len(), |i, j| basis[j][i])
+}
+
+/// An orthonormal basis of the orthogonal complement of the orthonormal columns `v` ($n \times r$,
+/// result $n \times (n - r)$): the last $n - r$ columns of the Householder $Q$ of `v`.
+fn complement(v: MatRef<'_, f64>) -> Mat<f64> {
+    let (n, r) = (v.nrows(), v.ncols());
+    let mut w = v.to_owned();
+    // Householder vectors (unit norm, zero above the diagonal); a zero vector is no reflection
+    let mut hs: Vec<Vec<f64>> = Vec::with_capacity(r);
+    for k in 0..r {
+        let x: Vec<f64> = (k..n).map(|i| w[(i, k)]).collect();
+        let norm = x.iter().map(|t| t * t).sum::<f64>().sqrt();
+        let mut h = vec![0.0; n];
+        if norm > 0.0 {
+            let alpha = if x[0] >= 0.0 { -norm } else { norm };
+            for (i, xi) in x.iter().enumerate() {
+                h[k + i] = *xi;
+            }
+            h[k] -= alpha;
+            let hn = h.iter().map(|t| t * t).sum::<f64>().sqrt();
+            if hn > 0.0 {
+                for t in h.iter_mut() {
+                    *t /= hn;
+                }
+            }
+        }
+        // apply (I - 2 h hᵀ) to the remaining columns
+        for j in k..r {
+            let d: f64 = (k..n).map(|i| h[i] * w[(i, j)]).sum();
+            for i in k..n {
+                w[(i, j)] -= 2.0 * d * h[i];
+            }
+        }
+        hs.push(h);
+    }
+    // Q e_j for j = r..n: apply the reflectors in reverse order to the unit vectors
+    let mut q = Mat::from_fn(n, n - r, |i, j| if i == r + j { 1.0 } else { 0.0 });
+    for h in hs.iter().rev() {
+        for j in 0..n - r {
+            let d: f64 = (0..n).map(|i| h[i] * q[(i, j)]).sum();
+            if d != 0.0 {
+                for i in 0..n {
+                    q[(i, j)] -= 2.0 * d * h[i];
+                }
+            }
+        }
+    }
+    q
+}
+
 impl StateSpace {
     /// Builds a model after checking dimensions, finiteness and the sample time.
     pub fn new(
@@ -438,16 +534,50 @@ impl StateSpace {
             .collect())
     }
 
-    /// Transmission zeros of a square model ($p = m$): the finite generalized eigenvalues of the
+    /// Invariant zeros of a square model ($p = m$): the finite generalized eigenvalues of the
     /// Rosenbrock system pencil
     /// $$ \begin{bmatrix} A & B \\ C & D \end{bmatrix} - \lambda
-    ///    \begin{bmatrix} I & 0 \\ 0 & 0 \end{bmatrix}. $$
-    /// Infinite eigenvalues ($|\beta| \le 10^{-9} |\alpha|$, relative to the pencil scale) are
-    /// dropped. For a SISO model these are the roots of the transfer-function numerator.
-    /// A degenerate pencil (e.g. an input that reaches no state and no output) has no well
-    /// defined zeros; the result is then meaningless.
+    ///    \begin{bmatrix} I & 0 \\ 0 & 0 \end{bmatrix}, $$
+    /// as `control.zeros` / the scipy pencil give them. For a SISO model these are the roots of
+    /// the transfer-function numerator before any cancellation.
+    ///
+    /// They are computed without running QZ on the whole pencil: in the orthogonal Kalman
+    /// decomposition of [`minimal_part`](Self::minimal_part) the pencil is block triangular,
+    /// so its finite eigenvalues are those of the pencil of the controllable and observable
+    /// part (the transmission zeros) together with the eigenvalues of the uncontrollable part
+    /// and of the unobservable part of the controllable one (the decoupling zeros, by a plain
+    /// eigenvalue routine). Infinite eigenvalues ($|\beta| \le 10^{-9} |\alpha|$, relative to
+    /// the pencil scale) are dropped. A model that is already minimal gives bit-for-bit the
+    /// full pencil's result. A degenerate pencil (e.g. an input that reaches no state and no
+    /// output) has no well defined zeros; the result is then meaningless.
+    ///
+    /// Bounded: the reduction and the eigenvalues are $O(n^3)$; the QZ step is refused with an
+    /// [`Error::InvalidArgument`] naming [`ZEROS_MAX_ORDER`] when the controllable and observable
+    /// part has more states (QZ on large, highly structured pencils ran for minutes).
+    ///
+    /// ```
+    /// use ambid_core::lti::StateSpace;
+    /// use faer::{mat, Mat};
+    /// // 400 identical modes seen through one input and one output: one controllable mode,
+    /// // G(z) = 400/(z - 0.5); the other 399 modes are decoupling zeros at 0.5
+    /// let n = 400;
+    /// let g = StateSpace::discrete(
+    ///     Mat::from_fn(n, n, |i, j| if i == j { 0.5 } else { 0.0 }),
+    ///     Mat::from_fn(n, 1, |_, _| 1.0),
+    ///     Mat::from_fn(1, n, |_, _| 1.0),
+    ///     mat![[0.0]],
+    ///     1e-3,
+    /// )
+    /// .unwrap();
+    /// let m = g.minimal_part().unwrap();
+    /// assert_eq!(m.order(), 1);
+    /// assert!(m.zeros().unwrap().is_empty()); // no transmission zero
+    /// let z = g.zeros().unwrap();
+    /// assert_eq!(z.len(), 399);
+    /// assert!(z.iter().all(|z| (z.re - 0.5).abs() < 1e-12 && z.im.abs() < 1e-12));
+    /// ```
     pub fn zeros(&self) -> Result<Vec<c64>> {
-        let (n, m, p) = (self.order(), self.ninputs(), self.noutputs());
+        let (m, p) = (self.ninputs(), self.noutputs());
         if m != p {
             return Err(Error::DimensionMismatch {
                 context: "zeros (square systems only)",
@@ -455,6 +585,26 @@ impl StateSpace {
                 got: p.to_string(),
             });
         }
+        let (r, decoupling) = self.kalman_split()?;
+        let n = r.order();
+        if n > ZEROS_MAX_ORDER {
+            return Err(Error::invalid(
+                "model order",
+                format!(
+                    "the zeros of a model whose controllable and observable part has {n} states \
+                     are not computed (limit ZEROS_MAX_ORDER = {ZEROS_MAX_ORDER} states): reduce \
+                     the model first (a lower order or balanced truncation)"
+                ),
+            ));
+        }
+        let mut z = r.pencil_zeros()?;
+        z.extend(decoupling);
+        Ok(z)
+    }
+
+    /// The finite eigenvalues of the full Rosenbrock pencil (no reduction).
+    fn pencil_zeros(&self) -> Result<Vec<c64>> {
+        let (n, m) = (self.order(), self.ninputs());
         let big = Mat::from_fn(n + m, n + m, |i, j| match (i < n, j < n) {
             (true, true) => self.a[(i, j)],
             (true, false) => self.b[(i, j - n)],
@@ -468,6 +618,56 @@ impl StateSpace {
             .filter(|(al, be)| be.norm() > 1e-9 * al.norm() && be.norm() > 0.0)
             .map(|(al, be)| al / be)
             .collect())
+    }
+
+    /// The controllable and observable part of the model (a Kalman decomposition by
+    /// orthogonal projections): $V$ is an orthonormal basis of the controllable subspace
+    /// $\operatorname{span}\{B, AB, A^2B, \dots\}$ and $W$ one of the observable subspace of
+    /// $(V^{\mathsf T}AV, C V)$; the result is
+    /// $(W^{\mathsf T}V^{\mathsf T}AVW,\; W^{\mathsf T}V^{\mathsf T}B,\; CVW,\; D)$, with the same
+    /// transfer function. The bases are built by Arnoldi with Gram–Schmidt applied twice; a
+    /// new direction is kept when its component orthogonal to the basis exceeds
+    /// $10\,n\,\varepsilon\,\lVert A\rVert_F$ (for $A$ times a basis vector) or
+    /// $10\,n\,\varepsilon\,\lVert B\rVert_F$ (for a column of $B$): only exact (rounding-level)
+    /// uncontrollable or unobservable modes are removed. A model that is already minimal is
+    /// returned unchanged. $O(n^3)$.
+    pub fn minimal_part(&self) -> Result<StateSpace> {
+        Ok(self.kalman_split()?.0)
+    }
+
+    /// [`minimal_part`](Self::minimal_part) and the eigenvalues of the parts it removed (the
+    /// uncontrollable part $V_\perp^{\mathsf T} A V_\perp$, then the unobservable part of the
+    /// controllable one).
+    fn kalman_split(&self) -> Result<(StateSpace, Vec<c64>)> {
+        let n = self.order();
+        let mut removed = Vec::new();
+        let v = krylov_basis(self.a.as_ref(), self.b.as_ref());
+        let (a1, b1, c1) = if v.ncols() == n {
+            (self.a.clone(), self.b.clone(), self.c.clone())
+        } else {
+            let vc = complement(v.as_ref());
+            let au = vc.transpose() * (&self.a * &vc);
+            removed.extend(linalg::eigenvalues(au.as_ref())?);
+            let av = &self.a * &v;
+            (v.transpose() * &av, v.transpose() * &self.b, &self.c * &v)
+        };
+        let w = krylov_basis(a1.transpose(), c1.transpose());
+        if v.ncols() == n && w.ncols() == n {
+            return Ok((self.clone(), removed));
+        }
+        let (a2, b2, c2) = if w.ncols() == a1.nrows() {
+            (a1, b1, c1)
+        } else {
+            let wc = complement(w.as_ref());
+            let auo = wc.transpose() * (&a1 * &wc);
+            removed.extend(linalg::eigenvalues(auo.as_ref())?);
+            let aw = &a1 * &w;
+            (w.transpose() * &aw, w.transpose() * &b1, &c1 * &w)
+        };
+        Ok((
+            StateSpace::new(a2, b2, c2, self.d.clone(), self.ts)?,
+            removed,
+        ))
     }
 
     fn require_continuous(&self, context: &str) -> Result<()> {
@@ -886,5 +1086,117 @@ impl HessLu {
             x[i] = z;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lti::TransferFunction;
+    use rand::{RngExt, SeedableRng};
+
+    /// Sorted by (re, im) for comparison.
+    fn sorted(mut v: Vec<c64>) -> Vec<c64> {
+        v.sort_by(|a, b| a.re.total_cmp(&b.re).then(a.im.total_cmp(&b.im)));
+        v
+    }
+
+    fn close(a: &[c64], b: &[c64], tol: f64) -> bool {
+        a.len() == b.len() && a.iter().zip(b).all(|(x, y)| (x - y).norm() <= tol)
+    }
+
+    /// A minimal 3-state model, augmented by an uncontrollable mode (0.7) and an unobservable
+    /// one (-0.4), in random non-orthogonal coordinates: the reduction finds the 3 states with
+    /// the zeros of the minimal model, and `zeros` (minimal part plus decoupling zeros) equals
+    /// the full pencil's QZ.
+    #[test]
+    fn zeros_by_kalman_split_equal_the_full_pencil_on_a_non_minimal_model() {
+        // (1 - 0.3 q^-1)(1 + 0.5 q^-1) / ((1 - 0.9 q^-1)(1 - 1.2 q^-1)(1 + 0.2 q^-1)):
+        // zeros 0.3, -0.5 and the origin (numerator of degree 2 over 3 poles)
+        let num = [1.0, 0.2, -0.15];
+        let den = TransferFunction::new(vec![1.0], vec![1.0, -2.1, 1.08], 1e-3)
+            .unwrap()
+            .series(&TransferFunction::new(vec![1.0], vec![1.0, 0.2], 1e-3).unwrap())
+            .unwrap()
+            .den()
+            .to_vec();
+        let g = TransferFunction::new(num.to_vec(), den, 1e-3)
+            .unwrap()
+            .to_state_space()
+            .unwrap();
+        assert_eq!(g.order(), 3);
+        let n = 5;
+        let a = Mat::from_fn(n, n, |i, j| match (i < 3, j < 3) {
+            (true, true) => g.a()[(i, j)],
+            _ if i == 3 && j == 3 => 0.7,
+            _ if i == 4 && j == 4 => -0.4,
+            // the uncontrollable state feeds the others, the others feed the unobservable one
+            _ if i < 3 && j == 3 => 0.3,
+            _ if i == 4 && j < 3 => 0.25,
+            _ => 0.0,
+        });
+        let b = Mat::from_fn(n, 1, |i, _| match i {
+            0..=2 => g.b()[(i, 0)],
+            4 => 1.0,
+            _ => 0.0,
+        });
+        let c = Mat::from_fn(1, n, |_, j| match j {
+            0..=2 => g.c()[(0, j)],
+            3 => 0.8,
+            _ => 0.0,
+        });
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
+        let t = Mat::from_fn(n, n, |i, j| {
+            (if i == j { 1.0 } else { 0.0 }) + 0.3 * rng.random_range(-1.0..1.0)
+        });
+        let ti = linalg::solve(t.as_ref(), Mat::<f64>::identity(n, n).as_ref()).unwrap();
+        let big =
+            StateSpace::discrete(&ti * &a * &t, &ti * &b, &c * &t, g.d().to_owned(), 1e-3).unwrap();
+        let r = big.minimal_part().unwrap();
+        assert_eq!(r.order(), 3);
+        let f = [10.0, 123.0, 400.0];
+        let (h1, h2) = (
+            g.freq_response_siso(&f).unwrap(),
+            r.freq_response_siso(&f).unwrap(),
+        );
+        for (x, y) in h1.iter().zip(&h2) {
+            assert!((x - y).norm() <= 1e-10 * x.norm(), "{x} vs {y}");
+        }
+        let want = sorted(g.pencil_zeros().unwrap());
+        assert_eq!(want.len(), 3);
+        // transmission zeros: those of the minimal part
+        let got = sorted(r.zeros().unwrap());
+        assert!(close(&got, &want, 1e-9), "{got:?} vs {want:?}");
+        // invariant zeros: the full pencil's, i.e. with the decoupling zeros 0.7 and -0.4
+        let full = sorted(big.pencil_zeros().unwrap());
+        let mut with_decoupling = want.clone();
+        with_decoupling.extend([c64::new(0.7, 0.0), c64::new(-0.4, 0.0)]);
+        let with_decoupling = sorted(with_decoupling);
+        assert!(close(&full, &with_decoupling, 1e-8), "full pencil {full:?}");
+        let split = sorted(big.zeros().unwrap());
+        assert!(close(&split, &with_decoupling, 1e-9), "{split:?}");
+        assert!(close(&split, &full, 1e-8));
+        // a minimal model is used as it is
+        assert_eq!(g.minimal_part().unwrap(), g);
+    }
+
+    #[test]
+    fn zeros_refuse_a_minimal_part_above_the_limit_with_the_limit_named() {
+        // a chain of distinct modes, fully controllable and observable
+        let n = ZEROS_MAX_ORDER + 1;
+        let a = Mat::from_fn(n, n, |i, j| {
+            if i == j {
+                0.9 * (i as f64 / n as f64) - 0.45
+            } else if i == j + 1 {
+                1.0
+            } else {
+                0.0
+            }
+        });
+        let b = Mat::from_fn(n, 1, |i, _| if i == 0 { 1.0 } else { 0.0 });
+        let c = Mat::from_fn(1, n, |_, j| if j == n - 1 { 1.0 } else { 0.0 });
+        let g = StateSpace::discrete(a, b, c, Mat::zeros(1, 1), 1e-3).unwrap();
+        let msg = g.zeros().unwrap_err().to_string();
+        assert!(msg.contains("ZEROS_MAX_ORDER = 300"), "{msg}");
     }
 }

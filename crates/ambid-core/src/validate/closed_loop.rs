@@ -207,6 +207,43 @@ impl Loop {
         })
     }
 
+    /// The loop without inputs as $x_{t+1} = A_{cl} x_t$, $y_t = \psi_y x_t$, $u_t = \psi_u x_t$
+    /// ($x$ = plant states, then controller states): $A_{cl}$ row-major and the two output rows.
+    fn free_dynamics(&self) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+        let (np, nc) = (self.np, self.nc);
+        let nx = np + nc;
+        // u = (Cc xc − Dc Cp xp) / den, y = Cp xp + Dp u, e = −y
+        let mut ku = vec![0.0; nx];
+        for j in 0..np {
+            ku[j] = -self.dc * self.cp[j] / self.den;
+        }
+        for j in 0..nc {
+            ku[np + j] = self.cc[j] / self.den;
+        }
+        let mut ky: Vec<f64> = ku.iter().map(|v| self.dp * v).collect();
+        for j in 0..np {
+            ky[j] += self.cp[j];
+        }
+        let mut a = vec![0.0; nx * nx];
+        for i in 0..np {
+            for j in 0..np {
+                a[i * nx + j] = self.ap[i * np + j];
+            }
+            for j in 0..nx {
+                a[i * nx + j] += self.bp[i] * ku[j];
+            }
+        }
+        for i in 0..nc {
+            for j in 0..nc {
+                a[(np + i) * nx + np + j] = self.ac[i * nc + j];
+            }
+            for j in 0..nx {
+                a[(np + i) * nx + j] -= self.bc[i] * ky[j];
+            }
+        }
+        (a, ky, ku)
+    }
+
     /// `n` samples from the stacked initial state `x0` = (plant states, controller states), or
     /// from rest.
     fn run(
@@ -250,6 +287,13 @@ impl Loop {
     }
 }
 
+/// The largest loop (plant plus controller states) whose initial state
+/// [`estimate_loop_initial_state`] estimates; a larger one starts from rest. The work is
+/// $O(H n_x^2)$ for the free responses and $O(H n_x^2)$ for the least squares; identified plant
+/// models have a few tens of states, and a model of hundreds is refused by this bound instead of
+/// taking minutes.
+pub const MAX_X0_LOOP_STATES: usize = 64;
+
 /// The initial state of the loop (plant states, then controller states) that best explains the
 /// measured `y_meas` and `u_meas`: the loop's response is affine in its initial state $x_0$,
 /// $\hat y = y^{(0)} + \Psi_y x_0$, $\hat u = u^{(0)} + \Psi_u x_0$, where $y^{(0)}, u^{(0)}$
@@ -261,7 +305,8 @@ impl Loop {
 /// $H = \min(N, \lceil \ln 10^{-12} / \ln \rho \rceil)$ samples, beyond which they are below
 /// $10^{-12}$ of their start. This is MATLAB `compare`'s default (`InitialCondition` =
 /// `'e'`) applied to the closed loop, which is what a record taken in steady operation needs:
-/// the loop was running before the first sample.
+/// the loop was running before the first sample. Loops of more than [`MAX_X0_LOOP_STATES`]
+/// states start from rest (zeros are returned).
 ///
 /// # Errors
 /// As [`simulate_loop_with`]; [`Error::DimensionMismatch`] for measured signals of another length.
@@ -285,7 +330,7 @@ pub fn estimate_loop_initial_state(
     crate::error::check_finite("u_meas", u_meas)?;
     let lp = Loop::new(plant, controller)?;
     let nx = lp.np + lp.nc;
-    if nx == 0 || n < nx {
+    if nx == 0 || n < nx || nx > MAX_X0_LOOP_STATES {
         return Ok(vec![0.0; nx]);
     }
     let horizon = if lp.rho > 0.0 {
@@ -303,16 +348,25 @@ pub fn estimate_loop_initial_state(
             .max(f64::MIN_POSITIVE)
     };
     let (sy, su) = (1.0 / energy(y_meas), 1.0 / energy(u_meas));
+    // free responses as rows: y_t = ψ_y A_cl^t x0, u_t = ψ_u A_cl^t x0, propagated by
+    // ψ ← ψ A_cl (O(n_x²) per sample and output, not O(n_x³) for n_x unit simulations)
+    let (a_cl, mut row_y, mut row_u) = lp.free_dynamics();
     let mut psi = faer::Mat::<f64>::zeros(2 * h, nx);
-    let mut unit = vec![0.0; nx];
-    for j in 0..nx {
-        unit.iter_mut().for_each(|v| *v = 0.0);
-        unit[j] = 1.0;
-        let free = lp.run(h, None, None, Some(&unit));
-        for t in 0..h {
-            psi[(2 * t, j)] = sy * free.y[t];
-            psi[(2 * t + 1, j)] = su * free.u[t];
+    let mut next = vec![0.0; nx];
+    let times = |row: &[f64], out: &mut Vec<f64>| {
+        for (j, o) in out.iter_mut().enumerate() {
+            *o = (0..nx).map(|i| row[i] * a_cl[i * nx + j]).sum();
         }
+    };
+    for t in 0..h {
+        for j in 0..nx {
+            psi[(2 * t, j)] = sy * row_y[j];
+            psi[(2 * t + 1, j)] = su * row_u[j];
+        }
+        times(&row_y, &mut next);
+        std::mem::swap(&mut row_y, &mut next);
+        times(&row_u, &mut next);
+        std::mem::swap(&mut row_u, &mut next);
     }
     let rhs = faer::Mat::from_fn(2 * h, 1, |i, _| {
         let t = i / 2;

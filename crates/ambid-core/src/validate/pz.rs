@@ -312,6 +312,10 @@ pub struct PzAnalysis {
     pub cancellations: Vec<Cancellation>,
     /// Sample time in seconds.
     pub ts: f64,
+    /// Why the zeros were not computed, when [`from_state_space`](Self::from_state_space)
+    /// skipped them (a controllable and observable part larger than
+    /// [`ZEROS_MAX_ORDER`](crate::lti::ZEROS_MAX_ORDER)); `None` when `zeros` is complete.
+    pub zeros_skipped: Option<String>,
 }
 
 /// Order: finite roots by natural frequency, then Im z descending, then Re z; the origin last.
@@ -366,8 +370,18 @@ impl PzAnalysis {
         })?;
         opts.validate()?;
         let poles = m.poles()?;
-        let zeros = m.zeros()?;
-        Self::from_roots(&poles, &zeros, ts, opts)
+        match m.zeros() {
+            Ok(zeros) => Self::from_roots(&poles, &zeros, ts, opts),
+            Err(Error::InvalidArgument {
+                name: "model order",
+                reason,
+            }) => {
+                let mut pz = Self::from_roots(&poles, &[], ts, opts)?;
+                pz.zeros_skipped = Some(reason);
+                Ok(pz)
+            }
+            Err(e) => Err(e),
+        }
     }
 
     /// Analyses given poles and zeros (in $z$) of a model with sample time `ts` seconds. The
@@ -414,6 +428,7 @@ impl PzAnalysis {
             zeros,
             cancellations,
             ts,
+            zeros_skipped: None,
         })
     }
 
@@ -481,7 +496,12 @@ impl PzAnalysis {
             fmt_num(0.5 / self.ts)
         );
         self.write_roots(&mut out, "Poles", &self.poles, true);
-        self.write_roots(&mut out, "Zeros", &self.zeros, false);
+        match &self.zeros_skipped {
+            Some(why) => {
+                let _ = writeln!(out, "Zeros: not computed ({why})");
+            }
+            None => self.write_roots(&mut out, "Zeros", &self.zeros, false),
+        }
         if self.cancellations.is_empty() {
             let _ = writeln!(out, "Near cancellations: none");
         } else {

@@ -98,10 +98,20 @@ impl ControllerFormat {
     }
 }
 
+/// Largest controller order (states of its realisation; taps − 1 of a `tf` file) that
+/// [`ControllerModel`] accepts. A `tf` controller's frequency response is evaluated by
+/// Horner's rule, linear in its taps, but the closed-loop simulation of `validate`/`fit`
+/// costs $O(n^2)$ per sample and the closed-loop poles $O(n^3)$, so a 5000-tap filter would
+/// run for minutes. Real AMB controllers (PID with notches and low-passes) have at most a few
+/// dozen states; 256 keeps every loop computation on the seed record under a few seconds.
+pub const MAX_CONTROLLER_ORDER: usize = 256;
+
 /// A discrete SISO controller read from a file: $u = C(q)\,e$, $e = w - y$ \[m\], $u$ \[A\].
 #[derive(Debug, Clone, PartialEq)]
 pub struct ControllerModel {
     ss: StateSpace,
+    /// The transfer function of a `kind = "tf"` file, evaluated by Horner's rule.
+    tf: Option<TransferFunction>,
     ts: f64,
     description: String,
     pid: Option<PidSpec>,
@@ -148,8 +158,19 @@ impl ControllerModel {
                 ss.ninputs()
             );
         }
+        if ss.order() > MAX_CONTROLLER_ORDER {
+            bail!(
+                "the controller has {} states, more than the limit MAX_CONTROLLER_ORDER = \
+                 {MAX_CONTROLLER_ORDER}: the loop computations with it (frequency response, \
+                 closed-loop simulation and poles) grow as the square or cube of its order; \
+                 reduce it (balanced truncation, fewer FIR taps or a lower sampling rate of the \
+                 filter design)",
+                ss.order()
+            );
+        }
         Ok(Self {
             ss,
+            tf: None,
             ts,
             description: description.into(),
             pid: None,
@@ -202,13 +223,19 @@ impl ControllerModel {
         self.source.as_deref()
     }
 
-    /// The controller's frequency response $C(e^{j2\pi f T_s})$ at each frequency (Hz).
+    /// The controller's frequency response $C(e^{j2\pi f T_s})$ at each frequency (Hz): for a
+    /// `tf` file by Horner's rule in $q^{-1}$ on its coefficients ($O(\text{taps})$ per
+    /// frequency), otherwise from the state-space model.
     ///
     /// # Errors
     /// A non-finite frequency, or a frequency on a pole (DC for a controller with an
     /// integrator).
     pub fn freq_response(&self, f_hz: &[f64]) -> Result<Vec<c64>> {
-        Ok(self.ss.freq_response_siso(f_hz)?)
+        match &self.tf {
+            // Horner's rule in q^-1: O(taps) per frequency
+            Some(tf) => Ok(tf.freq_response(f_hz)?),
+            None => Ok(self.ss.freq_response_siso(f_hz)?),
+        }
     }
 
     /// Checks that the controller runs at the data's sample time `data_ts` (s): they may
@@ -488,6 +515,15 @@ fn tf_model(t: TfFile) -> Result<ControllerModel> {
              is not causal; list den in ascending powers of q^-1, den = [1, a1, a2, …]"
         );
     }
+    let n = t.num.len().max(t.den.len()).saturating_sub(1);
+    if n > MAX_CONTROLLER_ORDER {
+        bail!(
+            "`num`/`den` have {} coefficients, a controller of order {n}: more than the limit \
+             MAX_CONTROLLER_ORDER = {MAX_CONTROLLER_ORDER}; reduce it (balanced truncation, \
+             fewer FIR taps or a lower sampling rate of the filter design)",
+            n + 1
+        );
+    }
     let tf = TransferFunction::new(t.num, t.den, ts)?;
     let n = tf.num().len().max(tf.den().len()) - 1;
     let ss = tf.to_state_space()?;
@@ -497,7 +533,9 @@ fn tf_model(t: TfFile) -> Result<ControllerModel> {
             short(1.0 / ts)
         )
     });
-    ControllerModel::new(ss, desc)
+    let mut m = ControllerModel::new(ss, desc)?;
+    m.tf = Some(tf);
+    Ok(m)
 }
 
 /// Rows and columns of a matrix given as rows; errors on ragged rows.
@@ -545,6 +583,12 @@ fn ss_model(f: SsFile) -> Result<ControllerModel> {
         return Err(siso(format!("b has {m} columns (inputs)")));
     }
     let n = na;
+    if n > MAX_CONTROLLER_ORDER {
+        bail!(
+            "`a` has {n} rows, a controller of order {n}: more than the limit \
+             MAX_CONTROLLER_ORDER = {MAX_CONTROLLER_ORDER}; reduce it (balanced truncation)"
+        );
+    }
     if ca.is_some_and(|c| c != n) {
         bail!(
             "`a` must be square (n×n): it has {n} rows of {} entries",

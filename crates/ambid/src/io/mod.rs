@@ -11,6 +11,7 @@ pub mod csv;
 pub mod export;
 pub mod model;
 pub mod output;
+pub mod stream;
 pub mod table;
 
 pub use self::controller::{read_controller, ControllerModel};

@@ -6,6 +6,8 @@
 //! header detection, column naming, errors) are described in `docs/data-files.md`.
 
 mod arrays;
+pub use arrays::MAX_DECODED_BYTES;
+pub use text::{TextRows, MAX_LINE_BYTES};
 mod mat;
 mod npy;
 #[cfg(feature = "parquet")]

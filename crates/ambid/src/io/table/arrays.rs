@@ -10,6 +10,26 @@ use std::path::Path;
 
 use super::{DataFileError, Table};
 
+/// Largest amount of data one binary data file (`.npy`, `.npz`, `.mat`, `.parquet`) may
+/// declare or decompress to: $2^{29}$ bytes (512 MiB, 67 million `f64` values, e.g. 10⁷
+/// samples of six signals). It is checked against the sizes the file declares (array shapes,
+/// zip member sizes, MAT element lengths, Parquet row counts) *before* anything is inflated or
+/// allocated, and inflation itself stops at it, so a small compressed file cannot make the
+/// reader allocate gigabytes. Every later step holds the record in memory at a few times its
+/// size, which keeps the whole analysis within about 2 GiB.
+pub const MAX_DECODED_BYTES: u64 = 1 << 29;
+
+/// The error text for data of `bytes` (as `f64` or decompressed) above [`MAX_DECODED_BYTES`].
+pub(super) fn too_big(what: &str, bytes: u64) -> String {
+    format!(
+        "{what} would take {:.1} MiB in memory, more than the limit of {} MiB for one data file \
+         (MAX_DECODED_BYTES); split the record into shorter files or keep only the signals you \
+         need",
+        bytes as f64 / 1048576.0,
+        MAX_DECODED_BYTES >> 20
+    )
+}
+
 /// Element order of a stored array.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum Order {

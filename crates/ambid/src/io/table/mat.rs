@@ -10,7 +10,7 @@
 use std::io::Read;
 use std::path::Path;
 
-use super::arrays::{assemble, Order, Var};
+use super::arrays::{assemble, too_big, Order, Var, MAX_DECODED_BYTES};
 use super::{DataFileError, ReadOptions, Table};
 
 // Data types (MAT-file format reference, table "MAT-File Data Types").
@@ -37,10 +37,18 @@ const MX_DOUBLE: u8 = 6;
 const MX_UINT64: u8 = 15;
 const FLAG_COMPLEX: u32 = 0x0800;
 
-/// Limit on the decompressed size of one compressed variable (guards against damaged lengths).
-const MAX_DECOMPRESSED: u64 = 1 << 34;
+/// Limit on the decompressed size of one compressed variable and on the file itself: the
+/// shared [`MAX_DECODED_BYTES`] (512 MiB), checked against the length the compressed element's
+/// own tag declares before it is inflated.
+const MAX_DECOMPRESSED: u64 = MAX_DECODED_BYTES;
 
 pub(super) fn read(path: &Path, opts: &ReadOptions) -> Result<Table, DataFileError> {
+    let size = std::fs::metadata(path)
+        .map_err(|e| DataFileError::open(path, &e))?
+        .len();
+    if size > MAX_DECOMPRESSED {
+        return Err(DataFileError::invalid(path, too_big("the file", size)));
+    }
     let bytes = std::fs::read(path).map_err(|e| DataFileError::open(path, &e))?;
     let vars = parse(&bytes).map_err(|e| match e {
         MatError::V73 => DataFileError::MatV73 {
@@ -206,7 +214,7 @@ fn parse_elements(
                 }
             }
             MI_COMPRESSED if depth == 0 => {
-                let inner = inflate(el.data)?;
+                let inner = inflate(el.data, e)?;
                 parse_elements(&inner, e, depth + 1, vars)?;
             }
             // Other top-level elements carry no variables.
@@ -216,16 +224,43 @@ fn parse_elements(
     Ok(())
 }
 
-fn inflate(data: &[u8]) -> Result<Vec<u8>, MatError> {
-    let mut out = Vec::new();
-    flate2::read::ZlibDecoder::new(data)
-        .take(MAX_DECOMPRESSED)
+/// Inflates one `miCOMPRESSED` element. The inflated data start with the tag of the element
+/// they hold (type, byte count); that count is checked against [`MAX_DECOMPRESSED`] before the
+/// rest is inflated, and inflation stops at the declared size.
+fn inflate(data: &[u8], e: Endian) -> Result<Vec<u8>, MatError> {
+    let damaged = |err: std::io::Error| {
+        bad(format!(
+            "has a damaged compressed variable ({err}); {RESAVE}"
+        ))
+    };
+    let mut z = flate2::read::ZlibDecoder::new(data);
+    let mut tag = [0u8; 8];
+    let mut got = 0;
+    while got < tag.len() {
+        match z.read(&mut tag[got..]).map_err(damaged)? {
+            0 => break,
+            k => got += k,
+        }
+    }
+    let tag = &tag[..got];
+    // a small-element tag (byte count in the upper half of the first word) holds ≤ 4 bytes
+    let declared = if tag.len() == 8 && e.u32(&tag[..4]) >> 16 == 0 {
+        u64::from(e.u32(&tag[4..8]))
+    } else {
+        0
+    };
+    let total = declared.saturating_add(8 + 7);
+    if total > MAX_DECOMPRESSED {
+        return Err(bad(format!(
+            "has a compressed variable that declares {declared} bytes: {}",
+            too_big("it", declared)
+        )));
+    }
+    let mut out = Vec::with_capacity(total as usize);
+    out.extend_from_slice(tag);
+    z.take(total - tag.len() as u64)
         .read_to_end(&mut out)
-        .map_err(|err| {
-            bad(format!(
-                "has a damaged compressed variable ({err}); {RESAVE}"
-            ))
-        })?;
+        .map_err(damaged)?;
     Ok(out)
 }
 

@@ -6,7 +6,7 @@ use std::path::Path;
 
 use npyz::{NpyFile, TypeChar};
 
-use super::arrays::{assemble, Order, Var};
+use super::arrays::{assemble, too_big, Order, Var, MAX_DECODED_BYTES};
 use super::{DataFileError, ReadOptions, Table};
 
 const RESAVE: &str = "save it again with numpy.save / numpy.savez";
@@ -33,6 +33,7 @@ pub(super) fn read_npz(path: &Path, opts: &ReadOptions) -> Result<Table, DataFil
         )
     })?;
     let mut vars = Vec::new();
+    let mut decoded = 0u64;
     for i in 0..zip.len() {
         let entry = zip.by_index(i).map_err(|e| {
             DataFileError::invalid(
@@ -55,7 +56,25 @@ pub(super) fn read_npz(path: &Path, opts: &ReadOptions) -> Result<Table, DataFil
             }
         }
         let size = entry.size();
-        let var = read_array(entry, name.clone(), size)
+        // the size the zip directory declares, checked before anything is inflated; the
+        // stream is cut there as well, so a member cannot inflate past what it declares
+        if size > MAX_DECODED_BYTES {
+            return Err(DataFileError::invalid(
+                path,
+                format!(
+                    "variable `{name}`: {}",
+                    too_big("the decompressed member", size)
+                ),
+            ));
+        }
+        decoded = decoded.saturating_add(size);
+        if decoded > MAX_DECODED_BYTES {
+            return Err(DataFileError::invalid(
+                path,
+                too_big("the decompressed members together", decoded),
+            ));
+        }
+        let var = read_array(entry.take(size), name.clone(), size)
             .map_err(|m| DataFileError::invalid(path, format!("variable `{name}`: {m}")))?;
         vars.push(var);
     }
@@ -142,6 +161,14 @@ fn read_array<R: Read>(mut reader: R, name: String, size: u64) -> Result<Var, St
         return Err(format!(
             "claims {} values of {item} bytes but the data are only {size} bytes; the file is truncated or damaged; {RESAVE}",
             npy.len()
+        ));
+    }
+    // as f64, the values take 8 bytes each whatever their stored type
+    let as_f64 = (npy.len()).saturating_mul(8);
+    if as_f64 > MAX_DECODED_BYTES {
+        return Err(too_big(
+            &format!("the array of {} values", npy.len()),
+            as_f64,
         ));
     }
     let err = |e: std::io::Error| {

@@ -8,6 +8,7 @@ use ::parquet::basic::Type as Physical;
 use ::parquet::column::reader::ColumnReader;
 use ::parquet::file::reader::{FileReader, SerializedFileReader};
 
+use super::arrays::{too_big, MAX_DECODED_BYTES};
 use super::{DataFileError, ReadOptions, Table};
 
 /// Rows read per call.
@@ -60,6 +61,32 @@ fn read_checked(path: &Path, _opts: &ReadOptions) -> Result<Table, DataFileError
                     skipped.join(", ")
                 }
             ),
+        ));
+    }
+    // the sizes the metadata declare, before any page is decompressed: the values as f64, and
+    // the uncompressed column chunks
+    let rows = u64::try_from(reader.metadata().file_metadata().num_rows()).unwrap_or(u64::MAX);
+    let as_f64 = rows.saturating_mul(wanted.len() as u64).saturating_mul(8);
+    if as_f64 > MAX_DECODED_BYTES {
+        return Err(DataFileError::invalid(
+            path,
+            too_big(
+                &format!("{rows} rows of {} numeric columns", wanted.len()),
+                as_f64,
+            ),
+        ));
+    }
+    let unpacked = reader
+        .metadata()
+        .row_groups()
+        .iter()
+        .flat_map(|g| g.columns())
+        .map(|c| u64::try_from(c.uncompressed_size()).unwrap_or(u64::MAX))
+        .fold(0u64, u64::saturating_add);
+    if unpacked > MAX_DECODED_BYTES {
+        return Err(DataFileError::invalid(
+            path,
+            too_big("the uncompressed column chunks", unpacked),
         ));
     }
     let mut columns: Vec<Vec<f64>> = vec![Vec::new(); wanted.len()];

@@ -40,8 +40,8 @@ pub(super) fn read(path: &Path, opts: &ReadOptions) -> Result<Table, DataFileErr
 
 /// Content lines of a text file, read one at a time: (1-based line number, line without the
 /// line ending); blank and comment lines are skipped.
-struct Lines<'p, R> {
-    path: &'p Path,
+struct Lines<R> {
+    path: std::path::PathBuf,
     rdr: R,
     no: usize,
     buf: Vec<u8>,
@@ -49,7 +49,7 @@ struct Lines<'p, R> {
     any_text: bool,
 }
 
-impl<R: std::io::BufRead> Lines<'_, R> {
+impl<R: std::io::BufRead> Lines<R> {
     fn next_line(&mut self) -> Result<Option<(usize, String)>, DataFileError> {
         use std::io::{BufRead, Read};
         loop {
@@ -57,14 +57,14 @@ impl<R: std::io::BufRead> Lines<'_, R> {
             let n = (&mut self.rdr)
                 .take(MAX_LINE_BYTES as u64 + 1)
                 .read_until(b'\n', &mut self.buf)
-                .map_err(|e| DataFileError::open(self.path, &e))?;
+                .map_err(|e| DataFileError::open(&self.path, &e))?;
             if n == 0 {
                 return Ok(None);
             }
             self.no += 1;
             if self.buf.len() > MAX_LINE_BYTES && self.buf.last() != Some(&b'\n') {
                 return Err(DataFileError::invalid(
-                    self.path,
+                    &self.path,
                     format!(
                         "line {} is longer than {} MiB; this is not a text data file (if it is a binary file, give its format: npy, npz, mat, parquet)",
                         self.no,
@@ -76,7 +76,7 @@ impl<R: std::io::BufRead> Lines<'_, R> {
             let raw = raw.strip_suffix(b"\r").unwrap_or(raw);
             let text = std::str::from_utf8(raw).map_err(|_| {
                 DataFileError::invalid(
-                    self.path,
+                    &self.path,
                     format!(
                         "line {} is not UTF-8 text; if this is a binary file give its format (npy, npz, mat, parquet) or fix the file's extension",
                         self.no
@@ -100,154 +100,224 @@ impl<R: std::io::BufRead> Lines<'_, R> {
     }
 }
 
+/// A delimited text table read one row at a time, in the dialect of the module docs: the first
+/// lines decide the delimiter and the header, then every row comes as numbers (NaN for an empty
+/// cell), checked against the header's width. Every reader of text data (the whole-table reader
+/// [`read`] and the streaming FRF reader `ambid::io::stream`) goes through it, so there is one
+/// dialect.
+pub struct TextRows<R> {
+    src: Lines<R>,
+    delim: Delim,
+    /// Header cells (raw), if there is a header.
+    header: Option<Vec<String>>,
+    width: usize,
+    /// Sniffed lines not handed out yet.
+    pending: std::collections::VecDeque<(usize, String)>,
+    reference: String,
+}
+
+impl TextRows<std::io::BufReader<std::fs::File>> {
+    /// Opens `path` and reads up to its first data row.
+    ///
+    /// # Errors
+    /// An unreadable file, an empty file or one of comments only, a header that names a column
+    /// twice, no data row after the header, a line that is not text or is longer than
+    /// [`MAX_LINE_BYTES`].
+    pub fn open(path: &Path, opts: &ReadOptions) -> Result<Self, DataFileError> {
+        let file = std::fs::File::open(path).map_err(|e| DataFileError::open(path, &e))?;
+        Self::new(path, std::io::BufReader::with_capacity(1 << 16, file), opts)
+    }
+}
+
+impl<R: std::io::BufRead> TextRows<R> {
+    /// As [`TextRows::open`], on the text read from `rdr` (`path` names it in messages).
+    ///
+    /// # Errors
+    /// As [`TextRows::open`].
+    pub fn new(path: &Path, rdr: R, opts: &ReadOptions) -> Result<Self, DataFileError> {
+        let mut src = Lines {
+            path: path.to_path_buf(),
+            rdr,
+            no: 0,
+            buf: Vec::new(),
+            any_text: false,
+        };
+        let mut head: Vec<(usize, String)> = Vec::new();
+        while head.len() < SNIFF_LINES {
+            match src.next_line()? {
+                Some(l) => head.push(l),
+                None => break,
+            }
+        }
+        let Some((first_no, first_line)) = head.first().cloned() else {
+            return Err(DataFileError::no_data(
+                path,
+                if src.any_text {
+                    "the file has only comment and blank lines, no data; check that this is the right file"
+                        .to_string()
+                } else {
+                    "the file is empty; check that this is the right file".to_string()
+                },
+            ));
+        };
+        let lines: Vec<(usize, &str)> = head.iter().map(|(n, l)| (*n, l.as_str())).collect();
+        let delim = match opts.delimiter {
+            Some(' ') => Delim::Whitespace,
+            Some(c) => Delim::Char(c),
+            None => detect_delimiter(&lines),
+        };
+        let split_at = |no: usize, line: &str| -> Result<Vec<String>, DataFileError> {
+            Ok(split_line(path, no, line, delim)?
+                .into_iter()
+                .map(Cow::into_owned)
+                .collect())
+        };
+        let first = split_at(first_no, &first_line)?;
+        let has_header = match opts.header {
+            Some(h) => h,
+            None => first
+                .iter()
+                .any(|c| !c.is_empty() && parse_number(c).is_none()),
+        };
+        let (header, skip_head, reference) = if has_header {
+            let names: Vec<String> = first.iter().map(|c| c.to_string()).collect();
+            if let Some(m) = duplicate_names(&names) {
+                return Err(DataFileError::invalid(
+                    path,
+                    format!("line {first_no}: {m}"),
+                ));
+            }
+            (Some(names), 1, "the header".to_string())
+        } else {
+            (None, 0, format!("line {first_no} (the first data line)"))
+        };
+        let Some((ref_no, ref_line)) = head.get(skip_head).cloned() else {
+            return Err(DataFileError::no_data(
+                path,
+                format!("there are no data rows after the header on line {first_no}; check that this is the right file"),
+            ));
+        };
+        let width = match &header {
+            Some(n) => n.len(),
+            None => split_at(ref_no, &ref_line)?.len(),
+        };
+        Ok(Self {
+            src,
+            delim,
+            header,
+            width,
+            pending: head.into_iter().skip(skip_head).collect(),
+            reference,
+        })
+    }
+
+    /// Number of fields of every row.
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    /// The name of column `j` (0-based): the header's, or `col<j+1>` without a header or for an
+    /// empty header cell.
+    pub fn column_name(&self, j: usize) -> String {
+        self.header
+            .as_ref()
+            .and_then(|n| n.get(j))
+            .filter(|s| !s.is_empty())
+            .cloned()
+            .unwrap_or_else(|| format!("col{}", j + 1))
+    }
+
+    /// Whether the file has a header row, and whether its last cell is empty.
+    fn unnamed_last(&self) -> bool {
+        self.header
+            .as_ref()
+            .is_none_or(|n| n.last().is_some_and(|s| s.is_empty()))
+    }
+
+    /// The file being read.
+    pub fn path(&self) -> &Path {
+        &self.src.path
+    }
+
+    /// The next row into `out` (cleared first; `width` numbers, NaN for an empty cell); returns
+    /// its 1-based line number, `None` at the end of the file.
+    ///
+    /// # Errors
+    /// A row with another number of fields, a cell that is not a number (file, line and column
+    /// named), an overlong or non-text line.
+    pub fn next_row(&mut self, out: &mut Vec<f64>) -> Result<Option<usize>, DataFileError> {
+        let (no, line) = match self.pending.pop_front() {
+            Some(l) => l,
+            None => match self.src.next_line()? {
+                Some(l) => l,
+                None => return Ok(None),
+            },
+        };
+        let path = self.src.path.as_path();
+        let mut cells = split_line(path, no, &line, self.delim)?;
+        // Tolerate one extra trailing empty field (a trailing delimiter).
+        if cells.len() == self.width + 1 && cells.last().is_some_and(|c| c.is_empty()) {
+            cells.pop();
+        }
+        if cells.len() != self.width {
+            return Err(DataFileError::RaggedRow {
+                path: path.to_path_buf(),
+                line: no,
+                fields: cells.len(),
+                expected: self.width,
+                reference: self.reference.clone(),
+            });
+        }
+        out.clear();
+        for (j, cell) in cells.iter().enumerate() {
+            let v = if cell.is_empty() {
+                f64::NAN
+            } else {
+                match parse_number(cell) {
+                    Some(v) => v,
+                    None => {
+                        return Err(DataFileError::NotANumber {
+                            path: path.to_path_buf(),
+                            line: no,
+                            column: self.column_name(j),
+                            cell: cell.to_string(),
+                        })
+                    }
+                }
+            };
+            out.push(v);
+        }
+        Ok(Some(no))
+    }
+}
+
 /// Parses the text read from `rdr` (the file `path`, named in messages), one line at a time.
 fn parse<R: std::io::BufRead>(
     path: &Path,
     rdr: R,
     opts: &ReadOptions,
 ) -> Result<Table, DataFileError> {
-    let mut src = Lines {
-        path,
-        rdr,
-        no: 0,
-        buf: Vec::new(),
-        any_text: false,
-    };
-    // the first lines decide the delimiter and the header; the rest is read as it comes
-    let mut head: Vec<(usize, String)> = Vec::new();
-    while head.len() < SNIFF_LINES {
-        match src.next_line()? {
-            Some(l) => head.push(l),
-            None => break,
-        }
-    }
-    let Some((first_no, first_line)) = head.first().cloned() else {
-        return Err(DataFileError::no_data(
-            path,
-            if src.any_text {
-                "the file has only comment and blank lines, no data; check that this is the right file"
-                    .to_string()
-            } else {
-                "the file is empty; check that this is the right file".to_string()
-            },
-        ));
-    };
-    let lines: Vec<(usize, &str)> = head.iter().map(|(n, l)| (*n, l.as_str())).collect();
-
-    let delim = match opts.delimiter {
-        Some(' ') => Delim::Whitespace,
-        Some(c) => Delim::Char(c),
-        None => detect_delimiter(&lines),
-    };
-    let split_at = |no: usize, line: &str| -> Result<Vec<String>, DataFileError> {
-        Ok(split_line(path, no, line, delim)?
-            .into_iter()
-            .map(Cow::into_owned)
-            .collect())
-    };
-
-    let first = split_at(first_no, &first_line)?;
-    let has_header = match opts.header {
-        Some(h) => h,
-        None => first
-            .iter()
-            .any(|c| !c.is_empty() && parse_number(c).is_none()),
-    };
-    let (mut names, skip_head, reference) = if has_header {
-        let names: Vec<String> = first.iter().map(|c| c.to_string()).collect();
-        if let Some(m) = duplicate_names(&names) {
-            return Err(DataFileError::invalid(
-                path,
-                format!("line {first_no}: {m}"),
-            ));
-        }
-        (Some(names), 1, "the header".to_string())
-    } else {
-        (None, 0, format!("line {first_no} (the first data line)"))
-    };
-    let Some((ref_no, ref_line)) = head.get(skip_head).cloned() else {
-        return Err(DataFileError::no_data(
-            path,
-            format!("there are no data rows after the header on line {first_no}; check that this is the right file"),
-        ));
-    };
-    let width = match &names {
-        Some(n) => n.len(),
-        None => split_at(ref_no, &ref_line)?.len(),
-    };
-    let column_name = |names: &Option<Vec<String>>, j: usize| -> String {
-        names
-            .as_ref()
-            .and_then(|n| n.get(j))
-            .filter(|s| !s.is_empty())
-            .cloned()
-            .unwrap_or_else(|| format!("col{}", j + 1))
-    };
-
+    let mut rows = TextRows::new(path, rdr, opts)?;
+    let width = rows.width();
     let mut columns: Vec<Vec<f64>> = vec![Vec::new(); width];
     // Whether every cell of a column is empty so far.
     let mut all_empty = vec![true; width];
-    let mut head_rest = head.into_iter().skip(skip_head);
-    loop {
-        let (no, line) = match head_rest.next() {
-            Some(l) => l,
-            None => match src.next_line()? {
-                Some(l) => l,
-                None => break,
-            },
-        };
-        let mut cells = split_line(path, no, &line, delim)?;
-        // Tolerate one extra trailing empty field (a trailing delimiter).
-        if cells.len() == width + 1 && cells.last().is_some_and(|c| c.is_empty()) {
-            cells.pop();
-        }
-        if cells.len() != width {
-            return Err(DataFileError::RaggedRow {
-                path: path.to_path_buf(),
-                line: no,
-                fields: cells.len(),
-                expected: width,
-                reference: reference.clone(),
-            });
-        }
-        for (j, cell) in cells.iter().enumerate() {
-            let v = if cell.is_empty() {
-                f64::NAN
-            } else {
-                match parse_number(cell) {
-                    Some(v) => {
-                        if let Some(e) = all_empty.get_mut(j) {
-                            *e = false;
-                        }
-                        v
-                    }
-                    None => {
-                        return Err(DataFileError::NotANumber {
-                            path: path.to_path_buf(),
-                            line: no,
-                            column: column_name(&names, j),
-                            cell: cell.to_string(),
-                        })
-                    }
-                }
-            };
-            if let Some(c) = columns.get_mut(j) {
-                c.push(v);
+    let mut row = Vec::with_capacity(width);
+    while rows.next_row(&mut row)?.is_some() {
+        for (j, v) in row.iter().enumerate() {
+            if !v.is_nan() {
+                all_empty[j] = false;
             }
+            columns[j].push(*v);
         }
     }
-
     // A trailing delimiter on every line gives a last column without name and without values.
-    let unnamed_last = names
-        .as_ref()
-        .is_none_or(|n| n.last().is_some_and(|s| s.is_empty()));
-    if width > 1 && unnamed_last && all_empty.last() == Some(&true) {
+    let mut n_cols = width;
+    if width > 1 && rows.unnamed_last() && all_empty.last() == Some(&true) {
         columns.pop();
-        if let Some(n) = names.as_mut() {
-            n.pop();
-        }
+        n_cols -= 1;
     }
-    let names = unique_names((0..columns.len()).map(|j| column_name(&names, j)).collect());
+    let names = unique_names((0..n_cols).map(|j| rows.column_name(j)).collect());
     Ok(Table {
         path: path.to_path_buf(),
         names,
