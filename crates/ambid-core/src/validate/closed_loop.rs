@@ -213,16 +213,15 @@ impl Loop {
         let (np, nc) = (self.np, self.nc);
         let nx = np + nc;
         // u = (Cc xc − Dc Cp xp) / den, y = Cp xp + Dp u, e = −y
-        let mut ku = vec![0.0; nx];
-        for j in 0..np {
-            ku[j] = -self.dc * self.cp[j] / self.den;
-        }
-        for j in 0..nc {
-            ku[np + j] = self.cc[j] / self.den;
-        }
+        let ku: Vec<f64> = self
+            .cp
+            .iter()
+            .map(|c| -self.dc * c / self.den)
+            .chain(self.cc.iter().map(|c| c / self.den))
+            .collect();
         let mut ky: Vec<f64> = ku.iter().map(|v| self.dp * v).collect();
-        for j in 0..np {
-            ky[j] += self.cp[j];
+        for (k, c) in ky.iter_mut().zip(&self.cp) {
+            *k += c;
         }
         let mut a = vec![0.0; nx * nx];
         for i in 0..np {
