@@ -242,6 +242,16 @@ pub struct ExperimentOutput {
 /// Runs the experiment on the twin.
 pub fn run(exp: &Experiment) -> Result<ExperimentOutput> {
     let twin = Twin::new(exp.twin.clone()).context("building the AMB twin")?;
+    // the length the plan asks for, checked before the excitation is even generated
+    let p = &exp.excitation;
+    let per_period = match p.kind {
+        ExcitationKind::Prbs => 1usize
+            .checked_shl(p.prbs_order.min(63) as u32)
+            .map_or(usize::MAX, |v| v.saturating_sub(1))
+            .saturating_mul(p.samples_per_bit),
+        _ => (p.period_s / twin.ts()).round().min(usize::MAX as f64) as usize,
+    };
+    check_sim_length(per_period.saturating_mul(p.periods))?;
     let excitation = exp.excitation.generate(twin.i_sat(), twin.ts())?;
     simulate_with(twin, exp, excitation)
 }
@@ -287,7 +297,25 @@ pub fn run_with_excitation(
     simulate_with(twin, exp, excitation)
 }
 
+/// Longest record a twin experiment simulates: 2²³ samples (7 min at 20 kHz). The twin keeps
+/// about 60 bytes per sample for the record and what is written from it, so this bounds one
+/// experiment to about 0.5 GB (1.34·10⁸ samples aborted at 7.1 GiB before the bound).
+pub const MAX_SIM_SAMPLES: usize = 1 << 23;
+
+fn check_sim_length(n: usize) -> Result<()> {
+    if n > MAX_SIM_SAMPLES {
+        return Err(crate::workflow::usage(anyhow::anyhow!(
+            "the experiment would record {n} samples, more than the limit of {MAX_SIM_SAMPLES} \
+             a simulation may record (MAX_SIM_SAMPLES, about 60 bytes per sample); use fewer \
+             periods (or a shorter period) and simulate several records with different seeds"
+        ))
+        .into());
+    }
+    Ok(())
+}
+
 fn simulate_with(twin: Twin, exp: &Experiment, excitation: Excitation) -> Result<ExperimentOutput> {
+    check_sim_length(excitation.values.len())?;
     let opts = SimOptions {
         mode: exp.mode,
         seed: exp.seed,

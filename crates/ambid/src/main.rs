@@ -739,9 +739,7 @@ fn info(a: TwinArgs) -> Result<()> {
 /// allocating 8 GB after data.csv was written).
 const MAX_TRUTH_POINTS: usize = 1_000_000;
 
-/// Longest record `simulate --excitation-file` simulates: 2²³ samples (7 min at 20 kHz, about
-/// 0.5 GB for the record and what is written from it; 1.34·10⁸ samples aborted at 7.1 GiB).
-const MAX_SIM_SAMPLES: usize = 1 << 23;
+use ambid::experiment::MAX_SIM_SAMPLES;
 
 fn simulate(a: SimulateArgs) -> Result<()> {
     let data_path = a.out.join("data.csv");
