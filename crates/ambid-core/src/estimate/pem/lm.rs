@@ -860,11 +860,71 @@ mod tests {
         assert!(rep.rejected_inadmissible > 0);
     }
 
+    /// y = a e^{b t} + noise: the statistical rule stops within κ standard errors of the
+    /// exact minimiser (distance in the metric of σ̂²(JᵀJ)⁻¹ at that minimiser), and earlier.
+    struct NoisyExp(Vec<f64>, Vec<f64>);
+    impl LeastSquaresProblem for NoisyExp {
+        fn residuals(&mut self, x: &[f64]) -> Option<Vec<f64>> {
+            Some(
+                self.0
+                    .iter()
+                    .zip(&self.1)
+                    .map(|(t, y)| x[0] * (x[1] * t).exp() - y)
+                    .collect(),
+            )
+        }
+        fn jacobian(&mut self, x: &[f64]) -> Option<Mat<f64>> {
+            let t = &self.0;
+            Some(Mat::from_fn(t.len(), 2, |i, j| {
+                let e = (x[1] * t[i]).exp();
+                if j == 0 {
+                    e
+                } else {
+                    x[0] * t[i] * e
+                }
+            }))
+        }
+    }
+
+    #[test]
+    fn significance_rule_stops_within_kappa_standard_errors_of_the_minimiser() {
+        let t: Vec<f64> = (0..400).map(|k| k as f64 * 0.01).collect();
+        // deterministic "noise" of RMS ≈ 0.05
+        let y: Vec<f64> = t
+            .iter()
+            .enumerate()
+            .map(|(k, t)| {
+                2.0 * (-0.5 * t).exp() + 0.05 * ((k * 7919 % 997) as f64 / 498.5 - 1.0) * 1.7
+            })
+            .collect();
+        let mut p = NoisyExp(t, y);
+        let exact = LmOptions::exhaustive(200).unwrap();
+        let (xe, re) = minimize(&mut p, &[1.0, 0.3], &exact).unwrap();
+        for kappa in [0.1, 1.0] {
+            let o = LmOptions::default().with_significance_tol(kappa).unwrap();
+            let (xs, rs) = minimize(&mut p, &[1.0, 0.3], &o).unwrap();
+            assert_eq!(rs.reason, StopReason::Significance, "{rs:?}");
+            assert!(rs.iterations < re.iterations, "{rs:?} vs {re:?}");
+            // Mahalanobis distance with P = σ̂² (JᵀJ)⁻¹ at the exact minimiser
+            let j = p.jacobian(&xe).unwrap();
+            let r = p.residuals(&xe).unwrap();
+            let s2 = r.iter().map(|v| v * v).sum::<f64>() / (r.len() - 2) as f64;
+            let g = j.transpose() * &j;
+            let d = [xs[0] - xe[0], xs[1] - xe[1]];
+            let q = (0..2)
+                .map(|a| (0..2).map(|b| d[a] * g[(a, b)] * d[b]).sum::<f64>())
+                .sum::<f64>()
+                / s2;
+            assert!(q.sqrt() <= kappa * 1.05, "κ = {kappa}: {} σ", q.sqrt());
+        }
+    }
+
     #[test]
     fn bad_start_and_options_are_errors() {
         assert!(minimize(&mut Boundary, &[3.0], &LmOptions::default()).is_err());
         assert!(LmOptions::default().with_loss_tol(-1.0).is_err());
         assert!(LmOptions::default().with_max_iterations(0).is_err());
         assert!(LmOptions::default().with_initial_radius(f64::NAN).is_err());
+        assert!(LmOptions::default().with_significance_tol(-0.1).is_err());
     }
 }

@@ -578,6 +578,55 @@ mod tests {
     }
 
     #[test]
+    fn plain_residual_is_used_only_within_its_bound() {
+        // ARMAX-like (F = 1, no recursion) with noise of 1 % of the output: the bound allows
+        // plain double, and the plain result agrees with double-double to the bound's level
+        let u: Vec<f64> = (0..2000)
+            .map(|k| ((k * 37 % 101) as f64 - 50.0) / 7.0)
+            .collect();
+        let e: Vec<f64> = (0..2000)
+            .map(|k| ((k * 53 % 97) as f64 - 48.0) / 9.0)
+            .collect();
+        let p = Polys {
+            a: vec![1.0, -1.5, 0.7],
+            b: vec![0.0, 1.0, 0.5],
+            c: vec![1.0],
+            d: vec![1.0],
+            f: vec![1.0],
+        };
+        let g = filter(&p.b, &p.a, &u);
+        let y: Vec<f64> = g.iter().zip(&e).map(|(g, e)| g + 0.01 * e).collect();
+        let tau = 1e-10;
+        let (exact, _) = output_error(&p, &y, &u, Focus::Prediction, Accuracy::Exact);
+        let (bounded, _) =
+            output_error(&p, &y, &u, Focus::Prediction, Accuracy::RelativeBound(tau));
+        let (plain, _) = output_error(&p, &y, &u, Focus::Prediction, Accuracy::Plain);
+        assert_eq!(bounded, plain, "the bound should allow plain double here");
+        let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let diff: Vec<f64> = plain.iter().zip(&exact).map(|(a, b)| a - b).collect();
+        assert!(
+            norm(&diff) <= tau * norm(&exact),
+            "{}",
+            norm(&diff) / norm(&exact)
+        );
+        // a lightly damped F (‖h‖₁ ≈ 10³) with the same noise: double-double is chosen
+        let q = Polys {
+            a: vec![1.0],
+            b: vec![0.0, 0.3, 0.2],
+            c: vec![1.0],
+            d: vec![1.0],
+            f: vec![1.0, -2.0 * 0.999 * 0.05f64.cos(), 0.998001],
+        };
+        let v = filter(&q.b, &q.f, &u);
+        let y: Vec<f64> = v.iter().zip(&e).map(|(v, e)| v + 1e-6 * e).collect();
+        let (exact, _) = output_error(&q, &y, &u, Focus::Prediction, Accuracy::Exact);
+        let (bounded, _) =
+            output_error(&q, &y, &u, Focus::Prediction, Accuracy::RelativeBound(tau));
+        assert_eq!(bounded, exact);
+        assert!(impulse_l1(&q.f, 20_000) > 100.0);
+    }
+
+    #[test]
     fn filter_is_the_difference_equation() {
         // y = (1 + 0.5 q^-1)/(1 - 0.8 q^-1) x for an impulse
         let y = filter(&[1.0, 0.5], &[1.0, -0.8], &[1.0, 0.0, 0.0, 0.0]);
