@@ -191,14 +191,14 @@ impl LmOptions {
     /// assert_eq!((o.loss_tol(), o.step_tol(), o.significance_tol()), (0.0, 0.0, 0.0));
     /// ```
     pub fn exhaustive(max_iterations: usize) -> Result<Self> {
-        Ok(Self {
+        Self {
             loss_tol: 0.0,
             step_tol: 0.0,
             gradient_tol: 0.0,
             significance_tol: 0.0,
             ..Self::default()
         }
-        .with_max_iterations(max_iterations)?)
+        .with_max_iterations(max_iterations)
     }
     /// Maximum number of accepted steps (at least 1).
     ///

@@ -233,8 +233,8 @@ pub(crate) enum Accuracy {
 /// product of $k$ terms errs by at most $\gamma_k = k u/(1 - k u)$ times the sum of the
 /// magnitudes of its terms, and the recursion $1/F$ passes each step's error on with gain at
 /// most $\lVert h_{1/F}\rVert_1$):
-/// $$ \lVert \delta w\rVert_2 \le \gamma_{n_a+1}\, \bigl\lVert |A| * |y| \bigr\rVert_2
-///    + \lVert h_{1/F}\rVert_1\, \gamma_{n_b+n_f}\, \bigl\lVert |B| * |u| + |F - 1| * |v| \bigr\rVert_2 ; $$
+/// $$ \lVert \delta w\rVert_2 \le \gamma_{n_a+1}\, \bigl\lVert |A| * |y| \bigr\rVert_2 +
+///    \lVert h_{1/F}\rVert_1\, \gamma_{n_b+n_f}\, \bigl\lVert |B| * |u| + |F - 1| * |v| \bigr\rVert_2 ; $$
 /// when that bound exceeds $\tau \lVert w\rVert_2$ (heavy cancellation, or $F$ poles so close to
 /// the unit circle that the recursion amplifies the rounding) the double-double result is
 /// returned instead.
