@@ -18,8 +18,10 @@
 
 use ambid::experiment::{run, Experiment, ExperimentOutput};
 use ambid_core::estimate::arx::fit_percent;
+use ambid_core::estimate::pem::lm::LmOptions;
 use ambid_core::estimate::pem::{pem, Orders, PemOptions};
 use ambid_core::lti::Structure;
+use ambid_core::validate::predict::{poly_one_step, InitialState};
 use ambid_twin::Mode;
 use anyhow::Result;
 use faer::Mat;
@@ -45,17 +47,39 @@ fn main() -> Result<()> {
     let first = pos.first().copied().unwrap_or(1);
     let count = pos.get(1).copied().unwrap_or(20);
     let samples = pos.get(2).map(|&n| n as usize);
+    // (name, structure, orders, input: r (else u), score by the 1-step prediction (else simulation))
     let cases = [
-        ("oe 8/8", Structure::Oe, Orders::oe(8, 8, 1)),
-        ("armax 4/4/4", Structure::Armax, Orders::armax(4, 4, 4, 1)),
-        ("bj 4/2/2/4", Structure::Bj, Orders::bj(4, 2, 2, 4, 1)),
+        ("oe 8/8", Structure::Oe, Orders::oe(8, 8, 1), true, false),
+        (
+            "armax 4/4/4",
+            Structure::Armax,
+            Orders::armax(4, 4, 4, 1),
+            false,
+            true,
+        ),
+        (
+            "bj 4/2/2/4",
+            Structure::Bj,
+            Orders::bj(4, 2, 2, 4, 1),
+            true,
+            false,
+        ),
     ];
-    // PEM_LOSS_TOL=τ: a fixed loss tolerance instead of the statistical default
-    let opts = match std::env::var("PEM_LOSS_TOL") {
+    // PEM_LOSS_TOL=τ: another loss tolerance
+    let mut opts = match std::env::var("PEM_LOSS_TOL") {
         Ok(t) => PemOptions::default().with_loss_tol(t.parse()?)?,
         Err(_) => PemOptions::default(),
     };
+    // PEM_KAPPA=κ: another statistical tolerance (in standard errors)
+    if let Ok(k) = std::env::var("PEM_KAPPA") {
+        opts = opts.with_significance_tol(k.parse()?)?;
+    }
+    // PEM_REFERENCE=1: also run the iteration to its 100-step limit with every tolerance 0
+    let reference = std::env::var("PEM_REFERENCE").is_ok();
+    let full = PemOptions::default().with_lm(LmOptions::exhaustive(100)?);
+    let only: Option<String> = std::env::var("PEM_ONLY").ok();
     let mut gaps = vec![Vec::new(); cases.len()];
+    let mut losses = vec![Vec::new(); cases.len()];
     let mut unconverged = vec![0; cases.len()];
     let mut times = vec![Vec::new(); cases.len()];
     for rig in first..first + count {
@@ -64,34 +88,90 @@ fn main() -> Result<()> {
         let n = samples
             .unwrap_or(est.record.r.len())
             .min(est.record.r.len());
-        let (mu, my) = (mean(&est.record.r[..n]), mean(&est.record.y[..n]));
-        let u: Vec<f64> = est.record.r[..n].iter().map(|v| v - mu).collect();
-        let y: Vec<f64> = est.record.y[..n].iter().map(|v| v - my).collect();
-        let uv: Vec<f64> = val.record.r[..n].iter().map(|v| v - mu).collect();
-        let yv: Vec<f64> = val.record.y[..n].iter().map(|v| v - my).collect();
         let cl = val.twin.closed_loop();
         let rw = Mat::from_fn(n, 2, |k, c| if c == 0 { val.record.r[k] } else { 0.0 });
         let yt = cl.simulate(rw.as_ref(), None)?;
         let yt: Vec<f64> = (0..yt.nrows()).map(|k| yt[(k, 0)]).collect();
         let f_truth = fit_percent(&val.record.y[..n], &yt)?;
-        for (c, (name, s, o)) in cases.iter().enumerate() {
+        for (c, (name, s, o, from_r, one_step)) in cases.iter().enumerate() {
+            if only.as_deref().is_some_and(|w| !name.starts_with(w)) {
+                continue;
+            }
+            let (ue, uv) = if *from_r {
+                (&est.record.r, &val.record.r)
+            } else {
+                (&est.record.u, &val.record.u)
+            };
+            let (mu, my) = (mean(&ue[..n]), mean(&est.record.y[..n]));
+            let u: Vec<f64> = ue[..n].iter().map(|v| v - mu).collect();
+            let y: Vec<f64> = est.record.y[..n].iter().map(|v| v - my).collect();
+            let uv: Vec<f64> = uv[..n].iter().map(|v| v - mu).collect();
+            let yv: Vec<f64> = val.record.y[..n].iter().map(|v| v - my).collect();
+            let score = |m: &ambid_core::lti::PolyModel| -> Result<f64> {
+                let yh = if *one_step {
+                    poly_one_step(m, &yv, &uv, InitialState::Zero)?
+                } else {
+                    m.simulate(&uv, None, None)?
+                };
+                Ok(fit_percent(&yv, &yh)?)
+            };
             let t0 = Instant::now();
             let r = pem(&y, &u, *s, o, est.twin.ts(), &opts);
             let secs = t0.elapsed().as_secs_f64();
             times[c].push(secs);
+            let refit = if reference {
+                match pem(&y, &u, *s, o, est.twin.ts(), &full) {
+                    Ok((f, _)) => Some((score(&f.model)?, f.loss)),
+                    Err(_) => None,
+                }
+            } else {
+                None
+            };
             match r {
                 Ok((fit, rep)) => {
-                    let ysim = fit.model.simulate(&uv, None, None)?;
-                    let f_model = fit_percent(&yv, &ysim)?;
-                    let gap = f_truth - f_model;
+                    let f_model = score(&fit.model)?;
+                    // against the truth (simulation) or the 100-step result (1-step)
+                    let gap = match (refit, *one_step) {
+                        (Some((f_ref, _)), _) => f_ref - f_model,
+                        (None, false) => f_truth - f_model,
+                        (None, true) => f64::NAN,
+                    };
                     gaps[c].push(gap);
+                    if let Some((_, l_ref)) = refit {
+                        losses[c].push(fit.loss / l_ref - 1.0);
+                    }
                     if !rep.reason().converged() {
                         unconverged[c] += 1;
                     }
+                    if std::env::var("PEM_ROOTS").is_ok() {
+                        let roots = |p: &[f64]| -> String {
+                            ambid_core::linalg::roots(p)
+                                .map(|r| {
+                                    let mut m: Vec<String> = r
+                                        .iter()
+                                        .map(|z| format!("{:.5}@{:.4}", z.norm(), z.im.atan2(z.re)))
+                                        .collect();
+                                    m.sort();
+                                    m.join(" ")
+                                })
+                                .unwrap_or_default()
+                        };
+                        let st = &rep.start;
+                        println!(
+                            "  start A [{}] C [{}] D [{}] F [{}]\n  final A [{}] C [{}] D [{}] F [{}]\n  rejected inadmissible {} evals {}",
+                            roots(st.a()), roots(st.c()), roots(st.d()), roots(st.f()),
+                            roots(fit.model.a()), roots(fit.model.c()), roots(fit.model.d()), roots(fit.model.f()),
+                            rep.lm.rejected_inadmissible, rep.lm.evaluations
+                        );
+                    }
                     println!(
-                        "rig {rig:3} {name:12}: {:3} it {:13} | fit {f_model:7.3} % truth {f_truth:7.3} % gap {gap:7.3} | {secs:.2} s",
+                        "rig {rig:3} {name:12}: {:3} it {:20} | fit {f_model:8.4} % {} gap {gap:7.4} | {secs:.2} s",
                         rep.iterations(),
                         format!("{:?}", rep.reason()),
+                        match refit {
+                            Some((f, l)) => format!("100-step {f:8.4} % (loss ratio-1 {:.1e})", fit.loss / l - 1.0),
+                            None => format!("truth {f_truth:7.3} %"),
+                        },
                     );
                 }
                 Err(e) => {
@@ -101,8 +181,11 @@ fn main() -> Result<()> {
             }
         }
     }
-    for (c, (name, _, _)) in cases.iter().enumerate() {
+    for (c, (name, ..)) in cases.iter().enumerate() {
         let g = &mut gaps[c];
+        if g.is_empty() {
+            continue;
+        }
         g.sort_by(|a, b| a.total_cmp(b));
         let t = &mut times[c];
         t.sort_by(|a, b| a.total_cmp(b));

@@ -337,6 +337,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
     let mut problems: Vec<String> = Vec::new();
     let mut fallback = false;
     let open_loop = is_open_loop(&a)?;
+    let mut stop: Option<String> = None;
     let (fitted, iterations): (Fitted<PolyModel>, Option<usize>) = match a.structure {
         StructureArg::Fir | StructureArg::Arx => {
             let na = if a.structure == StructureArg::Fir {
@@ -372,6 +373,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
                             rep.reason()
                         ));
                     }
+                    stop = Some(stop_reason_text(rep.reason()).to_string());
                     (f, Some(rep.iterations()))
                 }
                 Err(e) if is_model_problem(&e) => {
@@ -400,7 +402,11 @@ pub fn fit(a: FitArgs) -> Result<()> {
         m.structure().name(),
         fitted.params.len(),
         fitted.n_samples,
-        iterations.map_or(String::new(), |i| format!(", {i} LM iterations"))
+        iterations.map_or(String::new(), |i| format!(
+            ", {i} LM iterations{}",
+            stop.as_deref()
+                .map_or(String::new(), |s| format!(" (stopped: {s})"))
+        ))
     );
     for (k, p) in fitted.params.iter().enumerate() {
         match &std {
@@ -461,6 +467,8 @@ pub fn fit(a: FitArgs) -> Result<()> {
         "initial_state": x0.name(),
         "skip": skip,
         "fallback": fallback,
+        "iterations": iterations,
+        "stop": stop,
         "loop": if open_loop { "open" } else { "closed" },
         "problems": problems,
         "source": a.data.display().to_string(),
@@ -1171,4 +1179,22 @@ fn finish_mimo(a: &FitArgs, ins: &[String], outs: &[String], f: MimoFit) -> Resu
     write_file(&a.out, &model_json_bytes(&j)?, a.force)?;
     println!("written: {}", a.out.display());
     Ok(())
+}
+
+/// What stopped the prediction-error iteration, for the summary (see
+/// [`ambid_core::estimate::pem::lm::StopReason`]).
+fn stop_reason_text(r: ambid_core::estimate::pem::lm::StopReason) -> &'static str {
+    use ambid_core::estimate::pem::lm::StopReason;
+    match r {
+        StopReason::Significance => {
+            "converged: the remaining Gauss-Newton step is below 0.1 standard errors"
+        }
+        StopReason::Stagnation => {
+            "converged: within 0.5 standard errors of the optimum and no visible progress"
+        }
+        StopReason::LossChange => "converged: loss change below the numerical tolerance",
+        StopReason::StepSize => "converged: step below the numerical tolerance",
+        StopReason::Gradient => "converged: gradient zero",
+        StopReason::MaxIterations => "iteration limit reached",
+    }
 }

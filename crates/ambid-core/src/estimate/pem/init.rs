@@ -648,3 +648,193 @@ fn general_start(y: &[f64], u: &[f64], o: &Orders, nl: usize) -> Option<Polys> {
 pub(crate) fn noise_order(n: usize, o: &Orders) -> usize {
     long_order(n, o)
 }
+
+/// An ARMAX start from the innovations form of a subspace model, for $n_a = n_b = n_c$ and
+/// $n_k \ge 1$ (an ARMAX$(n, n, n, n_k)$ model *is* an $n$-th order innovations state-space
+/// model $x^+ = A x + B u_{t-n_k+1} + K e$, $y = C x + e$): N4SID of order $n_a$ (default
+/// horizon rule, Kalman gain from its noise covariances) on the mean-free, unit-RMS data with
+/// $u$ delayed by $n_k - 1$; then $A(q) = \det(I - q^{-1}\mathbf A)$, $B(q)$ its transfer
+/// function's numerator (scaled back) and $C(q) = \det(I - q^{-1}(\mathbf A - K\mathbf C))$,
+/// the predictor's poles, moved radially inside $|z| = 0.95$ if a root lies beyond 0.99
+/// ([`contract`]) and then refined as the moving-average model of the equation error
+/// $A y - B u$ ([`refine_noise`]: the subspace Kalman gain of closed-loop data can be far from
+/// the ARMAX optimum's $C$). $A$ is kept as estimated (an unstable plant in closed loop stays
+/// unstable).
+///
+/// Why: the Hannan–Rissanen start takes the innovations from a long ARX model of order
+/// $\max(20, 3(n_a + n_c))$, far too short when the innovations filter $1/C$ has poles at
+/// $|z| \approx 0.99$ (an AMB loop's slow modes sampled at 20 kHz); from that start ARMAX(4, 4, 4, 1)
+/// of $u \to y$ crawled 60–100 iterations along a curved valley of the polynomial coefficients
+/// before its quadratic convergence set in. `None` when the orders differ, $n_k = 0$, the
+/// subspace step fails or gives no Kalman gain.
+pub(crate) fn subspace_armax_start(
+    y: &[f64],
+    u: &[f64],
+    o: &Orders,
+    ts: f64,
+    lm: &super::lm::LmOptions,
+) -> Option<Polys> {
+    if o.nk == 0 || o.na == 0 || o.nb != o.na || o.nc != o.na || o.nd != 0 || o.nf != 0 {
+        return None;
+    }
+    let (fit, su, sy) = scaled_n4sid(y, u, o.na, o.nk, ts)?;
+    let k = fit.kalman_gain.as_ref()?;
+    let m = &fit.fitted.model;
+    let (num, den) = m.tf_coefficients().ok()?;
+    if den.len() != o.na + 1 || num.len() != o.na + 1 || den[0] == 0.0 || num[0] != 0.0 {
+        return None;
+    }
+    let a: Vec<f64> = den.iter().map(|c| c / den[0]).collect();
+    let b: Vec<f64> = num[1..].iter().map(|c| c / den[0] * sy / su).collect();
+    let n = o.na;
+    let akc = Mat::from_fn(n, n, |i, j| m.a()[(i, j)] - k[(i, 0)] * m.c()[(0, j)]);
+    let c = crate::linalg::charpoly(akc.as_ref()).ok()?;
+    if c.len() != n + 1 || c.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    // C: the moving-average model of the equation error w = A y − B u, refined from the
+    // predictor's poles (the subspace Kalman gain of closed-loop data can be far off)
+    let b = with_delay(o.nk, &b);
+    let ay = filter(&a, &[1.0], y);
+    let bu = filter(&b, &[1.0], u);
+    let w: Vec<f64> = ay.iter().zip(&bu).map(|(p, q)| p - q).collect();
+    let (c, _) = refine_noise(&w, contract(c), vec![1.0], lm);
+    Some(Polys {
+        a,
+        b,
+        c,
+        d: vec![1.0],
+        f: vec![1.0],
+    })
+}
+
+/// A Box–Jenkins start from the state-space OE start ([`subspace_oe_start`]) for $B, F$ and,
+/// on its output error, Hannan–Rissanen for $C, D$ refined by [`refine_noise`] (iteration
+/// options `lm`). `None` when the OE start is unavailable.
+pub(crate) fn subspace_bj_start(
+    y: &[f64],
+    u: &[f64],
+    o: &Orders,
+    ts: f64,
+    lm: &super::lm::LmOptions,
+) -> Option<Polys> {
+    if o.na != 0 || o.nf < 2 {
+        return None;
+    }
+    let (b, f) = subspace_oe_start(y, u, o.nb, o.nf, o.nk, ts)?;
+    let v = filter(&b, &f, u);
+    let w: Vec<f64> = y.iter().zip(&v).map(|(a, b)| a - b).collect();
+    let (c, d) = arma_start(&w, o.nc, o.nd, long_order(y.len(), o));
+    let (c, d) = refine_noise(&w, c, d, lm);
+    Some(Polys {
+        a: vec![1.0],
+        b,
+        c,
+        d,
+        f,
+    })
+}
+
+/// N4SID of order `n` (default horizon rule) on the unit-RMS $y$ and $u$ delayed by
+/// $n_k - 1$; with the two scales (RMS of $u$, of $y$).
+fn scaled_n4sid(
+    y: &[f64],
+    u: &[f64],
+    n: usize,
+    nk: usize,
+    ts: f64,
+) -> Option<(crate::estimate::subspace::SubspaceFit, f64, f64)> {
+    use crate::estimate::subspace::{n4sid_detailed, SubspaceOptions};
+    let len = y.len();
+    let shift = nk.checked_sub(1)?;
+    let m = len.checked_sub(shift)?;
+    let rms = |x: &[f64]| (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt();
+    let (su, sy) = (rms(&u[..m]), rms(&y[shift..]));
+    if !(su > 0.0 && sy > 0.0 && su.is_finite() && sy.is_finite()) {
+        return None;
+    }
+    let ym = Mat::from_fn(m, 1, |i, _| y[i + shift] / sy);
+    let um = Mat::from_fn(m, 1, |i, _| u[i] / su);
+    let opts = SubspaceOptions {
+        order: Some(n),
+        ..SubspaceOptions::new(ts)
+    };
+    let fit = n4sid_detailed(ym.as_ref(), um.as_ref(), &opts).ok()?;
+    Some((fit, su, sy))
+}
+
+/// The ARMA criterion $\tfrac12\sum_t \bigl(\tfrac DC w_t\bigr)^2$ of a fixed output error $w$ over
+/// $\theta = [c_1 \dots c_{n_c}, d_1 \dots d_{n_d}]$ (gradient as in the parent module:
+/// $\partial\varepsilon/\partial c_i = -\frac1C \varepsilon_{t-i}$,
+/// $\partial\varepsilon/\partial d_i = \frac1C w_{t-i}$).
+struct ArmaCriterion<'a> {
+    w: &'a [f64],
+    nc: usize,
+    nd: usize,
+}
+
+impl ArmaCriterion<'_> {
+    fn polys(&self, x: &[f64]) -> (Vec<f64>, Vec<f64>) {
+        (monic(&x[..self.nc]), monic(&x[self.nc..self.nc + self.nd]))
+    }
+}
+
+impl super::lm::LeastSquaresProblem for ArmaCriterion<'_> {
+    fn residuals(&mut self, x: &[f64]) -> Option<Vec<f64>> {
+        let (c, d) = self.polys(x);
+        if !is_stable(&c) {
+            return None;
+        }
+        let e = filter(&d, &c, self.w);
+        e.iter().all(|v| v.is_finite()).then_some(e)
+    }
+    fn jacobian(&mut self, x: &[f64]) -> Option<Mat<f64>> {
+        let (c, d) = self.polys(x);
+        if !is_stable(&c) {
+            return None;
+        }
+        let e = filter(&d, &c, self.w);
+        let et = filter(&[1.0], &c, &e);
+        let wt = filter(&[1.0], &c, self.w);
+        let n = self.w.len();
+        Some(Mat::from_fn(n, self.nc + self.nd, |t, k| {
+            if k < self.nc {
+                -lagged(&et, k + 1, t)
+            } else {
+                lagged(&wt, k - self.nc + 1, t)
+            }
+        }))
+    }
+}
+
+/// The noise model $C, D$ of a fixed output error $w$ by the prediction-error method from the
+/// Hannan–Rissanen start `(c, d)` (a few Levenberg–Marquardt steps on a problem with only
+/// $n_c + n_d$ parameters and no input filtering). Returns the start unchanged if the
+/// iteration fails. Used for the Box–Jenkins start: with $G$ at the output-error optimum and
+/// the noise model at its optimum given $G$, the joint iteration starts close to the BJ
+/// optimum (from the Hannan–Rissanen $C, D$ it crawled 70–100 iterations on the twin's loop).
+pub(crate) fn refine_noise(
+    w: &[f64],
+    c: Vec<f64>,
+    d: Vec<f64>,
+    lm: &super::lm::LmOptions,
+) -> (Vec<f64>, Vec<f64>) {
+    let (nc, nd) = (c.len() - 1, d.len() - 1);
+    if nc + nd == 0 || !is_stable(&c) {
+        return (c, d);
+    }
+    let mut x0 = c[1..].to_vec();
+    x0.extend_from_slice(&d[1..]);
+    let mut crit = ArmaCriterion { w, nc, nd };
+    match super::lm::minimize(&mut crit, &x0, lm) {
+        Ok((x, _)) => {
+            let (cn, dn) = crit.polys(&x);
+            if is_stable(&cn) {
+                (cn, dn)
+            } else {
+                (c, d)
+            }
+        }
+        Err(_) => (c, d),
+    }
+}

@@ -46,6 +46,14 @@
 //!   declared converged while it can still move);
 //! * [`StopReason::Gradient`]: the largest cosine between $r$ and a column of $J$ is at most
 //!   `gradient_tol`, or $r = 0$;
+//! * [`StopReason::Significance`] (only with `significance_tol` $\kappa > 0$): the Gauss–Newton
+//!   step from the current point, whose predicted reduction of $\lVert r\rVert^2$ is
+//!   $\lVert z\rVert^2$, is shorter than $\kappa$ standard errors in the metric of the
+//!   covariance $\hat\sigma^2 (J^\top J)^{-1}$, $\hat\sigma^2 = \lVert r\rVert^2/(m - n)$:
+//!   $\lVert z\rVert^2 \le \kappa^2\hat\sigma^2$ (tested before each step);
+//! * [`StopReason::Stagnation`] (only with $\kappa > 0$): that step is shorter than
+//!   [`STAGNATION_SIGMA`] standard errors and the last [`STAGNATION_WINDOW`] accepted steps
+//!   lowered $\tfrac12\lVert r\rVert^2$ by less than $\kappa^2\hat\sigma^2/2$ in total;
 //! * [`StopReason::MaxIterations`]: `max_iterations` accepted steps.
 //!
 //! Complexity per iteration: one Jacobian, one $O(m n^2)$ QR, a few $O(n^3)$ small QRs.
@@ -103,6 +111,17 @@ pub enum StopReason {
     StepSize,
     /// The residual is (numerically) orthogonal to every Jacobian column, or zero.
     Gradient,
+    /// The Gauss–Newton step from the current point is statistically invisible: shorter than
+    /// `significance_tol` standard errors in the metric of the parameters' covariance,
+    /// $\lVert z\rVert^2 \le \kappa^2\,\lVert r\rVert^2/(m - n)$ (see the module docs).
+    Significance,
+    /// The Gauss–Newton step from the current point is shorter than [`STAGNATION_SIGMA`]
+    /// standard errors, and the last [`STAGNATION_WINDOW`] accepted steps together lowered the
+    /// loss by less than the significance rule's remaining improvement
+    /// $\kappa^2\hat\sigma^2/2$ (with `significance_tol` $\kappa > 0$): the optimum is within
+    /// half a standard error, and the trust region's progress towards it is too small to be
+    /// seen in the data (a curved valley of the polynomial coefficients).
+    Stagnation,
     /// The iteration limit was reached before any tolerance was met.
     MaxIterations,
 }
@@ -114,6 +133,13 @@ impl StopReason {
     }
 }
 
+/// Accepted steps over which [`StopReason::Stagnation`] measures the progress.
+pub const STAGNATION_WINDOW: usize = 5;
+
+/// [`StopReason::Stagnation`] applies only when the Gauss–Newton step from the current point is
+/// shorter than this many standard errors (the optimum is known to lie that close).
+pub const STAGNATION_SIGMA: f64 = 0.5;
+
 /// Options of [`minimize`]; the setters validate their argument.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LmOptions {
@@ -121,18 +147,20 @@ pub struct LmOptions {
     loss_tol: f64,
     step_tol: f64,
     gradient_tol: f64,
+    significance_tol: f64,
     initial_radius: f64,
 }
 
 impl Default for LmOptions {
-    /// 100 iterations, `loss_tol` 1e-12, `step_tol` 1e-10, `gradient_tol` 1e-12, initial
-    /// radius factor 100.
+    /// 100 iterations, `loss_tol` 1e-12, `step_tol` 1e-10, `gradient_tol` 1e-12,
+    /// `significance_tol` 0 (off: the numerical tolerances decide), initial radius factor 100.
     fn default() -> Self {
         Self {
             max_iterations: 100,
             loss_tol: 1e-12,
             step_tol: 1e-10,
             gradient_tol: 1e-12,
+            significance_tol: 0.0,
             initial_radius: 100.0,
         }
     }
@@ -149,6 +177,29 @@ fn check_tol(name: &'static str, v: f64) -> Result<()> {
 }
 
 impl LmOptions {
+    /// Every tolerance 0: the iteration runs until `max_iterations` accepted steps (or until
+    /// no step can be taken any more, $r = 0$ or a trust region below the smallest positive
+    /// number). Meant as a reference ("what the full budget gives") for tests and studies.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for `max_iterations` 0.
+    ///
+    /// # Example
+    /// ```
+    /// use ambid_core::estimate::pem::lm::LmOptions;
+    /// let o = LmOptions::exhaustive(100).unwrap();
+    /// assert_eq!((o.loss_tol(), o.step_tol(), o.significance_tol()), (0.0, 0.0, 0.0));
+    /// ```
+    pub fn exhaustive(max_iterations: usize) -> Result<Self> {
+        Self {
+            loss_tol: 0.0,
+            step_tol: 0.0,
+            gradient_tol: 0.0,
+            significance_tol: 0.0,
+            ..Self::default()
+        }
+        .with_max_iterations(max_iterations)
+    }
     /// Maximum number of accepted steps (at least 1).
     ///
     /// # Errors
@@ -190,6 +241,19 @@ impl LmOptions {
         self.gradient_tol = tol;
         Ok(self)
     }
+    /// Statistical stopping rule ([`StopReason::Significance`]): stop when the Gauss–Newton
+    /// step from the current point is shorter than $\kappa$ = `kappa` standard errors,
+    /// $\lVert z\rVert^2 \le \kappa^2 \lVert r\rVert^2/(m-n)$; 0 switches it off (the default of
+    /// [`LmOptions`]; the prediction-error estimators set 0.1, see
+    /// [`PemOptions`](super::PemOptions)).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for a negative or non-finite value.
+    pub fn with_significance_tol(mut self, kappa: f64) -> Result<Self> {
+        check_tol("significance_tol", kappa)?;
+        self.significance_tol = kappa;
+        Ok(self)
+    }
     /// Initial radius $\Delta_0 = $ `factor` $\cdot \lVert D x_0 \rVert$ (MINPACK's `factor`).
     ///
     /// # Errors
@@ -219,6 +283,10 @@ impl LmOptions {
     /// Gradient (cosine) tolerance.
     pub fn gradient_tol(&self) -> f64 {
         self.gradient_tol
+    }
+    /// Statistical tolerance $\kappa$ in standard errors (0: off).
+    pub fn significance_tol(&self) -> f64 {
+        self.significance_tol
     }
 }
 
@@ -509,6 +577,8 @@ pub fn minimize<P: LeastSquaresProblem + ?Sized>(
     let mut delta = 0.0;
     let mut par = 0.0;
     let mut first = true;
+    // ½‖r‖² after each accepted step (index = iterations), for the stagnation test
+    let mut costs = vec![0.5 * fnorm * fnorm];
     let reason = 'outer: loop {
         let jac = problem.jacobian(&x).ok_or_else(|| {
             Error::numerical(CTX, "the Jacobian is undefined at an admissible point")
@@ -559,6 +629,22 @@ pub fn minimize<P: LeastSquaresProblem + ?Sized>(
         }
         if gnorm <= opts.gradient_tol {
             break StopReason::Gradient;
+        }
+        // statistical test: the whole remaining Gauss–Newton reduction ‖z‖² is below κ² σ̂²
+        if opts.significance_tol > 0.0 && m > n {
+            let zz: f64 = z.iter().map(|v| v * v).sum();
+            let sigma2 = fnorm * fnorm / (m - n) as f64;
+            let k2 = opts.significance_tol.powi(2);
+            if zz <= k2 * sigma2 {
+                break StopReason::Significance;
+            }
+            let it = report.iterations;
+            if it >= STAGNATION_WINDOW
+                && zz <= STAGNATION_SIGMA * STAGNATION_SIGMA * sigma2
+                && costs[it - STAGNATION_WINDOW] - costs[it] <= 0.5 * k2 * sigma2
+            {
+                break StopReason::Stagnation;
+            }
         }
         for j in 0..n {
             diag[j] = diag[j].max(colnorm[j]);
@@ -617,6 +703,7 @@ pub fn minimize<P: LeastSquaresProblem + ?Sized>(
                 }
                 fnorm = fnorm1;
                 report.iterations += 1;
+                costs.push(0.5 * fnorm * fnorm);
                 first = false;
             }
             report.ended_on_boundary = !admissible;
@@ -647,15 +734,16 @@ pub fn minimize<P: LeastSquaresProblem + ?Sized>(
         StopReason::Gradient => false,
         // not at a minimum: the Gauss–Newton step says nothing, keep the last trial's verdict
         StopReason::MaxIterations => report.ended_on_boundary,
-        StopReason::LossChange | StopReason::StepSize => {
-            match gauss_newton_leaves(problem, &x, &r, m) {
-                Some(leaves) => {
-                    report.evaluations += 1;
-                    leaves
-                }
-                None => report.ended_on_boundary,
+        StopReason::LossChange
+        | StopReason::StepSize
+        | StopReason::Significance
+        | StopReason::Stagnation => match gauss_newton_leaves(problem, &x, &r, m) {
+            Some(leaves) => {
+                report.evaluations += 1;
+                leaves
             }
-        }
+            None => report.ended_on_boundary,
+        },
     };
     Ok((x, report))
 }
@@ -772,11 +860,71 @@ mod tests {
         assert!(rep.rejected_inadmissible > 0);
     }
 
+    /// y = a e^{b t} + noise: the statistical rule stops within κ standard errors of the
+    /// exact minimiser (distance in the metric of σ̂²(JᵀJ)⁻¹ at that minimiser), and earlier.
+    struct NoisyExp(Vec<f64>, Vec<f64>);
+    impl LeastSquaresProblem for NoisyExp {
+        fn residuals(&mut self, x: &[f64]) -> Option<Vec<f64>> {
+            Some(
+                self.0
+                    .iter()
+                    .zip(&self.1)
+                    .map(|(t, y)| x[0] * (x[1] * t).exp() - y)
+                    .collect(),
+            )
+        }
+        fn jacobian(&mut self, x: &[f64]) -> Option<Mat<f64>> {
+            let t = &self.0;
+            Some(Mat::from_fn(t.len(), 2, |i, j| {
+                let e = (x[1] * t[i]).exp();
+                if j == 0 {
+                    e
+                } else {
+                    x[0] * t[i] * e
+                }
+            }))
+        }
+    }
+
+    #[test]
+    fn significance_rule_stops_within_kappa_standard_errors_of_the_minimiser() {
+        let t: Vec<f64> = (0..400).map(|k| k as f64 * 0.01).collect();
+        // deterministic "noise" of RMS ≈ 0.05
+        let y: Vec<f64> = t
+            .iter()
+            .enumerate()
+            .map(|(k, t)| {
+                2.0 * (-0.5 * t).exp() + 0.05 * ((k * 7919 % 997) as f64 / 498.5 - 1.0) * 1.7
+            })
+            .collect();
+        let mut p = NoisyExp(t, y);
+        let exact = LmOptions::exhaustive(200).unwrap();
+        let (xe, re) = minimize(&mut p, &[1.0, 0.3], &exact).unwrap();
+        for kappa in [0.1, 1.0] {
+            let o = LmOptions::default().with_significance_tol(kappa).unwrap();
+            let (xs, rs) = minimize(&mut p, &[1.0, 0.3], &o).unwrap();
+            assert_eq!(rs.reason, StopReason::Significance, "{rs:?}");
+            assert!(rs.iterations < re.iterations, "{rs:?} vs {re:?}");
+            // Mahalanobis distance with P = σ̂² (JᵀJ)⁻¹ at the exact minimiser
+            let j = p.jacobian(&xe).unwrap();
+            let r = p.residuals(&xe).unwrap();
+            let s2 = r.iter().map(|v| v * v).sum::<f64>() / (r.len() - 2) as f64;
+            let g = j.transpose() * &j;
+            let d = [xs[0] - xe[0], xs[1] - xe[1]];
+            let q = (0..2)
+                .map(|a| (0..2).map(|b| d[a] * g[(a, b)] * d[b]).sum::<f64>())
+                .sum::<f64>()
+                / s2;
+            assert!(q.sqrt() <= kappa * 1.05, "κ = {kappa}: {} σ", q.sqrt());
+        }
+    }
+
     #[test]
     fn bad_start_and_options_are_errors() {
         assert!(minimize(&mut Boundary, &[3.0], &LmOptions::default()).is_err());
         assert!(LmOptions::default().with_loss_tol(-1.0).is_err());
         assert!(LmOptions::default().with_max_iterations(0).is_err());
         assert!(LmOptions::default().with_initial_radius(f64::NAN).is_err());
+        assert!(LmOptions::default().with_significance_tol(-0.1).is_err());
     }
 }

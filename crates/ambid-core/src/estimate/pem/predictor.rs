@@ -168,31 +168,127 @@ fn filter_dd(num: &[f64], den: &[f64], x: &[f64]) -> Vec<Dd> {
     y
 }
 
-/// $w = A y - (B/F) u$ (prediction) or $y - B/(AF)\,u$ (simulation), computed in double-double
-/// and rounded once, so that it is accurate relative to $|w|$ even when $y \approx G u$ cancels
-/// many digits (data with very little noise); also returns $(B/F) u$ resp. $B/(AF)\,u$.
-/// Without `accurate`, in plain double precision (about ten times faster; enough for the
+/// $\lVert h \rVert_1 = \sum_t |h_t|$ of the impulse response of the stable $1/\text{den}$ (monic),
+/// summed over at most `n` samples, stopped early once the last $n_\text{den}$ samples (the
+/// filter's state) are below $10^{-17}$ of the sum.
+fn impulse_l1(den: &[f64], n: usize) -> f64 {
+    let nd = den.len() - 1;
+    if nd == 0 {
+        return 1.0;
+    }
+    let mut h = vec![0.0; n.max(1)];
+    let mut sum = 0.0;
+    for t in 0..h.len() {
+        let mut s = if t == 0 { 1.0 } else { 0.0 };
+        for (k, dk) in den.iter().enumerate().skip(1).take(t) {
+            s -= dk * h[t - k];
+        }
+        h[t] = s;
+        sum += s.abs();
+        if t >= nd && h[t + 1 - nd..=t].iter().all(|v| v.abs() <= 1e-17 * sum) {
+            break;
+        }
+    }
+    sum
+}
+
+/// $\bigl(\sum_t (\sum_k |c_k| |x_{t-k}|)^2\bigr)^{1/2}$ plus, for a recursive filter with output
+/// `out`, $\sum_{k \ge 1} |\text{den}_k| |\text{out}_{t-k}|$ inside the sum: the magnitude that one
+/// step's rounding error is relative to.
+fn abs_sum_norm(c: &[f64], x: &[f64], den: &[f64], out: &[f64]) -> f64 {
+    let mut acc = 0.0;
+    for t in 0..x.len() {
+        let mut s = 0.0;
+        for (k, ck) in c.iter().enumerate().take(t + 1) {
+            s += ck.abs() * x[t - k].abs();
+        }
+        for (k, dk) in den.iter().enumerate().skip(1).take(t) {
+            s += dk.abs() * out[t - k].abs();
+        }
+        acc += s * s;
+    }
+    acc.sqrt()
+}
+
+/// When the iteration may use the plain double residual: see [`output_error`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Accuracy {
+    /// Always double-double (the final loss and covariance; the exact-optimum mode).
+    Exact,
+    /// Plain double when its rounding-error bound is at most this fraction of $\lVert w\rVert$.
+    RelativeBound(f64),
+    /// Always plain double (the Jacobian).
+    Plain,
+}
+
+/// $w = A y - (B/F) u$ (prediction) or $y - B/(AF)\,u$ (simulation); also returns $(B/F) u$ resp.
+/// $B/(AF)\,u$.
+///
+/// [`Accuracy::Exact`]: computed in double-double and rounded once, so that it is accurate
+/// relative to $|w|$ even when $y \approx G u$ cancels many digits (data with very little
+/// noise). [`Accuracy::Plain`]: plain double precision (about ten times faster; enough for the
 /// gradient, whose columns are filtered signals without that cancellation).
+/// [`Accuracy::RelativeBound`]`(τ)`: plain double, with a rigorous first-order bound of its
+/// rounding error (Higham, *Accuracy and Stability of Numerical Algorithms*, §3.1: each inner
+/// product of $k$ terms errs by at most $\gamma_k = k u/(1 - k u)$ times the sum of the
+/// magnitudes of its terms, and the recursion $1/F$ passes each step's error on with gain at
+/// most $\lVert h_{1/F}\rVert_1$):
+/// $$ \lVert \delta w\rVert_2 \le \gamma_{n_a+1}\, \bigl\lVert |A| * |y| \bigr\rVert_2 +
+///    \lVert h_{1/F}\rVert_1\, \gamma_{n_b+n_f}\, \bigl\lVert |B| * |u| + |F - 1| * |v| \bigr\rVert_2 ; $$
+/// when that bound exceeds $\tau \lVert w\rVert_2$ (heavy cancellation, or $F$ poles so close to
+/// the unit circle that the recursion amplifies the rounding) the double-double result is
+/// returned instead.
 fn output_error(
     p: &Polys,
     y: &[f64],
     u: &[f64],
     focus: Focus,
-    accurate: bool,
+    accuracy: Accuracy,
 ) -> (Vec<f64>, Vec<f64>) {
     let (a, den) = match focus {
         Focus::Prediction => (p.a.as_slice(), p.f.clone()),
         Focus::Simulation => (&[1.0][..], mul(&p.a, &p.f)),
     };
-    if !accurate {
+    if accuracy != Accuracy::Exact {
         let v = filter(&p.b, &den, u);
-        let ay = if a.len() == 1 && a[0] == 1.0 {
+        let unit_a = a.len() == 1 && a[0] == 1.0;
+        let ay = if unit_a {
             y.to_vec()
         } else {
             filter(a, &[1.0], y)
         };
-        let w = ay.iter().zip(&v).map(|(x, z)| x - z).collect();
-        return (w, v);
+        let w: Vec<f64> = ay.iter().zip(&v).map(|(x, z)| x - z).collect();
+        let plain_ok = match accuracy {
+            Accuracy::Plain => true,
+            Accuracy::RelativeBound(tau) => {
+                let gamma = |k: usize| {
+                    let ku = k as f64 * f64::EPSILON / 2.0;
+                    ku / (1.0 - ku)
+                };
+                let nb = p.b.iter().filter(|c| **c != 0.0).count();
+                let err_a = if unit_a {
+                    0.0
+                } else {
+                    gamma(a.len()) * abs_sum_norm(a, y, &[1.0], &[])
+                };
+                let wn = w.iter().map(|x| x * x).sum::<f64>().sqrt();
+                let gain = impulse_l1(&den, y.len()) * gamma(nb + den.len() - 1);
+                // |v_t| is at most the term magnitude of its step: a cheap lower bound first
+                let vn = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+                let err_v = if gain * vn > tau * wn {
+                    f64::INFINITY
+                } else {
+                    gain * abs_sum_norm(&p.b, u, &den, &v)
+                };
+                // the subtraction itself: one rounding of each w_t
+                let bound = err_a + err_v + f64::EPSILON * wn;
+                bound.is_finite() && bound <= tau * wn
+            }
+            Accuracy::Exact => false,
+        };
+        if plain_ok {
+            return (w, v);
+        }
     }
     let v = filter_dd(&p.b, &den, u);
     let ay = filter_dd(a, &[1.0], y);
@@ -267,11 +363,17 @@ pub(crate) fn predictor_stable(p: &Polys, focus: Focus) -> bool {
 
 /// Prediction errors. Prediction: $\varepsilon = (D/C)(A y - (B/F) u)$; simulation:
 /// $\varepsilon = y - B/(AF)\,u$. `None` if the predictor is unstable or the result not finite.
-pub(crate) fn errors(p: &Polys, y: &[f64], u: &[f64], focus: Focus) -> Option<Vec<f64>> {
+pub(crate) fn errors(
+    p: &Polys,
+    y: &[f64],
+    u: &[f64],
+    focus: Focus,
+    accuracy: Accuracy,
+) -> Option<Vec<f64>> {
     if !predictor_stable(p, focus) {
         return None;
     }
-    let (w, _) = output_error(p, y, u, focus, true);
+    let (w, _) = output_error(p, y, u, focus, accuracy);
     let e = match focus {
         Focus::Prediction => filter(&p.d, &p.c, &w),
         Focus::Simulation => w,
@@ -289,7 +391,7 @@ pub(crate) fn errors_and_gradient(
     u: &[f64],
     focus: Focus,
 ) -> Option<(Vec<f64>, Mat<f64>)> {
-    errors_and_gradient_with(p, o, y, u, focus, true)
+    errors_and_gradient_with(p, o, y, u, focus, Accuracy::Exact)
 }
 
 /// The gradient alone ([`errors_and_gradient`] with the errors in plain double precision: the
@@ -301,7 +403,7 @@ pub(crate) fn gradient(
     u: &[f64],
     focus: Focus,
 ) -> Option<Mat<f64>> {
-    errors_and_gradient_with(p, o, y, u, focus, false).map(|(_, j)| j)
+    errors_and_gradient_with(p, o, y, u, focus, Accuracy::Plain).map(|(_, j)| j)
 }
 
 fn errors_and_gradient_with(
@@ -310,7 +412,7 @@ fn errors_and_gradient_with(
     y: &[f64],
     u: &[f64],
     focus: Focus,
-    accurate: bool,
+    accuracy: Accuracy,
 ) -> Option<(Vec<f64>, Mat<f64>)> {
     if !predictor_stable(p, focus) {
         return None;
@@ -326,7 +428,7 @@ fn errors_and_gradient_with(
     let eps;
     match focus {
         Focus::Prediction => {
-            let (w, v) = output_error(p, y, u, focus, accurate); // A y − (B/F) u and (B/F) u
+            let (w, v) = output_error(p, y, u, focus, accuracy); // A y − (B/F) u and (B/F) u
             eps = filter(&p.d, &p.c, &w);
             let cf = mul(&p.c, &p.f);
             // ∂ε/∂a_i = (D/C) y(t−i)
@@ -375,7 +477,7 @@ fn errors_and_gradient_with(
         }
         Focus::Simulation => {
             let af = mul(&p.a, &p.f);
-            let (w, g) = output_error(p, y, u, focus, accurate); // y − B/(AF) u and B/(AF) u
+            let (w, g) = output_error(p, y, u, focus, accuracy); // y − B/(AF) u and B/(AF) u
             eps = w;
             // ∂ε/∂a_i = (B/(A²F)) u(t−i) = (1/A) g(t−i)
             if o.na > 0 {
@@ -453,7 +555,16 @@ mod tests {
             .zip(&e)
             .map(|(v, e)| (v.hi + v.lo) + 1e-12 * e)
             .collect();
-        let (w, _) = output_error(&p, &y, &u, Focus::Prediction, true);
+        let (w, _) = output_error(&p, &y, &u, Focus::Prediction, Accuracy::Exact);
+        // the bound sees the cancellation and falls back to double-double
+        let (wb, _) = output_error(
+            &p,
+            &y,
+            &u,
+            Focus::Prediction,
+            Accuracy::RelativeBound(1e-10),
+        );
+        assert_eq!(w, wb);
         for t in 0..400 {
             // y[t] itself is rounded: |y| · 2^-53 is the best possible
             assert!(
@@ -464,6 +575,55 @@ mod tests {
         let (a, b) = two_prod(1.0 + f64::EPSILON, 1.0 - f64::EPSILON);
         assert_eq!(a, 1.0);
         assert_eq!(b, -f64::EPSILON * f64::EPSILON);
+    }
+
+    #[test]
+    fn plain_residual_is_used_only_within_its_bound() {
+        // ARMAX-like (F = 1, no recursion) with noise of 1 % of the output: the bound allows
+        // plain double, and the plain result agrees with double-double to the bound's level
+        let u: Vec<f64> = (0..2000)
+            .map(|k| ((k * 37 % 101) as f64 - 50.0) / 7.0)
+            .collect();
+        let e: Vec<f64> = (0..2000)
+            .map(|k| ((k * 53 % 97) as f64 - 48.0) / 9.0)
+            .collect();
+        let p = Polys {
+            a: vec![1.0, -1.5, 0.7],
+            b: vec![0.0, 1.0, 0.5],
+            c: vec![1.0],
+            d: vec![1.0],
+            f: vec![1.0],
+        };
+        let g = filter(&p.b, &p.a, &u);
+        let y: Vec<f64> = g.iter().zip(&e).map(|(g, e)| g + 0.01 * e).collect();
+        let tau = 1e-10;
+        let (exact, _) = output_error(&p, &y, &u, Focus::Prediction, Accuracy::Exact);
+        let (bounded, _) =
+            output_error(&p, &y, &u, Focus::Prediction, Accuracy::RelativeBound(tau));
+        let (plain, _) = output_error(&p, &y, &u, Focus::Prediction, Accuracy::Plain);
+        assert_eq!(bounded, plain, "the bound should allow plain double here");
+        let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let diff: Vec<f64> = plain.iter().zip(&exact).map(|(a, b)| a - b).collect();
+        assert!(
+            norm(&diff) <= tau * norm(&exact),
+            "{}",
+            norm(&diff) / norm(&exact)
+        );
+        // a lightly damped F (‖h‖₁ ≈ 10³) with the same noise: double-double is chosen
+        let q = Polys {
+            a: vec![1.0],
+            b: vec![0.0, 0.3, 0.2],
+            c: vec![1.0],
+            d: vec![1.0],
+            f: vec![1.0, -2.0 * 0.999 * 0.05f64.cos(), 0.998001],
+        };
+        let v = filter(&q.b, &q.f, &u);
+        let y: Vec<f64> = v.iter().zip(&e).map(|(v, e)| v + 1e-6 * e).collect();
+        let (exact, _) = output_error(&q, &y, &u, Focus::Prediction, Accuracy::Exact);
+        let (bounded, _) =
+            output_error(&q, &y, &u, Focus::Prediction, Accuracy::RelativeBound(tau));
+        assert_eq!(bounded, exact);
+        assert!(impulse_l1(&q.f, 20_000) > 100.0);
     }
 
     #[test]
