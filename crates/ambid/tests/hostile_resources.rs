@@ -229,6 +229,32 @@ fn simulate_with_a_billion_truth_points_is_refused_before_anything_is_written() 
     assert!(!out.join("data.csv").exists() && !out.join("truth.csv").exists());
 }
 
+/// A designed excitation longer than a simulation may record (50 000 PRBS periods, 2.6·10⁸
+/// samples, under the allocation limit of `run`) is refused from the plan, before the excitation
+/// is generated: exit 2, at once, nothing written.
+#[test]
+fn simulate_of_a_record_too_long_to_hold_is_refused_from_the_plan() {
+    let dir = tmpdir("hr-longsim");
+    let out = dir.join("sim");
+    let r = run(&[
+        "simulate",
+        "--periods",
+        "50000",
+        "--mode",
+        "linear",
+        "--out",
+        s(&out),
+    ]);
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(
+        r.stderr.contains("255750000 samples") && r.stderr.contains("MAX_SIM_SAMPLES"),
+        "{}",
+        r.stderr
+    );
+    assert!(r.secs < 10.0, "{} s", r.secs);
+    assert!(!out.exists());
+}
+
 /// A zip archive with one stored member `name` holding `data` but *declaring* `declared`
 /// uncompressed bytes in both headers (CRC of the real data).
 fn zip_declaring(name: &str, data: &[u8], declared: u32) -> Vec<u8> {
