@@ -281,8 +281,69 @@ fn mean(x: &[f64]) -> f64 {
 /// One-step and simulation fit (%) of a polynomial model on a record.
 use ambid::fitting::poly_fits as fits;
 
+/// The least-squares work a time-domain fit may ask for: $N p^2 \le 2\cdot10^{10}$ multiply–adds
+/// (about 5 s on one core) for $N$ samples and $p$ parameters, e.g. 447 parameters on the seed
+/// record of 102 300 samples; with [`ambid::workflow::config::SAMPLES_PER_PARAMETER`] samples per
+/// parameter at least and every polynomial or state-space order at most
+/// [`ambid::workflow::config::MAX_MODEL_ORDER`] (FIR/ARX numerators may be longer, within the
+/// work bound). A hostile `--na 5000 --nb 5000` on 20 000 samples ran > 60 s at 3.9 GB.
+const MAX_LS_WORK: f64 = 2e10;
+
+/// Refuses a model too large for the record (`params` parameters on `n` samples) or for the
+/// work bound [`MAX_LS_WORK`], as a usage error naming the options.
+fn check_model_size(n: usize, params: usize, what: &str) -> Result<()> {
+    use ambid::workflow::config::SAMPLES_PER_PARAMETER;
+    let per = n / SAMPLES_PER_PARAMETER.max(1);
+    let work_cap = (MAX_LS_WORK / n.max(1) as f64).sqrt().floor() as usize;
+    let cap = per.min(work_cap);
+    if params > cap {
+        return Err(ambid::workflow::usage(anyhow::anyhow!(
+            "{what} has {params} parameters, more than the {cap} this record of {n} samples supports ({SAMPLES_PER_PARAMETER} samples per parameter, and N·p² ≤ {MAX_LS_WORK:e} least-squares work); give smaller orders"
+        ))
+        .into());
+    }
+    Ok(())
+}
+
+/// Every order option at most [`ambid::workflow::config::MAX_MODEL_ORDER`] (FIR/ARX `--nb`/`--na`
+/// excepted: those are bounded by [`check_model_size`]).
+fn check_orders(a: &FitArgs) -> Result<()> {
+    use ambid::workflow::config::MAX_MODEL_ORDER;
+    let ls = matches!(a.structure, StructureArg::Arx | StructureArg::Fir);
+    let mut opts = vec![
+        ("--nc", a.nc),
+        ("--nd", a.nd),
+        ("--nf", a.nf),
+        ("--nk", a.nk),
+    ];
+    if !ls {
+        opts.extend([("--na", a.na), ("--nb", a.nb)]);
+    }
+    if let Some(o) = a.order {
+        opts.push(("--order", o));
+    }
+    if let Some(b) = a.block_rows {
+        opts.push(("--block-rows", b));
+    }
+    for (name, v) in opts {
+        let cap = if name == "--block-rows" {
+            10 * MAX_MODEL_ORDER
+        } else {
+            MAX_MODEL_ORDER
+        };
+        if v > cap {
+            return Err(ambid::workflow::usage(anyhow::anyhow!(
+                "{name} {v} is more than {cap}, the largest ambid fits (50 rotor modes); give a smaller value"
+            ))
+            .into());
+        }
+    }
+    Ok(())
+}
+
 pub fn fit(a: FitArgs) -> Result<()> {
     OutputSet::check(&a.out, a.force)?;
+    check_orders(&a)?;
     if let Some(q) = &a.quantity {
         use ambid_core::validate::compare::FitStructure;
         let (structure, order) = match a.structure {
@@ -323,6 +384,12 @@ pub fn fit(a: FitArgs) -> Result<()> {
         };
     }
     let (mut u, mut y, ts) = read_io(&a.data, a.fs, &a.input, &a.output)?;
+    let params = match a.structure {
+        StructureArg::Ss => a.order.unwrap_or(0),
+        StructureArg::Fir => a.nb,
+        _ => a.na + a.nb + a.nc + a.nd + a.nf,
+    };
+    check_model_size(y.len(), params, "the model")?;
     let (mu, my) = if a.no_detrend {
         (0.0, 0.0)
     } else {
@@ -523,7 +590,23 @@ pub fn order(a: OrderArgs) -> Result<()> {
         ))
         .into());
     }
+    if a.na_max > ambid::workflow::config::MAX_MODEL_ORDER
+        || a.nb_max > ambid::workflow::config::MAX_MODEL_ORDER
+    {
+        return Err(ambid::workflow::usage(anyhow::anyhow!(
+            "--na-max {} / --nb-max {}: at most {} each (the scan fits every pair)",
+            a.na_max,
+            a.nb_max,
+            ambid::workflow::config::MAX_MODEL_ORDER
+        ))
+        .into());
+    }
     let (mut u, mut y, ts) = read_io(&a.data, a.fs, &a.input, &a.output)?;
+    check_model_size(
+        y.len(),
+        a.na_max + a.nb_max,
+        "the largest model of the scan",
+    )?;
     let (mu, my) = (mean(&u), mean(&y));
     u.iter_mut().for_each(|v| *v -= mu);
     y.iter_mut().for_each(|v| *v -= my);
