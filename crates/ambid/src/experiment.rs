@@ -246,7 +246,7 @@ pub fn run(exp: &Experiment) -> Result<ExperimentOutput> {
     let p = &exp.excitation;
     let per_period = match p.kind {
         ExcitationKind::Prbs => 1usize
-            .checked_shl(p.prbs_order.min(63) as u32)
+            .checked_shl(p.prbs_order.min(63))
             .map_or(usize::MAX, |v| v.saturating_sub(1))
             .saturating_mul(p.samples_per_bit),
         _ => (p.period_s / twin.ts()).round().min(usize::MAX as f64) as usize,
