@@ -278,7 +278,12 @@ fn main() {
             if !filter.is_empty() && !label.contains(filter.as_str()) {
                 continue;
             }
-            let args: Vec<&str> = args.iter().map(String::as_str).collect();
+            // every repetition replaces the previous one's outputs
+            let args: Vec<&str> = args
+                .iter()
+                .map(String::as_str)
+                .chain(std::iter::once("--force"))
+                .collect();
             let mut times = Vec::with_capacity(reps);
             let mut failure = None;
             for _ in 0..reps {

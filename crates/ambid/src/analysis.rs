@@ -210,6 +210,62 @@ pub struct Record<'a> {
 /// default segment rule (`n/8` clamped to 64 … 8192 samples).
 pub const MIN_FRF_SAMPLES: usize = 64;
 
+/// The Welch options of a [`FrfMethod::Welch`] `method` for a record of `n` samples at `fs` Hz
+/// (the in-memory and the streamed analysis alike).
+///
+/// # Errors
+/// A `skip_samples` that drops the whole record; another method.
+pub(crate) fn welch_options(method: &FrfMethod, fs: f64, n: usize) -> Result<WelchOptions> {
+    let FrfMethod::Welch {
+        nperseg,
+        noverlap,
+        window,
+        skip_samples,
+    } = method
+    else {
+        bail!("Welch options asked for a period-averaging analysis");
+    };
+    if *skip_samples >= n {
+        bail!("--skip-samples {skip_samples} drops the whole record of {n} samples");
+    }
+    let mut opts = WelchOptions::new(fs, *nperseg);
+    opts.window = *window;
+    if let Some(o) = noverlap {
+        opts.noverlap = *o;
+    }
+    Ok(opts)
+}
+
+/// Screens `y` and the controller part `u − r` of a block (module docs of the screening: `u − r`
+/// is smooth, `r` a designed signal) and returns the repaired `u`, `y` and the two reports
+/// (`u − r`, `y`). With `u_saturated` (a clamped `u` makes `u − r` flat-topped with jumps) only
+/// non-finite samples of `u − r` are screened; the clamp is the saturation check's to report.
+///
+/// # Errors
+/// The screening's errors, naming the channel.
+pub(crate) fn screen_channels(
+    r: &[f64],
+    u: &[f64],
+    y: &[f64],
+    u_saturated: bool,
+) -> Result<(Vec<f64>, Vec<f64>, AbnormalReport, AbnormalReport)> {
+    let opts = AbnormalOptions::default();
+    let (y2, ry) = repair_abnormal(y, &opts).context("screening y")?;
+    let c: Vec<f64> = u.iter().zip(r).map(|(u, r)| u - r).collect();
+    let copts = if u_saturated {
+        AbnormalOptions {
+            hampel: None,
+            stuck_min_run: None,
+            ..AbnormalOptions::default()
+        }
+    } else {
+        opts
+    };
+    let (c2, rc) = repair_abnormal(&c, &copts).context("screening u − r")?;
+    let u2: Vec<f64> = c2.iter().zip(r).map(|(c, r)| c + r).collect();
+    Ok((u2, y2, rc, ry))
+}
+
 /// Runs the FRF analysis. `y_noise` (a record without excitation under the same loop) enables
 /// the output SNR.
 pub fn analyze(
@@ -260,23 +316,8 @@ pub fn analyze(
     // screening: y and the controller part of u (u − r is smooth; r itself is a designed signal)
     let mut abnormal = Vec::new();
     let (u, y) = if settings.screen {
-        let opts = AbnormalOptions::default();
-        let (y2, ry) = repair_abnormal(rec.y, &opts).context("screening y")?;
-        let c: Vec<f64> = rec.u.iter().zip(rec.r).map(|(u, r)| u - r).collect();
-        // a clamped u makes u − r flat-topped with jumps: there only non-finite samples are
-        // screened, the clamp is reported by the saturation check instead
         let u_saturated = saturation.iter().any(|(n, r)| n == "u" && r.count > 0);
-        let copts = if u_saturated {
-            AbnormalOptions {
-                hampel: None,
-                stuck_min_run: None,
-                ..AbnormalOptions::default()
-            }
-        } else {
-            opts
-        };
-        let (c2, rc) = repair_abnormal(&c, &copts).context("screening u − r")?;
-        let u2: Vec<f64> = c2.iter().zip(rec.r).map(|(c, r)| c + r).collect();
+        let (u2, y2, rc, ry) = screen_channels(rec.r, rec.u, rec.y, u_saturated)?;
         for (name, rep) in [("y", &ry), ("u - r", &rc)] {
             if !rep.is_clean() {
                 warnings.push(format!("{name}: {}", rep.summary()));
@@ -304,20 +345,8 @@ pub fn analyze(
                 .context("period-synchronous averaging")?;
             Spectra::Periodic(s)
         }
-        FrfMethod::Welch {
-            nperseg,
-            noverlap,
-            window,
-            skip_samples,
-        } => {
-            if *skip_samples >= n {
-                bail!("--skip-samples {skip_samples} drops the whole record of {n} samples");
-            }
-            let mut opts = WelchOptions::new(rec.fs, *nperseg);
-            opts.window = *window;
-            if let Some(o) = noverlap {
-                opts.noverlap = *o;
-            }
+        FrfMethod::Welch { skip_samples, .. } => {
+            let opts = welch_options(&settings.method, rec.fs, n)?;
             let k0 = *skip_samples;
             let cs = welch_spectra(&[&rec.r[k0..], &u[k0..], &y[k0..]], &opts)
                 .context("Welch spectra")?;

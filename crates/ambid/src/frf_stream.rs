@@ -23,12 +23,9 @@
 
 use crate::analysis::{analyze_spectra, Checks, FrfAnalysis, FrfMethod, FrfSettings, Spectra};
 use crate::io::stream::RowStream;
-use ambid_core::data::{
-    repair_abnormal, AbnormalOptions, AbnormalReport, LimitSource, SaturationOptions,
-    SaturationReport,
-};
+use ambid_core::data::{AbnormalReport, LimitSource, SaturationOptions, SaturationReport};
 use ambid_core::frf::periodic::{PeriodicAccumulator, PeriodicOptions};
-use ambid_core::frf::welch::{WelchAccumulator, WelchOptions};
+use ambid_core::frf::welch::WelchAccumulator;
 use anyhow::{anyhow, bail, Context, Result};
 use std::path::Path;
 
@@ -434,20 +431,8 @@ pub fn analyze_csv(
                     .context("period-synchronous averaging")?,
             ))
         }
-        FrfMethod::Welch {
-            nperseg,
-            noverlap,
-            window,
-            skip_samples,
-        } => {
-            if *skip_samples >= n {
-                bail!("--skip-samples {skip_samples} drops the whole record of {n} samples");
-            }
-            let mut opts = WelchOptions::new(rate, *nperseg);
-            opts.window = *window;
-            if let Some(o) = noverlap {
-                opts.noverlap = *o;
-            }
+        FrfMethod::Welch { skip_samples, .. } => {
+            let opts = crate::analysis::welch_options(&settings.method, rate, n)?;
             let acc = WelchAccumulator::new(3, &opts).context("Welch spectra")?;
             if opts.n_segments(n - skip_samples) == 0 {
                 return Err(anyhow!(opts.too_short(n - skip_samples)).context("Welch spectra"));
@@ -467,20 +452,8 @@ pub fn analyze_csv(
         }
         let r = &out[0];
         let (u, y) = if screen {
-            let opts = AbnormalOptions::default();
-            let (y2, by) = repair_abnormal(&out[2], &opts).context("screening y")?;
-            let c: Vec<f64> = out[1].iter().zip(r).map(|(u, r)| u - r).collect();
-            let copts = if u_saturated {
-                AbnormalOptions {
-                    hampel: None,
-                    stuck_min_run: None,
-                    ..AbnormalOptions::default()
-                }
-            } else {
-                opts
-            };
-            let (c2, bc) = repair_abnormal(&c, &copts).context("screening u − r")?;
-            let u2: Vec<f64> = c2.iter().zip(r).map(|(c, r)| c + r).collect();
+            let (u2, y2, bc, by) =
+                crate::analysis::screen_channels(r, &out[1], &out[2], u_saturated)?;
             merge(&mut ry, by, k0);
             merge(&mut rc, bc, k0);
             (u2, y2)
