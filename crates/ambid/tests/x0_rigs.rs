@@ -98,3 +98,81 @@ fn estimated_initial_state_explains_a_running_loop_on_random_rigs() {
         gains[gains.len() - 1]
     );
 }
+
+/// The same through `ambid validate` as a user runs it: the second half of a rig's record as a
+/// file, the rig's exact plant as a model file and its controller file; the default (`--x0
+/// estimate`) fits the displacement better than `--x0 zero` and writes the state it used.
+#[test]
+fn validate_cli_estimates_the_initial_state_by_default() {
+    use std::process::Command;
+    let dir = std::env::temp_dir().join(format!("ambid-x0-cli-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    for rig in [2u64, 9] {
+        let cfg = random_rig(rig).unwrap();
+        let exp = Experiment {
+            twin: cfg.clone(),
+            excitation: ExcitationPlan {
+                periods: 8,
+                ..ExcitationPlan::default()
+            },
+            mode: Mode::Linear,
+            seed: 700 + rig,
+            noise: true,
+            record_b: false,
+        };
+        let out = run(&exp).unwrap();
+        let rec = &out.record;
+        let k0 = rec.y.len() / 2;
+        let t: Vec<f64> = rec.t[k0..].iter().map(|v| v - rec.t[k0]).collect();
+        let data = dir.join(format!("half{rig}.csv"));
+        ambid::io::write_time_csv(
+            &data,
+            &[
+                ("t", &t),
+                ("r", &rec.r[k0..]),
+                ("u", &rec.u[k0..]),
+                ("y", &rec.y[k0..]),
+            ],
+        )
+        .unwrap();
+        let model = dir.join(format!("plant{rig}.json"));
+        let j =
+            ambid::io::model::state_space_json(out.twin.plant(), "u", "y", serde_json::json!({}));
+        std::fs::write(&model, serde_json::to_string(&j).unwrap()).unwrap();
+        let ctrl = dir.join(format!("ctrl{rig}.toml"));
+        std::fs::write(
+            &ctrl,
+            ambid::io::controller::controller_toml_from_twin(&cfg),
+        )
+        .unwrap();
+        let fit = |x0: &str| -> (f64, serde_json::Value) {
+            let o = dir.join(format!("val{rig}-{x0}"));
+            let r = Command::new(env!("CARGO_BIN_EXE_ambid"))
+                .args([
+                    "validate",
+                    model.to_str().unwrap(),
+                    "--data",
+                    data.to_str().unwrap(),
+                ])
+                .args(["--controller", ctrl.to_str().unwrap(), "--x0", x0])
+                .args(["--out", o.to_str().unwrap()])
+                .output()
+                .unwrap();
+            assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+            let sm: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(o.join("summary.json")).unwrap())
+                    .unwrap();
+            (sm["fit_y_pct"].as_f64().unwrap(), sm)
+        };
+        let (f_est, sm) = fit("estimate");
+        let (f_zero, sz) = fit("zero");
+        println!("rig {rig}: validate fit y {f_est:.3} % (estimate) vs {f_zero:.3} % (zero)");
+        assert!(f_est > f_zero + 2.0, "rig {rig}: {f_est} vs {f_zero}");
+        assert_eq!(sm["initial_state"], "estimate");
+        assert_eq!(sz["initial_state"], "zero");
+        let xs = sm["initial_state_values"].as_array().unwrap();
+        assert!(xs.iter().any(|v| v.as_f64().unwrap() != 0.0));
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
