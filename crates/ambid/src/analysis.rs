@@ -210,6 +210,41 @@ pub struct Record<'a> {
 /// default segment rule (`n/8` clamped to 64 … 8192 samples).
 pub const MIN_FRF_SAMPLES: usize = 64;
 
+/// Refuses a record of fewer than [`MIN_FRF_SAMPLES`] samples (an input-data error naming
+/// `source`, the file, when known): one check and one message for the in-memory FRF, the
+/// streamed one and the workflow.
+///
+/// # Errors
+/// The record is too short.
+pub fn check_frf_length(n: usize, source: Option<&str>) -> Result<()> {
+    if n < MIN_FRF_SAMPLES {
+        let prefix = source.map_or(String::new(), |s| format!("{s}: "));
+        return Err(crate::workflow::input(anyhow::anyhow!(
+            "{prefix}{n} samples are too few for an FRF: at least {MIN_FRF_SAMPLES} are needed (the shortest Welch segment the defaults use); give a longer record"
+        ))
+        .into());
+    }
+    Ok(())
+}
+
+/// Refuses a sample rate given with `--fs` that disagrees (beyond 10⁻⁶ relative) with the one
+/// of the file's `t` column (sample time `ts`): a usage error.
+///
+/// # Errors
+/// The two rates disagree.
+pub fn check_fs_matches(fs: Option<f64>, ts: f64) -> Result<()> {
+    if let Some(fs) = fs {
+        let file_fs = 1.0 / ts;
+        if ((file_fs - fs) / fs).abs() > 1e-6 {
+            return Err(crate::workflow::usage(anyhow::anyhow!(
+                "--fs {fs:e} Hz disagrees with the file's `t` column ({file_fs:e} Hz)"
+            ))
+            .into());
+        }
+    }
+    Ok(())
+}
+
 /// The Welch options of a [`FrfMethod::Welch`] `method` for a record of `n` samples at `fs` Hz
 /// (the in-memory and the streamed analysis alike).
 ///
@@ -274,12 +309,7 @@ pub fn analyze(
     y_noise: Option<&[f64]>,
 ) -> Result<FrfAnalysis> {
     let n = rec.r.len();
-    if n < MIN_FRF_SAMPLES {
-        return Err(crate::workflow::input(anyhow::anyhow!(
-            "the record has {n} samples, too few for an FRF: at least {MIN_FRF_SAMPLES} are needed (the shortest Welch segment the defaults use); record longer"
-        ))
-        .into());
-    }
+    check_frf_length(n, None)?;
     for (name, x) in [("u", rec.u), ("y", rec.y)]
         .into_iter()
         .chain(rec.i.map(|i| ("i", i)))

@@ -290,15 +290,7 @@ pub fn frf(a: FrfArgs) -> Result<()> {
 /// when a local method wrote its output itself.
 fn frf_in_memory(a: &FrfArgs) -> Result<Option<FrfAnalysis>> {
     let data = read_time_csv(&a.data, a.fs)?;
-    if let Some(fs) = a.fs {
-        let file_fs = 1.0 / data.ts;
-        if ((file_fs - fs) / fs).abs() > 1e-6 {
-            return Err(ambid::workflow::usage(anyhow::anyhow!(
-                "--fs {fs:e} Hz disagrees with the file's `t` column ({file_fs:e} Hz)"
-            ))
-            .into());
-        }
-    }
+    ambid::analysis::check_fs_matches(a.fs, data.ts)?;
     // missing samples are kept for the screening; without it every sample must be a number
     let col = |name: &str| {
         if a.no_screen {

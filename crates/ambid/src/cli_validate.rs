@@ -138,10 +138,11 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
     };
     // an innovation-form model has a noise model: its 1-step prediction errors are tested for
     // whiteness and independence (validation::innovation_residuals)
-    let innovations = match read_kalman_gain(&a.model)? {
+    let kalman_gain = read_kalman_gain(&a.model)?;
+    let innovations = match &kalman_gain {
         Some(kg) => Some(innovation_residuals(
             &model,
-            &kg,
+            kg,
             &MeasuredLoop { w, r, y, u, ts },
             &settings,
         )?),
@@ -149,7 +150,7 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
     };
     let k_step = match a.k_step {
         Some(k) => {
-            let Some(kg) = read_kalman_gain(&a.model)? else {
+            let Some(kg) = &kalman_gain else {
                 return Err(ambid::workflow::usage(anyhow::anyhow!("--k-step needs an innovation-form model with a Kalman gain (`ambid fit --structure ss` with --focus prediction)")).into());
             };
             if kg.len() != model.order() {

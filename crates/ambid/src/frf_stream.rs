@@ -292,14 +292,7 @@ pub fn analyze_csv(
         }
         n += rows;
     }
-    if n < crate::analysis::MIN_FRF_SAMPLES {
-        return Err(crate::workflow::input(anyhow::anyhow!(
-            "{}: the record has {n} samples, too few for an FRF: at least {} are needed (the shortest Welch segment the defaults use); record longer",
-            path.display(),
-            crate::analysis::MIN_FRF_SAMPLES
-        ))
-        .into());
-    }
+    crate::analysis::check_frf_length(n, Some(&path.display().to_string()))?;
     let ts = match (has_t, fs) {
         (true, _) => {
             let ts = (t1 - t0) / (n - 1) as f64;
@@ -315,15 +308,7 @@ pub fn analyze_csv(
             path.display()
         ),
     };
-    if let Some(fs) = fs {
-        let file_fs = 1.0 / ts;
-        if ((file_fs - fs) / fs).abs() > 1e-6 {
-            return Err(crate::workflow::usage(anyhow::anyhow!(
-                "--fs {fs:e} Hz disagrees with the file's `t` column ({file_fs:e} Hz)"
-            ))
-            .into());
-        }
-    }
+    crate::analysis::check_fs_matches(fs, ts)?;
     let settings = settings(n, ts)?;
     let rate = 1.0 / ts;
 

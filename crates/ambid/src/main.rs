@@ -739,8 +739,6 @@ fn info(a: TwinArgs) -> Result<()> {
 /// allocating 8 GB after data.csv was written).
 const MAX_TRUTH_POINTS: usize = 1_000_000;
 
-use ambid::experiment::MAX_SIM_SAMPLES;
-
 fn simulate(a: SimulateArgs) -> Result<()> {
     let data_path = a.out.join("data.csv");
     let truth_path = a.out.join("truth.csv");
@@ -794,16 +792,6 @@ fn simulate(a: SimulateArgs) -> Result<()> {
         Some(p) => {
             let t = ambid::io::table::read_table(p, &Default::default())?;
             let r = t.column(&"r".into())?.to_vec();
-            if r.len() > MAX_SIM_SAMPLES {
-                bail!(
-                    "--excitation-file {}: {} samples, more than the limit of {MAX_SIM_SAMPLES} \
-                     samples a simulation may record (MAX_SIM_SAMPLES: the twin keeps about 60 \
-                     bytes per sample for the record and its outputs); use a shorter excitation \
-                     (fewer periods) and simulate it in several runs with different --seed",
-                    p.display(),
-                    r.len()
-                );
-            }
             let ts = if t.names.iter().any(|n| n == "t") {
                 Some(t.sample_time(Some(&"t".into()), None)?)
             } else {

@@ -532,12 +532,9 @@ fn cd_player_two_by_two_state_space() {
     // polynomial MIMO: the README's protocol (MISO ARX per output = diagonal coupling,
     // na = nb = 2, nk = 1) reproduces its numpy 1-step fits (83.10 %, 77.04 %) and, from the
     // estimated initial state, beats its simulation fits (66.72 %, 76.88 %)
-    let md = d.join("arx-diagonal.json");
-    let j = fit(
-        &e,
-        &v,
-        "1",
-        &[
+    // one 2 × 2 ARX(2,2,1) fit, extra options `more`: its validation figure `key` per output
+    let arx = |name: &str, more: &[&str]| -> serde_json::Value {
+        let mut args = vec![
             "--input",
             "u1,u2",
             "--output",
@@ -548,12 +545,11 @@ fn cd_player_two_by_two_state_space() {
             "2",
             "--nb",
             "2",
-            "--output-coupling",
-            "diagonal",
-        ],
-        &md,
-    );
-    let vals = |key: &str| -> Vec<f64> {
+        ];
+        args.extend_from_slice(more);
+        fit(&e, &v, "1", &args, &d.join(name))
+    };
+    let vals = |j: &serde_json::Value, key: &str| -> Vec<f64> {
         j["meta"]["validation"][key]
             .as_array()
             .unwrap_or_else(|| panic!("{key}: {j}"))
@@ -561,7 +557,8 @@ fn cd_player_two_by_two_state_space() {
             .map(|v| v.as_f64().unwrap())
             .collect()
     };
-    let (p1, sim) = (vals("one_step_fit_pct"), vals("simulation_fit_pct"));
+    let j = arx("arx-diagonal.json", &["--output-coupling", "diagonal"]);
+    let (p1, sim) = (vals(&j, "one_step_fit_pct"), vals(&j, "simulation_fit_pct"));
     println!("CD player ARX(2,2,1) diagonal: 1-step {p1:?}, simulation {sim:?}");
     assert!(
         (p1[0] - 83.10).abs() < 0.1 && (p1[1] - 77.04).abs() < 0.1,
@@ -569,31 +566,7 @@ fn cd_player_two_by_two_state_space() {
     );
     assert!(sim[0] >= 66.72 && sim[1] >= 76.88, "{sim:?}");
     // full coupling (MATLAB's multi-output ARX) has more parameters: a better 1-step fit
-    let mf = d.join("arx-full.json");
-    let j = fit(
-        &e,
-        &v,
-        "1",
-        &[
-            "--input",
-            "u1,u2",
-            "--output",
-            "y1,y2",
-            "--structure",
-            "arx",
-            "--na",
-            "2",
-            "--nb",
-            "2",
-        ],
-        &mf,
-    );
-    let pf: Vec<f64> = j["meta"]["validation"]["one_step_fit_pct"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
+    let pf = vals(&arx("arx-full.json", &[]), "one_step_fit_pct");
     println!("CD player ARX(2,2,1) full: 1-step {pf:?}");
     assert!(pf[0] > 80.0 && pf[1] > 75.0, "{pf:?}");
     // OE has no multi-output path here: a clear refusal naming the structures that do

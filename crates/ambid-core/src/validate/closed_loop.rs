@@ -543,12 +543,10 @@ mod tests {
     use super::*;
     use faer::mat;
 
-    /// The loop simulated sample by sample with explicit plant and controller states (a naive
-    /// oracle) agrees with the state-space closed loop.
-    #[test]
-    fn matches_a_sample_by_sample_loop() {
+    /// Plant with an unstable real pole and a lightly damped pair (strictly proper) and a PD-like
+    /// controller with feedthrough, at 1 kHz.
+    fn test_loop() -> (StateSpace, StateSpace, f64) {
         let ts = 1e-3;
-        // plant: unstable real pole and a lightly damped pair, strictly proper
         let p = StateSpace::discrete(
             mat![[1.02, 0.0, 0.0], [0.0, 0.9, 0.3], [0.0, -0.3, 0.9]],
             mat![[1.0], [0.0], [0.5]],
@@ -557,9 +555,16 @@ mod tests {
             ts,
         )
         .unwrap();
-        // PD-like controller with feedthrough
         let c =
             StateSpace::discrete(mat![[0.5]], mat![[1.0]], mat![[0.1]], mat![[0.3]], ts).unwrap();
+        (p, c, ts)
+    }
+
+    /// The loop simulated sample by sample with explicit plant and controller states (a naive
+    /// oracle) agrees with the state-space closed loop.
+    #[test]
+    fn matches_a_sample_by_sample_loop() {
+        let (p, c, ts) = test_loop();
         let r: Vec<f64> = (0..300)
             .map(|k| ((k * 37 % 11) as f64 - 5.0) / 5.0)
             .collect();
@@ -600,17 +605,7 @@ mod tests {
     /// rounding, the reconstruction from it is exact, and the one from rest is not.
     #[test]
     fn initial_state_of_a_running_loop_is_recovered() {
-        let ts = 1e-3;
-        let p = StateSpace::discrete(
-            mat![[1.02, 0.0, 0.0], [0.0, 0.9, 0.3], [0.0, -0.3, 0.9]],
-            mat![[1.0], [0.0], [0.5]],
-            mat![[0.4, 1.0, 0.2]],
-            mat![[0.0]],
-            ts,
-        )
-        .unwrap();
-        let c =
-            StateSpace::discrete(mat![[0.5]], mat![[1.0]], mat![[0.1]], mat![[0.3]], ts).unwrap();
+        let (p, c, ts) = test_loop();
         let r: Vec<f64> = (0..400)
             .map(|k| ((k * 37 % 11) as f64 - 5.0) / 5.0)
             .collect();

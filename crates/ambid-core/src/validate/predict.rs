@@ -194,7 +194,10 @@ pub fn predict_k_with(
         Ok(x) if x.iter().all(|v| v.is_finite()) => x,
         _ => return Ok((rest, vec![0.0; n])),
     };
-    let p = predict_k_from(model, k_gain, y, u, k, Some(&x0))?;
+    // the prediction is affine in x0: the one from rest plus the free part, no second run
+    let p = (0..nt)
+        .map(|t| rest[t] + (0..n).map(|j| psi[(t, j)] * x0[j]).sum::<f64>())
+        .collect();
     Ok((p, x0))
 }
 

@@ -474,13 +474,9 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
     // the values that depend on the records are checked before any step runs, too
     let mut fallback_note = None;
     if let Some(rec) = prepared.ident.as_ref() {
-        if steps.contains(&Step::Frf) && rec.len() < crate::analysis::MIN_FRF_SAMPLES {
-            return Err(input(anyhow::anyhow!(
-                "{}: {} samples are too few for an FRF: at least {} are needed (the shortest Welch segment the defaults use); give a longer record",
-                rec.source,
-                rec.len(),
-                crate::analysis::MIN_FRF_SAMPLES
-            )));
+        if steps.contains(&Step::Frf) {
+            crate::analysis::check_frf_length(rec.len(), Some(&rec.source.to_string()))
+                .map_err(input)?;
         }
         cfg.check_record(Path::new("workflow file"), rec.len())?;
         if let Some(p) = cfg.data.period_samples {

@@ -360,15 +360,7 @@ pub(crate) fn subspace_oe_start(
         return None;
     }
     let n = y.len();
-    let shift = nk - 1;
-    let m = n - shift;
-    let rms = |x: &[f64]| (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt();
-    let (su, sy) = (rms(&u[..m]), rms(&y[shift..]));
-    if !(su > 0.0 && sy > 0.0 && su.is_finite() && sy.is_finite()) {
-        return None;
-    }
-    let ym = Mat::from_fn(m, 1, |i, _| y[i + shift] / sy);
-    let um = Mat::from_fn(m, 1, |i, _| u[i] / su);
+    let (ym, um, su, sy) = scaled_io(y, u, nk)?;
     let opts = SubspaceOptions {
         order: Some(nf),
         ..SubspaceOptions::new(ts)
@@ -745,22 +737,32 @@ fn scaled_n4sid(
     ts: f64,
 ) -> Option<(crate::estimate::subspace::SubspaceFit, f64, f64)> {
     use crate::estimate::subspace::{n4sid_detailed, SubspaceOptions};
-    let len = y.len();
-    let shift = nk.checked_sub(1)?;
-    let m = len.checked_sub(shift)?;
-    let rms = |x: &[f64]| (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt();
-    let (su, sy) = (rms(&u[..m]), rms(&y[shift..]));
-    if !(su > 0.0 && sy > 0.0 && su.is_finite() && sy.is_finite()) {
-        return None;
-    }
-    let ym = Mat::from_fn(m, 1, |i, _| y[i + shift] / sy);
-    let um = Mat::from_fn(m, 1, |i, _| u[i] / su);
+    let (ym, um, su, sy) = scaled_io(y, u, nk)?;
     let opts = SubspaceOptions {
         order: Some(n),
         ..SubspaceOptions::new(ts)
     };
     let fit = n4sid_detailed(ym.as_ref(), um.as_ref(), &opts).ok()?;
     Some((fit, su, sy))
+}
+
+/// `y` and `u` aligned for the delay `nk` ≥ 1 (`y` shifted by `nk − 1`, so a subspace model with
+/// one sample of delay carries the rest) and scaled to unit RMS, as columns, with the two RMS
+/// values. `None` for `nk` = 0 or a zero, non-finite or too short signal.
+fn scaled_io(y: &[f64], u: &[f64], nk: usize) -> Option<(Mat<f64>, Mat<f64>, f64, f64)> {
+    let shift = nk.checked_sub(1)?;
+    let m = y.len().checked_sub(shift)?.min(u.len());
+    if m == 0 {
+        return None;
+    }
+    let rms = |x: &[f64]| (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt();
+    let (su, sy) = (rms(&u[..m]), rms(&y[shift..shift + m]));
+    if !(su > 0.0 && sy > 0.0 && su.is_finite() && sy.is_finite()) {
+        return None;
+    }
+    let ym = Mat::from_fn(m, 1, |i, _| y[i + shift] / sy);
+    let um = Mat::from_fn(m, 1, |i, _| u[i] / su);
+    Some((ym, um, su, sy))
 }
 
 /// The ARMA criterion $\tfrac12\sum_t \bigl(\tfrac DC w_t\bigr)^2$ of a fixed output error $w$ over
