@@ -65,21 +65,89 @@ impl Polys {
     }
 }
 
-/// $y = (\text{num}/\text{den})\,x$ with zero initial conditions; `den` monic.
+/// Samples per block of [`filter`], [`filter_dd`] and [`abs_sum_norm`]: the numerator pass and
+/// the recursion of one block work on data that stays in the L1 cache.
+const BLOCK: usize = 1024;
+
+/// $y = (\text{num}/\text{den})\,x$ with zero initial conditions; `den` monic (`den[0]` is not
+/// read).
+///
+/// Each output is summed in one fixed order, the numerator terms $\text{num}_k x_{t-k}$
+/// ($k = 0, 1, \dots$, from $0.0$) and then the terms $-\text{den}_k y_{t-k}$ ($k = 1, 2, \dots$),
+/// each only while $t - k \ge 0$; the numerator terms of a block of samples are added lag by lag
+/// (independent samples, vectorised), the recursion then runs sample by sample.
 pub(crate) fn filter(num: &[f64], den: &[f64], x: &[f64]) -> Vec<f64> {
     let n = x.len();
     let mut y = vec![0.0; n];
-    for t in 0..n {
-        let mut s = 0.0;
-        for (k, bk) in num.iter().enumerate().take(t + 1) {
-            s += bk * x[t - k];
+    let a = den.get(1..).unwrap_or(&[]);
+    let mut t0 = 0;
+    while t0 < n {
+        let t1 = (t0 + BLOCK).min(n);
+        for (k, &bk) in num.iter().enumerate() {
+            let s = t0.max(k);
+            if s >= t1 {
+                break;
+            }
+            for (yv, xv) in y[s..t1].iter_mut().zip(&x[s - k..t1 - k]) {
+                *yv += bk * xv;
+            }
         }
-        for (k, ak) in den.iter().enumerate().skip(1).take(t) {
-            s -= ak * y[t - k];
+        recursion(a, &mut y, t0, t1);
+        t0 = t1;
+    }
+    y
+}
+
+/// $y_t \leftarrow y_t - \sum_{k=1}^{\min(n_a, t)} a_k y_{t-k}$ for $t \in [t_0, t_1)$, in that
+/// order of $k$ (`a` holds $a_1, \dots, a_{n_a}$); the outputs before $t_0$ are final.
+fn recursion(a: &[f64], y: &mut [f64], t0: usize, t1: usize) {
+    macro_rules! fixed {
+        ($($n:literal)*) => {
+            match a.len() {
+                0 => {}
+                $($n => recursion_fixed::<$n>(a, y, t0, t1),)*
+                _ => recursion_any(a, y, t0, t1),
+            }
+        };
+    }
+    fixed!(1 2 3 4 5 6 7 8 9 10 11 12);
+}
+
+/// [`recursion`] for any order (and the first samples, with fewer than $n_a$ past outputs).
+fn recursion_any(a: &[f64], y: &mut [f64], t0: usize, t1: usize) {
+    for t in t0..t1 {
+        let mut s = y[t];
+        for (k, ak) in a.iter().enumerate().take(t) {
+            s -= ak * y[t - 1 - k];
         }
         y[t] = s;
     }
-    y
+}
+
+/// [`recursion`] for the order `N`: the last `N` outputs stay in registers.
+fn recursion_fixed<const N: usize>(a: &[f64], y: &mut [f64], t0: usize, t1: usize) {
+    let Ok(a) = <&[f64; N]>::try_from(a) else {
+        return recursion_any(a, y, t0, t1);
+    };
+    let warm = t1.min(N).max(t0);
+    recursion_any(a, y, t0, warm);
+    if warm >= t1 {
+        return;
+    }
+    // h[k] = y[t − 1 − k]
+    let mut h = [0.0; N];
+    for (k, hk) in h.iter_mut().enumerate() {
+        *hk = y[warm - 1 - k];
+    }
+    for v in &mut y[warm..t1] {
+        let mut s = *v;
+        for k in 0..N {
+            s -= a[k] * h[k];
+        }
+        h.rotate_right(1);
+        h[0] = s;
+        *v = s;
+    }
 }
 
 /// Polynomial product.
@@ -143,7 +211,8 @@ impl Dd {
     }
 }
 
-/// `filter` in double-double arithmetic (about 32 significant digits).
+/// `filter` in double-double arithmetic (about 32 significant digits), in the same order of
+/// terms as [`filter`] (the zero numerator coefficients skipped).
 fn filter_dd(num: &[f64], den: &[f64], x: &[f64]) -> Vec<Dd> {
     let n = x.len();
     let mut y = vec![Dd::default(); n];
@@ -154,18 +223,73 @@ fn filter_dd(num: &[f64], den: &[f64], x: &[f64]) -> Vec<Dd> {
         .filter(|(_, b)| **b != 0.0)
         .map(|(k, b)| (k, *b))
         .collect();
-    for t in 0..n {
-        let mut s = Dd::default();
-        for &(k, bk) in nz.iter().take_while(|(k, _)| *k <= t) {
-            let (p, e) = two_prod(bk, x[t - k]);
-            s = s.add(Dd { hi: p, lo: e });
+    let a = den.get(1..).unwrap_or(&[]);
+    let mut t0 = 0;
+    while t0 < n {
+        let t1 = (t0 + BLOCK).min(n);
+        for &(k, bk) in &nz {
+            let s = t0.max(k);
+            if s >= t1 {
+                break;
+            }
+            for (yv, xv) in y[s..t1].iter_mut().zip(&x[s - k..t1 - k]) {
+                let (p, e) = two_prod(bk, *xv);
+                *yv = yv.add(Dd { hi: p, lo: e });
+            }
         }
-        for (k, ak) in den.iter().enumerate().skip(1).take(t) {
-            s = s.add(y[t - k].scale(-ak));
+        recursion_dd(a, &mut y, t0, t1);
+        t0 = t1;
+    }
+    y
+}
+
+/// [`recursion`] in double-double arithmetic: $y_t \leftarrow y_t + \sum_k (-a_k)\,y_{t-k}$.
+fn recursion_dd(a: &[f64], y: &mut [Dd], t0: usize, t1: usize) {
+    macro_rules! fixed {
+        ($($n:literal)*) => {
+            match a.len() {
+                0 => {}
+                $($n => recursion_dd_fixed::<$n>(a, y, t0, t1),)*
+                _ => recursion_dd_any(a, y, t0, t1),
+            }
+        };
+    }
+    fixed!(1 2 3 4 5 6 7 8 9 10 11 12);
+}
+
+fn recursion_dd_any(a: &[f64], y: &mut [Dd], t0: usize, t1: usize) {
+    for t in t0..t1 {
+        let mut s = y[t];
+        for (k, ak) in a.iter().enumerate().take(t) {
+            s = s.add(y[t - 1 - k].scale(-ak));
         }
         y[t] = s;
     }
-    y
+}
+
+fn recursion_dd_fixed<const N: usize>(a: &[f64], y: &mut [Dd], t0: usize, t1: usize) {
+    let Ok(a) = <&[f64; N]>::try_from(a) else {
+        return recursion_dd_any(a, y, t0, t1);
+    };
+    let warm = t1.min(N).max(t0);
+    recursion_dd_any(a, y, t0, warm);
+    if warm >= t1 {
+        return;
+    }
+    // h[k] = y[t − 1 − k]
+    let mut h = [Dd::default(); N];
+    for (k, hk) in h.iter_mut().enumerate() {
+        *hk = y[warm - 1 - k];
+    }
+    for v in &mut y[warm..t1] {
+        let mut s = *v;
+        for k in 0..N {
+            s = s.add(h[k].scale(-a[k]));
+        }
+        h.rotate_right(1);
+        h[0] = s;
+        *v = s;
+    }
 }
 
 /// $\lVert h \rVert_1 = \sum_t |h_t|$ of the impulse response of the stable $1/\text{den}$ (monic),
@@ -196,16 +320,40 @@ fn impulse_l1(den: &[f64], n: usize) -> f64 {
 /// `out`, $\sum_{k \ge 1} |\text{den}_k| |\text{out}_{t-k}|$ inside the sum: the magnitude that one
 /// step's rounding error is relative to.
 fn abs_sum_norm(c: &[f64], x: &[f64], den: &[f64], out: &[f64]) -> f64 {
+    let n = x.len();
+    let d = den.get(1..).unwrap_or(&[]);
+    let mut buf = vec![0.0; BLOCK.min(n)];
     let mut acc = 0.0;
-    for t in 0..x.len() {
-        let mut s = 0.0;
-        for (k, ck) in c.iter().enumerate().take(t + 1) {
-            s += ck.abs() * x[t - k].abs();
+    let mut t0 = 0;
+    while t0 < n {
+        let t1 = (t0 + BLOCK).min(n);
+        let s = &mut buf[..t1 - t0];
+        s.fill(0.0);
+        for (k, ck) in c.iter().enumerate() {
+            let st = t0.max(k);
+            if st >= t1 {
+                break;
+            }
+            let ca = ck.abs();
+            for (sv, xv) in s[st - t0..].iter_mut().zip(&x[st - k..t1 - k]) {
+                *sv += ca * xv.abs();
+            }
         }
-        for (k, dk) in den.iter().enumerate().skip(1).take(t) {
-            s += dk.abs() * out[t - k].abs();
+        for (j, dk) in d.iter().enumerate() {
+            let k = j + 1;
+            let st = t0.max(k);
+            if st >= t1 {
+                break;
+            }
+            let da = dk.abs();
+            for (sv, ov) in s[st - t0..].iter_mut().zip(&out[st - k..t1 - k]) {
+                *sv += da * ov.abs();
+            }
         }
-        acc += s * s;
+        for v in s.iter() {
+            acc += v * v;
+        }
+        t0 = t1;
     }
     acc.sqrt()
 }
@@ -343,12 +491,21 @@ pub(crate) fn max_root(p: &[f64]) -> f64 {
         .unwrap_or(f64::NAN)
 }
 
-/// Shifted copy: $x(t - k)$, zero before the start.
-fn shifted(x: &[f64], k: usize, t: usize) -> f64 {
-    if t >= k {
-        x[t - k]
+/// Column `col` of `jac` $\leftarrow \pm x(t - k)$, $\pm 0$ before the start (`negate` for the
+/// minus sign).
+fn fill_shifted(jac: &mut Mat<f64>, col: usize, x: &[f64], k: usize, negate: bool) {
+    let c = jac.col_as_slice_mut(col);
+    let (head, tail) = c.split_at_mut(k.min(c.len()));
+    if negate {
+        head.fill(-0.0);
+        for (d, v) in tail.iter_mut().zip(x) {
+            *d = -v;
+        }
     } else {
-        0.0
+        head.fill(0.0);
+        for (d, v) in tail.iter_mut().zip(x) {
+            *d = *v;
+        }
     }
 }
 
@@ -435,43 +592,33 @@ fn errors_and_gradient_with(
             if o.na > 0 {
                 let yt = filter(&p.d, &p.c, y);
                 for i in 0..o.na {
-                    for t in 0..n {
-                        jac[(t, i)] = shifted(&yt, i + 1, t);
-                    }
+                    fill_shifted(&mut jac, i, &yt, i + 1, false);
                 }
             }
             // ∂ε/∂b_j = −(D/(CF)) u(t−nk−j)
             let ut = filter(&p.d, &cf, u);
             for j in 0..o.nb {
-                for t in 0..n {
-                    jac[(t, ia + j)] = -shifted(&ut, o.nk + j, t);
-                }
+                fill_shifted(&mut jac, ia + j, &ut, o.nk + j, true);
             }
             // ∂ε/∂c_i = −(1/C) ε(t−i)
             if o.nc > 0 {
                 let et = filter(&[1.0], &p.c, &eps);
                 for i in 0..o.nc {
-                    for t in 0..n {
-                        jac[(t, ib + i)] = -shifted(&et, i + 1, t);
-                    }
+                    fill_shifted(&mut jac, ib + i, &et, i + 1, true);
                 }
             }
             // ∂ε/∂d_i = (1/C) w(t−i)
             if o.nd > 0 {
                 let wt = filter(&[1.0], &p.c, &w);
                 for i in 0..o.nd {
-                    for t in 0..n {
-                        jac[(t, ic + i)] = shifted(&wt, i + 1, t);
-                    }
+                    fill_shifted(&mut jac, ic + i, &wt, i + 1, false);
                 }
             }
             // ∂ε/∂f_i = (D B/(C F²)) u(t−i) = (D/(CF)) v(t−i)
             if o.nf > 0 {
                 let vt = filter(&p.d, &cf, &v);
                 for i in 0..o.nf {
-                    for t in 0..n {
-                        jac[(t, id + i)] = shifted(&vt, i + 1, t);
-                    }
+                    fill_shifted(&mut jac, id + i, &vt, i + 1, false);
                 }
             }
         }
@@ -483,31 +630,25 @@ fn errors_and_gradient_with(
             if o.na > 0 {
                 let ga = filter(&[1.0], &p.a, &g);
                 for i in 0..o.na {
-                    for t in 0..n {
-                        jac[(t, i)] = shifted(&ga, i + 1, t);
-                    }
+                    fill_shifted(&mut jac, i, &ga, i + 1, false);
                 }
             }
             // ∂ε/∂b_j = −(1/(AF)) u(t−nk−j)
             let ut = filter(&[1.0], &af, u);
             for j in 0..o.nb {
-                for t in 0..n {
-                    jac[(t, ia + j)] = -shifted(&ut, o.nk + j, t);
-                }
+                fill_shifted(&mut jac, ia + j, &ut, o.nk + j, true);
             }
             // ∂ε/∂f_i = (1/F) g(t−i)
             if o.nf > 0 {
                 let gf = filter(&[1.0], &p.f, &g);
                 for i in 0..o.nf {
-                    for t in 0..n {
-                        jac[(t, id + i)] = shifted(&gf, i + 1, t);
-                    }
+                    fill_shifted(&mut jac, id + i, &gf, i + 1, false);
                 }
             }
         }
     }
     let finite = eps.iter().all(|v| v.is_finite())
-        && (0..jac.ncols()).all(|j| jac.col(j).iter().all(|v| v.is_finite()));
+        && (0..jac.ncols()).all(|j| jac.col_as_slice(j).iter().all(|v| v.is_finite()));
     finite.then_some((eps, jac))
 }
 
@@ -633,6 +774,395 @@ mod tests {
         let want = [1.0, 1.3, 1.04, 0.832];
         for (a, b) in y.iter().zip(want) {
             assert!((a - b).abs() < 1e-15);
+        }
+    }
+
+    /// The implementations before the block-wise rewrite (issue 16), kept as the oracle of
+    /// `new_filters_are_bit_identical_to_the_old_ones`.
+    mod oracle {
+        use super::super::*;
+
+        pub(super) fn old_filter(num: &[f64], den: &[f64], x: &[f64]) -> Vec<f64> {
+            let n = x.len();
+            let mut y = vec![0.0; n];
+            for t in 0..n {
+                let mut s = 0.0;
+                for (k, bk) in num.iter().enumerate().take(t + 1) {
+                    s += bk * x[t - k];
+                }
+                for (k, ak) in den.iter().enumerate().skip(1).take(t) {
+                    s -= ak * y[t - k];
+                }
+                y[t] = s;
+            }
+            y
+        }
+
+        pub(super) fn old_filter_dd(num: &[f64], den: &[f64], x: &[f64]) -> Vec<Dd> {
+            let n = x.len();
+            let mut y = vec![Dd::default(); n];
+            // the zero coefficients (B's leading delays) cost a double-double product each otherwise
+            let nz: Vec<(usize, f64)> = num
+                .iter()
+                .enumerate()
+                .filter(|(_, b)| **b != 0.0)
+                .map(|(k, b)| (k, *b))
+                .collect();
+            for t in 0..n {
+                let mut s = Dd::default();
+                for &(k, bk) in nz.iter().take_while(|(k, _)| *k <= t) {
+                    let (p, e) = two_prod(bk, x[t - k]);
+                    s = s.add(Dd { hi: p, lo: e });
+                }
+                for (k, ak) in den.iter().enumerate().skip(1).take(t) {
+                    s = s.add(y[t - k].scale(-ak));
+                }
+                y[t] = s;
+            }
+            y
+        }
+
+        pub(super) fn old_abs_sum_norm(c: &[f64], x: &[f64], den: &[f64], out: &[f64]) -> f64 {
+            let mut acc = 0.0;
+            for t in 0..x.len() {
+                let mut s = 0.0;
+                for (k, ck) in c.iter().enumerate().take(t + 1) {
+                    s += ck.abs() * x[t - k].abs();
+                }
+                for (k, dk) in den.iter().enumerate().skip(1).take(t) {
+                    s += dk.abs() * out[t - k].abs();
+                }
+                acc += s * s;
+            }
+            acc.sqrt()
+        }
+
+        pub(super) fn old_output_error(
+            p: &Polys,
+            y: &[f64],
+            u: &[f64],
+            focus: Focus,
+            accuracy: Accuracy,
+        ) -> (Vec<f64>, Vec<f64>) {
+            let (a, den) = match focus {
+                Focus::Prediction => (p.a.as_slice(), p.f.clone()),
+                Focus::Simulation => (&[1.0][..], mul(&p.a, &p.f)),
+            };
+            if accuracy != Accuracy::Exact {
+                let v = old_filter(&p.b, &den, u);
+                let unit_a = a.len() == 1 && a[0] == 1.0;
+                let ay = if unit_a {
+                    y.to_vec()
+                } else {
+                    old_filter(a, &[1.0], y)
+                };
+                let w: Vec<f64> = ay.iter().zip(&v).map(|(x, z)| x - z).collect();
+                let plain_ok = match accuracy {
+                    Accuracy::Plain => true,
+                    Accuracy::RelativeBound(tau) => {
+                        let gamma = |k: usize| {
+                            let ku = k as f64 * f64::EPSILON / 2.0;
+                            ku / (1.0 - ku)
+                        };
+                        let nb = p.b.iter().filter(|c| **c != 0.0).count();
+                        let err_a = if unit_a {
+                            0.0
+                        } else {
+                            gamma(a.len()) * old_abs_sum_norm(a, y, &[1.0], &[])
+                        };
+                        let wn = w.iter().map(|x| x * x).sum::<f64>().sqrt();
+                        let gain = impulse_l1(&den, y.len()) * gamma(nb + den.len() - 1);
+                        // |v_t| is at most the term magnitude of its step: a cheap lower bound first
+                        let vn = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+                        let err_v = if gain * vn > tau * wn {
+                            f64::INFINITY
+                        } else {
+                            gain * old_abs_sum_norm(&p.b, u, &den, &v)
+                        };
+                        // the subtraction itself: one rounding of each w_t
+                        let bound = err_a + err_v + f64::EPSILON * wn;
+                        bound.is_finite() && bound <= tau * wn
+                    }
+                    Accuracy::Exact => false,
+                };
+                if plain_ok {
+                    return (w, v);
+                }
+            }
+            let v = old_filter_dd(&p.b, &den, u);
+            let ay = old_filter_dd(a, &[1.0], y);
+            let w = ay
+                .iter()
+                .zip(&v)
+                .map(|(x, z)| {
+                    let d = x.add(Dd {
+                        hi: -z.hi,
+                        lo: -z.lo,
+                    });
+                    d.hi + d.lo
+                })
+                .collect();
+            (w, v.iter().map(|z| z.hi + z.lo).collect())
+        }
+
+        fn old_shifted(x: &[f64], k: usize, t: usize) -> f64 {
+            if t >= k {
+                x[t - k]
+            } else {
+                0.0
+            }
+        }
+
+        pub(super) fn old_errors_and_gradient_with(
+            p: &Polys,
+            o: &Orders,
+            y: &[f64],
+            u: &[f64],
+            focus: Focus,
+            accuracy: Accuracy,
+        ) -> Option<(Vec<f64>, Mat<f64>)> {
+            if !predictor_stable(p, focus) {
+                return None;
+            }
+            let n = y.len();
+            let (ia, ib, ic, id) = (
+                o.na,
+                o.na + o.nb,
+                o.na + o.nb + o.nc,
+                o.na + o.nb + o.nc + o.nd,
+            );
+            let mut jac = Mat::<f64>::zeros(n, o.n_params());
+            let eps;
+            match focus {
+                Focus::Prediction => {
+                    let (w, v) = old_output_error(p, y, u, focus, accuracy); // A y − (B/F) u and (B/F) u
+                    eps = old_filter(&p.d, &p.c, &w);
+                    let cf = mul(&p.c, &p.f);
+                    // ∂ε/∂a_i = (D/C) y(t−i)
+                    if o.na > 0 {
+                        let yt = old_filter(&p.d, &p.c, y);
+                        for i in 0..o.na {
+                            for t in 0..n {
+                                jac[(t, i)] = old_shifted(&yt, i + 1, t);
+                            }
+                        }
+                    }
+                    // ∂ε/∂b_j = −(D/(CF)) u(t−nk−j)
+                    let ut = old_filter(&p.d, &cf, u);
+                    for j in 0..o.nb {
+                        for t in 0..n {
+                            jac[(t, ia + j)] = -old_shifted(&ut, o.nk + j, t);
+                        }
+                    }
+                    // ∂ε/∂c_i = −(1/C) ε(t−i)
+                    if o.nc > 0 {
+                        let et = old_filter(&[1.0], &p.c, &eps);
+                        for i in 0..o.nc {
+                            for t in 0..n {
+                                jac[(t, ib + i)] = -old_shifted(&et, i + 1, t);
+                            }
+                        }
+                    }
+                    // ∂ε/∂d_i = (1/C) w(t−i)
+                    if o.nd > 0 {
+                        let wt = old_filter(&[1.0], &p.c, &w);
+                        for i in 0..o.nd {
+                            for t in 0..n {
+                                jac[(t, ic + i)] = old_shifted(&wt, i + 1, t);
+                            }
+                        }
+                    }
+                    // ∂ε/∂f_i = (D B/(C F²)) u(t−i) = (D/(CF)) v(t−i)
+                    if o.nf > 0 {
+                        let vt = old_filter(&p.d, &cf, &v);
+                        for i in 0..o.nf {
+                            for t in 0..n {
+                                jac[(t, id + i)] = old_shifted(&vt, i + 1, t);
+                            }
+                        }
+                    }
+                }
+                Focus::Simulation => {
+                    let af = mul(&p.a, &p.f);
+                    let (w, g) = old_output_error(p, y, u, focus, accuracy); // y − B/(AF) u and B/(AF) u
+                    eps = w;
+                    // ∂ε/∂a_i = (B/(A²F)) u(t−i) = (1/A) g(t−i)
+                    if o.na > 0 {
+                        let ga = old_filter(&[1.0], &p.a, &g);
+                        for i in 0..o.na {
+                            for t in 0..n {
+                                jac[(t, i)] = old_shifted(&ga, i + 1, t);
+                            }
+                        }
+                    }
+                    // ∂ε/∂b_j = −(1/(AF)) u(t−nk−j)
+                    let ut = old_filter(&[1.0], &af, u);
+                    for j in 0..o.nb {
+                        for t in 0..n {
+                            jac[(t, ia + j)] = -old_shifted(&ut, o.nk + j, t);
+                        }
+                    }
+                    // ∂ε/∂f_i = (1/F) g(t−i)
+                    if o.nf > 0 {
+                        let gf = old_filter(&[1.0], &p.f, &g);
+                        for i in 0..o.nf {
+                            for t in 0..n {
+                                jac[(t, id + i)] = old_shifted(&gf, i + 1, t);
+                            }
+                        }
+                    }
+                }
+            }
+            let finite = eps.iter().all(|v| v.is_finite())
+                && (0..jac.ncols()).all(|j| jac.col(j).iter().all(|v| v.is_finite()));
+            finite.then_some((eps, jac))
+        }
+    }
+
+    fn bits(v: &[f64]) -> Vec<u64> {
+        v.iter().map(|x| x.to_bits()).collect()
+    }
+
+    fn bits_dd(v: &[Dd]) -> Vec<(u64, u64)> {
+        v.iter().map(|x| (x.hi.to_bits(), x.lo.to_bits())).collect()
+    }
+
+    /// A monic polynomial with `n` roots of magnitude below 0.995 (real or in conjugate pairs).
+    fn stable_poly(rng: &mut rand_chacha::ChaCha8Rng, n: usize) -> Vec<f64> {
+        use rand::RngExt;
+        let mut p = vec![1.0];
+        let mut left = n;
+        while left > 0 {
+            let r: f64 = rng.random_range(0.0..0.995);
+            if left >= 2 && rng.random_range(0..2) == 0 {
+                let w: f64 = rng.random_range(0.0..std::f64::consts::PI);
+                p = mul(&p, &[1.0, -2.0 * r * w.cos(), r * r]);
+                left -= 2;
+            } else {
+                let sign = if rng.random_range(0..2) == 0 {
+                    -1.0
+                } else {
+                    1.0
+                };
+                p = mul(&p, &[1.0, sign * r]);
+                left -= 1;
+            }
+        }
+        p
+    }
+
+    fn random_vec(rng: &mut rand_chacha::ChaCha8Rng, n: usize) -> Vec<f64> {
+        use rand::RngExt;
+        (0..n)
+            .map(|k| match k % 17 {
+                3 => 0.0,
+                11 => -0.0,
+                _ => rng.random_range(-3.0..3.0),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn new_filters_are_bit_identical_to_the_old_ones() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(16);
+        let lengths = [0, 1, 2, 3, 7, 15, 1023, 1024, 1025, 2049, 3000];
+        for case in 0..400 {
+            let n = lengths[case % lengths.len()];
+            let x = random_vec(&mut rng, n);
+            let out = random_vec(&mut rng, n);
+            // numerators of 0..=15 coefficients, some with leading (and inner) zeros
+            let nb = rng.random_range(0..16);
+            let mut num = random_vec(&mut rng, nb);
+            let lead = rng.random_range(0..4).min(nb);
+            for v in num.iter_mut().take(lead) {
+                *v = 0.0;
+            }
+            // denominators of order 0..=14 (the fixed orders 1..=12 and the general loop),
+            // also the empty list and a den of length 1
+            let nd = case % 15;
+            let den = match case % 23 {
+                0 => vec![],
+                1 => vec![1.0],
+                _ => stable_poly(&mut rng, nd),
+            };
+            let msg = format!("case {case}: n {n}, num {num:?}, den {den:?}");
+            assert_eq!(
+                bits(&filter(&num, &den, &x)),
+                bits(&oracle::old_filter(&num, &den, &x)),
+                "filter, {msg}"
+            );
+            assert_eq!(
+                bits_dd(&filter_dd(&num, &den, &x)),
+                bits_dd(&oracle::old_filter_dd(&num, &den, &x)),
+                "filter_dd, {msg}"
+            );
+            assert_eq!(
+                abs_sum_norm(&num, &x, &den, &out).to_bits(),
+                oracle::old_abs_sum_norm(&num, &x, &den, &out).to_bits(),
+                "abs_sum_norm, {msg}"
+            );
+        }
+    }
+
+    #[test]
+    fn new_errors_and_gradient_are_bit_identical_to_the_old_ones() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
+        let lengths = [40, 1023, 1025, 2600];
+        for case in 0..60 {
+            let n = lengths[case % lengths.len()];
+            let o = Orders {
+                na: rng.random_range(0..5),
+                nb: rng.random_range(1..5),
+                nc: rng.random_range(0..5),
+                nd: rng.random_range(0..4),
+                nf: rng.random_range(0..5),
+                nk: rng.random_range(0..3),
+            };
+            let mut b = vec![0.0; o.nk];
+            b.extend(random_vec(&mut rng, o.nb).iter().map(|v| 0.3 * v));
+            let p = Polys {
+                a: stable_poly(&mut rng, o.na),
+                b,
+                c: stable_poly(&mut rng, o.nc),
+                d: stable_poly(&mut rng, o.nd),
+                f: stable_poly(&mut rng, o.nf),
+            };
+            let u = random_vec(&mut rng, n);
+            // y = B/(AF) u + noise: realistic cancellation in w for the bound
+            let g = filter(&p.b, &mul(&p.a, &p.f), &u);
+            let scale = [1.0, 1e-3, 1e-9][case % 3];
+            let e = random_vec(&mut rng, n);
+            let y: Vec<f64> = g.iter().zip(&e).map(|(g, e)| g + scale * e).collect();
+            for focus in [Focus::Prediction, Focus::Simulation] {
+                for acc in [
+                    Accuracy::Exact,
+                    Accuracy::Plain,
+                    Accuracy::RelativeBound(1e-6),
+                    Accuracy::RelativeBound(1e-12),
+                ] {
+                    let msg = format!("case {case}: {o:?} {focus:?} {acc:?}");
+                    let (w1, v1) = output_error(&p, &y, &u, focus, acc);
+                    let (w0, v0) = oracle::old_output_error(&p, &y, &u, focus, acc);
+                    assert_eq!(bits(&w1), bits(&w0), "w, {msg}");
+                    assert_eq!(bits(&v1), bits(&v0), "v, {msg}");
+                    let new = errors_and_gradient_with(&p, &o, &y, &u, focus, acc);
+                    let old = oracle::old_errors_and_gradient_with(&p, &o, &y, &u, focus, acc);
+                    let (Some((e1, j1)), Some((e0, j0))) = (new, old) else {
+                        panic!("both must be defined, {msg}");
+                    };
+                    assert_eq!(bits(&e1), bits(&e0), "errors, {msg}");
+                    assert_eq!(j1.ncols(), j0.ncols());
+                    for c in 0..j1.ncols() {
+                        assert_eq!(
+                            bits(j1.col_as_slice(c)),
+                            bits(j0.col_as_slice(c)),
+                            "column {c}, {msg}"
+                        );
+                    }
+                }
+            }
         }
     }
 }
