@@ -84,7 +84,7 @@
 //! assert!(p.iter().all(|z| (z.norm() - 0.97).abs() < 1e-8 && (z.im.abs() - 0.97 * 0.3f64.sin()).abs() < 1e-8));
 //! ```
 
-use super::pem::lm::{minimize, LeastSquaresProblem, LmOptions, LmReport};
+use super::pem::lm::{all_finite, minimize, LeastSquaresProblem, LmOptions, LmReport};
 use super::pem::Focus;
 use super::{channel_rms, check_samples, Fitted};
 use crate::error::{Error, Result};
@@ -824,6 +824,76 @@ impl Problem<'_> {
     }
 }
 
+/// One run of a block's dynamics for [`Problem::sensitivities_into`]: start state, forcing of
+/// each state row (`None`: 0.0) and the column of the Jacobian it fills.
+struct Run<'s> {
+    s0: [f64; 2],
+    f: [Option<&'s [f64]>; 2],
+    col: usize,
+}
+
+impl Problem<'_> {
+    /// [`Problem::sensitivity_into`] for several runs of block `b` at once, interleaved sample by
+    /// sample (each run alone is bound by the latency of its recursion); every entry is computed
+    /// by the same operations in the same order as one `sensitivity_into` per run. The columns
+    /// of `runs` must be distinct.
+    fn sensitivities_into(&self, th: &[f64], b: &Block, runs: &[Run<'_>], jac: &mut Mat<f64>) {
+        let nn = self.len();
+        let cr: Vec<[f64; 2]> = (0..self.lay.l)
+            .map(|o| {
+                let mut c = [0.0; 2];
+                for (r, cv) in c.iter_mut().enumerate().take(b.dim) {
+                    *cv = self.lay.c_val(th, b, o, r);
+                }
+                c
+            })
+            .collect();
+        let mut cols: Vec<Option<&mut [f64]>> = jac
+            .col_iter_mut()
+            .map(|c| c.try_as_col_major_mut().map(|c| c.as_slice_mut()))
+            .collect();
+        let outs: Option<Vec<&mut [f64]>> = runs
+            .iter()
+            .map(|r| cols.get_mut(r.col).and_then(Option::take))
+            .collect();
+        let Some(mut outs) = outs.filter(|o| o.iter().all(|c| c.len() >= nn * cr.len())) else {
+            drop(cols);
+            for r in runs {
+                let f = |rr: usize, k: usize| r.f[rr].map_or(0.0, |v| v[k]);
+                self.sensitivity_into(th, b, r.s0, f, jac, r.col);
+            }
+            return;
+        };
+        let mut s1: Vec<f64> = runs.iter().map(|r| r.s0[0]).collect();
+        let mut s2: Vec<f64> = runs.iter().map(|r| r.s0[1]).collect();
+        let forcing = |f: Option<&[f64]>, k: usize| f.map_or(0.0, |v| v[k]);
+        if b.dim == 2 {
+            let (al1, al2) = (th[b.off], th[b.off + 1]);
+            for k in 0..nn {
+                for (i, r) in runs.iter().enumerate() {
+                    let (a, c) = (s1[i], s2[i]);
+                    for (o, cc) in cr.iter().enumerate() {
+                        outs[i][o * nn + k] = -(cc[0] * a + cc[1] * c);
+                    }
+                    s1[i] = a + c + forcing(r.f[0], k);
+                    s2[i] = -al2 * a + (1.0 - al1) * c + forcing(r.f[1], k);
+                }
+            }
+        } else {
+            let lam = th[b.off];
+            for k in 0..nn {
+                for (i, r) in runs.iter().enumerate() {
+                    let a = s1[i];
+                    for (o, cc) in cr.iter().enumerate() {
+                        outs[i][o * nn + k] = -(cc[0] * a + cc[1] * 0.0);
+                    }
+                    s1[i] = lam * a + forcing(r.f[0], k);
+                }
+            }
+        }
+    }
+}
+
 impl LeastSquaresProblem for Problem<'_> {
     fn residuals(&mut self, th: &[f64]) -> Option<Vec<f64>> {
         let lay = self.lay;
@@ -867,44 +937,56 @@ impl LeastSquaresProblem for Problem<'_> {
         let mut jac = Mat::<f64>::zeros(nn * lay.l, lay.n_theta);
         for b in &lay.blocks {
             let x = self.states(th, b);
-            // denominator
-            if b.dim == 2 {
-                let (x1, x2) = (&x[0], &x[1]);
-                self.sensitivity_into(
-                    th,
-                    b,
-                    [0.0; 2],
-                    |r, k| if r == 1 { -x2[k] } else { 0.0 },
-                    &mut jac,
-                    b.off,
-                );
-                self.sensitivity_into(
-                    th,
-                    b,
-                    [0.0; 2],
-                    |r, k| if r == 1 { -x1[k] } else { 0.0 },
-                    &mut jac,
-                    b.off + 1,
-                );
+            let neg: Vec<Vec<f64>> = if b.dim == 2 {
+                x.iter().map(|v| v.iter().map(|a| -a).collect()).collect()
             } else {
-                let x1 = &x[0];
-                self.sensitivity_into(th, b, [0.0; 2], |_, k| x1[k], &mut jac, b.off);
+                Vec::new()
+            };
+            let mut runs = Vec::new();
+            // denominator
+            if let [n1, n2] = &neg[..] {
+                runs.push(Run {
+                    s0: [0.0; 2],
+                    f: [None, Some(n2)],
+                    col: b.off,
+                });
+                runs.push(Run {
+                    s0: [0.0; 2],
+                    f: [None, Some(n1)],
+                    col: b.off + 1,
+                });
+            } else {
+                runs.push(Run {
+                    s0: [0.0; 2],
+                    f: [Some(&x[0]), None],
+                    col: b.off,
+                });
             }
             // G
             for r in 0..b.dim {
                 for ch in 0..lay.q {
-                    let w = &self.w[ch];
-                    let col = lay.g_idx(b, r, ch);
-                    self.sensitivity_into(
-                        th,
-                        b,
-                        [0.0; 2],
-                        |rr, k| if rr == r { w[k] } else { 0.0 },
-                        &mut jac,
-                        col,
-                    );
+                    let mut f = [None, None];
+                    f[r] = Some(&self.w[ch][..]);
+                    runs.push(Run {
+                        s0: [0.0; 2],
+                        f,
+                        col: lay.g_idx(b, r, ch),
+                    });
                 }
             }
+            // initial state
+            if let Some(off) = lay.x0_off {
+                for r in 0..b.dim {
+                    let mut s0 = [0.0; 2];
+                    s0[r] = 1.0;
+                    runs.push(Run {
+                        s0,
+                        f: [None, None],
+                        col: off + b.state + r,
+                    });
+                }
+            }
+            self.sensitivities_into(th, b, &runs, &mut jac);
             // free rows of C
             for o in 0..lay.l {
                 for (r, xr) in x.iter().enumerate() {
@@ -914,14 +996,6 @@ impl LeastSquaresProblem for Problem<'_> {
                             out[o * nn + k] = -v;
                         }
                     }
-                }
-            }
-            // initial state
-            if let Some(off) = lay.x0_off {
-                for r in 0..b.dim {
-                    let mut s0 = [0.0; 2];
-                    s0[r] = 1.0;
-                    self.sensitivity_into(th, b, s0, |_, _| 0.0, &mut jac, off + b.state + r);
                 }
             }
         }
@@ -935,7 +1009,7 @@ impl LeastSquaresProblem for Problem<'_> {
                 }
             }
         }
-        let finite = jac.col_iter().all(|c| c.iter().all(|v| v.is_finite()));
+        let finite = (0..jac.ncols()).all(|j| all_finite(jac.col_as_slice(j)));
         finite.then_some(jac)
     }
 }
@@ -953,11 +1027,18 @@ fn best_x0(prob: &mut Problem<'_>, theta: Vec<f64>) -> Vec<f64> {
     // only the n columns of the initial state
     let mut jx = Mat::<f64>::zeros(r.len(), n);
     for b in &prob.lay.blocks {
-        for k in 0..b.dim {
-            let mut s0 = [0.0; 2];
-            s0[k] = 1.0;
-            prob.sensitivity_into(&theta, b, s0, |_, _| 0.0, &mut jx, b.state + k);
-        }
+        let runs: Vec<Run<'_>> = (0..b.dim)
+            .map(|k| {
+                let mut s0 = [0.0; 2];
+                s0[k] = 1.0;
+                Run {
+                    s0,
+                    f: [None, None],
+                    col: b.state + k,
+                }
+            })
+            .collect();
+        prob.sensitivities_into(&theta, b, &runs, &mut jx);
     }
     let rhs = Mat::from_fn(r.len(), 1, |k, _| r[k]);
     match linalg::lstsq(jx.as_ref(), rhs.as_ref()) {
@@ -1099,6 +1180,148 @@ mod tests {
         let poles_b = linalg::eigenvalues(ab.as_ref()).unwrap();
         for z in &poles {
             assert!(poles_b.iter().any(|p| (p - z).norm() < 1e-10), "{z:?}");
+        }
+    }
+
+    /// The Jacobian as computed before the interleaved runs (one `sensitivity_into` per
+    /// column): the oracle of `interleaved_jacobian_is_bit_identical`.
+    fn old_jacobian(this: &Problem<'_>, th: &[f64]) -> Option<Mat<f64>> {
+        let s = this;
+        let lay = s.lay;
+        if !lay.admissible(th) {
+            return None;
+        }
+        let nn = s.len();
+        let mut jac = Mat::<f64>::zeros(nn * lay.l, lay.n_theta);
+        for b in &lay.blocks {
+            let x = s.states(th, b);
+            // denominator
+            if b.dim == 2 {
+                let (x1, x2) = (&x[0], &x[1]);
+                s.sensitivity_into(
+                    th,
+                    b,
+                    [0.0; 2],
+                    |r, k| if r == 1 { -x2[k] } else { 0.0 },
+                    &mut jac,
+                    b.off,
+                );
+                s.sensitivity_into(
+                    th,
+                    b,
+                    [0.0; 2],
+                    |r, k| if r == 1 { -x1[k] } else { 0.0 },
+                    &mut jac,
+                    b.off + 1,
+                );
+            } else {
+                let x1 = &x[0];
+                s.sensitivity_into(th, b, [0.0; 2], |_, k| x1[k], &mut jac, b.off);
+            }
+            // G
+            for r in 0..b.dim {
+                for ch in 0..lay.q {
+                    let w = &s.w[ch];
+                    let col = lay.g_idx(b, r, ch);
+                    s.sensitivity_into(
+                        th,
+                        b,
+                        [0.0; 2],
+                        |rr, k| if rr == r { w[k] } else { 0.0 },
+                        &mut jac,
+                        col,
+                    );
+                }
+            }
+            // free rows of C
+            for o in 0..lay.l {
+                for (r, xr) in x.iter().enumerate() {
+                    if let Some(idx) = lay.c_idx(b, o, r) {
+                        let mut out = jac.col_mut(idx);
+                        for (k, v) in xr.iter().enumerate() {
+                            out[o * nn + k] = -v;
+                        }
+                    }
+                }
+            }
+            // initial state
+            if let Some(off) = lay.x0_off {
+                for r in 0..b.dim {
+                    let mut s0 = [0.0; 2];
+                    s0[r] = 1.0;
+                    s.sensitivity_into(th, b, s0, |_, _| 0.0, &mut jac, off + b.state + r);
+                }
+            }
+        }
+        if let Some(off) = lay.d_off {
+            for o in 0..lay.l {
+                for ch in 0..lay.m {
+                    let mut out = jac.col_mut(off + o * lay.m + ch);
+                    for (k, v) in s.w[ch].iter().enumerate() {
+                        out[o * nn + k] = -v;
+                    }
+                }
+            }
+        }
+        let finite = jac.col_iter().all(|c| c.iter().all(|v| v.is_finite()));
+        finite.then_some(jac)
+    }
+
+    #[test]
+    fn interleaved_jacobian_is_bit_identical() {
+        let mut rng = ChaCha8Rng::seed_from_u64(12);
+        for (feedthrough, estimate_x0, l, nn) in [(true, true, 2, 1500), (false, false, 1, 777)] {
+            let (n, m) = (5, 2);
+            let a = faer::mat![
+                [0.5, 0.3, 0.0, 0.0, 0.0],
+                [-0.3, 0.5, 0.0, 0.0, 0.0],
+                [0.0, 0.0, 0.8, 0.1, 0.0],
+                [0.0, 0.0, 0.0, 0.6, 0.0],
+                [0.0, 0.0, 0.0, 0.0, -0.4]
+            ];
+            let g = Mat::from_fn(n, m + l, |_, _| rng.sample::<f64, _>(StandardNormal));
+            let c = Mat::from_fn(l, n, |_, _| rng.sample::<f64, _>(StandardNormal));
+            let d = Mat::from_fn(l, m, |_, _| rng.sample::<f64, _>(StandardNormal));
+            let opts = SsPemOptions {
+                feedthrough,
+                estimate_x0,
+                ..SsPemOptions::default()
+            };
+            let poles = linalg::eigenvalues(a.as_ref()).unwrap();
+            let (lay, mut th) = to_blocks(
+                a.as_ref(),
+                g.as_ref(),
+                c.as_ref(),
+                d.as_ref(),
+                &poles,
+                &opts,
+            )
+            .unwrap();
+            if let Some(off) = lay.x0_off {
+                for (i, v) in th.iter_mut().enumerate().skip(off) {
+                    *v = 0.1 * (i as f64).sin();
+                }
+            }
+            let w: Vec<Vec<f64>> = (0..m + l)
+                .map(|_| (0..nn).map(|_| rng.sample(StandardNormal)).collect())
+                .collect();
+            let y: Vec<Vec<f64>> = (0..l)
+                .map(|_| (0..nn).map(|_| rng.sample(StandardNormal)).collect())
+                .collect();
+            let mut p = Problem {
+                lay: &lay,
+                w: &w,
+                y: &y,
+            };
+            let new = p.jacobian(&th).unwrap();
+            let old = old_jacobian(&p, &th).unwrap();
+            assert_eq!((new.nrows(), new.ncols()), (old.nrows(), old.ncols()));
+            for col in 0..new.ncols() {
+                let bits = |j: &Mat<f64>| -> Vec<u64> {
+                    j.col_as_slice(col).iter().map(|v| v.to_bits()).collect()
+                };
+                assert_eq!(bits(&new), bits(&old), "column {col}");
+            }
         }
     }
 }

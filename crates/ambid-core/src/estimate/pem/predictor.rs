@@ -1,6 +1,7 @@
 //! The one-step predictor of the general polynomial model, its prediction errors and their
 //! analytic gradient (filtered regressors), with zero initial conditions.
 
+use super::lm::all_finite;
 use super::{Focus, Orders};
 use crate::lti::PolyModel;
 use faer::Mat;
@@ -83,19 +84,152 @@ pub(crate) fn filter(num: &[f64], den: &[f64], x: &[f64]) -> Vec<f64> {
     let mut t0 = 0;
     while t0 < n {
         let t1 = (t0 + BLOCK).min(n);
-        for (k, &bk) in num.iter().enumerate() {
-            let s = t0.max(k);
-            if s >= t1 {
-                break;
-            }
-            for (yv, xv) in y[s..t1].iter_mut().zip(&x[s - k..t1 - k]) {
-                *yv += bk * xv;
-            }
-        }
+        numerator_block(num, x, &mut y, t0, t1);
         recursion(a, &mut y, t0, t1);
         t0 = t1;
     }
     y
+}
+
+/// [`filter`] of several independent signals, `jobs[i] = (num, den, x)`, each output bit for bit
+/// that of `filter(num, den, x)`. The recursions of equal order run interleaved (two or three
+/// at a time), so that their dependency chains overlap: one recursion alone is bound by the
+/// latency of its $n_a + 1$ dependent operations per sample.
+pub(crate) fn filter_many(jobs: &[(&[f64], &[f64], &[f64])]) -> Vec<Vec<f64>> {
+    let n = jobs.first().map_or(0, |j| j.2.len());
+    if jobs.iter().any(|j| j.2.len() != n) {
+        return jobs.iter().map(|(b, a, x)| filter(b, a, x)).collect();
+    }
+    let order = |j: usize| jobs[j].1.len().saturating_sub(1);
+    let max_group = |nd: usize| match nd {
+        1..=4 => 3,
+        5..=8 => 2,
+        _ => 1,
+    };
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    for j in 0..jobs.len() {
+        match groups
+            .iter_mut()
+            .find(|g| order(g[0]) == order(j) && g.len() < max_group(order(j)))
+        {
+            Some(g) => g.push(j),
+            None => groups.push(vec![j]),
+        }
+    }
+    let mut ys: Vec<Vec<f64>> = jobs.iter().map(|_| vec![0.0; n]).collect();
+    let mut t0 = 0;
+    while t0 < n {
+        let t1 = (t0 + BLOCK).min(n);
+        for ((num, _, x), y) in jobs.iter().zip(ys.iter_mut()) {
+            numerator_block(num, x, y, t0, t1);
+        }
+        for g in &groups {
+            let den = |j: usize| jobs[j].1.get(1..).unwrap_or(&[]);
+            match g[..] {
+                [i] => recursion(den(i), &mut ys[i], t0, t1),
+                [i, j] => {
+                    let (mut yi, mut yj) = (std::mem::take(&mut ys[i]), std::mem::take(&mut ys[j]));
+                    recursion_group([den(i), den(j)], [&mut yi, &mut yj], t0, t1);
+                    (ys[i], ys[j]) = (yi, yj);
+                }
+                [i, j, k] => {
+                    let (mut yi, mut yj, mut yk) = (
+                        std::mem::take(&mut ys[i]),
+                        std::mem::take(&mut ys[j]),
+                        std::mem::take(&mut ys[k]),
+                    );
+                    recursion_group(
+                        [den(i), den(j), den(k)],
+                        [&mut yi, &mut yj, &mut yk],
+                        t0,
+                        t1,
+                    );
+                    (ys[i], ys[j], ys[k]) = (yi, yj, yk);
+                }
+                _ => {
+                    for &i in g {
+                        recursion(den(i), &mut ys[i], t0, t1);
+                    }
+                }
+            }
+        }
+        t0 = t1;
+    }
+    ys
+}
+
+/// $y_t \leftarrow y_t + \sum_k \text{num}_k x_{t-k}$ ($0 \le k \le t$, in that order of $k$) for
+/// $t \in [t_0, t_1)$: lag by lag over the block.
+fn numerator_block(num: &[f64], x: &[f64], y: &mut [f64], t0: usize, t1: usize) {
+    for (k, &bk) in num.iter().enumerate() {
+        let s = t0.max(k);
+        if s >= t1 {
+            break;
+        }
+        for (yv, xv) in y[s..t1].iter_mut().zip(&x[s - k..t1 - k]) {
+            *yv += bk * xv;
+        }
+    }
+}
+
+/// [`recursion`] of `M` signals of one order at once (interleaved sample by sample).
+fn recursion_group<const M: usize>(a: [&[f64]; M], y: [&mut [f64]; M], t0: usize, t1: usize) {
+    macro_rules! fixed {
+        ($($n:literal)*) => {
+            match a[0].len() {
+                $($n => recursion_group_fixed::<$n, M>(a, y, t0, t1),)*
+                _ => {
+                    for (aj, yj) in a.into_iter().zip(y) {
+                        recursion(aj, yj, t0, t1);
+                    }
+                }
+            }
+        };
+    }
+    fixed!(1 2 3 4 5 6 7 8);
+}
+
+fn recursion_group_fixed<const N: usize, const M: usize>(
+    a: [&[f64]; M],
+    y: [&mut [f64]; M],
+    t0: usize,
+    t1: usize,
+) {
+    let mut c = [[0.0; N]; M];
+    let warm = t1.min(N).max(t0);
+    if a.iter().any(|aj| aj.len() != N) || y.iter().any(|yj| yj.len() < t1) {
+        for (aj, yj) in a.into_iter().zip(y) {
+            recursion(aj, yj, t0, t1);
+        }
+        return;
+    }
+    for j in 0..M {
+        c[j].copy_from_slice(a[j]);
+        recursion_any(a[j], y[j], t0, warm);
+    }
+    if warm >= t1 {
+        return;
+    }
+    // h[j][k] = y_j[t − 1 − k]
+    let mut h = [[0.0; N]; M];
+    for j in 0..M {
+        for k in 0..N {
+            h[j][k] = y[j][warm - 1 - k];
+        }
+    }
+    for t in warm..t1 {
+        for j in 0..M {
+            let mut s = y[j][t];
+            for k in 0..N {
+                s -= c[j][k] * h[j][k];
+            }
+            for k in (1..N).rev() {
+                h[j][k] = h[j][k - 1];
+            }
+            h[j][0] = s;
+            y[j][t] = s;
+        }
+    }
 }
 
 /// $y_t \leftarrow y_t - \sum_{k=1}^{\min(n_a, t)} a_k y_{t-k}$ for $t \in [t_0, t_1)$, in that
@@ -144,7 +278,10 @@ fn recursion_fixed<const N: usize>(a: &[f64], y: &mut [f64], t0: usize, t1: usiz
         for k in 0..N {
             s -= a[k] * h[k];
         }
-        h.rotate_right(1);
+        // a shift of constant indices (not `rotate_right`, a memory move): h stays in registers
+        for k in (1..N).rev() {
+            h[k] = h[k - 1];
+        }
         h[0] = s;
         *v = s;
     }
@@ -286,7 +423,10 @@ fn recursion_dd_fixed<const N: usize>(a: &[f64], y: &mut [Dd], t0: usize, t1: us
         for k in 0..N {
             s = s.add(h[k].scale(-a[k]));
         }
-        h.rotate_right(1);
+        // a shift of constant indices (not `rotate_right`, a memory move): h stays in registers
+        for k in (1..N).rev() {
+            h[k] = h[k - 1];
+        }
         h[0] = s;
         *v = s;
     }
@@ -535,7 +675,7 @@ pub(crate) fn errors(
         Focus::Prediction => filter(&p.d, &p.c, &w),
         Focus::Simulation => w,
     };
-    e.iter().all(|v| v.is_finite()).then_some(e)
+    all_finite(&e).then_some(e)
 }
 
 /// Prediction errors and their gradient $\psi = \partial\varepsilon/\partial\theta$ ($N \times d$,
@@ -586,37 +726,52 @@ fn errors_and_gradient_with(
     match focus {
         Focus::Prediction => {
             let (w, v) = output_error(p, y, u, focus, accuracy); // A y − (B/F) u and (B/F) u
-            eps = filter(&p.d, &p.c, &w);
             let cf = mul(&p.c, &p.f);
+            let one = [1.0];
+            // the independent filters at once: ε = (D/C) w, (D/C) y, (D/(CF)) u, (1/C) w,
+            // (D/(CF)) v
+            let mut jobs: Vec<(&[f64], &[f64], &[f64])> = vec![(&p.d, &p.c, &w), (&p.d, &cf, u)];
+            let mut slot = |on: bool, job| {
+                on.then(|| {
+                    jobs.push(job);
+                    jobs.len() - 1
+                })
+            };
+            let iy = slot(o.na > 0, (&p.d, &p.c, y));
+            let iw = slot(o.nd > 0, (&one, &p.c, &w));
+            let iv = slot(o.nf > 0, (&p.d, &cf, &v));
+            let mut out = filter_many(&jobs);
+            let take = |out: &mut Vec<Vec<f64>>, i: usize| std::mem::take(&mut out[i]);
+            eps = take(&mut out, 0);
             // ∂ε/∂a_i = (D/C) y(t−i)
-            if o.na > 0 {
-                let yt = filter(&p.d, &p.c, y);
+            if let Some(k) = iy {
+                let yt = take(&mut out, k);
                 for i in 0..o.na {
                     fill_shifted(&mut jac, i, &yt, i + 1, false);
                 }
             }
             // ∂ε/∂b_j = −(D/(CF)) u(t−nk−j)
-            let ut = filter(&p.d, &cf, u);
+            let ut = take(&mut out, 1);
             for j in 0..o.nb {
                 fill_shifted(&mut jac, ia + j, &ut, o.nk + j, true);
             }
             // ∂ε/∂c_i = −(1/C) ε(t−i)
             if o.nc > 0 {
-                let et = filter(&[1.0], &p.c, &eps);
+                let et = filter(&one, &p.c, &eps);
                 for i in 0..o.nc {
                     fill_shifted(&mut jac, ib + i, &et, i + 1, true);
                 }
             }
             // ∂ε/∂d_i = (1/C) w(t−i)
-            if o.nd > 0 {
-                let wt = filter(&[1.0], &p.c, &w);
+            if let Some(k) = iw {
+                let wt = take(&mut out, k);
                 for i in 0..o.nd {
                     fill_shifted(&mut jac, ic + i, &wt, i + 1, false);
                 }
             }
             // ∂ε/∂f_i = (D B/(C F²)) u(t−i) = (D/(CF)) v(t−i)
-            if o.nf > 0 {
-                let vt = filter(&p.d, &cf, &v);
+            if let Some(k) = iv {
+                let vt = take(&mut out, k);
                 for i in 0..o.nf {
                     fill_shifted(&mut jac, id + i, &vt, i + 1, false);
                 }
@@ -626,29 +781,38 @@ fn errors_and_gradient_with(
             let af = mul(&p.a, &p.f);
             let (w, g) = output_error(p, y, u, focus, accuracy); // y − B/(AF) u and B/(AF) u
             eps = w;
+            let one = [1.0];
+            // the independent filters at once: (1/(AF)) u, (1/A) g, (1/F) g
+            let mut jobs: Vec<(&[f64], &[f64], &[f64])> = vec![(&one, &af, u)];
+            let mut slot = |on: bool, job| {
+                on.then(|| {
+                    jobs.push(job);
+                    jobs.len() - 1
+                })
+            };
+            let ia_job = slot(o.na > 0, (&one, &p.a, &g));
+            let if_job = slot(o.nf > 0, (&one, &p.f, &g));
+            let mut out = filter_many(&jobs);
             // ∂ε/∂a_i = (B/(A²F)) u(t−i) = (1/A) g(t−i)
-            if o.na > 0 {
-                let ga = filter(&[1.0], &p.a, &g);
+            if let Some(k) = ia_job {
                 for i in 0..o.na {
-                    fill_shifted(&mut jac, i, &ga, i + 1, false);
+                    fill_shifted(&mut jac, i, &out[k], i + 1, false);
                 }
             }
             // ∂ε/∂b_j = −(1/(AF)) u(t−nk−j)
-            let ut = filter(&[1.0], &af, u);
+            let ut = std::mem::take(&mut out[0]);
             for j in 0..o.nb {
                 fill_shifted(&mut jac, ia + j, &ut, o.nk + j, true);
             }
             // ∂ε/∂f_i = (1/F) g(t−i)
-            if o.nf > 0 {
-                let gf = filter(&[1.0], &p.f, &g);
+            if let Some(k) = if_job {
                 for i in 0..o.nf {
-                    fill_shifted(&mut jac, id + i, &gf, i + 1, false);
+                    fill_shifted(&mut jac, id + i, &out[k], i + 1, false);
                 }
             }
         }
     }
-    let finite = eps.iter().all(|v| v.is_finite())
-        && (0..jac.ncols()).all(|j| jac.col_as_slice(j).iter().all(|v| v.is_finite()));
+    let finite = all_finite(&eps) && (0..jac.ncols()).all(|j| all_finite(jac.col_as_slice(j)));
     finite.then_some((eps, jac))
 }
 
