@@ -864,30 +864,85 @@ impl Problem<'_> {
             }
             return;
         };
-        let mut s1: Vec<f64> = runs.iter().map(|r| r.s0[0]).collect();
-        let mut s2: Vec<f64> = runs.iter().map(|r| r.s0[1]).collect();
-        let forcing = |f: Option<&[f64]>, k: usize| f.map_or(0.0, |v| v[k]);
-        if b.dim == 2 {
-            let (al1, al2) = (th[b.off], th[b.off + 1]);
+        // no forcing: +0.0, read like any other forcing (the same value as the literal)
+        let zeros = vec![0.0; nn];
+        let dynamics = if b.dim == 2 {
+            Dynamics::Pair(th[b.off], th[b.off + 1])
+        } else {
+            Dynamics::Single(th[b.off])
+        };
+        for (rs, os) in runs.chunks(4).zip(outs.chunks_mut(4)) {
+            let f = |i: usize| -> [&[f64]; 2] {
+                let g = |r: usize| rs[i].f[r].unwrap_or(&zeros[..]);
+                [g(0), g(1)]
+            };
+            let s0 = |i: usize| rs[i].s0;
+            match os {
+                [a] => run_chunk(dynamics, &cr, [s0(0)], [f(0)], [a], nn),
+                [a, b] => run_chunk(dynamics, &cr, [s0(0), s0(1)], [f(0), f(1)], [a, b], nn),
+                [a, b, c] => run_chunk(
+                    dynamics,
+                    &cr,
+                    [s0(0), s0(1), s0(2)],
+                    [f(0), f(1), f(2)],
+                    [a, b, c],
+                    nn,
+                ),
+                [a, b, c, d] => run_chunk(
+                    dynamics,
+                    &cr,
+                    [s0(0), s0(1), s0(2), s0(3)],
+                    [f(0), f(1), f(2), f(3)],
+                    [a, b, c, d],
+                    nn,
+                ),
+                _ => {}
+            }
+        }
+    }
+}
+
+/// A block's state update: $(\alpha_1, \alpha_2)$ of a $2 \times 2$ block, or $\lambda$ of a
+/// $1 \times 1$ block.
+#[derive(Debug, Clone, Copy)]
+enum Dynamics {
+    Pair(f64, f64),
+    Single(f64),
+}
+
+/// `R` runs of one block interleaved: [`Problem::run_block`] with the sink of
+/// [`Problem::sensitivity_into`] (outputs `cr`, $N$ = `nn` samples each), per run.
+fn run_chunk<const R: usize>(
+    dynamics: Dynamics,
+    cr: &[[f64; 2]],
+    s0: [[f64; 2]; R],
+    f: [[&[f64]; 2]; R],
+    outs: [&mut &mut [f64]; R],
+    nn: usize,
+) {
+    let mut s1: [f64; R] = std::array::from_fn(|i| s0[i][0]);
+    let mut s2: [f64; R] = std::array::from_fn(|i| s0[i][1]);
+    match dynamics {
+        Dynamics::Pair(al1, al2) => {
             for k in 0..nn {
-                for (i, r) in runs.iter().enumerate() {
+                for i in 0..R {
                     let (a, c) = (s1[i], s2[i]);
                     for (o, cc) in cr.iter().enumerate() {
                         outs[i][o * nn + k] = -(cc[0] * a + cc[1] * c);
                     }
-                    s1[i] = a + c + forcing(r.f[0], k);
-                    s2[i] = -al2 * a + (1.0 - al1) * c + forcing(r.f[1], k);
+                    s1[i] = a + c + f[i][0][k];
+                    s2[i] = -al2 * a + (1.0 - al1) * c + f[i][1][k];
                 }
             }
-        } else {
-            let lam = th[b.off];
+        }
+        Dynamics::Single(lam) => {
             for k in 0..nn {
-                for (i, r) in runs.iter().enumerate() {
+                for i in 0..R {
                     let a = s1[i];
                     for (o, cc) in cr.iter().enumerate() {
                         outs[i][o * nn + k] = -(cc[0] * a + cc[1] * 0.0);
                     }
-                    s1[i] = lam * a + forcing(r.f[0], k);
+                    s1[i] = lam * a + f[i][0][k];
                 }
             }
         }
