@@ -633,7 +633,7 @@ pub(crate) fn max_root(p: &[f64]) -> f64 {
 
 /// Column `col` of `jac` $\leftarrow \pm x(t - k)$, $\pm 0$ before the start (`negate` for the
 /// minus sign).
-fn fill_shifted(jac: &mut Mat<f64>, col: usize, x: &[f64], k: usize, negate: bool) {
+pub(crate) fn fill_shifted(jac: &mut Mat<f64>, col: usize, x: &[f64], k: usize, negate: bool) {
     let c = jac.col_as_slice_mut(col);
     let (head, tail) = c.split_at_mut(k.min(c.len()));
     if negate {
