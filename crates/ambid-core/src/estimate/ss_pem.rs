@@ -770,8 +770,7 @@ impl Problem<'_> {
         }
     }
     /// State trajectory of block `b` (`dim` rows of length N) driven by $G_b w$ from its
-    /// initial state (the oracle of [`Problem::states_all`] in the tests).
-    #[cfg(test)]
+    /// initial state.
     fn states(&self, th: &[f64], b: &Block) -> Vec<Vec<f64>> {
         let nn = self.len();
         let lay = self.lay;
@@ -793,53 +792,6 @@ impl Problem<'_> {
                 x2[k] = s2;
             }
         });
-        x
-    }
-    /// [`Problem::states`] of every block, the blocks' recursions interleaved sample by sample
-    /// (each alone is bound by the latency of its update); every state is computed by the same
-    /// operations in the same order as `states` computes it.
-    fn states_all(&self, th: &[f64]) -> Vec<Vec<Vec<f64>>> {
-        let nn = self.len();
-        let lay = self.lay;
-        // the forcing G_b w of each block and state row, as `states` sums it
-        let drives: Vec<Vec<Vec<f64>>> = lay
-            .blocks
-            .iter()
-            .map(|b| {
-                (0..b.dim)
-                    .map(|r| {
-                        let g: Vec<f64> = (0..lay.q).map(|c| th[lay.g_idx(b, r, c)]).collect();
-                        (0..nn)
-                            .map(|k| g.iter().zip(self.w).map(|(g, w)| g * w[k]).sum::<f64>())
-                            .collect()
-                    })
-                    .collect()
-            })
-            .collect();
-        let mut x: Vec<Vec<Vec<f64>>> = lay
-            .blocks
-            .iter()
-            .map(|b| vec![vec![0.0; nn]; b.dim])
-            .collect();
-        let mut st: Vec<[f64; 2]> = lay
-            .blocks
-            .iter()
-            .map(|b| [lay.x0_val(th, b.state), lay.x0_val(th, b.state + b.dim - 1)])
-            .collect();
-        for k in 0..nn {
-            for (((b, xb), d), s) in lay.blocks.iter().zip(&mut x).zip(&drives).zip(&mut st) {
-                let (s1, s2) = (s[0], s[1]);
-                if let ([x1, x2], [d1, d2]) = (&mut xb[..], &d[..]) {
-                    x1[k] = s1;
-                    x2[k] = s2;
-                    let (al1, al2) = (th[b.off], th[b.off + 1]);
-                    *s = [s1 + s2 + d1[k], -al2 * s1 + (1.0 - al1) * s2 + d2[k]];
-                } else if let ([x1], [d1]) = (&mut xb[..], &d[..]) {
-                    x1[k] = s1;
-                    s[0] = th[b.off] * s1 + d1[k];
-                }
-            }
-        }
         x
     }
     /// Runs block `b`'s dynamics from `s0` with the forcing `f(r, k)` and writes
@@ -1005,8 +957,8 @@ impl LeastSquaresProblem for Problem<'_> {
         }
         let nn = self.len();
         let mut r: Vec<f64> = self.y.iter().flat_map(|v| v.iter().copied()).collect();
-        let xs = self.states_all(th);
-        for (b, x) in lay.blocks.iter().zip(&xs) {
+        for b in &lay.blocks {
+            let x = self.states(th, b);
             for o in 0..lay.l {
                 for (rr, xr) in x.iter().enumerate() {
                     let cv = lay.c_val(th, b, o, rr);
@@ -1038,8 +990,8 @@ impl LeastSquaresProblem for Problem<'_> {
         }
         let nn = self.len();
         let mut jac = Mat::<f64>::zeros(nn * lay.l, lay.n_theta);
-        let xs = self.states_all(th);
-        for (b, x) in lay.blocks.iter().zip(&xs) {
+        for b in &lay.blocks {
+            let x = self.states(th, b);
             let neg: Vec<Vec<f64>> = if b.dim == 2 {
                 x.iter().map(|v| v.iter().map(|a| -a).collect()).collect()
             } else {
@@ -1370,42 +1322,6 @@ mod tests {
         finite.then_some(jac)
     }
 
-    /// The residuals as computed before `states_all` (one `states` per block): an oracle of
-    /// `interleaved_jacobian_is_bit_identical`.
-    fn old_residuals(this: &Problem<'_>, th: &[f64]) -> Option<Vec<f64>> {
-        let s = this;
-        let lay = s.lay;
-        if !lay.admissible(th) {
-            return None;
-        }
-        let nn = s.len();
-        let mut r: Vec<f64> = s.y.iter().flat_map(|v| v.iter().copied()).collect();
-        for b in &lay.blocks {
-            let x = s.states(th, b);
-            for o in 0..lay.l {
-                for (rr, xr) in x.iter().enumerate() {
-                    let cv = lay.c_val(th, b, o, rr);
-                    if cv != 0.0 {
-                        for (res, xv) in r[o * nn..(o + 1) * nn].iter_mut().zip(xr) {
-                            *res -= cv * xv;
-                        }
-                    }
-                }
-            }
-        }
-        for o in 0..lay.l {
-            for ch in 0..lay.m {
-                let dv = lay.d_val(th, o, ch);
-                if dv != 0.0 {
-                    for (res, uv) in r[o * nn..(o + 1) * nn].iter_mut().zip(&s.w[ch]) {
-                        *res -= dv * uv;
-                    }
-                }
-            }
-        }
-        r.iter().all(|v| v.is_finite()).then_some(r)
-    }
-
     #[test]
     fn interleaved_jacobian_is_bit_identical() {
         let mut rng = ChaCha8Rng::seed_from_u64(12);
@@ -1452,11 +1368,6 @@ mod tests {
                 w: &w,
                 y: &y,
             };
-            let bits = |v: &[f64]| -> Vec<u64> { v.iter().map(|x| x.to_bits()).collect() };
-            assert_eq!(
-                bits(&p.residuals(&th).unwrap()),
-                bits(&old_residuals(&p, &th).unwrap())
-            );
             let new = p.jacobian(&th).unwrap();
             let old = old_jacobian(&p, &th).unwrap();
             assert_eq!((new.nrows(), new.ncols()), (old.nrows(), old.ncols()));

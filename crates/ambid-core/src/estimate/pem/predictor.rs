@@ -189,6 +189,9 @@ fn recursion_group<const M: usize>(a: [&[f64]; M], y: [&mut [f64]; M], t0: usize
     fixed!(1 2 3 4 5 6 7 8);
 }
 
+/// [`recursion_group`] for the order `N`: the last `N` outputs of each signal in registers.
+// `t` indexes all `M` signals at once: no single iterator replaces it
+#[allow(clippy::needless_range_loop)]
 fn recursion_group_fixed<const N: usize, const M: usize>(
     a: [&[f64]; M],
     y: [&mut [f64]; M],
