@@ -648,10 +648,10 @@ pub(crate) fn noise_order(n: usize, o: &Orders) -> usize {
 /// $u$ delayed by $n_k - 1$; then $A(q) = \det(I - q^{-1}\mathbf A)$, $B(q)$ its transfer
 /// function's numerator (scaled back) and $C(q) = \det(I - q^{-1}(\mathbf A - K\mathbf C))$,
 /// the predictor's poles, moved radially inside $|z| = 0.95$ if a root lies beyond 0.99
-/// ([`contract`]) and then refined as the moving-average model of the equation error
-/// $A y - B u$ ([`refine_noise`]: the subspace Kalman gain of closed-loop data can be far from
-/// the ARMAX optimum's $C$). $A$ is kept as estimated (an unstable plant in closed loop stays
-/// unstable).
+/// ([`contract`]). $A$ is kept as estimated (an unstable plant in closed loop stays unstable).
+/// The ARMAX iteration starts from this $C$ by variable projection ($A$, $B$ re-estimated for
+/// it), so the subspace Kalman gain of closed-loop data, which can be far from the ARMAX
+/// optimum's $C$, needs no separate refinement.
 ///
 /// Why: the Hannan–Rissanen start takes the innovations from a long ARX model of order
 /// $\max(20, 3(n_a + n_c))$, far too short when the innovations filter $1/C$ has poles at
@@ -659,13 +659,7 @@ pub(crate) fn noise_order(n: usize, o: &Orders) -> usize {
 /// of $u \to y$ crawled 60–100 iterations along a curved valley of the polynomial coefficients
 /// before its quadratic convergence set in. `None` when the orders differ, $n_k = 0$, the
 /// subspace step fails or gives no Kalman gain.
-pub(crate) fn subspace_armax_start(
-    y: &[f64],
-    u: &[f64],
-    o: &Orders,
-    ts: f64,
-    lm: &super::lm::LmOptions,
-) -> Option<Polys> {
+pub(crate) fn subspace_armax_start(y: &[f64], u: &[f64], o: &Orders, ts: f64) -> Option<Polys> {
     if o.nk == 0 || o.na == 0 || o.nb != o.na || o.nc != o.na || o.nd != 0 || o.nf != 0 {
         return None;
     }
@@ -684,17 +678,10 @@ pub(crate) fn subspace_armax_start(
     if c.len() != n + 1 || c.iter().any(|v| !v.is_finite()) {
         return None;
     }
-    // C: the moving-average model of the equation error w = A y − B u, refined from the
-    // predictor's poles (the subspace Kalman gain of closed-loop data can be far off)
-    let b = with_delay(o.nk, &b);
-    let ay = filter(&a, &[1.0], y);
-    let bu = filter(&b, &[1.0], u);
-    let w: Vec<f64> = ay.iter().zip(&bu).map(|(p, q)| p - q).collect();
-    let (c, _) = refine_noise(&w, contract(c), vec![1.0], lm);
     Some(Polys {
         a,
-        b,
-        c,
+        b: with_delay(o.nk, &b),
+        c: contract(c),
         d: vec![1.0],
         f: vec![1.0],
     })

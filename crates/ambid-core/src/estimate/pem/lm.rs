@@ -136,6 +136,10 @@ impl StopReason {
 /// Accepted steps over which [`StopReason::Stagnation`] measures the progress.
 pub const STAGNATION_WINDOW: usize = 5;
 
+/// Largest multiple of an accepted Gauss–Newton step the extrapolation moves to
+/// ([`LmOptions::with_extrapolation`]).
+const EXTRAPOLATION_MAX: f64 = 16.0;
+
 /// [`StopReason::Stagnation`] applies only when the Gauss–Newton step from the current point is
 /// shorter than this many standard errors (the optimum is known to lie that close).
 pub const STAGNATION_SIGMA: f64 = 0.5;
@@ -149,6 +153,7 @@ pub struct LmOptions {
     gradient_tol: f64,
     significance_tol: f64,
     initial_radius: f64,
+    extrapolate: bool,
 }
 
 impl Default for LmOptions {
@@ -162,6 +167,7 @@ impl Default for LmOptions {
             gradient_tol: 1e-12,
             significance_tol: 0.0,
             initial_radius: 100.0,
+            extrapolate: false,
         }
     }
 }
@@ -267,6 +273,29 @@ impl LmOptions {
         }
         self.initial_radius = factor;
         Ok(self)
+    }
+    /// Extrapolation along accepted Gauss–Newton steps: when a full (undamped) step $p$ lowered
+    /// the loss by more than the linear model predicted, the loss along it is modelled as the
+    /// parabola $f(\alpha) = f_0 - 2\alpha g + h\alpha^2$ through $f_0$, the model's slope
+    /// ($g = \lVert J p\rVert^2$) and the actual $f(1)$, and one more point is evaluated at its
+    /// minimum $\alpha^\ast = g/h$ (at most 16; 16 if $h \le 0$), kept if lower. For
+    /// large-residual problems whose Gauss–Newton iteration converges only linearly because
+    /// $J^\top J$ overestimates the curvature (every step too short): the variable-projection
+    /// ARMAX criterion of a misspecified closed-loop model needed 100 iterations without it and
+    /// 37 with it on random rig 14's record. Off by default.
+    ///
+    /// # Example
+    /// ```
+    /// use ambid_core::estimate::pem::lm::LmOptions;
+    /// assert!(LmOptions::default().with_extrapolation(true).extrapolation());
+    /// ```
+    pub fn with_extrapolation(mut self, on: bool) -> Self {
+        self.extrapolate = on;
+        self
+    }
+    /// Whether [`with_extrapolation`](Self::with_extrapolation) is on.
+    pub fn extrapolation(&self) -> bool {
+        self.extrapolate
     }
     /// Maximum number of accepted steps.
     pub fn max_iterations(&self) -> usize {
@@ -669,6 +698,7 @@ pub fn minimize<P: LeastSquaresProblem + ?Sized>(
                 delta = delta.min(pnorm);
             }
             let xt: Vec<f64> = x.iter().zip(&step).map(|(a, b)| a + b).collect();
+            let fnorm_prev = fnorm;
             report.evaluations += 1;
             let trial = finite_residuals(problem, &xt, m);
             let admissible = trial.is_some();
@@ -712,6 +742,36 @@ pub fn minimize<P: LeastSquaresProblem + ?Sized>(
                     r = rn;
                 }
                 fnorm = fnorm1;
+                if opts.extrapolate && par == 0.0 && ratio > 1.0 && report.evaluations < max_evals {
+                    // the Gauss–Newton step fell short of the decrease it predicted: along the
+                    // step the loss is f(α) ≈ f₀ − 2αg + hα² with g = ‖J p‖² (the linear model's
+                    // slope) and h from the actual f(1); one more evaluation at its minimum α*
+                    let f0 = fnorm_prev * fnorm_prev;
+                    let g = (temp1 * fnorm_prev).powi(2);
+                    let h = fnorm * fnorm - f0 + 2.0 * g;
+                    let alpha = if h > 0.0 {
+                        (g / h).min(EXTRAPOLATION_MAX)
+                    } else {
+                        EXTRAPOLATION_MAX
+                    };
+                    if alpha > 1.0 {
+                        let xe: Vec<f64> = x
+                            .iter()
+                            .zip(&step)
+                            .map(|(a, b)| a + (alpha - 1.0) * b)
+                            .collect();
+                        report.evaluations += 1;
+                        if let Some(re) = finite_residuals(problem, &xe, m) {
+                            let fe = norm(&re);
+                            if fe < fnorm {
+                                fnorm = fe;
+                                x = xe;
+                                r = re;
+                                delta = delta.max(2.0 * alpha * pnorm);
+                            }
+                        }
+                    }
+                }
                 report.iterations += 1;
                 costs.push(0.5 * fnorm * fnorm);
                 first = false;
@@ -789,6 +849,49 @@ fn gauss_newton_leaves<P: LeastSquaresProblem + ?Sized>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Dennis & Schnabel's large-residual example: $r = [x + 1,\; \lambda x^2 + x - 1]$, minimum
+    /// at $x = 0$ with $r = [1, -1]$; the true curvature $2 - 2\lambda$ is below
+    /// $J^\top J = 2$, so Gauss–Newton converges only linearly (rate $\lambda$).
+    struct LargeResidual(f64);
+    impl LeastSquaresProblem for LargeResidual {
+        fn residuals(&mut self, x: &[f64]) -> Option<Vec<f64>> {
+            Some(vec![x[0] + 1.0, self.0 * x[0] * x[0] + x[0] - 1.0])
+        }
+        fn jacobian(&mut self, x: &[f64]) -> Option<Mat<f64>> {
+            let lam = self.0;
+            Some(Mat::from_fn(2, 1, |i, _| {
+                if i == 0 {
+                    1.0
+                } else {
+                    2.0 * lam * x[0] + 1.0
+                }
+            }))
+        }
+    }
+
+    #[test]
+    fn extrapolation_shortens_a_linearly_converging_gauss_newton_iteration() {
+        let opts = LmOptions::default();
+        let (x0, r0) = minimize(&mut LargeResidual(0.5), &[0.2], &opts).unwrap();
+        let (x1, r1) = minimize(
+            &mut LargeResidual(0.5),
+            &[0.2],
+            &opts.with_extrapolation(true),
+        )
+        .unwrap();
+        // both at the analytic minimum x = 0
+        assert!(x0[0].abs() < 1e-6 && x1[0].abs() < 1e-6, "{x0:?} {x1:?}");
+        assert!(r0.reason.converged() && r1.reason.converged());
+        // the parabola along the step finds the 1-D minimum of this quartic-in-x loss
+        // (nearly) at once; without it the error halves per step
+        assert!(
+            r1.iterations * 3 <= r0.iterations,
+            "with extrapolation {} iterations, without {}",
+            r1.iterations,
+            r0.iterations
+        );
+    }
 
     /// Linear least squares: one Gauss–Newton step is exact.
     struct Linear {
