@@ -167,13 +167,17 @@
 //!   moving after 400 iterations (estimation fit 95.78 %; the optimum, reached from the
 //!   state-space start in 4 iterations, 95.89 %).
 //!
-//! # ARMAX by variable projection
+//! # ARMAX and Box–Jenkins by variable projection
 //! For a fixed $C$ the ARMAX prediction error $\varepsilon = \frac AC y - \frac BC u$ is linear
 //! in $A$ and $B$, so the ARMAX iteration first minimises over $C$ alone, $A$ and $B$ eliminated
 //! by least squares at every $C$ (Golub–Pereyra variable projection with Kaufman's Jacobian,
 //! and an extrapolated step [`LmOptions::with_extrapolation`]), then runs the joint iteration
 //! from that point with the rest of the budget; the joint stopping rules decide convergence
-//! (at a reduced optimum they hold at once) and the joint Jacobian gives the covariance. On the
+//! (at a reduced optimum they hold at once) and the joint Jacobian gives the covariance. The
+//! Box–Jenkins error $\varepsilon = \frac DC y - B\,\frac{D}{CF} u$ is linear in $B$, so BJ
+//! iterates $C, D, F$ the same way (both probes and the continuation). Over random rigs 1–20
+//! (BJ(4,2,2,4,1) of $r \to y$) it converged on all 20, where the joint iteration had stopped at
+//! the limit on 2, with validation fits within 0.03 point of the joint iteration's. On the
 //! twin's seed record the optimum of ARMAX(4,4,4,1) of $u \to y$ puts a pair of $C$ zeros
 //! next to the bending mode's pair of $A$ poles (760 Hz, $|z| = 0.992$ and $0.996$): the joint
 //! iteration followed that near cancellation along a curved valley for 126 iterations (100 of
@@ -1235,10 +1239,12 @@ fn run(
     let accuracy = residual_accuracy(&opts.lm, n, o.n_params());
     let (theta, lm_main, noise_lm, cov) = match focus {
         Focus::Prediction => {
-            // ARMAX: variable projection over C first (module varpro), then the joint iteration
-            let projected = (structure == Structure::Armax)
-                .then(|| varpro::armax(y, u, o, &start, &opts.lm))
-                .flatten();
+            // ARMAX, BJ: variable projection first (module varpro), then the joint iteration
+            let projected = match structure {
+                Structure::Armax => varpro::armax(y, u, o, &start, &opts.lm),
+                Structure::Bj => varpro::bj(y, u, o, &start, &opts.lm),
+                _ => None,
+            };
             let (theta1, lm_opts, pre) = match projected {
                 Some((p, rep)) => {
                     let rest = opts
