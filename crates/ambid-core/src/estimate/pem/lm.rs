@@ -527,6 +527,14 @@ fn lm_parameter(rt: &Mat<f64>, z: &[f64], delta: f64, par0: f64) -> (Vec<f64>, f
             par = paru;
         }
     }
+    // a (nearly) rank-deficient R̃ can drive the damping to underflow and the step to overflow:
+    // then the steepest-descent step to the trust-region boundary (damping at its upper bound)
+    if !s.iter().all(|v| v.is_finite()) && gnorm > 0.0 && gnorm.is_finite() {
+        return (
+            g.iter().map(|v| -v * delta / gnorm).collect(),
+            gnorm / delta,
+        );
+    }
     (s, par)
 }
 
@@ -868,6 +876,42 @@ mod tests {
                 }
             }))
         }
+    }
+
+    /// Two exactly opposite Jacobian columns at the start (as C = D = 1 gives for Box–Jenkins):
+    /// the damped step must stay finite and the iteration reach the minimum.
+    struct Opposite;
+    impl LeastSquaresProblem for Opposite {
+        fn residuals(&mut self, x: &[f64]) -> Option<Vec<f64>> {
+            Some(
+                (0..50)
+                    .map(|i| {
+                        let s = (i as f64 * 0.1).sin();
+                        s * (1.0 + x[0] - x[1]) + x[2] - 0.3 + 0.01 * x[0] * x[0]
+                    })
+                    .collect(),
+            )
+        }
+        fn jacobian(&mut self, x: &[f64]) -> Option<Mat<f64>> {
+            Some(Mat::from_fn(50, 3, |i, j| {
+                let s = (i as f64 * 0.1).sin();
+                match j {
+                    0 => s + 0.02 * x[0],
+                    1 => -s,
+                    _ => 1.0,
+                }
+            }))
+        }
+    }
+
+    #[test]
+    fn rank_deficient_start_gives_a_finite_step_and_converges() {
+        let (x, rep) = minimize(&mut Opposite, &[0.0, 0.0, 0.0], &LmOptions::default()).unwrap();
+        assert_eq!(rep.rejected_inadmissible, 0, "{rep:?}");
+        assert!(rep.reason.converged(), "{rep:?}");
+        // the minimum: 1 + x0 − x1 + 0.01 x0² = 0 (the sine term vanishes) and x2 = 0.3
+        let r = Opposite.residuals(&x).unwrap();
+        assert!(r.iter().all(|v| v.abs() < 1e-8), "{x:?}: {r:?}");
     }
 
     #[test]
