@@ -273,11 +273,16 @@ impl<'a> ArmaxProjection<'a> {
             super::predictor::gradient(&p, &self.o, self.y, self.u, super::Focus::Prediction)?;
         let ev = self.cache.as_ref()?;
         let nb = self.o.nb;
-        let k = x.len();
-        let n = ev.eps.len();
-        let mut jac = Mat::<f64>::zeros(n, k);
+        Some(self.projected(ev, x.len(), |i| full.col(nb + i).iter().copied().collect()))
+    }
+
+    /// The Kaufman Jacobian: `k` columns of $\partial\varepsilon$ at fixed $\theta_{AB}$, each
+    /// projected onto the complement of $\Phi_C$'s range by one normal-equations step (the
+    /// Jacobian only steers the step; the refined trial residuals decide its acceptance).
+    fn projected(&self, ev: &Evaluation, k: usize, column: impl Fn(usize) -> Vec<f64>) -> Mat<f64> {
+        let mut jac = Mat::<f64>::zeros(ev.eps.len(), k);
         for i in 0..k {
-            let mut col: Vec<f64> = full.col(nb + i).iter().copied().collect();
+            let mut col = column(i);
             let rhs: Vec<f64> = self
                 .phi_t(&ev.yc, &ev.uc, &col)
                 .iter()
@@ -289,7 +294,7 @@ impl<'a> ArmaxProjection<'a> {
                 *dst = *v;
             }
         }
-        Some(jac)
+        jac
     }
 
     fn cached(&mut self, c: &[f64]) -> Option<&Evaluation> {
@@ -337,25 +342,11 @@ impl LeastSquaresProblem for ArmaxProjection<'_> {
         let n = ev.eps.len();
         // ∂ε/∂c_i = −(1/C) ε(t−i), then projected onto the complement of Φ_C's range
         let et = filter(&[1.0], &cp, &ev.eps);
-        let mut jac = Mat::<f64>::zeros(n, nc);
-        for i in 0..nc {
-            let mut col: Vec<f64> = (0..n)
+        Some(self.projected(ev, nc, |i| {
+            (0..n)
                 .map(|t| if t > i { -et[t - i - 1] } else { 0.0 })
-                .collect();
-            // one normal-equations projection: the Jacobian only steers the step, the trial
-            // residuals (refined) decide its acceptance
-            let rhs: Vec<f64> = self
-                .phi_t(&ev.yc, &ev.uc, &col)
-                .iter()
-                .map(|v| -v)
-                .collect();
-            let d = ev.gram.solve(&rhs);
-            self.add_phi(&ev.yc, &ev.uc, &d, &mut col);
-            for (dst, v) in jac.col_mut(i).iter_mut().zip(&col) {
-                *dst = *v;
-            }
-        }
-        Some(jac)
+                .collect()
+        }))
     }
 }
 
