@@ -159,7 +159,7 @@
 //! assert!(p.iter().all(|z| (z.norm() - 0.95).abs() < 1e-8 && (z.im.abs() - im).abs() < 1e-8));
 //! ```
 
-mod hankel;
+pub(crate) mod hankel;
 
 use super::qr_stream::StreamingQr;
 use super::{channel_rms, check_samples};

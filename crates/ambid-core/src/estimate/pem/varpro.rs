@@ -30,10 +30,12 @@ use super::Orders;
 use faer::Mat;
 
 /// The reduced ARMAX criterion in $c = [c_1..c_{n_c}]$ (Box–Jenkins: in $[c, d, f]$).
-pub(crate) struct ArmaxProjection<'a> {
+pub(crate) struct Projection<'a> {
     y: &'a [f64],
     u: &'a [f64],
     o: Orders,
+    /// The regression columns of $\Phi_C$ ([`columns`]).
+    cols: Vec<(bool, usize, f64)>,
     /// The last evaluation, reused by the Jacobian at the same $c$.
     cache: Option<Evaluation>,
 }
@@ -54,18 +56,7 @@ fn dot_lagged(a: &[f64], la: usize, b: &[f64], lb: usize) -> f64 {
     if l >= n {
         return 0.0;
     }
-    let (xa, xb) = (&a[l - la..n - la], &b[l - lb..n - lb]);
-    // four partial sums: independent chains the compiler can keep in flight
-    let mut acc = [0.0f64; 4];
-    let (ca, cb) = (xa.chunks_exact(4), xb.chunks_exact(4));
-    let (ra, rb) = (ca.remainder(), cb.remainder());
-    for (p, q) in ca.zip(cb) {
-        for k in 0..4 {
-            acc[k] += p[k] * q[k];
-        }
-    }
-    let tail: f64 = ra.iter().zip(rb).map(|(p, q)| p * q).sum();
-    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
+    crate::estimate::subspace::hankel::dot(&a[l - la..n - la], &b[l - lb..n - lb])
 }
 
 /// The regression columns of $\Phi_C$: lag and sign on $y_C$ (first $n_a$) or $u_C$.
@@ -135,12 +126,13 @@ impl Gram {
 /// iteration runs alone.
 const RANK_TOL: f64 = 1e-7;
 
-impl<'a> ArmaxProjection<'a> {
+impl<'a> Projection<'a> {
     pub(crate) fn new(y: &'a [f64], u: &'a [f64], o: Orders) -> Self {
         Self {
             y,
             u,
             o,
+            cols: columns(&o),
             cache: None,
         }
     }
@@ -166,7 +158,7 @@ impl<'a> ArmaxProjection<'a> {
 
     /// $\Phi_C^\top x$ for a signal $x$.
     fn phi_t(&self, yc: &[f64], uc: &[f64], x: &[f64]) -> Vec<f64> {
-        columns(&self.o)
+        self.cols
             .iter()
             .map(|&(is_y, lag, sign)| sign * dot_lagged(if is_y { yc } else { uc }, lag, x, 0))
             .collect()
@@ -174,7 +166,7 @@ impl<'a> ArmaxProjection<'a> {
 
     /// $x \leftarrow x + \Phi_C\,\theta$.
     fn add_phi(&self, yc: &[f64], uc: &[f64], theta: &[f64], x: &mut [f64]) {
-        for (&(is_y, lag, sign), th) in columns(&self.o).iter().zip(theta) {
+        for (&(is_y, lag, sign), th) in self.cols.iter().zip(theta) {
             let src = if is_y { yc } else { uc };
             let w = sign * th;
             if lag < x.len() {
@@ -220,7 +212,7 @@ impl<'a> ArmaxProjection<'a> {
             let cf = super::predictor::mul(&p.c, &p.f);
             (filter(&p.d, &p.c, self.y), filter(&p.d, &cf, self.u))
         };
-        let cols = columns(&self.o);
+        let cols = &self.cols;
         let p = cols.len();
         // Σ_t a(t−l_i) b(t−l_j) depends on l_i − l_j except for the last min(l_i, l_j) samples:
         // one full lagged product per distinct lag difference, less those few end terms
@@ -326,7 +318,7 @@ impl<'a> ArmaxProjection<'a> {
     }
 }
 
-impl LeastSquaresProblem for ArmaxProjection<'_> {
+impl LeastSquaresProblem for Projection<'_> {
     fn residuals(&mut self, c: &[f64]) -> Option<Vec<f64>> {
         self.cached(c).map(|e| e.eps.clone())
     }
@@ -385,7 +377,7 @@ pub(crate) fn armax(
     if o.nc == 0 || o.nd != 0 || o.nf != 0 || start.c.len() != o.nc + 1 {
         return None;
     }
-    let mut problem = ArmaxProjection::new(y, u, *o);
+    let mut problem = Projection::new(y, u, *o);
     let c0 = start.c[1..].to_vec();
     let (c, rep) = lm::minimize(&mut problem, &c0, &phase_options(opts)?).ok()?;
     let p = problem.polys(&c)?;
@@ -404,7 +396,7 @@ pub(crate) fn bj(
     if o.na != 0 || o.nf == 0 {
         return None;
     }
-    let mut problem = ArmaxProjection::new(y, u, *o);
+    let mut problem = Projection::new(y, u, *o);
     let mut x0 = start.c[1..].to_vec();
     x0.extend_from_slice(&start.d[1..]);
     x0.extend_from_slice(&start.f[1..]);
@@ -422,7 +414,7 @@ pub(crate) fn projected_loss(y: &[f64], u: &[f64], o: &Orders, start: &Polys) ->
     if o.nc == 0 || start.c.len() != o.nc + 1 {
         return None;
     }
-    let ev = ArmaxProjection::new(y, u, *o).evaluate(&start.c[1..])?;
+    let ev = Projection::new(y, u, *o).evaluate(&start.c[1..])?;
     Some(ev.eps.iter().map(|v| v * v).sum())
 }
 
@@ -434,6 +426,12 @@ mod tests {
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
     use rand_distr::StandardNormal;
+
+    /// $\lVert a - b\rVert / \lVert b\rVert$.
+    fn relative_difference(a: &[f64], b: &[f64]) -> f64 {
+        let diff: f64 = a.iter().zip(b).map(|(p, q)| (p - q).powi(2)).sum();
+        (diff / b.iter().map(|v| v * v).sum::<f64>()).sqrt()
+    }
 
     /// ARMAX(2, 2, 2, 1) data: A = 1 − 1.5q⁻¹ + 0.7q⁻², B = q⁻¹ + 0.5q⁻², C = 1 − 0.6q⁻¹ + 0.2q⁻².
     fn data(n: usize, seed: u64) -> (Vec<f64>, Vec<f64>) {
@@ -451,20 +449,14 @@ mod tests {
     fn projected_errors_are_the_joint_predictors_at_the_least_squares_a_b() {
         let (y, u) = data(3000, 1);
         let o = Orders::armax(2, 2, 2, 1);
-        let mut pr = ArmaxProjection::new(&y, &u, o);
+        let mut pr = Projection::new(&y, &u, o);
         for c in [[-0.6, 0.2], [0.3, -0.1], [-1.2, 0.5]] {
             let p = pr.polys(&c).unwrap();
             let eps = pr.residuals(&c).unwrap();
             // the joint predictor (double-double) at (A, B, C) gives the same errors
             let joint = errors(&p, &y, &u, Focus::Prediction, Accuracy::Exact).unwrap();
-            let scale = joint.iter().map(|v| v * v).sum::<f64>().sqrt();
-            let diff = eps
-                .iter()
-                .zip(&joint)
-                .map(|(a, b)| (a - b).powi(2))
-                .sum::<f64>()
-                .sqrt();
-            assert!(diff < 1e-10 * scale, "c = {c:?}: {diff:e} vs {scale:e}");
+            let rel = relative_difference(&eps, &joint);
+            assert!(rel < 1e-10, "c = {c:?}: relative difference {rel:e}");
             // and (A, B) is the least-squares optimum: an explicit regression solved by QR
             let cp = [1.0, c[0], c[1]];
             let (yc, uc) = (filter(&[1.0], &cp, &y), filter(&[1.0], &cp, &u));
@@ -493,11 +485,11 @@ mod tests {
         // orthogonal to ε); checked against central differences of the loss
         let (y, u) = data(2000, 2);
         let o = Orders::armax(2, 2, 2, 1);
-        let mut pr = ArmaxProjection::new(&y, &u, o);
+        let mut pr = Projection::new(&y, &u, o);
         let c = [-0.4, 0.1];
         let eps = pr.residuals(&c).unwrap();
         let jac = pr.jacobian(&c).unwrap();
-        let loss = |pr: &mut ArmaxProjection, c: &[f64]| {
+        let loss = |pr: &mut Projection, c: &[f64]| {
             0.5 * pr.residuals(c).unwrap().iter().map(|v| v * v).sum::<f64>()
         };
         for i in 0..2 {
@@ -578,7 +570,7 @@ mod tests {
         let h = filter(&[1.0, -0.5], &[1.0, -0.8], &e);
         let y: Vec<f64> = g.iter().zip(&h).map(|(a, b)| a + b).collect();
         let o = Orders::bj(2, 1, 1, 2, 1);
-        let mut pr = ArmaxProjection::new(&y, &u, o);
+        let mut pr = Projection::new(&y, &u, o);
         let x = [-0.3, -0.6, -1.4, 0.6];
         let p = pr.polys(&x).unwrap();
         assert_eq!(
@@ -588,14 +580,8 @@ mod tests {
         assert_eq!(p.f, vec![1.0, -1.4, 0.6]);
         let eps = pr.residuals(&x).unwrap();
         let joint = errors(&p, &y, &u, Focus::Prediction, Accuracy::Exact).unwrap();
-        let scale = joint.iter().map(|v| v * v).sum::<f64>().sqrt();
-        let diff = eps
-            .iter()
-            .zip(&joint)
-            .map(|(a, b)| (a - b).powi(2))
-            .sum::<f64>()
-            .sqrt();
-        assert!(diff < 1e-10 * scale, "{diff:e} vs {scale:e}");
+        let rel = relative_difference(&eps, &joint);
+        assert!(rel < 1e-10, "relative difference {rel:e}");
         // from a rough start, the projected optimum is the joint one
         let start = Polys {
             a: vec![1.0],

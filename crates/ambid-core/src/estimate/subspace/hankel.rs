@@ -245,7 +245,7 @@ fn lagged_sums(a: &[f64], b: &[f64], j: usize, w: usize) -> Vec<f64> {
 }
 
 /// Inner product with four partial sums (vectorisable).
-fn dot(a: &[f64], b: &[f64]) -> f64 {
+pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
     let mut s = [0.0; 4];
     let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
     let (ra, rb) = (ca.remainder(), cb.remainder());
