@@ -636,3 +636,42 @@ fn loop_auto_detects_the_closed_loop_record() {
         assert_eq!(j["meta"]["loop"], want, "input {input}");
     }
 }
+
+/// ARMAX on real open-loop data (half/half splits) must not settle in a worse local minimum than
+/// the joint iteration did before variable projection (commit 779b697: ball-and-beam
+/// ARMAX(4,4,4,1) loss 4.6137e-6, cascaded tanks ARMAX(3,3,3,1) 2.1784e-3), and flutter
+/// ARMAX(2,2,2,1) must converge within the default budget. Iterating only the start with the
+/// smaller projected loss failed all three (4.6761e-6, 2.2077e-3, iteration limit); the probe of
+/// both starts (docs/estimation.md) passes. A regression guard on measured optima, not a truth.
+#[test]
+fn armax_on_real_data_keeps_the_joint_iterations_optima_and_converges() {
+    let d = tmpdir("real-armax");
+    let m = d.join("m.json");
+    let loss = |j: &serde_json::Value| j["meta"]["loss"].as_f64().unwrap();
+    let armax = |n: &'static str| ["--structure", "armax", "--na", n, "--nb", n, "--nc", n];
+    let (e, v) = daisy(&d, "daisy-ballbeam/ballbeam.dat", 500);
+    let j = fit(&e, &v, "10", &armax("4"), &m);
+    assert!(
+        loss(&j) <= 4.6137e-6 * 1.0005,
+        "ball-and-beam ARMAX(4,4,4,1): {}",
+        loss(&j)
+    );
+    let c = bench_cols("cascaded-tanks/dataBenchmark.csv", &[0, 1, 2, 3]);
+    let (e, v) = (d.join("te.csv"), d.join("tv.csv"));
+    let rows = |u: &[f64], y: &[f64]| u.iter().copied().zip(y.iter().copied()).collect::<Vec<_>>();
+    write_uy(&e, &rows(&c[0], &c[2]));
+    write_uy(&v, &rows(&c[1], &c[3]));
+    let j = fit(&e, &v, "0.25", &armax("3"), &m);
+    assert!(
+        loss(&j) <= 2.1784e-3 * 1.0005,
+        "tanks ARMAX(3,3,3,1): {}",
+        loss(&j)
+    );
+    let (e, v) = daisy(&d, "daisy-flutter/flutter.dat", 512);
+    let j = fit(&e, &v, "1", &armax("2"), &m);
+    let stop = j["meta"]["stop"].as_str().unwrap_or_default();
+    assert!(
+        stop.starts_with("converged"),
+        "flutter ARMAX(2,2,2,1): {stop}"
+    );
+}
