@@ -180,15 +180,12 @@ pub enum CouplingArg {
 }
 
 /// Open-loop data per `--loop` (module docs of [`LoopArg`]).
-fn is_open_loop(a: &FitArgs) -> Result<bool> {
-    Ok(match a.loop_kind {
+fn is_open_loop(a: &FitArgs, has_r: bool) -> bool {
+    match a.loop_kind {
         LoopArg::Open => true,
         LoopArg::Closed => false,
-        LoopArg::Auto => {
-            let d = read_time_csv(&a.data, a.fs)?;
-            !(d.names.iter().any(|n| n == "r") && a.input != "r")
-        }
-    })
+        LoopArg::Auto => !(has_r && a.input != "r"),
+    }
 }
 
 /// Whether an estimator error is about the data's dynamics (instability, numerics), so that a
@@ -216,16 +213,23 @@ fn rms_error(fit: Option<f64>, y: &[f64], skip: usize) -> Option<f64> {
     fit.map(|f| (1.0 - f / 100.0) * sd)
 }
 
-fn read_io(
-    p: &Path,
-    fs: Option<f64>,
-    input: &str,
-    output: &str,
-) -> Result<(Vec<f64>, Vec<f64>, f64)> {
+/// One input and one output column of a time-data file, its sample time and whether it has an
+/// `r` column (a closed-loop experiment, for `--loop auto`).
+struct IoColumns {
+    u: Vec<f64>,
+    y: Vec<f64>,
+    ts: f64,
+    has_r: bool,
+}
+
+fn read_io(p: &Path, fs: Option<f64>, input: &str, output: &str) -> Result<IoColumns> {
     let d = read_time_csv(p, fs)?;
-    let u = d.column(input)?.to_vec();
-    let y = d.column(output)?.to_vec();
-    Ok((u, y, d.ts))
+    Ok(IoColumns {
+        u: d.column(input)?.to_vec(),
+        y: d.column(output)?.to_vec(),
+        ts: d.ts,
+        has_r: d.names.iter().any(|n| n == "r"),
+    })
 }
 
 /// Reads a validation record, checks its sample time against the estimation data's and removes
@@ -239,7 +243,12 @@ fn read_validation(
     mu: f64,
     my: f64,
 ) -> Result<(Vec<f64>, Vec<f64>)> {
-    let (mut u, mut y, tsv) = read_io(p, fs, input, output)?;
+    let IoColumns {
+        mut u,
+        mut y,
+        ts: tsv,
+        ..
+    } = read_io(p, fs, input, output)?;
     if ((tsv - ts) / ts).abs() > 1e-9 {
         return Err(ambid::workflow::input(anyhow::anyhow!(
             "the validation data are sampled at {} Hz, the estimation data at {} Hz",
@@ -383,7 +392,13 @@ pub fn fit(a: FitArgs) -> Result<()> {
             .into()),
         };
     }
-    let (mut u, mut y, ts) = read_io(&a.data, a.fs, &a.input, &a.output)?;
+    let IoColumns {
+        mut u,
+        mut y,
+        ts,
+        has_r,
+    } = read_io(&a.data, a.fs, &a.input, &a.output)?;
+    let open_loop = is_open_loop(&a, has_r);
     let params = match a.structure {
         StructureArg::Ss => a.order.unwrap_or(0),
         StructureArg::Fir => a.nb,
@@ -403,7 +418,6 @@ pub fn fit(a: FitArgs) -> Result<()> {
     };
     let mut problems: Vec<String> = Vec::new();
     let mut fallback = false;
-    let open_loop = is_open_loop(&a)?;
     let mut stop: Option<String> = None;
     let (fitted, iterations): (Fitted<PolyModel>, Option<usize>) = match a.structure {
         StructureArg::Fir | StructureArg::Arx => {
@@ -414,7 +428,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
             };
             (arx_fitted(&y, &u, na, a.nb, a.nk, ts)?, None)
         }
-        StructureArg::Ss => return fit_ss(&a, &u, &y, ts, mu, my),
+        StructureArg::Ss => return fit_ss(&a, &u, &y, ts, (mu, my), open_loop),
         s => {
             let orders = match s {
                 StructureArg::Armax => Orders::armax(a.na, a.nb, a.nc, a.nk),
@@ -601,7 +615,9 @@ pub fn order(a: OrderArgs) -> Result<()> {
         ))
         .into());
     }
-    let (mut u, mut y, ts) = read_io(&a.data, a.fs, &a.input, &a.output)?;
+    let IoColumns {
+        mut u, mut y, ts, ..
+    } = read_io(&a.data, a.fs, &a.input, &a.output)?;
     check_model_size(
         y.len(),
         a.na_max + a.nb_max,
@@ -665,7 +681,14 @@ pub fn order(a: OrderArgs) -> Result<()> {
 /// open-loop data, from the subspace model with its poles beyond |z| = 0.99 moved onto 0.99
 /// ([`stabilised_refine`]); if that fails too, the subspace model is written with the problem
 /// named. A model file is always written.
-fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Result<()> {
+fn fit_ss(
+    a: &FitArgs,
+    u: &[f64],
+    y: &[f64],
+    ts: f64,
+    (mu, my): (f64, f64),
+    open_loop: bool,
+) -> Result<()> {
     use ambid::fitting::{SsFitOptions, SsFocus};
     use ambid::io::model::state_space_json;
     use ambid_core::estimate::ss_pem::SsPemOptions;
@@ -688,7 +711,6 @@ fn fit_ss(a: &FitArgs, u: &[f64], y: &[f64], ts: f64, mu: f64, my: f64) -> Resul
         max_iterations: a.max_iterations,
         feedthrough: a.feedthrough,
     };
-    let open_loop = is_open_loop(a)?;
     let mut problems: Vec<String> = Vec::new();
     let mut method = if a.no_pem { "subspace" } else { "subspace+pem" };
     let fit = match ambid::fitting::identify_state_space(u, y, ts, &opts) {
