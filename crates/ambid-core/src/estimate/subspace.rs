@@ -169,6 +169,7 @@ use crate::linalg;
 use crate::lti::StateSpace;
 use faer::{Mat, MatRef, Side};
 use hankel::Layout;
+use rayon::prelude::*;
 
 /// Weighting of the oblique projection before the SVD (see the module docs).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
@@ -437,12 +438,32 @@ pub fn n4sid_detailed(
     let exact = |f: &SubspaceFit| {
         f.simulation_nmse.is_some_and(|e| e <= 1e-20) || f.fitted.loss <= 1e-20 * power
     };
-    let mut rungs = vec![identify_with_rows(y, u, opts, i0, &sy, &su)?];
-    let mut i = i0;
-    while 2 * i <= cap && !rungs.last().is_some_and(exact) {
-        i *= 2;
-        match identify_with_rows(y, u, opts, i, &sy, &su) {
-            Ok(next) => rungs.push(next),
+    // the rungs i0, 2 i0, 4 i0, … ≤ cap are independent jobs, identified side by side; the
+    // ladder then reads them in order as a sequential scan would: it stops after the first
+    // exact rung and before the first failing one past i0 (a failing i0 is the error)
+    let mut horizons = vec![i0];
+    while let Some(&i) = horizons.last().filter(|&&i| 2 * i <= cap) {
+        horizons.push(2 * i);
+    }
+    // (longest horizon first: the costliest rung starts at once, the short ones share the other
+    // thread)
+    let mut fits: Vec<Result<SubspaceFit>> = horizons
+        .par_iter()
+        .rev()
+        .map(|&i| identify_with_rows(y, u, opts, i, &sy, &su))
+        .collect();
+    fits.reverse();
+    let mut rungs: Vec<SubspaceFit> = Vec::with_capacity(fits.len());
+    for fit in fits.drain(..) {
+        match fit {
+            Ok(f) => {
+                let stop = exact(&f);
+                rungs.push(f);
+                if stop {
+                    break;
+                }
+            }
+            Err(e) if rungs.is_empty() => return Err(e),
             Err(_) => break,
         }
     }

@@ -393,14 +393,46 @@ fn full_rank(u: &Mat<f64>) -> bool {
 /// factorisation of $[J \;\, r]$ ($m \times (n+1)$), computed in row chunks
 /// ([`StreamingQr`](crate::estimate::qr_stream::StreamingQr)) so that $[J\;r]$ is never copied
 /// whole; with fewer than $n + 1$ rows the missing rows of the triangle are zero.
+///
+/// Tall problems are cut into [`triangle_parts`] contiguous row ranges, whose triangles are
+/// computed side by side and then reduced by one QR of the stacked triangles (the Gram matrix
+/// $[J\;r]^\top[J\;r]$ is the sum over the parts, so the result is the same triangle up to
+/// rounding and row signs). The cut depends on $m$ only, never on the number of threads, so an
+/// estimate is the same on any machine.
 fn triangle_of(jac: &Mat<f64>, r: &[f64]) -> Mat<f64> {
+    use rayon::prelude::*;
     let (m, n) = (jac.nrows(), jac.ncols());
+    let parts = triangle_parts(m);
+    if parts < 2 {
+        return triangle_rows(jac, r, 0, m);
+    }
+    let p = n + 1;
+    let tris: Vec<Mat<f64>> = (0..parts)
+        .into_par_iter()
+        .map(|k| triangle_rows(jac, r, k * m / parts, (k + 1) * m / parts))
+        .collect();
+    let stacked = Mat::from_fn(parts * p, p, |i, j| tris[i / p][(i % p, j)]);
+    qr_triangle(&stacked)
+}
+
+/// Row ranges of [`triangle_of`]: one per [`TRIANGLE_PART_ROWS`] rows, at most 8.
+fn triangle_parts(m: usize) -> usize {
+    (m / TRIANGLE_PART_ROWS).clamp(1, 8)
+}
+
+/// Rows per part of [`triangle_of`] (small problems stay in one part).
+const TRIANGLE_PART_ROWS: usize = 16_384;
+
+/// [`triangle_of`] for the rows `k_start..k_end` of $[J\;r]$.
+fn triangle_rows(jac: &Mat<f64>, r: &[f64], k_start: usize, k_end: usize) -> Mat<f64> {
+    let n = jac.ncols();
+    let m = k_end - k_start;
     let p = n + 1;
     let mut qr = crate::estimate::qr_stream::StreamingQr::new(p, (8 * p).max(256).min(m.max(1)));
     let c = qr.chunk_rows();
-    let mut k0 = 0;
-    while k0 < m {
-        let cc = c.min(m - k0);
+    let mut k0 = k_start;
+    while k0 < k_end {
+        let cc = c.min(k_end - k0);
         let mut w = qr.chunk_mut(cc);
         for j in 0..n {
             for (dst, src) in w
@@ -857,6 +889,44 @@ fn gauss_newton_leaves<P: LeastSquaresProblem + ?Sized>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The triangle of a tall $[J\;r]$ cut into parts equals the one of the whole (one streaming
+    /// QR) up to rounding, as Gram matrices $T^\top T$ (row signs may differ), and is upper
+    /// triangular.
+    #[test]
+    fn triangle_in_parts_matches_the_one_part_triangle() {
+        use rand::{RngExt, SeedableRng};
+        use rand_chacha::ChaCha8Rng;
+        let mut rng = ChaCha8Rng::seed_from_u64(17);
+        for &(m, n) in &[(40_000, 3), (100_003, 9), (3 * TRIANGLE_PART_ROWS + 1, 14)] {
+            assert!(triangle_parts(m) >= 2);
+            // badly scaled columns, as Jacobians of polynomial coefficients are
+            let jac = Mat::from_fn(m, n, |_, j| {
+                rng.random_range(-1.0..1.0) * 10f64.powi(j as i32 - 3)
+            });
+            let r: Vec<f64> = (0..m).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let parts = triangle_of(&jac, &r);
+            let whole = triangle_rows(&jac, &r, 0, m);
+            let gram = |t: &Mat<f64>| t.transpose() * t;
+            let (gp, gw) = (gram(&parts), gram(&whole));
+            for i in 0..=n {
+                for j in 0..=n {
+                    let scale = (gw[(i, i)] * gw[(j, j)]).sqrt();
+                    assert!(
+                        (gp[(i, j)] - gw[(i, j)]).abs() <= 1e-13 * scale,
+                        "m {m}, n {n}: Gram ({i}, {j}) {} vs {}",
+                        gp[(i, j)],
+                        gw[(i, j)]
+                    );
+                    if i > j {
+                        assert_eq!(parts[(i, j)], 0.0);
+                    }
+                }
+            }
+        }
+        assert_eq!(triangle_parts(TRIANGLE_PART_ROWS * 2 - 1), 1);
+        assert_eq!(triangle_parts(usize::MAX / 2), 8);
+    }
 
     /// Dennis & Schnabel's large-residual example: $r = [x + 1,\; \lambda x^2 + x - 1]$, minimum
     /// at $x = 0$ with $r = [1, -1]$; the true curvature $2 - 2\lambda$ is below
