@@ -275,15 +275,19 @@ fn main() {
             ),
         ];
         for (label, args) in cases {
-            if !filter.is_empty() && !label.contains(filter.as_str()) {
-                continue;
-            }
             // every repetition replaces the previous one's outputs
             let args: Vec<&str> = args
                 .iter()
                 .map(String::as_str)
                 .chain(std::iter::once("--force"))
                 .collect();
+            if !filter.is_empty() && !label.contains(filter.as_str()) {
+                // not timed, but run once: later commands read its outputs (frf.csv, plant.json)
+                if let Err(e) = run(&args) {
+                    println!("| {rig} | `{label}` (untimed, for later commands) | failed: {e} | |");
+                }
+                continue;
+            }
             let mut times = Vec::with_capacity(reps);
             let mut failure = None;
             for _ in 0..reps {
