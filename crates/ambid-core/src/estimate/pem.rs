@@ -211,6 +211,13 @@
 //! $c_1 = 0.5$: about $-0.06$ at $N = 1000$, $-0.017$ at $N = 4000$); use the prediction focus
 //! when the noise model matters.
 //!
+//! # Threads
+//! Independent parts run side by side on rayon's global pool: the two starts, the two start
+//! probes, and the row parts of each step's QR factorisation of $[J\;\varepsilon]$ (one part per
+//! 16 384 samples, at most 8, reduced by one QR of the stacked triangles). The cuts depend on the
+//! data only, so an estimate is bit for bit the same on any number of threads
+//! (`RAYON_NUM_THREADS=1` keeps it on one core).
+//!
 //! # Requirements on the problem
 //! * Open-loop data, or closed-loop data with a noise model that contains the true one
 //!   (ARMAX/BJ with the prediction focus; OE and the simulation focus are biased in closed loop).
