@@ -87,7 +87,11 @@ fn broken_page_is_flagged() {
         "<!DOCTYPE html><html><head><link rel=\"stylesheet\" href=\"missing.css\"></head><body>\
          <svg width=\"100\" height=\"50\"><path d=\"M0 0L10 10\"/></svg>\
          <svg width=\"100\" height=\"50\"></svg>\
-         <script>console.error('boom'); notDefined();</script></body></html>",
+         <script>console.error('boom'); notDefined();</script>\
+         <div id=\"wide\" style=\"width:3000px\">wide</div><p>measured Some(42) here</p>\
+         <div class=\"table-wrap\" id=\"tw\" style=\"overflow-x:auto;width:200px\"><table><tr>\
+         <td style=\"white-space:nowrap\">aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa</td>\
+         </tr></table></div></body></html>",
     )
     .expect("write page");
     match browser_check(&path).expect("browser check ran") {
@@ -99,6 +103,22 @@ fn broken_page_is_flagged() {
             // console.error and the uncaught ReferenceError, each once.
             assert_eq!(c.console_errors.len(), 2, "{:?}", c.console_errors);
             assert!(!c.external_refs.is_empty());
+            // the layout probe: the 3000-px div, the scrolling table, the debug text
+            assert!(
+                c.overflowing
+                    .iter()
+                    .any(|e| e.starts_with("div#wide ends at")),
+                "{:?}",
+                c.overflowing
+            );
+            assert!(
+                c.overflowing.iter().any(|e| e.starts_with("div#tw: table")),
+                "{:?}",
+                c.overflowing
+            );
+            assert_eq!(c.debug_text.len(), 1, "{:?}", c.debug_text);
+            assert!(c.debug_text[0].contains("Some(42)"));
+            assert_eq!(c.first_section, "");
         }
     }
     let _ = std::fs::remove_dir_all(&dir);

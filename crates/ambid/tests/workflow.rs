@@ -3,7 +3,7 @@
 
 mod common;
 use ambid::report::Block;
-use ambid::workflow::{self, flatten_summary, Outcome, Progress, Verbosity, WorkflowConfig};
+use ambid::workflow::{self, Outcome, Progress, Verbosity, WorkflowConfig};
 use common::{ambid, s, text, tmpdir};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -26,15 +26,101 @@ fn run(cfg: &WorkflowConfig, base: &Path) -> Outcome {
     workflow::run(cfg, base, &mut progress).unwrap_or_else(|e| panic!("workflow failed: {e}"))
 }
 
-/// Every number of summary.json appears in the report (as the report formats it).
+/// The report opens with its summary (issue 18): a headline table that states the chosen model
+/// with its validation fit, the excitation level, the ISO zone and the unstable poles as
+/// summary.json records them; and no text of the page (outside style and SVG) looks like Rust
+/// debug output. (The dump of every summary.json key that used to end the report is gone: the
+/// summary links the file instead.)
 fn assert_summary_in_report(out: &Outcome) {
-    let html = out.report.to_html();
-    for (key, value) in flatten_summary(&out.summary) {
-        assert!(
-            html.contains(&key) && html.contains(&value),
-            "summary entry {key} = {value} is not in the report"
-        );
+    use ambid::report::format_number as f;
+    let s = &out.report.sections[0];
+    assert_eq!(s.id, "summary", "the first section is {}", s.id);
+    let table = s
+        .blocks
+        .iter()
+        .find_map(|b| match b {
+            Block::Table(t) if t.id == "headline" => Some(t),
+            _ => None,
+        })
+        .expect("the summary has its headline table");
+    let row = |what: &str| -> String {
+        table
+            .rows
+            .iter()
+            .find(|r| r[0].starts_with(what))
+            .map(|r| r[1].clone())
+            .unwrap_or_else(|| panic!("no summary row '{what}': {:?}", table.rows))
+    };
+    let sm = &out.summary;
+    if let Some(chosen) = sm["models"]["chosen"].as_str() {
+        let r = row("chosen model");
+        assert!(r.starts_with(chosen), "{r}");
+        if let Some(fit) = sm["validation"]["fit_y_pct"].as_f64() {
+            assert!(r.contains(&format!("{} %", f(fit))), "{r}");
+        }
+        let poles = row("unstable poles");
+        if let Some(n) = sm["pole_zero"]["chosen_unstable_poles"].as_f64() {
+            let stated = if n == 0.0 {
+                "none".to_string()
+            } else {
+                format!("{n:.0}:")
+            };
+            assert!(poles.starts_with(&stated), "{poles} vs {n}");
+        }
     }
+    if let Some(level) = sm["identification"]["level_pct"].as_f64() {
+        let r = row("excitation level");
+        assert!(r.starts_with(&format!("{} %", f(level))), "{r}");
+    }
+    if let Some(zone) = sm["iso"]["zone"].as_str() {
+        let r = row("peak sensitivity");
+        assert!(r.starts_with(&format!("zone {zone}")), "{r}");
+    }
+    row("warnings");
+    // visible text without style and SVG
+    let html = out.report.to_html();
+    let mut visible = String::new();
+    let mut rest = html.as_str();
+    while let Some(i) = rest.find(['<']) {
+        visible.push_str(&rest[..i]);
+        let skip_to = ["<svg", "<style"]
+            .iter()
+            .find(|t| rest[i..].starts_with(*t))
+            .map(|t| format!("</{}>", &t[1..]));
+        rest = match skip_to {
+            Some(end) => rest[i..]
+                .find(&end)
+                .map_or("", |j| &rest[i + j + end.len()..]),
+            None => rest[i..].find('>').map_or("", |j| &rest[i + j + 1..]),
+        };
+    }
+    visible.push_str(rest);
+    for pat in ["Some(", "::", "None,", "(None", "None)"] {
+        assert!(!visible.contains(pat), "debug text '{pat}' on the page");
+    }
+}
+
+/// Writes the report and checks it in headless Chromium: it renders, the summary is the first
+/// section, nothing is wider than a 1280-px page and no visible text looks like debug output
+/// (`BrowserCheck::problems`). Skipped, saying so, without Chromium.
+fn browser_checked(out: &Outcome, tag: &str) {
+    let dir = tmpdir(tag);
+    let dest = dir.join("report");
+    out.write(&dest, false).unwrap();
+    match ambid::report::browser_check(&dest.join("report.html")) {
+        Ok(check @ ambid::report::BrowserCheck::Checked(_)) => {
+            assert!(check.problems().is_empty(), "{tag}: {:?}", check.problems());
+            let Some(c) = check.counts() else {
+                unreachable!()
+            };
+            assert_eq!(c.first_section, "summary", "{tag}");
+        }
+        Ok(ambid::report::BrowserCheck::Unavailable { reason }) => {
+            println!("SKIP: the browser check of the {tag} report: {reason}")
+        }
+        Err(e) => panic!("browser check failed: {e}"),
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 fn figures(out: &Outcome) -> Vec<&ambid::report::Figure> {
@@ -144,6 +230,7 @@ fn the_default_workflow_on_the_twin_recovers_the_truth_and_reports_every_number(
             let Some(c) = check.counts() else {
                 unreachable!()
             };
+            assert_eq!(c.first_section, "summary");
             println!(
                 "browser check: {} svgs, {} empty, {} console errors, screenshot {} bytes",
                 c.svgs,
@@ -242,6 +329,7 @@ fn the_workflow_runs_on_the_open_loop_robot_arm_and_skips_the_closed_loop_steps(
     assert_summary_in_report(&out);
     let html = out.report.to_html();
     assert!(html.contains("Open-loop data"), "no open-loop note");
+    browser_checked(&out, "wf-robot-arm");
 }
 
 #[test]
@@ -264,6 +352,7 @@ fn the_workflow_runs_on_the_matlab_maglev_file() {
     assert_eq!(sm["validation"]["kind"], "1-step prediction");
     assert!(num(sm, "validation.fit_y_pct") >= f3 - 0.5);
     assert_summary_in_report(&out);
+    browser_checked(&out, "wf-maglev");
 }
 
 fn write(dir: &Path, name: &str, text: &str) -> PathBuf {

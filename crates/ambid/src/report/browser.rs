@@ -59,6 +59,13 @@ pub struct BrowserCounts {
     pub screenshot_bytes: u64,
     /// Size of the rendered DOM in bytes.
     pub dom_bytes: usize,
+    /// Elements whose box ends right of the page (1280 px wide window), and table wrappers whose
+    /// table is wider than they are (columns hidden behind a scroll bar), from the layout run.
+    pub overflowing: Vec<String>,
+    /// The id of the first `<section>` of the page (the report's summary comes first).
+    pub first_section: String,
+    /// Pieces of the visible text that look like Rust debug output (`Some(`, `None`, `::`).
+    pub debug_text: Vec<String>,
 }
 
 impl BrowserCheck {
@@ -92,6 +99,12 @@ impl BrowserCheck {
         }
         for e in &c.external_refs {
             p.push(format!("external resource: {e}"));
+        }
+        for e in &c.overflowing {
+            p.push(format!("wider than the page: {e}"));
+        }
+        for e in &c.debug_text {
+            p.push(format!("debug text on the page: {e}"));
         }
         if c.screenshot_bytes <= MIN_SCREENSHOT_BYTES {
             p.push(format!(
@@ -150,6 +163,28 @@ pub fn browser_check(html_path: &Path) -> Result<BrowserCheck, String> {
             url,
         ],
     )?;
+    // (d) Layout: a copy of the page with a script at the end of its body that measures every
+    // element against the window width and writes the findings into the DOM.
+    let probe = work.0.join("layout.html");
+    let page =
+        fs::read_to_string(&html).map_err(|e| format!("cannot read {}: {e}", html.display()))?;
+    let with_probe = match page.rfind("</body>") {
+        Some(i) => format!("{}{LAYOUT_PROBE}{}", &page[..i], &page[i..]),
+        None => format!("{page}{LAYOUT_PROBE}"),
+    };
+    fs::write(&probe, with_probe).map_err(|e| format!("cannot write the layout copy: {e}"))?;
+    let run_c = run_chromium(
+        &chromium,
+        &work.0,
+        "layout",
+        &[
+            "--dump-dom".into(),
+            "--window-size=1280,8000".into(),
+            "--hide-scrollbars".into(),
+            file_url(&probe),
+        ],
+    )?;
+    let layout = parse_layout(&run_c.stdout)?;
     let (svgs, empty_svgs) = count_svgs(&run_b.stdout);
     let name = html
         .file_name()
@@ -173,7 +208,79 @@ pub fn browser_check(html_path: &Path) -> Result<BrowserCheck, String> {
         external_refs: external_refs(&run_b.stdout),
         screenshot_bytes,
         dom_bytes: run_b.stdout.len(),
+        overflowing: layout.overflow,
+        first_section: layout.first,
+        debug_text: debug_text(&layout.text),
     }))
+}
+
+/// The layout probe (see [`browser_check`], run (d)); its result is JSON in `<pre id="ambid-layout">`.
+const LAYOUT_PROBE: &str = r#"<script>
+(function(){
+  var W = document.documentElement.clientWidth, bad = [];
+  var all = document.querySelectorAll('body *');
+  for (var k = 0; k < all.length; k++) {
+    var e = all[k], r = e.getBoundingClientRect();
+    var name = e.tagName.toLowerCase() + (e.id ? '#' + e.id : '');
+    if (r.width > 0 && r.right > W + 1) bad.push(name + ' ends at ' + Math.round(r.right) + ' px of ' + W);
+    if (e.classList && e.classList.contains('table-wrap') && e.scrollWidth > e.clientWidth + 1)
+      bad.push(name + ': table ' + e.scrollWidth + ' px wide in ' + e.clientWidth + ' px');
+  }
+  var first = document.querySelector('main section');
+  var p = document.createElement('pre');
+  p.id = 'ambid-layout';
+  p.textContent = JSON.stringify({width: W, overflow: bad.slice(0, 40),
+    first: first ? first.id : '', text: document.body.innerText});
+  document.body.appendChild(p);
+})();
+</script>
+"#;
+
+/// What the layout probe found.
+#[derive(serde::Deserialize)]
+struct Layout {
+    overflow: Vec<String>,
+    first: String,
+    text: String,
+}
+
+fn parse_layout(dom: &str) -> Result<Layout, String> {
+    let start = dom
+        .find("<pre id=\"ambid-layout\">")
+        .ok_or("the layout probe wrote no result (script did not run)")?;
+    let body = &dom[start + "<pre id=\"ambid-layout\">".len()..];
+    let end = body.find("</pre>").ok_or("unterminated layout result")?;
+    let json = body[..end]
+        .replace("&lt;", "<")
+        .replace("&gt;", ">")
+        .replace("&nbsp;", "\u{a0}")
+        .replace("&amp;", "&");
+    serde_json::from_str(&json).map_err(|e| format!("unreadable layout result: {e}"))
+}
+
+/// Pieces of `text` that look like Rust debug output: `Some(`, the word `None`, `::`.
+pub(crate) fn debug_text(text: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let s = text;
+    for pat in ["Some(", "None", "::"] {
+        for (i, _) in s.match_indices(pat) {
+            if pat == "None" {
+                let before = s[..i].chars().next_back();
+                let after = s[i + 4..].chars().next();
+                let word = |c: Option<char>| c.is_some_and(|c| c.is_alphanumeric() || c == '_');
+                if word(before) || word(after) {
+                    continue;
+                }
+            }
+            let from = s[..i].char_indices().rev().nth(40).map_or(0, |(j, _)| j);
+            let to = s[i..]
+                .char_indices()
+                .nth(40)
+                .map_or(s.len(), |(j, _)| i + j);
+            out.push(s[from..to].replace('\n', " "));
+        }
+    }
+    out
 }
 
 /// Output of one Chromium run.
@@ -399,6 +506,25 @@ fn has_drawn_element(body: &str) -> bool {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn debug_text_finds_rust_debug_output_and_not_plain_words() {
+        let hits =
+            debug_text("measured 15.3 (Some((0.0, 42.5))) → zone D; tol of PzOptions::default()");
+        assert_eq!(hits.len(), 2, "{hits:?}");
+        assert!(hits[0].contains("Some(("));
+        assert!(hits[1].contains("PzOptions::default"));
+        assert_eq!(debug_text("value: None\n").len(), 1);
+        for fine in [
+            "none of the levels",
+            "Nonexistent",
+            "NoneSuch",
+            "a: b, c ratio 1:2",
+        ] {
+            assert!(debug_text(fine).is_empty(), "{fine}");
+        }
+    }
+
     use super::*;
 
     #[test]

@@ -82,9 +82,9 @@ figcaption{{font-size:13px;color:#424a53;margin-top:6px;max-width:{fig}px}}
 .table-wrap{{overflow-x:auto;margin:18px 0}}
 table{{border-collapse:collapse;font-size:13px;font-variant-numeric:tabular-nums}}
 caption{{caption-side:top;text-align:left;font-size:13px;color:#424a53;padding-bottom:6px}}
-th,td{{padding:4px 10px;border-bottom:1px solid #e5e7eb;text-align:left;white-space:nowrap}}
+th,td{{padding:4px 10px;border-bottom:1px solid #e5e7eb;text-align:left;vertical-align:top;overflow-wrap:anywhere}}
 th{{background:#f6f8fa;border-bottom:2px solid #d0d7de;font-weight:620}}
-td.num{{text-align:right}}
+td.num{{text-align:right;white-space:nowrap}}
 tr.hl td{{background:#e6f1fa;font-weight:650}}
 footer{{margin-top:40px;color:#8c959f;font-size:12px;border-top:1px solid #eaeef2;padding-top:8px}}
 @media print{{body{{background:#fff}}main{{box-shadow:none;max-width:none}}figure,.table-wrap{{break-inside:avoid}}}}

@@ -20,11 +20,12 @@ mod steps_frf;
 mod steps_models;
 mod steps_signal;
 mod steps_validate;
+mod summary;
 
 pub use self::config::{ConfigError, Step, WorkflowConfig};
 use self::data::Recording;
 use crate::io::output::{OutputDir, OutputError};
-use crate::report::{Block, NoteKind, Report, Section, Table};
+use crate::report::{Block, NoteKind, Report, Section};
 use ambid_core::lti::{PolyModel, StateSpace};
 use serde_json::{Map, Value};
 use std::path::{Path, PathBuf};
@@ -326,7 +327,8 @@ pub struct StepTime {
 pub struct Outcome {
     /// The report.
     pub report: Report,
-    /// Headline numbers (also written as `summary.json`; every number is also in the report).
+    /// Headline numbers (written as `summary.json`; the report's first section states the answer
+    /// from them and links the file).
     pub summary: Value,
     /// Models to export (JSON, `.m`, `.mat`, `.npz`).
     pub models: Vec<ModelOut>,
@@ -568,23 +570,8 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
     let summary = Value::Object(ctx.summary.clone());
     let mut sections = sections_prelude;
     sections.append(&mut ctx.sections);
-    let rows: Vec<Vec<String>> = flatten_summary(&summary)
-        .into_iter()
-        .map(|(k, v)| vec![k, v])
-        .collect();
-    sections.push(Section {
-        id: "summary".into(),
-        title: "All headline numbers (summary.json)".into(),
-        blocks: vec![Block::Table(Table {
-            id: "summary".into(),
-            caption: "Every number written to summary.json, with its key. Units are in the key \
-                      (_pct %, _hz Hz, _s s, _db dB; otherwise SI)."
-                .into(),
-            header: vec!["key".into(), "value".into()],
-            rows,
-            highlight: None,
-        })],
-    });
+    // the answer first; every number stays in summary.json (linked, no longer dumped here)
+    sections.insert(0, summary::section(&summary, &sections, &ctx));
     let title = cfg.title.clone().unwrap_or_else(|| match cfg.source {
         config::SourceKind::Twin => {
             "ambid: closed-loop identification of the embedded AMB twin".into()

@@ -706,10 +706,12 @@ pub fn pole_zero(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     ))];
     blocks.push(Block::Table(Table {
         id: "pole_zero".into(),
-        caption: "Poles, zeros, unstable poles and near pole-zero cancellations (distance in the z-plane below \
-             the tolerance of PzOptions::default()); a near cancellation means the order is higher than the \
-             data support."
-            .into(),
+        caption: format!(
+            "Poles, zeros, unstable poles and near pole-zero cancellations (a pole and a zero closer \
+             than {} in the z-plane); a near cancellation means the order is higher than the data \
+             support.",
+            fmt(opts.cancellation_tol)
+        ),
         header: vec![
             "model".into(),
             "poles".into(),
