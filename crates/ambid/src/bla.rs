@@ -503,16 +503,23 @@ pub fn recommend(rows: Vec<LevelBla>) -> Result<BlaStudy> {
     };
     let reasoning = format!(
         "{excluded_txt}noise + NL variance of one {P}-period experiment (relative to |G_BLA|², band mean) is smallest \
-         at {recommended_pct:.1} % of i_sat RMS ({:.2e} = noise {:.2e} + NL {:.2e}; {dominant}). Below it \
+         at {recommended_pct:.1} % of i_sat RMS ({:.2e}: noise {:.2e}, NL {}; {dominant}). Below it \
          the noise share grows as 1/level²; above it the stochastic NL distortion (and clipping) grows faster than the \
          noise falls. NL variance significant (> 3 standard errors) from {}.{}{}",
         best.sum_rel,
         best.noise_rel,
-        best.nl_rel,
+        if significant(best) {
+            format!("{:.2e}", best.nl_rel)
+        } else {
+            format!(
+                "not significant (below 3 standard errors, {:.2e})",
+                3.0 * best.nl_rel_se
+            )
+        },
         first_nl.map_or("no level of the list".to_string(), |p| format!("{p:.1} %")),
         best.bla_vs_linear_rel.map_or(String::new(), |e| format!(
             " The BLA's systematic drift from the linearised plant is not in the sum \
-             (bla_vs_linear_rel: {:.1} % at the recommended level).",
+             (the BLA differs from it by {:.1} % RMS at the recommended level).",
             100.0 * e
         )),
         if best.saturated_fraction > 0.0 {

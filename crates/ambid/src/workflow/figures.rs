@@ -119,6 +119,8 @@ pub struct Curve<'a> {
 pub fn bode_panels(curves: &[Curve<'_>], mag_label: &str) -> Vec<Panel> {
     let mut mag = Vec::new();
     let mut ph = Vec::new();
+    // the confidence bands first, then the lines in reverse order: the first curve (the
+    // estimate) is drawn last, on top of the references it is compared with
     for c in curves {
         if let Some(s) = c.std {
             let hi: Vec<f64> =
@@ -139,6 +141,8 @@ pub fn bode_panels(curves: &[Curve<'_>], mag_label: &str) -> Vec<Panel> {
                 color: c.color,
             });
         }
+    }
+    for c in curves.iter().rev() {
         mag.push(series(c.name, c.f, &db(c.g), c.style.clone(), c.color));
         ph.push(series(
             c.name,

@@ -185,7 +185,9 @@ pub fn frf(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         &curves,
         &format!("|P| [dB re 1 {}]", super::data::plant_unit(ctx)),
     );
-    let mut coh = vec![series("γ²_ry", &f, &a.frf.coh_ry, Style::Line, Some(0))];
+    // without a recorded r the "reference" of the analysis is u itself
+    let coh_name = if has_r { "γ²_ry" } else { "γ²_uy" };
+    let mut coh = vec![series(coh_name, &f, &a.frf.coh_ry, Style::Line, Some(0))];
     if has_r {
         coh.push(series("γ²_ru", &f, &a.frf.coh_ru, Style::Line, Some(3)));
     }
@@ -458,11 +460,19 @@ pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             caption: format!(
                 "Resonance peaks of the plant FRF in the quality band {}–{} Hz ({searched} lines with \
                  relative standard deviation ≤ 10 %, prominence ≥ {} dB), with the half-power \
-                 bandwidth and the damping ratio it implies. Two states per lightly damped mode give {n} \
-                 states for the peaks; {}",
+                 bandwidth and the damping ratio it implies. {}; {}",
                 fmt(opts.band.0),
                 fmt(opts.band.1),
                 fmt(opts.min_prominence_db),
+                if peaks.is_empty() {
+                    "No resonance peak in the band, so no state comes from peaks".to_string()
+                } else {
+                    format!(
+                        "Two states per lightly damped mode give {n} states for the {} peak{}",
+                        peaks.len(),
+                        if peaks.len() == 1 { "" } else { "s" }
+                    )
+                },
                 if closed {
                     format!(
                         "in an AMB loop the rigid-body (unstable) pair adds two more, so orders near {} \

@@ -30,22 +30,34 @@ pub fn plan(ctx: &Ctx<'_>, frac: f64) -> ExcitationPlan {
 }
 
 pub fn excitation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
-    let (fs, level, unit, isat) = match (&ctx.twin, &ctx.ident) {
-        (Some(t), _) => {
-            let isat = t.twin.i_sat();
-            (
-                t.twin.fs(),
-                ctx.cfg.excitation.compare_level_pct / 100.0 * isat,
-                "A",
-                Some(isat),
-            )
-        }
-        (None, Some(r)) => (r.fs(), 1.0, "normalised", None),
-        (None, None) => return Ok(StepStatus::Skipped("no data source".into())),
+    let (fs, level, unit, isat) =
+        match (&ctx.twin, &ctx.ident) {
+            (Some(t), _) => {
+                let isat = t.twin.i_sat();
+                (
+                    t.twin.fs(),
+                    ctx.cfg.excitation.compare_level_pct / 100.0 * isat,
+                    "A",
+                    Some(isat),
+                )
+            }
+            (None, Some(r)) if r.closed_loop && r.r.is_none() => return Ok(StepStatus::Skipped(
+                "the record has no excitation r (the loop ran on its own noise), so there is no \
+                 excitation to describe; the comparison of candidate excitations runs on the twin \
+                 and on records with an excitation"
+                    .into(),
+            )),
+            (None, Some(r)) => (r.fs(), 1.0, "normalised", None),
+            (None, None) => return Ok(StepStatus::Skipped("no data source".into())),
+        };
+    let for_files = if ctx.twin.is_none() {
+        "Candidates for a new experiment at this record's sample rate (not the recorded signal). "
+    } else {
+        ""
     };
     let cmp = crate::comparison::compare(fs, level, ctx.cfg.seed, 400).map_err(computation)?;
     let mut blocks = vec![Block::Text(format!(
-        "The four candidate excitations of the seed paper, each one PRBS period long ({} samples at \
+        "{for_files}The four candidate excitations of the seed paper, each one PRBS period long ({} samples at \
          {} Hz) and scaled to the same RMS level ({} {unit}{}): PRBS (order 10, 5 samples per bit), \
          a linear chirp, Gaussian white noise and a Schroeder-phased multisine over the PRBS band.",
         cmp.signals.first().map_or(0, |s| s.values.len()),
@@ -842,7 +854,12 @@ pub fn bla(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         rows.push(vec![
             fmt(r.level_pct),
             fmt(r.noise_rel),
-            format!("{} ± {}", fmt(r.nl_rel), fmt(r.nl_rel_se)),
+            if r.nl_rel > 3.0 * r.nl_rel_se {
+                format!("{} ± {}", fmt(r.nl_rel), fmt(r.nl_rel_se))
+            } else {
+                // a variance estimate within 3 standard errors of zero (possibly negative)
+                format!("< {} (not significant)", fmt(3.0 * r.nl_rel_se))
+            },
             fmt(r.sum_rel),
             fmt(r.even_db),
             fmt(r.odd_db),

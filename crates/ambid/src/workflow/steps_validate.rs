@@ -1,10 +1,10 @@
 //! Steps 8–10: validation on an independent record with residual tests, the chirp closed-loop
 //! reconstruction and the ISO 14839-3 sensitivity zone.
 
-use super::figures::{envelope, figure, lin, log, series, xy};
+use super::figures::{envelope, figure, lin, log, series, with_spans, xy};
 use super::steps_frf::ensure_valid;
 use super::{computation, Ctx, Failure, StepStatus};
-use crate::report::{format_number as fmt, Block, NoteKind, Style, Table};
+use crate::report::{format_number as fmt, Block, NoteKind, Series, Span, Style, Table};
 use crate::validation::{
     validate_closed_loop, MeasuredLoop, ValidationOutcome, ValidationSettings,
 };
@@ -135,12 +135,17 @@ fn residual_figure(res: &ResidualTest, input: &str, error: &str, no_white: &str)
         )
     };
     let ind = res.independence.as_ref().map_or_else(
-        || "not computed".to_string(),
+        || {
+            format!(
+                "Independence of the {error} is not tested: no recorded signal is independent of \
+                 the noise (in closed loop u carries the noise back; an excitation r would be)."
+            )
+        },
         |c| {
             format!(
-                "lags ±{}, with the per-lag 95 % bound of coloured signals ±1.96·√(σ̂(0)/(R̂ε(0)R̂r(0)))/√N \
+                "Cross-correlation of the {error} with the {input} (lags ±{}, with the per-lag 95 % bound of coloured signals ±1.96·√(σ̂(0)/(R̂ε(0)R̂r(0)))/√N \
                  (N = {}); the verdict is one portmanteau test N xᵀΣ̂⁺x of all lags together, Σ̂ from \
-                 the error's and the {input}'s autocovariances (Parzen window, K = {} lags): {}",
+                 the error's and the {input}'s autocovariances (Parzen window, K = {} lags): {}).",
                 c.lags.len() / 2,
                 res.n_samples,
                 c.covariance_lags,
@@ -155,10 +160,7 @@ fn residual_figure(res: &ResidualTest, input: &str, error: &str, no_white: &str)
     Block::Figure(figure(
         "residuals",
         "Residual tests",
-        format!(
-            "Cross-correlation of the {error} with the {input} ({ind}). The true model passes each test \
-             in 95 % of records. {white}"
-        ),
+        format!("{ind} The true model passes each test in 95 % of records. {white}"),
         panels,
         2,
     ))
@@ -552,6 +554,11 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     let mut rows = Vec::new();
     let mut verdicts = Vec::new();
     let mut iso_notes: Vec<String> = Vec::new();
+    // drawn in this order: zone shading, the measured 95 % band, model and truth, measured |S|
+    let mut bands = Vec::new();
+    let mut measured = None;
+    let mut search_span = None;
+    let db1 = |m: f64| 20.0 * m.max(1e-300).log10();
     // measured S = T_ru from the FRF (closed loop with an excitation)
     if let (Some(a), true) = (
         &ctx.frf,
@@ -569,13 +576,39 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         )
         .map_err(computation)?;
         let v = search.verdict.clone();
-        curves.push(series(
+        let mag: Vec<f64> = s.values().iter().map(|x| x.norm()).collect();
+        if let Some(sd) = s.std() {
+            // the 95 % band of |S| (±1.96 σ of the complex estimate, floored at a tenth of |S|)
+            let up: Vec<f64> = mag
+                .iter()
+                .zip(&sd)
+                .map(|(m, d)| db1(m + 1.96 * d))
+                .collect();
+            let lo: Vec<f64> = mag
+                .iter()
+                .zip(&sd)
+                .map(|(m, d)| db1((m - 1.96 * d).max(0.1 * m)))
+                .collect();
+            bands.push(series(
+                "measured |S|, 95 % band",
+                s.f_hz(),
+                &up,
+                Style::Band { lower: lo },
+                Some(0),
+            ));
+        }
+        measured = Some(series(
             "measured S = T_ru",
             s.f_hz(),
-            &s.values().iter().map(|x| x.norm()).collect::<Vec<_>>(),
+            &mag.iter().map(|m| db1(*m)).collect::<Vec<_>>(),
             Style::Line,
             Some(0),
         ));
+        search_span = Some(Span {
+            label: "ISO search band".into(),
+            x0: search.band.0,
+            x1: search.band.1,
+        });
         ctx.put("iso.measured.peak", v.peak);
         ctx.put("iso.measured.f_peak_hz", v.f_peak_hz);
         ctx.put("iso.measured.zone", format!("{:?}", v.zone));
@@ -595,9 +628,9 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             series(
                 "model S = 1/(1+PC)",
                 &v.grid_hz,
-                &v.s_model.iter().map(|x| x.norm()).collect::<Vec<_>>(),
+                &v.s_model.iter().map(|x| db1(x.norm())).collect::<Vec<_>>(),
                 Style::Dashed,
-                Some(1),
+                Some(6),
             ),
             v.iso_model.clone(),
             v.margins.phase_margin(),
@@ -625,20 +658,21 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         curves.push(series(
             "twin's exact S",
             &f,
-            &s.iter().map(|x| x.norm()).collect::<Vec<_>>(),
+            &s.iter().map(|x| db1(x.norm())).collect::<Vec<_>>(),
             Style::Dashed,
-            Some(2),
+            Some(7),
         ));
         ctx.put("iso.truth.peak", v.peak);
         ctx.put("iso.truth.zone", format!("{:?}", v.zone));
         rows.push(iso_row("twin's exact plant", &v));
     }
-    if curves.is_empty() {
+    if curves.is_empty() && measured.is_none() {
         return Ok(StepStatus::Skipped(
             "the ISO 14839-3 zone needs the measured sensitivity (closed-loop data with an excitation) or a model validated with the controller".into(),
         ));
     }
-    let fx: Vec<f64> = curves
+    let all: Vec<&Series> = curves.iter().chain(measured.iter()).collect();
+    let fx: Vec<f64> = all
         .iter()
         .flat_map(|s| s.x.iter().copied())
         .filter(|f| *f > 0.0)
@@ -647,18 +681,42 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         fx.iter().copied().fold(f64::INFINITY, f64::min),
         fx.iter().copied().fold(0.0, f64::max),
     );
-    for (k, (name, lim)) in [("A/B limit", z.a), ("B/C limit", z.b), ("C/D limit", z.c)]
-        .into_iter()
-        .enumerate()
-    {
-        curves.push(series(
-            name,
+    // zone shading from the lowest drawn |S| (at most 60 dB below the A/B limit) to 6 dB above C/D
+    let y_min = all
+        .iter()
+        .flat_map(|s| s.y.iter().copied())
+        .filter(|v| v.is_finite())
+        .fold(f64::INFINITY, f64::min)
+        .max(db1(z.a) - 60.0)
+        .min(db1(z.a) - 6.0);
+    let edges = [y_min, db1(z.a), db1(z.b), db1(z.c), db1(z.c) + 6.0];
+    let mut shading = Vec::new();
+    for (k, name) in ["zone A", "zone B", "zone C", "zone D"].iter().enumerate() {
+        shading.push(series(
+            &format!(
+                "{name} ({})",
+                match k {
+                    0 => format!("|S| < {}", fmt(z.a)),
+                    1 => format!("{}–{}", fmt(z.a), fmt(z.b)),
+                    2 => format!("{}–{}", fmt(z.b), fmt(z.c)),
+                    _ => format!("|S| > {}", fmt(z.c)),
+                }
+            ),
             &[f0, f1],
-            &[lim, lim],
-            Style::Dashed,
-            Some(4 + k),
+            &[edges[k + 1]; 2],
+            Style::Band {
+                lower: vec![edges[k]; 2],
+            },
+            // green, amber, vermillion, purple (palette of report::svg)
+            Some([2, 3, 1, 4][k]),
         ));
     }
+    let curves: Vec<Series> = shading
+        .into_iter()
+        .chain(bands)
+        .chain(curves)
+        .chain(measured)
+        .collect();
     let verdict = verdicts.first().copied();
     if let Some(v) = verdict {
         ctx.put("iso.zone", format!("{v:?}"));
@@ -668,13 +726,20 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             "iso_sensitivity",
             "Sensitivity and ISO 14839-3 zones",
             format!(
-                "|S| = |T_ru| against frequency with the zone limits of ISO 14839-3 (A/B {}, B/C {}, C/D {}; \
-                 peak sensitivity, linear scale).",
+                "|S| = |T_ru| in dB against frequency over the zones of ISO 14839-3 (limits A/B {}, B/C {}, \
+                 C/D {}, i.e. {} / {} / {} dB); the measured |S| with its 95 % band is drawn on top, the \
+                 shaded span is the band where the measured peak is searched.",
                 fmt(z.a),
                 fmt(z.b),
-                fmt(z.c)
+                fmt(z.c),
+                fmt(db1(z.a)),
+                fmt(db1(z.b)),
+                fmt(db1(z.c))
             ),
-            vec![xy("", log("frequency [Hz]"), lin("|S| [-]"), curves)],
+            vec![with_spans(
+                xy("", log("frequency [Hz]"), lin("|S| [dB]"), curves),
+                search_span.into_iter().collect(),
+            )],
             1,
         )),
         Block::Table(Table {

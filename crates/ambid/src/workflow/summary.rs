@@ -34,15 +34,14 @@ pub(crate) fn section(summary: &Value, sections: &[Section], ctx: &Ctx<'_>) -> S
         if let Some(f) = num(summary, "validation.fit_y_pct")
             .or_else(|| num(summary, "models.chosen_validation_fit_pct"))
         {
-            parts.push(format!(
-                "validation fit of y {} % ({})",
-                fmt(f),
-                if ctx.is_closed_loop() {
-                    "closed loop with the controller, independent record"
-                } else {
-                    "independent record"
+            let how = match text(summary, "validation.kind") {
+                Some(kind) => format!("{kind}, independent record"),
+                None if ctx.is_closed_loop() => {
+                    "closed loop with the controller, independent record".to_string()
                 }
-            ));
+                None => "independent record".to_string(),
+            };
+            parts.push(format!("validation fit of y {} % ({how})", fmt(f)));
         }
         let row = get(summary, "models.table")
             .and_then(Value::as_array)
