@@ -2,6 +2,9 @@
 //! systems (noise-free, with transients), FdiTools' LPM on a committed fixture, and the typed
 //! errors of bad input.
 
+#[path = "../../ambid/tests/common/skip.rs"]
+mod skip;
+
 use ambid_core::c64;
 use ambid_core::frf::lpm::{lpm, lpm_closed_loop, LpmOptions};
 use ambid_core::lti::TransferFunction;
@@ -519,7 +522,10 @@ fn periodic_lpm_on_the_f16_record_matches_period_averaging() {
             "F-16 data not found above {}",
             base.display()
         );
-        println!("F-16 data not found next to the repository: skipped");
+        skip::skip(
+            "frf_lpm: LPM on the F-16 ground vibration test",
+            "shared/data/real/f16-gvt not found next to the repository",
+        );
         return;
     };
     let text = std::fs::read_to_string(path).unwrap();

@@ -2,10 +2,13 @@
 //! axes, heatmaps, a pole-zero map, bands, spans, empty panels) is written to a temporary
 //! directory and loaded in headless Chromium (`/usr/bin/chromium`): the screenshot must be
 //! non-trivial, every `<svg>` in the rendered DOM must draw something, and there must be no
-//! console message and no external resource. Skipped (passing) when Chromium is not installed.
+//! console message and no external resource. Skipped (recorded by `common::skip`, listed at the
+//! end of `bash .ci/run`) when Chromium is not installed.
 //!
 //! Also: a deliberately broken page must be flagged (so the check can fail), and a large report
 //! (25 figures of 5000-point series) must stay small and render fast.
+
+mod common;
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -63,7 +66,10 @@ fn demo_report_renders_in_chromium() {
     let check = browser_check(&path).expect("browser check ran");
     match &check {
         BrowserCheck::Unavailable { reason } => {
-            println!("skipped: {reason}");
+            common::skip(
+                "report_browser: the demo report in headless Chromium",
+                reason,
+            );
         }
         BrowserCheck::Checked(c) => {
             println!("browser check: {c:?}");
@@ -95,7 +101,9 @@ fn broken_page_is_flagged() {
     )
     .expect("write page");
     match browser_check(&path).expect("browser check ran") {
-        BrowserCheck::Unavailable { reason } => println!("skipped: {reason}"),
+        BrowserCheck::Unavailable { reason } => {
+            common::skip("report_browser: a broken page flagged by Chromium", &reason)
+        }
         BrowserCheck::Checked(c) => {
             println!("broken page: {c:?}");
             assert_eq!(c.svgs, 2);

@@ -36,8 +36,8 @@ pub enum ExportModel<'a> {
     StateSpace(&'a StateSpace, Option<&'a [f64]>),
 }
 
-/// Names carried into the exported files.
-#[derive(Debug, Clone)]
+/// Names (and the noise variance) carried into the exported files.
+#[derive(Debug, Clone, Default)]
 pub struct ExportNames {
     /// Variable / model name; it is passed through [`sanitize_identifier`] before use, so any
     /// text is accepted.
@@ -46,6 +46,10 @@ pub struct ExportNames {
     pub input: String,
     /// Output signal name.
     pub output: String,
+    /// Variance λ of the innovations e (the fit's `noise_variance`), exported as
+    /// `noise_variance` of a polynomial model (`idpoly`'s `NoiseVariance`); `None` when unknown (exported
+    /// as 1, MATLAB's `idpoly` default).
+    pub noise_variance: Option<f64>,
 }
 
 /// Why a model could not be exported.
@@ -153,6 +157,9 @@ pub(crate) fn variables(model: ExportModel<'_>, names: &ExportNames) -> Result<V
             check_finite("Ts", &[m.ts()])?;
             vars.push(var("Ts", Value::Scalar(m.ts())));
             vars.push(var("nk", Value::Scalar(m.delay() as f64)));
+            let lambda = names.noise_variance.unwrap_or(1.0);
+            check_finite("noise_variance", &[lambda])?;
+            vars.push(var("noise_variance", Value::Scalar(lambda)));
             m.structure().name()
         }
         ExportModel::StateSpace(m, k) => {
@@ -197,6 +204,83 @@ pub(crate) fn variables(model: ExportModel<'_>, names: &ExportNames) -> Result<V
         Value::Text(sanitize_identifier(&names.name)),
     ));
     Ok(vars)
+}
+
+/// The polynomial form of a SISO discrete transfer-function model that is held as a state-space
+/// realisation (the frequency-domain ARX and OE fits of the workflow are fitted as
+/// $G = B/A$ resp. $B/F$ and kept in companion form): `structure` `"arx"` gives
+/// $A = \mathrm{den}$, $B = \mathrm{num}$ (`A y = B u + e`), `"oe"` gives $F = \mathrm{den}$,
+/// $B = \mathrm{num}$ (`y = B/F u + e`). A model in the companion form of
+/// [`ambid_core::lti::TransferFunction::to_state_space`] gives its coefficients back exactly;
+/// any other realisation goes through [`StateSpace::tf_coefficients`] (monic denominator from
+/// the eigenvalues, numerator from the Markov parameters, the delay as exact leading zeros of
+/// $B$). `None` for any other structure, a
+/// MIMO or continuous model, or when the conversion fails: the model is then exported as state
+/// space. The poles are not touched (an unstable plant stays unstable).
+///
+/// ```
+/// use ambid::io::export::polynomial_form;
+/// use ambid_core::lti::TransferFunction;
+/// // G = 0.5 q^-1 / (1 - 1.02 q^-1): unstable, as an AMB plant
+/// let ss = TransferFunction::new(vec![0.0, 0.5], vec![1.0, -1.02], 5e-5).unwrap().to_state_space().unwrap();
+/// let p = polynomial_form("oe", &ss).unwrap();
+/// assert_eq!(p.b(), &[0.0, 0.5]);
+/// assert_eq!(p.f(), &[1.0, -1.02]); // read back from the companion form, bit for bit
+/// assert!(polynomial_form("ss", &ss).is_none());
+/// ```
+pub fn polynomial_form(structure: &str, ss: &StateSpace) -> Option<PolyModel> {
+    if ss.ninputs() != 1 || ss.noutputs() != 1 {
+        return None;
+    }
+    let ts = ss.ts()?;
+    let (num, den) = companion_coefficients(ss).or_else(|| ss.tf_coefficients().ok())?;
+    let a0 = *den.first()?;
+    if a0 == 0.0 {
+        return None;
+    }
+    let num: Vec<f64> = num.iter().map(|x| x / a0).collect();
+    let den: Vec<f64> = den.iter().map(|x| x / a0).collect();
+    match structure {
+        "arx" => PolyModel::arx(den, num, ts).ok(),
+        "oe" => PolyModel::oe(num, den, ts).ok(),
+        _ => None,
+    }
+}
+
+/// The exact `(num, den)` of a SISO model in the controllable canonical form of
+/// [`ambid_core::lti::TransferFunction::to_state_space`] (first row of `A` = −den₁…, ones on the
+/// subdiagonal, `B = e₁`, `C_j = num_{j+1} − num₀ den_{j+1}`, `D = num₀`), trailing zero
+/// coefficients removed; `None` for any other realisation. Reading the coefficients back
+/// instead of recomputing them from the eigenvalues keeps them bit for bit: at 20 kHz, where all
+/// poles sit near z = 1, a relative change of 1e-11 in the denominator moves the low-frequency
+/// response by per cent.
+fn companion_coefficients(ss: &StateSpace) -> Option<(Vec<f64>, Vec<f64>)> {
+    let (a, b, c, d) = (ss.a(), ss.b(), ss.c(), ss.d());
+    let n = a.nrows();
+    if n == 0 {
+        return None;
+    }
+    for i in 0..n {
+        if b[(i, 0)] != if i == 0 { 1.0 } else { 0.0 } {
+            return None;
+        }
+        if i > 0 && (0..n).any(|j| a[(i, j)] != if i == j + 1 { 1.0 } else { 0.0 }) {
+            return None;
+        }
+    }
+    let b0 = d[(0, 0)];
+    let mut den: Vec<f64> = std::iter::once(1.0)
+        .chain((0..n).map(|j| -a[(0, j)]))
+        .collect();
+    let mut num: Vec<f64> = std::iter::once(b0)
+        .chain((0..n).map(|j| c[(0, j)] + b0 * den[j + 1]))
+        .collect();
+    for p in [&mut num, &mut den] {
+        while p.len() > 1 && p.last() == Some(&0.0) {
+            p.pop();
+        }
+    }
+    Some((num, den))
 }
 
 /// Maximum identifier length in MATLAB (`namelengthmax`).
@@ -262,6 +346,9 @@ const RESERVED: &[&str] = &[
     "K",
     "Ts",
     "nk",
+    "noise_variance",
+    "Gnum",
+    "Gden",
     "conv",
     "exist",
     "idpoly",
@@ -332,11 +419,13 @@ pub fn sanitize_identifier(text: &str) -> String {
 /// use ambid_core::lti::PolyModel;
 /// // OE: y = 0.2 q^-1 / (1 - 0.8 q^-1) u + e
 /// let m = PolyModel::oe(vec![0.0, 0.2], vec![1.0, -0.8], 1e-3).unwrap();
-/// let names = ExportNames { name: "plant".into(), input: "u".into(), output: "y".into() };
+/// let names = ExportNames { name: "plant".into(), input: "u".into(), output: "y".into(), noise_variance: None };
+/// let names = ExportNames { noise_variance: Some(1e-3), ..names };
 /// let text = matlab_script(ExportModel::Poly(&m), &names).unwrap();
 /// assert!(text.contains("B = [0, 0.20000000000000001];"));
 /// assert!(text.contains("F = [1, -0.80000000000000004];"));
-/// assert!(text.contains("plant = idpoly(A, B, C, D, F, 1, Ts, 'InputName', 'u', 'OutputName', 'y');"));
+/// assert!(text.contains("noise_variance = 0.001;"));
+/// assert!(text.contains("plant = idpoly(A, B, C, D, F, noise_variance, Ts, 'InputName', 'u', 'OutputName', 'y');"));
 /// ```
 pub fn matlab_script(model: ExportModel<'_>, names: &ExportNames) -> Result<String> {
     let vars = variables(model, names)?;
@@ -355,7 +444,7 @@ pub fn matlab_script(model: ExportModel<'_>, names: &ExportNames) -> Result<Stri
 /// use ambid::io::export::{mat_bytes, ExportModel, ExportNames};
 /// use ambid_core::lti::PolyModel;
 /// let m = PolyModel::arx(vec![1.0, -0.5], vec![0.0, 1.0], 1e-3).unwrap();
-/// let names = ExportNames { name: "g".into(), input: "u".into(), output: "y".into() };
+/// let names = ExportNames { name: "g".into(), input: "u".into(), output: "y".into(), noise_variance: None };
 /// let bytes = mat_bytes(ExportModel::Poly(&m), &names).unwrap();
 /// assert!(bytes.starts_with(b"MATLAB 5.0 MAT-file"));
 /// assert_eq!(&bytes[126..128], b"IM"); // little-endian
@@ -377,7 +466,7 @@ pub fn mat_bytes(model: ExportModel<'_>, names: &ExportNames) -> Result<Vec<u8>>
 /// use ambid::io::export::{npz_bytes, ExportModel, ExportNames};
 /// use ambid_core::lti::PolyModel;
 /// let m = PolyModel::fir(vec![0.0, 0.5, 0.25], 1e-3).unwrap();
-/// let names = ExportNames { name: "g".into(), input: "u".into(), output: "y".into() };
+/// let names = ExportNames { name: "g".into(), input: "u".into(), output: "y".into(), noise_variance: None };
 /// let bytes = npz_bytes(ExportModel::Poly(&m), &names).unwrap();
 /// assert!(bytes.starts_with(b"PK\x03\x04")); // a zip archive
 /// ```
@@ -448,6 +537,7 @@ mod tests {
             name: "plant".into(),
             input: "u".into(),
             output: "y".into(),
+            noise_variance: None,
         }
     }
 

@@ -60,6 +60,101 @@ pub fn read_model_json(path: &Path) -> Result<StateSpace> {
 const KINDS: &str = "\"state_space\" or \"polynomial\"";
 
 fn read_model_inner(path: &Path) -> Result<StateSpace> {
+    match read_model_value(path)?.0 {
+        Parsed::StateSpace(ss) => Ok(ss),
+        Parsed::Poly(m) => Ok(m.g()?.to_state_space()?),
+    }
+}
+
+/// A model file parsed in its own form.
+#[derive(Debug, Clone)]
+pub enum Parsed {
+    /// A polynomial model (`kind = "polynomial"`, with its `structure`: `oe` stays `oe`).
+    Poly(PolyModel),
+    /// A discrete state-space model (`kind = "state_space"`).
+    StateSpace(StateSpace),
+}
+
+/// A model file read back for export: its polynomial or state-space form, the Kalman gain
+/// (`meta.pem.kalman_gain`), the signal names and the noise variance (`meta.noise_variance`).
+#[derive(Debug, Clone)]
+pub struct ModelFile {
+    /// The model in the form the file holds.
+    pub model: Parsed,
+    /// Kalman gain of an innovations-form state-space model.
+    pub kalman: Option<Vec<f64>>,
+    /// Model name (the file stem), signal names and noise variance for the export.
+    pub names: crate::io::export::ExportNames,
+}
+
+impl ModelFile {
+    /// The model as [`crate::io::export`] takes it.
+    pub fn export_model(&self) -> crate::io::export::ExportModel<'_> {
+        use crate::io::export::ExportModel;
+        match &self.model {
+            Parsed::Poly(p) => ExportModel::Poly(p),
+            Parsed::StateSpace(ss) => ExportModel::StateSpace(ss, self.kalman.as_deref()),
+        }
+    }
+}
+
+/// Reads a model file written by `ambid fit`, `ambid freqfit` or `ambid run` (`models/*.json`)
+/// in its own form, for [`write_model_exports`]. Errors name the file and the field (exit 3).
+pub fn read_model_file(path: &Path) -> Result<ModelFile> {
+    (|| -> Result<ModelFile> {
+        let (parsed, v) = read_model_value(path)?;
+        let text = |k: &str, d: &str| v[k].as_str().unwrap_or(d).to_string();
+        let names = crate::io::export::ExportNames {
+            name: path
+                .file_stem()
+                .map_or("model".into(), |s| s.to_string_lossy().into_owned()),
+            input: text("input", "u"),
+            output: text("output", "y"),
+            noise_variance: v["meta"]["noise_variance"]
+                .as_f64()
+                .filter(|x| x.is_finite() && *x >= 0.0),
+        };
+        let kalman = v["meta"]["pem"]["kalman_gain"]
+            .as_array()
+            .map(|a| a.iter().filter_map(Value::as_f64).collect());
+        let kalman = match parsed {
+            Parsed::StateSpace(_) => kalman,
+            Parsed::Poly(_) => None,
+        };
+        Ok(ModelFile {
+            model: parsed,
+            kalman,
+            names,
+        })
+    })()
+    .map_err(|e| crate::workflow::input(e).into())
+}
+
+/// Writes the MATLAB script, `.mat` and `.npz` exports (`docs/export.md`) of the model file
+/// `json` as `<stem>.m`, `<stem>.mat`, `<stem>.npz` beside it; returns the paths written. A
+/// polynomial model file (ARX, OE, BJ, …) is exported as polynomials (`idpoly`), a state-space
+/// one as matrices (`idss`).
+pub fn write_model_exports(json: &Path) -> Result<Vec<std::path::PathBuf>> {
+    use crate::io::export::{mat_bytes, matlab_script, npz_bytes};
+    let m = read_model_file(json)?;
+    let em = m.export_model();
+    let files: [(&str, Vec<u8>); 3] = [
+        ("m", matlab_script(em, &m.names)?.into_bytes()),
+        ("mat", mat_bytes(em, &m.names)?),
+        ("npz", npz_bytes(em, &m.names)?),
+    ];
+    let mut set = crate::io::output::OutputSet::new(true);
+    let mut out = Vec::new();
+    for (ext, bytes) in files {
+        let p = json.with_extension(ext);
+        set.write(&p, &bytes)?;
+        out.push(p);
+    }
+    set.commit()?;
+    Ok(out)
+}
+
+fn read_model_value(path: &Path) -> Result<(Parsed, Value)> {
     use anyhow::{anyhow, bail};
     let text =
         std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
@@ -159,26 +254,46 @@ fn read_model_inner(path: &Path) -> Result<StateSpace> {
         Ok(faer::Mat::from_fn(data.len(), nc, |i, j| data[i][j]))
     };
     if kind == "state_space" {
-        Ok(
-            StateSpace::discrete(mat_of("a")?, mat_of("b")?, mat_of("c")?, mat_of("d")?, ts)
-                .with_context(|| {
-                    format!(
-                        "model file {}: inconsistent state-space matrices",
-                        path.display()
-                    )
-                })?,
-        )
+        let ss = StateSpace::discrete(mat_of("a")?, mat_of("b")?, mat_of("c")?, mat_of("d")?, ts)
+            .with_context(|| {
+            format!(
+                "model file {}: inconsistent state-space matrices",
+                path.display()
+            )
+        })?;
+        Ok((Parsed::StateSpace(ss), v))
     } else {
-        let m = PolyModel::general(
+        use ambid_core::lti::Structure;
+        let structure = [
+            Structure::Fir,
+            Structure::Arx,
+            Structure::Armax,
+            Structure::Oe,
+            Structure::Bj,
+        ]
+        .into_iter()
+        .find(|s| v["structure"].as_str() == Some(s.name()))
+        .unwrap_or(Structure::General);
+        let (a, b, c, d, f) = (
             vec_of("a")?,
             vec_of("b")?,
             vec_of("c")?,
             vec_of("d")?,
             vec_of("f")?,
+        );
+        // the file's structure tag when its polynomials fit it, else the general structure
+        let m = PolyModel::new(
+            structure,
+            a.clone(),
+            b.clone(),
+            c.clone(),
+            d.clone(),
+            f.clone(),
             ts,
         )
+        .or_else(|_| PolyModel::general(a, b, c, d, f, ts))
         .with_context(|| format!("model file {}: inconsistent polynomials", path.display()))?;
-        Ok(m.g()?.to_state_space()?)
+        Ok((Parsed::Poly(m), v))
     }
 }
 

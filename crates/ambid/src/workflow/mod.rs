@@ -655,6 +655,7 @@ impl Outcome {
                 name: m.name.clone(),
                 input: "u".into(),
                 output: "y".into(),
+                noise_variance: m.meta["noise_variance"].as_f64(),
             };
             let (json, em) = match &m.poly {
                 Some(p) => (

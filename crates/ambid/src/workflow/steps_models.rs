@@ -600,7 +600,11 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             ctx.models.push(ModelOut {
                 name: format!("{}{}", c.structure, c.order),
                 ss: m.clone(),
-                poly: c.poly.clone(),
+                // an FRF-fitted ARX/OE is held in companion form: export its polynomials
+                poly: c
+                    .poly
+                    .clone()
+                    .or_else(|| crate::io::export::polynomial_form(c.structure, m)),
                 kalman: c.kalman.clone(),
                 meta: json!({
                     "structure": c.structure,

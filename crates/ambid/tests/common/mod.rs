@@ -5,6 +5,9 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+mod skip;
+pub use skip::skip;
+
 /// Runs the `ambid` binary with `args`.
 pub fn ambid(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_ambid"))
@@ -67,7 +70,10 @@ pub fn real_data(rel: &str) -> Option<PathBuf> {
             "shared/data/real/{rel} not found above {} (CI must have ../shared)",
             here.display()
         );
-        println!("skipped: shared/data/real/{rel} is not present");
+        skip(
+            &format!("real data set shared/data/real/{rel}"),
+            "not present next to the repository (put the shared/ folder beside the clone)",
+        );
     }
     found
 }

@@ -90,18 +90,25 @@ pub(super) fn render(model: ExportModel<'_>, names: &ExportNames, vars: &[Var]) 
             );
             let _ = writeln!(
                 s,
-                "%   The noise variance is not part of the export (idpoly gets 1); it is in the model's JSON meta."
+                "%   noise_variance is the variance of e (1 when the fit did not report one)."
             );
             let _ = writeln!(s, "%");
             let _ = writeln!(
                 s,
-                "% Running this script defines A, B, C, D, F, Ts, nk and {id}: an idpoly (System Identification"
+                "% Running this script defines A, B, C, D, F, Ts, nk, noise_variance and {id}: an idpoly (System"
             );
             let _ = writeln!(
                 s,
-                "% Toolbox) or else a tf of the deterministic part G = B/(A F) in z^-1 (Control System Toolbox);"
+                "% Identification Toolbox). Without it (e.g. in Octave, which has no idpoly) it defines the"
             );
-            let _ = writeln!(s, "% without either, only the coefficient vectors.");
+            let _ = writeln!(
+                s,
+                "% deterministic part G = Gnum/Gden = B/(A F) in z^-1 as plain vectors, and {id} = tf(...) when"
+            );
+            let _ = writeln!(
+                s,
+                "% a tf function exists (Control System Toolbox, Octave's control package)."
+            );
         }
         ExportModel::StateSpace(m, k) => {
             let (n, nu, ny) = (m.order(), m.ninputs(), m.noutputs());
@@ -177,13 +184,24 @@ pub(super) fn render(model: ExportModel<'_>, names: &ExportNames, vars: &[Var]) 
     }
     match model {
         ExportModel::Poly(_) => {
-            let _ = writeln!(s, "if exist('idpoly', 'file')");
-            let _ = writeln!(s, "  {id} = idpoly(A, B, C, D, F, 1, Ts, {io_names});");
-            let _ = writeln!(s, "elseif exist('tf', 'file')");
+            let _ = writeln!(s, "if exist('idpoly')");
             let _ = writeln!(
                 s,
-                "  {id} = tf(B, conv(A, F), Ts, 'Variable', 'z^-1', {io_names});"
+                "  {id} = idpoly(A, B, C, D, F, noise_variance, Ts, {io_names});"
             );
+            let _ = writeln!(s, "else");
+            let _ = writeln!(
+                s,
+                "  % no idpoly (Octave, or MATLAB without the System Identification Toolbox)"
+            );
+            let _ = writeln!(s, "  Gnum = B;");
+            let _ = writeln!(s, "  Gden = conv(A, F);");
+            let _ = writeln!(s, "  if exist('tf')");
+            let _ = writeln!(
+                s,
+                "    {id} = tf(Gnum, Gden, Ts, 'Variable', 'z^-1', {io_names});"
+            );
+            let _ = writeln!(s, "  end");
             let _ = writeln!(s, "end");
         }
         ExportModel::StateSpace(m, k) => {
@@ -193,12 +211,12 @@ pub(super) fn render(model: ExportModel<'_>, names: &ExportNames, vars: &[Var]) 
             } else {
                 format!("zeros({n}, {ny})")
             };
-            let _ = writeln!(s, "if exist('idss', 'file')");
+            let _ = writeln!(s, "if exist('idss')");
             let _ = writeln!(
                 s,
                 "  {id} = idss(A, B, C, D, {kexpr}, zeros({n}, 1), Ts, {io_names});"
             );
-            let _ = writeln!(s, "elseif exist('ss', 'file')");
+            let _ = writeln!(s, "elseif exist('ss')");
             let _ = writeln!(s, "  {id} = ss(A, B, C, D, Ts, {io_names});");
             let _ = writeln!(s, "end");
         }
