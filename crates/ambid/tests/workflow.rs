@@ -115,9 +115,10 @@ fn browser_checked(out: &Outcome, tag: &str) {
             };
             assert_eq!(c.first_section, "summary", "{tag}");
         }
-        Ok(ambid::report::BrowserCheck::Unavailable { reason }) => {
-            println!("SKIP: the browser check of the {tag} report: {reason}")
-        }
+        Ok(ambid::report::BrowserCheck::Unavailable { reason }) => common::skip(
+            &format!("workflow: the {tag} report in headless Chromium"),
+            &reason,
+        ),
         Err(e) => panic!("browser check failed: {e}"),
     }
     let _ = std::fs::remove_dir_all(&dir);
