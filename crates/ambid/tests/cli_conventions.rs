@@ -289,6 +289,29 @@ fn study_and_bla_levels_and_bands() {
     usage_error(&["study", "amplitude", "--levels", "4,x"], "--levels");
     usage_error(&["study", "amplitude", "--band", "10"], "--band");
     // operating point: --level (%) against the deprecated --amplitude (fraction)
+    let op = |name: &str, level: &[&str]| -> (Output, String) {
+        let out = d.join(format!("op_{name}.csv"));
+        let frf = d.join(format!("opf_{name}.csv"));
+        let mut a = vec![
+            "study",
+            "operating-point",
+            "--mode",
+            "linear",
+            "--band",
+            "10:1000",
+            "--out",
+            s(&out),
+            "--frf-out",
+            s(&frf),
+        ];
+        a.extend_from_slice(level);
+        let o = ok(&a);
+        (o, read(&out) + &read(&frf))
+    };
+    let (n, p1) = op("new", &["--level", "12%"]);
+    let (o, p2) = op("old", &["--amplitude", "0.12"]);
+    noted(&o, &n, "--level 12");
+    assert_eq!(p1, p2);
     usage_error(&["study", "operating-point", "--level", "200"], "--level");
     // BLA: the band of the averages
     let bla = |name: &str, band: &str| -> (Output, String) {
@@ -504,5 +527,30 @@ fn fit_prints_named_parameters_and_iteration_limits() {
     assert!(
         t.contains("warning:") && t.contains("raise --max-iterations"),
         "{t}"
+    );
+}
+
+/// `run --steps models` runs the `frf` step it reads (and says so), so the models are fitted to
+/// the FRF as in the full run — the issue measured 94.5 s for the silent time-domain fallback —
+/// and the chosen model is close to the twin's exact plant.
+#[test]
+fn run_steps_pull_in_their_prerequisites() {
+    let d = tmpdir("conv-run");
+    let out = d.join("rep");
+    let o = ok(&["run", "--steps", "models", "-q", "--out", s(&out)]);
+    assert!(
+        stderr(&o).contains("also running `frf` (`models` uses its results)"),
+        "{}",
+        stderr(&o)
+    );
+    let sum: serde_json::Value = serde_json::from_str(&read(&out.join("summary.json"))).unwrap();
+    assert_eq!(sum["models"]["domain"], "frf", "{}", sum["models"]);
+    assert!(sum["frf"].is_object(), "the frf step ran");
+    let err = sum["models"]["chosen_error_vs_truth_pct"].as_f64().unwrap();
+    assert!(err < 10.0, "chosen model {err} % from the truth");
+    // an unknown step is still a usage error naming --steps
+    usage_error(
+        &["run", "--steps", "modles", "--out", s(&d.join("x"))],
+        "--steps",
     );
 }
