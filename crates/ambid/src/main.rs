@@ -747,7 +747,7 @@ pub(crate) fn deprecated_band(
 /// `excitation: peak … % / RMS … % of i_sat (… A)` of the injected excitation, or `None`
 /// without one.
 fn excitation_level(r: &[f64], i_sat: f64) -> Option<String> {
-    if r.is_empty() || !(i_sat > 0.0) {
+    if r.is_empty() || !(i_sat.is_finite() && i_sat > 0.0) {
         return None;
     }
     let peak = r.iter().fold(0.0f64, |m, v| m.max(v.abs()));

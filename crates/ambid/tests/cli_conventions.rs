@@ -537,7 +537,7 @@ fn fit_prints_named_parameters_and_iteration_limits() {
 fn run_steps_pull_in_their_prerequisites() {
     let d = tmpdir("conv-run");
     let out = d.join("rep");
-    let o = ok(&["run", "--steps", "models", "-q", "--out", s(&out)]);
+    let o = ok(&["run", "--steps", "models", "--out", s(&out)]);
     assert!(
         stderr(&o).contains("also running `frf` (`models` uses its results)"),
         "{}",
@@ -553,4 +553,55 @@ fn run_steps_pull_in_their_prerequisites() {
         &["run", "--steps", "modles", "--out", s(&d.join("x"))],
         "--steps",
     );
+}
+
+/// The level is relative to each rig's own i_sat: on 20 random rigs (`--rig-seed 1…20`, noise
+/// seeds 101…120, whose i_sat is drawn at 80–100 % of the bias current) `simulate --level 10`
+/// injects a PRBS of ±10 % of that rig's `magnet.i_sat_a` (read back with `ambid config
+/// --rig-seed N`), and says so.
+#[test]
+fn simulate_level_follows_each_rigs_i_sat() {
+    let d = tmpdir("conv-rigs");
+    let mut seen = Vec::new();
+    for rig in 1..=20u64 {
+        let (rs, ns) = (rig.to_string(), (100 + rig).to_string());
+        let cfg = ok(&["config", "--rig-seed", &rs]);
+        let cfg: toml::Value = toml::from_str(&String::from_utf8_lossy(&cfg.stdout)).unwrap();
+        let i_sat = cfg["magnet"]["i_sat_a"].as_float().unwrap();
+        let dir = d.join(format!("rig{rig}"));
+        let o = ok(&[
+            "simulate",
+            "--rig-seed",
+            &rs,
+            "--seed",
+            &ns,
+            "--mode",
+            "linear",
+            "--order",
+            "6",
+            "--periods",
+            "2",
+            "--level",
+            "10",
+            "--out",
+            s(&dir),
+        ]);
+        let r = column(&dir.join("data.csv"), "r");
+        assert!(
+            r.iter()
+                .all(|v| (v.abs() - 0.1 * i_sat).abs() < 1e-12 * i_sat),
+            "rig {rig}: i_sat {i_sat}"
+        );
+        assert!(
+            String::from_utf8_lossy(&o.stdout).contains("peak 10.000 % / RMS 10.000 % of i_sat"),
+            "rig {rig}: {}",
+            text(&o)
+        );
+        seen.push(i_sat);
+    }
+    // the rigs do differ in i_sat (else the test would not tell % of i_sat from a fixed 0.2 A)
+    let (lo, hi) = seen
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(l, h), v| (l.min(*v), h.max(*v)));
+    assert!(hi / lo > 1.1, "i_sat {lo} … {hi}");
 }
