@@ -15,7 +15,13 @@
 
 /// Prints the one-line deprecation note of an old spelling on stderr.
 pub(crate) fn deprecated(old: &str, new: &str) {
-    eprintln!("note: {old} is deprecated; write {new} (docs/conventions.md, \"Command line\")");
+    // huge values print compactly, as in the error messages
+    eprintln!(
+        "{}",
+        ambid::workflow::compact_numbers(&format!(
+            "note: {old} is deprecated; write {new} (docs/conventions.md, \"Command line\")"
+        ))
+    );
 }
 
 fn number(s: &str, what: &str) -> Result<f64, String> {
