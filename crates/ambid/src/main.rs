@@ -129,9 +129,12 @@ struct ExciteArgs {
 enum SignalCmd {
     /// Maximum-length pseudo-random binary sequence.
     Prbs {
-        /// LFSR order n (2..=31); period 2^n − 1 bits.
+        /// PRBS register (LFSR) order n (2..=31); period 2^n − 1 bits.
         #[arg(long, default_value_t = 10)]
-        order: u32,
+        prbs_order: u32,
+        /// Deprecated spelling of --prbs-order (`--order` is a model order in `fit`).
+        #[arg(long, hide = true, conflicts_with = "prbs_order")]
+        order: Option<u32>,
         /// Samples per bit Nb.
         #[arg(long, default_value_t = 5)]
         samples_per_bit: usize,
@@ -309,9 +312,13 @@ struct TwinArgs {
 struct SimulateArgs {
     #[command(flatten)]
     twin: TwinArgs,
-    /// Excitation injected at the controller output of bearing A.
+    /// Excitation signal injected at the controller output of bearing A.
     #[arg(long, value_enum, default_value_t = ExcitationKind::Prbs)]
-    excitation: ExcitationKind,
+    signal: ExcitationKind,
+    /// Deprecated spelling of --signal (`--excitation` names the column r in `frf`,
+    /// `validate` and `bla`).
+    #[arg(long, value_enum, hide = true, conflicts_with = "signal")]
+    excitation: Option<ExcitationKind>,
     /// Excitation level in % of the saturation current i_sat (`10` or `10%`): peak for PRBS,
     /// chirp and multisine, RMS for noise.
     #[arg(long, default_value = "10", allow_negative_numbers = true, value_parser = cli_args::parse_pct)]
@@ -324,9 +331,12 @@ struct SimulateArgs {
         allow_negative_numbers = true
     )]
     amplitude: Option<f64>,
-    /// PRBS order n.
+    /// PRBS register order n (period 2^n − 1 bits).
     #[arg(long, default_value_t = 10)]
-    order: u32,
+    prbs_order: u32,
+    /// Deprecated spelling of --prbs-order (`--order` is a model order in `fit`).
+    #[arg(long, hide = true, conflicts_with = "prbs_order")]
+    order: Option<u32>,
     /// PRBS samples per bit.
     #[arg(long, default_value_t = 5)]
     samples_per_bit: usize,
@@ -367,14 +377,14 @@ struct SimulateArgs {
     #[arg(long, default_value_t = 400)]
     truth_points: usize,
     /// A linear chirp position reference `amplitude_m,duration_s,f0_hz,f1_hz` at bearing A (the
-    /// seed's closed-loop reconstruction uses 5e-6,10,1,1000); needs `--excitation none`, and
+    /// seed's closed-loop reconstruction uses 5e-6,10,1,1000); needs `--signal none`, and
     /// the record lasts the chirp's duration.
     #[arg(long)]
     reference_chirp: Option<String>,
     /// Inject the excitation read from this file (column `r`; a `t` column, if present, must
     /// match the twin's 20 kHz) instead of designing one, e.g. one realisation written by
     /// `ambid excite multisine --phases random --realisations M`.
-    #[arg(long, conflicts_with_all = ["excitation", "reference_chirp"])]
+    #[arg(long, conflicts_with_all = ["signal", "excitation", "reference_chirp"])]
     excitation_file: Option<PathBuf>,
     /// Output directory (data.csv, truth.csv, meta.json, controller.toml).
     #[arg(long, default_value = "out")]
@@ -453,10 +463,15 @@ fn excite(a: ExciteArgs) -> Result<()> {
         .into());
     }
     let ts = 1.0 / a.fs;
-    let prbs_bits = match &a.signal {
-        SignalCmd::Prbs { order, .. } if (2..=31).contains(order) => Some((1u64 << order) - 1),
+    let prbs_order = match &a.signal {
+        SignalCmd::Prbs {
+            prbs_order, order, ..
+        } => Some(prbs_order_arg(*prbs_order, *order)),
         _ => None,
     };
+    let prbs_bits = prbs_order
+        .filter(|o| (2..=31).contains(o))
+        .map(|o| (1u64 << o) - 1);
     let realisations = match &a.signal {
         SignalCmd::Multisine { realisations, .. } => *realisations,
         _ => None,
@@ -493,13 +508,13 @@ fn excite(a: ExciteArgs) -> Result<()> {
     }
     let spec = match a.signal {
         SignalCmd::Prbs {
-            order,
             samples_per_bit,
             periods,
             amplitude,
             offset,
+            ..
         } => ExcitationSpec::Prbs(PrbsSpec {
-            order,
+            order: prbs_order.unwrap_or(10),
             samples_per_bit,
             periods,
             amplitude: level(amplitude, "--amplitude", 10.0)?,
@@ -709,6 +724,20 @@ fn write_realisations(
     Ok(paths)
 }
 
+/// The PRBS order from `--prbs-order`, or from the deprecated `--order` (with its note).
+fn prbs_order_arg(prbs_order: u32, deprecated_order: Option<u32>) -> u32 {
+    match deprecated_order {
+        Some(o) => {
+            cli_args::deprecated(
+                &format!("--order {o} (the PRBS order)"),
+                &format!("--prbs-order {o}"),
+            );
+            o
+        }
+        None => prbs_order,
+    }
+}
+
 /// The level in % of i_sat as a fraction: `level_pct`, or the deprecated `--amplitude` fraction
 /// (with its note).
 pub(crate) fn level_frac(level_pct: f64, deprecated_frac: Option<f64>) -> Result<f64> {
@@ -912,9 +941,21 @@ fn simulate(a: SimulateArgs) -> Result<()> {
     let exp = Experiment {
         twin: cfg,
         excitation: ExcitationPlan {
-            kind: a.excitation,
+            kind: match a.excitation {
+                Some(k) => {
+                    let name = k
+                        .to_possible_value()
+                        .map_or_else(String::new, |v| v.get_name().to_string());
+                    cli_args::deprecated(
+                        &format!("simulate --excitation {name}"),
+                        &format!("--signal {name}"),
+                    );
+                    k
+                }
+                None => a.signal,
+            },
             amplitude_frac: level_frac(a.level, a.amplitude)?,
-            prbs_order: a.order,
+            prbs_order: prbs_order_arg(a.prbs_order, a.order),
             samples_per_bit: a.samples_per_bit,
             periods: a.periods,
             f_min_hz: band.0,
@@ -967,7 +1008,7 @@ fn simulate(a: SimulateArgs) -> Result<()> {
                 format!("--reference-chirp `{spec}`: give amplitude_m,duration_s,f0_hz,f1_hz, e.g. 5e-6,10,1,1000")
             })?;
         if exp.excitation.kind != ExcitationKind::None {
-            bail!("--reference-chirp drives the loop by its position reference: use it with --excitation none");
+            bail!("--reference-chirp drives the loop by its position reference: use it with --signal none");
         }
         let w = ambid_core::signal::ChirpSpec {
             amplitude: c[0],
