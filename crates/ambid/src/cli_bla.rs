@@ -21,13 +21,7 @@ fn parse_record(s: &str) -> std::result::Result<(f64, PathBuf), String> {
     let (l, p) = s.split_once(':').ok_or_else(|| {
         format!("`{s}`: give a recorded realisation as LEVEL_PCT:PATH, e.g. 4:bla04_m1.csv")
     })?;
-    let level: f64 = l
-        .trim()
-        .parse()
-        .map_err(|_| format!("`{l}` is not a level in % of i_sat (in `{s}`)"))?;
-    if !(level.is_finite() && level > 0.0 && level <= 100.0) {
-        return Err(format!("`{s}`: the level must be in (0, 100] %"));
-    }
+    let level = crate::cli_args::parse_pct(l).map_err(|e| format!("{e} (in `{s}`)"))?;
     if p.is_empty() {
         return Err(format!("`{s}`: the path is empty"));
     }
@@ -37,10 +31,11 @@ fn parse_record(s: &str) -> std::result::Result<(f64, PathBuf), String> {
 #[derive(Args)]
 pub struct BlaArgs {
     /// RMS levels of the study in % of i_sat (ignored with --level).
-    #[arg(long, value_delimiter = ',', default_value = "2,4,8,16,32")]
+    #[arg(long, value_delimiter = ',', default_value = "2,4,8,16,32", value_parser = crate::cli_args::parse_pct)]
     levels: Vec<f64>,
-    /// One RMS level in % of i_sat: write the per-line BLA (value, std, noise std, NL std).
-    #[arg(long)]
+    /// One RMS level in % of i_sat (`8` or `8%`): write the per-line BLA (value, std, noise
+    /// std, NL std).
+    #[arg(long, value_parser = crate::cli_args::parse_pct)]
     level: Option<f64>,
     /// Random-phase multisine realisations M (≥ 2).
     #[arg(long, default_value_t = 8)]

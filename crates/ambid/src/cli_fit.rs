@@ -283,6 +283,33 @@ fn arx_fitted(
     })
 }
 
+/// The names of a polynomial model's parameters in the order of θ, as MATLAB's `idpoly`
+/// displays them: `a1 … a_na` (A), `b_nk … b_{nk+nb−1}` (B, indexed by the power of
+/// $q^{-1}$), `c1 …` (C), `d1 …` (D), `f1 …` (F). `None` when `theta` is not the model's
+/// coefficients in that order (the plain θ[k] is printed then).
+fn param_names(m: &PolyModel, theta: &[f64]) -> Option<Vec<String>> {
+    let o = Orders::of(m);
+    let mut names = Vec::with_capacity(theta.len());
+    let mut vals = Vec::with_capacity(theta.len());
+    let mut push = |letter: char, poly: &[f64], range: std::ops::Range<usize>| {
+        for j in range {
+            names.push(format!("{letter}{j}"));
+            vals.push(poly.get(j).copied().unwrap_or(f64::NAN));
+        }
+    };
+    push('a', m.a(), 1..o.na + 1);
+    push('b', m.b(), o.nk..o.nk + o.nb);
+    push('c', m.c(), 1..o.nc + 1);
+    push('d', m.d(), 1..o.nd + 1);
+    push('f', m.f(), 1..o.nf + 1);
+    let same = vals.len() == theta.len()
+        && vals
+            .iter()
+            .zip(theta)
+            .all(|(v, t)| (v - t).abs() <= 1e-9 * (1.0 + t.abs()));
+    same.then_some(names)
+}
+
 fn mean(x: &[f64]) -> f64 {
     x.iter().sum::<f64>() / x.len() as f64
 }
@@ -489,10 +516,14 @@ pub fn fit(a: FitArgs) -> Result<()> {
                 .map_or(String::new(), |s| format!(" (stopped: {s})"))
         ))
     );
+    let names = param_names(m, &fitted.params);
     for (k, p) in fitted.params.iter().enumerate() {
+        let name = names
+            .as_ref()
+            .map_or_else(|| format!("θ[{k}]"), |n| n[k].clone());
         match &std {
-            Some(s) => println!("  θ[{k}] = {p:+.6e} ± {:.2e}", s[k]),
-            None => println!("  θ[{k}] = {p:+.6e}"),
+            Some(s) => println!("  {name:<4} = {p:+.6e} ± {:.2e}", s[k]),
+            None => println!("  {name:<4} = {p:+.6e}"),
         }
     }
     println!(
@@ -538,6 +569,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
     }
     let meta = json!({
         "params": fitted.params,
+        "param_names": names,
         "std": std,
         "loss": fitted.loss,
         "noise_variance": fitted.noise_variance,
@@ -782,6 +814,17 @@ fn fit_ss(
             p.stop,
             if p.on_boundary { "; the optimum lies on the predictor's stability boundary" } else { "" }
         );
+        if p.stop
+            == format!(
+                "{:?}",
+                ambid_core::estimate::pem::lm::StopReason::MaxIterations
+            )
+        {
+            problems.push(format!(
+                "the prediction-error refinement stopped at its limit ({} iterations) before converging: raise --max-iterations",
+                p.iterations
+            ));
+        }
         pem_meta = json!({
             "focus": format!("{:?}", p.focus).to_lowercase(),
             "iterations": p.iterations,

@@ -155,6 +155,13 @@ pub fn fit_frf(
         .into());
     };
     print!("{}", table(&rows));
+    if row.converged == Some(false) {
+        eprintln!(
+            "warning: the {} fit of order {order} stopped at its iteration limit ({max_iterations} \
+             iterations) before converging: raise --max-iterations",
+            structure.name()
+        );
+    }
     if !row.valid {
         eprintln!(
             "warning: the model is written but is not valid: {}",

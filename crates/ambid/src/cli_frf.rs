@@ -17,27 +17,7 @@ use anyhow::{Context, Result};
 use clap::{Args, Subcommand, ValueEnum};
 use std::path::{Path, PathBuf};
 
-/// Parses `a,b` or `a:b` as a frequency band in Hz.
-pub(crate) fn parse_band(s: &str) -> std::result::Result<(f64, f64), String> {
-    let (a, b) = s
-        .split_once(',')
-        .or_else(|| s.split_once(':'))
-        .ok_or_else(|| {
-            format!("`{s}`: give a band as f_min,f_max (or f_min:f_max) in Hz, e.g. 10,1000")
-        })?;
-    let lo: f64 = a
-        .trim()
-        .parse()
-        .map_err(|_| format!("`{a}` is not a number"))?;
-    let hi: f64 = b
-        .trim()
-        .parse()
-        .map_err(|_| format!("`{b}` is not a number"))?;
-    if !(lo.is_finite() && hi.is_finite() && lo >= 0.0 && hi > lo) {
-        return Err(format!("`{s}`: need 0 ≤ f_min < f_max"));
-    }
-    Ok((lo, hi))
-}
+pub(crate) use crate::cli_args::parse_band;
 
 #[derive(Clone, Copy, ValueEnum)]
 pub enum WindowArg {
@@ -618,8 +598,10 @@ pub enum StudyCmd {
 
 #[derive(Args)]
 pub struct AmplitudeArgs {
-    /// Levels in % of i_sat (comma-separated).
-    #[arg(long, value_delimiter = ',', default_values_t = seed_levels().iter().map(|l| 100.0 * l).collect::<Vec<f64>>())]
+    /// PRBS levels in % of i_sat, peak (= RMS for a PRBS), comma-separated (`2,4,8` or
+    /// `2%,4%,8%`).
+    #[arg(long, value_delimiter = ',', value_parser = crate::cli_args::parse_pct,
+          default_values_t = seed_levels().iter().map(|l| crate::cli_args::clean(100.0 * l)).collect::<Vec<f64>>())]
     levels: Vec<f64>,
     /// Recorded files instead of the twin, one per level (same order as --levels), with columns
     /// r, u, y.
@@ -670,9 +652,17 @@ pub struct OperatingPointArgs {
     /// Twin configuration (TOML) of the nominal point.
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Excitation level as a fraction of i_sat.
-    #[arg(long, default_value_t = 0.10)]
-    amplitude: f64,
+    /// PRBS level in % of i_sat, peak (`10` or `10%`).
+    #[arg(long, value_parser = crate::cli_args::parse_pct, default_value = "10")]
+    level: f64,
+    /// Deprecated: the level as a fraction of i_sat (0.1 = 10 %); write `--level 10`.
+    #[arg(
+        long,
+        hide = true,
+        conflicts_with = "level",
+        allow_negative_numbers = true
+    )]
+    amplitude: Option<f64>,
     /// Noise seed.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -808,7 +798,14 @@ fn amplitude(a: AmplitudeArgs) -> Result<()> {
         );
     }
     match out.recommended_pct {
-        Some((lo, hi)) => println!("recommended excitation: {lo:.0}–{hi:.0} % of i_sat"),
+        Some((lo, hi)) => {
+            let (lo, hi) = (crate::cli_args::clean(lo), crate::cli_args::clean(hi));
+            if lo == hi {
+                println!("recommended excitation: {lo} % of i_sat (peak)");
+            } else {
+                println!("recommended excitation: {lo}–{hi} % of i_sat (peak)");
+            }
+        }
         None => println!("no level recommended"),
     }
     println!("({})", out.reasoning);
@@ -826,7 +823,7 @@ fn operating_point(a: OperatingPointArgs) -> Result<()> {
         &nominal,
         &cases,
         &ExcitationPlan {
-            amplitude_frac: a.amplitude,
+            amplitude_frac: crate::level_frac(a.level, a.amplitude)?,
             ..ExcitationPlan::default()
         },
         mode(a.mode),

@@ -70,6 +70,16 @@ pub fn run(a: RunArgs) -> Result<()> {
                 })?;
             v.push(step);
         }
+        // a step runs with the steps whose results it reads (`run --steps models` fits the
+        // FRF, as the full run does, instead of falling back to the slower time-domain fit)
+        let (v, added) = Step::with_prerequisites(&v);
+        for (p, by) in added.iter().filter(|_| !a.quiet) {
+            eprintln!(
+                "note: --steps: also running `{}` (`{}` uses its results)",
+                p.name(),
+                by.name()
+            );
+        }
         cfg.steps = Some(v);
         // the file's values are checked again against the steps that will run
         let path = a

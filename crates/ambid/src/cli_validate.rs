@@ -34,9 +34,13 @@ pub struct ValidateArgs {
     /// Column of the displacement.
     #[arg(long, default_value = "y")]
     output: String,
-    /// Column of the controller output (current command).
+    /// Column of the controller output u, the plant input (current command); `--input` in every
+    /// command.
     #[arg(long, default_value = "u")]
-    current: String,
+    input: String,
+    /// Deprecated spelling of --input (`--current` names the coil current i in `frf`).
+    #[arg(long, hide = true, conflicts_with = "input")]
+    current: Option<String>,
     /// Samples at the start left out of the measures (initial transient).
     #[arg(long, default_value_t = 0)]
     skip: usize,
@@ -80,7 +84,17 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
     let ts = d.ts;
     ctrl.check_ts(ts)?;
     let y = d.column(&a.output)?;
-    let u = d.column(&a.current)?;
+    let u_col = match &a.current {
+        Some(c) => {
+            crate::cli_args::deprecated(
+                &format!("validate --current {c}"),
+                &format!("--input {c} (the controller output u)"),
+            );
+            c
+        }
+        None => &a.input,
+    };
+    let u = d.column(u_col)?;
     let r = d
         .optional_column(&a.excitation)?
         .filter(|r| r.iter().any(|v| *v != 0.0));

@@ -13,6 +13,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::{Path, PathBuf};
 
+mod cli_args;
 mod cli_bla;
 mod cli_fit;
 mod cli_freqfit;
@@ -96,6 +97,14 @@ struct ExciteArgs {
     /// Print the report as JSON instead of text.
     #[arg(long, global = true)]
     json: bool,
+    /// Excitation level in % of --i-sat (`10` or `10%`; `0.2A` for amperes): the peak of a
+    /// PRBS or chirp, the RMS of noise or a multisine (default 10 % peak, 5 % RMS).
+    #[arg(long, global = true, allow_negative_numbers = true, value_parser = cli_args::parse_level)]
+    level: Option<cli_args::Level>,
+    /// Band of noise or a multisine, Hz, as `f_min:f_max` (noise: band-limited; multisine: its
+    /// lowest and highest line; default 5:2000 for a multisine, white noise).
+    #[arg(long, global = true, allow_negative_numbers = true, value_parser = cli_args::parse_band)]
+    band: Option<(f64, f64)>,
     /// The amplifier's saturation current in A, to state the level as a percentage of it.
     #[arg(
         long,
@@ -120,18 +129,21 @@ struct ExciteArgs {
 enum SignalCmd {
     /// Maximum-length pseudo-random binary sequence.
     Prbs {
-        /// LFSR order n (2..=31); period 2^n − 1 bits.
+        /// PRBS register (LFSR) order n (2..=31); period 2^n − 1 bits.
         #[arg(long, default_value_t = 10)]
-        order: u32,
+        prbs_order: u32,
+        /// Deprecated spelling of --prbs-order (`--order` is a model order in `fit`).
+        #[arg(long, hide = true, conflicts_with = "prbs_order")]
+        order: Option<u32>,
         /// Samples per bit Nb.
         #[arg(long, default_value_t = 5)]
         samples_per_bit: usize,
         /// Number of periods Np.
         #[arg(long, default_value_t = 20)]
         periods: usize,
-        /// Amplitude in A (values ±amplitude + offset).
-        #[arg(long, default_value_t = 0.2, allow_negative_numbers = true)]
-        amplitude: f64,
+        /// Deprecated: amplitude in A (values ±amplitude + offset); write `--level PCT`.
+        #[arg(long, hide = true, allow_negative_numbers = true)]
+        amplitude: Option<f64>,
         /// Mean offset in A.
         #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
         offset: f64,
@@ -147,9 +159,9 @@ enum SignalCmd {
         /// Duration of one sweep, s.
         #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
         duration: f64,
-        /// Amplitude in A.
-        #[arg(long, default_value_t = 0.2, allow_negative_numbers = true)]
-        amplitude: f64,
+        /// Deprecated: amplitude in A; write `--level PCT`.
+        #[arg(long, hide = true, allow_negative_numbers = true)]
+        amplitude: Option<f64>,
         /// Sweep law.
         #[arg(long, value_enum, default_value_t = SweepArg::Linear)]
         sweep: SweepArg,
@@ -159,20 +171,20 @@ enum SignalCmd {
     },
     /// White noise, Gaussian or uniform, optionally band-limited.
     Noise {
-        /// RMS value in A.
-        #[arg(long, default_value_t = 0.1, allow_negative_numbers = true)]
-        rms: f64,
+        /// Deprecated: RMS value in A; write `--level PCT`.
+        #[arg(long, hide = true, allow_negative_numbers = true)]
+        rms: Option<f64>,
         /// Number of samples.
         #[arg(long, default_value_t = 102_300)]
         samples: usize,
         /// Distribution.
         #[arg(long, value_enum, default_value_t = DistArg::Gaussian)]
         distribution: DistArg,
-        /// Lower band edge, Hz (band-limited noise needs both edges).
-        #[arg(long, requires = "band_hi")]
+        /// Deprecated: lower band edge, Hz; write `--band LO:HI`.
+        #[arg(long, hide = true, requires = "band_hi", allow_negative_numbers = true)]
         band_lo: Option<f64>,
-        /// Upper band edge, Hz.
-        #[arg(long, requires = "band_lo")]
+        /// Deprecated: upper band edge, Hz; write `--band LO:HI`.
+        #[arg(long, hide = true, requires = "band_lo", allow_negative_numbers = true)]
         band_hi: Option<f64>,
         /// Random seed.
         #[arg(long, default_value_t = 1)]
@@ -180,21 +192,21 @@ enum SignalCmd {
     },
     /// Periodic multisine with bin-aligned lines.
     Multisine {
-        /// Lowest line, Hz.
-        #[arg(long, default_value_t = 5.0, allow_negative_numbers = true)]
-        f_min: f64,
-        /// Highest line, Hz.
-        #[arg(long, default_value_t = 2000.0, allow_negative_numbers = true)]
-        f_max: f64,
+        /// Deprecated: lowest line, Hz; write `--band LO:HI`.
+        #[arg(long, hide = true, allow_negative_numbers = true)]
+        f_min: Option<f64>,
+        /// Deprecated: highest line, Hz; write `--band LO:HI`.
+        #[arg(long, hide = true, allow_negative_numbers = true)]
+        f_max: Option<f64>,
         /// Samples per period.
         #[arg(long, default_value_t = 5115)]
         period_samples: usize,
         /// Number of periods.
         #[arg(long, default_value_t = 20)]
         periods: usize,
-        /// RMS value in A.
-        #[arg(long, default_value_t = 0.1, allow_negative_numbers = true)]
-        rms: f64,
+        /// Deprecated: RMS value in A; write `--level PCT`.
+        #[arg(long, hide = true, allow_negative_numbers = true)]
+        rms: Option<f64>,
         /// Frequency grid.
         #[arg(long, value_enum, default_value_t = GridArg::Odd)]
         grid: GridArg,
@@ -249,9 +261,14 @@ struct CompareArgs {
     /// Sample rate in Hz.
     #[arg(long, default_value_t = 20_000.0, allow_negative_numbers = true)]
     fs: f64,
-    /// Common RMS level in A.
-    #[arg(long, default_value_t = 0.1, allow_negative_numbers = true)]
-    level: f64,
+    /// Common RMS level in % of --i-sat (`5` or `5%`; `0.1A` for amperes). Before, this option
+    /// took amperes: a bare value below 1 gets a note.
+    #[arg(long, default_value = "5", allow_negative_numbers = true,
+          value_parser = |s: &str| cli_args::parse_level(s).map_err(|e| format!("{e} (the common RMS level)")))]
+    level: cli_args::Level,
+    /// The amplifier's saturation current in A (the reference of --level).
+    #[arg(long, default_value_t = 2.0, allow_negative_numbers = true)]
+    i_sat: f64,
     /// Seed of the noise signal.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -295,28 +312,46 @@ struct TwinArgs {
 struct SimulateArgs {
     #[command(flatten)]
     twin: TwinArgs,
-    /// Excitation injected at the controller output of bearing A.
+    /// Excitation signal injected at the controller output of bearing A.
     #[arg(long, value_enum, default_value_t = ExcitationKind::Prbs)]
-    excitation: ExcitationKind,
-    /// Excitation level as a fraction of the saturation current i_sat (peak for PRBS, chirp and
-    /// multisine; RMS for noise). 0.1 = 10 %.
-    #[arg(long, default_value_t = 0.10, allow_negative_numbers = true)]
-    amplitude: f64,
-    /// PRBS order n.
+    signal: ExcitationKind,
+    /// Deprecated spelling of --signal (`--excitation` names the column r in `frf`,
+    /// `validate` and `bla`).
+    #[arg(long, value_enum, hide = true, conflicts_with = "signal")]
+    excitation: Option<ExcitationKind>,
+    /// Excitation level in % of the saturation current i_sat (`10` or `10%`): peak for PRBS,
+    /// chirp and multisine, RMS for noise.
+    #[arg(long, default_value = "10", allow_negative_numbers = true, value_parser = cli_args::parse_pct)]
+    level: f64,
+    /// Deprecated: the level as a fraction of i_sat (0.1 = 10 %); write `--level 10`.
+    #[arg(
+        long,
+        hide = true,
+        conflicts_with = "level",
+        allow_negative_numbers = true
+    )]
+    amplitude: Option<f64>,
+    /// PRBS register order n (period 2^n − 1 bits).
     #[arg(long, default_value_t = 10)]
-    order: u32,
+    prbs_order: u32,
+    /// Deprecated spelling of --prbs-order (`--order` is a model order in `fit`).
+    #[arg(long, hide = true, conflicts_with = "prbs_order")]
+    order: Option<u32>,
     /// PRBS samples per bit.
     #[arg(long, default_value_t = 5)]
     samples_per_bit: usize,
     /// Periods (PRBS, chirp, multisine).
     #[arg(long, default_value_t = 20)]
     periods: usize,
-    /// Lowest frequency (chirp, noise band, multisine), Hz.
-    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
-    f_min: f64,
-    /// Highest frequency (chirp, noise band, multisine), Hz.
-    #[arg(long, default_value_t = 2000.0, allow_negative_numbers = true)]
-    f_max: f64,
+    /// Band of the chirp, noise or multisine, Hz, as `f_min:f_max`.
+    #[arg(long, default_value = "1:2000", allow_negative_numbers = true, value_parser = cli_args::parse_band)]
+    band: (f64, f64),
+    /// Deprecated: lowest frequency, Hz; write `--band LO:HI`.
+    #[arg(long, hide = true, allow_negative_numbers = true)]
+    f_min: Option<f64>,
+    /// Deprecated: highest frequency, Hz; write `--band LO:HI`.
+    #[arg(long, hide = true, allow_negative_numbers = true)]
+    f_max: Option<f64>,
     /// Period length for chirp and multisine, s (default: one period of the seed PRBS, 5115
     /// samples). Noise and `none` records last periods × period.
     #[arg(long, default_value_t = 0.25575, allow_negative_numbers = true)]
@@ -342,14 +377,14 @@ struct SimulateArgs {
     #[arg(long, default_value_t = 400)]
     truth_points: usize,
     /// A linear chirp position reference `amplitude_m,duration_s,f0_hz,f1_hz` at bearing A (the
-    /// seed's closed-loop reconstruction uses 5e-6,10,1,1000); needs `--excitation none`, and
+    /// seed's closed-loop reconstruction uses 5e-6,10,1,1000); needs `--signal none`, and
     /// the record lasts the chirp's duration.
     #[arg(long)]
     reference_chirp: Option<String>,
     /// Inject the excitation read from this file (column `r`; a `t` column, if present, must
     /// match the twin's 20 kHz) instead of designing one, e.g. one realisation written by
     /// `ambid excite multisine --phases random --realisations M`.
-    #[arg(long, conflicts_with_all = ["excitation", "reference_chirp"])]
+    #[arg(long, conflicts_with_all = ["signal", "excitation", "reference_chirp"])]
     excitation_file: Option<PathBuf>,
     /// Output directory (data.csv, truth.csv, meta.json, controller.toml).
     #[arg(long, default_value = "out")]
@@ -428,26 +463,61 @@ fn excite(a: ExciteArgs) -> Result<()> {
         .into());
     }
     let ts = 1.0 / a.fs;
-    let prbs_bits = match &a.signal {
-        SignalCmd::Prbs { order, .. } if (2..=31).contains(order) => Some((1u64 << order) - 1),
+    let prbs_order = match &a.signal {
+        SignalCmd::Prbs {
+            prbs_order, order, ..
+        } => Some(prbs_order_arg(*prbs_order, *order)),
         _ => None,
     };
+    let prbs_bits = prbs_order
+        .filter(|o| (2..=31).contains(o))
+        .map(|o| (1u64 << o) - 1);
     let realisations = match &a.signal {
         SignalCmd::Multisine { realisations, .. } => *realisations,
         _ => None,
     };
+    // the level: --level (% of --i-sat, or A), else the deprecated amperes, else the default
+    let i_sat = a.i_sat;
+    let level = |old: Option<f64>, old_name: &str, default_pct: f64| -> Result<f64> {
+        match (a.level, old) {
+            (Some(_), Some(_)) => Err(ambid::workflow::usage(anyhow::anyhow!(
+                "give the level once: --level, or the deprecated {old_name}, not both"
+            ))
+            .into()),
+            (Some(l), None) => Ok(l.amps(i_sat)),
+            (None, Some(v)) => {
+                cli_args::deprecated(
+                    &format!("{old_name} {v} (A)"),
+                    &format!(
+                        "--level {}% (of --i-sat {i_sat} A) or --level {v}A",
+                        cli_args::clean(100.0 * v / i_sat)
+                    ),
+                );
+                Ok(v)
+            }
+            (None, None) => Ok(default_pct / 100.0 * i_sat),
+        }
+    };
+    let band = a.band;
+    if band.is_some() && matches!(a.signal, SignalCmd::Prbs { .. } | SignalCmd::Chirp { .. }) {
+        return Err(ambid::workflow::usage(anyhow::anyhow!(
+            "--band applies to noise and multisine (a PRBS has no band parameter; a chirp sweeps \
+             from --f0 to --f1)"
+        ))
+        .into());
+    }
     let spec = match a.signal {
         SignalCmd::Prbs {
-            order,
             samples_per_bit,
             periods,
             amplitude,
             offset,
+            ..
         } => ExcitationSpec::Prbs(PrbsSpec {
-            order,
+            order: prbs_order.unwrap_or(10),
             samples_per_bit,
             periods,
-            amplitude,
+            amplitude: level(amplitude, "--amplitude", 10.0)?,
             offset,
         }),
         SignalCmd::Chirp {
@@ -461,7 +531,7 @@ fn excite(a: ExciteArgs) -> Result<()> {
             f0_hz: f0,
             f1_hz: f1,
             duration_s: duration,
-            amplitude,
+            amplitude: level(amplitude, "--amplitude", 10.0)?,
             sweep: match sweep {
                 SweepArg::Linear => Sweep::Linear,
                 SweepArg::Logarithmic => Sweep::Logarithmic,
@@ -480,9 +550,25 @@ fn excite(a: ExciteArgs) -> Result<()> {
                 DistArg::Gaussian => Distribution::Gaussian,
                 DistArg::Uniform => Distribution::Uniform,
             },
-            rms,
+            rms: level(rms, "--rms", 5.0)?,
             n_samples: samples,
-            band_hz: band_lo.zip(band_hi),
+            band_hz: match (band, band_lo.zip(band_hi)) {
+                (Some(_), Some(_)) => {
+                    return Err(ambid::workflow::usage(anyhow::anyhow!(
+                        "give the band once: --band LO:HI, or the deprecated --band-lo/--band-hi"
+                    ))
+                    .into())
+                }
+                (Some(b), None) => Some(b),
+                (None, Some((lo, hi))) => {
+                    cli_args::deprecated(
+                        &format!("--band-lo {lo} --band-hi {hi}"),
+                        &format!("--band {lo}:{hi}"),
+                    );
+                    Some((lo, hi))
+                }
+                (None, None) => None,
+            },
             seed,
         }),
         SignalCmd::Multisine {
@@ -495,23 +581,37 @@ fn excite(a: ExciteArgs) -> Result<()> {
             phases,
             seed,
             realisations: _,
-        } => ExcitationSpec::Multisine(MultisineSpec {
-            f_min_hz: f_min,
-            f_max_hz: f_max,
-            period_samples,
-            periods,
-            rms,
-            grid: match grid {
-                GridArg::Full => Grid::Full,
-                GridArg::Odd => Grid::Odd,
-                GridArg::RandomOdd => Grid::RandomOdd,
-            },
-            phases: match phases {
-                PhaseArg::Schroeder => Phases::Schroeder,
-                PhaseArg::Random => Phases::Random,
-            },
-            seed,
-        }),
+        } => {
+            let (f_min, f_max) = match band {
+                Some(b) if f_min.is_some() || f_max.is_some() => {
+                    return Err(ambid::workflow::usage(anyhow::anyhow!(
+                        "give the band once: --band {}:{}, or the deprecated --f-min/--f-max",
+                        b.0,
+                        b.1
+                    ))
+                    .into())
+                }
+                Some(b) => b,
+                None => deprecated_band((5.0, 2000.0), f_min, f_max, ("--f-min", "--f-max"))?,
+            };
+            ExcitationSpec::Multisine(MultisineSpec {
+                f_min_hz: f_min,
+                f_max_hz: f_max,
+                period_samples,
+                periods,
+                rms: level(rms, "--rms", 5.0)?,
+                grid: match grid {
+                    GridArg::Full => Grid::Full,
+                    GridArg::Odd => Grid::Odd,
+                    GridArg::RandomOdd => Grid::RandomOdd,
+                },
+                phases: match phases {
+                    PhaseArg::Schroeder => Phases::Schroeder,
+                    PhaseArg::Random => Phases::Random,
+                },
+                seed,
+            })
+        }
     };
     let report = spec.report(ts)?;
     // refuse to overwrite before any work
@@ -624,6 +724,72 @@ fn write_realisations(
     Ok(paths)
 }
 
+/// The PRBS order from `--prbs-order`, or from the deprecated `--order` (with its note).
+fn prbs_order_arg(prbs_order: u32, deprecated_order: Option<u32>) -> u32 {
+    match deprecated_order {
+        Some(o) => {
+            cli_args::deprecated(
+                &format!("--order {o} (the PRBS order)"),
+                &format!("--prbs-order {o}"),
+            );
+            o
+        }
+        None => prbs_order,
+    }
+}
+
+/// The level in % of i_sat as a fraction: `level_pct`, or the deprecated `--amplitude` fraction
+/// (with its note).
+pub(crate) fn level_frac(level_pct: f64, deprecated_frac: Option<f64>) -> Result<f64> {
+    match deprecated_frac {
+        Some(f) => {
+            cli_args::deprecated(
+                &format!("--amplitude {f} (a fraction of i_sat)"),
+                &format!("--level {}", cli_args::clean(100.0 * f)),
+            );
+            Ok(f)
+        }
+        None => Ok(level_pct / 100.0),
+    }
+}
+
+/// The band from `--band` (or its default `band`), or from the deprecated separate edges
+/// (`names`, with a note); an edge given alone replaces that edge of `band`.
+pub(crate) fn deprecated_band(
+    band: (f64, f64),
+    lo: Option<f64>,
+    hi: Option<f64>,
+    names: (&str, &str),
+) -> Result<(f64, f64)> {
+    if lo.is_none() && hi.is_none() {
+        return Ok(band);
+    }
+    let (l, h) = (lo.unwrap_or(band.0), hi.unwrap_or(band.1));
+    let old: Vec<String> = [(names.0, lo), (names.1, hi)]
+        .iter()
+        .filter_map(|(n, v)| v.map(|v| format!("{n} {v}")))
+        .collect();
+    cli_args::deprecated(&old.join(" "), &format!("--band {l}:{h}"));
+    Ok((l, h))
+}
+
+/// `excitation: peak … % / RMS … % of i_sat (… A)` of the injected excitation, or `None`
+/// without one.
+fn excitation_level(r: &[f64], i_sat: f64) -> Option<String> {
+    if r.is_empty() || !(i_sat.is_finite() && i_sat > 0.0) {
+        return None;
+    }
+    let peak = r.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let rms = (r.iter().map(|v| v * v).sum::<f64>() / r.len() as f64).sqrt();
+    (peak > 0.0).then(|| {
+        format!(
+            "excitation: peak {:.3} % / RMS {:.3} % of i_sat = {i_sat} A",
+            100.0 * peak / i_sat,
+            100.0 * rms / i_sat
+        )
+    })
+}
+
 /// Longest autocorrelation lag written by `excite --autocorr` (samples).
 const MAX_AUTOCORR_LAG: usize = 20_000;
 
@@ -637,7 +803,23 @@ fn compare(a: CompareArgs) -> Result<()> {
     for n in names {
         OutputSet::check(&a.out.join(n), a.force)?;
     }
-    let c = ambid::comparison::compare(a.fs, a.level, a.seed, a.max_lag)?;
+    if !(a.i_sat.is_finite() && a.i_sat > 0.0) {
+        return Err(ambid::workflow::usage(anyhow::anyhow!(
+            "--i-sat must be a positive current in A, got {:e}",
+            a.i_sat
+        ))
+        .into());
+    }
+    if let cli_args::Level::Pct(p) = a.level {
+        if p < 1.0 {
+            eprintln!(
+                "note: --level {p} is {p} % of i_sat = {} A RMS (compare read amperes before; \
+                 write {p}A for {p} A)",
+                cli_args::clean(a.level.amps(a.i_sat))
+            );
+        }
+    }
+    let c = ambid::comparison::compare(a.fs, a.level.amps(a.i_sat), a.seed, a.max_lag)?;
     let mut set = OutputSet::new(a.force);
     let t: Vec<f64> = (0..c.signals[0].values.len())
         .map(|k| k as f64 * c.ts)
@@ -748,6 +930,7 @@ fn simulate(a: SimulateArgs) -> Result<()> {
     for p in [&data_path, &truth_path, &meta_path, &ctrl_path] {
         OutputSet::check(p, a.force)?;
     }
+    let band = deprecated_band(a.band, a.f_min, a.f_max, ("--f-min", "--f-max"))?;
     let mut cfg = twin_config(&a.twin)?;
     if let Some(integ) = a.integrator {
         cfg.simulation.integrator = match integ {
@@ -758,13 +941,25 @@ fn simulate(a: SimulateArgs) -> Result<()> {
     let exp = Experiment {
         twin: cfg,
         excitation: ExcitationPlan {
-            kind: a.excitation,
-            amplitude_frac: a.amplitude,
-            prbs_order: a.order,
+            kind: match a.excitation {
+                Some(k) => {
+                    let name = k
+                        .to_possible_value()
+                        .map_or_else(String::new, |v| v.get_name().to_string());
+                    cli_args::deprecated(
+                        &format!("simulate --excitation {name}"),
+                        &format!("--signal {name}"),
+                    );
+                    k
+                }
+                None => a.signal,
+            },
+            amplitude_frac: level_frac(a.level, a.amplitude)?,
+            prbs_order: prbs_order_arg(a.prbs_order, a.order),
             samples_per_bit: a.samples_per_bit,
             periods: a.periods,
-            f_min_hz: a.f_min,
-            f_max_hz: a.f_max,
+            f_min_hz: band.0,
+            f_max_hz: band.1,
             period_s: a.period,
             seed: a.seed,
         },
@@ -813,7 +1008,7 @@ fn simulate(a: SimulateArgs) -> Result<()> {
                 format!("--reference-chirp `{spec}`: give amplitude_m,duration_s,f0_hz,f1_hz, e.g. 5e-6,10,1,1000")
             })?;
         if exp.excitation.kind != ExcitationKind::None {
-            bail!("--reference-chirp drives the loop by its position reference: use it with --excitation none");
+            bail!("--reference-chirp drives the loop by its position reference: use it with --signal none");
         }
         let w = ambid_core::signal::ChirpSpec {
             amplitude: c[0],
@@ -906,11 +1101,14 @@ fn simulate(a: SimulateArgs) -> Result<()> {
         out.twin.fs(),
         exp.mode
     );
+    if let Some(l) = excitation_level(&out.excitation.values, exp.twin.magnet.i_sat_a) {
+        println!("{l}");
+    }
     let sat = rec.meta.saturated_fraction;
     if sat > 0.0 {
         eprintln!(
             "warning: the amplifier or controller output saturated in {:.3} % of the samples; \
-             the data are not from a linear operating regime — reduce --amplitude",
+             the data are not from a linear operating regime — reduce --level",
             100.0 * sat
         );
     }

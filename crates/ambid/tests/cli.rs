@@ -237,7 +237,8 @@ fn excite_writes_spectrum_and_autocorrelation_of_one_period() {
 #[test]
 fn compare_writes_the_four_signals_side_by_side() {
     let d = tmpdir("compare");
-    let o = ambid(&["compare", "--level", "0.2", "--out", d.to_str().unwrap()]);
+    // 10 % of the default i_sat = 2 A (the level is in % of i_sat since issue 18)
+    let o = ambid(&["compare", "--level", "10", "--out", d.to_str().unwrap()]);
     assert!(o.status.success(), "{}", text(&o));
     for f in ["waveforms.csv", "spectra.csv", "autocorr.csv"] {
         let s = std::fs::read_to_string(d.join(f)).unwrap();

@@ -35,6 +35,44 @@ pub enum Step {
 }
 
 impl Step {
+    /// The steps whose results this step reads: `frf` for `order` (its resonance count),
+    /// `models` (the default frequency-domain fit of closed-loop data with r) and `iso` (the
+    /// measured S); `models` for `pole_zero`, `validation` and `reconstruction`.
+    pub fn prerequisites(self) -> &'static [Step] {
+        match self {
+            Step::Order | Step::Models | Step::Iso => &[Step::Frf],
+            Step::PoleZero | Step::Validation | Step::Reconstruction => &[Step::Models],
+            _ => &[],
+        }
+    }
+
+    /// `steps` with every prerequisite added (transitively), in the procedure's order, and the
+    /// added steps each with the step that needed it.
+    ///
+    /// ```
+    /// use ambid::workflow::config::Step;
+    /// let (all, added) = Step::with_prerequisites(&[Step::Validation]);
+    /// assert_eq!(all, vec![Step::Frf, Step::Models, Step::Validation]);
+    /// assert_eq!(added, vec![(Step::Models, Step::Validation), (Step::Frf, Step::Models)]);
+    /// ```
+    pub fn with_prerequisites(steps: &[Step]) -> (Vec<Step>, Vec<(Step, Step)>) {
+        let mut all: Vec<Step> = steps.to_vec();
+        let mut added = Vec::new();
+        let mut k = 0;
+        while k < all.len() {
+            for &p in all[k].prerequisites() {
+                if !all.contains(&p) {
+                    added.push((p, all[k]));
+                    all.push(p);
+                }
+            }
+            k += 1;
+        }
+        all.sort();
+        all.dedup();
+        (all, added)
+    }
+
     /// Every step, in order.
     pub const ALL: [Step; 11] = [
         Step::Excitation,
@@ -166,7 +204,7 @@ impl Default for WorkflowConfig {
 pub struct TwinSection {
     /// `nonlinear` (default) or `linear` physics.
     pub mode: String,
-    /// Sensor noise RMS \[µm\] (default: the twin's, 0.1 µm... as configured).
+    /// Sensor noise RMS \[µm\] (default: the twin configuration's `sensor.noise_rms_m`, 0.2 µm on the nominal rig).
     pub noise_rms_um: Option<f64>,
     /// A twin configuration file (`ambid config` writes one), relative to the workflow file.
     pub config: Option<PathBuf>,

@@ -1,0 +1,148 @@
+//! The command line's shared conventions, parsed in one place for every command
+//! (docs/conventions.md, "Command line"):
+//!
+//! - **Excitation level**: a percentage of the actuator's saturation current $i_\mathrm{sat}$,
+//!   written `12` or `12%` (`--level`, `--levels`); `0.24A` gives amperes where a command knows
+//!   $i_\mathrm{sat}$ (`excite`, `compare`). Peak for PRBS and chirp (a PRBS's RMS equals its
+//!   peak), RMS for noise and random-phase multisines (whose peak depends on the phases).
+//! - **Band**: `f_min:f_max` in Hz (`--band 10:1000`); the older `f_min,f_max` is accepted with
+//!   a note on stderr.
+//! - **Columns**: `--excitation` (r), `--input` (the controller output u, the plant input),
+//!   `--output` (y), `--current` (the coil current i) in every command that reads them.
+//!
+//! Deprecated spellings keep working and print one `note:` line on stderr naming the new one;
+//! malformed values are usage errors (exit code 2) naming the option.
+
+/// Prints the one-line deprecation note of an old spelling on stderr.
+pub(crate) fn deprecated(old: &str, new: &str) {
+    // huge values print compactly, as in the error messages
+    eprintln!(
+        "{}",
+        ambid::workflow::compact_numbers(&format!(
+            "note: {old} is deprecated; write {new} (docs/conventions.md, \"Command line\")"
+        ))
+    );
+}
+
+fn number(s: &str, what: &str) -> Result<f64, String> {
+    let v: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{s}` is not a number ({what})"))?;
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(format!("`{s}` is not a finite number ({what})"))
+    }
+}
+
+/// Parses a frequency band in Hz: `f_min:f_max` (e.g. `10:1000`); the older `f_min,f_max` is
+/// accepted with a deprecation note on stderr. Needs $0 \le f_\mathrm{min} < f_\mathrm{max}$.
+pub(crate) fn parse_band(s: &str) -> Result<(f64, f64), String> {
+    let (a, b) = match s.split_once(':') {
+        Some(p) => p,
+        None => {
+            let p = s.split_once(',').ok_or_else(|| {
+                format!("`{s}`: give a band as f_min:f_max in Hz, e.g. 10:1000 (the older f_min,f_max is accepted)")
+            })?;
+            deprecated(&format!("the band `{s}`"), &format!("`{}:{}`", p.0, p.1));
+            p
+        }
+    };
+    let lo = number(a, "band f_min, Hz")?;
+    let hi = number(b, "band f_max, Hz")?;
+    if !(lo >= 0.0 && hi > lo) {
+        return Err(format!("`{s}`: need 0 ≤ f_min < f_max, e.g. 10:1000 (Hz)"));
+    }
+    Ok((lo, hi))
+}
+
+/// An excitation level as given on the command line.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Level {
+    /// Percent of $i_\mathrm{sat}$ (`12` or `12%`).
+    Pct(f64),
+    /// Amperes (`0.24A`), converted with the command's $i_\mathrm{sat}$.
+    Amps(f64),
+}
+
+impl Level {
+    /// The level in amperes for the saturation current `i_sat` (A).
+    pub(crate) fn amps(self, i_sat: f64) -> f64 {
+        match self {
+            Level::Pct(p) => p / 100.0 * i_sat,
+            Level::Amps(a) => a,
+        }
+    }
+}
+
+/// Parses a level: `12` or `12%` (percent of i_sat, in (0, 100]) or `0.24A` (amperes, > 0).
+pub(crate) fn parse_level(s: &str) -> Result<Level, String> {
+    let t = s.trim();
+    if let Some(a) = t.strip_suffix(['A', 'a']) {
+        let v = number(a, "level in A")?;
+        if v <= 0.0 {
+            return Err(format!("`{s}`: a level in A must be positive"));
+        }
+        return Ok(Level::Amps(v));
+    }
+    parse_pct(t).map(Level::Pct)
+}
+
+/// Parses a level in % of i_sat: `12` or `12%`, in (0, 100].
+pub(crate) fn parse_pct(s: &str) -> Result<f64, String> {
+    let t = s.trim();
+    let v = number(
+        t.strip_suffix('%').unwrap_or(t),
+        "level in % of i_sat, e.g. 10 or 10%",
+    )?;
+    if !(v > 0.0 && v <= 100.0) {
+        return Err(format!(
+            "`{s}`: a level is a percentage of i_sat in (0, 100], e.g. 10 or 10%"
+        ));
+    }
+    Ok(v)
+}
+
+/// `x` printed without binary noise: the shortest decimal that reads back to `x` rounded to
+/// 12 significant digits (`100.0 * 0.14` prints `14`, not `14.000000000000002`).
+pub(crate) fn clean(x: f64) -> f64 {
+    if x == 0.0 || !x.is_finite() {
+        return x;
+    }
+    let mag = 10f64.powi(11 - x.abs().log10().floor() as i32);
+    (x * mag).round() / mag
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn band_forms() {
+        assert_eq!(parse_band("10:1000"), Ok((10.0, 1000.0)));
+        assert_eq!(parse_band("10,1000"), Ok((10.0, 1000.0)));
+        assert!(parse_band("1000:10").is_err());
+        assert!(parse_band("10-1000").is_err());
+        assert!(parse_band("a:1000").is_err());
+    }
+
+    #[test]
+    fn level_forms() {
+        assert_eq!(parse_level("12"), Ok(Level::Pct(12.0)));
+        assert_eq!(parse_level("12%"), Ok(Level::Pct(12.0)));
+        assert_eq!(parse_level("0.24A"), Ok(Level::Amps(0.24)));
+        assert!((Level::Pct(12.0).amps(2.0) - 0.24).abs() < 1e-15);
+        assert!(parse_level("0").is_err());
+        assert!(parse_level("150%").is_err());
+        assert!(parse_level("x%").is_err());
+    }
+
+    #[test]
+    fn clean_prints_without_binary_noise() {
+        assert_eq!(format!("{}", clean(100.0 * 0.14)), "14");
+        assert_eq!(format!("{}", clean(100.0 * 0.07)), "7");
+        assert_eq!(format!("{}", clean(0.1 + 0.2)), "0.3");
+        assert_eq!(format!("{}", clean(1.0 / 3.0)), "0.333333333333");
+    }
+}
