@@ -226,11 +226,13 @@ fn per_line_csv(bla: &Bla) -> Result<String> {
 
 fn print_level(f: &ambid::bla::LevelBla, band: (f64, f64), lines: usize) {
     println!(
-        "BLA at {} % of i_sat RMS, M = {}, P = {}: {lines} lines; over {band:?} Hz noise {:.2e}, NL {:.2e} ± {:.1e} \
+        "BLA at {} % of i_sat RMS, M = {}, P = {}: {lines} lines; over {}–{} Hz noise {:.2e}, NL {:.2e} ± {:.1e} \
          (relative, one realisation); detection lines: even {:.1} dB, odd {:.1} dB over noise; limits active on {:.2} % of samples",
         f.level_pct,
         f.realisations,
         f.periods,
+        ambid::report::format_number(band.0),
+        ambid::report::format_number(band.1),
         f.noise_rel,
         f.nl_rel,
         f.nl_rel_se,

@@ -476,9 +476,9 @@ pub fn fit(a: FitArgs) -> Result<()> {
                     problems.extend(rep.warnings.iter().cloned());
                     if !rep.reason().converged() {
                         problems.push(format!(
-                            "the iteration stopped at its limit ({} iterations, {:?}): raise --max-iterations",
+                            "the iteration stopped at its limit ({} iterations, {}): raise --max-iterations",
                             rep.iterations(),
-                            rep.reason()
+                            stop_reason_text(rep.reason())
                         ));
                     }
                     stop = Some(stop_reason_text(rep.reason()).to_string());
@@ -806,12 +806,12 @@ fn fit_ss(
     let mut pem_meta = json!(null);
     if let Some(p) = &fit.pem {
         println!(
-            "prediction-error refinement ({:?} focus): loss {:.4e} -> {:.4e} after {} iterations ({}){}",
-            p.focus,
+            "prediction-error refinement ({} focus): loss {:.4e} -> {:.4e} after {} iterations ({}){}",
+            format!("{:?}", p.focus).to_lowercase(),
             p.start_loss,
             p.loss,
             p.iterations,
-            p.stop,
+            readable_stop(&p.stop),
             if p.on_boundary { "; the optimum lies on the predictor's stability boundary" } else { "" }
         );
         if p.stop
@@ -1331,6 +1331,23 @@ fn finish_mimo(a: &FitArgs, ins: &[String], outs: &[String], f: MimoFit) -> Resu
 
 /// What stopped the prediction-error iteration, for the summary (see
 /// [`ambid_core::estimate::pem::lm::StopReason`]).
+/// [`stop_reason_text`] for a stop recorded by its variant name (`"MaxIterations"`, …); other
+/// text is returned as it is.
+fn readable_stop(name: &str) -> String {
+    use ambid_core::estimate::pem::lm::StopReason::*;
+    [
+        Significance,
+        Stagnation,
+        LossChange,
+        StepSize,
+        Gradient,
+        MaxIterations,
+    ]
+    .into_iter()
+    .find(|r| format!("{r:?}") == name)
+    .map_or_else(|| name.to_string(), |r| stop_reason_text(r).to_string())
+}
+
 fn stop_reason_text(r: ambid_core::estimate::pem::lm::StopReason) -> &'static str {
     use ambid_core::estimate::pem::lm::StopReason;
     match r {

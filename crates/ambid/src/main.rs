@@ -1095,11 +1095,11 @@ fn simulate(a: SimulateArgs) -> Result<()> {
     )?;
     set.commit()?;
     println!(
-        "simulated {} samples ({:.3} s at {} Hz), {:?} mode",
+        "simulated {} samples ({:.3} s at {} Hz), {} mode",
         rec.t.len(),
         rec.t.len() as f64 * rec.ts,
         out.twin.fs(),
-        exp.mode
+        format!("{:?}", exp.mode).to_lowercase()
     );
     if let Some(l) = excitation_level(&out.excitation.values, exp.twin.magnet.i_sat_a) {
         println!("{l}");
