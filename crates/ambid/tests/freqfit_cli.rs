@@ -333,7 +333,7 @@ fn chirp_reconstruction_through_the_cli() {
         sum["fit_u_pct"].as_f64().unwrap(),
     );
     assert!(fy >= 99.0 && fu >= 99.0, "{fy} {fu}: {t}");
-    // the reference needs --excitation none
+    // the reference needs --signal none (the option was --excitation, still accepted with a note)
     let o = ambid(&[
         "simulate",
         "--mode",
@@ -344,7 +344,7 @@ fn chirp_reconstruction_through_the_cli() {
         s(&d.join("x")),
     ]);
     assert!(
-        !o.status.success() && text(&o).contains("--excitation none"),
+        !o.status.success() && text(&o).contains("--signal none"),
         "{}",
         text(&o)
     );
