@@ -627,6 +627,9 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     Ok(StepStatus::Done)
 }
 
+/// The chosen model's label, poles, zeros and sample time (for its zoomed views and table).
+type ChosenPz = (String, Vec<c64>, Vec<c64>, Option<f64>);
+
 pub fn pole_zero(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     let Some(ch) = ctx.chosen else {
         return Ok(StepStatus::Skipped(
@@ -642,7 +645,7 @@ pub fn pole_zero(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     };
     let opts = PzOptions::default();
     let mut chosen_pz = None;
-    let mut chosen_poles: Option<(String, Vec<c64>, Vec<c64>, Option<f64>)> = None;
+    let mut chosen_poles: Option<ChosenPz> = None;
     for (i, c) in ctx.candidates.iter().enumerate() {
         if c.structure != structure {
             continue;
