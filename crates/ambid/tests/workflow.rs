@@ -143,6 +143,32 @@ fn the_default_workflow_on_the_twin_recovers_the_truth_and_reports_every_number(
     for t in &out.timings {
         assert_eq!(t.status, "done", "step {} was {}", t.step, t.status);
     }
+    // the chosen model's poles in Hz: its unstable pole at the exact plant's, s = f_s ln z
+    let twin = ambid_twin::Twin::new(ambid_twin::TwinConfig::default()).unwrap();
+    let z_true = twin.plant_unstable_poles().unwrap()[0];
+    let f_true = z_true.norm().ln() / twin.ts() / std::f64::consts::TAU;
+    let poles_hz = out
+        .report
+        .sections
+        .iter()
+        .flat_map(|s| &s.blocks)
+        .find_map(|b| match b {
+            Block::Table(t) if t.id == "poles_hz" => Some(t),
+            _ => None,
+        })
+        .expect("the table of the chosen model's poles in Hz");
+    let unstable: Vec<f64> = poles_hz
+        .rows
+        .iter()
+        .filter(|r| r[4].starts_with("unstable"))
+        .map(|r| r[2].parse::<f64>().unwrap())
+        .collect();
+    assert_eq!(unstable.len(), 1, "{:?}", poles_hz.rows);
+    assert!(
+        (unstable[0] - f_true).abs() < 0.03 * f_true,
+        "unstable pole at {} Hz, exact plant {f_true} Hz",
+        unstable[0]
+    );
     // amplitude study: a recommended range inside the studied levels, and the chosen level in it
     let (lo, hi) = (
         num(sm, "amplitude.recommended_min_pct"),

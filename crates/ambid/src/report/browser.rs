@@ -220,7 +220,10 @@ const LAYOUT_PROBE: &str = r#"<script>
   var W = document.documentElement.clientWidth, bad = [];
   var all = document.querySelectorAll('body *');
   for (var k = 0; k < all.length; k++) {
-    var e = all[k], r = e.getBoundingClientRect();
+    var e = all[k];
+    // inside an <svg> nothing is drawn beyond the svg's own box (clipped): measure the svg only
+    if (e.tagName.toLowerCase() !== 'svg' && e.closest('svg')) continue;
+    var r = e.getBoundingClientRect();
     var name = e.tagName.toLowerCase() + (e.id ? '#' + e.id : '');
     if (r.width > 0 && r.right > W + 1) bad.push(name + ' ends at ' + Math.round(r.right) + ' px of ' + W);
     if (e.classList && e.classList.contains('table-wrap') && e.scrollWidth > e.clientWidth + 1)

@@ -5,7 +5,7 @@ use super::figures::{bode_panels, figure, lin, log, pz_panel, series, xy, Curve}
 use super::steps_frf::{ensure_ident, ensure_valid};
 use super::{computation, Ctx, Failure, ModelOut, StepStatus};
 use crate::fitting::{identify_state_space, SsFitOptions, SsFocus};
-use crate::report::{format_number as fmt, Block, NoteKind, Style, Table};
+use crate::report::{format_number as fmt, Block, Marker, NoteKind, Style, Table};
 use ambid_core::c64;
 use ambid_core::estimate::arx::{arx, fit_percent, ArxOrders};
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
@@ -627,6 +627,9 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     Ok(StepStatus::Done)
 }
 
+/// The chosen model's label, poles, zeros and sample time (for its zoomed views and table).
+type ChosenPz = (String, Vec<c64>, Vec<c64>, Option<f64>);
+
 pub fn pole_zero(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     let Some(ch) = ctx.chosen else {
         return Ok(StepStatus::Skipped(
@@ -642,6 +645,7 @@ pub fn pole_zero(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     };
     let opts = PzOptions::default();
     let mut chosen_pz = None;
+    let mut chosen_poles: Option<ChosenPz> = None;
     for (i, c) in ctx.candidates.iter().enumerate() {
         if c.structure != structure {
             continue;
@@ -680,6 +684,131 @@ pub fn pole_zero(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         ]);
         if i == ch {
             chosen_pz = Some((pz.cancellations.len(), unstable.len()));
+            chosen_poles = Some((c.label(), poles.clone(), zeros.clone(), m.ts()));
+        }
+    }
+    // the chosen model at a glance: its map zoomed onto the poles near z = 1 (at a high sample
+    // rate every mode sits there), the s-plane in Hz and a table of the poles in Hz and damping
+    let mut ct_rows = Vec::new();
+    let mut ct_note = None;
+    if let Some((label, poles, zeros, ts)) = &chosen_poles {
+        // the poles that matter for the loop: natural frequency below f_s/15 (rigid-body and
+        // bending modes; actuator, sensor and delay poles lie beyond)
+        let fs_model = ts.filter(|t| *t > 0.0).map_or(1.0, |t| 1.0 / t);
+        let slow = |z: &c64| {
+            z.norm() > 1e-9 && (z.ln() * fs_model).norm() / std::f64::consts::TAU < fs_model / 15.0
+        };
+        let near: Vec<f64> = poles
+            .iter()
+            .filter(|z| slow(z))
+            .map(|z| (c64::new(1.0, 0.0) - z).norm())
+            .collect();
+        let excess = poles.iter().map(|z| z.norm() - 1.0).fold(0.0_f64, f64::max);
+        let r = (1.5 * near.iter().copied().fold(0.0, f64::max))
+            .max(2.5 * excess)
+            .clamp(1e-4, 0.6);
+        let outside = poles.len() - near.len();
+        panels.push(pz_panel(
+            &format!("{label}, zoomed near z = 1"),
+            poles,
+            zeros,
+            Some(r),
+        ));
+        if outside > 0 {
+            ct_note = Some(format!(
+                "{outside} pole{} of {label} with a natural frequency above f_s/15 lie{} outside the \
+                 zoomed views.",
+                if outside == 1 { "" } else { "s" },
+                if outside == 1 { "s" } else { "" }
+            ));
+        }
+        if let Some(ts) = ts.filter(|t| *t > 0.0) {
+            let fs = 1.0 / ts;
+            let to_hz = |z: &c64| -> Option<c64> {
+                (z.norm() > 1e-9).then(|| z.ln() * fs / std::f64::consts::TAU)
+            };
+            let sp: Vec<c64> = poles.iter().filter_map(to_hz).collect();
+            let sz: Vec<c64> = zeros
+                .iter()
+                .filter(|z| z.norm() < 10.0)
+                .filter_map(to_hz)
+                .collect();
+            let mut p = xy(
+                &format!("{label}, s-plane (s = f_s ln z, in Hz)"),
+                lin("real part σ/2π [Hz]"),
+                lin("imaginary part ω/2π [Hz]"),
+                vec![
+                    series(
+                        "poles",
+                        &sp.iter().map(|v| v.re).collect::<Vec<_>>(),
+                        &sp.iter().map(|v| v.im).collect::<Vec<_>>(),
+                        Style::Markers(Marker::Cross),
+                        Some(0),
+                    ),
+                    series(
+                        "zeros",
+                        &sz.iter().map(|v| v.re).collect::<Vec<_>>(),
+                        &sz.iter().map(|v| v.im).collect::<Vec<_>>(),
+                        Style::Markers(Marker::Circle),
+                        Some(1),
+                    ),
+                ],
+            );
+            p.equal_aspect = false;
+            // zoomed onto the slow poles (with the origin)
+            let slow_s: Vec<c64> = poles.iter().filter(|z| slow(z)).filter_map(to_hz).collect();
+            if !slow_s.is_empty() {
+                let xr = slow_s
+                    .iter()
+                    .map(|v| v.re.abs())
+                    .fold(0.0, f64::max)
+                    .max(1.0);
+                let yr = slow_s
+                    .iter()
+                    .map(|v| v.im.abs())
+                    .fold(0.0, f64::max)
+                    .max(xr);
+                p.x.range = Some((-1.2 * xr, 1.2 * xr));
+                p.y.range = Some((-1.2 * yr, 1.2 * yr));
+            }
+            panels.push(p);
+            let mut sorted: Vec<(&c64, c64)> = poles
+                .iter()
+                .filter(|z| z.im >= 0.0)
+                .filter_map(|z| to_hz(z).map(|s| (z, s)))
+                .collect();
+            sorted.sort_by(|a, b| a.1.norm().total_cmp(&b.1.norm()));
+            for (z, s) in sorted {
+                let fnat = s.norm();
+                let zeta = if fnat > 0.0 { -s.re / fnat } else { 0.0 };
+                ct_rows.push(vec![
+                    if z.im.abs() < 1e-12 {
+                        format!("{:.6}", z.re)
+                    } else {
+                        format!("{:.6} ± {:.6}j", z.re, z.im)
+                    },
+                    fmt(z.norm()),
+                    fmt(fnat),
+                    if z.im.abs() < 1e-12 {
+                        "— (real)".into()
+                    } else {
+                        fmt(zeta)
+                    },
+                    if z.norm() > 1.0 {
+                        format!(
+                            "unstable (time constant {} ms)",
+                            fmt(1e3 / (s.re * std::f64::consts::TAU))
+                        )
+                    } else if z.im.abs() < 1e-12 {
+                        format!(
+                            "stable (time constant {} ms)",
+                            fmt(-1e3 / (s.re * std::f64::consts::TAU))
+                        )
+                    } else {
+                        "stable".into()
+                    },
+                ]);
+            }
         }
     }
     if let Some((nc, nu)) = chosen_pz {
@@ -691,7 +820,9 @@ pub fn pole_zero(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         &format!("Pole-zero maps of the {} candidates", structure.to_uppercase()),
         format!(
             "Poles (×) and zeros (○) in the z-plane with the unit circle, for every order of the chosen \
-             structure. An AMB plant must keep its unstable real pole outside the unit circle{}.",
+             structure; the last two panels show the chosen model zoomed onto the poles near z = 1 (at \
+             a high sample rate every mode of the plant sits there) and in the s-plane in Hz \
+             (s = f_s ln z). An AMB plant must keep its unstable real pole outside the unit circle{}.",
             if truth_unstable.is_empty() {
                 String::new()
             } else {
@@ -727,7 +858,29 @@ pub fn pole_zero(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         rows,
         highlight: None,
     }));
-    let _ = (lin, log);
+    if !ct_rows.is_empty() {
+        let label = chosen_poles.as_ref().map_or(String::new(), |c| c.0.clone());
+        blocks.push(Block::Table(Table {
+            id: "poles_hz".into(),
+            caption: format!(
+                "Poles of the chosen model {label} in continuous time, s = f_s ln z: natural frequency \
+                 |s|/2π and damping ratio −Re s/|s| (one row per complex pair), slowest first."
+            ),
+            header: vec![
+                "z".into(),
+                "|z|".into(),
+                "natural frequency [Hz]".into(),
+                "damping [-]".into(),
+                "stability".into(),
+            ],
+            rows: ct_rows,
+            highlight: None,
+        }));
+    }
+    if let Some(n) = ct_note {
+        blocks.push(Ctx::note(NoteKind::Info, n));
+    }
+    let _ = log;
     ctx.section("pole-zero", "Pole-zero check", blocks);
     Ok(StepStatus::Done)
 }
