@@ -564,10 +564,13 @@ pub const ORDER_SCAN_MAX: usize = 10;
 /// * when the models step fits FRFs (closed loop with an excitation): state-space fits of orders
 ///   1 … [`ORDER_SCAN_MAX`] to the plant FRF on the models step's fit band, with its weights and
 ///   unstable-pole count; the adequate orders are the valid fits whose relative RMSE is at most
-///   [`ORDER_ERROR_TOLERANCE`] times the smallest; the recommendation is the smallest adequate
-///   order, the range the run of adequate orders that starts there;
-/// * otherwise (time-domain models): the order at the largest gap of the subspace (CVA)
-///   singular values of the identification record, up to [`ORDER_SCAN_MAX`];
+///   [`order_error_tolerance`] (of the band's line count) times the smallest; the
+///   recommendation is the smallest adequate order, the range the adequate orders from it up to
+///   [`ORDER_RANGE_ABOVE`] more;
+/// * otherwise (time-domain models): the same rule on time-domain state-space fits scored by
+///   100 % − their one-step fit on the validation record (tolerance of its sample count), with
+///   the largest gap of the subspace (CVA) singular values quoted beside it (and used alone
+///   when no fit has a predictor);
 /// * the resonance count (a lower bound) and the ARX BIC minimum (an upper bound, or nothing
 ///   when it lies on the grid's edge) are compared with the range and each disagreement stated.
 fn recommend(
