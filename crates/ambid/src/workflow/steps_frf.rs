@@ -2,6 +2,7 @@
 
 use super::data::Recording;
 use super::figures::{bode_panels, figure, lin, log, series, xy, Curve};
+use super::steps_models::{open_loop_response, Candidate};
 use super::steps_signal::plan;
 use super::{computation, Ctx, Failure, StepStatus};
 use crate::analysis::{analyze, FrfSettings, Record};
@@ -19,7 +20,6 @@ use ambid_core::frf::resonance::{find_resonances_reliable, order_from_peaks, Res
 use ambid_core::validate::compare::{
     compare_models, supported_unstable_poles, CompareSpec, FitStructure,
 };
-use ambid_core::validate::predict::predict_k;
 use serde_json::json;
 
 /// FRF settings for a record of `n` samples at `fs` (periodic when the period is known).
@@ -730,9 +730,26 @@ fn recommend(
                     let e = identify_state_space(&rec.u, &rec.y, rec.ts, &so)
                         .ok()
                         .and_then(|f| {
-                            let k = f.pem.and_then(|p| p.kalman_gain)?;
-                            let km = faer::Mat::from_fn(k.len(), 1, |i, _| k[i]);
-                            let yh = predict_k(&f.model, km.as_ref(), &val.y, &val.u, 1).ok()?;
+                            // the models step's own criterion: simulation when the model is
+                            // stable, else the one-step prediction of its innovations form
+                            let c = Candidate {
+                                structure: "ss",
+                                order: o,
+                                model: None,
+                                poly: None,
+                                n_params: o * o + 2 * o,
+                                relative_rmse: None,
+                                median_relative: None,
+                                db_rmse: None,
+                                bic: None,
+                                validation_fit: None,
+                                unstable_poles: None,
+                                truth_median_relative: None,
+                                valid: true,
+                                note: None,
+                                kalman: f.pem.and_then(|p| p.kalman_gain),
+                            };
+                            let (yh, _) = open_loop_response(&c, &f.model, &val.y, &val.u)?;
                             fit_percent(&val.y, &yh).ok().map(|p| 100.0 - p)
                         });
                     (o, e)
@@ -757,7 +774,8 @@ fn recommend(
                     id: "order_fit_errors".into(),
                     caption: format!(
                         "State-space fits of orders 1–{scan_max} to the identification record \
-                         (prediction criterion): validation error 100 % − one-step fit per order. \
+                         (the models step's criterion): validation error 100 % − fit per order (simulation for a \
+                         stable model, else one-step prediction). \
                          Adequate: within {} % of the smallest error ({} %).",
                         fmt(100.0 * (tol - 1.0)),
                         fmt(b)
@@ -772,7 +790,7 @@ fn recommend(
                         .map(|(o, e)| {
                             vec![
                                 o.to_string(),
-                                e.map_or("— (no predictor)".into(), fmt),
+                                e.map_or("— (no fit)".into(), fmt),
                                 if ok(*e) { "yes" } else { "no" }.into(),
                             ]
                         })
@@ -781,9 +799,9 @@ fn recommend(
                 });
                 let (lo, hi) = (errs[i0].0, errs[i1].0);
                 let agree = if (lo..=hi).contains(&fit.order) {
-                    "agree".to_string()
+                    "agrees".to_string()
                 } else {
-                    "disagree; the fits decide, since the gap of measured singular values is \
+                    "disagrees; the fits decide, since the gap of measured singular values is \
                      blurred by noise and feedback"
                         .to_string()
                 };
@@ -793,7 +811,7 @@ fn recommend(
                     hi,
                     "time_fit_error",
                     format!(
-                        "the state-space fits' one-step validation error stops improving there: \
+                        "the state-space fits' validation error stops improving there: \
                          orders from {lo} on are within {} % of the smallest error ({} %) (the range \
                          adds up to one more pole pair), order {} is not; {sv_text}, which {agree}",
                         fmt(100.0 * (tol - 1.0)),
@@ -822,6 +840,14 @@ fn recommend(
                 " The resonance count disagrees: {p} significant peak(s) ask for at least {lower} \
                  states, more than the range; check the peaks below against the FRF's noise."
             ));
+        } else if p == 0 {
+            text.push_str(if closed {
+                " No resonance peak is significant against the FRF's noise, so the peaks set no \
+                 lower bound beyond the rigid-body pair (2 states)."
+            } else {
+                " No resonance peak is significant against the FRF's noise, so the peaks set no \
+                 lower bound."
+            });
         } else {
             text.push_str(&format!(
                 " The {p} significant resonance peak(s) give at least {lower} states, consistent \
