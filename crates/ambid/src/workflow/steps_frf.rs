@@ -490,7 +490,7 @@ pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                     format!(
                         "in an AMB loop the rigid-body (unstable) pair adds two more, so at least {} \
                          states (a lower bound: modes outside the band and actuator, sensor and delay \
-                         poles show no peak; see the recommendation below).",
+                         poles show no peak; see the recommendation above).",
                         n + 2
                     )
                 } else {
@@ -714,7 +714,10 @@ fn recommend(
         );
         // time-domain state-space fits per order, scored by their one-step prediction error
         // on the validation record (the models step's fits and criterion)
-        let errs: Vec<(usize, Option<f64>)> = match ctx.valid.as_ref() {
+        // (only when the models step runs: the scan serves its order list, and ten state-space
+        // fits of a long record cost seconds; without it the singular values decide)
+        let models_run = ctx.cfg.steps().contains(&super::config::Step::Models);
+        let errs: Vec<(usize, Option<f64>)> = match ctx.valid.as_ref().filter(|_| models_run) {
             Some(val) => (1..=scan_max)
                 .map(|o| {
                     let so = SsFitOptions {

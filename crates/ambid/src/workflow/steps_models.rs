@@ -481,13 +481,14 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     }
     ctx.put("models.table", jrows);
     let mut blocks = vec![Block::Text(format!(
-        "{} at orders {:?}; {}. Validation fit: {validation_kind}. Chosen by {} among the valid models{}.",
+        "{} at orders {:?} ([models] orders {:?} plus the order step's recommended range); {}. Validation fit: {validation_kind}. Chosen by {} among the valid models{}.",
         if domain == "frf" {
             "ARX (Levy), OE (Sanathanan–Koerner + Levenberg–Marquardt) and state-space (frequency-domain subspace + LM) models fitted to the plant FRF"
         } else {
             "ARX (least squares), OE (prediction-error method) and state-space (N4SID + prediction-error refinement) models fitted to the identification record"
         },
         cfg.orders,
+        cfg_orig.orders,
         if domain == "frf" {
             format!(
                 "weights {}; {}",
