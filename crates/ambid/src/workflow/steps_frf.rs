@@ -510,16 +510,26 @@ pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     }
     let arx_edge = on_edge.then_some((best.na, best.nb));
     let arx_na = (!on_edge).then_some(best.na);
-    let rec_order = recommend(ctx, &rec, n_peaks, closed, arx_na, arx_edge)?;
-    if let Some(r) = rec_order {
-        ctx.put("order.recommended", r.n as f64);
-        ctx.put("order.recommended_lo", r.lo as f64);
-        ctx.put("order.recommended_hi", r.hi as f64);
-        ctx.put("order.recommended_source", r.source);
-        if let Some(t) = r.table {
-            blocks.push(Block::Table(t));
+    match recommend(ctx, &rec, n_peaks, closed, arx_na, arx_edge) {
+        Err(why) => blocks.insert(
+            0,
+            Ctx::note(
+                NoteKind::Warning,
+                format!(
+                    "No order recommendation: {why}. The models step fits [models] orders only."
+                ),
+            ),
+        ),
+        Ok(r) => {
+            ctx.put("order.recommended", r.n as f64);
+            ctx.put("order.recommended_lo", r.lo as f64);
+            ctx.put("order.recommended_hi", r.hi as f64);
+            ctx.put("order.recommended_source", r.source);
+            if let Some(t) = r.table {
+                blocks.push(Block::Table(t));
+            }
+            blocks.insert(0, Ctx::note(NoteKind::Info, r.text));
         }
-        blocks.insert(0, Ctx::note(NoteKind::Info, r.text));
     }
     ctx.section("order", "Order estimation", blocks);
     Ok(StepStatus::Done)
@@ -580,7 +590,7 @@ fn recommend(
     closed: bool,
     arx_na: Option<usize>,
     arx_edge: Option<(usize, usize)>,
-) -> Result<Option<Recommendation>, Failure> {
+) -> Result<Recommendation, String> {
     let mcfg = &ctx.cfg.models;
     let scan_max = ORDER_SCAN_MAX.max(mcfg.orders.iter().copied().max().unwrap_or(1));
     let frf_domain = match mcfg.domain.as_deref() {
@@ -593,7 +603,11 @@ fn recommend(
         let explicit_band = mcfg.band_hz.map(|[a, b]| (a, b));
         let band = match explicit_band {
             Some(b) => b,
-            None => fit_band(frd, FIT_REL_HALFWIDTH).map_err(computation)?.band,
+            None => {
+                fit_band(frd, FIT_REL_HALFWIDTH)
+                    .map_err(|e| format!("no fit band for the order scan ({e})"))?
+                    .band
+            }
         };
         let weights = match mcfg.weights.as_str() {
             "uniform" => FreqWeights::Uniform,
@@ -617,7 +631,8 @@ fn recommend(
             controller: ctrl.cloned(),
             ..CompareSpec::default()
         };
-        let rows = compare_models(frd, &spec, None).map_err(computation)?;
+        let rows = compare_models(frd, &spec, None)
+            .map_err(|e| format!("the state-space fits of the order scan failed ({e})"))?;
         let errs: Vec<(usize, Option<f64>)> = rows
             .iter()
             .map(|r| (r.order, r.relative_rmse.filter(|_| r.valid)))
@@ -627,7 +642,7 @@ fn recommend(
             .filter_map(|e| e.1)
             .min_by(|a, b| a.total_cmp(b))
         else {
-            return Ok(None);
+            return Err("no state-space fit of the order scan is valid".into());
         };
         let lines = frd
             .f_hz()
@@ -637,7 +652,7 @@ fn recommend(
         let tol = order_error_tolerance(lines);
         let ok = |e: Option<f64>| e.is_some_and(|e| e <= tol * best);
         let Some(i0) = errs.iter().position(|e| ok(e.1)) else {
-            return Ok(None);
+            return Err("no order of the scan is adequate".into());
         };
         let mut i1 = i0;
         while i1 + 1 < errs.len() && i1 < i0 + ORDER_RANGE_ABOVE && ok(errs[i1 + 1].1) {
@@ -699,7 +714,7 @@ fn recommend(
         };
         let fit = match n4sid_detailed(y.as_ref(), u.as_ref(), &opts) {
             Ok(f) => f,
-            Err(_) => return Ok(None),
+            Err(e) => return Err(format!("the subspace fit of the order scan failed ({e})")),
         };
         let sv: Vec<String> = fit
             .singular_values
@@ -873,12 +888,12 @@ fn recommend(
         )),
         _ => {}
     }
-    Ok(Some(Recommendation {
+    Ok(Recommendation {
         n,
         lo,
         hi,
         source,
         text,
         table,
-    }))
+    })
 }
