@@ -2,15 +2,24 @@
 
 use super::data::Recording;
 use super::figures::{bode_panels, figure, lin, log, series, xy, Curve};
+use super::steps_models::{open_loop_response, Candidate};
 use super::steps_signal::plan;
 use super::{computation, Ctx, Failure, StepStatus};
 use crate::analysis::{analyze, FrfSettings, Record};
 use crate::experiment::{ExcitationKind, ExcitationPlan};
+use crate::fitting::{identify_state_space, SsFitOptions, SsFocus};
 use crate::report::{
     format_number as fmt, Block, Heatmap, NoteKind, Panel, PanelContent, Style, Table,
 };
+use ambid_core::estimate::arx::fit_percent;
+use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::estimate::order::{arx_order_scan, ArxScanSpec};
+use ambid_core::estimate::subspace::{n4sid_detailed, SubspaceOptions};
+use ambid_core::frf::band::{fit_band, FIT_REL_HALFWIDTH};
 use ambid_core::frf::resonance::{find_resonances_reliable, order_from_peaks, ResonanceOptions};
+use ambid_core::validate::compare::{
+    compare_models, supported_unstable_poles, CompareSpec, FitStructure,
+};
 use serde_json::json;
 
 /// FRF settings for a record of `n` samples at `fs` (periodic when the period is known).
@@ -423,6 +432,7 @@ pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     }
     // resonance count on the plant FRF
     let closed = ctx.is_closed_loop();
+    let mut n_peaks: Option<usize> = None;
     if let Some(a) = &ctx.frf {
         let plant = &a.frf.plant;
         let opts = ResonanceOptions {
@@ -441,6 +451,9 @@ pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             }
         };
         let n = order_from_peaks(&peaks);
+        if searched > 0 {
+            n_peaks = Some(peaks.len());
+        }
         ctx.put("order.resonances", peaks.len() as f64);
         ctx.put("order.order_from_peaks", n as f64);
         let rows = peaks
@@ -475,8 +488,9 @@ pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                 },
                 if closed {
                     format!(
-                        "in an AMB loop the rigid-body (unstable) pair adds two more, so orders near {} \
-                         are the candidates (seed paper, section 3.4).",
+                        "in an AMB loop the rigid-body (unstable) pair adds two more, so at least {} \
+                         states (a lower bound: modes outside the band and actuator, sensor and delay \
+                         poles show no peak; see the recommendation above).",
                         n + 2
                     )
                 } else {
@@ -494,6 +508,392 @@ pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             highlight: None,
         }));
     }
+    let arx_edge = on_edge.then_some((best.na, best.nb));
+    let arx_na = (!on_edge).then_some(best.na);
+    match recommend(ctx, &rec, n_peaks, closed, arx_na, arx_edge) {
+        Err(why) => blocks.insert(
+            0,
+            Ctx::note(
+                NoteKind::Warning,
+                format!(
+                    "No order recommendation: {why}. The models step fits [models] orders only."
+                ),
+            ),
+        ),
+        Ok(r) => {
+            ctx.put("order.recommended", r.n as f64);
+            ctx.put("order.recommended_lo", r.lo as f64);
+            ctx.put("order.recommended_hi", r.hi as f64);
+            ctx.put("order.recommended_source", r.source);
+            if let Some(t) = r.table {
+                blocks.push(Block::Table(t));
+            }
+            blocks.insert(0, Ctx::note(NoteKind::Info, r.text));
+        }
+    }
     ctx.section("order", "Order estimation", blocks);
     Ok(StepStatus::Done)
+}
+
+/// The reconciled order recommendation of the `order` step.
+struct Recommendation {
+    /// Recommended order.
+    n: usize,
+    /// Range of adequate orders.
+    lo: usize,
+    hi: usize,
+    /// Which source set the range: `frf_fit_error` or `subspace_singular_values`.
+    source: &'static str,
+    /// The paragraph the report states.
+    text: String,
+    /// Error per order of the frequency-domain fits.
+    table: Option<Table>,
+}
+
+/// Relative tolerance on an error per order that makes an order adequate, from the number `n`
+/// of residuals the error is computed on (FRF lines in the fit band, or validation samples):
+/// $1 + 2/\sqrt{2n}$, two standard deviations of an RMS estimated from $n$ independent
+/// residuals (its relative standard deviation is $\approx 1/\sqrt{2n}$), so an order within
+/// it of the smallest error cannot be told apart from the best by the data.
+pub fn order_error_tolerance(n: usize) -> f64 {
+    1.0 + 2.0 / (2.0 * n.max(1) as f64).sqrt()
+}
+
+/// How far the recommended range reaches above the recommended (smallest adequate) order: one
+/// more complex pole pair, when those orders are adequate too, so that the models step
+/// compares the smallest adequate model with ones that can hold a hidden mode or the delay.
+pub const ORDER_RANGE_ABOVE: usize = 2;
+
+/// The largest order the recommendation scans (state-space fits of orders 1 … this, or the
+/// largest of `[models] orders` when that is larger): two states per mode, so five modes in the
+/// band; above it the subspace singular values of measured records are noise.
+pub const ORDER_SCAN_MAX: usize = 10;
+
+/// Reconciles the three order sources into one recommended order and range (rule in
+/// docs/workflow.md, "Order"):
+/// * when the models step fits FRFs (closed loop with an excitation): state-space fits of orders
+///   1 … [`ORDER_SCAN_MAX`] to the plant FRF on the models step's fit band, with its weights and
+///   unstable-pole count; the adequate orders are the valid fits whose relative RMSE is at most
+///   [`order_error_tolerance`] (of the band's line count) times the smallest; the
+///   recommendation is the smallest adequate order, the range the adequate orders from it up to
+///   [`ORDER_RANGE_ABOVE`] more;
+/// * otherwise (time-domain models): the same rule on time-domain state-space fits scored by
+///   100 % − their one-step fit on the validation record (tolerance of its sample count), with
+///   the largest gap of the subspace (CVA) singular values quoted beside it (and used alone
+///   when no fit has a predictor);
+/// * the resonance count (a lower bound) and the ARX BIC minimum (an upper bound, or nothing
+///   when it lies on the grid's edge) are compared with the range and each disagreement stated.
+fn recommend(
+    ctx: &Ctx<'_>,
+    rec: &Recording,
+    n_peaks: Option<usize>,
+    closed: bool,
+    arx_na: Option<usize>,
+    arx_edge: Option<(usize, usize)>,
+) -> Result<Recommendation, String> {
+    let mcfg = &ctx.cfg.models;
+    let scan_max = ORDER_SCAN_MAX.max(mcfg.orders.iter().copied().max().unwrap_or(1));
+    let frf_domain = match mcfg.domain.as_deref() {
+        Some(d) => d == "frf" && ctx.frf.is_some(),
+        None => rec.r.is_some() && rec.closed_loop && ctx.frf.is_some(),
+    };
+    let mut table = None;
+    let (n, lo, hi, source, how) = if let (true, Some(a)) = (frf_domain, ctx.frf.as_ref()) {
+        let frd = &a.frf.plant;
+        let explicit_band = mcfg.band_hz.map(|[a, b]| (a, b));
+        let band = match explicit_band {
+            Some(b) => b,
+            None => {
+                fit_band(frd, FIT_REL_HALFWIDTH)
+                    .map_err(|e| format!("no fit band for the order scan ({e})"))?
+                    .band
+            }
+        };
+        let weights = match mcfg.weights.as_str() {
+            "uniform" => FreqWeights::Uniform,
+            "coherence" => FreqWeights::Coherence(a.frf.coh_ry.clone()),
+            _ if frd.variance().is_some() => FreqWeights::InverseVariance,
+            _ => FreqWeights::Uniform,
+        };
+        let ctrl = ctx.controller.as_ref().map(|c| c.state_space());
+        let (n_u, _) = supported_unstable_poles(frd, ctrl, explicit_band, mcfg.unstable_poles);
+        let spec = CompareSpec {
+            structures: vec![FitStructure::Ss],
+            orders: (1..=scan_max).collect(),
+            nk: mcfg.nk,
+            fit: FreqFitOptions {
+                band_hz: Some(band),
+                weights,
+                max_iterations: mcfg.max_iterations,
+                ..FreqFitOptions::default()
+            },
+            unstable_poles: n_u,
+            controller: ctrl.cloned(),
+            ..CompareSpec::default()
+        };
+        let rows = compare_models(frd, &spec, None)
+            .map_err(|e| format!("the state-space fits of the order scan failed ({e})"))?;
+        let errs: Vec<(usize, Option<f64>)> = rows
+            .iter()
+            .map(|r| (r.order, r.relative_rmse.filter(|_| r.valid)))
+            .collect();
+        let Some(best) = errs
+            .iter()
+            .filter_map(|e| e.1)
+            .min_by(|a, b| a.total_cmp(b))
+        else {
+            return Err("no state-space fit of the order scan is valid".into());
+        };
+        let lines = frd
+            .f_hz()
+            .iter()
+            .filter(|f| (band.0..=band.1).contains(*f))
+            .count();
+        let tol = order_error_tolerance(lines);
+        let ok = |e: Option<f64>| e.is_some_and(|e| e <= tol * best);
+        let Some(i0) = errs.iter().position(|e| ok(e.1)) else {
+            return Err("no order of the scan is adequate".into());
+        };
+        let mut i1 = i0;
+        while i1 + 1 < errs.len() && i1 < i0 + ORDER_RANGE_ABOVE && ok(errs[i1 + 1].1) {
+            i1 += 1;
+        }
+        table = Some(Table {
+            id: "order_fit_errors".into(),
+            caption: format!(
+                "State-space fits of orders 1–{scan_max} to the plant FRF over {}–{} Hz (the models \
+                 step's band, weights and unstable-pole count): relative RMSE per order. Adequate: \
+                 valid and within {} % of the smallest error ({} %).",
+                fmt(band.0),
+                fmt(band.1),
+                fmt(100.0 * (tol - 1.0)),
+                fmt(100.0 * best)
+            ),
+            header: vec![
+                "order".into(),
+                "relative RMSE [%]".into(),
+                "adequate".into(),
+            ],
+            rows: errs
+                .iter()
+                .map(|(o, e)| {
+                    vec![
+                        o.to_string(),
+                        e.map_or("— (not valid)".into(), |e| fmt(100.0 * e)),
+                        if ok(*e) { "yes" } else { "no" }.into(),
+                    ]
+                })
+                .collect(),
+            highlight: None,
+        });
+        (
+            errs[i0].0,
+            errs[i0].0,
+            errs[i1].0,
+            "frf_fit_error",
+            format!(
+                "the state-space fits to the plant FRF stop improving there: orders from {} on fit within \
+                 {} % of the smallest relative error ({} %) (the range adds up to one more pole pair), order {} does not",
+                errs[i0].0,
+                fmt(100.0 * (tol - 1.0)),
+                fmt(100.0 * best),
+                if i0 > 0 {
+                    errs[i0 - 1].0.to_string()
+                } else {
+                    "0".into()
+                }
+            ),
+        )
+    } else {
+        let n = rec.len();
+        let y = faer::Mat::from_fn(n, 1, |k, _| rec.y[k]);
+        let u = faer::Mat::from_fn(n, 1, |k, _| rec.u[k]);
+        let opts = SubspaceOptions {
+            max_order: scan_max,
+            ..SubspaceOptions::new(rec.ts)
+        };
+        let fit = match n4sid_detailed(y.as_ref(), u.as_ref(), &opts) {
+            Ok(f) => f,
+            Err(e) => return Err(format!("the subspace fit of the order scan failed ({e})")),
+        };
+        let sv: Vec<String> = fit
+            .singular_values
+            .iter()
+            .take(scan_max + 1)
+            .map(|v| fmt(*v))
+            .collect();
+        let sv_text = format!(
+            "the subspace (CVA) singular values of u → y ({}) have their largest gap after {}",
+            sv.join(", "),
+            fit.order
+        );
+        // time-domain state-space fits per order, scored by their one-step prediction error
+        // on the validation record (the models step's fits and criterion)
+        // (only when the models step runs: the scan serves its order list, and ten state-space
+        // fits of a long record cost seconds; without it the singular values decide)
+        let models_run = ctx.cfg.steps().contains(&super::config::Step::Models);
+        let errs: Vec<(usize, Option<f64>)> = match ctx.valid.as_ref().filter(|_| models_run) {
+            Some(val) => (1..=scan_max)
+                .map(|o| {
+                    let so = SsFitOptions {
+                        order: Some(o),
+                        focus: if rec.closed_loop {
+                            SsFocus::Prediction
+                        } else {
+                            SsFocus::Auto
+                        },
+                        max_iterations: mcfg.max_iterations,
+                        ..SsFitOptions::default()
+                    };
+                    let e = identify_state_space(&rec.u, &rec.y, rec.ts, &so)
+                        .ok()
+                        .and_then(|f| {
+                            // the models step's own criterion: simulation when the model is
+                            // stable, else the one-step prediction of its innovations form
+                            let c = Candidate {
+                                structure: "ss",
+                                order: o,
+                                model: None,
+                                poly: None,
+                                n_params: o * o + 2 * o,
+                                relative_rmse: None,
+                                median_relative: None,
+                                db_rmse: None,
+                                bic: None,
+                                validation_fit: None,
+                                unstable_poles: None,
+                                truth_median_relative: None,
+                                valid: true,
+                                note: None,
+                                kalman: f.pem.and_then(|p| p.kalman_gain),
+                            };
+                            let (yh, _) = open_loop_response(&c, &f.model, &val.y, &val.u)?;
+                            fit_percent(&val.y, &yh).ok().map(|p| 100.0 - p)
+                        });
+                    (o, e)
+                })
+                .collect(),
+            None => Vec::new(),
+        };
+        let best = errs
+            .iter()
+            .filter_map(|e| e.1)
+            .min_by(|a, b| a.total_cmp(b));
+        let tol = order_error_tolerance(ctx.valid.as_ref().map_or(1, |v| v.len()));
+        let ok = |e: Option<f64>| best.is_some_and(|b| e.is_some_and(|e| e <= tol * b));
+        match errs.iter().position(|e| ok(e.1)) {
+            Some(i0) => {
+                let mut i1 = i0;
+                while i1 + 1 < errs.len() && i1 < i0 + ORDER_RANGE_ABOVE && ok(errs[i1 + 1].1) {
+                    i1 += 1;
+                }
+                let b = best.unwrap_or(f64::NAN);
+                table = Some(Table {
+                    id: "order_fit_errors".into(),
+                    caption: format!(
+                        "State-space fits of orders 1–{scan_max} to the identification record \
+                         (the models step's criterion): validation error 100 % − fit per order (simulation for a \
+                         stable model, else one-step prediction). \
+                         Adequate: within {} % of the smallest error ({} %).",
+                        fmt(100.0 * (tol - 1.0)),
+                        fmt(b)
+                    ),
+                    header: vec![
+                        "order".into(),
+                        "validation error [%]".into(),
+                        "adequate".into(),
+                    ],
+                    rows: errs
+                        .iter()
+                        .map(|(o, e)| {
+                            vec![
+                                o.to_string(),
+                                e.map_or("— (no fit)".into(), fmt),
+                                if ok(*e) { "yes" } else { "no" }.into(),
+                            ]
+                        })
+                        .collect(),
+                    highlight: None,
+                });
+                let (lo, hi) = (errs[i0].0, errs[i1].0);
+                let agree = if (lo..=hi).contains(&fit.order) {
+                    "agrees".to_string()
+                } else {
+                    "disagrees; the fits decide, since the gap of measured singular values is \
+                     blurred by noise and feedback"
+                        .to_string()
+                };
+                (
+                    lo,
+                    lo,
+                    hi,
+                    "time_fit_error",
+                    format!(
+                        "the state-space fits' validation error stops improving there: \
+                         orders from {lo} on are within {} % of the smallest error ({} %) (the range \
+                         adds up to one more pole pair), order {} is not; {sv_text}, which {agree}",
+                        fmt(100.0 * (tol - 1.0)),
+                        fmt(b),
+                        lo - 1
+                    ),
+                )
+            }
+            None => (
+                fit.order,
+                fit.order,
+                fit.order,
+                "subspace_singular_values",
+                sv_text,
+            ),
+        }
+    };
+    let mut text = format!(
+        "Recommended order {n} (range {lo}–{hi}) because {how}. The models step fits these orders \
+         besides [models] orders."
+    );
+    if let Some(p) = n_peaks {
+        let lower = 2 * p + usize::from(closed) * 2;
+        if lower > hi {
+            text.push_str(&format!(
+                " The resonance count disagrees: {p} significant peak(s) ask for at least {lower} \
+                 states, more than the range; check the peaks below against the FRF's noise."
+            ));
+        } else if p == 0 {
+            text.push_str(if closed {
+                " No resonance peak is significant against the FRF's noise, so the peaks set no \
+                 lower bound beyond the rigid-body pair (2 states)."
+            } else {
+                " No resonance peak is significant against the FRF's noise, so the peaks set no \
+                 lower bound."
+            });
+        } else {
+            text.push_str(&format!(
+                " The {p} significant resonance peak(s) give at least {lower} states, consistent \
+                 (actuator, sensor and delay poles make no peak)."
+            ));
+        }
+    }
+    match (arx_na, arx_edge) {
+        (_, Some((na, nb))) => text.push_str(&format!(
+            " The ARX BIC minimum lies on the grid's edge (na = {na}, nb = {nb}), so it is no \
+             estimate: ARX also models the noise and needs high orders."
+        )),
+        (Some(na), None) if na < lo => text.push_str(&format!(
+            " The ARX BIC minimum na = {na} is below the range (an ARX model with a short noise \
+             model may merge modes); the range rests on the fits above."
+        )),
+        (Some(na), None) => text.push_str(&format!(
+            " The ARX BIC minimum na = {na} is consistent (an upper bound: ARX needs extra poles \
+             for the noise model)."
+        )),
+        _ => {}
+    }
+    Ok(Recommendation {
+        n,
+        lo,
+        hi,
+        source,
+        text,
+        table,
+    })
 }

@@ -115,10 +115,44 @@ pub fn open_loop_response(
     }
 }
 
+/// `[models] orders` with the order step's recommended range (`order.recommended_lo` …
+/// `order.recommended_hi`) added, sorted, each order capped by the record's parameter budget
+/// ([`super::config::SAMPLES_PER_PARAMETER`] samples per parameter) and
+/// [`super::config::MAX_MODEL_ORDER`].
+fn orders_with_recommendation(
+    given: &[usize],
+    summary: &serde_json::Map<String, serde_json::Value>,
+    rec: Option<&super::data::Recording>,
+) -> Vec<usize> {
+    let get = |k: &str| {
+        summary
+            .get("order")
+            .and_then(|o| o.get(k))
+            .and_then(|v| v.as_f64())
+            .map(|v| v as usize)
+    };
+    let mut out = given.to_vec();
+    if let (Some(lo), Some(hi)) = (get("recommended_lo"), get("recommended_hi")) {
+        let cap = rec.map_or(usize::MAX, |r| {
+            r.len() / super::config::SAMPLES_PER_PARAMETER
+        });
+        out.extend((lo.max(1)..=hi).filter(|&o| {
+            o <= super::config::MAX_MODEL_ORDER && super::config::parameters_of_order(o) <= cap
+        }));
+    }
+    out.sort_unstable();
+    out.dedup();
+    out
+}
+
 pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     ensure_ident(ctx)?;
     ensure_valid(ctx)?;
-    let cfg = &ctx.cfg.models;
+    let cfg_orig = &ctx.cfg.models;
+    let cfg = &super::config::ModelsSection {
+        orders: orders_with_recommendation(&cfg_orig.orders, &ctx.summary, ctx.ident.as_ref()),
+        ..cfg_orig.clone()
+    };
     let Some(rec) = ctx.ident.clone() else {
         return Ok(StepStatus::Skipped("no identification record".into()));
     };
@@ -447,13 +481,14 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     }
     ctx.put("models.table", jrows);
     let mut blocks = vec![Block::Text(format!(
-        "{} at orders {:?}; {}. Validation fit: {validation_kind}. Chosen by {} among the valid models{}.",
+        "{} at orders {:?} ([models] orders {:?} plus the order step's recommended range); {}. Validation fit: {validation_kind}. Chosen by {} among the valid models{}.",
         if domain == "frf" {
             "ARX (Levy), OE (Sanathanan–Koerner + Levenberg–Marquardt) and state-space (frequency-domain subspace + LM) models fitted to the plant FRF"
         } else {
             "ARX (least squares), OE (prediction-error method) and state-space (N4SID + prediction-error refinement) models fitted to the identification record"
         },
         cfg.orders,
+        cfg_orig.orders,
         if domain == "frf" {
             format!(
                 "weights {}; {}",
