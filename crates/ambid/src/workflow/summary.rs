@@ -68,6 +68,36 @@ pub(crate) fn section(summary: &Value, sections: &[Section], ctx: &Ctx<'_>) -> S
         ]);
     }
 
+    // the reconciled order (order step)
+    if let Some(n) = num(summary, "order.recommended") {
+        let range = match (
+            num(summary, "order.recommended_lo"),
+            num(summary, "order.recommended_hi"),
+        ) {
+            (Some(a), Some(b)) if a < b => format!(" (range {a:.0}–{b:.0})"),
+            _ => String::new(),
+        };
+        rows.push(vec![
+            "model order".into(),
+            format!(
+                "recommended {n:.0}{range}{}",
+                text(summary, "order.recommended_source").map_or(String::new(), |s| {
+                    format!(
+                        ", from {}",
+                        match s.as_str() {
+                            "frf_fit_error" => "the error of state-space fits to the FRF per order",
+                            "time_fit_error" =>
+                                "the validation error of time-domain fits per order",
+                            "subspace_singular_values" => "the gap in the subspace singular values",
+                            _ => "the order step",
+                        }
+                    )
+                })
+            ),
+            "Order estimation".into(),
+        ]);
+    }
+
     // the one excitation level: % of i_sat, RMS (for a binary PRBS its amplitude equals its RMS)
     if let Some(level) =
         num(summary, "identification.level_pct").or_else(|| num(summary, "amplitude.chosen_pct"))
