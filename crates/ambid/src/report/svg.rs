@@ -671,10 +671,19 @@ fn spans_svg(out: &mut String, panel: &Panel, mx: &AxisMap, lay: &Layout) {
             format_number(span.x0.max(span.x1))
         );
         if !span.label.is_empty() {
+            // left-aligned inside the span's left edge; when that would run past the plot's
+            // right edge (about 6 px per character at 10 px), right-aligned so it stays inside
+            let width = 6.0 * span.label.chars().count() as f64;
+            let right = lay.left + lay.pw - 3.0;
+            let (x, anchor) = if x0 + 4.0 + width <= right {
+                (x0 + 4.0, "start")
+            } else {
+                ((x1 - 4.0).min(right).max(lay.left + width), "end")
+            };
             w!(
                 out,
-                "<text x=\"{:.1}\" y=\"{}\" font-size=\"10\" fill=\"{MUTED}\">{}</text>",
-                x0 + 4.0,
+                "<text x=\"{:.1}\" y=\"{}\" font-size=\"10\" fill=\"{MUTED}\" text-anchor=\"{anchor}\">{}</text>",
+                x,
                 lay.top + 13.0,
                 escape(&span.label)
             );
@@ -1170,6 +1179,59 @@ mod tests {
         };
         let c = series_colors(&[mk(Some(0)), mk(None), mk(None), mk(Some(9))]);
         assert_eq!(c, [PALETTE[0], PALETTE[2], PALETTE[3], PALETTE[1]]);
+    }
+
+    /// A span label that would run past the plot's right edge is right-aligned inside it (the
+    /// amplitude study's "recommended" label was cut at the edge); one with room stays
+    /// left-aligned at the span.
+    #[test]
+    fn span_labels_stay_inside_the_plot() {
+        use crate::report::{Axis, PanelContent, Span};
+        let panel = |x0: f64| Panel {
+            title: String::new(),
+            x: Axis {
+                label: "x".into(),
+                scale: crate::report::Scale::Linear,
+                range: Some((0.0, 16.0)),
+            },
+            y: Axis {
+                label: "y".into(),
+                scale: crate::report::Scale::Linear,
+                range: Some((0.0, 1.0)),
+            },
+            content: PanelContent::Xy(vec![Series {
+                name: "a".into(),
+                x: vec![0.0, 16.0],
+                y: vec![0.0, 1.0],
+                style: Style::Line,
+                color: None,
+            }]),
+            spans: vec![Span {
+                label: "recommended".into(),
+                x0,
+                x1: x0 + 1.0,
+            }],
+            equal_aspect: false,
+        };
+        let text_of = |svg: &str| {
+            let i = svg.find(">recommended<").expect("label drawn");
+            let start = svg[..i].rfind("<text").expect("text element");
+            svg[start..i].to_string()
+        };
+        let mut near_edge = String::new();
+        panel_svg(&panel(14.5), 3, "t1", &mut near_edge);
+        assert!(
+            text_of(&near_edge).contains("text-anchor=\"end\""),
+            "{}",
+            text_of(&near_edge)
+        );
+        let mut roomy = String::new();
+        panel_svg(&panel(2.0), 3, "t2", &mut roomy);
+        assert!(
+            text_of(&roomy).contains("text-anchor=\"start\""),
+            "{}",
+            text_of(&roomy)
+        );
     }
 
     #[test]
