@@ -395,3 +395,131 @@ pub fn consistency(
         iso_search: search,
     })
 }
+
+/// Smallest number of residual-test lags [`residual_lags`] chooses (enough degrees of freedom
+/// for the portmanteau test to see a model error at all).
+pub const RESIDUAL_LAGS_MIN: usize = 10;
+/// Largest number of residual-test lags [`residual_lags`] chooses: beyond it a lightly damped
+/// mode's tail adds degrees of freedom (and cost) faster than it adds power against model errors.
+pub const RESIDUAL_LAGS_MAX: usize = 250;
+/// The impulse response is followed down to this fraction of its peak.
+pub const RESIDUAL_LAGS_DECAY: f64 = 0.05;
+/// The fallback when the rule has nothing to follow (an unstable model without a controller).
+pub const RESIDUAL_LAGS_FALLBACK: usize = 25;
+
+/// What the residual tests' number of lags was derived from (see [`residual_lags`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LagBasis {
+    /// The model's closed-loop impulse response $r \to y$, $T_{ry} = P/(1 + PC)$, with the controller.
+    ClosedLoop,
+    /// The model's own impulse response (no controller; a stable model).
+    Model,
+    /// Nothing to follow (an unstable model without a controller): [`RESIDUAL_LAGS_FALLBACK`].
+    Fallback,
+    /// Given by the user.
+    Given,
+}
+
+/// The residual tests' number of lags and where it came from.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct LagChoice {
+    /// Largest lag $M$ of the tests (the cross-correlation spans $-M \dots M$).
+    pub lags: usize,
+    /// Last sample where the followed impulse response is at least
+    /// [`RESIDUAL_LAGS_DECAY`] of its peak (before clamping), if one was followed.
+    pub settle_samples: Option<usize>,
+    /// What it was derived from.
+    pub basis: LagBasis,
+}
+
+impl LagChoice {
+    /// One sentence for captions: the lags in samples and ms and the rule.
+    pub fn describe(&self, ts: f64) -> String {
+        let ms = self.lags as f64 * ts * 1e3;
+        let rule = match (self.basis, self.settle_samples) {
+            (LagBasis::ClosedLoop, Some(k)) => format!(
+                "the chosen model's closed-loop impulse response r → y (T_ry = P/(1 + PC) with the controller) stays above {} % of its peak for {k} samples ({:.3} ms), clamped to {RESIDUAL_LAGS_MIN}–{RESIDUAL_LAGS_MAX} lags",
+                RESIDUAL_LAGS_DECAY * 100.0,
+                k as f64 * ts * 1e3
+            ),
+            (LagBasis::Model, Some(k)) => format!(
+                "the chosen model's impulse response stays above {} % of its peak for {k} samples ({:.3} ms), clamped to {RESIDUAL_LAGS_MIN}–{RESIDUAL_LAGS_MAX} lags",
+                RESIDUAL_LAGS_DECAY * 100.0,
+                k as f64 * ts * 1e3
+            ),
+            (LagBasis::Given, _) => "set in the configuration ([validation] lags)".to_string(),
+            _ => format!(
+                "the fallback {RESIDUAL_LAGS_FALLBACK}: the model is unstable and no controller closes its loop, so it has no impulse response to follow"
+            ),
+        };
+        format!("lags ±{} ({ms:.3} ms): {rule}", self.lags)
+    }
+}
+
+/// The number of lags $M$ of the residual tests, from the dynamics of the chosen `model`.
+///
+/// A model error shows in the cross-correlation of the output error with the excitation at the
+/// lags over which the error's impulse response is non-zero; in closed loop that is the loop's
+/// response $r \to y$, $T_{ry} = P/(1 + PC)$. **Rule:** $M$ is the last sample $k$ at which the
+/// model's impulse response $h$ (of $T_{ry}$ with `controller`; of the model itself without one)
+/// still satisfies $|h(k)| \ge 0.05 \max|h|$, clamped to
+/// [`RESIDUAL_LAGS_MIN`]–[`RESIDUAL_LAGS_MAX`] and to at most a tenth of the `n` tested samples.
+/// An unstable model without a controller has no impulse response to follow:
+/// [`RESIDUAL_LAGS_FALLBACK`]. The response is followed over $20 M_{\max}$ samples; an unstable
+/// loop gets the fallback too (its validation fails with the unstable poles anyway).
+///
+/// # Example
+/// ```
+/// use ambid::validation::{residual_lags, LagBasis};
+/// use ambid_core::lti::StateSpace;
+/// use faer::mat;
+/// // y(t+1) = 0.9 y(t) + u(t): |h(k)| = 0.9^(k-1) ≥ 0.05 up to k = 29
+/// let p = StateSpace::discrete(mat![[0.9]], mat![[1.0]], mat![[1.0]], mat![[0.0]], 1e-3).unwrap();
+/// let l = residual_lags(&p, None, 100_000);
+/// assert_eq!((l.lags, l.basis), (29, LagBasis::Model));
+/// ```
+pub fn residual_lags(model: &StateSpace, controller: Option<&StateSpace>, n: usize) -> LagChoice {
+    let horizon = 20 * RESIDUAL_LAGS_MAX;
+    let mut imp = vec![0.0; horizon];
+    imp[0] = 1.0;
+    let (h, basis) = match controller {
+        Some(c) => (
+            ambid_core::validate::closed_loop::simulate_loop(model, c, &imp)
+                .ok()
+                .filter(|_| model.feedback(c).and_then(|cl| cl.is_stable()).unwrap_or(false))
+                .map(|r| r.y),
+            LagBasis::ClosedLoop,
+        ),
+        None => (
+            model
+                .is_stable()
+                .unwrap_or(false)
+                .then(|| model.simulate_siso(&imp, None).ok())
+                .flatten(),
+            LagBasis::Model,
+        ),
+    };
+    let cap = RESIDUAL_LAGS_MAX.min(n / 10).max(RESIDUAL_LAGS_MIN.min(n / 10).max(1));
+    let fallback = LagChoice {
+        lags: RESIDUAL_LAGS_FALLBACK.min(cap),
+        settle_samples: None,
+        basis: LagBasis::Fallback,
+    };
+    let Some(h) = h.filter(|h| h.iter().all(|v| v.is_finite())) else {
+        return fallback;
+    };
+    let peak = h.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    if peak <= 0.0 {
+        return fallback;
+    }
+    let settle = h
+        .iter()
+        .rposition(|v| v.abs() >= RESIDUAL_LAGS_DECAY * peak)
+        .unwrap_or(0);
+    LagChoice {
+        lags: settle.clamp(RESIDUAL_LAGS_MIN, RESIDUAL_LAGS_MAX).min(cap),
+        settle_samples: Some(settle),
+        basis,
+    }
+}
