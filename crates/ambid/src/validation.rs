@@ -523,3 +523,149 @@ pub fn residual_lags(model: &StateSpace, controller: Option<&StateSpace>, n: usi
         basis,
     }
 }
+
+/// The instantaneous frequency \[Hz\] of a sweep reference `w` at every sample, from its zero
+/// crossings (of $w - \bar w$, located by linear interpolation): half a period between two
+/// crossings, $f = 1/(2\,\Delta t)$ at their midpoint, linear in between and held before the first
+/// and after the last midpoint. `None` with fewer than 4 crossings (not a sweep) or when the
+/// frequency is not rising through the record (each midpoint's at least 0.9 of the largest before
+/// it): only a rising sweep maps time onto frequency one to one.
+///
+/// # Example
+/// ```
+/// // a linear chirp 10 → 100 Hz over 1 s at 10 kHz: f(t) = 10 + 90 t
+/// let ts = 1e-4;
+/// let w: Vec<f64> = (0..10_000)
+///     .map(|k| {
+///         let t = k as f64 * ts;
+///         (2.0 * std::f64::consts::PI * (10.0 * t + 45.0 * t * t)).sin()
+///     })
+///     .collect();
+/// let f = ambid::validation::chirp_frequency(&w, ts).unwrap();
+/// assert!((f[5000] - 55.0).abs() < 0.5);
+/// ```
+pub fn chirp_frequency(w: &[f64], ts: f64) -> Option<Vec<f64>> {
+    let n = w.len();
+    if n < 4 || ts <= 0.0 {
+        return None;
+    }
+    let mean = w.iter().sum::<f64>() / n as f64;
+    let mut cross = Vec::new();
+    for k in 1..n {
+        let (a, b) = (w[k - 1] - mean, w[k] - mean);
+        if (a < 0.0 && b >= 0.0) || (a > 0.0 && b <= 0.0) {
+            cross.push((k - 1) as f64 + a / (a - b));
+        }
+    }
+    if cross.len() < 4 {
+        return None;
+    }
+    let mids: Vec<(f64, f64)> = cross
+        .windows(2)
+        .filter(|c| c[1] > c[0])
+        .map(|c| (0.5 * (c[0] + c[1]), 0.5 / ((c[1] - c[0]) * ts)))
+        .collect();
+    let mut top = 0.0f64;
+    for (_, f) in &mids {
+        if *f < 0.9 * top {
+            return None;
+        }
+        top = top.max(*f);
+    }
+    let mut out = Vec::with_capacity(n);
+    let mut j = 0;
+    for k in 0..n {
+        let x = k as f64;
+        while j + 1 < mids.len() && mids[j + 1].0 <= x {
+            j += 1;
+        }
+        let f = if x <= mids[0].0 {
+            mids[0].1
+        } else if j + 1 >= mids.len() {
+            mids[mids.len() - 1].1
+        } else {
+            let ((x0, f0), (x1, f1)) = (mids[j], mids[j + 1]);
+            f0 + (f1 - f0) * (x - x0) / (x1 - x0)
+        };
+        out.push(f);
+    }
+    Some(out)
+}
+
+/// Below this multiple of the error floor a window's signal is too small to be judged (see
+/// [`worst_window`]).
+pub const WORST_WINDOW_SIGNAL_FACTOR: f64 = 3.0;
+
+/// The worst window of a reconstruction, by [`worst_window`]'s rule.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct WorstWindow {
+    /// Index into the reconstruction's windows.
+    pub index: usize,
+    /// $100\,(1 - e_{\mathrm{rms},k} / \sigma_y)$: the window's error against the whole record's
+    /// signal RMS $\sigma_y$ \[%\].
+    pub record_fit_pct: f64,
+    /// The window's measured signal RMS (about its mean).
+    pub signal_rms: f64,
+    /// The error floor: the smallest window error RMS (the sensor noise through the loop).
+    pub error_floor: f64,
+    /// Windows judged (signal RMS at least [`WORST_WINDOW_SIGNAL_FACTOR`] × the floor).
+    pub judged: usize,
+}
+
+/// The window where the model is worst, judged so that a quiet window where the error is only
+/// sensor noise is not reported. **Rule:** each window's error RMS $e_k$ is compared with the
+/// whole record's measured signal RMS $\sigma_y$ (not the window's own, which makes a quiet
+/// window's noise look like a bad fit); the error floor $e_{\min} = \min_k e_k$ estimates the
+/// noise every window carries, and windows whose measured signal RMS is below
+/// [`WORST_WINDOW_SIGNAL_FACTOR`] $\cdot e_{\min}$ are not judged (all are when none is above it).
+/// The worst is the judged window with the largest $e_k$. `y` is the measured signal, `windows`
+/// the reconstruction's windows (times in s), `ts` the sample time.
+pub fn worst_window(
+    windows: &[ambid_core::validate::closed_loop::WindowFit],
+    y: &[f64],
+    ts: f64,
+) -> Option<WorstWindow> {
+    let rms = |x: &[f64]| {
+        if x.is_empty() {
+            return 0.0;
+        }
+        let m = x.iter().sum::<f64>() / x.len() as f64;
+        (x.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / x.len() as f64).sqrt()
+    };
+    let sigma = rms(y);
+    let n = y.len();
+    let sig: Vec<f64> = windows
+        .iter()
+        .map(|w| {
+            let i0 = ((w.t_s.0 / ts).round().max(0.0) as usize).min(n);
+            let i1 = ((w.t_s.1 / ts).round().max(0.0) as usize).clamp(i0, n);
+            rms(&y[i0..i1])
+        })
+        .collect();
+    let floor = windows
+        .iter()
+        .map(|w| w.rms_error_y)
+        .filter(|e| e.is_finite())
+        .fold(f64::INFINITY, f64::min);
+    if !floor.is_finite() || !(sigma > 0.0) {
+        return None;
+    }
+    let eligible: Vec<usize> = (0..windows.len())
+        .filter(|&k| sig[k] >= WORST_WINDOW_SIGNAL_FACTOR * floor)
+        .collect();
+    let judged: Vec<usize> = if eligible.is_empty() {
+        (0..windows.len()).collect()
+    } else {
+        eligible
+    };
+    let index = *judged
+        .iter()
+        .max_by(|a, b| windows[**a].rms_error_y.total_cmp(&windows[**b].rms_error_y))?;
+    Some(WorstWindow {
+        index,
+        record_fit_pct: 100.0 * (1.0 - windows[index].rms_error_y / sigma),
+        signal_rms: sig[index],
+        error_floor: floor,
+        judged: judged.len(),
+    })
+}

@@ -4,10 +4,10 @@
 use super::figures::{envelope, figure, lin, log, series, with_spans, xy};
 use super::steps_frf::ensure_valid;
 use super::{computation, Ctx, Failure, StepStatus};
-use crate::report::{format_number as fmt, Block, NoteKind, Series, Span, Style, Table};
+use crate::report::{format_number as fmt, Block, Marker, NoteKind, Series, Span, Style, Table};
 use crate::validation::{
-    residual_lags, validate_closed_loop, LagBasis, LagChoice, MeasuredLoop, ValidationOutcome,
-    ValidationSettings,
+    chirp_frequency, residual_lags, validate_closed_loop, worst_window, LagBasis, LagChoice,
+    MeasuredLoop, ValidationOutcome, ValidationSettings, WORST_WINDOW_SIGNAL_FACTOR,
 };
 use ambid_core::c64;
 use ambid_core::estimate::arx::fit_percent;
@@ -587,51 +587,161 @@ pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     ctx.put("reconstruction.fit_y_pct", v.reconstruction.fit_y);
     ctx.put("reconstruction.fit_u_pct", v.reconstruction.fit_u);
     ctx.put("reconstruction.max_error_y", v.reconstruction.max_error_y);
-    let worst = v.reconstruction.worst_window().cloned();
-    if let Some(wf) = &worst {
+    let wins = &v.reconstruction.windows;
+    let worst = worst_window(wins, &y, ts);
+    // the chirp's instantaneous frequency, from the reference's zero crossings
+    let freq = chirp_frequency(&w, ts);
+    let n = y.len();
+    let idx = |t: f64| ((t / ts).round().max(0.0) as usize).min(n.saturating_sub(1));
+    let win_f = |wf: &ambid_core::validate::closed_loop::WindowFit| {
+        freq.as_ref()
+            .map(|f| (f[idx(wf.t_s.0)], f[idx(wf.t_s.1)]))
+    };
+    if let Some(ww) = &worst {
+        let wf = &wins[ww.index];
         ctx.put("reconstruction.worst_window_fit_y_pct", wf.fit_y);
         ctx.put("reconstruction.worst_window_start_s", wf.t_s.0);
+        ctx.put("reconstruction.worst_window_end_s", wf.t_s.1);
+        ctx.put("reconstruction.worst_window_record_fit_pct", ww.record_fit_pct);
+        ctx.put("reconstruction.worst_window_rms_error_y", wf.rms_error_y);
+        ctx.put("reconstruction.worst_window_signal_rms_y", ww.signal_rms);
+        ctx.put("reconstruction.error_floor_y", ww.error_floor);
+        ctx.put("reconstruction.windows_judged", ww.judged);
+        if let Some((f0, f1)) = win_f(wf) {
+            ctx.put("reconstruction.worst_window_f_lo_hz", f0);
+            ctx.put("reconstruction.worst_window_f_hi_hz", f1);
+        }
     }
-    // measured vs reconstructed over the whole sweep (min/max envelopes), and a zoom on the worst window
-    let n = y.len();
+    // measured vs reconstructed over the whole sweep (min/max envelopes) against the chirp's
+    // instantaneous frequency (time when the reference is not a rising sweep)
     let t: Vec<f64> = (0..n).map(|k| k as f64 * ts).collect();
+    let (x, x_axis, x_of): (&[f64], &str, Box<dyn Fn(f64) -> f64>) = match &freq {
+        Some(f) => (
+            f,
+            "chirp instantaneous frequency [Hz]",
+            Box::new(move |tt: f64| f[idx(tt)]),
+        ),
+        None => (&t, "time [s]", Box::new(|tt: f64| tt)),
+    };
     let sim = &v.reconstruction.simulated;
+    let spans = |label: &str| -> Vec<Span> {
+        worst
+            .as_ref()
+            .map(|ww| {
+                let wf = &wins[ww.index];
+                vec![Span {
+                    label: label.to_string(),
+                    x0: x_of(wf.t_s.0),
+                    x1: x_of(wf.t_s.1),
+                }]
+            })
+            .unwrap_or_default()
+    };
     let mut panels = Vec::new();
     for (name, meas, rec, unit) in [
         ("displacement y", &y, &sim.y, super::data::y_unit(ctx)),
         ("controller output u", &u, &sim.u, super::data::u_unit(ctx)),
     ] {
-        let (tm, m) = envelope(&t, meas, 3000);
-        let (tr, r) = envelope(&t, rec, 3000);
-        panels.push(xy(
-            name,
-            lin("time [s]"),
-            lin(&format!("{name} [{unit}]")),
-            vec![
-                series("measured", &tm, &m, Style::Line, Some(0)),
-                series("reconstructed", &tr, &r, Style::Dashed, Some(1)),
-            ],
+        let (tm, m) = envelope(x, meas, 3000);
+        let (tr, r) = envelope(x, rec, 3000);
+        panels.push(with_spans(
+            xy(
+                name,
+                lin(x_axis),
+                lin(&format!("{name} [{unit}]")),
+                vec![
+                    series("measured", &tm, &m, Style::Line, Some(0)),
+                    series("reconstructed", &tr, &r, Style::Dashed, Some(1)),
+                ],
+            ),
+            spans("worst window"),
         ));
     }
-    let win: Vec<Vec<String>> = v
-        .reconstruction
-        .windows
+    // error per window against frequency, with the window's signal and the judging threshold
+    let yu = super::data::y_unit(ctx);
+    let mid: Vec<f64> = wins
         .iter()
-        .map(|w| {
+        .map(|wf| x_of(0.5 * (wf.t_s.0 + wf.t_s.1)))
+        .collect();
+    let sig_rms: Vec<f64> = wins
+        .iter()
+        .map(|wf| {
+            let (i0, i1) = (idx(wf.t_s.0), idx(wf.t_s.1).max(idx(wf.t_s.0) + 1).min(n));
+            let seg = &y[i0..i1];
+            let m = seg.iter().sum::<f64>() / seg.len() as f64;
+            (seg.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / seg.len() as f64).sqrt()
+        })
+        .collect();
+    let err: Vec<f64> = wins.iter().map(|wf| wf.rms_error_y).collect();
+    let mut ws = vec![
+        series(
+            "measured signal RMS",
+            &mid,
+            &sig_rms,
+            Style::LineMarkers(Marker::Square),
+            Some(0),
+        ),
+        series(
+            "error RMS (measured − reconstructed)",
+            &mid,
+            &err,
+            Style::LineMarkers(Marker::Dot),
+            Some(3),
+        ),
+    ];
+    if let Some(ww) = &worst {
+        let thr = WORST_WINDOW_SIGNAL_FACTOR * ww.error_floor;
+        ws.push(series(
+            &format!("{}× error floor (windows below: not judged)", fmt(WORST_WINDOW_SIGNAL_FACTOR)),
+            &mid,
+            &vec![thr; mid.len()],
+            Style::Dashed,
+            Some(7),
+        ));
+    }
+    if err.iter().chain(&sig_rms).all(|v| *v > 0.0) {
+        panels.push(with_spans(
+            xy(
+                "displacement error per window",
+                lin(x_axis),
+                log(&format!("RMS [{yu}]")),
+                ws,
+            ),
+            spans("worst window"),
+        ));
+    }
+    let win: Vec<Vec<String>> = wins
+        .iter()
+        .enumerate()
+        .map(|(k, wf)| {
             vec![
-                format!("{}–{}", fmt(w.t_s.0), fmt(w.t_s.1)),
-                fmt(w.fit_y),
-                fmt(w.fit_u),
-                fmt(w.rms_error_y),
+                format!("{}–{}", fmt(wf.t_s.0), fmt(wf.t_s.1)),
+                win_f(wf).map_or("—".into(), |(a, b)| format!("{}–{}", fmt(a), fmt(b))),
+                fmt(wf.fit_y),
+                fmt(wf.fit_u),
+                fmt(wf.rms_error_y),
+                fmt(sig_rms[k]),
             ]
         })
         .collect();
-    let worst_idx = worst.as_ref().and_then(|wf| {
-        v.reconstruction
-            .windows
-            .iter()
-            .position(|w| w.t_s == wf.t_s)
-    });
+    let rule = format!(
+        "Worst window: the largest displacement error RMS among the windows whose measured signal RMS is at least {}× the error floor (the smallest window error RMS, the sensor noise every window carries); its error is {} of the whole record's signal RMS{}. A window's own fit (error against its own signal) is not the judge: where the displacement is small it only measures the noise.",
+        fmt(WORST_WINDOW_SIGNAL_FACTOR),
+        worst.as_ref().map_or("—".into(), |ww| format!("{} %", fmt(100.0 - ww.record_fit_pct))),
+        worst.as_ref().map_or(String::new(), |ww| {
+            let wf = &wins[ww.index];
+            format!(
+                " ({}–{} s{}, signal RMS {} against the floor {}; {} of {} windows judged)",
+                fmt(wf.t_s.0),
+                fmt(wf.t_s.1),
+                win_f(wf).map_or(String::new(), |(a, b)| format!(", {}–{} Hz", fmt(a), fmt(b))),
+                fmt(ww.signal_rms),
+                fmt(ww.error_floor),
+                ww.judged,
+                wins.len()
+            )
+        })
+    );
     let blocks = vec![
         Block::Text(format!(
             "Closed-loop reconstruction (seed paper, section 4): {source} driven by a linear chirp position \
@@ -649,22 +759,30 @@ pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             "Closed-loop reconstruction: displacement and current",
             format!(
                 "Measured and reconstructed displacement and controller output (current reference) during \
-                 the chirp (min/max per block of the {n}-sample record). The chirp frequency rises linearly with time."
+                 the chirp (min/max per block of the {n}-sample record), against {}; last panel: the \
+                 displacement error RMS and the measured signal RMS per window (log scale). Shaded: the worst window. {rule}",
+                if freq.is_some() {
+                    "the chirp's instantaneous frequency (from the reference's zero crossings)"
+                } else {
+                    "time (the reference is not a rising sweep)"
+                }
             ),
             panels,
             1,
         )),
         Block::Table(Table {
             id: "reconstruction_windows".into(),
-            caption: "Fit per time window of the sweep (the window's frequency range follows from the linear chirp); highlighted: the worst.".into(),
+            caption: format!("Fit per time window of the sweep, with the chirp's frequency range in the window; highlighted: the worst window. {rule}"),
             header: vec![
                 "window [s]".into(),
+                "frequency [Hz]".into(),
                 "fit y [%]".into(),
                 "fit u [%]".into(),
-                "RMS error y".into(),
+                format!("RMS error y [{yu}]"),
+                format!("signal RMS y [{yu}]"),
             ],
             rows: win,
-            highlight: worst_idx,
+            highlight: worst.as_ref().map(|ww| ww.index),
         }),
     ];
     ctx.section("reconstruction", "Closed-loop reconstruction", blocks);
