@@ -96,7 +96,7 @@ fn lag_choice(
     match ctx.cfg.validation.lags {
         Some(l) => LagChoice {
             lags: l,
-            settle_samples: None,
+            peak_sample: None,
             basis: LagBasis::Given,
         },
         None => residual_lags(model, controller, n),
@@ -272,8 +272,8 @@ fn put_residuals(ctx: &mut Ctx<'_>, res: &ResidualTest, lags: &LagChoice, ts: f6
     ctx.put("residuals.lags", lags.lags);
     ctx.put("residuals.lags_ms", lags.lags as f64 * ts * 1e3);
     ctx.put("residuals.lags_rule", json!(lags.basis));
-    if let Some(k) = lags.settle_samples {
-        ctx.put("residuals.lags_settle_samples", k);
+    if let Some(k) = lags.peak_sample {
+        ctx.put("residuals.lags_peak_sample", k);
     }
     if let Some(w) = &res.whiteness {
         ctx.put("residuals.whiteness_statistic", w.statistic);
