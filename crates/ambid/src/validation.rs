@@ -488,7 +488,12 @@ pub fn residual_lags(model: &StateSpace, controller: Option<&StateSpace>, n: usi
         Some(c) => (
             ambid_core::validate::closed_loop::simulate_loop(model, c, &imp)
                 .ok()
-                .filter(|_| model.feedback(c).and_then(|cl| cl.is_stable()).unwrap_or(false))
+                .filter(|_| {
+                    model
+                        .feedback(c)
+                        .and_then(|cl| cl.is_stable())
+                        .unwrap_or(false)
+                })
                 .map(|r| r.y),
             LagBasis::ClosedLoop,
         ),
@@ -501,7 +506,9 @@ pub fn residual_lags(model: &StateSpace, controller: Option<&StateSpace>, n: usi
             LagBasis::Model,
         ),
     };
-    let cap = RESIDUAL_LAGS_MAX.min(n / 10).max(RESIDUAL_LAGS_MIN.min(n / 10).max(1));
+    let cap = RESIDUAL_LAGS_MAX
+        .min(n / 10)
+        .max(RESIDUAL_LAGS_MIN.min(n / 10).max(1));
     let fallback = LagChoice {
         lags: RESIDUAL_LAGS_FALLBACK.min(cap),
         peak_sample: None,
@@ -647,7 +654,7 @@ pub fn worst_window(
         .map(|w| w.rms_error_y)
         .filter(|e| e.is_finite())
         .fold(f64::INFINITY, f64::min);
-    if !floor.is_finite() || !(sigma > 0.0) {
+    if !floor.is_finite() || sigma.is_nan() || sigma <= 0.0 {
         return None;
     }
     let eligible: Vec<usize> = (0..windows.len())
@@ -658,9 +665,11 @@ pub fn worst_window(
     } else {
         eligible
     };
-    let index = *judged
-        .iter()
-        .max_by(|a, b| windows[**a].rms_error_y.total_cmp(&windows[**b].rms_error_y))?;
+    let index = *judged.iter().max_by(|a, b| {
+        windows[**a]
+            .rms_error_y
+            .total_cmp(&windows[**b].rms_error_y)
+    })?;
     Some(WorstWindow {
         index,
         record_fit_pct: 100.0 * (1.0 - windows[index].rms_error_y / sigma),

@@ -138,7 +138,13 @@ fn residual_blocks(
     let mut panels = Vec::new();
     if let Some(w) = &res.whiteness {
         let x = ms(&w.lags);
-        let mut s1 = vec![series("autocorrelation", &x, &w.values, Style::Stems, Some(0))];
+        let mut s1 = vec![series(
+            "autocorrelation",
+            &x,
+            &w.values,
+            Style::Stems,
+            Some(0),
+        )];
         s1.extend(bound(&x, w.bound));
         panels.push(xy(
             "whiteness",
@@ -217,9 +223,7 @@ fn residual_blocks(
     let mut blocks = vec![Block::Figure(figure(
         "residuals",
         "Residual tests",
-        format!(
-            "{ind} The true model passes each test in 95 % of records.{truth_text} {white}"
-        ),
+        format!("{ind} The true model passes each test in 95 % of records.{truth_text} {white}"),
         panels,
         2,
     ))];
@@ -594,15 +598,17 @@ pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     let n = y.len();
     let idx = |t: f64| ((t / ts).round().max(0.0) as usize).min(n.saturating_sub(1));
     let win_f = |wf: &ambid_core::validate::closed_loop::WindowFit| {
-        freq.as_ref()
-            .map(|f| (f[idx(wf.t_s.0)], f[idx(wf.t_s.1)]))
+        freq.as_ref().map(|f| (f[idx(wf.t_s.0)], f[idx(wf.t_s.1)]))
     };
     if let Some(ww) = &worst {
         let wf = &wins[ww.index];
         ctx.put("reconstruction.worst_window_fit_y_pct", wf.fit_y);
         ctx.put("reconstruction.worst_window_start_s", wf.t_s.0);
         ctx.put("reconstruction.worst_window_end_s", wf.t_s.1);
-        ctx.put("reconstruction.worst_window_record_fit_pct", ww.record_fit_pct);
+        ctx.put(
+            "reconstruction.worst_window_record_fit_pct",
+            ww.record_fit_pct,
+        );
         ctx.put("reconstruction.worst_window_rms_error_y", wf.rms_error_y);
         ctx.put("reconstruction.worst_window_signal_rms_y", ww.signal_rms);
         ctx.put("reconstruction.error_floor_y", ww.error_floor);
@@ -615,7 +621,8 @@ pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     // measured vs reconstructed over the whole sweep (min/max envelopes) against the chirp's
     // instantaneous frequency (time when the reference is not a rising sweep)
     let t: Vec<f64> = (0..n).map(|k| k as f64 * ts).collect();
-    let (x, x_axis, x_of): (&[f64], &str, Box<dyn Fn(f64) -> f64>) = match &freq {
+    type XOf<'a> = Box<dyn Fn(f64) -> f64 + 'a>;
+    let (x, x_axis, x_of): (&[f64], &str, XOf<'_>) = match &freq {
         Some(f) => (
             f,
             "chirp instantaneous frequency [Hz]",
@@ -692,7 +699,10 @@ pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     if let Some(ww) = &worst {
         let thr = WORST_WINDOW_SIGNAL_FACTOR * ww.error_floor;
         ws.push(series(
-            &format!("{}× error floor (windows below: not judged)", fmt(WORST_WINDOW_SIGNAL_FACTOR)),
+            &format!(
+                "{}× error floor (windows below: not judged)",
+                fmt(WORST_WINDOW_SIGNAL_FACTOR)
+            ),
             &mid,
             &vec![thr; mid.len()],
             Style::Dashed,
@@ -725,7 +735,7 @@ pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         })
         .collect();
     let rule = format!(
-        "Worst window: the largest displacement error RMS among the windows whose measured signal RMS is at least {}× the error floor (the smallest window error RMS, the sensor noise every window carries); its error is {} of the whole record's signal RMS{}. A window's own fit (error against its own signal) is not the judge: where the displacement is small it only measures the noise.",
+        "Worst window: the largest displacement error RMS among the windows whose measured signal RMS is at least {}× the error floor (the smallest window error RMS, the sensor noise every window carries); its error is {} of the whole record's signal RMS{}.{} A window's own fit (error against its own signal) is not the judge: where the displacement is small it only measures the noise.",
         fmt(WORST_WINDOW_SIGNAL_FACTOR),
         worst.as_ref().map_or("—".into(), |ww| format!("{} %", fmt(100.0 - ww.record_fit_pct))),
         worst.as_ref().map_or(String::new(), |ww| {
@@ -740,6 +750,13 @@ pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                 ww.judged,
                 wins.len()
             )
+        }),
+        worst.as_ref().map_or(String::new(), |ww| {
+            if wins[ww.index].rms_error_y <= 1.5 * ww.error_floor {
+                " Its error is within 1.5× the floor: no window stands out from the noise.".into()
+            } else {
+                String::new()
+            }
         })
     );
     let blocks = vec![
