@@ -127,6 +127,7 @@ fn residual_blocks(
     no_white: &str,
     ts: f64,
     lags: &LagChoice,
+    nonlinear_twin: bool,
 ) -> Vec<Block> {
     let bound = |x: &[f64], b: f64| {
         vec![
@@ -209,6 +210,7 @@ fn residual_blocks(
             verdict(tc),
             match (res.independence.as_ref().map(|c| c.pass), tc.pass) {
                 (Some(false), true) => "the truth passes where the model fails: the test resolves a real model error (with 10⁵ samples it sees errors far below 1 % of the output)",
+                (_, false) if nonlinear_twin => "the twin runs its nonlinear physics here, and its exact linearised plant leaves the nonlinear distortion in the error, which the test resolves: a fail says the record is not linear enough for the test, not that a linear model could do better",
                 (Some(false), false) => "the truth fails too: this record is one of the 5 % where the test rejects the true model, so the model's fail is not evidence against it",
                 (Some(true), false) => "the truth fails where the model passes: one of the 5 % of records where the test rejects the true model",
                 _ => "both pass",
@@ -425,6 +427,9 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                 "the output error of the model simulated in closed loop is the sensor noise through the loop, S·v, coloured even for the true plant (and correlated with u, so u is not the test signal)",
                 val.ts,
                 &lags,
+                ctx.twin
+                    .as_ref()
+                    .is_some_and(|t| t.mode == ambid_twin::Mode::Nonlinear),
             ));
             ctx.validation = Some(v);
         }
@@ -503,6 +508,7 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                         "the simulation error of a model is the noise as it reaches the output, coloured unless the noise is white, whatever the model",
                         val.ts,
                         &lag_rule,
+                        false,
                     ));
                 }
                 None => blocks.push(Ctx::note(
