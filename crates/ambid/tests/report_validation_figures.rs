@@ -322,7 +322,8 @@ fn the_worst_window_is_never_a_quiet_one_on_20_rigs() {
         );
         let seg = &rec.y[i0..i1];
         let m = seg.iter().sum::<f64>() / seg.len() as f64;
-        let old_sig = (seg.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / seg.len() as f64).sqrt();
+        let old_sig =
+            (seg.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / seg.len() as f64).sqrt();
         old_quiet += usize::from(old_sig < 3.0 * noise);
         let err = wins[ww.index].rms_error_y;
         stands_out += usize::from(err > 1.5 * ww.error_floor);
@@ -341,5 +342,8 @@ fn the_worst_window_is_never_a_quiet_one_on_20_rigs() {
         );
     }
     println!("old rule picked a window at the noise level on {old_quiet} of 20 rigs; the new worst window stands out (> 1.5× floor) on {stands_out} of 20");
-    assert!(stands_out >= 18, "the 3 % gain error stands out on {stands_out} of 20 rigs only");
+    assert!(
+        stands_out >= 18,
+        "the 3 % gain error stands out on {stands_out} of 20 rigs only"
+    );
 }
