@@ -395,3 +395,286 @@ pub fn consistency(
         iso_search: search,
     })
 }
+
+/// Smallest number of residual-test lags [`residual_lags`] chooses (enough degrees of freedom
+/// for the portmanteau test to see a model error at all).
+pub const RESIDUAL_LAGS_MIN: usize = 10;
+/// Largest number of residual-test lags [`residual_lags`] chooses: the test's cost grows as
+/// $(2M+1)^3$ (the pseudo-inverse of its lag covariance), about 0.5 s per 20 000-sample record at
+/// 150 lags in the test profile.
+pub const RESIDUAL_LAGS_MAX: usize = 150;
+/// The lags are this multiple of the impulse response's peak time.
+pub const RESIDUAL_LAGS_PEAK_FACTOR: usize = 2;
+/// The fallback when the rule has nothing to follow (an unstable model without a controller).
+pub const RESIDUAL_LAGS_FALLBACK: usize = 25;
+
+/// What the residual tests' number of lags was derived from (see [`residual_lags`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LagBasis {
+    /// The model's closed-loop impulse response $r \to y$, $T_{ry} = P/(1 + PC)$, with the controller.
+    ClosedLoop,
+    /// The model's own impulse response (no controller; a stable model).
+    Model,
+    /// Nothing to follow (an unstable model without a controller): [`RESIDUAL_LAGS_FALLBACK`].
+    Fallback,
+    /// Given by the user.
+    Given,
+}
+
+/// The residual tests' number of lags and where it came from.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct LagChoice {
+    /// Largest lag $M$ of the tests (the cross-correlation spans $-M \dots M$).
+    pub lags: usize,
+    /// The sample at which the followed impulse response peaks, if one was followed.
+    pub peak_sample: Option<usize>,
+    /// What it was derived from.
+    pub basis: LagBasis,
+}
+
+impl LagChoice {
+    /// One sentence for captions: the lags in samples and ms and the rule.
+    pub fn describe(&self, ts: f64) -> String {
+        let ms = self.lags as f64 * ts * 1e3;
+        let rule = match (self.basis, self.peak_sample) {
+            (LagBasis::ClosedLoop, Some(k)) => format!(
+                "{RESIDUAL_LAGS_PEAK_FACTOR}× the peak time of the chosen model's closed-loop impulse response r → y (T_ry = P/(1 + PC) with the controller), which peaks after {k} samples ({:.3} ms), clamped to {RESIDUAL_LAGS_MIN}–{RESIDUAL_LAGS_MAX} lags",
+                k as f64 * ts * 1e3
+            ),
+            (LagBasis::Model, Some(k)) => format!(
+                "{RESIDUAL_LAGS_PEAK_FACTOR}× the peak time of the chosen model's impulse response, which peaks after {k} samples ({:.3} ms), clamped to {RESIDUAL_LAGS_MIN}–{RESIDUAL_LAGS_MAX} lags",
+                k as f64 * ts * 1e3
+            ),
+            (LagBasis::Given, _) => "set in the configuration ([validation] lags)".to_string(),
+            _ => format!(
+                "the fallback {RESIDUAL_LAGS_FALLBACK}: the model is unstable and no controller closes its loop, so it has no impulse response to follow"
+            ),
+        };
+        format!("lags ±{} ({ms:.3} ms): {rule}", self.lags)
+    }
+}
+
+/// The number of lags $M$ of the residual tests, from the dynamics of the chosen `model`.
+///
+/// A model error shows in the cross-correlation of the output error with the excitation at the
+/// lags where the loop's response $r \to y$, $T_{ry} = P/(1 + PC)$, carries it: its first swing
+/// and the swing back, which take about twice the time to its peak. **Rule:**
+/// $M = 2\,k_{\mathrm{peak}}$, where $k_{\mathrm{peak}} = \arg\max_k |h(k)|$ for the model's
+/// impulse response $h$ (of $T_{ry}$ with `controller`; of the model itself without one), clamped to
+/// [`RESIDUAL_LAGS_MIN`]–[`RESIDUAL_LAGS_MAX`] and to at most a tenth of the `n` tested samples.
+/// (Following $h$ down to 5 % of its peak would need 365–940 lags on random rigs 0–19, whose
+/// integral action leaves a slow tail; the test's cost grows as $M^3$.) An unstable model without
+/// a controller has no impulse response to follow: [`RESIDUAL_LAGS_FALLBACK`]; an unstable loop
+/// gets the fallback too (its validation fails with the unstable poles anyway).
+///
+/// # Example
+/// ```
+/// use ambid::validation::{residual_lags, LagBasis};
+/// use ambid_core::lti::StateSpace;
+/// use faer::mat;
+/// // y = q⁻²/(1 − 0.93 q⁻¹)² u: h(k) = (k − 1) 0.93^(k−2), largest at k = 15
+/// let p = StateSpace::discrete(
+///     mat![[1.86, -0.8649], [1.0, 0.0]], mat![[1.0], [0.0]], mat![[0.0, 1.0]], mat![[0.0]], 1e-3,
+/// ).unwrap();
+/// let l = residual_lags(&p, None, 100_000);
+/// assert_eq!((l.peak_sample, l.lags, l.basis), (Some(15), 30, LagBasis::Model));
+/// ```
+pub fn residual_lags(model: &StateSpace, controller: Option<&StateSpace>, n: usize) -> LagChoice {
+    let horizon = 20 * RESIDUAL_LAGS_MAX;
+    let mut imp = vec![0.0; horizon];
+    imp[0] = 1.0;
+    let (h, basis) = match controller {
+        Some(c) => (
+            ambid_core::validate::closed_loop::simulate_loop(model, c, &imp)
+                .ok()
+                .filter(|_| {
+                    model
+                        .feedback(c)
+                        .and_then(|cl| cl.is_stable())
+                        .unwrap_or(false)
+                })
+                .map(|r| r.y),
+            LagBasis::ClosedLoop,
+        ),
+        None => (
+            model
+                .is_stable()
+                .unwrap_or(false)
+                .then(|| model.simulate_siso(&imp, None).ok())
+                .flatten(),
+            LagBasis::Model,
+        ),
+    };
+    let cap = RESIDUAL_LAGS_MAX
+        .min(n / 10)
+        .max(RESIDUAL_LAGS_MIN.min(n / 10).max(1));
+    let fallback = LagChoice {
+        lags: RESIDUAL_LAGS_FALLBACK.min(cap),
+        peak_sample: None,
+        basis: LagBasis::Fallback,
+    };
+    let Some(h) = h.filter(|h| h.iter().all(|v| v.is_finite())) else {
+        return fallback;
+    };
+    let peak = h.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    if peak <= 0.0 {
+        return fallback;
+    }
+    let k_peak = h.iter().position(|v| v.abs() >= peak).unwrap_or(0);
+    LagChoice {
+        lags: (RESIDUAL_LAGS_PEAK_FACTOR * k_peak)
+            .clamp(RESIDUAL_LAGS_MIN, RESIDUAL_LAGS_MAX)
+            .min(cap),
+        peak_sample: Some(k_peak),
+        basis,
+    }
+}
+
+/// The instantaneous frequency \[Hz\] of a sweep reference `w` at every sample, from its zero
+/// crossings (of $w - \bar w$, located by linear interpolation): half a period between two
+/// crossings, $f = 1/(2\,\Delta t)$ at their midpoint, linear in between and held before the first
+/// and after the last midpoint. `None` with fewer than 4 crossings (not a sweep) or when the
+/// frequency is not rising through the record (each midpoint's at least 0.9 of the largest before
+/// it): only a rising sweep maps time onto frequency one to one.
+///
+/// # Example
+/// ```
+/// // a linear chirp 10 → 100 Hz over 1 s at 10 kHz: f(t) = 10 + 90 t
+/// let ts = 1e-4;
+/// let w: Vec<f64> = (0..10_000)
+///     .map(|k| {
+///         let t = k as f64 * ts;
+///         (2.0 * std::f64::consts::PI * (10.0 * t + 45.0 * t * t)).sin()
+///     })
+///     .collect();
+/// let f = ambid::validation::chirp_frequency(&w, ts).unwrap();
+/// assert!((f[5000] - 55.0).abs() < 0.5);
+/// ```
+pub fn chirp_frequency(w: &[f64], ts: f64) -> Option<Vec<f64>> {
+    let n = w.len();
+    if n < 4 || ts <= 0.0 {
+        return None;
+    }
+    let mean = w.iter().sum::<f64>() / n as f64;
+    let mut cross = Vec::new();
+    for k in 1..n {
+        let (a, b) = (w[k - 1] - mean, w[k] - mean);
+        if (a < 0.0 && b >= 0.0) || (a > 0.0 && b <= 0.0) {
+            cross.push((k - 1) as f64 + a / (a - b));
+        }
+    }
+    if cross.len() < 4 {
+        return None;
+    }
+    let mids: Vec<(f64, f64)> = cross
+        .windows(2)
+        .filter(|c| c[1] > c[0])
+        .map(|c| (0.5 * (c[0] + c[1]), 0.5 / ((c[1] - c[0]) * ts)))
+        .collect();
+    let mut top = 0.0f64;
+    for (_, f) in &mids {
+        if *f < 0.9 * top {
+            return None;
+        }
+        top = top.max(*f);
+    }
+    let mut out = Vec::with_capacity(n);
+    let mut j = 0;
+    for k in 0..n {
+        let x = k as f64;
+        while j + 1 < mids.len() && mids[j + 1].0 <= x {
+            j += 1;
+        }
+        let f = if x <= mids[0].0 {
+            mids[0].1
+        } else if j + 1 >= mids.len() {
+            mids[mids.len() - 1].1
+        } else {
+            let ((x0, f0), (x1, f1)) = (mids[j], mids[j + 1]);
+            f0 + (f1 - f0) * (x - x0) / (x1 - x0)
+        };
+        out.push(f);
+    }
+    Some(out)
+}
+
+/// Below this multiple of the error floor a window's signal is too small to be judged (see
+/// [`worst_window`]).
+pub const WORST_WINDOW_SIGNAL_FACTOR: f64 = 3.0;
+
+/// The worst window of a reconstruction, by [`worst_window`]'s rule.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct WorstWindow {
+    /// Index into the reconstruction's windows.
+    pub index: usize,
+    /// $100\,(1 - e_{\mathrm{rms},k} / \sigma_y)$: the window's error against the whole record's
+    /// signal RMS $\sigma_y$ \[%\].
+    pub record_fit_pct: f64,
+    /// The window's measured signal RMS (about its mean).
+    pub signal_rms: f64,
+    /// The error floor: the smallest window error RMS (the sensor noise through the loop).
+    pub error_floor: f64,
+    /// Windows judged (signal RMS at least [`WORST_WINDOW_SIGNAL_FACTOR`] × the floor).
+    pub judged: usize,
+}
+
+/// The window where the model is worst, judged so that a quiet window where the error is only
+/// sensor noise is not reported. **Rule:** each window's error RMS $e_k$ is compared with the
+/// whole record's measured signal RMS $\sigma_y$ (not the window's own, which makes a quiet
+/// window's noise look like a bad fit); the error floor $e_{\min} = \min_k e_k$ estimates the
+/// noise every window carries, and windows whose measured signal RMS is below
+/// [`WORST_WINDOW_SIGNAL_FACTOR`] $\cdot e_{\min}$ are not judged (all are when none is above it).
+/// The worst is the judged window with the largest $e_k$. `y` is the measured signal, `windows`
+/// the reconstruction's windows (times in s), `ts` the sample time.
+pub fn worst_window(
+    windows: &[ambid_core::validate::closed_loop::WindowFit],
+    y: &[f64],
+    ts: f64,
+) -> Option<WorstWindow> {
+    let rms = |x: &[f64]| {
+        if x.is_empty() {
+            return 0.0;
+        }
+        let m = x.iter().sum::<f64>() / x.len() as f64;
+        (x.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / x.len() as f64).sqrt()
+    };
+    let sigma = rms(y);
+    let n = y.len();
+    let sig: Vec<f64> = windows
+        .iter()
+        .map(|w| {
+            let i0 = ((w.t_s.0 / ts).round().max(0.0) as usize).min(n);
+            let i1 = ((w.t_s.1 / ts).round().max(0.0) as usize).clamp(i0, n);
+            rms(&y[i0..i1])
+        })
+        .collect();
+    let floor = windows
+        .iter()
+        .map(|w| w.rms_error_y)
+        .filter(|e| e.is_finite())
+        .fold(f64::INFINITY, f64::min);
+    if !floor.is_finite() || sigma.is_nan() || sigma <= 0.0 {
+        return None;
+    }
+    let eligible: Vec<usize> = (0..windows.len())
+        .filter(|&k| sig[k] >= WORST_WINDOW_SIGNAL_FACTOR * floor)
+        .collect();
+    let judged: Vec<usize> = if eligible.is_empty() {
+        (0..windows.len()).collect()
+    } else {
+        eligible
+    };
+    let index = *judged.iter().max_by(|a, b| {
+        windows[**a]
+            .rms_error_y
+            .total_cmp(&windows[**b].rms_error_y)
+    })?;
+    Some(WorstWindow {
+        index,
+        record_fit_pct: 100.0 * (1.0 - windows[index].rms_error_y / sigma),
+        signal_rms: sig[index],
+        error_floor: floor,
+        judged: judged.len(),
+    })
+}

@@ -539,8 +539,10 @@ pub struct ValidationSection {
     pub amplitude_pct: Option<f64>,
     /// Leading samples excluded.
     pub skip: usize,
-    /// Largest lag of the residual tests.
-    pub lags: usize,
+    /// Largest lag of the residual tests; unset (default): from the chosen model's dynamics
+    /// (`validation::residual_lags`, docs/validation.md).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lags: Option<usize>,
     /// Windows of the windowed fit.
     pub windows: usize,
     /// How the simulated loop starts: `"estimate"` (default; the initial state that best explains
@@ -554,7 +556,7 @@ impl Default for ValidationSection {
             excitation: "noise".into(),
             amplitude_pct: None,
             skip: 2000,
-            lags: 25,
+            lags: None,
             windows: 20,
             x0: ambid_core::validate::predict::InitialState::Estimate,
         }
@@ -898,7 +900,7 @@ impl WorkflowConfig {
             ("excitation.samples_per_bit", ex.samples_per_bit),
             ("excitation.periods", ex.periods),
             ("validation.windows", self.validation.windows),
-            ("validation.lags", self.validation.lags),
+            ("validation.lags", self.validation.lags.unwrap_or(1)),
         ] {
             if v == 0 {
                 return Err(bad(format!("{key} = 0 must be at least 1")));
