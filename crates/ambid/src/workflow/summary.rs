@@ -299,6 +299,26 @@ pub(crate) fn section(summary: &Value, sections: &[Section], ctx: &Ctx<'_>) -> S
             ));
         }
     }
+    // on the twin: the same test on the exact plant, so a "fail" can be told from a test limit
+    if let (Some(pass), Some(q), Some(lim)) = (
+        get(summary, "residuals.truth_independence_pass").and_then(Value::as_bool),
+        num(summary, "residuals.truth_independence_statistic"),
+        num(summary, "residuals.truth_independence_threshold"),
+    ) {
+        tests.push(format!(
+            "the twin's exact plant on the same record: {} (Q = {}, threshold {})",
+            if pass { "pass" } else { "fail" },
+            fmt(q),
+            fmt(lim)
+        ));
+    }
+    if let Some(l) = num(summary, "residuals.lags") {
+        tests.push(format!(
+            "{l:.0} lags{}",
+            num(summary, "residuals.lags_ms")
+                .map_or(String::new(), |ms| format!(" ({} ms)", fmt(ms)))
+        ));
+    }
     if !tests.is_empty() {
         rows.push(vec![
             "residual tests (95 % level)".into(),
