@@ -601,7 +601,7 @@ const FITTED: [(&str, &str, bool); 4] = [
 /// A short closed-loop record of random rig 7 (linear twin, 3 PRBS periods, 15 345 samples) and
 /// ARX/OE/BJ/SS models of r → y (the stable T_ry) fitted to it by `ambid fit`, each with its
 /// exports written by `ambid::io::model::write_model_exports` beside the JSON file.
-fn fitted_exports(name: &str) -> PathBuf {
+fn fitted_exports(name: &str) -> common::TmpDir {
     let d = common::tmpdir(name);
     let o = common::ambid(&[
         "simulate",
