@@ -44,9 +44,10 @@ pub struct ValidateArgs {
     /// Samples at the start left out of the measures (initial transient).
     #[arg(long, default_value_t = 0)]
     skip: usize,
-    /// Largest lag of the residual tests.
-    #[arg(long, default_value_t = 25)]
-    lags: usize,
+    /// Largest lag of the residual tests; default from the dynamics: 2× the peak time of the
+    /// model's closed-loop impulse response with the controller, 10–150 lags (docs/validation.md).
+    #[arg(long)]
+    lags: Option<usize>,
     /// Time windows of the reconstruction report.
     #[arg(long, default_value_t = 20)]
     windows: usize,
@@ -103,9 +104,22 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
     if r.is_none() && w.iter().all(|v| *v == 0.0) {
         return Err(ambid::workflow::input(anyhow::anyhow!("the record has neither an excitation column `{}` nor a reference `w`: nothing drives the loop", a.excitation)).into());
     }
+    // the residual lags: given, or from the dynamics as in the workflow's validation step
+    let lags = match a.lags {
+        Some(l) => l,
+        None => {
+            let choice = ambid::validation::residual_lags(
+                &model,
+                Some(ctrl.state_space()),
+                y.len().saturating_sub(a.skip),
+            );
+            println!("residual tests: {}", choice.describe(ts));
+            choice.lags
+        }
+    };
     let settings = ValidationSettings {
         skip: a.skip,
-        lags: a.lags,
+        lags,
         windows: a.windows,
         initial_state: a.x0.core(),
         ..ValidationSettings::default()
@@ -114,7 +128,7 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
     let c = ctrl.state_space();
     let v = validate_closed_loop(&model, c, &MeasuredLoop { w, r, y, u, ts }, &settings).map_err(
         |e| {
-            if a.skip + 4 * a.lags.max(5) >= y.len() {
+            if a.skip + 4 * lags.max(5) >= y.len() {
                 e.context("use a smaller --skip or fewer --lags")
             } else {
                 e
@@ -213,7 +227,7 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
         "cross_correlation",
         "cross_bound",
     ])?;
-    for (i, lag) in (-(a.lags as i64)..=a.lags as i64).enumerate() {
+    for (i, lag) in (-(lags as i64)..=lags as i64).enumerate() {
         // the closed-loop output error has no whiteness test (validation module docs): empty
         let white = res.whiteness.as_ref();
         let auto = match white {

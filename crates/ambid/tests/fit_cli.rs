@@ -237,4 +237,18 @@ fn fit_state_space_from_twin_records() {
     let sim = sum["fit_y_pct"].as_f64().unwrap();
     // the one-step predictor uses the measured outputs: it beats the simulation
     assert!(k1 > sim && sim > 90.0, "{k1} vs {sim}: {t}");
+    // without --lags the residual lags come from the dynamics (closed-loop impulse response of
+    // the model with the controller), as in the workflow: the printed M and residuals.csv agree
+    let m: usize = t
+        .split("residual tests: lags ±")
+        .nth(1)
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no lag rule printed: {t}"));
+    assert!((10..=150).contains(&m) && m != 25, "M = {m}");
+    let rows = std::fs::read_to_string(vdir.join("residuals.csv"))
+        .unwrap()
+        .lines()
+        .count();
+    assert_eq!(rows, 2 * m + 2, "header + lags −M…M");
 }
