@@ -90,10 +90,9 @@ fn main() -> Result<()> {
         let yt = cl.simulate(rw.as_ref(), None)?;
         let yt: Vec<f64> = (0..yt.nrows()).map(|k| yt[(k, 0)]).collect();
         let f_truth = fit_percent(&val.record.y, &yt)?;
-        let (iters, stop) = fit
-            .pem
-            .as_ref()
-            .map_or((0, "-".to_string()), |p| (p.iterations, p.stop.clone()));
+        let (iters, stop) = fit.pem.as_ref().map_or((0, "-".to_string()), |p| {
+            (p.iterations, format!("{:?}", p.stop))
+        });
         if stop == "MaxIterations" {
             unconverged += 1;
         }

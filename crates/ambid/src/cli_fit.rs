@@ -811,15 +811,10 @@ fn fit_ss(
             p.start_loss,
             p.loss,
             p.iterations,
-            readable_stop(&p.stop),
+            stop_reason_text(p.stop),
             if p.on_boundary { "; the optimum lies on the predictor's stability boundary" } else { "" }
         );
-        if p.stop
-            == format!(
-                "{:?}",
-                ambid_core::estimate::pem::lm::StopReason::MaxIterations
-            )
-        {
+        if p.stop == ambid_core::estimate::pem::lm::StopReason::MaxIterations {
             problems.push(format!(
                 "the prediction-error refinement stopped at its limit ({} iterations) before converging: raise --max-iterations",
                 p.iterations
@@ -828,7 +823,7 @@ fn fit_ss(
         pem_meta = json!({
             "focus": format!("{:?}", p.focus).to_lowercase(),
             "iterations": p.iterations,
-            "stop": p.stop,
+            "stop": format!("{:?}", p.stop),
             "start_loss": p.start_loss,
             "loss": p.loss,
             "kalman_gain": p.kalman_gain,
@@ -1331,23 +1326,6 @@ fn finish_mimo(a: &FitArgs, ins: &[String], outs: &[String], f: MimoFit) -> Resu
 
 /// What stopped the prediction-error iteration, for the summary (see
 /// [`ambid_core::estimate::pem::lm::StopReason`]).
-/// [`stop_reason_text`] for a stop recorded by its variant name (`"MaxIterations"`, …); other
-/// text is returned as it is.
-fn readable_stop(name: &str) -> String {
-    use ambid_core::estimate::pem::lm::StopReason::*;
-    [
-        Significance,
-        Stagnation,
-        LossChange,
-        StepSize,
-        Gradient,
-        MaxIterations,
-    ]
-    .into_iter()
-    .find(|r| format!("{r:?}") == name)
-    .map_or_else(|| name.to_string(), |r| stop_reason_text(r).to_string())
-}
-
 fn stop_reason_text(r: ambid_core::estimate::pem::lm::StopReason) -> &'static str {
     use ambid_core::estimate::pem::lm::StopReason;
     match r {

@@ -18,7 +18,7 @@ pub struct PemSummary {
     /// Iterations.
     pub iterations: usize,
     /// Why it stopped.
-    pub stop: String,
+    pub stop: ambid_core::estimate::pem::lm::StopReason,
     /// Loss before (in the data's units squared).
     pub start_loss: f64,
     /// Loss after.
@@ -42,7 +42,7 @@ impl PemSummary {
         PemSummary {
             focus,
             iterations: p.report.iterations,
-            stop: format!("{:?}", p.report.reason),
+            stop: p.report.reason,
             start_loss: p.start_loss * sy * sy,
             loss: p.fitted.loss * sy * sy,
             kalman_gain: p

@@ -50,7 +50,7 @@ fn ss8_defaults_reach_the_true_systems_validation_fit_on_random_rigs() {
         let f_truth = exact_loop_fit(&val.twin, &val.record.r, &val.record.y);
         let pem = fit.pem.as_ref().unwrap();
         eprintln!(
-            "rig {rig}: block rows {} of {:?} ({:?}), PEM {:?} {} iterations ({}), validation fit {f_model:.3} % vs the truth's {f_truth:.3} %",
+            "rig {rig}: block rows {} of {:?} ({:?}), PEM {:?} {} iterations ({:?}), validation fit {f_model:.3} % vs the truth's {f_truth:.3} %",
             fit.block_rows,
             fit.block_rows_scan,
             fit.block_rows_criterion,
@@ -60,7 +60,11 @@ fn ss8_defaults_reach_the_true_systems_validation_fit_on_random_rigs() {
         );
         // the closed-loop T_ry is stable, so the automatic focus is the simulation focus
         assert_eq!(pem.focus, Focus::Simulation, "rig {rig}");
-        assert_ne!(pem.stop, "MaxIterations", "rig {rig}: PEM did not converge");
+        assert_ne!(
+            pem.stop,
+            ambid_core::estimate::pem::lm::StopReason::MaxIterations,
+            "rig {rig}: PEM did not converge"
+        );
         assert!(pem.loss <= pem.start_loss * (1.0 + 1e-12), "rig {rig}");
         assert!(
             f_model >= f_truth - 0.5,

@@ -1392,10 +1392,7 @@ fn run(
             (eps.iter().map(|e| e * e).sum(), None)
         }
         Some((psi, g_free, h_free)) => {
-            let (eps, jac) = errors_and_gradient(&p, o, y, u, Focus::Prediction)
-                .ok_or_else(|| Error::numerical(CTX, OVERFLOW_AT_ESTIMATE))?;
-            let sse: f64 = eps.iter().map(|e| e * e).sum();
-            let lambda = sse / (n - d) as f64;
+            let (sse, lambda, jac) = at_estimate(&p, o, y, u)?;
             let cov = sim_covariance(&p, &psi, &jac, &g_free, &h_free, lambda, d);
             (sse, cov)
         }
@@ -1433,14 +1430,20 @@ fn prediction_covariance(
     y: &[f64],
     u: &[f64],
 ) -> Result<(f64, Option<Mat<f64>>)> {
-    let (eps, jac) = errors_and_gradient(p, o, y, u, Focus::Prediction)
-        .ok_or_else(|| Error::numerical("pem", OVERFLOW_AT_ESTIMATE))?;
+    let (sse, lambda, jac) = at_estimate(p, o, y, u)?;
     let d = o.n_params();
-    let sse: f64 = eps.iter().map(|e| e * e).sum();
-    let lambda = sse / (y.len() - d) as f64;
     let cov = inverse_gram(&jac, &(0..d).collect::<Vec<_>>())
         .map(|m| Mat::from_fn(d, d, |i, j| lambda * m[(i, j)]));
     Ok((sse, cov))
+}
+
+/// The sum of squared prediction errors at `p`, $\hat\lambda = \sum\varepsilon^2 / (N - d)$
+/// and the gradient $\Psi$ of the errors (prediction focus), for the covariances.
+fn at_estimate(p: &Polys, o: &Orders, y: &[f64], u: &[f64]) -> Result<(f64, f64, Mat<f64>)> {
+    let (eps, jac) = errors_and_gradient(p, o, y, u, Focus::Prediction)
+        .ok_or_else(|| Error::numerical("pem", OVERFLOW_AT_ESTIMATE))?;
+    let sse: f64 = eps.iter().map(|e| e * e).sum();
+    Ok((sse, sse / (y.len() - o.n_params()) as f64, jac))
 }
 
 /// Covariance of the two-stage estimate under the simulation focus (see the module docs): the

@@ -454,7 +454,7 @@ pub fn n4sid_detailed(
         .collect();
     fits.reverse();
     let mut rungs: Vec<SubspaceFit> = Vec::with_capacity(fits.len());
-    for fit in fits.drain(..) {
+    for fit in fits {
         match fit {
             Ok(f) => {
                 let stop = exact(&f);

@@ -264,23 +264,22 @@ fn parse_layout(dom: &str) -> Result<Layout, String> {
 /// Pieces of `text` that look like Rust debug output: `Some(`, the word `None`, `::`.
 pub(crate) fn debug_text(text: &str) -> Vec<String> {
     let mut out = Vec::new();
-    let s = text;
     for pat in ["Some(", "None", "::"] {
-        for (i, _) in s.match_indices(pat) {
+        for (i, _) in text.match_indices(pat) {
             if pat == "None" {
-                let before = s[..i].chars().next_back();
-                let after = s[i + 4..].chars().next();
+                let before = text[..i].chars().next_back();
+                let after = text[i + 4..].chars().next();
                 let word = |c: Option<char>| c.is_some_and(|c| c.is_alphanumeric() || c == '_');
                 if word(before) || word(after) {
                     continue;
                 }
             }
-            let from = s[..i].char_indices().rev().nth(40).map_or(0, |(j, _)| j);
-            let to = s[i..]
+            let from = text[..i].char_indices().rev().nth(40).map_or(0, |(j, _)| j);
+            let to = text[i..]
                 .char_indices()
                 .nth(40)
-                .map_or(s.len(), |(j, _)| i + j);
-            out.push(s[from..to].replace('\n', " "));
+                .map_or(text.len(), |(j, _)| i + j);
+            out.push(text[from..to].replace('\n', " "));
         }
     }
     out
