@@ -119,9 +119,22 @@ pub(crate) fn section(summary: &Value, sections: &[Section], ctx: &Ctx<'_>) -> S
         }
         let mut level_note = None;
         if let Some(bla) = num(summary, "bla.recommended_pct") {
+            // an optimum at the largest level studied is only a lower bound of the true optimum
+            let top = get(summary, "bla.levels")
+                .and_then(Value::as_array)
+                .and_then(|l| {
+                    l.iter()
+                        .filter_map(|r| r.get("level_pct")?.as_f64())
+                        .reduce(f64::max)
+                });
             why.push(format!(
-                "the robust BLA's noise + nonlinear variance is smallest at {} % RMS",
-                fmt(bla)
+                "the robust BLA's noise + nonlinear variance is smallest at {} % RMS{}",
+                fmt(bla),
+                if top.is_some_and(|t| (t - bla).abs() < 1e-9) {
+                    " (the largest level it studied)"
+                } else {
+                    ""
+                }
             ));
             if bla < level - 1e-9 {
                 level_note = Some(format!(
