@@ -6,6 +6,7 @@
 pub mod analysis;
 pub mod bla;
 pub mod comparison;
+pub mod error;
 pub mod experiment;
 pub mod fitting;
 pub mod frf_stream;

@@ -31,35 +31,7 @@ use serde_json::{Map, Value};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-/// Classes of failure, each with its own process exit code; the one rule of every `ambid`
-/// command (`docs/workflow.md`, "Exit codes"): 0 success, 1 an error of no class below,
-/// 2 usage (the workflow file or a command-line option value), 3 input data, 4 computation,
-/// 5 output. [`exit_code`] finds the class of any command's error.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum FailureClass {
-    /// The workflow file is unreadable or wrong, or a command-line option value (or a
-    /// combination of options) is refused (exit 2, as clap's own usage errors).
-    Config,
-    /// A data, controller or model file is missing, unreadable, malformed, holds NaN where a
-    /// number is needed, or is too short (exit 3).
-    Input,
-    /// A computation failed on the data (exit 4).
-    Computation,
-    /// The outputs could not be written, or would overwrite without `--force` (exit 5).
-    Output,
-}
-
-impl FailureClass {
-    /// The process exit code.
-    pub fn exit_code(self) -> i32 {
-        match self {
-            FailureClass::Config => 2,
-            FailureClass::Input => 3,
-            FailureClass::Computation => 4,
-            FailureClass::Output => 5,
-        }
-    }
-}
+pub use crate::error::FailureClass;
 
 /// The only fields of `ambid run`'s outputs that differ between two runs of the same workflow:
 /// the wall-clock step timings, `summary.json`'s object `"timing"` (keys `timing.<step>_s`,
@@ -149,6 +121,9 @@ pub fn output(e: impl Into<anyhow::Error>) -> Failure {
 /// ```
 pub fn exit_code(e: &anyhow::Error) -> i32 {
     for c in e.chain() {
+        if let Some(ae) = c.downcast_ref::<crate::error::Error>() {
+            return ae.exit_code();
+        }
         if let Some(f) = c.downcast_ref::<Failure>() {
             return f.class.exit_code();
         }
