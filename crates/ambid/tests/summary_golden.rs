@@ -55,7 +55,7 @@ fn diff(path: &str, got: &Value, want: &Value, out: &mut Vec<String>) {
                 w.as_f64().unwrap_or(f64::NAN),
             );
             let scale = a.abs().max(b.abs());
-            if !((a - b).abs() <= REL * scale) {
+            if (a - b).abs() > REL * scale || a.is_nan() != b.is_nan() {
                 out.push(format!("{path}: {a:e} ≠ {b:e}"));
             }
         }
