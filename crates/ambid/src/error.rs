@@ -200,3 +200,41 @@ impl<T, E: Into<Error>> Context<T> for std::result::Result<T, E> {
         self.map_err(|e| e.into().context(context()))
     }
 }
+
+/// Transitional bridge while the library's files move from `anyhow` to [`Error`] (issue 19):
+/// the message of the whole chain, in the class of the outermost classified error in it.
+/// Removed when no library file returns `anyhow` any more.
+#[doc(hidden)]
+impl From<anyhow::Error> for Error {
+    fn from(e: anyhow::Error) -> Self {
+        let msg = Error::Other(format!("{e:#}"));
+        for c in e.chain() {
+            let class = if let Some(ae) = c.downcast_ref::<Error>() {
+                ae.class()
+            } else if let Some(f) = c.downcast_ref::<crate::workflow::Failure>() {
+                Some(f.class)
+            } else if c.is::<ConfigError>() {
+                Some(FailureClass::Config)
+            } else if c.is::<DataFileError>() {
+                Some(FailureClass::Input)
+            } else if c.is::<OutputError>() {
+                Some(FailureClass::Output)
+            } else if let Some(ce) = c.downcast_ref::<ambid_core::Error>() {
+                Error::from(ce.clone()).class()
+            } else if let Some(te) = c.downcast_ref::<ambid_twin::TwinError>() {
+                match te {
+                    ambid_twin::TwinError::Toml(_) | ambid_twin::TwinError::NonFinite { .. } => {
+                        Some(FailureClass::Input)
+                    }
+                    _ => Some(FailureClass::Computation),
+                }
+            } else {
+                None
+            };
+            if let Some(class) = class {
+                return Error::classified(class, msg);
+            }
+        }
+        msg
+    }
+}
