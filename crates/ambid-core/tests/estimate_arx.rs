@@ -11,8 +11,9 @@
 
 mod common;
 
-use ambid_core::estimate::arx::{arx, arx_with, fir, fit_percent, ArxModel, ArxOptions, ArxOrders};
+use ambid_core::estimate::arx::{arx, arx_with, fir, ArxModel, ArxOptions, ArxOrders};
 use ambid_core::lti::Structure;
+use ambid_core::validate::fit::fit_percent;
 use ambid_core::Error;
 use faer::Mat;
 use rand::SeedableRng;

@@ -5,9 +5,10 @@
 
 mod common;
 
-use ambid_core::estimate::arx::{arx, fit_percent, ArxOrders};
+use ambid_core::estimate::arx::{arx, ArxOrders};
 use ambid_core::estimate::pem::{oe, PemOptions};
 use ambid_core::linalg::roots;
+use ambid_core::validate::fit::fit_percent;
 use ambid_core::Error;
 
 fn ballbeam() -> (Vec<f64>, Vec<f64>) {

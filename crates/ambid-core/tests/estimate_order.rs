@@ -6,10 +6,11 @@
 
 mod common;
 
-use ambid_core::estimate::arx::{arx_with, fit_percent, ArxOptions};
+use ambid_core::estimate::arx::{arx_with, ArxOptions};
 use ambid_core::estimate::order::{
     arx_order_scan, ArxScanSpec, OrderScan, ScanMethod, ScanSolver, BIC_TOLERANCE,
 };
+use ambid_core::validate::fit::fit_percent;
 use ambid_core::Error;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

@@ -17,10 +17,10 @@
 //! time) and a summary per structure.
 
 use ambid::experiment::{run, Experiment, ExperimentOutput};
-use ambid_core::estimate::arx::fit_percent;
 use ambid_core::estimate::pem::lm::LmOptions;
 use ambid_core::estimate::pem::{pem, Orders, PemOptions};
 use ambid_core::lti::Structure;
+use ambid_core::validate::fit::fit_percent;
 use ambid_core::validate::predict::{poly_one_step, InitialState};
 use ambid_twin::Mode;
 use anyhow::Result;

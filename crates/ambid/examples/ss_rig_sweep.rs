@@ -16,7 +16,7 @@
 
 use ambid::experiment::{run, Experiment, ExperimentOutput};
 use ambid::fitting::{identify_state_space, SsFitOptions, SsFocus};
-use ambid_core::estimate::arx::fit_percent;
+use ambid_core::validate::fit::fit_percent;
 use ambid_twin::Mode;
 use anyhow::{Context, Result};
 use faer::Mat;

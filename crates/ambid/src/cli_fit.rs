@@ -381,7 +381,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
     OutputSet::check(&a.out, a.force)?;
     check_orders(&a)?;
     if let Some(q) = &a.quantity {
-        use ambid_core::validate::compare::FitStructure;
+        use ambid_core::lti::Structure as FitStructure;
         let (structure, order) = match a.structure {
             StructureArg::Arx => (FitStructure::Arx, a.order.unwrap_or(a.na)),
             StructureArg::Oe => (FitStructure::Oe, a.order.unwrap_or(a.nf)),

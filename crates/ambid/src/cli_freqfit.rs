@@ -9,9 +9,9 @@ use ambid::io::OutputSet;
 use ambid::io::{read_controller, read_time_csv};
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::frf::band::{fit_band, FIT_REL_HALFWIDTH};
+use ambid_core::lti::Structure as FitStructure;
 use ambid_core::validate::compare::{
-    choose, compare_models, supported_unstable_poles, table, CompareSpec, FitStructure,
-    ValidationRecord,
+    choose, compare_models, supported_unstable_poles, table, CompareSpec, ValidationRecord,
 };
 use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};

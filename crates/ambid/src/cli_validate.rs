@@ -8,7 +8,7 @@ use ambid::validation::{
     consistency, innovation_residuals, innovation_summary, residual_summary, validate_closed_loop,
     MeasuredLoop, ValidationSettings,
 };
-use ambid_core::estimate::arx::fit_percent;
+use ambid_core::validate::fit::fit_percent;
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;

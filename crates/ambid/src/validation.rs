@@ -22,10 +22,10 @@
 //! stable closed loop with the controller is an error that names the unstable closed-loop poles.
 
 use ambid_core::c64;
-use ambid_core::estimate::arx::fit_percent;
 use ambid_core::frf::band::{iso_search, BandRule, IsoSearch};
 use ambid_core::lti::{Frd, StateSpace};
 use ambid_core::validate::closed_loop::{reconstruct_with, Reconstruction};
+use ambid_core::validate::fit::fit_percent;
 use ambid_core::validate::iso::{sensitivity_zone, IsoVerdict, IsoZones};
 use ambid_core::validate::margins::{margins, Margins};
 use ambid_core::validate::predict::InitialState;

@@ -3,11 +3,12 @@
 //! against the exact T_ry; and the direct method (u → y in closed loop) against the exact plant.
 
 use ambid::experiment::{run, Experiment, ExperimentOutput};
-use ambid_core::estimate::arx::{arx, fit_percent, ArxOrders};
+use ambid_core::estimate::arx::{arx, ArxOrders};
 use ambid_core::estimate::pem::Focus;
 use ambid_core::estimate::ss_pem::{refine_ss, SsPemOptions};
 use ambid_core::estimate::subspace::{n4sid_detailed, SubspaceOptions};
 use ambid_core::lti::StateSpace;
+use ambid_core::validate::fit::fit_percent;
 use ambid_twin::Mode;
 use faer::Mat;
 use num_complex::Complex64;

@@ -19,9 +19,9 @@ use ambid::analysis::{analyze, FrfSettings, Record};
 use ambid::experiment::{run, ExcitationPlan};
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::frf::band::{fit_band, FIT_REL_HALFWIDTH};
+use ambid_core::lti::Structure;
 use ambid_core::validate::compare::{
-    choose, compare_models, supported_unstable_poles, CompareRow, CompareSpec, FitStructure,
-    ValidationRecord,
+    choose, compare_models, supported_unstable_poles, CompareRow, CompareSpec, ValidationRecord,
 };
 
 #[test]
@@ -91,7 +91,7 @@ fn the_derived_fit_band_holds_on_random_rigs() {
             Some(twin.plant_unstable_poles().unwrap().len()),
             "rig {rig} seed {seed}: {how}"
         );
-        let spec = |structures: Vec<FitStructure>, orders: Vec<usize>, band| CompareSpec {
+        let spec = |structures: Vec<Structure>, orders: Vec<usize>, band| CompareSpec {
             structures,
             orders,
             fit: FreqFitOptions {
@@ -104,7 +104,7 @@ fn the_derived_fit_band_holds_on_random_rigs() {
             controller: Some(ctrl.clone()),
             ..CompareSpec::default()
         };
-        let all = vec![FitStructure::Arx, FitStructure::Oe, FitStructure::Ss];
+        let all = vec![Structure::Arx, Structure::Oe, Structure::Ss];
         let vrec = ValidationRecord {
             r: &val.record.r,
             y: &val.record.y,
@@ -144,8 +144,7 @@ fn the_derived_fit_band_holds_on_random_rigs() {
         chosen.push(e);
         // `fit frf.csv --structure ss --order 8` (default band) against `--band 10:1000`
         let ss = |band| {
-            let r =
-                compare_models(frd, &spec(vec![FitStructure::Ss], vec![8], band), None).unwrap();
+            let r = compare_models(frd, &spec(vec![Structure::Ss], vec![8], band), None).unwrap();
             model_err(&r[0])
         };
         let (e_def, e_exp) = (ss(fb.band), ss((10.0, 1000.0)));
@@ -155,7 +154,7 @@ fn the_derived_fit_band_holds_on_random_rigs() {
         // line of the file it was 7–58 % on these rigs)
         let reported = {
             let r =
-                compare_models(frd, &spec(vec![FitStructure::Ss], vec![8], fb.band), None).unwrap();
+                compare_models(frd, &spec(vec![Structure::Ss], vec![8], fb.band), None).unwrap();
             r[0].median_relative.unwrap()
         };
         let in_band: Vec<usize> = (0..f_all.len())

@@ -200,9 +200,8 @@ fn order_7_meets_the_bar_on_other_seeds() {
 /// twin's controller on the independent seed-2 record (first period left out: the transient).
 #[test]
 fn comparison_table_and_closed_loop_validation() {
-    use ambid_core::validate::compare::{
-        compare_models, table, CompareSpec, FitStructure, ValidationRecord,
-    };
+    use ambid_core::lti::Structure;
+    use ambid_core::validate::compare::{compare_models, table, CompareSpec, ValidationRecord};
     let (frf, twin) = estimate(1, None);
     let val = run(&seed_experiment(2)).unwrap();
     let spec = CompareSpec {
@@ -221,14 +220,14 @@ fn comparison_table_and_closed_loop_validation() {
     };
     let rows = compare_models(&frf.plant, &spec, Some(rec)).unwrap();
     eprintln!("{}", table(&rows));
-    let get = |s: FitStructure, n: usize| {
+    let get = |s: Structure, n: usize| {
         rows.iter()
             .find(|r| r.structure == s && r.order == n)
             .unwrap()
     };
     // the bar: the state-space model of order <= 10 chosen by the FRF criteria (order 7)
     // validates through the closed loop at >= 97 %
-    let ss7 = get(FitStructure::Ss, 7);
+    let ss7 = get(Structure::Ss, 7);
     let vfit = ss7.validation_fit.unwrap();
     eprintln!(
         "SS order 7: closed-loop validation fit {vfit:.2} % (seed paper's chosen model: 88.1 %)"
@@ -260,9 +259,9 @@ fn comparison_table_and_closed_loop_validation() {
     );
     // the seed's qualitative finding: ARX worst below 200 Hz, for every order
     for n in 6..=9 {
-        let arx = get(FitStructure::Arx, n).low_band_relative_rmse.unwrap();
-        let oe = get(FitStructure::Oe, n).low_band_relative_rmse.unwrap();
-        let ss = get(FitStructure::Ss, n).low_band_relative_rmse.unwrap();
+        let arx = get(Structure::Arx, n).low_band_relative_rmse.unwrap();
+        let oe = get(Structure::Oe, n).low_band_relative_rmse.unwrap();
+        let ss = get(Structure::Ss, n).low_band_relative_rmse.unwrap();
         assert!(
             arx > 10.0 * oe.max(ss),
             "order {n}: ARX {arx} OE {oe} SS {ss}"
@@ -279,11 +278,11 @@ fn comparison_table_and_closed_loop_validation() {
     eprintln!("best BIC: {} order {}", best.structure.name(), best.order);
     assert_eq!(best.order, 7);
     let (b_oe, b_ss) = (
-        get(FitStructure::Oe, 7).bic.unwrap(),
-        get(FitStructure::Ss, 7).bic.unwrap(),
+        get(Structure::Oe, 7).bic.unwrap(),
+        get(Structure::Ss, 7).bic.unwrap(),
     );
     assert!((b_oe - b_ss).abs() < 1e-3 * b_oe.abs(), "{b_oe} vs {b_ss}");
-    assert!(get(FitStructure::Ss, 9).validation_fit.unwrap() >= 97.0);
+    assert!(get(Structure::Ss, 9).validation_fit.unwrap() >= 97.0);
 }
 
 /// The coprime route on the twin: T_ry and S (= T_ru) fitted jointly with a common denominator,

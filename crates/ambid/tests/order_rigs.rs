@@ -13,7 +13,8 @@ mod common;
 use ambid::workflow::{self, Progress, Verbosity, WorkflowConfig};
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::lti::Frd;
-use ambid_core::validate::compare::{compare_models, CompareSpec, FitStructure};
+use ambid_core::lti::Structure;
+use ambid_core::validate::compare::{compare_models, CompareSpec};
 use ambid_twin::{random_rig, Twin, TwinConfig};
 use common::{ambid, s, text, tmpdir};
 use serde_json::Value;
@@ -47,7 +48,7 @@ fn true_in_band_order(twin: &Twin, f: &[f64]) -> (usize, Vec<f64>) {
     let var: Vec<f64> = p.iter().map(|g| (0.01 * g.norm()).powi(2)).collect();
     let frd = Frd::new(f.to_vec(), p, Some(var), Some(twin.plant().ts().unwrap())).unwrap();
     let spec = CompareSpec {
-        structures: vec![FitStructure::Ss],
+        structures: vec![Structure::Ss],
         orders: (1..=12).collect(),
         fit: FreqFitOptions {
             weights: FreqWeights::InverseVariance,

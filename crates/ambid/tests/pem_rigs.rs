@@ -25,10 +25,10 @@
 mod common;
 use common::{exact_loop_fit, mean, seed_record_on_rig};
 
-use ambid_core::estimate::arx::fit_percent;
 use ambid_core::estimate::pem::lm::{LmOptions, StopReason};
 use ambid_core::estimate::pem::{pem, Orders, PemOptions};
 use ambid_core::lti::{PolyModel, Structure};
+use ambid_core::validate::fit::fit_percent;
 use ambid_core::validate::predict::{poly_one_step, InitialState};
 
 /// Rig seeds tested here.

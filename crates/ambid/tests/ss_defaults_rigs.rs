@@ -20,8 +20,8 @@ mod common;
 use common::{exact_loop_fit, mean, seed_record_on_rig};
 
 use ambid::fitting::{identify_state_space, SsFitOptions};
-use ambid_core::estimate::arx::fit_percent;
 use ambid_core::estimate::pem::Focus;
+use ambid_core::validate::fit::fit_percent;
 
 /// Rig seeds tested here (the first ones of the documented 40-rig sweep).
 const RIGS: u64 = 20;

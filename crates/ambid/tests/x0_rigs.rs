@@ -15,7 +15,7 @@
 
 use ambid::experiment::{run, ExcitationPlan, Experiment};
 use ambid::validation::{validate_closed_loop, MeasuredLoop, ValidationSettings};
-use ambid_core::estimate::arx::fit_percent;
+use ambid_core::validate::fit::fit_percent;
 use ambid_core::validate::predict::InitialState;
 use ambid_twin::{random_rig, Mode};
 

@@ -65,15 +65,16 @@
 //! # Prediction, simulation and fit
 //! [`ArxModel::predict`] gives the one-step-ahead predictor
 //! $\hat y_{k|k-1} = \varphi_k^\top\hat\theta$, [`ArxModel::simulate`] the simulated output
-//! $A(q)\hat y_k = \sum_i B_i(q) u_{i,k}$ (started from given measured outputs), and [`fit_percent`]
-//! the normalised fit $100\,(1 - \lVert y-\hat y\rVert / \lVert y - \bar y\rVert)$ (MATLAB
+//! $A(q)\hat y_k = \sum_i B_i(q) u_{i,k}$ (started from given measured outputs), and
+//! [`crate::validate::fit::fit_percent`] the normalised fit $100\,(1 - \lVert y-\hat y\rVert / \lVert y - \bar y\rVert)$ (MATLAB
 //! `compare`).
 //!
 //! Complexity: $O(N d^2)$ for the QR, $O(N d)$ for building $\Phi$ and the residuals.
 //!
 //! # Example
 //! ```
-//! use ambid_core::estimate::arx::{arx, fit_percent, ArxOrders};
+//! use ambid_core::estimate::arx::{arx, ArxOrders};
+//! use ambid_core::validate::fit::fit_percent;
 //! use rand::{RngExt, SeedableRng};
 //! // y_k = 1.5 y_{k-1} - 0.7 y_{k-2} + u_{k-1} + 0.5 u_{k-2}: A = [1, -1.5, 0.7], B = [0, 1, 0.5]
 //! let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
@@ -580,57 +581,6 @@ pub fn arx_with(
         noise_variance,
         n_samples: n,
     })
-}
-
-/// The normalised fit in percent, $100\,(1 - \lVert y - \hat y\rVert / \lVert y - \bar y\rVert)$
-/// (NRMSE fit, MATLAB `compare`): $100$ is perfect, $0$ is no better than the mean $\bar y$ of
-/// `y`, and it is negative for a worse model. Pass the samples to be compared (e.g. `&y[k0..]`).
-///
-/// This is the project's one fit metric (`docs/conventions.md`); it lives here until the
-/// `validate` module takes it over.
-///
-/// # Errors
-/// [`Error::DimensionMismatch`] for different lengths; [`Error::InvalidArgument`] for empty or
-/// constant `y` (the fit is undefined); [`Error::NonFinite`].
-///
-/// # Example
-/// ```
-/// use ambid_core::estimate::arx::fit_percent;
-/// let y = [1.0, 2.0, 3.0];
-/// assert_eq!(fit_percent(&y, &y).unwrap(), 100.0);
-/// assert_eq!(fit_percent(&y, &[2.0, 2.0, 2.0]).unwrap(), 0.0);
-/// ```
-pub fn fit_percent(y: &[f64], yhat: &[f64]) -> Result<f64> {
-    if y.len() != yhat.len() {
-        return Err(Error::DimensionMismatch {
-            context: "fit_percent: measured and model output",
-            expected: y.len().to_string(),
-            got: yhat.len().to_string(),
-        });
-    }
-    if y.is_empty() {
-        return Err(Error::invalid(
-            "y",
-            "the fit of an empty record is undefined",
-        ));
-    }
-    check_finite("y", y)?;
-    check_finite("yhat", yhat)?;
-    let mean = y.iter().sum::<f64>() / y.len() as f64;
-    let spread = y.iter().map(|v| (v - mean).powi(2)).sum::<f64>().sqrt();
-    if spread == 0.0 {
-        return Err(Error::invalid(
-            "y",
-            "y is constant, so the fit (relative to its variation about the mean) is undefined",
-        ));
-    }
-    let err = y
-        .iter()
-        .zip(yhat)
-        .map(|(a, b)| (a - b).powi(2))
-        .sum::<f64>()
-        .sqrt();
-    Ok(100.0 * (1.0 - err / spread))
 }
 
 // ---------------------------------------------------------------------------------------------

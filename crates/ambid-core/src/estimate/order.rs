@@ -9,7 +9,7 @@
 //! with $d = n_a + n_b$ parameters and $N$ samples in the criterion (the AIC and BIC are $-2$ times
 //! the Gaussian log-likelihood at $\hat\theta$, $\hat\sigma^2 = V_N$, plus the penalty; the constant
 //! $N(\ln 2\pi + 1)$ does not affect any ranking). With validation data, each model's one-step
-//! prediction loss and fit ([`crate::estimate::arx::fit_percent`]) on them are added.
+//! prediction loss and fit ([`crate::validate::fit::fit_percent`]) on them are added.
 //!
 //! # One window for all models
 //! Every model is fitted over the same samples $k \ge k_0$ with $k_0$ that of the *largest* model,

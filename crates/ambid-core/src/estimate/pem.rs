@@ -708,6 +708,12 @@ fn check_orders(structure: Structure, o: &Orders, focus: Focus) -> Result<()> {
         Structure::Oe => &[("na", o.na), ("nc", o.nc), ("nd", o.nd)],
         Structure::Bj => &[("na", o.na)],
         Structure::General => &[],
+        Structure::Ss => {
+            return Err(Error::invalid(
+                "structure",
+                "the polynomial prediction-error method does not fit a state-space structure (`ss`); use estimate::ss_pem (or estimate::subspace) instead",
+            ))
+        }
     };
     for (name, v) in fixed {
         if *v != 0 {

@@ -13,6 +13,9 @@
 //! | BJ        | $B, C, D, F$ |
 //! | general   | all |
 //!
+//! [`Structure`] also names the state-space structure (`ss`), so that one type names every
+//! model structure of the project.
+//!
 //! # Example
 //! ```
 //! use ambid_core::lti::{PolyModel, Structure};
@@ -30,8 +33,33 @@ use super::tf::{poly_mul, TransferFunction};
 use crate::error::{check_finite, Error, Result};
 use faer::{c64, Mat};
 
-/// Model structure tag of a [`PolyModel`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+/// Model structure: the one type that names a structure everywhere (polynomial models, the
+/// state-space estimators, the model comparison of [`crate::validate::compare`], the command line
+/// and the workflow file).
+///
+/// The polynomial structures tag a [`PolyModel`]; [`Structure::Ss`] is a state-space model
+/// (subspace + prediction-error refinement in the time domain, frequency-domain subspace + LM on
+/// FRF data) and never tags a [`PolyModel`].
+///
+/// Names ([`Structure::name`], [`std::fmt::Display`], [`std::str::FromStr`] and serde all use
+/// them): `fir`, `arx`, `armax`, `oe`, `bj`, `general`, `ss`. Parsing ignores ASCII case and
+/// surrounding blanks and also takes the aliases `box-jenkins`/`box_jenkins` for `bj`,
+/// `output-error`/`output_error` for `oe` and `state-space`/`state_space`/`statespace` for `ss`.
+///
+/// # Example
+/// ```
+/// use ambid_core::lti::Structure;
+/// let s: Structure = "SS".parse().unwrap();
+/// assert_eq!(s, Structure::Ss);
+/// assert_eq!(s.to_string(), "ss");
+/// assert_eq!("box-jenkins".parse::<Structure>().unwrap(), Structure::Bj);
+/// assert!(Structure::Oe.fits_frf() && !Structure::Bj.fits_frf());
+/// let err = "arma".parse::<Structure>().unwrap_err().to_string();
+/// assert!(err.contains("fir, arx, armax, oe, bj, general, ss"));
+/// assert_eq!(serde_json::to_string(&Structure::Armax).unwrap(), "\"armax\"");
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Structure {
     /// Finite impulse response: $y = B u + e$.
     Fir,
@@ -45,10 +73,25 @@ pub enum Structure {
     Bj,
     /// $A y = (B/F) u + (C/D) e$.
     General,
+    /// State space $x_{k+1} = A x_k + B u_k + K e_k$, $y_k = C x_k + D u_k + e_k$ (not a
+    /// [`PolyModel`]).
+    Ss,
 }
 
 impl Structure {
-    /// Lower-case name as used in model files (`"fir"`, `"arx"`, …).
+    /// Every structure, in the order of the table above (`ss` last).
+    pub const ALL: [Structure; 7] = [
+        Structure::Fir,
+        Structure::Arx,
+        Structure::Armax,
+        Structure::Oe,
+        Structure::Bj,
+        Structure::General,
+        Structure::Ss,
+    ];
+
+    /// Lower-case name as used in model files, on the command line and in workflow files
+    /// (`"fir"`, `"arx"`, …, `"ss"`).
     pub fn name(self) -> &'static str {
         match self {
             Structure::Fir => "fir",
@@ -57,19 +100,67 @@ impl Structure {
             Structure::Oe => "oe",
             Structure::Bj => "bj",
             Structure::General => "general",
+            Structure::Ss => "ss",
         }
     }
 
-    /// Which of $(A, C, D, F)$ may differ from $1$.
-    fn free(self) -> [bool; 4] {
+    /// `true` for the polynomial structures (those that tag a [`PolyModel`]).
+    pub fn is_polynomial(self) -> bool {
+        self != Structure::Ss
+    }
+
+    /// `true` for the structures a fit to frequency-response data supports
+    /// ([`crate::validate::compare::compare_models`]): ARX (Levy's linearised form), OE (SK + LM)
+    /// and state space (frequency-domain subspace + LM). The noise models of ARMAX, BJ and the
+    /// general structure are not identifiable from an FRF, and FIR is not offered.
+    pub fn fits_frf(self) -> bool {
+        matches!(self, Structure::Arx | Structure::Oe | Structure::Ss)
+    }
+
+    /// The structures [`Structure::fits_frf`] accepts: ARX, OE, SS.
+    pub const FRF: [Structure; 3] = [Structure::Arx, Structure::Oe, Structure::Ss];
+
+    /// Which of $(A, C, D, F)$ may differ from $1$ (`None` for state space).
+    fn free(self) -> Option<[bool; 4]> {
         match self {
-            Structure::Fir => [false, false, false, false],
-            Structure::Arx => [true, false, false, false],
-            Structure::Armax => [true, true, false, false],
-            Structure::Oe => [false, false, false, true],
-            Structure::Bj => [false, true, true, true],
-            Structure::General => [true, true, true, true],
+            Structure::Fir => Some([false, false, false, false]),
+            Structure::Arx => Some([true, false, false, false]),
+            Structure::Armax => Some([true, true, false, false]),
+            Structure::Oe => Some([false, false, false, true]),
+            Structure::Bj => Some([false, true, true, true]),
+            Structure::General => Some([true, true, true, true]),
+            Structure::Ss => None,
         }
+    }
+}
+
+impl std::fmt::Display for Structure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Structure {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        let key = s.trim().to_ascii_lowercase();
+        let found = match key.as_str() {
+            "box-jenkins" | "box_jenkins" => Some(Structure::Bj),
+            "output-error" | "output_error" => Some(Structure::Oe),
+            "state-space" | "state_space" | "statespace" => Some(Structure::Ss),
+            k => Structure::ALL.into_iter().find(|x| x.name() == k),
+        };
+        found.ok_or_else(|| {
+            let names: Vec<&str> = Structure::ALL.iter().map(|x| x.name()).collect();
+            Error::invalid(
+                "structure",
+                format!(
+                    "unknown model structure `{}`; use one of {}",
+                    s.trim(),
+                    names.join(", ")
+                ),
+            )
+        })
     }
 }
 
@@ -103,6 +194,12 @@ impl PolyModel {
         ts: f64,
     ) -> Result<Self> {
         check_ts(ts)?;
+        let Some(free) = structure.free() else {
+            return Err(Error::invalid(
+                "structure",
+                "a state-space structure (`ss`) is not a polynomial model; build a StateSpace instead",
+            ));
+        };
         let names: [&'static str; 4] = ["a", "c", "d", "f"];
         let polys = [&a, &c, &d, &f];
         for (k, (name, p)) in names.iter().zip(polys).enumerate() {
@@ -116,7 +213,7 @@ impl PolyModel {
                     ))
                 }
             }
-            if !structure.free()[k] && !is_one(p) {
+            if !free[k] && !is_one(p) {
                 return Err(Error::invalid(
                     name,
                     format!(

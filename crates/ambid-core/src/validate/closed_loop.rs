@@ -24,8 +24,8 @@
 //! ```
 
 use crate::error::{Error, Result};
-use crate::estimate::arx::fit_percent;
 use crate::lti::StateSpace;
+use crate::validate::fit::fit_percent;
 use crate::validate::predict::InitialState;
 
 /// Output and plant input of the simulated loop.

@@ -52,39 +52,16 @@
 //! the best validation fit when there is one, else the smallest BIC.
 
 use crate::error::{Error, Result};
-use crate::estimate::arx::fit_percent;
 use crate::estimate::freqfit::{arx_frd, oe_frd, FreqErrors, FreqFitOptions, TfOrders};
-use crate::lti::{Frd, StateSpace, TransferFunction};
+use crate::lti::{Frd, StateSpace, Structure, TransferFunction};
 use crate::validate::closed_loop::simulate_loop;
-
-/// Model structure of a candidate.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum FitStructure {
-    /// ARX in Levy's linearised form.
-    Arx,
-    /// Output-error transfer function (SK + LM).
-    Oe,
-    /// State space (frequency-domain subspace + LM).
-    Ss,
-}
-
-impl FitStructure {
-    /// Lower-case name (`arx`, `oe`, `ss`).
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Arx => "arx",
-            Self::Oe => "oe",
-            Self::Ss => "ss",
-        }
-    }
-}
+use crate::validate::fit::fit_percent;
 
 /// What to compare.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CompareSpec {
     /// Structures (default ARX, OE, SS).
-    pub structures: Vec<FitStructure>,
+    pub structures: Vec<Structure>,
     /// Orders (default 6, 7, 8, 9).
     pub orders: Vec<usize>,
     /// Input delay of the ARX and OE models in samples (default 1).
@@ -105,7 +82,7 @@ pub struct CompareSpec {
 impl Default for CompareSpec {
     fn default() -> Self {
         Self {
-            structures: vec![FitStructure::Arx, FitStructure::Oe, FitStructure::Ss],
+            structures: vec![Structure::Arx, Structure::Oe, Structure::Ss],
             orders: vec![6, 7, 8, 9],
             nk: 1,
             fit: FreqFitOptions::default(),
@@ -133,7 +110,7 @@ pub struct ValidationRecord<'a> {
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct CompareRow {
     /// Structure.
-    pub structure: FitStructure,
+    pub structure: Structure,
     /// Order.
     pub order: usize,
     /// Real parameters.
@@ -171,10 +148,12 @@ pub struct CompareRow {
 
 /// Fits every structure × order of `spec` to `frd` and scores it (module docs). A candidate that
 /// fails (rank-deficient fit, unstable closed loop) gets a row with the reason in `note`; the
-/// comparison itself fails only on invalid input (a bad band or weights).
+/// comparison itself fails only on invalid input (a bad band or weights, a structure an FRF fit
+/// does not support).
 ///
 /// # Errors
-/// The errors of [`crate::estimate::freqfit::FreqData::new`] for the band and weights.
+/// The errors of [`crate::estimate::freqfit::FreqData::new`] for the band and weights;
+/// [`Error::InvalidArgument`] naming a structure that is not [`Structure::fits_frf`] (e.g. `bj`).
 pub fn compare_models(
     frd: &Frd,
     spec: &CompareSpec,
@@ -182,6 +161,9 @@ pub fn compare_models(
 ) -> Result<Vec<CompareRow>> {
     // validate the band and the weights once, so that bad input is an error, not a note per row
     let data = crate::estimate::freqfit::FreqData::new(frd, &spec.fit)?;
+    if let Some(&s) = spec.structures.iter().find(|s| !s.fits_frf()) {
+        return Err(unsupported_frf_structure(s));
+    }
     let mut rows = Vec::new();
     for &structure in &spec.structures {
         for &order in &spec.orders {
@@ -191,11 +173,22 @@ pub fn compare_models(
     Ok(rows)
 }
 
+/// The typed error for a structure an FRF fit cannot fit ([`Structure::fits_frf`]).
+fn unsupported_frf_structure(s: Structure) -> Error {
+    Error::invalid(
+        "structures",
+        format!(
+            "a fit to frequency-response data supports the structures arx, oe and ss, not `{s}` \
+             (its noise model is not identifiable from an FRF); fit `{s}` to time-domain data instead"
+        ),
+    )
+}
+
 fn candidate(
     frd: &Frd,
     data: &crate::estimate::freqfit::FreqData,
     spec: &CompareSpec,
-    structure: FitStructure,
+    structure: Structure,
     order: usize,
     validation: Option<ValidationRecord<'_>>,
 ) -> CompareRow {
@@ -231,15 +224,15 @@ fn candidate(
         };
         let tf = |t: TransferFunction| t.to_state_space();
         match structure {
-            FitStructure::Arx => {
+            Structure::Arx => {
                 let f = arx_frd(frd, &o, fit_opts)?;
                 Ok((tf(f.model)?, f.n_params, f.cost, f.errors, f.converged))
             }
-            FitStructure::Oe => {
+            Structure::Oe => {
                 let f = oe_frd(frd, &o, fit_opts)?;
                 Ok((tf(f.model)?, f.n_params, f.cost, f.errors, f.converged))
             }
-            FitStructure::Ss => {
+            Structure::Ss => {
                 let f = crate::estimate::freqfit_ss::ss_frd(
                     frd,
                     order,
@@ -248,6 +241,7 @@ fn candidate(
                 )?;
                 Ok((f.model, f.n_params, f.cost, f.errors, f.converged))
             }
+            other => Err(unsupported_frf_structure(other)),
         }
     })();
     let (model, n_params, cost, errors, converged) = match fitted {

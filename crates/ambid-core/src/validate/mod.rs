@@ -3,6 +3,7 @@
 
 pub mod closed_loop;
 pub mod compare;
+pub mod fit;
 pub mod iso;
 pub mod margins;
 pub mod predict;

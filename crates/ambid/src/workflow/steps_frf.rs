@@ -11,15 +11,13 @@ use crate::fitting::{identify_state_space, SsFitOptions, SsFocus};
 use crate::report::{
     format_number as fmt, Block, Heatmap, NoteKind, Panel, PanelContent, Style, Table,
 };
-use ambid_core::estimate::arx::fit_percent;
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::estimate::order::{arx_order_scan, ArxScanSpec};
 use ambid_core::estimate::subspace::{n4sid_detailed, SubspaceOptions};
 use ambid_core::frf::band::{fit_band, FIT_REL_HALFWIDTH};
 use ambid_core::frf::resonance::{find_resonances_reliable, order_from_peaks, ResonanceOptions};
-use ambid_core::validate::compare::{
-    compare_models, supported_unstable_poles, CompareSpec, FitStructure,
-};
+use ambid_core::validate::compare::{compare_models, supported_unstable_poles, CompareSpec};
+use ambid_core::validate::fit::fit_percent;
 use serde_json::json;
 
 /// FRF settings for a record of `n` samples at `fs` (periodic when the period is known).
@@ -618,7 +616,7 @@ fn recommend(
         let ctrl = ctx.controller.as_ref().map(|c| c.state_space());
         let (n_u, _) = supported_unstable_poles(frd, ctrl, explicit_band, mcfg.unstable_poles);
         let spec = CompareSpec {
-            structures: vec![FitStructure::Ss],
+            structures: vec![ambid_core::lti::Structure::Ss],
             orders: (1..=scan_max).collect(),
             nk: mcfg.nk,
             fit: FreqFitOptions {

@@ -7,14 +7,15 @@ use super::{computation, Ctx, Failure, ModelOut, StepStatus};
 use crate::fitting::{identify_state_space, SsFitOptions, SsFocus};
 use crate::report::{format_number as fmt, Block, Marker, NoteKind, Style, Table};
 use ambid_core::c64;
-use ambid_core::estimate::arx::{arx, fit_percent, ArxOrders};
+use ambid_core::estimate::arx::{arx, ArxOrders};
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::estimate::pem::{self, Orders, PemOptions};
 use ambid_core::frf::band::{fit_band, FIT_REL_HALFWIDTH};
 use ambid_core::lti::{PolyModel, StateSpace, Structure};
 use ambid_core::validate::compare::{
-    compare_models, supported_unstable_poles, CompareSpec, FitStructure, ValidationRecord,
+    compare_models, supported_unstable_poles, CompareSpec, ValidationRecord,
 };
+use ambid_core::validate::fit::fit_percent;
 use ambid_core::validate::pz::{PzAnalysis, PzOptions};
 use serde_json::json;
 
@@ -50,12 +51,8 @@ impl Candidate {
     }
 }
 
-fn structure_name(s: FitStructure) -> &'static str {
-    match s {
-        FitStructure::Arx => "arx",
-        FitStructure::Oe => "oe",
-        FitStructure::Ss => "ss",
-    }
+fn structure_name(s: Structure) -> &'static str {
+    s.name()
 }
 
 use crate::validation::median_relative_error as median_rel;
@@ -212,9 +209,9 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                 .structures
                 .iter()
                 .map(|s| match s.as_str() {
-                    "arx" => FitStructure::Arx,
-                    "oe" => FitStructure::Oe,
-                    _ => FitStructure::Ss,
+                    "arx" => Structure::Arx,
+                    "oe" => Structure::Oe,
+                    _ => Structure::Ss,
                 })
                 .collect(),
             orders: cfg.orders.clone(),

@@ -10,8 +10,8 @@ use crate::validation::{
     MeasuredLoop, ValidationOutcome, ValidationSettings, WORST_WINDOW_SIGNAL_FACTOR,
 };
 use ambid_core::c64;
-use ambid_core::estimate::arx::fit_percent;
 use ambid_core::lti::Frd;
+use ambid_core::validate::fit::fit_percent;
 use ambid_core::validate::iso::{sensitivity_zone, IsoZones};
 use ambid_core::validate::residuals::{
     analyze, analyze_output_error, CorrelationTest, ResidualTest,

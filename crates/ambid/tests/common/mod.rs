@@ -160,5 +160,5 @@ pub fn exact_loop_fit(twin: &ambid_twin::Twin, r: &[f64], y: &[f64]) -> f64 {
     let rw = faer::Mat::from_fn(r.len(), 2, |k, c| if c == 0 { r[k] } else { 0.0 });
     let yt = twin.closed_loop().simulate(rw.as_ref(), None).unwrap();
     let yt: Vec<f64> = (0..yt.nrows()).map(|k| yt[(k, 0)]).collect();
-    ambid_core::estimate::arx::fit_percent(y, &yt).unwrap()
+    ambid_core::validate::fit::fit_percent(y, &yt).unwrap()
 }
