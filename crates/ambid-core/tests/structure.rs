@@ -39,7 +39,10 @@ fn names_parse_display_and_serde_round_trip() {
     }
     let err = "arma".parse::<Structure>().unwrap_err().to_string();
     assert!(err.contains("unknown model structure `arma`"), "{err}");
-    assert!(err.contains("fir, arx, armax, oe, bj, general, ss"), "{err}");
+    assert!(
+        err.contains("fir, arx, armax, oe, bj, general, ss"),
+        "{err}"
+    );
     assert!(serde_json::from_str::<Structure>("\"n4sid\"").is_err());
 }
 
