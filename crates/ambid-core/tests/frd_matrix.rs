@@ -440,9 +440,16 @@ fn siso_results_are_the_scalar_formulas() {
             let rel = (got.variance().unwrap()[k] - vv).abs() / vv;
             worst = worst.max(rel);
         }
-        let tol = if name.contains("feedback") { 2e-15 } else { 1e-15 };
+        let tol = if name.contains("feedback") {
+            2e-15
+        } else {
+            1e-15
+        };
         println!("{name}: worst relative variance difference {worst:.2e}");
-        assert!(worst <= tol, "{name}: variance differs by {worst:.2e} relative");
+        assert!(
+            worst <= tol,
+            "{name}: variance differs by {worst:.2e} relative"
+        );
     };
     check("series", &fx.series(&fy).unwrap(), &|k| {
         old_series(x[k], y[k], vx[k], vy[k])
@@ -473,4 +480,63 @@ fn siso_results_are_the_scalar_formulas() {
     let fy0 = Frd::new(f, y0, None, Some(1e-4)).unwrap();
     let e = fx.divide(&fy0).unwrap_err().to_string();
     assert!(e.contains("division by zero at 10 Hz"), "{e}");
+}
+
+#[test]
+fn closed_loop_set_from_two_by_two_responses() {
+    use ambid_core::frf::closed_loop::{Averaging, ClosedLoopFrf};
+    let cs = case(300, 8);
+    let (p, k) = (&cs.x, &cs.y);
+    let t: Vec<M2> = p
+        .iter()
+        .zip(k)
+        .map(|(p, k)| mul(&inv(&add(&eye(), &mul(p, k))), p))
+        .collect();
+    let s: Vec<M2> = p
+        .iter()
+        .zip(k)
+        .map(|(p, k)| inv(&add(&eye(), &mul(k, p))))
+        .collect();
+    let tf = frd_of(&cs.f, &t, Some(&cs.vx));
+    let sf = frd_of(&cs.f, &s, None);
+    let kf = frd_of(&cs.f, k, None);
+    let cl = ClosedLoopFrf::from_responses(
+        tf,
+        sf,
+        Some(&kf),
+        vec![1.0; 32],
+        vec![1.0; 32],
+        Averaging::Periods(4),
+        3.0,
+    )
+    .unwrap();
+    assert_close(&cl.plant, p, 1e-12, "joint P");
+    assert_close(&cl.controller, k, 1e-11, "C = (I − S) T⁻¹");
+    let ind = cl.plant_indirect.as_ref().unwrap();
+    assert_close(ind, p, 1e-11, "indirect P");
+    // indirect variance: δP = (I − T C)⁻¹ δT (I − C T)⁻¹, checked by numerical derivatives
+    for line in 0..cs.f.len() {
+        let kk = k[line];
+        let want = fd_var(
+            &|tt| mul(tt, &inv(&add(&eye(), &scale(&mul(&kk, tt), -1.0)))),
+            &t[line],
+            &cs.vx[line],
+        );
+        let got = ind.variance_at(line).unwrap();
+        for i in 0..2 {
+            for j in 0..2 {
+                assert!((got[(i, j)] - want[i][j]).abs() <= 1e-6 * want[i][j]);
+            }
+        }
+    }
+    let bad = ClosedLoopFrf::from_responses(
+        frd_of(&cs.f, &t, None),
+        frd_of(&cs.f, &s, None),
+        None,
+        vec![1.0; 8],
+        vec![1.0; 32],
+        Averaging::Periods(4),
+        3.0,
+    );
+    assert!(bad.unwrap_err().to_string().contains("coh_ry"));
 }

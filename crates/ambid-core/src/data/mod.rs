@@ -51,7 +51,7 @@ pub mod saturation;
 pub mod segment;
 
 pub use detrend::{detrend, Detrend, DetrendReport};
-pub use iodata::IoData;
+pub use iodata::{IoData, Role, AXES};
 pub use outliers::{
     find_abnormal, global_outliers, hampel, repair_abnormal, repair_data, stuck_runs,
     AbnormalOptions, AbnormalReport, HampelOptions, Repair, MAD_TO_SIGMA,

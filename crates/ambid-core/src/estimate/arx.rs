@@ -94,6 +94,7 @@
 //! ```
 
 use super::Fitted;
+use crate::data::{IoData, Role};
 use crate::error::{check_finite, Error, Result};
 use crate::lti::PolyModel;
 use faer::{Mat, MatRef, Par};
@@ -510,9 +511,52 @@ pub fn arx_with(
     ts: f64,
     opts: &ArxOptions,
 ) -> Result<Fitted<ArxModel>> {
+    arx_experiments(&[(y, u)], orders, ts, opts)
+}
+
+/// [`arx_with`] on several experiments of one system: the regressions of every experiment (each
+/// from its own $k_0$, so no regressor reaches across a boundary) are stacked into one
+/// least-squares problem, $\min_\theta \sum_e \lVert Y_e - \Phi_e \theta\rVert^2$. One experiment
+/// is exactly [`arx_with`]; [`Fitted::n_samples`] counts the rows of all experiments.
+///
+/// # Errors
+/// As [`arx_with`]; [`Error::InvalidArgument`] for no experiment or an experiment not longer
+/// than $k_0$ (named).
+///
+/// # Example
+/// ```
+/// use ambid_core::estimate::arx::{arx_experiments, ArxOptions, ArxOrders};
+/// // y_k = 0.5 y_{k-1} + u_{k-1}, two records
+/// let sim = |u: &[f64]| {
+///     let mut y = vec![0.0; u.len()];
+///     for k in 1..u.len() { y[k] = 0.5 * y[k - 1] + u[k - 1]; }
+///     y
+/// };
+/// let u1: Vec<f64> = (0..20).map(|k| ((k * 7) % 5) as f64 - 2.0).collect();
+/// let u2: Vec<f64> = (0..15).map(|k| ((k * 3) % 4) as f64 - 1.5).collect();
+/// let (y1, y2) = (sim(&u1), sim(&u2));
+/// let f = arx_experiments(&[(&y1, &[&u1]), (&y2, &[&u2])], &ArxOrders::siso(1, 1, 1), 1.0,
+///     &ArxOptions::default()).unwrap();
+/// assert!((f.model.a[1] + 0.5).abs() < 1e-12 && (f.model.b[0][1] - 1.0).abs() < 1e-12);
+/// assert_eq!(f.n_samples, 19 + 14);
+/// ```
+pub fn arx_experiments(
+    experiments: &[(&[f64], &[&[f64]])],
+    orders: &ArxOrders,
+    ts: f64,
+    opts: &ArxOptions,
+) -> Result<Fitted<ArxModel>> {
+    let Some(&(y0, u0)) = experiments.first() else {
+        return Err(Error::invalid(
+            "experiments",
+            "no experiment was given; pass at least one (y, u) record",
+        ));
+    };
     check_ts(ts)?;
-    check_orders(orders, u.len())?;
-    check_data(y, u, orders.n_inputs())?;
+    check_orders(orders, u0.len())?;
+    for &(y, u) in experiments {
+        check_data(y, u, orders.n_inputs())?;
+    }
     if !(opts.ridge.is_finite() && opts.ridge >= 0.0) {
         return Err(Error::invalid(
             "ridge",
@@ -537,8 +581,28 @@ pub fn arx_with(
         None => k0_min,
     };
     let d = orders.n_params();
-    let n_tot = y.len();
-    if n_tot < k0 + d + 1 {
+    if experiments.len() > 1 {
+        if let Some(e) = experiments.iter().position(|(y, _)| y.len() <= k0) {
+            return Err(Error::invalid(
+                "experiments",
+                format!(
+                    "experiment {e} has {} samples, but {} needs more than k0 = {k0} to give one equation; drop it or lower the orders",
+                    experiments[e].0.len(),
+                    orders.describe()
+                ),
+            ));
+        }
+    }
+    let n_rows: usize = experiments
+        .iter()
+        .map(|(y, _)| y.len().saturating_sub(k0))
+        .sum();
+    if n_rows < d + 1 {
+        let n_tot = if experiments.len() == 1 {
+            y0.len().to_string()
+        } else {
+            format!("{n_rows} equations from {} experiments", experiments.len())
+        };
         return Err(Error::invalid(
             "y",
             format!(
@@ -551,8 +615,27 @@ pub fn arx_with(
     let cols = orders.columns();
     let mut with_target = cols.clone();
     with_target.push(Column::y(0));
-    let z = build_regressor(y, u, &with_target, k0);
-    let n = y.len() - k0;
+    let z = if experiments.len() == 1 {
+        build_regressor(y0, u0, &with_target, k0)
+    } else {
+        let parts: Vec<Mat<f64>> = experiments
+            .iter()
+            .map(|&(y, u)| build_regressor(y, u, &with_target, k0))
+            .collect();
+        let mut z = Mat::<f64>::zeros(n_rows, with_target.len());
+        let mut row = 0;
+        for p in &parts {
+            for j in 0..p.ncols() {
+                for i in 0..p.nrows() {
+                    z[(row + i, j)] = p[(i, j)];
+                }
+            }
+            row += p.nrows();
+        }
+        z
+    };
+    let n = n_rows;
+    let u = u0;
     let ls = lstsq_columns(z, opts.ridge, &|j| cols[j].name(u.len())).map_err(|e| match e {
         Error::InvalidArgument { name, reason } => Error::InvalidArgument {
             name,
@@ -581,6 +664,71 @@ pub fn arx_with(
         noise_variance,
         n_samples: n,
     })
+}
+
+/// The front door on an [`IoData`]: ARX of the one output channel ([`Role::Output`]) on the
+/// input channels ([`Role::Input`], in axis order; several inputs make a MISO model, the orders
+/// having one `nb`/`nk` per input), the regressions of all experiments stacked
+/// ([`arx_experiments`]).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] for a record without an output or input channel, with several
+/// output channels (the message gives the counts; use
+/// [`crate::estimate::arx_mimo::arx_mimo_iodata`]) or with a non-finite sample in a used
+/// channel; the errors of [`arx_experiments`].
+///
+/// # Example
+/// ```
+/// use ambid_core::data::IoData;
+/// use ambid_core::estimate::arx::{arx_iodata, ArxOptions, ArxOrders};
+/// let u: Vec<f64> = (0..60).map(|k| ((k * 7) % 5) as f64 - 2.0).collect();
+/// let mut y = vec![0.0; 60];
+/// for k in 1..60 { y[k] = 0.5 * y[k - 1] + u[k - 1]; }
+/// let d = IoData::new(vec![("u".into(), u), ("y".into(), y)], 1e-3, None).unwrap();
+/// let f = arx_iodata(&d, &ArxOrders::siso(1, 1, 1), &ArxOptions::default()).unwrap();
+/// assert!((f.model.a[1] + 0.5).abs() < 1e-12);
+/// ```
+pub fn arx_iodata(
+    data: &IoData,
+    orders: &ArxOrders,
+    opts: &ArxOptions,
+) -> Result<Fitted<ArxModel>> {
+    let ny = data.role_count(Role::Output);
+    if ny > 1 {
+        return Err(Error::invalid(
+            "channels",
+            format!(
+                "arx fits one output, and the record has {ny} output channels ({}) and {} input channels; fit them jointly with arx_mimo (estimate::arx_mimo::arx_mimo_iodata) or select one output",
+                data.role_names(Role::Output).join(", "),
+                data.role_count(Role::Input)
+            ),
+        ));
+    }
+    data.require_finite(&[Role::Output, Role::Input])?;
+    let mut ys = Vec::with_capacity(data.n_experiments());
+    let mut us = Vec::with_capacity(data.n_experiments());
+    for e in 0..data.n_experiments() {
+        ys.push(data.signals(Role::Output, e)?[0]);
+        us.push(data.signals(Role::Input, e)?);
+    }
+    let exps: Vec<(&[f64], &[&[f64]])> = ys
+        .iter()
+        .zip(&us)
+        .map(|(y, u)| (*y, u.as_slice()))
+        .collect();
+    arx_experiments(&exps, orders, data.ts(), opts)
+}
+
+/// The FIR front door: [`arx_iodata`] with $n_a = 0$ and the given `nb`, `nk` per input.
+///
+/// # Errors
+/// As [`arx_iodata`].
+pub fn fir_iodata(data: &IoData, nb: &[usize], nk: &[usize]) -> Result<Fitted<ArxModel>> {
+    arx_iodata(
+        data,
+        &ArxOrders::fir(nb.to_vec(), nk.to_vec()),
+        &ArxOptions::default(),
+    )
 }
 
 // ---------------------------------------------------------------------------------------------

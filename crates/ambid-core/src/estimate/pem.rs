@@ -779,6 +779,23 @@ fn check_data(y: &[f64], u: &[f64], o: &Orders, ts: f64) -> Result<()> {
     Ok(())
 }
 
+/// The front door on an [`crate::data::IoData`]: [`pem`] of the output on the input channel
+/// (roles) of a single-experiment SISO record.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] for several experiments (not joined yet), a record that is not
+/// SISO (the message gives the role counts), a missing role or a non-finite sample; the errors
+/// of [`pem`].
+pub fn pem_iodata(
+    data: &crate::data::IoData,
+    structure: Structure,
+    orders: &Orders,
+    opts: &PemOptions,
+) -> Result<(Fitted<PolyModel>, PemReport)> {
+    let (y, u) = crate::data::iodata::siso_pair(data, "pem")?;
+    pem(y, u, structure, orders, data.ts(), opts)
+}
+
 /// Prediction-error estimate of a polynomial model of the given structure and orders.
 ///
 /// The general entry point behind [`armax`], [`oe`] and [`bj`]: also FIR, ARX (one

@@ -387,6 +387,23 @@ pub fn n4sid(
     Ok(n4sid_detailed(y, u, opts)?.fitted)
 }
 
+/// The front door on an [`crate::data::IoData`]: [`n4sid`] with $Y$ and $U$ the output and input
+/// channels (roles, in axis order) of a single-experiment record (MIMO allowed).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] for several experiments (not joined yet), a missing role or a
+/// non-finite sample; the errors of [`n4sid`].
+pub fn n4sid_iodata(
+    data: &crate::data::IoData,
+    opts: &SubspaceOptions,
+) -> Result<Fitted<StateSpace>> {
+    use crate::data::Role;
+    data.require_single_experiment("n4sid")?;
+    data.require_finite(&[Role::Output, Role::Input])?;
+    let (y, u) = (data.y_matrix(0)?, data.u_matrix(0)?);
+    n4sid(y.as_ref(), u.as_ref(), opts)
+}
+
 /// Identifies the innovation model $x_{k+1} = Ax_k + Bu_k + Ke_k$, $y_k = Cx_k + Du_k + e_k$ from
 /// `y` ($N \times l$) and `u` ($N \times m$), one row per sample, by the algorithm of the module
 /// docs.

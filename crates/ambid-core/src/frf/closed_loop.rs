@@ -32,6 +32,22 @@
 //! $\sigma_P^2 = \sigma_T^2 / |1 - CT|^4$; an error $\Delta C$ in the controller model biases it by
 //! $\Delta P \approx P^2 \Delta C$ (first order), which is why the joint estimate is the default.
 //!
+//! # The matrix algebra, written once
+//! With $n_y$ outputs and $n_u$ inputs ($r$ and $u$ have $n_u$ channels), $T_{ry}$ is
+//! $n_y \times n_u$ and $S = T_{ru}$ is $n_u \times n_u$; from $u = -C y + r$ and $y = P u$,
+//!
+//! $$T_{ry} = (I + P C)^{-1} P = P (I + C P)^{-1},\qquad S = (I + C P)^{-1},$$
+//! $$P = T_{ry} S^{-1}\ \text{(joint, [`joint_plant`])},\qquad
+//!   P = T_{ry} (I - C\,T_{ry})^{-1}\ \text{(indirect, [`indirect_plant`])},\qquad
+//!   C = (I - S)\, T_{ry}^{-1}\ \text{(square loops, [`controller_from_loop`])},$$
+//!
+//! the scalar formulas above being their $1 \times 1$ case; [`ClosedLoopFrf::from_responses`] builds
+//! the whole set from $T_{ry}$ and $S$ (e.g. a $4 \times 4$ MIMO estimate). The indirect estimate's
+//! variance propagates $\delta P = (I - T_{ry} C)^{-1}\, \delta T_{ry}\, (I - C T_{ry})^{-1}$ (the
+//! controller exact), i.e. $\sigma_T^2/|1 - CT|^4$ for SISO; the joint estimate from two separate
+//! responses propagates them as independent ([`Frd::divide`]), whereas the SISO estimators below
+//! use the cross-covariance of the spectra they have.
+//!
 //! # Confidence bands
 //! For a circular complex Gaussian error, $|\hat G - G|^2/\hat\sigma^2$ follows an $F(2, 2\nu)$
 //! law when $\hat\sigma^2$ has $\nu$ complex degrees of freedom ($\nu = P - 1$ periods), so the
@@ -88,6 +104,10 @@ pub enum Averaging {
 }
 
 /// Closed-loop FRFs on a common frequency grid, each with its variance, plus coherences.
+///
+/// Every response is an [`Frd`] matrix ($T_{ry}$ and $P$: $n_y \times n_u$; $S$: $n_u \times n_u$;
+/// the controller $n_u \times n_y$); SISO estimates are $1 \times 1$. The coherences are stored
+/// per line and entry like [`Frd::values`] (one per line for SISO data).
 #[derive(Debug, Clone, PartialEq)]
 pub struct ClosedLoopFrf {
     /// $T_{ry}$, $r \to y$.
@@ -100,9 +120,9 @@ pub struct ClosedLoopFrf {
     pub plant_indirect: Option<Frd>,
     /// The controller estimated from data, $C = (r-u)/y$ (valid with $w = 0$).
     pub controller: Frd,
-    /// Coherence $\gamma^2_{ry}$.
+    /// Coherence $\gamma^2_{ry}$ (per line and entry of $T_{ry}$).
     pub coh_ry: Vec<f64>,
-    /// Coherence $\gamma^2_{ru}$.
+    /// Coherence $\gamma^2_{ru}$ (per line and entry of $S$).
     pub coh_ru: Vec<f64>,
     /// How the estimate was averaged.
     pub averaging: Averaging,
@@ -120,6 +140,181 @@ impl ClosedLoopFrf {
     pub fn band_factor(&self, level: f64) -> Result<f64> {
         band_radius_factor(level, self.dof)
     }
+
+    /// The closed-loop set from estimated $T_{ry}$ ($n_y \times n_u$) and $S = T_{ru}$
+    /// ($n_u \times n_u$) of any size: $P = T_{ry} S^{-1}$ ([`joint_plant`]), the controller
+    /// $C = (I - S) T_{ry}^{-1}$ ([`controller_from_loop`], square loops), and, with the
+    /// controller's known response, the indirect $P = T_{ry}(I - C T_{ry})^{-1}$
+    /// ([`indirect_plant`]). `coh_ry` and `coh_ru` are per line and entry (flat, as
+    /// [`Frd::values`]).
+    ///
+    /// # Errors
+    /// [`Error::DimensionMismatch`] for inconsistent shapes or coherence lengths; singular lines
+    /// (named by frequency) of $S$, $T_{ry}$ or $I - C T_{ry}$.
+    ///
+    /// # Example
+    /// ```
+    /// use ambid_core::frf::closed_loop::{Averaging, ClosedLoopFrf};
+    /// use ambid_core::lti::Frd;
+    /// let f = [10.0, 20.0];
+    /// // P = 2, C = 0.5: T = P/(1 + PC) = 1, S = 1/(1 + CP) = 0.5
+    /// let t = Frd::constant(&f, 1.0, Some(1e-3)).unwrap();
+    /// let s = Frd::constant(&f, 0.5, Some(1e-3)).unwrap();
+    /// let c = Frd::constant(&f, 0.5, Some(1e-3)).unwrap();
+    /// let cl = ClosedLoopFrf::from_responses(t, s, Some(&c), vec![1.0; 2], vec![1.0; 2],
+    ///     Averaging::Periods(4), 3.0).unwrap();
+    /// assert!(cl.plant.values().iter().all(|p| (p.re - 2.0).abs() < 1e-15));
+    /// assert!(cl.controller.values().iter().all(|k| (k.re - 0.5).abs() < 1e-15));
+    /// assert!(cl.plant_indirect.unwrap().values().iter().all(|p| (p.re - 2.0).abs() < 1e-15));
+    /// ```
+    pub fn from_responses(
+        t_ry: Frd,
+        t_ru: Frd,
+        controller: Option<&Frd>,
+        coh_ry: Vec<f64>,
+        coh_ru: Vec<f64>,
+        averaging: Averaging,
+        dof: f64,
+    ) -> Result<Self> {
+        for (what, got, want) in [
+            ("ClosedLoopFrf coh_ry", coh_ry.len(), t_ry.values().len()),
+            ("ClosedLoopFrf coh_ru", coh_ru.len(), t_ru.values().len()),
+        ] {
+            if got != want {
+                return Err(Error::DimensionMismatch {
+                    context: what,
+                    expected: format!("{want} (one per line and entry)"),
+                    got: got.to_string(),
+                });
+            }
+        }
+        let plant = joint_plant(&t_ry, &t_ru)?;
+        let ctrl = controller_from_loop(&t_ry, &t_ru)?;
+        let plant_indirect = controller.map(|c| indirect_plant(&t_ry, c)).transpose()?;
+        Ok(Self {
+            t_ry,
+            t_ru,
+            plant,
+            plant_indirect,
+            controller: ctrl,
+            coh_ry,
+            coh_ru,
+            averaging,
+            dof,
+        })
+    }
+}
+
+/// The joint input–output plant $P = T_{ry} S^{-1}$ (right division, any size; $T_{ry}/T_{ru}$
+/// for SISO data), with the variances of [`Frd::divide`] (the two estimates taken as
+/// independent).
+///
+/// # Errors
+/// [`Error::DimensionMismatch`] unless $S$ is square with as many rows as $T_{ry}$ has columns;
+/// a singular $S$ on a line (named by frequency).
+pub fn joint_plant(t_ry: &Frd, t_ru: &Frd) -> Result<Frd> {
+    t_ry.divide(t_ru)
+}
+
+/// The controller seen by the loop, $C = (I - S)\, T_{ry}^{-1}$ (from $u = -C y + r$:
+/// $r - u = C y$), for a square loop ($n_y = n_u$); $(1 - S)/T_{ry}$ for SISO data. No variance
+/// (the estimators that have the spectra give it).
+///
+/// # Errors
+/// [`Error::DimensionMismatch`] for a non-square loop; a singular $T_{ry}$ on a line.
+pub fn controller_from_loop(t_ry: &Frd, t_ru: &Frd) -> Result<Frd> {
+    let strip = |g: &Frd| {
+        Frd::new_matrix(
+            g.f_hz().to_vec(),
+            g.ny(),
+            g.nu(),
+            g.values().to_vec(),
+            None,
+            g.ts(),
+        )
+    };
+    let eye = Frd::identity(t_ru.f_hz(), t_ru.ny(), t_ru.ts())?;
+    eye.parallel(&strip(t_ru)?.scaled(-1.0))?
+        .divide(&strip(t_ry)?)
+}
+
+/// The indirect plant $P = T_{ry}\,(I - C\,T_{ry})^{-1}$ from an estimated $T_{ry}$
+/// ($n_y \times n_u$) and the controller's exact response $C$ ($n_u \times n_y$, its variance
+/// ignored), with $\delta P = (I - T_{ry} C)^{-1}\, \delta T_{ry}\, (I - C T_{ry})^{-1}$, i.e.
+/// $\sigma^2_{P_{ij}} = \sum_{kl} |A_{ik}|^2 |B_{lj}|^2 \sigma^2_{T_{kl}}$ with
+/// $A = (I - T C)^{-1}$, $B = (I - C T)^{-1}$ ($\sigma_T^2/|1 - CT|^4$ for SISO data).
+///
+/// # Errors
+/// [`Error::DimensionMismatch`] unless $C$ is $n_u \times n_y$; different grids; a singular
+/// $I - C T_{ry}$ on a line.
+///
+/// # Example
+/// ```
+/// use ambid_core::frf::closed_loop::indirect_plant;
+/// use ambid_core::lti::Frd;
+/// use faer::c64;
+/// // P = 2, C = 0.5: T = 2/(1 + 1) = 1 with variance 0.01 → P = 1/(1 − 0.5) = 2, σ² = 0.01/0.5⁴
+/// let t = Frd::new(vec![5.0], vec![c64::new(1.0, 0.0)], Some(vec![0.01]), None).unwrap();
+/// let c = Frd::constant(&[5.0], 0.5, None).unwrap();
+/// let p = indirect_plant(&t, &c).unwrap();
+/// assert!((p.values()[0].re - 2.0).abs() < 1e-15);
+/// assert!((p.variance().unwrap()[0] - 0.16).abs() < 1e-15);
+/// ```
+pub fn indirect_plant(t_ry: &Frd, controller: &Frd) -> Result<Frd> {
+    let (ny, nu) = (t_ry.ny(), t_ry.nu());
+    if (controller.ny(), controller.nu()) != (nu, ny) {
+        return Err(Error::DimensionMismatch {
+            context: "indirect_plant: the controller maps the outputs to the inputs",
+            expected: format!("{nu}×{ny}"),
+            got: format!("{}×{}", controller.ny(), controller.nu()),
+        });
+    }
+    let plain = |g: &Frd| {
+        Frd::new_matrix(
+            g.f_hz().to_vec(),
+            g.ny(),
+            g.nu(),
+            g.values().to_vec(),
+            None,
+            g.ts(),
+        )
+    };
+    let (t, c) = (plain(t_ry)?, plain(controller)?);
+    let eye = |n: usize| Frd::identity(t.f_hz(), n, t.ts());
+    // B = I − C T (nu×nu), A = I − T C (ny×ny)
+    let b = eye(nu)?.parallel(&c.product(&t)?.scaled(-1.0))?;
+    let p = t.divide(&b)?;
+    let Some(vt) = t_ry.variance() else {
+        return Ok(p);
+    };
+    let a_inv = eye(ny)?.parallel(&t.product(&c)?.scaled(-1.0))?.inverse()?;
+    let b_inv = b.inverse()?;
+    let per = ny * nu;
+    let mut var = vec![0.0; p.values().len()];
+    for line in 0..p.len() {
+        let (ai, bi) = (a_inv.at(line), b_inv.at(line));
+        for j in 0..nu {
+            for i in 0..ny {
+                let mut acc = 0.0;
+                for k in 0..ny {
+                    for l in 0..nu {
+                        acc += ai[(i, k)].norm_sqr()
+                            * bi[(l, j)].norm_sqr()
+                            * vt[line * per + l * ny + k];
+                    }
+                }
+                var[line * per + j * ny + i] = acc;
+            }
+        }
+    }
+    Frd::new_matrix(
+        p.f_hz().to_vec(),
+        ny,
+        nu,
+        p.values().to_vec(),
+        Some(var),
+        p.ts(),
+    )
 }
 
 /// Radius of the level-$\alpha$ confidence disc in units of the estimated standard deviation,
@@ -178,7 +373,7 @@ fn quad_form2(a: c64, b: c64, saa: f64, sbb: f64, sab: c64) -> f64 {
     (a.norm_sqr() * saa + b.norm_sqr() * sbb + 2.0 * (a * sab * b.conj()).re).max(0.0)
 }
 
-fn controller_response(ctrl: &StateSpace, f_hz: &[f64], ts_data: f64) -> Result<Vec<c64>> {
+fn controller_response(ctrl: &StateSpace, f_hz: &[f64], ts_data: f64) -> Result<Frd> {
     match ctrl.ts() {
         None => Err(Error::TimeDomain(
             "the controller for the indirect method is continuous-time; discretise it at the data's \
@@ -189,7 +384,7 @@ fn controller_response(ctrl: &StateSpace, f_hz: &[f64], ts_data: f64) -> Result<
             left: ts,
             right: ts_data,
         }),
-        Some(_) => ctrl.freq_response_siso(f_hz),
+        Some(_) => Frd::from_model(ctrl, f_hz),
     }
 }
 
@@ -336,23 +531,139 @@ pub fn from_periodic(
     })
 }
 
-/// The indirect plant estimate $T/(1 - C T)$ from an estimated $T_{ry}$ and a known discrete
-/// controller (same sample time), with $\sigma_P^2 = \sigma_T^2/|1 - CT|^4$.
+/// The indirect plant estimate $T (I - C T)^{-1}$ ($T/(1 - CT)$ for SISO data) from an
+/// estimated $T_{ry}$ and a known discrete controller (same sample time), with the variance of
+/// [`indirect_plant`] ($\sigma_P^2 = \sigma_T^2/|1 - CT|^4$ for SISO data).
 ///
 /// # Errors
-/// Sample-time or time-domain mismatch of the controller; a non-SISO controller.
+/// Sample-time or time-domain mismatch of the controller; a controller whose size does not
+/// match $T_{ry}$ ($n_u \times n_y$).
 pub fn indirect(t_ry: &Frd, controller: &StateSpace, ts: f64) -> Result<Frd> {
     let cf = controller_response(controller, t_ry.f_hz(), ts)?;
-    let mut vals = Vec::with_capacity(cf.len());
-    let mut var = t_ry.variance().map(|_| Vec::with_capacity(cf.len()));
-    for (k, (&t, &c)) in t_ry.values().iter().zip(&cf).enumerate() {
-        let d = c64::new(1.0, 0.0) - c * t;
-        vals.push(t / d);
-        if let (Some(v), Some(vt)) = (var.as_mut(), t_ry.variance()) {
-            v.push(vt[k] / d.norm_sqr().powi(2));
-        }
+    let cf = Frd::new_matrix(
+        cf.f_hz().to_vec(),
+        cf.ny(),
+        cf.nu(),
+        cf.values().to_vec(),
+        None,
+        Some(ts),
+    )?;
+    let t = Frd::new_matrix(
+        t_ry.f_hz().to_vec(),
+        t_ry.ny(),
+        t_ry.nu(),
+        t_ry.values().to_vec(),
+        t_ry.variance().map(<[f64]>::to_vec),
+        Some(ts),
+    )?;
+    indirect_plant(&t, &cf)
+}
+
+/// The three SISO channels $(r, u, y)$ of a single-experiment record, by role.
+fn ruy(data: &crate::data::IoData, what: &str) -> Result<[Vec<f64>; 3]> {
+    use crate::data::Role;
+    let (y, u) = crate::data::iodata::siso_pair(data, what)?;
+    let nr = data.role_count(Role::Excitation);
+    if nr != 1 {
+        return Err(match nr {
+            0 => data.missing_role(Role::Excitation),
+            _ => Error::invalid(
+                "channels",
+                format!("{what} is SISO-only, and the record has {nr} excitation channels"),
+            ),
+        });
     }
-    Frd::new(t_ry.f_hz().to_vec(), vals, var, Some(ts))
+    data.require_finite(&[Role::Excitation])?;
+    Ok([
+        data.signals(Role::Excitation, 0)?[0].to_vec(),
+        u.to_vec(),
+        y.to_vec(),
+    ])
+}
+
+/// The front door on an [`crate::data::IoData`] for Welch estimates: [`from_welch`] on the
+/// excitation, input and output channels (roles) of a single-experiment SISO record, with
+/// `opts.fs` the record's sample rate.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] for several experiments, a record that is not SISO (role counts
+/// named), a missing role, a non-finite sample, or `opts.fs` different from the record's; the
+/// errors of [`crate::frf::welch::welch_spectra`] and [`from_welch`].
+pub fn from_welch_iodata(
+    data: &crate::data::IoData,
+    opts: &crate::frf::welch::WelchOptions,
+    band: (f64, f64),
+    rel_threshold: f64,
+    controller: Option<&StateSpace>,
+) -> Result<ClosedLoopFrf> {
+    if ((opts.fs - data.fs()) / data.fs()).abs() > 1e-9 {
+        return Err(Error::invalid(
+            "fs",
+            format!(
+                "the Welch options are for {} Hz but the record is sampled at {} Hz",
+                opts.fs,
+                data.fs()
+            ),
+        ));
+    }
+    let ch = ruy(data, "from_welch")?;
+    let spectra = crate::frf::welch::welch_spectra(&ch, opts)?;
+    from_welch(
+        &spectra,
+        Channels { r: 0, u: 1, y: 2 },
+        band,
+        rel_threshold,
+        controller,
+    )
+}
+
+/// The front door on an [`crate::data::IoData`] for periodic excitations: period-synchronous
+/// averages of the $(r, u, y)$ channels (roles) of a single-experiment SISO record with its
+/// [`IoData::period_samples`](crate::data::IoData::period_samples), on the lines where $r$
+/// exceeds `rel_threshold` of its largest line within `band` (Hz), then [`from_periodic`].
+///
+/// # Errors
+/// [`Error::InvalidArgument`] for a record without a period, several experiments, a record that
+/// is not SISO, a missing role or a non-finite sample; the errors of
+/// [`crate::frf::periodic::PeriodicAnalyzer::analyze`] and [`from_periodic`].
+///
+/// # Example
+/// ```
+/// use ambid_core::data::IoData;
+/// use ambid_core::frf::closed_loop::from_periodic_iodata;
+/// let base = [1.0, -1.0, 1.0, 1.0, -1.0, -1.0, 1.0, -1.0];
+/// let r: Vec<f64> = (0..32).map(|k| base[k % 8]).collect();
+/// let u: Vec<f64> = r.iter().map(|v| 0.5 * v).collect();
+/// let y: Vec<f64> = u.iter().map(|v| 2.0 * v).collect();
+/// let d = IoData::new(vec![("r".into(), r), ("u".into(), u), ("y".into(), y)], 1e-3, Some(8)).unwrap();
+/// let frf = from_periodic_iodata(&d, (0.0, 500.0), 1e-9, None).unwrap();
+/// assert!(frf.plant.values().iter().all(|p| (p.re - 2.0).abs() < 1e-12));
+/// ```
+pub fn from_periodic_iodata(
+    data: &crate::data::IoData,
+    band: (f64, f64),
+    rel_threshold: f64,
+    controller: Option<&StateSpace>,
+) -> Result<ClosedLoopFrf> {
+    use crate::frf::periodic::{PeriodicAnalyzer, PeriodicOptions};
+    let Some(p) = data.period_samples() else {
+        return Err(Error::invalid(
+            "period_samples",
+            "the record has no period; set IoData::with_period_samples (a periodic excitation's period in samples) or use from_welch_iodata",
+        ));
+    };
+    let ch = ruy(data, "from_periodic")?;
+    let refs: Vec<&[f64]> = ch.iter().map(|v| v.as_slice()).collect();
+    let s = PeriodicAnalyzer::new(p)?.analyze(&refs, data.fs(), &PeriodicOptions::new(p))?;
+    let lines: Vec<usize> = s
+        .excited_lines(0, rel_threshold)?
+        .into_iter()
+        .filter(|&k| {
+            let f = s.line_hz(k);
+            f >= band.0 && f <= band.1
+        })
+        .collect();
+    from_periodic(&s, Channels { r: 0, u: 1, y: 2 }, &lines, controller)
 }
 
 /// Closed-loop FRFs from Welch spectra (channel indices into `spectra`), $r$ as the reference;
