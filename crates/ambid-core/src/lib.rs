@@ -1,8 +1,10 @@
 //! # ambid-core
 //!
-//! A closed-loop system-identification library: linear models ([`lti`]), dense linear algebra glue
-//! ([`linalg`]), excitation signals ([`signal`]) and, in later modules, nonparametric FRF estimation,
-//! parametric estimation and validation. Pure computation: no file I/O, no plotting.
+//! A closed-loop system-identification library: linear models and matrix-valued frequency-response
+//! data ([`lti`]), dense linear algebra glue ([`linalg`]), excitation signals ([`signal`]), measured
+//! data with channel roles and experiments ([`data`]), nonparametric FRF estimation ([`frf`]),
+//! parametric estimation ([`estimate`]) and validation and metrics ([`validate`]). Pure
+//! computation: no file I/O, no plotting.
 //!
 //! Conventions (see `docs/conventions.md`): SI units, frequencies in Hz at every public boundary,
 //! polynomials in ascending powers of $q^{-1}$, every discrete model carries its sample time.

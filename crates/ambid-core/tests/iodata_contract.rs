@@ -61,8 +61,9 @@ fn naive_ls(rows: &[Vec<f64>]) -> Vec<f64> {
         for r in 0..d {
             if r != c {
                 let f = g[r][c] / g[c][c];
-                for j in c..=d {
-                    g[r][j] -= f * g[c][j];
+                let pivot = g[c].clone();
+                for (x, pv) in g[r].iter_mut().zip(&pivot).skip(c) {
+                    *x -= f * pv;
                 }
             }
         }

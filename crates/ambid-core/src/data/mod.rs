@@ -2,7 +2,10 @@
 //!
 //! A measurement arrives as an [`IoData`]: named channels of equal length (in closed loop typically
 //! `r`, `u`, `y`), the sample time $T_s$ and, for a periodic excitation, the period length $P$ in
-//! samples. Before a nonparametric FRF is estimated, the record is screened and prepared; every step
+//! samples. Each channel has a [`Role`] (excitation, input, output, current, reference, other;
+//! from its name, `y` or `y_xa`, or set explicitly), a role may have a channel per axis of
+//! [`AXES`], and a record may hold several experiments of one system; the estimators' front doors
+//! (`*_iodata`) select their signals by role. Before a nonparametric FRF is estimated, the record is screened and prepared; every step
 //! returns the new data together with a report of what it changed and where, so that nothing happens
 //! silently:
 //!

@@ -255,6 +255,28 @@ impl MimoArx {
     }
 }
 
+/// The front door on an [`crate::data::IoData`]: [`arx_mimo`] of the output channels on the
+/// input channels (roles, in axis order) of a single-experiment record.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] for a record without output or input channels, with several
+/// experiments (not joined yet) or a non-finite sample in a used channel; the errors of
+/// [`arx_mimo`].
+pub fn arx_mimo_iodata(
+    data: &crate::data::IoData,
+    na: usize,
+    nb: usize,
+    nk: usize,
+    coupling: OutputCoupling,
+) -> Result<MimoArx> {
+    use crate::data::Role;
+    data.require_single_experiment("arx_mimo")?;
+    data.require_finite(&[Role::Output, Role::Input])?;
+    let y = data.signals(Role::Output, 0)?;
+    let u = data.signals(Role::Input, 0)?;
+    arx_mimo(&y, &u, na, nb, nk, coupling, data.ts())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -366,26 +388,4 @@ mod tests {
         assert!(arx_mimo(&[&y], &[&u], 1, 0, 1, OutputCoupling::Full, 1.0).is_err());
         assert!(arx_mimo(&[&y], &[&u[..10]], 1, 1, 1, OutputCoupling::Full, 1.0).is_err());
     }
-}
-
-/// The front door on an [`crate::data::IoData`]: [`arx_mimo`] of the output channels on the
-/// input channels (roles, in axis order) of a single-experiment record.
-///
-/// # Errors
-/// [`Error::InvalidArgument`] for a record without output or input channels, with several
-/// experiments (not joined yet) or a non-finite sample in a used channel; the errors of
-/// [`arx_mimo`].
-pub fn arx_mimo_iodata(
-    data: &crate::data::IoData,
-    na: usize,
-    nb: usize,
-    nk: usize,
-    coupling: OutputCoupling,
-) -> Result<MimoArx> {
-    use crate::data::Role;
-    data.require_single_experiment("arx_mimo")?;
-    data.require_finite(&[Role::Output, Role::Input])?;
-    let y = data.signals(Role::Output, 0)?;
-    let u = data.signals(Role::Input, 0)?;
-    arx_mimo(&y, &u, na, nb, nk, coupling, data.ts())
 }

@@ -95,6 +95,7 @@ impl FreqData {
     /// values or is zero on every line of the band, or inverse-variance weights are asked for
     /// data without variance (or with a zero variance in the band).
     pub fn new(frd: &Frd, opts: &FreqFitOptions) -> Result<Self> {
+        frd.require_siso("FreqData::new")?;
         let ts = frd.ts().ok_or_else(|| {
             Error::invalid(
                 "frd",
@@ -541,6 +542,7 @@ pub fn arx_frd(
     o: &TfOrders,
     opts: &FreqFitOptions,
 ) -> Result<FreqFit<crate::lti::TransferFunction>> {
+    frd.require_siso("freqfit::arx_frd")?;
     o.check()?;
     let data = FreqData::new(frd, opts)?;
     data.check_params(o.n_params())?;
@@ -759,6 +761,7 @@ pub fn oe_frd(
     o: &TfOrders,
     opts: &FreqFitOptions,
 ) -> Result<FreqFit<crate::lti::TransferFunction>> {
+    frd.require_siso("freqfit::oe_frd")?;
     o.check()?;
     let data = FreqData::new(frd, opts)?;
     data.check_params(o.n_params())?;
@@ -947,6 +950,8 @@ pub fn coprime_frd(
     nk: usize,
     opts: &FreqFitOptions,
 ) -> Result<CoprimeFit> {
+    t_ry.require_siso("freqfit::coprime_frd")?;
+    s.require_siso("freqfit::coprime_frd")?;
     if n == 0 {
         return Err(Error::invalid(
             "n",
@@ -1153,6 +1158,7 @@ pub fn estimate_delay(
     max_nk: usize,
     opts: &FreqFitOptions,
 ) -> Result<(usize, FreqFit<crate::lti::TransferFunction>)> {
+    frd.require_siso("freqfit::estimate_delay")?;
     let mut best: Option<(usize, FreqFit<crate::lti::TransferFunction>)> = None;
     let mut last_err = None;
     for nk in 0..=max_nk {

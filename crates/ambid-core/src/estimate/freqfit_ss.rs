@@ -146,6 +146,7 @@ pub fn ss_frd(
     opts: &FreqFitOptions,
     ss_opts: &SsFreqOptions,
 ) -> Result<FreqFit<StateSpace>> {
+    frd.require_siso("freqfit_ss::ss_frd")?;
     if order == 0 {
         return Err(Error::invalid(
             "order",

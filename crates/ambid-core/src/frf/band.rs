@@ -205,6 +205,7 @@ pub fn excitation_bands(
 /// # Errors
 /// [`Error::InvalidArgument`] for a malformed rule or no line of `s` inside `band`.
 pub fn reliable_lines(s: &Frd, band: (f64, f64), rule: &BandRule) -> Result<(Vec<usize>, bool)> {
+    s.require_siso("band::reliable_lines")?;
     rule.check()?;
     let f = s.f_hz();
     let inside: Vec<usize> = (0..f.len())
@@ -291,6 +292,7 @@ pub fn iso_search(
     rule: &BandRule,
     zones: &IsoZones,
 ) -> Result<IsoSearch> {
+    s.require_siso("band::iso_search")?;
     let (idx, reliable) = reliable_lines(s, band, rule)?;
     let sub = select_lines(s, &idx)?;
     Ok(IsoSearch {
@@ -401,6 +403,7 @@ impl FitBand {
 /// assert_eq!((b.lines, b.reliable_lines), (50, 49));
 /// ```
 pub fn fit_band(q: &Frd, max_rel_halfwidth: f64) -> Result<FitBand> {
+    q.require_siso("band::fit_band")?;
     if !(max_rel_halfwidth.is_finite() && max_rel_halfwidth > 0.0) {
         return Err(Error::invalid(
             "max_rel_halfwidth",
@@ -455,6 +458,7 @@ pub fn fit_band(q: &Frd, max_rel_halfwidth: f64) -> Result<FitBand> {
 /// # Errors
 /// As [`Frd::new`] (e.g. no lines).
 pub fn select_lines(s: &Frd, idx: &[usize]) -> Result<Frd> {
+    s.require_siso("band::select_lines")?;
     if idx.is_empty() {
         return Err(Error::invalid("lines", "no line selected"));
     }

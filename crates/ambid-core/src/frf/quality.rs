@@ -103,6 +103,7 @@ pub fn band_mean(f_hz: &[f64], values: &[f64], band: (f64, f64)) -> Result<f64> 
 /// # Errors
 /// [`Error::InvalidArgument`] when the FRF has no variance, or as [`band_mean`].
 pub fn band_variance(frd: &Frd, periods: usize, band: (f64, f64)) -> Result<(f64, f64)> {
+    frd.require_siso("quality::band_variance")?;
     let var = frd.variance().ok_or_else(|| {
         Error::invalid(
             "frd",

@@ -209,6 +209,7 @@ pub fn find_resonances_reliable(
     opts: &ResonanceOptions,
     max_rel_std: f64,
 ) -> Result<(Vec<Resonance>, usize)> {
+    frd.require_siso("resonance::find_resonances_reliable")?;
     if !(max_rel_std.is_finite() && max_rel_std > 0.0) {
         return Err(Error::invalid(
             "max_rel_std",

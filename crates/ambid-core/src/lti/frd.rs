@@ -479,6 +479,29 @@ impl Frd {
         self.ny == 1 && self.nu == 1
     }
 
+    /// A typed error unless the response is $1 \times 1$: for the SISO-only consumers (fits to
+    /// FRF data, band rules, resonance search, the ISO zones); `what` names the caller.
+    ///
+    /// # Example
+    /// ```
+    /// use ambid_core::lti::Frd;
+    /// let g = Frd::identity(&[1.0], 2, None).unwrap();
+    /// assert!(g.require_siso("my_fit").unwrap_err().to_string().contains("2×2"));
+    /// assert!(g.entry(0, 0).unwrap().require_siso("my_fit").is_ok());
+    /// ```
+    pub fn require_siso(&self, what: &'static str) -> Result<()> {
+        if !self.is_siso() {
+            return Err(Error::invalid(
+                "frd",
+                format!(
+                    "{what} takes SISO frequency-response data, and this one is {}×{} per line; pass one entry (Frd::entry)",
+                    self.ny, self.nu
+                ),
+            ));
+        }
+        Ok(())
+    }
+
     fn block(&self, line: usize) -> &[c64] {
         let per = self.ny * self.nu;
         &self.values[line * per..(line + 1) * per]
@@ -703,11 +726,13 @@ impl Frd {
     /// [`Error::DimensionMismatch`] unless the columns of $X$ match the rows of $Y$; different
     /// grids or sample times.
     pub fn product(&self, right: &Frd) -> Result<Self> {
-        Self::check_dims(
-            "Frd::product (columns of the left factor vs rows of the right)",
-            (self.nu, self.nu),
-            (right.ny, self.nu),
-        )?;
+        if right.ny != self.nu {
+            return Err(Error::DimensionMismatch {
+                context: "Frd::product (the right factor needs a row per column of the left)",
+                expected: format!("{} rows (left factor {}×{})", self.nu, self.ny, self.nu),
+                got: format!("{}×{}", right.ny, right.nu),
+            });
+        }
         let (m, k, n) = (self.ny, self.nu, right.nu);
         self.combine(
             right,
@@ -740,11 +765,13 @@ impl Frd {
     /// # Errors
     /// [`Error::DimensionMismatch`] unless `next` has as many inputs as `self` has outputs.
     pub fn series(&self, next: &Frd) -> Result<Self> {
-        Self::check_dims(
-            "Frd::series (inputs of `next` vs outputs of `self`)",
-            (self.ny, self.ny),
-            (next.nu, self.ny),
-        )?;
+        if next.nu != self.ny {
+            return Err(Error::DimensionMismatch {
+                context: "Frd::series (`next` needs an input per output of `self`)",
+                expected: format!("{} inputs (`self` is {}×{})", self.ny, self.ny, self.nu),
+                got: format!("{}×{}", next.ny, next.nu),
+            });
+        }
         next.product(self)
     }
 

@@ -159,6 +159,7 @@ pub fn compare_models(
     spec: &CompareSpec,
     validation: Option<ValidationRecord<'_>>,
 ) -> Result<Vec<CompareRow>> {
+    frd.require_siso("compare::compare_models")?;
     // validate the band and the weights once, so that bad input is an error, not a note per row
     let data = crate::estimate::freqfit::FreqData::new(frd, &spec.fit)?;
     if let Some(&s) = spec.structures.iter().find(|s| !s.fits_frf()) {
@@ -377,6 +378,7 @@ pub fn unstable_poles_from_loop(
     controller: &StateSpace,
     band_hz: Option<(f64, f64)>,
 ) -> Result<usize> {
+    plant.require_siso("compare::unstable_poles_from_loop")?;
     use std::f64::consts::PI;
     const CTX: &str = "unstable_poles_from_loop";
     let ts = plant

@@ -115,6 +115,7 @@ pub struct IsoVerdict {
 /// # Errors
 /// [`Error::InvalidArgument`] for an empty FRF or zone limits that are not increasing above 1.
 pub fn sensitivity_zone(s: &Frd, zones: &IsoZones) -> Result<IsoVerdict> {
+    s.require_siso("iso::sensitivity_zone")?;
     zones.check()?;
     let (k, peak) = s
         .values()
