@@ -219,8 +219,8 @@ pub fn frf_input(
     })
 }
 
-/// One input and one output column of a time-data file, its sample time and whether it has an
-/// `r` column (a closed-loop experiment, for `--loop auto`).
+/// One input and one output column of a time-data file, its sample time and whether it has the
+/// excitation column (`--excitation`, default `r`) (a closed-loop experiment, for `--loop auto`).
 pub struct RecordIo {
     pub u: Vec<f64>,
     pub y: Vec<f64>,
@@ -229,13 +229,18 @@ pub struct RecordIo {
 }
 
 /// The columns `input` and `output` of the record `p`, read with `file`.
-pub fn read_io(p: &Path, file: &DataFileArgs, input: &str, output: &str) -> Result<RecordIo> {
+pub fn read_io(
+    p: &Path,
+    file: &DataFileArgs,
+    (input, output): (&str, &str),
+    excitation: &str,
+) -> Result<RecordIo> {
     let d = file.read(p)?;
     Ok(RecordIo {
         u: d.column(input)?.to_vec(),
         y: d.column(output)?.to_vec(),
         ts: d.ts,
-        has_r: d.has("r"),
+        has_r: d.has(excitation),
     })
 }
 
@@ -255,7 +260,7 @@ pub fn read_validation(
         mut y,
         ts: tsv,
         ..
-    } = read_io(p, file, input, output)?;
+    } = read_io(p, file, (input, output), "r")?;
     if ((tsv - ts) / ts).abs() > 1e-9 {
         return Err(ambid::workflow::input(anyhow::anyhow!(
             "the validation data are sampled at {} Hz, the estimation data at {} Hz",

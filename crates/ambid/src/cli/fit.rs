@@ -1,6 +1,6 @@
 //! `ambid fit` and `ambid order`: parametric models and ARX order scans from time-domain data.
 
-use super::args::{DataFileArgs, InputColumn, OutputColumn};
+use super::args::{DataFileArgs, ExcitationColumn, InputColumn, OutputColumn};
 use super::common::{check_model_size, mean, read_io, read_validation, RecordIo};
 use super::common::{frf_input, WeightsArg, X0Arg};
 use ambid::io::model::state_space_json;
@@ -41,8 +41,8 @@ pub enum FocusArg {
 /// Whether the data were measured in open or closed loop.
 #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum LoopArg {
-    /// Closed if the file has an `r` column and the input is not `r` (ambid's closed-loop
-    /// record `t, w, r, u, i, y`), open otherwise.
+    /// Closed if the file has the excitation column (`--excitation`, default `r`) and the input
+    /// is not that column (ambid's closed-loop record `t, w, r, u, i, y`), open otherwise.
     Auto,
     /// Open-loop data: an unstable starting estimate is an artefact and is stabilised.
     Open,
@@ -52,6 +52,7 @@ pub enum LoopArg {
 }
 
 #[derive(Args)]
+#[command(mut_arg("excitation", |a| a.help("Column of the excitation r (a name, or `#k`): a record that has it is closed-loop data for `--loop auto`")))]
 #[command(mut_arg("input", |a| a.help("Input column; several, comma-separated (`u1,u2`), for a MIMO state-space model (`--structure ss`)")))]
 #[command(mut_arg("output", |a| a.help("Output column; several, comma-separated (`y1,y2`), for a MIMO state-space model")))]
 pub struct FitArgs {
@@ -60,6 +61,8 @@ pub struct FitArgs {
     data: PathBuf,
     #[command(flatten)]
     file: DataFileArgs,
+    #[command(flatten)]
+    r: ExcitationColumn,
     #[command(flatten)]
     u: InputColumn,
     #[command(flatten)]
@@ -170,7 +173,7 @@ fn is_open_loop(a: &FitArgs, has_r: bool) -> bool {
     match a.loop_kind {
         LoopArg::Open => true,
         LoopArg::Closed => false,
-        LoopArg::Auto => !(has_r && a.u.input != "r"),
+        LoopArg::Auto => !(has_r && a.u.input != a.r.excitation),
     }
 }
 
@@ -333,7 +336,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
         mut y,
         ts,
         has_r,
-    } = read_io(&a.data, &a.file, &a.u.input, &a.y.output)?;
+    } = read_io(&a.data, &a.file, (&a.u.input, &a.y.output), &a.r.excitation)?;
     let open_loop = is_open_loop(&a, has_r);
     let params = match a.structure {
         StructureArg::Ss => a.order.unwrap_or(0),

@@ -295,12 +295,11 @@ fn frf_in_memory(a: &FrfArgs) -> Result<Option<FrfAnalysis>> {
 }
 
 /// The settings of `a` for a record of `n` samples at sample time `ts` (reads the controller).
-fn frf_settings(a: &FrfArgs, n: usize, ts: f64) -> Result<FrfSettings> {
+fn frf_settings(a: &FrfArgs, n: usize, ts: f64) -> ambid::error::Result<FrfSettings> {
     if let Some(k) = a.nperseg.filter(|&k| k > n) {
-        return Err(ambid::workflow::usage(anyhow::anyhow!(
+        return Err(ambid::error::Error::usage(format!(
             "--nperseg {k} is longer than the record ({n} samples); give at most {n}, or leave it out to derive it from the record length"
-        ))
-        .into());
+        )));
     }
     let method = match a.period_samples {
         Some(p) => FrfMethod::Periodic {

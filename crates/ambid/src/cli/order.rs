@@ -60,7 +60,7 @@ pub fn order(a: OrderArgs) -> Result<()> {
     }
     let RecordIo {
         mut u, mut y, ts, ..
-    } = read_io(&a.data, &a.file, &a.u.input, &a.y.output)?;
+    } = read_io(&a.data, &a.file, (&a.u.input, &a.y.output), "r")?;
     check_model_size(
         y.len(),
         a.na_max + a.nb_max,
