@@ -1,7 +1,7 @@
 //! `ambid compare-models` (the seed's table 1).
 
 use super::args::parse_band;
-use super::args::{ExcitationColumn, FileFormatArgs, OutputColumn};
+use super::args::{ExcitationColumn, FileFormatArgs, Force, OutputColumn};
 use super::common::{frf_input, WeightsArg};
 use ambid::io::output::write_file;
 use ambid::io::read_controller;
@@ -70,9 +70,8 @@ pub struct CompareModelsArgs {
     /// Output CSV of the comparison table.
     #[arg(long, default_value = "comparison.csv")]
     out: PathBuf,
-    /// Replace the output file if it exists.
-    #[arg(long)]
-    force: bool,
+    #[command(flatten)]
+    f: Force,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -93,7 +92,7 @@ impl From<StructureName> for FitStructure {
 }
 
 pub fn compare(a: CompareModelsArgs) -> Result<()> {
-    OutputSet::check(&a.out, a.force)?;
+    OutputSet::check(&a.out, a.f.force)?;
     let input = frf_input(
         &a.frf,
         &a.quantity,
@@ -174,7 +173,7 @@ pub fn compare(a: CompareModelsArgs) -> Result<()> {
     let bytes = w
         .into_inner()
         .map_err(|e| anyhow::anyhow!("{}", e.error()))?;
-    write_file(&a.out, &bytes, a.force)?;
+    write_file(&a.out, &bytes, a.f.force)?;
     println!("written: {}", a.out.display());
     Ok(())
 }

@@ -1,6 +1,6 @@
 //! `ambid fit` and `ambid order`: parametric models and ARX order scans from time-domain data.
 
-use super::args::{DataFileArgs, ExcitationColumn, InputColumn, OutputColumn};
+use super::args::{DataFileArgs, ExcitationColumn, Force, InputColumn, OutputColumn};
 use super::common::{check_model_size, mean, read_io, read_validation, RecordIo};
 use super::common::{frf_input, WeightsArg, X0Arg};
 use ambid::io::model::state_space_json;
@@ -154,9 +154,8 @@ pub struct FitArgs {
     /// Output model JSON.
     #[arg(long, default_value = "model.json")]
     out: PathBuf,
-    /// Replace the output file if it exists.
-    #[arg(long)]
-    force: bool,
+    #[command(flatten)]
+    f: Force,
 }
 
 /// How the outputs of a multi-output ARX enter each other's equations.
@@ -290,7 +289,7 @@ fn check_orders(a: &FitArgs) -> Result<()> {
 }
 
 pub fn fit(a: FitArgs) -> Result<()> {
-    OutputSet::check(&a.out, a.force)?;
+    OutputSet::check(&a.out, a.f.force)?;
     check_orders(&a)?;
     if let Some(q) = &a.quantity {
         use ambid_core::validate::compare::FitStructure;
@@ -314,7 +313,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
             a.weights,
             a.max_iterations,
             (a.controller.as_deref(), a.unstable_poles),
-            (&a.out, a.force),
+            (&a.out, a.f.force),
         );
     }
     let split = |s: &str| -> Vec<String> { s.split(',').map(|c| c.trim().to_string()).collect() };
@@ -501,7 +500,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
     write_file(
         &a.out,
         &model_json_bytes(&polynomial_json(m, &a.u.input, &a.y.output, meta))?,
-        a.force,
+        a.f.force,
     )?;
     println!("written: {}", a.out.display());
     Ok(())
@@ -703,7 +702,7 @@ fn fit_ss(
         // the initial state the refinement estimated on the estimation record
         j["x0"] = json!(x);
     }
-    write_file(&a.out, &model_json_bytes(&j)?, a.force)?;
+    write_file(&a.out, &model_json_bytes(&j)?, a.f.force)?;
     println!("written: {}", a.out.display());
     Ok(())
 }
@@ -1118,7 +1117,7 @@ fn finish_mimo(a: &FitArgs, ins: &[String], outs: &[String], f: MimoFit) -> Resu
             m.insert(k.clone(), v.clone());
         }
     }
-    write_file(&a.out, &model_json_bytes(&j)?, a.force)?;
+    write_file(&a.out, &model_json_bytes(&j)?, a.f.force)?;
     println!("written: {}", a.out.display());
     Ok(())
 }

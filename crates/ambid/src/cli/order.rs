@@ -1,6 +1,6 @@
 //! `ambid order`: ARX order scan.
 
-use super::args::{DataFileArgs, InputColumn, OutputColumn};
+use super::args::{DataFileArgs, Force, InputColumn, OutputColumn};
 use super::common::{check_model_size, mean, read_io, read_validation, RecordIo};
 use ambid::io::output::write_file;
 use ambid::io::OutputSet;
@@ -34,13 +34,12 @@ pub struct OrderArgs {
     /// Output CSV of the grid (one row per model).
     #[arg(long, default_value = "order.csv")]
     out: PathBuf,
-    /// Replace the output file if it exists.
-    #[arg(long)]
-    force: bool,
+    #[command(flatten)]
+    f: Force,
 }
 
 pub fn order(a: OrderArgs) -> Result<()> {
-    OutputSet::check(&a.out, a.force)?;
+    OutputSet::check(&a.out, a.f.force)?;
     if a.na_max == 0 || a.nb_max == 0 {
         return Err(ambid::workflow::usage(anyhow::anyhow!(
             "--na-max and --nb-max must be at least 1"
@@ -114,7 +113,7 @@ pub fn order(a: OrderArgs) -> Result<()> {
     let bytes = w
         .into_inner()
         .map_err(|e| anyhow::anyhow!("{}", e.error()))?;
-    write_file(&a.out, &bytes, a.force)?;
+    write_file(&a.out, &bytes, a.f.force)?;
     println!("written: {}", a.out.display());
     Ok(())
 }
