@@ -174,7 +174,7 @@ fn welch(o: &Opts, warmup: usize, reps: usize) -> Result<(Vec<f64>, Value)> {
     let cols = names
         .iter()
         .map(|n| d.column(n))
-        .collect::<Result<Vec<_>>>()?;
+        .collect::<std::result::Result<Vec<_>, _>>()?;
     let opts = WelchOptions::new(1.0 / d.ts, o.num_or("nperseg", 4096)?);
     let nc = cols.len();
     let (times, (s, coh)) = timed(warmup, reps, || {

@@ -19,7 +19,7 @@ use super::args::parse_band;
 pub enum StudyCmd {
     /// Excitation-amplitude study (the seed's figure 6): coherence, FRF variance and output SNR
     /// per level, and a recommended range.
-    Amplitude(AmplitudeArgs),
+    Amplitude(Box<AmplitudeArgs>),
     /// Operating-point study (the seed's figure 7): plant FRFs at nominal, bias ±20 % and air gap
     /// ±10 µm, with the deviation from nominal per band.
     OperatingPoint(OperatingPointArgs),
@@ -32,10 +32,19 @@ pub struct AmplitudeArgs {
     #[arg(long, value_delimiter = ',', value_parser = super::args::parse_pct,
           default_values_t = seed_levels().iter().map(|l| super::args::clean(100.0 * l)).collect::<Vec<f64>>())]
     levels: Vec<f64>,
-    /// Recorded files instead of the twin, one per level (same order as --levels), with columns
-    /// r, u, y.
+    /// Recorded files instead of the twin, one per level (same order as --levels), with the
+    /// columns r, u, y (and i when present) named by --excitation, --input, --output, --current;
+    /// any format of docs/data-files.md.
     #[arg(long, value_delimiter = ',')]
     files: Vec<PathBuf>,
+    #[command(flatten)]
+    r: super::args::ExcitationColumn,
+    #[command(flatten)]
+    u: super::args::InputColumn,
+    #[command(flatten)]
+    y: super::args::OutputColumn,
+    #[command(flatten)]
+    i: super::args::CurrentColumn,
     /// Noise-only file (files mode) for the output SNR.
     #[arg(long)]
     noise: Option<PathBuf>,
@@ -130,7 +139,7 @@ fn rows_csv<T: serde::Serialize>(rows: &[T]) -> Result<Vec<u8>> {
 
 pub fn study(cmd: StudyCmd) -> Result<()> {
     match cmd {
-        StudyCmd::Amplitude(a) => amplitude(a),
+        StudyCmd::Amplitude(a) => amplitude(*a),
         StudyCmd::OperatingPoint(a) => operating_point(a),
     }
 }
@@ -185,16 +194,16 @@ fn amplitude(a: AmplitudeArgs) -> Result<()> {
             fs = Some(1.0 / d.ts);
             records.push(LevelRecord {
                 level: l / 100.0,
-                r: d.column("r")?.to_vec(),
-                u: d.column("u")?.to_vec(),
-                y: d.column("y")?.to_vec(),
-                i: d.optional_column("i")?.map(<[f64]>::to_vec),
+                r: d.column(&a.r.excitation)?.to_vec(),
+                u: d.column(&a.u.input)?.to_vec(),
+                y: d.column(&a.y.output)?.to_vec(),
+                i: d.optional_column(&a.i.current)?.map(<[f64]>::to_vec),
                 saturated_fraction: None,
             });
         }
         let fs = fs.context("no file")?;
         let noise = match &a.noise {
-            Some(p) => Some(a.file.file.read(p, Some(fs))?.column("y")?.to_vec()),
+            Some(p) => Some(a.file.file.read(p, Some(fs))?.column(&a.y.output)?.to_vec()),
             None => None,
         };
         let mut settings = FrfSettings::periodic(a.period_samples, a.skip_periods);

@@ -87,18 +87,14 @@ impl ControllerFormat {
         match ext.as_deref() {
             Some("toml") => Ok(ControllerFormat::Toml),
             Some("json") => Ok(ControllerFormat::Json),
-            Some(other) => {
-                return Err(Error::other(format!(
+            Some(other) => Err(Error::other(format!(
                 "unsupported controller file extension `.{other}` in {}: use a .toml or .json file",
                 path.display()
-            )))
-            }
-            None => {
-                return Err(Error::other(format!(
-                    "controller file {} has no extension: name it *.toml or *.json",
-                    path.display()
-                )))
-            }
+            ))),
+            None => Err(Error::other(format!(
+                "controller file {} has no extension: name it *.toml or *.json",
+                path.display()
+            ))),
         }
     }
 }
@@ -153,9 +149,10 @@ impl ControllerModel {
     /// ```
     pub fn new(ss: StateSpace, description: impl Into<String>) -> Result<Self> {
         let ts = ss.ts().ok_or_else(|| {
-            Error::other(format!(
+            Error::other(
                 "a controller model must be discrete (have a sample time); discretise it first"
-            ))
+                    .to_string(),
+            )
         })?;
         if ss.ninputs() != 1 || ss.noutputs() != 1 {
             return Err(Error::other(format!(
@@ -397,25 +394,17 @@ pub fn parse_controller_str(s: &str, format: ControllerFormat) -> Result<Control
         "pid" => pid_model(decode(s, format)?),
         "tf" => tf_model(decode(s, format)?),
         "ss" => ss_model(decode(s, format)?),
-        other => {
-            return Err(Error::other(format!(
-                "unknown controller kind `{other}`: use \"pid\", \"tf\" or \"ss\""
-            )))
-        }
+        other => Err(Error::other(format!(
+            "unknown controller kind `{other}`: use \"pid\", \"tf\" or \"ss\""
+        ))),
     }
 }
 
 fn read_kind(s: &str, format: ControllerFormat) -> Result<String> {
-    let missing = || {
-        Error::other(format!(
-            "missing key `kind`: give kind = \"pid\", \"tf\" or \"ss\""
-        ))
-    };
-    let not_string = || {
-        Error::other(format!(
-            "`kind` must be a string: \"pid\", \"tf\" or \"ss\""
-        ))
-    };
+    let missing =
+        || Error::other("missing key `kind`: give kind = \"pid\", \"tf\" or \"ss\"".to_string());
+    let not_string =
+        || Error::other("`kind` must be a string: \"pid\", \"tf\" or \"ss\"".to_string());
     match format {
         ControllerFormat::Toml => {
             let t: toml::Table =
@@ -430,9 +419,9 @@ fn read_kind(s: &str, format: ControllerFormat) -> Result<String> {
             let v: serde_json::Value = serde_json::from_str(s)
                 .map_err(|e| Error::other(format!("malformed JSON: {e}")))?;
             let obj = v.as_object().ok_or_else(|| {
-                Error::other(format!(
-                    "a JSON controller file must hold one object {{\"kind\": …, …}}"
-                ))
+                Error::other(
+                    "a JSON controller file must hold one object {\"kind\": …, …}".to_string(),
+                )
             })?;
             match obj.get("kind") {
                 None => Err(missing()),
@@ -462,14 +451,14 @@ fn finite(key: &str, v: f64) -> Result<f64> {
 fn sample_time(ts: Option<f64>, fs_hz: Option<f64>) -> Result<f64> {
     let t = match (ts, fs_hz) {
         (Some(_), Some(_)) => {
-            return Err(Error::other(format!(
-                "give either `ts` (s) or `fs_hz` (Hz), not both"
-            )))
+            return Err(Error::other(
+                "give either `ts` (s) or `fs_hz` (Hz), not both".to_string(),
+            ))
         }
         (None, None) => {
-            return Err(Error::other(format!(
-                "missing sample time: give `ts` (s) or `fs_hz` (Hz)"
-            )))
+            return Err(Error::other(
+                "missing sample time: give `ts` (s) or `fs_hz` (Hz)".to_string(),
+            ))
         }
         (Some(t), None) => {
             finite("ts", t)?;
@@ -493,15 +482,16 @@ fn pid_model(p: PidFile) -> Result<ControllerModel> {
     finite("kp", p.kp)?;
     let ki = match (p.ki, p.integral_corner_hz) {
         (Some(_), Some(_)) => {
-            return Err(Error::other(format!(
-                "give either `ki` (A/(m·s)) or `integral_corner_hz` (Hz), not both"
-            )))
+            return Err(Error::other(
+                "give either `ki` (A/(m·s)) or `integral_corner_hz` (Hz), not both".to_string(),
+            ))
         }
         (None, None) => {
-            return Err(Error::other(format!(
+            return Err(Error::other(
                 "missing integral action: give `ki` (A/(m·s)) or `integral_corner_hz` (Hz, \
              Ki = Kp·2π·f_i); 0 means no integrator"
-            )))
+                    .to_string(),
+            ))
         }
         (Some(ki), None) => finite("ki", ki)?,
         (None, Some(fi)) => {
@@ -520,9 +510,10 @@ fn pid_model(p: PidFile) -> Result<ControllerModel> {
         (Method::Tustin, Some(f)) => Discretisation::TustinPrewarp { f_hz: f },
         (Method::Zoh, None) => Discretisation::Zoh,
         (Method::Zoh, Some(_)) => {
-            return Err(Error::other(format!(
+            return Err(Error::other(
                 "`prewarp_hz` applies to method = \"tustin\" only; remove it for \"zoh\""
-            )))
+                    .to_string(),
+            ))
         }
     };
     let spec = PidSpec {
@@ -553,15 +544,16 @@ fn tf_model(t: TfFile) -> Result<ControllerModel> {
         }
     }
     if t.num.iter().all(|b| *b == 0.0) {
-        return Err(Error::other(format!(
-            "`num` is empty or all zero, so the controller would be C = 0"
-        )));
+        return Err(Error::other(
+            "`num` is empty or all zero, so the controller would be C = 0".to_string(),
+        ));
     }
     if t.den.first().is_none_or(|a0| *a0 == 0.0) {
-        return Err(Error::other(format!(
+        return Err(Error::other(
             "`den[0]` (the coefficient of q^0) must be non-zero: with den[0] = 0 the controller \
              is not causal; list den in ascending powers of q^-1, den = [1, a1, a2, …]"
-        )));
+                .to_string(),
+        ));
     }
     let n = t.num.len().max(t.den.len()).saturating_sub(1);
     if n > MAX_CONTROLLER_ORDER {
@@ -622,9 +614,9 @@ fn ss_model(f: SsFile) -> Result<ControllerModel> {
     match (pd, md) {
         (1, Some(1)) => {}
         (0, _) => {
-            return Err(Error::other(format!(
-                "`d` is empty: give the 1×1 feed-through as d = [[d0]]"
-            )))
+            return Err(Error::other(
+                "`d` is empty: give the 1×1 feed-through as d = [[d0]]".to_string(),
+            ))
         }
         (p, m) => return Err(siso(format!("d is {p}×{}", m.unwrap_or(0)))),
     }
