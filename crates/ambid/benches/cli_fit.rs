@@ -12,7 +12,7 @@
 //! Run: `cargo bench -p ambid --bench cli_fit`. Figures: docs/benchmarks.md.
 
 use ambid::fitting::{identify_state_space, SsFitOptions};
-use ambid::io::read_time_csv;
+use ambid::io::{read_time, TimeOptions};
 use divan::{black_box, Bencher};
 use std::path::PathBuf;
 use std::process::Command;
@@ -64,7 +64,7 @@ fn cli_fit_ss_order8_defaults(b: Bencher) {
 
 #[divan::bench(sample_count = 5)]
 fn library_identify_state_space_defaults(b: Bencher) {
-    let d = read_time_csv(&seed_record(), None).expect("seed record");
+    let d = read_time(&seed_record(), &TimeOptions::default()).expect("seed record");
     let centred = |name: &str| {
         let x = d.column(name).expect("column");
         let m = x.iter().sum::<f64>() / x.len() as f64;

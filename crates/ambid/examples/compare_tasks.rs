@@ -29,7 +29,7 @@
 //!
 //! Nothing here is part of the test suite or CI; `bench/compare/run.sh` drives it.
 
-use ambid::io::read_time_csv;
+use ambid::io::{read_time, TimeOptions};
 use ambid_core::estimate::order::{arx_order_scan, ArxScanSpec};
 use ambid_core::estimate::pem::{self, Focus, PemOptions};
 use ambid_core::estimate::ss_pem::{refine_ss, SsPemOptions};
@@ -169,12 +169,12 @@ fn frd_json(f: &Frd) -> Value {
 }
 
 fn welch(o: &Opts, warmup: usize, reps: usize) -> Result<(Vec<f64>, Value)> {
-    let d = read_time_csv(Path::new(o.str("data")?), o.fs()?)?;
+    let d = read_time(Path::new(o.str("data")?), &TimeOptions::with_fs(o.fs()?))?;
     let names: Vec<&str> = o.str_or("channels", "r,u,y").split(',').collect();
     let cols = names
         .iter()
         .map(|n| d.column(n))
-        .collect::<Result<Vec<_>>>()?;
+        .collect::<std::result::Result<Vec<_>, _>>()?;
     let opts = WelchOptions::new(1.0 / d.ts, o.num_or("nperseg", 4096)?);
     let nc = cols.len();
     let (times, (s, coh)) = timed(warmup, reps, || {
@@ -200,7 +200,7 @@ fn welch(o: &Opts, warmup: usize, reps: usize) -> Result<(Vec<f64>, Value)> {
 }
 
 fn frf(o: &Opts, warmup: usize, reps: usize) -> Result<(Vec<f64>, Value)> {
-    let d = read_time_csv(Path::new(o.str("data")?), o.fs()?)?;
+    let d = read_time(Path::new(o.str("data")?), &TimeOptions::with_fs(o.fs()?))?;
     let (r, u, y) = (d.column("r")?, d.column("u")?, d.column("y")?);
     let n: usize = o.num("period")?;
     let skip: usize = o.num_or("skip", 1)?;
@@ -232,7 +232,7 @@ fn frf(o: &Opts, warmup: usize, reps: usize) -> Result<(Vec<f64>, Value)> {
 }
 
 fn io_columns(o: &Opts) -> Result<(Vec<f64>, Vec<f64>, f64)> {
-    let d = read_time_csv(Path::new(o.str("data")?), o.fs()?)?;
+    let d = read_time(Path::new(o.str("data")?), &TimeOptions::with_fs(o.fs()?))?;
     let u = d.column(o.str_or("input", "u"))?.to_vec();
     let y = d.column(o.str_or("output", "y"))?.to_vec();
     Ok((u, y, d.ts))

@@ -22,11 +22,11 @@
 //! record and keep the in-memory path.
 
 use crate::analysis::{analyze_spectra, Checks, FrfAnalysis, FrfMethod, FrfSettings, Spectra};
+use crate::error::{Context, Error, Result};
 use crate::io::stream::RowStream;
 use ambid_core::data::{AbnormalReport, LimitSource, SaturationOptions, SaturationReport};
 use ambid_core::frf::periodic::{PeriodicAccumulator, PeriodicOptions};
 use ambid_core::frf::welch::WelchAccumulator;
-use anyhow::{anyhow, bail, Context, Result};
 use std::path::Path;
 
 /// Rows per block (screening block and read block): 2¹⁹ samples.
@@ -133,11 +133,11 @@ impl SatRuns {
     fn finish(mut self) -> Result<SaturationReport> {
         if let Some(l) = self.limit {
             if !(l.is_finite() && l > 0.0) {
-                bail!(
+                return Err(Error::other(format!(
                     "saturation check of `{}`: the saturation limit must be finite and > 0 (the \
                      magnitude of the symmetric limit ±L), got {l}",
                     self.name
-                );
+                )));
             }
         }
         self.close();
@@ -187,7 +187,7 @@ fn merge(a: &mut AbnormalReport, b: AbnormalReport, off: usize) {
 /// use ambid::analysis::{analyze, FrfSettings, Record};
 /// use ambid::experiment::{run, Experiment};
 /// use ambid::frf_stream::{analyze_csv, StreamColumns};
-/// use ambid::io::{read_time_csv, write_time_csv};
+/// use ambid::io::{read_time, write_time_csv, TimeOptions};
 /// let mut exp = Experiment::seed_paper(ambid_twin::Mode::Linear, 1e-7, 1);
 /// exp.excitation.periods = 3;
 /// let rec = run(&exp).unwrap().record;
@@ -198,7 +198,7 @@ fn merge(a: &mut AbnormalReport, b: AbnormalReport, off: usize) {
 /// let cols = StreamColumns { r: "r", u: "u", y: "y", i: None };
 /// let streamed = analyze_csv(&p, &cols, None, |_n, _ts| Ok(FrfSettings::periodic(5115, 1)))
 ///     .unwrap();
-/// let d = read_time_csv(&p, None).unwrap();
+/// let d = read_time(&p, &TimeOptions::default()).unwrap();
 /// let whole = Record {
 ///     r: d.column("r").unwrap(),
 ///     u: d.column("u").unwrap(),
@@ -223,7 +223,10 @@ pub fn analyze_csv(
         .is_some_and(|i| i != "t" && st0.names().iter().any(|n| n == i));
     for c in [cols.r, cols.u, cols.y] {
         if c == "t" {
-            bail!("{}: `t` is the time column, not a signal", path.display());
+            return Err(Error::other(format!(
+                "{}: `t` is the time column, not a signal",
+                path.display()
+            )));
         }
     }
     let mut names = vec![cols.r, cols.u, cols.y];
@@ -266,14 +269,13 @@ pub fn analyze_csv(
         .chain(ti.map(|c| (c, "the time column must be complete")))
         {
             if let Some(k) = out[c].iter().position(|v| !v.is_finite()) {
-                return Err(crate::workflow::input(anyhow::anyhow!(
+                return Err(Error::input(format!(
                     "{}: line {}, column `{}`: not finite ({}); {what}",
                     path.display(),
                     lines[k],
                     names[c],
                     out[c][k]
-                ))
-                .into());
+                )));
             }
         }
         for (e, c) in ext.iter_mut().zip([Some(1), ii]) {
@@ -297,16 +299,25 @@ pub fn analyze_csv(
         (true, _) => {
             let ts = (t1 - t0) / (n - 1) as f64;
             if ts.is_nan() || ts <= 0.0 {
-                bail!("{}: the `t` column must increase", path.display());
+                return Err(Error::other(format!(
+                    "{}: the `t` column must increase",
+                    path.display()
+                )));
             }
             ts
         }
         (false, Some(f)) if f.is_finite() && f > 0.0 => 1.0 / f,
-        (false, Some(f)) => bail!("sample rate must be positive and finite, got {f}"),
-        (false, None) => bail!(
-            "{}: no `t` column; give the sample rate (--fs) to read this file",
-            path.display()
-        ),
+        (false, Some(f)) => {
+            return Err(Error::other(format!(
+                "sample rate must be positive and finite, got {f}"
+            )))
+        }
+        (false, None) => {
+            return Err(Error::other(format!(
+                "{}: no `t` column; give the sample rate (--fs) to read this file",
+                path.display()
+            )))
+        }
     };
     crate::analysis::check_fs_matches(fs, ts)?;
     let settings = settings(n, ts)?;
@@ -344,13 +355,13 @@ pub fn analyze_csv(
                 if g > 0 {
                     let prev = if j == 0 { t_prev } else { t[j - 1] };
                     if ((t[j] - prev) - ts).abs() > 1e-6 * ts {
-                        bail!(
+                        return Err(Error::other(format!(
                             "{}: the `t` column is not uniformly sampled (step at row {} is {} s, \
                              mean step {ts} s)",
                             path.display(),
                             g + 1,
                             t[j] - prev
-                        );
+                        )));
                     }
                 }
             }
@@ -420,7 +431,7 @@ pub fn analyze_csv(
             let opts = crate::analysis::welch_options(&settings.method, rate, n)?;
             let acc = WelchAccumulator::new(3, &opts).context("Welch spectra")?;
             if opts.n_segments(n - skip_samples) == 0 {
-                return Err(anyhow!(opts.too_short(n - skip_samples)).context("Welch spectra"));
+                return Err(Error::from(opts.too_short(n - skip_samples)).context("Welch spectra"));
             }
             Acc::Welch(Box::new(acc), *skip_samples)
         }
@@ -473,7 +484,7 @@ pub fn analyze_csv(
             Spectra::Periodic(p.finish(rate).context("period-synchronous averaging")?)
         }
     };
-    analyze_spectra(
+    Ok(analyze_spectra(
         spectra,
         &settings,
         Checks {
@@ -482,5 +493,5 @@ pub fn analyze_csv(
             saturation,
             warnings,
         },
-    )
+    )?)
 }

@@ -602,7 +602,7 @@ fn streamed_frf_equals_the_in_memory_frf_on_a_twin_record() {
         ],
     )
     .unwrap();
-    let mem = ambid::io::read_time_csv(&data, None).unwrap();
+    let mem = ambid::io::read_time(&data, &ambid::io::TimeOptions::default()).unwrap();
     let cfg = ambid_twin::random_rig(5).unwrap();
     let ctrl = ambid::io::controller::parse_controller_str(
         &ambid::io::controller::controller_toml_from_twin(&cfg),
@@ -683,7 +683,7 @@ fn streamed_frf_equals_the_in_memory_frf_across_blocks() {
         ],
     )
     .unwrap();
-    let mem = ambid::io::read_time_csv(&data, None).unwrap();
+    let mem = ambid::io::read_time(&data, &ambid::io::TimeOptions::default()).unwrap();
     let record = Record {
         r: mem.column("r").unwrap(),
         u: mem.column("u").unwrap(),

@@ -136,7 +136,8 @@ fn fit_cli_defaults_on_a_random_rig() {
         .as_f64()
         .unwrap();
     // the truth on the validation file's own columns
-    let v = ambid::io::read_time_csv(&d.join("v/data.csv"), None).unwrap();
+    let v =
+        ambid::io::read_time(&d.join("v/data.csv"), &ambid::io::TimeOptions::default()).unwrap();
     let twin = ambid_twin::Twin::new(ambid_twin::random_rig(21).unwrap()).unwrap();
     let f_truth = exact_loop_fit(&twin, v.column("r").unwrap(), v.column("y").unwrap());
     eprintln!("rig 21 through the CLI: {f_model:.3} % against the truth's {f_truth:.3} %");

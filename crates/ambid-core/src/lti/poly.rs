@@ -117,6 +117,17 @@ impl Structure {
         matches!(self, Structure::Arx | Structure::Oe | Structure::Ss)
     }
 
+    /// The structures fitted to time-domain data (`ambid fit --structure`, the workflow's
+    /// time-domain candidates): every one but the general polynomial form.
+    pub const TIME_DOMAIN: [Structure; 6] = [
+        Structure::Fir,
+        Structure::Arx,
+        Structure::Armax,
+        Structure::Oe,
+        Structure::Bj,
+        Structure::Ss,
+    ];
+
     /// The structures [`Structure::fits_frf`] accepts: ARX, OE, SS.
     pub const FRF: [Structure; 3] = [Structure::Arx, Structure::Oe, Structure::Ss];
 

@@ -47,10 +47,11 @@
 //! assert!(c.check_ts(1e-4).unwrap_err().to_string().contains("rediscretise"));
 //! ```
 
+use crate::error::{Context, Error, Result};
+use crate::workflow::FailureClass;
 use ambid_core::c64;
 use ambid_core::lti::{Discretisation, PidSpec, StateSpace, TransferFunction};
 use ambid_twin::TwinConfig;
-use anyhow::{anyhow, bail, Context, Result};
 use faer::Mat;
 use serde::de::DeserializeOwned;
 use serde::Deserialize;
@@ -86,14 +87,14 @@ impl ControllerFormat {
         match ext.as_deref() {
             Some("toml") => Ok(ControllerFormat::Toml),
             Some("json") => Ok(ControllerFormat::Json),
-            Some(other) => bail!(
+            Some(other) => Err(Error::other(format!(
                 "unsupported controller file extension `.{other}` in {}: use a .toml or .json file",
                 path.display()
-            ),
-            None => bail!(
+            ))),
+            None => Err(Error::other(format!(
                 "controller file {} has no extension: name it *.toml or *.json",
                 path.display()
-            ),
+            ))),
         }
     }
 }
@@ -148,25 +149,28 @@ impl ControllerModel {
     /// ```
     pub fn new(ss: StateSpace, description: impl Into<String>) -> Result<Self> {
         let ts = ss.ts().ok_or_else(|| {
-            anyhow!("a controller model must be discrete (have a sample time); discretise it first")
+            Error::other(
+                "a controller model must be discrete (have a sample time); discretise it first"
+                    .to_string(),
+            )
         })?;
         if ss.ninputs() != 1 || ss.noutputs() != 1 {
-            bail!(
+            return Err(Error::other(format!(
                 "the controller must be SISO (one input e = w - y, one output u), but the model \
                  has {} outputs × {} inputs",
                 ss.noutputs(),
                 ss.ninputs()
-            );
+            )));
         }
         if ss.order() > MAX_CONTROLLER_ORDER {
-            bail!(
+            return Err(Error::other(format!(
                 "the controller has {} states, more than the limit MAX_CONTROLLER_ORDER = \
                  {MAX_CONTROLLER_ORDER}: the loop computations with it (frequency response, \
                  closed-loop simulation and poles) grow as the square or cube of its order; \
                  reduce it (balanced truncation, fewer FIR taps or a lower sampling rate of the \
                  filter design)",
                 ss.order()
-            );
+            )));
         }
         Ok(Self {
             ss,
@@ -255,12 +259,14 @@ impl ControllerModel {
     /// ```
     pub fn check_ts(&self, data_ts: f64) -> Result<()> {
         self.check_ts_inner(data_ts)
-            .map_err(|e| crate::workflow::input(e).into())
+            .map_err(|e| Error::classified(FailureClass::Input, e))
     }
 
     fn check_ts_inner(&self, data_ts: f64) -> Result<()> {
         if !(data_ts.is_finite() && data_ts > 0.0) {
-            bail!("the data's sample time must be positive and finite, got {data_ts}");
+            return Err(Error::other(format!(
+                "the data's sample time must be positive and finite, got {data_ts}"
+            )));
         }
         let tc = self.ts;
         if (tc - data_ts).abs() > 1e-9 * tc.max(data_ts) {
@@ -268,7 +274,7 @@ impl ControllerModel {
                 Some(p) => format!("controller file {}", p.display()),
                 None => format!("controller ({})", self.description),
             };
-            bail!(
+            return Err(Error::other(format!(
                 "{who} has ts = {:e} s (fs {}) but the data are sampled at {:e} s (fs {}): \
                  rediscretise the controller at the data rate (for a `pid` file, set fs_hz or \
                  ts to the data's rate)",
@@ -276,7 +282,7 @@ impl ControllerModel {
                 fs_text(tc),
                 short(data_ts),
                 fs_text(data_ts)
-            );
+            )));
         }
         Ok(())
     }
@@ -295,12 +301,13 @@ impl ControllerModel {
 /// c.check_ts(5e-5).unwrap();
 /// ```
 pub fn read_controller(path: &Path) -> Result<ControllerModel> {
-    read_controller_inner(path).map_err(|e| crate::workflow::input(e).into())
+    read_controller_inner(path).map_err(|e| Error::classified(FailureClass::Input, e))
 }
 
 fn read_controller_inner(path: &Path) -> Result<ControllerModel> {
     let format = ControllerFormat::from_path(path)?;
     let text = std::fs::read_to_string(path)
+        .map_err(|e| Error::other(e.to_string()))
         .with_context(|| format!("cannot read controller file {}", path.display()))?;
     let mut model = parse_controller_str(&text, format)
         .with_context(|| format!("invalid controller file {}", path.display()))?;
@@ -387,16 +394,21 @@ pub fn parse_controller_str(s: &str, format: ControllerFormat) -> Result<Control
         "pid" => pid_model(decode(s, format)?),
         "tf" => tf_model(decode(s, format)?),
         "ss" => ss_model(decode(s, format)?),
-        other => bail!("unknown controller kind `{other}`: use \"pid\", \"tf\" or \"ss\""),
+        other => Err(Error::other(format!(
+            "unknown controller kind `{other}`: use \"pid\", \"tf\" or \"ss\""
+        ))),
     }
 }
 
 fn read_kind(s: &str, format: ControllerFormat) -> Result<String> {
-    let missing = || anyhow!("missing key `kind`: give kind = \"pid\", \"tf\" or \"ss\"");
-    let not_string = || anyhow!("`kind` must be a string: \"pid\", \"tf\" or \"ss\"");
+    let missing =
+        || Error::other("missing key `kind`: give kind = \"pid\", \"tf\" or \"ss\"".to_string());
+    let not_string =
+        || Error::other("`kind` must be a string: \"pid\", \"tf\" or \"ss\"".to_string());
     match format {
         ControllerFormat::Toml => {
-            let t: toml::Table = toml::from_str(s).map_err(|e| anyhow!("malformed TOML: {e}"))?;
+            let t: toml::Table =
+                toml::from_str(s).map_err(|e| Error::other(format!("malformed TOML: {e}")))?;
             match t.get("kind") {
                 None => Err(missing()),
                 Some(toml::Value::String(k)) => Ok(k.clone()),
@@ -404,10 +416,12 @@ fn read_kind(s: &str, format: ControllerFormat) -> Result<String> {
             }
         }
         ControllerFormat::Json => {
-            let v: serde_json::Value =
-                serde_json::from_str(s).map_err(|e| anyhow!("malformed JSON: {e}"))?;
+            let v: serde_json::Value = serde_json::from_str(s)
+                .map_err(|e| Error::other(format!("malformed JSON: {e}")))?;
             let obj = v.as_object().ok_or_else(|| {
-                anyhow!("a JSON controller file must hold one object {{\"kind\": …, …}}")
+                Error::other(
+                    "a JSON controller file must hold one object {\"kind\": …, …}".to_string(),
+                )
             })?;
             match obj.get("kind") {
                 None => Err(missing()),
@@ -420,35 +434,45 @@ fn read_kind(s: &str, format: ControllerFormat) -> Result<String> {
 
 fn decode<T: DeserializeOwned>(s: &str, format: ControllerFormat) -> Result<T> {
     match format {
-        ControllerFormat::Toml => toml::from_str(s).map_err(|e| anyhow!("{e}")),
-        ControllerFormat::Json => serde_json::from_str(s).map_err(|e| anyhow!("{e}")),
+        ControllerFormat::Toml => toml::from_str(s).map_err(|e| Error::other(format!("{e}"))),
+        ControllerFormat::Json => serde_json::from_str(s).map_err(|e| Error::other(format!("{e}"))),
     }
 }
 
 fn finite(key: &str, v: f64) -> Result<f64> {
     if !v.is_finite() {
-        bail!("`{key}` must be a finite number, got {v}");
+        return Err(Error::other(format!(
+            "`{key}` must be a finite number, got {v}"
+        )));
     }
     Ok(v)
 }
 
 fn sample_time(ts: Option<f64>, fs_hz: Option<f64>) -> Result<f64> {
     let t = match (ts, fs_hz) {
-        (Some(_), Some(_)) => bail!("give either `ts` (s) or `fs_hz` (Hz), not both"),
-        (None, None) => bail!("missing sample time: give `ts` (s) or `fs_hz` (Hz)"),
+        (Some(_), Some(_)) => {
+            return Err(Error::other(
+                "give either `ts` (s) or `fs_hz` (Hz), not both".to_string(),
+            ))
+        }
+        (None, None) => {
+            return Err(Error::other(
+                "missing sample time: give `ts` (s) or `fs_hz` (Hz)".to_string(),
+            ))
+        }
         (Some(t), None) => {
             finite("ts", t)?;
             t
         }
         (None, Some(f)) => {
             if finite("fs_hz", f)? <= 0.0 {
-                bail!("`fs_hz` must be positive, got {f}");
+                return Err(Error::other(format!("`fs_hz` must be positive, got {f}")));
             }
             1.0 / f
         }
     };
     if t <= 0.0 {
-        bail!("`ts` must be positive, got {t}");
+        return Err(Error::other(format!("`ts` must be positive, got {t}")));
     }
     Ok(t)
 }
@@ -458,17 +482,24 @@ fn pid_model(p: PidFile) -> Result<ControllerModel> {
     finite("kp", p.kp)?;
     let ki = match (p.ki, p.integral_corner_hz) {
         (Some(_), Some(_)) => {
-            bail!("give either `ki` (A/(m·s)) or `integral_corner_hz` (Hz), not both")
+            return Err(Error::other(
+                "give either `ki` (A/(m·s)) or `integral_corner_hz` (Hz), not both".to_string(),
+            ))
         }
-        (None, None) => bail!(
-            "missing integral action: give `ki` (A/(m·s)) or `integral_corner_hz` (Hz, \
+        (None, None) => {
+            return Err(Error::other(
+                "missing integral action: give `ki` (A/(m·s)) or `integral_corner_hz` (Hz, \
              Ki = Kp·2π·f_i); 0 means no integrator"
-        ),
+                    .to_string(),
+            ))
+        }
         (Some(ki), None) => finite("ki", ki)?,
         (None, Some(fi)) => {
             finite("integral_corner_hz", fi)?;
             if fi < 0.0 {
-                bail!("`integral_corner_hz` must be >= 0 (0: no integrator), got {fi}");
+                return Err(Error::other(format!(
+                    "`integral_corner_hz` must be >= 0 (0: no integrator), got {fi}"
+                )));
             }
             // the twin's expression, so a twin file reproduces its Ki bit for bit
             p.kp * 2.0 * std::f64::consts::PI * fi
@@ -479,7 +510,10 @@ fn pid_model(p: PidFile) -> Result<ControllerModel> {
         (Method::Tustin, Some(f)) => Discretisation::TustinPrewarp { f_hz: f },
         (Method::Zoh, None) => Discretisation::Zoh,
         (Method::Zoh, Some(_)) => {
-            bail!("`prewarp_hz` applies to method = \"tustin\" only; remove it for \"zoh\"")
+            return Err(Error::other(
+                "`prewarp_hz` applies to method = \"tustin\" only; remove it for \"zoh\""
+                    .to_string(),
+            ))
         }
     };
     let spec = PidSpec {
@@ -503,26 +537,32 @@ fn tf_model(t: TfFile) -> Result<ControllerModel> {
     let ts = sample_time(t.ts, t.fs_hz)?;
     for (key, p) in [("num", &t.num), ("den", &t.den)] {
         if let Some(i) = p.iter().position(|x| !x.is_finite()) {
-            bail!("`{key}[{i}]` must be a finite number, got {:e}", p[i]);
+            return Err(Error::other(format!(
+                "`{key}[{i}]` must be a finite number, got {:e}",
+                p[i]
+            )));
         }
     }
     if t.num.iter().all(|b| *b == 0.0) {
-        bail!("`num` is empty or all zero, so the controller would be C = 0");
+        return Err(Error::other(
+            "`num` is empty or all zero, so the controller would be C = 0".to_string(),
+        ));
     }
     if t.den.first().is_none_or(|a0| *a0 == 0.0) {
-        bail!(
+        return Err(Error::other(
             "`den[0]` (the coefficient of q^0) must be non-zero: with den[0] = 0 the controller \
              is not causal; list den in ascending powers of q^-1, den = [1, a1, a2, …]"
-        );
+                .to_string(),
+        ));
     }
     let n = t.num.len().max(t.den.len()).saturating_sub(1);
     if n > MAX_CONTROLLER_ORDER {
-        bail!(
+        return Err(Error::other(format!(
             "`num`/`den` have {} coefficients, a controller of order {n}: more than the limit \
              MAX_CONTROLLER_ORDER = {MAX_CONTROLLER_ORDER}; reduce it (balanced truncation, \
              fewer FIR taps or a lower sampling rate of the filter design)",
             n + 1
-        );
+        )));
     }
     let tf = TransferFunction::new(t.num, t.den, ts)?;
     let n = tf.num().len().max(tf.den().len()) - 1;
@@ -543,17 +583,17 @@ fn shape(key: &str, m: &[Vec<f64>]) -> Result<(usize, Option<usize>)> {
     let cols = m.first().map(Vec::len);
     for (i, row) in m.iter().enumerate() {
         if Some(row.len()) != cols {
-            bail!(
+            return Err(Error::other(format!(
                 "`{key}` row {i} has {} entries but row 0 has {}: every row needs the same length",
                 row.len(),
                 cols.unwrap_or(0)
-            );
+            )));
         }
         if let Some(j) = row.iter().position(|x| !x.is_finite()) {
-            bail!(
+            return Err(Error::other(format!(
                 "`{key}[{i}][{j}]` must be a finite number, got {:e}",
                 row[j]
-            );
+            )));
         }
     }
     Ok((m.len(), cols))
@@ -566,14 +606,18 @@ fn ss_model(f: SsFile) -> Result<ControllerModel> {
     let (pc, nc) = shape("c", &f.c)?;
     let (pd, md) = shape("d", &f.d)?;
     let siso = |what: String| {
-        anyhow!(
+        Error::other(format!(
             "the controller must be SISO (one input e = w - y, one output u), but {what}; \
              give one controller per file"
-        )
+        ))
     };
     match (pd, md) {
         (1, Some(1)) => {}
-        (0, _) => bail!("`d` is empty: give the 1×1 feed-through as d = [[d0]]"),
+        (0, _) => {
+            return Err(Error::other(
+                "`d` is empty: give the 1×1 feed-through as d = [[d0]]".to_string(),
+            ))
+        }
         (p, m) => return Err(siso(format!("d is {p}×{}", m.unwrap_or(0)))),
     }
     if pc != 1 {
@@ -584,22 +628,24 @@ fn ss_model(f: SsFile) -> Result<ControllerModel> {
     }
     let n = na;
     if n > MAX_CONTROLLER_ORDER {
-        bail!(
+        return Err(Error::other(format!(
             "`a` has {n} rows, a controller of order {n}: more than the limit \
              MAX_CONTROLLER_ORDER = {MAX_CONTROLLER_ORDER}; reduce it (balanced truncation)"
-        );
+        )));
     }
     if ca.is_some_and(|c| c != n) {
-        bail!(
+        return Err(Error::other(format!(
             "`a` must be square (n×n): it has {n} rows of {} entries",
             ca.unwrap_or(0)
-        );
+        )));
     }
     if nb != n {
-        bail!("`b` must have one row per state: a is {n}×{n} but b has {nb} rows");
+        return Err(Error::other(format!(
+            "`b` must have one row per state: a is {n}×{n} but b has {nb} rows"
+        )));
     }
     if nc.unwrap_or(0) != n {
-        bail!(
+        return Err(Error::other(format!(
             "`c` must have one column per state: a is {n}×{n} but c has {} columns{}",
             nc.unwrap_or(0),
             if n == 0 {
@@ -607,7 +653,7 @@ fn ss_model(f: SsFile) -> Result<ControllerModel> {
             } else {
                 ""
             }
-        );
+        )));
     }
     let a = Mat::from_fn(n, n, |i, j| f.a[i][j]);
     let b = Mat::from_fn(n, 1, |i, _| f.b[i][0]);

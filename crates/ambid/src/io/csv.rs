@@ -1,4 +1,5 @@
-//! CSV time data and FRF files.
+//! CSV time data (writing; reading is [`crate::io::time::read_time`], for every format) and FRF
+//! files.
 //!
 //! Time data: a header row, one column per signal, SI units. An optional `t` column holds the
 //! time in seconds; without it the sample rate must be given by the caller. Numbers are written
@@ -7,84 +8,13 @@
 //! FRF data: `f_hz, <q>_re, <q>_im, <q>_std, …` per quantity `q`, plus optional real columns such
 //! as `coh_ry`.
 
-use super::table::{read_table, ColumnRef, DataFileError, Format, ReadOptions};
-use anyhow::{anyhow, bail, Result};
+use super::table::{read_table, DataFileError, Format, ReadOptions};
+use crate::error::{Error, Result};
 use num_complex::Complex64;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-/// Time-domain data read from a file: named columns of equal length and the sample time.
-#[derive(Debug, Clone, PartialEq)]
-pub struct TimeData {
-    /// The file the data were read from (named in messages).
-    pub path: PathBuf,
-    /// Sample time in seconds.
-    pub ts: f64,
-    /// Column names in file order (without `t`).
-    pub names: Vec<String>,
-    /// Column values, same order as `names`.
-    pub columns: Vec<Vec<f64>>,
-}
-
-/// The largest magnitude a signal sample may have: sums of squares of up to 2²⁸ samples of
-/// this size stay far below `f64::MAX` (≈ 1.8·10³⁰⁸), so a larger (finite) value is refused at
-/// the reader instead of overflowing to ±inf inside a computation.
-pub const MAX_SAMPLE_MAGNITUDE: f64 = 1e100;
-
-impl TimeData {
-    /// The column called `name` with every sample finite: an error names the file, the column
-    /// and the 1-based data row (rows after the header; comment and blank lines are not
-    /// counted) of the first NaN, ±inf or missing value, or lists the available columns.
-    pub fn column(&self, name: &str) -> Result<&[f64]> {
-        let x = self.column_raw(name)?;
-        if let Some(k) = x.iter().position(|v| !v.is_finite()) {
-            return Err(DataFileError::Invalid {
-                path: self.path.clone(),
-                message: format!(
-                    "column `{name}`, data row {} (counted after the header, without comment lines): the value is {}; every sample must be a number for this command: repair or cut the record (`ambid frf` screens and repairs missing samples)",
-                    k + 1,
-                    if x[k].is_nan() { "missing or NaN".to_string() } else { format!("{}", x[k]) }
-                ),
-            }
-            .into());
-        }
-        Ok(x)
-    }
-
-    /// The column called `name` if the file has one, with every sample finite (as
-    /// [`TimeData::column`]: a NaN is an error, not a reason to drop the column).
-    pub fn optional_column(&self, name: &str) -> Result<Option<&[f64]>> {
-        if self.names.iter().any(|n| n == name) {
-            self.column(name).map(Some)
-        } else {
-            Ok(None)
-        }
-    }
-
-    /// The column called `name` as read, missing samples as NaN (for the screening of
-    /// `ambid frf`), or an error listing the available columns.
-    pub fn column_raw(&self, name: &str) -> Result<&[f64]> {
-        self.names
-            .iter()
-            .position(|n| n == name)
-            .map(|k| self.columns[k].as_slice())
-            .ok_or_else(|| {
-                anyhow!(DataFileError::Invalid {
-                    path: self.path.clone(),
-                    message: if self.names.iter().enumerate().all(|(j, n)| *n == format!("col{}", j + 1)) {
-                        format!(
-                            "unknown column `{name}`; the file has no header row, so its columns are {}: add a header row naming them (e.g. `t,r,u,y`), or select these names",
-                            self.names.join(", ")
-                        )
-                    } else {
-                        format!(
-                            "unknown column `{name}`; the file has columns: {}",
-                            self.names.join(", ")
-                        )
-                    },
-                })
-            })
-    }
-}
+/// The largest signal magnitude the reader accepts (defined with the reader, [`crate::io::time`]).
+pub use super::time::MAX_SAMPLE_MAGNITUDE;
 
 /// Writes equal-length columns with a header row. Errors on unequal lengths. The file is
 /// replaced atomically (written beside it, then renamed); commands use [`time_csv_bytes`] with
@@ -99,7 +29,7 @@ pub fn write_time_csv(path: &Path, columns: &[(&str, &[f64])]) -> Result<()> {
 /// The CSV text of [`write_time_csv`]. Errors on unequal lengths.
 pub fn time_csv_bytes(columns: &[(&str, &[f64])]) -> Result<Vec<u8>> {
     let mut v = Vec::new();
-    time_csv_to(&mut v, columns)?;
+    time_csv_to(&mut v, columns).map_err(|e| Error::other(e.to_string()))?;
     Ok(v)
 }
 
@@ -127,6 +57,11 @@ pub fn time_csv_to(w: &mut dyn std::io::Write, columns: &[(&str, &[f64])]) -> st
         w.write_record(&row).map_err(csv_io)?;
     }
     w.flush()
+}
+
+/// A CSV writer's error as an error of no class (its message kept).
+fn csv_error(e: ::csv::Error) -> Error {
+    Error::other(e.to_string())
 }
 
 /// A CSV writer's error as the I/O error it wraps.
@@ -175,20 +110,20 @@ pub fn frf_csv_bytes(
     extras: &[(&str, &[f64])],
 ) -> Result<Vec<u8>> {
     if let Some((name, v)) = extras.iter().find(|e| e.1.len() != f_hz.len()) {
-        bail!(
+        return Err(Error::other(format!(
             "FRF column `{name}` has {} values but there are {} frequencies",
             v.len(),
             f_hz.len()
-        );
+        )));
     }
     for q in quantities {
         if q.values.len() != f_hz.len() || q.std.is_some_and(|s| s.len() != f_hz.len()) {
-            bail!(
+            return Err(Error::other(format!(
                 "FRF quantity `{}` has {} values but there are {} frequencies",
                 q.name,
                 q.values.len(),
                 f_hz.len()
-            );
+            )));
         }
     }
     let mut w = ::csv::Writer::from_writer(Vec::new());
@@ -199,7 +134,7 @@ pub fn frf_csv_bytes(
         }
     }
     header.extend(extras.iter().map(|e| e.0.to_string()));
-    w.write_record(&header)?;
+    w.write_record(&header).map_err(csv_error)?;
     for (k, f) in f_hz.iter().enumerate() {
         let mut row = vec![format!("{f:.17e}")];
         for q in quantities {
@@ -209,70 +144,10 @@ pub fn frf_csv_bytes(
             row.push(format!("{:.17e}", q.std.map_or(0.0, |s| s[k])));
         }
         row.extend(extras.iter().map(|e| format!("{:.17e}", e.1[k])));
-        w.write_record(&row)?;
+        w.write_record(&row).map_err(csv_error)?;
     }
-    w.into_inner().map_err(|e| anyhow!("{}", e.error()))
-}
-
-/// Reads a time-data CSV (any delimited text file in the one text dialect of
-/// [`crate::io::table`], see `docs/data-files.md`: `#`/`%` comment lines, detected delimiter,
-/// quoted cells, a header row detected; without one the columns are `col1`, `col2`, …). A
-/// header names every column once. The
-/// sample time comes from the `t` column when present (it must be strictly increasing and
-/// uniform), otherwise from `fs_hz`. `NaN`, `inf` and empty fields in a signal column are read as
-/// missing samples (NaN): [`TimeData::column`] refuses them with the file, row and column,
-/// [`TimeData::column_raw`] keeps them for the screening of `ambid frf`; the `t` column must be
-/// finite. A finite value beyond ±[`MAX_SAMPLE_MAGNITUDE`] is refused.
-pub fn read_time_csv(path: &Path, fs_hz: Option<f64>) -> Result<TimeData> {
-    let table = read_text(path)?;
-    let n = table.len();
-    if n < 2 {
-        return Err(DataFileError::NoData {
-            path: path.to_path_buf(),
-            message: format!("needs at least 2 data rows, found {n}"),
-        }
-        .into());
-    }
-    let t_idx = table.names.iter().position(|h| h == "t");
-    let ts = match (t_idx, fs_hz) {
-        (Some(_), _) => table.sample_time(Some(&ColumnRef::Name("t".into())), None)?,
-        (None, Some(fs)) => table.sample_time(None, Some(fs))?,
-        (None, None) => {
-            return Err(DataFileError::SampleTime {
-                path: path.to_path_buf(),
-                message: "no `t` column; give the sample rate (--fs) to read this file".into(),
-            }
-            .into())
-        }
-    };
-    let mut names = Vec::new();
-    let mut columns = Vec::new();
-    for (k, (h, c)) in table.names.into_iter().zip(table.columns).enumerate() {
-        if Some(k) != t_idx {
-            if let Some(j) = c
-                .iter()
-                .position(|v| v.is_finite() && v.abs() > MAX_SAMPLE_MAGNITUDE)
-            {
-                return Err(DataFileError::Invalid {
-                    path: path.to_path_buf(),
-                    message: format!(
-                        "column `{h}`, data row {} (counted after the header, without comment lines): {:.6e} is beyond ±{MAX_SAMPLE_MAGNITUDE:e}, where sums of squares overflow; check the units of the column",
-                        j + 1,
-                        c[j]
-                    ),
-                }
-                .into());
-            }
-            names.push(h);
-            columns.push(c);
-        }
-    }
-    Ok(TimeData {
-        path: path.to_path_buf(),
-        ts,
-        names,
-        columns,
-    })
+    w.into_inner()
+        .map_err(|e| Error::other(format!("{}", e.error())))
 }
 
 /// A text file read in the one dialect (header detected: without one the columns are `col1`,
@@ -286,74 +161,6 @@ fn read_text(path: &Path) -> Result<crate::io::table::Table> {
         },
     )?;
     Ok(table)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn tmp(name: &str) -> std::path::PathBuf {
-        let dir = std::env::temp_dir().join(format!("ambid-io-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        dir.join(name)
-    }
-
-    #[test]
-    fn time_csv_round_trip_is_exact() {
-        let p = tmp("rt.csv");
-        let t: Vec<f64> = (0..50).map(|k| k as f64 * 5e-5).collect();
-        let y: Vec<f64> = (0..50).map(|k| (k as f64 * 0.37).sin() * 1e-6).collect();
-        write_time_csv(&p, &[("t", &t), ("y", &y)]).unwrap();
-        let d = read_time_csv(&p, None).unwrap();
-        assert_eq!(d.names, vec!["y"]);
-        assert_eq!(d.column("y").unwrap(), y.as_slice());
-        assert!((d.ts - 5e-5).abs() < 1e-18);
-        let e = d.column("x").unwrap_err().to_string();
-        assert!(e.contains("unknown column `x`") && e.contains("y"), "{e}");
-    }
-
-    #[test]
-    fn malformed_files_give_clear_errors() {
-        let p = tmp("bad.csv");
-        std::fs::write(&p, "t,y\n0,1\n0.1,abc\n").unwrap();
-        let e = read_time_csv(&p, None).unwrap_err().to_string();
-        assert!(
-            e.contains("line 3, column `y`: cannot read `abc` as a number"),
-            "{e}"
-        );
-        std::fs::write(&p, "y\n1\n2\n").unwrap();
-        let e = read_time_csv(&p, None).unwrap_err().to_string();
-        assert!(e.contains("--fs"), "{e}");
-        assert!(read_time_csv(&p, Some(100.0)).is_ok());
-        // missing or non-finite samples in a signal column are kept (as NaN) for the screening
-        std::fs::write(&p, "t,y\n0,1\n0.1,NaN\n0.2,\n").unwrap();
-        let d = read_time_csv(&p, None).unwrap();
-        let y = d.column_raw("y").unwrap();
-        assert!(y[1].is_nan() && y[2].is_nan());
-        // … and named with their row and column where a command needs every sample
-        let e = d.column("y").unwrap_err().to_string();
-        assert!(e.contains("column `y`, data row 2"), "{e}");
-        std::fs::write(&p, "t,y\n0,1\nNaN,2\n").unwrap();
-        let e = read_time_csv(&p, None).unwrap_err().to_string();
-        assert!(e.contains("non-finite value NaN in row 2"), "{e}");
-        // comment lines are comments, as in every reader (one dialect)
-        std::fs::write(&p, "# recorded\nt,y\n0,1\n% note\n0.1,2\n").unwrap();
-        assert_eq!(
-            read_time_csv(&p, None).unwrap().column("y").unwrap(),
-            [1.0, 2.0]
-        );
-        // a header naming a column twice is refused
-        std::fs::write(&p, "t,y,y\n0,1,2\n0.1,2,3\n").unwrap();
-        let e = read_time_csv(&p, None).unwrap_err().to_string();
-        assert!(e.contains("`y` twice"), "{e}");
-        // a finite value that would overflow sums of squares is refused with row and column
-        std::fs::write(&p, "t,y\n0,1\n0.1,1e308\n").unwrap();
-        let e = read_time_csv(&p, None).unwrap_err().to_string();
-        assert!(e.contains("column `y`, data row 2") && e.len() < 400, "{e}");
-        std::fs::write(&p, "t,y\n0,1\n0.1,2,3\n").unwrap();
-        assert!(read_time_csv(&p, None).is_err());
-        assert!(write_time_csv(&p, &[("a", &[1.0, 2.0]), ("b", &[1.0])]).is_err());
-    }
 }
 
 /// FRF data read from a file: the frequencies and every quantity and extra column.
@@ -386,10 +193,12 @@ impl FrfFile {
             self.col(&format!("{q}_std")),
         ) {
             (Some(re), Some(im), sd) => (re, im, sd),
-            _ => bail!(
-                "the FRF file has no quantity `{q}` (columns {q}_re, {q}_im); it has: {}",
-                self.quantities.join(", ")
-            ),
+            _ => {
+                return Err(Error::other(format!(
+                    "the FRF file has no quantity `{q}` (columns {q}_re, {q}_im); it has: {}",
+                    self.quantities.join(", ")
+                )))
+            }
         };
         let values = re
             .iter()
@@ -410,10 +219,10 @@ impl FrfFile {
     /// A real extra column such as `coh_ry`.
     pub fn extra(&self, name: &str) -> Result<&[f64]> {
         self.col(name).ok_or_else(|| {
-            anyhow!(
+            Error::other(format!(
                 "the FRF file has no column `{name}`; it has: {}",
                 self.names.join(", ")
-            )
+            ))
         })
     }
 }
@@ -425,13 +234,13 @@ pub fn read_frf_csv(path: &Path) -> Result<FrfFile> {
     let table = read_text(path)?;
     let (header, mut cols) = (table.names, table.columns);
     if header.first().map(String::as_str) != Some("f_hz") {
-        bail!(
+        return Err(Error::other(format!(
             "{}: an FRF file starts with the column `f_hz` (got {}); see docs/formats.md",
             path.display(),
             header
                 .first()
                 .map_or("no column".to_string(), |h| format!("`{h}`"))
-        );
+        )));
     }
     for (h, c) in header.iter().zip(&cols) {
         if let Some(k) = c.iter().position(|v| !v.is_finite()) {
@@ -446,13 +255,13 @@ pub fn read_frf_csv(path: &Path) -> Result<FrfFile> {
         }
     }
     if let Some(k) = (1..cols[0].len()).find(|&k| cols[0][k] <= cols[0][k - 1]) {
-        bail!(
+        return Err(Error::other(format!(
             "{}: f_hz must increase strictly (data row {} has {:.6e} after {:.6e})",
             path.display(),
             k + 1,
             cols[0][k],
             cols[0][k - 1]
-        );
+        )));
     }
     let quantities = header
         .iter()

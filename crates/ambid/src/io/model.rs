@@ -1,8 +1,9 @@
 //! Model files (JSON, `docs/formats.md`): one object per model, polynomial or state space, with
 //! the parameter standard deviations and fit statistics in `meta`.
 
+use crate::error::{Context, Error, Result};
+use crate::workflow::FailureClass;
 use ambid_core::lti::{PolyModel, StateSpace};
-use anyhow::{Context, Result};
 use serde_json::{json, Value};
 use std::path::Path;
 
@@ -46,14 +47,16 @@ pub fn write_model_json(path: &Path, model: &Value) -> Result<()> {
 
 /// The pretty JSON text of a model object.
 pub fn model_json_bytes(model: &Value) -> Result<Vec<u8>> {
-    Ok(serde_json::to_string_pretty(model)?.into_bytes())
+    Ok(serde_json::to_string_pretty(model)
+        .map_err(|e| Error::other(e.to_string()))?
+        .into_bytes())
 }
 
 /// Reads a model file written by `ambid fit` (`kind = "state_space"` or `"polynomial"`) as a
 /// discrete state-space model of its deterministic part $G$ (input → output). Every error
 /// names the file and the field, and is an input failure (exit 3).
 pub fn read_model_json(path: &Path) -> Result<StateSpace> {
-    read_model_inner(path).map_err(|e| crate::workflow::input(e).into())
+    read_model_inner(path).map_err(|e| Error::classified(FailureClass::Input, e))
 }
 
 /// The kinds of model file.
@@ -127,7 +130,7 @@ pub fn read_model_file(path: &Path) -> Result<ModelFile> {
             names,
         })
     })()
-    .map_err(|e| crate::workflow::input(e).into())
+    .map_err(|e| Error::classified(FailureClass::Input, e))
 }
 
 /// Writes the MATLAB script, `.mat` and `.npz` exports (`docs/export.md`) of the model file
@@ -139,9 +142,14 @@ pub fn write_model_exports(json: &Path) -> Result<Vec<std::path::PathBuf>> {
     let m = read_model_file(json)?;
     let em = m.export_model();
     let files: [(&str, Vec<u8>); 3] = [
-        ("m", matlab_script(em, &m.names)?.into_bytes()),
-        ("mat", mat_bytes(em, &m.names)?),
-        ("npz", npz_bytes(em, &m.names)?),
+        (
+            "m",
+            matlab_script(em, &m.names)
+                .map_err(export_error)?
+                .into_bytes(),
+        ),
+        ("mat", mat_bytes(em, &m.names).map_err(export_error)?),
+        ("npz", npz_bytes(em, &m.names).map_err(export_error)?),
     ];
     let mut set = crate::io::output::OutputSet::new(true);
     let mut out = Vec::new();
@@ -154,91 +162,109 @@ pub fn write_model_exports(json: &Path) -> Result<Vec<std::path::PathBuf>> {
     Ok(out)
 }
 
+/// An export error as an error of no class (its message kept, as before).
+fn export_error(e: crate::io::export::ExportError) -> Error {
+    Error::other(e.to_string())
+}
+
 fn read_model_value(path: &Path) -> Result<(Parsed, Value)> {
-    use anyhow::{anyhow, bail};
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| Error::other(e.to_string()))
+        .with_context(|| format!("cannot read {}", path.display()))?;
     let v: Value = serde_json::from_str(&text)
+        .map_err(|e| Error::other(e.to_string()))
         .with_context(|| format!("{}: not valid JSON", path.display()))?;
     if !v.is_object() {
-        bail!(
+        return Err(Error::other(format!(
             "model file {}: expected a JSON object with `kind` ({KINDS}), `ts` and the model's arrays, as `ambid fit` writes it; got {}",
             path.display(),
             json_kind(&v)
-        );
+        )));
     }
     let kind = match v.get("kind") {
-        None => bail!(
-            "model file {}: missing field `kind` (expected {KINDS})",
-            path.display()
-        ),
+        None => {
+            return Err(Error::other(format!(
+                "model file {}: missing field `kind` (expected {KINDS})",
+                path.display()
+            )))
+        }
         Some(Value::String(k)) => k.as_str(),
-        Some(other) => bail!(
-            "model file {}: field `kind` must be a string, {KINDS}; got {}",
-            path.display(),
-            json_kind(other)
-        ),
+        Some(other) => {
+            return Err(Error::other(format!(
+                "model file {}: field `kind` must be a string, {KINDS}; got {}",
+                path.display(),
+                json_kind(other)
+            )))
+        }
     };
     if kind != "state_space" && kind != "polynomial" {
-        bail!(
+        return Err(Error::other(format!(
             "model file {}: unknown model kind \"{kind}\" (expected {KINDS})",
             path.display()
-        );
+        )));
     }
     let ts = match v.get("ts") {
-        None => bail!(
-            "model file {}: missing field `ts` (the sample time in s of the discrete model)",
-            path.display()
-        ),
+        None => {
+            return Err(Error::other(format!(
+                "model file {}: missing field `ts` (the sample time in s of the discrete model)",
+                path.display()
+            )))
+        }
         Some(t) => t
             .as_f64()
             .filter(|t| t.is_finite() && *t > 0.0)
             .ok_or_else(|| {
-                anyhow!(
+                Error::other(format!(
                     "model file {}: field `ts` must be a positive sample time in s; got {}",
                     path.display(),
                     json_kind(t)
-                )
+                ))
             })?,
     };
     let vec_of = |key: &str| -> Result<Vec<f64>> {
         v[key]
             .as_array()
             .ok_or_else(|| {
-                anyhow!(
+                Error::other(format!(
                     "model file {}: `{key}` must be an array of numbers",
                     path.display()
-                )
+                ))
             })?
             .iter()
             .map(|x| {
                 x.as_f64().ok_or_else(|| {
-                    anyhow!("model file {}: `{key}` holds a non-number", path.display())
+                    Error::other(format!(
+                        "model file {}: `{key}` holds a non-number",
+                        path.display()
+                    ))
                 })
             })
             .collect()
     };
     let mat_of = |key: &str| -> Result<faer::Mat<f64>> {
         let rows = v[key].as_array().ok_or_else(|| {
-            anyhow!(
+            Error::other(format!(
                 "model file {}: `{key}` must be an array of rows",
                 path.display()
-            )
+            ))
         })?;
         let data: Vec<Vec<f64>> = rows
             .iter()
             .map(|r| {
                 r.as_array()
                     .ok_or_else(|| {
-                        anyhow!(
+                        Error::other(format!(
                             "model file {}: `{key}` must be an array of rows",
                             path.display()
-                        )
+                        ))
                     })?
                     .iter()
                     .map(|x| {
                         x.as_f64().ok_or_else(|| {
-                            anyhow!("model file {}: `{key}` holds a non-number", path.display())
+                            Error::other(format!(
+                                "model file {}: `{key}` holds a non-number",
+                                path.display()
+                            ))
                         })
                     })
                     .collect::<Result<Vec<f64>>>()
@@ -246,10 +272,10 @@ fn read_model_value(path: &Path) -> Result<(Parsed, Value)> {
             .collect::<Result<_>>()?;
         let nc = data.first().map_or(0, Vec::len);
         if data.iter().any(|r| r.len() != nc) {
-            bail!(
+            return Err(Error::other(format!(
                 "model file {}: the rows of `{key}` differ in length",
                 path.display()
-            );
+            )));
         }
         Ok(faer::Mat::from_fn(data.len(), nc, |i, j| data[i][j]))
     };
@@ -317,13 +343,15 @@ fn json_kind(v: &Value) -> String {
 /// The Kalman gain $K$ of an innovation-form model file (`meta.pem.kalman_gain`, written by
 /// `ambid fit --structure ss` with the prediction focus), if present.
 pub fn read_kalman_gain(path: &Path) -> Result<Option<Vec<f64>>> {
-    read_kalman_inner(path).map_err(|e| crate::workflow::input(e).into())
+    read_kalman_inner(path).map_err(|e| Error::classified(FailureClass::Input, e))
 }
 
 fn read_kalman_inner(path: &Path) -> Result<Option<Vec<f64>>> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| Error::other(e.to_string()))
+        .with_context(|| format!("cannot read {}", path.display()))?;
     let v: Value = serde_json::from_str(&text)
+        .map_err(|e| Error::other(e.to_string()))
         .with_context(|| format!("{}: not valid JSON", path.display()))?;
     Ok(v["meta"]["pem"]["kalman_gain"]
         .as_array()

@@ -27,8 +27,8 @@
 //! assert_eq!(s.next_block(&cols, 2, &mut out).unwrap(), 0);
 //! ```
 
+use crate::error::{Error, Result};
 use crate::io::table::{ReadOptions, TextRows};
-use anyhow::{anyhow, Result};
 use std::fs::File;
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
@@ -95,11 +95,11 @@ impl RowStream {
             .iter()
             .map(|w| {
                 self.names.iter().position(|n| n == w).ok_or_else(|| {
-                    anyhow!(
+                    Error::other(format!(
                         "{}: unknown column `{w}`; the file has columns: {}",
                         self.path.display(),
                         self.names.join(", ")
-                    )
+                    ))
                 })
             })
             .collect()

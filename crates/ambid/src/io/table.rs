@@ -53,6 +53,15 @@ impl Format {
         }
     }
 
+    /// The format [`read_table`] reads `path` in: `opts_format` when given, else from the
+    /// extension, else from the file's first bytes.
+    pub fn of_file(path: &Path, opts_format: Option<Format>) -> Result<Format, DataFileError> {
+        match opts_format {
+            Some(f) => Ok(f),
+            None => Format::detect(path),
+        }
+    }
+
     /// The format of a file: from its extension, else from its first bytes (NumPy, zip, MATLAB
     /// and Parquet signatures; anything else is read as text).
     fn detect(path: &Path) -> Result<Format, DataFileError> {

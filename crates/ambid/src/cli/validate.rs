@@ -1,9 +1,10 @@
 //! `ambid validate`: a model (usually of the unstable plant) checked on an independent record,
 //! always through the closed loop with the real controller.
 
+use super::args::{DataFileArgs, ExcitationColumn, InputColumn, OutputColumn};
 use ambid::io::csv::read_frf_csv;
 use ambid::io::model::{read_kalman_gain, read_model_json};
-use ambid::io::{read_controller, read_time_csv, time_csv_to, OutputSet};
+use ambid::io::{read_controller, time_csv_to, OutputSet};
 use ambid::validation::{
     consistency, innovation_residuals, innovation_summary, residual_summary, validate_closed_loop,
     MeasuredLoop, ValidationSettings,
@@ -15,29 +16,28 @@ use serde_json::json;
 use std::path::PathBuf;
 
 #[derive(Args)]
+#[command(mut_arg("excitation", |a| a.help("Column of the excitation injected at the controller output")))]
+#[command(mut_arg("output", |a| a.help("Column of the displacement")))]
+#[command(mut_arg("input", |a| a.help("Column of the controller output u, the plant input (current command); `--input` in every command")))]
 pub struct ValidateArgs {
     /// Model JSON written by `ambid fit` (its input is the plant input u, its output y).
     model: PathBuf,
-    /// Validation record (time CSV) with the excitation, the output and the current; an optional
-    /// `w` column is the position reference.
+    /// Validation record (CSV, .npy, .npz, .mat or .parquet; docs/data-files.md) with the
+    /// excitation, the output and the plant input; an optional `w` column is the position
+    /// reference.
     #[arg(long)]
     data: PathBuf,
     /// Controller file (TOML/JSON) of the loop.
     #[arg(long)]
     controller: PathBuf,
-    /// Sample rate in Hz (when the file has no `t` column).
-    #[arg(long)]
-    fs: Option<f64>,
-    /// Column of the excitation injected at the controller output.
-    #[arg(long, default_value = "r")]
-    excitation: String,
-    /// Column of the displacement.
-    #[arg(long, default_value = "y")]
-    output: String,
-    /// Column of the controller output u, the plant input (current command); `--input` in every
-    /// command.
-    #[arg(long, default_value = "u")]
-    input: String,
+    #[command(flatten)]
+    file: DataFileArgs,
+    #[command(flatten)]
+    r: ExcitationColumn,
+    #[command(flatten)]
+    y: OutputColumn,
+    #[command(flatten)]
+    u: InputColumn,
     /// Deprecated spelling of --input (`--current` names the coil current i in `frf`).
     #[arg(long, hide = true, conflicts_with = "input")]
     current: Option<String>,
@@ -62,8 +62,8 @@ pub struct ValidateArgs {
     /// How the simulated loop and the predictors start: from the initial state that best explains
     /// the record (the loop was running before the first sample; MATLAB `compare`'s default) or
     /// from rest.
-    #[arg(long, value_enum, default_value_t = crate::cli_fit::X0Arg::Estimate)]
-    x0: crate::cli_fit::X0Arg,
+    #[arg(long, value_enum, default_value_t = super::common::X0Arg::Estimate)]
+    x0: super::common::X0Arg,
     /// Output directory (summary.json, timeseries.csv, residuals.csv).
     #[arg(long, default_value = "validation")]
     out: PathBuf,
@@ -81,28 +81,28 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
     }
     let model = read_model_json(&a.model)?;
     let ctrl = read_controller(&a.controller)?;
-    let d = read_time_csv(&a.data, a.fs)?;
+    let d = a.file.read(&a.data)?;
     let ts = d.ts;
     ctrl.check_ts(ts)?;
-    let y = d.column(&a.output)?;
+    let y = d.column(&a.y.output)?;
     let u_col = match &a.current {
         Some(c) => {
-            crate::cli_args::deprecated(
+            super::args::deprecated(
                 &format!("validate --current {c}"),
                 &format!("--input {c} (the controller output u)"),
             );
             c
         }
-        None => &a.input,
+        None => &a.u.input,
     };
     let u = d.column(u_col)?;
     let r = d
-        .optional_column(&a.excitation)?
+        .optional_column(&a.r.excitation)?
         .filter(|r| r.iter().any(|v| *v != 0.0));
     let zeros = vec![0.0; y.len()];
     let w = d.optional_column("w")?.unwrap_or(&zeros);
     if r.is_none() && w.iter().all(|v| *v == 0.0) {
-        return Err(ambid::workflow::input(anyhow::anyhow!("the record has neither an excitation column `{}` nor a reference `w`: nothing drives the loop", a.excitation)).into());
+        return Err(ambid::workflow::input(anyhow::anyhow!("the record has neither an excitation column `{}` nor a reference `w`: nothing drives the loop", a.r.excitation)).into());
     }
     // the residual lags: given, or from the dynamics as in the workflow's validation step
     let lags = match a.lags {

@@ -10,8 +10,131 @@
 //! - **Columns**: `--excitation` (r), `--input` (the controller output u, the plant input),
 //!   `--output` (y), `--current` (the coil current i) in every command that reads them.
 //!
+//!
+//! The argument groups shared by several commands are defined here once and flattened into
+//! each command (`#[command(flatten)]`): [`DataFileArgs`] (the reader: `--fs`, `--format`,
+//! `--variable`, `--time`), the data columns [`ExcitationColumn`] (`--excitation`, r),
+//! [`InputColumn`] (`--input`, u), [`OutputColumn`] (`--output`, y), [`CurrentColumn`]
+//! (`--current`, i), [`BandArg`]
+//! (`--band`) and [`Force`] (`--force`). A command whose option says more than the shared
+//! help (its default band, a MIMO list) keeps its own text with `mut_arg`.
+//!
 //! Deprecated spellings keep working and print one `note:` line on stderr naming the new one;
 //! malformed values are usage errors (exit code 2) naming the option.
+
+use ambid::io::table::{ColumnRef, Format, ReadOptions};
+use ambid::io::{read_time, TimeData, TimeOptions};
+use clap::Args;
+use std::path::Path;
+
+/// How the data files of a command are read (every command that reads a record: `frf`, `fit`,
+/// `order`, `validate`, `compare-models`, `bla`, `study amplitude`): one reader for every format
+/// ([`ambid::io::time::read_time`], docs/data-files.md).
+#[derive(Args, Clone, Debug, Default)]
+pub struct DataFileArgs {
+    /// Sample rate in Hz (when the file has no `t` column).
+    #[arg(long)]
+    pub fs: Option<f64>,
+    #[command(flatten)]
+    pub file: FileFormatArgs,
+}
+
+/// The format options of the data files (without the sample rate, for commands whose `--fs`
+/// means more).
+#[derive(Args, Clone, Debug, Default)]
+pub struct FileFormatArgs {
+    /// Format of the data files: csv (any delimited text), npy, npz, mat (v5) or parquet
+    /// (default: from the extension, else from the file's first bytes).
+    #[arg(long, value_parser = parse_format)]
+    pub format: Option<Format>,
+    /// `.mat`/`.npz` data files: read only this variable (a 2-D variable `v` gives the columns
+    /// `v1` … `vk`).
+    #[arg(long)]
+    pub variable: Option<String>,
+    /// The time column of the data files, seconds: a name, or `#k` for the k-th column
+    /// (default: the column `t` when there is one).
+    #[arg(long)]
+    pub time: Option<String>,
+}
+
+fn parse_format(s: &str) -> Result<Format, String> {
+    s.parse()
+}
+
+impl FileFormatArgs {
+    /// The reader's options with sample rate `fs_hz`.
+    pub fn options(&self, fs_hz: Option<f64>) -> TimeOptions {
+        TimeOptions {
+            fs_hz,
+            time: self.time.as_deref().map(ColumnRef::parse),
+            read: ReadOptions {
+                format: self.format,
+                variable: self.variable.clone(),
+                ..ReadOptions::default()
+            },
+        }
+    }
+
+    /// Reads the record `path` with sample rate `fs_hz` (for a file without a time column).
+    pub fn read(&self, path: &Path, fs_hz: Option<f64>) -> anyhow::Result<TimeData> {
+        Ok(read_time(path, &self.options(fs_hz))?)
+    }
+}
+
+impl DataFileArgs {
+    /// Reads the record `path` with `--fs`.
+    pub fn read(&self, path: &Path) -> anyhow::Result<TimeData> {
+        self.file.read(path, self.fs)
+    }
+}
+
+/// The column of the excitation r.
+#[derive(Args, Clone, Debug)]
+pub struct ExcitationColumn {
+    /// Column of the excitation r (a name, or `#k` for the k-th column of the file).
+    #[arg(long, default_value = "r")]
+    pub excitation: String,
+}
+
+/// The column of the plant input u (the controller output).
+#[derive(Args, Clone, Debug)]
+pub struct InputColumn {
+    /// Column of the controller output u, the plant input (a name, or `#k`).
+    #[arg(long, default_value = "u")]
+    pub input: String,
+}
+
+/// The column of the measured output y.
+#[derive(Args, Clone, Debug)]
+pub struct OutputColumn {
+    /// Column of the measured output y (a name, or `#k`).
+    #[arg(long, default_value = "y")]
+    pub output: String,
+}
+
+/// The coil-current column i.
+#[derive(Args, Clone, Debug)]
+pub struct CurrentColumn {
+    /// Column of the coil current (saturation check); used when present.
+    #[arg(long, default_value = "i")]
+    pub current: String,
+}
+
+/// A frequency band `f_min:f_max` in Hz.
+#[derive(Args, Clone, Debug)]
+pub struct BandArg {
+    /// Band, Hz, as `f_min:f_max`.
+    #[arg(long, value_parser = parse_band)]
+    pub band: Option<(f64, f64)>,
+}
+
+/// Replace outputs that exist.
+#[derive(Args, Clone, Debug)]
+pub struct Force {
+    /// Replace the output file if it exists.
+    #[arg(long)]
+    pub force: bool,
+}
 
 /// Prints the one-line deprecation note of an old spelling on stderr.
 pub(crate) fn deprecated(old: &str, new: &str) {
@@ -145,4 +268,14 @@ mod tests {
         assert_eq!(format!("{}", clean(0.1 + 0.2)), "0.3");
         assert_eq!(format!("{}", clean(1.0 / 3.0)), "0.333333333333");
     }
+}
+
+/// The value parser of a model-structure option: one of `allowed` by its name
+/// ([`ambid_core::lti::Structure`]'s `FromStr`), the names listed in `--help`.
+pub(crate) fn structure_parser(
+    allowed: &'static [ambid_core::lti::Structure],
+) -> impl clap::builder::TypedValueParser<Value = ambid_core::lti::Structure> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(allowed.iter().map(|s| s.name()))
+        .try_map(|s: String| s.parse::<ambid_core::lti::Structure>())
 }

@@ -1,23 +1,22 @@
 //! `ambid frf` and `ambid study`: argument parsing and file output over `ambid::analysis` and
 //! `ambid::study`.
 
+use super::args::{
+    BandArg, CurrentColumn, DataFileArgs, ExcitationColumn, Force, InputColumn, OutputColumn,
+};
+use super::common::plant_unit;
 use ambid::analysis::{analyze, FrfAnalysis, FrfMethod, FrfSettings, Record};
-use ambid::experiment::ExcitationPlan;
 use ambid::frf_stream::{analyze_csv, StreamColumns};
 use ambid::io::output::write_file;
-use ambid::io::{frf_csv_bytes, read_controller, read_time_csv, FrfColumn, OutputSet};
-use ambid::study::{
-    amplitude_from_records, amplitude_on_twin, operating_point_on_twin, seed_cases, seed_levels,
-    LevelRecord, Recommendation, TwinAmplitudeStudy,
-};
+use ambid::io::table::Format;
+use ambid::io::{frf_csv_bytes, read_controller, FrfColumn, OutputSet};
 use ambid_core::frf::resonance::{find_resonances_reliable, order_from_peaks, ResonanceOptions};
 use ambid_core::frf::window::Window;
-use ambid_twin::{Mode, TwinConfig};
 use anyhow::{Context, Result};
-use clap::{Args, Subcommand, ValueEnum};
+use clap::{Args, ValueEnum};
 use std::path::{Path, PathBuf};
 
-pub(crate) use crate::cli_args::parse_band;
+use super::args::parse_band;
 
 #[derive(Clone, Copy, ValueEnum)]
 pub enum WindowArg {
@@ -41,24 +40,22 @@ impl From<WindowArg> for Window {
 }
 
 #[derive(Args)]
+#[command(mut_arg("band", |a| a.help("Band of the written FRF, Hz (f_min:f_max; default: derived from the excitation, the lines within 10 dB of its strongest; docs/frf.md)")))]
+#[command(mut_arg("input", |a| a.help("Column of the controller output u (including r)")))]
 pub struct FrfArgs {
-    /// Time-data CSV (header row; optional `t` column in seconds).
+    /// Time-data file (CSV with a header row and an optional `t` column in seconds, or .npy,
+    /// .npz, .mat, .parquet; docs/data-files.md).
     data: PathBuf,
-    /// Sample rate in Hz (needed when the file has no `t` column).
-    #[arg(long)]
-    fs: Option<f64>,
-    /// Column of the excitation r.
-    #[arg(long, default_value = "r")]
-    excitation: String,
-    /// Column of the controller output u (including r).
-    #[arg(long, default_value = "u")]
-    input: String,
-    /// Column of the measured output y.
-    #[arg(long, default_value = "y")]
-    output: String,
-    /// Column of the coil current (saturation check); used when present.
-    #[arg(long, default_value = "i")]
-    current: String,
+    #[command(flatten)]
+    file: DataFileArgs,
+    #[command(flatten)]
+    r: ExcitationColumn,
+    #[command(flatten)]
+    u: InputColumn,
+    #[command(flatten)]
+    y: OutputColumn,
+    #[command(flatten)]
+    cur: CurrentColumn,
     /// Controller file (TOML/JSON: pid, tf or ss) for the indirect plant estimate.
     #[arg(long)]
     controller: Option<PathBuf>,
@@ -81,10 +78,8 @@ pub struct FrfArgs {
     /// Leading samples dropped as transient (Welch).
     #[arg(long, default_value_t = 0)]
     skip_samples: usize,
-    /// Band of the written FRF, Hz (f_min,f_max; default: derived from the excitation, the
-    /// lines within 10 dB of its strongest; docs/frf.md).
-    #[arg(long, value_parser = parse_band)]
-    band: Option<(f64, f64)>,
+    #[command(flatten)]
+    b: BandArg,
     /// Band of the quality averages and the resonance search, Hz (default: derived from the
     /// excitation, where it is within 3 dB of its strongest line).
     #[arg(long, value_parser = parse_band)]
@@ -124,9 +119,8 @@ pub struct FrfArgs {
     /// Output FRF CSV.
     #[arg(long, default_value = "frf.csv")]
     out: PathBuf,
-    /// Replace the output file if it exists.
-    #[arg(long)]
-    force: bool,
+    #[command(flatten)]
+    f: Force,
 }
 
 /// FRF estimator choice.
@@ -236,27 +230,24 @@ fn print_quality(a: &FrfAnalysis) {
     }
 }
 
-/// The unit of a plant magnitude from the declared units of y and u.
-pub(crate) fn plant_unit(y: Option<&str>, u: Option<&str>) -> String {
-    match (y, u) {
-        (Some(y), Some(u)) => format!("{y}/{u}"),
-        (Some(y), None) => format!("{y}/(unit of u not given)"),
-        (None, Some(u)) => format!("(unit of y not given)/{u}"),
-        (None, None) => "(unit not given)".into(),
-    }
-}
-
 pub fn frf(a: FrfArgs) -> Result<()> {
-    OutputSet::check(&a.out, a.force)?;
-    let res = if a.method == MethodArg::Auto && a.noise.is_none() {
+    OutputSet::check(&a.out, a.f.force)?;
+    // one reader for every format; a text record with Welch or period averaging is streamed
+    // (the same arithmetic in bounded memory, frf_stream), everything else is read whole
+    let streamable = Format::of_file(&a.data, a.file.file.format)? == Format::Text
+        && a.file.file.time.is_none()
+        && [&a.r.excitation, &a.u.input, &a.y.output, &a.cur.current]
+            .iter()
+            .all(|c| !c.starts_with('#'));
+    let res = if a.method == MethodArg::Auto && a.noise.is_none() && streamable {
         // Welch and period averaging stream the file: memory for one block, segment or period
         let cols = StreamColumns {
-            r: &a.excitation,
-            u: &a.input,
-            y: &a.output,
-            i: Some(&a.current),
+            r: &a.r.excitation,
+            u: &a.u.input,
+            y: &a.y.output,
+            i: Some(&a.cur.current),
         };
-        analyze_csv(&a.data, &cols, a.fs, |n, ts| frf_settings(&a, n, ts))?
+        analyze_csv(&a.data, &cols, a.file.fs, |n, ts| frf_settings(&a, n, ts))?
     } else {
         match frf_in_memory(&a)? {
             Some(res) => res,
@@ -269,8 +260,8 @@ pub fn frf(a: FrfArgs) -> Result<()> {
 /// The FRF with the whole record in memory (LPM/LRM, or a noise record for the SNR). `None`
 /// when a local method wrote its output itself.
 fn frf_in_memory(a: &FrfArgs) -> Result<Option<FrfAnalysis>> {
-    let data = read_time_csv(&a.data, a.fs)?;
-    ambid::analysis::check_fs_matches(a.fs, data.ts)?;
+    let data = a.file.read(&a.data)?;
+    ambid::analysis::check_fs_matches(a.file.fs, data.ts)?;
     // missing samples are kept for the screening; without it every sample must be a number
     let col = |name: &str| {
         if a.no_screen {
@@ -279,10 +270,10 @@ fn frf_in_memory(a: &FrfArgs) -> Result<Option<FrfAnalysis>> {
             data.column_raw(name)
         }
     };
-    let r = col(&a.excitation)?;
-    let u = col(&a.input)?;
-    let y = col(&a.output)?;
-    let i = data.column_raw(&a.current).ok();
+    let r = col(&a.r.excitation)?;
+    let u = col(&a.u.input)?;
+    let y = col(&a.y.output)?;
+    let i = data.column_raw(&a.cur.current).ok();
     let fs = 1.0 / data.ts;
     if matches!(a.method, MethodArg::Lpm | MethodArg::Lrm) {
         frf_local(a, r, u, y, fs)?;
@@ -291,8 +282,8 @@ fn frf_in_memory(a: &FrfArgs) -> Result<Option<FrfAnalysis>> {
     let settings = frf_settings(a, r.len(), data.ts)?;
     let noise = match &a.noise {
         Some(p) => {
-            let d = read_time_csv(p, a.fs.or(Some(fs)))?;
-            Some(d.column_raw(&a.output)?.to_vec())
+            let d = a.file.file.read(p, a.file.fs.or(Some(fs)))?;
+            Some(d.column_raw(&a.y.output)?.to_vec())
         }
         None => None,
     };
@@ -304,12 +295,11 @@ fn frf_in_memory(a: &FrfArgs) -> Result<Option<FrfAnalysis>> {
 }
 
 /// The settings of `a` for a record of `n` samples at sample time `ts` (reads the controller).
-fn frf_settings(a: &FrfArgs, n: usize, ts: f64) -> Result<FrfSettings> {
+fn frf_settings(a: &FrfArgs, n: usize, ts: f64) -> ambid::error::Result<FrfSettings> {
     if let Some(k) = a.nperseg.filter(|&k| k > n) {
-        return Err(ambid::workflow::usage(anyhow::anyhow!(
+        return Err(ambid::error::Error::usage(format!(
             "--nperseg {k} is longer than the record ({n} samples); give at most {n}, or leave it out to derive it from the record length"
-        ))
-        .into());
+        )));
     }
     let method = match a.period_samples {
         Some(p) => FrfMethod::Periodic {
@@ -333,7 +323,7 @@ fn frf_settings(a: &FrfArgs, n: usize, ts: f64) -> Result<FrfSettings> {
     };
     Ok(FrfSettings {
         method,
-        band: a.band,
+        band: a.b.band,
         quality_band: a.quality_band,
         band_rule: Default::default(),
         rel_threshold: 1e-6,
@@ -394,7 +384,7 @@ fn report_and_write(a: &FrfArgs, res: &FrfAnalysis) -> Result<()> {
         }
         Err(e) => println!("plant resonance peaks: not searched ({e})"),
     }
-    write_analysis(&a.out, res, a.force)?;
+    write_analysis(&a.out, res, a.f.force)?;
     println!("written: {}", a.out.display());
     Ok(())
 }
@@ -437,7 +427,7 @@ fn line_ranges(lines: &[usize], step: usize) -> Vec<(usize, usize)> {
 fn frf_local(a: &FrfArgs, r: &[f64], u: &[f64], y: &[f64], fs: f64) -> Result<()> {
     use ambid_core::frf::lpm::{lpm_closed_loop, LpmOptions};
     use ambid_core::frf::lrm::{lrm_closed_loop, LrmOptions};
-    let band = a.band.unwrap_or((1.0, 0.5 * fs));
+    let band = a.b.band.unwrap_or((1.0, 0.5 * fs));
     // with --period-samples: whole periods only (the LPM detects periodic inputs from the line
     // pattern, which needs a whole number of periods)
     let (r, u, y) = match a.period_samples {
@@ -581,295 +571,7 @@ fn frf_local(a: &FrfArgs, r: &[f64], u: &[f64], y: &[f64], fs: f64) -> Result<()
         ],
         &[("fs_hz", &fs_col)],
     )?;
-    write_file(&a.out, &bytes, a.force)?;
+    write_file(&a.out, &bytes, a.f.force)?;
     println!("written: {}", a.out.display());
-    Ok(())
-}
-
-#[derive(Subcommand)]
-pub enum StudyCmd {
-    /// Excitation-amplitude study (the seed's figure 6): coherence, FRF variance and output SNR
-    /// per level, and a recommended range.
-    Amplitude(AmplitudeArgs),
-    /// Operating-point study (the seed's figure 7): plant FRFs at nominal, bias ±20 % and air gap
-    /// ±10 µm, with the deviation from nominal per band.
-    OperatingPoint(OperatingPointArgs),
-}
-
-#[derive(Args)]
-pub struct AmplitudeArgs {
-    /// PRBS levels in % of i_sat, peak (= RMS for a PRBS), comma-separated (`2,4,8` or
-    /// `2%,4%,8%`).
-    #[arg(long, value_delimiter = ',', value_parser = crate::cli_args::parse_pct,
-          default_values_t = seed_levels().iter().map(|l| crate::cli_args::clean(100.0 * l)).collect::<Vec<f64>>())]
-    levels: Vec<f64>,
-    /// Recorded files instead of the twin, one per level (same order as --levels), with columns
-    /// r, u, y.
-    #[arg(long, value_delimiter = ',')]
-    files: Vec<PathBuf>,
-    /// Noise-only file (files mode) for the output SNR.
-    #[arg(long)]
-    noise: Option<PathBuf>,
-    /// Sample rate for files without a `t` column.
-    #[arg(long)]
-    fs: Option<f64>,
-    /// Samples per excitation period (files mode; the twin uses its PRBS period).
-    #[arg(long, default_value_t = 5115)]
-    period_samples: usize,
-    /// PRBS periods per level (twin mode; the seed used 50).
-    #[arg(long, default_value_t = 20)]
-    periods: usize,
-    /// Leading periods dropped.
-    #[arg(long, default_value_t = 1)]
-    skip_periods: usize,
-    /// Twin mode.
-    #[arg(long, value_enum, default_value_t = crate::ModeArg::Nonlinear)]
-    mode: crate::ModeArg,
-    /// Twin configuration (TOML).
-    #[arg(long)]
-    config: Option<PathBuf>,
-    /// Noise seed (twin mode).
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
-    /// Band of the FRFs and of the averages, Hz (default: on the twin the seed paper's 10–1000
-    /// Hz; with --files derived from the excitation, the lines within 10 dB of its strongest for
-    /// the FRF and 3 dB for the averages; docs/frf.md).
-    #[arg(long, value_parser = parse_band)]
-    band: Option<(f64, f64)>,
-    /// Output CSV of the figures.
-    #[arg(long, default_value = "amplitude_study.csv")]
-    out: PathBuf,
-    /// Replace the output file if it exists.
-    #[arg(long)]
-    force: bool,
-}
-
-#[derive(Args)]
-pub struct OperatingPointArgs {
-    /// Twin mode.
-    #[arg(long, value_enum, default_value_t = crate::ModeArg::Nonlinear)]
-    mode: crate::ModeArg,
-    /// Twin configuration (TOML) of the nominal point.
-    #[arg(long)]
-    config: Option<PathBuf>,
-    /// PRBS level in % of i_sat, peak (`10` or `10%`).
-    #[arg(long, value_parser = crate::cli_args::parse_pct, default_value = "10")]
-    level: f64,
-    /// Deprecated: the level as a fraction of i_sat (0.1 = 10 %); write `--level 10`.
-    #[arg(
-        long,
-        hide = true,
-        conflicts_with = "level",
-        allow_negative_numbers = true
-    )]
-    amplitude: Option<f64>,
-    /// Noise seed.
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
-    /// Band of the FRFs, Hz (default 10–2000 Hz, the seed's: the excitation's own band reaches
-    /// ≈ 3 kHz, where the twin's plant is below the sensor noise).
-    #[arg(long, value_parser = parse_band)]
-    band: Option<(f64, f64)>,
-    /// Output CSV of the deviations per case and band.
-    #[arg(long, default_value = "operating_point_study.csv")]
-    out: PathBuf,
-    /// Output CSV of the plant FRF magnitudes of all cases (f_hz, then |P| and phase per case).
-    #[arg(long, default_value = "operating_point_frf.csv")]
-    frf_out: PathBuf,
-    /// Replace the output files if they exist.
-    #[arg(long)]
-    force: bool,
-}
-
-fn load_config(p: &Option<PathBuf>) -> Result<TwinConfig> {
-    match p {
-        Some(p) => {
-            let s = std::fs::read_to_string(p)
-                .with_context(|| format!("cannot read {}", p.display()))?;
-            Ok(TwinConfig::from_toml_str(&s).with_context(|| format!("in {}", p.display()))?)
-        }
-        None => Ok(TwinConfig::default()),
-    }
-}
-
-fn rows_csv<T: serde::Serialize>(rows: &[T]) -> Result<Vec<u8>> {
-    let mut w = csv::Writer::from_writer(Vec::new());
-    for r in rows {
-        w.serialize(r)?;
-    }
-    w.into_inner().map_err(|e| anyhow::anyhow!("{}", e.error()))
-}
-
-pub fn study(cmd: StudyCmd) -> Result<()> {
-    match cmd {
-        StudyCmd::Amplitude(a) => amplitude(a),
-        StudyCmd::OperatingPoint(a) => operating_point(a),
-    }
-}
-
-fn mode(m: crate::ModeArg) -> Mode {
-    match m {
-        crate::ModeArg::Linear => Mode::Linear,
-        crate::ModeArg::Nonlinear => Mode::Nonlinear,
-    }
-}
-
-fn amplitude(a: AmplitudeArgs) -> Result<()> {
-    OutputSet::check(&a.out, a.force)?;
-    if let Some(l) = a
-        .levels
-        .iter()
-        .find(|l| !(l.is_finite() && **l > 0.0 && **l <= 100.0))
-    {
-        return Err(ambid::workflow::usage(anyhow::anyhow!(
-            "--levels must be in (0, 100] % of i_sat, got {l:e}"
-        ))
-        .into());
-    }
-    let out = if a.files.is_empty() {
-        let study = TwinAmplitudeStudy {
-            twin: load_config(&a.config)?,
-            excitation: ExcitationPlan {
-                periods: a.periods,
-                ..ExcitationPlan::default()
-            },
-            levels: a.levels.iter().map(|l| l / 100.0).collect(),
-            mode: mode(a.mode),
-            seed: a.seed,
-            skip_periods: a.skip_periods,
-            band: a.band.or(Some(ambid_core::frf::quality::DEFAULT_BAND)),
-            noise: true,
-        };
-        amplitude_on_twin(&study)?
-    } else {
-        if a.files.len() != a.levels.len() {
-            return Err(ambid::workflow::usage(anyhow::anyhow!(
-                "{} files for {} levels: pass one file per level, in the order of --levels",
-                a.files.len(),
-                a.levels.len()
-            ))
-            .into());
-        }
-        let mut records = Vec::new();
-        let mut fs = None;
-        for (p, l) in a.files.iter().zip(&a.levels) {
-            let d = read_time_csv(p, a.fs)?;
-            fs = Some(1.0 / d.ts);
-            records.push(LevelRecord {
-                level: l / 100.0,
-                r: d.column("r")?.to_vec(),
-                u: d.column("u")?.to_vec(),
-                y: d.column("y")?.to_vec(),
-                i: d.optional_column("i")?.map(<[f64]>::to_vec),
-                saturated_fraction: None,
-            });
-        }
-        let fs = fs.context("no file")?;
-        let noise = match &a.noise {
-            Some(p) => Some(read_time_csv(p, Some(fs))?.column("y")?.to_vec()),
-            None => None,
-        };
-        let mut settings = FrfSettings::periodic(a.period_samples, a.skip_periods);
-        settings.band = a.band;
-        settings.quality_band = a.band;
-        amplitude_from_records(
-            &records,
-            fs,
-            noise.as_deref(),
-            &settings,
-            None,
-            Recommendation::default(),
-        )?
-    };
-    println!(
-        "{:>7} {:>9} {:>9} {:>12} {:>12} {:>9} {:>9}",
-        "level %", "coh_ry", "coh_ru", "FRF var", "rel var", "SNR dB", "sat %"
-    );
-    for r in &out.rows {
-        println!(
-            "{:7.1} {:9.4} {:9.4} {:12.4e} {:12.4e} {:>9} {:9.3}",
-            r.level_pct,
-            r.mean_coh_ry,
-            r.mean_coh_ru,
-            r.mean_plant_var,
-            r.mean_plant_rel_var,
-            r.snr_db.map_or("-".into(), |s| format!("{s:.2}")),
-            100.0 * r.saturated_fraction
-        );
-    }
-    match out.recommended_pct {
-        Some((lo, hi)) => {
-            let (lo, hi) = (crate::cli_args::clean(lo), crate::cli_args::clean(hi));
-            if lo == hi {
-                println!("recommended excitation: {lo} % of i_sat (peak)");
-            } else {
-                println!("recommended excitation: {lo}–{hi} % of i_sat (peak)");
-            }
-        }
-        None => println!("no level recommended"),
-    }
-    println!("({})", out.reasoning);
-    write_file(&a.out, &rows_csv(&out.rows)?, a.force)?;
-    println!("written: {}", a.out.display());
-    Ok(())
-}
-
-fn operating_point(a: OperatingPointArgs) -> Result<()> {
-    OutputSet::check(&a.out, a.force)?;
-    OutputSet::check(&a.frf_out, a.force)?;
-    let nominal = load_config(&a.config)?;
-    let cases = seed_cases(&nominal);
-    let out = operating_point_on_twin(
-        &nominal,
-        &cases,
-        &ExcitationPlan {
-            amplitude_frac: crate::level_frac(a.level, a.amplitude)?,
-            ..ExcitationPlan::default()
-        },
-        mode(a.mode),
-        a.seed,
-        1,
-        Some(a.band.unwrap_or((10.0, 2000.0))),
-    )?;
-    println!(
-        "{:>10} {:>10} {:>14} {:>14} {:>10}",
-        "case", "band", "median dev %", "true dev %", "max dB"
-    );
-    for d in &out.deviations {
-        println!(
-            "{:>10} {:>10} {:14.2} {:>14} {:10.2}",
-            d.case,
-            d.band,
-            100.0 * d.median_rel_dev,
-            d.truth_median_rel_dev
-                .map_or("-".into(), |t| format!("{:.2}", 100.0 * t)),
-            d.max_abs_db_dev
-        );
-    }
-    let mut set = OutputSet::new(a.force);
-    set.write(&a.out, &rows_csv(&out.deviations)?)?;
-    // overlay file
-    let mut w = csv::Writer::from_writer(Vec::new());
-    let mut header = vec!["f_hz".to_string()];
-    for c in &out.cases {
-        header.push(format!("{}_mag", c.name));
-        header.push(format!("{}_phase_deg", c.name));
-    }
-    w.write_record(&header)?;
-    let f = out.plants[0].f_hz();
-    for (k, fk) in f.iter().enumerate() {
-        let mut row = vec![format!("{fk:.17e}")];
-        for p in &out.plants {
-            row.push(format!("{:.17e}", p.values()[k].norm()));
-            row.push(format!("{:.17e}", p.values()[k].arg().to_degrees()));
-        }
-        w.write_record(&row)?;
-    }
-    let overlay = w
-        .into_inner()
-        .map_err(|e| anyhow::anyhow!("{}", e.error()))?;
-    set.write(&a.frf_out, &overlay)?;
-    set.commit()?;
-    println!("written: {}, {}", a.out.display(), a.frf_out.display());
     Ok(())
 }

@@ -3,11 +3,11 @@
 //! variance per RMS level and the recommended level) or, with `--level` (twin) or a single
 //! recorded level, the per-line BLA.
 
+use super::args::{BandArg, DataFileArgs, ExcitationColumn, Force, InputColumn, OutputColumn};
 use ambid::bla::{
     amplitude_study, amplitude_study_from_records, bla_of_level, figures_of, level_figures,
     run_level, BlaPlan, BlaStudy, Realisation, RecordedLevel, RecordedPlan,
 };
-use ambid::io::table::{read_table, ColumnRef, ReadOptions};
 use ambid_core::data::{check_saturation, SaturationOptions};
 use ambid_core::frf::bla::Bla;
 use ambid_twin::Mode;
@@ -21,7 +21,7 @@ fn parse_record(s: &str) -> std::result::Result<(f64, PathBuf), String> {
     let (l, p) = s.split_once(':').ok_or_else(|| {
         format!("`{s}`: give a recorded realisation as LEVEL_PCT:PATH, e.g. 4:bla04_m1.csv")
     })?;
-    let level = crate::cli_args::parse_pct(l).map_err(|e| format!("{e} (in `{s}`)"))?;
+    let level = super::args::parse_pct(l).map_err(|e| format!("{e} (in `{s}`)"))?;
     if p.is_empty() {
         return Err(format!("`{s}`: the path is empty"));
     }
@@ -29,13 +29,18 @@ fn parse_record(s: &str) -> std::result::Result<(f64, PathBuf), String> {
 }
 
 #[derive(Args)]
+#[command(mut_arg("fs", |a| a.help("Recorded data: sample rate in Hz (when the files have no `t` column)")))]
+#[command(mut_arg("excitation", |a| a.help("Recorded data: column of the excitation r (closed loop); `none` for open-loop data (u is then the excitation). Names, or `#k` for the k-th column")))]
+#[command(mut_arg("input", |a| a.help("Recorded data: column of the plant input u")))]
+#[command(mut_arg("output", |a| a.help("Recorded data: column of the plant output y")))]
+#[command(mut_arg("band", |a| a.help("Band of the study's averages, Hz (default 20–1000 on the twin, 10–1000 on files)")))]
 pub struct BlaArgs {
     /// RMS levels of the study in % of i_sat (ignored with --level).
-    #[arg(long, value_delimiter = ',', default_value = "2,4,8,16,32", value_parser = crate::cli_args::parse_pct)]
+    #[arg(long, value_delimiter = ',', default_value = "2,4,8,16,32", value_parser = super::args::parse_pct)]
     levels: Vec<f64>,
     /// One RMS level in % of i_sat (`8` or `8%`): write the per-line BLA (value, std, noise
     /// std, NL std).
-    #[arg(long, value_parser = crate::cli_args::parse_pct)]
+    #[arg(long, value_parser = super::args::parse_pct)]
     level: Option<f64>,
     /// Random-phase multisine realisations M (≥ 2).
     #[arg(long, default_value_t = 8)]
@@ -44,8 +49,8 @@ pub struct BlaArgs {
     #[arg(long, default_value_t = 4)]
     periods: usize,
     /// Twin physics.
-    #[arg(long, value_enum, default_value_t = crate::ModeArg::Nonlinear)]
-    mode: crate::ModeArg,
+    #[arg(long, value_enum, default_value_t = super::common::ModeArg::Nonlinear)]
+    mode: super::common::ModeArg,
     /// Seed of the grid, the phases and the noise.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -60,43 +65,36 @@ pub struct BlaArgs {
     /// Recorded data: leading periods dropped as transient.
     #[arg(long, default_value_t = 1)]
     skip_periods: usize,
-    /// Recorded data: sample rate in Hz (when the files have no `t` column).
-    #[arg(long)]
-    fs: Option<f64>,
-    /// Recorded data: column of the excitation r (closed loop); `none` for open-loop data (u
-    /// is then the excitation). Names, or `#k` for the k-th column.
-    #[arg(long, default_value = "r")]
-    excitation: String,
-    /// Recorded data: column of the plant input u.
-    #[arg(long, default_value = "u")]
-    input: String,
-    /// Recorded data: column of the plant output y.
-    #[arg(long, default_value = "y")]
-    output: String,
+    #[command(flatten)]
+    file: DataFileArgs,
+    #[command(flatten)]
+    r: ExcitationColumn,
+    #[command(flatten)]
+    u: InputColumn,
+    #[command(flatten)]
+    y: OutputColumn,
     /// Recorded data: saturation current in A; u (and the column `i`, if present) are checked
     /// against it and levels clipping on more than 1 % of the samples are not recommended.
     #[arg(long)]
     i_sat: Option<f64>,
-    /// Band of the study's averages, Hz (default 20–1000 on the twin, 10–1000 on files).
-    #[arg(long, value_parser = crate::cli_frf::parse_band)]
-    band: Option<(f64, f64)>,
+    #[command(flatten)]
+    b: BandArg,
     /// Output CSV.
     #[arg(long, default_value = "bla.csv")]
     out: PathBuf,
-    /// Replace the output file if it exists.
-    #[arg(long)]
-    force: bool,
+    #[command(flatten)]
+    f: Force,
 }
 
 /// Reads the recorded realisations, grouped by level (ascending).
 fn recorded_levels(a: &BlaArgs) -> Result<(Vec<RecordedLevel>, f64)> {
     let mut tagged = Vec::with_capacity(a.records.len());
     let mut fs: Option<f64> = None;
-    let none = a.excitation.eq_ignore_ascii_case("none");
+    let none = a.r.excitation.eq_ignore_ascii_case("none");
     for (level, path) in &a.records {
-        let t = read_table(path, &ReadOptions::default())?;
-        let has_t = t.names.iter().any(|n| n == "t");
-        let ts = t.sample_time(has_t.then(|| ColumnRef::parse("t")).as_ref(), a.fs)?;
+        let t = a.file.read(path)?;
+        t.check_fs(a.file.fs)?;
+        let ts = t.ts;
         match fs {
             None => fs = Some(1.0 / ts),
             Some(f) if (f * ts - 1.0).abs() > 1e-6 => return Err(ambid::workflow::input(anyhow::anyhow!(
@@ -107,15 +105,14 @@ fn recorded_levels(a: &BlaArgs) -> Result<(Vec<RecordedLevel>, f64)> {
             )).into()),
             Some(_) => {}
         }
-        let col =
-            |name: &str| -> Result<Vec<f64>> { Ok(t.column(&ColumnRef::parse(name))?.to_vec()) };
-        let u = col(&a.input)?;
+        let col = |name: &str| -> Result<Vec<f64>> { Ok(t.column_raw(name)?.to_vec()) };
+        let u = col(&a.u.input)?;
         let saturated_fraction = match a.i_sat {
             Some(lim) => {
                 let mut frac = check_saturation(&u, Some(lim), &SaturationOptions::default())
                     .with_context(|| format!("{}: saturation check of u", path.display()))?
                     .fraction;
-                if let Ok(i) = t.column(&ColumnRef::parse("i")) {
+                if let Ok(i) = t.column_raw("i") {
                     frac = frac.max(
                         check_saturation(i, Some(lim), &SaturationOptions::default())
                             .with_context(|| format!("{}: saturation check of i", path.display()))?
@@ -130,10 +127,10 @@ fn recorded_levels(a: &BlaArgs) -> Result<(Vec<RecordedLevel>, f64)> {
             r: if none {
                 None
             } else {
-                Some(col(&a.excitation)?)
+                Some(col(&a.r.excitation)?)
             },
             u,
-            y: col(&a.output)?,
+            y: col(&a.y.output)?,
             saturated_fraction,
             source: path.display().to_string(),
         };
@@ -144,21 +141,21 @@ fn recorded_levels(a: &BlaArgs) -> Result<(Vec<RecordedLevel>, f64)> {
 }
 
 pub fn bla(a: BlaArgs) -> Result<()> {
-    ambid::io::OutputSet::check(&a.out, a.force)?;
+    ambid::io::OutputSet::check(&a.out, a.f.force)?;
     if !a.records.is_empty() {
         return bla_from_files(&a);
     }
     let mut plan = BlaPlan {
         mode: match a.mode {
-            crate::ModeArg::Linear => Mode::Linear,
-            crate::ModeArg::Nonlinear => Mode::Nonlinear,
+            super::common::ModeArg::Linear => Mode::Linear,
+            super::common::ModeArg::Nonlinear => Mode::Nonlinear,
         },
         realisations: a.realisations,
         periods: a.periods,
         seed: a.seed,
         ..BlaPlan::default()
     };
-    if let Some(b) = a.band {
+    if let Some(b) = a.b.band {
         plan.summary_band_hz = b;
     }
     if let Some(level) = a.level {
@@ -166,11 +163,11 @@ pub fn bla(a: BlaArgs) -> Result<()> {
         let f = level_figures(&run, level / 100.0, plan.summary_band_hz)?;
         let csv = per_line_csv(&run.bla)?;
         print_level(&f, plan.summary_band_hz, run.bla.g.f_hz.len());
-        write(&a.out, &csv, a.force)
+        write(&a.out, &csv, a.f.force)
     } else {
         let levels: Vec<f64> = a.levels.iter().map(|l| l / 100.0).collect();
         let s = amplitude_study(&plan, &levels)?;
-        write(&a.out, &study_csv(&s)?, a.force)
+        write(&a.out, &study_csv(&s)?, a.f.force)
     }
 }
 
@@ -186,7 +183,7 @@ fn bla_from_files(a: &BlaArgs) -> Result<()> {
         fs,
         period_samples: n,
         skip_periods: a.skip_periods,
-        summary_band_hz: a.band.unwrap_or((10.0, 1000.0)),
+        summary_band_hz: a.b.band.unwrap_or((10.0, 1000.0)),
     };
     if let [level] = levels.as_slice() {
         let bla = bla_of_level(level, &plan)?;
@@ -197,10 +194,10 @@ fn bla_from_files(a: &BlaArgs) -> Result<()> {
             .fold(0.0, f64::max);
         let f = figures_of(&bla, level.level_pct, plan.summary_band_hz, sat, None)?;
         print_level(&f, plan.summary_band_hz, bla.g.f_hz.len());
-        write(&a.out, &per_line_csv(&bla)?, a.force)
+        write(&a.out, &per_line_csv(&bla)?, a.f.force)
     } else {
         let s = amplitude_study_from_records(&levels, &plan)?;
-        write(&a.out, &study_csv(&s)?, a.force)
+        write(&a.out, &study_csv(&s)?, a.f.force)
     }
 }
 

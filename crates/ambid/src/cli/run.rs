@@ -1,6 +1,6 @@
 //! `ambid run` and `ambid init`: the seed workflow end to end.
 
-use ambid::io::output::{write_file, OutputDir};
+use ambid::io::output::OutputDir;
 use ambid::workflow::{self, Failure, FailureClass, Progress, Step, Verbosity, WorkflowConfig};
 use anyhow::Result;
 use clap::Args;
@@ -27,16 +27,6 @@ pub struct RunArgs {
     /// Also print each step's details.
     #[arg(long, short)]
     verbose: bool,
-}
-
-#[derive(Args)]
-pub struct InitArgs {
-    /// Where to write the example workflow file.
-    #[arg(default_value = "workflow.toml")]
-    path: PathBuf,
-    /// Replace an existing file.
-    #[arg(long)]
-    force: bool,
 }
 
 fn config_failure(e: impl Into<anyhow::Error>) -> Failure {
@@ -129,15 +119,5 @@ pub fn run(a: RunArgs) -> Result<()> {
             total
         );
     }
-    Ok(())
-}
-
-pub fn init(a: InitArgs) -> Result<()> {
-    write_file(&a.path, workflow::config::EXAMPLE.as_bytes(), a.force).map_err(Failure::from)?;
-    println!(
-        "written: {} (edit it, then `ambid run {}`)",
-        a.path.display(),
-        a.path.display()
-    );
     Ok(())
 }

@@ -1,31 +1,22 @@
 //! `ambid fit` and `ambid order`: parametric models and ARX order scans from time-domain data.
 
+use super::args::{DataFileArgs, ExcitationColumn, Force, InputColumn, OutputColumn};
+use super::common::{check_model_size, mean, read_io, read_validation, RecordIo};
+use super::common::{frf_input, WeightsArg, X0Arg};
+use ambid::io::model::state_space_json;
 use ambid::io::model::{model_json_bytes, polynomial_json};
 use ambid::io::output::write_file;
-use ambid::io::read_time_csv;
+use ambid::io::read_controller;
 use ambid::io::OutputSet;
 use ambid_core::estimate::arx::{arx, ArxOrders};
-use ambid_core::estimate::order::{arx_order_scan, ArxScanSpec};
 use ambid_core::estimate::pem::{self, Focus, Orders, PemOptions};
 use ambid_core::estimate::Fitted;
-use ambid_core::lti::PolyModel;
-use ambid_core::validate::predict::InitialState;
+use ambid_core::lti::{PolyModel, Structure};
+use ambid_core::validate::compare::{compare_models, supported_unstable_poles, table, CompareSpec};
 use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
 use serde_json::json;
 use std::path::{Path, PathBuf};
-
-#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum StructureArg {
-    Fir,
-    Arx,
-    Armax,
-    Oe,
-    Bj,
-    /// State space by subspace identification (N4SID/CVA, order from --order or automatic),
-    /// then prediction-error refinement (`--focus`; `--no-pem` skips it).
-    Ss,
-}
 
 #[derive(Clone, Copy, ValueEnum)]
 pub enum FocusArg {
@@ -33,29 +24,11 @@ pub enum FocusArg {
     Simulation,
 }
 
-/// Initial state of the validation filters (MATLAB `compare`'s `InitialCondition`).
-#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum X0Arg {
-    /// From rest (samples before the record taken as zero).
-    Zero,
-    /// The state that best explains the record (least squares of the free response).
-    Estimate,
-}
-
-impl X0Arg {
-    pub fn core(self) -> InitialState {
-        match self {
-            Self::Zero => InitialState::Zero,
-            Self::Estimate => InitialState::Estimate,
-        }
-    }
-}
-
 /// Whether the data were measured in open or closed loop.
 #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum LoopArg {
-    /// Closed if the file has an `r` column and the input is not `r` (ambid's closed-loop
-    /// record `t, w, r, u, i, y`), open otherwise.
+    /// Closed if the file has the excitation column (`--excitation`, default `r`) and the input
+    /// is not that column (ambid's closed-loop record `t, w, r, u, i, y`), open otherwise.
     Auto,
     /// Open-loop data: an unstable starting estimate is an artefact and is stabilised.
     Open,
@@ -65,22 +38,25 @@ pub enum LoopArg {
 }
 
 #[derive(Args)]
+#[command(mut_arg("excitation", |a| a.help("Column of the excitation r (a name, or `#k`): a record that has it is closed-loop data for `--loop auto`")))]
+#[command(mut_arg("input", |a| a.help("Input column; several, comma-separated (`u1,u2`), for a MIMO state-space model (`--structure ss`)")))]
+#[command(mut_arg("output", |a| a.help("Output column; several, comma-separated (`y1,y2`), for a MIMO state-space model")))]
 pub struct FitArgs {
-    /// Estimation data CSV.
+    /// Estimation data file (CSV, .npy, .npz, .mat, .parquet; docs/data-files.md), or an FRF
+    /// CSV with --quantity.
     data: PathBuf,
-    /// Sample rate in Hz (when the file has no `t` column).
-    #[arg(long)]
-    fs: Option<f64>,
-    /// Input column; several, comma-separated (`u1,u2`), for a MIMO state-space model
-    /// (`--structure ss`).
-    #[arg(long, default_value = "u")]
-    input: String,
-    /// Output column; several, comma-separated (`y1,y2`), for a MIMO state-space model.
-    #[arg(long, default_value = "y")]
-    output: String,
-    /// Model structure.
-    #[arg(long, value_enum)]
-    structure: StructureArg,
+    #[command(flatten)]
+    file: DataFileArgs,
+    #[command(flatten)]
+    r: ExcitationColumn,
+    #[command(flatten)]
+    u: InputColumn,
+    #[command(flatten)]
+    y: OutputColumn,
+    /// Model structure; `ss` is state space by subspace identification (N4SID/CVA, order from
+    /// --order or automatic), then prediction-error refinement (`--focus`; `--no-pem` skips it).
+    #[arg(long, value_parser = crate::cli::args::structure_parser(&Structure::TIME_DOMAIN))]
+    structure: Structure,
     /// Order of A.
     #[arg(long, default_value_t = 0)]
     na: usize,
@@ -123,11 +99,11 @@ pub struct FitArgs {
     quantity: Option<String>,
     /// Band `f_min:f_max` in Hz of an FRF fit (default: derived from the file, from the first to
     /// the last run of 3 lines whose 95 % interval is within ±20 % of the value; printed).
-    #[arg(long, value_parser = crate::cli_frf::parse_band)]
+    #[arg(long, value_parser = super::args::parse_band)]
     band: Option<(f64, f64)>,
     /// Weights of the lines of an FRF fit.
-    #[arg(long, value_enum, default_value_t = crate::cli_freqfit::WeightsArg::Variance)]
-    weights: crate::cli_freqfit::WeightsArg,
+    #[arg(long, value_enum, default_value_t = super::common::WeightsArg::Variance)]
+    weights: super::common::WeightsArg,
     /// FRF fit: the controller of the loop the FRF was measured in (TOML/JSON): the fit is held
     /// to the plant's number of unstable poles from the measured loop's Nyquist count, and a
     /// model that does not close a stable loop with it is reported.
@@ -140,7 +116,7 @@ pub struct FitArgs {
     /// simulation when the subspace model is stable, else prediction).
     #[arg(long, value_enum)]
     focus: Option<FocusArg>,
-    /// Validation data CSV (same columns).
+    /// Validation data file (same columns and format).
     #[arg(long)]
     validation: Option<PathBuf>,
     /// Do not subtract the estimation data's means (they are subtracted from both records by
@@ -165,9 +141,8 @@ pub struct FitArgs {
     /// Output model JSON.
     #[arg(long, default_value = "model.json")]
     out: PathBuf,
-    /// Replace the output file if it exists.
-    #[arg(long)]
-    force: bool,
+    #[command(flatten)]
+    f: Force,
 }
 
 /// How the outputs of a multi-output ARX enter each other's equations.
@@ -184,7 +159,7 @@ fn is_open_loop(a: &FitArgs, has_r: bool) -> bool {
     match a.loop_kind {
         LoopArg::Open => true,
         LoopArg::Closed => false,
-        LoopArg::Auto => !(has_r && a.input != "r"),
+        LoopArg::Auto => !(has_r && a.u.input != a.r.excitation),
     }
 }
 
@@ -211,55 +186,6 @@ fn rms_error(fit: Option<f64>, y: &[f64], skip: usize) -> Option<f64> {
     let m = y.iter().sum::<f64>() / y.len() as f64;
     let sd = (y.iter().map(|v| (v - m).powi(2)).sum::<f64>() / y.len() as f64).sqrt();
     fit.map(|f| (1.0 - f / 100.0) * sd)
-}
-
-/// One input and one output column of a time-data file, its sample time and whether it has an
-/// `r` column (a closed-loop experiment, for `--loop auto`).
-struct IoColumns {
-    u: Vec<f64>,
-    y: Vec<f64>,
-    ts: f64,
-    has_r: bool,
-}
-
-fn read_io(p: &Path, fs: Option<f64>, input: &str, output: &str) -> Result<IoColumns> {
-    let d = read_time_csv(p, fs)?;
-    Ok(IoColumns {
-        u: d.column(input)?.to_vec(),
-        y: d.column(output)?.to_vec(),
-        ts: d.ts,
-        has_r: d.names.iter().any(|n| n == "r"),
-    })
-}
-
-/// Reads a validation record, checks its sample time against the estimation data's and removes
-/// the estimation data's means (`mu` from u, `my` from y).
-fn read_validation(
-    p: &Path,
-    fs: Option<f64>,
-    input: &str,
-    output: &str,
-    ts: f64,
-    mu: f64,
-    my: f64,
-) -> Result<(Vec<f64>, Vec<f64>)> {
-    let IoColumns {
-        mut u,
-        mut y,
-        ts: tsv,
-        ..
-    } = read_io(p, fs, input, output)?;
-    if ((tsv - ts) / ts).abs() > 1e-9 {
-        return Err(ambid::workflow::input(anyhow::anyhow!(
-            "the validation data are sampled at {} Hz, the estimation data at {} Hz",
-            1.0 / tsv,
-            1.0 / ts
-        ))
-        .into());
-    }
-    u.iter_mut().for_each(|v| *v -= mu);
-    y.iter_mut().for_each(|v| *v -= my);
-    Ok((u, y))
 }
 
 /// The least-squares ARX(na, nb, nk) model of `u → y` as a polynomial [`Fitted`] (the FIR and
@@ -310,42 +236,14 @@ fn param_names(m: &PolyModel, theta: &[f64]) -> Option<Vec<String>> {
     same.then_some(names)
 }
 
-fn mean(x: &[f64]) -> f64 {
-    x.iter().sum::<f64>() / x.len() as f64
-}
-
 /// One-step and simulation fit (%) of a polynomial model on a record.
 use ambid::fitting::poly_fits as fits;
-
-/// The least-squares work a time-domain fit may ask for: $N p^2 \le 2\cdot10^{10}$ multiply–adds
-/// (about 5 s on one core) for $N$ samples and $p$ parameters, e.g. 447 parameters on the seed
-/// record of 102 300 samples; with [`ambid::workflow::config::SAMPLES_PER_PARAMETER`] samples per
-/// parameter at least and every polynomial or state-space order at most
-/// [`ambid::workflow::config::MAX_MODEL_ORDER`] (FIR/ARX numerators may be longer, within the
-/// work bound). A hostile `--na 5000 --nb 5000` on 20 000 samples ran > 60 s at 3.9 GB.
-const MAX_LS_WORK: f64 = 2e10;
-
-/// Refuses a model too large for the record (`params` parameters on `n` samples) or for the
-/// work bound [`MAX_LS_WORK`], as a usage error naming the options.
-fn check_model_size(n: usize, params: usize, what: &str) -> Result<()> {
-    use ambid::workflow::config::SAMPLES_PER_PARAMETER;
-    let per = n / SAMPLES_PER_PARAMETER.max(1);
-    let work_cap = (MAX_LS_WORK / n.max(1) as f64).sqrt().floor() as usize;
-    let cap = per.min(work_cap);
-    if params > cap {
-        return Err(ambid::workflow::usage(anyhow::anyhow!(
-            "{what} has {params} parameters, more than the {cap} this record of {n} samples supports ({SAMPLES_PER_PARAMETER} samples per parameter, and N·p² ≤ {MAX_LS_WORK:e} least-squares work); give smaller orders"
-        ))
-        .into());
-    }
-    Ok(())
-}
 
 /// Every order option at most [`ambid::workflow::config::MAX_MODEL_ORDER`] (FIR/ARX `--nb`/`--na`
 /// excepted: those are bounded by [`check_model_size`]).
 fn check_orders(a: &FitArgs) -> Result<()> {
     use ambid::workflow::config::MAX_MODEL_ORDER;
-    let ls = matches!(a.structure, StructureArg::Arx | StructureArg::Fir);
+    let ls = matches!(a.structure, Structure::Arx | Structure::Fir);
     let mut opts = vec![
         ("--nc", a.nc),
         ("--nd", a.nd),
@@ -378,57 +276,56 @@ fn check_orders(a: &FitArgs) -> Result<()> {
 }
 
 pub fn fit(a: FitArgs) -> Result<()> {
-    OutputSet::check(&a.out, a.force)?;
+    OutputSet::check(&a.out, a.f.force)?;
     check_orders(&a)?;
     if let Some(q) = &a.quantity {
-        use ambid_core::lti::Structure as FitStructure;
         let (structure, order) = match a.structure {
-            StructureArg::Arx => (FitStructure::Arx, a.order.unwrap_or(a.na)),
-            StructureArg::Oe => (FitStructure::Oe, a.order.unwrap_or(a.nf)),
-            StructureArg::Ss => match a.order {
-                Some(n) => (FitStructure::Ss, n),
+            Structure::Arx => (Structure::Arx, a.order.unwrap_or(a.na)),
+            Structure::Oe => (Structure::Oe, a.order.unwrap_or(a.nf)),
+            Structure::Ss => match a.order {
+                Some(n) => (Structure::Ss, n),
                 None => return Err(ambid::workflow::usage(anyhow::anyhow!("a state-space fit to FRF data needs --order")).into()),
             },
             _ => return Err(ambid::workflow::usage(anyhow::anyhow!("fits to FRF data support --structure arx, oe or ss (ARX/OE of order n: n numerator and n denominator coefficients after --nk delays)")).into()),
         };
-        return crate::cli_freqfit::fit_frf(
+        return fit_frf(
             &a.data,
             q,
             structure,
             order,
             a.nk,
-            a.fs,
+            a.file.fs,
             a.band,
             a.weights,
             a.max_iterations,
             (a.controller.as_deref(), a.unstable_poles),
-            (&a.out, a.force),
+            (&a.out, a.f.force),
         );
     }
     let split = |s: &str| -> Vec<String> { s.split(',').map(|c| c.trim().to_string()).collect() };
-    let (ins, outs) = (split(&a.input), split(&a.output));
+    let (ins, outs) = (split(&a.u.input), split(&a.y.output));
     if ins.len() > 1 || outs.len() > 1 {
         return match a.structure {
-            StructureArg::Ss => fit_ss_mimo(&a, &ins, &outs),
-            StructureArg::Arx | StructureArg::Fir => fit_arx_mimo(&a, &ins, &outs),
+            Structure::Ss => fit_ss_mimo(&a, &ins, &outs),
+            Structure::Arx | Structure::Fir => fit_arx_mimo(&a, &ins, &outs),
             _ => Err(ambid::workflow::usage(anyhow::anyhow!(
                 "several inputs or outputs ({} → {}) need --structure ss, arx or fir (the multi-input multi-output paths); armax, oe and bj are single-input single-output here: fit one output (and input) at a time",
-                a.input,
-                a.output
+                a.u.input,
+                a.y.output
             ))
             .into()),
         };
     }
-    let IoColumns {
+    let RecordIo {
         mut u,
         mut y,
         ts,
         has_r,
-    } = read_io(&a.data, a.fs, &a.input, &a.output)?;
+    } = read_io(&a.data, &a.file, (&a.u.input, &a.y.output), &a.r.excitation)?;
     let open_loop = is_open_loop(&a, has_r);
     let params = match a.structure {
-        StructureArg::Ss => a.order.unwrap_or(0),
-        StructureArg::Fir => a.nb,
+        Structure::Ss => a.order.unwrap_or(0),
+        Structure::Fir => a.nb,
         _ => a.na + a.nb + a.nc + a.nd + a.nf,
     };
     check_model_size(y.len(), params, "the model")?;
@@ -447,25 +344,25 @@ pub fn fit(a: FitArgs) -> Result<()> {
     let mut fallback = false;
     let mut stop: Option<String> = None;
     let (fitted, iterations): (Fitted<PolyModel>, Option<usize>) = match a.structure {
-        StructureArg::Fir | StructureArg::Arx => {
-            let na = if a.structure == StructureArg::Fir {
+        Structure::Fir | Structure::Arx => {
+            let na = if a.structure == Structure::Fir {
                 0
             } else {
                 a.na
             };
             (arx_fitted(&y, &u, na, a.nb, a.nk, ts)?, None)
         }
-        StructureArg::Ss => return fit_ss(&a, &u, &y, ts, (mu, my), open_loop),
+        Structure::Ss => return fit_ss(&a, &u, &y, ts, (mu, my), open_loop),
         s => {
             let orders = match s {
-                StructureArg::Armax => Orders::armax(a.na, a.nb, a.nc, a.nk),
-                StructureArg::Oe => Orders::oe(a.nb, a.nf, a.nk),
+                Structure::Armax => Orders::armax(a.na, a.nb, a.nc, a.nk),
+                Structure::Oe => Orders::oe(a.nb, a.nf, a.nk),
                 _ => Orders::bj(a.nb, a.nc, a.nd, a.nf, a.nk),
             };
             let structure = match s {
-                StructureArg::Armax => ambid_core::lti::Structure::Armax,
-                StructureArg::Oe => ambid_core::lti::Structure::Oe,
-                _ => ambid_core::lti::Structure::Bj,
+                Structure::Armax => Structure::Armax,
+                Structure::Oe => Structure::Oe,
+                _ => Structure::Bj,
             };
             let opts = PemOptions::default()
                 .with_focus(focus)
@@ -550,7 +447,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
     );
     let mut val = json!(null);
     if let Some(p) = &a.validation {
-        let (uv, yv) = read_validation(p, a.fs, &a.input, &a.output, ts, mu, my)?;
+        let (uv, yv) = read_validation(p, &a.file, &a.u.input, &a.y.output, ts, mu, my)?;
         let (v1, vs) = fits(m, &yv, &uv, x0, skip)?;
         println!(
             "validation data: 1-step fit {}, simulation fit {}",
@@ -588,122 +485,9 @@ pub fn fit(a: FitArgs) -> Result<()> {
     });
     write_file(
         &a.out,
-        &model_json_bytes(&polynomial_json(m, &a.input, &a.output, meta))?,
-        a.force,
+        &model_json_bytes(&polynomial_json(m, &a.u.input, &a.y.output, meta))?,
+        a.f.force,
     )?;
-    println!("written: {}", a.out.display());
-    Ok(())
-}
-
-#[derive(Args)]
-pub struct OrderArgs {
-    /// Estimation data CSV.
-    data: PathBuf,
-    /// Sample rate in Hz (when the file has no `t` column).
-    #[arg(long)]
-    fs: Option<f64>,
-    /// Input column.
-    #[arg(long, default_value = "u")]
-    input: String,
-    /// Output column.
-    #[arg(long, default_value = "y")]
-    output: String,
-    /// Largest na (the scan runs na = 1..=na-max).
-    #[arg(long, default_value_t = 10)]
-    na_max: usize,
-    /// Largest nb (nb = 1..=nb-max).
-    #[arg(long, default_value_t = 10)]
-    nb_max: usize,
-    /// Delays to try (comma-separated).
-    #[arg(long, value_delimiter = ',', default_values_t = vec![1usize])]
-    nk: Vec<usize>,
-    /// Validation data CSV.
-    #[arg(long)]
-    validation: Option<PathBuf>,
-    /// Output CSV of the grid (one row per model).
-    #[arg(long, default_value = "order.csv")]
-    out: PathBuf,
-    /// Replace the output file if it exists.
-    #[arg(long)]
-    force: bool,
-}
-
-pub fn order(a: OrderArgs) -> Result<()> {
-    OutputSet::check(&a.out, a.force)?;
-    if a.na_max == 0 || a.nb_max == 0 {
-        return Err(ambid::workflow::usage(anyhow::anyhow!(
-            "--na-max and --nb-max must be at least 1"
-        ))
-        .into());
-    }
-    if a.na_max > ambid::workflow::config::MAX_MODEL_ORDER
-        || a.nb_max > ambid::workflow::config::MAX_MODEL_ORDER
-    {
-        return Err(ambid::workflow::usage(anyhow::anyhow!(
-            "--na-max {} / --nb-max {}: at most {} each (the scan fits every pair)",
-            a.na_max,
-            a.nb_max,
-            ambid::workflow::config::MAX_MODEL_ORDER
-        ))
-        .into());
-    }
-    let IoColumns {
-        mut u, mut y, ts, ..
-    } = read_io(&a.data, a.fs, &a.input, &a.output)?;
-    check_model_size(
-        y.len(),
-        a.na_max + a.nb_max,
-        "the largest model of the scan",
-    )?;
-    let (mu, my) = (mean(&u), mean(&y));
-    u.iter_mut().for_each(|v| *v -= mu);
-    y.iter_mut().for_each(|v| *v -= my);
-    let val = match &a.validation {
-        Some(p) => {
-            let (uv, yv) = read_validation(p, a.fs, &a.input, &a.output, ts, mu, my)?;
-            Some((yv, uv))
-        }
-        None => None,
-    };
-    let spec = ArxScanSpec::new(1..=a.na_max, 1..=a.nb_max, a.nk.clone());
-    let scan = arx_order_scan(
-        &y,
-        &u,
-        &spec,
-        val.as_ref().map(|(y, u)| (y.as_slice(), u.as_slice())),
-    )?;
-    let show = |label: &str, i: usize| {
-        let r = &scan.rows[i];
-        println!(
-            "{label}: ARX(na {}, nb {}, nk {}), loss {:.4e}, BIC {:.2}{}",
-            r.na,
-            r.nb,
-            r.nk,
-            r.loss,
-            r.bic,
-            r.val_fit.map_or(String::new(), |f| format!(
-                ", validation 1-step fit {f:.2} %"
-            ))
-        )
-    };
-    println!("{} models, {} samples", scan.rows.len(), scan.n_samples);
-    show("best BIC", scan.best_bic);
-    show("best AIC", scan.best_aic);
-    show("most parsimonious within BIC tolerance", scan.parsimonious);
-    if let Some(k) = scan.knee {
-        show("knee of the loss", k);
-    }
-    if let Some(b) = scan.best_val {
-        show("best on validation", b);
-    }
-    let mut w = csv::Writer::from_writer(Vec::new());
-    for r in &scan.rows {
-        w.serialize(r)?;
-    }
-    let bytes = w
-        .into_inner()
-        .map_err(|e| anyhow::anyhow!("{}", e.error()))?;
-    write_file(&a.out, &bytes, a.force)?;
     println!("written: {}", a.out.display());
     Ok(())
 }
@@ -874,7 +658,7 @@ fn fit_ss(
     );
     let mut val = json!(null);
     if let Some(p) = &a.validation {
-        let (uv, yv) = read_validation(p, a.fs, &a.input, &a.output, ts, mu, my)?;
+        let (uv, yv) = read_validation(p, &a.file, &a.u.input, &a.y.output, ts, mu, my)?;
         let fv = fit_on(&uv, &yv)?;
         println!("validation data: simulation fit {}", fmt_fit(fv));
         val = json!({"simulation_fit_pct": fv, "simulation_rms": rms_error(fv, &yv, skip)});
@@ -899,12 +683,12 @@ fn fit_ss(
         "problems": problems,
         "source": a.data.display().to_string(),
     });
-    let mut j = state_space_json(&model, &a.input, &a.output, meta);
+    let mut j = state_space_json(&model, &a.u.input, &a.y.output, meta);
     if let Some(x) = fit.pem.as_ref().and_then(|p| p.x0.clone()) {
         // the initial state the refinement estimated on the estimation record
         j["x0"] = json!(x);
     }
-    write_file(&a.out, &model_json_bytes(&j)?, a.force)?;
+    write_file(&a.out, &model_json_bytes(&j)?, a.f.force)?;
     println!("written: {}", a.out.display());
     Ok(())
 }
@@ -981,12 +765,12 @@ fn stabilised_refine(
 /// (`None`: its own means, returned).
 fn columns(
     p: &Path,
-    fs: Option<f64>,
+    file: &DataFileArgs,
     names: &[String],
     means: Option<&[f64]>,
     detrend: bool,
 ) -> Result<(Vec<Vec<f64>>, Vec<f64>, f64)> {
-    let d = read_time_csv(p, fs)?;
+    let d = file.read(p)?;
     let mut cols: Vec<Vec<f64>> = names
         .iter()
         .map(|n| Ok(d.column(n)?.to_vec()))
@@ -1011,8 +795,8 @@ fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
     use ambid_core::estimate::subspace::{n4sid_detailed, SubspaceOptions};
     use ambid_core::lti::StateSpace;
     use faer::Mat;
-    let (u, mu, ts) = columns(&a.data, a.fs, ins, None, !a.no_detrend)?;
-    let (y, my, _) = columns(&a.data, a.fs, outs, None, !a.no_detrend)?;
+    let (u, mu, ts) = columns(&a.data, &a.file, ins, None, !a.no_detrend)?;
+    let (y, my, _) = columns(&a.data, &a.file, outs, None, !a.no_detrend)?;
     let rms = |x: &[f64]| (x.iter().map(|v| v * v).sum::<f64>() / x.len().max(1) as f64).sqrt();
     let su: Vec<f64> = u.iter().map(|c| rms(c)).collect();
     let sy: Vec<f64> = y.iter().map(|c| rms(c)).collect();
@@ -1123,9 +907,9 @@ fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
 /// realised in state space for the simulation fits and the model file.
 fn fit_arx_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
     use ambid_core::estimate::arx_mimo::{arx_mimo, OutputCoupling};
-    let (u, mu, ts) = columns(&a.data, a.fs, ins, None, !a.no_detrend)?;
-    let (y, my, _) = columns(&a.data, a.fs, outs, None, !a.no_detrend)?;
-    let na = if a.structure == StructureArg::Fir {
+    let (u, mu, ts) = columns(&a.data, &a.file, ins, None, !a.no_detrend)?;
+    let (y, my, _) = columns(&a.data, &a.file, outs, None, !a.no_detrend)?;
+    let na = if a.structure == Structure::Fir {
         0
     } else {
         a.na
@@ -1276,8 +1060,8 @@ fn finish_mimo(a: &FitArgs, ins: &[String], outs: &[String], f: MimoFit) -> Resu
     );
     let mut val = json!(null);
     if let Some(p) = &a.validation {
-        let (uv, _, tsv) = columns(p, a.fs, ins, Some(&mu), true)?;
-        let (yv, _, _) = columns(p, a.fs, outs, Some(&my), true)?;
+        let (uv, _, tsv) = columns(p, &a.file, ins, Some(&mu), true)?;
+        let (yv, _, _) = columns(p, &a.file, outs, Some(&my), true)?;
         if ((tsv - ts) / ts).abs() > 1e-9 {
             return Err(ambid::workflow::input(anyhow::anyhow!(
                 "the validation data are sampled at {} Hz, the estimation data at {} Hz",
@@ -1319,7 +1103,7 @@ fn finish_mimo(a: &FitArgs, ins: &[String], outs: &[String], f: MimoFit) -> Resu
             m.insert(k.clone(), v.clone());
         }
     }
-    write_file(&a.out, &model_json_bytes(&j)?, a.force)?;
+    write_file(&a.out, &model_json_bytes(&j)?, a.f.force)?;
     println!("written: {}", a.out.display());
     Ok(())
 }
@@ -1340,4 +1124,106 @@ fn stop_reason_text(r: ambid_core::estimate::pem::lm::StopReason) -> &'static st
         StopReason::Gradient => "converged: gradient zero",
         StopReason::MaxIterations => "iteration limit reached",
     }
+}
+
+/// Fits one structure and order to the FRF and writes the model JSON.
+#[allow(clippy::too_many_arguments)]
+pub fn fit_frf(
+    path: &Path,
+    quantity: &str,
+    structure: Structure,
+    order: usize,
+    nk: usize,
+    fs: Option<f64>,
+    band: Option<(f64, f64)>,
+    weights: WeightsArg,
+    max_iterations: usize,
+    (controller, unstable_poles): (Option<&Path>, Option<usize>),
+    (out, force): (&Path, bool),
+) -> Result<()> {
+    OutputSet::check(out, force)?;
+    let input = frf_input(path, quantity, fs, band, weights, max_iterations)?;
+    if order == 0 {
+        return Err(ambid::workflow::usage(anyhow::anyhow!(
+            "--order must be at least 1 for a fit to FRF data"
+        ))
+        .into());
+    }
+    let ctrl = match controller {
+        Some(c) => {
+            let ctrl = read_controller(c)?;
+            ctrl.check_ts(input.frd.ts().unwrap_or(1.0 / ctrl.fs_hz()))?;
+            Some(ctrl)
+        }
+        None => None,
+    };
+    let (n_u, how) = supported_unstable_poles(
+        &input.frd,
+        ctrl.as_ref().map(|c| c.state_space()),
+        input.explicit_band,
+        unstable_poles,
+    );
+    println!("unstable plant poles: {how}");
+    let spec = CompareSpec {
+        structures: vec![structure],
+        orders: vec![order],
+        nk,
+        fit: input.opts.clone(),
+        unstable_poles: n_u,
+        controller: ctrl.as_ref().map(|c| c.state_space().clone()),
+        ..CompareSpec::default()
+    };
+    let rows = compare_models(&input.frd, &spec, None)?;
+    let row = &rows[0];
+    let Some(model) = &row.model else {
+        return Err(ambid::workflow::computation(anyhow::anyhow!(
+            "{} fit of order {order} failed: {}",
+            structure.name(),
+            row.note.as_deref().unwrap_or("unknown reason")
+        ))
+        .into());
+    };
+    print!("{}", table(&rows));
+    if row.converged == Some(false) {
+        eprintln!(
+            "warning: the {} fit of order {order} stopped at its iteration limit ({max_iterations} \
+             iterations) before converging: raise --max-iterations",
+            structure.name()
+        );
+    }
+    if !row.valid {
+        eprintln!(
+            "warning: the model is written but is not valid: {}",
+            row.note.as_deref().unwrap_or("see the table")
+        );
+    }
+    let pz = ambid_core::validate::pz::PzAnalysis::from_state_space(
+        model,
+        &ambid_core::validate::pz::PzOptions::default(),
+    )?;
+    print!("{}", pz.table());
+    let meta = json!({
+        "method": format!("{}_frd", structure.name()),
+        "quantity": quantity,
+        "order": order,
+        "n_params": row.n_params,
+        "band_hz": input.opts.band_hz,
+        "band_origin": if input.explicit_band.is_some() { "given (--band)" } else { "derived from the FRF's standard deviations (ambid_core::frf::band::fit_band)" },
+        "relative_rmse": row.relative_rmse,
+        "median_relative": row.median_relative,
+        "db_rmse": row.db_rmse,
+        "bic": row.bic,
+        "unstable_poles": row.unstable_poles,
+        "unstable_poles_supported": n_u,
+        "valid": row.valid,
+        "converged": row.converged,
+        "source": path.display().to_string(),
+    });
+    write_file(
+        out,
+        &model_json_bytes(&state_space_json(model, "u", quantity, meta))?,
+        force,
+    )?;
+    println!("written: {}", out.display());
+    Ok(())
 }

@@ -1,0 +1,304 @@
+//! Helpers and argument types shared by several commands.
+
+use super::args::DataFileArgs;
+use ambid::io::csv::read_frf_csv;
+use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
+use ambid_core::frf::band::{fit_band, FIT_REL_HALFWIDTH};
+use ambid_core::validate::predict::InitialState;
+use ambid_twin::TwinConfig;
+use anyhow::{Context, Result};
+use clap::{Args, ValueEnum};
+use std::path::{Path, PathBuf};
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum ModeArg {
+    Linear,
+    Nonlinear,
+}
+
+#[derive(Args)]
+pub struct RigArgs {
+    /// A random rig of the twin's test family instead of the nominal one: rotor, magnets, bias
+    /// and gap, amplifier and sensor bandwidths, bending mode, controller gains and noise drawn
+    /// ±15–30 % from this seed, accepted only when the loop is stable with max|S| ≤ 4
+    /// (`ambid_twin::rig`).
+    #[arg(long)]
+    pub rig_seed: Option<u64>,
+}
+
+#[derive(Args)]
+pub struct TwinArgs {
+    /// Twin configuration (TOML); defaults to the nominal rig (see `ambid config`).
+    #[arg(long, conflicts_with = "rig_seed")]
+    pub config: Option<PathBuf>,
+    #[command(flatten)]
+    pub rig: RigArgs,
+    /// Bias current i0 in A (overrides the configuration).
+    #[arg(long, allow_negative_numbers = true)]
+    pub bias: Option<f64>,
+    /// Nominal air gap g0 in m (overrides the configuration), e.g. 0.00041.
+    #[arg(long, allow_negative_numbers = true)]
+    pub gap: Option<f64>,
+}
+
+pub fn twin_config(a: &TwinArgs) -> Result<TwinConfig> {
+    let mut cfg = match &a.config {
+        Some(p) => {
+            let s = std::fs::read_to_string(p)
+                .with_context(|| format!("cannot read {}", p.display()))?;
+            TwinConfig::from_toml_str(&s).with_context(|| format!("in {}", p.display()))?
+        }
+        None => match a.rig.rig_seed {
+            Some(seed) => ambid_twin::random_rig(seed)?,
+            None => TwinConfig::default(),
+        },
+    };
+    if let Some(b) = a.bias {
+        cfg.operating_point.bias_current_a = b;
+    }
+    if let Some(g) = a.gap {
+        cfg.operating_point.air_gap_m = g;
+    }
+    cfg.validate()?;
+    Ok(cfg)
+}
+
+/// The PRBS order from `--prbs-order`, or from the deprecated `--order` (with its note).
+pub fn prbs_order_arg(prbs_order: u32, deprecated_order: Option<u32>) -> u32 {
+    match deprecated_order {
+        Some(o) => {
+            super::args::deprecated(
+                &format!("--order {o} (the PRBS order)"),
+                &format!("--prbs-order {o}"),
+            );
+            o
+        }
+        None => prbs_order,
+    }
+}
+
+/// The level in % of i_sat as a fraction: `level_pct`, or the deprecated `--amplitude` fraction
+/// (with its note).
+pub fn level_frac(level_pct: f64, deprecated_frac: Option<f64>) -> Result<f64> {
+    match deprecated_frac {
+        Some(f) => {
+            super::args::deprecated(
+                &format!("--amplitude {f} (a fraction of i_sat)"),
+                &format!("--level {}", super::args::clean(100.0 * f)),
+            );
+            Ok(f)
+        }
+        None => Ok(level_pct / 100.0),
+    }
+}
+
+/// The band from `--band` (or its default `band`), or from the deprecated separate edges
+/// (`names`, with a note); an edge given alone replaces that edge of `band`.
+pub fn deprecated_band(
+    band: (f64, f64),
+    lo: Option<f64>,
+    hi: Option<f64>,
+    names: (&str, &str),
+) -> Result<(f64, f64)> {
+    if lo.is_none() && hi.is_none() {
+        return Ok(band);
+    }
+    let (l, h) = (lo.unwrap_or(band.0), hi.unwrap_or(band.1));
+    let old: Vec<String> = [(names.0, lo), (names.1, hi)]
+        .iter()
+        .filter_map(|(n, v)| v.map(|v| format!("{n} {v}")))
+        .collect();
+    super::args::deprecated(&old.join(" "), &format!("--band {l}:{h}"));
+    Ok((l, h))
+}
+
+/// Initial state of the validation filters (MATLAB `compare`'s `InitialCondition`).
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum X0Arg {
+    /// From rest (samples before the record taken as zero).
+    Zero,
+    /// The state that best explains the record (least squares of the free response).
+    Estimate,
+}
+
+impl X0Arg {
+    pub fn core(self) -> InitialState {
+        match self {
+            Self::Zero => InitialState::Zero,
+            Self::Estimate => InitialState::Estimate,
+        }
+    }
+}
+
+/// The unit of a plant magnitude from the declared units of y and u.
+pub fn plant_unit(y: Option<&str>, u: Option<&str>) -> String {
+    match (y, u) {
+        (Some(y), Some(u)) => format!("{y}/{u}"),
+        (Some(y), None) => format!("{y}/(unit of u not given)"),
+        (None, Some(u)) => format!("(unit of y not given)/{u}"),
+        (None, None) => "(unit not given)".into(),
+    }
+}
+
+/// Weights of the FRF lines.
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum WeightsArg {
+    /// All lines alike.
+    Uniform,
+    /// Inverse variance from the file's `<q>_std` column (the default).
+    Variance,
+    /// From the coherence column (`coh_ry`).
+    Coherence,
+}
+
+/// The FRF and the fit options common to `fit --quantity` and `compare-models`.
+pub struct FrfInput {
+    pub frd: ambid_core::lti::Frd,
+    pub opts: FreqFitOptions,
+    /// The band the user gave (`--band`), `None` when it was derived from the file.
+    pub explicit_band: Option<(f64, f64)>,
+}
+
+/// Reads quantity `q` of an FRF CSV with sample rate `fs` and builds the fit options.
+pub fn frf_input(
+    path: &Path,
+    quantity: &str,
+    fs: Option<f64>,
+    band: Option<(f64, f64)>,
+    weights: WeightsArg,
+    max_iterations: usize,
+) -> Result<FrfInput> {
+    let file = read_frf_csv(path)?;
+    // the sample rate: --fs, else the `fs_hz` column that `ambid frf` writes
+    let fs = match (fs, file.extra("fs_hz").ok().and_then(|c| c.first().copied())) {
+        (Some(fs), _) => fs,
+        (None, Some(fs)) => fs,
+        (None, None) => return Err(ambid::workflow::usage(anyhow::anyhow!(
+            "this FRF file has no `fs_hz` column: give the sample rate of the data with --fs (e.g. --fs 20000)"
+        )).into()),
+    };
+    if !(fs.is_finite() && fs > 0.0) {
+        return Err(ambid::workflow::usage(anyhow::anyhow!(
+            "the sample rate must be positive and finite, got {fs:e} Hz"
+        ))
+        .into());
+    }
+    let frd = file.frd(quantity, 1.0 / fs)?;
+    // the band: --band, else where the file measures the quantity reliably (band::fit_band)
+    let fit_band = match band {
+        Some(b) => b,
+        None => {
+            let d = fit_band(&frd, FIT_REL_HALFWIDTH)?;
+            println!("{}", d.describe());
+            d.band
+        }
+    };
+    let weights = match weights {
+        WeightsArg::Uniform => FreqWeights::Uniform,
+        WeightsArg::Variance if frd.variance().is_some() => FreqWeights::InverseVariance,
+        WeightsArg::Variance => {
+            eprintln!("note: `{quantity}_std` is zero everywhere (exact data): uniform weights");
+            FreqWeights::Uniform
+        }
+        WeightsArg::Coherence => FreqWeights::Coherence(
+            file.extra("coh_ry")
+                .context("coherence weights need the `coh_ry` column of `ambid frf`")?
+                .to_vec(),
+        ),
+    };
+    let opts = FreqFitOptions {
+        band_hz: Some(fit_band),
+        weights,
+        max_iterations,
+        ..FreqFitOptions::default()
+    };
+    Ok(FrfInput {
+        frd,
+        opts,
+        explicit_band: band,
+    })
+}
+
+/// One input and one output column of a time-data file, its sample time and whether it has the
+/// excitation column (`--excitation`, default `r`) (a closed-loop experiment, for `--loop auto`).
+pub struct RecordIo {
+    pub u: Vec<f64>,
+    pub y: Vec<f64>,
+    pub ts: f64,
+    pub has_r: bool,
+}
+
+/// The columns `input` and `output` of the record `p`, read with `file`.
+pub fn read_io(
+    p: &Path,
+    file: &DataFileArgs,
+    (input, output): (&str, &str),
+    excitation: &str,
+) -> Result<RecordIo> {
+    let d = file.read(p)?;
+    Ok(RecordIo {
+        u: d.column(input)?.to_vec(),
+        y: d.column(output)?.to_vec(),
+        ts: d.ts,
+        has_r: d.has(excitation),
+    })
+}
+
+/// Reads a validation record, checks its sample time against the estimation data's and removes
+/// the estimation data's means (`mu` from u, `my` from y).
+pub fn read_validation(
+    p: &Path,
+    file: &DataFileArgs,
+    input: &str,
+    output: &str,
+    ts: f64,
+    mu: f64,
+    my: f64,
+) -> Result<(Vec<f64>, Vec<f64>)> {
+    let RecordIo {
+        mut u,
+        mut y,
+        ts: tsv,
+        ..
+    } = read_io(p, file, (input, output), "r")?;
+    if ((tsv - ts) / ts).abs() > 1e-9 {
+        return Err(ambid::workflow::input(anyhow::anyhow!(
+            "the validation data are sampled at {} Hz, the estimation data at {} Hz",
+            1.0 / tsv,
+            1.0 / ts
+        ))
+        .into());
+    }
+    u.iter_mut().for_each(|v| *v -= mu);
+    y.iter_mut().for_each(|v| *v -= my);
+    Ok((u, y))
+}
+
+/// The mean of `x`.
+pub fn mean(x: &[f64]) -> f64 {
+    x.iter().sum::<f64>() / x.len() as f64
+}
+
+/// The least-squares work a time-domain fit may ask for: $N p^2 \le 2\cdot10^{10}$ multiply–adds
+/// (about 5 s on one core) for $N$ samples and $p$ parameters, e.g. 447 parameters on the seed
+/// record of 102 300 samples; with [`ambid::workflow::config::SAMPLES_PER_PARAMETER`] samples per
+/// parameter at least and every polynomial or state-space order at most
+/// [`ambid::workflow::config::MAX_MODEL_ORDER`] (FIR/ARX numerators may be longer, within the
+/// work bound). A hostile `--na 5000 --nb 5000` on 20 000 samples ran > 60 s at 3.9 GB.
+pub const MAX_LS_WORK: f64 = 2e10;
+
+/// Refuses a model too large for the record (`params` parameters on `n` samples) or for the
+/// work bound [`MAX_LS_WORK`], as a usage error naming the options.
+pub fn check_model_size(n: usize, params: usize, what: &str) -> Result<()> {
+    use ambid::workflow::config::SAMPLES_PER_PARAMETER;
+    let per = n / SAMPLES_PER_PARAMETER.max(1);
+    let work_cap = (MAX_LS_WORK / n.max(1) as f64).sqrt().floor() as usize;
+    let cap = per.min(work_cap);
+    if params > cap {
+        return Err(ambid::workflow::usage(anyhow::anyhow!(
+            "{what} has {params} parameters, more than the {cap} this record of {n} samples supports ({SAMPLES_PER_PARAMETER} samples per parameter, and N·p² ≤ {MAX_LS_WORK:e} least-squares work); give smaller orders"
+        ))
+        .into());
+    }
+    Ok(())
+}

@@ -1,0 +1,91 @@
+//! The exit code of a failed command: one rule for every command (docs/workflow.md, "Exit
+//! codes").
+
+use ambid::error::FailureClass;
+use ambid::io::OutputError;
+use ambid::workflow::{ConfigError, Failure};
+
+/// The exit code of an error: the class of the first typed error found walking the `anyhow`
+/// chain from the outside in ([`ambid::error::Error::exit_code`] for the library's error; the
+/// other typed errors by their kind), else 1.
+///
+/// | class | code |
+/// |---|---|
+/// | usage / configuration | 2 |
+/// | input data | 3 |
+/// | computation | 4 |
+/// | output | 5 |
+pub fn exit_code(e: &anyhow::Error) -> i32 {
+    for c in e.chain() {
+        if let Some(ae) = c.downcast_ref::<ambid::error::Error>() {
+            return ae.exit_code();
+        }
+        if let Some(f) = c.downcast_ref::<Failure>() {
+            return f.class.exit_code();
+        }
+        if c.is::<ConfigError>() {
+            return FailureClass::Config.exit_code();
+        }
+        if c.is::<ambid::io::table::DataFileError>() {
+            return FailureClass::Input.exit_code();
+        }
+        if c.is::<OutputError>() {
+            return FailureClass::Output.exit_code();
+        }
+        if let Some(ce) = c.downcast_ref::<ambid_core::Error>() {
+            return match ce {
+                ambid_core::Error::NonFinite { .. } => FailureClass::Input.exit_code(),
+                // an argument (an option's value) the computation refuses; the message names it
+                ambid_core::Error::InvalidArgument { .. } => FailureClass::Config.exit_code(),
+                _ => FailureClass::Computation.exit_code(),
+            };
+        }
+        if let Some(te) = c.downcast_ref::<ambid_twin::TwinError>() {
+            return match te {
+                ambid_twin::TwinError::Toml(_) | ambid_twin::TwinError::NonFinite { .. } => {
+                    FailureClass::Input.exit_code()
+                }
+                _ => FailureClass::Computation.exit_code(),
+            };
+        }
+    }
+    1
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ambid::error::Error;
+
+    #[test]
+    fn typed_errors_give_their_class_code_through_any_context() {
+        let usage = anyhow::Error::from(Error::usage("--na-max must be at least 1"));
+        assert_eq!(exit_code(&usage), 2);
+        assert_eq!(exit_code(&usage.context("fit")), 2);
+        let data = anyhow::Error::from(Error::from(ambid::io::table::DataFileError::NoData {
+            path: "x.csv".into(),
+            message: "needs at least 2 data rows, found 1".into(),
+        }));
+        assert_eq!(exit_code(&data), 3);
+        // the library's error wrapping a data-file error in a context keeps the input class
+        let ctx = anyhow::Error::from(Error::input("short").context("reading x.csv"));
+        assert_eq!(exit_code(&ctx), 3);
+        assert_eq!(
+            exit_code(&anyhow::Error::from(Error::computation("no fit"))),
+            4
+        );
+        assert_eq!(exit_code(&anyhow::Error::from(Error::other("?"))), 1);
+        // a typed error put in another class keeps the class given
+        let cls = Error::classified(FailureClass::Input, Error::other("bad controller file"));
+        assert_eq!(exit_code(&anyhow::Error::from(cls)), 3);
+        // the other typed errors, still met in the chain while the library moves to one error
+        let f = Failure {
+            class: FailureClass::Output,
+            error: anyhow::anyhow!("disk full"),
+        };
+        assert_eq!(exit_code(&anyhow::Error::from(f)), 5);
+        let core = ambid_core::Error::invalid("order", "must be at least 1");
+        assert_eq!(exit_code(&anyhow::Error::from(core)), 2);
+        assert_eq!(exit_code(&anyhow::anyhow!("plain")), 1);
+    }
+}
