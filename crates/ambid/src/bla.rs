@@ -32,12 +32,12 @@
 //! println!("{}", study.reasoning);
 //! ```
 
+use crate::error::{Context, Error, Result};
 use ambid_core::c64;
 use ambid_core::frf::bla::{random_phase_period, robust_bla, Bla, Record};
 use ambid_core::frf::periodic::PeriodicOptions;
 use ambid_core::signal::{Grid, MultisineSpec, Phases};
 use ambid_twin::{Mode, SimOptions, Twin, TwinConfig};
-use anyhow::{bail, Context, Result};
 use serde::Serialize;
 
 /// How the BLA experiment is run on the twin.
@@ -107,14 +107,15 @@ pub struct LevelRun {
 /// Invalid plan (M or P below 2, level outside (0, 1], empty band), simulation or BLA errors.
 pub fn run_level(plan: &BlaPlan, rms_frac: f64) -> Result<LevelRun> {
     if !(rms_frac.is_finite() && rms_frac > 0.0 && rms_frac <= 1.0) {
-        bail!("the RMS level must be a fraction of i_sat in (0, 1], got {rms_frac}");
+        return Err(Error::other(format!(
+            "the RMS level must be a fraction of i_sat in (0, 1], got {rms_frac}"
+        )));
     }
     if plan.realisations < 2 || plan.periods < 2 {
-        bail!(
+        return Err(Error::other(format!(
             "the robust BLA needs at least 2 realisations and 2 periods (got M = {}, P = {})",
-            plan.realisations,
-            plan.periods
-        );
+            plan.realisations, plan.periods
+        )));
     }
     let twin = Twin::new(plan.twin.clone()).context("building the AMB twin")?;
     let ts = twin.ts();
@@ -236,19 +237,19 @@ pub struct RecordedPlan {
 pub fn bla_of_level(level: &RecordedLevel, plan: &RecordedPlan) -> Result<Bla> {
     let m = level.realisations.len();
     if m < 2 {
-        bail!(
+        return Err(Error::other(format!(
             "level {} %: the robust BLA needs at least 2 realisations (independent random-phase \
              multisines), got {m}; record more realisations at this level",
             level.level_pct
-        );
+        )));
     }
     let closed = level.realisations.iter().filter(|x| x.r.is_some()).count();
     if closed != 0 && closed != m {
-        bail!(
+        return Err(Error::other(format!(
             "level {} %: {closed} of {m} realisations have the excitation r and the others do not; \
              give r for all (closed loop) or for none (open loop)",
             level.level_pct
-        );
+        )));
     }
     let recs: Vec<Record> = level
         .realisations
@@ -310,15 +311,17 @@ pub fn amplitude_study_from_records(
     plan: &RecordedPlan,
 ) -> Result<BlaStudy> {
     if levels.is_empty() {
-        bail!("give at least one level of recorded realisations");
+        return Err(Error::other(
+            "give at least one level of recorded realisations",
+        ));
     }
     let mut rows = Vec::with_capacity(levels.len());
     for level in levels {
         if !(level.level_pct.is_finite() && level.level_pct > 0.0 && level.level_pct <= 100.0) {
-            bail!(
+            return Err(Error::other(format!(
                 "a level must be in (0, 100] % of i_sat, got {}",
                 level.level_pct
-            );
+            )));
         }
         let bla = bla_of_level(level, plan)?;
         let sat = level
@@ -461,7 +464,7 @@ pub const MAX_SATURATED: f64 = 0.01;
 /// No level, or the errors of [`run_level`].
 pub fn amplitude_study(plan: &BlaPlan, levels: &[f64]) -> Result<BlaStudy> {
     if levels.is_empty() {
-        bail!("give at least one level");
+        return Err(Error::other("give at least one level"));
     }
     let mut rows = Vec::with_capacity(levels.len());
     for &l in levels {
@@ -492,7 +495,7 @@ pub fn recommend(rows: Vec<LevelBla>) -> Result<BlaStudy> {
     let best = *candidates
         .iter()
         .min_by(|a, b| a.sum_rel.total_cmp(&b.sum_rel))
-        .context("no level")?;
+        .ok_or_else(|| Error::other("no level"))?;
     let recommended_pct = best.level_pct;
     let significant = |r: &LevelBla| r.nl_rel > 3.0 * r.nl_rel_se;
     let first_nl = rows.iter().find(|r| significant(r)).map(|r| r.level_pct);

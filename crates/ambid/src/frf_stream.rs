@@ -473,7 +473,7 @@ pub fn analyze_csv(
             Spectra::Periodic(p.finish(rate).context("period-synchronous averaging")?)
         }
     };
-    analyze_spectra(
+    Ok(analyze_spectra(
         spectra,
         &settings,
         Checks {
@@ -482,5 +482,5 @@ pub fn analyze_csv(
             saturation,
             warnings,
         },
-    )
+    )?)
 }

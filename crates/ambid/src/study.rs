@@ -7,10 +7,10 @@
 //!   with the deviation from nominal per band (low frequency, resonance region, high frequency).
 
 use crate::analysis::{analyze, FrfAnalysis, FrfSettings, Record};
+use crate::error::{Context, Error, Result};
 use crate::experiment::{run, ExcitationKind, ExcitationPlan, Experiment};
 use ambid_core::lti::Frd;
 use ambid_twin::{Mode, TwinConfig};
-use anyhow::{bail, Context, Result};
 use serde::Serialize;
 
 /// One recorded experiment of an amplitude study.
@@ -100,10 +100,10 @@ pub fn amplitude_from_records(
     rule: Recommendation,
 ) -> Result<AmplitudeOutcome> {
     if records.len() < 2 {
-        bail!(
+        return Err(Error::other(format!(
             "an amplitude study needs at least 2 levels, got {}",
             records.len()
-        );
+        )));
     }
     let mut rows = Vec::with_capacity(records.len());
     let mut plants = Vec::with_capacity(records.len());
@@ -238,7 +238,9 @@ impl Default for TwinAmplitudeStudy {
 /// for the output SNR).
 pub fn amplitude_on_twin(study: &TwinAmplitudeStudy) -> Result<AmplitudeOutcome> {
     if study.excitation.kind == ExcitationKind::None {
-        bail!("the amplitude study needs an excitation (prbs, chirp, noise or multisine)");
+        return Err(Error::other(
+            "the amplitude study needs an excitation (prbs, chirp, noise or multisine)",
+        ));
     }
     let mut records = Vec::with_capacity(study.levels.len());
     let mut twin = None;
@@ -282,7 +284,7 @@ pub fn amplitude_on_twin(study: &TwinAmplitudeStudy) -> Result<AmplitudeOutcome>
     } else {
         None
     };
-    let twin = twin.context("no level given")?;
+    let twin = twin.ok_or_else(|| Error::other("no level given"))?;
     let mut settings = FrfSettings::periodic(period, study.skip_periods);
     settings.band = study.band;
     settings.quality_band = study.band;
@@ -419,21 +421,23 @@ pub fn band_deviations(
     truths: Option<&[Vec<ambid_core::c64>]>,
 ) -> Result<Vec<BandDeviation>> {
     if plants.len() < 2 || names.len() != plants.len() {
-        bail!("an operating-point comparison needs the nominal case and at least one other, each named");
+        return Err(Error::other("an operating-point comparison needs the nominal case and at least one other, each named"));
     }
     let nom = &plants[0];
     let f = nom.f_hz();
     for (n, p) in names.iter().zip(plants) {
         if p.f_hz() != f {
-            bail!(
+            return Err(Error::other(format!(
                 "operating point `{n}` has other frequency lines than nominal; use the same excitation \
                  (and period) for every case"
-            );
+            )));
         }
     }
     if let Some(t) = truths {
         if t.len() != plants.len() || t.iter().any(|v| v.len() != f.len()) {
-            bail!("one true response per case, on the plants' lines, is needed");
+            return Err(Error::other(
+                "one true response per case, on the plants' lines, is needed",
+            ));
         }
     }
     let mut deviations = Vec::new();
@@ -494,9 +498,9 @@ pub fn operating_point_from_records(
     settings: &FrfSettings,
 ) -> Result<OperatingPointOutcome> {
     if records.len() < 2 || names.len() != records.len() {
-        bail!(
-            "an operating-point study needs the nominal record and at least one other, each named"
-        );
+        return Err(Error::computation(
+            "an operating-point study needs the nominal record and at least one other, each named",
+        ));
     }
     let mut plants = Vec::with_capacity(records.len());
     for (n, r) in names.iter().zip(records) {
@@ -539,7 +543,9 @@ pub fn operating_point_on_twin(
     band: Option<(f64, f64)>,
 ) -> Result<OperatingPointOutcome> {
     if cases.len() < 2 {
-        bail!("an operating-point study needs the nominal case and at least one other");
+        return Err(Error::other(
+            "an operating-point study needs the nominal case and at least one other",
+        ));
     }
     let mut plants = Vec::new();
     let mut truths = Vec::new();
@@ -584,11 +590,11 @@ pub fn operating_point_on_twin(
         if let Some(first) = plants.first() {
             let first: &Frd = first;
             if first.f_hz() != a.frf.f_hz() {
-                bail!(
+                return Err(Error::other(format!(
                     "operating point `{}` gave a different frequency grid from nominal; use the same \
                      excitation for every case",
                     case.name
-                );
+                )));
             }
         }
         plants.push(a.frf.plant);
