@@ -38,6 +38,7 @@ use ambid_core::frf::bla::{random_phase_period, robust_bla, Bla, Record};
 use ambid_core::frf::periodic::PeriodicOptions;
 use ambid_core::signal::{Grid, MultisineSpec, Phases};
 use ambid_twin::{Mode, SimOptions, Twin, TwinConfig};
+use rayon::prelude::*;
 use serde::Serialize;
 
 /// How the BLA experiment is run on the twin.
@@ -132,23 +133,27 @@ pub fn run_level(plan: &BlaPlan, rms_frac: f64) -> Result<LevelRun> {
     };
     let bins = spec.bins(ts).context("designing the multisine grid")?;
     let rms = rms_frac * twin.i_sat();
-    let mut data = Vec::with_capacity(plan.realisations);
-    for m in 0..plan.realisations {
-        let seed = plan.seed.wrapping_add(1 + m as u64);
-        let period = random_phase_period(&bins, n, rms, seed)?;
-        let r: Vec<f64> = (0..plan.periods * n).map(|t| period[t % n]).collect();
-        let opts = SimOptions {
-            mode: plan.mode,
-            seed: seed.wrapping_mul(7919),
-            noise: plan.noise,
-            settle_samples: n,
-            ..SimOptions::default()
-        };
-        let rec = twin
-            .simulate(&r, &opts)
-            .with_context(|| format!("simulating realisation {m}"))?;
-        data.push(rec);
-    }
+    // the realisations are independent (realisation m: seed + 1 + m): simulated in parallel, then
+    // used in order (the first failing one is the one reported, as in a sequential loop)
+    let data = (0..plan.realisations)
+        .into_par_iter()
+        .map(|m| {
+            let seed = plan.seed.wrapping_add(1 + m as u64);
+            let period = random_phase_period(&bins, n, rms, seed)?;
+            let r: Vec<f64> = (0..plan.periods * n).map(|t| period[t % n]).collect();
+            let opts = SimOptions {
+                mode: plan.mode,
+                seed: seed.wrapping_mul(7919),
+                noise: plan.noise,
+                settle_samples: n,
+                ..SimOptions::default()
+            };
+            twin.simulate(&r, &opts)
+                .with_context(|| format!("simulating realisation {m}"))
+        })
+        .collect::<Vec<Result<_>>>()
+        .into_iter()
+        .collect::<Result<Vec<_>>>()?;
     let recs: Vec<Record> = data
         .iter()
         .map(|d| Record::closed_loop(&d.r, &d.u, &d.y))
@@ -315,28 +320,28 @@ pub fn amplitude_study_from_records(
             "give at least one level of recorded realisations",
         ));
     }
-    let mut rows = Vec::with_capacity(levels.len());
-    for level in levels {
-        if !(level.level_pct.is_finite() && level.level_pct > 0.0 && level.level_pct <= 100.0) {
-            return Err(Error::other(format!(
-                "a level must be in (0, 100] % of i_sat, got {}",
-                level.level_pct
-            )));
-        }
-        let bla = bla_of_level(level, plan)?;
-        let sat = level
-            .realisations
-            .iter()
-            .filter_map(|x| x.saturated_fraction)
-            .fold(0.0, f64::max);
-        rows.push(figures_of(
-            &bla,
-            level.level_pct,
-            plan.summary_band_hz,
-            sat,
-            None,
-        )?);
-    }
+    // the levels are independent: in parallel, then used in level order (the first failing
+    // level is the one reported, as in a sequential loop)
+    let rows = levels
+        .par_iter()
+        .map(|level| {
+            if !(level.level_pct.is_finite() && level.level_pct > 0.0 && level.level_pct <= 100.0) {
+                return Err(Error::other(format!(
+                    "a level must be in (0, 100] % of i_sat, got {}",
+                    level.level_pct
+                )));
+            }
+            let bla = bla_of_level(level, plan)?;
+            let sat = level
+                .realisations
+                .iter()
+                .filter_map(|x| x.saturated_fraction)
+                .fold(0.0, f64::max);
+            figures_of(&bla, level.level_pct, plan.summary_band_hz, sat, None)
+        })
+        .collect::<Vec<Result<LevelBla>>>()
+        .into_iter()
+        .collect::<Result<Vec<_>>>()?;
     recommend(rows)
 }
 
@@ -466,11 +471,17 @@ pub fn amplitude_study(plan: &BlaPlan, levels: &[f64]) -> Result<BlaStudy> {
     if levels.is_empty() {
         return Err(Error::other("give at least one level"));
     }
-    let mut rows = Vec::with_capacity(levels.len());
-    for &l in levels {
-        let run = run_level(plan, l).with_context(|| format!("level {l}"))?;
-        rows.push(level_figures(&run, l, plan.summary_band_hz)?);
-    }
+    // the levels are independent experiments: in parallel (each with the plan's seeds, as in a
+    // sequential loop), then used in level order (the first failing level is the one reported)
+    let rows = levels
+        .par_iter()
+        .map(|&l| {
+            let run = run_level(plan, l).with_context(|| format!("level {l}"))?;
+            level_figures(&run, l, plan.summary_band_hz)
+        })
+        .collect::<Vec<Result<LevelBla>>>()
+        .into_iter()
+        .collect::<Result<Vec<_>>>()?;
     recommend(rows)
 }
 

@@ -48,6 +48,7 @@ use ambid_core::frf::stepped_sine::{
 };
 use ambid_core::signal::PrbsSpec;
 use ambid_twin::{Mode, SimOptions, Twin};
+use rayon::prelude::*;
 
 /// How to run a stepped-sine experiment on the twin.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -159,31 +160,45 @@ pub fn run_stepped_sine(
         )));
     }
     let n = plan.len();
+    // the points are independent experiments (point i: `point_seed(seed, i)`): simulated and
+    // locked in in parallel, then used in point order (the first failing point is the one
+    // reported, as in a sequential loop)
+    let per_point: Vec<Result<(SinePoint, u64, f64, usize)>> = plan
+        .points()
+        .par_iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let r = plan.excitation(i, amplitude_a)?;
+            let seed = point_seed(opts.seed, i);
+            let sim = SimOptions {
+                mode: opts.mode,
+                seed,
+                noise: opts.noise,
+                ..SimOptions::default()
+            };
+            let rec = twin.simulate(&r, &sim).with_context(|| {
+                format!("simulating stepped-sine point {i} at {:.3} Hz", p.f_hz)
+            })?;
+            let pt = plan
+                .estimate_point(i, &rec.r, &rec.u, &rec.y, opts.noise_estimate)
+                .with_context(|| {
+                    format!("lock-in of stepped-sine point {i} at {:.3} Hz", p.f_hz)
+                })?;
+            Ok((pt, seed, rec.meta.saturated_fraction, r.len()))
+        })
+        .collect();
     let (mut points, mut seeds, mut saturated) = (
         Vec::with_capacity(n),
         Vec::with_capacity(n),
         Vec::with_capacity(n),
     );
     let mut simulated = 0usize;
-    for (i, p) in plan.points().iter().enumerate() {
-        let r = plan.excitation(i, amplitude_a)?;
-        let seed = point_seed(opts.seed, i);
-        let sim = SimOptions {
-            mode: opts.mode,
-            seed,
-            noise: opts.noise,
-            ..SimOptions::default()
-        };
-        let rec = twin
-            .simulate(&r, &sim)
-            .with_context(|| format!("simulating stepped-sine point {i} at {:.3} Hz", p.f_hz))?;
-        let pt = plan
-            .estimate_point(i, &rec.r, &rec.u, &rec.y, opts.noise_estimate)
-            .with_context(|| format!("lock-in of stepped-sine point {i} at {:.3} Hz", p.f_hz))?;
-        simulated += r.len();
+    for item in per_point {
+        let (pt, seed, sat, len) = item?;
+        simulated += len;
         points.push(pt);
         seeds.push(seed);
-        saturated.push(rec.meta.saturated_fraction);
+        saturated.push(sat);
     }
     Ok(SteppedSineOutcome {
         plan: plan.clone(),

@@ -8,9 +8,10 @@
 
 use crate::analysis::{analyze, FrfAnalysis, FrfSettings, Record};
 use crate::error::{Context, Error, Result};
-use crate::experiment::{run, ExcitationKind, ExcitationPlan, Experiment};
+use crate::experiment::{run, ExcitationKind, ExcitationPlan, Experiment, ExperimentOutput};
 use ambid_core::lti::Frd;
 use ambid_twin::{Mode, TwinConfig};
+use rayon::prelude::*;
 use serde::Serialize;
 
 /// One recorded experiment of an amplitude study.
@@ -105,18 +106,26 @@ pub fn amplitude_from_records(
             records.len()
         )));
     }
+    // the levels' analyses are independent: in parallel, then used in level order (the first
+    // failing level is the one reported, as in a sequential loop)
+    let analyses: Vec<Result<FrfAnalysis>> = records
+        .par_iter()
+        .map(|rec| {
+            let record = Record {
+                r: &rec.r,
+                u: &rec.u,
+                y: &rec.y,
+                i: rec.i.as_deref(),
+                fs,
+            };
+            analyze(&record, settings, y_noise)
+                .with_context(|| format!("level {:.1} %", 100.0 * rec.level))
+        })
+        .collect();
     let mut rows = Vec::with_capacity(records.len());
     let mut plants = Vec::with_capacity(records.len());
-    for rec in records {
-        let record = Record {
-            r: &rec.r,
-            u: &rec.u,
-            y: &rec.y,
-            i: rec.i.as_deref(),
-            fs,
-        };
-        let a: FrfAnalysis = analyze(&record, settings, y_noise)
-            .with_context(|| format!("level {:.1} %", 100.0 * rec.level))?;
+    for (rec, a) in records.iter().zip(analyses) {
+        let a = a?;
         let err = match truth {
             Some(t) => {
                 let tv = t(a.frf.f_hz())?;
@@ -242,10 +251,23 @@ pub fn amplitude_on_twin(study: &TwinAmplitudeStudy) -> Result<AmplitudeOutcome>
             "the amplitude study needs an excitation (prbs, chirp, noise or multisine)",
         ));
     }
-    let mut records = Vec::with_capacity(study.levels.len());
-    let mut twin = None;
-    let mut period = 0;
-    for (j, &level) in study.levels.iter().enumerate() {
+    // one experiment per level (seed + j) and the noise record (seed + 1000), all independent:
+    // in parallel, each with its own seed as in a sequential loop, then used in level order
+    let experiment = |j: usize| -> Result<ExperimentOutput> {
+        if j == study.levels.len() {
+            return Ok(run(&Experiment {
+                twin: study.twin.clone(),
+                excitation: ExcitationPlan {
+                    kind: ExcitationKind::None,
+                    ..study.excitation.clone()
+                },
+                mode: study.mode,
+                seed: study.seed + 1000,
+                noise: true,
+                record_b: false,
+            })?);
+        }
+        let level = study.levels[j];
         let exp = Experiment {
             twin: study.twin.clone(),
             excitation: ExcitationPlan {
@@ -257,7 +279,17 @@ pub fn amplitude_on_twin(study: &TwinAmplitudeStudy) -> Result<AmplitudeOutcome>
             noise: study.noise,
             record_b: false,
         };
-        let out = run(&exp).with_context(|| format!("level {:.1} %", 100.0 * level))?;
+        run(&exp).with_context(|| format!("level {:.1} %", 100.0 * level))
+    };
+    let n_runs = study.levels.len() + usize::from(study.noise);
+    let mut outs: Vec<Result<ExperimentOutput>> =
+        (0..n_runs).into_par_iter().map(experiment).collect();
+    let noise = if study.noise { outs.pop() } else { None };
+    let mut records = Vec::with_capacity(study.levels.len());
+    let mut twin = None;
+    let mut period = 0;
+    for (out, &level) in outs.into_iter().zip(&study.levels) {
+        let out = out?;
         period = out.excitation.period_samples;
         records.push(LevelRecord {
             level,
@@ -269,21 +301,7 @@ pub fn amplitude_on_twin(study: &TwinAmplitudeStudy) -> Result<AmplitudeOutcome>
         });
         twin = Some(out.twin);
     }
-    let noise = if study.noise {
-        Some(run(&Experiment {
-            twin: study.twin.clone(),
-            excitation: ExcitationPlan {
-                kind: ExcitationKind::None,
-                ..study.excitation.clone()
-            },
-            mode: study.mode,
-            seed: study.seed + 1000,
-            noise: true,
-            record_b: false,
-        })?)
-    } else {
-        None
-    };
+    let noise = noise.transpose()?;
     let twin = twin.ok_or_else(|| Error::other("no level given"))?;
     let mut settings = FrfSettings::periodic(period, study.skip_periods);
     settings.band = study.band;
@@ -502,10 +520,15 @@ pub fn operating_point_from_records(
             "an operating-point study needs the nominal record and at least one other, each named",
         ));
     }
+    // independent analyses: in parallel, then used in record order
+    let analyses: Vec<Result<FrfAnalysis>> = names
+        .par_iter()
+        .zip(records)
+        .map(|(n, r)| analyze(r, settings, None).with_context(|| format!("operating point `{n}`")))
+        .collect();
     let mut plants = Vec::with_capacity(records.len());
-    for (n, r) in names.iter().zip(records) {
-        let a = analyze(r, settings, None).with_context(|| format!("operating point `{n}`"))?;
-        plants.push(a.frf.plant);
+    for a in analyses {
+        plants.push(a?.frf.plant);
     }
     let deviations = band_deviations(names, &plants, None)?;
     Ok(OperatingPointOutcome {
@@ -547,49 +570,58 @@ pub fn operating_point_on_twin(
             "an operating-point study needs the nominal case and at least one other",
         ));
     }
-    let mut plants = Vec::new();
-    let mut truths = Vec::new();
-    let mut truth_errors = Vec::new();
-    for (j, case) in cases.iter().enumerate() {
-        let mut cfg = nominal.clone();
-        cfg.operating_point.bias_current_a = case.bias_current_a;
-        cfg.operating_point.air_gap_m = case.air_gap_m;
-        let out = run(&Experiment {
-            twin: cfg,
-            excitation: excitation.clone(),
-            mode,
-            seed: seed + j as u64,
-            noise: true,
-            record_b: false,
-        })
-        .with_context(|| format!("operating point `{}`", case.name))?;
-        let mut settings = FrfSettings::periodic(out.excitation.period_samples, skip_periods);
-        settings.band = band;
-        settings.quality_band = band;
-        settings.i_sat = Some(out.twin.i_sat());
-        let rec = &out.record;
-        let record = Record {
-            r: &rec.r,
-            u: &rec.u,
-            y: &rec.y,
-            i: Some(&rec.i),
-            fs: out.twin.fs(),
-        };
-        let a = analyze(&record, &settings, None)
+    // the cases are independent experiments (seed + j): in parallel, then checked and used in
+    // case order (the first failing case is the one reported, as in a sequential loop)
+    let per_case: Vec<Result<(Frd, Vec<ambid_core::c64>, f64)>> = cases
+        .par_iter()
+        .enumerate()
+        .map(|(j, case)| {
+            let mut cfg = nominal.clone();
+            cfg.operating_point.bias_current_a = case.bias_current_a;
+            cfg.operating_point.air_gap_m = case.air_gap_m;
+            let out = run(&Experiment {
+                twin: cfg,
+                excitation: excitation.clone(),
+                mode,
+                seed: seed + j as u64,
+                noise: true,
+                record_b: false,
+            })
             .with_context(|| format!("operating point `{}`", case.name))?;
-        let truth = out.twin.plant_frf(a.frf.f_hz())?;
-        truth_errors.push(median(
-            a.frf
-                .plant
-                .values()
-                .iter()
-                .zip(&truth)
-                .map(|(x, t)| (x - t).norm() / t.norm())
-                .collect(),
-        ));
+            let mut settings = FrfSettings::periodic(out.excitation.period_samples, skip_periods);
+            settings.band = band;
+            settings.quality_band = band;
+            settings.i_sat = Some(out.twin.i_sat());
+            let rec = &out.record;
+            let record = Record {
+                r: &rec.r,
+                u: &rec.u,
+                y: &rec.y,
+                i: Some(&rec.i),
+                fs: out.twin.fs(),
+            };
+            let a = analyze(&record, &settings, None)
+                .with_context(|| format!("operating point `{}`", case.name))?;
+            let truth = out.twin.plant_frf(a.frf.f_hz())?;
+            let truth_error = median(
+                a.frf
+                    .plant
+                    .values()
+                    .iter()
+                    .zip(&truth)
+                    .map(|(x, t)| (x - t).norm() / t.norm())
+                    .collect(),
+            );
+            Ok((a.frf.plant, truth, truth_error))
+        })
+        .collect();
+    let mut plants: Vec<Frd> = Vec::with_capacity(cases.len());
+    let mut truths = Vec::with_capacity(cases.len());
+    let mut truth_errors = Vec::with_capacity(cases.len());
+    for (case, item) in cases.iter().zip(per_case) {
+        let (plant, truth, truth_error) = item?;
         if let Some(first) = plants.first() {
-            let first: &Frd = first;
-            if first.f_hz() != a.frf.f_hz() {
+            if first.f_hz() != plant.f_hz() {
                 return Err(Error::other(format!(
                     "operating point `{}` gave a different frequency grid from nominal; use the same \
                      excitation for every case",
@@ -597,7 +629,8 @@ pub fn operating_point_on_twin(
                 )));
             }
         }
-        plants.push(a.frf.plant);
+        truth_errors.push(truth_error);
+        plants.push(plant);
         truths.push(truth);
     }
     let names: Vec<String> = cases.iter().map(|c| c.name.clone()).collect();
