@@ -287,7 +287,6 @@ pub(crate) fn screen_channels(
     u_saturated: bool,
 ) -> Result<(Vec<f64>, Vec<f64>, AbnormalReport, AbnormalReport)> {
     let opts = AbnormalOptions::default();
-    let (y2, ry) = repair_abnormal(y, &opts).context("screening y")?;
     let c: Vec<f64> = u.iter().zip(r).map(|(u, r)| u - r).collect();
     let copts = if u_saturated {
         AbnormalOptions {
@@ -298,7 +297,12 @@ pub(crate) fn screen_channels(
     } else {
         opts
     };
-    let (c2, rc) = repair_abnormal(&c, &copts).context("screening u − r")?;
+    // the two channels are screened independently (the Hampel filter is most of an analysis's
+    // time): in parallel; the errors are reported in the same order (y first)
+    let (y_screened, c_screened) =
+        rayon::join(|| repair_abnormal(y, &opts), || repair_abnormal(&c, &copts));
+    let (y2, ry) = y_screened.context("screening y")?;
+    let (c2, rc) = c_screened.context("screening u − r")?;
     let u2: Vec<f64> = c2.iter().zip(r).map(|(c, r)| c + r).collect();
     Ok((u2, y2, rc, ry))
 }

@@ -98,9 +98,8 @@ fn amplitude_study_on_the_twin_is_independent_of_the_threads_and_equals_the_sequ
     settings.band = study.band;
     settings.quality_band = study.band;
     settings.i_sat = Some(twin.i_sat());
-    let truth = |f: &[f64]| -> ambid::error::Result<Vec<ambid_core::c64>> {
-        Ok(twin.plant_frf(f)?)
-    };
+    let truth =
+        |f: &[f64]| -> ambid::error::Result<Vec<ambid_core::c64>> { Ok(twin.plant_frf(f)?) };
     let seq = on_threads(1, || {
         amplitude_from_records(
             &records,
