@@ -7,6 +7,9 @@
 //! computation, writing): the median of `AMBID_BENCH_REPS` runs (default 5). It prints a Markdown
 //! table for docs/benchmarks.md. A command that fails is reported as failed with its message.
 //!
+//! On the nominal rig it also times the studies that simulate their own experiments (`study
+//! amplitude`, `study operating-point`, `bla` on the twin).
+//!
 //! Options by environment: `AMBID_BENCH_RIGS=nominal,3,7` (default `nominal,3`),
 //! `AMBID_BENCH_REPS=5`, `AMBID_BENCH_FILTER=fit` (only commands whose label contains it).
 
@@ -90,7 +93,7 @@ fn main() {
             o("ss8.json"),
             o("plant.json"),
         );
-        let cases: Vec<(&str, Vec<String>)> = vec![
+        let mut cases: Vec<(&str, Vec<String>)> = vec![
             ("simulate (seed experiment, nonlinear default)", {
                 let mut v: Vec<String> = ["simulate", "--out"]
                     .iter()
@@ -274,6 +277,32 @@ fn main() {
                 ],
             ),
         ];
+        if rig == "nominal" {
+            // the studies simulate their own experiments on the nominal twin (issue 19: their
+            // levels, operating points and realisations run in parallel)
+            let owned = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<String>>();
+            cases.extend([
+                (
+                    "study amplitude (8 levels + noise record, nonlinear twin)",
+                    owned(&["study", "amplitude", "--out", &o("amplitude.csv")]),
+                ),
+                (
+                    "study operating-point (5 cases, nonlinear twin)",
+                    owned(&[
+                        "study",
+                        "operating-point",
+                        "--out",
+                        &o("op.csv"),
+                        "--frf-out",
+                        &o("op_frf.csv"),
+                    ]),
+                ),
+                (
+                    "bla (defaults: 5 levels 2–32 %, M = 8, P = 4, twin)",
+                    owned(&["bla", "--out", &o("bla.csv")]),
+                ),
+            ]);
+        }
         for (label, args) in cases {
             // every repetition replaces the previous one's outputs
             let args: Vec<&str> = args

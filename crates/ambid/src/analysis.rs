@@ -1,6 +1,7 @@
 //! The nonparametric FRF pipeline behind `ambid frf`: recorded channels → screening (abnormal
 //! samples, saturation) → closed-loop FRFs with variances, coherences and quality measures.
 
+use crate::error::{Context, Error, Result};
 use ambid_core::data::{
     check_saturation, repair_abnormal, AbnormalOptions, AbnormalReport, SaturationOptions,
     SaturationReport,
@@ -12,7 +13,6 @@ use ambid_core::frf::quality::{assess, output_snr_db, Quality};
 use ambid_core::frf::welch::{welch_spectra, CrossSpectra, WelchOptions};
 use ambid_core::frf::window::Window;
 use ambid_core::lti::StateSpace;
-use anyhow::{bail, Context, Result};
 
 /// How the spectra are formed.
 #[derive(Debug, Clone, PartialEq)]
@@ -219,10 +219,9 @@ pub const MIN_FRF_SAMPLES: usize = 64;
 pub fn check_frf_length(n: usize, source: Option<&str>) -> Result<()> {
     if n < MIN_FRF_SAMPLES {
         let prefix = source.map_or(String::new(), |s| format!("{s}: "));
-        return Err(crate::workflow::input(anyhow::anyhow!(
+        return Err(Error::input(format!(
             "{prefix}{n} samples are too few for an FRF: at least {MIN_FRF_SAMPLES} are needed (the shortest Welch segment the defaults use); give a longer record"
-        ))
-        .into());
+        )));
     }
     Ok(())
 }
@@ -236,10 +235,9 @@ pub fn check_fs_matches(fs: Option<f64>, ts: f64) -> Result<()> {
     if let Some(fs) = fs {
         let file_fs = 1.0 / ts;
         if ((file_fs - fs) / fs).abs() > 1e-6 {
-            return Err(crate::workflow::usage(anyhow::anyhow!(
+            return Err(Error::usage(format!(
                 "--fs {fs:e} Hz disagrees with the file's `t` column ({file_fs:e} Hz)"
-            ))
-            .into());
+            )));
         }
     }
     Ok(())
@@ -258,10 +256,14 @@ pub(crate) fn welch_options(method: &FrfMethod, fs: f64, n: usize) -> Result<Wel
         skip_samples,
     } = method
     else {
-        bail!("Welch options asked for a period-averaging analysis");
+        return Err(Error::other(
+            "Welch options asked for a period-averaging analysis",
+        ));
     };
     if *skip_samples >= n {
-        bail!("--skip-samples {skip_samples} drops the whole record of {n} samples");
+        return Err(Error::other(format!(
+            "--skip-samples {skip_samples} drops the whole record of {n} samples"
+        )));
     }
     let mut opts = WelchOptions::new(fs, *nperseg);
     opts.window = *window;
@@ -285,7 +287,6 @@ pub(crate) fn screen_channels(
     u_saturated: bool,
 ) -> Result<(Vec<f64>, Vec<f64>, AbnormalReport, AbnormalReport)> {
     let opts = AbnormalOptions::default();
-    let (y2, ry) = repair_abnormal(y, &opts).context("screening y")?;
     let c: Vec<f64> = u.iter().zip(r).map(|(u, r)| u - r).collect();
     let copts = if u_saturated {
         AbnormalOptions {
@@ -296,7 +297,12 @@ pub(crate) fn screen_channels(
     } else {
         opts
     };
-    let (c2, rc) = repair_abnormal(&c, &copts).context("screening u − r")?;
+    // the two channels are screened independently (the Hampel filter is most of an analysis's
+    // time): in parallel; the errors are reported in the same order (y first)
+    let (y_screened, c_screened) =
+        rayon::join(|| repair_abnormal(y, &opts), || repair_abnormal(&c, &copts));
+    let (y2, ry) = y_screened.context("screening y")?;
+    let (c2, rc) = c_screened.context("screening u − r")?;
     let u2: Vec<f64> = c2.iter().zip(r).map(|(c, r)| c + r).collect();
     Ok((u2, y2, rc, ry))
 }
@@ -315,15 +321,18 @@ pub fn analyze(
         .chain(rec.i.map(|i| ("i", i)))
     {
         if x.len() != n {
-            bail!(
+            return Err(Error::other(format!(
                 "channel `{name}` has {} samples but the excitation has {n}; all channels must be \
                  recorded together",
                 x.len()
-            );
+            )));
         }
     }
     if !(rec.fs.is_finite() && rec.fs > 0.0) {
-        bail!("the sampling frequency must be positive, got {}", rec.fs);
+        return Err(Error::other(format!(
+            "the sampling frequency must be positive, got {}",
+            rec.fs
+        )));
     }
     ambid_core::error::check_finite("r (excitation)", rec.r)?;
     let mut warnings = Vec::new();
@@ -454,11 +463,11 @@ pub fn analyze_spectra(
                 .context("the band of the excitation")?;
             let (lo, hi, origin) = pick(derived);
             if s.periods() < 2 {
-                bail!(
+                return Err(Error::other(format!(
                     "only {} period is left after skipping {skip_periods}: at least 2 are needed for a \
                      variance; record more periods or skip fewer",
                     s.periods()
-                );
+                )));
             }
             let lines: Vec<usize> = s
                 .excited_lines(0, settings.rel_threshold)?
@@ -466,22 +475,22 @@ pub fn analyze_spectra(
                 .filter(|&k| (lo..=hi).contains(&s.line_hz(k)))
                 .collect();
             if lines.is_empty() {
-                bail!(
+                return Err(Error::other(format!(
                     "the excitation has no excited line in {lo}–{hi} Hz (resolution {:.4} Hz); widen \
                      the band or check the excitation and the period length",
                     s.resolution_hz()
-                );
+                )));
             }
             let frf = from_periodic(&s, ch, &lines, settings.controller.as_ref())?;
             (frf, Some(s), derived, origin)
         }
         Spectra::Welch(cs) => {
             if cs.n_segments() < 2 {
-                bail!(
+                return Err(Error::other(format!(
                     "only {} Welch segment fits in the record; at least 2 are needed for a variance: \
                      lower --nperseg",
                     cs.n_segments()
-                );
+                )));
             }
             let derived = excitation_bands(
                 cs.f_hz(),

@@ -32,12 +32,13 @@
 //! println!("{}", study.reasoning);
 //! ```
 
+use crate::error::{Context, Error, Result};
 use ambid_core::c64;
 use ambid_core::frf::bla::{random_phase_period, robust_bla, Bla, Record};
 use ambid_core::frf::periodic::PeriodicOptions;
 use ambid_core::signal::{Grid, MultisineSpec, Phases};
 use ambid_twin::{Mode, SimOptions, Twin, TwinConfig};
-use anyhow::{bail, Context, Result};
+use rayon::prelude::*;
 use serde::Serialize;
 
 /// How the BLA experiment is run on the twin.
@@ -107,14 +108,15 @@ pub struct LevelRun {
 /// Invalid plan (M or P below 2, level outside (0, 1], empty band), simulation or BLA errors.
 pub fn run_level(plan: &BlaPlan, rms_frac: f64) -> Result<LevelRun> {
     if !(rms_frac.is_finite() && rms_frac > 0.0 && rms_frac <= 1.0) {
-        bail!("the RMS level must be a fraction of i_sat in (0, 1], got {rms_frac}");
+        return Err(Error::other(format!(
+            "the RMS level must be a fraction of i_sat in (0, 1], got {rms_frac}"
+        )));
     }
     if plan.realisations < 2 || plan.periods < 2 {
-        bail!(
+        return Err(Error::other(format!(
             "the robust BLA needs at least 2 realisations and 2 periods (got M = {}, P = {})",
-            plan.realisations,
-            plan.periods
-        );
+            plan.realisations, plan.periods
+        )));
     }
     let twin = Twin::new(plan.twin.clone()).context("building the AMB twin")?;
     let ts = twin.ts();
@@ -131,23 +133,27 @@ pub fn run_level(plan: &BlaPlan, rms_frac: f64) -> Result<LevelRun> {
     };
     let bins = spec.bins(ts).context("designing the multisine grid")?;
     let rms = rms_frac * twin.i_sat();
-    let mut data = Vec::with_capacity(plan.realisations);
-    for m in 0..plan.realisations {
-        let seed = plan.seed.wrapping_add(1 + m as u64);
-        let period = random_phase_period(&bins, n, rms, seed)?;
-        let r: Vec<f64> = (0..plan.periods * n).map(|t| period[t % n]).collect();
-        let opts = SimOptions {
-            mode: plan.mode,
-            seed: seed.wrapping_mul(7919),
-            noise: plan.noise,
-            settle_samples: n,
-            ..SimOptions::default()
-        };
-        let rec = twin
-            .simulate(&r, &opts)
-            .with_context(|| format!("simulating realisation {m}"))?;
-        data.push(rec);
-    }
+    // the realisations are independent (realisation m: seed + 1 + m): simulated in parallel, then
+    // used in order (the first failing one is the one reported, as in a sequential loop)
+    let data = (0..plan.realisations)
+        .into_par_iter()
+        .map(|m| {
+            let seed = plan.seed.wrapping_add(1 + m as u64);
+            let period = random_phase_period(&bins, n, rms, seed)?;
+            let r: Vec<f64> = (0..plan.periods * n).map(|t| period[t % n]).collect();
+            let opts = SimOptions {
+                mode: plan.mode,
+                seed: seed.wrapping_mul(7919),
+                noise: plan.noise,
+                settle_samples: n,
+                ..SimOptions::default()
+            };
+            twin.simulate(&r, &opts)
+                .with_context(|| format!("simulating realisation {m}"))
+        })
+        .collect::<Vec<Result<_>>>()
+        .into_iter()
+        .collect::<Result<Vec<_>>>()?;
     let recs: Vec<Record> = data
         .iter()
         .map(|d| Record::closed_loop(&d.r, &d.u, &d.y))
@@ -236,19 +242,19 @@ pub struct RecordedPlan {
 pub fn bla_of_level(level: &RecordedLevel, plan: &RecordedPlan) -> Result<Bla> {
     let m = level.realisations.len();
     if m < 2 {
-        bail!(
+        return Err(Error::other(format!(
             "level {} %: the robust BLA needs at least 2 realisations (independent random-phase \
              multisines), got {m}; record more realisations at this level",
             level.level_pct
-        );
+        )));
     }
     let closed = level.realisations.iter().filter(|x| x.r.is_some()).count();
     if closed != 0 && closed != m {
-        bail!(
+        return Err(Error::other(format!(
             "level {} %: {closed} of {m} realisations have the excitation r and the others do not; \
              give r for all (closed loop) or for none (open loop)",
             level.level_pct
-        );
+        )));
     }
     let recs: Vec<Record> = level
         .realisations
@@ -310,30 +316,32 @@ pub fn amplitude_study_from_records(
     plan: &RecordedPlan,
 ) -> Result<BlaStudy> {
     if levels.is_empty() {
-        bail!("give at least one level of recorded realisations");
+        return Err(Error::other(
+            "give at least one level of recorded realisations",
+        ));
     }
-    let mut rows = Vec::with_capacity(levels.len());
-    for level in levels {
-        if !(level.level_pct.is_finite() && level.level_pct > 0.0 && level.level_pct <= 100.0) {
-            bail!(
-                "a level must be in (0, 100] % of i_sat, got {}",
-                level.level_pct
-            );
-        }
-        let bla = bla_of_level(level, plan)?;
-        let sat = level
-            .realisations
-            .iter()
-            .filter_map(|x| x.saturated_fraction)
-            .fold(0.0, f64::max);
-        rows.push(figures_of(
-            &bla,
-            level.level_pct,
-            plan.summary_band_hz,
-            sat,
-            None,
-        )?);
-    }
+    // the levels are independent: in parallel, then used in level order (the first failing
+    // level is the one reported, as in a sequential loop)
+    let rows = levels
+        .par_iter()
+        .map(|level| {
+            if !(level.level_pct.is_finite() && level.level_pct > 0.0 && level.level_pct <= 100.0) {
+                return Err(Error::other(format!(
+                    "a level must be in (0, 100] % of i_sat, got {}",
+                    level.level_pct
+                )));
+            }
+            let bla = bla_of_level(level, plan)?;
+            let sat = level
+                .realisations
+                .iter()
+                .filter_map(|x| x.saturated_fraction)
+                .fold(0.0, f64::max);
+            figures_of(&bla, level.level_pct, plan.summary_band_hz, sat, None)
+        })
+        .collect::<Vec<Result<LevelBla>>>()
+        .into_iter()
+        .collect::<Result<Vec<_>>>()?;
     recommend(rows)
 }
 
@@ -461,13 +469,19 @@ pub const MAX_SATURATED: f64 = 0.01;
 /// No level, or the errors of [`run_level`].
 pub fn amplitude_study(plan: &BlaPlan, levels: &[f64]) -> Result<BlaStudy> {
     if levels.is_empty() {
-        bail!("give at least one level");
+        return Err(Error::other("give at least one level"));
     }
-    let mut rows = Vec::with_capacity(levels.len());
-    for &l in levels {
-        let run = run_level(plan, l).with_context(|| format!("level {l}"))?;
-        rows.push(level_figures(&run, l, plan.summary_band_hz)?);
-    }
+    // the levels are independent experiments: in parallel (each with the plan's seeds, as in a
+    // sequential loop), then used in level order (the first failing level is the one reported)
+    let rows = levels
+        .par_iter()
+        .map(|&l| {
+            let run = run_level(plan, l).with_context(|| format!("level {l}"))?;
+            level_figures(&run, l, plan.summary_band_hz)
+        })
+        .collect::<Vec<Result<LevelBla>>>()
+        .into_iter()
+        .collect::<Result<Vec<_>>>()?;
     recommend(rows)
 }
 
@@ -492,7 +506,7 @@ pub fn recommend(rows: Vec<LevelBla>) -> Result<BlaStudy> {
     let best = *candidates
         .iter()
         .min_by(|a, b| a.sum_rel.total_cmp(&b.sum_rel))
-        .context("no level")?;
+        .ok_or_else(|| Error::other("no level"))?;
     let recommended_pct = best.level_pct;
     let significant = |r: &LevelBla| r.nl_rel > 3.0 * r.nl_rel_se;
     let first_nl = rows.iter().find(|r| significant(r)).map(|r| r.level_pct);

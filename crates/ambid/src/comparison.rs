@@ -4,11 +4,11 @@
 //! The four signals share the sample rate and the record length of one seed PRBS period
 //! (order 10, 5 samples per bit: 5115 samples) so that their spectra fall on the same DFT grid.
 
+use crate::error::{Error, Result};
 use ambid_core::signal::{
     amplitude_spectrum, autocorrelation, BandReport, ChirpSpec, Distribution, ExcitationSpec, Grid,
     MultisineSpec, NoiseSpec, Phases, PrbsSpec, Sweep,
 };
-use anyhow::{bail, Result};
 
 /// One signal of the comparison.
 pub struct Compared {
@@ -39,10 +39,14 @@ pub struct Comparison {
 /// PRBS period's length and scaled to the RMS `level`. `max_lag` bounds the autocorrelation.
 pub fn compare(fs_hz: f64, level: f64, seed: u64, max_lag: usize) -> Result<Comparison> {
     if !(fs_hz.is_finite() && fs_hz > 0.0) {
-        bail!("the sample rate must be positive and finite, got {fs_hz}");
+        return Err(Error::other(format!(
+            "the sample rate must be positive and finite, got {fs_hz}"
+        )));
     }
     if !(level.is_finite() && level > 0.0) {
-        bail!("the RMS level must be positive and finite, got {level}");
+        return Err(Error::other(format!(
+            "the RMS level must be positive and finite, got {level}"
+        )));
     }
     let ts = 1.0 / fs_hz;
     let prbs = PrbsSpec {

@@ -2,12 +2,12 @@
 //! (data scaled to unit RMS, subspace identification, optional prediction-error refinement,
 //! model scaled back) and the fit figures of a polynomial model.
 
+use crate::error::{Context, Error, Result};
 use ambid_core::estimate::pem::Focus;
 use ambid_core::estimate::ss_pem::{refine_ss, SsPemOptions};
 use ambid_core::estimate::subspace::{n4sid_detailed, HorizonCriterion, SubspaceOptions};
 use ambid_core::lti::{PolyModel, StateSpace};
 use ambid_core::validate::predict::{fit_from, poly_one_step, poly_simulate, InitialState};
-use anyhow::{bail, Context, Result};
 use faer::Mat;
 
 /// What the prediction-error refinement did.
@@ -216,7 +216,9 @@ fn fit_scaled(
     let rms = |x: &[f64]| (x.iter().map(|v| v * v).sum::<f64>() / x.len().max(1) as f64).sqrt();
     let (su, sy) = (rms(u), rms(y));
     if su == 0.0 || sy == 0.0 {
-        bail!("the input or the output is constant after removing its mean: nothing to identify");
+        return Err(Error::other(
+            "the input or the output is constant after removing its mean: nothing to identify",
+        ));
     }
     let um = Mat::from_fn(u.len(), 1, |k, _| u[k] / su);
     let ym = Mat::from_fn(y.len(), 1, |k, _| y[k] / sy);

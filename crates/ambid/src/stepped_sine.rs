@@ -41,13 +41,14 @@
 //! assert!((out.experiment_time_s - plan.total_time_s()).abs() < 1e-12);
 //! ```
 
+use crate::error::{Context, Error, Result};
 use ambid_core::c64;
 use ambid_core::frf::stepped_sine::{
     lock_in, NoiseEstimate, Ratio, Settle, SinePoint, SteppedSinePlan, SteppedSineResult,
 };
 use ambid_core::signal::PrbsSpec;
 use ambid_twin::{Mode, SimOptions, Twin};
-use anyhow::{bail, Context, Result};
+use rayon::prelude::*;
 
 /// How to run a stepped-sine experiment on the twin.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -147,43 +148,57 @@ pub fn run_stepped_sine(
 ) -> Result<SteppedSineOutcome> {
     let fs = twin.fs();
     if (plan.fs_hz() - fs).abs() > 1e-9 * fs {
-        bail!(
+        return Err(Error::usage(format!(
             "the plan was made for {} Hz but the twin samples at {fs} Hz; plan with twin.fs()",
             plan.fs_hz()
-        );
+        )));
     }
     if !(amplitude_a.is_finite() && amplitude_a > 0.0 && amplitude_a <= twin.i_sat()) {
-        bail!(
+        return Err(Error::usage(format!(
             "the sine amplitude must be in (0, i_sat] = (0, {}] A, got {amplitude_a}",
             twin.i_sat()
-        );
+        )));
     }
     let n = plan.len();
+    // the points are independent experiments (point i: `point_seed(seed, i)`): simulated and
+    // locked in in parallel, then used in point order (the first failing point is the one
+    // reported, as in a sequential loop)
+    let per_point: Vec<Result<(SinePoint, u64, f64, usize)>> = plan
+        .points()
+        .par_iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let r = plan.excitation(i, amplitude_a)?;
+            let seed = point_seed(opts.seed, i);
+            let sim = SimOptions {
+                mode: opts.mode,
+                seed,
+                noise: opts.noise,
+                ..SimOptions::default()
+            };
+            let rec = twin.simulate(&r, &sim).with_context(|| {
+                format!("simulating stepped-sine point {i} at {:.3} Hz", p.f_hz)
+            })?;
+            let pt = plan
+                .estimate_point(i, &rec.r, &rec.u, &rec.y, opts.noise_estimate)
+                .with_context(|| {
+                    format!("lock-in of stepped-sine point {i} at {:.3} Hz", p.f_hz)
+                })?;
+            Ok((pt, seed, rec.meta.saturated_fraction, r.len()))
+        })
+        .collect();
     let (mut points, mut seeds, mut saturated) = (
         Vec::with_capacity(n),
         Vec::with_capacity(n),
         Vec::with_capacity(n),
     );
     let mut simulated = 0usize;
-    for (i, p) in plan.points().iter().enumerate() {
-        let r = plan.excitation(i, amplitude_a)?;
-        let seed = point_seed(opts.seed, i);
-        let sim = SimOptions {
-            mode: opts.mode,
-            seed,
-            noise: opts.noise,
-            ..SimOptions::default()
-        };
-        let rec = twin
-            .simulate(&r, &sim)
-            .with_context(|| format!("simulating stepped-sine point {i} at {:.3} Hz", p.f_hz))?;
-        let pt = plan
-            .estimate_point(i, &rec.r, &rec.u, &rec.y, opts.noise_estimate)
-            .with_context(|| format!("lock-in of stepped-sine point {i} at {:.3} Hz", p.f_hz))?;
-        simulated += r.len();
+    for item in per_point {
+        let (pt, seed, sat, len) = item?;
+        simulated += len;
         points.push(pt);
         seeds.push(seed);
-        saturated.push(rec.meta.saturated_fraction);
+        saturated.push(sat);
     }
     Ok(SteppedSineOutcome {
         plan: plan.clone(),
@@ -343,7 +358,9 @@ pub fn prbs_time_comparison(
     min_measure_s: f64,
 ) -> Result<PrbsTimeComparison> {
     if !(fs_hz.is_finite() && fs_hz > 0.0) {
-        bail!("the sample rate must be finite and positive, got {fs_hz}");
+        return Err(Error::usage(format!(
+            "the sample rate must be finite and positive, got {fs_hz}"
+        )));
     }
     let ts = 1.0 / fs_hz;
     let report = prbs.report(ts).context("the PRBS design")?;
@@ -351,12 +368,16 @@ pub fn prbs_time_comparison(
     let df = fs_hz / np as f64;
     let (f_lo, f_hi) = band_hz;
     if !(f_lo.is_finite() && f_hi.is_finite() && 0.0 < f_lo && f_lo <= f_hi) {
-        bail!("the band must satisfy 0 < f_lo ≤ f_hi, got ({f_lo}, {f_hi}) Hz");
+        return Err(Error::usage(format!(
+            "the band must satisfy 0 < f_lo ≤ f_hi, got ({f_lo}, {f_hi}) Hz"
+        )));
     }
     let k_lo = (f_lo / df).ceil().max(1.0) as usize;
     let k_hi = ((f_hi / df).floor() as usize).min((np - 1) / 2);
     if k_hi < k_lo {
-        bail!("no PRBS line ({df:.4} Hz spacing) lies in {f_lo}–{f_hi} Hz; widen the band");
+        return Err(Error::usage(format!(
+            "no PRBS line ({df:.4} Hz spacing) lies in {f_lo}–{f_hi} Hz; widen the band"
+        )));
     }
     let lines: Vec<f64> = (k_lo..=k_hi).map(|k| k as f64 * df).collect();
     let plan = SteppedSinePlan::new(fs_hz, &lines, settle, measure_cycles, min_measure_s)?;
@@ -400,14 +421,14 @@ pub fn prbs_time_comparison(
 fn check_snap(plan: &SteppedSinePlan, df: f64) -> Result<()> {
     for p in plan.points() {
         if (p.f_hz - p.f_requested_hz).abs() >= 0.5 * df {
-            bail!(
+            return Err(Error::usage(format!(
                 "snapping {:.3} Hz to a whole number of cycles in {} samples moved it to {:.3} Hz, \
                  half a PRBS line spacing ({df:.3} Hz) or more; raise min_measure_s (the snap is at \
                  most f/(2 N), N the window in samples)",
                 p.f_requested_hz,
                 p.measure_samples,
                 p.f_hz
-            );
+            )));
         }
     }
     Ok(())

@@ -7,10 +7,11 @@
 //!   with the deviation from nominal per band (low frequency, resonance region, high frequency).
 
 use crate::analysis::{analyze, FrfAnalysis, FrfSettings, Record};
-use crate::experiment::{run, ExcitationKind, ExcitationPlan, Experiment};
+use crate::error::{Context, Error, Result};
+use crate::experiment::{run, ExcitationKind, ExcitationPlan, Experiment, ExperimentOutput};
 use ambid_core::lti::Frd;
 use ambid_twin::{Mode, TwinConfig};
-use anyhow::{bail, Context, Result};
+use rayon::prelude::*;
 use serde::Serialize;
 
 /// One recorded experiment of an amplitude study.
@@ -100,23 +101,31 @@ pub fn amplitude_from_records(
     rule: Recommendation,
 ) -> Result<AmplitudeOutcome> {
     if records.len() < 2 {
-        bail!(
+        return Err(Error::other(format!(
             "an amplitude study needs at least 2 levels, got {}",
             records.len()
-        );
+        )));
     }
+    // the levels' analyses are independent: in parallel, then used in level order (the first
+    // failing level is the one reported, as in a sequential loop)
+    let analyses: Vec<Result<FrfAnalysis>> = records
+        .par_iter()
+        .map(|rec| {
+            let record = Record {
+                r: &rec.r,
+                u: &rec.u,
+                y: &rec.y,
+                i: rec.i.as_deref(),
+                fs,
+            };
+            analyze(&record, settings, y_noise)
+                .with_context(|| format!("level {:.1} %", 100.0 * rec.level))
+        })
+        .collect();
     let mut rows = Vec::with_capacity(records.len());
     let mut plants = Vec::with_capacity(records.len());
-    for rec in records {
-        let record = Record {
-            r: &rec.r,
-            u: &rec.u,
-            y: &rec.y,
-            i: rec.i.as_deref(),
-            fs,
-        };
-        let a: FrfAnalysis = analyze(&record, settings, y_noise)
-            .with_context(|| format!("level {:.1} %", 100.0 * rec.level))?;
+    for (rec, a) in records.iter().zip(analyses) {
+        let a = a?;
         let err = match truth {
             Some(t) => {
                 let tv = t(a.frf.f_hz())?;
@@ -238,12 +247,27 @@ impl Default for TwinAmplitudeStudy {
 /// for the output SNR).
 pub fn amplitude_on_twin(study: &TwinAmplitudeStudy) -> Result<AmplitudeOutcome> {
     if study.excitation.kind == ExcitationKind::None {
-        bail!("the amplitude study needs an excitation (prbs, chirp, noise or multisine)");
+        return Err(Error::other(
+            "the amplitude study needs an excitation (prbs, chirp, noise or multisine)",
+        ));
     }
-    let mut records = Vec::with_capacity(study.levels.len());
-    let mut twin = None;
-    let mut period = 0;
-    for (j, &level) in study.levels.iter().enumerate() {
+    // one experiment per level (seed + j) and the noise record (seed + 1000), all independent:
+    // in parallel, each with its own seed as in a sequential loop, then used in level order
+    let experiment = |j: usize| -> Result<ExperimentOutput> {
+        if j == study.levels.len() {
+            return Ok(run(&Experiment {
+                twin: study.twin.clone(),
+                excitation: ExcitationPlan {
+                    kind: ExcitationKind::None,
+                    ..study.excitation.clone()
+                },
+                mode: study.mode,
+                seed: study.seed + 1000,
+                noise: true,
+                record_b: false,
+            })?);
+        }
+        let level = study.levels[j];
         let exp = Experiment {
             twin: study.twin.clone(),
             excitation: ExcitationPlan {
@@ -255,7 +279,17 @@ pub fn amplitude_on_twin(study: &TwinAmplitudeStudy) -> Result<AmplitudeOutcome>
             noise: study.noise,
             record_b: false,
         };
-        let out = run(&exp).with_context(|| format!("level {:.1} %", 100.0 * level))?;
+        run(&exp).with_context(|| format!("level {:.1} %", 100.0 * level))
+    };
+    let n_runs = study.levels.len() + usize::from(study.noise);
+    let mut outs: Vec<Result<ExperimentOutput>> =
+        (0..n_runs).into_par_iter().map(experiment).collect();
+    let noise = if study.noise { outs.pop() } else { None };
+    let mut records = Vec::with_capacity(study.levels.len());
+    let mut twin = None;
+    let mut period = 0;
+    for (out, &level) in outs.into_iter().zip(&study.levels) {
+        let out = out?;
         period = out.excitation.period_samples;
         records.push(LevelRecord {
             level,
@@ -267,22 +301,8 @@ pub fn amplitude_on_twin(study: &TwinAmplitudeStudy) -> Result<AmplitudeOutcome>
         });
         twin = Some(out.twin);
     }
-    let noise = if study.noise {
-        Some(run(&Experiment {
-            twin: study.twin.clone(),
-            excitation: ExcitationPlan {
-                kind: ExcitationKind::None,
-                ..study.excitation.clone()
-            },
-            mode: study.mode,
-            seed: study.seed + 1000,
-            noise: true,
-            record_b: false,
-        })?)
-    } else {
-        None
-    };
-    let twin = twin.context("no level given")?;
+    let noise = noise.transpose()?;
+    let twin = twin.ok_or_else(|| Error::other("no level given"))?;
     let mut settings = FrfSettings::periodic(period, study.skip_periods);
     settings.band = study.band;
     settings.quality_band = study.band;
@@ -419,21 +439,23 @@ pub fn band_deviations(
     truths: Option<&[Vec<ambid_core::c64>]>,
 ) -> Result<Vec<BandDeviation>> {
     if plants.len() < 2 || names.len() != plants.len() {
-        bail!("an operating-point comparison needs the nominal case and at least one other, each named");
+        return Err(Error::other("an operating-point comparison needs the nominal case and at least one other, each named"));
     }
     let nom = &plants[0];
     let f = nom.f_hz();
     for (n, p) in names.iter().zip(plants) {
         if p.f_hz() != f {
-            bail!(
+            return Err(Error::other(format!(
                 "operating point `{n}` has other frequency lines than nominal; use the same excitation \
                  (and period) for every case"
-            );
+            )));
         }
     }
     if let Some(t) = truths {
         if t.len() != plants.len() || t.iter().any(|v| v.len() != f.len()) {
-            bail!("one true response per case, on the plants' lines, is needed");
+            return Err(Error::other(
+                "one true response per case, on the plants' lines, is needed",
+            ));
         }
     }
     let mut deviations = Vec::new();
@@ -494,14 +516,19 @@ pub fn operating_point_from_records(
     settings: &FrfSettings,
 ) -> Result<OperatingPointOutcome> {
     if records.len() < 2 || names.len() != records.len() {
-        bail!(
-            "an operating-point study needs the nominal record and at least one other, each named"
-        );
+        return Err(Error::computation(
+            "an operating-point study needs the nominal record and at least one other, each named",
+        ));
     }
+    // independent analyses: in parallel, then used in record order
+    let analyses: Vec<Result<FrfAnalysis>> = names
+        .par_iter()
+        .zip(records)
+        .map(|(n, r)| analyze(r, settings, None).with_context(|| format!("operating point `{n}`")))
+        .collect();
     let mut plants = Vec::with_capacity(records.len());
-    for (n, r) in names.iter().zip(records) {
-        let a = analyze(r, settings, None).with_context(|| format!("operating point `{n}`"))?;
-        plants.push(a.frf.plant);
+    for a in analyses {
+        plants.push(a?.frf.plant);
     }
     let deviations = band_deviations(names, &plants, None)?;
     Ok(OperatingPointOutcome {
@@ -539,59 +566,71 @@ pub fn operating_point_on_twin(
     band: Option<(f64, f64)>,
 ) -> Result<OperatingPointOutcome> {
     if cases.len() < 2 {
-        bail!("an operating-point study needs the nominal case and at least one other");
-    }
-    let mut plants = Vec::new();
-    let mut truths = Vec::new();
-    let mut truth_errors = Vec::new();
-    for (j, case) in cases.iter().enumerate() {
-        let mut cfg = nominal.clone();
-        cfg.operating_point.bias_current_a = case.bias_current_a;
-        cfg.operating_point.air_gap_m = case.air_gap_m;
-        let out = run(&Experiment {
-            twin: cfg,
-            excitation: excitation.clone(),
-            mode,
-            seed: seed + j as u64,
-            noise: true,
-            record_b: false,
-        })
-        .with_context(|| format!("operating point `{}`", case.name))?;
-        let mut settings = FrfSettings::periodic(out.excitation.period_samples, skip_periods);
-        settings.band = band;
-        settings.quality_band = band;
-        settings.i_sat = Some(out.twin.i_sat());
-        let rec = &out.record;
-        let record = Record {
-            r: &rec.r,
-            u: &rec.u,
-            y: &rec.y,
-            i: Some(&rec.i),
-            fs: out.twin.fs(),
-        };
-        let a = analyze(&record, &settings, None)
-            .with_context(|| format!("operating point `{}`", case.name))?;
-        let truth = out.twin.plant_frf(a.frf.f_hz())?;
-        truth_errors.push(median(
-            a.frf
-                .plant
-                .values()
-                .iter()
-                .zip(&truth)
-                .map(|(x, t)| (x - t).norm() / t.norm())
-                .collect(),
+        return Err(Error::other(
+            "an operating-point study needs the nominal case and at least one other",
         ));
+    }
+    // the cases are independent experiments (seed + j): in parallel, then checked and used in
+    // case order (the first failing case is the one reported, as in a sequential loop)
+    let per_case: Vec<Result<(Frd, Vec<ambid_core::c64>, f64)>> = cases
+        .par_iter()
+        .enumerate()
+        .map(|(j, case)| {
+            let mut cfg = nominal.clone();
+            cfg.operating_point.bias_current_a = case.bias_current_a;
+            cfg.operating_point.air_gap_m = case.air_gap_m;
+            let out = run(&Experiment {
+                twin: cfg,
+                excitation: excitation.clone(),
+                mode,
+                seed: seed + j as u64,
+                noise: true,
+                record_b: false,
+            })
+            .with_context(|| format!("operating point `{}`", case.name))?;
+            let mut settings = FrfSettings::periodic(out.excitation.period_samples, skip_periods);
+            settings.band = band;
+            settings.quality_band = band;
+            settings.i_sat = Some(out.twin.i_sat());
+            let rec = &out.record;
+            let record = Record {
+                r: &rec.r,
+                u: &rec.u,
+                y: &rec.y,
+                i: Some(&rec.i),
+                fs: out.twin.fs(),
+            };
+            let a = analyze(&record, &settings, None)
+                .with_context(|| format!("operating point `{}`", case.name))?;
+            let truth = out.twin.plant_frf(a.frf.f_hz())?;
+            let truth_error = median(
+                a.frf
+                    .plant
+                    .values()
+                    .iter()
+                    .zip(&truth)
+                    .map(|(x, t)| (x - t).norm() / t.norm())
+                    .collect(),
+            );
+            Ok((a.frf.plant, truth, truth_error))
+        })
+        .collect();
+    let mut plants: Vec<Frd> = Vec::with_capacity(cases.len());
+    let mut truths = Vec::with_capacity(cases.len());
+    let mut truth_errors = Vec::with_capacity(cases.len());
+    for (case, item) in cases.iter().zip(per_case) {
+        let (plant, truth, truth_error) = item?;
         if let Some(first) = plants.first() {
-            let first: &Frd = first;
-            if first.f_hz() != a.frf.f_hz() {
-                bail!(
+            if first.f_hz() != plant.f_hz() {
+                return Err(Error::other(format!(
                     "operating point `{}` gave a different frequency grid from nominal; use the same \
                      excitation for every case",
                     case.name
-                );
+                )));
             }
         }
-        plants.push(a.frf.plant);
+        truth_errors.push(truth_error);
+        plants.push(plant);
         truths.push(truth);
     }
     let names: Vec<String> = cases.iter().map(|c| c.name.clone()).collect();

@@ -21,6 +21,7 @@
 //! The plant model is never simulated in open loop (it is unstable); a model that does not give a
 //! stable closed loop with the controller is an error that names the unstable closed-loop poles.
 
+use crate::error::{Error, Result};
 use ambid_core::c64;
 use ambid_core::frf::band::{iso_search, BandRule, IsoSearch};
 use ambid_core::lti::{Frd, StateSpace};
@@ -31,7 +32,6 @@ use ambid_core::validate::margins::{margins, Margins};
 use ambid_core::validate::predict::InitialState;
 use ambid_core::validate::pz::{PzAnalysis, PzOptions};
 use ambid_core::validate::residuals::{analyze, analyze_output_error, ResidualTest};
-use anyhow::{bail, Result};
 use serde::Serialize;
 
 /// Settings of [`validate_closed_loop`].
@@ -141,22 +141,22 @@ pub fn validate_closed_loop(
     let ts = rec.ts;
     let mts = model.ts().unwrap_or(0.0);
     if (mts - ts).abs() > 1e-9 * ts {
-        bail!(
+        return Err(Error::other(format!(
             "the model's sample time {mts} s differs from the data's {ts} s: identify the model at the data's rate (or resample the data)"
-        );
+        )));
     }
     let (y, u, w) = (rec.y, rec.u, rec.w);
     let r = rec.r.filter(|r| r.iter().any(|v| *v != 0.0));
     if r.is_none() && w.iter().all(|v| *v == 0.0) {
-        bail!("the record has neither an excitation nor a position reference: nothing drives the loop");
+        return Err(Error::other("the record has neither an excitation nor a position reference: nothing drives the loop"));
     }
     if s.skip + 4 * s.lags.max(5) >= y.len() {
-        bail!(
+        return Err(Error::other(format!(
             "skipping {} samples leaves too few ({}) for the residual tests with {} lags",
             s.skip,
             y.len().saturating_sub(s.skip),
             s.lags
-        );
+        )));
     }
     let k0 = s.skip;
     let cl = model.feedback(controller)?;
@@ -168,10 +168,10 @@ pub fn validate_closed_loop(
         .map(|p| format!("{:.6}{:+.6}j (|z| = {:.6})", p.z.re, p.z.im, p.z.norm()))
         .collect();
     if !unstable.is_empty() {
-        bail!(
+        return Err(Error::other(format!(
             "the model does not give a stable closed loop with this controller; unstable closed-loop poles: {}. The model is wrong near crossover or the controller does not match the data",
             unstable.join(", ")
-        );
+        )));
     }
     let reconstruction = reconstruct_with(
         model,
@@ -273,17 +273,21 @@ pub fn innovation_residuals(
     s: &ValidationSettings,
 ) -> Result<(ResidualTest, &'static str)> {
     if k_gain.len() != model.order() {
-        bail!(
+        return Err(Error::other(format!(
             "the model's Kalman gain has {} entries for {} states",
             k_gain.len(),
             model.order()
-        );
+        )));
     }
     let r = rec.r.filter(|r| r.iter().any(|v| *v != 0.0));
     let (x, name) = match r {
         Some(r) => (r, "r"),
         None if rec.w.iter().any(|v| *v != 0.0) => (rec.w, "w"),
-        None => bail!("the record has neither an excitation nor a position reference"),
+        None => {
+            return Err(Error::other(
+                "the record has neither an excitation nor a position reference",
+            ))
+        }
     };
     let km = faer::Mat::from_fn(k_gain.len(), 1, |i, _| k_gain[i]);
     let (yhat, _) = ambid_core::validate::predict::predict_k_with(
@@ -367,7 +371,9 @@ pub fn consistency(
 ) -> Result<Consistency> {
     let f = s_meas.f_hz();
     if t_meas.f_hz() != f {
-        bail!("the measured S and T_ry must be on the same frequency lines");
+        return Err(Error::other(
+            "the measured S and T_ry must be on the same frequency lines",
+        ));
     }
     let (gp, gc) = (
         model.freq_response_siso(f)?,

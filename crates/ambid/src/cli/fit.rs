@@ -531,7 +531,7 @@ fn fit_ss(
     let mut method = if a.no_pem { "subspace" } else { "subspace+pem" };
     let fit = match ambid::fitting::identify_state_space(u, y, ts, &opts) {
         Ok(f) => f,
-        Err(e) if a.no_pem => return Err(e),
+        Err(e) if a.no_pem => return Err(e.into()),
         Err(e) => {
             // the refinement failed: a model is still written
             let first = format!("{e:#}");
