@@ -1,7 +1,8 @@
 //! `ambid run` and `ambid init`: the seed workflow end to end.
 
 use ambid::io::output::{write_file, OutputDir};
-use ambid::workflow::{self, Failure, FailureClass, Progress, Step, Verbosity, WorkflowConfig};
+use ambid::error::Error as Failure;
+use ambid::workflow::{self, FailureClass, Progress, Step, Verbosity, WorkflowConfig};
 use anyhow::Result;
 use clap::Args;
 use std::path::{Path, PathBuf};
@@ -40,10 +41,7 @@ pub struct InitArgs {
 }
 
 fn config_failure(e: impl Into<anyhow::Error>) -> Failure {
-    Failure {
-        class: FailureClass::Config,
-        error: e.into(),
-    }
+    Failure::classified(FailureClass::Config, e.into())
 }
 
 pub fn run(a: RunArgs) -> Result<()> {

@@ -211,8 +211,6 @@ impl From<anyhow::Error> for Error {
         for c in e.chain() {
             let class = if let Some(ae) = c.downcast_ref::<Error>() {
                 ae.class()
-            } else if let Some(f) = c.downcast_ref::<crate::workflow::Failure>() {
-                Some(f.class)
             } else if c.is::<ConfigError>() {
                 Some(FailureClass::Config)
             } else if c.is::<DataFileError>() {

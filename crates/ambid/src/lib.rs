@@ -12,6 +12,7 @@ pub mod fitting;
 pub mod frf_stream;
 pub mod io;
 pub mod report;
+pub mod stage;
 pub mod stepped_sine;
 pub mod study;
 pub mod validation;

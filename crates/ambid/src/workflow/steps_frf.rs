@@ -3,10 +3,8 @@
 use super::data::Recording;
 use super::figures::{bode_panels, figure, lin, log, series, xy, Curve};
 use super::steps_models::{open_loop_response, Candidate};
-use super::steps_signal::plan;
-use super::{computation, Ctx, Failure, StepStatus};
-use crate::analysis::{analyze, FrfSettings, Record};
-use crate::experiment::{ExcitationKind, ExcitationPlan};
+use super::{computation, Ctx, Error, StepStatus};
+use crate::analysis::{analyze, Record};
 use crate::fitting::{identify_state_space, SsFitOptions, SsFocus};
 use crate::report::{
     format_number as fmt, Block, Heatmap, NoteKind, Panel, PanelContent, Style, Table,
@@ -22,105 +20,13 @@ use ambid_core::validate::compare::{
 };
 use serde_json::json;
 
-/// FRF settings for a record of `n` samples at `fs` (periodic when the period is known).
-pub fn settings(ctx: &Ctx<'_>, period: Option<usize>, n: usize, fs: f64) -> FrfSettings {
-    let cfg = &ctx.cfg.frf;
-    let periodic = match cfg.method.as_str() {
-        "welch" => None,
-        _ => period.filter(|p| n / p.max(&1) >= 2),
-    };
-    let mut s = match periodic {
-        Some(p) => FrfSettings::periodic(p, ctx.cfg.data.skip_periods.min(n / p - 1)),
-        None => {
-            let nper = cfg
-                .nperseg
-                .unwrap_or_else(|| FrfSettings::default_nperseg(n));
-            FrfSettings::welch(nper.min(n))
-        }
-    };
-    // an explicit band wins; otherwise both bands are derived from the excitation of the record
-    // (ambid_core::frf::band), on the twin and on files alike
-    let _ = fs;
-    s.band = cfg.band_hz.map(|[a, b]| (a, b));
-    s.quality_band = cfg.quality_band_hz.map(|[a, b]| (a, b));
-    s.i_sat = ctx.twin.as_ref().map(|t| t.twin.i_sat());
-    s
-}
-
-/// The identification record (simulated on the twin at the chosen level on first use).
-pub fn ensure_ident(ctx: &mut Ctx<'_>) -> Result<(), Failure> {
-    if ctx.ident.is_some() {
-        return Ok(());
-    }
-    let frac = ctx
-        .level_frac
-        .or(ctx.cfg.excitation.amplitude_pct.map(|p| p / 100.0))
-        .unwrap_or(0.1);
-    ctx.level_frac = Some(frac);
-    let p = plan(ctx, frac);
-    if let Some(t) = &ctx.twin {
-        let (rec, _) = t.record(p, ctx.cfg.seed + 200, "identification")?;
-        ctx.put("identification.level_pct", 100.0 * frac);
-        ctx.put("identification.samples", rec.len() as f64);
-        if let Some(s) = rec.saturated_fraction {
-            ctx.put("identification.saturated_pct", 100.0 * s);
-        }
-        ctx.ident = Some(rec);
-    }
-    Ok(())
-}
-
-/// The independent validation record (twin: a different excitation and noise realisation).
-pub fn ensure_valid(ctx: &mut Ctx<'_>) -> Result<(), Failure> {
-    if ctx.valid.is_some() {
-        return Ok(());
-    }
-    let frac = ctx
-        .cfg
-        .validation
-        .amplitude_pct
-        .map(|p| p / 100.0)
-        .or(ctx.level_frac)
-        .unwrap_or(0.1);
-    let p = ExcitationPlan {
-        kind: super::data::excitation_kind(&ctx.cfg.validation.excitation),
-        seed: ctx.cfg.seed + 7,
-        ..plan(ctx, frac)
-    };
-    if let Some(t) = &ctx.twin {
-        let (rec, _) = t.record(p, ctx.cfg.seed + 300, "validation")?;
-        ctx.valid = Some(rec);
-    }
-    Ok(())
-}
-
-/// The twin record without excitation (output SNR), or the `[data] noise` file.
-fn noise_record(ctx: &Ctx<'_>) -> Result<Option<Vec<f64>>, Failure> {
-    if let Some(t) = &ctx.twin {
-        if !t.noise {
-            return Ok(None);
-        }
-        let p = ExcitationPlan {
-            kind: ExcitationKind::None,
-            ..plan(ctx, 0.0)
-        };
-        return Ok(Some(t.record(p, ctx.cfg.seed + 400, "noise")?.0.y));
-    }
-    match &ctx.cfg.data.noise {
-        Some(p) => Ok(Some(
-            super::data::load_file(ctx.cfg, &ctx.base, p, "noise")?.y,
-        )),
-        None => Ok(None),
-    }
-}
-
-pub fn frf(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
-    ensure_ident(ctx)?;
+pub fn frf(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
+    ctx.ensure_ident()?;
     let Some(rec) = ctx.ident.clone() else {
         return Ok(StepStatus::Skipped("no identification record".into()));
     };
-    let noise = noise_record(ctx)?;
-    let mut s = settings(ctx, rec.period, rec.len(), rec.fs());
+    let noise = ctx.noise_record()?;
+    let mut s = ctx.frf_settings(rec.period, rec.len());
     let has_r = rec.r.is_some();
     if has_r {
         s.controller = ctx.controller.as_ref().map(|c| c.state_space().clone());
@@ -344,9 +250,9 @@ pub fn frf(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     Ok(StepStatus::Done)
 }
 
-pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
-    ensure_ident(ctx)?;
-    ensure_valid(ctx)?;
+pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
+    ctx.ensure_ident()?;
+    ctx.ensure_valid()?;
     let (Some(rec), Some(val)) = (ctx.ident.clone(), ctx.valid.clone()) else {
         return Ok(StepStatus::Skipped("no identification record".into()));
     };

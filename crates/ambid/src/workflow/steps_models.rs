@@ -2,8 +2,7 @@
 //! their comparison table and Bode overlays, and the pole-zero check.
 
 use super::figures::{bode_panels, figure, lin, log, pz_panel, series, xy, Curve};
-use super::steps_frf::{ensure_ident, ensure_valid};
-use super::{computation, Ctx, Failure, ModelOut, StepStatus};
+use super::{computation, Ctx, Error, ModelOut, StepStatus};
 use crate::fitting::{identify_state_space, SsFitOptions, SsFocus};
 use crate::report::{format_number as fmt, Block, Marker, NoteKind, Style, Table};
 use ambid_core::c64;
@@ -145,9 +144,9 @@ fn orders_with_recommendation(
     out
 }
 
-pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
-    ensure_ident(ctx)?;
-    ensure_valid(ctx)?;
+pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
+    ctx.ensure_ident()?;
+    ctx.ensure_valid()?;
     let cfg_orig = &ctx.cfg.models;
     let cfg = &super::config::ModelsSection {
         orders: orders_with_recommendation(&cfg_orig.orders, &ctx.summary, ctx.ident.as_ref()),
@@ -297,7 +296,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         };
         for s in &cfg.structures {
             for &n in &cfg.orders {
-                let fitted: anyhow::Result<TimeFit> = (|| match s.as_str() {
+                let fitted: crate::error::Result<TimeFit> = (|| match s.as_str() {
                     "arx" => {
                         let f = arx(&rec.y, &[&rec.u], &ArxOrders::siso(n, n, cfg.nk), ts)?;
                         let p = f.model.to_poly(0)?;
@@ -665,7 +664,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
 /// The chosen model's label, poles, zeros and sample time (for its zoomed views and table).
 type ChosenPz = (String, Vec<c64>, Vec<c64>, Option<f64>);
 
-pub fn pole_zero(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
+pub fn pole_zero(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     let Some(ch) = ctx.chosen else {
         return Ok(StepStatus::Skipped(
             "no fitted model (run the models step)".into(),

@@ -2,8 +2,7 @@
 //! reconstruction and the ISO 14839-3 sensitivity zone.
 
 use super::figures::{envelope, figure, lin, log, series, with_spans, xy};
-use super::steps_frf::ensure_valid;
-use super::{computation, Ctx, Failure, StepStatus};
+use super::{computation, Ctx, Error, StepStatus};
 use crate::report::{format_number as fmt, Block, Marker, NoteKind, Series, Span, Style, Table};
 use crate::validation::{
     chirp_frequency, residual_lags, validate_closed_loop, worst_window, LagBasis, LagChoice,
@@ -303,8 +302,8 @@ fn put_truth_residuals(ctx: &mut Ctx<'_>, res: &ResidualTest) {
     }
 }
 
-pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
-    ensure_valid(ctx)?;
+pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
+    ctx.ensure_valid()?;
     let Some(ch) = ctx.chosen else {
         return Ok(StepStatus::Skipped(
             "no fitted model (run the models step)".into(),
@@ -524,7 +523,7 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     Ok(StepStatus::Done)
 }
 
-pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
+pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     let Some(ch) = ctx.chosen else {
         return Ok(StepStatus::Skipped(
             "no fitted model (run the models step)".into(),
@@ -566,7 +565,7 @@ pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     } else if let Some(p) = ctx.cfg.data.reconstruction.clone() {
         let r = super::data::load_file(ctx.cfg, &ctx.base, &p, "reconstruction")?;
         let Some(w) = r.w.clone() else {
-            return Err(super::input(anyhow::anyhow!(
+            return Err(Error::input(format!(
                 "{}: the reconstruction record needs the position reference column ([data] w = \"…\")",
                 r.source
             )));
@@ -823,7 +822,7 @@ fn iso_row(source: &str, v: &ambid_core::validate::iso::IsoVerdict) -> Vec<Strin
     ]
 }
 
-pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
+pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     let z = zones(ctx);
     let mut curves = Vec::new();
     let mut rows = Vec::new();
