@@ -32,8 +32,8 @@
 //! let r = rec.r.as_deref().unwrap();
 //! let a = ambid::analysis::analyze(
 //!     &ambid::analysis::Record { r, u: &rec.u, y: &rec.y, i: rec.i.as_deref(), fs: rec.fs() },
-//!     None,
 //!     &s,
+//!     None,
 //! ).unwrap();
 //! // the measured plant against the twin's exact one at 200 Hz: within a few per cent
 //! let k = a.frf.f_hz().iter().position(|&f| f >= 200.0).unwrap();

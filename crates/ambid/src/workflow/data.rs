@@ -348,10 +348,13 @@ pub fn describe(ctx: &mut Ctx<'_>) -> Section {
                     },
                 )
             });
-            ctx.put("data.source", "twin");
-            ctx.put("data.fs_hz", fs);
-            ctx.put("data.i_sat_a", isat);
-            ctx.put("data.noise_rms_m", noise);
+            ctx.typed.data = Some(super::DataSummary {
+                source: Some("twin".into()),
+                fs_hz: Some(fs),
+                i_sat_a: Some(isat),
+                noise_rms_m: Some(noise),
+                ..Default::default()
+            });
             blocks.push(Block::Text(format!(
                 "Data come from ambid's embedded AMB digital twin ({mode} physics): rigid rotor on two \
                  radial bearings with a bending mode near 780 Hz, magnet force law, amplifier lag and \
@@ -390,14 +393,18 @@ pub fn describe(ctx: &mut Ctx<'_>) -> Section {
             if let Some(r) = ctx.ident.as_ref() {
                 let closed = r.closed_loop;
                 let (n, fs) = (r.len(), r.fs());
-                ctx.put("data.source", "files");
-                ctx.put("data.fs_hz", fs);
-                ctx.put("data.identification_samples", n as f64);
-                ctx.put("data.closed_loop", closed);
+                let d = ctx.typed.data.get_or_insert_with(Default::default);
+                d.source = Some("files".into());
+                d.fs_hz = Some(fs);
+                d.identification_samples = Some(n as f64);
+                d.closed_loop = Some(closed);
             }
             if let Some(v) = ctx.valid.as_ref() {
                 let n = v.len();
-                ctx.put("data.validation_samples", n as f64);
+                ctx.typed
+                    .data
+                    .get_or_insert_with(Default::default)
+                    .validation_samples = Some(n as f64);
             }
             blocks.push(Block::Table(RTable {
                 id: "data".into(),

@@ -266,6 +266,12 @@ pub struct Outcome {
 /// per-step timings, and (transitional) the figures the remaining steps record by key.
 #[derive(Debug, Default, Clone, serde::Serialize)]
 pub struct Summary {
+    /// The data (`data.*`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub data: Option<DataSummary>,
+    /// The excitation comparison and the identification excitation (`excitation.*`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub excitation: Option<ExcitationSummary>,
     /// The amplitude study (`amplitude.*`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub amplitude: Option<crate::stage::AmplitudeStage>,
@@ -284,6 +290,68 @@ pub struct Summary {
     /// The figures of the steps not yet typed, by section.
     #[serde(flatten)]
     pub steps: Map<String, Value>,
+}
+
+/// `summary.json`'s `data`.
+#[derive(Debug, Default, Clone, serde::Serialize)]
+pub struct DataSummary {
+    /// `twin` or `files`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub source: Option<String>,
+    /// Sample rate \[Hz\].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fs_hz: Option<f64>,
+    /// The twin's saturation current \[A\].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub i_sat_a: Option<f64>,
+    /// The twin's sensor noise \[m RMS\].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub noise_rms_m: Option<f64>,
+    /// Closed-loop records (files).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub closed_loop: Option<bool>,
+    /// Samples of the estimation record (files).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub identification_samples: Option<f64>,
+    /// Samples of the validation record (files).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub validation_samples: Option<f64>,
+}
+
+/// `summary.json`'s `excitation`.
+#[derive(Debug, Default, Clone, serde::Serialize)]
+pub struct ExcitationSummary {
+    /// Per candidate signal of the comparison.
+    pub compare: std::collections::BTreeMap<String, CompareFigures>,
+    /// The identification excitation as designed (twin).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub identification: Option<ExcitationFigures>,
+}
+
+/// One candidate of the excitation comparison.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct CompareFigures {
+    /// Peak over RMS.
+    pub crest_factor: f64,
+    /// Upper end of the usable band \[Hz\].
+    pub f_max_hz: f64,
+}
+
+/// The identification excitation as designed.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ExcitationFigures {
+    /// Lower end of the usable band \[Hz\].
+    pub f_min_hz: f64,
+    /// Upper end of the usable band \[Hz\].
+    pub f_max_hz: f64,
+    /// Frequency resolution \[Hz\].
+    pub resolution_hz: f64,
+    /// Duration \[s\].
+    pub duration_s: f64,
+    /// Samples per period.
+    pub period_samples: f64,
+    /// Peak over RMS.
+    pub crest_factor: f64,
 }
 
 /// `summary.json`'s `bla`.

@@ -56,6 +56,7 @@ pub fn excitation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     let mut spec = Vec::new();
     let mut acf = Vec::new();
     let mut rows = Vec::new();
+    let mut summary = super::ExcitationSummary::default();
     for (k, s) in cmp.signals.iter().enumerate() {
         let n = s.values.len().min(nwin);
         let t: Vec<f64> = (0..n).map(|j| 1e3 * j as f64 * cmp.ts).collect();
@@ -89,13 +90,12 @@ pub fn excitation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             fmt(r.peak),
             fmt(r.crest_factor),
         ]);
-        ctx.put(
-            &format!("excitation.compare.{}.crest_factor", s.name),
-            r.crest_factor,
-        );
-        ctx.put(
-            &format!("excitation.compare.{}.f_max_hz", s.name),
-            r.f_max_hz,
+        summary.compare.insert(
+            s.name.to_string(),
+            super::CompareFigures {
+                crest_factor: r.crest_factor,
+                f_max_hz: r.f_max_hz,
+            },
         );
     }
     // overlaid panels: the PRBS (the seed paper's choice, first in the list) is drawn last, on top
@@ -169,15 +169,14 @@ pub fn excitation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         let ts = 1.0 / fs;
         if let Some(spec) = p.spec(isat, ts).map_err(input)? {
             let r = spec.report(ts).map_err(computation)?;
-            ctx.put("excitation.identification.f_min_hz", r.f_min_hz);
-            ctx.put("excitation.identification.f_max_hz", r.f_max_hz);
-            ctx.put("excitation.identification.resolution_hz", r.resolution_hz);
-            ctx.put("excitation.identification.duration_s", r.duration_s);
-            ctx.put(
-                "excitation.identification.period_samples",
-                r.period_samples as f64,
-            );
-            ctx.put("excitation.identification.crest_factor", r.crest_factor);
+            summary.identification = Some(super::ExcitationFigures {
+                f_min_hz: r.f_min_hz,
+                f_max_hz: r.f_max_hz,
+                resolution_hz: r.resolution_hz,
+                duration_s: r.duration_s,
+                period_samples: r.period_samples as f64,
+                crest_factor: r.crest_factor,
+            });
             blocks.push(Block::Table(Table {
                 id: "excitation_identification".into(),
                 caption: format!(
@@ -224,6 +223,7 @@ pub fn excitation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         }
     }
     ctx.section("excitation", "Excitation design and comparison", blocks);
+    ctx.typed.excitation = Some(summary);
     Ok(StepStatus::Done)
 }
 
