@@ -272,6 +272,12 @@ pub struct Summary {
     /// The excitation comparison and the identification excitation (`excitation.*`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub excitation: Option<ExcitationSummary>,
+    /// The nonparametric FRF (`frf.*`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frf: Option<FrfSummary>,
+    /// The order evidence (`order.*`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub order: Option<OrderSummary>,
     /// The amplitude study (`amplitude.*`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub amplitude: Option<crate::stage::AmplitudeStage>,
@@ -352,6 +358,98 @@ pub struct ExcitationFigures {
     pub period_samples: f64,
     /// Peak over RMS.
     pub crest_factor: f64,
+}
+
+/// `summary.json`'s `frf`: the bands and the quality of the nonparametric FRF.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct FrfSummary {
+    /// Band of the estimate \[Hz\].
+    pub band_lo_hz: f64,
+    /// Band of the estimate \[Hz\].
+    pub band_hi_hz: f64,
+    /// Band of the quality averages \[Hz\].
+    pub quality_band_lo_hz: f64,
+    /// Band of the quality averages \[Hz\].
+    pub quality_band_hi_hz: f64,
+    /// Where the band came from.
+    pub band_origin: crate::analysis::BandOrigin,
+    /// Where the quality band came from.
+    pub quality_band_origin: crate::analysis::BandOrigin,
+    /// Frequency lines.
+    pub lines: f64,
+    /// Band average of γ²_ry (γ²_uy without r).
+    pub mean_coh_ry: f64,
+    /// Band average of γ²_ru (with r).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mean_coh_ru: Option<f64>,
+    /// Band average of the plant variance.
+    pub mean_plant_variance: f64,
+    /// Band average of the relative plant variance.
+    pub mean_plant_rel_variance: f64,
+    /// Output SNR \[dB\] (with a noise record).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub output_snr_db: Option<f64>,
+    /// Median relative error against the twin's exact plant over the quality band \[%\].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub plant_median_error_vs_truth_pct: Option<f64>,
+    /// Its 90th percentile \[%\].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub plant_p90_error_vs_truth_pct: Option<f64>,
+    /// The median over 10–1000 Hz \[%\].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub plant_median_error_vs_truth_10_1000_pct: Option<f64>,
+}
+
+/// `summary.json`'s `order`: the order evidence and the reconciled recommendation.
+#[derive(Debug, Default, Clone, serde::Serialize)]
+pub struct OrderSummary {
+    /// The ARX structure of smallest BIC.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub arx_best_bic: Option<ArxOrders>,
+    /// The ARX structure of best validation fit.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub arx_best_validation: Option<ArxValidation>,
+    /// Resonances found in the FRF.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub resonances: Option<f64>,
+    /// The order they imply.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub order_from_peaks: Option<f64>,
+    /// Recommended order.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub recommended: Option<f64>,
+    /// Lowest adequate order.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub recommended_lo: Option<f64>,
+    /// Highest adequate order.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub recommended_hi: Option<f64>,
+    /// Which evidence set the range.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub recommended_source: Option<String>,
+}
+
+/// ARX orders.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ArxOrders {
+    /// Denominator order.
+    pub na: f64,
+    /// Numerator order.
+    pub nb: f64,
+    /// Delay.
+    pub nk: f64,
+}
+
+/// The ARX structure of best validation fit.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ArxValidation {
+    /// Denominator order.
+    pub na: f64,
+    /// Numerator order.
+    pub nb: f64,
+    /// Validation fit \[%\].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fit_pct: Option<f64>,
 }
 
 /// `summary.json`'s `bla`.

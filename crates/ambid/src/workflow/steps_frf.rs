@@ -18,7 +18,6 @@ use ambid_core::frf::resonance::{find_resonances_reliable, order_from_peaks, Res
 use ambid_core::validate::compare::{
     compare_models, supported_unstable_poles, CompareSpec, FitStructure,
 };
-use serde_json::json;
 
 pub fn frf(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     ctx.ensure_ident()?;
@@ -113,12 +112,23 @@ pub fn frf(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         coh,
     ));
     let bands = a.bands;
-    ctx.put("frf.band_lo_hz", bands.band.0);
-    ctx.put("frf.band_hi_hz", bands.band.1);
-    ctx.put("frf.quality_band_lo_hz", bands.quality_band.0);
-    ctx.put("frf.quality_band_hi_hz", bands.quality_band.1);
-    ctx.put("frf.band_origin", json!(bands.band_origin));
-    ctx.put("frf.quality_band_origin", json!(bands.quality_origin));
+    let mut summary = super::FrfSummary {
+        band_lo_hz: bands.band.0,
+        band_hi_hz: bands.band.1,
+        quality_band_lo_hz: bands.quality_band.0,
+        quality_band_hi_hz: bands.quality_band.1,
+        band_origin: bands.band_origin,
+        quality_band_origin: bands.quality_origin,
+        lines: f.len() as f64,
+        mean_coh_ry: a.quality.mean_coherence_ry,
+        mean_coh_ru: None,
+        mean_plant_variance: a.quality.mean_plant_variance,
+        mean_plant_rel_variance: a.quality.mean_plant_rel_variance,
+        output_snr_db: None,
+        plant_median_error_vs_truth_pct: None,
+        plant_p90_error_vs_truth_pct: None,
+        plant_median_error_vs_truth_10_1000_pct: None,
+    };
     let mut blocks = vec![
         Block::Text(format!(
             "Nonparametric plant FRF of the identification record ({} samples, {} Hz) by {method}; {how}. \
@@ -159,14 +169,12 @@ pub fn frf(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         vec!["lines in band".into(), q.lines.to_string()],
         vec!["mean coherence γ²_ry".into(), fmt(q.mean_coherence_ry)],
     ];
-    ctx.put("frf.lines", f.len() as f64);
-    ctx.put("frf.mean_coh_ry", q.mean_coherence_ry);
     if has_r {
         qrows.push(vec![
             "mean coherence γ²_ru".into(),
             fmt(q.mean_coherence_ru),
         ]);
-        ctx.put("frf.mean_coh_ru", q.mean_coherence_ru);
+        summary.mean_coh_ru = Some(q.mean_coherence_ru);
     }
     qrows.push(vec![
         "mean plant variance".into(),
@@ -176,11 +184,9 @@ pub fn frf(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         "mean relative plant variance".into(),
         fmt(q.mean_plant_rel_variance),
     ]);
-    ctx.put("frf.mean_plant_variance", q.mean_plant_variance);
-    ctx.put("frf.mean_plant_rel_variance", q.mean_plant_rel_variance);
     if let Some(snr) = q.output_snr_db {
         qrows.push(vec!["output SNR [dB]".into(), fmt(snr)]);
-        ctx.put("frf.output_snr_db", snr);
+        summary.output_snr_db = Some(snr);
     }
     if let Some(t) = &truth {
         // over the quality band (derived from the excitation), and over the seed paper's
@@ -215,9 +221,9 @@ pub fn frf(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             "median error vs exact plant, 10–1000 Hz (the seed paper's band) [%]".into(),
             fmt(med_seed),
         ]);
-        ctx.put("frf.plant_median_error_vs_truth_pct", med);
-        ctx.put("frf.plant_p90_error_vs_truth_pct", p90);
-        ctx.put("frf.plant_median_error_vs_truth_10_1000_pct", med_seed);
+        summary.plant_median_error_vs_truth_pct = Some(med);
+        summary.plant_p90_error_vs_truth_pct = Some(p90);
+        summary.plant_median_error_vs_truth_10_1000_pct = Some(med_seed);
     }
     blocks.push(Block::Table(Table {
         id: "frf_quality".into(),
@@ -247,6 +253,7 @@ pub fn frf(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     }
     ctx.section("frf", "Nonparametric FRF", blocks);
     ctx.frf = Some(a);
+    ctx.typed.frf = Some(summary);
     Ok(StepStatus::Done)
 }
 
@@ -296,16 +303,21 @@ pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         equal_aspect: false,
     };
     let on_edge = best.na == na.len() || best.nb == nb.len();
-    ctx.put("order.arx_best_bic.na", best.na as f64);
-    ctx.put("order.arx_best_bic.nb", best.nb as f64);
-    ctx.put("order.arx_best_bic.nk", best.nk as f64);
+    let mut summary = super::OrderSummary {
+        arx_best_bic: Some(super::ArxOrders {
+            na: best.na as f64,
+            nb: best.nb as f64,
+            nk: best.nk as f64,
+        }),
+        ..Default::default()
+    };
     if let Some(v) = scan.best_val {
         let r = &scan.rows[v];
-        ctx.put("order.arx_best_validation.na", r.na as f64);
-        ctx.put("order.arx_best_validation.nb", r.nb as f64);
-        if let Some(f) = r.val_fit {
-            ctx.put("order.arx_best_validation.fit_pct", f);
-        }
+        summary.arx_best_validation = Some(super::ArxValidation {
+            na: r.na as f64,
+            nb: r.nb as f64,
+            fit_pct: r.val_fit,
+        });
     }
     let mut blocks = vec![Block::Figure(figure(
         "order_heatmaps",
@@ -360,8 +372,8 @@ pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         if searched > 0 {
             n_peaks = Some(peaks.len());
         }
-        ctx.put("order.resonances", peaks.len() as f64);
-        ctx.put("order.order_from_peaks", n as f64);
+        summary.resonances = Some(peaks.len() as f64);
+        summary.order_from_peaks = Some(n as f64);
         let rows = peaks
             .iter()
             .map(|p| {
@@ -427,10 +439,10 @@ pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             ),
         ),
         Ok(r) => {
-            ctx.put("order.recommended", r.n as f64);
-            ctx.put("order.recommended_lo", r.lo as f64);
-            ctx.put("order.recommended_hi", r.hi as f64);
-            ctx.put("order.recommended_source", r.source);
+            summary.recommended = Some(r.n as f64);
+            summary.recommended_lo = Some(r.lo as f64);
+            summary.recommended_hi = Some(r.hi as f64);
+            summary.recommended_source = Some(r.source.to_string());
             if let Some(t) = r.table {
                 blocks.push(Block::Table(t));
             }
@@ -438,6 +450,7 @@ pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         }
     }
     ctx.section("order", "Order estimation", blocks);
+    ctx.typed.order = Some(summary);
     Ok(StepStatus::Done)
 }
 

@@ -120,18 +120,11 @@ pub fn open_loop_response(
 /// [`super::config::MAX_MODEL_ORDER`].
 fn orders_with_recommendation(
     given: &[usize],
-    summary: &serde_json::Map<String, serde_json::Value>,
+    order: Option<&super::OrderSummary>,
     rec: Option<&super::data::Recording>,
 ) -> Vec<usize> {
-    let get = |k: &str| {
-        summary
-            .get("order")
-            .and_then(|o| o.get(k))
-            .and_then(|v| v.as_f64())
-            .map(|v| v as usize)
-    };
     let mut out = given.to_vec();
-    if let (Some(lo), Some(hi)) = (get("recommended_lo"), get("recommended_hi")) {
+    if let Some((lo, hi)) = order.and_then(|o| Some((o.recommended_lo? as usize, o.recommended_hi? as usize))) {
         let cap = rec.map_or(usize::MAX, |r| {
             r.len() / super::config::SAMPLES_PER_PARAMETER
         });
@@ -149,7 +142,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     ctx.ensure_valid()?;
     let cfg_orig = &ctx.cfg.models;
     let cfg = &super::config::ModelsSection {
-        orders: orders_with_recommendation(&cfg_orig.orders, &ctx.summary, ctx.ident.as_ref()),
+        orders: orders_with_recommendation(&cfg_orig.orders, ctx.typed.order.as_ref(), ctx.ident.as_ref()),
         ..cfg_orig.clone()
     };
     let Some(rec) = ctx.ident.clone() else {
