@@ -278,6 +278,12 @@ pub struct Summary {
     /// The order evidence (`order.*`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub order: Option<OrderSummary>,
+    /// The model candidates and the choice (`models.*`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub models: Option<ModelsSummary>,
+    /// The pole-zero check of the chosen model (`pole_zero.*`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pole_zero: Option<PoleZeroSummary>,
     /// The amplitude study (`amplitude.*`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub amplitude: Option<crate::stage::AmplitudeStage>,
@@ -450,6 +456,61 @@ pub struct ArxValidation {
     /// Validation fit \[%\].
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fit_pct: Option<f64>,
+}
+
+/// `summary.json`'s `models`.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ModelsSummary {
+    /// `frf` or `time`.
+    pub domain: String,
+    /// Unstable plant poles the data support (Nyquist count; `null`: not determined).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unstable_poles_supported: Option<Option<f64>>,
+    /// One row per candidate.
+    pub table: Vec<ModelRow>,
+    /// The chosen candidate.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub chosen: Option<String>,
+    /// Its validation fit \[%\].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub chosen_validation_fit_pct: Option<f64>,
+    /// Its median error against the twin's exact plant \[%\].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub chosen_error_vs_truth_pct: Option<f64>,
+}
+
+/// One model candidate in `summary.json`.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ModelRow {
+    /// e.g. `oe8`.
+    pub model: String,
+    /// Parameters.
+    pub n_params: f64,
+    /// Relative RMS error against the measured FRF \[%\].
+    pub relative_rmse_pct: Option<f64>,
+    /// Median relative error against the measured FRF \[%\].
+    pub median_relative_pct: Option<f64>,
+    /// RMS error in dB.
+    pub db_rmse: Option<f64>,
+    /// Bayesian information criterion.
+    pub bic: Option<f64>,
+    /// Validation fit \[%\].
+    pub validation_fit_pct: Option<f64>,
+    /// Unstable poles.
+    pub unstable_poles: Option<f64>,
+    /// Whether the candidate is admissible.
+    pub valid: bool,
+    /// Median relative error against the twin's exact plant \[%\].
+    pub median_error_vs_truth_pct: Option<f64>,
+}
+
+/// `summary.json`'s `pole_zero`.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct PoleZeroSummary {
+    /// Near pole-zero cancellations of the chosen model.
+    pub chosen_near_cancellations: f64,
+    /// Its unstable poles.
+    pub chosen_unstable_poles: f64,
 }
 
 /// `summary.json`'s `bla`.

@@ -454,24 +454,29 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         .collect();
     let mut jrows = Vec::new();
     for c in &cands {
-        jrows.push(json!({
-            "model": c.label(),
-            "n_params": c.n_params as f64,
-            "relative_rmse_pct": c.relative_rmse.map(|v| 100.0 * v),
-            "median_relative_pct": c.median_relative.map(|v| 100.0 * v),
-            "db_rmse": c.db_rmse,
-            "bic": c.bic,
-            "validation_fit_pct": c.validation_fit,
-            "unstable_poles": c.unstable_poles.map(|u| u as f64),
-            "valid": c.valid,
-            "median_error_vs_truth_pct": c.truth_median_relative.map(|v| 100.0 * v),
-        }));
+        jrows.push(super::ModelRow {
+            model: c.label(),
+            n_params: c.n_params as f64,
+            relative_rmse_pct: c.relative_rmse.map(|v| 100.0 * v),
+            median_relative_pct: c.median_relative.map(|v| 100.0 * v),
+            db_rmse: c.db_rmse,
+            bic: c.bic,
+            validation_fit_pct: c.validation_fit,
+            unstable_poles: c.unstable_poles.map(|u| u as f64),
+            valid: c.valid,
+            median_error_vs_truth_pct: c.truth_median_relative.map(|v| 100.0 * v),
+        });
     }
-    ctx.put("models.domain", domain.clone());
-    if let Some((n_u, _)) = &unstable_how {
-        ctx.put("models.unstable_poles_supported", n_u.map(|n| n as f64));
-    }
-    ctx.put("models.table", jrows);
+    let mut summary = super::ModelsSummary {
+        domain: domain.clone(),
+        unstable_poles_supported: unstable_how
+            .as_ref()
+            .map(|(n_u, _)| n_u.map(|n| n as f64)),
+        table: jrows,
+        chosen: None,
+        chosen_validation_fit_pct: None,
+        chosen_error_vs_truth_pct: None,
+    };
     let mut blocks = vec![Block::Text(format!(
         "{} at orders {:?} ([models] orders {:?} plus the order step's recommended range); {}. Validation fit: {validation_kind}. Chosen by {} among the valid models{}.",
         if domain == "frf" {
@@ -531,13 +536,9 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     }
     if let Some(i) = chosen {
         let c = &cands[i];
-        ctx.put("models.chosen", c.label());
-        if let Some(f) = c.validation_fit {
-            ctx.put("models.chosen_validation_fit_pct", f);
-        }
-        if let Some(e) = c.truth_median_relative {
-            ctx.put("models.chosen_error_vs_truth_pct", 100.0 * e);
-        }
+        summary.chosen = Some(c.label());
+        summary.chosen_validation_fit_pct = c.validation_fit;
+        summary.chosen_error_vs_truth_pct = c.truth_median_relative.map(|e| 100.0 * e);
         blocks.push(Ctx::note(
             NoteKind::Pass,
             format!(
@@ -651,6 +652,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     ctx.section("models", "Parametric models", blocks);
     ctx.candidates = cands;
     ctx.chosen = chosen;
+    ctx.typed.models = Some(summary);
     Ok(StepStatus::Done)
 }
 
@@ -839,8 +841,10 @@ pub fn pole_zero(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         }
     }
     if let Some((nc, nu)) = chosen_pz {
-        ctx.put("pole_zero.chosen_near_cancellations", nc as f64);
-        ctx.put("pole_zero.chosen_unstable_poles", nu as f64);
+        ctx.typed.pole_zero = Some(super::PoleZeroSummary {
+            chosen_near_cancellations: nc as f64,
+            chosen_unstable_poles: nu as f64,
+        });
     }
     let mut blocks = vec![Block::Figure(figure(
         "pole_zero",
