@@ -1,7 +1,7 @@
 //! `ambid run` and `ambid init`: the seed workflow end to end.
 
-use ambid::io::output::{write_file, OutputDir};
 use ambid::error::Error as Failure;
+use ambid::io::output::{write_file, OutputDir};
 use ambid::workflow::{self, FailureClass, Progress, Step, Verbosity, WorkflowConfig};
 use anyhow::Result;
 use clap::Args;

@@ -3,12 +3,12 @@
 //!
 //! This is the library behind `ambid simulate`; everything it computes is reachable from Rust.
 
+use crate::error::{Context, Error, Result};
 use ambid_core::signal::{
     ChirpSpec, Distribution, Excitation, ExcitationSpec, Grid, MultisineSpec, NoiseSpec, Phases,
     PrbsSpec, Sweep,
 };
 use ambid_twin::{Mode, SimOptions, SimRecord, Twin, TwinConfig};
-use crate::error::{Context, Error, Result};
 use num_complex::Complex64;
 use serde::Serialize;
 
@@ -133,7 +133,9 @@ impl ExcitationPlan {
             None => {
                 let period_samples = (self.period_s / ts).round() as usize;
                 if period_samples == 0 || self.periods == 0 {
-                    return Err(Error::other(format!("a record without excitation needs --period > 0 and --periods ≥ 1")));
+                    return Err(Error::other(format!(
+                        "a record without excitation needs --period > 0 and --periods ≥ 1"
+                    )));
                 }
                 Ok(Excitation {
                     values: vec![0.0; period_samples * self.periods],
@@ -352,7 +354,9 @@ impl ExperimentOutput {
         use ambid_core::frf::periodic::{PeriodicAnalyzer, PeriodicOptions};
         let period = self.excitation.period_samples;
         if self.excitation.periods < 2 {
-            return Err(Error::other(format!("the excitation is not periodic (one period): use a Welch estimate instead")));
+            return Err(Error::other(format!(
+                "the excitation is not periodic (one period): use a Welch estimate instead"
+            )));
         }
         let rec = &self.record;
         let mut an = PeriodicAnalyzer::new(period)?;

@@ -85,7 +85,11 @@ fn stages_on_their_own_give_the_workflow_numbers() {
         "BLA level",
     );
     for (s, w) in bla.rows.iter().zip(sm["bla"]["levels"].as_array().unwrap()) {
-        close(s.nl_rel, w["nl_rel"].as_f64().unwrap(), "nonlinear variance");
+        close(
+            s.nl_rel,
+            w["nl_rel"].as_f64().unwrap(),
+            "nonlinear variance",
+        );
     }
 
     // acquisition at the chosen level, then the FRF stage
@@ -129,7 +133,11 @@ fn stages_on_their_own_give_the_workflow_numbers() {
     )
     .unwrap();
     let f = &sm["frf"];
-    close(a.frf.f_hz().len() as f64, f["lines"].as_f64().unwrap(), "lines");
+    close(
+        a.frf.f_hz().len() as f64,
+        f["lines"].as_f64().unwrap(),
+        "lines",
+    );
     close(
         a.quality.mean_coherence_ry,
         f["mean_coh_ry"].as_f64().unwrap(),

@@ -2,12 +2,12 @@
 
 use super::config::{ColumnSpec, SourceKind, WorkflowConfig};
 use super::{computation, input, Ctx, Error};
+use crate::error::Context;
 use crate::io::table::{read_table, ReadOptions, Table};
 use crate::io::ControllerModel;
 use crate::report::{Block, NoteKind, Section, Table as RTable};
 use ambid_core::data::{detrend, Detrend};
 use ambid_twin::{Mode, Twin, TwinConfig};
-use crate::error::Context;
 use std::path::Path;
 
 pub use crate::stage::{excitation_kind, Recording, TwinSource};
@@ -178,11 +178,7 @@ fn split(rec: &Recording, k: usize) -> (Recording, Recording) {
     )
 }
 
-fn detrend_pair(
-    a: &mut Recording,
-    b: Option<&mut Recording>,
-    kind: Detrend,
-) -> Result<(), Error> {
+fn detrend_pair(a: &mut Recording, b: Option<&mut Recording>, kind: Detrend) -> Result<(), Error> {
     if kind == Detrend::None {
         return Ok(());
     }

@@ -24,11 +24,11 @@ mod summary;
 
 pub use self::config::{ConfigError, Step, WorkflowConfig};
 use self::data::Recording;
-use crate::stage::Seeds;
 use crate::io::output::{OutputDir, OutputError};
 use crate::report::{Block, NoteKind, Report, Section};
+use crate::stage::Seeds;
 use ambid_core::lti::{PolyModel, StateSpace};
-use serde_json::{Map, Value};
+use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -262,8 +262,9 @@ pub struct Outcome {
     pub timings: Vec<StepTime>,
 }
 
-/// The typed part of `summary.json`: one field per stage that has moved to typed outputs, the
-/// per-step timings, and (transitional) the figures the remaining steps record by key.
+/// `summary.json`, typed: one field per stage that ran (absent when it did not run or was
+/// skipped before it had a figure), and the timings. Serialised with `serde` (keys sorted, as
+/// `serde_json` writes a map).
 #[derive(Debug, Default, Clone, serde::Serialize)]
 pub struct Summary {
     /// The data (`data.*`).
@@ -284,6 +285,18 @@ pub struct Summary {
     /// The pole-zero check of the chosen model (`pole_zero.*`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pole_zero: Option<PoleZeroSummary>,
+    /// The validation of the chosen model (`validation.*`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub validation: Option<ValidationSummary>,
+    /// Its residual tests (`residuals.*`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub residuals: Option<ResidualsSummary>,
+    /// The chirp reconstruction (`reconstruction.*`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reconstruction: Option<ReconstructionSummary>,
+    /// The ISO 14839-3 verdict (`iso.*`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub iso: Option<IsoSummary>,
     /// The amplitude study (`amplitude.*`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub amplitude: Option<crate::stage::AmplitudeStage>,
@@ -292,16 +305,14 @@ pub struct Summary {
     pub bla: Option<BlaSummary>,
     /// The operating-point study: per case, `<band>_median_dev_pct` and `error_vs_truth_pct`.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub operating_point: Option<std::collections::BTreeMap<String, std::collections::BTreeMap<String, f64>>>,
+    pub operating_point:
+        Option<std::collections::BTreeMap<String, std::collections::BTreeMap<String, f64>>>,
     /// The identification record (`identification.*`, twin).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub identification: Option<IdentificationSummary>,
     /// Seconds per step (`<step>_s`), their sum (`total_s`) and the run's wall-clock time
     /// (`wall_s`; less than the sum when stages overlap).
     pub timing: std::collections::BTreeMap<String, f64>,
-    /// The figures of the steps not yet typed, by section.
-    #[serde(flatten)]
-    pub steps: Map<String, Value>,
 }
 
 /// `summary.json`'s `data`.
@@ -513,6 +524,201 @@ pub struct PoleZeroSummary {
     pub chosen_unstable_poles: f64,
 }
 
+/// `summary.json`'s `residuals`: the residual tests of the chosen model (and of the twin's exact plant).
+#[derive(Debug, Default, Clone, serde::Serialize)]
+pub struct ResidualsSummary {
+    /// `lags`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lags: Option<usize>,
+    /// `lags_ms`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lags_ms: Option<f64>,
+    /// `lags_rule`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lags_rule: Option<crate::validation::LagBasis>,
+    /// `lags_peak_sample`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lags_peak_sample: Option<usize>,
+    /// `whiteness_statistic`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub whiteness_statistic: Option<f64>,
+    /// `whiteness_threshold`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub whiteness_threshold: Option<f64>,
+    /// `whiteness_pass`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub whiteness_pass: Option<bool>,
+    /// `independence_statistic`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub independence_statistic: Option<f64>,
+    /// `independence_threshold`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub independence_threshold: Option<f64>,
+    /// `independence_dof`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub independence_dof: Option<usize>,
+    /// `independence_pass`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub independence_pass: Option<bool>,
+    /// `truth_independence_statistic`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub truth_independence_statistic: Option<f64>,
+    /// `truth_independence_threshold`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub truth_independence_threshold: Option<f64>,
+    /// `truth_independence_dof`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub truth_independence_dof: Option<usize>,
+    /// `truth_independence_pass`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub truth_independence_pass: Option<bool>,
+}
+
+/// `summary.json`'s `validation`: the chosen model on the independent record.
+#[derive(Debug, Default, Clone, serde::Serialize)]
+pub struct ValidationSummary {
+    /// `model`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub model: Option<String>,
+    /// `kind`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub kind: Option<String>,
+    /// `fit_y_pct`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fit_y_pct: Option<f64>,
+    /// `fit_u_pct`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fit_u_pct: Option<f64>,
+    /// `rmse_y`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rmse_y: Option<f64>,
+    /// `max_error_y`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_error_y: Option<f64>,
+    /// `exact_plant_fit_y_pct`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub exact_plant_fit_y_pct: Option<f64>,
+}
+
+/// `summary.json`'s `reconstruction`: the chirp closed-loop reconstruction.
+#[derive(Debug, Default, Clone, serde::Serialize)]
+pub struct ReconstructionSummary {
+    /// `fit_y_pct`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fit_y_pct: Option<f64>,
+    /// `fit_u_pct`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fit_u_pct: Option<f64>,
+    /// `max_error_y`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_error_y: Option<f64>,
+    /// `worst_window_fit_y_pct`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub worst_window_fit_y_pct: Option<f64>,
+    /// `worst_window_start_s`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub worst_window_start_s: Option<f64>,
+    /// `worst_window_end_s`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub worst_window_end_s: Option<f64>,
+    /// `worst_window_record_fit_pct`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub worst_window_record_fit_pct: Option<f64>,
+    /// `worst_window_rms_error_y`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub worst_window_rms_error_y: Option<f64>,
+    /// `worst_window_signal_rms_y`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub worst_window_signal_rms_y: Option<f64>,
+    /// `error_floor_y`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error_floor_y: Option<f64>,
+    /// `windows_judged`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub windows_judged: Option<usize>,
+    /// `worst_window_f_lo_hz`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub worst_window_f_lo_hz: Option<f64>,
+    /// `worst_window_f_hi_hz`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub worst_window_f_hi_hz: Option<f64>,
+}
+
+/// The ISO 14839-3 figures of the measured sensitivity.
+#[derive(Debug, Default, Clone, serde::Serialize)]
+pub struct IsoMeasured {
+    /// `peak`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub peak: Option<f64>,
+    /// `f_peak_hz`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub f_peak_hz: Option<f64>,
+    /// `zone`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub zone: Option<String>,
+    /// `peak_ci_lo`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub peak_ci_lo: Option<f64>,
+    /// `peak_ci_hi`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub peak_ci_hi: Option<f64>,
+    /// `search_lo_hz`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub search_lo_hz: Option<f64>,
+    /// `search_hi_hz`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub search_hi_hz: Option<f64>,
+    /// `search_lines`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub search_lines: Option<f64>,
+}
+
+/// The ISO 14839-3 figures of the chosen model with the controller.
+#[derive(Debug, Default, Clone, serde::Serialize)]
+pub struct IsoModel {
+    /// `peak`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub peak: Option<f64>,
+    /// `f_peak_hz`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub f_peak_hz: Option<f64>,
+    /// `zone`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub zone: Option<String>,
+    /// `phase_margin_deg`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub phase_margin_deg: Option<f64>,
+}
+
+/// The ISO 14839-3 figures of the twin's exact plant.
+#[derive(Debug, Default, Clone, serde::Serialize)]
+pub struct IsoTruth {
+    /// `peak`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub peak: Option<f64>,
+    /// `zone`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub zone: Option<String>,
+}
+
+/// `summary.json`'s `iso`: the ISO 14839-3 zone of the measured sensitivity, of the chosen
+/// model with the controller and of the twin's exact plant, and the verdict (`zone`).
+#[derive(Debug, Default, Clone, serde::Serialize)]
+pub struct IsoSummary {
+    /// From the measured S.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub measured: Option<IsoMeasured>,
+    /// From the chosen model.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub model: Option<IsoModel>,
+    /// From the twin's exact plant.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub truth: Option<IsoTruth>,
+    /// The verdict.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub zone: Option<String>,
+}
+
 /// `summary.json`'s `bla`.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct BlaSummary {
@@ -572,7 +778,6 @@ pub(crate) struct Ctx<'a> {
     pub sections: Vec<Section>,
     /// The step (index in the run's step list) of each section.
     pub section_step: Vec<usize>,
-    pub summary: Map<String, Value>,
     pub typed: Summary,
     pub models: Vec<ModelOut>,
     /// Stage outputs computed ahead.
@@ -602,11 +807,6 @@ pub(crate) struct Ctx<'a> {
 }
 
 impl Ctx<'_> {
-    /// Records a headline number (also shown in the report's summary table).
-    pub fn put(&mut self, key: &str, v: impl Into<Value>) {
-        insert_path(&mut self.summary, key, v.into());
-    }
-
     pub fn section(&mut self, id: &str, title: &str, blocks: Vec<Block>) {
         self.sections.push(Section {
             id: id.into(),
@@ -742,25 +942,6 @@ impl Ctx<'_> {
     }
 }
 
-fn insert_path(map: &mut Map<String, Value>, key: &str, v: Value) {
-    match key.split_once('.') {
-        Some((head, rest)) => {
-            let e = map
-                .entry(head.to_string())
-                .or_insert_with(|| Value::Object(Map::new()));
-            if !e.is_object() {
-                *e = Value::Object(Map::new());
-            }
-            if let Value::Object(m) = e {
-                insert_path(m, rest, v);
-            }
-        }
-        None => {
-            map.insert(key.to_string(), v);
-        }
-    }
-}
-
 /// An error's message with its sources, `a: b: c` (how the error chain was always printed).
 fn chain_message(e: &dyn std::error::Error) -> String {
     let mut msg = e.to_string();
@@ -869,7 +1050,6 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
         seeds: crate::stage::Seeds::from_workflow_seed(cfg.seed),
         sections: Vec::new(),
         section_step: Vec::new(),
-        summary: Map::new(),
         typed: Summary::default(),
         models: Vec::new(),
         pre: Prefetched::default(),
@@ -924,8 +1104,9 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
     for t in &timings {
         ctx.typed.timing.insert(format!("{}_s", t.step), t.seconds);
     }
-    ctx.typed.timing.insert("wall_s".into(), t0.elapsed().as_secs_f64());
-    ctx.typed.steps = std::mem::take(&mut ctx.summary);
+    ctx.typed
+        .timing
+        .insert("wall_s".into(), t0.elapsed().as_secs_f64());
     let summary = serde_json::to_value(&ctx.typed)
         .map_err(|e| Error::computation(format!("summary.json: {e}")))?;
     // the sections in the order of the steps (a stage run alongside others renders later)
@@ -1131,9 +1312,7 @@ impl Outcome {
             out.write(&format!("models/{}.json", m.name), text.as_bytes())?;
             out.write(
                 &format!("models/{}.m", m.name),
-                matlab_script(em, &names)
-                    .map_err(export_error)?
-                    .as_bytes(),
+                matlab_script(em, &names).map_err(export_error)?.as_bytes(),
             )?;
             out.write(
                 &format!("models/{}.mat", m.name),

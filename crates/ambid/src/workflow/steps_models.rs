@@ -124,7 +124,9 @@ fn orders_with_recommendation(
     rec: Option<&super::data::Recording>,
 ) -> Vec<usize> {
     let mut out = given.to_vec();
-    if let Some((lo, hi)) = order.and_then(|o| Some((o.recommended_lo? as usize, o.recommended_hi? as usize))) {
+    if let Some((lo, hi)) =
+        order.and_then(|o| Some((o.recommended_lo? as usize, o.recommended_hi? as usize)))
+    {
         let cap = rec.map_or(usize::MAX, |r| {
             r.len() / super::config::SAMPLES_PER_PARAMETER
         });
@@ -142,7 +144,11 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     ctx.ensure_valid()?;
     let cfg_orig = &ctx.cfg.models;
     let cfg = &super::config::ModelsSection {
-        orders: orders_with_recommendation(&cfg_orig.orders, ctx.typed.order.as_ref(), ctx.ident.as_ref()),
+        orders: orders_with_recommendation(
+            &cfg_orig.orders,
+            ctx.typed.order.as_ref(),
+            ctx.ident.as_ref(),
+        ),
         ..cfg_orig.clone()
     };
     let Some(rec) = ctx.ident.clone() else {
@@ -469,9 +475,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     }
     let mut summary = super::ModelsSummary {
         domain: domain.clone(),
-        unstable_poles_supported: unstable_how
-            .as_ref()
-            .map(|(n_u, _)| n_u.map(|n| n as f64)),
+        unstable_poles_supported: unstable_how.as_ref().map(|(n_u, _)| n_u.map(|n| n as f64)),
         table: jrows,
         chosen: None,
         chosen_validation_fit_pct: None,

@@ -6,8 +6,8 @@ use super::figures::{bode_panels, figure, lin, log, series, with_spans, xy, Curv
 use super::{computation, input, Ctx, Error, StepStatus};
 use crate::report::{format_number as fmt, Block, NoteKind, Span, Style, Table};
 use crate::study::{
-    amplitude_from_records, AmplitudeOutcome,
-    LevelRecord, OperatingCase, Recommendation, TwinAmplitudeStudy,
+    amplitude_from_records, AmplitudeOutcome, LevelRecord, OperatingCase, Recommendation,
+    TwinAmplitudeStudy,
 };
 
 pub fn excitation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
@@ -688,9 +688,10 @@ fn operating_point_blocks(
             d.truth_median_rel_dev
                 .map_or("—".into(), |v| fmt(100.0 * v)),
         ]);
-        op.entry(d.case.clone())
-            .or_default()
-            .insert(format!("{}_median_dev_pct", d.band), 100.0 * d.median_rel_dev);
+        op.entry(d.case.clone()).or_default().insert(
+            format!("{}_median_dev_pct", d.band),
+            100.0 * d.median_rel_dev,
+        );
     }
     for (c, e) in out.cases.iter().zip(&out.truth_errors) {
         op.entry(c.name.clone())

@@ -15,7 +15,6 @@ use ambid_core::validate::iso::{sensitivity_zone, IsoZones};
 use ambid_core::validate::residuals::{
     analyze, analyze_output_error, CorrelationTest, ResidualTest,
 };
-use serde_json::json;
 
 fn settings(ctx: &Ctx<'_>, n: usize) -> ValidationSettings {
     let v = &ctx.cfg.validation;
@@ -274,31 +273,76 @@ fn residual_blocks(
 }
 
 fn put_residuals(ctx: &mut Ctx<'_>, res: &ResidualTest, lags: &LagChoice, ts: f64) {
-    ctx.put("residuals.lags", lags.lags);
-    ctx.put("residuals.lags_ms", lags.lags as f64 * ts * 1e3);
-    ctx.put("residuals.lags_rule", json!(lags.basis));
+    ctx.typed
+        .residuals
+        .get_or_insert_with(Default::default)
+        .lags = Some(lags.lags);
+    ctx.typed
+        .residuals
+        .get_or_insert_with(Default::default)
+        .lags_ms = Some(lags.lags as f64 * ts * 1e3);
+    ctx.typed
+        .residuals
+        .get_or_insert_with(Default::default)
+        .lags_rule = Some(lags.basis);
     if let Some(k) = lags.peak_sample {
-        ctx.put("residuals.lags_peak_sample", k);
+        ctx.typed
+            .residuals
+            .get_or_insert_with(Default::default)
+            .lags_peak_sample = Some(k);
     }
     if let Some(w) = &res.whiteness {
-        ctx.put("residuals.whiteness_statistic", w.statistic);
-        ctx.put("residuals.whiteness_threshold", w.threshold);
-        ctx.put("residuals.whiteness_pass", w.pass);
+        ctx.typed
+            .residuals
+            .get_or_insert_with(Default::default)
+            .whiteness_statistic = Some(w.statistic);
+        ctx.typed
+            .residuals
+            .get_or_insert_with(Default::default)
+            .whiteness_threshold = Some(w.threshold);
+        ctx.typed
+            .residuals
+            .get_or_insert_with(Default::default)
+            .whiteness_pass = Some(w.pass);
     }
     if let Some(c) = &res.independence {
-        ctx.put("residuals.independence_statistic", c.statistic);
-        ctx.put("residuals.independence_threshold", c.threshold);
-        ctx.put("residuals.independence_dof", c.dof);
-        ctx.put("residuals.independence_pass", c.pass);
+        ctx.typed
+            .residuals
+            .get_or_insert_with(Default::default)
+            .independence_statistic = Some(c.statistic);
+        ctx.typed
+            .residuals
+            .get_or_insert_with(Default::default)
+            .independence_threshold = Some(c.threshold);
+        ctx.typed
+            .residuals
+            .get_or_insert_with(Default::default)
+            .independence_dof = Some(c.dof);
+        ctx.typed
+            .residuals
+            .get_or_insert_with(Default::default)
+            .independence_pass = Some(c.pass);
     }
 }
 
 fn put_truth_residuals(ctx: &mut Ctx<'_>, res: &ResidualTest) {
     if let Some(c) = &res.independence {
-        ctx.put("residuals.truth_independence_statistic", c.statistic);
-        ctx.put("residuals.truth_independence_threshold", c.threshold);
-        ctx.put("residuals.truth_independence_dof", c.dof);
-        ctx.put("residuals.truth_independence_pass", c.pass);
+        ctx.typed
+            .residuals
+            .get_or_insert_with(Default::default)
+            .truth_independence_statistic = Some(c.statistic);
+        ctx.typed
+            .residuals
+            .get_or_insert_with(Default::default)
+            .truth_independence_threshold = Some(c.threshold);
+        ctx.typed
+            .residuals
+            .get_or_insert_with(Default::default)
+            .truth_independence_dof = Some(c.dof);
+        ctx.typed
+            .residuals
+            .get_or_insert_with(Default::default)
+            .truth_independence_pass = Some(c.pass);
     }
 }
 
@@ -344,11 +388,26 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                 ts: val.ts,
             };
             let v = validate_closed_loop(&model, c.state_space(), &rec, &s).map_err(computation)?;
-            ctx.put("validation.model", label.clone());
-            ctx.put("validation.fit_y_pct", v.fit_y);
-            ctx.put("validation.fit_u_pct", v.fit_u);
-            ctx.put("validation.rmse_y", v.rmse_y);
-            ctx.put("validation.max_error_y", v.max_error_y);
+            ctx.typed
+                .validation
+                .get_or_insert_with(Default::default)
+                .model = Some(label.clone());
+            ctx.typed
+                .validation
+                .get_or_insert_with(Default::default)
+                .fit_y_pct = Some(v.fit_y);
+            ctx.typed
+                .validation
+                .get_or_insert_with(Default::default)
+                .fit_u_pct = Some(v.fit_u);
+            ctx.typed
+                .validation
+                .get_or_insert_with(Default::default)
+                .rmse_y = Some(v.rmse_y);
+            ctx.typed
+                .validation
+                .get_or_insert_with(Default::default)
+                .max_error_y = Some(v.max_error_y);
             let mut rows = vec![vec![
                 label.clone(),
                 fmt(v.fit_y),
@@ -361,7 +420,10 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             let mut truth_res = None;
             if let Some(t) = &ctx.twin {
                 if let Ok(vt) = validate_closed_loop(t.twin.plant(), c.state_space(), &rec, &s) {
-                    ctx.put("validation.exact_plant_fit_y_pct", vt.fit_y);
+                    ctx.typed
+                        .validation
+                        .get_or_insert_with(Default::default)
+                        .exact_plant_fit_y_pct = Some(vt.fit_y);
                     truth_res = Some(vt.residuals.clone());
                     rows.push(vec![
                         "twin's exact linear plant".into(),
@@ -452,9 +514,18 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                 )));
             };
             let fit = fit_percent(&val.y, &yhat).map_err(computation)?;
-            ctx.put("validation.model", label.clone());
-            ctx.put("validation.fit_y_pct", fit);
-            ctx.put("validation.kind", kind);
+            ctx.typed
+                .validation
+                .get_or_insert_with(Default::default)
+                .model = Some(label.clone());
+            ctx.typed
+                .validation
+                .get_or_insert_with(Default::default)
+                .fit_y_pct = Some(fit);
+            ctx.typed
+                .validation
+                .get_or_insert_with(Default::default)
+                .kind = Some(kind.to_string());
             let eps: Vec<f64> = val.y.iter().zip(&yhat).map(|(a, b)| a - b).collect();
             // the quantity that should be white / independent (docs/validation.md): a one-step
             // prediction error of a model with a noise model is white and independent of the
@@ -593,9 +664,18 @@ pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     )
     .map_err(computation)?;
     let label = ctx.candidates[ch].label();
-    ctx.put("reconstruction.fit_y_pct", v.reconstruction.fit_y);
-    ctx.put("reconstruction.fit_u_pct", v.reconstruction.fit_u);
-    ctx.put("reconstruction.max_error_y", v.reconstruction.max_error_y);
+    ctx.typed
+        .reconstruction
+        .get_or_insert_with(Default::default)
+        .fit_y_pct = Some(v.reconstruction.fit_y);
+    ctx.typed
+        .reconstruction
+        .get_or_insert_with(Default::default)
+        .fit_u_pct = Some(v.reconstruction.fit_u);
+    ctx.typed
+        .reconstruction
+        .get_or_insert_with(Default::default)
+        .max_error_y = Some(v.reconstruction.max_error_y);
     let wins = &v.reconstruction.windows;
     let worst = worst_window(wins, &y, ts);
     // the chirp's instantaneous frequency, from the reference's zero crossings
@@ -607,20 +687,47 @@ pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     };
     if let Some(ww) = &worst {
         let wf = &wins[ww.index];
-        ctx.put("reconstruction.worst_window_fit_y_pct", wf.fit_y);
-        ctx.put("reconstruction.worst_window_start_s", wf.t_s.0);
-        ctx.put("reconstruction.worst_window_end_s", wf.t_s.1);
-        ctx.put(
-            "reconstruction.worst_window_record_fit_pct",
-            ww.record_fit_pct,
-        );
-        ctx.put("reconstruction.worst_window_rms_error_y", wf.rms_error_y);
-        ctx.put("reconstruction.worst_window_signal_rms_y", ww.signal_rms);
-        ctx.put("reconstruction.error_floor_y", ww.error_floor);
-        ctx.put("reconstruction.windows_judged", ww.judged);
+        ctx.typed
+            .reconstruction
+            .get_or_insert_with(Default::default)
+            .worst_window_fit_y_pct = Some(wf.fit_y);
+        ctx.typed
+            .reconstruction
+            .get_or_insert_with(Default::default)
+            .worst_window_start_s = Some(wf.t_s.0);
+        ctx.typed
+            .reconstruction
+            .get_or_insert_with(Default::default)
+            .worst_window_end_s = Some(wf.t_s.1);
+        ctx.typed
+            .reconstruction
+            .get_or_insert_with(Default::default)
+            .worst_window_record_fit_pct = Some(ww.record_fit_pct);
+        ctx.typed
+            .reconstruction
+            .get_or_insert_with(Default::default)
+            .worst_window_rms_error_y = Some(wf.rms_error_y);
+        ctx.typed
+            .reconstruction
+            .get_or_insert_with(Default::default)
+            .worst_window_signal_rms_y = Some(ww.signal_rms);
+        ctx.typed
+            .reconstruction
+            .get_or_insert_with(Default::default)
+            .error_floor_y = Some(ww.error_floor);
+        ctx.typed
+            .reconstruction
+            .get_or_insert_with(Default::default)
+            .windows_judged = Some(ww.judged);
         if let Some((f0, f1)) = win_f(wf) {
-            ctx.put("reconstruction.worst_window_f_lo_hz", f0);
-            ctx.put("reconstruction.worst_window_f_hi_hz", f1);
+            ctx.typed
+                .reconstruction
+                .get_or_insert_with(Default::default)
+                .worst_window_f_lo_hz = Some(f0);
+            ctx.typed
+                .reconstruction
+                .get_or_insert_with(Default::default)
+                .worst_window_f_hi_hz = Some(f1);
         }
     }
     // measured vs reconstructed over the whole sweep (min/max envelopes) against the chirp's
@@ -883,16 +990,56 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             x0: search.band.0,
             x1: search.band.1,
         });
-        ctx.put("iso.measured.peak", v.peak);
-        ctx.put("iso.measured.f_peak_hz", v.f_peak_hz);
-        ctx.put("iso.measured.zone", format!("{:?}", v.zone));
+        ctx.typed
+            .iso
+            .get_or_insert_with(Default::default)
+            .measured
+            .get_or_insert_with(Default::default)
+            .peak = Some(v.peak);
+        ctx.typed
+            .iso
+            .get_or_insert_with(Default::default)
+            .measured
+            .get_or_insert_with(Default::default)
+            .f_peak_hz = Some(v.f_peak_hz);
+        ctx.typed
+            .iso
+            .get_or_insert_with(Default::default)
+            .measured
+            .get_or_insert_with(Default::default)
+            .zone = Some(format!("{:?}", v.zone));
         if let Some((lo, hi)) = v.interval {
-            ctx.put("iso.measured.peak_ci_lo", lo);
-            ctx.put("iso.measured.peak_ci_hi", hi);
+            ctx.typed
+                .iso
+                .get_or_insert_with(Default::default)
+                .measured
+                .get_or_insert_with(Default::default)
+                .peak_ci_lo = Some(lo);
+            ctx.typed
+                .iso
+                .get_or_insert_with(Default::default)
+                .measured
+                .get_or_insert_with(Default::default)
+                .peak_ci_hi = Some(hi);
         }
-        ctx.put("iso.measured.search_lo_hz", search.band.0);
-        ctx.put("iso.measured.search_hi_hz", search.band.1);
-        ctx.put("iso.measured.search_lines", search.lines as f64);
+        ctx.typed
+            .iso
+            .get_or_insert_with(Default::default)
+            .measured
+            .get_or_insert_with(Default::default)
+            .search_lo_hz = Some(search.band.0);
+        ctx.typed
+            .iso
+            .get_or_insert_with(Default::default)
+            .measured
+            .get_or_insert_with(Default::default)
+            .search_hi_hz = Some(search.band.1);
+        ctx.typed
+            .iso
+            .get_or_insert_with(Default::default)
+            .measured
+            .get_or_insert_with(Default::default)
+            .search_lines = Some(search.lines as f64);
         iso_notes.push(format!("Measured: {}.", search.describe()));
         rows.push(iso_row("measured S (FRF)", &v));
         verdicts.push(v.zone);
@@ -913,11 +1060,31 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     if let Some((curve, m, pm)) = model_s {
         curves.push(curve);
         let m = &m;
-        ctx.put("iso.model.peak", m.peak);
-        ctx.put("iso.model.f_peak_hz", m.f_peak_hz);
-        ctx.put("iso.model.zone", format!("{:?}", m.zone));
+        ctx.typed
+            .iso
+            .get_or_insert_with(Default::default)
+            .model
+            .get_or_insert_with(Default::default)
+            .peak = Some(m.peak);
+        ctx.typed
+            .iso
+            .get_or_insert_with(Default::default)
+            .model
+            .get_or_insert_with(Default::default)
+            .f_peak_hz = Some(m.f_peak_hz);
+        ctx.typed
+            .iso
+            .get_or_insert_with(Default::default)
+            .model
+            .get_or_insert_with(Default::default)
+            .zone = Some(format!("{:?}", m.zone));
         if let Some(p) = pm {
-            ctx.put("iso.model.phase_margin_deg", p);
+            ctx.typed
+                .iso
+                .get_or_insert_with(Default::default)
+                .model
+                .get_or_insert_with(Default::default)
+                .phase_margin_deg = Some(p);
         }
         rows.push(iso_row("chosen model with the controller", m));
         verdicts.push(m.zone);
@@ -936,8 +1103,18 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             Style::Dashed,
             Some(7),
         ));
-        ctx.put("iso.truth.peak", v.peak);
-        ctx.put("iso.truth.zone", format!("{:?}", v.zone));
+        ctx.typed
+            .iso
+            .get_or_insert_with(Default::default)
+            .truth
+            .get_or_insert_with(Default::default)
+            .peak = Some(v.peak);
+        ctx.typed
+            .iso
+            .get_or_insert_with(Default::default)
+            .truth
+            .get_or_insert_with(Default::default)
+            .zone = Some(format!("{:?}", v.zone));
         rows.push(iso_row("twin's exact plant", &v));
     }
     if curves.is_empty() && measured.is_none() {
@@ -993,7 +1170,7 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         .collect();
     let verdict = verdicts.first().copied();
     if let Some(v) = verdict {
-        ctx.put("iso.zone", format!("{v:?}"));
+        ctx.typed.iso.get_or_insert_with(Default::default).zone = Some(format!("{v:?}"));
     }
     let blocks = vec![
         Block::Figure(figure(
@@ -1042,7 +1219,7 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             ),
         ),
     ];
-    let _ = json!(null);
+
     let mut blocks = blocks;
     for n in iso_notes {
         blocks.push(Ctx::note(NoteKind::Info, n));
