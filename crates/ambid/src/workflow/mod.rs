@@ -1118,7 +1118,7 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
     let mut sections = sections_prelude;
     sections.extend(tagged.into_iter().map(|(_, s)| s));
     // the answer first; every number stays in summary.json (linked, no longer dumped here)
-    sections.insert(0, summary::section(&summary, &sections, &ctx));
+    sections.insert(0, summary::section(&ctx.typed, &sections, &ctx));
     let title = cfg.title.clone().unwrap_or_else(|| match cfg.source {
         config::SourceKind::Twin => {
             "ambid: closed-loop identification of the embedded AMB twin".into()
