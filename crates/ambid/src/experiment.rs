@@ -78,14 +78,13 @@ impl ExcitationPlan {
             return Err(Error::usage(format!(
                 "excitation amplitude must be a finite, non-negative fraction of i_sat, got {}",
                 self.amplitude_frac
-            ))
-            .into());
+            )));
         }
         if self.amplitude_frac > 1.0 {
             return Err(Error::usage(format!(
                 "excitation amplitude {} exceeds i_sat (1.0 = 100 %); the amplifier would saturate permanently",
                 self.amplitude_frac
-            )).into());
+            )));
         }
         let amp = self.amplitude_frac * i_sat;
         let period_samples = (self.period_s / ts).round() as usize;
@@ -133,9 +132,9 @@ impl ExcitationPlan {
             None => {
                 let period_samples = (self.period_s / ts).round() as usize;
                 if period_samples == 0 || self.periods == 0 {
-                    return Err(Error::other(format!(
-                        "a record without excitation needs --period > 0 and --periods ≥ 1"
-                    )));
+                    return Err(Error::other(
+                        "a record without excitation needs --period > 0 and --periods ≥ 1",
+                    ));
                 }
                 Ok(Excitation {
                     values: vec![0.0; period_samples * self.periods],
@@ -270,7 +269,7 @@ pub fn run_with_excitation(
 ) -> Result<ExperimentOutput> {
     let twin = Twin::new(exp.twin.clone()).context("building the AMB twin")?;
     if r.is_empty() {
-        return Err(Error::other(format!("the excitation is empty")));
+        return Err(Error::other("the excitation is empty"));
     }
     if let Some(k) = r.iter().position(|v| !v.is_finite()) {
         return Err(Error::other(format!(
@@ -310,8 +309,7 @@ fn check_sim_length(n: usize) -> Result<()> {
             "the experiment would record {n} samples, more than the limit of {MAX_SIM_SAMPLES} \
              a simulation may record (MAX_SIM_SAMPLES, about 60 bytes per sample); use fewer \
              periods (or a shorter period) and simulate several records with different seeds"
-        ))
-        .into());
+        )));
     }
     Ok(())
 }
@@ -354,9 +352,9 @@ impl ExperimentOutput {
         use ambid_core::frf::periodic::{PeriodicAnalyzer, PeriodicOptions};
         let period = self.excitation.period_samples;
         if self.excitation.periods < 2 {
-            return Err(Error::other(format!(
-                "the excitation is not periodic (one period): use a Welch estimate instead"
-            )));
+            return Err(Error::other(
+                "the excitation is not periodic (one period): use a Welch estimate instead",
+            ));
         }
         let rec = &self.record;
         let mut an = PeriodicAnalyzer::new(period)?;

@@ -71,7 +71,7 @@ pub fn prepare(cfg: &WorkflowConfig, base: &Path) -> Result<Prepared, Error> {
             let ident_path = d
                 .identification
                 .as_ref()
-                .ok_or_else(|| Error::input(format!("[data] identification is missing")))?;
+                .ok_or_else(|| Error::input("[data] identification is missing"))?;
             let mut ident = load_file(cfg, base, ident_path, "identification")?;
             let mut valid = match &d.validation {
                 Some(p) => Some(load_file(cfg, base, p, "validation")?),

@@ -786,9 +786,7 @@ pub fn bla(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                 ));
             }
             let Some(n) = cfg.data.period_samples else {
-                return Err(Error::input(format!(
-                    "[bla] files are given but the multisine period is not: set [data] period_samples"
-                )));
+                return Err(Error::input("[bla] files are given but the multisine period is not: set [data] period_samples"));
             };
             let mut tagged = Vec::with_capacity(cfg.bla.files.len());
             let mut fs = f64::NAN;
