@@ -273,76 +273,33 @@ fn residual_blocks(
 }
 
 fn put_residuals(ctx: &mut Ctx<'_>, res: &ResidualTest, lags: &LagChoice, ts: f64) {
-    ctx.typed
-        .residuals
-        .get_or_insert_with(Default::default)
-        .lags = Some(lags.lags);
-    ctx.typed
-        .residuals
-        .get_or_insert_with(Default::default)
-        .lags_ms = Some(lags.lags as f64 * ts * 1e3);
-    ctx.typed
-        .residuals
-        .get_or_insert_with(Default::default)
-        .lags_rule = Some(lags.basis);
+    let r = ctx.typed.residuals.get_or_insert_with(Default::default);
+    r.lags = Some(lags.lags);
+    r.lags_ms = Some(lags.lags as f64 * ts * 1e3);
+    r.lags_rule = Some(lags.basis);
     if let Some(k) = lags.peak_sample {
-        ctx.typed
-            .residuals
-            .get_or_insert_with(Default::default)
-            .lags_peak_sample = Some(k);
+        r.lags_peak_sample = Some(k);
     }
     if let Some(w) = &res.whiteness {
-        ctx.typed
-            .residuals
-            .get_or_insert_with(Default::default)
-            .whiteness_statistic = Some(w.statistic);
-        ctx.typed
-            .residuals
-            .get_or_insert_with(Default::default)
-            .whiteness_threshold = Some(w.threshold);
-        ctx.typed
-            .residuals
-            .get_or_insert_with(Default::default)
-            .whiteness_pass = Some(w.pass);
+        r.whiteness_statistic = Some(w.statistic);
+        r.whiteness_threshold = Some(w.threshold);
+        r.whiteness_pass = Some(w.pass);
     }
     if let Some(c) = &res.independence {
-        ctx.typed
-            .residuals
-            .get_or_insert_with(Default::default)
-            .independence_statistic = Some(c.statistic);
-        ctx.typed
-            .residuals
-            .get_or_insert_with(Default::default)
-            .independence_threshold = Some(c.threshold);
-        ctx.typed
-            .residuals
-            .get_or_insert_with(Default::default)
-            .independence_dof = Some(c.dof);
-        ctx.typed
-            .residuals
-            .get_or_insert_with(Default::default)
-            .independence_pass = Some(c.pass);
+        r.independence_statistic = Some(c.statistic);
+        r.independence_threshold = Some(c.threshold);
+        r.independence_dof = Some(c.dof);
+        r.independence_pass = Some(c.pass);
     }
 }
 
 fn put_truth_residuals(ctx: &mut Ctx<'_>, res: &ResidualTest) {
     if let Some(c) = &res.independence {
-        ctx.typed
-            .residuals
-            .get_or_insert_with(Default::default)
-            .truth_independence_statistic = Some(c.statistic);
-        ctx.typed
-            .residuals
-            .get_or_insert_with(Default::default)
-            .truth_independence_threshold = Some(c.threshold);
-        ctx.typed
-            .residuals
-            .get_or_insert_with(Default::default)
-            .truth_independence_dof = Some(c.dof);
-        ctx.typed
-            .residuals
-            .get_or_insert_with(Default::default)
-            .truth_independence_pass = Some(c.pass);
+        let r = ctx.typed.residuals.get_or_insert_with(Default::default);
+        r.truth_independence_statistic = Some(c.statistic);
+        r.truth_independence_threshold = Some(c.threshold);
+        r.truth_independence_dof = Some(c.dof);
+        r.truth_independence_pass = Some(c.pass);
     }
 }
 
@@ -388,26 +345,12 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                 ts: val.ts,
             };
             let v = validate_closed_loop(&model, c.state_space(), &rec, &s).map_err(computation)?;
-            ctx.typed
-                .validation
-                .get_or_insert_with(Default::default)
-                .model = Some(label.clone());
-            ctx.typed
-                .validation
-                .get_or_insert_with(Default::default)
-                .fit_y_pct = Some(v.fit_y);
-            ctx.typed
-                .validation
-                .get_or_insert_with(Default::default)
-                .fit_u_pct = Some(v.fit_u);
-            ctx.typed
-                .validation
-                .get_or_insert_with(Default::default)
-                .rmse_y = Some(v.rmse_y);
-            ctx.typed
-                .validation
-                .get_or_insert_with(Default::default)
-                .max_error_y = Some(v.max_error_y);
+            let vs = ctx.typed.validation.get_or_insert_with(Default::default);
+            vs.model = Some(label.clone());
+            vs.fit_y_pct = Some(v.fit_y);
+            vs.fit_u_pct = Some(v.fit_u);
+            vs.rmse_y = Some(v.rmse_y);
+            vs.max_error_y = Some(v.max_error_y);
             let mut rows = vec![vec![
                 label.clone(),
                 fmt(v.fit_y),
@@ -514,18 +457,10 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                 )));
             };
             let fit = fit_percent(&val.y, &yhat).map_err(computation)?;
-            ctx.typed
-                .validation
-                .get_or_insert_with(Default::default)
-                .model = Some(label.clone());
-            ctx.typed
-                .validation
-                .get_or_insert_with(Default::default)
-                .fit_y_pct = Some(fit);
-            ctx.typed
-                .validation
-                .get_or_insert_with(Default::default)
-                .kind = Some(kind.to_string());
+            let vs = ctx.typed.validation.get_or_insert_with(Default::default);
+            vs.model = Some(label.clone());
+            vs.fit_y_pct = Some(fit);
+            vs.kind = Some(kind.to_string());
             let eps: Vec<f64> = val.y.iter().zip(&yhat).map(|(a, b)| a - b).collect();
             // the quantity that should be white / independent (docs/validation.md): a one-step
             // prediction error of a model with a noise model is white and independent of the
@@ -664,18 +599,12 @@ pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     )
     .map_err(computation)?;
     let label = ctx.candidates[ch].label();
-    ctx.typed
-        .reconstruction
-        .get_or_insert_with(Default::default)
-        .fit_y_pct = Some(v.reconstruction.fit_y);
-    ctx.typed
-        .reconstruction
-        .get_or_insert_with(Default::default)
-        .fit_u_pct = Some(v.reconstruction.fit_u);
-    ctx.typed
-        .reconstruction
-        .get_or_insert_with(Default::default)
-        .max_error_y = Some(v.reconstruction.max_error_y);
+    let mut summary = super::ReconstructionSummary {
+        fit_y_pct: Some(v.reconstruction.fit_y),
+        fit_u_pct: Some(v.reconstruction.fit_u),
+        max_error_y: Some(v.reconstruction.max_error_y),
+        ..Default::default()
+    };
     let wins = &v.reconstruction.windows;
     let worst = worst_window(wins, &y, ts);
     // the chirp's instantaneous frequency, from the reference's zero crossings
@@ -687,49 +616,20 @@ pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     };
     if let Some(ww) = &worst {
         let wf = &wins[ww.index];
-        ctx.typed
-            .reconstruction
-            .get_or_insert_with(Default::default)
-            .worst_window_fit_y_pct = Some(wf.fit_y);
-        ctx.typed
-            .reconstruction
-            .get_or_insert_with(Default::default)
-            .worst_window_start_s = Some(wf.t_s.0);
-        ctx.typed
-            .reconstruction
-            .get_or_insert_with(Default::default)
-            .worst_window_end_s = Some(wf.t_s.1);
-        ctx.typed
-            .reconstruction
-            .get_or_insert_with(Default::default)
-            .worst_window_record_fit_pct = Some(ww.record_fit_pct);
-        ctx.typed
-            .reconstruction
-            .get_or_insert_with(Default::default)
-            .worst_window_rms_error_y = Some(wf.rms_error_y);
-        ctx.typed
-            .reconstruction
-            .get_or_insert_with(Default::default)
-            .worst_window_signal_rms_y = Some(ww.signal_rms);
-        ctx.typed
-            .reconstruction
-            .get_or_insert_with(Default::default)
-            .error_floor_y = Some(ww.error_floor);
-        ctx.typed
-            .reconstruction
-            .get_or_insert_with(Default::default)
-            .windows_judged = Some(ww.judged);
+        summary.worst_window_fit_y_pct = Some(wf.fit_y);
+        summary.worst_window_start_s = Some(wf.t_s.0);
+        summary.worst_window_end_s = Some(wf.t_s.1);
+        summary.worst_window_record_fit_pct = Some(ww.record_fit_pct);
+        summary.worst_window_rms_error_y = Some(wf.rms_error_y);
+        summary.worst_window_signal_rms_y = Some(ww.signal_rms);
+        summary.error_floor_y = Some(ww.error_floor);
+        summary.windows_judged = Some(ww.judged);
         if let Some((f0, f1)) = win_f(wf) {
-            ctx.typed
-                .reconstruction
-                .get_or_insert_with(Default::default)
-                .worst_window_f_lo_hz = Some(f0);
-            ctx.typed
-                .reconstruction
-                .get_or_insert_with(Default::default)
-                .worst_window_f_hi_hz = Some(f1);
+            summary.worst_window_f_lo_hz = Some(f0);
+            summary.worst_window_f_hi_hz = Some(f1);
         }
     }
+    ctx.typed.reconstruction = Some(summary);
     // measured vs reconstructed over the whole sweep (min/max envelopes) against the chirp's
     // instantaneous frequency (time when the reference is not a rising sweep)
     let t: Vec<f64> = (0..n).map(|k| k as f64 * ts).collect();
@@ -990,56 +890,34 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             x0: search.band.0,
             x1: search.band.1,
         });
-        ctx.typed
+        let ms = ctx
+            .typed
             .iso
             .get_or_insert_with(Default::default)
             .measured
-            .get_or_insert_with(Default::default)
-            .peak = Some(v.peak);
-        ctx.typed
-            .iso
-            .get_or_insert_with(Default::default)
-            .measured
-            .get_or_insert_with(Default::default)
-            .f_peak_hz = Some(v.f_peak_hz);
-        ctx.typed
-            .iso
-            .get_or_insert_with(Default::default)
-            .measured
-            .get_or_insert_with(Default::default)
-            .zone = Some(format!("{:?}", v.zone));
+            .get_or_insert_with(Default::default);
+        ms.peak = Some(v.peak);
+        ms.f_peak_hz = Some(v.f_peak_hz);
+        ms.zone = Some(format!("{:?}", v.zone));
         if let Some((lo, hi)) = v.interval {
-            ctx.typed
+            let ms = ctx
+                .typed
                 .iso
                 .get_or_insert_with(Default::default)
                 .measured
-                .get_or_insert_with(Default::default)
-                .peak_ci_lo = Some(lo);
-            ctx.typed
-                .iso
-                .get_or_insert_with(Default::default)
-                .measured
-                .get_or_insert_with(Default::default)
-                .peak_ci_hi = Some(hi);
+                .get_or_insert_with(Default::default);
+            ms.peak_ci_lo = Some(lo);
+            ms.peak_ci_hi = Some(hi);
         }
-        ctx.typed
+        let ms = ctx
+            .typed
             .iso
             .get_or_insert_with(Default::default)
             .measured
-            .get_or_insert_with(Default::default)
-            .search_lo_hz = Some(search.band.0);
-        ctx.typed
-            .iso
-            .get_or_insert_with(Default::default)
-            .measured
-            .get_or_insert_with(Default::default)
-            .search_hi_hz = Some(search.band.1);
-        ctx.typed
-            .iso
-            .get_or_insert_with(Default::default)
-            .measured
-            .get_or_insert_with(Default::default)
-            .search_lines = Some(search.lines as f64);
+            .get_or_insert_with(Default::default);
+        ms.search_lo_hz = Some(search.band.0);
+        ms.search_hi_hz = Some(search.band.1);
+        ms.search_lines = Some(search.lines as f64);
         iso_notes.push(format!("Measured: {}.", search.describe()));
         rows.push(iso_row("measured S (FRF)", &v));
         verdicts.push(v.zone);
@@ -1060,24 +938,15 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     if let Some((curve, m, pm)) = model_s {
         curves.push(curve);
         let m = &m;
-        ctx.typed
+        let ms = ctx
+            .typed
             .iso
             .get_or_insert_with(Default::default)
             .model
-            .get_or_insert_with(Default::default)
-            .peak = Some(m.peak);
-        ctx.typed
-            .iso
-            .get_or_insert_with(Default::default)
-            .model
-            .get_or_insert_with(Default::default)
-            .f_peak_hz = Some(m.f_peak_hz);
-        ctx.typed
-            .iso
-            .get_or_insert_with(Default::default)
-            .model
-            .get_or_insert_with(Default::default)
-            .zone = Some(format!("{:?}", m.zone));
+            .get_or_insert_with(Default::default);
+        ms.peak = Some(m.peak);
+        ms.f_peak_hz = Some(m.f_peak_hz);
+        ms.zone = Some(format!("{:?}", m.zone));
         if let Some(p) = pm {
             ctx.typed
                 .iso
@@ -1103,18 +972,14 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             Style::Dashed,
             Some(7),
         ));
-        ctx.typed
+        let ts = ctx
+            .typed
             .iso
             .get_or_insert_with(Default::default)
             .truth
-            .get_or_insert_with(Default::default)
-            .peak = Some(v.peak);
-        ctx.typed
-            .iso
-            .get_or_insert_with(Default::default)
-            .truth
-            .get_or_insert_with(Default::default)
-            .zone = Some(format!("{:?}", v.zone));
+            .get_or_insert_with(Default::default);
+        ts.peak = Some(v.peak);
+        ts.zone = Some(format!("{:?}", v.zone));
         rows.push(iso_row("twin's exact plant", &v));
     }
     if curves.is_empty() && measured.is_none() {
