@@ -344,7 +344,16 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                 u: &val.u,
                 ts: val.ts,
             };
-            let v = validate_closed_loop(&model, c.state_space(), &rec, &s).map_err(computation)?;
+            // the chosen model and (twin) the exact plant through the same validation, side by side
+            let (v, exact) = rayon::join(
+                || validate_closed_loop(&model, c.state_space(), &rec, &s),
+                || {
+                    ctx.twin
+                        .as_ref()
+                        .map(|t| validate_closed_loop(t.twin.plant(), c.state_space(), &rec, &s))
+                },
+            );
+            let v = v.map_err(computation)?;
             let vs = ctx.typed.validation.get_or_insert_with(Default::default);
             vs.model = Some(label.clone());
             vs.fit_y_pct = Some(v.fit_y);
@@ -361,8 +370,8 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             // the twin's exact plant through the same validation (same record, same lags): the
             // best any model can do, and the residual tests' reference
             let mut truth_res = None;
-            if let Some(t) = &ctx.twin {
-                if let Ok(vt) = validate_closed_loop(t.twin.plant(), c.state_space(), &rec, &s) {
+            if ctx.twin.is_some() {
+                if let Some(Ok(vt)) = exact {
                     ctx.typed
                         .validation
                         .get_or_insert_with(Default::default)
