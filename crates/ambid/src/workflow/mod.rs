@@ -253,8 +253,10 @@ pub struct StepTime {
 pub struct Outcome {
     /// The report.
     pub report: Report,
-    /// Headline numbers (written as `summary.json`; the report's first section states the answer
-    /// from them and links the file).
+    /// Every stage's figures, typed (what `summary.json` holds; the report's first section states
+    /// the answer from them and links the file).
+    pub stages: Summary,
+    /// The same as JSON: `serde_json::to_value(&stages)`, written as `summary.json`.
     pub summary: Value,
     /// Models to export (JSON, `.m`, `.mat`, `.npz`).
     pub models: Vec<ModelOut>,
@@ -1149,6 +1151,7 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
     };
     Ok(Outcome {
         report,
+        stages: ctx.typed,
         summary,
         models: ctx.models,
         timings,
