@@ -13,6 +13,7 @@
 //! recorded files. A step the data do not allow (closed-loop steps on open-loop data, the twin's
 //! studies on files without one record per level) is skipped with a note in the report.
 
+mod candidates;
 pub mod config;
 mod data;
 pub mod figures;

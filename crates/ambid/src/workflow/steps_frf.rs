@@ -1,8 +1,8 @@
 //! Steps 4–5: the nonparametric FRF of the identification record and the order estimation.
 
+use super::candidates::{open_loop_response, Candidate};
 use super::data::Recording;
 use super::figures::{bode_panels, figure, lin, log, series, xy, Curve};
-use super::steps_models::{open_loop_response, Candidate};
 use super::{computation, Ctx, Error, StepStatus};
 use crate::analysis::{analyze, Record};
 use crate::fitting::{identify_state_space, SsFitOptions, SsFocus};
