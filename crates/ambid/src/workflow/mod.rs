@@ -274,6 +274,8 @@ pub(crate) struct Prefetched {
     pub amplitude: Option<(Result<crate::stage::AmplitudeStage, Error>, f64)>,
     pub bla: Option<(Result<crate::bla::BlaStudy, Error>, f64)>,
     pub noise_y: Option<Option<Vec<f64>>>,
+    /// Seconds of the noise record made ahead (counted in the FRF step).
+    pub noise_s: f64,
 }
 
 /// State shared by the steps.
@@ -389,7 +391,8 @@ impl Ctx<'_> {
         let frac = self.ident_frac();
         self.level_frac = Some(frac);
         if let Some(t) = &self.twin {
-            let noise = self.cfg.steps().contains(&Step::Frf);
+            // the noise record may have been made ahead, beside the studies
+            let noise = self.cfg.steps().contains(&Step::Frf) && self.pre.noise_y.is_none();
             let plan = self.acquisition_plan(noise);
             let acq = crate::stage::acquire_twin(t, &plan)?;
             let rec = acq.identification;
@@ -426,6 +429,19 @@ impl Ctx<'_> {
         Ok(())
     }
 
+    /// The twin's record without excitation, made ahead of the FRF step (it depends on no
+    /// other stage); `None` when the twin has no noise or the simulation fails (the FRF step
+    /// then makes it again and reports the error).
+    fn noise_ahead(&self) -> Option<(Vec<f64>, f64)> {
+        let t = self.twin.as_ref().filter(|t| t.noise)?;
+        let p = crate::experiment::ExcitationPlan {
+            kind: crate::experiment::ExcitationKind::None,
+            ..self.plan(0.0)
+        };
+        let (rec, secs) = timed(|| t.record(p, self.seeds.noise_record, "noise"));
+        rec.ok().map(|(r, _)| (r.y, secs))
+    }
+
     /// The twin record without excitation (output SNR), or the `[data] noise` file.
     pub fn noise_record(&mut self) -> Result<Option<Vec<f64>>, Error> {
         if let Some(t) = &self.twin {
@@ -433,6 +449,7 @@ impl Ctx<'_> {
                 return Ok(None);
             }
             if let Some(y) = self.pre.noise_y.take().flatten() {
+                self.pre_seconds += std::mem::take(&mut self.pre.noise_s);
                 return Ok(Some(y));
             }
             let p = crate::experiment::ExcitationPlan {
@@ -577,7 +594,8 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
     let dt = t0.elapsed().as_secs_f64();
     progress.finish("data", dt, "done");
     let mut timings: Vec<Option<StepTime>> = vec![None; steps.len()];
-    // on the twin, the amplitude and BLA studies (independent experiments) run together
+    // on the twin, the amplitude and BLA studies and the noise-only record (independent
+    // experiments, each from its own seed) run together
     if ctx.twin.is_some() {
         let amp = steps
             .contains(&Step::Amplitude)
@@ -588,12 +606,23 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
             .then(|| steps_signal::bla_input(&ctx))
             .flatten();
         let configured = cfg.excitation.amplitude_pct;
-        let (a, b) = rayon::join(
+        let want_noise = steps.contains(&Step::Frf);
+        let shared = &ctx;
+        let (a, (b, n)) = rayon::join(
             || amp.map(|i| timed(|| crate::stage::amplitude_twin(&i, configured))),
-            || bla.map(|i| timed(|| crate::stage::bla_twin(&i))),
+            || {
+                rayon::join(
+                    || bla.map(|i| timed(|| crate::stage::bla_twin(&i))),
+                    || want_noise.then(|| shared.noise_ahead()).flatten(),
+                )
+            },
         );
         ctx.pre.amplitude = a;
         ctx.pre.bla = b;
+        if let Some((y, secs)) = n {
+            ctx.pre.noise_y = Some(Some(y));
+            ctx.pre.noise_s = secs;
+        }
     }
     let indexed: Vec<(usize, Step)> = steps.iter().copied().enumerate().collect();
     run_steps(&mut ctx, &indexed, progress, &mut timings)?;
