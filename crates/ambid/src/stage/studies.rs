@@ -2,14 +2,16 @@
 //! BLA. Each runs its own experiments from its own seed ([`super::Seeds`]), so the studies are
 //! independent of each other and of the identification records and can run in parallel.
 
+use crate::analysis::FrfSettings;
 use crate::bla::{BlaPlan, BlaStudy};
 use crate::error::{Context, Error, FailureClass, Result};
-use crate::experiment::ExcitationPlan;
+use crate::experiment::{run, ExcitationKind, ExcitationPlan, Experiment};
 use crate::study::{
-    amplitude_on_twin, operating_point_on_twin, AmplitudeOutcome, OperatingCase,
-    OperatingPointOutcome, TwinAmplitudeStudy,
+    amplitude_from_records, operating_point_on_twin, AmplitudeOutcome, LevelRecord, OperatingCase,
+    OperatingPointOutcome, Recommendation, TwinAmplitudeStudy,
 };
 use ambid_twin::{Mode, TwinConfig};
+use rayon::prelude::*;
 use serde::Serialize;
 
 /// One level of the amplitude study as `summary.json` gives it (`amplitude.levels[k]`).
@@ -108,8 +110,12 @@ pub fn choose_level_pct(configured_pct: Option<f64>, out: &AmplitudeOutcome) -> 
     }
 }
 
-/// The amplitude stage on the twin: one experiment per level of `study` (plus one without
-/// excitation), the identification level chosen from `configured_pct` or the recommendation.
+/// The amplitude stage on the twin: one experiment per level of `study` (level `j` with seed
+/// `study.seed + j`) plus one without excitation (seed `study.seed + 1000`), all simulated in
+/// parallel, then the study of [`crate::study::amplitude_from_records`]; the identification
+/// level chosen from `configured_pct` or the recommendation. The numbers are those of
+/// [`crate::study::amplitude_on_twin`] (the same experiments and analysis), whatever the number
+/// of threads.
 ///
 /// # Errors
 /// A computation error when a simulation or an estimate fails.
@@ -117,8 +123,90 @@ pub fn amplitude_twin(
     study: &TwinAmplitudeStudy,
     configured_pct: Option<f64>,
 ) -> Result<AmplitudeStage> {
-    let out =
-        amplitude_on_twin(study).map_err(|e| Error::classified(FailureClass::Computation, e))?;
+    let computation = |e: Error| Error::classified(FailureClass::Computation, e);
+    if study.excitation.kind == ExcitationKind::None {
+        return Err(computation(Error::other(
+            "the amplitude study needs an excitation (prbs, chirp, noise or multisine)",
+        )));
+    }
+    let experiment = |excitation: ExcitationPlan, seed: u64, noise: bool| Experiment {
+        twin: study.twin.clone(),
+        excitation,
+        mode: study.mode,
+        seed,
+        noise,
+        record_b: false,
+    };
+    // every level and the noise-only record from their own seeds, side by side; the first
+    // failing level (in the given order) is the error
+    let (levels, noise) = rayon::join(
+        || {
+            study
+                .levels
+                .par_iter()
+                .enumerate()
+                .map(|(j, &level)| {
+                    let exp = experiment(
+                        ExcitationPlan {
+                            amplitude_frac: level,
+                            ..study.excitation.clone()
+                        },
+                        study.seed + j as u64,
+                        study.noise,
+                    );
+                    run(&exp).with_context(|| format!("level {:.1} %", 100.0 * level))
+                })
+                .collect::<Vec<_>>()
+        },
+        || {
+            study
+                .noise
+                .then(|| {
+                    run(&experiment(
+                        ExcitationPlan {
+                            kind: ExcitationKind::None,
+                            ..study.excitation.clone()
+                        },
+                        study.seed + 1000,
+                        true,
+                    ))
+                })
+                .transpose()
+        },
+    );
+    let mut records = Vec::with_capacity(levels.len());
+    let mut twin = None;
+    let mut period = 0;
+    for (out, &level) in levels.into_iter().zip(&study.levels) {
+        let out = out.map_err(computation)?;
+        period = out.excitation.period_samples;
+        records.push(LevelRecord {
+            level,
+            r: out.record.r,
+            u: out.record.u,
+            y: out.record.y,
+            i: Some(out.record.i),
+            saturated_fraction: Some(out.record.meta.saturated_fraction),
+        });
+        twin = Some(out.twin);
+    }
+    let noise = noise.map_err(computation)?;
+    let twin = twin.ok_or_else(|| computation(Error::other("no level given")))?;
+    let mut settings = FrfSettings::periodic(period, study.skip_periods);
+    settings.band = study.band;
+    settings.quality_band = study.band;
+    settings.i_sat = Some(twin.i_sat());
+    // the closure's error type is the one `study::TruthFn` names
+    let truth: &crate::study::TruthFn<'_> = &|f: &[f64]| Ok(twin.plant_frf(f)?);
+    let out = amplitude_from_records(
+        &records,
+        twin.fs(),
+        noise.as_ref().map(|n| n.record.y.as_slice()),
+        &settings,
+        Some(truth),
+        Recommendation::default(),
+    )
+    .map_err(|e| computation(Error::from(e)))?;
     Ok(AmplitudeStage::new(
         out,
         "the twin (one experiment per level plus one without excitation)".to_string(),
