@@ -594,38 +594,56 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
     let dt = t0.elapsed().as_secs_f64();
     progress.finish("data", dt, "done");
     let mut timings: Vec<Option<StepTime>> = vec![None; steps.len()];
-    // on the twin, the amplitude and BLA studies and the noise-only record (independent
-    // experiments, each from its own seed) run together
-    if ctx.twin.is_some() {
-        let amp = steps
-            .contains(&Step::Amplitude)
-            .then(|| steps_signal::amplitude_input(&ctx))
-            .flatten();
-        let bla = steps
-            .contains(&Step::Bla)
-            .then(|| steps_signal::bla_input(&ctx))
-            .flatten();
-        let configured = cfg.excitation.amplitude_pct;
-        let want_noise = steps.contains(&Step::Frf);
-        let shared = &ctx;
-        let (a, (b, n)) = rayon::join(
-            || amp.map(|i| timed(|| crate::stage::amplitude_twin(&i, configured))),
-            || {
-                rayon::join(
-                    || bla.map(|i| timed(|| crate::stage::bla_twin(&i))),
-                    || want_noise.then(|| shared.noise_ahead()).flatten(),
-                )
-            },
-        );
-        ctx.pre.amplitude = a;
-        ctx.pre.bla = b;
-        if let Some((y, secs)) = n {
-            ctx.pre.noise_y = Some(Some(y));
-            ctx.pre.noise_s = secs;
-        }
-    }
     let indexed: Vec<(usize, Step)> = steps.iter().copied().enumerate().collect();
-    run_steps(&mut ctx, &indexed, progress, &mut timings)?;
+    // on the twin the robust BLA study (it feeds no other stage) runs beside everything else and
+    // is rendered in its place afterwards; the amplitude study and the noise-only record
+    // (independent experiments, each from its own seed) run together first
+    let bla = ctx
+        .twin
+        .is_some()
+        .then(|| indexed.iter().find(|(_, s)| *s == Step::Bla).copied())
+        .flatten()
+        .and_then(|kb| Some((kb, steps_signal::bla_input(&ctx)?)));
+    let rest: Vec<(usize, Step)> = indexed
+        .iter()
+        .copied()
+        .filter(|(k, _)| bla.as_ref().is_none_or(|(kb, _)| kb.0 != *k))
+        .collect();
+    let (bla_out, result) = rayon::join(
+        || {
+            bla.as_ref()
+                .map(|(kb, i)| (*kb, timed(|| crate::stage::bla_twin(i))))
+        },
+        || {
+            studies_ahead(&mut ctx, &steps);
+            run_steps(&mut ctx, &rest, progress, &mut timings)
+        },
+    );
+    // the first failure in the order of the steps
+    if let Some(((kb, step), (study, secs))) = bla_out {
+        if let Err((k, e)) = result {
+            if k < kb || study.is_ok() {
+                return Err(e);
+            }
+        }
+        ctx.pre.bla = Some((study, secs));
+        let t = Instant::now();
+        progress.start(step.name());
+        let n_before = ctx.sections.len();
+        let status = dispatch(&mut ctx, step)?;
+        let dt = t.elapsed().as_secs_f64() + std::mem::take(&mut ctx.pre_seconds);
+        finish_step(
+            &mut ctx,
+            progress,
+            &mut timings,
+            (kb, step),
+            n_before,
+            status,
+            dt,
+        );
+    } else {
+        result.map_err(|(_, e)| e)?;
+    }
     let timings: Vec<StepTime> = std::iter::once(StepTime {
         step: "data".into(),
         seconds: dt,
@@ -691,6 +709,29 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
     })
 }
 
+/// On the twin: the amplitude study and the noise-only record, side by side, ahead of their steps.
+fn studies_ahead(ctx: &mut Ctx<'_>, steps: &[Step]) {
+    if ctx.twin.is_none() {
+        return;
+    }
+    let amp = steps
+        .contains(&Step::Amplitude)
+        .then(|| steps_signal::amplitude_input(ctx))
+        .flatten();
+    let configured = ctx.cfg.excitation.amplitude_pct;
+    let want_noise = steps.contains(&Step::Frf);
+    let shared = &*ctx;
+    let (a, n) = rayon::join(
+        || amp.map(|i| timed(|| crate::stage::amplitude_twin(&i, configured))),
+        || want_noise.then(|| shared.noise_ahead()).flatten(),
+    );
+    ctx.pre.amplitude = a;
+    if let Some((y, secs)) = n {
+        ctx.pre.noise_y = Some(Some(y));
+        ctx.pre.noise_s = secs;
+    }
+}
+
 /// `f`'s result and its wall-clock seconds.
 fn timed<T>(f: impl FnOnce() -> T) -> (T, f64) {
     let t = Instant::now();
@@ -751,13 +792,14 @@ fn finish_step(
 }
 
 /// Runs `steps` in order; on the twin the operating-point study runs beside the steps after it
-/// (it depends only on the identification level, which the amplitude step fixed before).
+/// (it depends only on the identification level, which the amplitude step fixed before). An
+/// error comes with the index of its step.
 fn run_steps(
     ctx: &mut Ctx<'_>,
     steps: &[(usize, Step)],
     progress: &mut Progress,
     timings: &mut [Option<StepTime>],
-) -> Result<(), Error> {
+) -> Result<(), (usize, Error)> {
     let mut rest = steps;
     while let Some((&(k, step), tail)) = rest.split_first() {
         if step == Step::OperatingPoint && !tail.is_empty() {
@@ -769,7 +811,9 @@ fn run_steps(
                 );
                 let t = Instant::now();
                 let n_before = ctx.sections.len();
-                let status = steps_signal::operating_point(ctx, Some((op?, input)))?;
+                let op = op.map_err(|e| (k, e))?;
+                let status =
+                    steps_signal::operating_point(ctx, Some((op, input))).map_err(|e| (k, e))?;
                 let dt = op_s + t.elapsed().as_secs_f64();
                 finish_step(ctx, progress, timings, (k, step), n_before, status, dt);
                 return chain;
@@ -778,7 +822,7 @@ fn run_steps(
         let t = Instant::now();
         progress.start(step.name());
         let n_before = ctx.sections.len();
-        let status = dispatch(ctx, step)?;
+        let status = dispatch(ctx, step).map_err(|e| (k, e))?;
         let dt = t.elapsed().as_secs_f64() + std::mem::take(&mut ctx.pre_seconds);
         finish_step(ctx, progress, timings, (k, step), n_before, status, dt);
         rest = tail;
