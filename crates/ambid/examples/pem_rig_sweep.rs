@@ -32,7 +32,7 @@ fn experiment(rig: u64, noise_seed: u64, amplitude: f64) -> Result<ExperimentOut
     e.twin = ambid_twin::random_rig(rig)?;
     e.noise = true;
     e.excitation.amplitude_frac = amplitude;
-    run(&e)
+    Ok(run(&e)?)
 }
 
 fn mean(x: &[f64]) -> f64 {

@@ -3,12 +3,12 @@
 //!
 //! This is the library behind `ambid simulate`; everything it computes is reachable from Rust.
 
+use crate::error::{Context, Error, Result};
 use ambid_core::signal::{
     ChirpSpec, Distribution, Excitation, ExcitationSpec, Grid, MultisineSpec, NoiseSpec, Phases,
     PrbsSpec, Sweep,
 };
 use ambid_twin::{Mode, SimOptions, SimRecord, Twin, TwinConfig};
-use anyhow::{bail, Context, Result};
 use num_complex::Complex64;
 use serde::Serialize;
 
@@ -75,17 +75,16 @@ impl ExcitationPlan {
     /// excitation.
     pub fn spec(&self, i_sat: f64, ts: f64) -> Result<Option<ExcitationSpec>> {
         if !(self.amplitude_frac.is_finite() && self.amplitude_frac >= 0.0) {
-            return Err(crate::workflow::usage(anyhow::anyhow!(
+            return Err(Error::usage(format!(
                 "excitation amplitude must be a finite, non-negative fraction of i_sat, got {}",
                 self.amplitude_frac
-            ))
-            .into());
+            )));
         }
         if self.amplitude_frac > 1.0 {
-            return Err(crate::workflow::usage(anyhow::anyhow!(
+            return Err(Error::usage(format!(
                 "excitation amplitude {} exceeds i_sat (1.0 = 100 %); the amplifier would saturate permanently",
                 self.amplitude_frac
-            )).into());
+            )));
         }
         let amp = self.amplitude_frac * i_sat;
         let period_samples = (self.period_s / ts).round() as usize;
@@ -133,7 +132,9 @@ impl ExcitationPlan {
             None => {
                 let period_samples = (self.period_s / ts).round() as usize;
                 if period_samples == 0 || self.periods == 0 {
-                    bail!("a record without excitation needs --period > 0 and --periods ≥ 1");
+                    return Err(Error::other(
+                        "a record without excitation needs --period > 0 and --periods ≥ 1",
+                    ));
                 }
                 Ok(Excitation {
                     values: vec![0.0; period_samples * self.periods],
@@ -268,23 +269,23 @@ pub fn run_with_excitation(
 ) -> Result<ExperimentOutput> {
     let twin = Twin::new(exp.twin.clone()).context("building the AMB twin")?;
     if r.is_empty() {
-        bail!("the excitation is empty");
+        return Err(Error::other("the excitation is empty"));
     }
     if let Some(k) = r.iter().position(|v| !v.is_finite()) {
-        bail!(
+        return Err(Error::other(format!(
             "excitation sample {k} is not finite ({}); repair or regenerate the excitation",
             r[k]
-        );
+        )));
     }
     if let Some(ts) = ts {
         if (ts / twin.ts() - 1.0).abs() > 1e-6 {
-            bail!(
+            return Err(Error::other(format!(
                 "the excitation is sampled at {} Hz but the twin's controller runs at {} Hz; \
                  regenerate it at the twin's rate (e.g. `ambid excite … --fs {}`)",
                 1.0 / ts,
                 twin.fs(),
                 twin.fs()
-            );
+            )));
         }
     }
     let n = r.len();
@@ -304,12 +305,11 @@ pub const MAX_SIM_SAMPLES: usize = 1 << 23;
 
 fn check_sim_length(n: usize) -> Result<()> {
     if n > MAX_SIM_SAMPLES {
-        return Err(crate::workflow::usage(anyhow::anyhow!(
+        return Err(Error::usage(format!(
             "the experiment would record {n} samples, more than the limit of {MAX_SIM_SAMPLES} \
              a simulation may record (MAX_SIM_SAMPLES, about 60 bytes per sample); use fewer \
              periods (or a shorter period) and simulate several records with different seeds"
-        ))
-        .into());
+        )));
     }
     Ok(())
 }
@@ -352,7 +352,9 @@ impl ExperimentOutput {
         use ambid_core::frf::periodic::{PeriodicAnalyzer, PeriodicOptions};
         let period = self.excitation.period_samples;
         if self.excitation.periods < 2 {
-            bail!("the excitation is not periodic (one period): use a Welch estimate instead");
+            return Err(Error::other(
+                "the excitation is not periodic (one period): use a Welch estimate instead",
+            ));
         }
         let rec = &self.record;
         let mut an = PeriodicAnalyzer::new(period)?;

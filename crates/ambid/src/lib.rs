@@ -1,7 +1,9 @@
 //! # ambid
 //!
 //! The ambid application as a library: file formats ([`io`]), the twin experiment
-//! ([`experiment`]) and the excitation comparison ([`comparison`]). The `ambid` binary is a thin command-line layer over these.
+//! ([`experiment`]), the excitation comparison ([`comparison`]), the identification pipeline as
+//! typed stages ([`stage`]) and the workflow that sequences them into one typed outcome
+//! ([`workflow`]). The `ambid` binary is a thin command-line layer over these.
 
 pub mod analysis;
 pub mod bla;
@@ -12,6 +14,7 @@ pub mod fitting;
 pub mod frf_stream;
 pub mod io;
 pub mod report;
+pub mod stage;
 pub mod stepped_sine;
 pub mod study;
 pub mod validation;

@@ -97,7 +97,7 @@ fn recorded_levels(a: &BlaArgs) -> Result<(Vec<RecordedLevel>, f64)> {
         let ts = t.ts;
         match fs {
             None => fs = Some(1.0 / ts),
-            Some(f) if (f * ts - 1.0).abs() > 1e-6 => return Err(ambid::workflow::input(anyhow::anyhow!(
+            Some(f) if (f * ts - 1.0).abs() > 1e-6 => return Err(ambid::error::Error::input(format!(
                 "{}: sampled at {} Hz, the first realisation at {f} Hz; all realisations must share the \
                  sample rate",
                 path.display(),
@@ -173,7 +173,7 @@ pub fn bla(a: BlaArgs) -> Result<()> {
 
 fn bla_from_files(a: &BlaArgs) -> Result<()> {
     let Some(n) = a.period_samples else {
-        return Err(ambid::workflow::usage(anyhow::anyhow!(
+        return Err(ambid::error::Error::usage(format!(
             "recorded BLA realisations need the multisine period: pass --period-samples N"
         ))
         .into());

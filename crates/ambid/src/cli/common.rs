@@ -173,12 +173,12 @@ pub fn frf_input(
     let fs = match (fs, file.extra("fs_hz").ok().and_then(|c| c.first().copied())) {
         (Some(fs), _) => fs,
         (None, Some(fs)) => fs,
-        (None, None) => return Err(ambid::workflow::usage(anyhow::anyhow!(
+        (None, None) => return Err(ambid::error::Error::usage(format!(
             "this FRF file has no `fs_hz` column: give the sample rate of the data with --fs (e.g. --fs 20000)"
         )).into()),
     };
     if !(fs.is_finite() && fs > 0.0) {
-        return Err(ambid::workflow::usage(anyhow::anyhow!(
+        return Err(ambid::error::Error::usage(format!(
             "the sample rate must be positive and finite, got {fs:e} Hz"
         ))
         .into());
@@ -262,7 +262,7 @@ pub fn read_validation(
         ..
     } = read_io(p, file, (input, output), "r")?;
     if ((tsv - ts) / ts).abs() > 1e-9 {
-        return Err(ambid::workflow::input(anyhow::anyhow!(
+        return Err(ambid::error::Error::input(format!(
             "the validation data are sampled at {} Hz, the estimation data at {} Hz",
             1.0 / tsv,
             1.0 / ts
@@ -295,7 +295,7 @@ pub fn check_model_size(n: usize, params: usize, what: &str) -> Result<()> {
     let work_cap = (MAX_LS_WORK / n.max(1) as f64).sqrt().floor() as usize;
     let cap = per.min(work_cap);
     if params > cap {
-        return Err(ambid::workflow::usage(anyhow::anyhow!(
+        return Err(ambid::error::Error::usage(format!(
             "{what} has {params} parameters, more than the {cap} this record of {n} samples supports ({SAMPLES_PER_PARAMETER} samples per parameter, and N·p² ≤ {MAX_LS_WORK:e} least-squares work); give smaller orders"
         ))
         .into());

@@ -44,7 +44,7 @@ pub fn compare(a: CompareArgs) -> Result<()> {
         OutputSet::check(&a.out.join(n), a.force)?;
     }
     if !(a.i_sat.is_finite() && a.i_sat > 0.0) {
-        return Err(ambid::workflow::usage(anyhow::anyhow!(
+        return Err(ambid::error::Error::usage(format!(
             "--i-sat must be a positive current in A, got {:e}",
             a.i_sat
         ))

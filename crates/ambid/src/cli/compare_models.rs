@@ -93,7 +93,7 @@ pub fn compare(a: CompareModelsArgs) -> Result<()> {
         ..CompareSpec::default()
     };
     if spec.orders.contains(&0) {
-        return Err(ambid::workflow::usage(anyhow::anyhow!(
+        return Err(ambid::error::Error::usage(format!(
             "--orders: every order must be at least 1"
         ))
         .into());

@@ -174,14 +174,14 @@ pub enum PhaseArg {
 
 pub fn excite(a: ExciteArgs) -> Result<()> {
     if !(a.fs.is_finite() && a.fs > 0.0) {
-        return Err(ambid::workflow::usage(anyhow::anyhow!(
+        return Err(ambid::error::Error::usage(format!(
             "--fs must be a positive sample rate in Hz, got {:e}",
             a.fs
         ))
         .into());
     }
     if !(a.i_sat.is_finite() && a.i_sat > 0.0) {
-        return Err(ambid::workflow::usage(anyhow::anyhow!(
+        return Err(ambid::error::Error::usage(format!(
             "--i-sat must be a positive current in A, got {:e}",
             a.i_sat
         ))
@@ -205,7 +205,7 @@ pub fn excite(a: ExciteArgs) -> Result<()> {
     let i_sat = a.i_sat;
     let level = |old: Option<f64>, old_name: &str, default_pct: f64| -> Result<f64> {
         match (a.level, old) {
-            (Some(_), Some(_)) => Err(ambid::workflow::usage(anyhow::anyhow!(
+            (Some(_), Some(_)) => Err(ambid::error::Error::usage(format!(
                 "give the level once: --level, or the deprecated {old_name}, not both"
             ))
             .into()),
@@ -225,7 +225,7 @@ pub fn excite(a: ExciteArgs) -> Result<()> {
     };
     let band = a.band;
     if band.is_some() && matches!(a.signal, SignalCmd::Prbs { .. } | SignalCmd::Chirp { .. }) {
-        return Err(ambid::workflow::usage(anyhow::anyhow!(
+        return Err(ambid::error::Error::usage(format!(
             "--band applies to noise and multisine (a PRBS has no band parameter; a chirp sweeps \
              from --f0 to --f1)"
         ))
@@ -279,7 +279,7 @@ pub fn excite(a: ExciteArgs) -> Result<()> {
             n_samples: samples,
             band_hz: match (band, band_lo.zip(band_hi)) {
                 (Some(_), Some(_)) => {
-                    return Err(ambid::workflow::usage(anyhow::anyhow!(
+                    return Err(ambid::error::Error::usage(format!(
                         "give the band once: --band LO:HI, or the deprecated --band-lo/--band-hi"
                     ))
                     .into())
@@ -309,10 +309,9 @@ pub fn excite(a: ExciteArgs) -> Result<()> {
         } => {
             let (f_min, f_max) = match band {
                 Some(b) if f_min.is_some() || f_max.is_some() => {
-                    return Err(ambid::workflow::usage(anyhow::anyhow!(
+                    return Err(ambid::error::Error::usage(format!(
                         "give the band once: --band {}:{}, or the deprecated --f-min/--f-max",
-                        b.0,
-                        b.1
+                        b.0, b.1
                     ))
                     .into())
                 }
@@ -406,19 +405,18 @@ fn write_realisations(
     out: &Path,
 ) -> Result<Vec<PathBuf>> {
     let ExcitationSpec::Multisine(ms) = spec else {
-        return Err(ambid::workflow::usage(anyhow::anyhow!(
-            "--realisations applies to a multisine"
-        ))
-        .into());
+        return Err(
+            ambid::error::Error::usage(format!("--realisations applies to a multisine")).into(),
+        );
     };
     if ms.phases != Phases::Random {
-        return Err(ambid::workflow::usage(anyhow::anyhow!(
+        return Err(ambid::error::Error::usage(format!(
             "--realisations needs --phases random (Schroeder phases are the same every time)"
         ))
         .into());
     }
     if m < 2 {
-        return Err(ambid::workflow::usage(anyhow::anyhow!(
+        return Err(ambid::error::Error::usage(format!(
             "--realisations must be at least 2 (the robust BLA needs M ≥ 2), got {m}"
         ))
         .into());

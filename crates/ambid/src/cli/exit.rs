@@ -3,7 +3,7 @@
 
 use ambid::error::FailureClass;
 use ambid::io::OutputError;
-use ambid::workflow::{ConfigError, Failure};
+use ambid::workflow::ConfigError;
 
 /// The exit code of an error: the class of the first typed error found walking the `anyhow`
 /// chain from the outside in ([`ambid::error::Error::exit_code`] for the library's error; the
@@ -19,9 +19,6 @@ pub fn exit_code(e: &anyhow::Error) -> i32 {
     for c in e.chain() {
         if let Some(ae) = c.downcast_ref::<ambid::error::Error>() {
             return ae.exit_code();
-        }
-        if let Some(f) = c.downcast_ref::<Failure>() {
-            return f.class.exit_code();
         }
         if c.is::<ConfigError>() {
             return FailureClass::Config.exit_code();
@@ -78,12 +75,9 @@ mod tests {
         // a typed error put in another class keeps the class given
         let cls = Error::classified(FailureClass::Input, Error::other("bad controller file"));
         assert_eq!(exit_code(&anyhow::Error::from(cls)), 3);
-        // the other typed errors, still met in the chain while the library moves to one error
-        let f = Failure {
-            class: FailureClass::Output,
-            error: anyhow::anyhow!("disk full"),
-        };
-        assert_eq!(exit_code(&anyhow::Error::from(f)), 5);
+        let out = Error::classified(FailureClass::Output, Error::other("disk full"));
+        assert_eq!(exit_code(&anyhow::Error::from(out).context("writing")), 5);
+        // the other typed errors met in the chain keep their class
         let core = ambid_core::Error::invalid("order", "must be at least 1");
         assert_eq!(exit_code(&anyhow::Error::from(core)), 2);
         assert_eq!(exit_code(&anyhow::anyhow!("plain")), 1);

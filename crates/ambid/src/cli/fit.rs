@@ -266,7 +266,7 @@ fn check_orders(a: &FitArgs) -> Result<()> {
             MAX_MODEL_ORDER
         };
         if v > cap {
-            return Err(ambid::workflow::usage(anyhow::anyhow!(
+            return Err(ambid::error::Error::usage(format!(
                 "{name} {v} is more than {cap}, the largest ambid fits (50 rotor modes); give a smaller value"
             ))
             .into());
@@ -284,9 +284,9 @@ pub fn fit(a: FitArgs) -> Result<()> {
             Structure::Oe => (Structure::Oe, a.order.unwrap_or(a.nf)),
             Structure::Ss => match a.order {
                 Some(n) => (Structure::Ss, n),
-                None => return Err(ambid::workflow::usage(anyhow::anyhow!("a state-space fit to FRF data needs --order")).into()),
+                None => return Err(ambid::error::Error::usage(format!("a state-space fit to FRF data needs --order")).into()),
             },
-            _ => return Err(ambid::workflow::usage(anyhow::anyhow!("fits to FRF data support --structure arx, oe or ss (ARX/OE of order n: n numerator and n denominator coefficients after --nk delays)")).into()),
+            _ => return Err(ambid::error::Error::usage(format!("fits to FRF data support --structure arx, oe or ss (ARX/OE of order n: n numerator and n denominator coefficients after --nk delays)")).into()),
         };
         return fit_frf(
             &a.data,
@@ -308,7 +308,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
         return match a.structure {
             Structure::Ss => fit_ss_mimo(&a, &ins, &outs),
             Structure::Arx | Structure::Fir => fit_arx_mimo(&a, &ins, &outs),
-            _ => Err(ambid::workflow::usage(anyhow::anyhow!(
+            _ => Err(ambid::error::Error::usage(format!(
                 "several inputs or outputs ({} → {}) need --structure ss, arx or fir (the multi-input multi-output paths); armax, oe and bj are single-input single-output here: fit one output (and input) at a time",
                 a.u.input,
                 a.y.output
@@ -510,7 +510,7 @@ fn fit_ss(
     use ambid_core::estimate::ss_pem::SsPemOptions;
     use ambid_core::estimate::subspace::HorizonCriterion;
     if a.no_pem && a.feedthrough {
-        return Err(ambid::workflow::usage(anyhow::anyhow!(
+        return Err(ambid::error::Error::usage(format!(
             "--feedthrough needs the prediction-error refinement (it estimates D); drop --no-pem"
         ))
         .into());
@@ -801,7 +801,7 @@ fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
     let su: Vec<f64> = u.iter().map(|c| rms(c)).collect();
     let sy: Vec<f64> = y.iter().map(|c| rms(c)).collect();
     if su.iter().chain(&sy).any(|v| *v == 0.0) {
-        return Err(ambid::workflow::input(anyhow::anyhow!(
+        return Err(ambid::error::Error::input(format!(
             "an input or output column is constant after removing its mean: nothing to identify"
         ))
         .into());
@@ -820,7 +820,7 @@ fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
     let mut pem_meta = json!(null);
     let mut x0_est: Option<Vec<f64>> = None;
     if a.feedthrough && a.no_pem {
-        return Err(ambid::workflow::usage(anyhow::anyhow!(
+        return Err(ambid::error::Error::usage(format!(
             "--feedthrough needs the prediction-error refinement (it estimates D); drop --no-pem"
         ))
         .into());
@@ -1063,7 +1063,7 @@ fn finish_mimo(a: &FitArgs, ins: &[String], outs: &[String], f: MimoFit) -> Resu
         let (uv, _, tsv) = columns(p, &a.file, ins, Some(&mu), true)?;
         let (yv, _, _) = columns(p, &a.file, outs, Some(&my), true)?;
         if ((tsv - ts) / ts).abs() > 1e-9 {
-            return Err(ambid::workflow::input(anyhow::anyhow!(
+            return Err(ambid::error::Error::input(format!(
                 "the validation data are sampled at {} Hz, the estimation data at {} Hz",
                 1.0 / tsv,
                 1.0 / ts
@@ -1144,7 +1144,7 @@ pub fn fit_frf(
     OutputSet::check(out, force)?;
     let input = frf_input(path, quantity, fs, band, weights, max_iterations)?;
     if order == 0 {
-        return Err(ambid::workflow::usage(anyhow::anyhow!(
+        return Err(ambid::error::Error::usage(format!(
             "--order must be at least 1 for a fit to FRF data"
         ))
         .into());
@@ -1176,7 +1176,7 @@ pub fn fit_frf(
     let rows = compare_models(&input.frd, &spec, None)?;
     let row = &rows[0];
     let Some(model) = &row.model else {
-        return Err(ambid::workflow::computation(anyhow::anyhow!(
+        return Err(ambid::error::Error::computation(format!(
             "{} fit of order {order} failed: {}",
             structure.name(),
             row.note.as_deref().unwrap_or("unknown reason")

@@ -434,7 +434,7 @@ fn frf_local(a: &FrfArgs, r: &[f64], u: &[f64], y: &[f64], fs: f64) -> Result<()
         Some(p) if p > 0 => {
             let m = r.len() / p * p;
             if m < 2 * p {
-                return Err(ambid::workflow::usage(anyhow::anyhow!(
+                return Err(ambid::error::Error::usage(format!(
                     "--period-samples {p}: the record of {} samples holds fewer than two periods",
                     r.len()
                 ))

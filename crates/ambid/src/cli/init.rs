@@ -1,7 +1,7 @@
 //! `ambid init`: write a commented example workflow file.
 
 use ambid::io::output::write_file;
-use ambid::workflow::{self, Failure};
+use ambid::workflow;
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
@@ -17,7 +17,8 @@ pub struct InitArgs {
 }
 
 pub fn init(a: InitArgs) -> Result<()> {
-    write_file(&a.path, workflow::config::EXAMPLE.as_bytes(), a.force).map_err(Failure::from)?;
+    write_file(&a.path, workflow::config::EXAMPLE.as_bytes(), a.force)
+        .map_err(ambid::error::Error::from)?;
     println!(
         "written: {} (edit it, then `ambid run {}`)",
         a.path.display(),

@@ -41,7 +41,7 @@ pub struct OrderArgs {
 pub fn order(a: OrderArgs) -> Result<()> {
     OutputSet::check(&a.out, a.f.force)?;
     if a.na_max == 0 || a.nb_max == 0 {
-        return Err(ambid::workflow::usage(anyhow::anyhow!(
+        return Err(ambid::error::Error::usage(format!(
             "--na-max and --nb-max must be at least 1"
         ))
         .into());
@@ -49,7 +49,7 @@ pub fn order(a: OrderArgs) -> Result<()> {
     if a.na_max > ambid::workflow::config::MAX_MODEL_ORDER
         || a.nb_max > ambid::workflow::config::MAX_MODEL_ORDER
     {
-        return Err(ambid::workflow::usage(anyhow::anyhow!(
+        return Err(ambid::error::Error::usage(format!(
             "--na-max {} / --nb-max {}: at most {} each (the scan fits every pair)",
             a.na_max,
             a.nb_max,

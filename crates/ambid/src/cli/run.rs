@@ -1,7 +1,8 @@
 //! `ambid run` and `ambid init`: the seed workflow end to end.
 
+use ambid::error::Error;
 use ambid::io::output::OutputDir;
-use ambid::workflow::{self, Failure, FailureClass, Progress, Step, Verbosity, WorkflowConfig};
+use ambid::workflow::{self, FailureClass, Progress, Step, Verbosity, WorkflowConfig};
 use anyhow::Result;
 use clap::Args;
 use std::path::{Path, PathBuf};
@@ -29,17 +30,14 @@ pub struct RunArgs {
     verbose: bool,
 }
 
-fn config_failure(e: impl Into<anyhow::Error>) -> Failure {
-    Failure {
-        class: FailureClass::Config,
-        error: e.into(),
-    }
+fn config_failure(message: String) -> Error {
+    Error::classified(FailureClass::Config, Error::other(message))
 }
 
 pub fn run(a: RunArgs) -> Result<()> {
     let (mut cfg, base) = match &a.workflow {
         Some(p) => (
-            WorkflowConfig::from_path(p).map_err(Failure::from)?,
+            WorkflowConfig::from_path(p).map_err(Error::from)?,
             p.parent()
                 .filter(|d| !d.as_os_str().is_empty())
                 .map_or_else(|| PathBuf::from("."), Path::to_path_buf),
@@ -53,7 +51,7 @@ pub fn run(a: RunArgs) -> Result<()> {
                 .into_iter()
                 .find(|x| x.name() == s.trim())
                 .ok_or_else(|| {
-                    config_failure(anyhow::anyhow!(
+                    config_failure(format!(
                         "--steps: unknown step `{s}` (steps: {})",
                         Step::ALL.map(|x| x.name()).join(", ")
                     ))
@@ -76,7 +74,7 @@ pub fn run(a: RunArgs) -> Result<()> {
             .workflow
             .clone()
             .unwrap_or_else(|| PathBuf::from("--steps"));
-        cfg.check(&path).map_err(Failure::from)?;
+        cfg.check(&path).map_err(Error::from)?;
     }
     // refuse to overwrite (or to delete a directory holding our inputs) before spending any time
     let inputs: Vec<PathBuf> = a
@@ -98,7 +96,7 @@ pub fn run(a: RunArgs) -> Result<()> {
         )
         .collect();
     let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
-    OutputDir::check_with_inputs(&a.out, a.force, &inputs).map_err(Failure::from)?;
+    OutputDir::check_with_inputs(&a.out, a.force, &inputs).map_err(Error::from)?;
     let verbosity = if a.quiet {
         Verbosity::Quiet
     } else if a.verbose {

@@ -158,7 +158,7 @@ fn amplitude(a: AmplitudeArgs) -> Result<()> {
         .iter()
         .find(|l| !(l.is_finite() && **l > 0.0 && **l <= 100.0))
     {
-        return Err(ambid::workflow::usage(anyhow::anyhow!(
+        return Err(ambid::error::Error::usage(format!(
             "--levels must be in (0, 100] % of i_sat, got {l:e}"
         ))
         .into());
@@ -180,7 +180,7 @@ fn amplitude(a: AmplitudeArgs) -> Result<()> {
         amplitude_on_twin(&study)?
     } else {
         if a.files.len() != a.levels.len() {
-            return Err(ambid::workflow::usage(anyhow::anyhow!(
+            return Err(ambid::error::Error::usage(format!(
                 "{} files for {} levels: pass one file per level, in the order of --levels",
                 a.files.len(),
                 a.levels.len()

@@ -102,7 +102,7 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
     let zeros = vec![0.0; y.len()];
     let w = d.optional_column("w")?.unwrap_or(&zeros);
     if r.is_none() && w.iter().all(|v| *v == 0.0) {
-        return Err(ambid::workflow::input(anyhow::anyhow!("the record has neither an excitation column `{}` nor a reference `w`: nothing drives the loop", a.r.excitation)).into());
+        return Err(ambid::error::Error::input(format!("the record has neither an excitation column `{}` nor a reference `w`: nothing drives the loop", a.r.excitation)).into());
     }
     // the residual lags: given, or from the dynamics as in the workflow's validation step
     let lags = match a.lags {
@@ -179,10 +179,10 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
     let k_step = match a.k_step {
         Some(k) => {
             let Some(kg) = &kalman_gain else {
-                return Err(ambid::workflow::usage(anyhow::anyhow!("--k-step needs an innovation-form model with a Kalman gain (`ambid fit --structure ss` with --focus prediction)")).into());
+                return Err(ambid::error::Error::usage(format!("--k-step needs an innovation-form model with a Kalman gain (`ambid fit --structure ss` with --focus prediction)")).into());
             };
             if kg.len() != model.order() {
-                return Err(ambid::workflow::input(anyhow::anyhow!(
+                return Err(ambid::error::Error::input(format!(
                     "the model's Kalman gain has {} entries for {} states",
                     kg.len(),
                     model.order()

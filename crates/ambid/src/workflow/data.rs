@@ -1,100 +1,16 @@
 //! The workflow's data: the twin, or recorded files read through [`crate::io::table`].
 
 use super::config::{ColumnSpec, SourceKind, WorkflowConfig};
-use super::{computation, input, Ctx, Failure};
-use crate::experiment::{self, ExcitationKind, ExcitationPlan, Experiment};
+use super::{computation, input, Ctx, Error};
+use crate::error::Context;
 use crate::io::table::{read_table, ReadOptions, Table};
 use crate::io::ControllerModel;
 use crate::report::{Block, NoteKind, Section, Table as RTable};
 use ambid_core::data::{detrend, Detrend};
 use ambid_twin::{Mode, Twin, TwinConfig};
-use anyhow::{anyhow, Context};
 use std::path::Path;
 
-/// One closed- or open-loop record in SI units.
-#[derive(Debug, Clone)]
-pub struct Recording {
-    /// Sample time \[s\].
-    pub ts: f64,
-    /// Excitation at the controller output, if recorded.
-    pub r: Option<Vec<f64>>,
-    /// Plant input.
-    pub u: Vec<f64>,
-    /// Plant output.
-    pub y: Vec<f64>,
-    /// Coil current.
-    pub i: Option<Vec<f64>>,
-    /// Position reference.
-    pub w: Option<Vec<f64>>,
-    /// Closed-loop data.
-    pub closed_loop: bool,
-    /// Samples per excitation period, when periodic.
-    pub period: Option<usize>,
-    /// Where it came from.
-    pub source: String,
-    /// Fraction of saturated samples (twin).
-    pub saturated_fraction: Option<f64>,
-    /// Notes on how the record was read (e.g. columns taken by their names).
-    pub notes: Vec<String>,
-}
-
-impl Recording {
-    pub fn len(&self) -> usize {
-        self.y.len()
-    }
-
-    pub fn fs(&self) -> f64 {
-        1.0 / self.ts
-    }
-}
-
-/// The twin and how it is run.
-pub struct TwinSource {
-    pub cfg: TwinConfig,
-    pub mode: Mode,
-    pub noise: bool,
-    pub twin: Twin,
-}
-
-impl TwinSource {
-    /// Runs one experiment on the twin.
-    pub fn record(
-        &self,
-        plan: ExcitationPlan,
-        seed: u64,
-        what: &str,
-    ) -> Result<(Recording, experiment::ExperimentOutput), Failure> {
-        let exp = Experiment {
-            twin: self.cfg.clone(),
-            excitation: plan,
-            mode: self.mode,
-            seed,
-            noise: self.noise,
-            record_b: false,
-        };
-        let out = experiment::run(&exp)
-            .with_context(|| format!("simulating the {what} record on the twin"))
-            .map_err(computation)?;
-        let rec = &out.record;
-        let periodic = out.excitation.periods >= 2;
-        Ok((
-            Recording {
-                ts: rec.ts,
-                r: Some(rec.r.clone()),
-                u: rec.u.clone(),
-                y: rec.y.clone(),
-                i: Some(rec.i.clone()),
-                w: Some(rec.w.clone()),
-                closed_loop: true,
-                period: periodic.then_some(out.excitation.period_samples),
-                source: format!("twin, {what} record"),
-                saturated_fraction: Some(rec.meta.saturated_fraction),
-                notes: Vec::new(),
-            },
-            out,
-        ))
-    }
-}
+pub use crate::stage::{excitation_kind, Recording, TwinSource};
 
 pub struct Prepared {
     pub twin: Option<TwinSource>,
@@ -103,27 +19,19 @@ pub struct Prepared {
     pub controller: Option<ControllerModel>,
 }
 
-pub fn excitation_kind(name: &str) -> ExcitationKind {
-    match name {
-        "chirp" => ExcitationKind::Chirp,
-        "noise" => ExcitationKind::Noise,
-        "multisine" => ExcitationKind::Multisine,
-        _ => ExcitationKind::Prbs,
-    }
-}
-
 /// Reads the data (files) or builds the twin.
-pub fn prepare(cfg: &WorkflowConfig, base: &Path) -> Result<Prepared, Failure> {
+pub fn prepare(cfg: &WorkflowConfig, base: &Path) -> Result<Prepared, Error> {
     match cfg.source {
         SourceKind::Twin => {
             let mut tc = match &cfg.twin.config {
                 Some(p) => {
                     let path = base.join(p);
-                    let text = std::fs::read_to_string(&path)
-                        .with_context(|| {
-                            format!("{}: cannot read the twin configuration", path.display())
-                        })
-                        .map_err(input)?;
+                    let text = std::fs::read_to_string(&path).map_err(|e| {
+                        Error::input(format!(
+                            "{}: cannot read the twin configuration: {e}",
+                            path.display()
+                        ))
+                    })?;
                     TwinConfig::from_toml_str(&text)
                         .with_context(|| {
                             format!("{}: not a valid twin configuration", path.display())
@@ -163,7 +71,7 @@ pub fn prepare(cfg: &WorkflowConfig, base: &Path) -> Result<Prepared, Failure> {
             let ident_path = d
                 .identification
                 .as_ref()
-                .ok_or_else(|| input(anyhow!("[data] identification is missing")))?;
+                .ok_or_else(|| Error::input("[data] identification is missing"))?;
             let mut ident = load_file(cfg, base, ident_path, "identification")?;
             let mut valid = match &d.validation {
                 Some(p) => Some(load_file(cfg, base, p, "validation")?),
@@ -182,7 +90,7 @@ pub fn prepare(cfg: &WorkflowConfig, base: &Path) -> Result<Prepared, Failure> {
                 let n = ident.len();
                 let k = ((n as f64) * d.split).floor() as usize;
                 if k < 50 || n - k < 50 {
-                    return Err(input(anyhow!(
+                    return Err(Error::input(format!(
                         "{}: {n} samples are too few to split into estimation and validation (split = {}); give a [data] validation file",
                         ident.source, d.split
                     )));
@@ -270,11 +178,7 @@ fn split(rec: &Recording, k: usize) -> (Recording, Recording) {
     )
 }
 
-fn detrend_pair(
-    a: &mut Recording,
-    b: Option<&mut Recording>,
-    kind: Detrend,
-) -> Result<(), Failure> {
+fn detrend_pair(a: &mut Recording, b: Option<&mut Recording>, kind: Detrend) -> Result<(), Error> {
     if kind == Detrend::None {
         return Ok(());
     }
@@ -322,7 +226,7 @@ pub fn load_file(
     base: &Path,
     rel: &Path,
     what: &str,
-) -> Result<Recording, Failure> {
+) -> Result<Recording, Error> {
     let d = &cfg.data;
     let path = base.join(rel);
     let opts = ReadOptions {
@@ -369,12 +273,12 @@ pub fn load_file(
     let ts = table
         .sample_time(time.as_ref().map(ColumnSpec::to_ref).as_ref(), d.fs_hz)
         .map_err(input)?;
-    let col = |name: &str, spec: &ColumnSpec| -> Result<Vec<f64>, Failure> {
+    let col = |name: &str, spec: &ColumnSpec| -> Result<Vec<f64>, Error> {
         let x = table.column(&spec.to_ref()).map_err(input)?;
         let scale = d.scale.get(name).copied().unwrap_or(1.0);
         let skip = d.skip_samples;
         if skip + 2 >= x.len() {
-            return Err(input(anyhow!(
+            return Err(Error::input(format!(
                 "{}: skip_samples = {skip} leaves no data ({} samples)",
                 path.display(),
                 x.len()
@@ -382,7 +286,7 @@ pub fn load_file(
         }
         let v: Vec<f64> = x[skip..].iter().map(|v| v * scale).collect();
         if let Some(k) = v.iter().position(|v| !v.is_finite()) {
-            return Err(input(anyhow!(
+            return Err(Error::input(format!(
                 "{}: column `{}` (`{name}`), data row {} (counted after the header, without comment lines): the value is {}; repair the sample, or cut the record with [data] skip_samples",
                 path.display(),
                 spec_name(spec),
@@ -392,7 +296,7 @@ pub fn load_file(
         }
         let max = crate::io::csv::MAX_SAMPLE_MAGNITUDE;
         if let Some(k) = v.iter().position(|v| v.abs() > max) {
-            return Err(input(anyhow!(
+            return Err(Error::input(format!(
                 "{}: column `{}` (`{name}`), data row {}: {:.6e} is beyond ±{max:e}, where sums of squares overflow; check the column's units or [data] scale",
                 path.display(),
                 spec_name(spec),
@@ -402,7 +306,7 @@ pub fn load_file(
         }
         Ok(v)
     };
-    let opt = |name: &str, spec: &Option<ColumnSpec>| -> Result<Option<Vec<f64>>, Failure> {
+    let opt = |name: &str, spec: &Option<ColumnSpec>| -> Result<Option<Vec<f64>>, Error> {
         spec.as_ref().map(|s| col(name, s)).transpose()
     };
     let rec = Recording {
@@ -440,10 +344,13 @@ pub fn describe(ctx: &mut Ctx<'_>) -> Section {
                     },
                 )
             });
-            ctx.put("data.source", "twin");
-            ctx.put("data.fs_hz", fs);
-            ctx.put("data.i_sat_a", isat);
-            ctx.put("data.noise_rms_m", noise);
+            ctx.typed.data = Some(super::DataSummary {
+                source: Some("twin".into()),
+                fs_hz: Some(fs),
+                i_sat_a: Some(isat),
+                noise_rms_m: Some(noise),
+                ..Default::default()
+            });
             blocks.push(Block::Text(format!(
                 "Data come from ambid's embedded AMB digital twin ({mode} physics): rigid rotor on two \
                  radial bearings with a bending mode near 780 Hz, magnet force law, amplifier lag and \
@@ -482,14 +389,18 @@ pub fn describe(ctx: &mut Ctx<'_>) -> Section {
             if let Some(r) = ctx.ident.as_ref() {
                 let closed = r.closed_loop;
                 let (n, fs) = (r.len(), r.fs());
-                ctx.put("data.source", "files");
-                ctx.put("data.fs_hz", fs);
-                ctx.put("data.identification_samples", n as f64);
-                ctx.put("data.closed_loop", closed);
+                let d = ctx.typed.data.get_or_insert_with(Default::default);
+                d.source = Some("files".into());
+                d.fs_hz = Some(fs);
+                d.identification_samples = Some(n as f64);
+                d.closed_loop = Some(closed);
             }
             if let Some(v) = ctx.valid.as_ref() {
                 let n = v.len();
-                ctx.put("data.validation_samples", n as f64);
+                ctx.typed
+                    .data
+                    .get_or_insert_with(Default::default)
+                    .validation_samples = Some(n as f64);
             }
             blocks.push(Block::Table(RTable {
                 id: "data".into(),

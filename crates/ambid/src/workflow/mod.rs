@@ -13,9 +13,11 @@
 //! recorded files. A step the data do not allow (closed-loop steps on open-loop data, the twin's
 //! studies on files without one record per level) is skipped with a note in the report.
 
+mod candidates;
 pub mod config;
 mod data;
 pub mod figures;
+mod outcome;
 mod steps_frf;
 mod steps_models;
 mod steps_signal;
@@ -24,136 +26,42 @@ mod summary;
 
 pub use self::config::{ConfigError, Step, WorkflowConfig};
 use self::data::Recording;
-use crate::io::output::{OutputDir, OutputError};
+pub use self::outcome::*;
+use crate::io::output::OutputDir;
 use crate::report::{Block, NoteKind, Report, Section};
+use crate::stage::Seeds;
 use ambid_core::lti::{PolyModel, StateSpace};
-use serde_json::{Map, Value};
+use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-pub use crate::error::FailureClass;
+pub use crate::error::{Error, FailureClass};
 
 /// The only fields of `ambid run`'s outputs that differ between two runs of the same workflow:
 /// the wall-clock step timings, `summary.json`'s object `"timing"` (keys `timing.<step>_s`,
-/// `timing.total_s`), which appear again as the `timing.*` rows of the summary table in
+/// `timing.total_s`, `timing.wall_s`), which appear again as the `timing.*` rows of the summary table in
 /// `report.html` and `tables/summary.csv`. Every other byte of every output is reproduced
 /// exactly (docs/workflow.md, "Outputs").
 pub const TIMING_KEY: &str = "timing";
 
-/// A workflow failure: its class and the error chain.
-#[derive(Debug)]
-pub struct Failure {
-    /// The class (exit code).
-    pub class: FailureClass,
-    /// What went wrong.
-    pub error: anyhow::Error,
+/// An input-data error (exit 3): a file that is missing, unreadable or malformed.
+pub fn input(e: impl Into<Error>) -> Error {
+    Error::classified(FailureClass::Input, e)
 }
 
-impl std::fmt::Display for Failure {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{:#}", self.error)
-    }
+/// A computation error (exit 4).
+pub fn computation(e: impl Into<Error>) -> Error {
+    Error::classified(FailureClass::Computation, e)
 }
 
-impl std::error::Error for Failure {}
-
-impl From<ConfigError> for Failure {
-    fn from(e: ConfigError) -> Self {
-        Failure {
-            class: FailureClass::Config,
-            error: e.into(),
-        }
-    }
+/// A usage error (exit 2): a command-line option value or combination that is refused.
+pub fn usage(e: impl Into<Error>) -> Error {
+    Error::classified(FailureClass::Config, e)
 }
 
-impl From<OutputError> for Failure {
-    fn from(e: OutputError) -> Self {
-        Failure {
-            class: FailureClass::Output,
-            error: e.into(),
-        }
-    }
-}
-
-/// An input-data failure (exit 3): a file that is missing, unreadable or malformed.
-pub fn input(e: impl Into<anyhow::Error>) -> Failure {
-    Failure {
-        class: FailureClass::Input,
-        error: e.into(),
-    }
-}
-
-/// A computation failure (exit 4).
-pub fn computation(e: impl Into<anyhow::Error>) -> Failure {
-    Failure {
-        class: FailureClass::Computation,
-        error: e.into(),
-    }
-}
-
-/// A usage failure (exit 2): a command-line option value or combination that is refused.
-pub fn usage(e: impl Into<anyhow::Error>) -> Failure {
-    Failure {
-        class: FailureClass::Config,
-        error: e.into(),
-    }
-}
-
-/// An output failure (exit 5): a file or directory that cannot be written.
-pub fn output(e: impl Into<anyhow::Error>) -> Failure {
-    Failure {
-        class: FailureClass::Output,
-        error: e.into(),
-    }
-}
-
-/// The process exit code of a command's error: the class of the outermost classified error in
-/// its chain — a [`Failure`], a [`ConfigError`] (2), a data-file error (3), an
-/// [`OutputError`] (5), an invalid argument refused by `ambid_core` (2), a non-finite sample
-/// found by `ambid_core` or `ambid_twin` (3), a twin configuration that does not parse (3), or
-/// another `ambid_core`/`ambid_twin` error (4) — and 1 when nothing in the chain has a class.
-///
-/// ```
-/// use ambid::workflow::{exit_code, usage};
-/// let e: anyhow::Error = usage(anyhow::anyhow!("--order must be at least 1")).into();
-/// assert_eq!(exit_code(&e.context("fit")), 2);
-/// assert_eq!(exit_code(&anyhow::anyhow!("something else")), 1);
-/// ```
-pub fn exit_code(e: &anyhow::Error) -> i32 {
-    for c in e.chain() {
-        if let Some(ae) = c.downcast_ref::<crate::error::Error>() {
-            return ae.exit_code();
-        }
-        if let Some(f) = c.downcast_ref::<Failure>() {
-            return f.class.exit_code();
-        }
-        if c.is::<ConfigError>() {
-            return FailureClass::Config.exit_code();
-        }
-        if c.is::<crate::io::table::DataFileError>() {
-            return FailureClass::Input.exit_code();
-        }
-        if c.is::<OutputError>() {
-            return FailureClass::Output.exit_code();
-        }
-        if let Some(ce) = c.downcast_ref::<ambid_core::Error>() {
-            return match ce {
-                ambid_core::Error::NonFinite { .. } => FailureClass::Input.exit_code(),
-                // an argument (an option's value) the computation refuses; the message names it
-                ambid_core::Error::InvalidArgument { .. } => FailureClass::Config.exit_code(),
-                _ => FailureClass::Computation.exit_code(),
-            };
-        }
-        if let Some(te) = c.downcast_ref::<ambid_twin::TwinError>() {
-            return match te {
-                ambid_twin::TwinError::Toml(_) | ambid_twin::TwinError::NonFinite { .. } => {
-                    FailureClass::Input.exit_code()
-                }
-                _ => FailureClass::Computation.exit_code(),
-            };
-        }
-    }
-    1
+/// An output error (exit 5): a file or directory that cannot be written.
+pub fn output(e: impl Into<Error>) -> Error {
+    Error::classified(FailureClass::Output, e)
 }
 
 /// A message with every over-long decimal number (more than [`MAX_MESSAGE_DIGITS`] digits,
@@ -302,8 +210,10 @@ pub struct StepTime {
 pub struct Outcome {
     /// The report.
     pub report: Report,
-    /// Headline numbers (written as `summary.json`; the report's first section states the answer
-    /// from them and links the file).
+    /// Every stage's figures, typed (what `summary.json` holds; the report's first section states
+    /// the answer from them and links the file).
+    pub stages: Summary,
+    /// The same as JSON: `serde_json::to_value(&stages)`, written as `summary.json`.
     pub summary: Value,
     /// Models to export (JSON, `.m`, `.mat`, `.npz`).
     pub models: Vec<ModelOut>,
@@ -311,13 +221,31 @@ pub struct Outcome {
     pub timings: Vec<StepTime>,
 }
 
+/// Stage outputs computed ahead of their step (in parallel with other stages), each with its
+/// seconds; the step renders them.
+#[derive(Default)]
+pub(crate) struct Prefetched {
+    pub amplitude: Option<(Result<crate::stage::AmplitudeStage, Error>, f64)>,
+    pub bla: Option<(Result<crate::bla::BlaStudy, Error>, f64)>,
+    pub noise_y: Option<Option<Vec<f64>>>,
+    /// Seconds of the noise record made ahead (counted in the FRF step).
+    pub noise_s: f64,
+}
+
 /// State shared by the steps.
 pub(crate) struct Ctx<'a> {
     pub cfg: &'a WorkflowConfig,
     pub base: PathBuf,
+    pub seeds: Seeds,
     pub sections: Vec<Section>,
-    pub summary: Map<String, Value>,
+    /// The step (index in the run's step list) of each section.
+    pub section_step: Vec<usize>,
+    pub typed: Summary,
     pub models: Vec<ModelOut>,
+    /// Stage outputs computed ahead.
+    pub pre: Prefetched,
+    /// Seconds a step's stage spent before the step (in parallel), added to its timing.
+    pub pre_seconds: f64,
     /// The twin (source = twin).
     pub twin: Option<data::TwinSource>,
     /// Identification record.
@@ -341,11 +269,6 @@ pub(crate) struct Ctx<'a> {
 }
 
 impl Ctx<'_> {
-    /// Records a headline number (also shown in the report's summary table).
-    pub fn put(&mut self, key: &str, v: impl Into<Value>) {
-        insert_path(&mut self.summary, key, v.into());
-    }
-
     pub fn section(&mut self, id: &str, title: &str, blocks: Vec<Block>) {
         self.sections.push(Section {
             id: id.into(),
@@ -364,25 +287,148 @@ impl Ctx<'_> {
     pub fn is_closed_loop(&self) -> bool {
         self.ident.as_ref().is_some_and(|r| r.closed_loop)
     }
-}
 
-fn insert_path(map: &mut Map<String, Value>, key: &str, v: Value) {
-    match key.split_once('.') {
-        Some((head, rest)) => {
-            let e = map
-                .entry(head.to_string())
-                .or_insert_with(|| Value::Object(Map::new()));
-            if !e.is_object() {
-                *e = Value::Object(Map::new());
-            }
-            if let Value::Object(m) = e {
-                insert_path(m, rest, v);
-            }
-        }
-        None => {
-            map.insert(key.to_string(), v);
+    /// The identification excitation plan of the workflow file at level `frac` of i_sat.
+    pub fn plan(&self, frac: f64) -> crate::experiment::ExcitationPlan {
+        crate::stage::identification_plan(&self.cfg.excitation, frac, &self.seeds)
+    }
+
+    /// FRF settings for a record of `n` samples (periodic when the period is known).
+    pub fn frf_settings(&self, period: Option<usize>, n: usize) -> crate::analysis::FrfSettings {
+        crate::stage::frf_settings(
+            &self.cfg.frf,
+            self.cfg.data.skip_periods,
+            period,
+            n,
+            self.twin.as_ref().map(|t| t.twin.i_sat()),
+        )
+    }
+
+    /// The identification level (fraction of i_sat): the amplitude study's choice, else the
+    /// configured one, else 10 %.
+    fn ident_frac(&self) -> f64 {
+        self.level_frac
+            .or(self.cfg.excitation.amplitude_pct.map(|p| p / 100.0))
+            .unwrap_or(0.1)
+    }
+
+    /// The validation level (fraction of i_sat).
+    fn valid_frac(&self) -> f64 {
+        self.cfg
+            .validation
+            .amplitude_pct
+            .map(|p| p / 100.0)
+            .or(self.level_frac)
+            .unwrap_or(0.1)
+    }
+
+    /// The acquisition plan on the twin at the current identification level.
+    fn acquisition_plan(&self, noise_record: bool) -> crate::stage::AcquisitionPlan {
+        let frac = self.ident_frac();
+        crate::stage::AcquisitionPlan {
+            noise_record,
+            ..crate::stage::AcquisitionPlan::new(
+                self.plan(frac),
+                data::excitation_kind(&self.cfg.validation.excitation),
+                self.valid_frac(),
+                self.seeds,
+            )
         }
     }
+
+    /// The identification record (on the twin: the acquisition stage at the chosen level on
+    /// first use, which also makes the validation and noise records, in parallel).
+    pub fn ensure_ident(&mut self) -> Result<(), Error> {
+        if self.ident.is_some() {
+            return Ok(());
+        }
+        let frac = self.ident_frac();
+        self.level_frac = Some(frac);
+        if let Some(t) = &self.twin {
+            // the noise record may have been made ahead, beside the studies
+            let noise = self.cfg.steps().contains(&Step::Frf) && self.pre.noise_y.is_none();
+            let plan = self.acquisition_plan(noise);
+            let acq = crate::stage::acquire_twin(t, &plan)?;
+            let rec = acq.identification;
+            self.typed.identification = Some(IdentificationSummary {
+                level_pct: 100.0 * frac,
+                samples: rec.len() as f64,
+                saturated_pct: rec.saturated_fraction.map(|s| 100.0 * s),
+            });
+            self.ident = Some(rec);
+            if self.valid.is_none() {
+                self.valid = Some(acq.validation);
+            }
+            if noise {
+                self.pre.noise_y = Some(acq.noise_y);
+            }
+        }
+        Ok(())
+    }
+
+    /// The independent validation record (twin: a different excitation and noise realisation).
+    pub fn ensure_valid(&mut self) -> Result<(), Error> {
+        if self.valid.is_some() {
+            return Ok(());
+        }
+        if let Some(t) = &self.twin {
+            let plan = self.acquisition_plan(false);
+            let (rec, _) = t.record(
+                plan.validation.clone(),
+                plan.seeds.validation_record,
+                "validation",
+            )?;
+            self.valid = Some(rec);
+        }
+        Ok(())
+    }
+
+    /// The twin's record without excitation, made ahead of the FRF step (it depends on no
+    /// other stage); `None` when the twin has no noise or the simulation fails (the FRF step
+    /// then makes it again and reports the error).
+    fn noise_ahead(&self) -> Option<(Vec<f64>, f64)> {
+        let t = self.twin.as_ref().filter(|t| t.noise)?;
+        let p = crate::experiment::ExcitationPlan {
+            kind: crate::experiment::ExcitationKind::None,
+            ..self.plan(0.0)
+        };
+        let (rec, secs) = timed(|| t.record(p, self.seeds.noise_record, "noise"));
+        rec.ok().map(|(r, _)| (r.y, secs))
+    }
+
+    /// The twin record without excitation (output SNR), or the `[data] noise` file.
+    pub fn noise_record(&mut self) -> Result<Option<Vec<f64>>, Error> {
+        if let Some(t) = &self.twin {
+            if !t.noise {
+                return Ok(None);
+            }
+            if let Some(y) = self.pre.noise_y.take().flatten() {
+                self.pre_seconds += std::mem::take(&mut self.pre.noise_s);
+                return Ok(Some(y));
+            }
+            let p = crate::experiment::ExcitationPlan {
+                kind: crate::experiment::ExcitationKind::None,
+                ..self.plan(0.0)
+            };
+            return Ok(Some(t.record(p, self.seeds.noise_record, "noise")?.0.y));
+        }
+        match &self.cfg.data.noise {
+            Some(p) => Ok(Some(data::load_file(self.cfg, &self.base, p, "noise")?.y)),
+            None => Ok(None),
+        }
+    }
+}
+
+/// An error's message with its sources, `a: b: c` (how the error chain was always printed).
+fn chain_message(e: &dyn std::error::Error) -> String {
+    let mut msg = e.to_string();
+    let mut src = e.source();
+    while let Some(s) = src {
+        msg.push_str(": ");
+        msg.push_str(&s.to_string());
+        src = s.source();
+    }
+    msg
 }
 
 /// Flattens `summary` into (dotted key, formatted value) rows; numbers are formatted with
@@ -423,6 +469,12 @@ pub fn flatten_summary(v: &Value) -> Vec<(String, String)> {
 /// Runs the workflow. `base` is the directory relative paths in `cfg` are resolved against (the
 /// workflow file's directory).
 ///
+/// The stages run in the order of `cfg.steps()`, except that on the twin the studies that do
+/// not feed the identification run alongside it: the amplitude and BLA studies together, the
+/// operating-point study beside the FRF → order → models → validation chain (rayon). Every
+/// stage draws from its own seed ([`crate::stage::Seeds`]), so the numbers do not depend on the
+/// number of threads; the report's sections keep the step order.
+///
 /// # Example
 /// ```
 /// use ambid::workflow::{run, Progress, Step, Verbosity, WorkflowConfig};
@@ -439,11 +491,10 @@ pub fn flatten_summary(v: &Value) -> Vec<(String, String)> {
 /// ```
 ///
 /// # Errors
-/// A [`Failure`] with its class: input files missing or malformed, or a computation that failed.
-pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result<Outcome, Failure> {
+/// An [`Error`] with its class: input files missing or malformed, or a computation that failed.
+pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result<Outcome, Error> {
     let steps = cfg.steps();
     progress.total = steps.len() + 1;
-    let mut timings = Vec::new();
     let t0 = Instant::now();
     let mut sections_prelude = Vec::new();
     progress.start("data");
@@ -473,9 +524,13 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
     let mut ctx = Ctx {
         cfg,
         base: base.to_path_buf(),
+        seeds: crate::stage::Seeds::from_workflow_seed(cfg.seed),
         sections: Vec::new(),
-        summary: Map::new(),
+        section_step: Vec::new(),
+        typed: Summary::default(),
         models: Vec::new(),
+        pre: Prefetched::default(),
+        pre_seconds: 0.0,
         twin: prepared.twin,
         ident: prepared.ident,
         valid: prepared.valid,
@@ -492,61 +547,85 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
     sections_prelude.push(data_section);
     let dt = t0.elapsed().as_secs_f64();
     progress.finish("data", dt, "done");
-    timings.push(StepTime {
-        step: "data".into(),
-        seconds: dt,
-        status: "done".into(),
-    });
-    for step in steps {
+    let mut timings: Vec<Option<StepTime>> = vec![None; steps.len()];
+    let indexed: Vec<(usize, Step)> = steps.iter().copied().enumerate().collect();
+    // on the twin the robust BLA study (it feeds no other stage) runs beside everything else and
+    // is rendered in its place afterwards; the amplitude study and the noise-only record
+    // (independent experiments, each from its own seed) run together first
+    let bla = ctx
+        .twin
+        .is_some()
+        .then(|| indexed.iter().find(|(_, s)| *s == Step::Bla).copied())
+        .flatten()
+        .and_then(|kb| Some((kb, steps_signal::bla_input(&ctx)?)));
+    let rest: Vec<(usize, Step)> = indexed
+        .iter()
+        .copied()
+        .filter(|(k, _)| bla.as_ref().is_none_or(|(kb, _)| kb.0 != *k))
+        .collect();
+    let (bla_out, result) = rayon::join(
+        || {
+            bla.as_ref()
+                .map(|(kb, i)| (*kb, timed(|| crate::stage::bla_twin(i))))
+        },
+        || {
+            studies_ahead(&mut ctx, &steps);
+            run_steps(&mut ctx, &rest, progress, &mut timings)
+        },
+    );
+    // the first failure in the order of the steps
+    if let Some(((kb, step), (study, secs))) = bla_out {
+        if let Err((k, e)) = result {
+            if k < kb || study.is_ok() {
+                return Err(e);
+            }
+        }
+        ctx.pre.bla = Some((study, secs));
         let t = Instant::now();
         progress.start(step.name());
         let n_before = ctx.sections.len();
-        let status = match step {
-            Step::Excitation => steps_signal::excitation(&mut ctx),
-            Step::Amplitude => steps_signal::amplitude(&mut ctx),
-            Step::Bla => steps_signal::bla(&mut ctx),
-            Step::OperatingPoint => steps_signal::operating_point(&mut ctx),
-            Step::Frf => steps_frf::frf(&mut ctx),
-            Step::Order => steps_frf::order(&mut ctx),
-            Step::Models => steps_models::models(&mut ctx),
-            Step::PoleZero => steps_models::pole_zero(&mut ctx),
-            Step::Validation => steps_validate::validation(&mut ctx),
-            Step::Reconstruction => steps_validate::reconstruction(&mut ctx),
-            Step::Iso => steps_validate::iso(&mut ctx),
-        }?;
-        let dt = t.elapsed().as_secs_f64();
-        let status = match status {
-            StepStatus::Done => "done".to_string(),
-            StepStatus::Skipped(why) => {
-                if ctx.sections.len() == n_before {
-                    ctx.section(
-                        step.name(),
-                        &format!("{} (skipped)", step.name().replace('_', " ")),
-                        vec![Ctx::note(NoteKind::Warning, format!("Skipped: {why}"))],
-                    );
-                }
-                progress.detail(&why);
-                "skipped".to_string()
-            }
-        };
-        progress.finish(step.name(), dt, &status);
-        timings.push(StepTime {
-            step: step.name().into(),
-            seconds: dt,
+        let status = dispatch(&mut ctx, step)?;
+        let dt = t.elapsed().as_secs_f64() + std::mem::take(&mut ctx.pre_seconds);
+        finish_step(
+            &mut ctx,
+            progress,
+            &mut timings,
+            (kb, step),
+            n_before,
             status,
-        });
+            dt,
+        );
+    } else {
+        result.map_err(|(_, e)| e)?;
     }
+    let timings: Vec<StepTime> = std::iter::once(StepTime {
+        step: "data".into(),
+        seconds: dt,
+        status: "done".into(),
+    })
+    .chain(timings.into_iter().flatten())
+    .collect();
     // the per-step timings are part of the summary and of the report
     let total: f64 = timings.iter().map(|t| t.seconds).sum();
-    ctx.put(&format!("{TIMING_KEY}.total_s"), total);
+    ctx.typed.timing.insert("total_s".into(), total);
     for t in &timings {
-        ctx.put(&format!("{TIMING_KEY}.{}_s", t.step), t.seconds);
+        ctx.typed.timing.insert(format!("{}_s", t.step), t.seconds);
     }
-    let summary = Value::Object(ctx.summary.clone());
+    ctx.typed
+        .timing
+        .insert("wall_s".into(), t0.elapsed().as_secs_f64());
+    let summary = serde_json::to_value(&ctx.typed)
+        .map_err(|e| Error::computation(format!("summary.json: {e}")))?;
+    // the sections in the order of the steps (a stage run alongside others renders later)
+    let mut tagged: Vec<(usize, Section)> = std::mem::take(&mut ctx.section_step)
+        .into_iter()
+        .zip(std::mem::take(&mut ctx.sections))
+        .collect();
+    tagged.sort_by_key(|(k, _)| *k);
     let mut sections = sections_prelude;
-    sections.append(&mut ctx.sections);
+    sections.extend(tagged.into_iter().map(|(_, s)| s));
     // the answer first; every number stays in summary.json (linked, no longer dumped here)
-    sections.insert(0, summary::section(&summary, &sections, &ctx));
+    sections.insert(0, summary::section(&ctx.typed, &sections, &ctx));
     let title = cfg.title.clone().unwrap_or_else(|| match cfg.source {
         config::SourceKind::Twin => {
             "ambid: closed-loop identification of the embedded AMB twin".into()
@@ -577,10 +656,132 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
     };
     Ok(Outcome {
         report,
+        stages: ctx.typed,
         summary,
         models: ctx.models,
         timings,
     })
+}
+
+/// On the twin: the amplitude study and the noise-only record, side by side, ahead of their steps.
+fn studies_ahead(ctx: &mut Ctx<'_>, steps: &[Step]) {
+    if ctx.twin.is_none() {
+        return;
+    }
+    let amp = steps
+        .contains(&Step::Amplitude)
+        .then(|| steps_signal::amplitude_input(ctx))
+        .flatten();
+    let configured = ctx.cfg.excitation.amplitude_pct;
+    let want_noise = steps.contains(&Step::Frf);
+    let shared = &*ctx;
+    let (a, n) = rayon::join(
+        || amp.map(|i| timed(|| crate::stage::amplitude_twin(&i, configured))),
+        || want_noise.then(|| shared.noise_ahead()).flatten(),
+    );
+    ctx.pre.amplitude = a;
+    if let Some((y, secs)) = n {
+        ctx.pre.noise_y = Some(Some(y));
+        ctx.pre.noise_s = secs;
+    }
+}
+
+/// `f`'s result and its wall-clock seconds.
+fn timed<T>(f: impl FnOnce() -> T) -> (T, f64) {
+    let t = Instant::now();
+    let out = f();
+    (out, t.elapsed().as_secs_f64())
+}
+
+/// Runs one step on the context.
+fn dispatch(ctx: &mut Ctx<'_>, step: Step) -> Result<StepStatus, Error> {
+    match step {
+        Step::Excitation => steps_signal::excitation(ctx),
+        Step::Amplitude => steps_signal::amplitude(ctx),
+        Step::Bla => steps_signal::bla(ctx),
+        Step::OperatingPoint => steps_signal::operating_point(ctx, None),
+        Step::Frf => steps_frf::frf(ctx),
+        Step::Order => steps_frf::order(ctx),
+        Step::Models => steps_models::models(ctx),
+        Step::PoleZero => steps_models::pole_zero(ctx),
+        Step::Validation => steps_validate::validation(ctx),
+        Step::Reconstruction => steps_validate::reconstruction(ctx),
+        Step::Iso => steps_validate::iso(ctx),
+    }
+}
+
+/// Books a finished step: tags its new sections, adds the skipped note, reports progress and
+/// keeps its time.
+fn finish_step(
+    ctx: &mut Ctx<'_>,
+    progress: &mut Progress,
+    timings: &mut [Option<StepTime>],
+    (k, step): (usize, Step),
+    n_before: usize,
+    status: StepStatus,
+    dt: f64,
+) {
+    let status = match status {
+        StepStatus::Done => "done".to_string(),
+        StepStatus::Skipped(why) => {
+            if ctx.sections.len() == n_before {
+                ctx.section(
+                    step.name(),
+                    &format!("{} (skipped)", step.name().replace('_', " ")),
+                    vec![Ctx::note(NoteKind::Warning, format!("Skipped: {why}"))],
+                );
+            }
+            progress.detail(&why);
+            "skipped".to_string()
+        }
+    };
+    let n = ctx.sections.len() - ctx.section_step.len();
+    ctx.section_step.extend(std::iter::repeat_n(k, n));
+    progress.finish(step.name(), dt, &status);
+    timings[k] = Some(StepTime {
+        step: step.name().into(),
+        seconds: dt,
+        status,
+    });
+}
+
+/// Runs `steps` in order; on the twin the operating-point study runs beside the steps after it
+/// (it depends only on the identification level, which the amplitude step fixed before). An
+/// error comes with the index of its step.
+fn run_steps(
+    ctx: &mut Ctx<'_>,
+    steps: &[(usize, Step)],
+    progress: &mut Progress,
+    timings: &mut [Option<StepTime>],
+) -> Result<(), (usize, Error)> {
+    let mut rest = steps;
+    while let Some((&(k, step), tail)) = rest.split_first() {
+        if step == Step::OperatingPoint && !tail.is_empty() {
+            if let Some(input) = steps_signal::operating_point_input(ctx) {
+                progress.start(step.name());
+                let ((op, op_s), chain) = rayon::join(
+                    || timed(|| crate::stage::operating_point_twin(&input)),
+                    || run_steps(ctx, tail, progress, timings),
+                );
+                let t = Instant::now();
+                let n_before = ctx.sections.len();
+                let op = op.map_err(|e| (k, e))?;
+                let status =
+                    steps_signal::operating_point(ctx, Some((op, input))).map_err(|e| (k, e))?;
+                let dt = op_s + t.elapsed().as_secs_f64();
+                finish_step(ctx, progress, timings, (k, step), n_before, status, dt);
+                return chain;
+            }
+        }
+        let t = Instant::now();
+        progress.start(step.name());
+        let n_before = ctx.sections.len();
+        let status = dispatch(ctx, step).map_err(|e| (k, e))?;
+        let dt = t.elapsed().as_secs_f64() + std::mem::take(&mut ctx.pre_seconds);
+        finish_step(ctx, progress, timings, (k, step), n_before, status, dt);
+        rest = tail;
+    }
+    Ok(())
 }
 
 /// What a step did.
@@ -596,20 +797,19 @@ impl Outcome {
     /// half-written. An existing `dir` is replaced only with `force`.
     ///
     /// # Errors
-    /// [`FailureClass::Output`] failures.
-    pub fn write(&self, dir: &Path, force: bool) -> Result<Vec<PathBuf>, Failure> {
+    /// [`FailureClass::Output`] errors.
+    pub fn write(&self, dir: &Path, force: bool) -> Result<Vec<PathBuf>, Error> {
         use crate::io::export::{mat_bytes, matlab_script, npz_bytes, ExportModel, ExportNames};
         use crate::io::model::{polynomial_json, state_space_json};
         let out = OutputDir::create(dir, force)?;
-        let output = |e: anyhow::Error| Failure {
-            class: FailureClass::Output,
-            error: e,
-        };
+        let json_error = |e: serde_json::Error| output(Error::other(chain_message(&e)));
+        let export_error =
+            |e: crate::io::export::ExportError| output(Error::other(chain_message(&e)));
         out.write("report.html", self.report.to_html().as_bytes())?;
         out.write(
             "summary.json",
             serde_json::to_string_pretty(&self.summary)
-                .map_err(|e| output(e.into()))?
+                .map_err(json_error)?
                 .as_bytes(),
         )?;
         for s in &self.report.sections {
@@ -642,21 +842,19 @@ impl Outcome {
                     ExportModel::StateSpace(&m.ss, m.kalman.as_deref()),
                 ),
             };
-            let text = serde_json::to_string_pretty(&json).map_err(|e| output(e.into()))?;
+            let text = serde_json::to_string_pretty(&json).map_err(json_error)?;
             out.write(&format!("models/{}.json", m.name), text.as_bytes())?;
             out.write(
                 &format!("models/{}.m", m.name),
-                matlab_script(em, &names)
-                    .map_err(|e| output(e.into()))?
-                    .as_bytes(),
+                matlab_script(em, &names).map_err(export_error)?.as_bytes(),
             )?;
             out.write(
                 &format!("models/{}.mat", m.name),
-                &mat_bytes(em, &names).map_err(|e| output(e.into()))?,
+                &mat_bytes(em, &names).map_err(export_error)?,
             )?;
             out.write(
                 &format!("models/{}.npz", m.name),
-                &npz_bytes(em, &names).map_err(|e| output(e.into()))?,
+                &npz_bytes(em, &names).map_err(export_error)?,
             )?;
         }
         Ok(out.commit()?)

@@ -1,12 +1,10 @@
 //! Steps 4–5: the nonparametric FRF of the identification record and the order estimation.
 
+use super::candidates::{open_loop_response, Candidate};
 use super::data::Recording;
 use super::figures::{bode_panels, figure, lin, log, series, xy, Curve};
-use super::steps_models::{open_loop_response, Candidate};
-use super::steps_signal::plan;
-use super::{computation, Ctx, Failure, StepStatus};
-use crate::analysis::{analyze, FrfSettings, Record};
-use crate::experiment::{ExcitationKind, ExcitationPlan};
+use super::{computation, Ctx, Error, StepStatus};
+use crate::analysis::{analyze, Record};
 use crate::fitting::{identify_state_space, SsFitOptions, SsFocus};
 use crate::report::{
     format_number as fmt, Block, Heatmap, NoteKind, Panel, PanelContent, Style, Table,
@@ -18,107 +16,14 @@ use ambid_core::frf::band::{fit_band, FIT_REL_HALFWIDTH};
 use ambid_core::frf::resonance::{find_resonances_reliable, order_from_peaks, ResonanceOptions};
 use ambid_core::validate::compare::{compare_models, supported_unstable_poles, CompareSpec};
 use ambid_core::validate::fit::fit_percent;
-use serde_json::json;
 
-/// FRF settings for a record of `n` samples at `fs` (periodic when the period is known).
-pub fn settings(ctx: &Ctx<'_>, period: Option<usize>, n: usize, fs: f64) -> FrfSettings {
-    let cfg = &ctx.cfg.frf;
-    let periodic = match cfg.method.as_str() {
-        "welch" => None,
-        _ => period.filter(|p| n / p.max(&1) >= 2),
-    };
-    let mut s = match periodic {
-        Some(p) => FrfSettings::periodic(p, ctx.cfg.data.skip_periods.min(n / p - 1)),
-        None => {
-            let nper = cfg
-                .nperseg
-                .unwrap_or_else(|| FrfSettings::default_nperseg(n));
-            FrfSettings::welch(nper.min(n))
-        }
-    };
-    // an explicit band wins; otherwise both bands are derived from the excitation of the record
-    // (ambid_core::frf::band), on the twin and on files alike
-    let _ = fs;
-    s.band = cfg.band_hz.map(|[a, b]| (a, b));
-    s.quality_band = cfg.quality_band_hz.map(|[a, b]| (a, b));
-    s.i_sat = ctx.twin.as_ref().map(|t| t.twin.i_sat());
-    s
-}
-
-/// The identification record (simulated on the twin at the chosen level on first use).
-pub fn ensure_ident(ctx: &mut Ctx<'_>) -> Result<(), Failure> {
-    if ctx.ident.is_some() {
-        return Ok(());
-    }
-    let frac = ctx
-        .level_frac
-        .or(ctx.cfg.excitation.amplitude_pct.map(|p| p / 100.0))
-        .unwrap_or(0.1);
-    ctx.level_frac = Some(frac);
-    let p = plan(ctx, frac);
-    if let Some(t) = &ctx.twin {
-        let (rec, _) = t.record(p, ctx.cfg.seed + 200, "identification")?;
-        ctx.put("identification.level_pct", 100.0 * frac);
-        ctx.put("identification.samples", rec.len() as f64);
-        if let Some(s) = rec.saturated_fraction {
-            ctx.put("identification.saturated_pct", 100.0 * s);
-        }
-        ctx.ident = Some(rec);
-    }
-    Ok(())
-}
-
-/// The independent validation record (twin: a different excitation and noise realisation).
-pub fn ensure_valid(ctx: &mut Ctx<'_>) -> Result<(), Failure> {
-    if ctx.valid.is_some() {
-        return Ok(());
-    }
-    let frac = ctx
-        .cfg
-        .validation
-        .amplitude_pct
-        .map(|p| p / 100.0)
-        .or(ctx.level_frac)
-        .unwrap_or(0.1);
-    let p = ExcitationPlan {
-        kind: super::data::excitation_kind(&ctx.cfg.validation.excitation),
-        seed: ctx.cfg.seed + 7,
-        ..plan(ctx, frac)
-    };
-    if let Some(t) = &ctx.twin {
-        let (rec, _) = t.record(p, ctx.cfg.seed + 300, "validation")?;
-        ctx.valid = Some(rec);
-    }
-    Ok(())
-}
-
-/// The twin record without excitation (output SNR), or the `[data] noise` file.
-fn noise_record(ctx: &Ctx<'_>) -> Result<Option<Vec<f64>>, Failure> {
-    if let Some(t) = &ctx.twin {
-        if !t.noise {
-            return Ok(None);
-        }
-        let p = ExcitationPlan {
-            kind: ExcitationKind::None,
-            ..plan(ctx, 0.0)
-        };
-        return Ok(Some(t.record(p, ctx.cfg.seed + 400, "noise")?.0.y));
-    }
-    match &ctx.cfg.data.noise {
-        Some(p) => Ok(Some(
-            super::data::load_file(ctx.cfg, &ctx.base, p, "noise")?.y,
-        )),
-        None => Ok(None),
-    }
-}
-
-pub fn frf(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
-    ensure_ident(ctx)?;
+pub fn frf(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
+    ctx.ensure_ident()?;
     let Some(rec) = ctx.ident.clone() else {
         return Ok(StepStatus::Skipped("no identification record".into()));
     };
-    let noise = noise_record(ctx)?;
-    let mut s = settings(ctx, rec.period, rec.len(), rec.fs());
+    let noise = ctx.noise_record()?;
+    let mut s = ctx.frf_settings(rec.period, rec.len());
     let has_r = rec.r.is_some();
     if has_r {
         s.controller = ctx.controller.as_ref().map(|c| c.state_space().clone());
@@ -205,12 +110,23 @@ pub fn frf(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         coh,
     ));
     let bands = a.bands;
-    ctx.put("frf.band_lo_hz", bands.band.0);
-    ctx.put("frf.band_hi_hz", bands.band.1);
-    ctx.put("frf.quality_band_lo_hz", bands.quality_band.0);
-    ctx.put("frf.quality_band_hi_hz", bands.quality_band.1);
-    ctx.put("frf.band_origin", json!(bands.band_origin));
-    ctx.put("frf.quality_band_origin", json!(bands.quality_origin));
+    let mut summary = super::FrfSummary {
+        band_lo_hz: bands.band.0,
+        band_hi_hz: bands.band.1,
+        quality_band_lo_hz: bands.quality_band.0,
+        quality_band_hi_hz: bands.quality_band.1,
+        band_origin: bands.band_origin,
+        quality_band_origin: bands.quality_origin,
+        lines: f.len() as f64,
+        mean_coh_ry: a.quality.mean_coherence_ry,
+        mean_coh_ru: None,
+        mean_plant_variance: a.quality.mean_plant_variance,
+        mean_plant_rel_variance: a.quality.mean_plant_rel_variance,
+        output_snr_db: None,
+        plant_median_error_vs_truth_pct: None,
+        plant_p90_error_vs_truth_pct: None,
+        plant_median_error_vs_truth_10_1000_pct: None,
+    };
     let mut blocks = vec![
         Block::Text(format!(
             "Nonparametric plant FRF of the identification record ({} samples, {} Hz) by {method}; {how}. \
@@ -251,14 +167,12 @@ pub fn frf(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         vec!["lines in band".into(), q.lines.to_string()],
         vec!["mean coherence γ²_ry".into(), fmt(q.mean_coherence_ry)],
     ];
-    ctx.put("frf.lines", f.len() as f64);
-    ctx.put("frf.mean_coh_ry", q.mean_coherence_ry);
     if has_r {
         qrows.push(vec![
             "mean coherence γ²_ru".into(),
             fmt(q.mean_coherence_ru),
         ]);
-        ctx.put("frf.mean_coh_ru", q.mean_coherence_ru);
+        summary.mean_coh_ru = Some(q.mean_coherence_ru);
     }
     qrows.push(vec![
         "mean plant variance".into(),
@@ -268,11 +182,9 @@ pub fn frf(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         "mean relative plant variance".into(),
         fmt(q.mean_plant_rel_variance),
     ]);
-    ctx.put("frf.mean_plant_variance", q.mean_plant_variance);
-    ctx.put("frf.mean_plant_rel_variance", q.mean_plant_rel_variance);
     if let Some(snr) = q.output_snr_db {
         qrows.push(vec!["output SNR [dB]".into(), fmt(snr)]);
-        ctx.put("frf.output_snr_db", snr);
+        summary.output_snr_db = Some(snr);
     }
     if let Some(t) = &truth {
         // over the quality band (derived from the excitation), and over the seed paper's
@@ -307,9 +219,9 @@ pub fn frf(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             "median error vs exact plant, 10–1000 Hz (the seed paper's band) [%]".into(),
             fmt(med_seed),
         ]);
-        ctx.put("frf.plant_median_error_vs_truth_pct", med);
-        ctx.put("frf.plant_p90_error_vs_truth_pct", p90);
-        ctx.put("frf.plant_median_error_vs_truth_10_1000_pct", med_seed);
+        summary.plant_median_error_vs_truth_pct = Some(med);
+        summary.plant_p90_error_vs_truth_pct = Some(p90);
+        summary.plant_median_error_vs_truth_10_1000_pct = Some(med_seed);
     }
     blocks.push(Block::Table(Table {
         id: "frf_quality".into(),
@@ -339,12 +251,13 @@ pub fn frf(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     }
     ctx.section("frf", "Nonparametric FRF", blocks);
     ctx.frf = Some(a);
+    ctx.typed.frf = Some(summary);
     Ok(StepStatus::Done)
 }
 
-pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
-    ensure_ident(ctx)?;
-    ensure_valid(ctx)?;
+pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
+    ctx.ensure_ident()?;
+    ctx.ensure_valid()?;
     let (Some(rec), Some(val)) = (ctx.ident.clone(), ctx.valid.clone()) else {
         return Ok(StepStatus::Skipped("no identification record".into()));
     };
@@ -388,16 +301,21 @@ pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         equal_aspect: false,
     };
     let on_edge = best.na == na.len() || best.nb == nb.len();
-    ctx.put("order.arx_best_bic.na", best.na as f64);
-    ctx.put("order.arx_best_bic.nb", best.nb as f64);
-    ctx.put("order.arx_best_bic.nk", best.nk as f64);
+    let mut summary = super::OrderSummary {
+        arx_best_bic: Some(super::ArxOrders {
+            na: best.na as f64,
+            nb: best.nb as f64,
+            nk: best.nk as f64,
+        }),
+        ..Default::default()
+    };
     if let Some(v) = scan.best_val {
         let r = &scan.rows[v];
-        ctx.put("order.arx_best_validation.na", r.na as f64);
-        ctx.put("order.arx_best_validation.nb", r.nb as f64);
-        if let Some(f) = r.val_fit {
-            ctx.put("order.arx_best_validation.fit_pct", f);
-        }
+        summary.arx_best_validation = Some(super::ArxValidation {
+            na: r.na as f64,
+            nb: r.nb as f64,
+            fit_pct: r.val_fit,
+        });
     }
     let mut blocks = vec![Block::Figure(figure(
         "order_heatmaps",
@@ -452,8 +370,8 @@ pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         if searched > 0 {
             n_peaks = Some(peaks.len());
         }
-        ctx.put("order.resonances", peaks.len() as f64);
-        ctx.put("order.order_from_peaks", n as f64);
+        summary.resonances = Some(peaks.len() as f64);
+        summary.order_from_peaks = Some(n as f64);
         let rows = peaks
             .iter()
             .map(|p| {
@@ -519,10 +437,10 @@ pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             ),
         ),
         Ok(r) => {
-            ctx.put("order.recommended", r.n as f64);
-            ctx.put("order.recommended_lo", r.lo as f64);
-            ctx.put("order.recommended_hi", r.hi as f64);
-            ctx.put("order.recommended_source", r.source);
+            summary.recommended = Some(r.n as f64);
+            summary.recommended_lo = Some(r.lo as f64);
+            summary.recommended_hi = Some(r.hi as f64);
+            summary.recommended_source = Some(r.source.to_string());
             if let Some(t) = r.table {
                 blocks.push(Block::Table(t));
             }
@@ -530,6 +448,7 @@ pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         }
     }
     ctx.section("order", "Order estimation", blocks);
+    ctx.typed.order = Some(summary);
     Ok(StepStatus::Done)
 }
 

@@ -1,9 +1,9 @@
 //! Steps 6–7: parametric models (fitted to the FRF in closed loop, or to the time record) with
 //! their comparison table and Bode overlays, and the pole-zero check.
 
+pub use super::candidates::{open_loop_response, Candidate, ONE_STEP, SIMULATION};
 use super::figures::{bode_panels, figure, lin, log, pz_panel, series, xy, Curve};
-use super::steps_frf::{ensure_ident, ensure_valid};
-use super::{computation, Ctx, Failure, ModelOut, StepStatus};
+use super::{computation, Ctx, Error, ModelOut, StepStatus};
 use crate::fitting::{identify_state_space, SsFitOptions, SsFocus};
 use crate::report::{format_number as fmt, Block, Marker, NoteKind, Style, Table};
 use ambid_core::c64;
@@ -22,95 +22,11 @@ use serde_json::json;
 /// A time-domain fit: the model, its polynomial form, its parameter count and its Kalman gain.
 type TimeFit = (StateSpace, Option<PolyModel>, usize, Option<Vec<f64>>);
 
-/// One fitted candidate.
-#[derive(Debug, Clone)]
-pub struct Candidate {
-    pub structure: &'static str,
-    pub order: usize,
-    pub model: Option<StateSpace>,
-    pub poly: Option<PolyModel>,
-    pub n_params: usize,
-    pub relative_rmse: Option<f64>,
-    pub median_relative: Option<f64>,
-    pub db_rmse: Option<f64>,
-    pub bic: Option<f64>,
-    pub validation_fit: Option<f64>,
-    pub unstable_poles: Option<usize>,
-    pub truth_median_relative: Option<f64>,
-    /// May be chosen (FRF fits: the supported number of unstable poles and a stable loop with
-    /// the controller, see [`ambid_core::validate::compare`]; time fits: fitted).
-    pub valid: bool,
-    pub note: Option<String>,
-    /// Kalman gain of the innovations form (time-domain state-space fits).
-    pub kalman: Option<Vec<f64>>,
-}
-
-impl Candidate {
-    pub fn label(&self) -> String {
-        format!("{} {}", self.structure.to_uppercase(), self.order)
-    }
-}
-
 fn structure_name(s: Structure) -> &'static str {
     s.name()
 }
 
 use crate::validation::median_relative_error as median_rel;
-
-/// Open-loop simulation of a stable model from the initial state that best explains the
-/// record (least squares, as MATLAB's `compare` does by default).
-pub fn simulate_from_estimated_state(
-    m: &StateSpace,
-    u: &[f64],
-    y: &[f64],
-) -> ambid_core::Result<Vec<f64>> {
-    let x0 = m.estimate_initial_state(u, y)?;
-    m.simulate_siso(u, Some(&x0))
-}
-
-/// How a model is compared with an open-loop (or controller-less) record.
-pub const SIMULATION: &str = "simulation from the least-squares initial state";
-/// The fallback for unstable models that have a predictor.
-pub const ONE_STEP: &str = "1-step prediction";
-
-/// The model's response on a record: the simulation from the least-squares initial state when
-/// the model is stable (MATLAB `compare`'s default), else the one-step prediction where a
-/// predictor exists (ARX's, or the innovations form with its Kalman gain); `None` otherwise.
-pub fn open_loop_response(
-    c: &Candidate,
-    m: &StateSpace,
-    y: &[f64],
-    u: &[f64],
-) -> Option<(Vec<f64>, &'static str)> {
-    let stable = m
-        .poles()
-        .map(|p| p.iter().all(|z| z.norm() < 1.0))
-        .unwrap_or(false);
-    if stable {
-        if let Ok(ys) = simulate_from_estimated_state(m, u, y) {
-            return Some((ys, SIMULATION));
-        }
-    }
-    match (c.structure, &c.poly, &c.kalman) {
-        ("arx", Some(p), _) => {
-            let (eps, _) = ambid_core::estimate::pem::prediction_errors(
-                p,
-                y,
-                u,
-                ambid_core::estimate::pem::Focus::Prediction,
-            )
-            .ok()?;
-            Some((y.iter().zip(&eps).map(|(y, e)| y - e).collect(), ONE_STEP))
-        }
-        (_, _, Some(k)) => {
-            let km = faer::Mat::from_fn(k.len(), 1, |i, _| k[i]);
-            ambid_core::validate::predict::predict_k(m, km.as_ref(), y, u, 1)
-                .ok()
-                .map(|p| (p, ONE_STEP))
-        }
-        _ => None,
-    }
-}
 
 /// `[models] orders` with the order step's recommended range (`order.recommended_lo` …
 /// `order.recommended_hi`) added, sorted, each order capped by the record's parameter budget
@@ -118,18 +34,13 @@ pub fn open_loop_response(
 /// [`super::config::MAX_MODEL_ORDER`].
 fn orders_with_recommendation(
     given: &[usize],
-    summary: &serde_json::Map<String, serde_json::Value>,
+    order: Option<&super::OrderSummary>,
     rec: Option<&super::data::Recording>,
 ) -> Vec<usize> {
-    let get = |k: &str| {
-        summary
-            .get("order")
-            .and_then(|o| o.get(k))
-            .and_then(|v| v.as_f64())
-            .map(|v| v as usize)
-    };
     let mut out = given.to_vec();
-    if let (Some(lo), Some(hi)) = (get("recommended_lo"), get("recommended_hi")) {
+    if let Some((lo, hi)) =
+        order.and_then(|o| Some((o.recommended_lo? as usize, o.recommended_hi? as usize)))
+    {
         let cap = rec.map_or(usize::MAX, |r| {
             r.len() / super::config::SAMPLES_PER_PARAMETER
         });
@@ -142,12 +53,16 @@ fn orders_with_recommendation(
     out
 }
 
-pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
-    ensure_ident(ctx)?;
-    ensure_valid(ctx)?;
+pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
+    ctx.ensure_ident()?;
+    ctx.ensure_valid()?;
     let cfg_orig = &ctx.cfg.models;
     let cfg = &super::config::ModelsSection {
-        orders: orders_with_recommendation(&cfg_orig.orders, &ctx.summary, ctx.ident.as_ref()),
+        orders: orders_with_recommendation(
+            &cfg_orig.orders,
+            ctx.typed.order.as_ref(),
+            ctx.ident.as_ref(),
+        ),
         ..cfg_orig.clone()
     };
     let Some(rec) = ctx.ident.clone() else {
@@ -294,7 +209,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         };
         for s in &cfg.structures {
             for &n in &cfg.orders {
-                let fitted: anyhow::Result<TimeFit> = (|| match s.as_str() {
+                let fitted: crate::error::Result<TimeFit> = (|| match s.as_str() {
                     "arx" => {
                         let f = arx(&rec.y, &[&rec.u], &ArxOrders::siso(n, n, cfg.nk), ts)?;
                         let p = f.model.to_poly(0)?;
@@ -459,24 +374,27 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         .collect();
     let mut jrows = Vec::new();
     for c in &cands {
-        jrows.push(json!({
-            "model": c.label(),
-            "n_params": c.n_params as f64,
-            "relative_rmse_pct": c.relative_rmse.map(|v| 100.0 * v),
-            "median_relative_pct": c.median_relative.map(|v| 100.0 * v),
-            "db_rmse": c.db_rmse,
-            "bic": c.bic,
-            "validation_fit_pct": c.validation_fit,
-            "unstable_poles": c.unstable_poles.map(|u| u as f64),
-            "valid": c.valid,
-            "median_error_vs_truth_pct": c.truth_median_relative.map(|v| 100.0 * v),
-        }));
+        jrows.push(super::ModelRow {
+            model: c.label(),
+            n_params: c.n_params as f64,
+            relative_rmse_pct: c.relative_rmse.map(|v| 100.0 * v),
+            median_relative_pct: c.median_relative.map(|v| 100.0 * v),
+            db_rmse: c.db_rmse,
+            bic: c.bic,
+            validation_fit_pct: c.validation_fit,
+            unstable_poles: c.unstable_poles.map(|u| u as f64),
+            valid: c.valid,
+            median_error_vs_truth_pct: c.truth_median_relative.map(|v| 100.0 * v),
+        });
     }
-    ctx.put("models.domain", domain.clone());
-    if let Some((n_u, _)) = &unstable_how {
-        ctx.put("models.unstable_poles_supported", n_u.map(|n| n as f64));
-    }
-    ctx.put("models.table", jrows);
+    let mut summary = super::ModelsSummary {
+        domain: domain.clone(),
+        unstable_poles_supported: unstable_how.as_ref().map(|(n_u, _)| n_u.map(|n| n as f64)),
+        table: jrows,
+        chosen: None,
+        chosen_validation_fit_pct: None,
+        chosen_error_vs_truth_pct: None,
+    };
     let mut blocks = vec![Block::Text(format!(
         "{} at orders {:?} ([models] orders {:?} plus the order step's recommended range); {}. Validation fit: {validation_kind}. Chosen by {} among the valid models{}.",
         if domain == "frf" {
@@ -536,13 +454,9 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     }
     if let Some(i) = chosen {
         let c = &cands[i];
-        ctx.put("models.chosen", c.label());
-        if let Some(f) = c.validation_fit {
-            ctx.put("models.chosen_validation_fit_pct", f);
-        }
-        if let Some(e) = c.truth_median_relative {
-            ctx.put("models.chosen_error_vs_truth_pct", 100.0 * e);
-        }
+        summary.chosen = Some(c.label());
+        summary.chosen_validation_fit_pct = c.validation_fit;
+        summary.chosen_error_vs_truth_pct = c.truth_median_relative.map(|e| 100.0 * e);
         blocks.push(Ctx::note(
             NoteKind::Pass,
             format!(
@@ -656,13 +570,14 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     ctx.section("models", "Parametric models", blocks);
     ctx.candidates = cands;
     ctx.chosen = chosen;
+    ctx.typed.models = Some(summary);
     Ok(StepStatus::Done)
 }
 
 /// The chosen model's label, poles, zeros and sample time (for its zoomed views and table).
 type ChosenPz = (String, Vec<c64>, Vec<c64>, Option<f64>);
 
-pub fn pole_zero(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
+pub fn pole_zero(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     let Some(ch) = ctx.chosen else {
         return Ok(StepStatus::Skipped(
             "no fitted model (run the models step)".into(),
@@ -844,8 +759,10 @@ pub fn pole_zero(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         }
     }
     if let Some((nc, nu)) = chosen_pz {
-        ctx.put("pole_zero.chosen_near_cancellations", nc as f64);
-        ctx.put("pole_zero.chosen_unstable_poles", nu as f64);
+        ctx.typed.pole_zero = Some(super::PoleZeroSummary {
+            chosen_near_cancellations: nc as f64,
+            chosen_unstable_poles: nu as f64,
+        });
     }
     let mut blocks = vec![Block::Figure(figure(
         "pole_zero",

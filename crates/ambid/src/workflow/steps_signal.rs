@@ -1,35 +1,16 @@
 //! Steps 1–3: excitation design and comparison, amplitude study, operating-point study.
 
 use super::config::SourceKind;
-use super::data::{excitation_kind, Recording};
+use super::data::Recording;
 use super::figures::{bode_panels, figure, lin, log, series, with_spans, xy, Curve};
-use super::{computation, input, Ctx, Failure, StepStatus};
-use crate::experiment::ExcitationPlan;
+use super::{computation, input, Ctx, Error, StepStatus};
 use crate::report::{format_number as fmt, Block, NoteKind, Span, Style, Table};
 use crate::study::{
-    amplitude_from_records, amplitude_on_twin, operating_point_on_twin, AmplitudeOutcome,
-    LevelRecord, OperatingCase, Recommendation, TwinAmplitudeStudy,
+    amplitude_from_records, AmplitudeOutcome, LevelRecord, OperatingCase, Recommendation,
+    TwinAmplitudeStudy,
 };
-use anyhow::{anyhow, Context};
-use serde_json::json;
 
-/// The identification excitation plan of the workflow file at level `frac` of i_sat.
-pub fn plan(ctx: &Ctx<'_>, frac: f64) -> ExcitationPlan {
-    let e = &ctx.cfg.excitation;
-    ExcitationPlan {
-        kind: excitation_kind(&e.kind),
-        amplitude_frac: frac,
-        prbs_order: e.prbs_order,
-        samples_per_bit: e.samples_per_bit,
-        periods: e.periods,
-        f_min_hz: e.f_min_hz,
-        f_max_hz: e.f_max_hz,
-        seed: ctx.cfg.seed,
-        ..ExcitationPlan::default()
-    }
-}
-
-pub fn excitation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
+pub fn excitation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     let (fs, level, unit, isat) =
         match (&ctx.twin, &ctx.ident) {
             (Some(t), _) => {
@@ -75,6 +56,7 @@ pub fn excitation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     let mut spec = Vec::new();
     let mut acf = Vec::new();
     let mut rows = Vec::new();
+    let mut summary = super::ExcitationSummary::default();
     for (k, s) in cmp.signals.iter().enumerate() {
         let n = s.values.len().min(nwin);
         let t: Vec<f64> = (0..n).map(|j| 1e3 * j as f64 * cmp.ts).collect();
@@ -108,13 +90,12 @@ pub fn excitation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             fmt(r.peak),
             fmt(r.crest_factor),
         ]);
-        ctx.put(
-            &format!("excitation.compare.{}.crest_factor", s.name),
-            r.crest_factor,
-        );
-        ctx.put(
-            &format!("excitation.compare.{}.f_max_hz", s.name),
-            r.f_max_hz,
+        summary.compare.insert(
+            s.name.to_string(),
+            super::CompareFigures {
+                crest_factor: r.crest_factor,
+                f_max_hz: r.f_max_hz,
+            },
         );
     }
     // overlaid panels: the PRBS (the seed paper's choice, first in the list) is drawn last, on top
@@ -184,19 +165,18 @@ pub fn excitation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     // the identification PRBS as designed
     if let Some(isat) = isat {
         let frac = ctx.cfg.excitation.amplitude_pct.unwrap_or(10.0) / 100.0;
-        let p = plan(ctx, frac);
+        let p = ctx.plan(frac);
         let ts = 1.0 / fs;
         if let Some(spec) = p.spec(isat, ts).map_err(input)? {
             let r = spec.report(ts).map_err(computation)?;
-            ctx.put("excitation.identification.f_min_hz", r.f_min_hz);
-            ctx.put("excitation.identification.f_max_hz", r.f_max_hz);
-            ctx.put("excitation.identification.resolution_hz", r.resolution_hz);
-            ctx.put("excitation.identification.duration_s", r.duration_s);
-            ctx.put(
-                "excitation.identification.period_samples",
-                r.period_samples as f64,
-            );
-            ctx.put("excitation.identification.crest_factor", r.crest_factor);
+            summary.identification = Some(super::ExcitationFigures {
+                f_min_hz: r.f_min_hz,
+                f_max_hz: r.f_max_hz,
+                resolution_hz: r.resolution_hz,
+                duration_s: r.duration_s,
+                period_samples: r.period_samples as f64,
+                crest_factor: r.crest_factor,
+            });
             blocks.push(Block::Table(Table {
                 id: "excitation_identification".into(),
                 caption: format!(
@@ -243,6 +223,7 @@ pub fn excitation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         }
     }
     ctx.section("excitation", "Excitation design and comparison", blocks);
+    ctx.typed.excitation = Some(summary);
     Ok(StepStatus::Done)
 }
 
@@ -386,34 +367,46 @@ fn amplitude_figure(out: &AmplitudeOutcome) -> Block {
     ))
 }
 
-pub fn amplitude(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
+/// The amplitude stage's input on the twin (`None` on files).
+pub fn amplitude_input(ctx: &Ctx<'_>) -> Option<TwinAmplitudeStudy> {
     let cfg = ctx.cfg;
-    let levels: Vec<f64> = cfg
-        .amplitude_study
-        .levels_pct
-        .iter()
-        .map(|l| l / 100.0)
-        .collect();
-    let (out, source) = match (&ctx.twin, cfg.source) {
-        (Some(t), _) => {
-            let study = TwinAmplitudeStudy {
-                twin: t.cfg.clone(),
-                excitation: plan(ctx, 0.1),
-                levels: levels.clone(),
-                mode: t.mode,
-                seed: cfg.seed,
-                skip_periods: 1,
-                noise: t.noise,
-                band: cfg
-                    .frf
-                    .band_hz
-                    .map(|[a, b]| (a, b))
-                    .or(TwinAmplitudeStudy::default().band),
+    let t = ctx.twin.as_ref()?;
+    Some(TwinAmplitudeStudy {
+        twin: t.cfg.clone(),
+        excitation: ctx.plan(0.1),
+        levels: cfg
+            .amplitude_study
+            .levels_pct
+            .iter()
+            .map(|l| l / 100.0)
+            .collect(),
+        mode: t.mode,
+        seed: ctx.seeds.amplitude,
+        skip_periods: 1,
+        noise: t.noise,
+        band: cfg
+            .frf
+            .band_hz
+            .map(|[a, b]| (a, b))
+            .or(TwinAmplitudeStudy::default().band),
+    })
+}
+
+pub fn amplitude(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
+    let cfg = ctx.cfg;
+    let stage = match (&ctx.twin, cfg.source) {
+        (Some(_), _) => {
+            let (out, secs) = match ctx.pre.amplitude.take() {
+                Some(pre) => pre,
+                None => match amplitude_input(ctx) {
+                    Some(study) => super::timed(|| {
+                        crate::stage::amplitude_twin(&study, cfg.excitation.amplitude_pct)
+                    }),
+                    None => return Ok(StepStatus::Skipped("no data source".into())),
+                },
             };
-            (
-                amplitude_on_twin(&study).map_err(computation)?,
-                "the twin (one experiment per level plus one without excitation)".to_string(),
-            )
+            ctx.pre_seconds += secs;
+            out?
         }
         (None, SourceKind::Files) => {
             if cfg.amplitude_study.files.len() < 2 {
@@ -430,7 +423,7 @@ pub fn amplitude(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                 let rec: Recording =
                     super::data::load_file(cfg, &ctx.base, &lf.path, "amplitude level")?;
                 let r = rec.r.clone().ok_or_else(|| {
-                    input(anyhow!(
+                    Error::input(format!(
                         "{}: the amplitude study needs the excitation column r",
                         rec.source
                     ))
@@ -450,8 +443,8 @@ pub fn amplitude(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                 Some(p) => Some(super::data::load_file(cfg, &ctx.base, p, "noise")?.y),
                 None => None,
             };
-            let settings = super::steps_frf::settings(ctx, period, records[0].r.len(), fs);
-            (
+            let settings = ctx.frf_settings(period, records[0].r.len());
+            crate::stage::AmplitudeStage::new(
                 amplitude_from_records(
                     &records,
                     fs,
@@ -462,25 +455,14 @@ pub fn amplitude(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                 )
                 .map_err(computation)?,
                 format!("{} recorded files", records.len()),
+                cfg.excitation.amplitude_pct,
             )
         }
         _ => return Ok(StepStatus::Skipped("no data source".into())),
     };
-    // the identification level: the configured one, else the studied level nearest the middle
-    // of the recommended range, else 10 %
-    let chosen_pct = match (cfg.excitation.amplitude_pct, out.recommended_pct) {
-        (Some(p), _) => p,
-        (None, Some((a, b))) => {
-            let mid = 0.5 * (a + b);
-            out.rows
-                .iter()
-                .map(|r| r.level_pct)
-                .filter(|l| (a..=b).contains(l))
-                .min_by(|x, y| (x - mid).abs().total_cmp(&(y - mid).abs()))
-                .unwrap_or(mid)
-        }
-        (None, None) => 10.0,
-    };
+    let chosen_pct = stage.chosen_pct;
+    let out = &stage.outcome;
+    let source = &stage.source;
     ctx.level_frac = Some(chosen_pct / 100.0);
     ctx.seed_study = Some(
         out.rows
@@ -489,7 +471,6 @@ pub fn amplitude(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             .collect(),
     );
     let mut rows = Vec::new();
-    let mut jrows = Vec::new();
     for r in &out.rows {
         rows.push(vec![
             fmt(r.level_pct),
@@ -501,29 +482,14 @@ pub fn amplitude(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             r.plant_median_rel_err
                 .map_or("—".into(), |e| fmt(100.0 * e)),
         ]);
-        jrows.push(json!({
-            "level_pct": r.level_pct,
-            "mean_coh_ry": r.mean_coh_ry,
-            "mean_coh_ru": r.mean_coh_ru,
-            "mean_plant_rel_var": r.mean_plant_rel_var,
-            "snr_db": r.snr_db,
-            "saturated_pct": 100.0 * r.saturated_fraction,
-            "plant_median_rel_err_pct": r.plant_median_rel_err.map(|e| 100.0 * e),
-        }));
     }
-    ctx.put("amplitude.levels", jrows);
-    if let Some((a, b)) = out.recommended_pct {
-        ctx.put("amplitude.recommended_min_pct", a);
-        ctx.put("amplitude.recommended_max_pct", b);
-    }
-    ctx.put("amplitude.chosen_pct", chosen_pct);
     let highlight = out
         .rows
         .iter()
         .position(|r| (r.level_pct - chosen_pct).abs() < 1e-9);
     let mut blocks = vec![
         Block::Text(format!("Amplitude study on {source}.")),
-        amplitude_figure(&out),
+        amplitude_figure(out),
         Block::Table(Table {
             id: "amplitude_study".into(),
             caption: "Quality measures per level (quality band averages). The last column is the \
@@ -561,56 +527,14 @@ pub fn amplitude(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         ),
     ));
     ctx.section("amplitude", "Excitation-amplitude study", blocks);
+    ctx.typed.amplitude = Some(stage);
     Ok(StepStatus::Done)
 }
 
-pub fn operating_point(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
+/// The operating-point stage's input on the twin at the identification level (`None` on files).
+pub fn operating_point_input(ctx: &Ctx<'_>) -> Option<crate::stage::OperatingPointInput> {
     let cfg = ctx.cfg;
-    if ctx.twin.is_none() {
-        let files = &cfg.operating_point.files;
-        if files.len() < 2 {
-            return Ok(StepStatus::Skipped(
-                "an operating-point study on recorded data needs one record per operating point, \
-                 the nominal one first: [operating_point] files = [{ name = \"nominal\", path = \"…\" }, …]"
-                    .into(),
-            ));
-        }
-        let mut recs = Vec::new();
-        for f in files {
-            recs.push(super::data::load_file(cfg, &ctx.base, &f.path, &f.name)?);
-        }
-        let records: Vec<crate::analysis::Record<'_>> = recs
-            .iter()
-            .map(|r| crate::analysis::Record {
-                r: r.r.as_deref().unwrap_or(&r.u),
-                u: &r.u,
-                y: &r.y,
-                i: r.i.as_deref(),
-                fs: r.fs(),
-            })
-            .collect();
-        let settings = super::steps_frf::settings(ctx, recs[0].period, recs[0].len(), recs[0].fs());
-        let names: Vec<String> = files.iter().map(|f| f.name.clone()).collect();
-        let out = crate::study::operating_point_from_records(&names, &records, &settings)
-            .map_err(computation)?;
-        let caption = format!(
-            "Plant FRF of each recorded operating point ({}), {}.",
-            names.join(", "),
-            settings
-                .band
-                .map_or("band derived from the excitation".into(), |b| format!(
-                    "{}–{} Hz",
-                    fmt(b.0),
-                    fmt(b.1)
-                ))
-        );
-        let blocks = operating_point_blocks(ctx, &out, caption);
-        ctx.section("operating-point", "Operating-point study", blocks);
-        return Ok(StepStatus::Done);
-    }
-    let Some(t) = &ctx.twin else {
-        return Ok(StepStatus::Skipped("no data source".into()));
-    };
+    let t = ctx.twin.as_ref()?;
     let (i0, g0) = (
         t.cfg.operating_point.bias_current_a,
         t.cfg.operating_point.air_gap_m,
@@ -636,17 +560,77 @@ pub fn operating_point(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             .band_hz
             .map_or((10.0, 2000.0f64.min(0.45 * t.twin.fs())), |[a, b]| (a, b)),
     );
-    let out = operating_point_on_twin(
-        &t.cfg,
-        &cases,
-        &plan(ctx, frac),
-        t.mode,
-        cfg.seed + 100,
-        1,
+    Some(crate::stage::OperatingPointInput {
+        twin: t.cfg.clone(),
+        cases,
+        excitation: ctx.plan(frac),
+        mode: t.mode,
+        seed: ctx.seeds.operating_point,
+        skip_periods: 1,
         band,
-    )
-    .context("operating-point study")
-    .map_err(computation)?;
+    })
+}
+
+/// The operating-point step; on the twin `pre` is the stage's output when it ran ahead.
+pub fn operating_point(
+    ctx: &mut Ctx<'_>,
+    pre: Option<(
+        crate::study::OperatingPointOutcome,
+        crate::stage::OperatingPointInput,
+    )>,
+) -> Result<StepStatus, Error> {
+    let cfg = ctx.cfg;
+    if ctx.twin.is_none() {
+        let files = &cfg.operating_point.files;
+        if files.len() < 2 {
+            return Ok(StepStatus::Skipped(
+                "an operating-point study on recorded data needs one record per operating point, \
+                 the nominal one first: [operating_point] files = [{ name = \"nominal\", path = \"…\" }, …]"
+                    .into(),
+            ));
+        }
+        let mut recs = Vec::new();
+        for f in files {
+            recs.push(super::data::load_file(cfg, &ctx.base, &f.path, &f.name)?);
+        }
+        let records: Vec<crate::analysis::Record<'_>> = recs
+            .iter()
+            .map(|r| crate::analysis::Record {
+                r: r.r.as_deref().unwrap_or(&r.u),
+                u: &r.u,
+                y: &r.y,
+                i: r.i.as_deref(),
+                fs: r.fs(),
+            })
+            .collect();
+        let settings = ctx.frf_settings(recs[0].period, recs[0].len());
+        let names: Vec<String> = files.iter().map(|f| f.name.clone()).collect();
+        let out = crate::study::operating_point_from_records(&names, &records, &settings)
+            .map_err(computation)?;
+        let caption = format!(
+            "Plant FRF of each recorded operating point ({}), {}.",
+            names.join(", "),
+            settings
+                .band
+                .map_or("band derived from the excitation".into(), |b| format!(
+                    "{}–{} Hz",
+                    fmt(b.0),
+                    fmt(b.1)
+                ))
+        );
+        let blocks = operating_point_blocks(ctx, &out, caption);
+        ctx.section("operating-point", "Operating-point study", blocks);
+        return Ok(StepStatus::Done);
+    }
+    let (out, input) = match pre {
+        Some(pre) => pre,
+        None => match operating_point_input(ctx) {
+            Some(input) => (crate::stage::operating_point_twin(&input)?, input),
+            None => return Ok(StepStatus::Skipped("no data source".into())),
+        },
+    };
+    let (b, g) = (cfg.operating_point.bias_pct, cfg.operating_point.air_gap_um);
+    let frac = input.excitation.amplitude_frac;
     let caption = format!(
         "Period-averaged plant FRF (joint input-output) at nominal, bias current ±{b} % and air \
          gap ±{g} µm, each from its own experiment at {} % of i_sat, {}–{} Hz (band {}).",
@@ -691,6 +675,8 @@ fn operating_point_blocks(
         1,
     );
     let mut rows = Vec::new();
+    let mut op: std::collections::BTreeMap<String, std::collections::BTreeMap<String, f64>> =
+        Default::default();
     for d in &out.deviations {
         rows.push(vec![
             d.case.clone(),
@@ -702,17 +688,17 @@ fn operating_point_blocks(
             d.truth_median_rel_dev
                 .map_or("—".into(), |v| fmt(100.0 * v)),
         ]);
-        ctx.put(
-            &format!("operating_point.{}.{}_median_dev_pct", d.case, d.band),
+        op.entry(d.case.clone()).or_default().insert(
+            format!("{}_median_dev_pct", d.band),
             100.0 * d.median_rel_dev,
         );
     }
     for (c, e) in out.cases.iter().zip(&out.truth_errors) {
-        ctx.put(
-            &format!("operating_point.{}.error_vs_truth_pct", c.name),
-            100.0 * e,
-        );
+        op.entry(c.name.clone())
+            .or_default()
+            .insert("error_vs_truth_pct".into(), 100.0 * e);
     }
+    ctx.typed.operating_point = Some(op);
     vec![
         Block::Figure(fig),
         Block::Table(Table {
@@ -737,26 +723,43 @@ fn operating_point_blocks(
     ]
 }
 
-pub fn bla(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
+/// The robust-BLA stage's input on the twin (`None` on files).
+pub fn bla_input(ctx: &Ctx<'_>) -> Option<crate::stage::BlaInput> {
+    let cfg = ctx.cfg;
+    let t = ctx.twin.as_ref()?;
+    Some(crate::stage::BlaInput {
+        plan: crate::bla::BlaPlan {
+            twin: t.cfg.clone(),
+            mode: t.mode,
+            noise: t.noise,
+            realisations: cfg.bla.realisations,
+            periods: cfg.bla.periods,
+            seed: ctx.seeds.bla,
+            ..crate::bla::BlaPlan::default()
+        },
+        levels: cfg
+            .amplitude_study
+            .levels_pct
+            .iter()
+            .map(|l| l / 100.0)
+            .collect(),
+    })
+}
+
+pub fn bla(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     let cfg = ctx.cfg;
     let (study, intro) = match (&ctx.twin, cfg.source) {
-        (Some(t), _) => {
-            let plan = crate::bla::BlaPlan {
-                twin: t.cfg.clone(),
-                mode: t.mode,
-                noise: t.noise,
-                realisations: cfg.bla.realisations,
-                periods: cfg.bla.periods,
-                seed: cfg.seed + 600,
-                ..crate::bla::BlaPlan::default()
+        (Some(_), _) => {
+            let Some(input) = bla_input(ctx) else {
+                return Ok(StepStatus::Skipped("no data source".into()));
             };
-            let levels: Vec<f64> = cfg
-                .amplitude_study
-                .levels_pct
-                .iter()
-                .map(|l| l / 100.0)
-                .collect();
-            let study = crate::bla::amplitude_study(&plan, &levels).map_err(computation)?;
+            let (study, secs) = match ctx.pre.bla.take() {
+                Some(pre) => pre,
+                None => super::timed(|| crate::stage::bla_twin(&input)),
+            };
+            ctx.pre_seconds += secs;
+            let study = study?;
+            let plan = &input.plan;
             let intro = format!(
                 "Robust best linear approximation (Pintelon & Schoukens) on the twin: at each RMS level, \
                  {} random-phase random-odd multisines of {} periods (one more period settles the loop), \
@@ -783,9 +786,7 @@ pub fn bla(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                 ));
             }
             let Some(n) = cfg.data.period_samples else {
-                return Err(input(anyhow!(
-                    "[bla] files are given but the multisine period is not: set [data] period_samples"
-                )));
+                return Err(Error::input("[bla] files are given but the multisine period is not: set [data] period_samples"));
             };
             let mut tagged = Vec::with_capacity(cfg.bla.files.len());
             let mut fs = f64::NAN;
@@ -795,7 +796,7 @@ pub fn bla(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                 if fs.is_nan() {
                     fs = rec.fs();
                 } else if (rec.fs() - fs).abs() > 1e-9 * fs {
-                    return Err(input(anyhow!(
+                    return Err(Error::input(format!(
                         "{}: sampled at {} Hz, the first BLA file at {} Hz; all realisations must share \
                          the sample rate",
                         rec.source,
@@ -933,19 +934,21 @@ pub fn bla(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             r.bla_vs_linear_rel.map_or("—".into(), |e| fmt(100.0 * e)),
             fmt(100.0 * r.saturated_fraction),
         ]);
-        jrows.push(json!({
-            "level_pct": r.level_pct,
-            "noise_rel": r.noise_rel,
-            "nl_rel": r.nl_rel,
-            "nl_rel_se": r.nl_rel_se,
-            "even_db": r.even_db,
-            "odd_db": r.odd_db,
-            "bla_vs_linear_pct": r.bla_vs_linear_rel.map(|e| 100.0 * e),
-            "saturated_pct": 100.0 * r.saturated_fraction,
-        }));
+        jrows.push(super::BlaLevel {
+            level_pct: r.level_pct,
+            noise_rel: r.noise_rel,
+            nl_rel: r.nl_rel,
+            nl_rel_se: r.nl_rel_se,
+            even_db: r.even_db,
+            odd_db: r.odd_db,
+            bla_vs_linear_pct: r.bla_vs_linear_rel.map(|e| 100.0 * e),
+            saturated_pct: 100.0 * r.saturated_fraction,
+        });
     }
-    ctx.put("bla.levels", jrows);
-    ctx.put("bla.recommended_pct", study.recommended_pct);
+    ctx.typed.bla = Some(super::BlaSummary {
+        levels: jrows,
+        recommended_pct: study.recommended_pct,
+    });
     let highlight = study
         .rows
         .iter()

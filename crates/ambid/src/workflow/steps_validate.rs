@@ -2,8 +2,7 @@
 //! reconstruction and the ISO 14839-3 sensitivity zone.
 
 use super::figures::{envelope, figure, lin, log, series, with_spans, xy};
-use super::steps_frf::ensure_valid;
-use super::{computation, Ctx, Failure, StepStatus};
+use super::{computation, Ctx, Error, StepStatus};
 use crate::report::{format_number as fmt, Block, Marker, NoteKind, Series, Span, Style, Table};
 use crate::validation::{
     chirp_frequency, residual_lags, validate_closed_loop, worst_window, LagBasis, LagChoice,
@@ -16,7 +15,6 @@ use ambid_core::validate::iso::{sensitivity_zone, IsoZones};
 use ambid_core::validate::residuals::{
     analyze, analyze_output_error, CorrelationTest, ResidualTest,
 };
-use serde_json::json;
 
 fn settings(ctx: &Ctx<'_>, n: usize) -> ValidationSettings {
     let v = &ctx.cfg.validation;
@@ -275,36 +273,38 @@ fn residual_blocks(
 }
 
 fn put_residuals(ctx: &mut Ctx<'_>, res: &ResidualTest, lags: &LagChoice, ts: f64) {
-    ctx.put("residuals.lags", lags.lags);
-    ctx.put("residuals.lags_ms", lags.lags as f64 * ts * 1e3);
-    ctx.put("residuals.lags_rule", json!(lags.basis));
+    let r = ctx.typed.residuals.get_or_insert_with(Default::default);
+    r.lags = Some(lags.lags);
+    r.lags_ms = Some(lags.lags as f64 * ts * 1e3);
+    r.lags_rule = Some(lags.basis);
     if let Some(k) = lags.peak_sample {
-        ctx.put("residuals.lags_peak_sample", k);
+        r.lags_peak_sample = Some(k);
     }
     if let Some(w) = &res.whiteness {
-        ctx.put("residuals.whiteness_statistic", w.statistic);
-        ctx.put("residuals.whiteness_threshold", w.threshold);
-        ctx.put("residuals.whiteness_pass", w.pass);
+        r.whiteness_statistic = Some(w.statistic);
+        r.whiteness_threshold = Some(w.threshold);
+        r.whiteness_pass = Some(w.pass);
     }
     if let Some(c) = &res.independence {
-        ctx.put("residuals.independence_statistic", c.statistic);
-        ctx.put("residuals.independence_threshold", c.threshold);
-        ctx.put("residuals.independence_dof", c.dof);
-        ctx.put("residuals.independence_pass", c.pass);
+        r.independence_statistic = Some(c.statistic);
+        r.independence_threshold = Some(c.threshold);
+        r.independence_dof = Some(c.dof);
+        r.independence_pass = Some(c.pass);
     }
 }
 
 fn put_truth_residuals(ctx: &mut Ctx<'_>, res: &ResidualTest) {
     if let Some(c) = &res.independence {
-        ctx.put("residuals.truth_independence_statistic", c.statistic);
-        ctx.put("residuals.truth_independence_threshold", c.threshold);
-        ctx.put("residuals.truth_independence_dof", c.dof);
-        ctx.put("residuals.truth_independence_pass", c.pass);
+        let r = ctx.typed.residuals.get_or_insert_with(Default::default);
+        r.truth_independence_statistic = Some(c.statistic);
+        r.truth_independence_threshold = Some(c.threshold);
+        r.truth_independence_dof = Some(c.dof);
+        r.truth_independence_pass = Some(c.pass);
     }
 }
 
-pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
-    ensure_valid(ctx)?;
+pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
+    ctx.ensure_valid()?;
     let Some(ch) = ctx.chosen else {
         return Ok(StepStatus::Skipped(
             "no fitted model (run the models step)".into(),
@@ -344,12 +344,22 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                 u: &val.u,
                 ts: val.ts,
             };
-            let v = validate_closed_loop(&model, c.state_space(), &rec, &s).map_err(computation)?;
-            ctx.put("validation.model", label.clone());
-            ctx.put("validation.fit_y_pct", v.fit_y);
-            ctx.put("validation.fit_u_pct", v.fit_u);
-            ctx.put("validation.rmse_y", v.rmse_y);
-            ctx.put("validation.max_error_y", v.max_error_y);
+            // the chosen model and (twin) the exact plant through the same validation, side by side
+            let (v, exact) = rayon::join(
+                || validate_closed_loop(&model, c.state_space(), &rec, &s),
+                || {
+                    ctx.twin
+                        .as_ref()
+                        .map(|t| validate_closed_loop(t.twin.plant(), c.state_space(), &rec, &s))
+                },
+            );
+            let v = v.map_err(computation)?;
+            let vs = ctx.typed.validation.get_or_insert_with(Default::default);
+            vs.model = Some(label.clone());
+            vs.fit_y_pct = Some(v.fit_y);
+            vs.fit_u_pct = Some(v.fit_u);
+            vs.rmse_y = Some(v.rmse_y);
+            vs.max_error_y = Some(v.max_error_y);
             let mut rows = vec![vec![
                 label.clone(),
                 fmt(v.fit_y),
@@ -360,9 +370,12 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             // the twin's exact plant through the same validation (same record, same lags): the
             // best any model can do, and the residual tests' reference
             let mut truth_res = None;
-            if let Some(t) = &ctx.twin {
-                if let Ok(vt) = validate_closed_loop(t.twin.plant(), c.state_space(), &rec, &s) {
-                    ctx.put("validation.exact_plant_fit_y_pct", vt.fit_y);
+            if ctx.twin.is_some() {
+                if let Some(Ok(vt)) = exact {
+                    ctx.typed
+                        .validation
+                        .get_or_insert_with(Default::default)
+                        .exact_plant_fit_y_pct = Some(vt.fit_y);
                     truth_res = Some(vt.residuals.clone());
                     rows.push(vec![
                         "twin's exact linear plant".into(),
@@ -453,9 +466,10 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
                 )));
             };
             let fit = fit_percent(&val.y, &yhat).map_err(computation)?;
-            ctx.put("validation.model", label.clone());
-            ctx.put("validation.fit_y_pct", fit);
-            ctx.put("validation.kind", kind);
+            let vs = ctx.typed.validation.get_or_insert_with(Default::default);
+            vs.model = Some(label.clone());
+            vs.fit_y_pct = Some(fit);
+            vs.kind = Some(kind.to_string());
             let eps: Vec<f64> = val.y.iter().zip(&yhat).map(|(a, b)| a - b).collect();
             // the quantity that should be white / independent (docs/validation.md): a one-step
             // prediction error of a model with a noise model is white and independent of the
@@ -524,7 +538,7 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     Ok(StepStatus::Done)
 }
 
-pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
+pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     let Some(ch) = ctx.chosen else {
         return Ok(StepStatus::Skipped(
             "no fitted model (run the models step)".into(),
@@ -566,7 +580,7 @@ pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     } else if let Some(p) = ctx.cfg.data.reconstruction.clone() {
         let r = super::data::load_file(ctx.cfg, &ctx.base, &p, "reconstruction")?;
         let Some(w) = r.w.clone() else {
-            return Err(super::input(anyhow::anyhow!(
+            return Err(Error::input(format!(
                 "{}: the reconstruction record needs the position reference column ([data] w = \"…\")",
                 r.source
             )));
@@ -594,9 +608,12 @@ pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     )
     .map_err(computation)?;
     let label = ctx.candidates[ch].label();
-    ctx.put("reconstruction.fit_y_pct", v.reconstruction.fit_y);
-    ctx.put("reconstruction.fit_u_pct", v.reconstruction.fit_u);
-    ctx.put("reconstruction.max_error_y", v.reconstruction.max_error_y);
+    let mut summary = super::ReconstructionSummary {
+        fit_y_pct: Some(v.reconstruction.fit_y),
+        fit_u_pct: Some(v.reconstruction.fit_u),
+        max_error_y: Some(v.reconstruction.max_error_y),
+        ..Default::default()
+    };
     let wins = &v.reconstruction.windows;
     let worst = worst_window(wins, &y, ts);
     // the chirp's instantaneous frequency, from the reference's zero crossings
@@ -608,22 +625,20 @@ pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     };
     if let Some(ww) = &worst {
         let wf = &wins[ww.index];
-        ctx.put("reconstruction.worst_window_fit_y_pct", wf.fit_y);
-        ctx.put("reconstruction.worst_window_start_s", wf.t_s.0);
-        ctx.put("reconstruction.worst_window_end_s", wf.t_s.1);
-        ctx.put(
-            "reconstruction.worst_window_record_fit_pct",
-            ww.record_fit_pct,
-        );
-        ctx.put("reconstruction.worst_window_rms_error_y", wf.rms_error_y);
-        ctx.put("reconstruction.worst_window_signal_rms_y", ww.signal_rms);
-        ctx.put("reconstruction.error_floor_y", ww.error_floor);
-        ctx.put("reconstruction.windows_judged", ww.judged);
+        summary.worst_window_fit_y_pct = Some(wf.fit_y);
+        summary.worst_window_start_s = Some(wf.t_s.0);
+        summary.worst_window_end_s = Some(wf.t_s.1);
+        summary.worst_window_record_fit_pct = Some(ww.record_fit_pct);
+        summary.worst_window_rms_error_y = Some(wf.rms_error_y);
+        summary.worst_window_signal_rms_y = Some(ww.signal_rms);
+        summary.error_floor_y = Some(ww.error_floor);
+        summary.windows_judged = Some(ww.judged);
         if let Some((f0, f1)) = win_f(wf) {
-            ctx.put("reconstruction.worst_window_f_lo_hz", f0);
-            ctx.put("reconstruction.worst_window_f_hi_hz", f1);
+            summary.worst_window_f_lo_hz = Some(f0);
+            summary.worst_window_f_hi_hz = Some(f1);
         }
     }
+    ctx.typed.reconstruction = Some(summary);
     // measured vs reconstructed over the whole sweep (min/max envelopes) against the chirp's
     // instantaneous frequency (time when the reference is not a rising sweep)
     let t: Vec<f64> = (0..n).map(|k| k as f64 * ts).collect();
@@ -823,7 +838,7 @@ fn iso_row(source: &str, v: &ambid_core::validate::iso::IsoVerdict) -> Vec<Strin
     ]
 }
 
-pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
+pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     let z = zones(ctx);
     let mut curves = Vec::new();
     let mut rows = Vec::new();
@@ -884,16 +899,34 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             x0: search.band.0,
             x1: search.band.1,
         });
-        ctx.put("iso.measured.peak", v.peak);
-        ctx.put("iso.measured.f_peak_hz", v.f_peak_hz);
-        ctx.put("iso.measured.zone", format!("{:?}", v.zone));
+        let ms = ctx
+            .typed
+            .iso
+            .get_or_insert_with(Default::default)
+            .measured
+            .get_or_insert_with(Default::default);
+        ms.peak = Some(v.peak);
+        ms.f_peak_hz = Some(v.f_peak_hz);
+        ms.zone = Some(format!("{:?}", v.zone));
         if let Some((lo, hi)) = v.interval {
-            ctx.put("iso.measured.peak_ci_lo", lo);
-            ctx.put("iso.measured.peak_ci_hi", hi);
+            let ms = ctx
+                .typed
+                .iso
+                .get_or_insert_with(Default::default)
+                .measured
+                .get_or_insert_with(Default::default);
+            ms.peak_ci_lo = Some(lo);
+            ms.peak_ci_hi = Some(hi);
         }
-        ctx.put("iso.measured.search_lo_hz", search.band.0);
-        ctx.put("iso.measured.search_hi_hz", search.band.1);
-        ctx.put("iso.measured.search_lines", search.lines as f64);
+        let ms = ctx
+            .typed
+            .iso
+            .get_or_insert_with(Default::default)
+            .measured
+            .get_or_insert_with(Default::default);
+        ms.search_lo_hz = Some(search.band.0);
+        ms.search_hi_hz = Some(search.band.1);
+        ms.search_lines = Some(search.lines as f64);
         iso_notes.push(format!("Measured: {}.", search.describe()));
         rows.push(iso_row("measured S (FRF)", &v));
         verdicts.push(v.zone);
@@ -914,11 +947,22 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
     if let Some((curve, m, pm)) = model_s {
         curves.push(curve);
         let m = &m;
-        ctx.put("iso.model.peak", m.peak);
-        ctx.put("iso.model.f_peak_hz", m.f_peak_hz);
-        ctx.put("iso.model.zone", format!("{:?}", m.zone));
+        let ms = ctx
+            .typed
+            .iso
+            .get_or_insert_with(Default::default)
+            .model
+            .get_or_insert_with(Default::default);
+        ms.peak = Some(m.peak);
+        ms.f_peak_hz = Some(m.f_peak_hz);
+        ms.zone = Some(format!("{:?}", m.zone));
         if let Some(p) = pm {
-            ctx.put("iso.model.phase_margin_deg", p);
+            ctx.typed
+                .iso
+                .get_or_insert_with(Default::default)
+                .model
+                .get_or_insert_with(Default::default)
+                .phase_margin_deg = Some(p);
         }
         rows.push(iso_row("chosen model with the controller", m));
         verdicts.push(m.zone);
@@ -937,8 +981,14 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             Style::Dashed,
             Some(7),
         ));
-        ctx.put("iso.truth.peak", v.peak);
-        ctx.put("iso.truth.zone", format!("{:?}", v.zone));
+        let ts = ctx
+            .typed
+            .iso
+            .get_or_insert_with(Default::default)
+            .truth
+            .get_or_insert_with(Default::default);
+        ts.peak = Some(v.peak);
+        ts.zone = Some(format!("{:?}", v.zone));
         rows.push(iso_row("twin's exact plant", &v));
     }
     if curves.is_empty() && measured.is_none() {
@@ -994,7 +1044,7 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
         .collect();
     let verdict = verdicts.first().copied();
     if let Some(v) = verdict {
-        ctx.put("iso.zone", format!("{v:?}"));
+        ctx.typed.iso.get_or_insert_with(Default::default).zone = Some(format!("{v:?}"));
     }
     let blocks = vec![
         Block::Figure(figure(
@@ -1043,7 +1093,7 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Failure> {
             ),
         ),
     ];
-    let _ = json!(null);
+
     let mut blocks = blocks;
     for n in iso_notes {
         blocks.push(Ctx::note(NoteKind::Info, n));

@@ -2,39 +2,38 @@
 //! frequency error, the one recommended excitation level, peak |S| with its confidence interval
 //! and ISO 14839-3 zone, stability margins, unstable poles) and every warning of the run.
 //!
-//! Everything here is read from the numbers the steps recorded (`summary.json`), the chosen
-//! model and the notes of the other sections; nothing is computed twice.
+//! Everything here is read from the run's typed outcome ([`super::Summary`], what
+//! `summary.json` holds), the chosen model and the notes of the other sections; nothing is
+//! computed twice.
 
-use super::Ctx;
+use super::{Ctx, Summary};
 use crate::report::{format_number as fmt, Block, NoteKind, Section, Table};
-use serde_json::Value;
 
-/// The value at a dotted key of the summary.
-fn get<'v>(v: &'v Value, key: &str) -> Option<&'v Value> {
-    key.split('.').try_fold(v, |v, k| v.get(k))
-}
-
-fn num(v: &Value, key: &str) -> Option<f64> {
-    get(v, key).and_then(Value::as_f64)
-}
-
-fn text(v: &Value, key: &str) -> Option<String> {
-    get(v, key).and_then(Value::as_str).map(str::to_string)
+/// A number as `summary.json` keeps it: `None` when absent or not finite (written as `null`).
+fn fin(x: Option<f64>) -> Option<f64> {
+    x.filter(|v| v.is_finite())
 }
 
 /// The summary section (id `summary`), built after every step ran.
-pub(crate) fn section(summary: &Value, sections: &[Section], ctx: &Ctx<'_>) -> Section {
+pub(crate) fn section(summary: &Summary, sections: &[Section], ctx: &Ctx<'_>) -> Section {
+    let s = summary;
+    let models = s.models.as_ref();
+    let validation = s.validation.as_ref();
+    let order = s.order.as_ref();
+    let amplitude = s.amplitude.as_ref();
+    let iso = s.iso.as_ref();
+    let residuals = s.residuals.as_ref();
     let mut rows: Vec<Vec<String>> = Vec::new();
     let mut blocks = Vec::new();
     let twin = ctx.twin.is_some();
 
     // the chosen model
-    if let Some(chosen) = text(summary, "models.chosen") {
+    if let Some(chosen) = models.and_then(|m| m.chosen.clone()) {
         let mut parts = Vec::new();
-        if let Some(f) = num(summary, "validation.fit_y_pct")
-            .or_else(|| num(summary, "models.chosen_validation_fit_pct"))
+        if let Some(f) = fin(validation.and_then(|v| v.fit_y_pct))
+            .or_else(|| fin(models.and_then(|m| m.chosen_validation_fit_pct)))
         {
-            let how = match text(summary, "validation.kind") {
+            let how = match validation.and_then(|v| v.kind.clone()) {
                 Some(kind) => format!("{kind}, independent record"),
                 None if ctx.is_closed_loop() => {
                     "closed loop with the controller, independent record".to_string()
@@ -43,19 +42,14 @@ pub(crate) fn section(summary: &Value, sections: &[Section], ctx: &Ctx<'_>) -> S
             };
             parts.push(format!("validation fit of y {} % ({how})", fmt(f)));
         }
-        let row = get(summary, "models.table")
-            .and_then(Value::as_array)
-            .and_then(|t| {
-                t.iter()
-                    .find(|r| r.get("model").and_then(Value::as_str) == Some(chosen.as_str()))
-            });
-        if let Some(e) = row.and_then(|r| r.get("median_relative_pct")?.as_f64()) {
+        let row = models.and_then(|m| m.table.iter().find(|r| r.model == chosen));
+        if let Some(e) = fin(row.and_then(|r| r.median_relative_pct)) {
             parts.push(format!(
                 "median error against the measured FRF {} %",
                 fmt(e)
             ));
         }
-        if let Some(e) = num(summary, "models.chosen_error_vs_truth_pct") {
+        if let Some(e) = fin(models.and_then(|m| m.chosen_error_vs_truth_pct)) {
             parts.push(format!(
                 "median error against the twin's exact plant {} %",
                 fmt(e)
@@ -69,10 +63,10 @@ pub(crate) fn section(summary: &Value, sections: &[Section], ctx: &Ctx<'_>) -> S
     }
 
     // the reconciled order (order step)
-    if let Some(n) = num(summary, "order.recommended") {
+    if let Some(n) = fin(order.and_then(|o| o.recommended)) {
         let range = match (
-            num(summary, "order.recommended_lo"),
-            num(summary, "order.recommended_hi"),
+            fin(order.and_then(|o| o.recommended_lo)),
+            fin(order.and_then(|o| o.recommended_hi)),
         ) {
             (Some(a), Some(b)) if a < b => format!(" (range {a:.0}–{b:.0})"),
             _ => String::new(),
@@ -81,31 +75,35 @@ pub(crate) fn section(summary: &Value, sections: &[Section], ctx: &Ctx<'_>) -> S
             "model order".into(),
             format!(
                 "recommended {n:.0}{range}{}",
-                text(summary, "order.recommended_source").map_or(String::new(), |s| {
-                    format!(
-                        ", from {}",
-                        match s.as_str() {
-                            "frf_fit_error" => "the error of state-space fits to the FRF per order",
-                            "time_fit_error" =>
-                                "the validation error of time-domain fits per order",
-                            "subspace_singular_values" => "the gap in the subspace singular values",
-                            _ => "the order step",
-                        }
-                    )
-                })
+                order
+                    .and_then(|o| o.recommended_source.clone())
+                    .map_or(String::new(), |s| {
+                        format!(
+                            ", from {}",
+                            match s.as_str() {
+                                "frf_fit_error" =>
+                                    "the error of state-space fits to the FRF per order",
+                                "time_fit_error" =>
+                                    "the validation error of time-domain fits per order",
+                                "subspace_singular_values" =>
+                                    "the gap in the subspace singular values",
+                                _ => "the order step",
+                            }
+                        )
+                    })
             ),
             "Order estimation".into(),
         ]);
     }
 
     // the one excitation level: % of i_sat, RMS (for a binary PRBS its amplitude equals its RMS)
-    if let Some(level) =
-        num(summary, "identification.level_pct").or_else(|| num(summary, "amplitude.chosen_pct"))
+    if let Some(level) = fin(s.identification.as_ref().map(|i| i.level_pct))
+        .or_else(|| fin(amplitude.map(|a| a.chosen_pct)))
     {
         let mut why = Vec::new();
         match (
-            num(summary, "amplitude.recommended_min_pct"),
-            num(summary, "amplitude.recommended_max_pct"),
+            fin(amplitude.and_then(|a| a.recommended_min_pct)),
+            fin(amplitude.and_then(|a| a.recommended_max_pct)),
         ) {
             (Some(a), Some(b)) if (a - b).abs() < 1e-9 => {
                 why.push(format!("the amplitude study recommends {} %", fmt(a)))
@@ -118,15 +116,14 @@ pub(crate) fn section(summary: &Value, sections: &[Section], ctx: &Ctx<'_>) -> S
             _ => {}
         }
         let mut level_note = None;
-        if let Some(bla) = num(summary, "bla.recommended_pct") {
+        if let Some(bla) = fin(s.bla.as_ref().map(|b| b.recommended_pct)) {
             // an optimum at the largest level studied is only a lower bound of the true optimum
-            let top = get(summary, "bla.levels")
-                .and_then(Value::as_array)
-                .and_then(|l| {
-                    l.iter()
-                        .filter_map(|r| r.get("level_pct")?.as_f64())
-                        .reduce(f64::max)
-                });
+            let top = s.bla.as_ref().and_then(|b| {
+                b.levels
+                    .iter()
+                    .filter_map(|r| fin(Some(r.level_pct)))
+                    .reduce(f64::max)
+            });
             why.push(format!(
                 "the robust BLA's noise + nonlinear variance is smallest at {} % RMS{}",
                 fmt(bla),
@@ -151,7 +148,9 @@ pub(crate) fn section(summary: &Value, sections: &[Section], ctx: &Ctx<'_>) -> S
                 ));
             }
         }
-        if let Some(s) = num(summary, "identification.saturated_pct").filter(|s| *s > 0.0) {
+        if let Some(s) =
+            fin(s.identification.as_ref().and_then(|i| i.saturated_pct)).filter(|s| *s > 0.0)
+        {
             why.push(format!("{} % of the samples saturated", fmt(s)));
         }
         rows.push(vec![
@@ -173,27 +172,30 @@ pub(crate) fn section(summary: &Value, sections: &[Section], ctx: &Ctx<'_>) -> S
     }
 
     // peak |S| and the ISO zone
-    if let Some(zone) = text(summary, "iso.zone") {
+    let measured = iso.and_then(|i| i.measured.as_ref());
+    let model = iso.and_then(|i| i.model.as_ref());
+    if let Some(zone) = iso.and_then(|i| i.zone.clone()) {
         let mut parts = Vec::new();
-        if let Some(p) = num(summary, "iso.measured.peak") {
+        if let Some(p) = fin(measured.and_then(|m| m.peak)) {
             let ci = match (
-                num(summary, "iso.measured.peak_ci_lo"),
-                num(summary, "iso.measured.peak_ci_hi"),
+                fin(measured.and_then(|m| m.peak_ci_lo)),
+                fin(measured.and_then(|m| m.peak_ci_hi)),
             ) {
                 (Some(a), Some(b)) => format!(" (95 % interval {}–{})", fmt(a), fmt(b)),
                 _ => String::new(),
             };
-            let at = num(summary, "iso.measured.f_peak_hz")
+            let at = fin(measured.and_then(|m| m.f_peak_hz))
                 .map_or(String::new(), |f| format!(" at {} Hz", fmt(f)));
             parts.push(format!("measured max |S| {}{ci}{at}", fmt(p)));
         }
-        if let Some(p) = num(summary, "iso.model.peak") {
+        if let Some(p) = fin(model.and_then(|m| m.peak)) {
             parts.push(format!("chosen model with the controller {}", fmt(p)));
         }
         if let (true, Some(p), Some(z)) = (
             twin,
-            num(summary, "iso.truth.peak"),
-            text(summary, "iso.truth.zone"),
+            fin(iso.and_then(|i| i.truth.as_ref()).and_then(|t| t.peak)),
+            iso.and_then(|i| i.truth.as_ref())
+                .and_then(|t| t.zone.clone()),
         ) {
             parts.push(format!("twin's exact plant {} (zone {z})", fmt(p)));
         }
@@ -206,13 +208,13 @@ pub(crate) fn section(summary: &Value, sections: &[Section], ctx: &Ctx<'_>) -> S
 
     // margins
     let mut margins = Vec::new();
-    if let Some(pm) = num(summary, "iso.model.phase_margin_deg") {
+    if let Some(pm) = fin(model.and_then(|m| m.phase_margin_deg)) {
         margins.push(format!(
             "phase margin {}° (chosen model with the controller)",
             fmt(pm)
         ));
     }
-    if let Some(p) = num(summary, "iso.measured.peak").filter(|p| *p > 0.0) {
+    if let Some(p) = fin(measured.and_then(|m| m.peak)).filter(|p| *p > 0.0) {
         margins.push(format!(
             "modulus margin 1/max|S| = {} (measured)",
             fmt(1.0 / p)
@@ -232,7 +234,7 @@ pub(crate) fn section(summary: &Value, sections: &[Section], ctx: &Ctx<'_>) -> S
         .and_then(|c| ctx.candidates.get(c))
         .and_then(|c| c.model.as_ref())
     {
-        let fs = num(summary, "data.fs_hz")
+        let fs = fin(s.data.as_ref().and_then(|d| d.fs_hz))
             .or_else(|| m.ts().map(|t| 1.0 / t))
             .unwrap_or(1.0);
         let poles = ambid_core::linalg::eigenvalues(m.a()).unwrap_or_default();
@@ -260,7 +262,7 @@ pub(crate) fn section(summary: &Value, sections: &[Section], ctx: &Ctx<'_>) -> S
                 }
             })
             .collect();
-        let supported = num(summary, "models.unstable_poles_supported")
+        let supported = fin(models.and_then(|m| m.unstable_poles_supported.flatten()))
             .map_or(String::new(), |n| {
                 format!("; the data support {n:.0} (Nyquist count of the measured loop)")
             });
@@ -293,16 +295,30 @@ pub(crate) fn section(summary: &Value, sections: &[Section], ctx: &Ctx<'_>) -> S
 
     // residual tests of the chosen model
     let mut tests = Vec::new();
-    for (key, what) in [
+    for (test, what) in [
         (
-            "independence",
+            residuals.map(|r| {
+                (
+                    r.independence_pass,
+                    r.independence_statistic,
+                    r.independence_threshold,
+                )
+            }),
             "independence of the output error from the excitation r",
         ),
-        ("whiteness", "whiteness of the prediction errors"),
+        (
+            residuals.map(|r| {
+                (
+                    r.whiteness_pass,
+                    r.whiteness_statistic,
+                    r.whiteness_threshold,
+                )
+            }),
+            "whiteness of the prediction errors",
+        ),
     ] {
-        let pass = get(summary, &format!("residuals.{key}_pass")).and_then(Value::as_bool);
-        let q = num(summary, &format!("residuals.{key}_statistic"));
-        let lim = num(summary, &format!("residuals.{key}_threshold"));
+        let (pass, q, lim) = test.unwrap_or((None, None, None));
+        let (q, lim) = (fin(q), fin(lim));
         if let (Some(pass), Some(q), Some(lim)) = (pass, q, lim) {
             tests.push(format!(
                 "{what}: {} (Q = {}, 95 % threshold {})",
@@ -314,9 +330,9 @@ pub(crate) fn section(summary: &Value, sections: &[Section], ctx: &Ctx<'_>) -> S
     }
     // on the twin: the same test on the exact plant, so a "fail" can be told from a test limit
     if let (Some(pass), Some(q), Some(lim)) = (
-        get(summary, "residuals.truth_independence_pass").and_then(Value::as_bool),
-        num(summary, "residuals.truth_independence_statistic"),
-        num(summary, "residuals.truth_independence_threshold"),
+        residuals.and_then(|r| r.truth_independence_pass),
+        fin(residuals.and_then(|r| r.truth_independence_statistic)),
+        fin(residuals.and_then(|r| r.truth_independence_threshold)),
     ) {
         tests.push(format!(
             "the twin's exact plant on the same record: {} (Q = {}, threshold {})",
@@ -325,10 +341,10 @@ pub(crate) fn section(summary: &Value, sections: &[Section], ctx: &Ctx<'_>) -> S
             fmt(lim)
         ));
     }
-    if let Some(l) = num(summary, "residuals.lags") {
+    if let Some(l) = residuals.and_then(|r| r.lags).map(|l| l as f64) {
         tests.push(format!(
             "{l:.0} lags{}",
-            num(summary, "residuals.lags_ms")
+            fin(residuals.and_then(|r| r.lags_ms))
                 .map_or(String::new(), |ms| format!(" ({} ms)", fmt(ms)))
         ));
     }

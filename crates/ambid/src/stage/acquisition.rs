@@ -1,0 +1,249 @@
+//! The acquisition stage: the records an identification works on — from the twin (simulated
+//! with named seeds, [`Seeds`]) or from files — as [`Recording`]s in SI units.
+
+use super::Seeds;
+use crate::error::{Context, Error, FailureClass, Result};
+use crate::experiment::{self, ExcitationKind, ExcitationPlan, Experiment};
+use ambid_twin::{Mode, Twin, TwinConfig};
+use serde::Serialize;
+
+/// One closed- or open-loop record in SI units.
+#[derive(Debug, Clone, Serialize)]
+pub struct Recording {
+    /// Sample time \[s\].
+    pub ts: f64,
+    /// Excitation at the controller output, if recorded.
+    pub r: Option<Vec<f64>>,
+    /// Plant input.
+    pub u: Vec<f64>,
+    /// Plant output.
+    pub y: Vec<f64>,
+    /// Coil current.
+    pub i: Option<Vec<f64>>,
+    /// Position reference.
+    pub w: Option<Vec<f64>>,
+    /// Closed-loop data.
+    pub closed_loop: bool,
+    /// Samples per excitation period, when periodic.
+    pub period: Option<usize>,
+    /// Where it came from.
+    pub source: String,
+    /// Fraction of saturated samples (twin).
+    pub saturated_fraction: Option<f64>,
+    /// Notes on how the record was read (e.g. columns taken by their names).
+    pub notes: Vec<String>,
+}
+
+impl Recording {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.y.len()
+    }
+
+    /// `true` for a record without samples.
+    pub fn is_empty(&self) -> bool {
+        self.y.is_empty()
+    }
+
+    /// Sample rate \[Hz\].
+    pub fn fs(&self) -> f64 {
+        1.0 / self.ts
+    }
+}
+
+/// The twin and how it is run.
+pub struct TwinSource {
+    /// Its configuration.
+    pub cfg: TwinConfig,
+    /// Linear or nonlinear physics.
+    pub mode: Mode,
+    /// Whether the sensor is noisy (a noise-only record is then meaningful).
+    pub noise: bool,
+    /// The twin built from `cfg` (exact truth).
+    pub twin: Twin,
+}
+
+impl TwinSource {
+    /// The twin of a configuration.
+    ///
+    /// # Errors
+    /// An input error when the configuration does not make a twin.
+    pub fn new(cfg: TwinConfig, mode: Mode) -> Result<Self> {
+        let twin = Twin::new(cfg.clone())
+            .context("building the twin")
+            .map_err(|e| Error::classified(FailureClass::Input, e))?;
+        Ok(Self {
+            noise: cfg.sensor.noise_rms_m > 0.0,
+            cfg,
+            mode,
+            twin,
+        })
+    }
+
+    /// Runs one experiment on the twin: the closed-loop record of excitation `plan` with the
+    /// twin's noise drawn from `seed`; `what` names the record in messages and its source.
+    ///
+    /// # Errors
+    /// A computation error when the simulation fails.
+    pub fn record(
+        &self,
+        plan: ExcitationPlan,
+        seed: u64,
+        what: &str,
+    ) -> Result<(Recording, experiment::ExperimentOutput)> {
+        let exp = Experiment {
+            twin: self.cfg.clone(),
+            excitation: plan,
+            mode: self.mode,
+            seed,
+            noise: self.noise,
+            record_b: false,
+        };
+        let out = experiment::run(&exp)
+            .with_context(|| format!("simulating the {what} record on the twin"))
+            .map_err(|e| Error::classified(FailureClass::Computation, e))?;
+        let rec = &out.record;
+        let periodic = out.excitation.periods >= 2;
+        Ok((
+            Recording {
+                ts: rec.ts,
+                r: Some(rec.r.clone()),
+                u: rec.u.clone(),
+                y: rec.y.clone(),
+                i: Some(rec.i.clone()),
+                w: Some(rec.w.clone()),
+                closed_loop: true,
+                period: periodic.then_some(out.excitation.period_samples),
+                source: format!("twin, {what} record"),
+                saturated_fraction: Some(rec.meta.saturated_fraction),
+                notes: Vec::new(),
+            },
+            out,
+        ))
+    }
+}
+
+/// The excitation kind named in a workflow file (`prbs`, `chirp`, `noise`, `multisine`; anything
+/// else is a PRBS, as the file's check allows no other name).
+pub fn excitation_kind(name: &str) -> ExcitationKind {
+    match name {
+        "chirp" => ExcitationKind::Chirp,
+        "noise" => ExcitationKind::Noise,
+        "multisine" => ExcitationKind::Multisine,
+        _ => ExcitationKind::Prbs,
+    }
+}
+
+/// What the acquisition stage simulates on the twin.
+#[derive(Debug, Clone, Serialize)]
+pub struct AcquisitionPlan {
+    /// The identification experiment (its `seed` is the excitation's).
+    pub identification: ExcitationPlan,
+    /// The validation experiment: a different excitation realisation and noise.
+    pub validation: ExcitationPlan,
+    /// Whether to record a run without excitation (the output SNR); only with a noisy sensor.
+    pub noise_record: bool,
+    /// The seeds of the twin's noise in each record.
+    pub seeds: Seeds,
+}
+
+impl AcquisitionPlan {
+    /// The workflow's plan: identification by `identification` (with the identification
+    /// excitation seed), validation by the same plan with kind `validation_kind` at
+    /// `validation_frac` of i_sat and the validation excitation seed, and a noise-only record.
+    pub fn new(
+        identification: ExcitationPlan,
+        validation_kind: ExcitationKind,
+        validation_frac: f64,
+        seeds: Seeds,
+    ) -> Self {
+        let validation = ExcitationPlan {
+            kind: validation_kind,
+            seed: seeds.validation_excitation,
+            amplitude_frac: validation_frac,
+            ..identification.clone()
+        };
+        Self {
+            identification: ExcitationPlan {
+                seed: seeds.identification_excitation,
+                ..identification
+            },
+            validation,
+            noise_record: true,
+            seeds,
+        }
+    }
+}
+
+/// The records of one identification: the identification record, the independent validation
+/// record and the output of a run without excitation (the output SNR's reference).
+#[derive(Debug, Clone, Serialize)]
+pub struct Acquisition {
+    /// The estimation record.
+    pub identification: Recording,
+    /// The validation record.
+    pub validation: Recording,
+    /// The output `y` of a record without excitation (twin with a noisy sensor).
+    pub noise_y: Option<Vec<f64>>,
+}
+
+/// The acquisition stage on the twin: the three records of `plan`, simulated in parallel (each
+/// from its own seed, so the records do not depend on the number of threads).
+///
+/// ```
+/// use ambid::stage::{acquire_twin, AcquisitionPlan, Seeds, TwinSource};
+/// use ambid::experiment::{ExcitationKind, ExcitationPlan};
+/// let twin = TwinSource::new(ambid_twin::TwinConfig::default(), ambid_twin::Mode::Nonlinear).unwrap();
+/// let plan = AcquisitionPlan::new(
+///     ExcitationPlan { periods: 3, ..ExcitationPlan::default() },
+///     ExcitationKind::Multisine,
+///     0.1,
+///     Seeds::from_workflow_seed(1),
+/// );
+/// let a = acquire_twin(&twin, &plan).unwrap();
+/// // PRBS n = 10, 5 samples per bit: 5115 samples per period, 3 periods
+/// assert_eq!(a.identification.len(), 3 * 5115);
+/// assert_eq!(a.identification.period, Some(5115));
+/// assert!(a.noise_y.is_some());
+/// ```
+///
+/// # Errors
+/// A computation error when a simulation fails.
+pub fn acquire_twin(twin: &TwinSource, plan: &AcquisitionPlan) -> Result<Acquisition> {
+    let noise_plan = ExcitationPlan {
+        kind: ExcitationKind::None,
+        amplitude_frac: 0.0,
+        ..plan.identification.clone()
+    };
+    let want_noise = plan.noise_record && twin.noise;
+    let (ident, (valid, noise)) = rayon::join(
+        || {
+            twin.record(
+                plan.identification.clone(),
+                plan.seeds.identification_record,
+                "identification",
+            )
+        },
+        || {
+            rayon::join(
+                || {
+                    twin.record(
+                        plan.validation.clone(),
+                        plan.seeds.validation_record,
+                        "validation",
+                    )
+                },
+                || {
+                    want_noise
+                        .then(|| twin.record(noise_plan, plan.seeds.noise_record, "noise"))
+                        .transpose()
+                },
+            )
+        },
+    );
+    Ok(Acquisition {
+        identification: ident?.0,
+        validation: valid?.0,
+        noise_y: noise?.map(|(r, _)| r.y),
+    })
+}

@@ -1,0 +1,115 @@
+//! The identification pipeline as typed stages, shared by `ambid run` ([`crate::workflow`]) and
+//! usable on their own from Rust.
+//!
+//! Each stage takes a typed input (its settings and the typed outputs of the stages it needs)
+//! and returns a typed output (`serde::Serialize`) or an [`crate::error::Error`]:
+//!
+//! | stage | input | output |
+//! |---|---|---|
+//! | seeds | the workflow seed | [`Seeds`] |
+//! | acquisition (twin) | [`TwinSource`], [`AcquisitionPlan`] | [`Acquisition`] (identification, validation and noise records) |
+//! | excitation comparison | sample rate, level, [`Seeds::comparison`] | [`crate::comparison::Comparison`] |
+//! | amplitude study | [`crate::study::TwinAmplitudeStudy`] | [`AmplitudeStage`] |
+//! | operating-point study | [`OperatingPointInput`] | [`crate::study::OperatingPointOutcome`] |
+//! | robust BLA study | [`BlaInput`] | [`crate::bla::BlaStudy`] |
+//! | nonparametric FRF | [`crate::analysis::Record`], [`FrfSettings`] | [`crate::analysis::FrfAnalysis`] |
+//!
+//! Stages do not import each other except to read an upstream stage's output type, and none
+//! depends on the report or on the workflow's state; every random number comes from a seed in
+//! [`Seeds`], so stages run in any order and in parallel with identical results.
+//!
+//! # Example: acquisition → FRF from code
+//! ```
+//! use ambid::stage::{acquire_twin, frf_settings, identification_plan, AcquisitionPlan, Seeds, TwinSource};
+//! use ambid::experiment::ExcitationKind;
+//! use ambid::workflow::config::{ExcitationSection, FrfSection};
+//! let twin = TwinSource::new(ambid_twin::TwinConfig::default(), ambid_twin::Mode::Nonlinear).unwrap();
+//! let seeds = Seeds::from_workflow_seed(1);
+//! let exc = ExcitationSection { periods: 4, ..ExcitationSection::default() };
+//! let plan = AcquisitionPlan::new(identification_plan(&exc, 0.1, &seeds), ExcitationKind::Multisine, 0.1, seeds);
+//! let rec = acquire_twin(&twin, &plan).unwrap().identification;
+//! let s = frf_settings(&FrfSection::default(), 1, rec.period, rec.len(), Some(twin.twin.i_sat()));
+//! let r = rec.r.as_deref().unwrap();
+//! let a = ambid::analysis::analyze(
+//!     &ambid::analysis::Record { r, u: &rec.u, y: &rec.y, i: rec.i.as_deref(), fs: rec.fs() },
+//!     &s,
+//!     None,
+//! ).unwrap();
+//! // the measured plant against the twin's exact one at 200 Hz: within a few per cent
+//! let k = a.frf.f_hz().iter().position(|&f| f >= 200.0).unwrap();
+//! let exact = twin.twin.plant_frf(&[a.frf.f_hz()[k]]).unwrap()[0];
+//! assert!(((a.frf.plant.values()[k] - exact) / exact).norm() < 0.1);
+//! ```
+
+mod acquisition;
+mod seeds;
+mod studies;
+
+pub use self::acquisition::{
+    acquire_twin, excitation_kind, Acquisition, AcquisitionPlan, Recording, TwinSource,
+};
+pub use self::seeds::Seeds;
+pub use self::studies::{
+    amplitude_twin, bla_twin, choose_level_pct, operating_point_twin, AmplitudeStage, BlaInput,
+    OperatingPointInput,
+};
+
+use crate::analysis::FrfSettings;
+use crate::experiment::ExcitationPlan;
+use crate::workflow::config::{ExcitationSection, FrfSection};
+
+/// The identification excitation of an `[excitation]` section at level `frac` of i_sat, with
+/// the identification excitation seed.
+pub fn identification_plan(e: &ExcitationSection, frac: f64, seeds: &Seeds) -> ExcitationPlan {
+    ExcitationPlan {
+        kind: excitation_kind(&e.kind),
+        amplitude_frac: frac,
+        prbs_order: e.prbs_order,
+        samples_per_bit: e.samples_per_bit,
+        periods: e.periods,
+        f_min_hz: e.f_min_hz,
+        f_max_hz: e.f_max_hz,
+        seed: seeds.identification_excitation,
+        ..ExcitationPlan::default()
+    }
+}
+
+/// The nonparametric FRF's settings for a record of `n` samples: period averaging when the
+/// period is known and at least two periods are recorded (dropping `skip_periods`, at most all
+/// but one), Welch averaging otherwise or with `method = "welch"`; the bands of `frf` (derived
+/// from the excitation when not given) and the saturation current `i_sat` when known.
+///
+/// ```
+/// use ambid::stage::frf_settings;
+/// use ambid::workflow::config::FrfSection;
+/// let s = frf_settings(&FrfSection::default(), 1, Some(5115), 20 * 5115, Some(1.5));
+/// assert!(matches!(s.method, ambid::analysis::FrfMethod::Periodic { period_samples: 5115, skip_periods: 1 }));
+/// assert_eq!(s.i_sat, Some(1.5));
+/// ```
+pub fn frf_settings(
+    frf: &FrfSection,
+    skip_periods: usize,
+    period: Option<usize>,
+    n: usize,
+    i_sat: Option<f64>,
+) -> FrfSettings {
+    let periodic = match frf.method.as_str() {
+        "welch" => None,
+        _ => period.filter(|p| n / p.max(&1) >= 2),
+    };
+    let mut s = match periodic {
+        Some(p) => FrfSettings::periodic(p, skip_periods.min(n / p - 1)),
+        None => {
+            let nper = frf
+                .nperseg
+                .unwrap_or_else(|| FrfSettings::default_nperseg(n));
+            FrfSettings::welch(nper.min(n))
+        }
+    };
+    // an explicit band wins; otherwise both bands are derived from the excitation of the record
+    // (ambid_core::frf::band), on the twin and on files alike
+    s.band = frf.band_hz.map(|[a, b]| (a, b));
+    s.quality_band = frf.quality_band_hz.map(|[a, b]| (a, b));
+    s.i_sat = i_sat;
+    s
+}
