@@ -484,7 +484,7 @@ impl Default for OrderSection {
 #[serde(default, deny_unknown_fields)]
 pub struct ModelsSection {
     /// Structures: `arx`, `oe`, `ss`.
-    pub structures: Vec<String>,
+    pub structures: Vec<ambid_core::lti::Structure>,
     /// Orders.
     pub orders: Vec<usize>,
     /// Input delay (polynomial models).
@@ -515,7 +515,7 @@ pub struct ModelsSection {
 impl Default for ModelsSection {
     fn default() -> Self {
         Self {
-            structures: vec!["arx".into(), "oe".into(), "ss".into()],
+            structures: ambid_core::lti::Structure::FRF.to_vec(),
             orders: vec![6, 7, 8, 9],
             nk: 1,
             band_hz: None,
@@ -748,8 +748,10 @@ impl WorkflowConfig {
         if let Some(d) = &self.models.domain {
             one_of("models.domain", d, &["frf", "time"])?;
         }
-        for s in &self.models.structures {
-            one_of("models.structures", s, &["arx", "oe", "ss"])?;
+        if let Some(s) = self.models.structures.iter().find(|s| !s.fits_frf()) {
+            return Err(bad(format!(
+                "models.structures = \"{s}\" is not available; use \"arx\", \"oe\" or \"ss\""
+            )));
         }
         if self.bla.realisations < 2 || self.bla.periods < 2 {
             return Err(bad(format!(
@@ -1060,3 +1062,31 @@ pub(crate) fn fmt_num(v: f64) -> String {
 
 /// The commented example written by `ambid init` (it parses to the defaults).
 pub const EXAMPLE: &str = include_str!("example.toml");
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn model_structures_are_the_one_structure_type() {
+        let p = Path::new("wf.toml");
+        let cfg =
+            WorkflowConfig::from_toml_str("[models]\nstructures = [\"oe\", \"ss\"]\n", p).unwrap();
+        assert_eq!(
+            cfg.models.structures,
+            [
+                ambid_core::lti::Structure::Oe,
+                ambid_core::lti::Structure::Ss
+            ]
+        );
+        // a structure the FRF fits do not take is refused by name
+        let e = WorkflowConfig::from_toml_str("[models]\nstructures = [\"armax\"]\n", p)
+            .and_then(|c| c.check(p).map(|()| c))
+            .unwrap_err();
+        assert!(e.to_string().contains("armax"), "{e}");
+        // an unknown name is refused at parsing, naming it
+        let e =
+            WorkflowConfig::from_toml_str("[models]\nstructures = [\"narx\"]\n", p).unwrap_err();
+        assert!(e.to_string().contains("narx"), "{e}");
+    }
+}

@@ -120,15 +120,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             _ => FreqWeights::Uniform,
         };
         let spec = CompareSpec {
-            structures: cfg
-                .structures
-                .iter()
-                .map(|s| match s.as_str() {
-                    "arx" => Structure::Arx,
-                    "oe" => Structure::Oe,
-                    _ => Structure::Ss,
-                })
-                .collect(),
+            structures: cfg.structures.iter().copied().collect(),
             orders: cfg.orders.clone(),
             nk: cfg.nk,
             fit: FreqFitOptions {
@@ -209,13 +201,13 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         };
         for s in &cfg.structures {
             for &n in &cfg.orders {
-                let fitted: crate::error::Result<TimeFit> = (|| match s.as_str() {
-                    "arx" => {
+                let fitted: crate::error::Result<TimeFit> = (|| match s {
+                    Structure::Arx => {
                         let f = arx(&rec.y, &[&rec.u], &ArxOrders::siso(n, n, cfg.nk), ts)?;
                         let p = f.model.to_poly(0)?;
                         Ok((p.g()?.to_state_space()?, Some(p), f.params.len(), None))
                     }
-                    "oe" => {
+                    Structure::Oe => {
                         // open-loop records (no excitation r): an unstable start is an
                         // artefact and is stabilised; closed-loop ones keep the strict rule
                         let opts = PemOptions::default()
@@ -246,11 +238,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                         Ok((f.model, None, np, k))
                     }
                 })();
-                let sname: &'static str = match s.as_str() {
-                    "arx" => "arx",
-                    "oe" => "oe",
-                    _ => "ss",
-                };
+                let sname: &'static str = s.name();
                 match fitted {
                     Ok((m, poly, np, k)) => {
                         let mut c = Candidate {
