@@ -255,7 +255,7 @@ pub fn amplitude_on_twin(study: &TwinAmplitudeStudy) -> Result<AmplitudeOutcome>
     // in parallel, each with its own seed as in a sequential loop, then used in level order
     let experiment = |j: usize| -> Result<ExperimentOutput> {
         if j == study.levels.len() {
-            return Ok(run(&Experiment {
+            return run(&Experiment {
                 twin: study.twin.clone(),
                 excitation: ExcitationPlan {
                     kind: ExcitationKind::None,
@@ -265,7 +265,7 @@ pub fn amplitude_on_twin(study: &TwinAmplitudeStudy) -> Result<AmplitudeOutcome>
                 seed: study.seed + 1000,
                 noise: true,
                 record_b: false,
-            })?);
+            });
         }
         let level = study.levels[j];
         let exp = Experiment {

@@ -237,6 +237,16 @@ pub(crate) fn clean(x: f64) -> f64 {
     (x * mag).round() / mag
 }
 
+/// The value parser of a model-structure option: one of `allowed` by its name
+/// ([`ambid_core::lti::Structure`]'s `FromStr`), the names listed in `--help`.
+pub(crate) fn structure_parser(
+    allowed: &'static [ambid_core::lti::Structure],
+) -> impl clap::builder::TypedValueParser<Value = ambid_core::lti::Structure> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(allowed.iter().map(|s| s.name()))
+        .try_map(|s: String| s.parse::<ambid_core::lti::Structure>())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -268,14 +278,4 @@ mod tests {
         assert_eq!(format!("{}", clean(0.1 + 0.2)), "0.3");
         assert_eq!(format!("{}", clean(1.0 / 3.0)), "0.333333333333");
     }
-}
-
-/// The value parser of a model-structure option: one of `allowed` by its name
-/// ([`ambid_core::lti::Structure`]'s `FromStr`), the names listed in `--help`.
-pub(crate) fn structure_parser(
-    allowed: &'static [ambid_core::lti::Structure],
-) -> impl clap::builder::TypedValueParser<Value = ambid_core::lti::Structure> {
-    use clap::builder::TypedValueParser;
-    clap::builder::PossibleValuesParser::new(allowed.iter().map(|s| s.name()))
-        .try_map(|s: String| s.parse::<ambid_core::lti::Structure>())
 }

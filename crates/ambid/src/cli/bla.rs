@@ -173,9 +173,10 @@ pub fn bla(a: BlaArgs) -> Result<()> {
 
 fn bla_from_files(a: &BlaArgs) -> Result<()> {
     let Some(n) = a.period_samples else {
-        return Err(ambid::error::Error::usage(format!(
+        return Err(ambid::error::Error::usage(
             "recorded BLA realisations need the multisine period: pass --period-samples N"
-        ))
+                .to_string(),
+        )
         .into());
     };
     let (levels, fs) = recorded_levels(a)?;

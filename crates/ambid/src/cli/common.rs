@@ -173,9 +173,7 @@ pub fn frf_input(
     let fs = match (fs, file.extra("fs_hz").ok().and_then(|c| c.first().copied())) {
         (Some(fs), _) => fs,
         (None, Some(fs)) => fs,
-        (None, None) => return Err(ambid::error::Error::usage(format!(
-            "this FRF file has no `fs_hz` column: give the sample rate of the data with --fs (e.g. --fs 20000)"
-        )).into()),
+        (None, None) => return Err(ambid::error::Error::usage("this FRF file has no `fs_hz` column: give the sample rate of the data with --fs (e.g. --fs 20000)".to_string()).into()),
     };
     if !(fs.is_finite() && fs > 0.0) {
         return Err(ambid::error::Error::usage(format!(

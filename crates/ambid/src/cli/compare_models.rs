@@ -93,9 +93,9 @@ pub fn compare(a: CompareModelsArgs) -> Result<()> {
         ..CompareSpec::default()
     };
     if spec.orders.contains(&0) {
-        return Err(ambid::error::Error::usage(format!(
-            "--orders: every order must be at least 1"
-        ))
+        return Err(ambid::error::Error::usage(
+            "--orders: every order must be at least 1".to_string(),
+        )
         .into());
     }
     let ctrl = match &a.controller {

@@ -225,118 +225,119 @@ pub fn excite(a: ExciteArgs) -> Result<()> {
     };
     let band = a.band;
     if band.is_some() && matches!(a.signal, SignalCmd::Prbs { .. } | SignalCmd::Chirp { .. }) {
-        return Err(ambid::error::Error::usage(format!(
+        return Err(ambid::error::Error::usage(
             "--band applies to noise and multisine (a PRBS has no band parameter; a chirp sweeps \
              from --f0 to --f1)"
-        ))
+                .to_string(),
+        )
         .into());
     }
-    let spec = match a.signal {
-        SignalCmd::Prbs {
-            samples_per_bit,
-            periods,
-            amplitude,
-            offset,
-            ..
-        } => ExcitationSpec::Prbs(PrbsSpec {
-            order: prbs_order.unwrap_or(10),
-            samples_per_bit,
-            periods,
-            amplitude: level(amplitude, "--amplitude", 10.0)?,
-            offset,
-        }),
-        SignalCmd::Chirp {
-            f0,
-            f1,
-            duration,
-            amplitude,
-            sweep,
-            periods,
-        } => ExcitationSpec::Chirp(ChirpSpec {
-            f0_hz: f0,
-            f1_hz: f1,
-            duration_s: duration,
-            amplitude: level(amplitude, "--amplitude", 10.0)?,
-            sweep: match sweep {
-                SweepArg::Linear => Sweep::Linear,
-                SweepArg::Logarithmic => Sweep::Logarithmic,
-            },
-            periods,
-        }),
-        SignalCmd::Noise {
-            rms,
-            samples,
-            distribution,
-            band_lo,
-            band_hi,
-            seed,
-        } => ExcitationSpec::Noise(NoiseSpec {
-            distribution: match distribution {
-                DistArg::Gaussian => Distribution::Gaussian,
-                DistArg::Uniform => Distribution::Uniform,
-            },
-            rms: level(rms, "--rms", 5.0)?,
-            n_samples: samples,
-            band_hz: match (band, band_lo.zip(band_hi)) {
-                (Some(_), Some(_)) => {
-                    return Err(ambid::error::Error::usage(format!(
-                        "give the band once: --band LO:HI, or the deprecated --band-lo/--band-hi"
-                    ))
-                    .into())
-                }
-                (Some(b), None) => Some(b),
-                (None, Some((lo, hi))) => {
-                    super::args::deprecated(
-                        &format!("--band-lo {lo} --band-hi {hi}"),
-                        &format!("--band {lo}:{hi}"),
-                    );
-                    Some((lo, hi))
-                }
-                (None, None) => None,
-            },
-            seed,
-        }),
-        SignalCmd::Multisine {
-            f_min,
-            f_max,
-            period_samples,
-            periods,
-            rms,
-            grid,
-            phases,
-            seed,
-            realisations: _,
-        } => {
-            let (f_min, f_max) = match band {
-                Some(b) if f_min.is_some() || f_max.is_some() => {
-                    return Err(ambid::error::Error::usage(format!(
-                        "give the band once: --band {}:{}, or the deprecated --f-min/--f-max",
-                        b.0, b.1
-                    ))
-                    .into())
-                }
-                Some(b) => b,
-                None => deprecated_band((5.0, 2000.0), f_min, f_max, ("--f-min", "--f-max"))?,
-            };
-            ExcitationSpec::Multisine(MultisineSpec {
-                f_min_hz: f_min,
-                f_max_hz: f_max,
-                period_samples,
+    let spec =
+        match a.signal {
+            SignalCmd::Prbs {
+                samples_per_bit,
                 periods,
-                rms: level(rms, "--rms", 5.0)?,
-                grid: match grid {
-                    GridArg::Full => Grid::Full,
-                    GridArg::Odd => Grid::Odd,
-                    GridArg::RandomOdd => Grid::RandomOdd,
+                amplitude,
+                offset,
+                ..
+            } => ExcitationSpec::Prbs(PrbsSpec {
+                order: prbs_order.unwrap_or(10),
+                samples_per_bit,
+                periods,
+                amplitude: level(amplitude, "--amplitude", 10.0)?,
+                offset,
+            }),
+            SignalCmd::Chirp {
+                f0,
+                f1,
+                duration,
+                amplitude,
+                sweep,
+                periods,
+            } => ExcitationSpec::Chirp(ChirpSpec {
+                f0_hz: f0,
+                f1_hz: f1,
+                duration_s: duration,
+                amplitude: level(amplitude, "--amplitude", 10.0)?,
+                sweep: match sweep {
+                    SweepArg::Linear => Sweep::Linear,
+                    SweepArg::Logarithmic => Sweep::Logarithmic,
                 },
-                phases: match phases {
-                    PhaseArg::Schroeder => Phases::Schroeder,
-                    PhaseArg::Random => Phases::Random,
+                periods,
+            }),
+            SignalCmd::Noise {
+                rms,
+                samples,
+                distribution,
+                band_lo,
+                band_hi,
+                seed,
+            } => ExcitationSpec::Noise(NoiseSpec {
+                distribution: match distribution {
+                    DistArg::Gaussian => Distribution::Gaussian,
+                    DistArg::Uniform => Distribution::Uniform,
+                },
+                rms: level(rms, "--rms", 5.0)?,
+                n_samples: samples,
+                band_hz: match (band, band_lo.zip(band_hi)) {
+                    (Some(_), Some(_)) => return Err(ambid::error::Error::usage(
+                        "give the band once: --band LO:HI, or the deprecated --band-lo/--band-hi"
+                            .to_string(),
+                    )
+                    .into()),
+                    (Some(b), None) => Some(b),
+                    (None, Some((lo, hi))) => {
+                        super::args::deprecated(
+                            &format!("--band-lo {lo} --band-hi {hi}"),
+                            &format!("--band {lo}:{hi}"),
+                        );
+                        Some((lo, hi))
+                    }
+                    (None, None) => None,
                 },
                 seed,
-            })
-        }
-    };
+            }),
+            SignalCmd::Multisine {
+                f_min,
+                f_max,
+                period_samples,
+                periods,
+                rms,
+                grid,
+                phases,
+                seed,
+                realisations: _,
+            } => {
+                let (f_min, f_max) = match band {
+                    Some(b) if f_min.is_some() || f_max.is_some() => {
+                        return Err(ambid::error::Error::usage(format!(
+                            "give the band once: --band {}:{}, or the deprecated --f-min/--f-max",
+                            b.0, b.1
+                        ))
+                        .into())
+                    }
+                    Some(b) => b,
+                    None => deprecated_band((5.0, 2000.0), f_min, f_max, ("--f-min", "--f-max"))?,
+                };
+                ExcitationSpec::Multisine(MultisineSpec {
+                    f_min_hz: f_min,
+                    f_max_hz: f_max,
+                    period_samples,
+                    periods,
+                    rms: level(rms, "--rms", 5.0)?,
+                    grid: match grid {
+                        GridArg::Full => Grid::Full,
+                        GridArg::Odd => Grid::Odd,
+                        GridArg::RandomOdd => Grid::RandomOdd,
+                    },
+                    phases: match phases {
+                        PhaseArg::Schroeder => Phases::Schroeder,
+                        PhaseArg::Random => Phases::Random,
+                    },
+                    seed,
+                })
+            }
+        };
     let report = spec.report(ts)?;
     // refuse to overwrite before any work
     for p in [&a.out, &a.spectrum, &a.autocorr].into_iter().flatten() {
@@ -405,14 +406,16 @@ fn write_realisations(
     out: &Path,
 ) -> Result<Vec<PathBuf>> {
     let ExcitationSpec::Multisine(ms) = spec else {
-        return Err(
-            ambid::error::Error::usage(format!("--realisations applies to a multisine")).into(),
-        );
+        return Err(ambid::error::Error::usage(
+            "--realisations applies to a multisine".to_string(),
+        )
+        .into());
     };
     if ms.phases != Phases::Random {
-        return Err(ambid::error::Error::usage(format!(
+        return Err(ambid::error::Error::usage(
             "--realisations needs --phases random (Schroeder phases are the same every time)"
-        ))
+                .to_string(),
+        )
         .into());
     }
     if m < 2 {

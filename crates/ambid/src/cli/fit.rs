@@ -284,9 +284,9 @@ pub fn fit(a: FitArgs) -> Result<()> {
             Structure::Oe => (Structure::Oe, a.order.unwrap_or(a.nf)),
             Structure::Ss => match a.order {
                 Some(n) => (Structure::Ss, n),
-                None => return Err(ambid::error::Error::usage(format!("a state-space fit to FRF data needs --order")).into()),
+                None => return Err(ambid::error::Error::usage("a state-space fit to FRF data needs --order".to_string()).into()),
             },
-            _ => return Err(ambid::error::Error::usage(format!("fits to FRF data support --structure arx, oe or ss (ARX/OE of order n: n numerator and n denominator coefficients after --nk delays)")).into()),
+            _ => return Err(ambid::error::Error::usage("fits to FRF data support --structure arx, oe or ss (ARX/OE of order n: n numerator and n denominator coefficients after --nk delays)".to_string()).into()),
         };
         return fit_frf(
             &a.data,
@@ -510,9 +510,10 @@ fn fit_ss(
     use ambid_core::estimate::ss_pem::SsPemOptions;
     use ambid_core::estimate::subspace::HorizonCriterion;
     if a.no_pem && a.feedthrough {
-        return Err(ambid::error::Error::usage(format!(
+        return Err(ambid::error::Error::usage(
             "--feedthrough needs the prediction-error refinement (it estimates D); drop --no-pem"
-        ))
+                .to_string(),
+        )
         .into());
     }
     let opts = SsFitOptions {
@@ -801,9 +802,10 @@ fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
     let su: Vec<f64> = u.iter().map(|c| rms(c)).collect();
     let sy: Vec<f64> = y.iter().map(|c| rms(c)).collect();
     if su.iter().chain(&sy).any(|v| *v == 0.0) {
-        return Err(ambid::error::Error::input(format!(
+        return Err(ambid::error::Error::input(
             "an input or output column is constant after removing its mean: nothing to identify"
-        ))
+                .to_string(),
+        )
         .into());
     }
     let nt = u[0].len();
@@ -820,9 +822,10 @@ fn fit_ss_mimo(a: &FitArgs, ins: &[String], outs: &[String]) -> Result<()> {
     let mut pem_meta = json!(null);
     let mut x0_est: Option<Vec<f64>> = None;
     if a.feedthrough && a.no_pem {
-        return Err(ambid::error::Error::usage(format!(
+        return Err(ambid::error::Error::usage(
             "--feedthrough needs the prediction-error refinement (it estimates D); drop --no-pem"
-        ))
+                .to_string(),
+        )
         .into());
     }
     if !a.no_pem {
@@ -1144,9 +1147,9 @@ pub fn fit_frf(
     OutputSet::check(out, force)?;
     let input = frf_input(path, quantity, fs, band, weights, max_iterations)?;
     if order == 0 {
-        return Err(ambid::error::Error::usage(format!(
-            "--order must be at least 1 for a fit to FRF data"
-        ))
+        return Err(ambid::error::Error::usage(
+            "--order must be at least 1 for a fit to FRF data".to_string(),
+        )
         .into());
     }
     let ctrl = match controller {

@@ -41,9 +41,9 @@ pub struct OrderArgs {
 pub fn order(a: OrderArgs) -> Result<()> {
     OutputSet::check(&a.out, a.f.force)?;
     if a.na_max == 0 || a.nb_max == 0 {
-        return Err(ambid::error::Error::usage(format!(
-            "--na-max and --nb-max must be at least 1"
-        ))
+        return Err(ambid::error::Error::usage(
+            "--na-max and --nb-max must be at least 1".to_string(),
+        )
         .into());
     }
     if a.na_max > ambid::workflow::config::MAX_MODEL_ORDER

@@ -179,7 +179,7 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
     let k_step = match a.k_step {
         Some(k) => {
             let Some(kg) = &kalman_gain else {
-                return Err(ambid::error::Error::usage(format!("--k-step needs an innovation-form model with a Kalman gain (`ambid fit --structure ss` with --focus prediction)")).into());
+                return Err(ambid::error::Error::usage("--k-step needs an innovation-form model with a Kalman gain (`ambid fit --structure ss` with --focus prediction)".to_string()).into());
             };
             if kg.len() != model.order() {
                 return Err(ambid::error::Error::input(format!(

@@ -120,7 +120,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             _ => FreqWeights::Uniform,
         };
         let spec = CompareSpec {
-            structures: cfg.structures.iter().copied().collect(),
+            structures: cfg.structures.to_vec(),
             orders: cfg.orders.clone(),
             nk: cfg.nk,
             fit: FreqFitOptions {
