@@ -549,8 +549,8 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
     progress.finish("data", dt, "done");
     let mut timings: Vec<Option<StepTime>> = vec![None; steps.len()];
     let indexed: Vec<(usize, Step)> = steps.iter().copied().enumerate().collect();
-    // on the twin the robust BLA study (it feeds no other stage) runs beside everything else and
-    // is rendered in its place afterwards; the amplitude study and the noise-only record
+    // on the twin the robust BLA study (it feeds no other stage) runs beside the steps and is
+    // rendered in its place afterwards; the amplitude study and the noise-only record
     // (independent experiments, each from its own seed) run together first
     let bla = ctx
         .twin
@@ -563,15 +563,16 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
         .copied()
         .filter(|(k, _)| bla.as_ref().is_none_or(|(kb, _)| kb.0 != *k))
         .collect();
+    // the amplitude study first (its chosen level feeds the identification chain): the BLA
+    // study then runs beside the chain and the operating-point study, where the two cores have
+    // room, instead of competing with the amplitude study on the critical path
+    studies_ahead(&mut ctx, &steps);
     let (bla_out, result) = rayon::join(
         || {
             bla.as_ref()
                 .map(|(kb, i)| (*kb, timed(|| crate::stage::bla_twin(i))))
         },
-        || {
-            studies_ahead(&mut ctx, &steps);
-            run_steps(&mut ctx, &rest, progress, &mut timings)
-        },
+        || run_steps(&mut ctx, &rest, progress, &mut timings),
     );
     // the first failure in the order of the steps
     if let Some(((kb, step), (study, secs))) = bla_out {
@@ -801,61 +802,93 @@ impl Outcome {
     pub fn write(&self, dir: &Path, force: bool) -> Result<Vec<PathBuf>, Error> {
         use crate::io::export::{mat_bytes, matlab_script, npz_bytes, ExportModel, ExportNames};
         use crate::io::model::{polynomial_json, state_space_json};
+        use rayon::prelude::*;
         let out = OutputDir::create(dir, force)?;
         let json_error = |e: serde_json::Error| output(Error::other(chain_message(&e)));
         let export_error =
             |e: crate::io::export::ExportError| output(Error::other(chain_message(&e)));
-        out.write("report.html", self.report.to_html().as_bytes())?;
-        out.write(
-            "summary.json",
-            serde_json::to_string_pretty(&self.summary)
-                .map_err(json_error)?
-                .as_bytes(),
-        )?;
-        for s in &self.report.sections {
-            for b in &s.blocks {
-                match b {
-                    Block::Figure(f) => {
-                        out.write(&format!("figures/{}.csv", f.id), f.to_csv().as_bytes())?
-                    }
-                    Block::Table(t) => {
-                        out.write(&format!("tables/{}.csv", t.id), t.to_csv().as_bytes())?
-                    }
-                    _ => {}
-                }
-            }
+        // every file's bytes are made in parallel (they are independent), then written in the
+        // order below, so the output and the first error are those of a sequential write
+        let blocks: Vec<&Block> = self
+            .report
+            .sections
+            .iter()
+            .flat_map(|s| &s.blocks)
+            .filter(|b| matches!(b, Block::Figure(_) | Block::Table(_)))
+            .collect();
+        let ((html, summary), (tables, models)) = rayon::join(
+            || {
+                rayon::join(
+                    || self.report.to_html(),
+                    || serde_json::to_string_pretty(&self.summary),
+                )
+            },
+            || {
+                rayon::join(
+                    || {
+                        blocks
+                            .par_iter()
+                            .map(|b| match b {
+                                Block::Figure(f) => (format!("figures/{}.csv", f.id), f.to_csv()),
+                                Block::Table(t) => (format!("tables/{}.csv", t.id), t.to_csv()),
+                                _ => (String::new(), String::new()),
+                            })
+                            .collect::<Vec<_>>()
+                    },
+                    || {
+                        self.models
+                            .par_iter()
+                            .map(|m| -> Result<[(String, Vec<u8>); 4], Error> {
+                                let names = ExportNames {
+                                    name: m.name.clone(),
+                                    input: "u".into(),
+                                    output: "y".into(),
+                                    noise_variance: m.meta["noise_variance"].as_f64(),
+                                };
+                                let (json, em) = match &m.poly {
+                                    Some(p) => (
+                                        polynomial_json(p, "u", "y", m.meta.clone()),
+                                        ExportModel::Poly(p),
+                                    ),
+                                    None => (
+                                        state_space_json(&m.ss, "u", "y", m.meta.clone()),
+                                        ExportModel::StateSpace(&m.ss, m.kalman.as_deref()),
+                                    ),
+                                };
+                                let text =
+                                    serde_json::to_string_pretty(&json).map_err(json_error)?;
+                                Ok([
+                                    (format!("models/{}.json", m.name), text.into_bytes()),
+                                    (
+                                        format!("models/{}.m", m.name),
+                                        matlab_script(em, &names)
+                                            .map_err(export_error)?
+                                            .into_bytes(),
+                                    ),
+                                    (
+                                        format!("models/{}.mat", m.name),
+                                        mat_bytes(em, &names).map_err(export_error)?,
+                                    ),
+                                    (
+                                        format!("models/{}.npz", m.name),
+                                        npz_bytes(em, &names).map_err(export_error)?,
+                                    ),
+                                ])
+                            })
+                            .collect::<Vec<_>>()
+                    },
+                )
+            },
+        );
+        out.write("report.html", html.as_bytes())?;
+        out.write("summary.json", summary.map_err(json_error)?.as_bytes())?;
+        for (name, text) in &tables {
+            out.write(name, text.as_bytes())?;
         }
-        for m in &self.models {
-            let names = ExportNames {
-                name: m.name.clone(),
-                input: "u".into(),
-                output: "y".into(),
-                noise_variance: m.meta["noise_variance"].as_f64(),
-            };
-            let (json, em) = match &m.poly {
-                Some(p) => (
-                    polynomial_json(p, "u", "y", m.meta.clone()),
-                    ExportModel::Poly(p),
-                ),
-                None => (
-                    state_space_json(&m.ss, "u", "y", m.meta.clone()),
-                    ExportModel::StateSpace(&m.ss, m.kalman.as_deref()),
-                ),
-            };
-            let text = serde_json::to_string_pretty(&json).map_err(json_error)?;
-            out.write(&format!("models/{}.json", m.name), text.as_bytes())?;
-            out.write(
-                &format!("models/{}.m", m.name),
-                matlab_script(em, &names).map_err(export_error)?.as_bytes(),
-            )?;
-            out.write(
-                &format!("models/{}.mat", m.name),
-                &mat_bytes(em, &names).map_err(export_error)?,
-            )?;
-            out.write(
-                &format!("models/{}.npz", m.name),
-                &npz_bytes(em, &names).map_err(export_error)?,
-            )?;
+        for files in models {
+            for (name, bytes) in files? {
+                out.write(&name, &bytes)?;
+            }
         }
         Ok(out.commit()?)
     }
