@@ -80,7 +80,7 @@ fn frd_of(f: &[f64], ms: &[M2], var: Option<&[[[f64; 2]; 2]]>) -> Frd {
 fn assert_close(got: &Frd, want: &[M2], tol: f64, what: &str) {
     assert_eq!((got.ny(), got.nu()), (2, 2), "{what}");
     for (k, w) in want.iter().enumerate() {
-        let g = got.at(k);
+        let g = got.at(k).unwrap();
         let scale = w.iter().flatten().fold(0.0f64, |s, z| s.max(z.norm()));
         for i in 0..2 {
             for j in 0..2 {
@@ -263,7 +263,7 @@ fn first_order_variances_match_numerical_derivatives_of_the_oracle() {
                 let from_x = fd_var(&|p| oracle(p, &b), &a, &cs.vx[k]);
                 let uses_y = name != "inverse";
                 let from_y = fd_var(&|q| oracle(&a, q), &b, &cs.vy[k]);
-                let got = z.variance_at(k).unwrap();
+                let got = z.variance_at(k).unwrap().unwrap();
                 for i in 0..2 {
                     for j in 0..2 {
                         let want = from_x[i][j] + if uses_y { from_y[i][j] } else { 0.0 };
@@ -308,9 +308,16 @@ fn matrix_access_entries_and_band() {
     let b = x.band(cs.f[1], cs.f[3]).unwrap();
     assert_eq!(b.f_hz(), &cs.f[1..4]);
     for k in 0..3 {
-        assert_eq!(b.at(k), x.at(k + 1));
-        assert_eq!(b.variance_at(k), x.variance_at(k + 1));
+        assert_eq!(b.at(k).unwrap(), x.at(k + 1).unwrap());
+        assert_eq!(b.variance_at(k).unwrap(), x.variance_at(k + 1).unwrap());
     }
+    // a line past the end is a typed error, not a panic
+    assert!(b
+        .at(3)
+        .unwrap_err()
+        .to_string()
+        .contains("line 3 is outside"));
+    assert!(b.variance_at(3).is_err());
     // a 2×3 response: products and series check the inner dimension
     let g = Frd::from_matrices(
         &[1.0],
@@ -329,7 +336,7 @@ fn matrix_access_entries_and_band() {
     let gh = g.product(&h).unwrap();
     assert_eq!((gh.ny(), gh.nu()), (2, 2));
     // (GH)_01 = Σ_k G_0k H_k1 = 1·1 + (1+i)(1+i) + (1+2i)(1+2i) = 1 + 2i + (−3+4i) = −2 + 6i
-    assert!((gh.at(0)[(0, 1)] - c(-2.0, 6.0)).norm() < 1e-15);
+    assert!((gh.at(0).unwrap()[(0, 1)] - c(-2.0, 6.0)).norm() < 1e-15);
     assert_eq!(
         (h.series(&g).unwrap().ny(), h.series(&g).unwrap().nu()),
         (2, 2)
@@ -522,7 +529,7 @@ fn closed_loop_set_from_two_by_two_responses() {
             &t[line],
             &cs.vx[line],
         );
-        let got = ind.variance_at(line).unwrap();
+        let got = ind.variance_at(line).unwrap().unwrap();
         for i in 0..2 {
             for j in 0..2 {
                 assert!((got[(i, j)] - want[i][j]).abs() <= 1e-6 * want[i][j]);

@@ -152,18 +152,8 @@ impl Error {
             Error::DataFile(_) | Error::Input(_) => FailureClass::Input,
             Error::Output(_) => FailureClass::Output,
             Error::Computation(_) => FailureClass::Computation,
-            Error::Core(ce) => match ce {
-                ambid_core::Error::NonFinite { .. } => FailureClass::Input,
-                // an argument (an option's value) the computation refuses; the message names it
-                ambid_core::Error::InvalidArgument { .. } => FailureClass::Config,
-                _ => FailureClass::Computation,
-            },
-            Error::Twin(te) => match te {
-                ambid_twin::TwinError::Toml(_) | ambid_twin::TwinError::NonFinite { .. } => {
-                    FailureClass::Input
-                }
-                _ => FailureClass::Computation,
-            },
+            Error::Core(ce) => core_class(ce),
+            Error::Twin(te) => twin_class(te),
             Error::Other(_) => return None,
             Error::Classified { class, .. } => *class,
             Error::Context { inner, .. } => return inner.class(),
@@ -173,6 +163,57 @@ impl Error {
     /// The process exit code of this error (1 when it has no class).
     pub fn exit_code(&self) -> i32 {
         self.class().map_or(1, FailureClass::exit_code)
+    }
+
+    /// The exit code of `e` when it is one of the library's typed errors ([`Error`] or one it
+    /// wraps), by the same rule as [`Error::exit_code`]; `None` for any other type. The
+    /// binary walks an error chain with it.
+    ///
+    /// ```
+    /// use ambid::error::Error;
+    /// let core = ambid_core::Error::invalid("order", "must be at least 1");
+    /// assert_eq!(Error::exit_code_of(&core), Some(2));
+    /// assert_eq!(Error::exit_code_of(&Error::other("?")), Some(1));
+    /// assert_eq!(Error::exit_code_of(&std::fmt::Error), None);
+    /// ```
+    pub fn exit_code_of(e: &(dyn std::error::Error + 'static)) -> Option<i32> {
+        let class = if let Some(ae) = e.downcast_ref::<Error>() {
+            return Some(ae.exit_code());
+        } else if e.is::<ConfigError>() {
+            FailureClass::Config
+        } else if e.is::<DataFileError>() {
+            FailureClass::Input
+        } else if e.is::<OutputError>() {
+            FailureClass::Output
+        } else if let Some(ce) = e.downcast_ref::<ambid_core::Error>() {
+            core_class(ce)
+        } else if let Some(te) = e.downcast_ref::<ambid_twin::TwinError>() {
+            twin_class(te)
+        } else {
+            return None;
+        };
+        Some(class.exit_code())
+    }
+}
+
+/// The class of a core error: a refused argument (an option's value; the message names it) is
+/// a usage error, a non-finite sample an input error, anything else a computation error.
+fn core_class(e: &ambid_core::Error) -> FailureClass {
+    match e {
+        ambid_core::Error::NonFinite { .. } => FailureClass::Input,
+        ambid_core::Error::InvalidArgument { .. } => FailureClass::Config,
+        _ => FailureClass::Computation,
+    }
+}
+
+/// The class of a twin error: a configuration that does not parse or a non-finite input is
+/// an input error, anything else a computation error.
+fn twin_class(e: &ambid_twin::TwinError) -> FailureClass {
+    match e {
+        ambid_twin::TwinError::Toml(_) | ambid_twin::TwinError::NonFinite { .. } => {
+            FailureClass::Input
+        }
+        _ => FailureClass::Computation,
     }
 }
 

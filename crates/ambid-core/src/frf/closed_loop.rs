@@ -292,7 +292,7 @@ pub fn indirect_plant(t_ry: &Frd, controller: &Frd) -> Result<Frd> {
     let per = ny * nu;
     let mut var = vec![0.0; p.values().len()];
     for line in 0..p.len() {
-        let (ai, bi) = (a_inv.at(line), b_inv.at(line));
+        let (ai, bi) = (a_inv.at(line)?, b_inv.at(line)?);
         for j in 0..nu {
             for i in 0..ny {
                 let mut acc = 0.0;

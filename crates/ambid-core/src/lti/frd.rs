@@ -75,7 +75,7 @@
 //! let s = Frd::identity(&f, 2, None).unwrap().feedback(&plant.series(&ctrl).unwrap()).unwrap();
 //! let back = t.divide(&s).unwrap();
 //! for line in 0..2 {
-//!     let (a, b) = (back.at(line), plant.at(line));
+//!     let (a, b) = (back.at(line).unwrap(), plant.at(line).unwrap());
 //!     for i in 0..2 {
 //!         for j in 0..2 {
 //!             assert!((a[(i, j)] - b[(i, j)]).norm() < 1e-12);
@@ -243,7 +243,7 @@ impl Frd {
     /// // one line, G = [[1, 3], [2, 4]] stored column by column
     /// let v: Vec<c64> = [1.0, 2.0, 3.0, 4.0].iter().map(|&x| c64::new(x, 0.0)).collect();
     /// let g = Frd::new_matrix(vec![5.0], 2, 2, v, None, None).unwrap();
-    /// assert_eq!(g.at(0)[(0, 1)], c64::new(3.0, 0.0));
+    /// assert_eq!(g.at(0).unwrap()[(0, 1)], c64::new(3.0, 0.0));
     /// assert_eq!(g.entry(1, 0).unwrap().values(), &[c64::new(2.0, 0.0)]);
     /// ```
     pub fn new_matrix(
@@ -343,7 +343,7 @@ impl Frd {
     /// let g = Mat::from_fn(2, 3, |i, j| c64::new(i as f64, j as f64));
     /// let frd = Frd::from_matrices(&[1.0, 2.0], &[g.clone(), g], None, Some(1e-3)).unwrap();
     /// assert_eq!((frd.len(), frd.ny(), frd.nu()), (2, 2, 3));
-    /// assert_eq!(frd.at(1)[(1, 2)], c64::new(1.0, 2.0));
+    /// assert_eq!(frd.at(1).unwrap()[(1, 2)], c64::new(1.0, 2.0));
     /// ```
     pub fn from_matrices(
         f_hz: &[f64],
@@ -516,20 +516,37 @@ impl Frd {
 
     /// The $n_y \times n_u$ matrix of line `line`.
     ///
-    /// # Panics
-    /// If `line >= self.len()` (an index, as for a slice).
-    pub fn at(&self, line: usize) -> Mat<c64> {
+    /// # Errors
+    /// [`Error::InvalidArgument`] if `line >= self.len()`.
+    pub fn at(&self, line: usize) -> Result<Mat<c64>> {
+        self.check_line(line)?;
         let b = self.block(line);
-        Mat::from_fn(self.ny, self.nu, |i, j| b[i + j * self.ny])
+        Ok(Mat::from_fn(self.ny, self.nu, |i, j| b[i + j * self.ny]))
     }
 
     /// The entry variances of line `line`, if known.
     ///
-    /// # Panics
-    /// If `line >= self.len()`.
-    pub fn variance_at(&self, line: usize) -> Option<Mat<f64>> {
-        self.var_block(line)
-            .map(|b| Mat::from_fn(self.ny, self.nu, |i, j| b[i + j * self.ny]))
+    /// # Errors
+    /// [`Error::InvalidArgument`] if `line >= self.len()`.
+    pub fn variance_at(&self, line: usize) -> Result<Option<Mat<f64>>> {
+        self.check_line(line)?;
+        Ok(self
+            .var_block(line)
+            .map(|b| Mat::from_fn(self.ny, self.nu, |i, j| b[i + j * self.ny])))
+    }
+
+    fn check_line(&self, line: usize) -> Result<()> {
+        if line < self.len() {
+            Ok(())
+        } else {
+            Err(Error::invalid(
+                "line",
+                format!(
+                    "line {line} is outside the response's {} frequency lines (0-based)",
+                    self.len()
+                ),
+            ))
+        }
     }
 
     /// Entry $(i, j)$ (output $i$, input $j$) as SISO data with its variance.

@@ -1,13 +1,8 @@
 //! The exit code of a failed command: one rule for every command (docs/workflow.md, "Exit
 //! codes").
 
-use ambid::error::FailureClass;
-use ambid::io::OutputError;
-use ambid::workflow::ConfigError;
-
-/// The exit code of an error: the class of the first typed error found walking the `anyhow`
-/// chain from the outside in ([`ambid::error::Error::exit_code`] for the library's error; the
-/// other typed errors by their kind), else 1.
+/// The exit code of an error: that of the first typed error found walking the `anyhow` chain
+/// from the outside in ([`ambid::error::Error::exit_code_of`], the library's one rule), else 1.
 ///
 /// | class | code |
 /// |---|---|
@@ -16,43 +11,16 @@ use ambid::workflow::ConfigError;
 /// | computation | 4 |
 /// | output | 5 |
 pub fn exit_code(e: &anyhow::Error) -> i32 {
-    for c in e.chain() {
-        if let Some(ae) = c.downcast_ref::<ambid::error::Error>() {
-            return ae.exit_code();
-        }
-        if c.is::<ConfigError>() {
-            return FailureClass::Config.exit_code();
-        }
-        if c.is::<ambid::io::table::DataFileError>() {
-            return FailureClass::Input.exit_code();
-        }
-        if c.is::<OutputError>() {
-            return FailureClass::Output.exit_code();
-        }
-        if let Some(ce) = c.downcast_ref::<ambid_core::Error>() {
-            return match ce {
-                ambid_core::Error::NonFinite { .. } => FailureClass::Input.exit_code(),
-                // an argument (an option's value) the computation refuses; the message names it
-                ambid_core::Error::InvalidArgument { .. } => FailureClass::Config.exit_code(),
-                _ => FailureClass::Computation.exit_code(),
-            };
-        }
-        if let Some(te) = c.downcast_ref::<ambid_twin::TwinError>() {
-            return match te {
-                ambid_twin::TwinError::Toml(_) | ambid_twin::TwinError::NonFinite { .. } => {
-                    FailureClass::Input.exit_code()
-                }
-                _ => FailureClass::Computation.exit_code(),
-            };
-        }
-    }
-    1
+    e.chain()
+        .find_map(ambid::error::Error::exit_code_of)
+        .unwrap_or(1)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use ambid::error::Error;
+    use ambid::error::FailureClass;
 
     #[test]
     fn typed_errors_give_their_class_code_through_any_context() {

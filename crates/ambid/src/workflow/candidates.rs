@@ -27,6 +27,33 @@ pub struct Candidate {
 }
 
 impl Candidate {
+    /// A time-domain fit that succeeded: chosen by its validation fit, with no FRF figures yet.
+    pub fn time_fit(
+        structure: &'static str,
+        order: usize,
+        poly: Option<PolyModel>,
+        n_params: usize,
+        kalman: Option<Vec<f64>>,
+    ) -> Self {
+        Candidate {
+            structure,
+            order,
+            model: None,
+            poly,
+            n_params,
+            relative_rmse: None,
+            median_relative: None,
+            db_rmse: None,
+            bic: None,
+            validation_fit: None,
+            unstable_poles: None,
+            truth_median_relative: None,
+            valid: true,
+            note: None,
+            kalman,
+        }
+    }
+
     pub fn label(&self) -> String {
         format!("{} {}", self.structure.to_uppercase(), self.order)
     }

@@ -667,23 +667,13 @@ fn recommend(
                         .and_then(|f| {
                             // the models step's own criterion: simulation when the model is
                             // stable, else the one-step prediction of its innovations form
-                            let c = Candidate {
-                                structure: "ss",
-                                order: o,
-                                model: None,
-                                poly: None,
-                                n_params: o * o + 2 * o,
-                                relative_rmse: None,
-                                median_relative: None,
-                                db_rmse: None,
-                                bic: None,
-                                validation_fit: None,
-                                unstable_poles: None,
-                                truth_median_relative: None,
-                                valid: true,
-                                note: None,
-                                kalman: f.pem.and_then(|p| p.kalman_gain),
-                            };
+                            let c = Candidate::time_fit(
+                                "ss",
+                                o,
+                                None,
+                                o * o + 2 * o,
+                                f.pem.and_then(|p| p.kalman_gain),
+                            );
                             let (yh, _) = open_loop_response(&c, &f.model, &val.y, &val.u)?;
                             fit_percent(&val.y, &yh).ok().map(|p| 100.0 - p)
                         });

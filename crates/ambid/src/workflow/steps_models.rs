@@ -22,10 +22,6 @@ use serde_json::json;
 /// A time-domain fit: the model, its polynomial form, its parameter count and its Kalman gain.
 type TimeFit = (StateSpace, Option<PolyModel>, usize, Option<Vec<f64>>);
 
-fn structure_name(s: Structure) -> &'static str {
-    s.name()
-}
-
 use crate::validation::median_relative_error as median_rel;
 
 /// `[models] orders` with the order step's recommended range (`order.recommended_lo` …
@@ -163,7 +159,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                 _ => None,
             };
             cands.push(Candidate {
-                structure: structure_name(r.structure),
+                structure: r.structure.name(),
                 order: r.order,
                 model: r.model,
                 poly: None,
@@ -241,23 +237,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                 let sname: &'static str = s.name();
                 match fitted {
                     Ok((m, poly, np, k)) => {
-                        let mut c = Candidate {
-                            structure: sname,
-                            order: n,
-                            model: None,
-                            poly,
-                            n_params: np,
-                            relative_rmse: None,
-                            median_relative: None,
-                            db_rmse: None,
-                            bic: None,
-                            validation_fit: None,
-                            unstable_poles: None,
-                            truth_median_relative: None,
-                            valid: true,
-                            note: None,
-                            kalman: k,
-                        };
+                        let mut c = Candidate::time_fit(sname, n, poly, np, k);
                         let (fit, kind) = match open_loop_response(&c, &m, &val.y, &val.u) {
                             Some((yhat, kind)) => (fit_percent(&val.y, &yhat).ok(), kind),
                             None => (None, "unstable without a predictor: no fit"),
@@ -295,21 +275,9 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                     }
                     Err(e) => {
                         cands.push(Candidate {
-                            structure: sname,
-                            order: n,
-                            model: None,
-                            poly: None,
-                            n_params: 0,
-                            relative_rmse: None,
-                            median_relative: None,
-                            db_rmse: None,
-                            bic: None,
-                            validation_fit: None,
-                            unstable_poles: None,
-                            truth_median_relative: None,
                             valid: false,
                             note: Some(format!("{e:#}")),
-                            kalman: None,
+                            ..Candidate::time_fit(sname, n, None, 0, None)
                         });
                     }
                 }
