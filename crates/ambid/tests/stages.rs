@@ -115,17 +115,17 @@ fn stages_on_their_own_give_the_workflow_numbers() {
     let mut s = frf_settings(
         &cfg.frf,
         cfg.data.skip_periods,
-        rec.period,
+        rec.period(),
         rec.len(),
         Some(twin.twin.i_sat()),
     );
     s.controller = Some(twin.twin.controller().clone());
     let a = analyze(
         &Record {
-            r: rec.r.as_deref().unwrap(),
-            u: &rec.u,
-            y: &rec.y,
-            i: rec.i.as_deref(),
+            r: rec.r().unwrap(),
+            u: rec.u(),
+            y: rec.y(),
+            i: rec.i(),
             fs: rec.fs(),
         },
         &s,

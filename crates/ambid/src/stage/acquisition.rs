@@ -4,28 +4,39 @@
 use super::Seeds;
 use crate::error::{Context, Error, FailureClass, Result};
 use crate::experiment::{self, ExcitationKind, ExcitationPlan, Experiment};
+use ambid_core::data::{IoData, Role};
 use ambid_twin::{Mode, Twin, TwinConfig};
 use serde::Serialize;
 
-/// One closed- or open-loop record in SI units.
+/// One closed- or open-loop record in SI units: the samples as an [`IoData`] (channels `r` when
+/// recorded, `u`, `y`, `i` and `w` when recorded, with their roles inferred from the names; the
+/// sample time and the excitation period) and where they came from.
+///
+/// A one-axis record is the 1×1 case of the core's data contract; the accessors [`Recording::y`],
+/// [`Recording::u`], … read its channels by role.
+///
+/// ```
+/// use ambid::stage::{Recording, Signals};
+/// let rec = Recording::from_signals(
+///     1e-3,
+///     Some(2),
+///     Signals { r: Some(vec![1.0, -1.0, 1.0, -1.0]), u: vec![0.5, -0.5, 0.4, -0.6], y: vec![0.0, 1.0, 0.0, 1.0], i: None, w: None },
+///     true,
+///     "example",
+/// ).unwrap();
+/// assert_eq!(rec.len(), 4);
+/// assert_eq!(rec.y(), &[0.0, 1.0, 0.0, 1.0]);
+/// assert_eq!(rec.r(), Some(&[1.0, -1.0, 1.0, -1.0][..]));
+/// assert_eq!(rec.period(), Some(2));
+/// assert!(rec.i().is_none());
+/// assert_eq!(rec.data.role_count(ambid_core::data::Role::Output), 1);
+/// ```
 #[derive(Debug, Clone, Serialize)]
 pub struct Recording {
-    /// Sample time \[s\].
-    pub ts: f64,
-    /// Excitation at the controller output, if recorded.
-    pub r: Option<Vec<f64>>,
-    /// Plant input.
-    pub u: Vec<f64>,
-    /// Plant output.
-    pub y: Vec<f64>,
-    /// Coil current.
-    pub i: Option<Vec<f64>>,
-    /// Position reference.
-    pub w: Option<Vec<f64>>,
+    /// The samples with their roles, sample time and period.
+    pub data: IoData,
     /// Closed-loop data.
     pub closed_loop: bool,
-    /// Samples per excitation period, when periodic.
-    pub period: Option<usize>,
     /// Where it came from.
     pub source: String,
     /// Fraction of saturated samples (twin).
@@ -34,20 +45,140 @@ pub struct Recording {
     pub notes: Vec<String>,
 }
 
+/// The signals of a one-axis record by role, in SI units ([`Recording::from_signals`]).
+#[derive(Debug, Clone, Default)]
+pub struct Signals {
+    /// Excitation at the controller output, if recorded.
+    pub r: Option<Vec<f64>>,
+    /// Plant input.
+    pub u: Vec<f64>,
+    /// Plant output.
+    pub y: Vec<f64>,
+    /// Coil current, if recorded.
+    pub i: Option<Vec<f64>>,
+    /// Position reference, if recorded.
+    pub w: Option<Vec<f64>>,
+}
+
 impl Recording {
+    /// A record of `signals` with sample time `ts` \[s\] and `period` samples per excitation
+    /// period (when periodic).
+    ///
+    /// # Errors
+    /// An input error when the signals differ in length or are empty, `ts` is not positive, or
+    /// the period is 0 (the core's [`IoData::new`] checks).
+    pub fn from_signals(
+        ts: f64,
+        period: Option<usize>,
+        signals: Signals,
+        closed_loop: bool,
+        source: impl Into<String>,
+    ) -> Result<Self> {
+        let source = source.into();
+        let Signals { r, u, y, i, w } = signals;
+        let channels: Vec<(String, Vec<f64>)> =
+            [("r", r), ("u", Some(u)), ("y", Some(y)), ("i", i), ("w", w)]
+                .into_iter()
+                .filter_map(|(n, x)| x.map(|x| (n.to_string(), x)))
+                .collect();
+        let data = IoData::new(channels, ts, period)
+            .with_context(|| format!("{source}: the record's signals"))
+            .map_err(|e| Error::classified(FailureClass::Input, e))?;
+        Ok(Self {
+            data,
+            closed_loop,
+            source,
+            saturated_fraction: None,
+            notes: Vec::new(),
+        })
+    }
+
+    /// The record's signals, copied out by role.
+    pub fn signals(&self) -> Signals {
+        Signals {
+            r: self.r().map(<[f64]>::to_vec),
+            u: self.u().to_vec(),
+            y: self.y().to_vec(),
+            i: self.i().map(<[f64]>::to_vec),
+            w: self.w().map(<[f64]>::to_vec),
+        }
+    }
+
+    /// The same record with its signals replaced by `signals` (same sample time, period, source
+    /// and notes).
+    ///
+    /// # Errors
+    /// As [`Recording::from_signals`].
+    pub fn with_signals(&self, signals: Signals) -> Result<Self> {
+        Ok(Self {
+            saturated_fraction: self.saturated_fraction,
+            notes: self.notes.clone(),
+            ..Self::from_signals(
+                self.ts(),
+                self.period(),
+                signals,
+                self.closed_loop,
+                self.source.clone(),
+            )?
+        })
+    }
+
+    /// The first channel of `role`, if the record has one.
+    fn first(&self, role: Role) -> Option<&[f64]> {
+        self.data
+            .signals(role, 0)
+            .ok()
+            .and_then(|s| s.first().copied())
+    }
+
+    /// The excitation `r` at the controller output, if recorded.
+    pub fn r(&self) -> Option<&[f64]> {
+        self.first(Role::Excitation)
+    }
+
+    /// The plant input `u`.
+    pub fn u(&self) -> &[f64] {
+        self.first(Role::Input).unwrap_or(&[])
+    }
+
+    /// The plant output `y`.
+    pub fn y(&self) -> &[f64] {
+        self.first(Role::Output).unwrap_or(&[])
+    }
+
+    /// The coil current `i`, if recorded.
+    pub fn i(&self) -> Option<&[f64]> {
+        self.first(Role::Current)
+    }
+
+    /// The position reference `w`, if recorded.
+    pub fn w(&self) -> Option<&[f64]> {
+        self.first(Role::Reference)
+    }
+
+    /// Samples per excitation period, when periodic.
+    pub fn period(&self) -> Option<usize> {
+        self.data.period_samples()
+    }
+
+    /// Sample time \[s\].
+    pub fn ts(&self) -> f64 {
+        self.data.ts()
+    }
+
     /// Number of samples.
     pub fn len(&self) -> usize {
-        self.y.len()
+        self.data.len()
     }
 
     /// `true` for a record without samples.
     pub fn is_empty(&self) -> bool {
-        self.y.is_empty()
+        self.data.is_empty()
     }
 
     /// Sample rate \[Hz\].
     pub fn fs(&self) -> f64 {
-        1.0 / self.ts
+        1.0 / self.ts()
     }
 }
 
@@ -106,17 +237,20 @@ impl TwinSource {
         let periodic = out.excitation.periods >= 2;
         Ok((
             Recording {
-                ts: rec.ts,
-                r: Some(rec.r.clone()),
-                u: rec.u.clone(),
-                y: rec.y.clone(),
-                i: Some(rec.i.clone()),
-                w: Some(rec.w.clone()),
-                closed_loop: true,
-                period: periodic.then_some(out.excitation.period_samples),
-                source: format!("twin, {what} record"),
                 saturated_fraction: Some(rec.meta.saturated_fraction),
-                notes: Vec::new(),
+                ..Recording::from_signals(
+                    rec.ts,
+                    periodic.then_some(out.excitation.period_samples),
+                    Signals {
+                        r: Some(rec.r.clone()),
+                        u: rec.u.clone(),
+                        y: rec.y.clone(),
+                        i: Some(rec.i.clone()),
+                        w: Some(rec.w.clone()),
+                    },
+                    true,
+                    format!("twin, {what} record"),
+                )?
             },
             out,
         ))
@@ -203,7 +337,7 @@ pub struct Acquisition {
 /// let a = acquire_twin(&twin, &plan).unwrap();
 /// // PRBS n = 10, 5 samples per bit: 5115 samples per period, 3 periods
 /// assert_eq!(a.identification.len(), 3 * 5115);
-/// assert_eq!(a.identification.period, Some(5115));
+/// assert_eq!(a.identification.period(), Some(5115));
 /// assert!(a.noise_y.is_some());
 /// ```
 ///
@@ -244,6 +378,6 @@ pub fn acquire_twin(twin: &TwinSource, plan: &AcquisitionPlan) -> Result<Acquisi
     Ok(Acquisition {
         identification: ident?.0,
         validation: valid?.0,
-        noise_y: noise?.map(|(r, _)| r.y),
+        noise_y: noise?.map(|(r, _)| r.y().to_vec()),
     })
 }

@@ -46,7 +46,7 @@ mod seeds;
 mod studies;
 
 pub use self::acquisition::{
-    acquire_twin, excitation_kind, Acquisition, AcquisitionPlan, Recording, TwinSource,
+    acquire_twin, excitation_kind, Acquisition, AcquisitionPlan, Recording, Signals, TwinSource,
 };
 pub use self::seeds::Seeds;
 pub use self::studies::{

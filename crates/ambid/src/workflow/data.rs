@@ -10,7 +10,7 @@ use ambid_core::data::{detrend, Detrend};
 use ambid_twin::{Mode, Twin, TwinConfig};
 use std::path::Path;
 
-pub use crate::stage::{excitation_kind, Recording, TwinSource};
+pub use crate::stage::{excitation_kind, Recording, Signals, TwinSource};
 
 pub struct Prepared {
     pub twin: Option<TwinSource>,
@@ -95,7 +95,7 @@ pub fn prepare(cfg: &WorkflowConfig, base: &Path) -> Result<Prepared, Error> {
                         ident.source, d.split
                     )));
                 }
-                let (a, b) = split(&ident, k);
+                let (a, b) = split(&ident, k)?;
                 ident = a;
                 valid = Some(b);
             }
@@ -119,7 +119,7 @@ pub fn prepare(cfg: &WorkflowConfig, base: &Path) -> Result<Prepared, Error> {
                 Some(p) => {
                     let path = base.join(p);
                     let c = crate::io::read_controller(&path).map_err(input)?;
-                    c.check_ts(ident.ts)
+                    c.check_ts(ident.ts())
                         .with_context(|| format!("{}", path.display()))
                         .map_err(input)?;
                     Some(c)
@@ -128,7 +128,7 @@ pub fn prepare(cfg: &WorkflowConfig, base: &Path) -> Result<Prepared, Error> {
             };
             let closed = d
                 .closed_loop
-                .unwrap_or(ident.r.is_some() || controller.is_some());
+                .unwrap_or(ident.r().is_some() || controller.is_some());
             ident.closed_loop = closed;
             if let Some(v) = valid.as_mut() {
                 v.closed_loop = closed;
@@ -143,39 +143,23 @@ pub fn prepare(cfg: &WorkflowConfig, base: &Path) -> Result<Prepared, Error> {
     }
 }
 
-fn split(rec: &Recording, k: usize) -> (Recording, Recording) {
-    let cut = |x: &Option<Vec<f64>>, a: bool| {
-        x.as_ref()
-            .map(|v| if a { v[..k].to_vec() } else { v[k..].to_vec() })
+fn split(rec: &Recording, k: usize) -> Result<(Recording, Recording), Error> {
+    let part = |range: (usize, usize), what: &str| -> Result<Recording, Error> {
+        Ok(Recording {
+            data: rec.data.slice(range.0, range.1).map_err(input)?,
+            closed_loop: rec.closed_loop,
+            source: format!("{} ({what})", rec.source),
+            saturated_fraction: None,
+            notes: rec.notes.clone(),
+        })
     };
-    let part = |a: bool, what: &str| Recording {
-        ts: rec.ts,
-        r: cut(&rec.r, a),
-        u: if a {
-            rec.u[..k].to_vec()
-        } else {
-            rec.u[k..].to_vec()
-        },
-        y: if a {
-            rec.y[..k].to_vec()
-        } else {
-            rec.y[k..].to_vec()
-        },
-        i: cut(&rec.i, a),
-        w: cut(&rec.w, a),
-        closed_loop: rec.closed_loop,
-        period: rec.period,
-        source: format!("{} ({what})", rec.source),
-        saturated_fraction: None,
-        notes: rec.notes.clone(),
-    };
-    (
-        part(true, &format!("samples 1–{k}, estimation")),
+    Ok((
+        part((0, k), &format!("samples 1–{k}, estimation"))?,
         part(
-            false,
+            (k, rec.len()),
             &format!("samples {}–{}, validation", k + 1, rec.len()),
-        ),
-    )
+        )?,
+    ))
 }
 
 fn detrend_pair(a: &mut Recording, b: Option<&mut Recording>, kind: Detrend) -> Result<(), Error> {
@@ -183,9 +167,10 @@ fn detrend_pair(a: &mut Recording, b: Option<&mut Recording>, kind: Detrend) -> 
         return Ok(());
     }
     let mut offsets = Vec::new();
-    for (name, x) in [("u", &mut a.u), ("y", &mut a.y)]
+    let mut sa = a.signals();
+    for (name, x) in [("u", &mut sa.u), ("y", &mut sa.y)]
         .into_iter()
-        .chain(a.i.as_mut().map(|i| ("i", i)))
+        .chain(sa.i.as_mut().map(|i| ("i", i)))
     {
         let (d, rep) = detrend(x, kind)
             .with_context(|| format!("{}: detrending `{name}`", a.source))
@@ -193,12 +178,14 @@ fn detrend_pair(a: &mut Recording, b: Option<&mut Recording>, kind: Detrend) -> 
         *x = d;
         offsets.push((name, rep));
     }
+    *a = a.with_signals(sa)?;
     if let Some(b) = b {
+        let mut sb = b.signals();
         for (name, rep) in offsets {
             let x = match name {
-                "u" => &mut b.u,
-                "y" => &mut b.y,
-                _ => match b.i.as_mut() {
+                "u" => &mut sb.u,
+                "y" => &mut sb.y,
+                _ => match sb.i.as_mut() {
                     Some(i) => i,
                     None => continue,
                 },
@@ -212,6 +199,7 @@ fn detrend_pair(a: &mut Recording, b: Option<&mut Recording>, kind: Detrend) -> 
                 *x = d;
             }
         }
+        *b = b.with_signals(sb)?;
     }
     Ok(())
 }
@@ -310,17 +298,20 @@ pub fn load_file(
         spec.as_ref().map(|s| col(name, s)).transpose()
     };
     let rec = Recording {
-        ts,
-        r: opt("r", &r_spec)?,
-        u: col("u", &d.u)?,
-        y: col("y", &d.y)?,
-        i: opt("i", &i_spec)?,
-        w: opt("w", &w_spec)?,
-        closed_loop: false,
-        period: d.period_samples,
-        source: format!("{} ({what})", path.display()),
-        saturated_fraction: None,
         notes,
+        ..Recording::from_signals(
+            ts,
+            d.period_samples,
+            Signals {
+                r: opt("r", &r_spec)?,
+                u: col("u", &d.u)?,
+                y: col("y", &d.y)?,
+                i: opt("i", &i_spec)?,
+                w: opt("w", &w_spec)?,
+            },
+            false,
+            format!("{} ({what})", path.display()),
+        )?
     };
     let _: &Table = &table;
     Ok(rec)
@@ -374,11 +365,11 @@ pub fn describe(ctx: &mut Ctx<'_>) -> Section {
                     r.len().to_string(),
                     crate::report::format_number(r.fs()),
                     [
-                        r.r.as_ref().map(|_| "r"),
+                        r.r().as_ref().map(|_| "r"),
                         Some("u"),
                         Some("y"),
-                        r.i.as_ref().map(|_| "i"),
-                        r.w.as_ref().map(|_| "w"),
+                        r.i().as_ref().map(|_| "i"),
+                        r.w().as_ref().map(|_| "w"),
                     ]
                     .into_iter()
                     .flatten()
@@ -435,7 +426,7 @@ pub fn describe(ctx: &mut Ctx<'_>) -> Section {
                 ),
             ));
             let cl = ctx.is_closed_loop();
-            let has_r = ctx.ident.as_ref().is_some_and(|r| r.r.is_some());
+            let has_r = ctx.ident.as_ref().is_some_and(|r| r.r().is_some());
             blocks.push(note_of(match (cl, has_r, ctx.controller.is_some()) {
                 (false, _, _) => (NoteKind::Info, "Open-loop data: the FRF is the H1 estimate u → y; the closed-loop steps (closed-loop validation, reconstruction, ISO zone) are skipped.".to_string()),
                 (true, false, _) => (NoteKind::Warning, "Closed-loop data without a recorded excitation r: the plant can only be estimated by the direct method (u → y), which is biased by the feedback of the noise; treat the FRF and the models with care.".to_string()),

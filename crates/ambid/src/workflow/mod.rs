@@ -393,7 +393,7 @@ impl Ctx<'_> {
             ..self.plan(0.0)
         };
         let (rec, secs) = timed(|| t.record(p, self.seeds.noise_record, "noise"));
-        rec.ok().map(|(r, _)| (r.y, secs))
+        rec.ok().map(|(r, _)| (r.y().to_vec(), secs))
     }
 
     /// The twin record without excitation (output SNR), or the `[data] noise` file.
@@ -410,10 +410,19 @@ impl Ctx<'_> {
                 kind: crate::experiment::ExcitationKind::None,
                 ..self.plan(0.0)
             };
-            return Ok(Some(t.record(p, self.seeds.noise_record, "noise")?.0.y));
+            return Ok(Some(
+                t.record(p, self.seeds.noise_record, "noise")?
+                    .0
+                    .y()
+                    .to_vec(),
+            ));
         }
         match &self.cfg.data.noise {
-            Some(p) => Ok(Some(data::load_file(self.cfg, &self.base, p, "noise")?.y)),
+            Some(p) => Ok(Some(
+                data::load_file(self.cfg, &self.base, p, "noise")?
+                    .y()
+                    .to_vec(),
+            )),
             None => Ok(None),
         }
     }

@@ -23,19 +23,19 @@ pub fn frf(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         return Ok(StepStatus::Skipped("no identification record".into()));
     };
     let noise = ctx.noise_record()?;
-    let mut s = ctx.frf_settings(rec.period, rec.len());
-    let has_r = rec.r.is_some();
+    let mut s = ctx.frf_settings(rec.period(), rec.len());
+    let has_r = rec.r().is_some();
     if has_r {
         s.controller = ctx.controller.as_ref().map(|c| c.state_space().clone());
     }
     // without a recorded excitation the input itself is the reference: the joint estimate is
     // then the H1 estimate u → y (open loop: unbiased; closed loop: the biased direct method)
-    let r: &[f64] = rec.r.as_deref().unwrap_or(&rec.u);
+    let r: &[f64] = rec.r().unwrap_or(rec.u());
     let record = Record {
         r,
-        u: &rec.u,
-        y: &rec.y,
-        i: rec.i.as_deref(),
+        u: rec.u(),
+        y: rec.y(),
+        i: rec.i(),
         fs: rec.fs(),
     };
     let a = analyze(&record, &s, noise.as_deref()).map_err(computation)?;
@@ -268,7 +268,7 @@ pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         } else {
             r.len()
         };
-        (r.y[..n].to_vec(), r.u[..n].to_vec())
+        (r.y()[..n].to_vec(), r.u()[..n].to_vec())
     };
     let (y, u) = cut(&rec);
     let (yv, uv) = cut(&val);
@@ -512,7 +512,7 @@ fn recommend(
     let scan_max = ORDER_SCAN_MAX.max(mcfg.orders.iter().copied().max().unwrap_or(1));
     let frf_domain = match mcfg.domain.as_deref() {
         Some(d) => d == "frf" && ctx.frf.is_some(),
-        None => rec.r.is_some() && rec.closed_loop && ctx.frf.is_some(),
+        None => rec.r().is_some() && rec.closed_loop && ctx.frf.is_some(),
     };
     let mut table = None;
     let (n, lo, hi, source, how) = if let (true, Some(a)) = (frf_domain, ctx.frf.as_ref()) {
@@ -623,11 +623,11 @@ fn recommend(
         )
     } else {
         let n = rec.len();
-        let y = faer::Mat::from_fn(n, 1, |k, _| rec.y[k]);
-        let u = faer::Mat::from_fn(n, 1, |k, _| rec.u[k]);
+        let y = faer::Mat::from_fn(n, 1, |k, _| rec.y()[k]);
+        let u = faer::Mat::from_fn(n, 1, |k, _| rec.u()[k]);
         let opts = SubspaceOptions {
             max_order: scan_max,
-            ..SubspaceOptions::new(rec.ts)
+            ..SubspaceOptions::new(rec.ts())
         };
         let fit = match n4sid_detailed(y.as_ref(), u.as_ref(), &opts) {
             Ok(f) => f,
@@ -662,7 +662,7 @@ fn recommend(
                         max_iterations: mcfg.max_iterations,
                         ..SsFitOptions::default()
                     };
-                    let e = identify_state_space(&rec.u, &rec.y, rec.ts, &so)
+                    let e = identify_state_space(rec.u(), rec.y(), rec.ts(), &so)
                         .ok()
                         .and_then(|f| {
                             // the models step's own criterion: simulation when the model is
@@ -674,8 +674,8 @@ fn recommend(
                                 o * o + 2 * o,
                                 f.pem.and_then(|p| p.kalman_gain),
                             );
-                            let (yh, _) = open_loop_response(&c, &f.model, &val.y, &val.u)?;
-                            fit_percent(&val.y, &yh).ok().map(|p| 100.0 - p)
+                            let (yh, _) = open_loop_response(&c, &f.model, val.y(), val.u())?;
+                            fit_percent(val.y(), &yh).ok().map(|p| 100.0 - p)
                         });
                     (o, e)
                 })

@@ -64,7 +64,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     let Some(rec) = ctx.ident.clone() else {
         return Ok(StepStatus::Skipped("no identification record".into()));
     };
-    let has_r = rec.r.is_some();
+    let has_r = rec.r().is_some();
     let domain = cfg.domain.clone().unwrap_or_else(|| {
         if has_r && rec.closed_loop && ctx.frf.is_some() {
             "frf".into()
@@ -77,7 +77,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             "models.domain = \"frf\" needs the frf step".into(),
         ));
     }
-    let ts = rec.ts;
+    let ts = rec.ts();
     let mut cands: Vec<Candidate> = Vec::new();
     let truth_f = ctx.frf.as_ref().map(|a| a.frf.f_hz().to_vec());
     let truth = match (&ctx.twin, &truth_f) {
@@ -137,9 +137,9 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         };
         let val = ctx.valid.as_ref();
         let vrec = match (val, &ctx.controller) {
-            (Some(v), Some(c)) if v.r.is_some() && v.closed_loop => Some(ValidationRecord {
-                r: v.r.as_deref().unwrap_or(&[]),
-                y: &v.y,
+            (Some(v), Some(c)) if v.r().is_some() && v.closed_loop => Some(ValidationRecord {
+                r: v.r().unwrap_or(&[]),
+                y: v.y(),
                 controller: c.state_space(),
                 skip: ctx.cfg.validation.skip.min(v.len() / 4),
             }),
@@ -199,7 +199,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             for &n in &cfg.orders {
                 let fitted: crate::error::Result<TimeFit> = (|| match s {
                     Structure::Arx => {
-                        let f = arx(&rec.y, &[&rec.u], &ArxOrders::siso(n, n, cfg.nk), ts)?;
+                        let f = arx(rec.y(), &[rec.u()], &ArxOrders::siso(n, n, cfg.nk), ts)?;
                         let p = f.model.to_poly(0)?;
                         Ok((p.g()?.to_state_space()?, Some(p), f.params.len(), None))
                     }
@@ -211,8 +211,8 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                             .with_focus(focus)
                             .with_open_loop(!(has_r && rec.closed_loop));
                         let (f, _) = pem::pem(
-                            &rec.y,
-                            &rec.u,
+                            rec.y(),
+                            rec.u(),
                             Structure::Oe,
                             &Orders::oe(n, n, cfg.nk),
                             ts,
@@ -228,7 +228,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                             max_iterations: cfg.max_iterations,
                             ..SsFitOptions::default()
                         };
-                        let f = identify_state_space(&rec.u, &rec.y, ts, &o)?;
+                        let f = identify_state_space(rec.u(), rec.y(), ts, &o)?;
                         let np = n * n + 2 * n;
                         let k = f.pem.and_then(|p| p.kalman_gain);
                         Ok((f.model, None, np, k))
@@ -238,8 +238,8 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                 match fitted {
                     Ok((m, poly, np, k)) => {
                         let mut c = Candidate::time_fit(sname, n, poly, np, k);
-                        let (fit, kind) = match open_loop_response(&c, &m, &val.y, &val.u) {
-                            Some((yhat, kind)) => (fit_percent(&val.y, &yhat).ok(), kind),
+                        let (fit, kind) = match open_loop_response(&c, &m, val.y(), val.u()) {
+                            Some((yhat, kind)) => (fit_percent(val.y(), &yhat).ok(), kind),
                             None => (None, "unstable without a predictor: no fit"),
                         };
                         kinds.push(kind);

@@ -22,7 +22,7 @@ pub fn excitation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                     Some(isat),
                 )
             }
-            (None, Some(r)) if r.closed_loop && r.r.is_none() => return Ok(StepStatus::Skipped(
+            (None, Some(r)) if r.closed_loop && r.r().is_none() => return Ok(StepStatus::Skipped(
                 "the record has no excitation r (the loop ran on its own noise), so there is no \
                  excitation to describe; the comparison of candidate excitations runs on the twin \
                  and on records with an excitation"
@@ -422,25 +422,30 @@ pub fn amplitude(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             for lf in &cfg.amplitude_study.files {
                 let rec: Recording =
                     super::data::load_file(cfg, &ctx.base, &lf.path, "amplitude level")?;
-                let r = rec.r.clone().ok_or_else(|| {
+                let sig = rec.signals();
+                let r = sig.r.ok_or_else(|| {
                     Error::input(format!(
                         "{}: the amplitude study needs the excitation column r",
                         rec.source
                     ))
                 })?;
                 fs = rec.fs();
-                period = rec.period;
+                period = rec.period();
                 records.push(LevelRecord {
                     level: lf.level_pct / 100.0,
                     r,
-                    u: rec.u,
-                    y: rec.y,
-                    i: rec.i,
+                    u: sig.u,
+                    y: sig.y,
+                    i: sig.i,
                     saturated_fraction: None,
                 });
             }
             let noise = match &cfg.data.noise {
-                Some(p) => Some(super::data::load_file(cfg, &ctx.base, p, "noise")?.y),
+                Some(p) => Some(
+                    super::data::load_file(cfg, &ctx.base, p, "noise")?
+                        .y()
+                        .to_vec(),
+                ),
                 None => None,
             };
             let settings = ctx.frf_settings(period, records[0].r.len());
@@ -596,14 +601,14 @@ pub fn operating_point(
         let records: Vec<crate::analysis::Record<'_>> = recs
             .iter()
             .map(|r| crate::analysis::Record {
-                r: r.r.as_deref().unwrap_or(&r.u),
-                u: &r.u,
-                y: &r.y,
-                i: r.i.as_deref(),
+                r: r.r().unwrap_or(r.u()),
+                u: r.u(),
+                y: r.y(),
+                i: r.i(),
                 fs: r.fs(),
             })
             .collect();
-        let settings = ctx.frf_settings(recs[0].period, recs[0].len());
+        let settings = ctx.frf_settings(recs[0].period(), recs[0].len());
         let names: Vec<String> = files.iter().map(|f| f.name.clone()).collect();
         let out = crate::study::operating_point_from_records(&names, &records, &settings)
             .map_err(computation)?;
@@ -804,10 +809,11 @@ pub fn bla(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                         fs
                     )));
                 }
+                let sig = rec.signals();
                 let x = crate::bla::Realisation {
-                    r: rec.r,
-                    u: rec.u,
-                    y: rec.y,
+                    r: sig.r,
+                    u: sig.u,
+                    y: sig.y,
                     saturated_fraction: rec.saturated_fraction,
                     source: rec.source,
                 };

@@ -321,8 +321,14 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     let controller = ctx.controller.clone();
     match (&controller, val.closed_loop) {
         (Some(_), true)
-            if !val.r.as_ref().is_some_and(|r| r.iter().any(|v| *v != 0.0))
-                && !val.w.as_ref().is_some_and(|w| w.iter().any(|v| *v != 0.0)) =>
+            if !val
+                .r()
+                .as_ref()
+                .is_some_and(|r| r.iter().any(|v| *v != 0.0))
+                && !val
+                    .w()
+                    .as_ref()
+                    .is_some_and(|w| w.iter().any(|v| *v != 0.0)) =>
         {
             // a record without excitation is a failure of this step, not of the whole report
             return Ok(StepStatus::Skipped(format!(
@@ -333,16 +339,16 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         }
         (Some(c), true) => {
             let zeros = vec![0.0; val.len()];
-            let w = val.w.as_deref().unwrap_or(&zeros);
+            let w = val.w().unwrap_or(&zeros);
             let mut s = settings(ctx, val.len());
             let lags = lag_choice(ctx, &model, Some(c.state_space()), val.len() - s.skip);
             s.lags = lags.lags;
             let rec = MeasuredLoop {
                 w,
-                r: val.r.as_deref(),
-                y: &val.y,
-                u: &val.u,
-                ts: val.ts,
+                r: val.r(),
+                y: val.y(),
+                u: val.u(),
+                ts: val.ts(),
             };
             // the chosen model and (twin) the exact plant through the same validation, side by side
             let (v, exact) = rayon::join(
@@ -404,10 +410,10 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                     fmt(v.fit_y),
                     fmt(v.fit_u)
                 ),
-                val.ts,
+                val.ts(),
                 &[
-                    ("y", &val.y, &v.reconstruction.simulated.y, &super::data::y_unit(ctx)),
-                    ("u", &val.u, &v.reconstruction.simulated.u, &super::data::u_unit(ctx)),
+                    ("y", val.y(), &v.reconstruction.simulated.y, &super::data::y_unit(ctx)),
+                    ("u", val.u(), &v.reconstruction.simulated.u, &super::data::u_unit(ctx)),
                 ],
             ));
             blocks.push(Block::Table(Table {
@@ -423,7 +429,7 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                 rows,
                 highlight: Some(0),
             }));
-            put_residuals(ctx, &v.residuals, &lags, val.ts);
+            put_residuals(ctx, &v.residuals, &lags, val.ts());
             if let Some(t) = &truth_res {
                 put_truth_residuals(ctx, t);
             }
@@ -438,7 +444,7 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                 },
                 "closed-loop output error y − ŷ",
                 "the output error of the model simulated in closed loop is the sensor noise through the loop, S·v, coloured even for the true plant (and correlated with u, so u is not the test signal)",
-                val.ts,
+                val.ts(),
                 &lags,
                 ctx.twin
                     .as_ref()
@@ -459,30 +465,30 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             // open loop: simulate (stable) or predict one step (unstable) on the validation record
             let c = &ctx.candidates[ch];
             let Some((yhat, kind)) =
-                super::steps_models::open_loop_response(c, &model, &val.y, &val.u)
+                super::steps_models::open_loop_response(c, &model, val.y(), val.u())
             else {
                 return Ok(StepStatus::Skipped(format!(
                     "{label} is unstable and has no predictor: it cannot be validated in open loop"
                 )));
             };
-            let fit = fit_percent(&val.y, &yhat).map_err(computation)?;
+            let fit = fit_percent(val.y(), &yhat).map_err(computation)?;
             let vs = ctx.typed.validation.get_or_insert_with(Default::default);
             vs.model = Some(label.clone());
             vs.fit_y_pct = Some(fit);
             vs.kind = Some(kind.to_string());
-            let eps: Vec<f64> = val.y.iter().zip(&yhat).map(|(a, b)| a - b).collect();
+            let eps: Vec<f64> = val.y().iter().zip(&yhat).map(|(a, b)| a - b).collect();
             // the quantity that should be white / independent (docs/validation.md): a one-step
             // prediction error of a model with a noise model is white and independent of the
             // input; a simulation error (no noise model) is only independent of it. In closed loop
             // the test signal is the excitation r (or reference w), never u (it contains −C v).
             let test_signal: Option<(&[f64], &str)> = if closed {
-                match (val.r.as_deref(), val.w.as_deref()) {
+                match (val.r(), val.w()) {
                     (Some(r), _) if r.iter().any(|v| *v != 0.0) => Some((r, "excitation r")),
                     (_, Some(w)) if w.iter().any(|v| *v != 0.0) => Some((w, "reference w")),
                     _ => None,
                 }
             } else {
-                Some((&val.u, "input u"))
+                Some((val.u(), "input u"))
             };
             let lag_rule = lag_choice(ctx, &model, None, val.len());
             let lags = lag_rule.lags;
@@ -506,13 +512,13 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                     "Measured output and the model's {kind} on the validation record; fit {} %.",
                     fmt(fit)
                 ),
-                val.ts,
-                &[("y", &val.y, &yhat, &super::data::y_unit(ctx))],
+                val.ts(),
+                &[("y", val.y(), &yhat, &super::data::y_unit(ctx))],
             ));
             match res {
                 Some((res, signal)) => {
                     let res = res.map_err(computation)?;
-                    put_residuals(ctx, &res, &lag_rule, val.ts);
+                    put_residuals(ctx, &res, &lag_rule, val.ts());
                     blocks.extend(residual_blocks(
                         &res,
                         None,
@@ -520,7 +526,7 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                         signal,
                         if one_step { "1-step prediction error" } else { "simulation error" },
                         "the simulation error of a model is the noise as it reaches the output, coloured unless the noise is white, whatever the model",
-                        val.ts,
+                        val.ts(),
                         &lag_rule,
                         false,
                     ));
@@ -579,13 +585,13 @@ pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         (w, rec.y, rec.u, rec.ts, "the twin".to_string())
     } else if let Some(p) = ctx.cfg.data.reconstruction.clone() {
         let r = super::data::load_file(ctx.cfg, &ctx.base, &p, "reconstruction")?;
-        let Some(w) = r.w.clone() else {
+        let Some(w) = r.w().map(<[f64]>::to_vec) else {
             return Err(Error::input(format!(
                 "{}: the reconstruction record needs the position reference column ([data] w = \"…\")",
                 r.source
             )));
         };
-        (w, r.y, r.u, r.ts, r.source)
+        (w, r.y().to_vec(), r.u().to_vec(), r.ts(), r.source)
     } else {
         return Ok(StepStatus::Skipped(
             "no chirp-reference record ([data] reconstruction = \"chirp.csv\" with a w column)"
@@ -854,7 +860,7 @@ pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         &ctx.frf,
         ctx.ident
             .as_ref()
-            .is_some_and(|r| r.r.is_some() && r.closed_loop),
+            .is_some_and(|r| r.r().is_some() && r.closed_loop),
     ) {
         let s = &a.frf.t_ru;
         // the peak over the lines of the FRF band where S is known to ±10 % (docs/validation.md)
