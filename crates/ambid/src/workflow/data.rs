@@ -473,6 +473,30 @@ pub fn plant_unit(ctx: &Ctx<'_>) -> String {
     }
 }
 
+/// The units the report labels its axes and tables with (what a section renderer needs besides
+/// its stage's typed result).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Units {
+    /// Unit of y ([`y_unit`]).
+    pub y: String,
+    /// Unit of u ([`u_unit`]).
+    pub u: String,
+    /// Unit of a plant magnitude |y/u| ([`plant_unit`]).
+    pub plant: String,
+}
+
+impl Units {
+    /// The units of the run's data.
+    pub fn of(ctx: &Ctx<'_>) -> Self {
+        let (y, u) = units(ctx);
+        Self {
+            y,
+            u,
+            plant: plant_unit(ctx),
+        }
+    }
+}
+
 fn note_of((kind, text): (NoteKind, String)) -> Block {
     Ctx::note(kind, text)
 }
