@@ -11,6 +11,7 @@ use ambid_core::signal::{
 };
 
 /// One signal of the comparison.
+#[derive(Debug, Clone)]
 pub struct Compared {
     /// Family name (`prbs`, `chirp`, `noise`, `multisine`).
     pub name: &'static str,
@@ -25,6 +26,7 @@ pub struct Compared {
 }
 
 /// The four signals on a common grid.
+#[derive(Debug, Clone)]
 pub struct Comparison {
     /// Sample time, s.
     pub ts: f64,

@@ -8,7 +8,7 @@
 //! |---|---|---|
 //! | seeds | the workflow seed | [`Seeds`] |
 //! | acquisition (twin) | [`TwinSource`], [`AcquisitionPlan`] | [`Acquisition`] (identification, validation and noise records) |
-//! | excitation comparison | sample rate, level, [`Seeds::comparison`] | [`crate::comparison::Comparison`] |
+//! | excitation design | [`ExcitationInput`] (sample rate, level, [`Seeds::comparison`], the identification plan) | [`ExcitationStage`] |
 //! | amplitude study | [`crate::study::TwinAmplitudeStudy`] | [`AmplitudeStage`] |
 //! | operating-point study | [`OperatingPointInput`] | [`crate::study::OperatingPointOutcome`] |
 //! | robust BLA study | [`BlaInput`] | [`crate::bla::BlaStudy`] |
@@ -42,11 +42,16 @@
 //! ```
 
 mod acquisition;
+mod excitation;
 mod seeds;
 mod studies;
 
 pub use self::acquisition::{
     acquire_twin, excitation_kind, Acquisition, AcquisitionPlan, Recording, Signals, TwinSource,
+};
+pub use self::excitation::{
+    excitation_design, hold_3db_hz, spectrum_3db_hz, ExcitationInput, ExcitationStage,
+    IdentificationDesign,
 };
 pub use self::seeds::Seeds;
 pub use self::studies::{

@@ -18,6 +18,7 @@ pub mod config;
 mod data;
 pub mod figures;
 mod outcome;
+mod render_signal;
 mod steps_frf;
 mod steps_models;
 mod steps_signal;
@@ -219,6 +220,12 @@ pub struct Outcome {
     pub models: Vec<ModelOut>,
     /// Time per step.
     pub timings: Vec<StepTime>,
+    /// The excitation stage's result (when the step ran).
+    pub excitation: Option<crate::stage::ExcitationStage>,
+    /// The operating-point study's result (when the step ran).
+    pub operating_point: Option<crate::study::OperatingPointOutcome>,
+    /// The robust BLA study's result (when the step ran).
+    pub bla: Option<crate::bla::BlaStudy>,
 }
 
 /// Stage outputs computed ahead of their step (in parallel with other stages), each with its
@@ -266,6 +273,12 @@ pub(crate) struct Ctx<'a> {
     pub chosen: Option<usize>,
     /// Validation outcome of the chosen model.
     pub validation: Option<crate::validation::ValidationOutcome>,
+    /// The excitation stage's result.
+    pub excitation: Option<crate::stage::ExcitationStage>,
+    /// The operating-point study's result.
+    pub operating_point: Option<crate::study::OperatingPointOutcome>,
+    /// The robust BLA study's result.
+    pub bla: Option<crate::bla::BlaStudy>,
 }
 
 impl Ctx<'_> {
@@ -550,6 +563,9 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
         candidates: Vec::new(),
         chosen: None,
         validation: None,
+        excitation: None,
+        operating_point: None,
+        bla: None,
     };
     let mut data_section = data::describe(&mut ctx);
     data_section.blocks.extend(fallback_note);
@@ -670,6 +686,9 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
         summary,
         models: ctx.models,
         timings,
+        excitation: ctx.excitation,
+        operating_point: ctx.operating_point,
+        bla: ctx.bla,
     })
 }
 
