@@ -7,8 +7,9 @@ use ambid::io::output::write_file;
 use ambid::io::read_controller;
 use ambid::io::OutputSet;
 use ambid_core::lti::Structure;
+use ambid::stage::{choose, Select};
 use ambid_core::validate::compare::{
-    choose, compare_models, supported_unstable_poles, table, CompareSpec, ValidationRecord,
+    compare_models, supported_unstable_poles, table, CompareSpec, ValidationRecord,
 };
 use anyhow::Result;
 use clap::Args;
@@ -137,7 +138,10 @@ pub fn compare(a: CompareModelsArgs) -> Result<()> {
     if let Some(d) = controller_desc {
         println!("closed-loop validation with controller: {d}");
     }
-    match choose(&rows) {
+    // the models stage's choice rule (`ambid run`'s, with the default `[models] select`): among
+    // the valid rows only
+    let choice = choose(&rows, Select::Validation);
+    match choice.index.filter(|_| choice.among_valid) {
         Some(i) => println!(
             "chosen: {} {} (the best {} among the valid rows)",
             rows[i].structure.name(),

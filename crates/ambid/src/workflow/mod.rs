@@ -15,7 +15,7 @@
 
 /// The candidate types, now in [`crate::stage`] (re-exported where the steps use them).
 mod candidates {
-    pub use crate::stage::{open_loop_response, Candidate, ONE_STEP, SIMULATION};
+    pub use crate::stage::{open_loop_response, Candidate, ONE_STEP};
 }
 pub mod config;
 mod data;
