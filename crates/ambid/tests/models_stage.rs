@@ -214,14 +214,20 @@ fn the_choice_rule_is_the_cores_on_valid_rows_and_falls_back_as_documented() {
                 let valid = fitted && next() % 3 != 0;
                 let fit = (next() % 4 != 0).then(|| (next() % 1000) as f64 / 10.0);
                 let bic = (next() % 4 != 0).then(|| -((next() % 1000) as f64));
-                row(valid, fit.filter(|_| fitted), bic.filter(|_| fitted), fitted)
+                row(
+                    valid,
+                    fit.filter(|_| fitted),
+                    bic.filter(|_| fitted),
+                    fitted,
+                )
             })
             .collect();
         let c = choose(&rows, Select::Validation);
         let core = ambid_core::validate::compare::choose(&rows);
         assert_eq!(c.index.filter(|_| c.among_valid), core);
         // naive oracles
-        let argmin = |keep: &dyn Fn(&CompareRow) -> bool, key: &dyn Fn(&CompareRow) -> Option<f64>| {
+        let argmin = |keep: &dyn Fn(&CompareRow) -> bool,
+                      key: &dyn Fn(&CompareRow) -> Option<f64>| {
             let mut best: Option<(usize, f64)> = None;
             for (i, r) in rows.iter().enumerate() {
                 if let Some(v) = key(r).filter(|_| keep(r)) {

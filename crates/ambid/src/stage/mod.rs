@@ -57,8 +57,9 @@ pub use self::candidates::{
     open_loop_response, simulate_from_estimated_state, Candidate, ONE_STEP, SIMULATION,
 };
 pub use self::models::{
-    choose, models, BandChoice, Choice, FitCurve, MeasuredPlant, ModelOut, ModelsInput,
-    ModelsStage, Overlay, Scored, Select, UnstableChoice,
+    choose, frf_candidates, models, unstable_pole_rule, BandChoice, Choice, FitCurve,
+    FrfCandidates, MeasuredPlant, ModelOut, ModelsInput, ModelsStage, Overlay, Scored, Select,
+    UnstableChoice,
 };
 pub use self::pole_zero::{
     pole_zero, ChosenPz, PoleHz, PoleZeroInput, PoleZeroStage, PzRow, SPlane,

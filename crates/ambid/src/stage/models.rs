@@ -16,7 +16,7 @@ use ambid_core::estimate::arx::{arx, ArxOrders};
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::estimate::pem::{self, Orders, PemOptions};
 use ambid_core::frf::band::{fit_band, FIT_REL_HALFWIDTH};
-use ambid_core::lti::{PolyModel, StateSpace, Structure};
+use ambid_core::lti::{Frd, PolyModel, StateSpace, Structure};
 use ambid_core::validate::compare::{
     compare_models, supported_unstable_poles, CompareRow, CompareSpec, ValidationRecord,
 };
@@ -338,6 +338,62 @@ impl ModelsStage {
     }
 }
 
+/// The unstable-pole rule of the FRF fits: `given` (`[models] unstable_poles`,
+/// `--unstable-poles`) when set, else the Nyquist count of the measured loop with the
+/// controller, $n_u(P) = W - n_u(C)$, over `explicit_band` (all lines when `None`);
+/// unconstrained without a controller (`ambid_core::validate::compare::supported_unstable_poles`).
+/// `ambid run`, `ambid fit` on an FRF file and `compare-models` all apply it.
+pub fn unstable_pole_rule(
+    plant: &Frd,
+    controller: Option<&StateSpace>,
+    explicit_band: Option<(f64, f64)>,
+    given: Option<usize>,
+) -> UnstableChoice {
+    let (supported, how) = supported_unstable_poles(plant, controller, explicit_band, given);
+    UnstableChoice { supported, how }
+}
+
+/// The FRF fits of a comparison: structures × orders with their input delay and fit options.
+#[derive(Debug, Clone)]
+pub struct FrfCandidates<'a> {
+    /// Structures (ARX, OE, SS).
+    pub structures: &'a [Structure],
+    /// Orders.
+    pub orders: &'a [usize],
+    /// Input delay of the ARX and OE models in samples.
+    pub nk: usize,
+    /// Band, weights and iteration limit.
+    pub fit: FreqFitOptions,
+}
+
+/// Fits every structure × order of `fits` to the measured plant FRF and scores it
+/// (`ambid_core::validate::compare::compare_models`): each fit held to the unstable-pole count
+/// of `unstable` ([`unstable_pole_rule`]), a row valid only with that count and a stable loop
+/// with `controller`, the closed-loop validation fit on `validation` when given. The comparison
+/// of `ambid run`'s models stage, `compare-models` and `ambid fit` on an FRF file.
+///
+/// # Errors
+/// Invalid input to the comparison (a bad band or weights, a structure an FRF fit does not
+/// take); a candidate that fails is a row with the reason in its note.
+pub fn frf_candidates(
+    plant: &Frd,
+    fits: &FrfCandidates<'_>,
+    unstable: &UnstableChoice,
+    controller: Option<&StateSpace>,
+    validation: Option<ValidationRecord<'_>>,
+) -> ambid_core::Result<Vec<CompareRow>> {
+    let spec = CompareSpec {
+        structures: fits.structures.to_vec(),
+        orders: fits.orders.to_vec(),
+        nk: fits.nk,
+        fit: fits.fit.clone(),
+        unstable_poles: unstable.supported,
+        controller: controller.cloned(),
+        ..CompareSpec::default()
+    };
+    compare_models(plant, &spec, validation)
+}
+
 /// `orders` with the recommended range `(lo, hi)` added, sorted, each added order capped by
 /// the record's parameter budget (`n / SAMPLES_PER_PARAMETER` samples per parameter) and
 /// [`MAX_MODEL_ORDER`].
@@ -484,9 +540,9 @@ pub fn models(input: &ModelsInput<'_>) -> Result<ModelsStage> {
             _ if frd.variance().is_some() => FreqWeights::InverseVariance,
             _ => FreqWeights::Uniform,
         };
-        let spec = CompareSpec {
-            structures: cfg.structures.to_vec(),
-            orders: cfg.orders.clone(),
+        let fits = FrfCandidates {
+            structures: &cfg.structures,
+            orders: &cfg.orders,
             nk: cfg.nk,
             fit: FreqFitOptions {
                 band_hz: Some(fit_band_hz),
@@ -494,19 +550,9 @@ pub fn models(input: &ModelsInput<'_>) -> Result<ModelsStage> {
                 max_iterations: cfg.max_iterations,
                 ..FreqFitOptions::default()
             },
-            ..CompareSpec::default()
         };
         let ctrl = input.controller.map(|c| c.state_space());
-        let (n_u, how) = supported_unstable_poles(frd, ctrl, explicit_band, cfg.unstable_poles);
-        unstable = Some(UnstableChoice {
-            supported: n_u,
-            how,
-        });
-        let spec = CompareSpec {
-            unstable_poles: n_u,
-            controller: ctrl.cloned(),
-            ..spec
-        };
+        let rule = unstable_pole_rule(frd, ctrl, explicit_band, cfg.unstable_poles);
         let vrec = match (input.validation, input.controller) {
             (Some(v), Some(c)) if v.r().is_some() && v.closed_loop => Some(ValidationRecord {
                 r: v.r().unwrap_or(&[]),
@@ -521,7 +567,8 @@ pub fn models(input: &ModelsInput<'_>) -> Result<ModelsStage> {
         } else {
             "none (no controller or no validation record with r)".into()
         };
-        let rows = compare_models(frd, &spec, vrec).map_err(computation)?;
+        let rows = frf_candidates(frd, &fits, &rule, ctrl, vrec).map_err(computation)?;
+        unstable = Some(rule);
         for r in rows {
             let truth_med = match (&r.model, &truth, &truth_f) {
                 (Some(m), Some(t), Some(f)) => {
@@ -663,7 +710,9 @@ pub fn models(input: &ModelsInput<'_>) -> Result<ModelsStage> {
         f_hz: a.frf.f_hz().to_vec(),
         plant: a.frf.plant.values().to_vec(),
     });
-    let overlays = measured.as_ref().map_or_else(Vec::new, |m| overlays(&cands, m));
+    let overlays = measured
+        .as_ref()
+        .map_or_else(Vec::new, |m| overlays(&cands, m));
     let export = export(&cands, choice.index, &domain);
     let truth_unstable_poles = input
         .twin

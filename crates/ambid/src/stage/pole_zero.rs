@@ -158,7 +158,12 @@ pub fn pole_zero(input: &PoleZeroInput<'_>) -> Result<PoleZeroStage> {
             .map_err(|e| Error::classified(FailureClass::Computation, e))?;
         let poles: Vec<c64> = pz.poles.iter().map(|r| r.z).collect();
         let zeros: Vec<c64> = pz.zeros.iter().map(|r| r.z).collect();
-        let unstable: Vec<c64> = pz.poles.iter().filter(|r| r.unstable).map(|r| r.z).collect();
+        let unstable: Vec<c64> = pz
+            .poles
+            .iter()
+            .filter(|r| r.unstable)
+            .map(|r| r.z)
+            .collect();
         let min_d = pz
             .cancellations
             .iter()

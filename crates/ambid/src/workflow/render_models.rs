@@ -314,7 +314,10 @@ pub(crate) fn pole_zero_section(stage: &PoleZeroStage) -> Section {
         highlight: None,
     }));
     if !ct_rows.is_empty() {
-        let label = stage.chosen.as_ref().map_or(String::new(), |c| c.label.clone());
+        let label = stage
+            .chosen
+            .as_ref()
+            .map_or(String::new(), |c| c.label.clone());
         blocks.push(Block::Table(Table {
             id: "poles_hz".into(),
             caption: format!(

@@ -398,11 +398,7 @@ pub(crate) fn section(
         rows,
         highlight: None,
     })];
-    out.extend(
-        warnings
-            .into_iter()
-            .map(|(kind, text)| note(kind, text)),
-    );
+    out.extend(warnings.into_iter().map(|(kind, text)| note(kind, text)));
     out.push(Block::Text(
         "Every number of this run is in summary.json beside this page (with its key; units in \
          the key: _pct %, _hz Hz, _s s, _db dB, otherwise SI); each figure's data and each \
