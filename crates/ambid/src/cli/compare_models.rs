@@ -6,10 +6,9 @@ use super::common::{frf_input, WeightsArg};
 use ambid::io::output::write_file;
 use ambid::io::read_controller;
 use ambid::io::OutputSet;
+use ambid::stage::{choose, frf_candidates, unstable_pole_rule, FrfCandidates, Select};
 use ambid_core::lti::Structure;
-use ambid_core::validate::compare::{
-    choose, compare_models, supported_unstable_poles, table, CompareSpec, ValidationRecord,
-};
+use ambid_core::validate::compare::{table, ValidationRecord};
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
@@ -85,19 +84,18 @@ pub fn compare(a: CompareModelsArgs) -> Result<()> {
         a.weights,
         a.max_iterations,
     )?;
-    let mut spec = CompareSpec {
-        structures: a.structures.clone(),
-        orders: a.orders.clone(),
-        nk: a.nk,
-        fit: input.opts.clone(),
-        ..CompareSpec::default()
-    };
-    if spec.orders.contains(&0) {
+    if a.orders.contains(&0) {
         return Err(ambid::error::Error::usage(
             "--orders: every order must be at least 1".to_string(),
         )
         .into());
     }
+    let fits = FrfCandidates {
+        structures: &a.structures,
+        orders: &a.orders,
+        nk: a.nk,
+        fit: input.opts.clone(),
+    };
     let ctrl = match &a.controller {
         Some(c) => {
             let ctrl = read_controller(c)?;
@@ -107,15 +105,9 @@ pub fn compare(a: CompareModelsArgs) -> Result<()> {
         }
         None => None,
     };
-    let (n_u, how) = supported_unstable_poles(
-        &input.frd,
-        ctrl.as_ref().map(|c| c.state_space()),
-        input.explicit_band,
-        a.unstable_poles,
-    );
-    println!("unstable plant poles: {how}");
-    spec.unstable_poles = n_u;
-    spec.controller = ctrl.as_ref().map(|c| c.state_space().clone());
+    let ctrl_ss = ctrl.as_ref().map(|c| c.state_space());
+    let rule = unstable_pole_rule(&input.frd, ctrl_ss, input.explicit_band, a.unstable_poles);
+    println!("unstable plant poles: {}", rule.how);
     let (rows, controller_desc) = match (&a.validation, &ctrl) {
         (Some(v), Some(ctrl)) => {
             let d = a.file.read(v, a.fs)?;
@@ -127,17 +119,23 @@ pub fn compare(a: CompareModelsArgs) -> Result<()> {
                 skip: a.skip,
             };
             (
-                compare_models(&input.frd, &spec, Some(rec))?,
+                frf_candidates(&input.frd, &fits, &rule, ctrl_ss, Some(rec))?,
                 Some(ctrl.description().to_string()),
             )
         }
-        _ => (compare_models(&input.frd, &spec, None)?, None),
+        _ => (
+            frf_candidates(&input.frd, &fits, &rule, ctrl_ss, None)?,
+            None,
+        ),
     };
     print!("{}", table(&rows));
     if let Some(d) = controller_desc {
         println!("closed-loop validation with controller: {d}");
     }
-    match choose(&rows) {
+    // the models stage's choice rule (`ambid run`'s, with the default `[models] select`): among
+    // the valid rows only
+    let choice = choose(&rows, Select::Validation);
+    match choice.index.filter(|_| choice.among_valid) {
         Some(i) => println!(
             "chosen: {} {} (the best {} among the valid rows)",
             rows[i].structure.name(),

@@ -8,11 +8,12 @@ use ambid::io::model::{model_json_bytes, polynomial_json};
 use ambid::io::output::write_file;
 use ambid::io::read_controller;
 use ambid::io::OutputSet;
+use ambid::stage::{frf_candidates, unstable_pole_rule, FrfCandidates};
 use ambid_core::estimate::arx::{arx, ArxOrders};
 use ambid_core::estimate::pem::{self, Focus, Orders, PemOptions};
 use ambid_core::estimate::Fitted;
 use ambid_core::lti::{PolyModel, Structure};
-use ambid_core::validate::compare::{compare_models, supported_unstable_poles, table, CompareSpec};
+use ambid_core::validate::compare::table;
 use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
 use serde_json::json;
@@ -1160,23 +1161,17 @@ pub fn fit_frf(
         }
         None => None,
     };
-    let (n_u, how) = supported_unstable_poles(
-        &input.frd,
-        ctrl.as_ref().map(|c| c.state_space()),
-        input.explicit_band,
-        unstable_poles,
-    );
-    println!("unstable plant poles: {how}");
-    let spec = CompareSpec {
-        structures: vec![structure],
-        orders: vec![order],
+    let ctrl_ss = ctrl.as_ref().map(|c| c.state_space());
+    let rule = unstable_pole_rule(&input.frd, ctrl_ss, input.explicit_band, unstable_poles);
+    println!("unstable plant poles: {}", rule.how);
+    let fits = FrfCandidates {
+        structures: &[structure],
+        orders: &[order],
         nk,
         fit: input.opts.clone(),
-        unstable_poles: n_u,
-        controller: ctrl.as_ref().map(|c| c.state_space().clone()),
-        ..CompareSpec::default()
     };
-    let rows = compare_models(&input.frd, &spec, None)?;
+    let rows = frf_candidates(&input.frd, &fits, &rule, ctrl_ss, None)?;
+    let n_u = rule.supported;
     let row = &rows[0];
     let Some(model) = &row.model else {
         return Err(ambid::error::Error::computation(format!(

@@ -13,6 +13,8 @@
 //! | operating-point study | [`OperatingPointInput`] | [`crate::study::OperatingPointOutcome`] |
 //! | robust BLA study | [`BlaInput`] | [`crate::bla::BlaStudy`] |
 //! | nonparametric FRF | [`crate::analysis::Record`], [`FrfSettings`] | [`crate::analysis::FrfAnalysis`] |
+//! | model candidates and choice | [`ModelsInput`] | [`ModelsStage`] |
+//! | pole-zero check | [`PoleZeroInput`] | [`PoleZeroStage`] |
 //!
 //! Stages do not import each other except to read an upstream stage's output type, and none
 //! depends on the report or on the workflow's state; every random number comes from a seed in
@@ -42,16 +44,30 @@
 //! ```
 
 mod acquisition;
+mod candidates;
 mod excitation;
+mod models;
+mod pole_zero;
 mod seeds;
 mod studies;
 
 pub use self::acquisition::{
     acquire_twin, excitation_kind, Acquisition, AcquisitionPlan, Recording, Signals, TwinSource,
 };
+pub use self::candidates::{
+    open_loop_response, simulate_from_estimated_state, Candidate, ONE_STEP, SIMULATION,
+};
 pub use self::excitation::{
     excitation_design, hold_3db_hz, spectrum_3db_hz, ExcitationInput, ExcitationStage,
     IdentificationDesign,
+};
+pub use self::models::{
+    choose, frf_candidates, models, unstable_pole_rule, BandChoice, Choice, FitCurve,
+    FrfCandidates, MeasuredPlant, ModelOut, ModelsInput, ModelsStage, Overlay, Scored, Select,
+    UnstableChoice,
+};
+pub use self::pole_zero::{
+    pole_zero, ChosenPz, PoleHz, PoleZeroInput, PoleZeroStage, PzRow, SPlane,
 };
 pub use self::seeds::Seeds;
 pub use self::studies::{

@@ -13,11 +13,15 @@
 //! recorded files. A step the data do not allow (closed-loop steps on open-loop data, the twin's
 //! studies on files without one record per level) is skipped with a note in the report.
 
-mod candidates;
+/// The candidate types, now in [`crate::stage`] (re-exported where the steps use them).
+mod candidates {
+    pub use crate::stage::{open_loop_response, Candidate, ONE_STEP};
+}
 pub mod config;
 mod data;
 pub mod figures;
 mod outcome;
+mod render_models;
 mod render_signal;
 mod steps_frf;
 mod steps_models;
@@ -31,7 +35,6 @@ pub use self::outcome::*;
 use crate::io::output::OutputDir;
 use crate::report::{Block, NoteKind, Report, Section};
 use crate::stage::Seeds;
-use ambid_core::lti::{PolyModel, StateSpace};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -181,20 +184,7 @@ impl Progress {
     }
 }
 
-/// An identified model kept for export.
-#[derive(Debug, Clone)]
-pub struct ModelOut {
-    /// File stem, e.g. `oe8`.
-    pub name: String,
-    /// The state-space form (always).
-    pub ss: StateSpace,
-    /// The polynomial form, when the model was fitted as one.
-    pub poly: Option<PolyModel>,
-    /// Kalman gain of the innovations form, when the model has one (exported with it).
-    pub kalman: Option<Vec<f64>>,
-    /// Metadata for the JSON (structure, order, fit figures).
-    pub meta: Value,
-}
+pub use crate::stage::ModelOut;
 
 /// Time spent per step.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -226,6 +216,10 @@ pub struct Outcome {
     pub operating_point: Option<crate::study::OperatingPointOutcome>,
     /// The robust BLA study's result (when the step ran).
     pub bla: Option<crate::bla::BlaStudy>,
+    /// The models stage's typed result (candidates, choice, curves), when it ran.
+    pub models_stage: Option<crate::stage::ModelsStage>,
+    /// The pole-zero stage's typed result, when it ran.
+    pub pole_zero_stage: Option<crate::stage::PoleZeroStage>,
 }
 
 /// Stage outputs computed ahead of their step (in parallel with other stages), each with its
@@ -279,6 +273,10 @@ pub(crate) struct Ctx<'a> {
     pub operating_point: Option<crate::study::OperatingPointOutcome>,
     /// The robust BLA study's result.
     pub bla: Option<crate::bla::BlaStudy>,
+    /// The models stage's result.
+    pub models_stage: Option<crate::stage::ModelsStage>,
+    /// The pole-zero stage's result.
+    pub pole_zero_stage: Option<crate::stage::PoleZeroStage>,
 }
 
 impl Ctx<'_> {
@@ -566,6 +564,8 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
         excitation: None,
         operating_point: None,
         bla: None,
+        models_stage: None,
+        pole_zero_stage: None,
     };
     let mut data_section = data::describe(&mut ctx);
     data_section.blocks.extend(fallback_note);
@@ -651,7 +651,15 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
     let mut sections = sections_prelude;
     sections.extend(tagged.into_iter().map(|(_, s)| s));
     // the answer first; every number stays in summary.json (linked, no longer dumped here)
-    sections.insert(0, summary::section(&ctx.typed, &sections, &ctx));
+    sections.insert(
+        0,
+        summary::section(
+            &ctx.typed,
+            &sections,
+            ctx.models_stage.as_ref(),
+            ctx.is_closed_loop(),
+        ),
+    );
     let title = cfg.title.clone().unwrap_or_else(|| match cfg.source {
         config::SourceKind::Twin => {
             "ambid: closed-loop identification of the embedded AMB twin".into()
@@ -689,6 +697,8 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
         excitation: ctx.excitation,
         operating_point: ctx.operating_point,
         bla: ctx.bla,
+        models_stage: ctx.models_stage,
+        pole_zero_stage: ctx.pole_zero_stage,
     })
 }
 

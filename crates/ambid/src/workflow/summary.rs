@@ -3,19 +3,32 @@
 //! and ISO 14839-3 zone, stability margins, unstable poles) and every warning of the run.
 //!
 //! Everything here is read from the run's typed outcome ([`super::Summary`], what
-//! `summary.json` holds), the chosen model and the notes of the other sections; nothing is
-//! computed twice.
+//! `summary.json` holds), the models stage's typed result ([`ModelsStage`]: the chosen model,
+//! its unstable poles and, on the twin, the exact plant's) and the notes of the other sections;
+//! nothing is computed here.
 
-use super::{Ctx, Summary};
+use super::Summary;
 use crate::report::{format_number as fmt, Block, NoteKind, Section, Table};
+use crate::stage::ModelsStage;
+
+fn note(kind: NoteKind, text: String) -> Block {
+    Block::Note { kind, text }
+}
 
 /// A number as `summary.json` keeps it: `None` when absent or not finite (written as `null`).
 fn fin(x: Option<f64>) -> Option<f64> {
     x.filter(|v| v.is_finite())
 }
 
-/// The summary section (id `summary`), built after every step ran.
-pub(crate) fn section(summary: &Summary, sections: &[Section], ctx: &Ctx<'_>) -> Section {
+/// The summary section (id `summary`), built after every step ran from the typed `summary`, the
+/// other `sections` (their warnings), the models stage's result `stage` and whether the
+/// identification record is `closed_loop`.
+pub(crate) fn section(
+    summary: &Summary,
+    sections: &[Section],
+    stage: Option<&ModelsStage>,
+    closed_loop: bool,
+) -> Section {
     let s = summary;
     let models = s.models.as_ref();
     let validation = s.validation.as_ref();
@@ -25,7 +38,7 @@ pub(crate) fn section(summary: &Summary, sections: &[Section], ctx: &Ctx<'_>) ->
     let residuals = s.residuals.as_ref();
     let mut rows: Vec<Vec<String>> = Vec::new();
     let mut blocks = Vec::new();
-    let twin = ctx.twin.is_some();
+    let twin = s.data.as_ref().and_then(|d| d.source.as_deref()) == Some("twin");
 
     // the chosen model
     if let Some(chosen) = models.and_then(|m| m.chosen.clone()) {
@@ -35,7 +48,7 @@ pub(crate) fn section(summary: &Summary, sections: &[Section], ctx: &Ctx<'_>) ->
         {
             let how = match validation.and_then(|v| v.kind.clone()) {
                 Some(kind) => format!("{kind}, independent record"),
-                None if ctx.is_closed_loop() => {
+                None if closed_loop => {
                     "closed loop with the controller, independent record".to_string()
                 }
                 None => "independent record".to_string(),
@@ -167,7 +180,7 @@ pub(crate) fn section(summary: &Summary, sections: &[Section], ctx: &Ctx<'_>) ->
             "Excitation-amplitude study, Robust BLA".into(),
         ]);
         if let Some(n) = level_note {
-            blocks.push(Ctx::note(NoteKind::Warning, n));
+            blocks.push(note(NoteKind::Warning, n));
         }
     }
 
@@ -229,18 +242,15 @@ pub(crate) fn section(summary: &Summary, sections: &[Section], ctx: &Ctx<'_>) ->
     }
 
     // unstable poles of the chosen model, in z and as s = fs ln z
-    if let Some(m) = ctx
-        .chosen
-        .and_then(|c| ctx.candidates.get(c))
-        .and_then(|c| c.model.as_ref())
+    if let Some((stage, m)) =
+        stage.and_then(|st| Some((st, st.chosen().and_then(|c| c.model.as_ref())?)))
     {
         let fs = fin(s.data.as_ref().and_then(|d| d.fs_hz))
             .or_else(|| m.ts().map(|t| 1.0 / t))
             .unwrap_or(1.0);
-        let poles = ambid_core::linalg::eigenvalues(m.a()).unwrap_or_default();
-        let unstable: Vec<String> = poles
+        let unstable: Vec<String> = stage
+            .chosen_unstable
             .iter()
-            .filter(|z| z.norm() > 1.0 && z.im >= 0.0)
             .map(|z| {
                 let s = z.ln() * fs;
                 if z.im.abs() < 1e-12 {
@@ -266,18 +276,14 @@ pub(crate) fn section(summary: &Summary, sections: &[Section], ctx: &Ctx<'_>) ->
             .map_or(String::new(), |n| {
                 format!("; the data support {n:.0} (Nyquist count of the measured loop)")
             });
-        let truth = match &ctx.twin {
-            Some(t) => t
-                .twin
-                .plant_unstable_poles()
-                .ok()
-                .filter(|p| !p.is_empty())
-                .map_or(String::new(), |p| {
-                    let list: Vec<String> = p.iter().map(|z| format!("{:.5}", z.re)).collect();
-                    format!("; the twin's exact plant: z = {}", list.join(", "))
-                }),
-            None => String::new(),
-        };
+        let truth = stage
+            .truth_unstable_poles
+            .as_ref()
+            .filter(|p| !p.is_empty())
+            .map_or(String::new(), |p| {
+                let list: Vec<String> = p.iter().map(|z| format!("{:.5}", z.re)).collect();
+                format!("; the twin's exact plant: z = {}", list.join(", "))
+            });
         rows.push(vec![
             "unstable poles of the chosen model".into(),
             if unstable.is_empty() {
@@ -392,11 +398,7 @@ pub(crate) fn section(summary: &Summary, sections: &[Section], ctx: &Ctx<'_>) ->
         rows,
         highlight: None,
     })];
-    out.extend(
-        warnings
-            .into_iter()
-            .map(|(kind, text)| Ctx::note(kind, text)),
-    );
+    out.extend(warnings.into_iter().map(|(kind, text)| note(kind, text)));
     out.push(Block::Text(
         "Every number of this run is in summary.json beside this page (with its key; units in \
          the key: _pct %, _hz Hz, _s s, _db dB, otherwise SI); each figure's data and each \

@@ -1,4 +1,4 @@
-//! A model candidate of the models step and how it answers on a record: the types the order,
+//! A model candidate of the models stage and how it answers on a record: the types the order,
 //! models, pole-zero and validation steps share (no step imports another step for them).
 
 use ambid_core::lti::{PolyModel, StateSpace};
@@ -6,21 +6,34 @@ use ambid_core::lti::{PolyModel, StateSpace};
 /// One fitted candidate.
 #[derive(Debug, Clone)]
 pub struct Candidate {
+    /// `arx`, `oe` or `ss`.
     pub structure: &'static str,
+    /// Model order.
     pub order: usize,
+    /// The fitted model (`None`: the fit failed, the reason is in `note`).
     pub model: Option<StateSpace>,
+    /// Its polynomial form, when fitted as one (time-domain ARX/OE).
     pub poly: Option<PolyModel>,
+    /// Real parameters.
     pub n_params: usize,
+    /// Relative RMS error against the measured plant FRF.
     pub relative_rmse: Option<f64>,
+    /// Median relative error against the measured plant FRF.
     pub median_relative: Option<f64>,
+    /// RMS error in dB against the measured plant FRF (FRF fits).
     pub db_rmse: Option<f64>,
+    /// Bayesian information criterion (FRF fits).
     pub bic: Option<f64>,
+    /// Validation fit on the independent record \[%\].
     pub validation_fit: Option<f64>,
+    /// Unstable poles of the model.
     pub unstable_poles: Option<usize>,
+    /// On the twin: median relative error against the exact plant.
     pub truth_median_relative: Option<f64>,
     /// May be chosen (FRF fits: the supported number of unstable poles and a stable loop with
     /// the controller, see [`ambid_core::validate::compare`]; time fits: fitted).
     pub valid: bool,
+    /// Why the fit failed, why it is not valid, or how it was validated.
     pub note: Option<String>,
     /// Kalman gain of the innovations form (time-domain state-space fits).
     pub kalman: Option<Vec<f64>>,
@@ -54,6 +67,7 @@ impl Candidate {
         }
     }
 
+    /// The label of the report and `summary.json`, e.g. `OE 8`.
     pub fn label(&self) -> String {
         format!("{} {}", self.structure.to_uppercase(), self.order)
     }
