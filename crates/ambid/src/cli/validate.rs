@@ -101,22 +101,20 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
         .filter(|r| r.iter().any(|v| *v != 0.0));
     let zeros = vec![0.0; y.len()];
     let w = d.optional_column("w")?.unwrap_or(&zeros);
-    if r.is_none() && w.iter().all(|v| *v == 0.0) {
+    if !ambid::stage::drives_loop(r, Some(w)) {
         return Err(ambid::error::Error::input(format!("the record has neither an excitation column `{}` nor a reference `w`: nothing drives the loop", a.r.excitation)).into());
     }
-    // the residual lags: given, or from the dynamics as in the workflow's validation step
-    let lags = match a.lags {
-        Some(l) => l,
-        None => {
-            let choice = ambid::validation::residual_lags(
-                &model,
-                Some(ctrl.state_space()),
-                y.len().saturating_sub(a.skip),
-            );
-            println!("residual tests: {}", choice.describe(ts));
-            choice.lags
-        }
-    };
+    // the residual lags: given, or from the dynamics, by the validation stage's rule
+    let choice = ambid::stage::lag_choice(
+        a.lags,
+        &model,
+        Some(ctrl.state_space()),
+        y.len().saturating_sub(a.skip),
+    );
+    if a.lags.is_none() {
+        println!("residual tests: {}", choice.describe(ts));
+    }
+    let lags = choice.lags;
     let settings = ValidationSettings {
         skip: a.skip,
         lags,

@@ -13,6 +13,9 @@
 //! | operating-point study | [`OperatingPointInput`] | [`crate::study::OperatingPointOutcome`] |
 //! | robust BLA study | [`BlaInput`] | [`crate::bla::BlaStudy`] |
 //! | nonparametric FRF | [`crate::analysis::Record`], [`FrfSettings`] | [`crate::analysis::FrfAnalysis`] |
+//! | validation | [`ValidationInput`] (the model as data, the validation record, the controller) | [`ValidationStage`] |
+//! | closed-loop reconstruction | [`ReconstructionInput`] (the model, the controller, the chirp record) | [`ReconstructionStage`] |
+//! | ISO 14839-3 zone | [`IsoInput`] (the FRF, the validation outcome, the twin) | [`IsoStage`] |
 //!
 //! Stages do not import each other except to read an upstream stage's output type, and none
 //! depends on the report or on the workflow's state; every random number comes from a seed in
@@ -42,16 +45,29 @@
 //! ```
 
 mod acquisition;
+mod iso;
+mod reconstruction;
 mod seeds;
 mod studies;
+mod validation;
 
 pub use self::acquisition::{
     acquire_twin, excitation_kind, Acquisition, AcquisitionPlan, Recording, Signals, TwinSource,
+};
+pub use self::iso::{iso, GridSensitivity, IsoInput, IsoStage, MeasuredSensitivity};
+pub use self::reconstruction::{
+    reconstruction, reconstruction_seed, ReconstructionInput, ReconstructionSource,
+    ReconstructionStage, RECONSTRUCTION_SEED_OFFSET,
 };
 pub use self::seeds::Seeds;
 pub use self::studies::{
     amplitude_twin, bla_twin, choose_level_pct, operating_point_twin, AmplitudeStage, BlaInput,
     OperatingPointInput,
+};
+pub use self::validation::{
+    drives_loop, lag_choice, open_loop_response, validation, validation_settings, ClosedLoopCheck,
+    ModelUnderTest, OpenLoopCheck, OpenLoopResiduals, ValidationCheck, ValidationInput,
+    ValidationStage, ONE_STEP, SIMULATION,
 };
 
 use crate::analysis::FrfSettings;

@@ -18,6 +18,7 @@ pub mod config;
 mod data;
 pub mod figures;
 mod outcome;
+mod render_validation;
 mod steps_frf;
 mod steps_models;
 mod steps_signal;
@@ -219,6 +220,12 @@ pub struct Outcome {
     pub models: Vec<ModelOut>,
     /// Time per step.
     pub timings: Vec<StepTime>,
+    /// The validation stage's typed result (validation step).
+    pub validation_stage: Option<crate::stage::ValidationStage>,
+    /// The reconstruction stage's typed result (reconstruction step).
+    pub reconstruction_stage: Option<crate::stage::ReconstructionStage>,
+    /// The ISO 14839-3 stage's typed result (iso step).
+    pub iso_stage: Option<crate::stage::IsoStage>,
 }
 
 /// Stage outputs computed ahead of their step (in parallel with other stages), each with its
@@ -266,6 +273,12 @@ pub(crate) struct Ctx<'a> {
     pub chosen: Option<usize>,
     /// Validation outcome of the chosen model.
     pub validation: Option<crate::validation::ValidationOutcome>,
+    /// The validation stage's result.
+    pub validation_stage: Option<crate::stage::ValidationStage>,
+    /// The reconstruction stage's result.
+    pub reconstruction_stage: Option<crate::stage::ReconstructionStage>,
+    /// The ISO 14839-3 stage's result.
+    pub iso_stage: Option<crate::stage::IsoStage>,
 }
 
 impl Ctx<'_> {
@@ -550,6 +563,9 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
         candidates: Vec::new(),
         chosen: None,
         validation: None,
+        validation_stage: None,
+        reconstruction_stage: None,
+        iso_stage: None,
     };
     let mut data_section = data::describe(&mut ctx);
     data_section.blocks.extend(fallback_note);
@@ -670,6 +686,9 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
         summary,
         models: ctx.models,
         timings,
+        validation_stage: ctx.validation_stage,
+        reconstruction_stage: ctx.reconstruction_stage,
+        iso_stage: ctx.iso_stage,
     })
 }
 
