@@ -5,9 +5,9 @@
 use ambid::experiment::ExcitationPlan;
 use ambid::io::ControllerModel;
 use ambid::stage::{
-    iso, reconstruction, validation, IsoInput, ModelUnderTest, ReconstructionInput,
-    ReconstructionSource, Recording, Signals, TwinSource, ValidationCheck, ValidationInput,
-    ONE_STEP, SIMULATION,
+    iso, reconstruction, validation, validation_settings, IsoInput, ModelUnderTest,
+    ReconstructionInput, ReconstructionSource, Recording, Signals, TwinSource, ValidationCheck,
+    ValidationInput, ONE_STEP, SIMULATION,
 };
 use ambid::workflow::config::{ReconstructionSection, ValidationSection};
 use ambid_core::c64;
@@ -66,8 +66,8 @@ fn closed_loop_validation_of_the_exact_plant_matches_the_twin() {
         record: &rec,
         controller: Some(&ctrl),
         twin: Some(&t),
-        settings: &ValidationSection::default(),
-        zones: Default::default(),
+        settings: validation_settings(&ValidationSection::default(), Default::default(), rec.len()),
+        lags: None,
     })
     .unwrap();
     let ValidationCheck::ClosedLoop(c) = &st.check else {
@@ -121,8 +121,8 @@ fn a_record_without_excitation_is_not_validated_and_says_why() {
         record: &rec,
         controller: Some(&ctrl),
         twin: None,
-        settings: &ValidationSection::default(),
-        zones: Default::default(),
+        settings: validation_settings(&ValidationSection::default(), Default::default(), rec.len()),
+        lags: None,
     })
     .unwrap();
     let ValidationCheck::NotDone(why) = &st.check else {
@@ -179,8 +179,8 @@ fn open_loop_validation_simulates_stable_and_predicts_unstable_arx_models() {
         record: &rec,
         controller: None,
         twin: None,
-        settings: &ValidationSection::default(),
-        zones: Default::default(),
+        settings: Default::default(),
+        lags: None,
     })
     .unwrap();
     let ValidationCheck::OpenLoop(o) = &st.check else {
@@ -207,7 +207,6 @@ fn open_loop_validation_simulates_stable_and_predicts_unstable_arx_models() {
         .map(|k| (0.73 * k as f64).cos() + 0.3 * (2.3 * k as f64).sin())
         .collect();
     let rec = open_loop_record(u.clone(), yr.clone());
-    let vs = ValidationSection::default();
     let input = |poly| ValidationInput {
         model: ModelUnderTest {
             name: "ARX 1",
@@ -218,14 +217,18 @@ fn open_loop_validation_simulates_stable_and_predicts_unstable_arx_models() {
         record: &rec,
         controller: None,
         twin: None,
-        settings: &vs,
-        zones: Default::default(),
+        settings: Default::default(),
+        lags: Some(12),
     };
     let st = validation(&input(Some(&p))).unwrap();
     let ValidationCheck::OpenLoop(o) = &st.check else {
         panic!("{:?}", st.check)
     };
     assert_eq!(o.kind, ONE_STEP);
+    assert_eq!(
+        (o.lags.lags, o.lags.basis),
+        (12, ambid::validation::LagBasis::Given)
+    );
     // the naive predictor, from the second sample on (the first has no past)
     for k in 1..n {
         let naive = 1.5 * yr[k - 1] + 0.8 * u[k - 1];
@@ -237,7 +240,7 @@ fn open_loop_validation_simulates_stable_and_predicts_unstable_arx_models() {
     }
     let r = o.residuals.as_ref().expect("residual tests");
     assert_eq!(r.signal, "input u");
-    assert!(r.test.whiteness.is_some());
+    assert_eq!(r.test.whiteness.as_ref().map(|w| w.values.len()), Some(12));
     // without its polynomial form the same unstable model has no predictor
     let st = validation(&input(None)).unwrap();
     let ValidationCheck::NotDone(why) = &st.check else {

@@ -4,7 +4,7 @@
 //! or one-step prediction) — with the residual tests and their number of lags.
 
 use super::{Recording, TwinSource};
-use crate::error::{Error, FailureClass, Result};
+use crate::error::Result;
 use crate::io::ControllerModel;
 use crate::validation::{
     residual_lags, validate_closed_loop, LagBasis, LagChoice, MeasuredLoop, ValidationOutcome,
@@ -21,10 +21,6 @@ use ambid_core::validate::residuals::{analyze, analyze_output_error, ResidualTes
 pub const SIMULATION: &str = "simulation from the least-squares initial state";
 /// How an unstable model with a predictor is compared with a record: its one-step prediction.
 pub const ONE_STEP: &str = "1-step prediction";
-
-fn computation(e: impl Into<Error>) -> Error {
-    Error::classified(FailureClass::Computation, e)
-}
 
 /// The model under test, as data: its state-space form, its name in the report, and — when it
 /// has them — its polynomial form (an ARX model's one-step predictor) and the Kalman gain of its
@@ -51,10 +47,13 @@ pub struct ValidationInput<'a> {
     pub controller: Option<&'a ControllerModel>,
     /// The twin (its exact plant is validated the same way, as the reference).
     pub twin: Option<&'a TwinSource>,
-    /// `[validation]`: start-up samples left out, lags, windows, initial state.
-    pub settings: &'a ValidationSection,
-    /// ISO 14839-3 zone limits (the model's sensitivity zone).
-    pub zones: IsoZones,
+    /// Start-up samples left out, windows, zone limits, frequency grid and initial state of the
+    /// check ([`validation_settings`] from a workflow's `[validation]`); its `lags` is replaced
+    /// by the lag choice of `lags`.
+    pub settings: ValidationSettings,
+    /// The residual tests' number of lags; `None`: the rule of [`residual_lags`]
+    /// ([`lag_choice`]).
+    pub lags: Option<usize>,
 }
 
 /// The settings of [`validate_closed_loop`] for a record of `n` samples: `[validation]`'s skip
@@ -279,7 +278,7 @@ pub fn drives_loop(r: Option<&[f64]>, w: Option<&[f64]>) -> bool {
 ///
 /// ```
 /// use ambid::experiment::ExcitationPlan;
-/// use ambid::stage::{validation, ModelUnderTest, ValidationCheck, ValidationInput, TwinSource};
+/// use ambid::stage::{validation, validation_settings, ModelUnderTest, ValidationCheck, ValidationInput, TwinSource};
 /// use ambid::workflow::config::ValidationSection;
 /// use ambid_twin::{Mode, TwinConfig};
 /// let twin = TwinSource::new(TwinConfig::default(), Mode::Linear).unwrap();
@@ -293,8 +292,8 @@ pub fn drives_loop(r: Option<&[f64]>, w: Option<&[f64]>) -> bool {
 ///     record: &rec,
 ///     controller: Some(&ctrl),
 ///     twin: None,
-///     settings: &ValidationSection::default(),
-///     zones: Default::default(),
+///     settings: validation_settings(&ValidationSection::default(), Default::default(), rec.len()),
+///     lags: None,
 /// }).unwrap();
 /// let ValidationCheck::ClosedLoop(c) = &stage.check else { panic!() };
 /// // the exact plant reproduces the noisy record to the sensor noise
@@ -302,8 +301,9 @@ pub fn drives_loop(r: Option<&[f64]>, w: Option<&[f64]>) -> bool {
 /// ```
 ///
 /// # Errors
-/// A computation error when the closed-loop check fails (an unstable loop with the model, a
-/// sample time that differs from the record's, too few samples) or the residual tests fail.
+/// The errors of [`validate_closed_loop`] (an unstable loop with the model, a sample time that
+/// differs from the record's, too few samples after the start-up) and of the residual tests, as
+/// they come (`ambid run` classes them as computation errors, `ambid validate` keeps them).
 pub fn validation(input: &ValidationInput<'_>) -> Result<ValidationStage> {
     let val = input.record;
     let m = &input.model;
@@ -325,12 +325,12 @@ pub fn validation(input: &ValidationInput<'_>) -> Result<ValidationStage> {
         (Some(c), true) => {
             let zeros = vec![0.0; val.len()];
             let w = val.w().unwrap_or(&zeros);
-            let mut s = validation_settings(input.settings, input.zones, val.len());
+            let mut s = input.settings.clone();
             let lags = lag_choice(
-                input.settings.lags,
+                input.lags,
                 m.model,
                 Some(c.state_space()),
-                val.len() - s.skip,
+                val.len().saturating_sub(s.skip),
             );
             s.lags = lags.lags;
             let rec = MeasuredLoop {
@@ -351,7 +351,7 @@ pub fn validation(input: &ValidationInput<'_>) -> Result<ValidationStage> {
             );
             ValidationCheck::ClosedLoop(Box::new(ClosedLoopCheck {
                 controller: c.description().to_string(),
-                outcome: v.map_err(computation)?,
+                outcome: v?,
                 exact_plant: exact.and_then(|e| e.ok()),
                 lags,
                 nonlinear_twin: input
@@ -382,7 +382,7 @@ fn open_loop(input: &ValidationInput<'_>, closed: bool) -> Result<ValidationChec
             m.name
         )));
     };
-    let fit_y = fit_percent(val.y(), &yhat).map_err(computation)?;
+    let fit_y = fit_percent(val.y(), &yhat)?;
     let eps: Vec<f64> = val.y().iter().zip(&yhat).map(|(a, b)| a - b).collect();
     // the quantity that should be white / independent (docs/validation.md): a one-step
     // prediction error of a model with a noise model is white and independent of the input; a
@@ -397,15 +397,15 @@ fn open_loop(input: &ValidationInput<'_>, closed: bool) -> Result<ValidationChec
     } else {
         Some((val.u(), "input u"))
     };
-    let lags = lag_choice(input.settings.lags, m.model, None, val.len());
+    let lags = lag_choice(input.lags, m.model, None, val.len());
     let one_step = kind == ONE_STEP;
     let residuals = match (one_step, test_signal) {
         (true, t) => Ok(OpenLoopResiduals {
-            test: analyze(&eps, t.map(|t| t.0), lags.lags).map_err(computation)?,
+            test: analyze(&eps, t.map(|t| t.0), lags.lags)?,
             signal: t.map_or("—", |t| t.1),
         }),
         (false, Some((x, signal))) => Ok(OpenLoopResiduals {
-            test: analyze_output_error(&eps, x, lags.lags).map_err(computation)?,
+            test: analyze_output_error(&eps, x, lags.lags)?,
             signal,
         }),
         (false, None) => Err(

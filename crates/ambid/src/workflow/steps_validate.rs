@@ -129,9 +129,10 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         record: val,
         controller: ctx.controller.as_ref(),
         twin: ctx.twin.as_ref(),
-        settings: &ctx.cfg.validation,
-        zones: zones(ctx),
-    })?;
+        settings: crate::stage::validation_settings(&ctx.cfg.validation, zones(ctx), val.len()),
+        lags: ctx.cfg.validation.lags,
+    })
+    .map_err(super::computation)?;
     // the validation stage and the models step name the open-loop comparison alike
     debug_assert_eq!(crate::stage::ONE_STEP, super::steps_models::ONE_STEP);
     if let ValidationCheck::NotDone(why) = &st.check {
