@@ -65,9 +65,6 @@ fn time_figure(
     Block::Figure(figure(id, title, caption, panels, 2))
 }
 
-/// The residual tests' number of lags: `[validation] lags` when set, else the rule of
-/// [`residual_lags`] on the chosen model (with the controller when there is one) over the `n`
-
 /// One residual test's verdict in words.
 fn verdict(c: &CorrelationTest) -> String {
     format!(
