@@ -340,3 +340,65 @@ fn iso_stage_truth_is_the_exact_sensitivity() {
         .unwrap()
         .contains("needs the measured sensitivity"));
 }
+
+/// `ambid run` hands its caller the three stages' typed results beside summary.json, and they
+/// are what summary.json says; the ISO truth is the twin's exact 1/(1 + P C).
+#[test]
+fn the_workflow_outcome_carries_the_typed_stage_results() {
+    use ambid::workflow::{run, Progress, Step, Verbosity, WorkflowConfig};
+    let cfg = WorkflowConfig {
+        steps: Some(vec![
+            Step::Frf,
+            Step::Order,
+            Step::Models,
+            Step::Validation,
+            Step::Reconstruction,
+            Step::Iso,
+        ]),
+        ..WorkflowConfig::default()
+    };
+    let out = run(
+        &cfg,
+        std::path::Path::new("."),
+        &mut Progress::new(Verbosity::Quiet),
+    )
+    .unwrap();
+    let s = &out.summary;
+    let v = out.validation_stage.as_ref().expect("validation stage");
+    let cl = v.closed_loop().expect("validated through the closed loop");
+    assert_eq!(s["validation"]["fit_y_pct"].as_f64(), Some(cl.fit_y));
+    assert_eq!(s["validation"]["model"].as_str(), Some(v.model.as_str()));
+    let r = out
+        .reconstruction_stage
+        .as_ref()
+        .expect("reconstruction stage");
+    assert_eq!(
+        s["reconstruction"]["fit_y_pct"].as_f64(),
+        Some(r.outcome.reconstruction.fit_y)
+    );
+    let iso = out.iso_stage.as_ref().expect("iso stage");
+    let m = iso.measured.as_ref().expect("measured S on the twin");
+    assert_eq!(
+        s["iso"]["measured"]["peak"].as_f64(),
+        Some(m.search.verdict.peak)
+    );
+    assert_eq!(
+        s["iso"]["zone"].as_str().map(str::to_string),
+        iso.verdict().map(|z| format!("{z:?}"))
+    );
+    let t = twin(true);
+    let tr = iso.truth.as_ref().unwrap();
+    assert!(rel_dev(&tr.s, &exact_s(&t, &tr.f_hz)) < 1e-9);
+    // the measured peak against the twin's exact |S| at that line: within 1 % (the default twin
+    // runs its nonlinear physics, so the measured S is a best linear approximation and its
+    // 95 % interval, a few per mille wide, need not hold the linearised truth)
+    let (lo, hi) = m.search.verdict.interval.expect("an interval");
+    assert!(lo <= m.search.verdict.peak && m.search.verdict.peak <= hi);
+    let exact_at = exact_s(&t, &[m.search.verdict.f_peak_hz])[0].norm();
+    let err = (m.search.verdict.peak - exact_at).abs() / exact_at;
+    assert!(
+        err < 0.01,
+        "peak {} vs exact {exact_at}",
+        m.search.verdict.peak
+    );
+}
