@@ -31,10 +31,10 @@
 //! let exc = ExcitationSection { periods: 4, ..ExcitationSection::default() };
 //! let plan = AcquisitionPlan::new(identification_plan(&exc, 0.1, &seeds), ExcitationKind::Multisine, 0.1, seeds);
 //! let rec = acquire_twin(&twin, &plan).unwrap().identification;
-//! let s = frf_settings(&FrfSection::default(), 1, rec.period, rec.len(), Some(twin.twin.i_sat()));
-//! let r = rec.r.as_deref().unwrap();
+//! let s = frf_settings(&FrfSection::default(), 1, rec.period(), rec.len(), Some(twin.twin.i_sat()));
+//! let r = rec.r().unwrap();
 //! let a = ambid::analysis::analyze(
-//!     &ambid::analysis::Record { r, u: &rec.u, y: &rec.y, i: rec.i.as_deref(), fs: rec.fs() },
+//!     &ambid::analysis::Record { r, u: rec.u(), y: rec.y(), i: rec.i(), fs: rec.fs() },
 //!     &s,
 //!     None,
 //! ).unwrap();
