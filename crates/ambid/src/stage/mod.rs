@@ -2,7 +2,9 @@
 //! usable on their own from Rust.
 //!
 //! Each stage takes a typed input (its settings and the typed outputs of the stages it needs)
-//! and returns a typed output (`serde::Serialize`) or an [`crate::error::Error`]:
+//! and returns a typed output (`serde::Serialize`, except the validation, reconstruction and ISO
+//! results, which hold core types without it: `PzAnalysis`, `Frd`, complex responses) or an
+//! [`crate::error::Error`]:
 //!
 //! | stage | input | output |
 //! |---|---|---|
