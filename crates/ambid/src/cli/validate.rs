@@ -5,9 +5,10 @@ use super::args::{DataFileArgs, ExcitationColumn, InputColumn, OutputColumn};
 use ambid::io::csv::read_frf_csv;
 use ambid::io::model::{read_kalman_gain, read_model_json};
 use ambid::io::{read_controller, time_csv_to, OutputSet};
+use ambid::stage::{ModelUnderTest, Recording, Signals, ValidationCheck, ValidationInput};
 use ambid::validation::{
-    consistency, innovation_residuals, innovation_summary, residual_summary, validate_closed_loop,
-    MeasuredLoop, ValidationSettings,
+    consistency, innovation_residuals, innovation_summary, residual_summary, MeasuredLoop,
+    ValidationSettings,
 };
 use ambid_core::validate::fit::fit_percent;
 use anyhow::Result;
@@ -101,22 +102,20 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
         .filter(|r| r.iter().any(|v| *v != 0.0));
     let zeros = vec![0.0; y.len()];
     let w = d.optional_column("w")?.unwrap_or(&zeros);
-    if r.is_none() && w.iter().all(|v| *v == 0.0) {
+    if !ambid::stage::drives_loop(r, Some(w)) {
         return Err(ambid::error::Error::input(format!("the record has neither an excitation column `{}` nor a reference `w`: nothing drives the loop", a.r.excitation)).into());
     }
-    // the residual lags: given, or from the dynamics as in the workflow's validation step
-    let lags = match a.lags {
-        Some(l) => l,
-        None => {
-            let choice = ambid::validation::residual_lags(
-                &model,
-                Some(ctrl.state_space()),
-                y.len().saturating_sub(a.skip),
-            );
-            println!("residual tests: {}", choice.describe(ts));
-            choice.lags
-        }
-    };
+    // the residual lags: given, or from the dynamics, by the validation stage's rule
+    let choice = ambid::stage::lag_choice(
+        a.lags,
+        &model,
+        Some(ctrl.state_space()),
+        y.len().saturating_sub(a.skip),
+    );
+    if a.lags.is_none() {
+        println!("residual tests: {}", choice.describe(ts));
+    }
+    let lags = choice.lags;
     let settings = ValidationSettings {
         skip: a.skip,
         lags,
@@ -126,15 +125,51 @@ pub fn validate(a: ValidateArgs) -> Result<()> {
     };
     let k0 = a.skip;
     let c = ctrl.state_space();
-    let v = validate_closed_loop(&model, c, &MeasuredLoop { w, r, y, u, ts }, &settings).map_err(
-        |e| {
-            if a.skip + 4 * lags.max(5) >= y.len() {
-                e.context("use a smaller --skip or fewer --lags")
-            } else {
-                e
-            }
+    // the workflow's validation stage, on the record as the core's data contract
+    let record = Recording::from_signals(
+        ts,
+        None,
+        Signals {
+            r: r.map(<[f64]>::to_vec),
+            u: u.to_vec(),
+            y: y.to_vec(),
+            i: None,
+            w: Some(w.to_vec()),
         },
+        true,
+        a.data.display().to_string(),
     )?;
+    let name = a.model.display().to_string();
+    let stage = ambid::stage::validation(&ValidationInput {
+        model: ModelUnderTest {
+            name: &name,
+            model: &model,
+            poly: None,
+            kalman: None,
+        },
+        record: &record,
+        controller: Some(&ctrl),
+        twin: None,
+        settings: settings.clone(),
+        lags: Some(lags),
+    })
+    .map_err(|e| {
+        if a.skip + 4 * lags.max(5) >= y.len() {
+            e.context("use a smaller --skip or fewer --lags")
+        } else {
+            e
+        }
+    })?;
+    let v = match stage.check {
+        ValidationCheck::ClosedLoop(c) => c.outcome,
+        ValidationCheck::NotDone(why) => return Err(ambid::error::Error::input(why).into()),
+        ValidationCheck::OpenLoop(_) => {
+            return Err(ambid::error::Error::other(
+                "the record was not validated through the closed loop",
+            )
+            .into())
+        }
+    };
     let full = &v.reconstruction;
     let sim = &full.simulated;
     let res = &v.residuals;

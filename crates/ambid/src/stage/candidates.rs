@@ -73,57 +73,25 @@ impl Candidate {
     }
 }
 
-/// Open-loop simulation of a stable model from the initial state that best explains the
-/// record (least squares, as MATLAB's `compare` does by default).
-pub fn simulate_from_estimated_state(
-    m: &StateSpace,
-    u: &[f64],
-    y: &[f64],
-) -> ambid_core::Result<Vec<f64>> {
-    let x0 = m.estimate_initial_state(u, y)?;
-    m.simulate_siso(u, Some(&x0))
-}
-
-/// How a model is compared with an open-loop (or controller-less) record.
-pub const SIMULATION: &str = "simulation from the least-squares initial state";
-/// The fallback for unstable models that have a predictor.
-pub const ONE_STEP: &str = "1-step prediction";
-
-/// The model's response on a record: the simulation from the least-squares initial state when
-/// the model is stable (MATLAB `compare`'s default), else the one-step prediction where a
-/// predictor exists (ARX's, or the innovations form with its Kalman gain); `None` otherwise.
-pub fn open_loop_response(
-    c: &Candidate,
-    m: &StateSpace,
-    y: &[f64],
-    u: &[f64],
-) -> Option<(Vec<f64>, &'static str)> {
-    let stable = m
-        .poles()
-        .map(|p| p.iter().all(|z| z.norm() < 1.0))
-        .unwrap_or(false);
-    if stable {
-        if let Ok(ys) = simulate_from_estimated_state(m, u, y) {
-            return Some((ys, SIMULATION));
-        }
-    }
-    match (c.structure, &c.poly, &c.kalman) {
-        ("arx", Some(p), _) => {
-            let (eps, _) = ambid_core::estimate::pem::prediction_errors(
-                p,
-                y,
-                u,
-                ambid_core::estimate::pem::Focus::Prediction,
-            )
-            .ok()?;
-            Some((y.iter().zip(&eps).map(|(y, e)| y - e).collect(), ONE_STEP))
-        }
-        (_, _, Some(k)) => {
-            let km = faer::Mat::from_fn(k.len(), 1, |i, _| k[i]);
-            ambid_core::validate::predict::predict_k(m, km.as_ref(), y, u, 1)
-                .ok()
-                .map(|p| (p, ONE_STEP))
-        }
-        _ => None,
+impl Candidate {
+    /// The candidate's response on a record without a controller, by the validation stage's
+    /// rule ([`crate::stage::open_loop_response`]): `m` is its model (state space), its
+    /// polynomial form and Kalman gain come from the candidate.
+    pub fn open_loop_response(
+        &self,
+        m: &StateSpace,
+        y: &[f64],
+        u: &[f64],
+    ) -> Option<(Vec<f64>, &'static str)> {
+        super::validation::open_loop_response(
+            &super::validation::ModelUnderTest {
+                name: self.structure,
+                model: m,
+                poly: self.poly.as_ref(),
+                kalman: self.kalman.as_deref(),
+            },
+            y,
+            u,
+        )
     }
 }

@@ -2,7 +2,9 @@
 //! usable on their own from Rust.
 //!
 //! Each stage takes a typed input (its settings and the typed outputs of the stages it needs)
-//! and returns a typed output (`serde::Serialize`) or an [`crate::error::Error`]:
+//! and returns a typed output (`serde::Serialize`, except the validation, reconstruction and ISO
+//! results, which hold core types without it: `PzAnalysis`, `Frd`, complex responses) or an
+//! [`crate::error::Error`]:
 //!
 //! | stage | input | output |
 //! |---|---|---|
@@ -15,6 +17,9 @@
 //! | nonparametric FRF | [`crate::analysis::Record`], [`FrfSettings`] | [`crate::analysis::FrfAnalysis`] |
 //! | model candidates and choice | [`ModelsInput`] | [`ModelsStage`] |
 //! | pole-zero check | [`PoleZeroInput`] | [`PoleZeroStage`] |
+//! | validation | [`ValidationInput`] (the model as data, the validation record, the controller) | [`ValidationStage`] |
+//! | closed-loop reconstruction | [`ReconstructionInput`] (the model, the controller, the chirp record) | [`ReconstructionStage`] |
+//! | ISO 14839-3 zone | [`IsoInput`] (the FRF, the validation outcome, the twin) | [`IsoStage`] |
 //!
 //! Stages do not import each other except to read an upstream stage's output type, and none
 //! depends on the report or on the workflow's state; every random number comes from a seed in
@@ -46,21 +51,23 @@
 mod acquisition;
 mod candidates;
 mod excitation;
+mod iso;
 mod models;
 mod pole_zero;
+mod reconstruction;
 mod seeds;
 mod studies;
+mod validation;
 
 pub use self::acquisition::{
     acquire_twin, excitation_kind, Acquisition, AcquisitionPlan, Recording, Signals, TwinSource,
 };
-pub use self::candidates::{
-    open_loop_response, simulate_from_estimated_state, Candidate, ONE_STEP, SIMULATION,
-};
+pub use self::candidates::Candidate;
 pub use self::excitation::{
     excitation_design, hold_3db_hz, spectrum_3db_hz, ExcitationInput, ExcitationStage,
     IdentificationDesign,
 };
+pub use self::iso::{iso, GridSensitivity, IsoInput, IsoStage, MeasuredSensitivity};
 pub use self::models::{
     choose, frf_candidates, models, unstable_pole_rule, BandChoice, Choice, FitCurve,
     FrfCandidates, MeasuredPlant, ModelOut, ModelsInput, ModelsStage, Overlay, Scored, Select,
@@ -69,10 +76,19 @@ pub use self::models::{
 pub use self::pole_zero::{
     pole_zero, ChosenPz, PoleHz, PoleZeroInput, PoleZeroStage, PzRow, SPlane,
 };
+pub use self::reconstruction::{
+    reconstruction, reconstruction_seed, ReconstructionInput, ReconstructionSource,
+    ReconstructionStage, RECONSTRUCTION_SEED_OFFSET,
+};
 pub use self::seeds::Seeds;
 pub use self::studies::{
     amplitude_twin, bla_twin, choose_level_pct, operating_point_twin, AmplitudeStage, BlaInput,
     OperatingPointInput,
+};
+pub use self::validation::{
+    drives_loop, lag_choice, open_loop_response, validation, validation_settings, ClosedLoopCheck,
+    ModelUnderTest, OpenLoopCheck, OpenLoopResiduals, ValidationCheck, ValidationInput,
+    ValidationStage, ONE_STEP, SIMULATION,
 };
 
 use crate::analysis::FrfSettings;

@@ -3,7 +3,8 @@
 //! choice of one of them; shared by `ambid run` and the `compare-models` command (the choice
 //! rule, [`choose`]).
 
-use super::candidates::{open_loop_response, Candidate, SIMULATION};
+use super::candidates::Candidate;
+use super::validation::SIMULATION;
 use super::{Recording, TwinSource};
 use crate::analysis::FrfAnalysis;
 use crate::error::{Error, FailureClass, Result};
@@ -656,7 +657,7 @@ pub fn models(input: &ModelsInput<'_>) -> Result<ModelsStage> {
                 match fitted {
                     Ok((m, poly, np, k)) => {
                         let mut c = Candidate::time_fit(sname, n, poly, np, k);
-                        let (fit, kind) = match open_loop_response(&c, &m, val.y(), val.u()) {
+                        let (fit, kind) = match c.open_loop_response(&m, val.y(), val.u()) {
                             Some((yhat, kind)) => (fit_percent(val.y(), &yhat).ok(), kind),
                             None => (None, "unstable without a predictor: no fit"),
                         };

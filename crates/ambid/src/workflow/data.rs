@@ -453,16 +453,6 @@ pub fn units(ctx: &Ctx<'_>) -> (String, String) {
     (given(&d.y_unit), given(&d.u_unit))
 }
 
-/// The unit of y (see [`units`]).
-pub fn y_unit(ctx: &Ctx<'_>) -> String {
-    units(ctx).0
-}
-
-/// The unit of u (see [`units`]).
-pub fn u_unit(ctx: &Ctx<'_>) -> String {
-    units(ctx).1
-}
-
 /// The unit of a plant magnitude |y/u|: `m/A`, or "unit not given" when either is unknown.
 pub fn plant_unit(ctx: &Ctx<'_>) -> String {
     let d = &ctx.cfg.data;
@@ -477,9 +467,9 @@ pub fn plant_unit(ctx: &Ctx<'_>) -> String {
 /// its stage's typed result).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Units {
-    /// Unit of y ([`y_unit`]).
+    /// Unit of y ([`units`]).
     pub y: String,
-    /// Unit of u ([`u_unit`]).
+    /// Unit of u ([`units`]).
     pub u: String,
     /// Unit of a plant magnitude |y/u| ([`plant_unit`]).
     pub plant: String,

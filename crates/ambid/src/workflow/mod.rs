@@ -13,16 +13,13 @@
 //! recorded files. A step the data do not allow (closed-loop steps on open-loop data, the twin's
 //! studies on files without one record per level) is skipped with a note in the report.
 
-/// The candidate types, now in [`crate::stage`] (re-exported where the steps use them).
-mod candidates {
-    pub use crate::stage::{open_loop_response, Candidate, ONE_STEP};
-}
 pub mod config;
 mod data;
 pub mod figures;
 mod outcome;
 mod render_models;
 mod render_signal;
+mod render_validation;
 mod steps_frf;
 mod steps_models;
 mod steps_signal;
@@ -220,6 +217,12 @@ pub struct Outcome {
     pub models_stage: Option<crate::stage::ModelsStage>,
     /// The pole-zero stage's typed result, when it ran.
     pub pole_zero_stage: Option<crate::stage::PoleZeroStage>,
+    /// The validation stage's typed result (validation step).
+    pub validation_stage: Option<crate::stage::ValidationStage>,
+    /// The reconstruction stage's typed result (reconstruction step).
+    pub reconstruction_stage: Option<crate::stage::ReconstructionStage>,
+    /// The ISO 14839-3 stage's typed result (iso step).
+    pub iso_stage: Option<crate::stage::IsoStage>,
 }
 
 /// Stage outputs computed ahead of their step (in parallel with other stages), each with its
@@ -262,7 +265,7 @@ pub(crate) struct Ctx<'a> {
     /// Controller (closed loop).
     pub controller: Option<crate::io::ControllerModel>,
     /// Candidate models.
-    pub candidates: Vec<steps_models::Candidate>,
+    pub candidates: Vec<crate::stage::Candidate>,
     /// Index of the chosen candidate.
     pub chosen: Option<usize>,
     /// Validation outcome of the chosen model.
@@ -277,6 +280,12 @@ pub(crate) struct Ctx<'a> {
     pub models_stage: Option<crate::stage::ModelsStage>,
     /// The pole-zero stage's result.
     pub pole_zero_stage: Option<crate::stage::PoleZeroStage>,
+    /// The validation stage's result.
+    pub validation_stage: Option<crate::stage::ValidationStage>,
+    /// The reconstruction stage's result.
+    pub reconstruction_stage: Option<crate::stage::ReconstructionStage>,
+    /// The ISO 14839-3 stage's result.
+    pub iso_stage: Option<crate::stage::IsoStage>,
 }
 
 impl Ctx<'_> {
@@ -566,6 +575,9 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
         bla: None,
         models_stage: None,
         pole_zero_stage: None,
+        validation_stage: None,
+        reconstruction_stage: None,
+        iso_stage: None,
     };
     let mut data_section = data::describe(&mut ctx);
     data_section.blocks.extend(fallback_note);
@@ -699,6 +711,9 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
         bla: ctx.bla,
         models_stage: ctx.models_stage,
         pole_zero_stage: ctx.pole_zero_stage,
+        validation_stage: ctx.validation_stage,
+        reconstruction_stage: ctx.reconstruction_stage,
+        iso_stage: ctx.iso_stage,
     })
 }
 

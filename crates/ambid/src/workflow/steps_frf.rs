@@ -1,6 +1,5 @@
 //! Steps 4–5: the nonparametric FRF of the identification record and the order estimation.
 
-use super::candidates::{open_loop_response, Candidate};
 use super::data::Recording;
 use super::figures::{bode_panels, figure, lin, log, series, xy, Curve};
 use super::{computation, Ctx, Error, StepStatus};
@@ -9,6 +8,7 @@ use crate::fitting::{identify_state_space, SsFitOptions, SsFocus};
 use crate::report::{
     format_number as fmt, Block, Heatmap, NoteKind, Panel, PanelContent, Style, Table,
 };
+use crate::stage::Candidate;
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::estimate::order::{arx_order_scan, ArxScanSpec};
 use ambid_core::estimate::subspace::{n4sid_detailed, SubspaceOptions};
@@ -674,7 +674,7 @@ fn recommend(
                                 o * o + 2 * o,
                                 f.pem.and_then(|p| p.kalman_gain),
                             );
-                            let (yh, _) = open_loop_response(&c, &f.model, val.y(), val.u())?;
+                            let (yh, _) = c.open_loop_response(&f.model, val.y(), val.u())?;
                             fit_percent(val.y(), &yh).ok().map(|p| 100.0 - p)
                         });
                     (o, e)

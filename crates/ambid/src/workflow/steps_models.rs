@@ -3,7 +3,6 @@
 //! workflow's state and the stages [`crate::stage::models`] and [`crate::stage::pole_zero`]
 //! (compute) and [`super::render_models`] (report).
 
-pub use super::candidates::{open_loop_response, Candidate, ONE_STEP};
 use super::{render_models, Ctx, Error, StepStatus};
 use crate::stage::{ModelsInput, ModelsStage, PoleZeroInput, PoleZeroStage};
 
