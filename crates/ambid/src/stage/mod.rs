@@ -12,7 +12,8 @@
 //! | amplitude study | [`crate::study::TwinAmplitudeStudy`] | [`AmplitudeStage`] |
 //! | operating-point study | [`OperatingPointInput`] | [`crate::study::OperatingPointOutcome`] |
 //! | robust BLA study | [`BlaInput`] | [`crate::bla::BlaStudy`] |
-//! | nonparametric FRF | [`crate::analysis::Record`], [`FrfSettings`] | [`crate::analysis::FrfAnalysis`] |
+//! | nonparametric FRF | [`FrfInput`] (record, `[frf]`, noise record, controller, twin) | [`FrfStage`] |
+//! | order | [`OrderInput`] (records, FRF, `[order]`, `[models]`, controller) | [`OrderStage`] |
 //!
 //! Stages do not import each other except to read an upstream stage's output type, and none
 //! depends on the report or on the workflow's state; every random number comes from a seed in
@@ -42,11 +43,19 @@
 //! ```
 
 mod acquisition;
+mod frf;
+mod order;
 mod seeds;
 mod studies;
 
 pub use self::acquisition::{
     acquire_twin, excitation_kind, Acquisition, AcquisitionPlan, Recording, Signals, TwinSource,
+};
+pub use self::frf::{frf, FrfInput, FrfStage, PlantEstimator, TruthErrors, TwinTruth};
+pub use self::order::{
+    order, order_error_tolerance, resonance_scan, ArxGrid, ErrorBasis, OrderError, OrderErrors,
+    OrderInput, OrderRecommendation, OrderStage, ResonanceScan, SubspaceEvidence,
+    ORDER_RANGE_ABOVE, ORDER_SCAN_MAX, RESONANCE_MAX_REL_STD,
 };
 pub use self::seeds::Seeds;
 pub use self::studies::{

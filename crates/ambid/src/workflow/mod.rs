@@ -18,6 +18,7 @@ pub mod config;
 mod data;
 pub mod figures;
 mod outcome;
+mod render_frf;
 mod steps_frf;
 mod steps_models;
 mod steps_signal;
@@ -219,6 +220,10 @@ pub struct Outcome {
     pub models: Vec<ModelOut>,
     /// Time per step.
     pub timings: Vec<StepTime>,
+    /// The nonparametric FRF stage's result (when the `frf` step ran).
+    pub frf_stage: Option<crate::stage::FrfStage>,
+    /// The order stage's result (when the `order` step ran).
+    pub order_stage: Option<crate::stage::OrderStage>,
 }
 
 /// Stage outputs computed ahead of their step (in parallel with other stages), each with its
@@ -258,6 +263,10 @@ pub(crate) struct Ctx<'a> {
     pub seed_study: Option<Vec<(f64, f64)>>,
     /// FRF analysis of the identification record.
     pub frf: Option<crate::analysis::FrfAnalysis>,
+    /// The FRF stage's result.
+    pub frf_stage: Option<crate::stage::FrfStage>,
+    /// The order stage's result.
+    pub order_stage: Option<crate::stage::OrderStage>,
     /// Controller (closed loop).
     pub controller: Option<crate::io::ControllerModel>,
     /// Candidate models.
@@ -546,6 +555,8 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
         level_frac: None,
         seed_study: None,
         frf: None,
+        frf_stage: None,
+        order_stage: None,
         controller: prepared.controller,
         candidates: Vec::new(),
         chosen: None,
@@ -670,6 +681,8 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
         summary,
         models: ctx.models,
         timings,
+        frf_stage: ctx.frf_stage,
+        order_stage: ctx.order_stage,
     })
 }
 
