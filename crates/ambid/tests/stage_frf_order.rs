@@ -81,7 +81,10 @@ fn the_frf_stage_on_the_twin_gives_the_exact_responses_and_measures_its_error_ag
             .map(|k| rel(fr.t_ru.values()[k], s[k]))
             .collect(),
     );
-    assert!(e_try < 0.1 && e_s < 0.05, "median errors T_ry {e_try}, S {e_s}");
+    assert!(
+        e_try < 0.1 && e_s < 0.05,
+        "median errors T_ry {e_try}, S {e_s}"
+    );
     // the stage's error quantile against a naive in-test one
     let naive = 100.0
         * median(
@@ -91,7 +94,11 @@ fn the_frf_stage_on_the_twin_gives_the_exact_responses_and_measures_its_error_ag
                 .collect(),
         );
     let e = st.errors_vs_truth.unwrap();
-    assert!((e.median_pct - naive).abs() <= 1e-12 * naive, "{} vs {naive}", e.median_pct);
+    assert!(
+        (e.median_pct - naive).abs() <= 1e-12 * naive,
+        "{} vs {naive}",
+        e.median_pct
+    );
     assert!(e.p90_pct >= e.median_pct && e.median_pct < 10.0, "{e:?}");
 }
 
@@ -148,7 +155,10 @@ fn the_order_stage_finds_the_order_of_a_known_second_order_system() {
     }
     assert!(st.resonances.is_none());
     let r = st.recommendation.as_ref().unwrap();
-    assert_eq!((r.n, r.lo, r.hi, r.source), (2, 2, 2, "subspace_singular_values"));
+    assert_eq!(
+        (r.n, r.lo, r.hi, r.source),
+        (2, 2, 2, "subspace_singular_values")
+    );
     assert_eq!(r.subspace.as_ref().unwrap().order, 2);
     // with the models step: the time-domain fits per order decide
     let st = order(&OrderInput {
@@ -165,10 +175,18 @@ fn the_order_stage_finds_the_order_of_a_known_second_order_system() {
     // the tolerance of 3000 validation samples, and adequacy by the rule, recomputed here
     let tol = 1.0 + 2.0 / (6000.0f64).sqrt();
     assert!((e.tolerance - tol).abs() < 1e-15);
-    let best = e.rows.iter().filter_map(|r| r.error).fold(f64::INFINITY, f64::min);
+    let best = e
+        .rows
+        .iter()
+        .filter_map(|r| r.error)
+        .fold(f64::INFINITY, f64::min);
     assert_eq!(e.best, best);
     for row in &e.rows {
-        assert_eq!(row.adequate, row.error.is_some_and(|v| v <= tol * best), "{row:?}");
+        assert_eq!(
+            row.adequate,
+            row.error.is_some_and(|v| v <= tol * best),
+            "{row:?}"
+        );
     }
     // order 1 cannot follow a complex pole pair
     assert!(!e.rows[0].adequate);
@@ -189,12 +207,17 @@ fn the_workflow_outcome_carries_the_stage_results_it_summarised() {
     );
     assert_eq!(
         fs.errors_vs_truth.unwrap().median_pct,
-        sm["frf"]["plant_median_error_vs_truth_pct"].as_f64().unwrap()
+        sm["frf"]["plant_median_error_vs_truth_pct"]
+            .as_f64()
+            .unwrap()
     );
     let os = out.order_stage.as_ref().unwrap();
     let r = os.recommendation.as_ref().unwrap();
     assert_eq!(r.n as f64, sm["order"]["recommended"].as_f64().unwrap());
-    assert_eq!(r.source, sm["order"]["recommended_source"].as_str().unwrap());
+    assert_eq!(
+        r.source,
+        sm["order"]["recommended_source"].as_str().unwrap()
+    );
     assert_eq!(
         os.resonances.as_ref().unwrap().peaks.len() as f64,
         sm["order"]["resonances"].as_f64().unwrap()

@@ -164,7 +164,11 @@ pub fn frf(input: &FrfInput<'_>) -> Result<FrfStage> {
             let f = a.frf.f_hz();
             let plant = t.twin.plant_frf(f).map_err(computation)?;
             let c = t.twin.controller_frf(f).map_err(computation)?;
-            let t_ry = plant.iter().zip(&c).map(|(p, c)| p / (*p * c + 1.0)).collect();
+            let t_ry = plant
+                .iter()
+                .zip(&c)
+                .map(|(p, c)| p / (*p * c + 1.0))
+                .collect();
             let sensitivity = plant
                 .iter()
                 .zip(&c)
