@@ -10,7 +10,6 @@ use ambid::frf_stream::{analyze_csv, StreamColumns};
 use ambid::io::output::write_file;
 use ambid::io::table::Format;
 use ambid::io::{frf_csv_bytes, read_controller, FrfColumn, OutputSet};
-use ambid_core::frf::resonance::{find_resonances_reliable, order_from_peaks, ResonanceOptions};
 use ambid_core::frf::window::Window;
 use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
@@ -356,23 +355,21 @@ fn report_and_write(a: &FrfArgs, res: &FrfAnalysis) -> Result<()> {
     println!("bands: {}", res.bands.describe());
     print_quality(res);
     // resonance peaks of the plant in the quality band, on lines whose relative standard
-    // deviation is below 10 % (noise ripple must not count as a mode)
-    let qb = res.quality.band;
-    let opts = ResonanceOptions {
-        band: qb,
-        ..ResonanceOptions::default()
-    };
+    // deviation is below 10 % (noise ripple must not count as a mode): the order stage's search
+    let scan = ambid::stage::resonance_scan(res);
+    let qb = scan.band;
     let unit = plant_unit(a.y_unit.as_deref(), a.u_unit.as_deref());
-    match find_resonances_reliable(&res.frf.plant, &opts, 0.1) {
-        Ok((peaks, n)) => {
+    match &scan.error {
+        None => {
             println!(
-                "plant resonance peaks in {:.1}–{:.1} Hz (≥ 3 dB prominence, {n} lines with relative std ≤ 10 %): {} → order estimate ≥ {}",
+                "plant resonance peaks in {:.1}–{:.1} Hz (≥ 3 dB prominence, {} lines with relative std ≤ 10 %): {} → order estimate ≥ {}",
                 qb.0,
                 qb.1,
-                peaks.len(),
-                order_from_peaks(&peaks)
+                scan.searched,
+                scan.peaks.len(),
+                scan.order
             );
-            for p in &peaks {
+            for p in &scan.peaks {
                 match p.damping {
                     Some(z) => println!(
                         "  {:8.2} Hz  |P| {:.3e} {unit}  ζ ≈ {z:.3}",
@@ -382,7 +379,7 @@ fn report_and_write(a: &FrfArgs, res: &FrfAnalysis) -> Result<()> {
                 }
             }
         }
-        Err(e) => println!("plant resonance peaks: not searched ({e})"),
+        Some(e) => println!("plant resonance peaks: not searched ({e})"),
     }
     write_analysis(&a.out, res, a.f.force)?;
     println!("written: {}", a.out.display());

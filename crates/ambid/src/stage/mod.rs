@@ -14,7 +14,8 @@
 //! | amplitude study | [`crate::study::TwinAmplitudeStudy`] | [`AmplitudeStage`] |
 //! | operating-point study | [`OperatingPointInput`] | [`crate::study::OperatingPointOutcome`] |
 //! | robust BLA study | [`BlaInput`] | [`crate::bla::BlaStudy`] |
-//! | nonparametric FRF | [`crate::analysis::Record`], [`FrfSettings`] | [`crate::analysis::FrfAnalysis`] |
+//! | nonparametric FRF | [`FrfInput`] (record, `[frf]`, noise record, controller, twin) | [`FrfStage`] |
+//! | order | [`OrderInput`] (records, FRF, `[order]`, `[models]`, controller) | [`OrderStage`] |
 //! | model candidates and choice | [`ModelsInput`] | [`ModelsStage`] |
 //! | pole-zero check | [`PoleZeroInput`] | [`PoleZeroStage`] |
 //! | validation | [`ValidationInput`] (the model as data, the validation record, the controller) | [`ValidationStage`] |
@@ -27,32 +28,30 @@
 //!
 //! # Example: acquisition → FRF from code
 //! ```
-//! use ambid::stage::{acquire_twin, frf_settings, identification_plan, AcquisitionPlan, Seeds, TwinSource};
+//! use ambid::stage::{acquire_twin, frf, identification_plan, AcquisitionPlan, FrfInput, Seeds, TwinSource};
 //! use ambid::experiment::ExcitationKind;
 //! use ambid::workflow::config::{ExcitationSection, FrfSection};
 //! let twin = TwinSource::new(ambid_twin::TwinConfig::default(), ambid_twin::Mode::Nonlinear).unwrap();
 //! let seeds = Seeds::from_workflow_seed(1);
-//! let exc = ExcitationSection { periods: 4, ..ExcitationSection::default() };
+//! let exc = ExcitationSection { periods: 8, ..ExcitationSection::default() };
 //! let plan = AcquisitionPlan::new(identification_plan(&exc, 0.1, &seeds), ExcitationKind::Multisine, 0.1, seeds);
 //! let rec = acquire_twin(&twin, &plan).unwrap().identification;
-//! let s = frf_settings(&FrfSection::default(), 1, rec.period(), rec.len(), Some(twin.twin.i_sat()));
-//! let r = rec.r().unwrap();
-//! let a = ambid::analysis::analyze(
-//!     &ambid::analysis::Record { r, u: rec.u(), y: rec.y(), i: rec.i(), fs: rec.fs() },
-//!     &s,
-//!     None,
-//! ).unwrap();
+//! let fs = FrfSection::default();
+//! let st = frf(&FrfInput { record: &rec, frf: &fs, skip_periods: 1, noise: None, controller: None, twin: None }).unwrap();
 //! // the measured plant against the twin's exact one at 200 Hz: within a few per cent
-//! let k = a.frf.f_hz().iter().position(|&f| f >= 200.0).unwrap();
-//! let exact = twin.twin.plant_frf(&[a.frf.f_hz()[k]]).unwrap()[0];
-//! assert!(((a.frf.plant.values()[k] - exact) / exact).norm() < 0.1);
+//! let (f, p) = (st.f_hz(), st.analysis.frf.plant.values());
+//! let k = f.iter().position(|&f| f >= 200.0).unwrap();
+//! let exact = twin.twin.plant_frf(&[f[k]]).unwrap()[0];
+//! assert!(((p[k] - exact) / exact).norm() < 0.1);
 //! ```
 
 mod acquisition;
 mod candidates;
 mod excitation;
+mod frf;
 mod iso;
 mod models;
+mod order;
 mod pole_zero;
 mod reconstruction;
 mod seeds;
@@ -67,11 +66,17 @@ pub use self::excitation::{
     excitation_design, hold_3db_hz, spectrum_3db_hz, ExcitationInput, ExcitationStage,
     IdentificationDesign,
 };
+pub use self::frf::{frf, FrfInput, FrfStage, PlantEstimator, TruthErrors, TwinTruth};
 pub use self::iso::{iso, GridSensitivity, IsoInput, IsoStage, MeasuredSensitivity};
 pub use self::models::{
     choose, frf_candidates, models, unstable_pole_rule, BandChoice, Choice, FitCurve,
     FrfCandidates, MeasuredPlant, ModelOut, ModelsInput, ModelsStage, Overlay, Scored, Select,
     UnstableChoice,
+};
+pub use self::order::{
+    order, order_error_tolerance, resonance_scan, ArxGrid, ErrorBasis, OrderError, OrderErrors,
+    OrderInput, OrderRecommendation, OrderStage, ResonanceScan, SubspaceEvidence,
+    ORDER_RANGE_ABOVE, ORDER_SCAN_MAX, RESONANCE_MAX_REL_STD,
 };
 pub use self::pole_zero::{
     pole_zero, ChosenPz, PoleHz, PoleZeroInput, PoleZeroStage, PzRow, SPlane,

@@ -17,6 +17,7 @@ pub mod config;
 mod data;
 pub mod figures;
 mod outcome;
+mod render_frf;
 mod render_models;
 mod render_signal;
 mod render_validation;
@@ -223,6 +224,10 @@ pub struct Outcome {
     pub reconstruction_stage: Option<crate::stage::ReconstructionStage>,
     /// The ISO 14839-3 stage's typed result (iso step).
     pub iso_stage: Option<crate::stage::IsoStage>,
+    /// The nonparametric FRF stage's result (when the `frf` step ran).
+    pub frf_stage: Option<crate::stage::FrfStage>,
+    /// The order stage's result (when the `order` step ran).
+    pub order_stage: Option<crate::stage::OrderStage>,
 }
 
 /// Stage outputs computed ahead of their step (in parallel with other stages), each with its
@@ -262,6 +267,10 @@ pub(crate) struct Ctx<'a> {
     pub seed_study: Option<Vec<(f64, f64)>>,
     /// FRF analysis of the identification record.
     pub frf: Option<crate::analysis::FrfAnalysis>,
+    /// The FRF stage's result.
+    pub frf_stage: Option<crate::stage::FrfStage>,
+    /// The order stage's result.
+    pub order_stage: Option<crate::stage::OrderStage>,
     /// Controller (closed loop).
     pub controller: Option<crate::io::ControllerModel>,
     /// Candidate models.
@@ -566,6 +575,8 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
         level_frac: None,
         seed_study: None,
         frf: None,
+        frf_stage: None,
+        order_stage: None,
         controller: prepared.controller,
         candidates: Vec::new(),
         chosen: None,
@@ -714,6 +725,8 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
         validation_stage: ctx.validation_stage,
         reconstruction_stage: ctx.reconstruction_stage,
         iso_stage: ctx.iso_stage,
+        frf_stage: ctx.frf_stage,
+        order_stage: ctx.order_stage,
     })
 }
 
