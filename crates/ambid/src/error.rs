@@ -20,7 +20,7 @@
 
 use crate::io::output::OutputError;
 use crate::io::table::DataFileError;
-use crate::workflow::ConfigError;
+use crate::config::ConfigError;
 use std::fmt::Display;
 
 /// Classes of failure, each with its own process exit code.

@@ -2,12 +2,13 @@
 //!
 //! The ambid application as a library: file formats ([`io`]), the twin experiment
 //! ([`experiment`]), the excitation comparison ([`comparison`]), the identification pipeline as
-//! typed stages ([`stage`]) and the workflow that sequences them into one typed outcome
+//! typed stages ([`stage`]) with their settings ([`config`], the workflow file) and the workflow that sequences them into one typed outcome
 //! ([`workflow`]). The `ambid` binary is a thin command-line layer over these.
 
 pub mod analysis;
 pub mod bla;
 pub mod comparison;
+pub mod config;
 pub mod error;
 pub mod experiment;
 pub mod fitting;

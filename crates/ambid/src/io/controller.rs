@@ -48,7 +48,7 @@
 //! ```
 
 use crate::error::{Context, Error, Result};
-use crate::workflow::FailureClass;
+use crate::error::FailureClass;
 use ambid_core::c64;
 use ambid_core::lti::{Discretisation, PidSpec, StateSpace, TransferFunction};
 use ambid_twin::TwinConfig;

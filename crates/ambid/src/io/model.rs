@@ -2,7 +2,7 @@
 //! the parameter standard deviations and fit statistics in `meta`.
 
 use crate::error::{Context, Error, Result};
-use crate::workflow::FailureClass;
+use crate::error::FailureClass;
 use ambid_core::lti::{PolyModel, StateSpace};
 use serde_json::{json, Value};
 use std::path::Path;

@@ -292,7 +292,7 @@ impl Table {
     }
 }
 
-use crate::workflow::config::fmt_num as num;
+use crate::config::fmt_num as num;
 
 /// Sample time of a time column: strictly increasing and uniform to 1e-3·Ts.
 fn uniform_step(t: &[f64], c: &ColumnRef) -> Result<f64, String> {

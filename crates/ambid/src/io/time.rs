@@ -149,12 +149,12 @@ impl TimeData {
                     format!(
                         "the time column gives Ts = {:e} s but fs = {} Hz gives Ts = {ts_fs:e} s; give only one of them, or correct fs",
                         self.ts,
-                        crate::workflow::config::fmt_num(fs)
+                        crate::config::fmt_num(fs)
                     )
                 } else {
                     format!(
                         "the sampling frequency fs = {} Hz is not a positive number; give fs in Hz, e.g. fs = 1000",
-                        crate::workflow::config::fmt_num(fs)
+                        crate::config::fmt_num(fs)
                     )
                 },
             });

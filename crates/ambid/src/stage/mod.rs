@@ -98,7 +98,7 @@ pub use self::validation::{
 
 use crate::analysis::FrfSettings;
 use crate::experiment::ExcitationPlan;
-use crate::workflow::config::{ExcitationSection, FrfSection};
+use crate::config::{ExcitationSection, FrfSection};
 
 /// The identification excitation of an `[excitation]` section at level `frac` of i_sat, with
 /// the identification excitation seed.

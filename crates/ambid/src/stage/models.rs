@@ -11,7 +11,7 @@ use crate::error::{Error, FailureClass, Result};
 use crate::fitting::{identify_state_space, SsFitOptions, SsFocus};
 use crate::io::ControllerModel;
 use crate::validation::median_relative_error as median_rel;
-use crate::workflow::config::{parameters_of_order, ModelsSection, MAX_MODEL_ORDER};
+use crate::config::{parameters_of_order, ModelsSection, MAX_MODEL_ORDER};
 use ambid_core::c64;
 use ambid_core::estimate::arx::{arx, ArxOrders};
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
@@ -406,7 +406,7 @@ fn orders_with_recommendation(
     let mut out = given.to_vec();
     if let Some((lo, hi)) = recommended {
         let cap = rec.map_or(usize::MAX, |r| {
-            r.len() / crate::workflow::config::SAMPLES_PER_PARAMETER
+            r.len() / crate::config::SAMPLES_PER_PARAMETER
         });
         out.extend(
             (lo.max(1)..=hi).filter(|&o| o <= MAX_MODEL_ORDER && parameters_of_order(o) <= cap),

@@ -9,7 +9,7 @@ use crate::analysis::FrfAnalysis;
 use crate::error::{Error, FailureClass, Result};
 use crate::fitting::{identify_state_space, SsFitOptions, SsFocus};
 use crate::io::ControllerModel;
-use crate::workflow::config::{ModelsSection, OrderSection};
+use crate::config::{ModelsSection, OrderSection};
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::estimate::order::{arx_order_scan, ArxScanSpec, OrderScan};
 use ambid_core::estimate::subspace::{n4sid_detailed, SubspaceOptions};

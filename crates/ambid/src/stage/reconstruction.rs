@@ -11,7 +11,7 @@ use crate::validation::{
     chirp_frequency, validate_closed_loop, worst_window, MeasuredLoop, ValidationOutcome,
     ValidationSettings, WorstWindow,
 };
-use crate::workflow::config::{ReconstructionSection, ValidationSection};
+use crate::config::{ReconstructionSection, ValidationSection};
 use ambid_core::lti::StateSpace;
 use ambid_core::validate::closed_loop::WindowFit;
 use ambid_core::validate::iso::IsoZones;

@@ -10,7 +10,7 @@ use crate::validation::{
     residual_lags, validate_closed_loop, LagBasis, LagChoice, MeasuredLoop, ValidationOutcome,
     ValidationSettings, RESIDUAL_LAGS_FALLBACK,
 };
-use crate::workflow::config::ValidationSection;
+use crate::config::ValidationSection;
 use ambid_core::lti::{PolyModel, StateSpace, Structure};
 use ambid_core::validate::fit::fit_percent;
 use ambid_core::validate::iso::IsoZones;

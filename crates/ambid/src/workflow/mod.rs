@@ -13,7 +13,8 @@
 //! recorded files. A step the data do not allow (closed-loop steps on open-loop data, the twin's
 //! studies on files without one record per level) is skipped with a note in the report.
 
-pub mod config;
+/// The workflow file's sections (the stages' settings), [`crate::config`].
+pub use crate::config;
 mod data;
 pub mod figures;
 mod outcome;

@@ -1061,7 +1061,7 @@ pub(crate) fn fmt_num(v: f64) -> String {
 }
 
 /// The commented example written by `ambid init` (it parses to the defaults).
-pub const EXAMPLE: &str = include_str!("example.toml");
+pub const EXAMPLE: &str = include_str!("workflow/example.toml");
 
 #[cfg(test)]
 mod tests {
