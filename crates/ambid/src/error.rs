@@ -18,9 +18,9 @@
 //! assert_eq!(Error::from(core).class(), Some(FailureClass::Config));
 //! ```
 
+use crate::config::ConfigError;
 use crate::io::output::OutputError;
 use crate::io::table::DataFileError;
-use crate::config::ConfigError;
 use std::fmt::Display;
 
 /// Classes of failure, each with its own process exit code.

@@ -2,6 +2,7 @@
 
 use super::args::DataFileArgs;
 use ambid::io::csv::read_frf_csv;
+use ambid::stage::{Recording, Signals};
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::frf::band::{fit_band, FIT_REL_HALFWIDTH};
 use ambid_core::validate::predict::InitialState;
@@ -217,29 +218,34 @@ pub fn frf_input(
     })
 }
 
-/// One input and one output column of a time-data file, its sample time and whether it has the
-/// excitation column (`--excitation`, default `r`) (a closed-loop experiment, for `--loop auto`).
-pub struct RecordIo {
-    pub u: Vec<f64>,
-    pub y: Vec<f64>,
-    pub ts: f64,
-    pub has_r: bool,
-}
-
-/// The columns `input` and `output` of the record `p`, read with `file`.
+/// The columns `input` and `output` of the record `p`, read with `file`, as a one-axis
+/// [`Recording`] (the core's data contract): `u`, `y` and, when the file has the excitation
+/// column (`--excitation`, default `r`), `r` (a closed-loop experiment, for `--loop auto`).
 pub fn read_io(
     p: &Path,
     file: &DataFileArgs,
     (input, output): (&str, &str),
     excitation: &str,
-) -> Result<RecordIo> {
+) -> Result<Recording> {
     let d = file.read(p)?;
-    Ok(RecordIo {
-        u: d.column(input)?.to_vec(),
-        y: d.column(output)?.to_vec(),
-        ts: d.ts,
-        has_r: d.has(excitation),
-    })
+    let r = if d.has(excitation) {
+        Some(d.column_raw(excitation)?.to_vec())
+    } else {
+        None
+    };
+    Ok(Recording::from_signals(
+        d.ts,
+        None,
+        Signals {
+            r,
+            u: d.column(input)?.to_vec(),
+            y: d.column(output)?.to_vec(),
+            i: None,
+            w: None,
+        },
+        d.has(excitation),
+        p.display().to_string(),
+    )?)
 }
 
 /// Reads a validation record, checks its sample time against the estimation data's and removes
@@ -253,12 +259,8 @@ pub fn read_validation(
     mu: f64,
     my: f64,
 ) -> Result<(Vec<f64>, Vec<f64>)> {
-    let RecordIo {
-        mut u,
-        mut y,
-        ts: tsv,
-        ..
-    } = read_io(p, file, (input, output), "r")?;
+    let rec = read_io(p, file, (input, output), "r")?;
+    let (mut u, mut y, tsv) = (rec.u().to_vec(), rec.y().to_vec(), rec.ts());
     if ((tsv - ts) / ts).abs() > 1e-9 {
         return Err(ambid::error::Error::input(format!(
             "the validation data are sampled at {} Hz, the estimation data at {} Hz",

@@ -1,7 +1,7 @@
 //! `ambid fit` and `ambid order`: parametric models and ARX order scans from time-domain data.
 
 use super::args::{DataFileArgs, ExcitationColumn, Force, InputColumn, OutputColumn};
-use super::common::{check_model_size, mean, read_io, read_validation, RecordIo};
+use super::common::{check_model_size, mean, read_io, read_validation};
 use super::common::{frf_input, WeightsArg, X0Arg};
 use ambid::io::model::state_space_json;
 use ambid::io::model::{model_json_bytes, polynomial_json};
@@ -317,12 +317,13 @@ pub fn fit(a: FitArgs) -> Result<()> {
             .into()),
         };
     }
-    let RecordIo {
-        mut u,
-        mut y,
-        ts,
-        has_r,
-    } = read_io(&a.data, &a.file, (&a.u.input, &a.y.output), &a.r.excitation)?;
+    let rec = read_io(&a.data, &a.file, (&a.u.input, &a.y.output), &a.r.excitation)?;
+    let (mut u, mut y, ts, has_r) = (
+        rec.u().to_vec(),
+        rec.y().to_vec(),
+        rec.ts(),
+        rec.r().is_some(),
+    );
     let open_loop = is_open_loop(&a, has_r);
     let params = match a.structure {
         Structure::Ss => a.order.unwrap_or(0),

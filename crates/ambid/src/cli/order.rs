@@ -1,7 +1,7 @@
 //! `ambid order`: ARX order scan.
 
 use super::args::{DataFileArgs, Force, InputColumn, OutputColumn};
-use super::common::{check_model_size, mean, read_io, read_validation, RecordIo};
+use super::common::{check_model_size, mean, read_io, read_validation};
 use ambid::io::output::write_file;
 use ambid::io::OutputSet;
 use ambid_core::estimate::order::{arx_order_scan, ArxScanSpec};
@@ -57,9 +57,8 @@ pub fn order(a: OrderArgs) -> Result<()> {
         ))
         .into());
     }
-    let RecordIo {
-        mut u, mut y, ts, ..
-    } = read_io(&a.data, &a.file, (&a.u.input, &a.y.output), "r")?;
+    let rec = read_io(&a.data, &a.file, (&a.u.input, &a.y.output), "r")?;
+    let (mut u, mut y, ts) = (rec.u().to_vec(), rec.y().to_vec(), rec.ts());
     check_model_size(
         y.len(),
         a.na_max + a.nb_max,

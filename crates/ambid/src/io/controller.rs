@@ -47,8 +47,8 @@
 //! assert!(c.check_ts(1e-4).unwrap_err().to_string().contains("rediscretise"));
 //! ```
 
-use crate::error::{Context, Error, Result};
 use crate::error::FailureClass;
+use crate::error::{Context, Error, Result};
 use ambid_core::c64;
 use ambid_core::lti::{Discretisation, PidSpec, StateSpace, TransferFunction};
 use ambid_twin::TwinConfig;

@@ -1,8 +1,8 @@
 //! Model files (JSON, `docs/formats.md`): one object per model, polynomial or state space, with
 //! the parameter standard deviations and fit statistics in `meta`.
 
-use crate::error::{Context, Error, Result};
 use crate::error::FailureClass;
+use crate::error::{Context, Error, Result};
 use ambid_core::lti::{PolyModel, StateSpace};
 use serde_json::{json, Value};
 use std::path::Path;

@@ -5,9 +5,9 @@
 
 use super::{frf_settings, Recording, TwinSource};
 use crate::analysis::{analyze, FrfAnalysis, FrfMethod, Record};
+use crate::config::FrfSection;
 use crate::error::{Error, FailureClass, Result};
 use crate::io::ControllerModel;
-use crate::config::FrfSection;
 use ambid_core::c64;
 
 /// The FRF stage's input: the identification record and how to analyse it.

@@ -97,8 +97,8 @@ pub use self::validation::{
 };
 
 use crate::analysis::FrfSettings;
-use crate::experiment::ExcitationPlan;
 use crate::config::{ExcitationSection, FrfSection};
+use crate::experiment::ExcitationPlan;
 
 /// The identification excitation of an `[excitation]` section at level `frac` of i_sat, with
 /// the identification excitation seed.

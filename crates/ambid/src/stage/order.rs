@@ -6,10 +6,10 @@
 
 use super::Recording;
 use crate::analysis::FrfAnalysis;
+use crate::config::{ModelsSection, OrderSection};
 use crate::error::{Error, FailureClass, Result};
 use crate::fitting::{identify_state_space, SsFitOptions, SsFocus};
 use crate::io::ControllerModel;
-use crate::config::{ModelsSection, OrderSection};
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::estimate::order::{arx_order_scan, ArxScanSpec, OrderScan};
 use ambid_core::estimate::subspace::{n4sid_detailed, SubspaceOptions};

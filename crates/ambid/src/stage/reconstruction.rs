@@ -5,13 +5,13 @@
 
 use super::validation::validation_settings;
 use super::{Recording, Seeds, TwinSource};
+use crate::config::{ReconstructionSection, ValidationSection};
 use crate::error::{Error, FailureClass, Result};
 use crate::io::ControllerModel;
 use crate::validation::{
     chirp_frequency, validate_closed_loop, worst_window, MeasuredLoop, ValidationOutcome,
     ValidationSettings, WorstWindow,
 };
-use crate::config::{ReconstructionSection, ValidationSection};
 use ambid_core::lti::StateSpace;
 use ambid_core::validate::closed_loop::WindowFit;
 use ambid_core::validate::iso::IsoZones;

@@ -4,13 +4,13 @@
 //! or one-step prediction) — with the residual tests and their number of lags.
 
 use super::{Recording, TwinSource};
+use crate::config::ValidationSection;
 use crate::error::Result;
 use crate::io::ControllerModel;
 use crate::validation::{
     residual_lags, validate_closed_loop, LagBasis, LagChoice, MeasuredLoop, ValidationOutcome,
     ValidationSettings, RESIDUAL_LAGS_FALLBACK,
 };
-use crate::config::ValidationSection;
 use ambid_core::lti::{PolyModel, StateSpace, Structure};
 use ambid_core::validate::fit::fit_percent;
 use ambid_core::validate::iso::IsoZones;
