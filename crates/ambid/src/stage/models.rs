@@ -105,41 +105,32 @@ pub trait Scored {
     fn relative_rmse(&self) -> Option<f64>;
 }
 
-impl Scored for Candidate {
-    fn fitted(&self) -> bool {
-        self.model.is_some()
-    }
-    fn valid(&self) -> bool {
-        self.valid
-    }
-    fn validation_fit(&self) -> Option<f64> {
-        self.validation_fit
-    }
-    fn bic(&self) -> Option<f64> {
-        self.bic
-    }
-    fn relative_rmse(&self) -> Option<f64> {
-        self.relative_rmse
-    }
+/// [`Scored`] for a row type with the fields `model`, `valid`, `validation_fit`, `bic` and
+/// `relative_rmse`.
+macro_rules! scored_by_fields {
+    ($t:ty) => {
+        impl Scored for $t {
+            fn fitted(&self) -> bool {
+                self.model.is_some()
+            }
+            fn valid(&self) -> bool {
+                self.valid
+            }
+            fn validation_fit(&self) -> Option<f64> {
+                self.validation_fit
+            }
+            fn bic(&self) -> Option<f64> {
+                self.bic
+            }
+            fn relative_rmse(&self) -> Option<f64> {
+                self.relative_rmse
+            }
+        }
+    };
 }
 
-impl Scored for CompareRow {
-    fn fitted(&self) -> bool {
-        self.model.is_some()
-    }
-    fn valid(&self) -> bool {
-        self.valid
-    }
-    fn validation_fit(&self) -> Option<f64> {
-        self.validation_fit
-    }
-    fn bic(&self) -> Option<f64> {
-        self.bic
-    }
-    fn relative_rmse(&self) -> Option<f64> {
-        self.relative_rmse
-    }
-}
+scored_by_fields!(Candidate);
+scored_by_fields!(CompareRow);
 
 /// The chosen row and whether it was chosen among the valid ones.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

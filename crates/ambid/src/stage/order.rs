@@ -188,6 +188,33 @@ pub struct OrderErrors {
     pub rows: Vec<OrderError>,
 }
 
+impl OrderErrors {
+    /// The rows of `errs` (order, error) with each marked adequate when its error is within
+    /// `tolerance` × `best`.
+    fn new(
+        basis: ErrorBasis,
+        scan_max: usize,
+        tolerance: f64,
+        best: f64,
+        errs: &[(usize, Option<f64>)],
+    ) -> Self {
+        Self {
+            basis,
+            scan_max,
+            tolerance,
+            best,
+            rows: errs
+                .iter()
+                .map(|&(order, error)| OrderError {
+                    order,
+                    error,
+                    adequate: error.is_some_and(|e| e <= tolerance * best),
+                })
+                .collect(),
+        }
+    }
+}
+
 /// The subspace (CVA) evidence: the singular values of $u \to y$ and the order at their
 /// largest gap.
 #[derive(Debug, Clone, PartialEq)]
@@ -365,194 +392,169 @@ fn recommend(input: &OrderInput<'_>) -> std::result::Result<OrderRecommendation,
         Some(d) => d == "frf" && input.frf.is_some(),
         None => rec.r().is_some() && rec.closed_loop && input.frf.is_some(),
     };
-    let (n, lo, hi, source, below, errors, subspace) =
-        if let (true, Some(a)) = (frf_domain, input.frf) {
-            let frd = &a.frf.plant;
-            let explicit_band = mcfg.band_hz.map(|[a, b]| (a, b));
-            let band = match explicit_band {
-                Some(b) => b,
-                None => {
-                    fit_band(frd, FIT_REL_HALFWIDTH)
-                        .map_err(|e| format!("no fit band for the order scan ({e})"))?
-                        .band
-                }
-            };
-            let weights = match mcfg.weights.as_str() {
-                "uniform" => FreqWeights::Uniform,
-                "coherence" => FreqWeights::Coherence(a.frf.coh_ry.clone()),
-                _ if frd.variance().is_some() => FreqWeights::InverseVariance,
-                _ => FreqWeights::Uniform,
-            };
-            let ctrl = input.controller.map(|c| c.state_space());
-            let (n_u, _) = supported_unstable_poles(frd, ctrl, explicit_band, mcfg.unstable_poles);
-            let spec = CompareSpec {
-                structures: vec![ambid_core::lti::Structure::Ss],
-                orders: (1..=scan_max).collect(),
-                nk: mcfg.nk,
-                fit: FreqFitOptions {
-                    band_hz: Some(band),
-                    weights,
-                    max_iterations: mcfg.max_iterations,
-                    ..FreqFitOptions::default()
-                },
-                unstable_poles: n_u,
-                controller: ctrl.cloned(),
-                ..CompareSpec::default()
-            };
-            let rows = compare_models(frd, &spec, None)
-                .map_err(|e| format!("the state-space fits of the order scan failed ({e})"))?;
-            let errs: Vec<(usize, Option<f64>)> = rows
-                .iter()
-                .map(|r| (r.order, r.relative_rmse.filter(|_| r.valid)))
-                .collect();
-            let Some(best) = errs
-                .iter()
-                .filter_map(|e| e.1)
-                .min_by(|a, b| a.total_cmp(b))
-            else {
-                return Err("no state-space fit of the order scan is valid".into());
-            };
-            let lines = frd
-                .f_hz()
-                .iter()
-                .filter(|f| (band.0..=band.1).contains(*f))
-                .count();
-            let tol = order_error_tolerance(lines);
-            let ok = |e: Option<f64>| e.is_some_and(|e| e <= tol * best);
-            let Some((i0, i1)) = adequate_range(&errs, ok) else {
-                return Err("no order of the scan is adequate".into());
-            };
-            let errors = OrderErrors {
-                basis: ErrorBasis::Frf { band },
-                scan_max,
-                tolerance: tol,
-                best,
-                rows: errs
-                    .iter()
-                    .map(|&(order, error)| OrderError {
-                        order,
-                        error,
-                        adequate: ok(error),
-                    })
-                    .collect(),
-            };
-            (
-                errs[i0].0,
-                errs[i0].0,
-                errs[i1].0,
-                "frf_fit_error",
-                if i0 > 0 { errs[i0 - 1].0 } else { 0 },
-                Some(errors),
-                None,
-            )
-        } else {
-            let n = rec.len();
-            let y = faer::Mat::from_fn(n, 1, |k, _| rec.y()[k]);
-            let u = faer::Mat::from_fn(n, 1, |k, _| rec.u()[k]);
-            let opts = SubspaceOptions {
-                max_order: scan_max,
-                ..SubspaceOptions::new(rec.ts())
-            };
-            let fit = match n4sid_detailed(y.as_ref(), u.as_ref(), &opts) {
-                Ok(f) => f,
-                Err(e) => return Err(format!("the subspace fit of the order scan failed ({e})")),
-            };
-            let subspace = SubspaceEvidence {
-                singular_values: fit
-                    .singular_values
-                    .iter()
-                    .take(scan_max + 1)
-                    .copied()
-                    .collect(),
-                order: fit.order,
-            };
-            // time-domain state-space fits per order, scored by their one-step prediction error
-            // on the validation record (the models step's fits and criterion)
-            // (only when the models step runs: the scan serves its order list, and ten state-space
-            // fits of a long record cost seconds; without it the singular values decide)
-            let val = input.validation;
-            let errs: Vec<(usize, Option<f64>)> = if input.models_run {
-                (1..=scan_max)
-                    .map(|o| {
-                        let so = SsFitOptions {
-                            order: Some(o),
-                            focus: if rec.closed_loop {
-                                SsFocus::Prediction
-                            } else {
-                                SsFocus::Auto
-                            },
-                            max_iterations: mcfg.max_iterations,
-                            ..SsFitOptions::default()
-                        };
-                        let e = identify_state_space(rec.u(), rec.y(), rec.ts(), &so)
-                            .ok()
-                            .and_then(|f| {
-                                // the models step's own criterion: simulation when the model is
-                                // stable, else the one-step prediction of its innovations form
-                                let k = f.pem.and_then(|p| p.kalman_gain);
-                                let (yh, _) = super::validation::open_loop_response(
-                                    &super::validation::ModelUnderTest {
-                                        name: "ss",
-                                        model: &f.model,
-                                        poly: None,
-                                        kalman: k.as_deref(),
-                                    },
-                                    val.y(),
-                                    val.u(),
-                                )?;
-                                fit_percent(val.y(), &yh).ok().map(|p| 100.0 - p)
-                            });
-                        (o, e)
-                    })
-                    .collect()
-            } else {
-                Vec::new()
-            };
-            let best = errs
-                .iter()
-                .filter_map(|e| e.1)
-                .min_by(|a, b| a.total_cmp(b));
-            let tol = order_error_tolerance(val.len());
-            let ok = |e: Option<f64>| best.is_some_and(|b| e.is_some_and(|e| e <= tol * b));
-            match adequate_range(&errs, ok) {
-                Some((i0, i1)) => {
-                    let b = best.unwrap_or(f64::NAN);
-                    let errors = OrderErrors {
-                        basis: ErrorBasis::TimeValidation,
-                        scan_max,
-                        tolerance: tol,
-                        best: b,
-                        rows: errs
-                            .iter()
-                            .map(|&(order, error)| OrderError {
-                                order,
-                                error,
-                                adequate: ok(error),
-                            })
-                            .collect(),
-                    };
-                    let (lo, hi) = (errs[i0].0, errs[i1].0);
-                    (
-                        lo,
-                        lo,
-                        hi,
-                        "time_fit_error",
-                        lo - 1,
-                        Some(errors),
-                        Some(subspace),
-                    )
-                }
-                None => (
-                    fit.order,
-                    fit.order,
-                    fit.order,
-                    "subspace_singular_values",
-                    0,
-                    None,
-                    Some(subspace),
-                ),
+    let (n, lo, hi, source, below, errors, subspace) = if let (true, Some(a)) =
+        (frf_domain, input.frf)
+    {
+        let frd = &a.frf.plant;
+        let explicit_band = mcfg.band_hz.map(|[a, b]| (a, b));
+        let band = match explicit_band {
+            Some(b) => b,
+            None => {
+                fit_band(frd, FIT_REL_HALFWIDTH)
+                    .map_err(|e| format!("no fit band for the order scan ({e})"))?
+                    .band
             }
         };
+        let weights = match mcfg.weights.as_str() {
+            "uniform" => FreqWeights::Uniform,
+            "coherence" => FreqWeights::Coherence(a.frf.coh_ry.clone()),
+            _ if frd.variance().is_some() => FreqWeights::InverseVariance,
+            _ => FreqWeights::Uniform,
+        };
+        let ctrl = input.controller.map(|c| c.state_space());
+        let (n_u, _) = supported_unstable_poles(frd, ctrl, explicit_band, mcfg.unstable_poles);
+        let spec = CompareSpec {
+            structures: vec![ambid_core::lti::Structure::Ss],
+            orders: (1..=scan_max).collect(),
+            nk: mcfg.nk,
+            fit: FreqFitOptions {
+                band_hz: Some(band),
+                weights,
+                max_iterations: mcfg.max_iterations,
+                ..FreqFitOptions::default()
+            },
+            unstable_poles: n_u,
+            controller: ctrl.cloned(),
+            ..CompareSpec::default()
+        };
+        let rows = compare_models(frd, &spec, None)
+            .map_err(|e| format!("the state-space fits of the order scan failed ({e})"))?;
+        let errs: Vec<(usize, Option<f64>)> = rows
+            .iter()
+            .map(|r| (r.order, r.relative_rmse.filter(|_| r.valid)))
+            .collect();
+        let Some(best) = errs
+            .iter()
+            .filter_map(|e| e.1)
+            .min_by(|a, b| a.total_cmp(b))
+        else {
+            return Err("no state-space fit of the order scan is valid".into());
+        };
+        let lines = frd
+            .f_hz()
+            .iter()
+            .filter(|f| (band.0..=band.1).contains(*f))
+            .count();
+        let tol = order_error_tolerance(lines);
+        let ok = |e: Option<f64>| e.is_some_and(|e| e <= tol * best);
+        let Some((i0, i1)) = adequate_range(&errs, ok) else {
+            return Err("no order of the scan is adequate".into());
+        };
+        let errors = OrderErrors::new(ErrorBasis::Frf { band }, scan_max, tol, best, &errs);
+        (
+            errs[i0].0,
+            errs[i0].0,
+            errs[i1].0,
+            "frf_fit_error",
+            if i0 > 0 { errs[i0 - 1].0 } else { 0 },
+            Some(errors),
+            None,
+        )
+    } else {
+        let n = rec.len();
+        let y = faer::Mat::from_fn(n, 1, |k, _| rec.y()[k]);
+        let u = faer::Mat::from_fn(n, 1, |k, _| rec.u()[k]);
+        let opts = SubspaceOptions {
+            max_order: scan_max,
+            ..SubspaceOptions::new(rec.ts())
+        };
+        let fit = match n4sid_detailed(y.as_ref(), u.as_ref(), &opts) {
+            Ok(f) => f,
+            Err(e) => return Err(format!("the subspace fit of the order scan failed ({e})")),
+        };
+        let subspace = SubspaceEvidence {
+            singular_values: fit
+                .singular_values
+                .iter()
+                .take(scan_max + 1)
+                .copied()
+                .collect(),
+            order: fit.order,
+        };
+        // time-domain state-space fits per order, scored by their one-step prediction error
+        // on the validation record (the models step's fits and criterion)
+        // (only when the models step runs: the scan serves its order list, and ten state-space
+        // fits of a long record cost seconds; without it the singular values decide)
+        let val = input.validation;
+        let errs: Vec<(usize, Option<f64>)> = if input.models_run {
+            (1..=scan_max)
+                .map(|o| {
+                    let so = SsFitOptions {
+                        order: Some(o),
+                        focus: if rec.closed_loop {
+                            SsFocus::Prediction
+                        } else {
+                            SsFocus::Auto
+                        },
+                        max_iterations: mcfg.max_iterations,
+                        ..SsFitOptions::default()
+                    };
+                    let e = identify_state_space(rec.u(), rec.y(), rec.ts(), &so)
+                        .ok()
+                        .and_then(|f| {
+                            // the models step's own criterion: simulation when the model is
+                            // stable, else the one-step prediction of its innovations form
+                            let k = f.pem.and_then(|p| p.kalman_gain);
+                            let (yh, _) = super::validation::open_loop_response(
+                                &super::validation::ModelUnderTest {
+                                    name: "ss",
+                                    model: &f.model,
+                                    poly: None,
+                                    kalman: k.as_deref(),
+                                },
+                                val.y(),
+                                val.u(),
+                            )?;
+                            fit_percent(val.y(), &yh).ok().map(|p| 100.0 - p)
+                        });
+                    (o, e)
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let best = errs
+            .iter()
+            .filter_map(|e| e.1)
+            .min_by(|a, b| a.total_cmp(b));
+        let tol = order_error_tolerance(val.len());
+        let ok = |e: Option<f64>| best.is_some_and(|b| e.is_some_and(|e| e <= tol * b));
+        match adequate_range(&errs, ok) {
+            Some((i0, i1)) => {
+                let b = best.unwrap_or(f64::NAN);
+                let errors = OrderErrors::new(ErrorBasis::TimeValidation, scan_max, tol, b, &errs);
+                let (lo, hi) = (errs[i0].0, errs[i1].0);
+                (
+                    lo,
+                    lo,
+                    hi,
+                    "time_fit_error",
+                    lo - 1,
+                    Some(errors),
+                    Some(subspace),
+                )
+            }
+            None => (
+                fit.order,
+                fit.order,
+                fit.order,
+                "subspace_singular_values",
+                0,
+                None,
+                Some(subspace),
+            ),
+        }
+    };
     Ok(OrderRecommendation {
         n,
         lo,

@@ -279,14 +279,7 @@ pub fn operating_point(
                     fmt(b.1)
                 ))
         );
-        ctx.typed.operating_point = Some(operating_point_summary(&out));
-        ctx.section(
-            "operating-point",
-            "Operating-point study",
-            super::render_signal::operating_point(&out, caption),
-        );
-        ctx.operating_point = Some(out);
-        return Ok(StepStatus::Done);
+        return Ok(finish_operating_point(ctx, out, caption));
     }
     let (out, input) = match pre {
         Some(pre) => pre,
@@ -309,6 +302,15 @@ pub fn operating_point(
             "the seed's"
         }
     );
+    Ok(finish_operating_point(ctx, out, caption))
+}
+
+/// Books the operating-point study's result: its summary part, its section, the typed result.
+fn finish_operating_point(
+    ctx: &mut Ctx<'_>,
+    out: crate::study::OperatingPointOutcome,
+    caption: String,
+) -> StepStatus {
     ctx.typed.operating_point = Some(operating_point_summary(&out));
     ctx.section(
         "operating-point",
@@ -316,7 +318,7 @@ pub fn operating_point(
         super::render_signal::operating_point(&out, caption),
     );
     ctx.operating_point = Some(out);
-    Ok(StepStatus::Done)
+    StepStatus::Done
 }
 
 /// The operating-point study's part of `summary.json`: per case, the median deviation from
