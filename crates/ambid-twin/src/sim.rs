@@ -77,7 +77,7 @@
 //! part of every lane advances with the same IEEE operations in the same order as a lone run's
 //! scalar RK4 (the branches of the amplifier limits become bitwise selects; with AVX2, detected
 //! at run time, four lanes share one 256-bit register; no FMA), so every record is bit for bit
-//! the lone run's (`tests/batch.rs`), at about 0.4× the CPU time per run.
+//! the lone run's (`tests/batch.rs`), at about 0.4–0.45× the CPU time per run.
 //!
 //! # Touchdown
 //! If $|x_A|$ or $|x_B|$ reaches the air gap $g_0$ (checked at every integrator step in nonlinear mode,
@@ -696,6 +696,7 @@ impl<const L: usize> NlLanes<L> {
 
     /// One classical RK4 step of length `h` with the references held.
     #[inline(always)]
+    #[allow(clippy::needless_range_loop)] // lane loops index several per-lane arrays
     fn rk4(&self, x: &mut LaneState<L>, ira: &[f64; L], irb: &[f64; L], lim: &mut Limits<L>) {
         let h = self.h;
         let hh: [f64; L] = std::array::from_fn(|l| 0.5 * h[l]);
@@ -789,6 +790,7 @@ impl<const L: usize> NlLanes<L> {
     /// Advances one control period with `nsub` RK4 substeps. A lane whose $|x_A|$ or $|x_B|$
     /// reaches the gap (or becomes non-finite) gets the substep and displacements in `fail`
     /// (its later values are not used); `flags` collects the limits of every lane.
+    #[allow(clippy::needless_range_loop)] // lane loops index several per-lane arrays
     #[inline(always)]
     fn period(
         &self,
@@ -854,7 +856,7 @@ impl Job<'_> {
 
 /// The widest batch [`Twin::simulate_batch`] runs in lock-step: four lanes fill one AVX2
 /// register. On the 2-core AMD EPYC of docs/benchmarks.md four nonlinear runs in lock-step take
-/// about 1.6 lone runs' CPU time with AVX2 (3.0 on the baseline SSE2 path); wider batches were
+/// about 1.6–1.8 lone runs' CPU time with AVX2 (3.0 on the baseline SSE2 path); wider batches were
 /// not faster per run.
 pub const MAX_LANES: usize = 4;
 
