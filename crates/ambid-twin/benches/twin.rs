@@ -67,6 +67,26 @@ fn simulate_102300_exp_rk4(bencher: Bencher, exp_substeps: usize) {
     bencher.bench(|| black_box(twin.simulate(black_box(&r), &opts).unwrap()));
 }
 
+/// Four nonlinear RK4 runs (seeds 1–4) of 102 300 samples in lock-step lanes
+/// (`Twin::simulate_batch`, AVX2 when the CPU has it); compare with 4 × `simulate_102300`
+/// (Nonlinear).
+#[divan::bench(sample_count = 10)]
+fn simulate_102300_batch_of_4(bencher: Bencher) {
+    let twin = Twin::new(TwinConfig::default()).unwrap();
+    let r = excitation();
+    let opts: Vec<SimOptions> = (1..=4)
+        .map(|seed| SimOptions {
+            mode: Mode::Nonlinear,
+            seed,
+            noise: true,
+            ..Default::default()
+        })
+        .collect();
+    let runs: Vec<(&Twin, &[f64], &SimOptions)> =
+        opts.iter().map(|o| (&twin, r.as_slice(), o)).collect();
+    bencher.bench(|| black_box(Twin::simulate_batch(black_box(&runs))));
+}
+
 #[divan::bench(sample_count = 10)]
 fn build_twin() -> Twin {
     Twin::new(TwinConfig::default()).unwrap()

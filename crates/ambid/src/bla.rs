@@ -133,9 +133,10 @@ pub fn run_level(plan: &BlaPlan, rms_frac: f64) -> Result<LevelRun> {
     };
     let bins = spec.bins(ts).context("designing the multisine grid")?;
     let rms = rms_frac * twin.i_sat();
-    // the realisations are independent (realisation m: seed + 1 + m): simulated in parallel, then
-    // used in order (the first failing one is the one reported, as in a sequential loop)
-    let data = (0..plan.realisations)
+    // the realisations are independent (realisation m: seed + 1 + m): simulated in lock-step
+    // lanes (`Twin::simulate_batch`, each exactly its lone run), the lane groups in parallel,
+    // then used in order (the first failing one is the one reported, as in a sequential loop)
+    let inputs = (0..plan.realisations)
         .into_par_iter()
         .map(|m| {
             let seed = plan.seed.wrapping_add(1 + m as u64);
@@ -148,8 +149,26 @@ pub fn run_level(plan: &BlaPlan, rms_frac: f64) -> Result<LevelRun> {
                 settle_samples: n,
                 ..SimOptions::default()
             };
-            twin.simulate(&r, &opts)
-                .with_context(|| format!("simulating realisation {m}"))
+            Ok((r, opts))
+        })
+        .collect::<Vec<Result<_>>>()
+        .into_iter()
+        .collect::<Result<Vec<_>>>()?;
+    let data = inputs
+        .par_chunks(ambid_twin::sim::MAX_LANES)
+        .enumerate()
+        .flat_map_iter(|(c, chunk)| {
+            let runs: Vec<(&Twin, &[f64], &SimOptions)> = chunk
+                .iter()
+                .map(|(r, o)| (&twin, r.as_slice(), o))
+                .collect();
+            Twin::simulate_batch(&runs)
+                .into_iter()
+                .enumerate()
+                .map(move |(k, rec)| {
+                    let m = c * ambid_twin::sim::MAX_LANES + k;
+                    rec.with_context(|| format!("simulating realisation {m}"))
+                })
         })
         .collect::<Vec<Result<_>>>()
         .into_iter()

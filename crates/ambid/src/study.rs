@@ -8,7 +8,7 @@
 
 use crate::analysis::{analyze, FrfAnalysis, FrfSettings, Record};
 use crate::error::{Context, Error, Result};
-use crate::experiment::{run, ExcitationKind, ExcitationPlan, Experiment, ExperimentOutput};
+use crate::experiment::{run_batch, ExcitationKind, ExcitationPlan, Experiment, ExperimentOutput};
 use ambid_core::lti::Frd;
 use ambid_twin::{Mode, TwinConfig};
 use rayon::prelude::*;
@@ -252,23 +252,13 @@ pub fn amplitude_on_twin(study: &TwinAmplitudeStudy) -> Result<AmplitudeOutcome>
         ));
     }
     // one experiment per level (seed + j) and the noise record (seed + 1000), all independent:
-    // in parallel, each with its own seed as in a sequential loop, then used in level order
-    let experiment = |j: usize| -> Result<ExperimentOutput> {
-        if j == study.levels.len() {
-            return run(&Experiment {
-                twin: study.twin.clone(),
-                excitation: ExcitationPlan {
-                    kind: ExcitationKind::None,
-                    ..study.excitation.clone()
-                },
-                mode: study.mode,
-                seed: study.seed + 1000,
-                noise: true,
-                record_b: false,
-            });
-        }
-        let level = study.levels[j];
-        let exp = Experiment {
+    // simulated in lock-step lanes and in parallel (`run_batch`, each exactly its lone run),
+    // then used in level order
+    let mut exps: Vec<Experiment> = study
+        .levels
+        .iter()
+        .enumerate()
+        .map(|(j, &level)| Experiment {
             twin: study.twin.clone(),
             excitation: ExcitationPlan {
                 amplitude_frac: level,
@@ -278,12 +268,29 @@ pub fn amplitude_on_twin(study: &TwinAmplitudeStudy) -> Result<AmplitudeOutcome>
             seed: study.seed + j as u64,
             noise: study.noise,
             record_b: false,
-        };
-        run(&exp).with_context(|| format!("level {:.1} %", 100.0 * level))
-    };
-    let n_runs = study.levels.len() + usize::from(study.noise);
-    let mut outs: Vec<Result<ExperimentOutput>> =
-        (0..n_runs).into_par_iter().map(experiment).collect();
+        })
+        .collect();
+    if study.noise {
+        exps.push(Experiment {
+            twin: study.twin.clone(),
+            excitation: ExcitationPlan {
+                kind: ExcitationKind::None,
+                ..study.excitation.clone()
+            },
+            mode: study.mode,
+            seed: study.seed + 1000,
+            noise: true,
+            record_b: false,
+        });
+    }
+    let mut outs: Vec<Result<ExperimentOutput>> = run_batch(&exps)
+        .into_iter()
+        .enumerate()
+        .map(|(j, out)| match study.levels.get(j) {
+            Some(level) => out.with_context(|| format!("level {:.1} %", 100.0 * level)),
+            None => out,
+        })
+        .collect();
     let noise = if study.noise { outs.pop() } else { None };
     let mut records = Vec::with_capacity(study.levels.len());
     let mut twin = None;
@@ -570,24 +577,31 @@ pub fn operating_point_on_twin(
             "an operating-point study needs the nominal case and at least one other",
         ));
     }
-    // the cases are independent experiments (seed + j): in parallel, then checked and used in
-    // case order (the first failing case is the one reported, as in a sequential loop)
-    let per_case: Vec<Result<(Frd, Vec<ambid_core::c64>, f64)>> = cases
-        .par_iter()
+    // the cases are independent experiments (seed + j): simulated in lock-step lanes and in
+    // parallel (`run_batch`, each exactly its lone run), analysed in parallel, then checked and
+    // used in case order (the first failing case is the one reported, as in a sequential loop)
+    let exps: Vec<Experiment> = cases
+        .iter()
         .enumerate()
         .map(|(j, case)| {
             let mut cfg = nominal.clone();
             cfg.operating_point.bias_current_a = case.bias_current_a;
             cfg.operating_point.air_gap_m = case.air_gap_m;
-            let out = run(&Experiment {
+            Experiment {
                 twin: cfg,
                 excitation: excitation.clone(),
                 mode,
                 seed: seed + j as u64,
                 noise: true,
                 record_b: false,
-            })
-            .with_context(|| format!("operating point `{}`", case.name))?;
+            }
+        })
+        .collect();
+    let per_case: Vec<Result<(Frd, Vec<ambid_core::c64>, f64)>> = cases
+        .par_iter()
+        .zip(run_batch(&exps))
+        .map(|(case, out)| {
+            let out = out.with_context(|| format!("operating point `{}`", case.name))?;
             let mut settings = FrfSettings::periodic(out.excitation.period_samples, skip_periods);
             settings.band = band;
             settings.quality_band = band;
