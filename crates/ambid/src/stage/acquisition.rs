@@ -222,15 +222,28 @@ impl TwinSource {
         seed: u64,
         what: &str,
     ) -> Result<(Recording, experiment::ExperimentOutput)> {
-        let exp = Experiment {
+        self.recording(experiment::run(&self.experiment(plan, seed)), what)
+    }
+
+    /// The experiment of excitation `plan` with the twin's noise drawn from `seed`.
+    pub fn experiment(&self, plan: ExcitationPlan, seed: u64) -> Experiment {
+        Experiment {
             twin: self.cfg.clone(),
             excitation: plan,
             mode: self.mode,
             seed,
             noise: self.noise,
             record_b: false,
-        };
-        let out = experiment::run(&exp)
+        }
+    }
+
+    /// The record of an experiment's output (`what` names it in messages and its source).
+    fn recording(
+        &self,
+        out: Result<experiment::ExperimentOutput>,
+        what: &str,
+    ) -> Result<(Recording, experiment::ExperimentOutput)> {
+        let out = out
             .with_context(|| format!("simulating the {what} record on the twin"))
             .map_err(|e| Error::classified(FailureClass::Computation, e))?;
         let rec = &out.record;
@@ -350,34 +363,35 @@ pub fn acquire_twin(twin: &TwinSource, plan: &AcquisitionPlan) -> Result<Acquisi
         ..plan.identification.clone()
     };
     let want_noise = plan.noise_record && twin.noise;
-    let (ident, (valid, noise)) = rayon::join(
-        || {
-            twin.record(
-                plan.identification.clone(),
-                plan.seeds.identification_record,
-                "identification",
-            )
-        },
-        || {
-            rayon::join(
-                || {
-                    twin.record(
-                        plan.validation.clone(),
-                        plan.seeds.validation_record,
-                        "validation",
-                    )
-                },
-                || {
-                    want_noise
-                        .then(|| twin.record(noise_plan, plan.seeds.noise_record, "noise"))
-                        .transpose()
-                },
-            )
-        },
-    );
+    // the records side by side: lock-step lanes of the twin's simulation (each record bit for
+    // bit its lone run's), experiment::run_batch
+    let mut exps = vec![
+        twin.experiment(
+            plan.identification.clone(),
+            plan.seeds.identification_record,
+        ),
+        twin.experiment(plan.validation.clone(), plan.seeds.validation_record),
+    ];
+    if want_noise {
+        exps.push(twin.experiment(noise_plan, plan.seeds.noise_record));
+    }
+    let mut outs = experiment::run_batch(&exps).into_iter();
+    let mut next = |what: &str| match outs.next() {
+        Some(out) => twin.recording(out, what),
+        None => Err(Error::computation(format!(
+            "the {what} record was not simulated"
+        ))),
+    };
+    let identification = next("identification")?.0;
+    let validation = next("validation")?.0;
+    let noise_y = if want_noise {
+        Some(next("noise")?.0.y().to_vec())
+    } else {
+        None
+    };
     Ok(Acquisition {
-        identification: ident?.0,
-        validation: valid?.0,
-        noise_y: noise?.map(|(r, _)| r.y().to_vec()),
+        identification,
+        validation,
+        noise_y,
     })
 }
