@@ -49,12 +49,17 @@
 
 pub mod analysis;
 pub mod chirp;
+pub mod multi;
 pub mod multisine;
 pub mod noise;
 pub mod prbs;
 
 pub use analysis::{amplitude_spectrum, autocorrelation, crest_factor, rms};
 pub use chirp::{ChirpSpec, Sweep};
+pub use multi::{
+    hadamard, hadamard_order, AxisLines, BaseSignal, LineCondition, MultiExcitation,
+    MultiInputDesign, MultiInputKind, MultiInputReport, MAX_HADAMARD_ORDER,
+};
 pub use multisine::{Grid, MultisineSpec, Phases};
 pub use noise::{Distribution, NoiseSpec};
 pub use prbs::{prbs_period, Lfsr, PrbsSpec, MAX_PRBS_ORDER, MIN_PRBS_ORDER};
