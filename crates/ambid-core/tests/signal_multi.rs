@@ -69,7 +69,7 @@ fn invalid_name(e: Error) -> &'static str {
 #[test]
 fn multisine_power_only_on_intended_lines() {
     let ts = 1e-3; // N = 240: 1/0.24 Hz lines
-    let levels = vec![0.3, 0.1, 0.25, 0.05];
+    let levels = [0.3, 0.1, 0.25, 0.05];
     let cases = [
         (MultiInputKind::Sequential, Grid::Full, Phases::Schroeder),
         (MultiInputKind::Orthogonal, Grid::Odd, Phases::Random),
@@ -94,7 +94,7 @@ fn multisine_power_only_on_intended_lines() {
                 }
             );
             for e in 0..m {
-                for j in 0..n {
+                for (j, &level) in levels.iter().enumerate().take(n) {
                     let sig = x.signal(e, j).unwrap();
                     assert_eq!(sig.len(), 3 * 240);
                     // Intended lines of axis j in experiment e.
@@ -106,7 +106,7 @@ fn multisine_power_only_on_intended_lines() {
                         _ => base_bins.clone(),
                     };
                     let f = lines.len().max(1) as f64;
-                    let amp = levels[j] * (2.0 / f).sqrt() * 240.0 / 2.0;
+                    let amp = level * (2.0 / f).sqrt() * 240.0 / 2.0;
                     for p in 0..3 {
                         let xk = naive_dft(&sig[p * 240..(p + 1) * 240]);
                         for (k, v) in xk.iter().enumerate() {

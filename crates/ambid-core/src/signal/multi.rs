@@ -17,8 +17,7 @@
 //! * **orthogonal** ($M$ = the Hadamard order $\ge n$): every axis carries the same signal with the
 //!   signs of a Sylvester–Hadamard matrix $H \in \{\pm1\}^{M \times M}$ ($H^\mathsf{T} H = M I$,
 //!   [`hadamard`]), $r_j^{(e)} = H_{ej}\, a_j s$, so
-//!   $$ R(k) = s(k)\, \operatorname{diag}(a)\, H_{:,1:n}^\mathsf{T}, \qquad
-//!      R R^\mathsf{H} = M |s(k)|^2 \operatorname{diag}(a)^2, $$
+//!   $$ R(k) = s(k)\, \operatorname{diag}(a)\, H_{:,1:n}^\mathsf{T}, \qquad R R^\mathsf{H} = M |s(k)|^2 \operatorname{diag}(a)^2, $$
 //!   and $\kappa = \max_j a_j / \min_j a_j$ again (1 at equal levels). Sylvester orders are powers of
 //!   two, so $n = 3$ uses the order-4 matrix and its first three columns: four experiments (rows),
 //!   the same conditioning, one experiment more than sequential;
