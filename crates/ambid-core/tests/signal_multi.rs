@@ -546,6 +546,11 @@ fn bad_input_gives_typed_errors() {
         assert_eq!(invalid_name(e.clone()), "n_inputs");
         assert!(e.to_string().contains("at least one input"), "{e}");
     }
+    // Too many inputs (sequential would need MAX_INPUTS + 1 experiments): refused before any
+    // allocation, also by weights().
+    let huge = MultiInputDesign::sequential(ambid_core::signal::MAX_INPUTS + 1, spec.clone());
+    assert_eq!(invalid_name(huge.weights().unwrap_err()), "n_inputs");
+    assert_eq!(invalid_name(huge.report(ts).unwrap_err()), "n_inputs");
     // More inputs than lines for a zipper (6 lines at 5 Hz spacing in 5..30 Hz, 7 inputs).
     let short = ms(5.0, 30.0, 200, 1, Grid::Full, Phases::Schroeder);
     let e = MultiInputDesign::zipper(7, short.clone())
@@ -652,4 +657,62 @@ fn serde_round_trip() {
     .unwrap();
     assert_eq!((z.levels.clone(), z.transient_periods), (None, 0));
     assert_eq!(z.axis_bins(0.01).unwrap()[1], vec![2, 4, 6, 8, 10]);
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig {
+        cases: 300,
+        rng_seed: proptest::test_runner::RngSeed::Fixed(20),
+        ..proptest::prelude::ProptestConfig::default()
+    })]
+
+    /// Hostile fields never panic: every design, report and IoData either works or returns a
+    /// typed error; when it works the zipper's lines partition the base grid and cond ≥ 1.
+    #[test]
+    fn never_panics(
+        kind in 0usize..3,
+        n in 0usize..7,
+        use_prbs in proptest::bool::ANY,
+        period in 0usize..80,
+        f_lo in -10.0f64..60.0,
+        f_hi in -10.0f64..60.0,
+        order in 0u32..8,
+        nb in 0usize..4,
+        periods in 0usize..3,
+        transient in 0usize..3,
+        level in -1.0f64..2.0,
+        levels in proptest::collection::vec(-0.5f64..2.0, 0..6),
+        ts in proptest::prop_oneof![proptest::strategy::Just(f64::NAN), proptest::strategy::Just(0.0), 1e-3f64..2e-2],
+        grid in 0usize..3,
+        random in proptest::bool::ANY,
+        with_levels in proptest::bool::ANY,
+    ) {
+        let kind = [MultiInputKind::Sequential, MultiInputKind::Orthogonal, MultiInputKind::Zipper][kind];
+        let base: BaseSignal = if use_prbs {
+            PrbsSpec { order, samples_per_bit: nb, periods, amplitude: level, offset: 0.0 }.into()
+        } else {
+            MultisineSpec {
+                f_min_hz: f_lo, f_max_hz: f_hi, period_samples: period, periods, rms: level,
+                grid: [Grid::Full, Grid::Odd, Grid::RandomOdd][grid],
+                phases: if random { Phases::Random } else { Phases::Schroeder }, seed: 3,
+            }.into()
+        };
+        let mut d = MultiInputDesign::new(kind, n, base.clone()).with_transient_periods(transient);
+        if with_levels {
+            d = d.with_levels(levels);
+        }
+        if let Ok(r) = d.report(ts) {
+            let x = d.generate(ts).unwrap();
+            proptest::prop_assert_eq!(r.experiments, x.n_experiments());
+            for c in &r.condition {
+                proptest::prop_assert!(c.cond >= 1.0 - 1e-9);
+            }
+            if kind == MultiInputKind::Zipper {
+                let mut all: Vec<usize> = x.axis_bins().iter().flatten().copied().collect();
+                all.sort_unstable();
+                proptest::prop_assert_eq!(all, base.bins(ts).unwrap());
+            }
+            let _ = x.to_iodata();
+        }
+    }
 }

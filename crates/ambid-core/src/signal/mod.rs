@@ -63,7 +63,7 @@ pub use analysis::{amplitude_spectrum, autocorrelation, crest_factor, rms};
 pub use chirp::{ChirpSpec, Sweep};
 pub use multi::{
     hadamard, hadamard_order, AxisLines, BaseSignal, LineCondition, MultiExcitation,
-    MultiInputDesign, MultiInputKind, MultiInputReport, MAX_HADAMARD_ORDER,
+    MultiInputDesign, MultiInputKind, MultiInputReport, MAX_HADAMARD_ORDER, MAX_INPUTS,
 };
 pub use multisine::{Grid, MultisineSpec, Phases};
 pub use noise::{Distribution, NoiseSpec};

@@ -90,6 +90,29 @@ use std::fmt;
 /// Largest Hadamard order [`hadamard`] builds ($2^{16}$); far more experiments than any rig runs.
 pub const MAX_HADAMARD_ORDER: usize = 1 << 16;
 
+/// Largest number of inputs a [`MultiInputDesign`] takes (1024; a rotor has 4 radial axes).
+pub const MAX_INPUTS: usize = 1 << 10;
+
+fn check_inputs(n_inputs: usize) -> Result<()> {
+    if n_inputs == 0 {
+        return Err(Error::invalid(
+            "n_inputs",
+            "a design needs at least one input; pass the number of excited axes (4 for a \
+             radial rotor: xa, xb, ya, yb)",
+        ));
+    }
+    if n_inputs > MAX_INPUTS {
+        return Err(Error::invalid(
+            "n_inputs",
+            format!(
+                "{n_inputs} inputs are more than the {MAX_INPUTS} a design takes; excite fewer \
+                 axes"
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// The three multi-input designs (see the [module docs](self)).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -237,8 +260,8 @@ impl BaseSignal {
 /// A multi-input excitation design: kind, number of inputs, base signal, levels, transient.
 ///
 /// # Requirements
-/// `n_inputs` $\ge 1$; a valid base spec (see [`MultisineSpec`], [`PrbsSpec`]); `levels`, when
-/// given, one finite level $> 0$ per input; the zipper needs a multisine base with at least
+/// `n_inputs` in $1 \dots$ [`MAX_INPUTS`]; a valid base spec (see [`MultisineSpec`],
+/// [`PrbsSpec`]); `levels`, when given, one finite level $> 0$ per input; the zipper needs a multisine base with at least
 /// `n_inputs` lines; all experiments together at most [`MAX_SAMPLES`] samples (summed over the
 /// inputs).
 ///
@@ -321,13 +344,7 @@ impl MultiInputDesign {
     /// for a level list of the wrong length.
     pub fn validate(&self, ts: f64) -> Result<()> {
         check_ts(ts)?;
-        if self.n_inputs == 0 {
-            return Err(Error::invalid(
-                "n_inputs",
-                "a design needs at least one input; pass the number of excited axes (4 for a \
-                 radial rotor: xa, xb, ya, yb)",
-            ));
-        }
+        check_inputs(self.n_inputs)?;
         if let Some(levels) = &self.levels {
             if levels.len() != self.n_inputs {
                 return Err(Error::DimensionMismatch {
@@ -410,15 +427,9 @@ impl MultiInputDesign {
     /// power of two $\ge n$), 1 (zipper).
     ///
     /// # Errors
-    /// [`Error::InvalidArgument`] for `n_inputs == 0` or an orthogonal design above
-    /// [`MAX_HADAMARD_ORDER`].
+    /// [`Error::InvalidArgument`] for `n_inputs` $= 0$ or above [`MAX_INPUTS`].
     pub fn n_experiments(&self) -> Result<usize> {
-        if self.n_inputs == 0 {
-            return Err(Error::invalid(
-                "n_inputs",
-                "a design needs at least one input",
-            ));
-        }
+        check_inputs(self.n_inputs)?;
         match self.kind {
             MultiInputKind::Sequential => Ok(self.n_inputs),
             MultiInputKind::Orthogonal => hadamard_order(self.n_inputs),
