@@ -29,10 +29,10 @@
 //!   The axes' line sets are disjoint and their union is $\mathcal K$. At a line of axis $j$ only
 //!   input $j$ is excited, so one experiment measures column $j$ of $T_{ry}$ and $S$ there, and only
 //!   there: the columns live on different lines and must be brought to a common grid before
-//!   $P = T_{ry} S^{-1}$ can be formed. The MIMO FRF (`frf::mimo`) interpolates each column onto the
-//!   union of the lines from its own neighbouring lines (a local polynomial in frequency), which
-//!   assumes the response is smooth over $n$ line spacings and is biased near resonances sharper than
-//!   that. The report takes the input matrix of each complete **group** of $n$ consecutive lines
+//!   $P = T_{ry} S^{-1}$ can be formed. Downstream the MIMO FRF (`frf::mimo`, which documents its
+//!   exact rule) interpolates each column onto the union of the lines from that column's own
+//!   neighbouring lines (a local polynomial in frequency); that assumes the response is smooth over
+//!   $n$ line spacings and is biased near resonances sharper than that. The report takes the input matrix of each complete **group** of $n$ consecutive lines
 //!   $(k_{gn}, \dots, k_{gn+n-1})$ — one line per axis, column $j$ the inputs' DFT at axis $j$'s line
 //!   — which is diagonal, $\kappa = \max_j |R_j| / \min_j |R_j| = \max_j (a_j\sqrt{2/F_j}) / \min_j
 //!   (a_j \sqrt{2/F_j})$.
@@ -43,7 +43,8 @@
 //! measures every entry from all $M$ experiments, $R R^\mathsf{H} = M |s|^2 a^2 I$, which gives
 //! each entry $n\times$ the averaging (a variance $n\times$ smaller) on the same lines; the zipper
 //! runs one experiment of length $T$ but gives each axis $1/n$ of the lines (each with
-//! $\sqrt{n}\times$ the amplitude at the same RMS) and needs the interpolation above. Every axis is
+//! $\sqrt{n}\times$ the amplitude at the same RMS, so $n^2\times$ less variance per line than the
+//! sequential design) and needs the interpolation above. Every axis is
 //! driven at once in the orthogonal and zippered designs: the summed load on the bearings is larger
 //! than in the sequential one.
 //!
