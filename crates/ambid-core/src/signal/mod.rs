@@ -30,6 +30,11 @@
 //!   phases. Full control of the excited lines (odd and random-odd grids reveal nonlinear distortion),
 //!   no leakage over whole periods, but only the chosen frequencies are excited.
 //!
+//! Several inputs ([`multi`]): [`MultiInputDesign`] excites $n$ axes from one periodic base signal,
+//! sequentially, with Hadamard signs (orthogonal) or on interleaved multisine lines (zipper), and
+//! [`MultiInputReport`] gives the experiments, durations, lines per axis and the input matrix's
+//! condition number per line (docs/signals.md, "Several inputs").
+//!
 //! The [`analysis`] functions ([`amplitude_spectrum`], [`autocorrelation`], [`crest_factor`], [`rms`])
 //! reproduce the paper's Figure 3 views of any signal.
 //!
@@ -49,12 +54,17 @@
 
 pub mod analysis;
 pub mod chirp;
+pub mod multi;
 pub mod multisine;
 pub mod noise;
 pub mod prbs;
 
 pub use analysis::{amplitude_spectrum, autocorrelation, crest_factor, rms};
 pub use chirp::{ChirpSpec, Sweep};
+pub use multi::{
+    hadamard, hadamard_order, AxisLines, BaseSignal, LineCondition, MultiExcitation,
+    MultiInputDesign, MultiInputKind, MultiInputReport, MAX_HADAMARD_ORDER, MAX_INPUTS,
+};
 pub use multisine::{Grid, MultisineSpec, Phases};
 pub use noise::{Distribution, NoiseSpec};
 pub use prbs::{prbs_period, Lfsr, PrbsSpec, MAX_PRBS_ORDER, MIN_PRBS_ORDER};
