@@ -65,9 +65,11 @@
 
 pub mod config;
 pub mod error;
+pub mod machine;
 pub mod model;
 pub mod rig;
 pub mod sim;
+pub mod sim4;
 mod twin;
 
 pub use config::{
@@ -76,7 +78,12 @@ pub use config::{
 };
 pub use error::{Result, TwinError};
 pub use faer::c64;
+pub use machine::{
+    campbell, AsymmetryConfig, CampbellPoint, Machine, MachineConfig, MachineMode, UnbalanceConfig,
+    Whirl, AXES,
+};
 pub use model::{LinearParams, UnstablePolePrediction};
 pub use rig::random_rig;
 pub use sim::{Channels, SimMeta, SimOptions, SimRecord};
+pub use sim4::{MachineRecord, MachineSimMeta, MachineSimOptions};
 pub use twin::{ClosedLoopMode, Twin, LIGHTLY_DAMPED};
