@@ -480,7 +480,10 @@ pub struct Machine {
     closed: StateSpace,
 }
 
-/// A discrete state-space model from its matrices.
+/// Plant and controller matrices per line.
+type PerLine2 = (Vec<Mat<c64>>, Vec<Mat<c64>>);
+
+/// The block-diagonal controller $\operatorname{diag}(C_A, C_B, C_A, C_B)$ as one discrete model.
 fn block_diag_controller(pids: &[Pid; 4], ts: f64) -> Result<StateSpace> {
     let mut a = Mat::<f64>::zeros(12, 12);
     let mut b = Mat::<f64>::zeros(12, 4);
@@ -646,7 +649,7 @@ impl Machine {
         Ok(Frd::from_matrices(f_hz, &c, None, Some(self.ts))?)
     }
 
-    fn pc(&self, f_hz: &[f64]) -> Result<(Vec<Mat<c64>>, Vec<Mat<c64>>)> {
+    fn pc(&self, f_hz: &[f64]) -> Result<PerLine2> {
         Ok((self.plant_mats(f_hz)?, self.controller_mats(f_hz)?))
     }
 

@@ -21,6 +21,9 @@
 //! The excitation is cyclic in the pre-roll (`settle_samples` samples before the record), so a
 //! periodic excitation reaches its periodic steady state before sample 0.
 
+// index loops over axes and states read clearer than zipped iterators here
+#![allow(clippy::needless_range_loop)]
+
 use crate::config::Mode;
 use crate::error::{Result, TwinError};
 use crate::machine::{Machine, AXES, I_CUR, I_SEN, NX4};
@@ -204,8 +207,9 @@ impl Machine {
         let lsb_v = 2.0 * sens.adc_range_v / (2f64).powi(sens.adc_bits as i32);
         let (gain, vmax, quant) = (sens.gain_v_per_m, sens.adc_range_v, sens.quantize);
         // exact linear update (N = 20 without, 22 with the unbalance oscillator)
-        let mut ad = [[0.0f64; N]; N];
-        let mut bd = [[0.0f64; 4]; N];
+        // transposed: adt[j] is column j of A_d, bdt[k] column k of B_d
+        let mut adt = [[0.0f64; N]; N];
+        let mut bdt = [[0.0f64; N]; 4];
         let disc = if N == NX4 {
             &self.discrete
         } else {
@@ -214,10 +218,10 @@ impl Machine {
         let nd = disc.order();
         for i in 0..nd.min(N) {
             for j in 0..nd.min(N) {
-                ad[i][j] = disc.a()[(i, j)];
+                adt[j][i] = disc.a()[(i, j)];
             }
             for k in 0..4 {
-                bd[i][k] = disc.b()[(i, k)];
+                bdt[k][i] = disc.b()[(i, k)];
             }
         }
         let nl = NlModel::new(self);
@@ -283,14 +287,17 @@ impl Machine {
             }
             match stepper {
                 Stepper::Linear => {
+                    // column by column (the update vectorises across the rows)
                     let mut xn = [0.0f64; N];
-                    for (i, row) in ad.iter().enumerate() {
-                        let b = &bd[i];
-                        let mut acc = b[0] * d[0] + b[1] * d[1] + b[2] * d[2] + b[3] * d[3];
-                        for j in 0..N {
-                            acc += row[j] * x[j];
+                    for (col, &dk) in bdt.iter().zip(&d) {
+                        for i in 0..N {
+                            xn[i] += col[i] * dk;
                         }
-                        xn[i] = acc;
+                    }
+                    for (col, &xj) in adt.iter().zip(&x) {
+                        for i in 0..N {
+                            xn[i] += col[i] * xj;
+                        }
                     }
                     x = xn;
                 }
@@ -428,9 +435,7 @@ impl NlModel {
             let fu = if p == 0 { fc } else { fs };
             gen[0] += fu;
             gen[1] += fu * self.zu;
-            for r in 0..3 {
-                dx[q0 + r] = x[v0 + r];
-            }
+            dx[q0..q0 + 3].copy_from_slice(&x[v0..v0 + 3]);
             dx[v0] = self.minv[0] * gen[0];
             dx[v0 + 1] = self.minv[1] * gen[1];
             dx[v0 + 2] = gen[2] - self.wb2 * x[q0 + 2] - self.dampb * x[v0 + 2];

@@ -1,6 +1,8 @@
 //! The 4-axis machine against independent truth: the single-plane twin, rigid-rotor gyroscopic
 //! physics, naive DFTs of the simulation, and eigenvalues of an independently assembled loop.
 
+#![allow(clippy::needless_range_loop)]
+
 use ambid_twin::{
     c64, campbell, random_rig, Machine, MachineConfig, MachineSimOptions, Mode, Twin, TwinConfig,
     TwinError, UnbalanceConfig, Whirl,
