@@ -41,7 +41,9 @@
 //!
 //! # Asymmetry
 //! [`AsymmetryConfig`] scales $k_i$ and $k_x$ of the two y magnets by $(1 + \delta_i)$ and
-//! $(1 + \delta_x)$; the controllers are not retuned.
+//! $(1 + \delta_x)$ in the linear model (truth and linear simulation); the controllers are not
+//! retuned. The nonlinear simulation scales the force constant $k$ of the y magnets by
+//! $(1 + \delta_i)$, which changes their $k_i$ and $k_x$ alike (δ_x is not used there).
 //!
 //! # Discrete model and truth
 //! The 20-state continuous model $\xi = (q_x, q_y, \dot q_x, \dot q_y, i, y_s)$ (currents and sensor
@@ -118,7 +120,7 @@ pub struct UnbalanceConfig {
 }
 
 impl Default for UnbalanceConfig {
-    /// 1 g at 1 mm (1 g·mm… i.e. $10^{-6}$ kg·m), at the centre of mass, phase 0.
+    /// 1 g at 1 mm ($m_u e = 10^{-6}$ kg·m), at the centre of mass, phase 0.
     fn default() -> Self {
         Self {
             mass_kg: 1e-3,

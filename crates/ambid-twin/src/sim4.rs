@@ -13,7 +13,7 @@
 //!   configured), so with noise off and no clamp active the record obeys the linear truth of
 //!   [`Machine`] to rounding error.
 //! * [`Mode::Nonlinear`]: the exact force law of every magnet pair with the actual coil control
-//!   currents (the y magnets scaled by the asymmetry), the amplifier output limit
+//!   currents (the y magnets' force constant scaled by $1 + \delta_i$), the amplifier output limit
 //!   $|i| \le \min(i_\mathrm{sat}, i_0)$, gyroscopics and unbalance, integrated by classical RK4 at
 //!   `simulation.substeps` steps per period. (Unlike the single-plane twin it has no amplifier
 //!   slew limit and no exponential integrator.)
@@ -380,8 +380,8 @@ impl NlModel {
     fn new(m: &Machine) -> NlModel {
         let [px, py] = m.ph.pl;
         let (f0, zu) = m.ph.unb.map(|u| (u.0, u.1)).unwrap_or((0.0, 0.0));
-        // the y magnets' asymmetry: k_i ∝ k, k_x ∝ k at a fixed operating point; the force law
-        // scales k by (1 + δ_i) (the k_x scaling follows only to first order, see the docs)
+        // the y magnets' asymmetry: k_i ∝ k and k_x ∝ k at a fixed operating point, so scaling
+        // k by (1 + δ_i) scales both by (1 + δ_i); δ_x is not used here (see crate::machine)
         let nsub = m.cfg.simulation.substeps.max(1);
         NlModel {
             c: [[px.c_a(), px.c_b()], [py.c_a(), py.c_b()]],

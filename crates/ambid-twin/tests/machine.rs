@@ -395,6 +395,21 @@ fn closed_loop_model_modes_and_sensitivity_peaks_agree() {
         }
     }
     assert!(peaks >= 1);
+    // (d) each axis's plant with the other three loops closed closes the loop of S's diagonal:
+    //     S_ii = 1/(1 + C_i P_i)
+    let f = log_grid(60, 2.0, 4000.0);
+    let s = m.sensitivity_frf(&f).unwrap();
+    let c = m.controller_frf(&f).unwrap();
+    for axis in 0..4 {
+        let pa = m.axis_plant_frf(axis, &f).unwrap();
+        for l in 0..f.len() {
+            let pi = pa.at(l).unwrap()[(0, 0)];
+            let ci = c.at(l).unwrap()[(axis, axis)];
+            let sii = s.at(l).unwrap()[(axis, axis)];
+            let e = (c64::new(1.0, 0.0) / (c64::new(1.0, 0.0) + ci * pi) - sii).norm() / sii.norm();
+            assert!(e < 1e-10, "axis {axis} at {} Hz: {e:e}", f[l]);
+        }
+    }
 }
 
 #[test]
@@ -614,6 +629,82 @@ fn nonlinear_mode_matches_linear_at_small_amplitude() {
         println!("axis {a}: rms {rms:.3e}, max |lin − nl| {err:.3e}");
         assert!(
             rms > 0.0 && err < 2e-3 * rms,
+            "axis {a}: {err:e} vs {rms:e}"
+        );
+    }
+}
+
+#[test]
+fn position_reference_is_tracked_and_nonlinear_unbalance_matches_linear() {
+    // integral action: a constant reference on xa is reached exactly, the other axes stay at 0
+    let m = Machine::new(MachineConfig {
+        speed_rpm: 15_000.0,
+        ..Default::default()
+    })
+    .unwrap();
+    let n = 500;
+    let z = vec![0.0; n];
+    let w0 = 20e-6;
+    let rec = m
+        .simulate(
+            [&z, &z, &z, &z],
+            &MachineSimOptions {
+                noise: false,
+                w: Some([vec![w0; n], z.clone(), z.clone(), z.clone()]),
+                settle_samples: settle_for(&m, 1e-12),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+    assert!(
+        (rec.y[0][n - 1] - w0).abs() < 1e-9 * w0,
+        "{}",
+        rec.y[0][n - 1]
+    );
+    for a in 1..4 {
+        assert!(
+            rec.y[a][n - 1].abs() < 1e-9 * w0,
+            "axis {a}: {}",
+            rec.y[a][n - 1]
+        );
+    }
+    assert_eq!(rec.w[0][7], w0);
+    // the nonlinear physics with the unbalance oscillator agrees with the exact linear update at
+    // a small orbit
+    let m = Machine::new(MachineConfig {
+        speed_rpm: 12_000.0,
+        unbalance: Some(UnbalanceConfig {
+            axial_position_m: -0.05,
+            phase_deg: 70.0,
+            ..Default::default()
+        }),
+        ..Default::default()
+    })
+    .unwrap();
+    let run = |mode| {
+        m.simulate(
+            [&z, &z, &z, &z],
+            &MachineSimOptions {
+                mode,
+                noise: false,
+                settle_samples: 200,
+                ..Default::default()
+            },
+        )
+        .unwrap()
+    };
+    let (lin, nl) = (run(Mode::Linear), run(Mode::Nonlinear));
+    assert!(lin.meta.unbalance && nl.meta.unbalance);
+    for a in 0..4 {
+        let rms = (lin.y[a].iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt();
+        let err = lin.y[a]
+            .iter()
+            .zip(&nl.y[a])
+            .map(|(p, q)| (p - q).abs())
+            .fold(0.0, f64::max);
+        println!("unbalance axis {a}: rms {rms:.3e}, max |lin − nl| {err:.3e}");
+        assert!(
+            rms > 1e-9 && err < 2e-3 * rms,
             "axis {a}: {err:e} vs {rms:e}"
         );
     }
