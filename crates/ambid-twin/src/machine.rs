@@ -487,13 +487,20 @@ type PerLine2 = (Vec<Mat<c64>>, Vec<Mat<c64>>);
 
 /// The block-diagonal controller $\operatorname{diag}(C_A, C_B, C_A, C_B)$ as one discrete model.
 fn block_diag_controller(pids: &[Pid; 4], ts: f64) -> Result<StateSpace> {
-    let mut a = Mat::<f64>::zeros(12, 12);
-    let mut b = Mat::<f64>::zeros(12, 4);
-    let mut c = Mat::<f64>::zeros(4, 12);
+    controller_without(pids, None, ts)
+}
+
+/// The block-diagonal controller with axis `skip` (if any) removed: no states, zero gain.
+fn controller_without(pids: &[Pid; 4], skip: Option<usize>, ts: f64) -> Result<StateSpace> {
+    let axes: Vec<usize> = (0..4).filter(|&k| Some(k) != skip).collect();
+    let n = 3 * axes.len();
+    let mut a = Mat::<f64>::zeros(n, n);
+    let mut b = Mat::<f64>::zeros(n, 4);
+    let mut c = Mat::<f64>::zeros(4, n);
     let mut d = Mat::<f64>::zeros(4, 4);
-    for (k, pid) in pids.iter().enumerate() {
-        let (ac, bc, cc, dc) = pid.matrices();
-        let o = 3 * k;
+    for (slot, &k) in axes.iter().enumerate() {
+        let (ac, bc, cc, dc) = pids[k].matrices();
+        let o = 3 * slot;
         for i in 0..3 {
             for j in 0..3 {
                 a[(o + i, o + j)] = ac[i][j];
@@ -764,6 +771,31 @@ impl Machine {
             })
             .collect::<Result<Vec<_>>>()?;
         Ok(Frd::from_matrices(f_hz, &v, None, Some(self.ts))?)
+    }
+
+    /// The plant of axis `axis` with the other three loops closed, as a discrete SISO model
+    /// (24 + 9 states; $u_i \to y_i$): the closed loop with controller $i$ removed, from $r_i$ to
+    /// $y_i$. Its frequency response is [`Machine::axis_plant_frf`]; at standstill it is the
+    /// single-plane twin's plant with one unstable pole.
+    pub fn axis_plant(&self, axis: usize) -> Result<StateSpace> {
+        if axis >= 4 {
+            return Err(TwinError::InvalidArgument {
+                name: "axis",
+                reason: format!("axis index {axis} out of range; use 0..4 for xa, xb, ya, yb"),
+            });
+        }
+        let ctl = controller_without(&self.pids, Some(axis), self.ts)?;
+        let cl = close_loops(&self.plant, &ctl, self.ts)?;
+        let n = cl.order();
+        let b = Mat::from_fn(n, 1, |i, _| cl.b()[(i, axis)]);
+        let c = Mat::from_fn(1, n, |_, j| cl.c()[(axis, j)]);
+        Ok(StateSpace::discrete(
+            cl.a().to_owned(),
+            b,
+            c,
+            Mat::zeros(1, 1),
+            self.ts,
+        )?)
     }
 
     /// Poles of the discrete closed loop, in $z$.

@@ -90,6 +90,34 @@ fn standstill_physics(tc: &TwinConfig) {
     }
     println!("x block vs SISO {worst:.2e}, y block vs SISO {worst_y:.2e}");
     assert!(worst <= 1e-9 && worst_y <= 1e-9, "{worst:e} {worst_y:e}");
+    // the per-axis plant as a state-space model: same response, one unstable pole = the SISO one
+    let siso_pole = twin.plant_unstable_poles().unwrap();
+    for axis in 0..4 {
+        let ss = m.axis_plant(axis).unwrap();
+        let fr = m.axis_plant_frf(axis, &f).unwrap();
+        let g = ss.freq_response_siso(&f).unwrap();
+        for l in 0..f.len() {
+            let v = fr.at(l).unwrap()[(0, 0)];
+            assert!(
+                (g[l] - v).norm() <= 1e-9 * v.norm(),
+                "axis {axis} at {} Hz",
+                f[l]
+            );
+        }
+        let up: Vec<c64> = ss
+            .poles()
+            .unwrap()
+            .into_iter()
+            .filter(|z| z.norm() > 1.0)
+            .collect();
+        assert_eq!(up.len(), 1, "axis {axis}: {up:?}");
+        if axis % 2 == 0 {
+            assert!(
+                (up[0] - siso_pole[0]).norm() < 1e-9,
+                "{up:?} vs {siso_pole:?}"
+            );
+        }
+    }
     // the per-axis plant with the other three loops closed = the SISO plant for A axes
     for axis in [0, 2] {
         let pa = m.axis_plant_frf(axis, &f).unwrap();
