@@ -798,6 +798,64 @@ impl Machine {
         )?)
     }
 
+    /// Peak of $|S_{ii}|$ per axis ([`AXES`] order) over 1 Hz … $f_s/2$ (ISO 14839-3 judges each
+    /// axis by its own sensitivity): a 4000-point log grid, then golden-section refinement
+    /// between the grid neighbours of the maximum, as [`Twin::peak_sensitivity`](crate::Twin::peak_sensitivity).
+    /// Returns `(f_hz, |S_ii|)` per axis.
+    pub fn peak_sensitivity(&self) -> Result<[(f64, f64); 4]> {
+        let n = 4000;
+        let (f0, f1) = (1.0f64, self.fs() / 2.0);
+        let grid: Vec<f64> = (0..n)
+            .map(|k| f0 * (f1 / f0).powf(k as f64 / (n - 1) as f64))
+            .collect();
+        let s = self.sensitivity_frf(&grid)?;
+        let mut out = [(0.0, 0.0); 4];
+        for (axis, o) in out.iter_mut().enumerate() {
+            let mag = |f: f64| -> Result<f64> {
+                Ok(self.sensitivity_frf(&[f])?.at(0)?[(axis, axis)].norm())
+            };
+            let mut kmax = 0;
+            let mut vmax = 0.0;
+            for k in 0..n {
+                let v = s.at(k)?[(axis, axis)].norm();
+                if v > vmax {
+                    (kmax, vmax) = (k, v);
+                }
+            }
+            let (mut lo, mut hi) = (grid[kmax.saturating_sub(1)], grid[(kmax + 1).min(n - 1)]);
+            let gr = (5f64.sqrt() - 1.0) / 2.0;
+            let mut x1 = hi - gr * (hi - lo);
+            let mut x2 = lo + gr * (hi - lo);
+            let (mut m1, mut m2) = (mag(x1)?, mag(x2)?);
+            for _ in 0..60 {
+                if m1 > m2 {
+                    hi = x2;
+                    x2 = x1;
+                    m2 = m1;
+                    x1 = hi - gr * (hi - lo);
+                    m1 = mag(x1)?;
+                } else {
+                    lo = x1;
+                    x1 = x2;
+                    m1 = m2;
+                    x2 = lo + gr * (hi - lo);
+                    m2 = mag(x2)?;
+                }
+                if hi - lo < 1e-9 * hi {
+                    break;
+                }
+            }
+            let fb = 0.5 * (lo + hi);
+            let vb = mag(fb)?;
+            *o = if vb > vmax {
+                (fb, vb)
+            } else {
+                (grid[kmax], vmax)
+            };
+        }
+        Ok(out)
+    }
+
     /// Poles of the discrete closed loop, in $z$.
     pub fn closed_loop_poles(&self) -> Result<Vec<c64>> {
         Ok(self.closed.poles()?)

@@ -118,6 +118,24 @@ fn standstill_physics(tc: &TwinConfig) {
             );
         }
     }
+    // per-axis peak sensitivity: the A axes' equal the single-plane twin's at standstill
+    let pk = m.peak_sensitivity().unwrap();
+    let (fs, vs) = twin.peak_sensitivity().unwrap();
+    for axis in [0, 2] {
+        assert!(
+            (pk[axis].1 - vs).abs() < 1e-9 * vs,
+            "{:?} vs {vs}",
+            pk[axis]
+        );
+        assert!(
+            (pk[axis].0 - fs).abs() < 1e-3 * fs,
+            "{:?} vs {fs}",
+            pk[axis]
+        );
+    }
+    assert!(
+        (pk[1].1 - pk[3].1).abs() < 1e-9 * pk[1].1 && (pk[1].0 - pk[3].0).abs() < 1e-3 * pk[1].0
+    );
     // the per-axis plant with the other three loops closed = the SISO plant for A axes
     for axis in [0, 2] {
         let pa = m.axis_plant_frf(axis, &f).unwrap();
