@@ -465,6 +465,28 @@ impl Physics4 {
 
 /// The 4-axis machine: configuration, exact linearised discrete-time truth and (see
 /// [`Machine::simulate`]) the closed-loop simulation. See the [module documentation](self).
+///
+/// ```
+/// use ambid_twin::{Machine, MachineConfig, UnbalanceConfig, Whirl};
+/// let m = Machine::new(MachineConfig {
+///     speed_rpm: 30_000.0,
+///     unbalance: Some(UnbalanceConfig::default()),
+///     ..Default::default()
+/// })
+/// .unwrap();
+/// // six lightly damped modes: translation, tilt and bending, each as a forward/backward pair
+/// let modes = m.closed_loop_modes().unwrap();
+/// assert_eq!(modes.len(), 6);
+/// assert!(modes.iter().any(|md| md.whirl == Whirl::Forward));
+/// // axis xa with the three other loops closed: one unstable pole
+/// let pa = m.axis_plant(0).unwrap();
+/// assert_eq!(pa.poles().unwrap().iter().filter(|z| z.norm() > 1.0).count(), 1);
+/// // per-axis peak sensitivity and the 1× response to the unbalance
+/// let peaks = m.peak_sensitivity().unwrap();
+/// assert!(peaks.iter().all(|&(_, s)| s > 1.0 && s < 4.0));
+/// let y1x = m.unbalance_response().unwrap();
+/// assert!(y1x[0].norm() > 0.0);
+/// ```
 #[derive(Debug, Clone)]
 pub struct Machine {
     pub(crate) cfg: MachineConfig,
