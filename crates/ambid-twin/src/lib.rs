@@ -51,6 +51,13 @@
 //! Not modelled: gravity (horizontal axis or compensated), gyroscopics (standstill), eddy
 //! currents and magnetic saturation of the iron, sensor runout.
 //!
+//! # The whole rotor
+//! [`Machine`] (module [`machine`], simulation in [`sim4`]) is the 4-axis twin: both planes, four
+//! radial axes `xa, xb, ya, yb` ([`AXES`]), gyroscopic coupling at speed, optional unbalance and
+//! x/y magnet asymmetry, with the exact 4×4 truth ($P$, $C$, $T_{ry}$, $S$ as `Frd`), closed-loop
+//! modes with forward/backward whirl labels and a [`campbell`] diagram. At standstill each plane
+//! reproduces the single-plane [`Twin`], which stays unchanged.
+//!
 //! # Example
 //! ```
 //! use ambid_twin::{Twin, TwinConfig, SimOptions, Mode};
@@ -65,9 +72,11 @@
 
 pub mod config;
 pub mod error;
+pub mod machine;
 pub mod model;
 pub mod rig;
 pub mod sim;
+pub mod sim4;
 mod twin;
 
 pub use config::{
@@ -76,7 +85,12 @@ pub use config::{
 };
 pub use error::{Result, TwinError};
 pub use faer::c64;
+pub use machine::{
+    campbell, AsymmetryConfig, CampbellPoint, Machine, MachineConfig, MachineMode, UnbalanceConfig,
+    Whirl, AXES,
+};
 pub use model::{LinearParams, UnstablePolePrediction};
 pub use rig::random_rig;
 pub use sim::{Channels, SimMeta, SimOptions, SimRecord};
+pub use sim4::{MachineRecord, MachineSimMeta, MachineSimOptions};
 pub use twin::{ClosedLoopMode, Twin, LIGHTLY_DAMPED};
