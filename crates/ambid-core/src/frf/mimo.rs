@@ -332,7 +332,7 @@ fn layout<'a>(data: &'a IoData, opts: &MimoOptions) -> Result<Layout<'a>> {
             format!("must be in [0, 1), got {}", opts.rel_threshold),
         ));
     }
-    if !(opts.max_cond >= 1.0) {
+    if opts.max_cond.is_nan() || opts.max_cond < 1.0 {
         return Err(Error::invalid(
             "max_cond",
             format!(
@@ -619,7 +619,7 @@ pub fn periodic(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> 
         let y = Mat::<c64>::from_fn(ny, m, |i, e| specs[e].mean(off_y + i)[k]);
         let (sv, uu, vv) = svd_small(&r)?;
         let cond_r = cond_of(&sv);
-        if !(cond_r <= opts.max_cond) {
+        if cond_r.is_nan() || cond_r > opts.max_cond {
             return Err(singular_line_error(
                 "excitation matrix R (inputs × experiments)",
                 k,
@@ -636,7 +636,7 @@ pub fn periodic(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> 
         });
         let (svu, _, _) = svd_small(&u)?;
         let cond_u = cond_of(&svu);
-        if !(cond_u <= opts.max_cond) {
+        if cond_u.is_nan() || cond_u > opts.max_cond {
             return Err(singular_line_error(
                 "input matrix U (inputs × experiments)",
                 k,
@@ -880,7 +880,7 @@ pub fn zippered(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> 
         let sm = Mat::<c64>::from_fn(nu, nu, |i, j| s[li * nu * nu + j * nu + i]);
         let (svs, _, _) = svd_small(&sm)?;
         cond_u[li] = cond_of(&svs);
-        if !(cond_u[li] <= opts.max_cond) {
+        if cond_u[li].is_nan() || cond_u[li] > opts.max_cond {
             return Err(singular_line_error(
                 "estimated sensitivity S",
                 k,
@@ -946,4 +946,66 @@ pub fn zippered(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> 
         dof: (pf - 1.0).max(0.0),
         design: MimoDesign::Zippered,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lagrange_weights_reproduce_cubics_and_pick_the_nearest_lines() {
+        let own = [2usize, 6, 10, 14, 18, 22];
+        let cubic = |x: f64| 0.5 - 1.5 * x + 0.25 * x * x - 0.01 * x * x * x;
+        for k in [1usize, 3, 7, 12, 17, 21, 25] {
+            let (xs, w) = lagrange4(&own, k);
+            let v: f64 = xs.iter().zip(w).map(|(&x, w)| w * cubic(x as f64)).sum();
+            assert!((v - cubic(k as f64)).abs() < 1e-12, "k = {k}: {v}");
+            assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        }
+        assert_eq!(lagrange4(&own, 12).0, [6, 10, 14, 18]);
+        assert_eq!(lagrange4(&own, 1).0, [2, 6, 10, 14]);
+        assert_eq!(lagrange4(&own, 25).0, [10, 14, 18, 22]);
+    }
+
+    #[test]
+    fn small_inverse_and_condition_number() {
+        let a = Mat::<c64>::from_fn(3, 3, |i, j| {
+            c64::new(
+                if i == j {
+                    2.0
+                } else {
+                    0.3 * (i + 2 * j) as f64
+                },
+                0.1 * i as f64 - 0.2 * j as f64,
+            )
+        });
+        let ai = inv_small(&a).unwrap();
+        let e = mat_mul(&a, &ai);
+        for i in 0..3 {
+            for j in 0..3 {
+                let want = if i == j { ONE } else { ZERO };
+                assert!((e[(i, j)] - want).norm() < 1e-14);
+            }
+        }
+        assert!(inv_small(&Mat::<c64>::zeros(2, 2)).is_none());
+        // diag(3, 1e-3) rotated: κ = 3000
+        let d = Mat::<c64>::from_fn(2, 2, |i, j| match (i, j) {
+            (0, 0) => c64::new(3.0, 0.0),
+            (1, 1) => c64::new(0.0, 1e-3),
+            _ => ZERO,
+        });
+        let (sv, _, _) = svd_small(&d).unwrap();
+        assert!((cond_of(&sv) - 3000.0).abs() < 1e-9);
+        // g^T Σ ḡ of a 2-vector against the expanded form
+        let sig = [
+            [c64::new(2.0, 0.0), c64::new(0.3, -0.4)],
+            [c64::new(0.3, 0.4), c64::new(1.0, 0.0)],
+        ];
+        let g = [(0usize, c64::new(1.0, 2.0)), (1usize, c64::new(-0.5, 0.25))];
+        let direct: c64 = (0..2)
+            .flat_map(|i| (0..2).map(move |l| (i, l)))
+            .map(|(i, l)| g[i].1 * sig[i][l] * g[l].1.conj())
+            .sum();
+        assert!((quad(&g, &|a, b| sig[a][b]) - direct.re).abs() < 1e-14 && direct.im.abs() < 1e-14);
+    }
 }
