@@ -252,6 +252,25 @@ impl MimoClosedLoopFrf {
     /// # Errors
     /// [`Error::InvalidArgument`] for a missing frequency; the errors of `indirect_plant`
     /// (shape, a singular $I - C T_{ry}$ on a line).
+    ///
+    /// # Example
+    /// ```
+    /// use ambid_core::data::IoData;
+    /// use ambid_core::frf::mimo::{periodic, MimoOptions};
+    /// use ambid_core::lti::Frd;
+    /// // SISO (the 1×1 case): P = 2, C = 0.5, u = r − C y → u = r/2, y = r
+    /// let base = [1.0, -1.0, 1.0, 1.0, -1.0, -1.0, 1.0, -1.0];
+    /// let r: Vec<f64> = (0..32).map(|k| base[k % 8]).collect();
+    /// let u: Vec<f64> = r.iter().map(|v| 0.5 * v).collect();
+    /// let data = IoData::new(
+    ///     vec![("r".into(), r.clone()), ("u".into(), u), ("y".into(), r)], 1e-3, Some(8),
+    /// ).unwrap();
+    /// let frf = periodic(&data, &MimoOptions::new()).unwrap();
+    /// let c = Frd::constant(frf.f_hz(), 0.5, Some(1e-3)).unwrap();
+    /// let frf = frf.with_indirect(&c).unwrap();
+    /// let pi = frf.plant_indirect.unwrap();
+    /// assert!(pi.values().iter().all(|p| (p.re - 2.0).abs() < 1e-12 && p.im.abs() < 1e-12));
+    /// ```
     pub fn with_indirect(mut self, controller: &Frd) -> Result<Self> {
         let cf = controller.f_hz();
         let per = controller.ny() * controller.nu();
@@ -767,6 +786,34 @@ fn lagrange4(own: &[usize], k: usize) -> ([usize; 4], [f64; 4]) {
 /// $\mathcal L_j$; columns measured there and interpolated (cubic Lagrange through the 4 nearest
 /// own lines) to the union of the lines, then $P = T_{ry} S^{-1}$ per line. See the
 /// [module docs](self) for the formulas and the bias near sharp resonances.
+///
+/// # Example
+/// ```
+/// use ambid_core::data::IoData;
+/// use ambid_core::frf::mimo::{zippered, MimoOptions};
+/// use std::f64::consts::PI;
+/// // 2 inputs in open loop (u = r), a static plant y = P u with P = [[1, 0.5], [0.2, 2]];
+/// // input 0 on the odd lines 1..7, input 1 on the even lines 2..8, 3 periods of 32 samples
+/// let n = 32;
+/// let tone = |lines: &[usize], t: usize| -> f64 {
+///     lines.iter().map(|&k| (2.0 * PI * (k * t % n) as f64 / n as f64 + k as f64).cos()).sum()
+/// };
+/// let r0: Vec<f64> = (0..3 * n).map(|t| tone(&[1, 3, 5, 7], t)).collect();
+/// let r1: Vec<f64> = (0..3 * n).map(|t| tone(&[2, 4, 6, 8], t)).collect();
+/// let y0: Vec<f64> = r0.iter().zip(&r1).map(|(a, b)| a + 0.5 * b).collect();
+/// let y1: Vec<f64> = r0.iter().zip(&r1).map(|(a, b)| 0.2 * a + 2.0 * b).collect();
+/// let data = IoData::new(vec![
+///     ("r_xa".into(), r0.clone()), ("r_xb".into(), r1.clone()),
+///     ("u_xa".into(), r0), ("u_xb".into(), r1),
+///     ("y_xa".into(), y0), ("y_xb".into(), y1),
+/// ], 1e-3, Some(n)).unwrap();
+/// let frf = zippered(&data, &MimoOptions::new()).unwrap();
+/// assert_eq!(frf.lines, (1..=8).collect::<Vec<_>>());
+/// // line 1: column 0 measured, column 1 interpolated (exactly, the plant is static)
+/// assert_eq!(&frf.measured[..2], &[true, false]);
+/// let p = frf.plant.at(0).unwrap();
+/// assert!((p[(0, 1)].re - 0.5).abs() < 1e-12 && (p[(1, 0)].re - 0.2).abs() < 1e-12);
+/// ```
 ///
 /// # Errors
 /// As [`periodic`] for the record; and [`Error::InvalidArgument`] for several experiments, a
