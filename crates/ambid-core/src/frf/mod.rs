@@ -5,9 +5,12 @@ pub mod bla;
 pub mod closed_loop;
 pub mod lpm;
 pub mod lrm;
+pub mod mimo;
 pub mod periodic;
 pub mod quality;
 pub mod resonance;
 pub mod stepped_sine;
 pub mod welch;
 pub mod window;
+
+pub use mimo::{MimoClosedLoopFrf, MimoDesign, MimoOptions};

@@ -1,0 +1,1058 @@
+//! The MIMO closed-loop frequency response from periodic multi-input experiments.
+//!
+//! Conventions (`docs/conventions.md`, DESIGN.md): the excitation $r$ ($n_r$ channels) is added to
+//! the controller outputs, $u = -C y + r$ ($n_u = n_r$ channels), $y = P u + v$ ($n_y$ channels),
+//! so that
+//!
+//! $$T_{ry} = (I + P C)^{-1} P,\qquad S = T_{ru} = (I + C P)^{-1},\qquad P = T_{ry} S^{-1}.$$
+//!
+//! Two periodic designs are supported, both from one [`IoData`] (channels found by their roles,
+//! `r_xa … r_yb`, `u_…`, `y_…`, in axis order):
+//!
+//! * **several experiments** ([`periodic`]; sequential, orthogonal/Hadamard or any other design
+//!   with $M \ge n_r$ experiments whose excitations are independent on every line);
+//! * **zippered** ([`zippered`]; one experiment, each input on its own interleaved lines).
+//!
+//! [`estimate`] picks the design from the record. Non-periodic multi-input data are **not
+//! supported yet**: the local polynomial method of [`lpm`](super::lpm) handles one input (and
+//! one experiment) only, so a record without a period length gets a typed error.
+//!
+//! # Period averages and excited lines
+//! Every experiment $e$ is cut into periods of $N$ samples (the first `skip_periods` dropped as
+//! transient) and analysed by [`PeriodicAnalyzer`]: per line $k$ the period-mean DFTs
+//! $\bar R_e(k), \bar U_e(k), \bar Y_e(k)$ and the per-period covariance $\hat\sigma$ of the
+//! stacked vector $(U_e(k), Y_e(k))$ across the $P$ periods; the covariance of the means is
+//! $\Sigma_e(k) = \hat\sigma/P$ (module [`periodic`](super::periodic)).
+//!
+//! **Excited lines** are decided from the DFT of $r$ alone: line $k \ge 1$ is excited by input
+//! $j$ in experiment $e$ when $|\bar R_{j,e}(k)| > \rho\,\max_{e',k'}|\bar R_{j,e'}(k')|$ with
+//! $\rho$ = [`MimoOptions::rel_threshold`] (default $10^{-6}$; DC is never used). The multi-
+//! experiment estimate uses every line excited by some input in some experiment (within the
+//! optional band); the zippered one assigns each line to the single input that excites it.
+//!
+//! # Several experiments
+//! Per line, stack the experiments as columns: $R(k)$ ($n_r \times M$), $U(k)$, $Y(k)$. With
+//! $R^+ = R^{\mathsf H}(R R^{\mathsf H})^{-1}$ (computed by an SVD),
+//!
+//! $$\hat T_{ry} = Y R^+,\qquad \hat S = U R^+,\qquad \hat P = \hat T_{ry}\hat S^{-1}
+//!   \ \big(= Y U^{-1}\ \text{for}\ M = n_r\big).$$
+//!
+//! $R$ is the recorded digital excitation and taken as exact (its period spread is not
+//! propagated). The experiments are independent records, so with $W = R^+ \hat S^{-1}$
+//! ($M \times n_u$) the first-order errors are
+//!
+//! $$\delta T_{ij} = \sum_e \delta Y_{ie} R^+_{ej},\qquad
+//!   \delta P_{ab} = \sum_e \big(\delta Y_{ae} - \textstyle\sum_c \hat P_{ac}\,\delta U_{ce}\big) W_{eb},$$
+//!
+//! $$\sigma^2_{T_{ij}} = \sum_e |R^+_{ej}|^2\, \Sigma_{e,y_iy_i},\qquad
+//!   \sigma^2_{S_{ij}} = \sum_e |R^+_{ej}|^2\, \Sigma_{e,u_iu_i},\qquad
+//!   \sigma^2_{P_{ab}} = \sum_e |W_{eb}|^2\; g_a^{\mathsf T}\, \Sigma_e\, \bar g_a,$$
+//!
+//! with $g_a = (-\hat P_{a1}, \dots, -\hat P_{a n_u}, e_a)$ over the stacked $(U, Y)$: the full
+//! covariance of each experiment's $(u, y)$ DFT vector enters the plant (noise that enters the
+//! loop shows in both $u$ and $y$). For $1 \times 1$ data these are exactly the formulas of
+//! [`closed_loop::from_periodic`](super::closed_loop::from_periodic).
+//!
+//! **Multiple coherence** of output $y_i$: the share of its period power explained by the
+//! excitation, $\gamma_i^2 = \sum_e |(\hat T R)_{ie}|^2 \big/ \sum_e \overline{|Y_{ie,p}|^2}$
+//! (mean over the periods; $= |\bar Y|^2/\overline{|Y_p|^2}$ for SISO, the
+//! [`ClosedLoopFrf::coh_ry`](super::closed_loop::ClosedLoopFrf::coh_ry) of an exact $r$),
+//! likewise for $u$. **Condition numbers** $\kappa(R(k))$ and $\kappa(U(k))$ (ratio of extreme
+//! singular values); a line with $\kappa > $ [`MimoOptions::max_cond`] (default $10^{12}$) is an
+//! error naming its frequency (e.g. two identical experiments).
+//!
+//! # Zippered design
+//! One experiment; input $j$ alone excites its lines $\mathcal L_j$ (a line excited by two inputs
+//! is an error). On $k \in \mathcal L_j$ column $j$ is measured, $\hat T_{:,j} = \bar Y/\bar R_j$,
+//! $\hat S_{:,j} = \bar U/\bar R_j$, with the covariance $\Sigma(k)/|\bar R_j|^2$ of the stacked
+//! column $z_j = (T_{:,j}, S_{:,j})$. The **common grid** is the union of all $\mathcal L_j$. Column
+//! $j$ is brought to a grid line $k \notin \mathcal L_j$ by the cubic (degree 3) Lagrange
+//! polynomial in the line index through the 4 lines of $\mathcal L_j$ nearest to $k$ (two on
+//! each side inside the grid, shifted at the ends):
+//!
+//! $$\hat z_j(k) = \sum_{l=1}^{4} w_l(k)\, \hat z_j(k_l),\qquad
+//!   w_l(k) = \prod_{m \ne l} \frac{k - k_m}{k_l - k_m},\qquad
+//!   \Sigma_{z_j}(k) = \sum_l w_l^2\, \Sigma_{z_j}(k_l)$$
+//!
+//! (different lines are independent). Then $\hat P = \hat T \hat S^{-1}$ per grid line, with
+//! $\delta P_{ab} = \sum_j (S^{-1})_{jb}\,(\delta T_{aj} - \sum_c P_{ac}\,\delta S_{cj})$ and the
+//! columns independent.
+//!
+//! **Bias.** The interpolation error of a column is
+//! $\frac{G^{(4)}(\xi)}{4!}\prod_m (k - k_m)$: with $n_r$ interleaved inputs the own lines are
+//! $n_r$ lines apart, so near a resonance of half-power bandwidth $B$ lines the relative bias is
+//! of the order of $(n_r/B)^4$ — negligible for $B \gtrsim 10\,n_r$ lines, but a lightly damped
+//! mode only a few lines wide is smeared (amplitude and phase both), and the plant, which needs
+//! all columns at once, inherits it. Use a finer frequency grid (longer periods) or a
+//! multi-experiment design near sharp resonances; the measured columns themselves are unbiased.
+//! [`MimoClosedLoopFrf::measured`] tells the measured entries from the interpolated ones. For
+//! zippered data `cond_r` is 1 (one input per line) and `cond_u` is $\kappa(\hat S(k))$.
+//!
+//! # Confidence bands
+//! Variances have $\nu = P - 1$ complex degrees of freedom per experiment ([`MimoClosedLoopFrf::dof`],
+//! conservative for sums over several experiments); the level-$\alpha$ disc has the radius
+//! $\hat\sigma\cdot$[`band_radius_factor`](super::closed_loop::band_radius_factor)$(\alpha, \nu)$.
+//!
+//! # Example
+//! ```
+//! use ambid_core::data::IoData;
+//! use ambid_core::frf::mimo::{periodic, MimoOptions};
+//! // 2 inputs, a static plant P = [[1, 0.5], [0.2, 2]] in open loop (C = 0): u = r, y = P u.
+//! // Two experiments (a sequential design), 4 periods of 8 samples each.
+//! let n = 8;
+//! let base = [1.0, -1.0, 1.0, 1.0, -1.0, -1.0, 1.0, -1.0];
+//! let sig: Vec<f64> = (0..4 * n).map(|k| base[k % n]).collect();
+//! let zero = vec![0.0; 4 * n];
+//! let exp = |r1: &Vec<f64>, r2: &Vec<f64>| {
+//!     let y1: Vec<f64> = r1.iter().zip(r2).map(|(a, b)| a + 0.5 * b).collect();
+//!     let y2: Vec<f64> = r1.iter().zip(r2).map(|(a, b)| 0.2 * a + 2.0 * b).collect();
+//!     IoData::new(vec![
+//!         ("r_xa".into(), r1.clone()), ("r_xb".into(), r2.clone()),
+//!         ("u_xa".into(), r1.clone()), ("u_xb".into(), r2.clone()),
+//!         ("y_xa".into(), y1), ("y_xb".into(), y2),
+//!     ], 1e-3, Some(n)).unwrap()
+//! };
+//! let data = IoData::from_experiments(vec![exp(&sig, &zero), exp(&zero, &sig)]).unwrap();
+//! let frf = periodic(&data, &MimoOptions::new()).unwrap();
+//! let p = frf.plant.at(0).unwrap();
+//! assert!((p[(0, 1)].re - 0.5).abs() < 1e-12 && (p[(1, 0)].re - 0.2).abs() < 1e-12);
+//! assert!(frf.cond_r.iter().all(|c| (c - 1.0).abs() < 1e-12));
+//! ```
+
+use super::periodic::{PeriodicAnalyzer, PeriodicOptions, PeriodicSpectra};
+use crate::data::{IoData, Role};
+use crate::error::{Error, Result};
+use crate::lti::Frd;
+use faer::{c64, Mat};
+use rayon::prelude::*;
+
+const ZERO: c64 = c64 { re: 0.0, im: 0.0 };
+const ONE: c64 = c64 { re: 1.0, im: 0.0 };
+
+/// Settings of the MIMO periodic estimators.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MimoOptions {
+    /// Samples per excitation period; `None` takes the record's
+    /// ([`IoData::period_samples`]).
+    pub period_samples: Option<usize>,
+    /// Leading periods of every experiment dropped as transient.
+    pub skip_periods: usize,
+    /// A line is excited by an input when its $|\bar R|$ exceeds this fraction of that input's
+    /// largest line amplitude (module docs); in $[0, 1)$.
+    pub rel_threshold: f64,
+    /// Only lines with $f_{min} \le f \le f_{max}$ \[Hz\] (`None`: all excited lines).
+    pub band: Option<(f64, f64)>,
+    /// Largest condition number of the input matrices accepted on a line.
+    pub max_cond: f64,
+}
+
+impl Default for MimoOptions {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl MimoOptions {
+    /// The record's period, no skipped period, threshold $10^{-6}$, all lines, $\kappa \le 10^{12}$.
+    pub fn new() -> Self {
+        Self {
+            period_samples: None,
+            skip_periods: 0,
+            rel_threshold: 1e-6,
+            band: None,
+            max_cond: 1e12,
+        }
+    }
+
+    /// Sets the period length in samples (overrides the record's).
+    pub fn period(mut self, samples: usize) -> Self {
+        self.period_samples = Some(samples);
+        self
+    }
+
+    /// Sets the number of leading (transient) periods dropped in every experiment.
+    pub fn skip(mut self, periods: usize) -> Self {
+        self.skip_periods = periods;
+        self
+    }
+
+    /// Restricts the lines to $[f_{min}, f_{max}]$ Hz.
+    pub fn band(mut self, f_min: f64, f_max: f64) -> Self {
+        self.band = Some((f_min, f_max));
+        self
+    }
+}
+
+/// Which design the estimate came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MimoDesign {
+    /// $M \ge n_r$ experiments solved per line by least squares.
+    Experiments(usize),
+    /// One zippered experiment, columns interpolated to the common grid.
+    Zippered,
+}
+
+/// The MIMO closed-loop FRF: responses with per-entry variances on the excited lines, and the
+/// per-line diagnostics; see the [module docs](self) for the formulas.
+///
+/// Flat per-line vectors follow [`Frd::values`]: line after line, within a line column by column
+/// (`coherence[line * ny + i]`, `measured[line * nu + j]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct MimoClosedLoopFrf {
+    /// $T_{ry}$ ($n_y \times n_u$), $r \to y$.
+    pub t_ry: Frd,
+    /// $S = T_{ru}$ ($n_u \times n_u$), $r \to u$.
+    pub s: Frd,
+    /// The plant $P = T_{ry} S^{-1}$ (joint input–output), $n_y \times n_u$.
+    pub plant: Frd,
+    /// The indirect plant $T_{ry}(I - C T_{ry})^{-1}$, after
+    /// [`with_indirect`](Self::with_indirect).
+    pub plant_indirect: Option<Frd>,
+    /// Multiple coherence of every output with the excitation, $n_y$ per line.
+    pub coherence: Vec<f64>,
+    /// Multiple coherence of every input channel $u$ with the excitation, $n_u$ per line.
+    pub coherence_u: Vec<f64>,
+    /// Condition number of $R(k)$ per line (1 for zippered data).
+    pub cond_r: Vec<f64>,
+    /// Condition number of $U(k)$ per line ($\hat S(k)$ for zippered data).
+    pub cond_u: Vec<f64>,
+    /// Line indices $k$ ($f = k f_s / N$).
+    pub lines: Vec<usize>,
+    /// Whether column $j$ of $T_{ry}$ and $S$ was measured on the line (always for several
+    /// experiments) or interpolated (zippered), $n_u$ per line.
+    pub measured: Vec<bool>,
+    /// Periods averaged per experiment.
+    pub periods: usize,
+    /// Complex degrees of freedom of the variances, $P - 1$.
+    pub dof: f64,
+    /// The design.
+    pub design: MimoDesign,
+}
+
+impl MimoClosedLoopFrf {
+    /// Frequencies of the lines \[Hz\].
+    pub fn f_hz(&self) -> &[f64] {
+        self.plant.f_hz()
+    }
+
+    /// Radius factor of the level-`level` confidence disc for [`dof`](Self::dof).
+    ///
+    /// # Errors
+    /// As [`band_radius_factor`](super::closed_loop::band_radius_factor) (e.g. a single period).
+    pub fn band_factor(&self, level: f64) -> Result<f64> {
+        super::closed_loop::band_radius_factor(level, self.dof)
+    }
+
+    /// Adds the indirect plant $P = T_{ry}(I - C T_{ry})^{-1}$ from the known controller
+    /// response `controller` ($n_u \times n_y$, from $u = -C y + r$), via
+    /// [`indirect_plant`](super::closed_loop::indirect_plant). The controller must hold every
+    /// line of [`f_hz`](Self::f_hz) (to $10^{-9}$ relative; other frequencies are ignored), e.g.
+    /// `Frd::from_model(&c, frf.f_hz())`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for a missing frequency; the errors of `indirect_plant`
+    /// (shape, a singular $I - C T_{ry}$ on a line).
+    ///
+    /// # Example
+    /// ```
+    /// use ambid_core::data::IoData;
+    /// use ambid_core::frf::mimo::{periodic, MimoOptions};
+    /// use ambid_core::lti::Frd;
+    /// // SISO (the 1×1 case): P = 2, C = 0.5, u = r − C y → u = r/2, y = r
+    /// let base = [1.0, -1.0, 1.0, 1.0, -1.0, -1.0, 1.0, -1.0];
+    /// let r: Vec<f64> = (0..32).map(|k| base[k % 8]).collect();
+    /// let u: Vec<f64> = r.iter().map(|v| 0.5 * v).collect();
+    /// let data = IoData::new(
+    ///     vec![("r".into(), r.clone()), ("u".into(), u), ("y".into(), r)], 1e-3, Some(8),
+    /// ).unwrap();
+    /// let frf = periodic(&data, &MimoOptions::new()).unwrap();
+    /// let c = Frd::constant(frf.f_hz(), 0.5, Some(1e-3)).unwrap();
+    /// let frf = frf.with_indirect(&c).unwrap();
+    /// let pi = frf.plant_indirect.unwrap();
+    /// assert!(pi.values().iter().all(|p| (p.re - 2.0).abs() < 1e-12 && p.im.abs() < 1e-12));
+    /// ```
+    pub fn with_indirect(mut self, controller: &Frd) -> Result<Self> {
+        let cf = controller.f_hz();
+        let per = controller.ny() * controller.nu();
+        let mut vals = Vec::with_capacity(self.lines.len() * per);
+        for &f in self.f_hz() {
+            let tol = 1e-9 * f.abs().max(1e-300);
+            let Some(i) = cf.iter().position(|g| (g - f).abs() <= tol) else {
+                return Err(Error::invalid(
+                    "controller",
+                    format!(
+                        "the controller response has no value at {f} Hz; evaluate it at the \
+                         estimate's lines (MimoClosedLoopFrf::f_hz)"
+                    ),
+                ));
+            };
+            vals.extend_from_slice(&controller.values()[i * per..(i + 1) * per]);
+        }
+        let c = Frd::new_matrix(
+            self.f_hz().to_vec(),
+            controller.ny(),
+            controller.nu(),
+            vals,
+            None,
+            self.t_ry.ts(),
+        )?;
+        self.plant_indirect = Some(super::closed_loop::indirect_plant(&self.t_ry, &c)?);
+        Ok(self)
+    }
+}
+
+/// The MIMO closed-loop FRF of a periodic record, the design chosen from it: several
+/// experiments ($M \ge n_r$) → [`periodic`]; one experiment with several inputs →
+/// [`zippered`]; a single input → [`periodic`] (the SISO case).
+///
+/// # Errors
+/// Those of [`periodic`] and [`zippered`]; a record without a period length (non-periodic data
+/// are not supported for several inputs yet).
+pub fn estimate(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> {
+    let nr = data.role_count(Role::Excitation);
+    if data.n_experiments() == 1 && nr > 1 {
+        zippered(data, opts)
+    } else {
+        periodic(data, opts)
+    }
+}
+
+/// [`periodic`] on several single-experiment records (e.g. one file per experiment), joined
+/// by [`IoData::from_experiments`].
+///
+/// # Errors
+/// Records that differ in channels, roles, sample time or period; those of [`periodic`].
+pub fn periodic_records(records: &[IoData], opts: &MimoOptions) -> Result<MimoClosedLoopFrf> {
+    periodic(&IoData::from_experiments(records.to_vec())?, opts)
+}
+
+/// The checked layout of a record: roles, period, experiments.
+struct Layout<'a> {
+    /// Per experiment, the channels in the order r…, u…, y….
+    chans: Vec<Vec<&'a [f64]>>,
+    nr: usize,
+    ny: usize,
+    n: usize,
+}
+
+fn layout<'a>(data: &'a IoData, opts: &MimoOptions) -> Result<Layout<'a>> {
+    let Some(n) = opts.period_samples.or(data.period_samples()) else {
+        return Err(Error::invalid(
+            "period_samples",
+            "the record has no period length: the MIMO closed-loop FRF needs periodic excitation \
+             (non-periodic multi-input data are not supported yet; the local polynomial method \
+             frf::lpm takes one input). Give the period (`period_samples`) or record with a \
+             periodic multisine",
+        ));
+    };
+    if !(0.0..1.0).contains(&opts.rel_threshold) {
+        return Err(Error::invalid(
+            "rel_threshold",
+            format!("must be in [0, 1), got {}", opts.rel_threshold),
+        ));
+    }
+    if opts.max_cond.is_nan() || opts.max_cond < 1.0 {
+        return Err(Error::invalid(
+            "max_cond",
+            format!(
+                "a condition number limit must be at least 1, got {}",
+                opts.max_cond
+            ),
+        ));
+    }
+    if let Some((lo, hi)) = opts.band {
+        if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+            return Err(Error::invalid(
+                "band",
+                format!("the band must be finite with f_min ≤ f_max, got ({lo}, {hi})"),
+            ));
+        }
+    }
+    let (nr, nu, ny) = (
+        data.role_count(Role::Excitation),
+        data.role_count(Role::Input),
+        data.role_count(Role::Output),
+    );
+    for (role, c) in [
+        (Role::Excitation, nr),
+        (Role::Input, nu),
+        (Role::Output, ny),
+    ] {
+        if c == 0 {
+            return Err(data.missing_role(role));
+        }
+    }
+    if nu != nr {
+        return Err(Error::invalid(
+            "channels",
+            format!(
+                "the record has {nr} excitation channels ({}) and {nu} input channels ({}); the \
+                 excitation is added to every controller output, so give one `r_<axis>` per \
+                 `u_<axis>`",
+                data.role_names(Role::Excitation).join(", "),
+                data.role_names(Role::Input).join(", ")
+            ),
+        ));
+    }
+    let m = data.n_experiments();
+    let len0 = data.len();
+    for e in 1..m {
+        let le = data.experiment_len(e).unwrap_or(0);
+        if le != len0 {
+            return Err(Error::invalid(
+                "experiments",
+                format!(
+                    "experiment {e} has {le} samples, experiment 0 has {len0}; record every \
+                     experiment with the same length (the same number of periods) or cut them to \
+                     the shortest"
+                ),
+            ));
+        }
+    }
+    data.require_finite(&[Role::Excitation, Role::Input, Role::Output])?;
+    let mut chans = Vec::with_capacity(m);
+    for e in 0..m {
+        let mut c = data.signals(Role::Excitation, e)?;
+        c.extend(data.signals(Role::Input, e)?);
+        c.extend(data.signals(Role::Output, e)?);
+        chans.push(c);
+    }
+    Ok(Layout { chans, nr, ny, n })
+}
+
+fn analyse(lay: &Layout<'_>, fs: f64, opts: &MimoOptions) -> Result<Vec<PeriodicSpectra>> {
+    let po = PeriodicOptions::new(lay.n).skip(opts.skip_periods);
+    lay.chans
+        .par_iter()
+        .map(|c| PeriodicAnalyzer::new(lay.n)?.analyze(c, fs, &po))
+        .collect()
+}
+
+/// The lines excited by each input: `out[j]` = sorted lines where $|\bar R_j|$ passes the
+/// threshold in some experiment, within the band.
+fn excited_by_input(
+    specs: &[PeriodicSpectra],
+    nr: usize,
+    opts: &MimoOptions,
+) -> Result<Vec<Vec<usize>>> {
+    let nl = specs[0].n_lines();
+    let in_band = |k: usize| match opts.band {
+        None => true,
+        Some((lo, hi)) => {
+            let f = specs[0].line_hz(k);
+            f >= lo && f <= hi
+        }
+    };
+    let mut out = Vec::with_capacity(nr);
+    for j in 0..nr {
+        let peak = specs
+            .iter()
+            .flat_map(|s| s.mean(j)[1..].iter())
+            .fold(0.0f64, |a, v| a.max(v.norm_sqr()));
+        if peak == 0.0 {
+            return Err(Error::invalid(
+                "excitation",
+                format!(
+                    "excitation channel {j} (in axis order) has no power on any line in any \
+                     experiment: every input must be excited; check the r columns"
+                ),
+            ));
+        }
+        let thr = opts.rel_threshold * opts.rel_threshold * peak;
+        out.push(
+            (1..nl)
+                .filter(|&k| in_band(k) && specs.iter().any(|s| s.mean(j)[k].norm_sqr() > thr))
+                .collect::<Vec<_>>(),
+        );
+    }
+    Ok(out)
+}
+
+/// Singular values of a small complex matrix (descending).
+fn svd_small(a: &Mat<c64>) -> Result<(Vec<f64>, Mat<c64>, Mat<c64>)> {
+    let svd = a
+        .svd()
+        .map_err(|e| Error::numerical("MIMO FRF", format!("SVD failed: {e:?}")))?;
+    let s = svd.S().column_vector();
+    let sv: Vec<f64> = (0..s.nrows()).map(|i| s[i].re).collect();
+    Ok((sv, svd.U().to_owned(), svd.V().to_owned()))
+}
+
+fn cond_of(sv: &[f64]) -> f64 {
+    let mx = sv.iter().fold(0.0f64, |a, &v| a.max(v));
+    let mn = sv.iter().fold(f64::INFINITY, |a, &v| a.min(v));
+    if mn > 0.0 {
+        mx / mn
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// Inverse of a small square complex matrix by Gauss–Jordan with partial pivoting (`None` if
+/// singular).
+fn inv_small(a: &Mat<c64>) -> Option<Mat<c64>> {
+    let n = a.nrows();
+    let mut m = a.clone();
+    let mut x = Mat::<c64>::from_fn(n, n, |i, j| if i == j { ONE } else { ZERO });
+    for col in 0..n {
+        let piv = (col..n).max_by(|&p, &q| m[(p, col)].norm().total_cmp(&m[(q, col)].norm()))?;
+        if m[(piv, col)].norm() == 0.0 {
+            return None;
+        }
+        if piv != col {
+            for j in 0..n {
+                let t = m[(col, j)];
+                m[(col, j)] = m[(piv, j)];
+                m[(piv, j)] = t;
+                let t = x[(col, j)];
+                x[(col, j)] = x[(piv, j)];
+                x[(piv, j)] = t;
+            }
+        }
+        let d = ONE / m[(col, col)];
+        for j in 0..n {
+            m[(col, j)] *= d;
+            x[(col, j)] *= d;
+        }
+        for i in 0..n {
+            if i != col {
+                let f = m[(i, col)];
+                if f != ZERO {
+                    for j in 0..n {
+                        let (mv, xv) = (m[(col, j)], x[(col, j)]);
+                        m[(i, j)] -= f * mv;
+                        x[(i, j)] -= f * xv;
+                    }
+                }
+            }
+        }
+    }
+    Some(x)
+}
+
+fn mat_mul(a: &Mat<c64>, b: &Mat<c64>) -> Mat<c64> {
+    Mat::from_fn(a.nrows(), b.ncols(), |i, j| {
+        (0..a.ncols()).fold(ZERO, |acc, l| acc + a[(i, l)] * b[(l, j)])
+    })
+}
+
+/// $\sum_{il} g_i \Sigma_{il} \bar g_l$ over the indices `idx` of the stacked channels, with the
+/// covariance `cov(a, b)`.
+fn quad(g: &[(usize, c64)], cov: &impl Fn(usize, usize) -> c64) -> f64 {
+    let mut v = 0.0;
+    for (a, &(i, gi)) in g.iter().enumerate() {
+        v += gi.norm_sqr() * cov(i, i).re;
+        for &(l, gl) in &g[a + 1..] {
+            v += 2.0 * (gi * cov(i, l) * gl.conj()).re;
+        }
+    }
+    v.max(0.0)
+}
+
+fn singular_line_error(what: &str, k: usize, f: f64, cond: f64, hint: &str) -> Error {
+    Error::numerical(
+        "MIMO closed-loop FRF",
+        format!(
+            "the {what} is singular at line {k} ({f:.6} Hz): condition number {cond:.3e}; {hint}"
+        ),
+    )
+}
+
+fn frd(
+    f: &[f64],
+    ny: usize,
+    nu: usize,
+    v: Vec<c64>,
+    var: Vec<f64>,
+    p: usize,
+    ts: f64,
+) -> Result<Frd> {
+    let var = if p > 1 { Some(var) } else { None };
+    Frd::new_matrix(f.to_vec(), ny, nu, v, var, Some(ts))
+}
+
+/// The MIMO closed-loop FRF from $M \ge n_r$ periodic experiments of one record (sequential,
+/// orthogonal or any design whose input matrix $R(k)$ has full row rank on every excited line);
+/// formulas in the [module docs](self). All experiments must have the same length; the period
+/// comes from `opts` or the record.
+///
+/// # Errors
+/// * [`Error::InvalidArgument`]: no period length (non-periodic data), a missing r, u or y
+///   channel or different r and u counts (the message lists the channels), fewer experiments
+///   than inputs, experiments of different lengths, a non-finite sample (channel, experiment
+///   and sample named), a record that is not a whole number of periods or too short for the
+///   skipped periods, an input never excited, no excited line in the band;
+/// * [`Error::Numerical`]: $R(k)$ or $U(k)$ with a condition number above
+///   [`MimoOptions::max_cond`] on some line (its frequency named), e.g. two identical
+///   experiments.
+pub fn periodic(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> {
+    let lay = layout(data, opts)?;
+    let (nr, ny) = (lay.nr, lay.ny);
+    let nu = nr;
+    let m = lay.chans.len();
+    if m < nr {
+        return Err(Error::invalid(
+            "experiments",
+            format!(
+                "{m} experiment(s) for {nr} inputs: solving T_ry and S per line needs at least as \
+                 many experiments as inputs; record {nr} (a sequential or orthogonal design) or \
+                 one zippered experiment"
+            ),
+        ));
+    }
+    let specs = analyse(&lay, data.fs(), opts)?;
+    let per_in = excited_by_input(&specs, nr, opts)?;
+    let mut lines: Vec<usize> = per_in.into_iter().flatten().collect();
+    lines.sort_unstable();
+    lines.dedup();
+    if lines.is_empty() {
+        return Err(Error::invalid(
+            "band",
+            "no excited line in the band: widen the band or check the excitation",
+        ));
+    }
+    let p = specs[0].periods();
+    let pf = p as f64;
+    let ts = 1.0 / data.fs();
+    let f: Vec<f64> = lines.iter().map(|&k| specs[0].line_hz(k)).collect();
+    let nl = lines.len();
+    let (off_u, off_y) = (nr, nr + nu);
+
+    struct LineOut {
+        t: Vec<c64>,
+        s: Vec<c64>,
+        p: Vec<c64>,
+        vt: Vec<f64>,
+        vs: Vec<f64>,
+        vp: Vec<f64>,
+        coh: Vec<f64>,
+        coh_u: Vec<f64>,
+        cond_r: f64,
+        cond_u: f64,
+    }
+    let per_line = |li: usize| -> Result<LineOut> {
+        let k = lines[li];
+        let fk = f[li];
+        let r = Mat::<c64>::from_fn(nr, m, |j, e| specs[e].mean(j)[k]);
+        let u = Mat::<c64>::from_fn(nu, m, |j, e| specs[e].mean(off_u + j)[k]);
+        let y = Mat::<c64>::from_fn(ny, m, |i, e| specs[e].mean(off_y + i)[k]);
+        let (sv, uu, vv) = svd_small(&r)?;
+        let cond_r = cond_of(&sv);
+        if cond_r.is_nan() || cond_r > opts.max_cond {
+            return Err(singular_line_error(
+                "excitation matrix R (inputs × experiments)",
+                k,
+                fk,
+                cond_r,
+                "the experiments do not excite the inputs independently there (e.g. two \
+                 identical experiments); use a sequential or orthogonal (Hadamard) design, or \
+                 restrict the band",
+            ));
+        }
+        // R⁺ = V Σ⁻¹ Uᴴ (M × nr), on the nr non-zero singular values
+        let rp = Mat::<c64>::from_fn(m, nr, |e, j| {
+            (0..nr).fold(ZERO, |acc, q| acc + vv[(e, q)] * uu[(j, q)].conj() / sv[q])
+        });
+        let (svu, _, _) = svd_small(&u)?;
+        let cond_u = cond_of(&svu);
+        if cond_u.is_nan() || cond_u > opts.max_cond {
+            return Err(singular_line_error(
+                "input matrix U (inputs × experiments)",
+                k,
+                fk,
+                cond_u,
+                "the controller outputs are not independent across the experiments there; \
+                 check the excitation design and the loop",
+            ));
+        }
+        let t = mat_mul(&y, &rp);
+        let s = mat_mul(&u, &rp);
+        let s_inv = inv_small(&s).ok_or_else(|| {
+            singular_line_error("sensitivity S", k, fk, f64::INFINITY, "check the data")
+        })?;
+        let pl = mat_mul(&t, &s_inv);
+        let w = mat_mul(&rp, &s_inv);
+        // per-experiment covariance of the means of (u, y), stacked u then y
+        let specs = &specs;
+        let cov_e =
+            |e: usize| move |a: usize, b: usize| specs[e].cov_at(off_u + a, off_u + b, k) / pf;
+        let mut vt = vec![0.0; ny * nu];
+        let mut vs = vec![0.0; nu * nu];
+        let mut vp = vec![0.0; ny * nu];
+        let mut g: Vec<(usize, c64)> = Vec::with_capacity(nu + 1);
+        for e in 0..m {
+            let cv = cov_e(e);
+            for j in 0..nu {
+                let w2 = rp[(e, j)].norm_sqr();
+                for i in 0..ny {
+                    vt[j * ny + i] += w2 * cv(nu + i, nu + i).re;
+                }
+                for i in 0..nu {
+                    vs[j * nu + i] += w2 * cv(i, i).re;
+                }
+            }
+            for a in 0..ny {
+                g.clear();
+                g.extend((0..nu).map(|c| (c, -pl[(a, c)])));
+                g.push((nu + a, ONE));
+                let q = quad(&g, &cv);
+                for b in 0..nu {
+                    vp[b * ny + a] += w[(e, b)].norm_sqr() * q;
+                }
+            }
+        }
+        let tr = mat_mul(&t, &r);
+        let sr = mat_mul(&s, &r);
+        let coh_of = |fit: &Mat<c64>, off: usize, i: usize| {
+            let num: f64 = (0..m).map(|e| fit[(i, e)].norm_sqr()).sum();
+            let den: f64 = (0..m)
+                .map(|e| specs[e].moment_at(off + i, off + i, k).re)
+                .sum();
+            if den > 0.0 {
+                (num / den).min(1.0)
+            } else {
+                f64::NAN
+            }
+        };
+        let col = |a: &Mat<c64>| -> Vec<c64> {
+            (0..a.ncols())
+                .flat_map(|j| (0..a.nrows()).map(move |i| (i, j)))
+                .map(|(i, j)| a[(i, j)])
+                .collect()
+        };
+        Ok(LineOut {
+            t: col(&t),
+            s: col(&s),
+            p: col(&pl),
+            vt,
+            vs,
+            vp,
+            coh: (0..ny).map(|i| coh_of(&tr, off_y, i)).collect(),
+            coh_u: (0..nu).map(|i| coh_of(&sr, off_u, i)).collect(),
+            cond_r,
+            cond_u,
+        })
+    };
+    let outs: Vec<LineOut> = (0..nl)
+        .into_par_iter()
+        .map(per_line)
+        .collect::<Result<_>>()?;
+    let cat = |g: &dyn Fn(&LineOut) -> &[c64]| {
+        outs.iter()
+            .flat_map(|o| g(o).iter().copied())
+            .collect::<Vec<_>>()
+    };
+    let catf = |g: &dyn Fn(&LineOut) -> &[f64]| {
+        outs.iter()
+            .flat_map(|o| g(o).iter().copied())
+            .collect::<Vec<_>>()
+    };
+    Ok(MimoClosedLoopFrf {
+        t_ry: frd(&f, ny, nu, cat(&|o| &o.t), catf(&|o| &o.vt), p, ts)?,
+        s: frd(&f, nu, nu, cat(&|o| &o.s), catf(&|o| &o.vs), p, ts)?,
+        plant: frd(&f, ny, nu, cat(&|o| &o.p), catf(&|o| &o.vp), p, ts)?,
+        plant_indirect: None,
+        coherence: catf(&|o| &o.coh),
+        coherence_u: catf(&|o| &o.coh_u),
+        cond_r: outs.iter().map(|o| o.cond_r).collect(),
+        cond_u: outs.iter().map(|o| o.cond_u).collect(),
+        measured: vec![true; nl * nu],
+        lines,
+        periods: p,
+        dof: (pf - 1.0).max(0.0),
+        design: MimoDesign::Experiments(m),
+    })
+}
+
+/// The 4 lines of `own` (sorted, at least 4) nearest to `k`, and the cubic Lagrange weights
+/// of `k` on them.
+fn lagrange4(own: &[usize], k: usize) -> ([usize; 4], [f64; 4]) {
+    let pos = own.partition_point(|&x| x < k);
+    let start = pos.saturating_sub(2).min(own.len() - 4);
+    let xs = [own[start], own[start + 1], own[start + 2], own[start + 3]];
+    let kf = k as f64;
+    let mut w = [1.0; 4];
+    for l in 0..4 {
+        for q in 0..4 {
+            if q != l {
+                w[l] *= (kf - xs[q] as f64) / (xs[l] as f64 - xs[q] as f64);
+            }
+        }
+    }
+    (xs, w)
+}
+
+/// The MIMO closed-loop FRF from one zippered periodic experiment: input $j$ alone on its lines
+/// $\mathcal L_j$; columns measured there and interpolated (cubic Lagrange through the 4 nearest
+/// own lines) to the union of the lines, then $P = T_{ry} S^{-1}$ per line. See the
+/// [module docs](self) for the formulas and the bias near sharp resonances.
+///
+/// # Example
+/// ```
+/// use ambid_core::data::IoData;
+/// use ambid_core::frf::mimo::{zippered, MimoOptions};
+/// use std::f64::consts::PI;
+/// // 2 inputs in open loop (u = r), a static plant y = P u with P = [[1, 0.5], [0.2, 2]];
+/// // input 0 on the odd lines 1..7, input 1 on the even lines 2..8, 3 periods of 32 samples
+/// let n = 32;
+/// let tone = |lines: &[usize], t: usize| -> f64 {
+///     lines.iter().map(|&k| (2.0 * PI * (k * t % n) as f64 / n as f64 + k as f64).cos()).sum()
+/// };
+/// let r0: Vec<f64> = (0..3 * n).map(|t| tone(&[1, 3, 5, 7], t)).collect();
+/// let r1: Vec<f64> = (0..3 * n).map(|t| tone(&[2, 4, 6, 8], t)).collect();
+/// let y0: Vec<f64> = r0.iter().zip(&r1).map(|(a, b)| a + 0.5 * b).collect();
+/// let y1: Vec<f64> = r0.iter().zip(&r1).map(|(a, b)| 0.2 * a + 2.0 * b).collect();
+/// let data = IoData::new(vec![
+///     ("r_xa".into(), r0.clone()), ("r_xb".into(), r1.clone()),
+///     ("u_xa".into(), r0), ("u_xb".into(), r1),
+///     ("y_xa".into(), y0), ("y_xb".into(), y1),
+/// ], 1e-3, Some(n)).unwrap();
+/// let frf = zippered(&data, &MimoOptions::new()).unwrap();
+/// assert_eq!(frf.lines, (1..=8).collect::<Vec<_>>());
+/// // line 1: column 0 measured, column 1 interpolated (exactly, the plant is static)
+/// assert_eq!(&frf.measured[..2], &[true, false]);
+/// let p = frf.plant.at(0).unwrap();
+/// assert!((p[(0, 1)].re - 0.5).abs() < 1e-12 && (p[(1, 0)].re - 0.2).abs() < 1e-12);
+/// ```
+///
+/// # Errors
+/// As [`periodic`] for the record; and [`Error::InvalidArgument`] for several experiments, a
+/// line excited by two inputs (not a zippered design), or an input with fewer than 4 lines;
+/// [`Error::Numerical`] for a singular $\hat S$ on a line.
+pub fn zippered(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> {
+    data.require_single_experiment("the zippered MIMO FRF")?;
+    let lay = layout(data, opts)?;
+    let (nr, ny) = (lay.nr, lay.ny);
+    let nu = nr;
+    let specs = analyse(&lay, data.fs(), opts)?;
+    let sp = &specs[0];
+    let own = excited_by_input(&specs, nr, opts)?;
+    let nlines = sp.n_lines();
+    let mut owner = vec![usize::MAX; nlines];
+    for (j, l) in own.iter().enumerate() {
+        if l.len() < 4 {
+            return Err(Error::invalid(
+                "excitation",
+                format!(
+                    "input {j} (in axis order) excites {} line(s) in the band; the zippered \
+                     estimate interpolates each column through 4 of its own lines: excite more \
+                     lines or widen the band",
+                    l.len()
+                ),
+            ));
+        }
+        for &k in l {
+            if owner[k] != usize::MAX {
+                return Err(Error::invalid(
+                    "excitation",
+                    format!(
+                        "line {k} ({:.6} Hz) is excited by inputs {} and {j}: this is not a \
+                         zippered design (each input on its own lines); record one experiment per \
+                         input (sequential or orthogonal design) and use frf::mimo::periodic",
+                        sp.line_hz(k),
+                        owner[k]
+                    ),
+                ));
+            }
+            owner[k] = j;
+        }
+    }
+    let lines: Vec<usize> = (1..nlines).filter(|&k| owner[k] != usize::MAX).collect();
+    let p = sp.periods();
+    let pf = p as f64;
+    let ts = 1.0 / data.fs();
+    let (off_u, off_y) = (nr, nr + nu);
+    let nz = ny + nu; // stacked column z = (T[:, j], S[:, j])
+                      // the measured column on an own line: values and covariance (nz × nz, row-major)
+    let measured_col = |j: usize, k: usize| -> (Vec<c64>, Vec<c64>) {
+        let rj = sp.mean(j)[k];
+        let ir = ONE / rj;
+        let ch = |a: usize| if a < ny { off_y + a } else { off_u + a - ny };
+        let z: Vec<c64> = (0..nz).map(|a| sp.mean(ch(a))[k] * ir).collect();
+        let s2 = rj.norm_sqr() * pf;
+        let mut cov = vec![ZERO; nz * nz];
+        for a in 0..nz {
+            for b in 0..nz {
+                cov[a * nz + b] = sp.cov_at(ch(a), ch(b), k) / s2;
+            }
+        }
+        (z, cov)
+    };
+    let f: Vec<f64> = lines.iter().map(|&k| sp.line_hz(k)).collect();
+    let nl = lines.len();
+    let mut t = vec![ZERO; nl * ny * nu];
+    let mut s = vec![ZERO; nl * nu * nu];
+    let mut pv = vec![ZERO; nl * ny * nu];
+    let (mut vt, mut vs, mut vp) = (
+        vec![0.0; nl * ny * nu],
+        vec![0.0; nl * nu * nu],
+        vec![0.0; nl * ny * nu],
+    );
+    let mut measured = vec![false; nl * nu];
+    let mut cond_u = vec![0.0; nl];
+    let mut coherence = vec![0.0; nl * ny];
+    let mut coherence_u = vec![0.0; nl * nu];
+    let mut covs: Vec<Vec<c64>> = vec![vec![ZERO; nz * nz]; nu];
+    for (li, &k) in lines.iter().enumerate() {
+        for j in 0..nu {
+            let (z, cov) = if owner[k] == j {
+                measured[li * nu + j] = true;
+                measured_col(j, k)
+            } else {
+                let (xs, w) = lagrange4(&own[j], k);
+                let mut z = vec![ZERO; nz];
+                let mut cov = vec![ZERO; nz * nz];
+                for (x, wl) in xs.iter().zip(w) {
+                    let (zl, cl) = measured_col(j, *x);
+                    for a in 0..nz {
+                        z[a] += zl[a] * wl;
+                    }
+                    for (c, v) in cov.iter_mut().zip(cl) {
+                        *c += v * (wl * wl);
+                    }
+                }
+                (z, cov)
+            };
+            for i in 0..ny {
+                t[li * ny * nu + j * ny + i] = z[i];
+                vt[li * ny * nu + j * ny + i] = cov[i * nz + i].re.max(0.0);
+            }
+            for i in 0..nu {
+                s[li * nu * nu + j * nu + i] = z[ny + i];
+                vs[li * nu * nu + j * nu + i] = cov[(ny + i) * nz + ny + i].re.max(0.0);
+            }
+            covs[j] = cov;
+        }
+        let tm = Mat::<c64>::from_fn(ny, nu, |i, j| t[li * ny * nu + j * ny + i]);
+        let sm = Mat::<c64>::from_fn(nu, nu, |i, j| s[li * nu * nu + j * nu + i]);
+        let (svs, _, _) = svd_small(&sm)?;
+        cond_u[li] = cond_of(&svs);
+        if cond_u[li].is_nan() || cond_u[li] > opts.max_cond {
+            return Err(singular_line_error(
+                "estimated sensitivity S",
+                k,
+                f[li],
+                cond_u[li],
+                "the loop's input response cannot be inverted there; restrict the band",
+            ));
+        }
+        let s_inv = inv_small(&sm).ok_or_else(|| {
+            singular_line_error(
+                "estimated sensitivity S",
+                k,
+                f[li],
+                f64::INFINITY,
+                "restrict the band",
+            )
+        })?;
+        let pm = mat_mul(&tm, &s_inv);
+        let mut g: Vec<(usize, c64)> = Vec::with_capacity(nu + 1);
+        for a in 0..ny {
+            for b in 0..nu {
+                pv[li * ny * nu + b * ny + a] = pm[(a, b)];
+                let mut acc = 0.0;
+                for (j, cov) in covs.iter().enumerate() {
+                    g.clear();
+                    g.push((a, ONE));
+                    g.extend((0..nu).map(|c| (ny + c, -pm[(a, c)])));
+                    let cv = |x: usize, y: usize| cov[x * nz + y];
+                    acc += s_inv[(j, b)].norm_sqr() * quad(&g, &cv);
+                }
+                vp[li * ny * nu + b * ny + a] = acc;
+            }
+        }
+        for i in 0..ny {
+            let mo = sp.moment_at(off_y + i, off_y + i, k).re;
+            coherence[li * ny + i] = if mo > 0.0 {
+                (sp.mean(off_y + i)[k].norm_sqr() / mo).min(1.0)
+            } else {
+                f64::NAN
+            };
+        }
+        for i in 0..nu {
+            let mo = sp.moment_at(off_u + i, off_u + i, k).re;
+            coherence_u[li * nu + i] = if mo > 0.0 {
+                (sp.mean(off_u + i)[k].norm_sqr() / mo).min(1.0)
+            } else {
+                f64::NAN
+            };
+        }
+    }
+    Ok(MimoClosedLoopFrf {
+        t_ry: frd(&f, ny, nu, t, vt, p, ts)?,
+        s: frd(&f, nu, nu, s, vs, p, ts)?,
+        plant: frd(&f, ny, nu, pv, vp, p, ts)?,
+        plant_indirect: None,
+        coherence,
+        coherence_u,
+        cond_r: vec![1.0; nl],
+        cond_u,
+        lines,
+        measured,
+        periods: p,
+        dof: (pf - 1.0).max(0.0),
+        design: MimoDesign::Zippered,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lagrange_weights_reproduce_cubics_and_pick_the_nearest_lines() {
+        let own = [2usize, 6, 10, 14, 18, 22];
+        let cubic = |x: f64| 0.5 - 1.5 * x + 0.25 * x * x - 0.01 * x * x * x;
+        for k in [1usize, 3, 7, 12, 17, 21, 25] {
+            let (xs, w) = lagrange4(&own, k);
+            let v: f64 = xs.iter().zip(w).map(|(&x, w)| w * cubic(x as f64)).sum();
+            assert!((v - cubic(k as f64)).abs() < 1e-12, "k = {k}: {v}");
+            assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        }
+        assert_eq!(lagrange4(&own, 12).0, [6, 10, 14, 18]);
+        assert_eq!(lagrange4(&own, 1).0, [2, 6, 10, 14]);
+        assert_eq!(lagrange4(&own, 25).0, [10, 14, 18, 22]);
+    }
+
+    #[test]
+    fn small_inverse_and_condition_number() {
+        let a = Mat::<c64>::from_fn(3, 3, |i, j| {
+            c64::new(
+                if i == j {
+                    2.0
+                } else {
+                    0.3 * (i + 2 * j) as f64
+                },
+                0.1 * i as f64 - 0.2 * j as f64,
+            )
+        });
+        let ai = inv_small(&a).unwrap();
+        let e = mat_mul(&a, &ai);
+        for i in 0..3 {
+            for j in 0..3 {
+                let want = if i == j { ONE } else { ZERO };
+                assert!((e[(i, j)] - want).norm() < 1e-14);
+            }
+        }
+        assert!(inv_small(&Mat::<c64>::zeros(2, 2)).is_none());
+        // diag(3, 1e-3) rotated: κ = 3000
+        let d = Mat::<c64>::from_fn(2, 2, |i, j| match (i, j) {
+            (0, 0) => c64::new(3.0, 0.0),
+            (1, 1) => c64::new(0.0, 1e-3),
+            _ => ZERO,
+        });
+        let (sv, _, _) = svd_small(&d).unwrap();
+        assert!((cond_of(&sv) - 3000.0).abs() < 1e-9);
+        // g^T Σ ḡ of a 2-vector against the expanded form
+        let sig = [
+            [c64::new(2.0, 0.0), c64::new(0.3, -0.4)],
+            [c64::new(0.3, 0.4), c64::new(1.0, 0.0)],
+        ];
+        let g = [(0usize, c64::new(1.0, 2.0)), (1usize, c64::new(-0.5, 0.25))];
+        let direct: c64 = (0..2)
+            .flat_map(|i| (0..2).map(move |l| (i, l)))
+            .map(|(i, l)| g[i].1 * sig[i][l] * g[l].1.conj())
+            .sum();
+        assert!((quad(&g, &|a, b| sig[a][b]) - direct.re).abs() < 1e-14 && direct.im.abs() < 1e-14);
+    }
+}
