@@ -70,6 +70,9 @@ enum Command {
     /// per RMS level and the recommended level, or for one level the per-line BLA with its total,
     /// noise and nonlinear standard deviations.
     Bla(bla::BlaArgs),
+    /// Campbell diagram of the 4-axis twin: the true closed-loop modes (frequency, damping,
+    /// forward/backward whirl) against rotor speed, with the 1× line; writes the CSV.
+    Campbell(campbell::CampbellArgs),
 }
 
 fn main() {
@@ -114,5 +117,6 @@ fn dispatch(cli: Cli) -> Result<()> {
         Command::CompareModels(a) => compare_models::compare(a),
         Command::Validate(a) => validate::validate(a),
         Command::Bla(a) => bla::bla(a),
+        Command::Campbell(a) => campbell::campbell(a),
     }
 }
