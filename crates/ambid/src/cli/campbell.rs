@@ -18,7 +18,7 @@ pub struct CampbellArgs {
     #[arg(long, default_value = "0:30000:7")]
     pub speeds: String,
     /// Highest natural frequency of the modes listed \[Hz\].
-    #[arg(long, default_value_t = 1000.0)]
+    #[arg(long, default_value_t = 1000.0, allow_negative_numbers = true)]
     pub f_max: f64,
     /// Output CSV: `speed_rpm,sync_hz,mode,freq_hz,damping,whirl`.
     #[arg(long)]
