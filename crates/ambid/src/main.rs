@@ -43,8 +43,9 @@ enum Command {
     /// Print the twin's default configuration (or a random rig's, with --rig-seed) as TOML (edit
     /// it and pass it with --config).
     Config(common::RigArgs),
-    /// Print the twin's linearised facts: closed-loop modes, peak sensitivity, unstable plant poles.
-    Info(common::TwinArgs),
+    /// Print the twin's linearised facts: closed-loop modes, peak sensitivity, unstable plant poles
+    /// (with `--axes 4` the whole rotor's: inertias, modes with whirl, peak |S| per axis, 1×).
+    Info(info::InfoArgs),
     /// Nonparametric closed-loop FRFs from recorded data (T_ry, S, plant by the joint and, with a
     /// controller file, the indirect method, the controller from data), with standard deviations,
     /// coherences, quality measures and resonance peaks; writes the FRF CSV.
@@ -70,6 +71,9 @@ enum Command {
     /// per RMS level and the recommended level, or for one level the per-line BLA with its total,
     /// noise and nonlinear standard deviations.
     Bla(bla::BlaArgs),
+    /// Campbell diagram of the 4-axis twin: the true closed-loop modes (frequency, damping,
+    /// forward/backward whirl) against rotor speed, with the 1× line; writes the CSV.
+    Campbell(campbell::CampbellArgs),
 }
 
 fn main() {
@@ -114,5 +118,6 @@ fn dispatch(cli: Cli) -> Result<()> {
         Command::CompareModels(a) => compare_models::compare(a),
         Command::Validate(a) => validate::validate(a),
         Command::Bla(a) => bla::bla(a),
+        Command::Campbell(a) => campbell::campbell(a),
     }
 }

@@ -8,6 +8,7 @@ pub mod common;
 pub mod exit;
 
 pub mod bla;
+pub mod campbell;
 pub mod compare;
 pub mod compare_models;
 pub mod config;
