@@ -242,8 +242,14 @@ pub struct ExperimentOutput {
 
 /// Runs the experiment on the twin.
 pub fn run(exp: &Experiment) -> Result<ExperimentOutput> {
+    let (twin, excitation) = prepare(exp)?;
+    simulate_with(twin, exp, excitation)
+}
+
+/// What [`run`] and [`run_batch`] do before they simulate: the twin, the length the plan asks
+/// for (checked before the excitation is even generated) and the excitation.
+fn prepare(exp: &Experiment) -> Result<(Twin, Excitation)> {
     let twin = Twin::new(exp.twin.clone()).context("building the AMB twin")?;
-    // the length the plan asks for, checked before the excitation is even generated
     let p = &exp.excitation;
     let per_period = match p.kind {
         ExcitationKind::Prbs => 1usize
@@ -254,7 +260,8 @@ pub fn run(exp: &Experiment) -> Result<ExperimentOutput> {
     };
     check_sim_length(per_period.saturating_mul(p.periods))?;
     let excitation = exp.excitation.generate(twin.i_sat(), twin.ts())?;
-    simulate_with(twin, exp, excitation)
+    check_sim_length(excitation.values.len())?;
+    Ok((twin, excitation))
 }
 
 /// Runs independent experiments on the twin and returns their outputs in the order given, each
@@ -280,25 +287,9 @@ pub fn run(exp: &Experiment) -> Result<ExperimentOutput> {
 /// ```
 pub fn run_batch(exps: &[Experiment]) -> Vec<Result<ExperimentOutput>> {
     use rayon::prelude::*;
-    // what `run` does before it simulates: the twin, the length check, the excitation
     let prepared: Vec<Result<(Twin, Excitation, SimOptions)>> = exps
         .par_iter()
-        .map(|exp| {
-            let twin = Twin::new(exp.twin.clone()).context("building the AMB twin")?;
-            let p = &exp.excitation;
-            let per_period = match p.kind {
-                ExcitationKind::Prbs => 1usize
-                    .checked_shl(p.prbs_order.min(63))
-                    .map_or(usize::MAX, |v| v.saturating_sub(1))
-                    .saturating_mul(p.samples_per_bit),
-                _ => (p.period_s / twin.ts()).round().min(usize::MAX as f64) as usize,
-            };
-            check_sim_length(per_period.saturating_mul(p.periods))?;
-            let excitation = exp.excitation.generate(twin.i_sat(), twin.ts())?;
-            check_sim_length(excitation.values.len())?;
-            let opts = sim_options(exp);
-            Ok((twin, excitation, opts))
-        })
+        .map(|exp| prepare(exp).map(|(twin, excitation)| (twin, excitation, sim_options(exp))))
         .collect();
     let ready: Vec<usize> = (0..exps.len()).filter(|&j| prepared[j].is_ok()).collect();
     let records: Vec<(usize, ambid_twin::Result<SimRecord>)> = ready

@@ -266,20 +266,12 @@ pub(crate) struct Ctx<'a> {
     pub level_frac: Option<f64>,
     /// The seed-style amplitude study's (level %, mean relative plant variance), for the BLA step.
     pub seed_study: Option<Vec<(f64, f64)>>,
-    /// FRF analysis of the identification record.
-    pub frf: Option<crate::analysis::FrfAnalysis>,
     /// The FRF stage's result.
     pub frf_stage: Option<crate::stage::FrfStage>,
     /// The order stage's result.
     pub order_stage: Option<crate::stage::OrderStage>,
     /// Controller (closed loop).
     pub controller: Option<crate::io::ControllerModel>,
-    /// Candidate models.
-    pub candidates: Vec<crate::stage::Candidate>,
-    /// Index of the chosen candidate.
-    pub chosen: Option<usize>,
-    /// Validation outcome of the chosen model.
-    pub validation: Option<crate::validation::ValidationOutcome>,
     /// The excitation stage's result.
     pub excitation: Option<crate::stage::ExcitationStage>,
     /// The operating-point study's result.
@@ -316,6 +308,22 @@ impl Ctx<'_> {
 
     pub fn is_closed_loop(&self) -> bool {
         self.ident.as_ref().is_some_and(|r| r.closed_loop)
+    }
+
+    /// The FRF analysis of the identification record (the FRF stage's, when it ran).
+    pub fn frf(&self) -> Option<&crate::analysis::FrfAnalysis> {
+        self.frf_stage.as_ref().map(|s| &s.analysis)
+    }
+
+    /// The chosen candidate model (the models stage's choice, when it ran and chose one).
+    pub fn chosen(&self) -> Option<&crate::stage::Candidate> {
+        self.models_stage.as_ref().and_then(|s| s.chosen())
+    }
+
+    /// The closed-loop validation outcome of the chosen model (the validation stage's, when it
+    /// validated in closed loop).
+    pub fn validation(&self) -> Option<&crate::validation::ValidationOutcome> {
+        self.validation_stage.as_ref().and_then(|s| s.closed_loop())
     }
 
     /// The identification excitation plan of the workflow file at level `frac` of i_sat.
@@ -575,13 +583,9 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
         valid: prepared.valid,
         level_frac: None,
         seed_study: None,
-        frf: None,
         frf_stage: None,
         order_stage: None,
         controller: prepared.controller,
-        candidates: Vec::new(),
-        chosen: None,
-        validation: None,
         excitation: None,
         operating_point: None,
         bla: None,

@@ -24,7 +24,6 @@ pub fn frf(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     ctx.typed.frf = Some(frf_summary(&st));
     let units = Units::of(ctx);
     ctx.sections.push(render_frf::frf_section(&st, &units));
-    ctx.frf = Some(st.analysis.clone());
     ctx.frf_stage = Some(st);
     Ok(StepStatus::Done)
 }
@@ -62,7 +61,7 @@ pub fn order(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     let st = crate::stage::order(&OrderInput {
         identification: rec,
         validation: val,
-        frf: ctx.frf.as_ref(),
+        frf: ctx.frf(),
         order: &ctx.cfg.order,
         models: &ctx.cfg.models,
         models_run: ctx.cfg.steps().contains(&Step::Models),

@@ -60,7 +60,7 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         identification: ctx.ident.as_ref(),
         validation: ctx.valid.as_ref(),
         validation_skip: ctx.cfg.validation.skip,
-        frf: ctx.frf.as_ref(),
+        frf: ctx.frf(),
         controller: ctx.controller.as_ref(),
         twin: ctx.twin.as_ref(),
     })?;
@@ -73,20 +73,22 @@ pub fn models(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         &ctx.cfg.models.weights,
     ));
     ctx.models.extend(stage.export.iter().cloned());
-    ctx.candidates = stage.candidates.clone();
-    ctx.chosen = stage.choice.index;
     ctx.models_stage = Some(stage);
     Ok(StepStatus::Done)
 }
 
 pub fn pole_zero(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
-    let Some(chosen) = ctx.chosen else {
+    let Some((models, chosen)) = ctx
+        .models_stage
+        .as_ref()
+        .and_then(|m| Some((m, m.choice.index?)))
+    else {
         return Ok(StepStatus::Skipped(
             "no fitted model (run the models step)".into(),
         ));
     };
     let stage = crate::stage::pole_zero(&PoleZeroInput {
-        candidates: &ctx.candidates,
+        candidates: &models.candidates,
         chosen,
         twin: ctx.twin.as_ref(),
     })?;

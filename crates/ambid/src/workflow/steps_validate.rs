@@ -106,12 +106,11 @@ fn validation_summary(
 
 pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     ctx.ensure_valid()?;
-    let Some(ch) = ctx.chosen else {
+    let Some(c) = ctx.chosen() else {
         return Ok(StepStatus::Skipped(
             "no fitted model (run the models step)".into(),
         ));
     };
-    let c = &ctx.candidates[ch];
     let Some(model) = c.model.as_ref() else {
         return Ok(StepStatus::Skipped("the chosen model failed".into()));
     };
@@ -144,7 +143,6 @@ pub fn validation(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     if let Some(s) = render::validation_section(&st, &Units::of(ctx)) {
         ctx.sections.push(s);
     }
-    ctx.validation = st.closed_loop().cloned();
     ctx.validation_stage = Some(st);
     Ok(StepStatus::Done)
 }
@@ -176,12 +174,12 @@ fn reconstruction_summary(st: &ReconstructionStage) -> ReconstructionSummary {
 }
 
 pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
-    let Some(ch) = ctx.chosen else {
+    let Some(c) = ctx.chosen() else {
         return Ok(StepStatus::Skipped(
             "no fitted model (run the models step)".into(),
         ));
     };
-    let Some(model) = ctx.candidates[ch].model.as_ref() else {
+    let Some(model) = c.model.as_ref() else {
         return Ok(StepStatus::Skipped("the chosen model failed".into()));
     };
     let Some(controller) = ctx.controller.as_ref() else {
@@ -204,7 +202,7 @@ pub fn reconstruction(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                 .into(),
         ));
     };
-    let label = ctx.candidates[ch].label();
+    let label = c.label();
     let st = crate::stage::reconstruction(&ReconstructionInput {
         name: &label,
         model,
@@ -254,9 +252,9 @@ fn iso_summary(st: &IsoStage) -> IsoSummary {
 pub fn iso(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     let st = crate::stage::iso(&IsoInput {
         zones: zones(ctx),
-        frf: ctx.frf.as_ref(),
+        frf: ctx.frf(),
         identification: ctx.ident.as_ref(),
-        validation: ctx.validation.as_ref(),
+        validation: ctx.validation(),
         twin: ctx.twin.as_ref(),
     })?;
     if let Some(why) = st.not_done() {
