@@ -570,13 +570,16 @@ fn bad_input_gets_a_clear_error() {
     let nan = IoData::new(ch, 1.0 / FS, Some(64)).unwrap();
     let m = msg(periodic(&nan, &opts).unwrap_err());
     assert!(m.contains("non-finite") && m.contains("sample 101"), "{m}");
-    // non-periodic data: not supported, said so
+    // no period: periodic() says how to proceed; estimate() takes the local polynomial method,
+    // which needs every input excited (this sequential experiment drives xa only)
     let np = IoData::new(e0.channels().to_vec(), 1.0 / FS, None).unwrap();
-    let m = msg(estimate(&np, &opts).unwrap_err());
+    let m = msg(periodic(&np, &opts).unwrap_err());
     assert!(
-        m.contains("non-periodic multi-input data are not supported"),
+        m.contains("no period length") && m.contains("local_polynomial"),
         "{m}"
     );
+    let m = msg(estimate(&np, &opts).unwrap_err());
+    assert!(m.contains("r_xb") && m.contains("no power"), "{m}");
     // a sequential experiment handed to the zippered estimator: inputs 1..3 are silent
     assert!(msg(zippered(&e0, &opts).unwrap_err()).contains("no power"));
     // an orthogonal experiment is not zippered: every line excited by all inputs

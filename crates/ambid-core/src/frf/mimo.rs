@@ -13,9 +13,9 @@
 //!   with $M \ge n_r$ experiments whose excitations are independent on every line);
 //! * **zippered** ([`zippered`]; one experiment, each input on its own interleaved lines).
 //!
-//! [`estimate`] picks the design from the record. Non-periodic multi-input data are **not
-//! supported yet**: the local polynomial method of [`lpm`](super::lpm) handles one input (and
-//! one experiment) only, so a record without a period length gets a typed error.
+//! [`estimate`] picks the design from the record. Non-periodic records (noise, chirps; no
+//! period length) go to the multivariable local polynomial method of
+//! [`mimo_lpm`](super::mimo_lpm), which returns the same [`MimoClosedLoopFrf`].
 //!
 //! # Period averages and excited lines
 //! Every experiment $e$ is cut into periods of $N$ samples (the first `skip_periods` dropped as
@@ -190,6 +190,14 @@ pub enum MimoDesign {
     Experiments(usize),
     /// One zippered experiment, columns interpolated to the common grid.
     Zippered,
+    /// Non-periodic experiments by the multivariable local polynomial method
+    /// ([`mimo_lpm`](super::mimo_lpm)): degree $R$ and half width $n$ of the window.
+    LocalPolynomial {
+        /// Polynomial degree $R$.
+        degree: usize,
+        /// Half width $n$ (window of $2n+1$ lines).
+        half_width: usize,
+    },
 }
 
 /// The MIMO closed-loop FRF: responses with per-entry variances on the excited lines, and the
@@ -301,15 +309,22 @@ impl MimoClosedLoopFrf {
     }
 }
 
-/// The MIMO closed-loop FRF of a periodic record, the design chosen from it: several
-/// experiments ($M \ge n_r$) → [`periodic`]; one experiment with several inputs →
-/// [`zippered`]; a single input → [`periodic`] (the SISO case).
+/// The MIMO closed-loop FRF of a record, the method chosen from it: no period length (neither
+/// in `opts` nor in the record) → the local polynomial method
+/// [`local_polynomial`](super::mimo_lpm::local_polynomial) (default degree and window, the
+/// band of `opts`); periodic with several experiments ($M \ge n_r$) → [`periodic`]; one
+/// periodic experiment with several inputs → [`zippered`]; a single input → [`periodic`] (the
+/// SISO case).
 ///
 /// # Errors
-/// Those of [`periodic`] and [`zippered`]; a record without a period length (non-periodic data
-/// are not supported for several inputs yet).
+/// Those of [`periodic`], [`zippered`] and [`local_polynomial`](super::mimo_lpm::local_polynomial).
 pub fn estimate(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> {
     let nr = data.role_count(Role::Excitation);
+    if opts.period_samples.or(data.period_samples()).is_none() {
+        let mut lo = super::mimo_lpm::MimoLpmOptions::new();
+        lo.band = opts.band;
+        return super::mimo_lpm::local_polynomial(data, &lo);
+    }
     if data.n_experiments() == 1 && nr > 1 {
         zippered(data, opts)
     } else {
@@ -339,10 +354,10 @@ fn layout<'a>(data: &'a IoData, opts: &MimoOptions) -> Result<Layout<'a>> {
     let Some(n) = opts.period_samples.or(data.period_samples()) else {
         return Err(Error::invalid(
             "period_samples",
-            "the record has no period length: the MIMO closed-loop FRF needs periodic excitation \
-             (non-periodic multi-input data are not supported yet; the local polynomial method \
-             frf::lpm takes one input). Give the period (`period_samples`) or record with a \
-             periodic multisine",
+            "the record has no period length: the periodic MIMO closed-loop FRF needs it. Give \
+             the period (`period_samples`), or for a non-periodic record (noise, chirp) use the \
+             local polynomial method frf::mimo_lpm::local_polynomial (frf::mimo::estimate picks \
+             it)",
         ));
     };
     if !(0.0..1.0).contains(&opts.rel_threshold) {
@@ -577,7 +592,8 @@ fn frd(
 /// comes from `opts` or the record.
 ///
 /// # Errors
-/// * [`Error::InvalidArgument`]: no period length (non-periodic data), a missing r, u or y
+/// * [`Error::InvalidArgument`]: no period length (non-periodic data: see
+///   [`mimo_lpm`](super::mimo_lpm)), a missing r, u or y
 ///   channel or different r and u counts (the message lists the channels), fewer experiments
 ///   than inputs, experiments of different lengths, a non-finite sample (channel, experiment
 ///   and sample named), a record that is not a whole number of periods or too short for the

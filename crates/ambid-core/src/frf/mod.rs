@@ -6,6 +6,7 @@ pub mod closed_loop;
 pub mod lpm;
 pub mod lrm;
 pub mod mimo;
+pub mod mimo_lpm;
 pub mod periodic;
 pub mod quality;
 pub mod resonance;
