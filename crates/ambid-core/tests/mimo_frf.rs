@@ -1,5 +1,5 @@
-//! `frf::mimo` against the exact truth of a discrete 4-axis closed loop built here from
-//! state-space parts: per axis an unstable mass with negative stiffness, an amplifier lag and a
+//! `frf::mimo` against the exact truth of a discrete 4-axis closed loop built in
+//! `common/mimo_loop.rs` from state-space parts: per axis an unstable mass with negative stiffness, an amplifier lag and a
 //! one-sample sensor delay (ZOH), the axes coupled by a known stiffness matrix (A–B through the
 //! rotor, x–y cross stiffness) and a skew (gyroscopic-like) velocity coupling; a discrete PD
 //! controller per axis (one design for the A axes, one for the B axes), u = −C y + r. Truth:
