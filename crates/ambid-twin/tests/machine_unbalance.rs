@@ -32,12 +32,11 @@ fn machine(line: f64, unbalance: bool) -> Machine {
     Machine::new(MachineConfig {
         speed_rpm: 60.0 * line * fs / N as f64,
         // 5 g at 2 mm (m_u e = 1e-5 kg·m): a 1× line of ~3 µm, 15 × the sensor noise rms
-        unbalance: unbalance.then(|| UnbalanceConfig {
+        unbalance: unbalance.then_some(UnbalanceConfig {
             mass_kg: 5e-3,
             eccentricity_m: 2e-3,
             axial_position_m: 0.02,
             phase_deg: 30.0,
-            ..UnbalanceConfig::default()
         }),
         ..MachineConfig::default()
     })

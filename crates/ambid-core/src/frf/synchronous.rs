@@ -356,7 +356,7 @@ pub fn synchronous(
             let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
             let (g11, g12, g22) = (dot(&ct, &ct), dot(&ct, &st), dot(&st, &st));
             let det = g11 * g22 - g12 * g12;
-            if !(det > 1e-12 * (g11 * g22).max(f64::MIN_POSITIVE)) {
+            if det.is_nan() || det <= 1e-12 * (g11 * g22).max(f64::MIN_POSITIVE) {
                 return Err(Error::numerical(
                     "synchronous line",
                     format!(
