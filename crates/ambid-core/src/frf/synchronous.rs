@@ -180,7 +180,7 @@ pub struct SynchronousLine {
     pub method: SynchronousMethod,
     /// Per channel: the inputs then the outputs, experiment after experiment.
     pub channels: Vec<SynchronousChannel>,
-    /// Periods used per experiment (1 without a period length).
+    /// Periods used per experiment (of the last one if they differ; 1 without a period length).
     pub periods: usize,
     /// Complex degrees of freedom of the variances.
     pub dof: f64,
