@@ -11,7 +11,9 @@ pub mod periodic;
 pub mod quality;
 pub mod resonance;
 pub mod stepped_sine;
+pub mod synchronous;
 pub mod welch;
 pub mod window;
 
 pub use mimo::{MimoClosedLoopFrf, MimoDesign, MimoOptions};
+pub use synchronous::{synchronous, SynchronousLine, SynchronousOptions};
