@@ -186,6 +186,75 @@ pub struct SynchronousLine {
     pub dof: f64,
 }
 
+impl SynchronousLine {
+    /// `data` with the measured 1× line taken out of every `u` and `y` channel it was measured
+    /// on: $x_t \leftarrow x_t - \operatorname{Re}(\hat A e^{j\Omega t T_s})$ for every sample
+    /// $t$ of each experiment (skipped periods included; $t$ from the experiment's sample 0, as
+    /// the amplitudes are defined). `r` (and other roles) are left alone.
+    ///
+    /// This is how the 1× line is *reported, not fitted*: an off-grid 1× line leaks into the
+    /// period means with the weight $|\sin(\pi\delta P)/(P\sin\pi\delta)|$ and so biases
+    /// every excited line near it; after `remove` the periodic estimators see only the
+    /// excitation's response and the noise (the regression is exact for a steady sinusoid, by
+    /// Frisch–Waugh). The standard deviation of $\hat A$ stays in the record as a sinusoid of that
+    /// size, far below the noise on every other line.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] when `data` is not the record the line was measured on (a
+    /// channel or experiment missing).
+    ///
+    /// # Example
+    /// ```
+    /// use ambid_core::data::IoData;
+    /// use ambid_core::frf::synchronous::{synchronous, SynchronousOptions};
+    /// use std::f64::consts::PI;
+    /// // a periodic response (period 16) plus a 1× line at 7.3 Hz (fs = 100 Hz)
+    /// let (n, periods, fs, f1) = (16, 12, 100.0, 7.3);
+    /// let periodic = |t: usize| (2.0 * PI * (t % n) as f64 / n as f64).sin();
+    /// let y: Vec<f64> = (0..n * periods)
+    ///     .map(|t| periodic(t) + 0.3 * (2.0 * PI * f1 * t as f64 / fs + 0.5).cos())
+    ///     .collect();
+    /// let data = IoData::new(
+    ///     vec![("u".into(), y.clone()), ("y".into(), y)], 1.0 / fs, Some(n),
+    /// ).unwrap();
+    /// let line = synchronous(&data, f1, &SynchronousOptions::new()).unwrap();
+    /// let clean = line.remove(&data).unwrap();
+    /// let y = clean.channel("y").unwrap();
+    /// assert!((0..n * periods).all(|t| (y[t] - periodic(t)).abs() < 1e-10));
+    /// ```
+    pub fn remove(&self, data: &IoData) -> Result<IoData> {
+        let w = 2.0 * PI * self.f_sync_hz * data.ts();
+        let mut exps = Vec::with_capacity(data.n_experiments());
+        for e in 0..data.n_experiments() {
+            let mut exp = data.experiment(e)?;
+            for ch in self.channels.iter().filter(|c| c.experiment == e) {
+                let (a, b) = (ch.amplitude.re, -ch.amplitude.im);
+                let x: Vec<f64> = exp
+                    .channel(&ch.name)?
+                    .iter()
+                    .enumerate()
+                    .map(|(t, v)| {
+                        let ph = w * t as f64;
+                        v - a * ph.cos() - b * ph.sin()
+                    })
+                    .collect();
+                exp = exp.with_channel(ch.name.clone(), x)?;
+            }
+            exps.push(exp);
+        }
+        if self.channels.iter().any(|c| c.experiment >= exps.len()) {
+            return Err(Error::invalid(
+                "data",
+                format!(
+                    "the synchronous line was measured on more experiments than the record has                      ({}); remove it from the record it was measured on",
+                    exps.len()
+                ),
+            ));
+        }
+        IoData::from_experiments(exps)
+    }
+}
+
 /// Measures the synchronous (1×) line at `f_sync_hz` on every `u` and `y` channel of every
 /// experiment of `data`; see the [module docs](self) for the method and its variance.
 ///
