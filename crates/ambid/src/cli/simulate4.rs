@@ -12,8 +12,9 @@
 //!   `--truth-points` from 1 Hz to just below $f_s/2$ (standard deviations 0: exact);
 //! * `meta.json`: the design report, speed, 1× frequency, unbalance, seeds, period.
 //!
-//! Every experiment starts in its periodic steady state: the machine runs `SETTLE_PERIODS`
-//! periods of the (cyclic) excitation before sample 0 (`MachineSimOptions::settle_samples`), so
+//! Every experiment starts in its periodic steady state: the machine runs whole periods of the
+//! (cyclic) excitation before sample 0 (`MachineSimOptions::settle_samples`, [`settle_samples`]:
+//! until the slowest closed-loop transient has decayed by $10^{-13}$), so
 //! `ambid frf --skip-periods 0` is exact on noise-free linear data (the default
 //! `--skip-periods 1` drops one more period, as for the single-axis twin).
 
@@ -33,11 +34,43 @@ use clap::ValueEnum;
 use num_complex::Complex64;
 use std::path::{Path, PathBuf};
 
-/// Periods of the cyclic excitation simulated (and discarded) before every experiment's first
-/// recorded sample: the closed loop's transient has decayed below 1e-10 of the response after
-/// two periods of the seed PRBS (5115 samples) at 0 and 30 000 rpm
-/// (`crates/ambid-twin/tests/machine_mimo_frf.rs`).
+/// Fewest periods of the cyclic excitation simulated (and discarded) before every experiment's
+/// first recorded sample; [`settle_samples`] adds more when the closed loop decays slowly.
 pub const SETTLE_PERIODS: usize = 2;
+
+/// Factor by which the slowest closed-loop transient must have decayed before the record starts
+/// ($10^{-13}$: far below the $10^{-6}$ self-consistency of noise-free data).
+pub const SETTLE_DECAY: f64 = 1e-13;
+
+/// Longest pre-roll, in seconds of simulated time (a closed loop slower than that is reported).
+pub const MAX_SETTLE_S: f64 = 20.0;
+
+/// The pre-roll of every experiment in samples: whole periods, at least [`SETTLE_PERIODS`], and
+/// enough for the slowest closed-loop pole $z$ to decay by [`SETTLE_DECAY`]
+/// ($|z|^n \le$ `SETTLE_DECAY`), at most [`MAX_SETTLE_S`] (then a warning says the record
+/// starts before steady state).
+pub fn settle_samples(machine: &Machine, period: usize) -> Result<usize> {
+    let rho = machine
+        .closed_loop_poles()
+        .context("the closed-loop poles")?
+        .iter()
+        .map(|z| z.norm())
+        .fold(0.0f64, f64::max);
+    let max = (MAX_SETTLE_S / machine.ts()).round() as usize;
+    let need = if rho < 1.0 {
+        (SETTLE_DECAY.ln() / rho.ln()).ceil().min(max as f64) as usize
+    } else {
+        max
+    };
+    if need >= max {
+        eprintln!(
+            "warning: the slowest closed-loop pole (|z| = {rho:.9}) needs more than {MAX_SETTLE_S} s \
+             to settle: the records start before the periodic steady state; use --skip-periods"
+        );
+    }
+    let periods = need.div_ceil(period.max(1)).max(SETTLE_PERIODS);
+    Ok(periods * period)
+}
 
 /// Largest number of DFT lines of one period on which `truth.csv` is written (every line
 /// $k f_s/N$, $k = 1 \dots \lfloor N/2 \rfloor$); a longer period gets the truth on the design's
@@ -379,6 +412,7 @@ pub fn simulate4(a: &SimulateArgs) -> Result<()> {
         super::common::ModeArg::Linear => Mode::Linear,
         super::common::ModeArg::Nonlinear => Mode::Nonlinear,
     };
+    let settle = settle_samples(&machine, period)?;
     let mut set = OutputSet::new(a.force);
     let mut runs = Vec::with_capacity(m);
     for (e, r) in exc.samples().iter().enumerate() {
@@ -388,7 +422,7 @@ pub fn simulate4(a: &SimulateArgs) -> Result<()> {
             seed,
             noise: !a.no_noise,
             w: None,
-            settle_samples: SETTLE_PERIODS * period,
+            settle_samples: settle,
         };
         let rec = machine
             .simulate([&r[0], &r[1], &r[2], &r[3]], &opts)
@@ -487,7 +521,7 @@ pub fn simulate4(a: &SimulateArgs) -> Result<()> {
             "level_pct_of_i_sat": 100.0 * level_frac(a.level, a.amplitude)?,
             "period_samples": report.period_samples,
             "periods": report.periods,
-            "settle_periods": SETTLE_PERIODS,
+            "settle_samples": settle,
             "samples_per_experiment": report.samples_per_experiment,
             "total_duration_s": report.total_duration_s,
             "resolution_hz": report.resolution_hz,
