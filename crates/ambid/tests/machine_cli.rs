@@ -124,12 +124,11 @@ fn worst(
             .flat_map(|o| AXES.iter().map(move |i| (o, i)))
             .map(|(o, i)| truth.c(t, q, o, i).norm())
             .fold(0.0f64, f64::max);
-        for (a, o) in AXES.iter().enumerate() {
+        for o in AXES {
             for (b, i) in AXES.iter().enumerate() {
                 if cols.is_some_and(|c| !c(k, b)) {
                     continue;
                 }
-                let _ = a;
                 w = w.max((est.c(k, q, o, i) - truth.c(t, q, o, i)).norm() / scale);
                 n += 1;
             }
@@ -548,4 +547,33 @@ fn simulate_axes_4_refuses_bad_options_and_never_half_writes() {
         Table::read(&out.join("exp3").join("data.csv")).rows.len(),
         2 * 635
     );
+}
+
+#[test]
+fn random_rigs_lifted_to_the_whole_rotor_keep_the_frf_exact() {
+    // the defaults (pre-roll, period detection, line matching) on rigs they were not tuned on
+    let d = tmpdir("machine-rigs");
+    for (seed, design) in [("3", "orthogonal"), ("11", "sequential")] {
+        let out = d.join(format!("rig{seed}"));
+        simulate(
+            &out,
+            &[
+                "--rig-seed",
+                seed,
+                "--speed-rpm",
+                "30000",
+                "--design",
+                design,
+            ],
+        );
+        let est_path = out.join("frf.csv");
+        let o = frf(&exp_files(&out, 4), &est_path, &["--skip-periods", "0"]);
+        assert!(o.status.success(), "{}", text(&o));
+        let (est, truth) = (Table::read(&est_path), Table::read(&out.join("truth.csv")));
+        for q in ["P", "T_ry", "S"] {
+            let (w, n) = worst(&est, &truth, q, None);
+            println!("rig {seed} {design} {q}: {w:.2e} over {n}");
+            assert!(w <= 1e-6, "rig {seed} {q}: {w}");
+        }
+    }
 }

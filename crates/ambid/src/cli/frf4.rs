@@ -52,7 +52,7 @@ pub fn is_mimo(a: &FrfArgs) -> Result<bool> {
 fn single_file_is_mimo(a: &FrfArgs) -> bool {
     let path = &a.files[0];
     let decide = |names: &[String]| {
-        !names.iter().any(|n| *n == a.r.excitation)
+        !names.contains(&a.r.excitation)
             && AXES
                 .iter()
                 .any(|ax| names.iter().any(|n| *n == format!("r_{ax}")))

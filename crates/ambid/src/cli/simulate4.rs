@@ -279,7 +279,7 @@ fn design(a: &SimulateArgs, ts: f64, i_sat: f64) -> Result<MultiInputDesign> {
                 .flatten()
                 .flatten()
                 .fold(0.0f64, |m, v| m.max(v.abs()));
-            if !(peak > 0.0) {
+            if peak.is_nan() || peak <= 0.0 {
                 return Err(Error::usage(
                     "the zippered multisine has no lines: widen --band or lengthen --period",
                 )
