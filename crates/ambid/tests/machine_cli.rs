@@ -497,6 +497,30 @@ fn simulate_axes_4_refuses_bad_options_and_never_half_writes() {
         assert!(t.contains(msg), "{args:?}: {t}");
         assert!(!out.exists(), "{args:?} wrote something");
     }
+    // a run that fails while simulating (touchdown at 100 % of i_sat on every axis, nonlinear)
+    // leaves no file and no directory
+    let o = ambid(&[
+        "simulate",
+        "--axes",
+        "4",
+        "--level",
+        "100",
+        "--design",
+        "orthogonal",
+        "--prbs-order",
+        "7",
+        "--periods",
+        "2",
+        "--out",
+        s(&out),
+    ]);
+    assert_eq!(o.status.code(), Some(4), "{}", text(&o));
+    assert!(
+        text(&o).contains("touched down") && text(&o).contains("reduce"),
+        "{}",
+        text(&o)
+    );
+    assert!(!out.exists());
     // an existing output: refused before any work, nothing else written
     std::fs::create_dir_all(out.join("exp3")).unwrap();
     std::fs::write(out.join("exp3").join("data.csv"), "x\n1\n").unwrap();
