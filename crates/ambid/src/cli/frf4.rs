@@ -443,3 +443,38 @@ fn write_path(p: &Path, bytes: &[u8], force: bool) -> Result<()> {
     write_file(p, bytes, force)?;
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::detect_period;
+
+    #[test]
+    fn the_period_is_the_smallest_exact_repeat_of_every_varying_column() {
+        let base = [0.3, -1.0, 1.0, 1.0, -1.0, 0.5, 0.0];
+        let a: Vec<f64> = (0..3 * 7).map(|k| base[k % 7]).collect();
+        let b: Vec<f64> = (0..3 * 7).map(|k| -2.0 * base[(k + 3) % 7]).collect();
+        let zero = vec![0.0; 21];
+        assert_eq!(detect_period(&[&a, &zero, &b]), Some(7));
+        // a column repeating every 14 samples only: the common period is 14 (not ≤ L/2 = 10)
+        let c: Vec<f64> = (0..21)
+            .map(|k| if k % 14 == 3 { 1.0 } else { 0.0 })
+            .collect();
+        assert_eq!(detect_period(&[&a, &c]), None);
+        // a record of 4 periods of 14 samples: 14
+        let c: Vec<f64> = (0..56)
+            .map(|k| if k % 14 == 3 { 1.0 } else { 0.0 })
+            .collect();
+        let a: Vec<f64> = (0..56).map(|k| base[k % 7]).collect();
+        assert_eq!(detect_period(&[&a, &c]), Some(14));
+        // nothing varies, or nothing repeats
+        assert_eq!(detect_period(&[&zero]), None);
+        let mut x = 1u64;
+        let noise: Vec<f64> = (0..200)
+            .map(|_| {
+                x = x.wrapping_mul(6364136223846793005).wrapping_add(1);
+                (x >> 11) as f64
+            })
+            .collect();
+        assert_eq!(detect_period(&[&noise]), None);
+    }
+}

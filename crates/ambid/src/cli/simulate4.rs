@@ -568,3 +568,38 @@ pub fn simulate4(a: &SimulateArgs) -> Result<()> {
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pairs_parse_two_finite_numbers() {
+        assert_eq!(parse_pair("1e-3,2e-3"), Ok((1e-3, 2e-3)));
+        assert_eq!(parse_pair(" -0.02 , 0.01"), Ok((-0.02, 0.01)));
+        assert!(parse_pair("1e-3").is_err());
+        assert!(parse_pair("1,2,3").is_err());
+        assert!(parse_pair("a,1").is_err());
+        assert!(parse_pair("inf,1").is_err());
+    }
+
+    #[test]
+    fn experiment_seeds_differ_across_experiments_and_neighbouring_seeds() {
+        let mut seen = std::collections::HashSet::new();
+        for seed in 0..64u64 {
+            for e in 0..8 {
+                assert!(
+                    seen.insert(experiment_seed(seed, e)),
+                    "seed {seed} experiment {e}"
+                );
+            }
+        }
+        assert_eq!(experiment_seed(7, 2), experiment_seed(7, 2));
+    }
+
+    #[test]
+    fn the_truth_grid_is_sorted_without_duplicates() {
+        let g = union_grid(vec![3.0, 1.0, 2.0, 1.0 + 1e-12, 2.5, 3.0]);
+        assert_eq!(g, vec![1.0, 2.0, 2.5, 3.0]);
+    }
+}
