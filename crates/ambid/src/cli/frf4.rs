@@ -12,6 +12,10 @@
 //! command (any supported format, docs/data-files.md); the files must share the sample rate and
 //! the length.
 //!
+//! **Lines.** Every line some input excites (`frf::mimo`'s rule) within `--band`, by default the
+//! band the single-axis `frf` derives from the excitation: the lines whose summed excitation
+//! power (over the inputs and experiments) is within 10 dB of the strongest.
+//!
 //! **Period.** `--period-samples`, else derived from the excitation: the smallest $N \le L/2$
 //! with $r_j[k + N] = r_j[k]$ (to $10^{-9}$ of the column's peak) for every non-constant
 //! `r` column of every file ($L$ samples per file); a record whose excitation does not repeat
@@ -24,7 +28,9 @@ use ambid::io::output::write_file;
 use ambid::io::table::Format;
 use ambid::io::{OutputSet, TimeData};
 use ambid_core::data::{IoData, AXES};
+use ambid_core::frf::band::{excitation_bands, BandRule, ExcitationBands};
 use ambid_core::frf::mimo::{self, MimoDesign, MimoOptions};
+use ambid_core::signal::amplitude_spectrum;
 use anyhow::{Context, Result};
 use std::path::Path;
 
@@ -199,6 +205,34 @@ fn median(mut v: Vec<f64>) -> f64 {
     }
 }
 
+/// The band of the lines written when `--band` is not given, as the single-axis `frf` derives
+/// it ([`excitation_bands`] with the default [`BandRule`]): the lines within 10 dB of the
+/// strongest, the power of line $k$ being $\sum_{e, j} A_{j,e}(k)^2$ over the inputs $j$ and
+/// experiments $e$ ($A$ the amplitude spectrum of one period of `r_<axis>`).
+fn derived_band(data: &IoData, n_inputs: usize, period: usize) -> Result<ExcitationBands> {
+    let mut power: Vec<f64> = Vec::new();
+    let mut f: Vec<f64> = Vec::new();
+    for e in 0..data.n_experiments() {
+        let ex = data.experiment(e).map_err(ambid::error::Error::from)?;
+        for ch in ex.channels().iter().take(n_inputs) {
+            let x = ch.1.get(..period).ok_or_else(|| {
+                Error::input(format!(
+                    "the record ({} samples) is shorter than one period ({period} samples); give \
+                     the right --period-samples",
+                    ch.1.len()
+                ))
+            })?;
+            let (fk, ak) = amplitude_spectrum(x, data.ts()).map_err(ambid::error::Error::from)?;
+            if power.is_empty() {
+                power = vec![0.0; ak.len()];
+                f = fk;
+            }
+            power.iter_mut().zip(&ak).for_each(|(p, a)| *p += a * a);
+        }
+    }
+    Ok(excitation_bands(&f, &power, 1, &BandRule::default()).map_err(ambid::error::Error::from)?)
+}
+
 /// Pairs of files whose excitation columns are identical (the same experiment twice).
 fn identical_excitations(files: &[TimeData], axes: &[&str]) -> Option<(usize, usize)> {
     for i in 0..files.len() {
@@ -332,9 +366,15 @@ pub fn frf4(a: &FrfArgs) -> Result<()> {
     }
     let data = IoData::from_experiments(exps).map_err(ambid::error::Error::from)?;
     let mut opts = MimoOptions::new().period(period).skip(a.skip_periods);
-    if let Some((lo, hi)) = a.b.band {
-        opts = opts.band(lo, hi);
-    }
+    let band = match a.b.band {
+        Some(b) => b,
+        None => {
+            let d = derived_band(&data, axes.len(), period)?;
+            println!("band: {}", d.describe());
+            d.excited
+        }
+    };
+    opts = opts.band(band.0, band.1);
     let names = a
         .files
         .iter()
