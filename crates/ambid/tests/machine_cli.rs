@@ -601,3 +601,40 @@ fn random_rigs_lifted_to_the_whole_rotor_keep_the_frf_exact() {
         }
     }
 }
+
+#[test]
+fn experiment_files_in_another_dialect_without_time_column_give_the_same_frf() {
+    // the one reader of every command: semicolon-delimited, a comment line, no `t` (--fs)
+    let d = tmpdir("machine-dialect");
+    let out = d.join("o");
+    simulate(&out, &["--design", "orthogonal", "--speed-rpm", "20000"]);
+    let files = exp_files(&out, 4);
+    let mut other = Vec::new();
+    for (k, f) in files.iter().enumerate() {
+        let txt = std::fs::read_to_string(f).unwrap();
+        let mut o = String::from("# experiment without a time column\n");
+        for l in txt.lines() {
+            o.push_str(&l.split(',').skip(1).collect::<Vec<_>>().join(";"));
+            o.push('\n');
+        }
+        other.push(put(&d, &format!("e{k}.txt"), &o));
+    }
+    let (a, b) = (d.join("a.csv"), d.join("b.csv"));
+    let o = frf(&files, &a, &[]);
+    assert!(o.status.success(), "{}", text(&o));
+    let o = frf(&other, &b, &["--fs", "20000", "--format", "csv"]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(
+        text(&o).contains("band: derived from the excitation"),
+        "{}",
+        text(&o)
+    );
+    let (ta, tb) = (Table::read(&a), Table::read(&b));
+    assert_eq!(ta.names, tb.names);
+    assert_eq!(ta.rows.len(), tb.rows.len());
+    for (ra, rb) in ta.rows.iter().zip(&tb.rows) {
+        for (x, y) in ra.iter().zip(rb) {
+            assert!((x - y).abs() <= 1e-12 * x.abs().max(1e-300), "{x} vs {y}");
+        }
+    }
+}
