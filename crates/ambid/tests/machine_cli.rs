@@ -638,3 +638,78 @@ fn experiment_files_in_another_dialect_without_time_column_give_the_same_frf() {
         }
     }
 }
+
+#[test]
+fn an_unbalance_on_a_line_of_the_period_biases_that_line_only() {
+    // PRBS order 7: 635 samples per period, lines 31.496 Hz apart; line 16 = 503.937 Hz
+    let d = tmpdir("machine-unbalance");
+    let df = 20_000.0 / 635.0;
+    // between two lines: a warning naming the speeds that put the 1x line on a line
+    let out = d.join("off");
+    let mut a = vec![
+        "simulate",
+        "--axes",
+        "4",
+        "--mode",
+        "linear",
+        "--no-noise",
+        "--prbs-order",
+        "7",
+    ];
+    a.extend_from_slice(&[
+        "--periods",
+        "3",
+        "--unbalance",
+        "1e-3,1e-3",
+        "--speed-rpm",
+        "30000",
+    ]);
+    a.extend_from_slice(&["--design", "orthogonal", "--out", s(&out)]);
+    let o = ambid(&a);
+    assert!(o.status.success(), "{}", text(&o));
+    let want = "(line 15) or 30236.22";
+    assert!(
+        text(&o).contains("falls between the lines") && text(&o).contains(want),
+        "{}",
+        text(&o)
+    );
+    let meta: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("meta.json")).unwrap()).unwrap();
+    assert!(meta["sync_line"].is_null());
+    // on line 16: the FRF equals the truth on every other line, and is off on line 16
+    let out = d.join("on");
+    let speed = format!("{}", 16.0 * df * 60.0);
+    simulate(
+        &out,
+        &[
+            "--unbalance",
+            "1e-3,1e-3",
+            "--speed-rpm",
+            &speed,
+            "--design",
+            "orthogonal",
+        ],
+    );
+    let meta: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("meta.json")).unwrap()).unwrap();
+    assert_eq!(meta["sync_line"], 16);
+    let est_path = out.join("frf.csv");
+    let o = frf(&exp_files(&out, 4), &est_path, &[]);
+    assert!(o.status.success(), "{}", text(&o));
+    let (est, truth) = (Table::read(&est_path), Table::read(&out.join("truth.csv")));
+    let sync = 16.0 * df;
+    let k_sync = est
+        .rows
+        .iter()
+        .position(|r| (r[0] - sync).abs() < 1e-6)
+        .unwrap();
+    let not_sync = |k: usize, _: usize| k != k_sync;
+    for q in ["P", "T_ry", "S"] {
+        let (w, n) = worst(&est, &truth, q, Some(&not_sync));
+        println!("unbalance on line 16, {q} on the other lines: {w:.2e} over {n}");
+        assert!(w <= 1e-6, "{q}: {w}");
+        let only = |k: usize, _: usize| k == k_sync;
+        let (w, _) = worst(&est, &truth, q, Some(&only));
+        assert!(w > 1e-3, "{q} on the 1x line: {w}");
+    }
+}

@@ -371,6 +371,47 @@ fn median(v: &mut [f64]) -> f64 {
     }
 }
 
+/// Where the unbalance's 1× line falls on the period's DFT grid ($f_k = k f_s/N$): `Some(k)`
+/// when it is line $k$ (to $10^{-6}$ of a line spacing; only that line of the FRF carries the
+/// unbalance response), `None` without an unbalance force or between lines (its leakage then
+/// reaches every line; a warning names the nearest speeds that put it on a line).
+pub fn sync_line(sync_hz: f64, period: usize, fs: f64) -> Option<usize> {
+    let x = sync_hz * period as f64 / fs;
+    let k = x.round();
+    (k >= 1.0 && (x - k).abs() <= 1e-6).then_some(k as usize)
+}
+
+/// [`sync_line`] for the configured machine, with the note or warning it deserves on stderr.
+fn sync_line_note(cfg: &MachineConfig, sync_hz: f64, period: usize, fs: f64) -> Option<usize> {
+    let unb = cfg.unbalance.as_ref()?;
+    if unb.mass_kg * unb.eccentricity_m == 0.0 || sync_hz <= 0.0 {
+        return None;
+    }
+    let df = fs / period as f64;
+    match sync_line(sync_hz, period, fs) {
+        Some(k) => {
+            eprintln!(
+                "note: the unbalance's 1x line ({sync_hz:.4} Hz) is line {k} of the period: the \
+                 FRF on that line carries the unbalance response, every other line is free of it"
+            );
+            Some(k)
+        }
+        None => {
+            let x = sync_hz / df;
+            let (lo, hi) = (x.floor().max(1.0), x.ceil().max(1.0));
+            eprintln!(
+                "warning: the unbalance's 1x line ({sync_hz:.4} Hz) falls between the lines of the \
+                 period ({period} samples, {df:.4} Hz apart): its leakage biases the FRF on every \
+                 line, most near {sync_hz:.1} Hz. Put it on a line with --speed-rpm {} (line {lo}) \
+                 or {} (line {hi}), or choose a period whose line spacing divides the 1x frequency",
+                lo * df * 60.0,
+                hi * df * 60.0
+            );
+            None
+        }
+    }
+}
+
 /// Runs `ambid simulate --axes 4`.
 pub fn simulate4(a: &SimulateArgs) -> Result<()> {
     refuse_siso_options(a)?;
@@ -412,6 +453,7 @@ pub fn simulate4(a: &SimulateArgs) -> Result<()> {
         super::common::ModeArg::Linear => Mode::Linear,
         super::common::ModeArg::Nonlinear => Mode::Nonlinear,
     };
+    let sync_line = sync_line_note(&cfg, machine.sync_hz(), period, fs);
     let settle = settle_samples(&machine, period)?;
     let mut set = OutputSet::new(a.force);
     let mut runs = Vec::with_capacity(m);
@@ -534,6 +576,7 @@ pub fn simulate4(a: &SimulateArgs) -> Result<()> {
         "fs_hz": fs,
         "speed_rpm": cfg.speed_rpm,
         "sync_hz": machine.sync_hz(),
+        "sync_line": sync_line,
         "unbalance": cfg.unbalance,
         "asymmetry": cfg.asymmetry,
         "mode": mode,
