@@ -43,83 +43,93 @@ impl From<WindowArg> for Window {
 #[command(mut_arg("input", |a| a.help("Column of the controller output u (including r)")))]
 pub struct FrfArgs {
     /// Time-data file (CSV with a header row and an optional `t` column in seconds, or .npy,
-    /// .npz, .mat, .parquet; docs/data-files.md).
+    /// .npz, .mat, .parquet; docs/data-files.md). Several files, or one file with columns
+    /// `r_xa … r_yb`, `u_…`, `y_…`: the experiments of a multi-axis (MIMO) FRF, written as a
+    /// matrix FRF CSV (docs/formats.md, "Matrix FRF").
+    #[arg(required = true, num_args = 1..)]
+    pub(crate) files: Vec<PathBuf>,
+    /// The single-axis data file (`files[0]`).
+    #[arg(skip)]
     data: PathBuf,
+    /// Axes of a multi-axis FRF: any N > 1 takes the MIMO path on one file (several files
+    /// always do); 1 forces the single-axis path (default: from the files, see docs/frf.md).
+    #[arg(long)]
+    pub(crate) axes: Option<u8>,
     #[command(flatten)]
-    file: DataFileArgs,
+    pub(crate) file: DataFileArgs,
     #[command(flatten)]
-    r: ExcitationColumn,
+    pub(crate) r: ExcitationColumn,
     #[command(flatten)]
-    u: InputColumn,
+    pub(crate) u: InputColumn,
     #[command(flatten)]
-    y: OutputColumn,
+    pub(crate) y: OutputColumn,
     #[command(flatten)]
-    cur: CurrentColumn,
+    pub(crate) cur: CurrentColumn,
     /// Controller file (TOML/JSON: pid, tf or ss) for the indirect plant estimate.
     #[arg(long)]
-    controller: Option<PathBuf>,
+    pub(crate) controller: Option<PathBuf>,
     /// Samples per excitation period: selects period-synchronous averaging (otherwise Welch);
     /// with `--method lpm|lrm`, cuts the record to whole periods.
     #[arg(long)]
-    period_samples: Option<usize>,
+    pub(crate) period_samples: Option<usize>,
     /// Leading periods dropped as transient (period averaging).
     #[arg(long, default_value_t = 1)]
-    skip_periods: usize,
+    pub(crate) skip_periods: usize,
     /// Welch segment length in samples (default: 1/8 of the record, at least 256).
     #[arg(long)]
-    nperseg: Option<usize>,
+    pub(crate) nperseg: Option<usize>,
     /// Welch overlap in samples (default: half a segment).
     #[arg(long)]
-    noverlap: Option<usize>,
+    pub(crate) noverlap: Option<usize>,
     /// Welch window.
     #[arg(long, value_enum, default_value_t = WindowArg::Hann)]
-    window: WindowArg,
+    pub(crate) window: WindowArg,
     /// Leading samples dropped as transient (Welch).
     #[arg(long, default_value_t = 0)]
-    skip_samples: usize,
+    pub(crate) skip_samples: usize,
     #[command(flatten)]
-    b: BandArg,
+    pub(crate) b: BandArg,
     /// Band of the quality averages and the resonance search, Hz (default: derived from the
     /// excitation, where it is within 3 dB of its strongest line).
     #[arg(long, value_parser = parse_band)]
-    quality_band: Option<(f64, f64)>,
+    pub(crate) quality_band: Option<(f64, f64)>,
     /// Unit of the output column (for printed magnitudes; default: not given).
     #[arg(long)]
-    y_unit: Option<String>,
+    pub(crate) y_unit: Option<String>,
     /// Unit of the input column (for printed magnitudes; default: not given).
     #[arg(long)]
-    u_unit: Option<String>,
+    pub(crate) u_unit: Option<String>,
     /// Saturation current of u and i in A (otherwise flat tops are looked for).
     #[arg(long)]
-    i_sat: Option<f64>,
+    pub(crate) i_sat: Option<f64>,
     /// Time-data CSV recorded without excitation under the same loop: output SNR.
     #[arg(long)]
-    noise: Option<PathBuf>,
+    pub(crate) noise: Option<PathBuf>,
     /// Do not screen for NaN/Inf, spikes and stuck samples.
     #[arg(long)]
-    no_screen: bool,
+    pub(crate) no_screen: bool,
     /// Estimator: `auto` (period averaging with --period-samples, else Welch), `lpm` (the Local
     /// Polynomial Method on one non-periodic record: T_ry, S and the plant with their
     /// variances, leakage and transients removed; no coherence) or `lrm` (the Local Rational
     /// Method: like `lpm`, better on lightly damped modes narrower than the window).
     #[arg(long, value_enum, default_value_t = MethodArg::Auto)]
-    method: MethodArg,
+    pub(crate) method: MethodArg,
     /// LPM: polynomial degree R (default: R and the window chosen from the record by
     /// leave-one-out cross-validation, see docs/lpm.md; 2 when only --lpm-half-width is given).
     #[arg(long)]
-    lpm_degree: Option<usize>,
+    pub(crate) lpm_degree: Option<usize>,
     /// LRM: degrees of numerator, denominator and transient, `Rn,Rd,Rm`.
     #[arg(long, value_delimiter = ',', default_values_t = [2usize, 2, 2])]
-    lrm_degrees: Vec<usize>,
+    pub(crate) lrm_degrees: Vec<usize>,
     /// LPM/LRM: half width n of the local window (2n + 1 lines); default: chosen from the record
     /// (LPM, see --lpm-degree), the smallest window with 5 degrees of freedom (LRM).
     #[arg(long, alias = "half-width")]
-    lpm_half_width: Option<usize>,
+    pub(crate) lpm_half_width: Option<usize>,
     /// Output FRF CSV.
     #[arg(long, default_value = "frf.csv")]
-    out: PathBuf,
+    pub(crate) out: PathBuf,
     #[command(flatten)]
-    f: Force,
+    pub(crate) f: Force,
 }
 
 /// FRF estimator choice.
@@ -229,7 +239,11 @@ fn print_quality(a: &FrfAnalysis) {
     }
 }
 
-pub fn frf(a: FrfArgs) -> Result<()> {
+pub fn frf(mut a: FrfArgs) -> Result<()> {
+    if super::frf4::is_mimo(&a)? {
+        return super::frf4::frf4(&a);
+    }
+    a.data = a.files[0].clone();
     OutputSet::check(&a.out, a.f.force)?;
     // one reader for every format; a text record with Welch or period averaging is streamed
     // (the same arithmetic in bounded memory, frf_stream), everything else is read whole

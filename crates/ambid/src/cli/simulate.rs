@@ -9,7 +9,7 @@ use clap::{Args, ValueEnum};
 use std::path::PathBuf;
 
 #[derive(Clone, Copy, ValueEnum)]
-enum IntegratorArg {
+pub(crate) enum IntegratorArg {
     Rk4,
     ExpRk4,
 }
@@ -17,18 +17,18 @@ enum IntegratorArg {
 #[derive(Args)]
 pub struct SimulateArgs {
     #[command(flatten)]
-    twin: TwinArgs,
+    pub(crate) twin: TwinArgs,
     /// Excitation signal injected at the controller output of bearing A.
     #[arg(long, value_enum, default_value_t = ExcitationKind::Prbs)]
-    signal: ExcitationKind,
+    pub(crate) signal: ExcitationKind,
     /// Deprecated spelling of --signal (`--excitation` names the column r in `frf`,
     /// `validate` and `bla`).
     #[arg(long, value_enum, hide = true, conflicts_with = "signal")]
-    excitation: Option<ExcitationKind>,
+    pub(crate) excitation: Option<ExcitationKind>,
     /// Excitation level in % of the saturation current i_sat (`10` or `10%`): peak for PRBS,
     /// chirp and multisine, RMS for noise.
     #[arg(long, default_value = "10", allow_negative_numbers = true, value_parser = super::args::parse_pct)]
-    level: f64,
+    pub(crate) level: f64,
     /// Deprecated: the level as a fraction of i_sat (0.1 = 10 %); write `--level 10`.
     #[arg(
         long,
@@ -36,68 +36,91 @@ pub struct SimulateArgs {
         conflicts_with = "level",
         allow_negative_numbers = true
     )]
-    amplitude: Option<f64>,
+    pub(crate) amplitude: Option<f64>,
     /// PRBS register order n (period 2^n − 1 bits).
     #[arg(long, default_value_t = 10)]
-    prbs_order: u32,
+    pub(crate) prbs_order: u32,
     /// Deprecated spelling of --prbs-order (`--order` is a model order in `fit`).
     #[arg(long, hide = true, conflicts_with = "prbs_order")]
-    order: Option<u32>,
+    pub(crate) order: Option<u32>,
     /// PRBS samples per bit.
     #[arg(long, default_value_t = 5)]
-    samples_per_bit: usize,
+    pub(crate) samples_per_bit: usize,
     /// Periods (PRBS, chirp, multisine).
     #[arg(long, default_value_t = 20)]
-    periods: usize,
+    pub(crate) periods: usize,
     /// Band of the chirp, noise or multisine, Hz, as `f_min:f_max`.
     #[arg(long, default_value = "1:2000", allow_negative_numbers = true, value_parser = super::args::parse_band)]
-    band: (f64, f64),
+    pub(crate) band: (f64, f64),
     /// Deprecated: lowest frequency, Hz; write `--band LO:HI`.
     #[arg(long, hide = true, allow_negative_numbers = true)]
-    f_min: Option<f64>,
+    pub(crate) f_min: Option<f64>,
     /// Deprecated: highest frequency, Hz; write `--band LO:HI`.
     #[arg(long, hide = true, allow_negative_numbers = true)]
-    f_max: Option<f64>,
+    pub(crate) f_max: Option<f64>,
     /// Period length for chirp and multisine, s (default: one period of the seed PRBS, 5115
     /// samples). Noise and `none` records last periods × period.
     #[arg(long, default_value_t = 0.25575, allow_negative_numbers = true)]
-    period: f64,
+    pub(crate) period: f64,
     /// Simulation mode.
     #[arg(long, value_enum, default_value_t = ModeArg::Nonlinear)]
-    mode: ModeArg,
+    pub(crate) mode: ModeArg,
     /// Integrator of the nonlinear mode (overrides the configuration): `rk4` (10 substeps per
     /// control period, the reference) or `exp-rk4` (exact linear flow + RK4 on the nonlinear
     /// residual, ≈ 4× faster, less accurate while the amplifier slew limit switches).
     #[arg(long, value_enum)]
-    integrator: Option<IntegratorArg>,
+    pub(crate) integrator: Option<IntegratorArg>,
     /// Seed for sensor noise and random excitations.
     #[arg(long, default_value_t = 1)]
-    seed: u64,
+    pub(crate) seed: u64,
     /// Switch the sensor noise off.
     #[arg(long)]
-    no_noise: bool,
+    pub(crate) no_noise: bool,
     /// Also record bearing B (columns u_b, i_b, y_b).
     #[arg(long)]
-    record_b: bool,
+    pub(crate) record_b: bool,
     /// Number of log-spaced truth frequencies from 1 Hz to fs/2 (at most 1000000).
     #[arg(long, default_value_t = 400)]
-    truth_points: usize,
+    pub(crate) truth_points: usize,
     /// A linear chirp position reference `amplitude_m,duration_s,f0_hz,f1_hz` at bearing A (the
     /// seed's closed-loop reconstruction uses 5e-6,10,1,1000); needs `--signal none`, and
     /// the record lasts the chirp's duration.
     #[arg(long)]
-    reference_chirp: Option<String>,
+    pub(crate) reference_chirp: Option<String>,
     /// Inject the excitation read from this file (column `r`; a `t` column, if present, must
     /// match the twin's 20 kHz) instead of designing one, e.g. one realisation written by
     /// `ambid excite multisine --phases random --realisations M`.
     #[arg(long, conflicts_with_all = ["signal", "excitation", "reference_chirp"])]
-    excitation_file: Option<PathBuf>,
+    pub(crate) excitation_file: Option<PathBuf>,
     /// Output directory (data.csv, truth.csv, meta.json, controller.toml).
     #[arg(long, default_value = "out")]
-    out: PathBuf,
+    pub(crate) out: PathBuf,
     /// Replace those files if they exist (other files in the directory are left alone).
     #[arg(long)]
-    force: bool,
+    pub(crate) force: bool,
+    /// 1: the single-plane twin (default); 4: the whole rotor (`ambid_twin::Machine`, both
+    /// planes, gyroscopic coupling at speed), excited by `--design`; writes `exp1/data.csv`,
+    /// `exp2/data.csv`, … (one per experiment), `truth.csv` (the 4×4 P, T_ry, S) and `meta.json`
+    /// (docs/formats.md, "Whole rotor"). `--config` may then be a machine configuration.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=4))]
+    pub(crate) axes: u8,
+    /// Rotor speed in rpm (with `--axes 4`; overrides the configuration's `speed_rpm`).
+    #[arg(long, allow_negative_numbers = true)]
+    pub(crate) speed_rpm: Option<f64>,
+    /// Multi-axis excitation design (with `--axes 4`; default sequential): `sequential` and
+    /// `orthogonal` (Hadamard signs) use the PRBS of `--prbs-order`, `--samples-per-bit` at
+    /// `--level` (peak) on every axis, 4 experiments; `zipper` one experiment, a multisine in
+    /// `--band` with period `--period`, its lines dealt out to the axes, peak = `--level`.
+    #[arg(long, value_enum)]
+    pub(crate) design: Option<super::simulate4::DesignArg>,
+    /// Unbalance `MASS_KG,ECC_M` (with `--axes 4`), e.g. `1e-3,1e-3` (1 g at 1 mm): a force at
+    /// 1× the rotation frequency at the centre of mass.
+    #[arg(long, value_parser = super::simulate4::parse_pair, allow_negative_numbers = true)]
+    pub(crate) unbalance: Option<(f64, f64)>,
+    /// x/y asymmetry of the magnets `KI_REL,KX_REL` (with `--axes 4`): the y magnets' k_i and
+    /// k_x are (1 + KI_REL)·k_i and (1 + KX_REL)·k_x, each |·| < 0.5, e.g. `0.02,0.02`.
+    #[arg(long, value_parser = super::simulate4::parse_pair, allow_negative_numbers = true)]
+    pub(crate) asymmetry: Option<(f64, f64)>,
 }
 
 /// `excitation: peak … % / RMS … % of i_sat (… A)` of the injected excitation, or `None`
@@ -120,9 +143,32 @@ fn excitation_level(r: &[f64], i_sat: f64) -> Option<String> {
 /// Largest `simulate --truth-points`: checked before anything is simulated or written (each
 /// point costs a few hundred bytes in memory and a row of truth.csv; 10⁹ points aborted
 /// allocating 8 GB after data.csv was written).
-const MAX_TRUTH_POINTS: usize = 1_000_000;
+pub(crate) const MAX_TRUTH_POINTS: usize = 1_000_000;
 
 pub fn simulate(a: SimulateArgs) -> Result<()> {
+    match a.axes {
+        4 => return super::simulate4::simulate4(&a),
+        1 => {}
+        n => {
+            return Err(ambid::error::Error::usage(format!(
+                "--axes {n}: give 1 (the single-plane twin) or 4 (the whole rotor)"
+            ))
+            .into())
+        }
+    }
+    for (given, opt) in [
+        (a.speed_rpm.is_some(), "--speed-rpm"),
+        (a.design.is_some(), "--design"),
+        (a.unbalance.is_some(), "--unbalance"),
+        (a.asymmetry.is_some(), "--asymmetry"),
+    ] {
+        if given {
+            return Err(ambid::error::Error::usage(format!(
+                "{opt} needs --axes 4 (the whole rotor; the single-plane twin does not rotate)"
+            ))
+            .into());
+        }
+    }
     let data_path = a.out.join("data.csv");
     let truth_path = a.out.join("truth.csv");
     let meta_path = a.out.join("meta.json");
