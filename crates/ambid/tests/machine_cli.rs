@@ -29,6 +29,34 @@ impl Table {
             .collect();
         Table { names, rows }
     }
+    /// The rows of a `_sync.csv` file: (channel, f_hz, abs).
+    fn read_mixed(p: &Path) -> Vec<(String, f64, f64)> {
+        let mut r = csv::Reader::from_path(p).unwrap();
+        let h: Vec<String> = r.headers().unwrap().iter().map(String::from).collect();
+        assert_eq!(
+            h,
+            [
+                "experiment",
+                "channel",
+                "f_hz",
+                "re",
+                "im",
+                "abs",
+                "phase_deg",
+                "std"
+            ]
+        );
+        r.records()
+            .map(|rec| {
+                let rec = rec.unwrap();
+                (
+                    rec[1].to_string(),
+                    rec[2].parse().unwrap(),
+                    rec[5].parse().unwrap(),
+                )
+            })
+            .collect()
+    }
     fn col(&self, name: &str) -> usize {
         self.names
             .iter()
@@ -449,12 +477,16 @@ fn bad_experiment_files_get_errors_naming_the_file_and_the_fix() {
     let (c, t) = run(&f, &["--axes", "1"]);
     assert_eq!(c, 2, "{t}");
     assert!(t.contains("--axes 1 takes one data file"), "{t}");
-    let (c, t) = run(&f, &["--method", "lpm"]);
+    let (c, t) = run(&f, &["--method", "lrm"]);
     assert_eq!(c, 2, "{t}");
     assert!(
-        t.contains("--method is not available for a multi-axis FRF"),
+        t.contains("--method lrm is not available for a multi-axis FRF"),
         "{t}"
     );
+    // the local polynomial method on a periodic record: pointed to the exact period average
+    let (c, t) = run(&f, &["--method", "lpm"]);
+    assert_ne!(c, 0, "{t}");
+    assert!(t.contains("periodic") && t.contains("instead"), "{t}");
 }
 
 #[test]
@@ -712,4 +744,135 @@ fn an_unbalance_on_a_line_of_the_period_biases_that_line_only() {
         let (w, _) = worst(&est, &truth, q, Some(&only));
         assert!(w > 1e-3, "{q} on the 1x line: {w}");
     }
+}
+
+/// `--speed-rpm` on an off-grid 1× line: the line is measured, written to `<out>_sync.csv`
+/// (every u and y channel of every experiment) and taken out of u and y, and the FRF is then
+/// exact on every line; without it the 1× line leaks into the period means. On an excited
+/// period line the 1× line cannot be separated: a clear error.
+#[test]
+fn speed_rpm_reports_the_synchronous_line_and_keeps_the_frf_exact() {
+    let d = tmpdir("machine-sync");
+    let out = d.join("off");
+    simulate(
+        &out,
+        &[
+            "--unbalance",
+            "1e-3,1e-3",
+            "--speed-rpm",
+            "30000",
+            "--design",
+            "orthogonal",
+        ],
+    );
+    let truth = Table::read(&out.join("truth.csv"));
+    let raw = out.join("raw.csv");
+    let o = frf(&exp_files(&out, 4), &raw, &[]);
+    assert!(o.status.success(), "{}", text(&o));
+    let (w_raw, _) = worst(&Table::read(&raw), &truth, "P", None);
+    let est_path = out.join("frf.csv");
+    let o = frf(&exp_files(&out, 4), &est_path, &["--speed-rpm", "30000"]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("removed from u and y"), "{}", text(&o));
+    let est = Table::read(&est_path);
+    let (w, n) = worst(&est, &truth, "P", None);
+    println!("off-grid 1x line: P error {w_raw:.2e} as recorded, {w:.2e} after --speed-rpm ({n} entries)");
+    assert!(w <= 1e-6, "{w}");
+    assert!(w_raw > 1e-3, "{w_raw}");
+    let sync = Table::read_mixed(&out.join("frf_sync.csv"));
+    assert_eq!(sync.len(), 4 * 8);
+    assert!(sync.iter().all(|r| (r.1 - 500.0).abs() < 1e-9 && r.2 > 0.0));
+    // on an excited line (line 16 of the PRBS period): refused, nothing written
+    let df = 20_000.0 / 635.0;
+    let speed = format!("{}", 16.0 * df * 60.0);
+    let on = d.join("on");
+    simulate(&on, &["--unbalance", "1e-3,1e-3", "--speed-rpm", &speed]);
+    let p = on.join("frf.csv");
+    let o = frf(&exp_files(&on, 4), &p, &["--speed-rpm", &speed]);
+    assert!(!o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("cannot be separated"), "{}", text(&o));
+    assert!(!p.exists() && !on.join("frf_sync.csv").exists());
+}
+
+/// A non-periodic record (four independent white noises at the controller outputs, one
+/// experiment) through `ambid frf --method lpm`: the multivariable local polynomial method,
+/// against the twin's exact plant (independent of the CLI). Noise off, so the error is the
+/// local polynomial's bias.
+#[test]
+fn lpm_on_a_non_periodic_record_follows_the_exact_plant() {
+    let m = Machine::new(MachineConfig {
+        speed_rpm: 15_000.0,
+        ..MachineConfig::default()
+    })
+    .unwrap();
+    let len = 16_384;
+    // a seeded 64-bit LCG's top 53 bits: uniform in [-1, 1)
+    let mut x: u64 = 9;
+    let mut uniform = || {
+        x = x
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        2.0 * ((x >> 11) as f64 / (1u64 << 53) as f64) - 1.0
+    };
+    let amp = 0.02 * m.i_sat();
+    let r: Vec<Vec<f64>> = (0..4)
+        .map(|_| (0..len).map(|_| amp * uniform()).collect())
+        .collect();
+    let rec = m
+        .simulate(
+            [&r[0], &r[1], &r[2], &r[3]],
+            &ambid_twin::MachineSimOptions {
+                mode: ambid_twin::Mode::Linear,
+                noise: false,
+                ..ambid_twin::MachineSimOptions::default()
+            },
+        )
+        .unwrap()
+        .to_iodata(None)
+        .unwrap();
+    let d = tmpdir("machine-lpm");
+    let names: Vec<String> = ["r", "u", "y"]
+        .iter()
+        .flat_map(|q| AXES.iter().map(move |a| format!("{q}_{a}")))
+        .collect();
+    let cols: Vec<&[f64]> = names.iter().map(|n| rec.channel(n).unwrap()).collect();
+    let mut csv = format!("t,{}\n", names.join(","));
+    for t in 0..len {
+        csv.push_str(&format!("{:e}", t as f64 * m.ts()));
+        for c in &cols {
+            csv.push_str(&format!(",{:e}", c[t]));
+        }
+        csv.push('\n');
+    }
+    let data = put(&d, "noise.csv", &csv);
+    // without --method lpm the non-periodic record is refused, pointing to it
+    let p = d.join("frf.csv");
+    let o = frf(std::slice::from_ref(&data), &p, &[]);
+    assert_eq!(o.status.code(), Some(3), "{}", text(&o));
+    assert!(text(&o).contains("--method lpm"), "{}", text(&o));
+    let o = frf(&[data], &p, &["--method", "lpm", "--band", "20:1000"]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("local polynomial method"), "{}", text(&o));
+    let est = Table::read(&p);
+    let f: Vec<f64> = est.rows.iter().map(|r| r[0]).collect();
+    assert!(f.len() > 700 && f[0] >= 20.0 && *f.last().unwrap() <= 1000.0);
+    let truth = m.plant_frf(&f).unwrap();
+    let mut errs = Vec::new();
+    for (k, _) in f.iter().enumerate() {
+        let t = truth.at(k).unwrap();
+        let scale = (0..4)
+            .flat_map(|i| (0..4).map(move |j| (i, j)))
+            .fold(0.0f64, |acc, (i, j)| acc.max(t[(i, j)].norm()));
+        for (a, o) in AXES.iter().enumerate() {
+            for (b, i) in AXES.iter().enumerate() {
+                let e = est.c(k, "P", o, i);
+                let tv = Complex64::new(t[(a, b)].re, t[(a, b)].im);
+                errs.push((e - tv).norm() / scale);
+            }
+        }
+    }
+    errs.sort_by(f64::total_cmp);
+    let (med, p95) = (errs[errs.len() / 2], errs[errs.len() * 95 / 100]);
+    println!("LPM, noise-free, 20-1000 Hz: P error median {med:.2e}, 95th percentile {p95:.2e}");
+    assert!(med < 1e-4 && p95 < 1e-2, "{med} {p95}");
 }

@@ -55,6 +55,12 @@ pub struct FrfArgs {
     /// always do); 1 forces the single-axis path (default: from the files, see docs/frf.md).
     #[arg(long)]
     pub(crate) axes: Option<u8>,
+    /// Multi-axis FRF: the rotor speed, rpm. The speed-synchronous (1×) line at speed/60 Hz is
+    /// measured on every u and y channel, written beside the FRF (`<out>` with `_sync` before
+    /// the extension) and taken out of u and y before the FRF is estimated, so that it is
+    /// reported, not fitted (docs/frf.md).
+    #[arg(long)]
+    pub(crate) speed_rpm: Option<f64>,
     #[command(flatten)]
     pub(crate) file: DataFileArgs,
     #[command(flatten)]

@@ -24,15 +24,16 @@
 use super::frf::FrfArgs;
 use super::simulate4::matrix_frf_csv;
 use ambid::error::Error;
-use ambid::io::output::write_file;
 use ambid::io::table::Format;
 use ambid::io::{OutputSet, TimeData};
 use ambid_core::data::{IoData, AXES};
 use ambid_core::frf::band::{excitation_bands, BandRule, ExcitationBands};
-use ambid_core::frf::mimo::{self, MimoDesign, MimoOptions};
+use ambid_core::frf::mimo::{self, MimoClosedLoopFrf, MimoDesign, MimoOptions};
+use ambid_core::frf::mimo_lpm::{local_polynomial, MimoLpmOptions};
+use ambid_core::frf::synchronous::{synchronous, SynchronousMethod, SynchronousOptions};
 use ambid_core::signal::amplitude_spectrum;
 use anyhow::{Context, Result};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Whether `ambid frf` takes the MIMO path for these arguments (module docs).
 ///
@@ -83,10 +84,10 @@ fn refuse_siso_options(a: &FrfArgs) -> Result<()> {
              SISO controller) does not give; the joint estimate P = T_ry S⁻¹ is written",
         ),
         (
-            a.method != MethodArg::Auto,
-            "--method",
-            "the multi-axis FRF is the period-averaged estimate (non-periodic multi-input data \
-             are not supported yet)",
+            a.method == MethodArg::Lrm,
+            "--method lrm",
+            "the local rational method is single-axis; the multi-axis FRF takes the period \
+             average (periodic excitation) or --method lpm (non-periodic)",
         ),
         (
             a.nperseg.is_some() || a.noverlap.is_some() || a.skip_samples != 0,
@@ -100,9 +101,15 @@ fn refuse_siso_options(a: &FrfArgs) -> Result<()> {
             "the summary covers every line written",
         ),
         (
-            a.lpm_degree.is_some() || a.lpm_half_width.is_some(),
+            a.method != MethodArg::Lpm && (a.lpm_degree.is_some() || a.lpm_half_width.is_some()),
             "--lpm-degree/--lpm-half-width",
-            "the local methods are single-axis",
+            "they set the local polynomial method: add --method lpm",
+        ),
+        (
+            a.method == MethodArg::Lpm && a.speed_rpm.is_some(),
+            "--speed-rpm",
+            "the synchronous line is separated from a periodic excitation's response by the \
+             period average; with --method lpm the 1× line stays in the record",
         ),
     ];
     if let Some((_, opt, why)) = bad.iter().find(|b| b.0) {
@@ -308,7 +315,9 @@ pub fn frf4(a: &FrfArgs) -> Result<()> {
         }
         records.push(ch);
     }
+    let lpm = a.method == super::frf::MethodArg::Lpm;
     let period = match a.period_samples {
+        _ if lpm => 0,
         Some(0) => return Err(Error::usage("--period-samples must be at least 1").into()),
         Some(p) => p,
         None => {
@@ -329,8 +338,9 @@ pub fn frf4(a: &FrfArgs) -> Result<()> {
                         "the excitation of {} is not periodic (no period of at most half the \
                          record repeats in every r_ column): the multi-axis FRF averages periods \
                          of a periodic excitation; give --period-samples N if it is periodic \
-                         with N samples, or record a periodic design (`ambid simulate --axes 4`, \
-                         docs/signals.md)",
+                         with N samples, use --method lpm (the local polynomial method) for a \
+                         non-periodic excitation (noise, chirps), or record a periodic design \
+                         (`ambid simulate --axes 4`, docs/signals.md)",
                         a.files
                             .iter()
                             .map(|p| p.display().to_string())
@@ -343,7 +353,7 @@ pub fn frf4(a: &FrfArgs) -> Result<()> {
         }
     };
     let m = records.len();
-    if m > 1 && m < axes.len() {
+    if m > 1 && m < axes.len() && !lpm {
         return Err(Error::input(format!(
             "{m} experiment files for {} excited axes ({}): the MIMO FRF solves T_ry and S per \
              line from at least as many experiments as inputs; give {} files (a sequential or \
@@ -359,29 +369,134 @@ pub fn frf4(a: &FrfArgs) -> Result<()> {
     let mut exps = Vec::with_capacity(m);
     for (ch, p) in records.into_iter().zip(&a.files) {
         exps.push(
-            IoData::new(ch, ts, Some(period))
+            IoData::new(ch, ts, (!lpm).then_some(period))
                 .map_err(ambid::error::Error::from)
                 .with_context(|| format!("{}", p.display()))?,
         );
     }
     let data = IoData::from_experiments(exps).map_err(ambid::error::Error::from)?;
-    let mut opts = MimoOptions::new().period(period).skip(a.skip_periods);
-    let band = match a.b.band {
-        Some(b) => b,
-        None => {
-            let d = derived_band(&data, axes.len(), period)?;
-            println!("band: {}", d.describe());
-            d.excited
-        }
-    };
-    opts = opts.band(band.0, band.1);
     let names = a
         .files
         .iter()
         .map(|p| p.display().to_string())
         .collect::<Vec<_>>()
         .join(", ");
-    let est = match mimo::estimate(&data, &opts) {
+    let mut extra_files: Vec<(PathBuf, Vec<u8>)> = Vec::new();
+    let data = match a.speed_rpm {
+        None => data,
+        Some(rpm) => {
+            let (clean, bytes) = synchronous_line(&data, rpm, period, a.skip_periods, &names)?;
+            extra_files.push((sync_path(&a.out), bytes));
+            clean
+        }
+    };
+    let est = if lpm {
+        let mut lo = MimoLpmOptions::new();
+        if let Some(r) = a.lpm_degree {
+            lo.degree = r;
+        }
+        lo.half_width = a.lpm_half_width;
+        lo.band = a.b.band;
+        local_polynomial(&data, &lo)
+            .map_err(ambid::error::Error::from)
+            .with_context(|| format!("the MIMO local polynomial FRF of {names}"))?
+    } else {
+        periodic_estimate(a, &data, &files, &axes, period, &names)?
+    };
+    write_estimate(a, &est, &axes, period, &names, ts, extra_files)
+}
+
+/// `<out>` with `_sync` before the extension.
+fn sync_path(out: &Path) -> PathBuf {
+    let stem = out
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let ext = out
+        .extension()
+        .map(|e| format!(".{}", e.to_string_lossy()))
+        .unwrap_or_default();
+    out.with_file_name(format!("{stem}_sync{ext}"))
+}
+
+/// Measures the 1× line at `rpm`/60 Hz on every u and y channel (printed, and as CSV bytes:
+/// `experiment, channel, f_hz, re, im, abs, phase_deg, std`) and returns the record without it.
+fn synchronous_line(
+    data: &IoData,
+    rpm: f64,
+    period: usize,
+    skip: usize,
+    names: &str,
+) -> Result<(IoData, Vec<u8>)> {
+    if !(rpm.is_finite() && rpm > 0.0) {
+        return Err(Error::usage(format!(
+            "--speed-rpm must be a positive speed, got {rpm}; leave it out at standstill"
+        ))
+        .into());
+    }
+    let f = rpm / 60.0;
+    let opts = SynchronousOptions::new().period(period).skip(skip);
+    let line = synchronous(data, f, &opts)
+        .map_err(ambid::error::Error::from)
+        .with_context(|| format!("the synchronous (1×) line at {f} Hz of {names}"))?;
+    let how = match line.method {
+        SynchronousMethod::Regression => format!(
+            "cos/sin regression after removing the period mean ({:+.3} lines off the period \
+             grid)",
+            line.grid_offset
+        ),
+        SynchronousMethod::PeriodLine { line: k } => {
+            format!("on the unexcited period line {k}: its period-mean DFT")
+        }
+    };
+    println!("synchronous line: {f:.4} Hz ({rpm} rpm), {how}; removed from u and y before the FRF");
+    let mut csv = String::from("experiment,channel,f_hz,re,im,abs,phase_deg,std\n");
+    for c in &line.channels {
+        println!(
+            "  experiment {} {}: |A| {:.4e} ∠ {:.2}° ± {:.2e}",
+            c.experiment + 1,
+            c.name,
+            c.amplitude.norm(),
+            c.amplitude.arg().to_degrees(),
+            c.std
+        );
+        csv.push_str(&format!(
+            "{},{},{:e},{:e},{:e},{:e},{:e},{:e}\n",
+            c.experiment + 1,
+            c.name,
+            f,
+            c.amplitude.re,
+            c.amplitude.im,
+            c.amplitude.norm(),
+            c.amplitude.arg().to_degrees(),
+            c.std
+        ));
+    }
+    let clean = line.remove(data).map_err(ambid::error::Error::from)?;
+    Ok((clean, csv.into_bytes()))
+}
+
+/// The period-averaged estimate (`frf::mimo::estimate`) in the band of `--band` or the one
+/// derived from the excitation.
+fn periodic_estimate(
+    a: &FrfArgs,
+    data: &IoData,
+    files: &[TimeData],
+    axes: &[&str],
+    period: usize,
+    names: &str,
+) -> Result<MimoClosedLoopFrf> {
+    let mut opts = MimoOptions::new().period(period).skip(a.skip_periods);
+    let band = match a.b.band {
+        Some(b) => b,
+        None => {
+            let d = derived_band(data, axes.len(), period)?;
+            println!("band: {}", d.describe());
+            d.excited
+        }
+    };
+    opts = opts.band(band.0, band.1);
+    let est = match mimo::estimate(data, &opts) {
         Ok(e) => e,
         Err(e) => {
             let e = ambid::error::Error::from(e);
@@ -398,6 +513,19 @@ pub fn frf4(a: &FrfArgs) -> Result<()> {
             });
         }
     };
+    Ok(est)
+}
+
+/// Writes the matrix FRF CSV (and `extra_files`, all or nothing) and prints the summary.
+fn write_estimate(
+    a: &FrfArgs,
+    est: &MimoClosedLoopFrf,
+    axes: &[&str],
+    period: usize,
+    names: &str,
+    ts: f64,
+    extra_files: Vec<(PathBuf, Vec<u8>)>,
+) -> Result<()> {
     let f = est.f_hz().to_vec();
     let nl = f.len();
     let (ny, nu) = (est.plant.ny(), est.plant.nu());
@@ -441,6 +569,12 @@ pub fn frf4(a: &FrfArgs) -> Result<()> {
     let design = match est.design {
         MimoDesign::Experiments(k) => format!("{k} experiments (sequential/orthogonal)"),
         MimoDesign::Zippered => "one zippered experiment".to_string(),
+        MimoDesign::LocalPolynomial { degree, half_width } => format!(
+            "local polynomial method (degree {degree}, {} lines per window, {} residual degrees \
+             of freedom)",
+            2 * half_width + 1,
+            est.dof
+        ),
     };
     println!(
         "MIMO closed-loop FRF, {}×{} ({}): {design}: {names}",
@@ -448,14 +582,22 @@ pub fn frf4(a: &FrfArgs) -> Result<()> {
         nu,
         axes.join(", ")
     );
-    println!(
-        "period averaging: {} periods of {period} samples per experiment ({} skipped), {nl} \
-         lines in {:.1}–{:.1} Hz",
-        est.periods,
-        a.skip_periods,
-        f.first().copied().unwrap_or(f64::NAN),
-        f.last().copied().unwrap_or(f64::NAN)
-    );
+    if matches!(est.design, MimoDesign::LocalPolynomial { .. }) {
+        println!(
+            "{nl} lines in {:.1}–{:.1} Hz",
+            f.first().copied().unwrap_or(f64::NAN),
+            f.last().copied().unwrap_or(f64::NAN)
+        );
+    } else {
+        println!(
+            "period averaging: {} periods of {period} samples per experiment ({} skipped), {nl} \
+             lines in {:.1}–{:.1} Hz",
+            est.periods,
+            a.skip_periods,
+            f.first().copied().unwrap_or(f64::NAN),
+            f.last().copied().unwrap_or(f64::NAN)
+        );
+    }
     let worst = |v: &[f64]| v.iter().copied().fold(0.0f64, f64::max);
     println!(
         "condition numbers: input matrix R worst {:.3}, U worst {:.3}",
@@ -474,13 +616,16 @@ pub fn frf4(a: &FrfArgs) -> Result<()> {
              interpolated on the others; P uses all columns on every line"
         );
     }
-    write_path(&a.out, &bytes, a.f.force)?;
+    let mut set = OutputSet::new(a.f.force);
+    set.write(&a.out, &bytes)?;
+    for (p, b) in &extra_files {
+        set.write(p, b)?;
+    }
+    set.commit()?;
     println!("written: {}", a.out.display());
-    Ok(())
-}
-
-fn write_path(p: &Path, bytes: &[u8], force: bool) -> Result<()> {
-    write_file(p, bytes, force)?;
+    for (p, _) in &extra_files {
+        println!("written: {}", p.display());
+    }
     Ok(())
 }
 
