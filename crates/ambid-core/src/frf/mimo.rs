@@ -782,6 +782,184 @@ fn lagrange4(own: &[usize], k: usize) -> ([usize; 4], [f64; 4]) {
     (xs, w)
 }
 
+/// How [`zippered_with`] brings a column to the lines of the other inputs (see the
+/// [module docs](self#zippered-design)).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ZipperInterpolation {
+    /// Cubic Lagrange polynomial in the line index through the 4 nearest own lines.
+    Lagrange,
+    /// Local rational fit over the 6 nearest own lines: degree-4 numerators with one degree-2
+    /// denominator common to the whole stacked column, one Sanathanan–Koerner step; cubic
+    /// Lagrange where the fit is ill-conditioned. The default.
+    #[default]
+    Rational,
+}
+
+/// The 2q lines of `own` (sorted, at least 2q) nearest to `k`, q on each side, shifted at the
+/// ends.
+fn window(own: &[usize], k: usize, q: usize) -> &[usize] {
+    let pos = own.partition_point(|&x| x < k);
+    let start = pos.saturating_sub(q).min(own.len() - 2 * q);
+    &own[start..start + 2 * q]
+}
+
+/// Solves the small real symmetric positive system `a x = b` (n ≤ 4) by Cholesky; `None` if
+/// not positive definite.
+fn chol_solve(a: &[f64], b: &[f64], n: usize) -> Option<Vec<f64>> {
+    let mut l = vec![0.0; n * n];
+    for i in 0..n {
+        for j in 0..=i {
+            let mut v = a[i * n + j];
+            for m in 0..j {
+                v -= l[i * n + m] * l[j * n + m];
+            }
+            if i == j {
+                if v <= 0.0 || !v.is_finite() {
+                    return None;
+                }
+                l[i * n + i] = v.sqrt();
+            } else {
+                l[i * n + j] = v / l[j * n + j];
+            }
+        }
+    }
+    let mut y = b.to_vec();
+    for i in 0..n {
+        for m in 0..i {
+            y[i] -= l[i * n + m] * y[m];
+        }
+        y[i] /= l[i * n + i];
+    }
+    for i in (0..n).rev() {
+        for m in i + 1..n {
+            y[i] -= l[m * n + i] * y[m];
+        }
+        y[i] /= l[i * n + i];
+    }
+    Some(y)
+}
+
+/// Degree of the local denominator of the rational interpolation.
+const RAT_DEG: usize = 2;
+/// Degree of the local numerators of the rational interpolation.
+const RAT_NUM_DEG: usize = 4;
+/// Own lines on each side of the target line in the rational interpolation.
+const RAT_HALF_WIDTH: usize = 3;
+/// Largest condition number of the denominator's normal equations accepted.
+const RAT_MAX_COND: f64 = 1e10;
+/// Largest noise gain $\sum_l |c_l|^2$ of the rational weights accepted.
+const RAT_MAX_GAIN: f64 = 1e2;
+
+/// The rational interpolation weights of the stacked column at line `k` from its values `z`
+/// (`xs.len()` lines × `nz` entries, line-major) on the own lines `xs`, with entry weights
+/// `ew` (nz): complex $c_l$ with $\hat z(k) = \sum_l c_l z(x_l)$, or `None` where the fit is
+/// ill-conditioned (the caller falls back to Lagrange).
+fn rational_weights(xs: &[usize], k: usize, z: &[c64], nz: usize, ew: &[f64]) -> Option<Vec<c64>> {
+    let nl = xs.len();
+    let (x0, x1) = (xs[0] as f64, xs[nl - 1] as f64);
+    let h = ((x1 - x0) / 2.0).max(1.0);
+    // local variable s = (x - k) / h, so that the target is s = 0 and D(0) = 1
+    let sv: Vec<f64> = xs.iter().map(|&x| (x as f64 - k as f64) / h).collect();
+    let np = RAT_NUM_DEG + 1;
+    let vand = |l: usize, p: usize| sv[l].powi(p as i32);
+    let mut omega = vec![1.0; nl];
+    let mut d = [ZERO; RAT_DEG]; // d_1 .. d_deg
+    for _iter in 0..2 {
+        // M = diag(ω) V; the projector Q = I − M (MᵀM)⁻¹ Mᵀ (real)
+        let mut g = vec![0.0; np * np];
+        for a in 0..np {
+            for b in 0..np {
+                g[a * np + b] = (0..nl)
+                    .map(|l| omega[l] * omega[l] * vand(l, a) * vand(l, b))
+                    .sum();
+            }
+        }
+        let mut q = vec![0.0; nl * nl];
+        for c in 0..nl {
+            let rhs: Vec<f64> = (0..np).map(|a| omega[c] * vand(c, a)).collect();
+            let sol = chol_solve(&g, &rhs, np)?;
+            for l in 0..nl {
+                let m_l: f64 = (0..np).map(|a| omega[l] * vand(l, a) * sol[a]).sum();
+                q[l * nl + c] = if l == c { 1.0 } else { 0.0 } - m_l;
+            }
+        }
+        // normal equations of the denominator: Σ_a ew_a² ‖Q ω z_a (1 + Σ d_p s^p)‖² → min
+        let nd = RAT_DEG;
+        let mut a_mat = vec![ZERO; nd * nd];
+        let mut b_vec = vec![ZERO; nd];
+        let mut col = vec![ZERO; nl * (nd + 1)];
+        for (ent, &w) in ew.iter().enumerate() {
+            if w == 0.0 {
+                continue;
+            }
+            // columns: Q diag(ω z) s^p for p = 0..=nd
+            for p in 0..=nd {
+                for l in 0..nl {
+                    let mut acc = ZERO;
+                    for c in 0..nl {
+                        let qv = q[l * nl + c];
+                        if qv != 0.0 {
+                            acc += z[c * nz + ent] * (qv * omega[c] * sv[c].powi(p as i32));
+                        }
+                    }
+                    col[p * nl + l] = acc * w;
+                }
+            }
+            for p in 0..nd {
+                for r in 0..nd {
+                    a_mat[p * nd + r] += (0..nl)
+                        .map(|l| col[(p + 1) * nl + l].conj() * col[(r + 1) * nl + l])
+                        .sum::<c64>();
+                }
+                b_vec[p] -= (0..nl)
+                    .map(|l| col[(p + 1) * nl + l].conj() * col[l])
+                    .sum::<c64>();
+            }
+        }
+        let am = Mat::<c64>::from_fn(nd, nd, |i, j| a_mat[i * nd + j]);
+        let (svs, _, _) = svd_small(&am).ok()?;
+        if !(cond_of(&svs) <= RAT_MAX_COND) {
+            return None;
+        }
+        let ai = inv_small(&am)?;
+        for p in 0..nd {
+            d[p] = (0..nd).fold(ZERO, |acc, r| acc + ai[(p, r)] * b_vec[r]);
+        }
+        for l in 0..nl {
+            let dl = (0..nd).fold(ONE, |acc, p| acc + d[p] * sv[l].powi(p as i32 + 1));
+            let m = dl.norm();
+            if !(m.is_finite() && m > 0.0) {
+                return None;
+            }
+            omega[l] = 1.0 / m;
+        }
+    }
+    // numerator at s = 0 for the final D, the last iteration's ω: row 0 of (MᵀM)⁻¹Mᵀ diag(ω)
+    let mut g = vec![0.0; np * np];
+    for a in 0..np {
+        for b in 0..np {
+            g[a * np + b] = (0..nl)
+                .map(|l| omega[l] * omega[l] * vand(l, a) * vand(l, b))
+                .sum();
+        }
+    }
+    let mut e0 = vec![0.0; np];
+    e0[0] = 1.0;
+    let row = chol_solve(&g, &e0, np)?;
+    let c: Vec<c64> = (0..nl)
+        .map(|l| {
+            let p: f64 = (0..np).map(|a| row[a] * vand(l, a)).sum::<f64>() * omega[l] * omega[l];
+            let dl = (0..RAT_DEG).fold(ONE, |acc, q| acc + d[q] * sv[l].powi(q as i32 + 1));
+            dl * p
+        })
+        .collect();
+    let gain: f64 = c.iter().map(|v| v.norm_sqr()).sum();
+    if !(gain.is_finite() && gain <= RAT_MAX_GAIN) {
+        return None;
+    }
+    Some(c)
+}
+
 /// The MIMO closed-loop FRF from one zippered periodic experiment: input $j$ alone on its lines
 /// $\mathcal L_j$; columns measured there and interpolated (cubic Lagrange through the 4 nearest
 /// own lines) to the union of the lines, then $P = T_{ry} S^{-1}$ per line. See the
@@ -820,7 +998,23 @@ fn lagrange4(own: &[usize], k: usize) -> ([usize; 4], [f64; 4]) {
 /// line excited by two inputs (not a zippered design), or an input with fewer than 4 lines;
 /// [`Error::Numerical`] for a singular $\hat S$ on a line.
 pub fn zippered(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> {
+    zippered_with(data, opts, ZipperInterpolation::default())
+}
+
+/// [`zippered`] with the interpolation of the columns chosen by `interp`.
+///
+/// # Errors
+/// As [`zippered`]; the rational interpolation needs 6 lines per input.
+pub fn zippered_with(
+    data: &IoData,
+    opts: &MimoOptions,
+    interp: ZipperInterpolation,
+) -> Result<MimoClosedLoopFrf> {
     data.require_single_experiment("the zippered MIMO FRF")?;
+    let min_lines = match interp {
+        ZipperInterpolation::Lagrange => 4,
+        ZipperInterpolation::Rational => 2 * RAT_HALF_WIDTH,
+    };
     let lay = layout(data, opts)?;
     let (nr, ny) = (lay.nr, lay.ny);
     let nu = nr;
@@ -830,13 +1024,13 @@ pub fn zippered(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> 
     let nlines = sp.n_lines();
     let mut owner = vec![usize::MAX; nlines];
     for (j, l) in own.iter().enumerate() {
-        if l.len() < 4 {
+        if l.len() < min_lines {
             return Err(Error::invalid(
                 "excitation",
                 format!(
                     "input {j} (in axis order) excites {} line(s) in the band; the zippered \
-                     estimate interpolates each column through 4 of its own lines: excite more \
-                     lines or widen the band",
+                     estimate interpolates each column through {min_lines} of its own lines: \
+                     excite more lines or widen the band",
                     l.len()
                 ),
             ));
@@ -899,16 +1093,51 @@ pub fn zippered(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> 
                 measured[li * nu + j] = true;
                 measured_col(j, k)
             } else {
-                let (xs, w) = lagrange4(&own[j], k);
+                let (xs, w): (Vec<usize>, Vec<c64>) = match interp {
+                    ZipperInterpolation::Rational => {
+                        let xs = window(&own[j], k, RAT_HALF_WIDTH);
+                        let cols: Vec<(Vec<c64>, Vec<c64>)> =
+                            xs.iter().map(|&x| measured_col(j, x)).collect();
+                        let zs: Vec<c64> =
+                            cols.iter().flat_map(|c| c.0.iter().copied()).collect();
+                        // entry weights: 1/sqrt(mean σ² + (1e-3 rms)²), the noise-free case
+                        // weighting every entry by its size
+                        let ew: Vec<f64> = (0..nz)
+                            .map(|a| {
+                                let n = xs.len() as f64;
+                                let ms = cols.iter().map(|c| c.0[a].norm_sqr()).sum::<f64>() / n;
+                                let var = cols.iter().map(|c| c.1[a * nz + a].re).sum::<f64>() / n;
+                                let den = (var.max(0.0) + 1e-6 * ms).sqrt();
+                                if den > 0.0 && den.is_finite() {
+                                    1.0 / den
+                                } else {
+                                    0.0
+                                }
+                            })
+                            .collect();
+                        match rational_weights(xs, k, &zs, nz, &ew) {
+                            Some(c) => (xs.to_vec(), c),
+                            None => {
+                                let (xs, w) = lagrange4(&own[j], k);
+                                (xs.to_vec(), w.iter().map(|&v| c64::new(v, 0.0)).collect())
+                            }
+                        }
+                    }
+                    ZipperInterpolation::Lagrange => {
+                        let (xs, w) = lagrange4(&own[j], k);
+                        (xs.to_vec(), w.iter().map(|&v| c64::new(v, 0.0)).collect())
+                    }
+                };
                 let mut z = vec![ZERO; nz];
                 let mut cov = vec![ZERO; nz * nz];
                 for (x, wl) in xs.iter().zip(w) {
                     let (zl, cl) = measured_col(j, *x);
+                    let w2 = wl.norm_sqr();
                     for a in 0..nz {
                         z[a] += zl[a] * wl;
                     }
                     for (c, v) in cov.iter_mut().zip(cl) {
-                        *c += v * (wl * wl);
+                        *c += v * w2;
                     }
                 }
                 (z, cov)
