@@ -164,7 +164,10 @@ const QN: [&str; 3] = ["T_ry", "S", "P"];
 /// Bands relative to the machine's rigid-body closed-loop modes and its sharp (ζ < 0.1) mode.
 fn bands(machine: &Machine) -> Vec<(String, f64, f64)> {
     let modes = machine.closed_loop_modes().unwrap();
-    let rigid_lo = modes.iter().map(|m| m.freq_hz).fold(f64::INFINITY, f64::min);
+    let rigid_lo = modes
+        .iter()
+        .map(|m| m.freq_hz)
+        .fold(f64::INFINITY, f64::min);
     let rigid_hi = modes
         .iter()
         .filter(|m| m.damping >= 0.1)
@@ -175,7 +178,10 @@ fn bands(machine: &Machine) -> Vec<(String, f64, f64)> {
         ("rigid".to_string(), 0.6 * rigid_lo, 1.5 * rigid_hi),
         ("above".to_string(), 1.5 * rigid_hi, 2000.0),
     ];
-    for m in modes.iter().filter(|m| m.damping < 0.1 && m.freq_hz < 2000.0) {
+    for m in modes
+        .iter()
+        .filter(|m| m.damping < 0.1 && m.freq_hz < 2000.0)
+    {
         let w = (3.0 * m.damping * m.freq_hz).max(25.0);
         if !b.iter().any(|x| x.0 == "sharp") {
             b.push(("sharp".to_string(), m.freq_hz - w, m.freq_hz + w));
@@ -275,8 +281,16 @@ fn check_ratios(s: &Study, tol: f64, label: &str) -> (f64, f64) {
             if q == 0 && diag {
                 out = (orth[0], zip[0]);
             }
-            assert!((orth[0] * 4.0 - 1.0).abs() < tol, "{label} {} orth {orth:?}", QN[q]);
-            assert!((zip[0] * 16.0 - 1.0).abs() < tol, "{label} {} zip {zip:?}", QN[q]);
+            assert!(
+                (orth[0] * 4.0 - 1.0).abs() < tol,
+                "{label} {} orth {orth:?}",
+                QN[q]
+            );
+            assert!(
+                (zip[0] * 16.0 - 1.0).abs() < tol,
+                "{label} {} zip {zip:?}",
+                QN[q]
+            );
         }
     }
     out
@@ -290,7 +304,11 @@ fn linear_designs_at_equal_measurement_time() {
     let machine = nominal();
     let t0 = std::time::Instant::now();
     let s = study(&machine, Mode::Linear, 20, 4);
-    table(&s, &machine, &format!("Linear, 15 000 rpm, 20 seeds ({:.1?})", t0.elapsed()));
+    table(
+        &s,
+        &machine,
+        &format!("Linear, 15 000 rpm, 20 seeds ({:.1?})", t0.elapsed()),
+    );
     check_ratios(&s, 0.15, "nominal");
     for (_, lo, hi) in bands(&machine).into_iter().skip(1) {
         for q in 0..3 {
@@ -314,12 +332,24 @@ fn nonlinear_designs_at_equal_measurement_time() {
     let machine = nominal();
     let t0 = std::time::Instant::now();
     let s = study(&machine, Mode::Nonlinear, 20, 4);
-    table(&s, &machine, &format!("Nonlinear, 15 000 rpm, 20 seeds ({:.1?})", t0.elapsed()));
+    table(
+        &s,
+        &machine,
+        &format!("Nonlinear, 15 000 rpm, 20 seeds ({:.1?})", t0.elapsed()),
+    );
     check_ratios(&s, 0.15, "nominal nonlinear");
     let (_, lo, hi) = bands(&machine)[1].clone();
-    let b: Vec<f64> = (0..3).map(|d| group(&s, d, 2, true, lo, hi, None)[2]).collect();
-    println!("rigid band P diagonal bias/σ: sequential {:.2}, orthogonal {:.2}, zipper {:.2}", b[0], b[1], b[2]);
-    assert!(b[0] < 0.4 && b[1] > 1.5 * b[0] && b[2] > 1.5 * b[0], "{b:?}");
+    let b: Vec<f64> = (0..3)
+        .map(|d| group(&s, d, 2, true, lo, hi, None)[2])
+        .collect();
+    println!(
+        "rigid band P diagonal bias/σ: sequential {:.2}, orthogonal {:.2}, zipper {:.2}",
+        b[0], b[1], b[2]
+    );
+    assert!(
+        b[0] < 0.4 && b[1] > 1.5 * b[0] && b[2] > 1.5 * b[0],
+        "{b:?}"
+    );
 }
 
 /// Three random machines at random speeds (linear, 12 seeds each): the same variance ratios.
@@ -337,7 +367,9 @@ fn variance_ratios_hold_on_random_machines() {
         let s = study(&machine, Mode::Linear, 12, 4);
         let (o, z) = check_ratios(&s, 0.2, &format!("rig {seed}"));
         let (_, lo, hi) = bands(&machine)[2].clone();
-        let b: Vec<f64> = (0..3).map(|d| group(&s, d, 2, true, lo, hi, None)[2]).collect();
+        let b: Vec<f64> = (0..3)
+            .map(|d| group(&s, d, 2, true, lo, hi, None)[2])
+            .collect();
         println!(
             "random rig {seed} at {speed:.0} rpm: T_ry diagonal variance / sequential above 300 Hz: \
              orthogonal {o:.3} (1/4 = 0.25), zipper measured {z:.4} (1/16 = 0.0625); P diagonal \

@@ -191,8 +191,14 @@ fn zipper_measured_entries_equal_the_truth_at_0_and_30000_rpm() {
         }
         let (lag, rat) = (res[0], res[1]);
         assert!(rat.0[1] < 0.1 * lag.0[1], "{speed}: P 95th {lag:?} {rat:?}");
-        assert!(rat.1[2] < 0.1 * lag.1[2], "{speed}: P near modes {lag:?} {rat:?}");
-        assert!(rat.2[2] < 0.1 * lag.2[2], "{speed}: T/S near modes {lag:?} {rat:?}");
+        assert!(
+            rat.1[2] < 0.1 * lag.1[2],
+            "{speed}: P near modes {lag:?} {rat:?}"
+        );
+        assert!(
+            rat.2[2] < 0.1 * lag.2[2],
+            "{speed}: T/S near modes {lag:?} {rat:?}"
+        );
     }
 }
 
@@ -216,7 +222,9 @@ fn rational_interpolation_beats_lagrange_on_random_machines() {
             let e = est(&data, skip, how);
             let mid = errors(&e, &machine, &|f| (20.0..=2000.0).contains(&f));
             assert!(mid.measured < 1e-6, "rig {seed}: {}", mid.measured);
-            let near = errors(&e, &machine, &|f| (20.0..=2000.0).contains(&f) && is_near(f));
+            let near = errors(&e, &machine, &|f| {
+                (20.0..=2000.0).contains(&f) && is_near(f)
+            });
             let np = if near.plant.is_empty() {
                 [f64::NAN; 3]
             } else {
@@ -266,7 +274,11 @@ fn noisy_rational_bands_cover_the_truth() {
                 machine.sensitivity_frf(&f).unwrap(),
                 machine.plant_frf(&f).unwrap(),
             ];
-            for (g, (est_g, tr)) in [&e.t_ry, &e.s, &e.plant].into_iter().zip(&truth).enumerate() {
+            for (g, (est_g, tr)) in [&e.t_ry, &e.s, &e.plant]
+                .into_iter()
+                .zip(&truth)
+                .enumerate()
+            {
                 let var = est_g.variance().unwrap();
                 for (idx, (a, b)) in est_g.values().iter().zip(tr.values()).enumerate() {
                     let (line, j) = (idx / 16, (idx % 16) / 4);
@@ -288,7 +300,9 @@ fn noisy_rational_bands_cover_the_truth() {
     }
     let ratio = var_ratio.0 / var_ratio.1 as f64;
     for (mi, name) in ["Lagrange", "rational"].iter().enumerate() {
-        let c: Vec<f64> = (0..3).map(|g| cov[mi][g] as f64 / tot[mi][g] as f64).collect();
+        let c: Vec<f64> = (0..3)
+            .map(|g| cov[mi][g] as f64 / tot[mi][g] as f64)
+            .collect();
         println!(
             "{name}: 95 % coverage 20 Hz-2 kHz, interpolated T_ry {:.3}, S {:.3}, P {:.3} ({} entry-lines)",
             c[0], c[1], c[2], tot[mi][0]
