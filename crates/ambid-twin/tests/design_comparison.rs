@@ -16,6 +16,9 @@
 //! estimates' own σ² agree with the empirical variance; in linear mode no design is biased
 //! outside the sharp mode; also on 3 random machines (ratios only).
 
+// entry-line loops index several parallel arrays (values, truth, flags) by the same index
+#![allow(clippy::needless_range_loop)]
+
 use ambid_core::data::IoData;
 use ambid_core::frf::mimo::{estimate, MimoClosedLoopFrf, MimoOptions};
 use ambid_core::lti::Frd;

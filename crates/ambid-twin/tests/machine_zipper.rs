@@ -14,6 +14,9 @@
 //! against the line's scale). `cargo test -p ambid-twin --test machine_zipper -- --nocapture`
 //! prints the tables.
 
+// entry-line loops index several parallel arrays (values, truth, flags) by the same index
+#![allow(clippy::needless_range_loop)]
+
 use ambid_core::data::IoData;
 use ambid_core::frf::closed_loop::band_radius_factor;
 use ambid_core::frf::mimo::{zippered_with, MimoClosedLoopFrf, MimoOptions, ZipperInterpolation};

@@ -954,7 +954,8 @@ fn rational_weights(xs: &[usize], k: usize, z: &[c64], nz: usize, ew: &[f64]) ->
         }
         let am = Mat::<c64>::from_fn(nd, nd, |i, j| a_mat[i * nd + j]);
         let (svs, _, _) = svd_small(&am).ok()?;
-        if !(cond_of(&svs) <= RAT_MAX_COND) {
+        let cond = cond_of(&svs);
+        if cond.is_nan() || cond > RAT_MAX_COND {
             return None;
         }
         let ai = inv_small(&am)?;
