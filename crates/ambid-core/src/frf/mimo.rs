@@ -1309,6 +1309,70 @@ mod tests {
     }
 
     #[test]
+    fn rational_weights_reproduce_one_pole_pair_and_polynomials() {
+        // own lines every 4th line; the target line between them
+        let own: Vec<usize> = (0..12).map(|i| 3 + 4 * i).collect();
+        let k = 22usize;
+        let xs = window(&own, k, RAT_HALF_WIDTH);
+        assert_eq!(xs, &[11, 15, 19, 23, 27, 31]);
+        // three entries sharing one sharp pole pair (a resonance 0.8 lines wide at line 21.3),
+        // each with its own numerator, plus an entry without the pole
+        let pole = c64::new(21.3, 0.8);
+        let f = |a: usize, x: f64| -> c64 {
+            let xc = c64::new(x, 0.0);
+            let d = (xc - pole) * (xc - pole.conj() - c64::new(2.0, 0.0));
+            let n =
+                c64::new(1.0 + a as f64, 0.3 * a as f64) + xc * c64::new(0.05, -0.02 * a as f64);
+            if a == 3 {
+                c64::new(0.5, 0.1) + xc * 0.01
+            } else {
+                n / d
+            }
+        };
+        let nz = 4;
+        let z: Vec<c64> = xs
+            .iter()
+            .flat_map(|&x| (0..nz).map(move |a| f(a, x as f64)))
+            .collect();
+        let ew = vec![1.0; nz];
+        let c = rational_weights(xs, k, &z, nz, &ew).unwrap();
+        for a in 0..nz {
+            let v: c64 = (0..xs.len()).map(|l| c[l] * z[l * nz + a]).sum();
+            let want = f(a, k as f64);
+            assert!(
+                (v - want).norm() < 1e-9 * want.norm(),
+                "entry {a}: {v} vs {want}"
+            );
+        }
+        // the cubic Lagrange through the 4 nearest lines misses the resonance by far
+        let (lx, lw) = lagrange4(&own, k);
+        let lv: c64 = lx.iter().zip(lw).map(|(&x, w)| f(0, x as f64) * w).sum();
+        assert!((lv - f(0, k as f64)).norm() > 1e-2 * f(0, k as f64).norm());
+        // degree-4 polynomials (no pole) are reproduced as well; with one entry the 6 lines
+        // leave one equation for the two denominator coefficients: refused (Lagrange then)
+        let poly = |a: usize, x: f64| {
+            c64::new(
+                0.3 - 0.1 * x + 0.002 * a as f64 * x * x * x,
+                1e-5 * x.powi(4 - a as i32),
+            )
+        };
+        let z: Vec<c64> = xs
+            .iter()
+            .flat_map(|&x| (0..3).map(move |a| poly(a, x as f64)))
+            .collect();
+        let c = rational_weights(xs, k, &z, 3, &[1.0; 3]).unwrap();
+        for a in 0..3 {
+            let v: c64 = (0..xs.len()).map(|l| c[l] * z[l * 3 + a]).sum();
+            let want = poly(a, k as f64);
+            assert!((v - want).norm() < 1e-9 * want.norm(), "{a}: {v} vs {want}");
+        }
+        let z1: Vec<c64> = xs.iter().map(|&x| poly(0, x as f64)).collect();
+        assert!(rational_weights(xs, k, &z1, 1, &[1.0]).is_none());
+        // all-zero data cannot define a denominator: refused (the caller falls back)
+        assert!(rational_weights(xs, k, &vec![ZERO; 6], 1, &[1.0]).is_none());
+    }
+
+    #[test]
     fn small_inverse_and_condition_number() {
         let a = Mat::<c64>::from_fn(3, 3, |i, j| {
             c64::new(
