@@ -1369,7 +1369,7 @@ mod tests {
         let z1: Vec<c64> = xs.iter().map(|&x| poly(0, x as f64)).collect();
         assert!(rational_weights(xs, k, &z1, 1, &[1.0]).is_none());
         // all-zero data cannot define a denominator: refused (the caller falls back)
-        assert!(rational_weights(xs, k, &vec![ZERO; 6], 1, &[1.0]).is_none());
+        assert!(rational_weights(xs, k, &[ZERO; 6], 1, &[1.0]).is_none());
     }
 
     #[test]
