@@ -31,7 +31,7 @@
 //!   there: the columns live on different lines and must be brought to a common grid before
 //!   $P = T_{ry} S^{-1}$ can be formed. Downstream the MIMO FRF (`frf::mimo`, which documents its
 //!   exact rule) interpolates each column onto the union of the lines from that column's own
-//!   neighbouring lines (a local polynomial in frequency); that assumes the response is smooth over
+//!   neighbouring lines (a local rational fit, one denominator per column); that assumes the response is smooth over
 //!   $n$ line spacings and is biased near resonances sharper than that. The report takes the input matrix of each complete **group** of $n$ consecutive lines
 //!   $(k_{gn}, \dots, k_{gn+n-1})$ — one line per axis, column $j$ the inputs' DFT at axis $j$'s line
 //!   — which is diagonal, $\kappa = \max_j |R_j| / \min_j |R_j| = \max_j (a_j\sqrt{2/F_j}) / \min_j
