@@ -500,7 +500,7 @@ fn periodic_estimate(
         Ok(e) => e,
         Err(e) => {
             let e = ambid::error::Error::from(e);
-            return Err(match identical_excitations(&files, &axes) {
+            return Err(match identical_excitations(files, axes) {
                 Some((i, j)) => anyhow::Error::from(e).context(format!(
                     "{} and {} have the same excitation: the same experiment twice? The input \
                      matrix of the experiments must have full rank on every line — give \
@@ -561,7 +561,7 @@ fn write_estimate(
     extras.push(("fs_hz", &fs_col));
     let bytes = matrix_frf_csv(
         &f,
-        &axes,
+        axes,
         &[("P", &est.plant), ("T_ry", &est.t_ry), ("S", &est.s)],
         &extras,
     )?;
