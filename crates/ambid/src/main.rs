@@ -38,7 +38,9 @@ enum Command {
     /// print their statistics, write their waveforms, spectra and autocorrelations.
     Compare(compare::CompareArgs),
     /// Run the embedded AMB twin in closed loop and write data.csv, truth.csv, meta.json and
-    /// controller.toml (the rig's controller, for `frf --controller` and `validate`).
+    /// controller.toml (the rig's controller, for `frf --controller` and `validate`); with
+    /// `--axes 4` the whole rotor under a multi-axis design: exp1/data.csv …, the 4×4 truth.csv
+    /// and meta.json.
     Simulate(simulate::SimulateArgs),
     /// Print the twin's default configuration (or a random rig's, with --rig-seed) as TOML (edit
     /// it and pass it with --config).
@@ -48,7 +50,8 @@ enum Command {
     Info(info::InfoArgs),
     /// Nonparametric closed-loop FRFs from recorded data (T_ry, S, plant by the joint and, with a
     /// controller file, the indirect method, the controller from data), with standard deviations,
-    /// coherences, quality measures and resonance peaks; writes the FRF CSV.
+    /// coherences, quality measures and resonance peaks; writes the FRF CSV. Several experiment
+    /// files (or `r_<axis>` columns): the 4×4 MIMO FRF as a matrix FRF CSV.
     Frf(frf::FrfArgs),
     /// The seed paper's studies: excitation amplitude and operating point.
     #[command(subcommand)]
