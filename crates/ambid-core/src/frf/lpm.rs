@@ -671,7 +671,7 @@ pub(super) fn no_power_error(band: (f64, f64), input: &'static str) -> Error {
 }
 
 /// First line of the window of `w = 2 half + 1` lines around `k`, inside `1..=n_lines`.
-fn window_lo(k: usize, half: usize, n_lines: usize) -> usize {
+pub(super) fn window_lo(k: usize, half: usize, n_lines: usize) -> usize {
     let w = 2 * half + 1;
     if k < 1 + half {
         1
@@ -1142,7 +1142,7 @@ pub(super) fn detect_periods(uf: &[c64], n_lines: usize, n: usize) -> Option<usi
     })
 }
 
-fn gcd(a: usize, b: usize) -> usize {
+pub(super) fn gcd(a: usize, b: usize) -> usize {
     if b == 0 {
         a
     } else {

@@ -87,7 +87,7 @@
 //! FRF models for multivariable systems — Part I: Theory", *Mechanical Systems and Signal
 //! Processing* 24(3), 573–595, 2010.
 
-use super::lpm::EXCITED_FRACTION;
+use super::lpm::{gcd, window_lo, EXCITED_FRACTION};
 use super::mimo::{MimoClosedLoopFrf, MimoDesign};
 use crate::data::{IoData, Role};
 use crate::error::{Error, Result};
@@ -165,18 +165,6 @@ fn spectra(x: &[&[f64]]) -> Result<Vec<Vec<c64>>> {
         .collect()
 }
 
-/// First line of the window of $w$ lines around `k`, inside `1..=n_lines`.
-fn window_lo(k: usize, half: usize, n_lines: usize) -> usize {
-    let w = 2 * half + 1;
-    if k < 1 + half {
-        1
-    } else if k + half > n_lines {
-        n_lines + 1 - w
-    } else {
-        k - half
-    }
-}
-
 /// Whether every line of $r$ lies on multiples of some $P \ge 2$ (a periodic excitation).
 fn is_periodic(rf: &[Vec<c64>], n_lines: usize) -> Option<usize> {
     let mut g = 0usize;
@@ -197,14 +185,6 @@ fn is_periodic(rf: &[Vec<c64>], n_lines: usize) -> Option<usize> {
         }
     }
     (g >= 2).then_some(g)
-}
-
-fn gcd(a: usize, b: usize) -> usize {
-    if b == 0 {
-        a
-    } else {
-        gcd(b, a % b)
-    }
 }
 
 /// Hermitian positive definite solve by Cholesky of an equilibrated matrix (row-major `h`,
