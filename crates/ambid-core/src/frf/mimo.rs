@@ -428,6 +428,24 @@ fn analyse(lay: &Layout<'_>, fs: f64, opts: &MimoOptions) -> Result<Vec<Periodic
         .collect()
 }
 
+/// [`analyse`] keeping only what [`periodic`] reads: the covariances of the pairs u–u, u–y
+/// and y–y on the diagonal (channels in the layout order r…, u…, y…), on the lines with
+/// `lines[k]` (all if `None`).
+fn analyse_for_periodic(
+    lay: &Layout<'_>,
+    fs: f64,
+    opts: &MimoOptions,
+    lines: Option<&[bool]>,
+) -> Result<Vec<PeriodicSpectra>> {
+    let po = PeriodicOptions::new(lay.n).skip(opts.skip_periods);
+    let nr = lay.nr;
+    let need = |i: usize, j: usize| i >= nr && (i < 2 * nr || i == j);
+    lay.chans
+        .par_iter()
+        .map(|c| PeriodicAnalyzer::new(lay.n)?.analyze_selected(c, fs, &po, &need, lines))
+        .collect()
+}
+
 /// The lines excited by each input: `out[j]` = sorted lines where $|\bar R_j|$ passes the
 /// threshold in some experiment, within the band.
 fn excited_by_input(
@@ -435,19 +453,34 @@ fn excited_by_input(
     nr: usize,
     opts: &MimoOptions,
 ) -> Result<Vec<Vec<usize>>> {
-    let nl = specs[0].n_lines();
+    let means: Vec<Vec<&[c64]>> = specs
+        .iter()
+        .map(|s| (0..nr).map(|j| s.mean(j)).collect())
+        .collect();
+    excited_from_means(&means, specs[0].resolution_hz(), opts)
+}
+
+/// [`excited_by_input`] from the period-mean DFTs of the excitation channels alone,
+/// `means[e][j]` (every line, DC first) of input `j` in experiment `e`, lines `df` Hz apart.
+fn excited_from_means(
+    means: &[Vec<&[c64]>],
+    df: f64,
+    opts: &MimoOptions,
+) -> Result<Vec<Vec<usize>>> {
+    let nr = means.first().map_or(0, |m| m.len());
+    let nl = means.first().and_then(|m| m.first()).map_or(0, |m| m.len());
     let in_band = |k: usize| match opts.band {
         None => true,
         Some((lo, hi)) => {
-            let f = specs[0].line_hz(k);
+            let f = k as f64 * df;
             f >= lo && f <= hi
         }
     };
     let mut out = Vec::with_capacity(nr);
     for j in 0..nr {
-        let peak = specs
+        let peak = means
             .iter()
-            .flat_map(|s| s.mean(j)[1..].iter())
+            .flat_map(|m| m[j][1..].iter())
             .fold(0.0f64, |a, v| a.max(v.norm_sqr()));
         if peak == 0.0 {
             return Err(Error::invalid(
@@ -461,21 +494,162 @@ fn excited_by_input(
         let thr = opts.rel_threshold * opts.rel_threshold * peak;
         out.push(
             (1..nl)
-                .filter(|&k| in_band(k) && specs.iter().any(|s| s.mean(j)[k].norm_sqr() > thr))
+                .filter(|&k| in_band(k) && means.iter().any(|m| m[j][k].norm_sqr() > thr))
                 .collect::<Vec<_>>(),
         );
     }
     Ok(out)
 }
 
-/// Singular values of a small complex matrix (descending).
+/// The period-mean DFT of every excitation channel of every experiment, `[e][j]` on every
+/// line, before the full analysis, so that the excited lines are known first: the DFT of the
+/// channel's time-averaged period (by linearity the mean of the period DFTs; the first period
+/// itself for a channel whose periods are bit-identical), two channels per complex FFT.
+/// `None` when the record cannot be cut into the periods asked for (the full analysis then
+/// reports why).
+fn excitation_means(lay: &Layout<'_>, opts: &MimoOptions) -> Option<Vec<Vec<Vec<c64>>>> {
+    let n = lay.n;
+    let len = lay.chans.first()?.first()?.len();
+    if n < 2 || len % n != 0 || len / n <= opts.skip_periods {
+        return None;
+    }
+    let start = opts.skip_periods * n;
+    let p_used = len / n - opts.skip_periods;
+    let lines = n / 2 + 1;
+    let fft = rustfft::FftPlanner::<f64>::new().plan_fft_forward(n);
+    let period = |x: &[f64]| -> Vec<f64> {
+        let first = &x[start..start + n];
+        if (1..p_used).all(|p| &x[start + p * n..start + (p + 1) * n] == first) {
+            return first.to_vec();
+        }
+        let mut acc = vec![0.0; n];
+        for p in 0..p_used {
+            for (a, v) in acc.iter_mut().zip(&x[start + p * n..start + (p + 1) * n]) {
+                *a += v;
+            }
+        }
+        let pf = p_used as f64;
+        acc.iter_mut().for_each(|a| *a /= pf);
+        acc
+    };
+    Some(
+        lay.chans
+            .par_iter()
+            .map(|ch| {
+                let mut buf = vec![ZERO; n];
+                let mut scratch = vec![ZERO; fft.get_inplace_scratch_len()];
+                let mut out = Vec::with_capacity(lay.nr);
+                for j in (0..lay.nr).step_by(2) {
+                    let a = period(ch[j]);
+                    let b = (j + 1 < lay.nr).then(|| period(ch[j + 1]));
+                    for (t, z) in buf.iter_mut().enumerate() {
+                        *z = c64::new(a[t], b.as_ref().map_or(0.0, |b| b[t]));
+                    }
+                    fft.process_with_scratch(&mut buf, &mut scratch);
+                    // A_k = (Z_k + conj Z_{N−k})/2, B_k = (Z_k − conj Z_{N−k})/(2j)
+                    let zc = |k: usize| if k == 0 { buf[0] } else { buf[n - k] }.conj();
+                    out.push((0..lines).map(|k| (buf[k] + zc(k)) * 0.5).collect());
+                    if b.is_some() {
+                        out.push(
+                            (0..lines)
+                                .map(|k| {
+                                    let d = buf[k] - zc(k);
+                                    c64::new(d.im * 0.5, -d.re * 0.5)
+                                })
+                                .collect(),
+                        );
+                    }
+                }
+                out
+            })
+            .collect(),
+    )
+}
+
+/// Thin SVD $A = U \Sigma V^{\mathsf H}$ of a small complex matrix by one-sided (Hestenes)
+/// Jacobi rotations: singular values descending (to high relative accuracy), $U$
+/// ($m \times q$) and $V$ ($n \times q$), $q = \min(m, n)$; no allocation beyond the results.
 fn svd_small(a: &Mat<c64>) -> Result<(Vec<f64>, Mat<c64>, Mat<c64>)> {
-    let svd = a
-        .svd()
-        .map_err(|e| Error::numerical("MIMO FRF", format!("SVD failed: {e:?}")))?;
-    let s = svd.S().column_vector();
-    let sv: Vec<f64> = (0..s.nrows()).map(|i| s[i].re).collect();
-    Ok((sv, svd.U().to_owned(), svd.V().to_owned()))
+    let (m, n) = (a.nrows(), a.ncols());
+    // work on the tall one of A and Aᴴ: B = W Σ Zᴴ, columns of B rotated until orthogonal
+    let tall = m >= n;
+    let (p, q) = if tall { (m, n) } else { (n, m) };
+    let mut w = if tall {
+        a.to_owned()
+    } else {
+        Mat::<c64>::from_fn(p, q, |i, j| a[(j, i)].conj())
+    };
+    let mut z = Mat::<c64>::from_fn(q, q, |i, j| if i == j { ONE } else { ZERO });
+    let mut converged = false;
+    for _ in 0..60 {
+        let mut rotated = false;
+        for i in 0..q {
+            for j in i + 1..q {
+                let (mut al, mut be, mut ga) = (0.0, 0.0, ZERO);
+                for r in 0..p {
+                    let (x, y) = (w[(r, i)], w[(r, j)]);
+                    al += x.norm_sqr();
+                    be += y.norm_sqr();
+                    ga += x.conj() * y;
+                }
+                let g = ga.norm();
+                if !(g > 4.0 * f64::EPSILON * (al * be).sqrt()) {
+                    continue;
+                }
+                rotated = true;
+                let ph = (ga / g).conj();
+                let zeta = (be - al) / (2.0 * g);
+                let t = if zeta == 0.0 {
+                    1.0
+                } else {
+                    zeta.signum() / (zeta.abs() + (1.0 + zeta * zeta).sqrt())
+                };
+                let c = 1.0 / (1.0 + t * t).sqrt();
+                let s = c * t;
+                for r in 0..p {
+                    let (x, y) = (w[(r, i)], w[(r, j)] * ph);
+                    w[(r, i)] = x * c - y * s;
+                    w[(r, j)] = x * s + y * c;
+                }
+                for r in 0..q {
+                    let (x, y) = (z[(r, i)], z[(r, j)] * ph);
+                    z[(r, i)] = x * c - y * s;
+                    z[(r, j)] = x * s + y * c;
+                }
+            }
+        }
+        if !rotated {
+            converged = true;
+            break;
+        }
+    }
+    if !converged {
+        return Err(Error::numerical(
+            "MIMO FRF",
+            "the SVD of a line's matrix did not converge (non-finite entries?)",
+        ));
+    }
+    let norms: Vec<f64> = (0..q)
+        .map(|j| (0..p).map(|r| w[(r, j)].norm_sqr()).sum::<f64>().sqrt())
+        .collect();
+    let mut order: Vec<usize> = (0..q).collect();
+    order.sort_by(|&x, &y| norms[y].total_cmp(&norms[x]));
+    let sv: Vec<f64> = order.iter().map(|&j| norms[j]).collect();
+    let left = Mat::<c64>::from_fn(p, q, |r, c| {
+        let j = order[c];
+        if norms[j] > 0.0 {
+            w[(r, j)] / norms[j]
+        } else {
+            ZERO
+        }
+    });
+    let right = Mat::<c64>::from_fn(q, q, |r, c| z[(r, order[c])]);
+    // B = left Σ rightᴴ; A = B (tall) or Bᴴ = right Σ leftᴴ
+    Ok(if tall {
+        (sv, left, right)
+    } else {
+        (sv, right, left)
+    })
 }
 
 fn cond_of(sv: &[f64]) -> f64 {
@@ -600,8 +774,29 @@ pub fn periodic(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> 
             ),
         ));
     }
-    let specs = analyse(&lay, data.fs(), opts)?;
-    let per_in = excited_by_input(&specs, nr, opts)?;
+    // the excited lines first, from r alone; then the period statistics on those lines only
+    let (specs, per_in) = match excitation_means(&lay, opts) {
+        Some(rm) => {
+            let means: Vec<Vec<&[c64]>> = rm
+                .iter()
+                .map(|e| e.iter().map(|v| v.as_slice()).collect())
+                .collect();
+            let per_in = excited_from_means(&means, data.fs() / lay.n as f64, opts)?;
+            let mut mask = vec![false; lay.n / 2 + 1];
+            for &k in per_in.iter().flatten() {
+                mask[k] = true;
+            }
+            (
+                analyse_for_periodic(&lay, data.fs(), opts, Some(&mask))?,
+                per_in,
+            )
+        }
+        None => {
+            let specs = analyse_for_periodic(&lay, data.fs(), opts, None)?;
+            let per_in = excited_by_input(&specs, nr, opts)?;
+            (specs, per_in)
+        }
+    };
     let mut lines: Vec<usize> = per_in.into_iter().flatten().collect();
     lines.sort_unstable();
     lines.dedup();
