@@ -566,20 +566,27 @@ fn excitation_means(lay: &Layout<'_>, opts: &MimoOptions) -> Option<Vec<Vec<Vec<
     )
 }
 
-/// Thin SVD $A = U \Sigma V^{\mathsf H}$ of a small complex matrix by one-sided (Hestenes)
-/// Jacobi rotations: singular values descending (to high relative accuracy), $U$
-/// ($m \times q$) and $V$ ($n \times q$), $q = \min(m, n)$; no allocation beyond the results.
-fn svd_small(a: &Mat<c64>) -> Result<(Vec<f64>, Mat<c64>, Mat<c64>)> {
+/// One-sided (Hestenes) Jacobi SVD of a small complex matrix $A$ ($m \times n$): with
+/// $B = A$ if $m \ge n$ (returns `true`) or $B = A^{\mathsf H}$ ($p \times q$, $p \ge q$),
+/// rotates the columns of $W = B Z$ until they are orthogonal: on return $B = W Z^{\mathsf H}$
+/// with $Z$ ($q \times q$) unitary, the columns of $W$ orthogonal and `norms[c]` $= \|W_c\|$
+/// the singular values (unsorted, to high relative accuracy). `w` and `z` must be $p \times q$
+/// and $q \times q$, `norms` $q$ long.
+fn jacobi_svd(a: &Mat<c64>, w: &mut Mat<c64>, z: &mut Mat<c64>, norms: &mut [f64]) -> Result<bool> {
     let (m, n) = (a.nrows(), a.ncols());
-    // work on the tall one of A and Aᴴ: B = W Σ Zᴴ, columns of B rotated until orthogonal
     let tall = m >= n;
-    let (p, q) = if tall { (m, n) } else { (n, m) };
-    let mut w = if tall {
-        a.to_owned()
-    } else {
-        Mat::<c64>::from_fn(p, q, |i, j| a[(j, i)].conj())
-    };
-    let mut z = Mat::<c64>::from_fn(q, q, |i, j| if i == j { ONE } else { ZERO });
+    let (p, q) = (w.nrows(), w.ncols());
+    debug_assert!(p == m.max(n) && q == m.min(n) && z.nrows() == q && norms.len() == q);
+    for r in 0..p {
+        for c in 0..q {
+            w[(r, c)] = if tall { a[(r, c)] } else { a[(c, r)].conj() };
+        }
+    }
+    for r in 0..q {
+        for c in 0..q {
+            z[(r, c)] = if r == c { ONE } else { ZERO };
+        }
+    }
     let mut converged = false;
     for _ in 0..60 {
         let mut rotated = false;
@@ -629,9 +636,21 @@ fn svd_small(a: &Mat<c64>) -> Result<(Vec<f64>, Mat<c64>, Mat<c64>)> {
             "the SVD of a line's matrix did not converge (non-finite entries?)",
         ));
     }
-    let norms: Vec<f64> = (0..q)
-        .map(|j| (0..p).map(|r| w[(r, j)].norm_sqr()).sum::<f64>().sqrt())
-        .collect();
+    for (j, nv) in norms.iter_mut().enumerate() {
+        *nv = (0..p).map(|r| w[(r, j)].norm_sqr()).sum::<f64>().sqrt();
+    }
+    Ok(tall)
+}
+
+/// Thin SVD $A = U \Sigma V^{\mathsf H}$ of a small complex matrix ([`jacobi_svd`]): singular
+/// values descending, $U$ ($m \times q$) and $V$ ($n \times q$), $q = \min(m, n)$.
+fn svd_small(a: &Mat<c64>) -> Result<(Vec<f64>, Mat<c64>, Mat<c64>)> {
+    let (m, n) = (a.nrows(), a.ncols());
+    let (p, q) = (m.max(n), m.min(n));
+    let mut w = Mat::<c64>::zeros(p, q);
+    let mut z = Mat::<c64>::zeros(q, q);
+    let mut norms = vec![0.0; q];
+    let tall = jacobi_svd(a, &mut w, &mut z, &mut norms)?;
     let mut order: Vec<usize> = (0..q).collect();
     order.sort_by(|&x, &y| norms[y].total_cmp(&norms[x]));
     let sv: Vec<f64> = order.iter().map(|&j| norms[j]).collect();
@@ -666,12 +685,27 @@ fn cond_of(sv: &[f64]) -> f64 {
 /// singular).
 fn inv_small(a: &Mat<c64>) -> Option<Mat<c64>> {
     let n = a.nrows();
-    let mut m = a.clone();
-    let mut x = Mat::<c64>::from_fn(n, n, |i, j| if i == j { ONE } else { ZERO });
+    let mut m = Mat::<c64>::zeros(n, n);
+    let mut x = Mat::<c64>::zeros(n, n);
+    inv_small_into(a, &mut m, &mut x).then_some(x)
+}
+
+/// [`inv_small`] into `x` with the work matrix `m` (both $n \times n$); `false` if singular.
+fn inv_small_into(a: &Mat<c64>, m: &mut Mat<c64>, x: &mut Mat<c64>) -> bool {
+    let n = a.nrows();
+    for i in 0..n {
+        for j in 0..n {
+            m[(i, j)] = a[(i, j)];
+            x[(i, j)] = if i == j { ONE } else { ZERO };
+        }
+    }
     for col in 0..n {
-        let piv = (col..n).max_by(|&p, &q| m[(p, col)].norm().total_cmp(&m[(q, col)].norm()))?;
+        let Some(piv) = (col..n).max_by(|&p, &q| m[(p, col)].norm().total_cmp(&m[(q, col)].norm()))
+        else {
+            return false;
+        };
         if m[(piv, col)].norm() == 0.0 {
-            return None;
+            return false;
         }
         if piv != col {
             for j in 0..n {
@@ -701,7 +735,16 @@ fn inv_small(a: &Mat<c64>) -> Option<Mat<c64>> {
             }
         }
     }
-    Some(x)
+    true
+}
+
+/// `out = a b` (shapes must agree).
+fn mat_mul_into(a: &Mat<c64>, b: &Mat<c64>, out: &mut Mat<c64>) {
+    for i in 0..a.nrows() {
+        for j in 0..b.ncols() {
+            out[(i, j)] = (0..a.ncols()).fold(ZERO, |acc, l| acc + a[(i, l)] * b[(l, j)]);
+        }
+    }
 }
 
 fn mat_mul(a: &Mat<c64>, b: &Mat<c64>) -> Mat<c64> {
@@ -813,26 +856,67 @@ pub fn periodic(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> 
     let nl = lines.len();
     let (off_u, off_y) = (nr, nr + nu);
 
-    struct LineOut {
-        t: Vec<c64>,
-        s: Vec<c64>,
-        p: Vec<c64>,
-        vt: Vec<f64>,
-        vs: Vec<f64>,
-        vp: Vec<f64>,
-        coh: Vec<f64>,
-        coh_u: Vec<f64>,
-        cond_r: f64,
-        cond_u: f64,
+    // per line: R, U, Y (inputs/outputs × experiments), the Jacobi SVDs, the products and the
+    // inverse in one workspace per rayon task (no allocation per line but the line's output)
+    let nz = nu + ny;
+    struct Ws {
+        r: Mat<c64>,
+        u: Mat<c64>,
+        y: Mat<c64>,
+        w: Mat<c64>,
+        z: Mat<c64>,
+        norms: Vec<f64>,
+        order: Vec<usize>,
+        rp: Mat<c64>,
+        t: Mat<c64>,
+        s: Mat<c64>,
+        s_inv: Mat<c64>,
+        inv_work: Mat<c64>,
+        pl: Mat<c64>,
+        wm: Mat<c64>,
+        tr: Mat<c64>,
+        sr: Mat<c64>,
+        cov: Vec<c64>,
+        g: Vec<(usize, c64)>,
     }
-    let per_line = |li: usize| -> Result<LineOut> {
+    let (sp, sq) = (nr.max(m), nr.min(m));
+    let new_ws = || Ws {
+        r: Mat::zeros(nr, m),
+        u: Mat::zeros(nu, m),
+        y: Mat::zeros(ny, m),
+        w: Mat::zeros(sp, sq),
+        z: Mat::zeros(sq, sq),
+        norms: vec![0.0; sq],
+        order: (0..sq).collect(),
+        rp: Mat::zeros(m, nr),
+        t: Mat::zeros(ny, nu),
+        s: Mat::zeros(nu, nu),
+        s_inv: Mat::zeros(nu, nu),
+        inv_work: Mat::zeros(nu, nu),
+        pl: Mat::zeros(ny, nu),
+        wm: Mat::zeros(m, nu),
+        tr: Mat::zeros(ny, m),
+        sr: Mat::zeros(nu, m),
+        cov: vec![ZERO; nz * nz],
+        g: Vec::with_capacity(nu + 1),
+    };
+    // per line: values t | s | p (column-major) and vt | vs | vp | coh | coh_u | cond_r | cond_u
+    let (nt, ns) = (ny * nu, nu * nu);
+    let per_line = |ws: &mut Ws, li: usize| -> Result<(Vec<c64>, Vec<f64>)> {
         let k = lines[li];
         let fk = f[li];
-        let r = Mat::<c64>::from_fn(nr, m, |j, e| specs[e].mean(j)[k]);
-        let u = Mat::<c64>::from_fn(nu, m, |j, e| specs[e].mean(off_u + j)[k]);
-        let y = Mat::<c64>::from_fn(ny, m, |i, e| specs[e].mean(off_y + i)[k]);
-        let (sv, uu, vv) = svd_small(&r)?;
-        let cond_r = cond_of(&sv);
+        for e in 0..m {
+            let sp = &specs[e];
+            for j in 0..nr {
+                ws.r[(j, e)] = sp.mean(j)[k];
+                ws.u[(j, e)] = sp.mean(off_u + j)[k];
+            }
+            for i in 0..ny {
+                ws.y[(i, e)] = sp.mean(off_y + i)[k];
+            }
+        }
+        let tall = jacobi_svd(&ws.r, &mut ws.w, &mut ws.z, &mut ws.norms)?;
+        let cond_r = cond_of(&ws.norms);
         if cond_r.is_nan() || cond_r > opts.max_cond {
             return Err(singular_line_error(
                 "excitation matrix R (inputs × experiments)",
@@ -844,12 +928,29 @@ pub fn periodic(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> 
                  restrict the band",
             ));
         }
-        // R⁺ = V Σ⁻¹ Uᴴ (M × nr), on the nr non-zero singular values
-        let rp = Mat::<c64>::from_fn(m, nr, |e, j| {
-            (0..nr).fold(ZERO, |acc, q| acc + vv[(e, q)] * uu[(j, q)].conj() / sv[q])
-        });
-        let (svu, _, _) = svd_small(&u)?;
-        let cond_u = cond_of(&svu);
+        // R⁺ = V Σ⁻¹ Uᴴ (M × nr) over the singular values in descending order; with the
+        // unnormalised Jacobi columns W (= left vectors · σ): R = W̃ Σ Zᴴ (tall) or Z Σ W̃ᴴ
+        for (q, o) in ws.order.iter_mut().enumerate() {
+            *o = q;
+        }
+        let norms = &ws.norms;
+        ws.order.sort_by(|&x, &y| norms[y].total_cmp(&norms[x]));
+        for e in 0..m {
+            for j in 0..nr {
+                let mut acc = ZERO;
+                for &q in &ws.order {
+                    let s2 = ws.norms[q] * ws.norms[q];
+                    acc += if tall {
+                        ws.z[(e, q)] * ws.w[(j, q)].conj() / s2
+                    } else {
+                        ws.w[(e, q)] * ws.z[(j, q)].conj() / s2
+                    };
+                }
+                ws.rp[(e, j)] = acc;
+            }
+        }
+        jacobi_svd(&ws.u, &mut ws.w, &mut ws.z, &mut ws.norms)?;
+        let cond_u = cond_of(&ws.norms);
         if cond_u.is_nan() || cond_u > opts.max_cond {
             return Err(singular_line_error(
                 "input matrix U (inputs × experiments)",
@@ -860,44 +961,65 @@ pub fn periodic(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> 
                  check the excitation design and the loop",
             ));
         }
-        let t = mat_mul(&y, &rp);
-        let s = mat_mul(&u, &rp);
-        let s_inv = inv_small(&s).ok_or_else(|| {
-            singular_line_error("sensitivity S", k, fk, f64::INFINITY, "check the data")
-        })?;
-        let pl = mat_mul(&t, &s_inv);
-        let w = mat_mul(&rp, &s_inv);
-        // per-experiment covariance of the means of (u, y), stacked u then y
-        let specs = &specs;
-        let cov_e =
-            |e: usize| move |a: usize, b: usize| specs[e].cov_at(off_u + a, off_u + b, k) / pf;
-        let mut vt = vec![0.0; ny * nu];
-        let mut vs = vec![0.0; nu * nu];
-        let mut vp = vec![0.0; ny * nu];
-        let mut g: Vec<(usize, c64)> = Vec::with_capacity(nu + 1);
-        for e in 0..m {
-            let cv = cov_e(e);
-            for j in 0..nu {
-                let w2 = rp[(e, j)].norm_sqr();
-                for i in 0..ny {
-                    vt[j * ny + i] += w2 * cv(nu + i, nu + i).re;
-                }
-                for i in 0..nu {
-                    vs[j * nu + i] += w2 * cv(i, i).re;
-                }
-            }
-            for a in 0..ny {
-                g.clear();
-                g.extend((0..nu).map(|c| (c, -pl[(a, c)])));
-                g.push((nu + a, ONE));
-                let q = quad(&g, &cv);
-                for b in 0..nu {
-                    vp[b * ny + a] += w[(e, b)].norm_sqr() * q;
+        mat_mul_into(&ws.y, &ws.rp, &mut ws.t);
+        mat_mul_into(&ws.u, &ws.rp, &mut ws.s);
+        if !inv_small_into(&ws.s, &mut ws.inv_work, &mut ws.s_inv) {
+            return Err(singular_line_error(
+                "sensitivity S",
+                k,
+                fk,
+                f64::INFINITY,
+                "check the data",
+            ));
+        }
+        mat_mul_into(&ws.t, &ws.s_inv, &mut ws.pl);
+        mat_mul_into(&ws.rp, &ws.s_inv, &mut ws.wm);
+        let mut vals = Vec::with_capacity(2 * nt + ns);
+        for a in [&ws.t, &ws.s, &ws.pl] {
+            for j in 0..a.ncols() {
+                for i in 0..a.nrows() {
+                    vals.push(a[(i, j)]);
                 }
             }
         }
-        let tr = mat_mul(&t, &r);
-        let sr = mat_mul(&s, &r);
+        let mut fl = vec![0.0; 2 * nt + ns + ny + nu + 2];
+        {
+            let (vt, rest) = fl.split_at_mut(nt);
+            let (vs, rest) = rest.split_at_mut(ns);
+            let vp = &mut rest[..nt];
+            for e in 0..m {
+                // the covariance of the means of (u, y), stacked u then y: the pairs used
+                let sp = &specs[e];
+                for a in 0..nz {
+                    for b in a..nz {
+                        if a < nu || a == b {
+                            ws.cov[a * nz + b] = sp.cov_at(off_u + a, off_u + b, k) / pf;
+                        }
+                    }
+                }
+                let cv = |a: usize, b: usize| ws.cov[a * nz + b];
+                for j in 0..nu {
+                    let w2 = ws.rp[(e, j)].norm_sqr();
+                    for i in 0..ny {
+                        vt[j * ny + i] += w2 * cv(nu + i, nu + i).re;
+                    }
+                    for i in 0..nu {
+                        vs[j * nu + i] += w2 * cv(i, i).re;
+                    }
+                }
+                for a in 0..ny {
+                    ws.g.clear();
+                    ws.g.extend((0..nu).map(|c| (c, -ws.pl[(a, c)])));
+                    ws.g.push((nu + a, ONE));
+                    let q = quad(&ws.g, &cv);
+                    for b in 0..nu {
+                        vp[b * ny + a] += ws.wm[(e, b)].norm_sqr() * q;
+                    }
+                }
+            }
+        }
+        mat_mul_into(&ws.t, &ws.r, &mut ws.tr);
+        mat_mul_into(&ws.s, &ws.r, &mut ws.sr);
         let coh_of = |fit: &Mat<c64>, off: usize, i: usize| {
             let num: f64 = (0..m).map(|e| fit[(i, e)].norm_sqr()).sum();
             let den: f64 = (0..m)
@@ -909,48 +1031,41 @@ pub fn periodic(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> 
                 f64::NAN
             }
         };
-        let col = |a: &Mat<c64>| -> Vec<c64> {
-            (0..a.ncols())
-                .flat_map(|j| (0..a.nrows()).map(move |i| (i, j)))
-                .map(|(i, j)| a[(i, j)])
-                .collect()
-        };
-        Ok(LineOut {
-            t: col(&t),
-            s: col(&s),
-            p: col(&pl),
-            vt,
-            vs,
-            vp,
-            coh: (0..ny).map(|i| coh_of(&tr, off_y, i)).collect(),
-            coh_u: (0..nu).map(|i| coh_of(&sr, off_u, i)).collect(),
-            cond_r,
-            cond_u,
-        })
+        let base = 2 * nt + ns;
+        for i in 0..ny {
+            fl[base + i] = coh_of(&ws.tr, off_y, i);
+        }
+        for i in 0..nu {
+            fl[base + ny + i] = coh_of(&ws.sr, off_u, i);
+        }
+        fl[base + ny + nu] = cond_r;
+        fl[base + ny + nu + 1] = cond_u;
+        Ok((vals, fl))
     };
-    let outs: Vec<LineOut> = (0..nl)
+    let outs: Vec<(Vec<c64>, Vec<f64>)> = (0..nl)
         .into_par_iter()
-        .map(per_line)
+        .map_init(new_ws, per_line)
         .collect::<Result<_>>()?;
-    let cat = |g: &dyn Fn(&LineOut) -> &[c64]| {
+    let cat = |r: std::ops::Range<usize>| -> Vec<c64> {
         outs.iter()
-            .flat_map(|o| g(o).iter().copied())
-            .collect::<Vec<_>>()
+            .flat_map(|o| o.0[r.clone()].iter().copied())
+            .collect()
     };
-    let catf = |g: &dyn Fn(&LineOut) -> &[f64]| {
+    let catf = |r: std::ops::Range<usize>| -> Vec<f64> {
         outs.iter()
-            .flat_map(|o| g(o).iter().copied())
-            .collect::<Vec<_>>()
+            .flat_map(|o| o.1[r.clone()].iter().copied())
+            .collect()
     };
+    let base = 2 * nt + ns;
     Ok(MimoClosedLoopFrf {
-        t_ry: frd(&f, ny, nu, cat(&|o| &o.t), catf(&|o| &o.vt), p, ts)?,
-        s: frd(&f, nu, nu, cat(&|o| &o.s), catf(&|o| &o.vs), p, ts)?,
-        plant: frd(&f, ny, nu, cat(&|o| &o.p), catf(&|o| &o.vp), p, ts)?,
+        t_ry: frd(&f, ny, nu, cat(0..nt), catf(0..nt), p, ts)?,
+        s: frd(&f, nu, nu, cat(nt..nt + ns), catf(nt..nt + ns), p, ts)?,
+        plant: frd(&f, ny, nu, cat(nt + ns..base), catf(nt + ns..base), p, ts)?,
         plant_indirect: None,
-        coherence: catf(&|o| &o.coh),
-        coherence_u: catf(&|o| &o.coh_u),
-        cond_r: outs.iter().map(|o| o.cond_r).collect(),
-        cond_u: outs.iter().map(|o| o.cond_u).collect(),
+        coherence: catf(base..base + ny),
+        coherence_u: catf(base + ny..base + ny + nu),
+        cond_r: catf(base + ny + nu..base + ny + nu + 1),
+        cond_u: catf(base + ny + nu + 1..base + ny + nu + 2),
         measured: vec![true; nl * nu],
         lines,
         periods: p,
