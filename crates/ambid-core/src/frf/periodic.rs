@@ -324,9 +324,8 @@ struct PeriodSums {
     /// Position of the first analysed period in the record.
     first_off: usize,
     periods: usize,
-    /// Spectra of the reference (first analysed) period and of the current one, noisy channels.
+    /// Spectra of the reference (first analysed) period, noisy channels.
     refp: Vec<Vec<c64>>,
-    cur: Vec<Vec<c64>>,
     s1: Vec<Vec<c64>>,
     /// Two noisy channels: Σ|d_a|², Σ|d_b|², Σ d_a d_b*.
     saa: Vec<f64>,
@@ -388,7 +387,6 @@ impl PeriodSums {
             first_off: 0,
             periods: 0,
             refp: vec![vec![zero; lines]; nn],
-            cur: vec![vec![zero; if two { 0 } else { lines }]; nn],
             s1: vec![vec![zero; lines]; nn],
             saa: vec![0.0; if two { lines } else { 0 }],
             sbb: vec![0.0; if two { lines } else { 0 }],
@@ -440,44 +438,67 @@ impl PeriodSums {
             }
         } else if !self.noisy.is_empty() {
             let nn = self.noisy.len();
+            let keep = !first && !self.pairs.is_empty();
+            if keep && self.dev.is_empty() {
+                self.dev = vec![c64::new(0.0, 0.0); lines * self.block * nn];
+            }
+            let (block, p) = (self.block, self.in_block);
             for pair in (0..nn).step_by(2) {
                 let a = period[self.noisy[pair]];
                 let b = self.noisy.get(pair + 1).map(|&c| period[c]);
                 an.transform_pair(a, b, off)?;
-                split_pair(&an.buf, n, lines, &mut self.cur, pair, b.is_some());
+                if first {
+                    split_pair(&an.buf, n, lines, &mut self.refp, pair, b.is_some());
+                    continue;
+                }
+                // split (as split_pair), deviate from the reference period, sum and hold the
+                // deviations in one pass
+                let z = &an.buf;
+                let has_b = b.is_some();
+                let mask = self.line_mask.as_deref();
+                let (s1a, s1b) = if has_b {
+                    let (lo, hi) = self.s1.split_at_mut(pair + 1);
+                    (&mut lo[pair], Some(&mut hi[0]))
+                } else {
+                    (&mut self.s1[pair], None)
+                };
+                let ra = &self.refp[pair];
+                let rb = has_b.then(|| &self.refp[pair + 1]);
+                let mut s1b = s1b;
+                for k in 0..lines {
+                    let (va, vb) = if !has_b {
+                        (z[k], c64::new(0.0, 0.0))
+                    } else if k == 0 {
+                        (c64::new(z[0].re, 0.0), c64::new(z[0].im, 0.0))
+                    } else {
+                        let zk = z[k];
+                        let zc = z[n - k].conj();
+                        let d = zk - zc; // = 2j B
+                        ((zk + zc) * 0.5, c64::new(d.im * 0.5, -d.re * 0.5))
+                    };
+                    let da = va - ra[k];
+                    s1a[k] += da;
+                    let db = match (rb, s1b.as_deref_mut()) {
+                        (Some(rb), Some(s1b)) => {
+                            let db = vb - rb[k];
+                            s1b[k] += db;
+                            Some(db)
+                        }
+                        _ => None,
+                    };
+                    if keep && mask.is_none_or(|m| m[k]) {
+                        let at = (k * block + p) * nn + pair;
+                        self.dev[at] = da;
+                        if let Some(db) = db {
+                            self.dev[at + 1] = db;
+                        }
+                    }
+                }
             }
-            if first {
-                for (r, c) in self.refp.iter_mut().zip(&self.cur) {
-                    r.copy_from_slice(c);
-                }
-            } else {
-                // deviations from the reference period
-                for a in 0..nn {
-                    let (cur, refp, s1) = (&mut self.cur[a], &self.refp[a], &mut self.s1[a]);
-                    for k in 0..lines {
-                        cur[k] -= refp[k];
-                        s1[k] += cur[k];
-                    }
-                }
-                if !self.pairs.is_empty() {
-                    let block = self.block;
-                    if self.dev.is_empty() {
-                        self.dev = vec![c64::new(0.0, 0.0); lines * block * nn];
-                    }
-                    let p = self.in_block;
-                    for k in 0..lines {
-                        if self.line_mask.as_ref().is_some_and(|m| !m[k]) {
-                            continue;
-                        }
-                        let d = &mut self.dev[(k * block + p) * nn..(k * block + p + 1) * nn];
-                        for (a, v) in d.iter_mut().enumerate() {
-                            *v = self.cur[a][k];
-                        }
-                    }
-                    self.in_block += 1;
-                    if self.in_block == block {
-                        self.fold_block();
-                    }
+            if keep {
+                self.in_block += 1;
+                if self.in_block == self.block {
+                    self.fold_block();
                 }
             }
         }
