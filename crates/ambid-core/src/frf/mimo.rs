@@ -600,7 +600,8 @@ fn jacobi_svd(a: &Mat<c64>, w: &mut Mat<c64>, z: &mut Mat<c64>, norms: &mut [f64
                     ga += x.conj() * y;
                 }
                 let g = ga.norm();
-                if !(g > 4.0 * f64::EPSILON * (al * be).sqrt()) {
+                // converged pair (or a NaN, which no rotation mends)
+                if g.is_nan() || g <= 4.0 * f64::EPSILON * (al * be).sqrt() {
                     continue;
                 }
                 rotated = true;
@@ -902,11 +903,38 @@ pub fn periodic(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> 
     };
     // per line: values t | s | p (column-major) and vt | vs | vp | coh | coh_u | cond_r | cond_u
     let (nt, ns) = (ny * nu, nu * nu);
+    // the covariance rows the per-line formulas read, looked up once: per experiment, the
+    // stacked (u, y) pairs a ≤ b with a < nu (u–u, u–y) or a = b (y–y diagonal), row-major
+    let used: Vec<(usize, usize)> = (0..nz)
+        .flat_map(|a| (a..nz).map(move |b| (a, b)))
+        .filter(|&(a, b)| a < nu || a == b)
+        .collect();
+    let rows: Vec<Vec<&[c64]>> = specs
+        .iter()
+        .map(|sp| {
+            used.iter()
+                .map(|&(a, b)| sp.cov_slice(off_u + a, off_u + b).0)
+                .collect()
+        })
+        .collect();
+    // the period-mean second moment of channel c (PeriodicSpectra::moment_at, same operations)
+    let diag: Vec<Vec<(&[c64], &[c64])>> = specs
+        .iter()
+        .map(|sp| {
+            (0..off_u + nz)
+                .map(|c| (sp.cov_slice(c, c).0, sp.mean(c)))
+                .collect()
+        })
+        .collect();
+    let moment = |e: usize, c: usize, k: usize| -> f64 {
+        let (row, mean) = diag[e][c];
+        let x = mean[k];
+        (row[k] * ((pf - 1.0) / pf) + x * x.conj()).re
+    };
     let per_line = |ws: &mut Ws, li: usize| -> Result<(Vec<c64>, Vec<f64>)> {
         let k = lines[li];
         let fk = f[li];
-        for e in 0..m {
-            let sp = &specs[e];
+        for (e, sp) in specs.iter().enumerate() {
             for j in 0..nr {
                 ws.r[(j, e)] = sp.mean(j)[k];
                 ws.u[(j, e)] = sp.mean(off_u + j)[k];
@@ -987,15 +1015,10 @@ pub fn periodic(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> 
             let (vt, rest) = fl.split_at_mut(nt);
             let (vs, rest) = rest.split_at_mut(ns);
             let vp = &mut rest[..nt];
-            for e in 0..m {
+            for (e, rows) in rows.iter().enumerate() {
                 // the covariance of the means of (u, y), stacked u then y: the pairs used
-                let sp = &specs[e];
-                for a in 0..nz {
-                    for b in a..nz {
-                        if a < nu || a == b {
-                            ws.cov[a * nz + b] = sp.cov_at(off_u + a, off_u + b, k) / pf;
-                        }
-                    }
+                for (&(a, b), row) in used.iter().zip(rows) {
+                    ws.cov[a * nz + b] = row[k] / pf;
                 }
                 let cv = |a: usize, b: usize| ws.cov[a * nz + b];
                 for j in 0..nu {
@@ -1022,9 +1045,7 @@ pub fn periodic(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> 
         mat_mul_into(&ws.s, &ws.r, &mut ws.sr);
         let coh_of = |fit: &Mat<c64>, off: usize, i: usize| {
             let num: f64 = (0..m).map(|e| fit[(i, e)].norm_sqr()).sum();
-            let den: f64 = (0..m)
-                .map(|e| specs[e].moment_at(off + i, off + i, k).re)
-                .sum();
+            let den: f64 = (0..m).map(|e| moment(e, off + i, k)).sum();
             if den > 0.0 {
                 (num / den).min(1.0)
             } else {
@@ -1322,6 +1343,64 @@ mod tests {
         assert_eq!(lagrange4(&own, 12).0, [6, 10, 14, 18]);
         assert_eq!(lagrange4(&own, 1).0, [2, 6, 10, 14]);
         assert_eq!(lagrange4(&own, 25).0, [10, 14, 18, 22]);
+    }
+
+    /// The Jacobi SVD against faer's singular values (an independent algorithm) and by
+    /// reconstruction, for tall, wide and square matrices, one of them rank-deficient.
+    #[test]
+    fn jacobi_svd_reconstructs_and_matches_faer() {
+        let el = |i: usize, j: usize, s: f64| {
+            c64::new(
+                ((i * 7 + j * 3) as f64 * 0.37 + s).sin(),
+                ((i * 5 + j * 11) as f64 * 0.23 - s).cos(),
+            )
+        };
+        let mut cases: Vec<Mat<c64>> = vec![
+            Mat::from_fn(4, 4, |i, j| el(i, j, 0.1)),
+            Mat::from_fn(3, 6, |i, j| el(i, j, 0.2)),
+            Mat::from_fn(6, 3, |i, j| el(i, j, 0.3)),
+            Mat::from_fn(1, 1, |_, _| c64::new(-2.0, 0.5)),
+        ];
+        // rank 1: σ₂ = 0 (to rounding) → κ huge
+        cases.push(Mat::from_fn(3, 3, |i, j| el(i, 0, 0.4) * el(0, j, 0.5)));
+        for a in &cases {
+            let (m, n) = (a.nrows(), a.ncols());
+            let (sv, u, v) = svd_small(a).unwrap();
+            let q = m.min(n);
+            assert_eq!(
+                (sv.len(), u.nrows(), u.ncols(), v.nrows(), v.ncols()),
+                (q, m, q, n, q)
+            );
+            let want = a.singular_values().unwrap();
+            let scale = sv[0];
+            for (x, y) in sv.iter().zip(&want) {
+                assert!((x - y).abs() <= 1e-13 * scale, "{sv:?} vs {want:?}");
+            }
+            assert!(sv.windows(2).all(|w| w[0] >= w[1]));
+            for i in 0..m {
+                for j in 0..n {
+                    let r: c64 = (0..q).map(|l| u[(i, l)] * v[(j, l)].conj() * sv[l]).sum();
+                    assert!((r - a[(i, j)]).norm() < 1e-13 * scale);
+                }
+            }
+            for (x, rows) in [(&v, n), (&u, m)] {
+                for c in 0..q {
+                    if sv[c] < 1e-12 * scale && std::ptr::eq(x, &u) {
+                        continue; // no left vector for a zero singular value
+                    }
+                    for d in 0..q {
+                        if sv[d] < 1e-12 * scale && std::ptr::eq(x, &u) {
+                            continue;
+                        }
+                        let g: c64 = (0..rows).map(|i| x[(i, c)].conj() * x[(i, d)]).sum();
+                        let want = if c == d { ONE } else { ZERO };
+                        assert!((g - want).norm() < 1e-13);
+                    }
+                }
+            }
+        }
+        let (sv, _, _) = svd_small(&cases[4]).unwrap();
+        assert!(cond_of(&sv) > 1e14);
     }
 
     #[test]

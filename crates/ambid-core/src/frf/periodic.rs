@@ -1105,6 +1105,90 @@ mod tests {
         }
     }
 
+    /// Many periods (several blocks of held deviations, the last one partial) against the
+    /// naive oracle; the selected analysis equals the full one bit for bit where it computes,
+    /// and reads NaN where it does not.
+    #[test]
+    fn blocks_of_periods_and_selected_pairs_and_lines() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let (n, periods, skip) = (14usize, 37usize, 2usize);
+        let len = n * periods;
+        let base: Vec<f64> = (0..n).map(|_| StandardNormal.sample(&mut rng)).collect();
+        let r: Vec<f64> = (0..len).map(|k| base[k % n]).collect();
+        let mut noisy = |g: f64, lag: usize| -> Vec<f64> {
+            (0..len)
+                .map(|k| {
+                    let z: f64 = StandardNormal.sample(&mut rng);
+                    g * base[(k + lag) % n] + 0.3 * z
+                })
+                .collect()
+        };
+        let chans: Vec<Vec<f64>> = vec![
+            r.clone(),
+            noisy(1.0, 0),
+            noisy(0.5, 1),
+            noisy(-0.7, 2),
+            noisy(0.2, 3),
+            noisy(1.5, 4),
+        ];
+        let refs: Vec<&[f64]> = chans.iter().map(|c| c.as_slice()).collect();
+        let opts = PeriodicOptions::new(n).skip(skip);
+        let mut an = PeriodicAnalyzer::new(n).unwrap();
+        let full = an.analyze(&refs, 10.0, &opts).unwrap();
+        let p = periods - skip;
+        for k in 0..full.n_lines() {
+            let dft: Vec<Vec<c64>> = refs
+                .iter()
+                .map(|x| {
+                    (skip..periods)
+                        .map(|q| naive_dft(&x[q * n..(q + 1) * n], k))
+                        .collect()
+                })
+                .collect();
+            let means: Vec<c64> = dft
+                .iter()
+                .map(|d| d.iter().sum::<c64>() / p as f64)
+                .collect();
+            for i in 0..refs.len() {
+                assert!((full.mean(i)[k] - means[i]).norm() < 1e-10);
+                for j in 0..refs.len() {
+                    let c: c64 = (0..p)
+                        .map(|q| (dft[i][q] - means[i]) * (dft[j][q] - means[j]).conj())
+                        .sum::<c64>()
+                        / (p as f64 - 1.0);
+                    assert!(
+                        (full.cov_at(i, j, k) - c).norm() < 1e-9 * (1.0 + c.norm()),
+                        "cov {i}{j} line {k}"
+                    );
+                }
+            }
+        }
+        // channels 1, 2 as "u", 3..5 as "y": u–u, u–y and y–y on the diagonal, odd lines
+        let need = |i: usize, j: usize| i >= 1 && (i < 3 || i == j);
+        let mask: Vec<bool> = (0..full.n_lines()).map(|k| k % 2 == 1).collect();
+        let sel = an
+            .analyze_selected(&refs, 10.0, &opts, &need, Some(&mask))
+            .unwrap();
+        for k in 0..full.n_lines() {
+            for i in 0..refs.len() {
+                assert_eq!(sel.mean(i)[k], full.mean(i)[k]);
+                for j in i..refs.len() {
+                    let (a, b) = (sel.cov_at(i, j, k), full.cov_at(i, j, k));
+                    if i == 0 {
+                        assert_eq!(a, c64::new(0.0, 0.0), "exact channel {i}{j}");
+                    } else if need(i, j) && mask[k] {
+                        assert_eq!(a, b, "pair {i}{j} line {k}");
+                    } else {
+                        assert!(a.re.is_nan() && a.im.is_nan(), "pair {i}{j} line {k}: {a}");
+                    }
+                }
+            }
+        }
+        assert!(an
+            .analyze_selected(&refs, 10.0, &opts, &need, Some(&mask[1..]))
+            .is_err());
+    }
+
     #[test]
     fn coherence_is_one_without_noise_and_below_with() {
         let n = 20;
