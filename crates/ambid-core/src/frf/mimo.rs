@@ -29,6 +29,10 @@
 //! $\rho$ = [`MimoOptions::rel_threshold`] (default $10^{-6}$; DC is never used). The multi-
 //! experiment estimate uses every line excited by some input in some experiment (within the
 //! optional band); the zippered one assigns each line to the single input that excites it.
+//! [`periodic`] decides them first, from the DFT of each r channel's time-averaged period (by
+//! linearity its period mean), and then accumulates the period covariances only on those lines
+//! and only for the pairs its formulas read (u–u, u–y and the y–y diagonal); the per-line solves
+//! run in one workspace per rayon task, so the result does not depend on the thread count.
 //!
 //! # Several experiments
 //! Per line, stack the experiments as columns: $R(k)$ ($n_r \times M$), $U(k)$, $Y(k)$. With
