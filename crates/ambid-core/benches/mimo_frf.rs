@@ -1,6 +1,11 @@
 //! Speed of the MIMO closed-loop FRF ([`ambid_core::frf::mimo`]) on the size of the issue's
 //! bar: 4 experiments (an orthogonal design) × 102 300 samples (20 periods of 5 115) of 12
-//! channels (r, u, y of the axes xa, xb, ya, yb), 1 023 excited lines.
+//! channels (r, u, y of the axes xa, xb, ya, yb), in two shapes:
+//!
+//! * multisine: 1 023 excited lines of the 2 558 (10 kHz);
+//! * PRBS (`*_prbs`): the twin's default excitation as `ambid simulate` writes it, order 10,
+//!   5 samples per bit (period 5 115 at 20 kHz), 20 periods, ± the same PRBS on every axis
+//!   with the signs of a Hadamard matrix; every line but the sinc nulls (2 555) excited.
 //!
 //! * `mimo_4x4_orthogonal`: [`periodic`] (period averages and covariances of every channel,
 //!   then T_ry, S, P with variances, coherences and condition numbers per line);
@@ -8,7 +13,9 @@
 //!   (4 experiments × 12 channels × 102 300 samples), the reference of the bar (≤ 3×);
 //! * `siso_periodic_frf`: today's SISO periodic closed-loop FRF of one experiment
 //!   ([`PeriodicAnalyzer`] on r, u, y and [`from_periodic`]), the other reference (≤ 4× per
-//!   experiment).
+//!   experiment);
+//! * `analysis_12_channels`: [`PeriodicAnalyzer::analyze`] of the 12 channels of one
+//!   experiment (every pair's covariance), a piece of the MIMO cost.
 //!
 //! Run: `cargo bench -p ambid-core --bench mimo_frf`.
 
@@ -16,6 +23,7 @@ use ambid_core::data::IoData;
 use ambid_core::frf::closed_loop::{from_periodic, Channels};
 use ambid_core::frf::mimo::{periodic, MimoOptions};
 use ambid_core::frf::periodic::{PeriodicAnalyzer, PeriodicOptions};
+use ambid_core::signal::prbs_period;
 use divan::{black_box, Bencher};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -25,6 +33,9 @@ use realfft::RealFftPlanner;
 const N: usize = 5115;
 const PERIODS: usize = 20;
 const FS: f64 = 10_000.0;
+const FS_PRBS: f64 = 20_000.0;
+/// Lines excited by the PRBS: all but DC and the sinc nulls at 1 023 and 2 046.
+const LINES_PRBS: usize = 2555;
 const LINES: usize = 1023;
 const AXES: [&str; 4] = ["xa", "xb", "ya", "yb"];
 const H4: [[f64; 4]; 4] = [
@@ -38,9 +49,8 @@ fn main() {
     divan::main();
 }
 
-/// An orthogonal 4-experiment record: r = ±multisine, u and y fixed FIR mixes of r plus noise.
-fn data() -> IoData {
-    let mut rng = ChaCha8Rng::seed_from_u64(20);
+/// One period of the multisine on lines 1..=1023 (Schroeder-like phases).
+fn multisine() -> Vec<f64> {
     let phases: Vec<f64> = (0..LINES)
         .map(|k| (k * k) as f64 * std::f64::consts::PI / LINES as f64)
         .collect();
@@ -55,6 +65,24 @@ fn data() -> IoData {
                 / (LINES as f64).sqrt()
         })
         .collect();
+    one
+}
+
+/// One period of the default PRBS: order 10, 5 samples per bit (5 115 samples).
+fn prbs() -> Vec<f64> {
+    let p: Vec<f64> = prbs_period(10)
+        .unwrap()
+        .iter()
+        .flat_map(|&b| std::iter::repeat_n(f64::from(b), 5))
+        .collect();
+    assert_eq!(p.len(), N);
+    p
+}
+
+/// An orthogonal 4-experiment record: r = ±`one` (repeated), u and y fixed FIR mixes of r plus
+/// noise.
+fn record(one: &[f64], fs: f64) -> IoData {
+    let mut rng = ChaCha8Rng::seed_from_u64(20);
     let len = N * PERIODS;
     let ms: Vec<f64> = (0..len).map(|t| one[t % N]).collect();
     let exps: Vec<IoData> = (0..4)
@@ -82,20 +110,78 @@ fn data() -> IoData {
                     ch.push((format!("{l}_{}", AXES[i]), v.clone()));
                 }
             }
-            IoData::new(ch, 1.0 / FS, Some(N)).unwrap()
+            IoData::new(ch, 1.0 / fs, Some(N)).unwrap()
         })
         .collect();
     IoData::from_experiments(exps).unwrap()
 }
 
-#[divan::bench(sample_count = 10)]
-fn mimo_4x4_orthogonal(bencher: Bencher) {
-    let d = data();
+fn data() -> IoData {
+    record(&multisine(), FS)
+}
+
+fn data_prbs() -> IoData {
+    record(&prbs(), FS_PRBS)
+}
+
+fn bench_mimo(bencher: Bencher, d: &IoData, lines: usize) {
     let o = MimoOptions::new();
     bencher.bench_local(|| {
-        let f = periodic(black_box(&d), &o).unwrap();
-        assert_eq!(f.lines.len(), LINES);
+        let f = periodic(black_box(d), &o).unwrap();
+        assert_eq!(f.lines.len(), lines);
         f
+    });
+}
+
+fn bench_siso(bencher: Bencher, d: &IoData, fs: f64) {
+    let ch: Vec<&[f64]> = ["r_xa", "u_xa", "y_xa"]
+        .iter()
+        .map(|c| d.channel(c).unwrap())
+        .collect();
+    bencher.bench_local(|| {
+        let s = PeriodicAnalyzer::new(N)
+            .unwrap()
+            .analyze(black_box(&ch), fs, &PeriodicOptions::new(N))
+            .unwrap();
+        let lines = s.excited_lines(0, 1e-6).unwrap();
+        from_periodic(&s, Channels { r: 0, u: 1, y: 2 }, &lines, None).unwrap()
+    });
+}
+
+#[divan::bench(sample_count = 10)]
+fn mimo_4x4_orthogonal(bencher: Bencher) {
+    bench_mimo(bencher, &data(), LINES);
+}
+
+#[divan::bench(sample_count = 10)]
+fn mimo_4x4_orthogonal_prbs(bencher: Bencher) {
+    bench_mimo(bencher, &data_prbs(), LINES_PRBS);
+}
+
+#[divan::bench(sample_count = 10)]
+fn siso_periodic_frf(bencher: Bencher) {
+    bench_siso(bencher, &data(), FS);
+}
+
+#[divan::bench(sample_count = 10)]
+fn siso_periodic_frf_prbs(bencher: Bencher) {
+    bench_siso(bencher, &data_prbs(), FS_PRBS);
+}
+
+#[divan::bench(sample_count = 10)]
+fn analysis_12_channels(bencher: Bencher) {
+    let d = data_prbs();
+    let e = d.experiment(0).unwrap();
+    let ch: Vec<&[f64]> = ["r", "u", "y"]
+        .iter()
+        .flat_map(|l| AXES.iter().map(move |a| format!("{l}_{a}")))
+        .map(|c| e.channel(&c).unwrap())
+        .collect();
+    bencher.bench_local(|| {
+        PeriodicAnalyzer::new(N)
+            .unwrap()
+            .analyze(black_box(&ch), FS_PRBS, &PeriodicOptions::new(N))
+            .unwrap()
     });
 }
 
@@ -123,22 +209,5 @@ fn rfft_all_channels(bencher: Bencher) {
                 .unwrap();
             black_box(&out);
         }
-    });
-}
-
-#[divan::bench(sample_count = 10)]
-fn siso_periodic_frf(bencher: Bencher) {
-    let d = data();
-    let ch: Vec<&[f64]> = ["r_xa", "u_xa", "y_xa"]
-        .iter()
-        .map(|c| d.channel(c).unwrap())
-        .collect();
-    bencher.bench_local(|| {
-        let s = PeriodicAnalyzer::new(N)
-            .unwrap()
-            .analyze(black_box(&ch), FS, &PeriodicOptions::new(N))
-            .unwrap();
-        let lines = s.excited_lines(0, 1e-6).unwrap();
-        from_periodic(&s, Channels { r: 0, u: 1, y: 2 }, &lines, None).unwrap()
     });
 }

@@ -29,6 +29,10 @@
 //! $\rho$ = [`MimoOptions::rel_threshold`] (default $10^{-6}$; DC is never used). The multi-
 //! experiment estimate uses every line excited by some input in some experiment (within the
 //! optional band); the zippered one assigns each line to the single input that excites it.
+//! [`periodic`] decides them first, from the DFT of each r channel's time-averaged period (by
+//! linearity its period mean), and then accumulates the period covariances only on those lines
+//! and only for the pairs its formulas read (u–u, u–y and the y–y diagonal); the per-line solves
+//! run in one workspace per rayon task, so the result does not depend on the thread count.
 //!
 //! # Several experiments
 //! Per line, stack the experiments as columns: $R(k)$ ($n_r \times M$), $U(k)$, $Y(k)$. With
@@ -459,13 +463,21 @@ fn layout<'a>(data: &'a IoData, opts: &MimoOptions) -> Result<Layout<'a>> {
             ));
         }
     }
-    data.require_finite(&[Role::Excitation, Role::Input, Role::Output])?;
     let mut chans = Vec::with_capacity(m);
     for e in 0..m {
         let mut c = data.signals(Role::Excitation, e)?;
         c.extend(data.signals(Role::Input, e)?);
         c.extend(data.signals(Role::Output, e)?);
         chans.push(c);
+    }
+    // every sample finite: a branch-free scan of all channels in parallel; on a failure
+    // IoData::require_finite names the first bad channel, experiment and sample
+    let all_finite = chans
+        .par_iter()
+        .flat_map(|c| c.par_iter())
+        .all(|x| !x.iter().fold(false, |bad, v| bad | !v.is_finite()));
+    if !all_finite {
+        data.require_finite(&[Role::Excitation, Role::Input, Role::Output])?;
     }
     Ok(Layout { chans, nr, ny, n })
 }
@@ -478,6 +490,24 @@ fn analyse(lay: &Layout<'_>, fs: f64, opts: &MimoOptions) -> Result<Vec<Periodic
         .collect()
 }
 
+/// [`analyse`] keeping only what [`periodic`] reads: the covariances of the pairs u–u, u–y
+/// and y–y on the diagonal (channels in the layout order r…, u…, y…), on the lines with
+/// `lines[k]` (all if `None`).
+fn analyse_for_periodic(
+    lay: &Layout<'_>,
+    fs: f64,
+    opts: &MimoOptions,
+    lines: Option<&[bool]>,
+) -> Result<Vec<PeriodicSpectra>> {
+    let po = PeriodicOptions::new(lay.n).skip(opts.skip_periods);
+    let nr = lay.nr;
+    let need = |i: usize, j: usize| i >= nr && (i < 2 * nr || i == j);
+    lay.chans
+        .par_iter()
+        .map(|c| PeriodicAnalyzer::new(lay.n)?.analyze_selected(c, fs, &po, &need, lines))
+        .collect()
+}
+
 /// The lines excited by each input: `out[j]` = sorted lines where $|\bar R_j|$ passes the
 /// threshold in some experiment, within the band.
 fn excited_by_input(
@@ -485,19 +515,34 @@ fn excited_by_input(
     nr: usize,
     opts: &MimoOptions,
 ) -> Result<Vec<Vec<usize>>> {
-    let nl = specs[0].n_lines();
+    let means: Vec<Vec<&[c64]>> = specs
+        .iter()
+        .map(|s| (0..nr).map(|j| s.mean(j)).collect())
+        .collect();
+    excited_from_means(&means, specs[0].resolution_hz(), opts)
+}
+
+/// [`excited_by_input`] from the period-mean DFTs of the excitation channels alone,
+/// `means[e][j]` (every line, DC first) of input `j` in experiment `e`, lines `df` Hz apart.
+fn excited_from_means(
+    means: &[Vec<&[c64]>],
+    df: f64,
+    opts: &MimoOptions,
+) -> Result<Vec<Vec<usize>>> {
+    let nr = means.first().map_or(0, |m| m.len());
+    let nl = means.first().and_then(|m| m.first()).map_or(0, |m| m.len());
     let in_band = |k: usize| match opts.band {
         None => true,
         Some((lo, hi)) => {
-            let f = specs[0].line_hz(k);
+            let f = k as f64 * df;
             f >= lo && f <= hi
         }
     };
     let mut out = Vec::with_capacity(nr);
     for j in 0..nr {
-        let peak = specs
+        let peak = means
             .iter()
-            .flat_map(|s| s.mean(j)[1..].iter())
+            .flat_map(|m| m[j][1..].iter())
             .fold(0.0f64, |a, v| a.max(v.norm_sqr()));
         if peak == 0.0 {
             return Err(Error::invalid(
@@ -511,21 +556,182 @@ fn excited_by_input(
         let thr = opts.rel_threshold * opts.rel_threshold * peak;
         out.push(
             (1..nl)
-                .filter(|&k| in_band(k) && specs.iter().any(|s| s.mean(j)[k].norm_sqr() > thr))
+                .filter(|&k| in_band(k) && means.iter().any(|m| m[j][k].norm_sqr() > thr))
                 .collect::<Vec<_>>(),
         );
     }
     Ok(out)
 }
 
-/// Singular values of a small complex matrix (descending).
+/// The period-mean DFT of every excitation channel of every experiment, `[e][j]` on every
+/// line, before the full analysis, so that the excited lines are known first: the DFT of the
+/// channel's time-averaged period (by linearity the mean of the period DFTs; the first period
+/// itself for a channel whose periods are bit-identical), two channels per complex FFT.
+/// `None` when the record cannot be cut into the periods asked for (the full analysis then
+/// reports why).
+fn excitation_means(lay: &Layout<'_>, opts: &MimoOptions) -> Option<Vec<Vec<Vec<c64>>>> {
+    let n = lay.n;
+    let len = lay.chans.first()?.first()?.len();
+    if n < 2 || len % n != 0 || len / n <= opts.skip_periods {
+        return None;
+    }
+    let start = opts.skip_periods * n;
+    let p_used = len / n - opts.skip_periods;
+    let lines = n / 2 + 1;
+    let fft = rustfft::FftPlanner::<f64>::new().plan_fft_forward(n);
+    let period = |x: &[f64]| -> Vec<f64> {
+        let first = &x[start..start + n];
+        if (1..p_used).all(|p| &x[start + p * n..start + (p + 1) * n] == first) {
+            return first.to_vec();
+        }
+        let mut acc = vec![0.0; n];
+        for p in 0..p_used {
+            for (a, v) in acc.iter_mut().zip(&x[start + p * n..start + (p + 1) * n]) {
+                *a += v;
+            }
+        }
+        let pf = p_used as f64;
+        acc.iter_mut().for_each(|a| *a /= pf);
+        acc
+    };
+    Some(
+        lay.chans
+            .par_iter()
+            .map(|ch| {
+                let mut buf = vec![ZERO; n];
+                let mut scratch = vec![ZERO; fft.get_inplace_scratch_len()];
+                let mut out = Vec::with_capacity(lay.nr);
+                for j in (0..lay.nr).step_by(2) {
+                    let a = period(ch[j]);
+                    let b = (j + 1 < lay.nr).then(|| period(ch[j + 1]));
+                    for (t, z) in buf.iter_mut().enumerate() {
+                        *z = c64::new(a[t], b.as_ref().map_or(0.0, |b| b[t]));
+                    }
+                    fft.process_with_scratch(&mut buf, &mut scratch);
+                    // A_k = (Z_k + conj Z_{N−k})/2, B_k = (Z_k − conj Z_{N−k})/(2j)
+                    let zc = |k: usize| if k == 0 { buf[0] } else { buf[n - k] }.conj();
+                    out.push((0..lines).map(|k| (buf[k] + zc(k)) * 0.5).collect());
+                    if b.is_some() {
+                        out.push(
+                            (0..lines)
+                                .map(|k| {
+                                    let d = buf[k] - zc(k);
+                                    c64::new(d.im * 0.5, -d.re * 0.5)
+                                })
+                                .collect(),
+                        );
+                    }
+                }
+                out
+            })
+            .collect(),
+    )
+}
+
+/// One-sided (Hestenes) Jacobi SVD of a small complex matrix $A$ ($m \times n$): with
+/// $B = A$ if $m \ge n$ (returns `true`) or $B = A^{\mathsf H}$ ($p \times q$, $p \ge q$),
+/// rotates the columns of $W = B Z$ until they are orthogonal: on return $B = W Z^{\mathsf H}$
+/// with $Z$ ($q \times q$) unitary, the columns of $W$ orthogonal and `norms[c]` $= \|W_c\|$
+/// the singular values (unsorted, to high relative accuracy). `w` and `z` must be $p \times q$
+/// and $q \times q$, `norms` $q$ long.
+fn jacobi_svd(a: &Mat<c64>, w: &mut Mat<c64>, z: &mut Mat<c64>, norms: &mut [f64]) -> Result<bool> {
+    let (m, n) = (a.nrows(), a.ncols());
+    let tall = m >= n;
+    let (p, q) = (w.nrows(), w.ncols());
+    debug_assert!(p == m.max(n) && q == m.min(n) && z.nrows() == q && norms.len() == q);
+    for r in 0..p {
+        for c in 0..q {
+            w[(r, c)] = if tall { a[(r, c)] } else { a[(c, r)].conj() };
+        }
+    }
+    for r in 0..q {
+        for c in 0..q {
+            z[(r, c)] = if r == c { ONE } else { ZERO };
+        }
+    }
+    let mut converged = false;
+    for _ in 0..60 {
+        let mut rotated = false;
+        for i in 0..q {
+            for j in i + 1..q {
+                let (mut al, mut be, mut ga) = (0.0, 0.0, ZERO);
+                for r in 0..p {
+                    let (x, y) = (w[(r, i)], w[(r, j)]);
+                    al += x.norm_sqr();
+                    be += y.norm_sqr();
+                    ga += x.conj() * y;
+                }
+                let g = ga.norm();
+                // converged pair (or a NaN, which no rotation mends)
+                if g.is_nan() || g <= 4.0 * f64::EPSILON * (al * be).sqrt() {
+                    continue;
+                }
+                rotated = true;
+                let ph = (ga / g).conj();
+                let zeta = (be - al) / (2.0 * g);
+                let t = if zeta == 0.0 {
+                    1.0
+                } else {
+                    zeta.signum() / (zeta.abs() + (1.0 + zeta * zeta).sqrt())
+                };
+                let c = 1.0 / (1.0 + t * t).sqrt();
+                let s = c * t;
+                for r in 0..p {
+                    let (x, y) = (w[(r, i)], w[(r, j)] * ph);
+                    w[(r, i)] = x * c - y * s;
+                    w[(r, j)] = x * s + y * c;
+                }
+                for r in 0..q {
+                    let (x, y) = (z[(r, i)], z[(r, j)] * ph);
+                    z[(r, i)] = x * c - y * s;
+                    z[(r, j)] = x * s + y * c;
+                }
+            }
+        }
+        if !rotated {
+            converged = true;
+            break;
+        }
+    }
+    if !converged {
+        return Err(Error::numerical(
+            "MIMO FRF",
+            "the SVD of a line's matrix did not converge (non-finite entries?)",
+        ));
+    }
+    for (j, nv) in norms.iter_mut().enumerate() {
+        *nv = (0..p).map(|r| w[(r, j)].norm_sqr()).sum::<f64>().sqrt();
+    }
+    Ok(tall)
+}
+
+/// Thin SVD $A = U \Sigma V^{\mathsf H}$ of a small complex matrix ([`jacobi_svd`]): singular
+/// values descending, $U$ ($m \times q$) and $V$ ($n \times q$), $q = \min(m, n)$.
 fn svd_small(a: &Mat<c64>) -> Result<(Vec<f64>, Mat<c64>, Mat<c64>)> {
-    let svd = a
-        .svd()
-        .map_err(|e| Error::numerical("MIMO FRF", format!("SVD failed: {e:?}")))?;
-    let s = svd.S().column_vector();
-    let sv: Vec<f64> = (0..s.nrows()).map(|i| s[i].re).collect();
-    Ok((sv, svd.U().to_owned(), svd.V().to_owned()))
+    let (m, n) = (a.nrows(), a.ncols());
+    let (p, q) = (m.max(n), m.min(n));
+    let mut w = Mat::<c64>::zeros(p, q);
+    let mut z = Mat::<c64>::zeros(q, q);
+    let mut norms = vec![0.0; q];
+    let tall = jacobi_svd(a, &mut w, &mut z, &mut norms)?;
+    let mut order: Vec<usize> = (0..q).collect();
+    order.sort_by(|&x, &y| norms[y].total_cmp(&norms[x]));
+    let sv: Vec<f64> = order.iter().map(|&j| norms[j]).collect();
+    let left = Mat::<c64>::from_fn(p, q, |r, c| {
+        let j = order[c];
+        if norms[j] > 0.0 {
+            w[(r, j)] / norms[j]
+        } else {
+            ZERO
+        }
+    });
+    let right = Mat::<c64>::from_fn(q, q, |r, c| z[(r, order[c])]);
+    // B = left Σ rightᴴ; A = B (tall) or Bᴴ = right Σ leftᴴ
+    Ok(if tall {
+        (sv, left, right)
+    } else {
+        (sv, right, left)
+    })
 }
 
 fn cond_of(sv: &[f64]) -> f64 {
@@ -542,12 +748,27 @@ fn cond_of(sv: &[f64]) -> f64 {
 /// singular).
 fn inv_small(a: &Mat<c64>) -> Option<Mat<c64>> {
     let n = a.nrows();
-    let mut m = a.clone();
-    let mut x = Mat::<c64>::from_fn(n, n, |i, j| if i == j { ONE } else { ZERO });
+    let mut m = Mat::<c64>::zeros(n, n);
+    let mut x = Mat::<c64>::zeros(n, n);
+    inv_small_into(a, &mut m, &mut x).then_some(x)
+}
+
+/// [`inv_small`] into `x` with the work matrix `m` (both $n \times n$); `false` if singular.
+fn inv_small_into(a: &Mat<c64>, m: &mut Mat<c64>, x: &mut Mat<c64>) -> bool {
+    let n = a.nrows();
+    for i in 0..n {
+        for j in 0..n {
+            m[(i, j)] = a[(i, j)];
+            x[(i, j)] = if i == j { ONE } else { ZERO };
+        }
+    }
     for col in 0..n {
-        let piv = (col..n).max_by(|&p, &q| m[(p, col)].norm().total_cmp(&m[(q, col)].norm()))?;
+        let Some(piv) = (col..n).max_by(|&p, &q| m[(p, col)].norm().total_cmp(&m[(q, col)].norm()))
+        else {
+            return false;
+        };
         if m[(piv, col)].norm() == 0.0 {
-            return None;
+            return false;
         }
         if piv != col {
             for j in 0..n {
@@ -577,7 +798,16 @@ fn inv_small(a: &Mat<c64>) -> Option<Mat<c64>> {
             }
         }
     }
-    Some(x)
+    true
+}
+
+/// `out = a b` (shapes must agree).
+fn mat_mul_into(a: &Mat<c64>, b: &Mat<c64>, out: &mut Mat<c64>) {
+    for i in 0..a.nrows() {
+        for j in 0..b.ncols() {
+            out[(i, j)] = (0..a.ncols()).fold(ZERO, |acc, l| acc + a[(i, l)] * b[(l, j)]);
+        }
+    }
 }
 
 fn mat_mul(a: &Mat<c64>, b: &Mat<c64>) -> Mat<c64> {
@@ -651,8 +881,29 @@ pub fn periodic(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> 
             ),
         ));
     }
-    let specs = analyse(&lay, data.fs(), opts)?;
-    let per_in = excited_by_input(&specs, nr, opts)?;
+    // the excited lines first, from r alone; then the period statistics on those lines only
+    let (specs, per_in) = match excitation_means(&lay, opts) {
+        Some(rm) => {
+            let means: Vec<Vec<&[c64]>> = rm
+                .iter()
+                .map(|e| e.iter().map(|v| v.as_slice()).collect())
+                .collect();
+            let per_in = excited_from_means(&means, data.fs() / lay.n as f64, opts)?;
+            let mut mask = vec![false; lay.n / 2 + 1];
+            for &k in per_in.iter().flatten() {
+                mask[k] = true;
+            }
+            (
+                analyse_for_periodic(&lay, data.fs(), opts, Some(&mask))?,
+                per_in,
+            )
+        }
+        None => {
+            let specs = analyse_for_periodic(&lay, data.fs(), opts, None)?;
+            let per_in = excited_by_input(&specs, nr, opts)?;
+            (specs, per_in)
+        }
+    };
     let mut lines: Vec<usize> = per_in.into_iter().flatten().collect();
     lines.sort_unstable();
     lines.dedup();
@@ -669,26 +920,94 @@ pub fn periodic(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> 
     let nl = lines.len();
     let (off_u, off_y) = (nr, nr + nu);
 
-    struct LineOut {
-        t: Vec<c64>,
-        s: Vec<c64>,
-        p: Vec<c64>,
-        vt: Vec<f64>,
-        vs: Vec<f64>,
-        vp: Vec<f64>,
-        coh: Vec<f64>,
-        coh_u: Vec<f64>,
-        cond_r: f64,
-        cond_u: f64,
+    // per line: R, U, Y (inputs/outputs × experiments), the Jacobi SVDs, the products and the
+    // inverse in one workspace per rayon task (no allocation per line but the line's output)
+    let nz = nu + ny;
+    struct Ws {
+        r: Mat<c64>,
+        u: Mat<c64>,
+        y: Mat<c64>,
+        w: Mat<c64>,
+        z: Mat<c64>,
+        norms: Vec<f64>,
+        order: Vec<usize>,
+        rp: Mat<c64>,
+        t: Mat<c64>,
+        s: Mat<c64>,
+        s_inv: Mat<c64>,
+        inv_work: Mat<c64>,
+        pl: Mat<c64>,
+        wm: Mat<c64>,
+        tr: Mat<c64>,
+        sr: Mat<c64>,
+        cov: Vec<c64>,
+        g: Vec<(usize, c64)>,
     }
-    let per_line = |li: usize| -> Result<LineOut> {
+    let (sp, sq) = (nr.max(m), nr.min(m));
+    let new_ws = || Ws {
+        r: Mat::zeros(nr, m),
+        u: Mat::zeros(nu, m),
+        y: Mat::zeros(ny, m),
+        w: Mat::zeros(sp, sq),
+        z: Mat::zeros(sq, sq),
+        norms: vec![0.0; sq],
+        order: (0..sq).collect(),
+        rp: Mat::zeros(m, nr),
+        t: Mat::zeros(ny, nu),
+        s: Mat::zeros(nu, nu),
+        s_inv: Mat::zeros(nu, nu),
+        inv_work: Mat::zeros(nu, nu),
+        pl: Mat::zeros(ny, nu),
+        wm: Mat::zeros(m, nu),
+        tr: Mat::zeros(ny, m),
+        sr: Mat::zeros(nu, m),
+        cov: vec![ZERO; nz * nz],
+        g: Vec::with_capacity(nu + 1),
+    };
+    // per line: values t | s | p (column-major) and vt | vs | vp | coh | coh_u | cond_r | cond_u
+    let (nt, ns) = (ny * nu, nu * nu);
+    // the covariance rows the per-line formulas read, looked up once: per experiment, the
+    // stacked (u, y) pairs a ≤ b with a < nu (u–u, u–y) or a = b (y–y diagonal), row-major
+    let used: Vec<(usize, usize)> = (0..nz)
+        .flat_map(|a| (a..nz).map(move |b| (a, b)))
+        .filter(|&(a, b)| a < nu || a == b)
+        .collect();
+    let rows: Vec<Vec<&[c64]>> = specs
+        .iter()
+        .map(|sp| {
+            used.iter()
+                .map(|&(a, b)| sp.cov_slice(off_u + a, off_u + b).0)
+                .collect()
+        })
+        .collect();
+    // the period-mean second moment of channel c (PeriodicSpectra::moment_at, same operations)
+    let diag: Vec<Vec<(&[c64], &[c64])>> = specs
+        .iter()
+        .map(|sp| {
+            (0..off_u + nz)
+                .map(|c| (sp.cov_slice(c, c).0, sp.mean(c)))
+                .collect()
+        })
+        .collect();
+    let moment = |e: usize, c: usize, k: usize| -> f64 {
+        let (row, mean) = diag[e][c];
+        let x = mean[k];
+        (row[k] * ((pf - 1.0) / pf) + x * x.conj()).re
+    };
+    let per_line = |ws: &mut Ws, li: usize| -> Result<(Vec<c64>, Vec<f64>)> {
         let k = lines[li];
         let fk = f[li];
-        let r = Mat::<c64>::from_fn(nr, m, |j, e| specs[e].mean(j)[k]);
-        let u = Mat::<c64>::from_fn(nu, m, |j, e| specs[e].mean(off_u + j)[k]);
-        let y = Mat::<c64>::from_fn(ny, m, |i, e| specs[e].mean(off_y + i)[k]);
-        let (sv, uu, vv) = svd_small(&r)?;
-        let cond_r = cond_of(&sv);
+        for (e, sp) in specs.iter().enumerate() {
+            for j in 0..nr {
+                ws.r[(j, e)] = sp.mean(j)[k];
+                ws.u[(j, e)] = sp.mean(off_u + j)[k];
+            }
+            for i in 0..ny {
+                ws.y[(i, e)] = sp.mean(off_y + i)[k];
+            }
+        }
+        let tall = jacobi_svd(&ws.r, &mut ws.w, &mut ws.z, &mut ws.norms)?;
+        let cond_r = cond_of(&ws.norms);
         if cond_r.is_nan() || cond_r > opts.max_cond {
             return Err(singular_line_error(
                 "excitation matrix R (inputs × experiments)",
@@ -700,12 +1019,29 @@ pub fn periodic(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> 
                  restrict the band",
             ));
         }
-        // R⁺ = V Σ⁻¹ Uᴴ (M × nr), on the nr non-zero singular values
-        let rp = Mat::<c64>::from_fn(m, nr, |e, j| {
-            (0..nr).fold(ZERO, |acc, q| acc + vv[(e, q)] * uu[(j, q)].conj() / sv[q])
-        });
-        let (svu, _, _) = svd_small(&u)?;
-        let cond_u = cond_of(&svu);
+        // R⁺ = V Σ⁻¹ Uᴴ (M × nr) over the singular values in descending order; with the
+        // unnormalised Jacobi columns W (= left vectors · σ): R = W̃ Σ Zᴴ (tall) or Z Σ W̃ᴴ
+        for (q, o) in ws.order.iter_mut().enumerate() {
+            *o = q;
+        }
+        let norms = &ws.norms;
+        ws.order.sort_by(|&x, &y| norms[y].total_cmp(&norms[x]));
+        for e in 0..m {
+            for j in 0..nr {
+                let mut acc = ZERO;
+                for &q in &ws.order {
+                    let s2 = ws.norms[q] * ws.norms[q];
+                    acc += if tall {
+                        ws.z[(e, q)] * ws.w[(j, q)].conj() / s2
+                    } else {
+                        ws.w[(e, q)] * ws.z[(j, q)].conj() / s2
+                    };
+                }
+                ws.rp[(e, j)] = acc;
+            }
+        }
+        jacobi_svd(&ws.u, &mut ws.w, &mut ws.z, &mut ws.norms)?;
+        let cond_u = cond_of(&ws.norms);
         if cond_u.is_nan() || cond_u > opts.max_cond {
             return Err(singular_line_error(
                 "input matrix U (inputs × experiments)",
@@ -716,97 +1052,104 @@ pub fn periodic(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> 
                  check the excitation design and the loop",
             ));
         }
-        let t = mat_mul(&y, &rp);
-        let s = mat_mul(&u, &rp);
-        let s_inv = inv_small(&s).ok_or_else(|| {
-            singular_line_error("sensitivity S", k, fk, f64::INFINITY, "check the data")
-        })?;
-        let pl = mat_mul(&t, &s_inv);
-        let w = mat_mul(&rp, &s_inv);
-        // per-experiment covariance of the means of (u, y), stacked u then y
-        let specs = &specs;
-        let cov_e =
-            |e: usize| move |a: usize, b: usize| specs[e].cov_at(off_u + a, off_u + b, k) / pf;
-        let mut vt = vec![0.0; ny * nu];
-        let mut vs = vec![0.0; nu * nu];
-        let mut vp = vec![0.0; ny * nu];
-        let mut g: Vec<(usize, c64)> = Vec::with_capacity(nu + 1);
-        for e in 0..m {
-            let cv = cov_e(e);
-            for j in 0..nu {
-                let w2 = rp[(e, j)].norm_sqr();
-                for i in 0..ny {
-                    vt[j * ny + i] += w2 * cv(nu + i, nu + i).re;
-                }
-                for i in 0..nu {
-                    vs[j * nu + i] += w2 * cv(i, i).re;
-                }
-            }
-            for a in 0..ny {
-                g.clear();
-                g.extend((0..nu).map(|c| (c, -pl[(a, c)])));
-                g.push((nu + a, ONE));
-                let q = quad(&g, &cv);
-                for b in 0..nu {
-                    vp[b * ny + a] += w[(e, b)].norm_sqr() * q;
+        mat_mul_into(&ws.y, &ws.rp, &mut ws.t);
+        mat_mul_into(&ws.u, &ws.rp, &mut ws.s);
+        if !inv_small_into(&ws.s, &mut ws.inv_work, &mut ws.s_inv) {
+            return Err(singular_line_error(
+                "sensitivity S",
+                k,
+                fk,
+                f64::INFINITY,
+                "check the data",
+            ));
+        }
+        mat_mul_into(&ws.t, &ws.s_inv, &mut ws.pl);
+        mat_mul_into(&ws.rp, &ws.s_inv, &mut ws.wm);
+        let mut vals = Vec::with_capacity(2 * nt + ns);
+        for a in [&ws.t, &ws.s, &ws.pl] {
+            for j in 0..a.ncols() {
+                for i in 0..a.nrows() {
+                    vals.push(a[(i, j)]);
                 }
             }
         }
-        let tr = mat_mul(&t, &r);
-        let sr = mat_mul(&s, &r);
+        let mut fl = vec![0.0; 2 * nt + ns + ny + nu + 2];
+        {
+            let (vt, rest) = fl.split_at_mut(nt);
+            let (vs, rest) = rest.split_at_mut(ns);
+            let vp = &mut rest[..nt];
+            for (e, rows) in rows.iter().enumerate() {
+                // the covariance of the means of (u, y), stacked u then y: the pairs used
+                for (&(a, b), row) in used.iter().zip(rows) {
+                    ws.cov[a * nz + b] = row[k] / pf;
+                }
+                let cv = |a: usize, b: usize| ws.cov[a * nz + b];
+                for j in 0..nu {
+                    let w2 = ws.rp[(e, j)].norm_sqr();
+                    for i in 0..ny {
+                        vt[j * ny + i] += w2 * cv(nu + i, nu + i).re;
+                    }
+                    for i in 0..nu {
+                        vs[j * nu + i] += w2 * cv(i, i).re;
+                    }
+                }
+                for a in 0..ny {
+                    ws.g.clear();
+                    ws.g.extend((0..nu).map(|c| (c, -ws.pl[(a, c)])));
+                    ws.g.push((nu + a, ONE));
+                    let q = quad(&ws.g, &cv);
+                    for b in 0..nu {
+                        vp[b * ny + a] += ws.wm[(e, b)].norm_sqr() * q;
+                    }
+                }
+            }
+        }
+        mat_mul_into(&ws.t, &ws.r, &mut ws.tr);
+        mat_mul_into(&ws.s, &ws.r, &mut ws.sr);
         let coh_of = |fit: &Mat<c64>, off: usize, i: usize| {
             let num: f64 = (0..m).map(|e| fit[(i, e)].norm_sqr()).sum();
-            let den: f64 = (0..m)
-                .map(|e| specs[e].moment_at(off + i, off + i, k).re)
-                .sum();
+            let den: f64 = (0..m).map(|e| moment(e, off + i, k)).sum();
             if den > 0.0 {
                 (num / den).min(1.0)
             } else {
                 f64::NAN
             }
         };
-        let col = |a: &Mat<c64>| -> Vec<c64> {
-            (0..a.ncols())
-                .flat_map(|j| (0..a.nrows()).map(move |i| (i, j)))
-                .map(|(i, j)| a[(i, j)])
-                .collect()
-        };
-        Ok(LineOut {
-            t: col(&t),
-            s: col(&s),
-            p: col(&pl),
-            vt,
-            vs,
-            vp,
-            coh: (0..ny).map(|i| coh_of(&tr, off_y, i)).collect(),
-            coh_u: (0..nu).map(|i| coh_of(&sr, off_u, i)).collect(),
-            cond_r,
-            cond_u,
-        })
+        let base = 2 * nt + ns;
+        for i in 0..ny {
+            fl[base + i] = coh_of(&ws.tr, off_y, i);
+        }
+        for i in 0..nu {
+            fl[base + ny + i] = coh_of(&ws.sr, off_u, i);
+        }
+        fl[base + ny + nu] = cond_r;
+        fl[base + ny + nu + 1] = cond_u;
+        Ok((vals, fl))
     };
-    let outs: Vec<LineOut> = (0..nl)
+    let outs: Vec<(Vec<c64>, Vec<f64>)> = (0..nl)
         .into_par_iter()
-        .map(per_line)
+        .map_init(new_ws, per_line)
         .collect::<Result<_>>()?;
-    let cat = |g: &dyn Fn(&LineOut) -> &[c64]| {
+    let cat = |r: std::ops::Range<usize>| -> Vec<c64> {
         outs.iter()
-            .flat_map(|o| g(o).iter().copied())
-            .collect::<Vec<_>>()
+            .flat_map(|o| o.0[r.clone()].iter().copied())
+            .collect()
     };
-    let catf = |g: &dyn Fn(&LineOut) -> &[f64]| {
+    let catf = |r: std::ops::Range<usize>| -> Vec<f64> {
         outs.iter()
-            .flat_map(|o| g(o).iter().copied())
-            .collect::<Vec<_>>()
+            .flat_map(|o| o.1[r.clone()].iter().copied())
+            .collect()
     };
+    let base = 2 * nt + ns;
     Ok(MimoClosedLoopFrf {
-        t_ry: frd(&f, ny, nu, cat(&|o| &o.t), catf(&|o| &o.vt), p, ts)?,
-        s: frd(&f, nu, nu, cat(&|o| &o.s), catf(&|o| &o.vs), p, ts)?,
-        plant: frd(&f, ny, nu, cat(&|o| &o.p), catf(&|o| &o.vp), p, ts)?,
+        t_ry: frd(&f, ny, nu, cat(0..nt), catf(0..nt), p, ts)?,
+        s: frd(&f, nu, nu, cat(nt..nt + ns), catf(nt..nt + ns), p, ts)?,
+        plant: frd(&f, ny, nu, cat(nt + ns..base), catf(nt + ns..base), p, ts)?,
         plant_indirect: None,
-        coherence: catf(&|o| &o.coh),
-        coherence_u: catf(&|o| &o.coh_u),
-        cond_r: outs.iter().map(|o| o.cond_r).collect(),
-        cond_u: outs.iter().map(|o| o.cond_u).collect(),
+        coherence: catf(base..base + ny),
+        coherence_u: catf(base + ny..base + ny + nu),
+        cond_r: catf(base + ny + nu..base + ny + nu + 1),
+        cond_u: catf(base + ny + nu + 1..base + ny + nu + 2),
         measured: vec![true; nl * nu],
         lines,
         periods: p,
@@ -1322,6 +1665,64 @@ mod tests {
         assert_eq!(lagrange4(&own, 12).0, [6, 10, 14, 18]);
         assert_eq!(lagrange4(&own, 1).0, [2, 6, 10, 14]);
         assert_eq!(lagrange4(&own, 25).0, [10, 14, 18, 22]);
+    }
+
+    /// The Jacobi SVD against faer's singular values (an independent algorithm) and by
+    /// reconstruction, for tall, wide and square matrices, one of them rank-deficient.
+    #[test]
+    fn jacobi_svd_reconstructs_and_matches_faer() {
+        let el = |i: usize, j: usize, s: f64| {
+            c64::new(
+                ((i * 7 + j * 3) as f64 * 0.37 + s).sin(),
+                ((i * 5 + j * 11) as f64 * 0.23 - s).cos(),
+            )
+        };
+        let mut cases: Vec<Mat<c64>> = vec![
+            Mat::from_fn(4, 4, |i, j| el(i, j, 0.1)),
+            Mat::from_fn(3, 6, |i, j| el(i, j, 0.2)),
+            Mat::from_fn(6, 3, |i, j| el(i, j, 0.3)),
+            Mat::from_fn(1, 1, |_, _| c64::new(-2.0, 0.5)),
+        ];
+        // rank 1: σ₂ = 0 (to rounding) → κ huge
+        cases.push(Mat::from_fn(3, 3, |i, j| el(i, 0, 0.4) * el(0, j, 0.5)));
+        for a in &cases {
+            let (m, n) = (a.nrows(), a.ncols());
+            let (sv, u, v) = svd_small(a).unwrap();
+            let q = m.min(n);
+            assert_eq!(
+                (sv.len(), u.nrows(), u.ncols(), v.nrows(), v.ncols()),
+                (q, m, q, n, q)
+            );
+            let want = a.singular_values().unwrap();
+            let scale = sv[0];
+            for (x, y) in sv.iter().zip(&want) {
+                assert!((x - y).abs() <= 1e-13 * scale, "{sv:?} vs {want:?}");
+            }
+            assert!(sv.windows(2).all(|w| w[0] >= w[1]));
+            for i in 0..m {
+                for j in 0..n {
+                    let r: c64 = (0..q).map(|l| u[(i, l)] * v[(j, l)].conj() * sv[l]).sum();
+                    assert!((r - a[(i, j)]).norm() < 1e-13 * scale);
+                }
+            }
+            for (x, rows) in [(&v, n), (&u, m)] {
+                for c in 0..q {
+                    if sv[c] < 1e-12 * scale && std::ptr::eq(x, &u) {
+                        continue; // no left vector for a zero singular value
+                    }
+                    for d in 0..q {
+                        if sv[d] < 1e-12 * scale && std::ptr::eq(x, &u) {
+                            continue;
+                        }
+                        let g: c64 = (0..rows).map(|i| x[(i, c)].conj() * x[(i, d)]).sum();
+                        let want = if c == d { ONE } else { ZERO };
+                        assert!((g - want).norm() < 1e-13);
+                    }
+                }
+            }
+        }
+        let (sv, _, _) = svd_small(&cases[4]).unwrap();
+        assert!(cond_of(&sv) > 1e14);
     }
 
     #[test]

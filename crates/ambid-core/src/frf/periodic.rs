@@ -24,7 +24,11 @@
 //! so $C$ noisy channels cost $\lceil C/2 \rceil P$ complex FFTs of length $N$,
 //! $O(C\,P\,N\log N)$ in total, and $O(C^2 N)$ memory. The second moments are accumulated as sums
 //! of deviations from the first analysed period, which avoids the cancellation of the textbook
-//! $\sum |X|^2 - P|\bar X|^2$ at lines with a high signal-to-noise ratio.
+//! $\sum |X|^2 - P|\bar X|^2$ at lines with a high signal-to-noise ratio. With more than two
+//! noisy channels the deviations of up to 16 periods are held line by line and folded into the
+//! $C^2/2$ pair sums once per block (each sum still in period order, so the numbers are those of
+//! one accumulation per period), which reads and writes the sums once per block rather than once
+//! per period; the block is shortened when it would hold more than $2^{22}$ numbers.
 //!
 //! # Example
 //! ```
@@ -94,8 +98,16 @@ pub struct PeriodicSpectra {
     dropped_tail: usize,
     n_channels: usize,
     mean: Vec<Vec<c64>>,
-    /// Upper triangle (i ≤ j) of the per-period covariance, row-major.
+    /// Upper triangle (i ≤ j) of the per-period covariance, row-major; an empty row is
+    /// [`zero_row`](Self::zero_row) (a pair with an exactly periodic channel) or, for a pair
+    /// left out by [`PeriodicAnalyzer::analyze_selected`], [`nan_row`](Self::nan_row).
     cov: Vec<Vec<c64>>,
+    /// Per pair: the row was left out (not computed).
+    cov_skipped: Vec<bool>,
+    /// `n_lines` zeros, the covariance of every pair with an exactly periodic channel.
+    zero_row: Vec<c64>,
+    /// `n_lines` NaNs if some pair was left out (otherwise empty).
+    nan_row: Vec<c64>,
     exact_periodic: Vec<bool>,
 }
 
@@ -164,6 +176,23 @@ impl PeriodicAnalyzer {
         fs: f64,
         opts: &PeriodicOptions,
     ) -> Result<PeriodicSpectra> {
+        self.analyze_selected(channels, fs, opts, &|_, _| true, None)
+    }
+
+    /// [`analyze`](Self::analyze) computing the covariance only of the channel pairs
+    /// `(i, j)`, `i ≤ j`, with `need(i, j)` and (if given) only on the lines `k` with
+    /// `lines[k]`; the other pairs' and lines' covariances read as NaN. Means are computed on
+    /// every line. With two channels that are not exactly periodic (the SISO case) every pair
+    /// and line is computed (the fused path). The values computed are bit-identical to
+    /// `analyze`'s.
+    pub(crate) fn analyze_selected(
+        &mut self,
+        channels: &[&[f64]],
+        fs: f64,
+        opts: &PeriodicOptions,
+        need: &dyn Fn(usize, usize) -> bool,
+        lines: Option<&[bool]>,
+    ) -> Result<PeriodicSpectra> {
         let n = self.n;
         if opts.period_samples != n {
             return Err(Error::invalid(
@@ -224,7 +253,7 @@ impl PeriodicAnalyzer {
                 (1..p_used).all(|p| &x[start + p * n..start + (p + 1) * n] == first)
             })
             .collect();
-        let mut sums = PeriodSums::new(n, &exact);
+        let mut sums = PeriodSums::new(n, &exact, need, lines)?;
         for p in 0..p_used {
             let off = start + p * n;
             let period: Vec<&[f64]> = channels.iter().map(|x| &x[off..off + n]).collect();
@@ -268,8 +297,21 @@ impl PeriodicAnalyzer {
     }
 }
 
+/// Most periods of deviations held before they are folded into the second-moment sums.
+const BLOCK: usize = 16;
+/// Largest block buffer (complex numbers) for which [`BLOCK`] periods are held; above it the
+/// block shrinks so that the buffer stays within the size of the sums themselves.
+const BLOCK_BUDGET: usize = 1 << 22;
+
 /// Running sums of the analysed periods, shared by [`PeriodicAnalyzer::analyze`] and
 /// [`PeriodicAccumulator`] so that both give bit-identical spectra.
+///
+/// Two noisy channels (the SISO case) are split, deviated and accumulated in one pass per
+/// period. More noisy channels: the deviations of up to `block` periods are held line-major
+/// (`dev[(k · block + p) · nn + a]`) and folded into the per-line pair sums
+/// (`s2[k · n_pairs + q]`) once per block, each sum in period order — the same additions, in
+/// the same order, as one accumulation per period, with one pass over the sums per block
+/// instead of per period, and only for the pairs and lines asked for.
 #[derive(Debug, Clone)]
 struct PeriodSums {
     n: usize,
@@ -282,26 +324,61 @@ struct PeriodSums {
     /// Position of the first analysed period in the record.
     first_off: usize,
     periods: usize,
-    /// Spectra of the reference (first analysed) period and of the current one, noisy channels.
+    /// Spectra of the reference (first analysed) period, noisy channels.
     refp: Vec<Vec<c64>>,
-    cur: Vec<Vec<c64>>,
     s1: Vec<Vec<c64>>,
     /// Two noisy channels: Σ|d_a|², Σ|d_b|², Σ d_a d_b*.
     saa: Vec<f64>,
     sbb: Vec<f64>,
     sab: Vec<c64>,
-    /// Otherwise: Σ d_a d_b* for every pair a ≤ b of noisy channels.
-    s2: Vec<Vec<c64>>,
+    /// Otherwise: the noisy pairs (a ≤ b, indices into `noisy`) whose sums are kept,
+    pairs: Vec<(usize, usize)>,
+    /// the lines on which they are kept (`None`: all),
+    line_mask: Option<Vec<bool>>,
+    /// Σ d_a d_b* per line and kept pair, line-major,
+    s2: Vec<c64>,
+    /// and the deviations of the periods of the current block.
+    dev: Vec<c64>,
+    block: usize,
+    in_block: usize,
 }
 
 impl PeriodSums {
-    fn new(n: usize, exact: &[bool]) -> Self {
+    fn new(
+        n: usize,
+        exact: &[bool],
+        need: &dyn Fn(usize, usize) -> bool,
+        line_mask: Option<&[bool]>,
+    ) -> Result<Self> {
         let lines = n / 2 + 1;
+        if let Some(m) = line_mask {
+            if m.len() != lines {
+                return Err(Error::invalid(
+                    "lines",
+                    format!("a line mask needs {lines} flags, got {}", m.len()),
+                ));
+            }
+        }
         let zero = c64::new(0.0, 0.0);
         let noisy: Vec<usize> = (0..exact.len()).filter(|&c| !exact[c]).collect();
         let nn = noisy.len();
         let two = nn == 2;
-        Self {
+        let pairs: Vec<(usize, usize)> = if two {
+            Vec::new()
+        } else {
+            (0..nn)
+                .flat_map(|a| (a..nn).map(move |b| (a, b)))
+                .filter(|&(a, b)| need(noisy[a], noisy[b]))
+                .collect()
+        };
+        let block = if two || nn == 0 {
+            0
+        } else if lines * nn * BLOCK <= BLOCK_BUDGET {
+            BLOCK
+        } else {
+            nn.div_ceil(2).clamp(1, BLOCK)
+        };
+        Ok(Self {
             n,
             lines,
             nc: exact.len(),
@@ -310,14 +387,18 @@ impl PeriodSums {
             first_off: 0,
             periods: 0,
             refp: vec![vec![zero; lines]; nn],
-            cur: vec![vec![zero; if two { 0 } else { lines }]; nn],
             s1: vec![vec![zero; lines]; nn],
             saa: vec![0.0; if two { lines } else { 0 }],
             sbb: vec![0.0; if two { lines } else { 0 }],
             sab: vec![zero; if two { lines } else { 0 }],
-            s2: vec![vec![zero; lines]; if two { 0 } else { nn * (nn + 1) / 2 }],
+            s2: vec![zero; if two { 0 } else { lines * pairs.len() }],
+            dev: Vec::new(),
+            block,
+            in_block: 0,
+            line_mask: line_mask.map(|m| m.to_vec()),
+            pairs,
             noisy,
-        }
+        })
     }
 
     /// Adds one period (`period[c]` holds `n` samples of channel `c`); `off` is its position in
@@ -357,32 +438,67 @@ impl PeriodSums {
             }
         } else if !self.noisy.is_empty() {
             let nn = self.noisy.len();
+            let keep = !first && !self.pairs.is_empty();
+            if keep && self.dev.is_empty() {
+                self.dev = vec![c64::new(0.0, 0.0); lines * self.block * nn];
+            }
+            let (block, p) = (self.block, self.in_block);
             for pair in (0..nn).step_by(2) {
                 let a = period[self.noisy[pair]];
                 let b = self.noisy.get(pair + 1).map(|&c| period[c]);
                 an.transform_pair(a, b, off)?;
-                split_pair(&an.buf, n, lines, &mut self.cur, pair, b.is_some());
-            }
-            if first {
-                for (r, c) in self.refp.iter_mut().zip(&self.cur) {
-                    r.copy_from_slice(c);
+                if first {
+                    split_pair(&an.buf, n, lines, &mut self.refp, pair, b.is_some());
+                    continue;
                 }
-            } else {
-                // deviations from the reference period
-                for a in 0..nn {
-                    for k in 0..lines {
-                        self.cur[a][k] -= self.refp[a][k];
-                        self.s1[a][k] += self.cur[a][k];
-                    }
-                }
-                for a in 0..nn {
-                    for b in a..nn {
-                        let acc = &mut self.s2[pair_index(nn, a, b)];
-                        let (da, db) = (&self.cur[a], &self.cur[b]);
-                        for k in 0..lines {
-                            acc[k] += da[k] * db[k].conj();
+                // split (as split_pair), deviate from the reference period, sum and hold the
+                // deviations in one pass
+                let z = &an.buf;
+                let has_b = b.is_some();
+                let mask = self.line_mask.as_deref();
+                let (s1a, s1b) = if has_b {
+                    let (lo, hi) = self.s1.split_at_mut(pair + 1);
+                    (&mut lo[pair], Some(&mut hi[0]))
+                } else {
+                    (&mut self.s1[pair], None)
+                };
+                let ra = &self.refp[pair];
+                let rb = has_b.then(|| &self.refp[pair + 1]);
+                let mut s1b = s1b;
+                for k in 0..lines {
+                    let (va, vb) = if !has_b {
+                        (z[k], c64::new(0.0, 0.0))
+                    } else if k == 0 {
+                        (c64::new(z[0].re, 0.0), c64::new(z[0].im, 0.0))
+                    } else {
+                        let zk = z[k];
+                        let zc = z[n - k].conj();
+                        let d = zk - zc; // = 2j B
+                        ((zk + zc) * 0.5, c64::new(d.im * 0.5, -d.re * 0.5))
+                    };
+                    let da = va - ra[k];
+                    s1a[k] += da;
+                    let db = match (rb, s1b.as_deref_mut()) {
+                        (Some(rb), Some(s1b)) => {
+                            let db = vb - rb[k];
+                            s1b[k] += db;
+                            Some(db)
+                        }
+                        _ => None,
+                    };
+                    if keep && mask.is_none_or(|m| m[k]) {
+                        let at = (k * block + p) * nn + pair;
+                        self.dev[at] = da;
+                        if let Some(db) = db {
+                            self.dev[at + 1] = db;
                         }
                     }
+                }
+            }
+            if keep {
+                self.in_block += 1;
+                if self.in_block == self.block {
+                    self.fold_block();
                 }
             }
         }
@@ -390,20 +506,51 @@ impl PeriodSums {
         Ok(())
     }
 
+    /// Folds the held deviations into the pair sums, period by period in order.
+    fn fold_block(&mut self) {
+        let (nn, block, np, held) = (
+            self.noisy.len(),
+            self.block,
+            self.pairs.len(),
+            self.in_block,
+        );
+        if held == 0 {
+            return;
+        }
+        for k in 0..self.lines {
+            if self.line_mask.as_ref().is_some_and(|m| !m[k]) {
+                continue;
+            }
+            let d = &self.dev[k * block * nn..(k * block + held) * nn];
+            let acc = &mut self.s2[k * np..(k + 1) * np];
+            for (s, &(a, b)) in acc.iter_mut().zip(&self.pairs) {
+                let mut v = *s;
+                for row in d.chunks_exact(nn) {
+                    v += row[a] * row[b].conj();
+                }
+                *s = v;
+            }
+        }
+        self.in_block = 0;
+    }
+
     // parallel per-line arrays, indexed alike
     #[allow(clippy::needless_range_loop)]
     fn finish(
-        &self,
+        &mut self,
         an: &mut PeriodicAnalyzer,
         fs: f64,
         skipped: usize,
         tail: usize,
     ) -> Result<PeriodicSpectra> {
+        self.fold_block();
         let (lines, nc) = (self.lines, self.nc);
         let zero = c64::new(0.0, 0.0);
         let p_used = self.periods;
         let mut mean = vec![vec![zero; lines]; nc];
-        let mut cov = vec![vec![zero; lines]; nc * (nc + 1) / 2];
+        let npairs = nc * (nc + 1) / 2;
+        let mut cov: Vec<Vec<c64>> = vec![Vec::new(); npairs];
+        let mut cov_skipped = vec![false; npairs];
         // Exactly periodic channels: one transform, zero (co)variance.
         for c in (0..nc).filter(|&c| self.exact[c]) {
             an.transform_pair(&self.first_exact[c], None, self.first_off)?;
@@ -417,13 +564,16 @@ impl PeriodSums {
                 mean[ia][k] = self.refp[0][k] + self.s1[0][k] / pf;
                 mean[ib][k] = self.refp[1][k] + self.s1[1][k] / pf;
             }
+            let (paa, pbb, pab) = (
+                pair_index(nc, ia, ia),
+                pair_index(nc, ib, ib),
+                pair_index(nc, ia, ib),
+            );
+            for q in [paa, pbb, pab] {
+                cov[q] = vec![zero; lines];
+            }
             if p_used > 1 {
                 let denom = pf - 1.0;
-                let (paa, pbb, pab) = (
-                    pair_index(nc, ia, ia),
-                    pair_index(nc, ib, ib),
-                    pair_index(nc, ia, ib),
-                );
                 for k in 0..lines {
                     let va = (self.saa[k] - self.s1[0][k].norm_sqr() / pf) / denom;
                     let vb = (self.sbb[k] - self.s1[1][k].norm_sqr() / pf) / denom;
@@ -438,32 +588,47 @@ impl PeriodSums {
                     mean[self.noisy[a]][k] = self.refp[a][k] + self.s1[a][k] / pf;
                 }
             }
-            if p_used > 1 {
-                let denom = pf - 1.0;
-                for a in 0..nn {
-                    for b in a..nn {
-                        let (ia, ib) = (self.noisy[a], self.noisy[b]);
-                        let (lo, hi, swap) = if ia <= ib {
-                            (ia, ib, false)
+            for a in 0..nn {
+                for b in a..nn {
+                    let (ia, ib) = (self.noisy[a], self.noisy[b]);
+                    cov_skipped[pair_index(nc, ia.min(ib), ia.max(ib))] = true;
+                }
+            }
+            let np = self.pairs.len();
+            let denom = pf - 1.0;
+            let nan = c64::new(f64::NAN, f64::NAN);
+            for (q, &(a, b)) in self.pairs.iter().enumerate() {
+                let (ia, ib) = (self.noisy[a], self.noisy[b]);
+                let (lo, hi, swap) = if ia <= ib {
+                    (ia, ib, false)
+                } else {
+                    (ib, ia, true)
+                };
+                let pi = pair_index(nc, lo, hi);
+                cov_skipped[pi] = false;
+                let out = &mut cov[pi];
+                *out = vec![zero; lines];
+                if p_used > 1 {
+                    for k in 0..lines {
+                        if self.line_mask.as_ref().is_some_and(|m| !m[k]) {
+                            out[k] = nan;
+                            continue;
+                        }
+                        // Σ d_a d_b* − (Σ d_a)(Σ d_b)*/P, d = X − X_ref
+                        let acc = self.s2[k * np + q];
+                        let v = (acc - self.s1[a][k] * self.s1[b][k].conj() / pf) / denom;
+                        out[k] = if a == b {
+                            c64::new(v.re.max(0.0), 0.0)
+                        } else if swap {
+                            v.conj()
                         } else {
-                            (ib, ia, true)
+                            v
                         };
-                        let out = &mut cov[pair_index(nc, lo, hi)];
-                        let acc = &self.s2[pair_index(nn, a, b)];
-                        for k in 0..lines {
-                            // Σ d_a d_b* − (Σ d_a)(Σ d_b)*/P, d = X − X_ref
-                            let v = (acc[k] - self.s1[a][k] * self.s1[b][k].conj() / pf) / denom;
-                            out[k] = if swap { v.conj() } else { v };
-                        }
-                        if a == b {
-                            for v in out.iter_mut() {
-                                *v = c64::new(v.re.max(0.0), 0.0);
-                            }
-                        }
                     }
                 }
             }
         }
+        let any_skipped = cov_skipped.iter().any(|&s| s);
         Ok(PeriodicSpectra {
             fs,
             period_samples: self.n,
@@ -473,6 +638,13 @@ impl PeriodSums {
             n_channels: nc,
             mean,
             cov,
+            cov_skipped,
+            zero_row: vec![zero; lines],
+            nan_row: if any_skipped {
+                vec![c64::new(f64::NAN, f64::NAN); lines]
+            } else {
+                Vec::new()
+            },
             exact_periodic: self.exact.clone(),
         })
     }
@@ -542,7 +714,7 @@ impl PeriodicAccumulator {
         Ok(Self {
             an,
             opts: *opts,
-            sums: PeriodSums::new(n, &exact),
+            sums: PeriodSums::new(n, &exact, &|_, _| true, None)?,
             buf: vec![0.0; n_channels * n],
             filled: 0,
             n_samples: 0,
@@ -738,46 +910,50 @@ impl PeriodicSpectra {
         &self.mean[c]
     }
 
+    /// The stored row of the pair `i ≤ j`.
+    fn cov_row(&self, i: usize, j: usize) -> &[c64] {
+        let q = pair_index(self.n_channels, i, j);
+        let row = &self.cov[q];
+        if !row.is_empty() {
+            row
+        } else if self.cov_skipped[q] {
+            &self.nan_row
+        } else {
+            &self.zero_row
+        }
+    }
+
     /// Per-period covariance $\hat\sigma_{ij}(k)$ between channels `i` and `j` on every line (zero
     /// when $P = 1$). The covariance of the means is this divided by [`periods`](Self::periods).
     pub fn cov(&self, i: usize, j: usize) -> Vec<c64> {
-        let nc = self.n_channels;
         if i <= j {
-            self.cov[pair_index(nc, i, j)].clone()
+            self.cov_row(i, j).to_vec()
         } else {
-            self.cov[pair_index(nc, j, i)]
-                .iter()
-                .map(|v| v.conj())
-                .collect()
+            self.cov_row(j, i).iter().map(|v| v.conj()).collect()
         }
     }
 
     /// Per-period variance $\hat\sigma_{ii}(k)$ of channel `c` on every line.
     pub fn var(&self, c: usize) -> Vec<f64> {
-        self.cov[pair_index(self.n_channels, c, c)]
-            .iter()
-            .map(|v| v.re)
-            .collect()
+        self.cov_row(c, c).iter().map(|v| v.re).collect()
     }
 
     /// The stored covariance row of the pair `(i, j)` and whether it must be conjugated to give
     /// $\hat\sigma_{ij}$ (the upper triangle is stored).
     pub fn cov_slice(&self, i: usize, j: usize) -> (&[c64], bool) {
-        let nc = self.n_channels;
         if i <= j {
-            (&self.cov[pair_index(nc, i, j)], false)
+            (self.cov_row(i, j), false)
         } else {
-            (&self.cov[pair_index(nc, j, i)], true)
+            (self.cov_row(j, i), true)
         }
     }
 
     /// One covariance entry without allocating.
     pub fn cov_at(&self, i: usize, j: usize, k: usize) -> c64 {
-        let nc = self.n_channels;
         if i <= j {
-            self.cov[pair_index(nc, i, j)][k]
+            self.cov_row(i, j)[k]
         } else {
-            self.cov[pair_index(nc, j, i)][k].conj()
+            self.cov_row(j, i)[k].conj()
         }
     }
 
@@ -927,6 +1103,90 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Many periods (several blocks of held deviations, the last one partial) against the
+    /// naive oracle; the selected analysis equals the full one bit for bit where it computes,
+    /// and reads NaN where it does not.
+    #[test]
+    fn blocks_of_periods_and_selected_pairs_and_lines() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let (n, periods, skip) = (14usize, 37usize, 2usize);
+        let len = n * periods;
+        let base: Vec<f64> = (0..n).map(|_| StandardNormal.sample(&mut rng)).collect();
+        let r: Vec<f64> = (0..len).map(|k| base[k % n]).collect();
+        let mut noisy = |g: f64, lag: usize| -> Vec<f64> {
+            (0..len)
+                .map(|k| {
+                    let z: f64 = StandardNormal.sample(&mut rng);
+                    g * base[(k + lag) % n] + 0.3 * z
+                })
+                .collect()
+        };
+        let chans: Vec<Vec<f64>> = vec![
+            r.clone(),
+            noisy(1.0, 0),
+            noisy(0.5, 1),
+            noisy(-0.7, 2),
+            noisy(0.2, 3),
+            noisy(1.5, 4),
+        ];
+        let refs: Vec<&[f64]> = chans.iter().map(|c| c.as_slice()).collect();
+        let opts = PeriodicOptions::new(n).skip(skip);
+        let mut an = PeriodicAnalyzer::new(n).unwrap();
+        let full = an.analyze(&refs, 10.0, &opts).unwrap();
+        let p = periods - skip;
+        for k in 0..full.n_lines() {
+            let dft: Vec<Vec<c64>> = refs
+                .iter()
+                .map(|x| {
+                    (skip..periods)
+                        .map(|q| naive_dft(&x[q * n..(q + 1) * n], k))
+                        .collect()
+                })
+                .collect();
+            let means: Vec<c64> = dft
+                .iter()
+                .map(|d| d.iter().sum::<c64>() / p as f64)
+                .collect();
+            for i in 0..refs.len() {
+                assert!((full.mean(i)[k] - means[i]).norm() < 1e-10);
+                for j in 0..refs.len() {
+                    let c: c64 = (0..p)
+                        .map(|q| (dft[i][q] - means[i]) * (dft[j][q] - means[j]).conj())
+                        .sum::<c64>()
+                        / (p as f64 - 1.0);
+                    assert!(
+                        (full.cov_at(i, j, k) - c).norm() < 1e-9 * (1.0 + c.norm()),
+                        "cov {i}{j} line {k}"
+                    );
+                }
+            }
+        }
+        // channels 1, 2 as "u", 3..5 as "y": u–u, u–y and y–y on the diagonal, odd lines
+        let need = |i: usize, j: usize| i >= 1 && (i < 3 || i == j);
+        let mask: Vec<bool> = (0..full.n_lines()).map(|k| k % 2 == 1).collect();
+        let sel = an
+            .analyze_selected(&refs, 10.0, &opts, &need, Some(&mask))
+            .unwrap();
+        for (k, &on) in mask.iter().enumerate() {
+            for i in 0..refs.len() {
+                assert_eq!(sel.mean(i)[k], full.mean(i)[k]);
+                for j in i..refs.len() {
+                    let (a, b) = (sel.cov_at(i, j, k), full.cov_at(i, j, k));
+                    if i == 0 {
+                        assert_eq!(a, c64::new(0.0, 0.0), "exact channel {i}{j}");
+                    } else if need(i, j) && on {
+                        assert_eq!(a, b, "pair {i}{j} line {k}");
+                    } else {
+                        assert!(a.re.is_nan() && a.im.is_nan(), "pair {i}{j} line {k}: {a}");
+                    }
+                }
+            }
+        }
+        assert!(an
+            .analyze_selected(&refs, 10.0, &opts, &need, Some(&mask[1..]))
+            .is_err());
     }
 
     #[test]
