@@ -389,6 +389,38 @@ struct Layout<'a> {
     n: usize,
 }
 
+/// The counts $(n_r, n_u, n_y)$ of the r, u and y channels, each present and $n_u = n_r$ (the
+/// excitation is added to every controller output).
+pub(super) fn channel_counts(data: &IoData) -> Result<(usize, usize, usize)> {
+    let (nr, nu, ny) = (
+        data.role_count(Role::Excitation),
+        data.role_count(Role::Input),
+        data.role_count(Role::Output),
+    );
+    for (role, c) in [
+        (Role::Excitation, nr),
+        (Role::Input, nu),
+        (Role::Output, ny),
+    ] {
+        if c == 0 {
+            return Err(data.missing_role(role));
+        }
+    }
+    if nu != nr {
+        return Err(Error::invalid(
+            "channels",
+            format!(
+                "the record has {nr} excitation channels ({}) and {nu} input channels ({}); the \
+                 excitation is added to every controller output, so give one `r_<axis>` per \
+                 `u_<axis>`",
+                data.role_names(Role::Excitation).join(", "),
+                data.role_names(Role::Input).join(", ")
+            ),
+        ));
+    }
+    Ok((nr, nu, ny))
+}
+
 fn layout<'a>(data: &'a IoData, opts: &MimoOptions) -> Result<Layout<'a>> {
     let Some(n) = opts.period_samples.or(data.period_samples()) else {
         return Err(Error::invalid(
@@ -422,32 +454,7 @@ fn layout<'a>(data: &'a IoData, opts: &MimoOptions) -> Result<Layout<'a>> {
             ));
         }
     }
-    let (nr, nu, ny) = (
-        data.role_count(Role::Excitation),
-        data.role_count(Role::Input),
-        data.role_count(Role::Output),
-    );
-    for (role, c) in [
-        (Role::Excitation, nr),
-        (Role::Input, nu),
-        (Role::Output, ny),
-    ] {
-        if c == 0 {
-            return Err(data.missing_role(role));
-        }
-    }
-    if nu != nr {
-        return Err(Error::invalid(
-            "channels",
-            format!(
-                "the record has {nr} excitation channels ({}) and {nu} input channels ({}); the \
-                 excitation is added to every controller output, so give one `r_<axis>` per \
-                 `u_<axis>`",
-                data.role_names(Role::Excitation).join(", "),
-                data.role_names(Role::Input).join(", ")
-            ),
-        ));
-    }
+    let (nr, _, ny) = channel_counts(data)?;
     let m = data.n_experiments();
     let len0 = data.len();
     for e in 1..m {

@@ -272,31 +272,7 @@ struct LineFit {
 /// * [`Error::Numerical`]: the local regressor rank deficient on every line (e.g. two inputs
 ///   driven by the same signal), or $\hat S$ singular on a line.
 pub fn local_polynomial(data: &IoData, opts: &MimoLpmOptions) -> Result<MimoClosedLoopFrf> {
-    let (nr, nu, ny) = (
-        data.role_count(Role::Excitation),
-        data.role_count(Role::Input),
-        data.role_count(Role::Output),
-    );
-    for (role, c) in [
-        (Role::Excitation, nr),
-        (Role::Input, nu),
-        (Role::Output, ny),
-    ] {
-        if c == 0 {
-            return Err(data.missing_role(role));
-        }
-    }
-    if nu != nr {
-        return Err(Error::invalid(
-            "channels",
-            format!(
-                "the record has {nr} excitation channels ({}) and {nu} input channels ({}); give \
-                 one `r_<axis>` per `u_<axis>`",
-                data.role_names(Role::Excitation).join(", "),
-                data.role_names(Role::Input).join(", ")
-            ),
-        ));
-    }
+    let (nr, nu, ny) = super::mimo::channel_counts(data)?;
     if opts.degree > 8 {
         return Err(Error::invalid(
             "degree",
