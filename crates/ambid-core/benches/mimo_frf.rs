@@ -21,7 +21,9 @@
 
 use ambid_core::data::IoData;
 use ambid_core::frf::closed_loop::{from_periodic, Channels};
+use ambid_core::frf::lpm::{lpm_closed_loop, LpmOptions};
 use ambid_core::frf::mimo::{periodic, MimoOptions};
+use ambid_core::frf::mimo_lpm::{local_polynomial, MimoLpmOptions};
 use ambid_core::frf::periodic::{PeriodicAnalyzer, PeriodicOptions};
 use ambid_core::signal::prbs_period;
 use divan::{black_box, Bencher};
@@ -209,5 +211,67 @@ fn rfft_all_channels(bencher: Bencher) {
                 .unwrap();
             black_box(&out);
         }
+    });
+}
+
+/// One non-periodic experiment of 102 300 samples at 20 kHz: four independent white-noise
+/// excitations, u and y the same FIR mixes of r plus noise as [`record`].
+fn data_noise() -> IoData {
+    let mut rng = ChaCha8Rng::seed_from_u64(21);
+    let len = N * PERIODS;
+    let r: Vec<Vec<f64>> = (0..4)
+        .map(|_| (0..len).map(|_| StandardNormal.sample(&mut rng)).collect())
+        .collect();
+    let mut ch = Vec::new();
+    let (mut u, mut y) = (Vec::new(), Vec::new());
+    for i in 0..4 {
+        let mut ui = vec![0.0; len];
+        let mut yi = vec![0.0; len];
+        for t in 2..len {
+            let g1: f64 = StandardNormal.sample(&mut rng);
+            let g2: f64 = StandardNormal.sample(&mut rng);
+            ui[t] = r[i][t] - 0.3 * r[(i + 1) % 4][t - 1] + 0.01 * g1;
+            yi[t] = 0.5 * r[i][t - 1] + 0.2 * r[(i + 2) % 4][t - 2] + 0.01 * g2;
+        }
+        u.push(ui);
+        y.push(yi);
+    }
+    for (l, s) in [("r", &r), ("u", &u), ("y", &y)] {
+        for (i, v) in s.iter().enumerate() {
+            ch.push((format!("{l}_{}", AXES[i]), v.clone()));
+        }
+    }
+    IoData::new(ch, 1.0 / FS_PRBS, None).unwrap()
+}
+
+/// The multivariable local polynomial method (`frf::mimo_lpm`, defaults: R = 2, 19-line
+/// window) on the 4×4 noise record, lines up to 2 kHz (10 230 lines).
+#[divan::bench(sample_count = 10)]
+fn mimo_lpm_4x4_to_2khz(bencher: Bencher) {
+    let d = data_noise();
+    let o = MimoLpmOptions::new().band(0.0, 2000.0);
+    bencher.bench_local(|| local_polynomial(black_box(&d), &o).unwrap());
+}
+
+/// Today's SISO closed-loop LPM (`lpm_closed_loop`, default 9-line window) on axis xa of the
+/// same record and band, the reference.
+#[divan::bench(sample_count = 10)]
+fn siso_lpm_to_2khz(bencher: Bencher) {
+    let d = data_noise();
+    let (r, u, y) = (
+        d.channel("r_xa").unwrap(),
+        d.channel("u_xa").unwrap(),
+        d.channel("y_xa").unwrap(),
+    );
+    bencher.bench_local(|| {
+        lpm_closed_loop(
+            black_box(r),
+            u,
+            y,
+            FS_PRBS,
+            (0.0, 2000.0),
+            &LpmOptions::default(),
+        )
+        .unwrap()
     });
 }
