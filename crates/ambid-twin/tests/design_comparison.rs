@@ -19,6 +19,8 @@
 // entry-line loops index several parallel arrays (values, truth, flags) by the same index
 #![allow(clippy::needless_range_loop)]
 
+mod common;
+
 use ambid_core::data::IoData;
 use ambid_core::frf::mimo::{estimate, MimoClosedLoopFrf, MimoOptions};
 use ambid_core::lti::Frd;
@@ -58,26 +60,12 @@ fn run(machine: &Machine, kind: Kind, p: usize, mode: Mode, seed: u64) -> MimoCl
     }
     .with_transient_periods(SKIP);
     let exc = d.generate(ts).unwrap();
-    let exps: Vec<IoData> = exc
-        .samples()
-        .iter()
-        .enumerate()
-        .map(|(e, r)| {
-            machine
-                .simulate(
-                    [&r[0], &r[1], &r[2], &r[3]],
-                    &MachineSimOptions {
-                        mode,
-                        noise: true,
-                        seed: seed * 16 + e as u64,
-                        ..MachineSimOptions::default()
-                    },
-                )
-                .unwrap()
-                .to_iodata(Some(n))
-                .unwrap()
-        })
-        .collect();
+    let exps: Vec<IoData> = common::run_design(machine, &exc, |e| MachineSimOptions {
+        mode,
+        noise: true,
+        seed: seed * 16 + e as u64,
+        ..MachineSimOptions::default()
+    });
     let data = IoData::from_experiments(exps).unwrap();
     estimate(&data, &MimoOptions::new().skip(SKIP)).unwrap()
 }

@@ -10,6 +10,7 @@
 //! 16 measured periods after a cyclic pre-roll of 20 periods (0.51 s; 4 periods left transients of 1e-4 on random rigs) (`settle_samples`), so every
 //! experiment is 8 160 recorded samples (0.41 s) and ν = 15 degrees of freedom.
 
+mod common;
 mod common_noise {
     use ambid_core::data::IoData;
     use ambid_core::frf::mimo::{periodic, MimoClosedLoopFrf, MimoOptions};
@@ -33,28 +34,14 @@ mod common_noise {
     /// The experiments of `exc` run on `machine` (noise on with `seed`, or off), joined.
     pub fn record(machine: &Machine, exc: &MultiExcitation, noise: bool, seed: u64) -> IoData {
         let n = exc.period_samples();
-        let experiments = exc
-            .samples()
-            .iter()
-            .enumerate()
-            .map(|(e, r)| {
-                machine
-                    .simulate(
-                        [&r[0], &r[1], &r[2], &r[3]],
-                        &MachineSimOptions {
-                            mode: Mode::Linear,
-                            noise,
-                            // every experiment its own noise streams
-                            seed: seed * 16 + e as u64,
-                            settle_samples: SETTLE_PERIODS * n,
-                            ..MachineSimOptions::default()
-                        },
-                    )
-                    .unwrap()
-                    .to_iodata(Some(n))
-                    .unwrap()
-            })
-            .collect();
+        let experiments = crate::common::run_design(machine, exc, |e| MachineSimOptions {
+            mode: Mode::Linear,
+            noise,
+            // every experiment its own noise streams
+            seed: seed * 16 + e as u64,
+            settle_samples: SETTLE_PERIODS * n,
+            ..MachineSimOptions::default()
+        });
         IoData::from_experiments(experiments).unwrap()
     }
 

@@ -5,6 +5,7 @@
 //! and P, and so in its error against the machine's exact truth, to 1e-9 relative. Skips visibly
 //! (the project's skip mechanism) without python3/numpy.
 
+mod common;
 #[path = "../../ambid/tests/common/skip.rs"]
 mod skip;
 
@@ -54,27 +55,13 @@ fn mimo_frf_on_twin_data_equals_the_numpy_reference() {
         .unwrap();
     let n = exc.period_samples();
     let skip_periods = 1;
-    let recs: Vec<IoData> = exc
-        .samples()
-        .iter()
-        .enumerate()
-        .map(|(e, r)| {
-            machine
-                .simulate(
-                    [&r[0], &r[1], &r[2], &r[3]],
-                    &MachineSimOptions {
-                        mode: Mode::Linear,
-                        noise: true,
-                        seed: 7 + e as u64,
-                        settle_samples: 40 * n,
-                        ..MachineSimOptions::default()
-                    },
-                )
-                .unwrap()
-                .to_iodata(Some(n))
-                .unwrap()
-        })
-        .collect();
+    let recs: Vec<IoData> = common::run_design(&machine, &exc, |e| MachineSimOptions {
+        mode: Mode::Linear,
+        noise: true,
+        seed: 7 + e as u64,
+        settle_samples: 40 * n,
+        ..MachineSimOptions::default()
+    });
     // the record as CSV, every value in full precision
     let names: Vec<String> = ["r", "u", "y"]
         .iter()

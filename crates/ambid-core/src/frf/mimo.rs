@@ -714,7 +714,7 @@ fn jacobi_svd(a: &Mat<c64>, w: &mut Mat<c64>, z: &mut Mat<c64>, norms: &mut [f64
 
 /// Thin SVD $A = U \Sigma V^{\mathsf H}$ of a small complex matrix ([`jacobi_svd`]): singular
 /// values descending, $U$ ($m \times q$) and $V$ ($n \times q$), $q = \min(m, n)$.
-fn svd_small(a: &Mat<c64>) -> Result<(Vec<f64>, Mat<c64>, Mat<c64>)> {
+pub(super) fn svd_small(a: &Mat<c64>) -> Result<(Vec<f64>, Mat<c64>, Mat<c64>)> {
     let (m, n) = (a.nrows(), a.ncols());
     let (p, q) = (m.max(n), m.min(n));
     let mut w = Mat::<c64>::zeros(p, q);
@@ -741,7 +741,8 @@ fn svd_small(a: &Mat<c64>) -> Result<(Vec<f64>, Mat<c64>, Mat<c64>)> {
     })
 }
 
-fn cond_of(sv: &[f64]) -> f64 {
+/// Ratio of the extreme singular values (infinite for a zero one).
+pub(super) fn cond_of(sv: &[f64]) -> f64 {
     let mx = sv.iter().fold(0.0f64, |a, &v| a.max(v));
     let mn = sv.iter().fold(f64::INFINITY, |a, &v| a.min(v));
     if mn > 0.0 {
@@ -753,7 +754,7 @@ fn cond_of(sv: &[f64]) -> f64 {
 
 /// Inverse of a small square complex matrix by Gauss–Jordan with partial pivoting (`None` if
 /// singular).
-fn inv_small(a: &Mat<c64>) -> Option<Mat<c64>> {
+pub(super) fn inv_small(a: &Mat<c64>) -> Option<Mat<c64>> {
     let n = a.nrows();
     let mut m = Mat::<c64>::zeros(n, n);
     let mut x = Mat::<c64>::zeros(n, n);
@@ -834,6 +835,15 @@ fn quad(g: &[(usize, c64)], cov: &impl Fn(usize, usize) -> c64) -> f64 {
         }
     }
     v.max(0.0)
+}
+
+/// The error for a condition number `cond` that is not a number or above `max` on line `k`
+/// (`f` Hz), naming the matrix (`what`) and the fix (`hint`).
+fn require_cond(cond: f64, max: f64, what: &str, k: usize, f: f64, hint: &str) -> Result<()> {
+    if cond.is_nan() || cond > max {
+        return Err(singular_line_error(what, k, f, cond, hint));
+    }
+    Ok(())
 }
 
 fn singular_line_error(what: &str, k: usize, f: f64, cond: f64, hint: &str) -> Error {
@@ -1015,17 +1025,15 @@ pub fn periodic(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> 
         }
         let tall = jacobi_svd(&ws.r, &mut ws.w, &mut ws.z, &mut ws.norms)?;
         let cond_r = cond_of(&ws.norms);
-        if cond_r.is_nan() || cond_r > opts.max_cond {
-            return Err(singular_line_error(
-                "excitation matrix R (inputs × experiments)",
-                k,
-                fk,
-                cond_r,
-                "the experiments do not excite the inputs independently there (e.g. two \
-                 identical experiments); use a sequential or orthogonal (Hadamard) design, or \
-                 restrict the band",
-            ));
-        }
+        require_cond(
+            cond_r,
+            opts.max_cond,
+            "excitation matrix R (inputs × experiments)",
+            k,
+            fk,
+            "the experiments do not excite the inputs independently there (e.g. two identical \
+             experiments); use a sequential or orthogonal (Hadamard) design, or restrict the band",
+        )?;
         // R⁺ = V Σ⁻¹ Uᴴ (M × nr) over the singular values in descending order; with the
         // unnormalised Jacobi columns W (= left vectors · σ): R = W̃ Σ Zᴴ (tall) or Z Σ W̃ᴴ
         for (q, o) in ws.order.iter_mut().enumerate() {
@@ -1049,16 +1057,15 @@ pub fn periodic(data: &IoData, opts: &MimoOptions) -> Result<MimoClosedLoopFrf> 
         }
         jacobi_svd(&ws.u, &mut ws.w, &mut ws.z, &mut ws.norms)?;
         let cond_u = cond_of(&ws.norms);
-        if cond_u.is_nan() || cond_u > opts.max_cond {
-            return Err(singular_line_error(
-                "input matrix U (inputs × experiments)",
-                k,
-                fk,
-                cond_u,
-                "the controller outputs are not independent across the experiments there; \
-                 check the excitation design and the loop",
-            ));
-        }
+        require_cond(
+            cond_u,
+            opts.max_cond,
+            "input matrix U (inputs × experiments)",
+            k,
+            fk,
+            "the controller outputs are not independent across the experiments there; check the \
+             excitation design and the loop",
+        )?;
         mat_mul_into(&ws.y, &ws.rp, &mut ws.t);
         mat_mul_into(&ws.u, &ws.rp, &mut ws.s);
         if !inv_small_into(&ws.s, &mut ws.inv_work, &mut ws.s_inv) {
@@ -1587,15 +1594,14 @@ pub fn zippered_with(
         let sm = Mat::<c64>::from_fn(nu, nu, |i, j| s[li * nu * nu + j * nu + i]);
         let (svs, _, _) = svd_small(&sm)?;
         cond_u[li] = cond_of(&svs);
-        if cond_u[li].is_nan() || cond_u[li] > opts.max_cond {
-            return Err(singular_line_error(
-                "estimated sensitivity S",
-                k,
-                f[li],
-                cond_u[li],
-                "the loop's input response cannot be inverted there; restrict the band",
-            ));
-        }
+        require_cond(
+            cond_u[li],
+            opts.max_cond,
+            "estimated sensitivity S",
+            k,
+            f[li],
+            "the loop's input response cannot be inverted there; restrict the band",
+        )?;
         let s_inv = inv_small(&sm).ok_or_else(|| {
             singular_line_error(
                 "estimated sensitivity S",

@@ -88,11 +88,10 @@
 //! Processing* 24(3), 573–595, 2010.
 
 use super::lpm::{gcd, window_lo, EXCITED_FRACTION};
-use super::mimo::{MimoClosedLoopFrf, MimoDesign};
+use super::mimo::{cond_of, inv_small, svd_small, MimoClosedLoopFrf, MimoDesign};
 use crate::data::{IoData, Role};
 use crate::error::{Error, Result};
 use crate::lti::Frd;
-use faer::linalg::solvers::Solve;
 use faer::{c64, Mat};
 use rayon::prelude::*;
 use realfft::RealFftPlanner;
@@ -166,7 +165,7 @@ fn spectra(x: &[&[f64]]) -> Result<Vec<Vec<c64>>> {
 }
 
 /// Whether every line of $r$ lies on multiples of some $P \ge 2$ (a periodic excitation).
-fn is_periodic(rf: &[Vec<c64>], n_lines: usize) -> Option<usize> {
+fn is_periodic<'a>(rf: impl Iterator<Item = &'a Vec<c64>>, n_lines: usize) -> Option<usize> {
     let mut g = 0usize;
     for spec in rf {
         let pmax = spec[1..=n_lines]
@@ -226,25 +225,6 @@ fn chol_solve(l: &[c64], n: usize, b: &mut [c64]) {
             v -= l[k * n + i].conj() * b[k];
         }
         b[i] = v / l[i * n + i].re;
-    }
-}
-
-fn cond_hermitian(a: &Mat<c64>) -> f64 {
-    match a.svd() {
-        Ok(svd) => {
-            let s = svd.S().column_vector();
-            let (mut mx, mut mn) = (0.0f64, f64::INFINITY);
-            for i in 0..s.nrows() {
-                mx = mx.max(s[i].re);
-                mn = mn.min(s[i].re);
-            }
-            if mn > 0.0 {
-                mx / mn
-            } else {
-                f64::INFINITY
-            }
-        }
-        Err(_) => f64::NAN,
     }
 }
 
@@ -361,8 +341,7 @@ pub fn local_polynomial(data: &IoData, opts: &MimoLpmOptions) -> Result<MimoClos
         }
         thr[j] = EXCITED_FRACTION * total / n_lines as f64 * w as f64;
     }
-    let all_rf: Vec<Vec<c64>> = rf.iter().flatten().cloned().collect();
-    if let Some(p) = is_periodic(&all_rf, n_lines) {
+    if let Some(p) = is_periodic(rf.iter().flatten(), n_lines) {
         return Err(Error::invalid(
             "excitation",
             format!(
@@ -558,17 +537,20 @@ pub fn local_polynomial(data: &IoData, opts: &MimoLpmOptions) -> Result<MimoClos
             }
         }
         let sm = Mat::<c64>::from_fn(nu, nu, |i, j| fit.g[j * nz + ny + i]);
-        let cu = cond_hermitian(&sm);
-        if !cu.is_finite() {
-            return Err(Error::numerical(
+        let singular = || {
+            Error::numerical(
                 "MIMO LPM",
                 format!(
                     "the estimated sensitivity S is singular at {:.6} Hz; restrict the band",
                     f[li]
                 ),
-            ));
+            )
+        };
+        let cu = cond_of(&svd_small(&sm)?.0);
+        if !cu.is_finite() {
+            return Err(singular());
         }
-        let s_inv = sm.partial_piv_lu().solve(Mat::<c64>::identity(nu, nu));
+        let s_inv = inv_small(&sm).ok_or_else(singular)?;
         let tm = Mat::<c64>::from_fn(ny, nu, |i, j| fit.g[j * nz + i]);
         let pm = &tm * &s_inv;
         for bcol in 0..nu {
@@ -621,7 +603,7 @@ pub fn local_polynomial(data: &IoData, opts: &MimoLpmOptions) -> Result<MimoClos
         coherence.extend((0..ny).map(coh));
         coherence_u.extend((ny..nz).map(coh));
         let qinfo = Mat::<c64>::from_fn(nr, nr, |j, l| fit.q[j * nr + l]);
-        cond_r.push(cond_hermitian(&qinfo));
+        cond_r.push(cond_of(&svd_small(&qinfo)?.0));
         cond_u.push(cu);
     }
     let ts = 1.0 / data.fs();

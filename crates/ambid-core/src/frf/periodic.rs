@@ -1031,6 +1031,47 @@ mod tests {
             .sum()
     }
 
+    /// The textbook oracle on line `k`: the per-period DFTs (by the definition) of the periods
+    /// `skip..periods` of every channel, their means and their sample covariance (zero for
+    /// one period), `cov[i][j]`.
+    fn naive_stats(
+        chans: &[&[f64]],
+        n: usize,
+        skip: usize,
+        periods: usize,
+        k: usize,
+    ) -> (Vec<c64>, Vec<Vec<c64>>) {
+        let p = periods - skip;
+        let dft: Vec<Vec<c64>> = chans
+            .iter()
+            .map(|x| {
+                (skip..periods)
+                    .map(|q| naive_dft(&x[q * n..(q + 1) * n], k))
+                    .collect()
+            })
+            .collect();
+        let means: Vec<c64> = dft
+            .iter()
+            .map(|d| d.iter().sum::<c64>() / p as f64)
+            .collect();
+        let cov = (0..chans.len())
+            .map(|i| {
+                (0..chans.len())
+                    .map(|j| {
+                        if p == 1 {
+                            return c64::new(0.0, 0.0);
+                        }
+                        (0..p)
+                            .map(|q| (dft[i][q] - means[i]) * (dft[j][q] - means[j]).conj())
+                            .sum::<c64>()
+                            / (p as f64 - 1.0)
+                    })
+                    .collect()
+            })
+            .collect();
+        (means, cov)
+    }
+
     /// Naive oracle: per-period DFTs by the O(N²) definition, then textbook mean and covariance.
     #[test]
     fn matches_naive_oracle_for_odd_and_even_lengths() {
@@ -1070,29 +1111,13 @@ mod tests {
                 assert_eq!(s.periods(), p);
                 assert!(s.is_exactly_periodic(0) && (p == 1 || !s.is_exactly_periodic(1)));
                 for k in 0..s.n_lines() {
-                    let dft: Vec<Vec<c64>> = chans
-                        .iter()
-                        .map(|x| {
-                            (skip..periods)
-                                .map(|q| naive_dft(&x[q * n..(q + 1) * n], k))
-                                .collect()
-                        })
-                        .collect();
-                    let means: Vec<c64> = dft
-                        .iter()
-                        .map(|d| d.iter().sum::<c64>() / p as f64)
-                        .collect();
+                    let (means, cov) = naive_stats(chans, n, skip, periods, k);
                     for i in 0..m {
                         assert!(
                             (s.mean(i)[k] - means[i]).norm() < 1e-10,
                             "mean {i} line {k}"
                         );
-                        for j in 0..m {
-                            let c: c64 = (0..p)
-                                .map(|q| (dft[i][q] - means[i]) * (dft[j][q] - means[j]).conj())
-                                .sum::<c64>()
-                                / (p as f64 - 1.0);
-                            let c = if p == 1 { c64::new(0.0, 0.0) } else { c };
+                        for (j, &c) in cov[i].iter().enumerate() {
                             assert!(
                                 (s.cov_at(i, j, k) - c).norm() < 1e-9,
                                 "cov {i}{j} line {k}: {} vs {c}",
@@ -1135,27 +1160,11 @@ mod tests {
         let opts = PeriodicOptions::new(n).skip(skip);
         let mut an = PeriodicAnalyzer::new(n).unwrap();
         let full = an.analyze(&refs, 10.0, &opts).unwrap();
-        let p = periods - skip;
         for k in 0..full.n_lines() {
-            let dft: Vec<Vec<c64>> = refs
-                .iter()
-                .map(|x| {
-                    (skip..periods)
-                        .map(|q| naive_dft(&x[q * n..(q + 1) * n], k))
-                        .collect()
-                })
-                .collect();
-            let means: Vec<c64> = dft
-                .iter()
-                .map(|d| d.iter().sum::<c64>() / p as f64)
-                .collect();
+            let (means, cov) = naive_stats(&refs, n, skip, periods, k);
             for i in 0..refs.len() {
                 assert!((full.mean(i)[k] - means[i]).norm() < 1e-10);
-                for j in 0..refs.len() {
-                    let c: c64 = (0..p)
-                        .map(|q| (dft[i][q] - means[i]) * (dft[j][q] - means[j]).conj())
-                        .sum::<c64>()
-                        / (p as f64 - 1.0);
+                for (j, &c) in cov[i].iter().enumerate() {
                     assert!(
                         (full.cov_at(i, j, k) - c).norm() < 1e-9 * (1.0 + c.norm()),
                         "cov {i}{j} line {k}"

@@ -27,3 +27,24 @@ pub fn averaged_dft(x: &[f64], n: usize, skip: usize, lmax: usize) -> Vec<c64> {
         })
         .collect()
 }
+
+/// Every experiment of the multi-input design `exc` run on the 4-axis `machine` with the
+/// options `opts(e)` of experiment `e`, as records with the design's period.
+pub fn run_design(
+    machine: &ambid_twin::Machine,
+    exc: &ambid_core::signal::multi::MultiExcitation,
+    opts: impl Fn(usize) -> ambid_twin::MachineSimOptions,
+) -> Vec<ambid_core::data::IoData> {
+    let n = exc.period_samples();
+    exc.samples()
+        .iter()
+        .enumerate()
+        .map(|(e, r)| {
+            machine
+                .simulate([&r[0], &r[1], &r[2], &r[3]], &opts(e))
+                .unwrap()
+                .to_iodata(Some(n))
+                .unwrap()
+        })
+        .collect()
+}
