@@ -173,6 +173,10 @@ pub struct WorkflowConfig {
     pub reconstruction: ReconstructionSection,
     /// ISO 14839-3 zone limits.
     pub iso: IsoSection,
+    /// The whole machine (4 axes across speeds, [`MachineSection`]); with it `ambid run` runs
+    /// the whole-machine procedure instead of the single-axis one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub machine: Option<MachineSection>,
 }
 
 impl Default for WorkflowConfig {
@@ -194,6 +198,7 @@ impl Default for WorkflowConfig {
             validation: ValidationSection::default(),
             reconstruction: ReconstructionSection::default(),
             iso: IsoSection::default(),
+            machine: None,
         }
     }
 }
@@ -611,6 +616,8 @@ impl Default for IsoSection {
     }
 }
 
+pub use crate::config_machine::{MachineFile, MachineSection};
+
 /// A workflow file that could not be used.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
@@ -820,6 +827,9 @@ impl WorkflowConfig {
             ));
         }
         self.check_values(path)?;
+        if let Some(m) = &self.machine {
+            return m.check(path, self.steps.is_some());
+        }
         if self.source == SourceKind::Files && self.data.identification.is_none() {
             return Err(bad(
                 "source = \"files\" needs [data] identification = \"path/to/record.csv\"".into(),

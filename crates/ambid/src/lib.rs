@@ -9,6 +9,7 @@ pub mod analysis;
 pub mod bla;
 pub mod comparison;
 pub mod config;
+mod config_machine;
 pub mod error;
 pub mod experiment;
 pub mod fitting;

@@ -94,6 +94,14 @@ pub fn run(a: RunArgs) -> Result<()> {
             .flatten()
             .map(|p| base.join(p)),
         )
+        .chain(cfg.machine.iter().flat_map(|m| {
+            m.config
+                .iter()
+                .cloned()
+                .chain(m.files.iter().map(|f| f.path.clone()))
+                .map(|p| base.join(p))
+                .collect::<Vec<_>>()
+        }))
         .collect();
     let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
     OutputDir::check_with_inputs(&a.out, a.force, &inputs).map_err(Error::from)?;

@@ -17,6 +17,8 @@
 pub use crate::config;
 mod data;
 pub mod figures;
+pub mod machine;
+mod machine_render;
 mod outcome;
 mod render_frf;
 mod render_models;
@@ -540,6 +542,11 @@ pub fn flatten_summary(v: &Value) -> Vec<(String, String)> {
 /// # Errors
 /// An [`Error`] with its class: input files missing or malformed, or a computation that failed.
 pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result<Outcome, Error> {
+    if cfg.machine.is_some() {
+        // the whole-machine procedure (docs/workflow.md, "Whole machine"); the models come
+        // through its seam, `machine::MachineModels`
+        return machine::run_with(cfg, base, progress, &machine::MeasuredOnly).map(|(o, _)| o);
+    }
     let steps = cfg.steps();
     progress.total = steps.len() + 1;
     let t0 = Instant::now();

@@ -61,6 +61,9 @@ pub struct Summary {
     /// The identification record (`identification.*`, twin).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub identification: Option<IdentificationSummary>,
+    /// The whole machine (`machine.*`, a workflow with a `[machine]` section).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub machine: Option<super::machine::MachineSummary>,
     /// Seconds per step (`<step>_s`), their sum (`total_s`) and the run's wall-clock time
     /// (`wall_s`; less than the sum when stages overlap).
     pub timing: BTreeMap<String, f64>,
