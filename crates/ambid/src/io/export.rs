@@ -20,6 +20,7 @@
 //! reproducible. Its output is checked against `scipy.io` in `tests/export.rs`.
 
 mod mat5;
+pub mod mimo;
 mod npz;
 mod script;
 
@@ -81,6 +82,22 @@ pub enum ExportError {
     TooLarge {
         /// Which variable.
         what: String,
+    },
+    /// A MIMO model's channel names do not match its channels.
+    #[error("{got} names given for the model's {expected} {what}: give one name per channel (e.g. u_xa, u_xb, u_ya, u_yb)")]
+    ChannelNames {
+        /// `inputs` or `outputs`.
+        what: &'static str,
+        /// Names given.
+        got: usize,
+        /// Channels of the model.
+        expected: usize,
+    },
+    /// A channel name is empty or holds a comma (the files join the names with commas).
+    #[error("the channel name `{name}` is empty or contains a comma; name every channel without commas, e.g. u_xa")]
+    ChannelName {
+        /// The name.
+        name: String,
     },
     /// Writing the `.npz` archive failed.
     #[error("cannot write the .npz archive: {0}")]

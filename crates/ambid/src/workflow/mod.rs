@@ -863,6 +863,47 @@ fn run_steps(
     Ok(())
 }
 
+/// The four files of a MIMO model (the whole machine's): channel names and speed from its
+/// `meta` (`inputs`, `outputs`, `speed_rpm`; `u1…`, `y1…` when absent).
+fn mimo_files(m: &ModelOut) -> Result<[(String, Vec<u8>); 4], crate::io::export::ExportError> {
+    use crate::io::export::mimo::{
+        mimo_json, mimo_mat_bytes, mimo_matlab_script, mimo_npz_bytes, MimoNames,
+    };
+    let list = |key: &str, prefix: &str, n: usize| -> Vec<String> {
+        m.meta[key]
+            .as_array()
+            .map(|a| {
+                a.iter()
+                    .map(|v| v.as_str().unwrap_or_default().to_string())
+                    .collect()
+            })
+            .unwrap_or_else(|| (1..=n).map(|k| format!("{prefix}{k}")).collect())
+    };
+    let names = MimoNames {
+        name: m.name.clone(),
+        inputs: list("inputs", "u", m.ss.ninputs()),
+        outputs: list("outputs", "y", m.ss.noutputs()),
+        speed_rpm: m.meta["speed_rpm"].as_f64(),
+    };
+    let json = mimo_json(&m.ss, &names, m.meta.clone())?;
+    let text = serde_json::to_string_pretty(&json).unwrap_or_default();
+    Ok([
+        (format!("models/{}.json", m.name), text.into_bytes()),
+        (
+            format!("models/{}.m", m.name),
+            mimo_matlab_script(&m.ss, &names)?.into_bytes(),
+        ),
+        (
+            format!("models/{}.mat", m.name),
+            mimo_mat_bytes(&m.ss, &names)?,
+        ),
+        (
+            format!("models/{}.npz", m.name),
+            mimo_npz_bytes(&m.ss, &names)?,
+        ),
+    ])
+}
+
 /// What a step did.
 pub(crate) enum StepStatus {
     Done,
@@ -917,6 +958,9 @@ impl Outcome {
                         self.models
                             .par_iter()
                             .map(|m| -> Result<[(String, Vec<u8>); 4], Error> {
+                                if m.ss.ninputs() > 1 || m.ss.noutputs() > 1 {
+                                    return mimo_files(m).map_err(export_error);
+                                }
                                 let names = ExportNames {
                                     name: m.name.clone(),
                                     input: "u".into(),

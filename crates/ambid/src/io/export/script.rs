@@ -5,7 +5,7 @@ use std::fmt::Write;
 
 /// A MATLAB expression for a text value: a quoted literal for printable ASCII (quotes doubled),
 /// otherwise `char([…])` of its UTF-16 code units, so no text can break the script.
-fn matlab_string(s: &str) -> String {
+pub(super) fn matlab_string(s: &str) -> String {
     if s.chars().all(|c| c == ' ' || c.is_ascii_graphic()) {
         format!("'{}'", s.replace('\'', "''"))
     } else {
@@ -22,7 +22,7 @@ fn row(data: &[f64]) -> String {
 }
 
 /// A MATLAB expression for a numeric value.
-fn matlab_value(v: &Value) -> String {
+pub(super) fn matlab_value(v: &Value) -> String {
     match v {
         Value::Scalar(x) => format_g17(*x),
         Value::Vector(p) if p.is_empty() => "zeros(1, 0)".to_string(),
