@@ -72,8 +72,9 @@ pub struct MachineSection {
     pub prbs_order: u32,
     /// Samples per PRBS bit (default 5).
     pub samples_per_bit: usize,
-    /// Periods recorded per experiment (default 6), after a pre-roll to the periodic steady
-    /// state.
+    /// Periods recorded per experiment (default 12: 11 averaged after the skipped one; the
+    /// FRF's noise falls as 1/√(periods − 1), docs/workflow.md "Whole machine"), after a pre-roll
+    /// to the periodic steady state.
     pub periods: usize,
     /// Periods dropped at the start of each record before averaging (default 1).
     pub skip_periods: usize,
@@ -115,7 +116,7 @@ impl Default for MachineSection {
             level_pct: 10.0,
             prbs_order: 10,
             samples_per_bit: 5,
-            periods: 6,
+            periods: 12,
             skip_periods: 1,
             band_hz: [1.0, 2000.0],
             period_s: 0.25575,
@@ -366,5 +367,42 @@ mod tests {
         assert!(e.contains("remove unbalance"), "{e}");
         let e = err("[machine]\nspeed = 3\n");
         assert!(e.contains("speed"), "{e}");
+    }
+
+    #[test]
+    fn the_example_machine_block_parses_to_the_defaults() {
+        // `ambid init`'s commented [machine] block, uncommented (without the files entry)
+        let ex = crate::config::EXAMPLE;
+        let start = ex.find("# [machine]").unwrap();
+        let end = ex.find("# [[machine.files]]").unwrap();
+        let block: String = ex[start..end]
+            .lines()
+            .map(|l| l.strip_prefix("# ").unwrap_or(l))
+            .map(|l| format!("{l}\n"))
+            .collect();
+        let m = WorkflowConfig::from_toml_str(&block, Path::new("wf.toml"))
+            .unwrap()
+            .machine
+            .unwrap();
+        let d = super::MachineSection::default();
+        assert_eq!(m.speeds(), d.speeds());
+        assert_eq!(
+            (
+                m.design.as_str(),
+                m.mode.as_str(),
+                m.periods,
+                m.prbs_order,
+                m.level_pct
+            ),
+            (
+                d.design.as_str(),
+                d.mode.as_str(),
+                d.periods,
+                d.prbs_order,
+                d.level_pct
+            )
+        );
+        assert_eq!(m.quality_band_hz, d.quality_band_hz);
+        assert_eq!(m.unbalance.unwrap().mass_kg, 1e-3);
     }
 }
