@@ -597,6 +597,9 @@ fn ruy(rec: &IoData, period: usize, what: &str) -> Result<IoData, Error> {
     Ok(IoData::new(ch, rec.ts(), Some(period))?)
 }
 
+/// One speed's FRF, its experiments (1× removed) and the 1× frequency removed.
+type Measured = (MeasuredFrf, Vec<IoData>, Option<f64>);
+
 /// The 4×4 FRF of the experiments `records` (one speed): the 1× line removed at `speed_rpm`
 /// (when > 0), then the period average.
 fn measure(
@@ -605,7 +608,7 @@ fn measure(
     m: &MachineSection,
     speed_rpm: f64,
     what: &str,
-) -> Result<(MeasuredFrf, Vec<IoData>, Option<f64>), Error> {
+) -> Result<Measured, Error> {
     let exps = records
         .iter()
         .map(|r| ruy(r, period, what))
@@ -713,7 +716,7 @@ pub fn acquire_twin(m: &MachineSection, base: &Path, seed: u64) -> Result<Machin
     for ((k, _), r) in jobs.iter().zip(recs) {
         per_speed[*k].push(r?);
     }
-    let measured: Vec<Result<(MeasuredFrf, Vec<IoData>, Option<f64>), Error>> = per_speed
+    let measured: Vec<Result<Measured, Error>> = per_speed
         .into_par_iter()
         .zip(speeds.par_iter())
         .map(|(recs, &s)| measure(recs, period, m, s, &format!("the twin at {s} rpm")))

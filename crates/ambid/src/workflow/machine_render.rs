@@ -74,8 +74,8 @@ pub fn bode_matrix(
             )));
         }
     }
-    for i in 0..4 {
-        for j in 0..4 {
+    for (i, out_ax) in AXES.iter().enumerate() {
+        for (j, in_ax) in AXES.iter().enumerate() {
             let mut series = Vec::new();
             for l in layers {
                 let g = l.frd.entry(i, j)?;
@@ -108,9 +108,9 @@ pub fn bode_matrix(
                 });
             }
             panels.push(Panel {
-                title: format!("{} ← {}", AXES[i], AXES[j]),
+                title: format!("{out_ax} ← {in_ax}"),
                 x: log_axis("frequency [Hz]"),
-                y: log_axis(&format!("|P {}←{}| [m/A]", AXES[i], AXES[j])),
+                y: log_axis(&format!("|P {out_ax}←{in_ax}| [m/A]")),
                 content: PanelContent::Xy(series),
                 spans: vec![],
                 equal_aspect: false,
