@@ -364,3 +364,105 @@ fn defaults_hold_on_random_rigs() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Recorded experiments: the directory `ambid simulate --axes 4` writes and the matrix FRF CSV
+/// `ambid frf --speed-rpm` writes from it give the same 4×4 plant on every line of the CSV (the
+/// same period average after the same 1× removal), as whole processes; `ambid run` refuses
+/// unsorted speeds (exit 2) naming the order to write.
+#[test]
+fn recorded_directories_and_frf_files_give_the_same_plant() {
+    let dir = common::tmpdir("machine-recorded");
+    let exe = env!("CARGO_BIN_EXE_ambid");
+    let sim = dir.join("sim");
+    let o = Command::new(exe)
+        .args([
+            "simulate",
+            "--axes",
+            "4",
+            "--design",
+            "orthogonal",
+            "--prbs-order",
+            "8",
+        ])
+        .args([
+            "--periods",
+            "4",
+            "--mode",
+            "linear",
+            "--speed-rpm",
+            "30000",
+            "--out",
+        ])
+        .arg(&sim)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let mut frf = Command::new(exe);
+    frf.arg("frf");
+    for e in 1..=4 {
+        frf.arg(sim.join(format!("exp{e}")).join("data.csv"));
+    }
+    let o = frf
+        .args(["--speed-rpm", "30000", "--out"])
+        .arg(dir.join("frf.csv"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let run = |path: &str| {
+        let c = WorkflowConfig::from_toml_str(
+            &format!("[machine]\n[[machine.files]]\nspeed_rpm = 30000\npath = \"{path}\"\n"),
+            &dir.join("wf.toml"),
+        )
+        .unwrap();
+        run_with(
+            &c,
+            &dir,
+            &mut Progress::new(Verbosity::Quiet),
+            &MeasuredOnly,
+        )
+        .unwrap_or_else(|e| panic!("{path}: {e}"))
+        .1
+    };
+    let from_dir = run("sim");
+    let from_csv = run("frf.csv");
+    assert_eq!(from_dir.summary.source, "files");
+    assert_eq!(from_dir.data.speeds[0].records.len(), 4);
+    assert_eq!(from_dir.data.speeds[0].sync_removed_hz, Some(500.0));
+    let (pd, pc) = (
+        &from_dir.data.speeds[0].frf.plant,
+        &from_csv.data.speeds[0].frf.plant,
+    );
+    assert!(pc.len() > 100, "{} lines", pc.len());
+    let mut worst = 0.0f64;
+    for (k, f) in pc.f_hz().iter().enumerate() {
+        let kd = pd
+            .f_hz()
+            .iter()
+            .position(|g| (g - f).abs() < 1e-9 * f)
+            .unwrap_or_else(|| panic!("{f} Hz not in the directory's FRF"));
+        for e in 0..16 {
+            let (a, b) = (pc.values()[k * 16 + e], pd.values()[kd * 16 + e]);
+            worst = worst.max((a - b).norm() / b.norm());
+        }
+    }
+    assert!(worst < 1e-9, "largest relative difference {worst}");
+    // both have S, so both have the per-axis ISO rows (no truth on recorded data)
+    assert_eq!(from_csv.summary.iso.len(), 4);
+    assert!(from_csv.summary.iso.iter().all(|r| r.from == "measured"));
+    // as a process: unsorted speeds are a configuration error (exit 2) with the order to write
+    let wf = dir.join("bad.toml");
+    std::fs::write(&wf, "[machine]\nspeeds_rpm = [30000, 15000]\n").unwrap();
+    let o = Command::new(exe)
+        .arg("run")
+        .arg(&wf)
+        .arg("--out")
+        .arg(dir.join("out"))
+        .arg("-q")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("write [15000, 30000]"), "{err}");
+    assert!(!dir.join("out").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
