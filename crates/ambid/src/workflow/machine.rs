@@ -85,6 +85,12 @@ pub struct MachineModelInput<'a> {
     pub controller: Option<&'a StateSpace>,
     /// The twin's exact model per speed (same order as `speeds`), on the twin only.
     pub truth: Option<&'a [SpeedTruth]>,
+    /// The twin's configuration (speed set per run with `speed_rpm`) and the physics of the
+    /// records (`Some` on the twin only): a fitter simulates its independent validation records
+    /// with them (`Machine::new(MachineConfig { speed_rpm, ..cfg })` then `simulate`).
+    pub twin: Option<(&'a MachineConfig, Mode)>,
+    /// Whether the twin's records have sensor noise.
+    pub noise: bool,
     /// Sample time \[s\].
     pub ts: f64,
     /// Band of the figures of merit \[Hz\].
@@ -232,7 +238,7 @@ pub trait MachineModels: Sync {
 /// ```
 /// use ambid::workflow::machine::{MachineModels, MachineModelInput, MeasuredOnly};
 /// use ambid_core::validate::iso::IsoZones;
-/// let input = MachineModelInput { speeds: &[], controller: None, truth: None, ts: 5e-5,
+/// let input = MachineModelInput { speeds: &[], controller: None, truth: None, twin: None, noise: true, ts: 5e-5,
 ///     quality_band_hz: [10.0, 1000.0], zones: IsoZones::default(), seed: 1 };
 /// let out = MeasuredOnly.identify(&input).unwrap();
 /// assert!(out.models.is_empty() && out.comparison.is_empty());
@@ -657,6 +663,8 @@ pub struct MachineData {
     pub truth: Option<Vec<SpeedTruth>>,
     /// The twin's configuration (source = twin), for the Campbell curves of the truth.
     pub twin: Option<MachineConfig>,
+    /// The twin's physics (source = twin).
+    pub mode: Option<Mode>,
     /// Sample time \[s\].
     pub ts: f64,
 }
@@ -744,6 +752,7 @@ pub fn acquire_twin(m: &MachineSection, base: &Path, seed: u64) -> Result<Machin
         speeds: out,
         truth: Some(truth),
         twin: Some(cfg0),
+        mode: Some(mode),
         ts,
     })
 }
@@ -778,6 +787,7 @@ pub fn acquire_files(m: &MachineSection, base: &Path) -> Result<MachineData, Err
         speeds,
         truth: None,
         twin: None,
+        mode: None,
         ts: ts.unwrap_or(f64::NAN),
     })
 }
@@ -1010,6 +1020,8 @@ pub fn run_with(
         speeds: &data.speeds,
         controller,
         truth: data.truth.as_deref(),
+        twin: data.twin.as_ref().zip(data.mode),
+        noise: m.noise,
         ts: data.ts,
         quality_band_hz: m.quality_band_hz,
         zones,
