@@ -220,8 +220,11 @@ fn check_inputs(
     let (ny, nu) = (plant.noutputs(), plant.ninputs());
     if controller.ninputs() != ny || controller.noutputs() != nu {
         return Err(Error::DimensionMismatch {
-            context: "closed-loop simulation: the controller maps the plant's outputs to its inputs",
-            expected: format!("a controller with {ny} inputs and {nu} outputs (plant {ny} outputs × {nu} inputs)"),
+            context:
+                "closed-loop simulation: the controller maps the plant's outputs to its inputs",
+            expected: format!(
+                "a controller with {ny} inputs and {nu} outputs (plant {ny} outputs × {nu} inputs)"
+            ),
             got: format!(
                 "{} inputs and {} outputs",
                 controller.ninputs(),
@@ -484,7 +487,8 @@ impl Loop {
             }
             for (i, ui) in u.iter_mut().enumerate() {
                 let rk = r.map_or(0.0, |r| r[i][k]);
-                *ui = dot(&cc[i * nc..(i + 1) * nc], &xc) + dot(&dc[i * ny..(i + 1) * ny], &ek) + rk;
+                *ui =
+                    dot(&cc[i * nc..(i + 1) * nc], &xc) + dot(&dc[i * ny..(i + 1) * ny], &ek) + rk;
             }
             lu_solve(&self.lu, &self.perm, &mut u, &mut tmp);
             for l in 0..ny {
@@ -940,16 +944,8 @@ pub fn reconstruct_mimo(
         })
         .collect();
     Ok(ReconstructionMimo {
-        fit_y: y_meas
-            .iter()
-            .zip(&sim.y)
-            .map(|(m, s)| fit(m, s))
-            .collect(),
-        fit_u: u_meas
-            .iter()
-            .zip(&sim.u)
-            .map(|(m, s)| fit(m, s))
-            .collect(),
+        fit_y: y_meas.iter().zip(&sim.y).map(|(m, s)| fit(m, s)).collect(),
+        fit_u: u_meas.iter().zip(&sim.u).map(|(m, s)| fit(m, s)).collect(),
         max_error_y: y_meas
             .iter()
             .zip(&sim.y)

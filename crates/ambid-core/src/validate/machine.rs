@@ -7,13 +7,15 @@
 //! `w_<axis>`, `i_<axis>`; axis order as [`IoData::role_names`], e.g. `xa, xb, ya, yb`):
 //! * **Closed-loop simulation** of $u = r + C(w - y)$, $y = \hat P u$ driven by the recorded
 //!   $r$ (and $w$), from the loop's initial state that best explains the record
-//!   ([`reconstruct_mimo`], [`InitialState::Estimate`] by default), and per axis the fit
+//!   ([`reconstruct_mimo`], [`InitialState::Estimate`] by default; simulated in a state basis
+//!   scaled so that every state is seen equally at the outputs, which keeps that least squares
+//!   well conditioned), and per axis the fit
 //!   ([`fit_percent`]) of the **displacement** $y_k$ and of the **current reference** $u_k$ (the
 //!   controller output the amplifier follows: what the SISO validation calls the current).
 //! * **Coil current** $i_k$, when recorded: $\hat P$ does not contain the amplifier (it maps $u$
 //!   to $y$), so $i$ is predicted from the simulated $\hat u_k$ through an amplifier model
 //!   identified on the record's own $u_k \to i_k$ relation (an ARX model, default
-//!   $n_a = 2$, $n_b = 3$, $n_k = 1$, [`CurrentModel`]; the amplifier is a stable, fast current
+//!   $n_a = 1$, $n_b = 2$, $n_k = 1$, [`CurrentModel`]; the amplifier is a stable, fast current
 //!   loop measured in open loop by its own input and output, so this fit is consistent). The
 //!   fit of $i_k$ then judges $\hat P$ through $\hat u_k$; the amplifier model's own one-step fit
 //!   is reported with it.
@@ -96,13 +98,14 @@ pub enum CurrentModel {
 }
 
 impl Default for CurrentModel {
-    /// ARX with $n_a = 2$, $n_b = 3$, $n_k = 1$: a first- or second-order amplifier with up to
-    /// two samples of delay (the twin's amplifier, a first-order lag behind the one-sample
-    /// computation delay, is $n_a = 1$, $n_b = 1$, $n_k = 2$ exactly).
+    /// ARX with $n_a = 1$, $n_b = 2$, $n_k = 1$: a first-order amplifier behind up to two
+    /// samples of delay (the twin's amplifier, a first-order lag behind the one-sample
+    /// computation delay, is $i_k = a\,i_{k-1} + b\,u_{k-2}$, inside this set). Larger orders
+    /// than the data need make the regressor of noise-free data rank-deficient (an error).
     fn default() -> Self {
         CurrentModel::Arx {
-            na: 2,
-            nb: 3,
+            na: 1,
+            nb: 2,
             nk: 1,
         }
     }
@@ -206,7 +209,8 @@ pub struct MachineValidation {
     /// $S_{kk}$ on the grid, per axis.
     #[serde(skip)]
     pub s_diag: Vec<Vec<c64>>,
-    /// The closed-loop simulation (fits over the whole record, initial state).
+    /// The closed-loop simulation (fits over the whole record, initial state in the models'
+    /// own state bases: plant states, then controller states).
     pub reconstruction: ReconstructionMimo,
     /// The model's closed loop $T_{ry} = (I + \hat P C)^{-1}\hat P$ (inputs $r$, outputs $y$;
     /// states: the plant's, then the controller's).
@@ -274,7 +278,11 @@ fn channels(data: &IoData) -> Result<Channels<'_>> {
         }
     }
     let opt = |role: Role| -> Vec<Option<&[f64]>> { axes.iter().map(|a| find(role, a)).collect() };
-    let (r, w, i) = (opt(Role::Excitation), opt(Role::Reference), opt(Role::Current));
+    let (r, w, i) = (
+        opt(Role::Excitation),
+        opt(Role::Reference),
+        opt(Role::Current),
+    );
     let excited = |v: &[Option<&[f64]>]| v.iter().flatten().any(|x| x.iter().any(|s| *s != 0.0));
     if !excited(&r) && !excited(&w) {
         return Err(Error::invalid(
@@ -399,9 +407,14 @@ pub fn validate_machine(
     let w: Vec<&[f64]> = ch.w.iter().map(|x| x.unwrap_or(&zeros)).collect();
     let has_r = ch.r.iter().any(|x| x.is_some());
     let has_w = ch.w.iter().any(|x| x.is_some());
-    let reconstruction = reconstruct_mimo(
-        plant,
-        controller,
+    // the simulation in a state basis where every state is seen equally at the outputs: the
+    // initial-state least squares would otherwise truncate badly scaled states (displacements
+    // in m next to currents in A) and miss a noise-free record by ~1e-5 points
+    let (plant_b, plant_scale) = observability_scaled(plant)?;
+    let (ctl_b, ctl_scale) = observability_scaled(controller)?;
+    let mut reconstruction = reconstruct_mimo(
+        &plant_b,
+        &ctl_b,
         has_w.then_some(&w[..]),
         has_r.then_some(&r[..]),
         &ch.y,
@@ -410,6 +423,14 @@ pub fn validate_machine(
         ts,
         opts.initial_state,
     )?;
+    // the initial state in the models' own bases: x = D x'
+    for (x, d) in reconstruction
+        .initial_state
+        .iter_mut()
+        .zip(plant_scale.iter().chain(&ctl_scale))
+    {
+        *x *= d;
+    }
     // the excitations the residuals are tested against: every nonzero r (w without any)
     let nonzero = |x: &&[f64]| x.iter().any(|v| *v != 0.0);
     let mut drivers: Vec<(String, &[f64])> = ch
@@ -497,6 +518,46 @@ pub fn validate_machine(
     })
 }
 
+/// The model in the state basis $x = D x'$ with $D = \operatorname{diag}(1/\lVert O e_j\rVert)$,
+/// $O = [C; CA; \dots; CA^{h-1}]$, $h = 2n + 20$ (each state's output energy over the first
+/// samples normalised to one; states the outputs do not see, or a non-finite norm, keep scale
+/// 1): the same input-output model, with the initial-state least squares well conditioned.
+/// Returns the model and the diagonal of $D$.
+fn observability_scaled(m: &StateSpace) -> Result<(StateSpace, Vec<f64>)> {
+    let n = m.order();
+    let (a, c) = (m.a(), m.c());
+    let mut norms = vec![0.0f64; n];
+    let mut ca = c.to_owned();
+    for _ in 0..2 * n + 20 {
+        for (j, v) in norms.iter_mut().enumerate() {
+            *v += (0..ca.nrows())
+                .map(|i| ca[(i, j)] * ca[(i, j)])
+                .sum::<f64>();
+        }
+        ca = &ca * a;
+    }
+    let d: Vec<f64> = norms
+        .iter()
+        .map(|v| {
+            let s = v.sqrt();
+            if s.is_finite() && s > 0.0 {
+                1.0 / s
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    let (nu, ny) = (m.ninputs(), m.noutputs());
+    let scaled = StateSpace::new(
+        Mat::from_fn(n, n, |i, j| a[(i, j)] * d[j] / d[i]),
+        Mat::from_fn(n, nu, |i, j| m.b()[(i, j)] / d[i]),
+        Mat::from_fn(ny, n, |i, j| c[(i, j)] * d[j]),
+        m.d().to_owned(),
+        m.ts(),
+    )?;
+    Ok((scaled, d))
+}
+
 /// The residual tests of one output error against every driving channel (module docs).
 fn output_residuals(
     eps: &[f64],
@@ -512,13 +573,16 @@ fn output_residuals(
     }
     let thresholds: Vec<f64> = tests
         .iter()
-        .map(|t| t.independence.as_ref().map_or(f64::NAN, |c| chi2_quantile(c.dof, level)))
+        .map(|t| {
+            t.independence
+                .as_ref()
+                .map_or(f64::NAN, |c| chi2_quantile(c.dof, level))
+        })
         .collect();
-    let pass = tests.iter().zip(&thresholds).all(|(t, th)| {
-        t.independence
-            .as_ref()
-            .is_some_and(|c| c.statistic < *th)
-    });
+    let pass = tests
+        .iter()
+        .zip(&thresholds)
+        .all(|(t, th)| t.independence.as_ref().is_some_and(|c| c.statistic < *th));
     Ok(OutputResiduals {
         inputs: drivers.iter().map(|(n, _)| n.clone()).collect(),
         tests,
@@ -618,7 +682,9 @@ fn sensitivity_lines(
             } else {
                 Err(Error::numerical(
                     "validate_machine: sensitivity",
-                    format!("I + C P is singular at {f} Hz (a closed-loop pole on the unit circle)"),
+                    format!(
+                        "I + C P is singular at {f} Hz (a closed-loop pole on the unit circle)"
+                    ),
                 ))
             }
         })
