@@ -461,7 +461,7 @@ pub fn validate_machine(
     let sim = &reconstruction.simulated;
     let mut axes = Vec::with_capacity(n_axes);
     let mut amplifiers = Vec::with_capacity(n_axes);
-    for k in 0..n_axes {
+    for (k, s_kk) in s_diag.iter().enumerate() {
         let (y, u) = (ch.y[k], ch.u[k]);
         let eps: Vec<f64> = y[k0..]
             .iter()
@@ -482,7 +482,7 @@ pub fn validate_machine(
             _ => (None, None, None),
         };
         amplifiers.push(amp);
-        let mags: Vec<f64> = s_diag[k].iter().map(|v| v.norm()).collect();
+        let mags: Vec<f64> = s_kk.iter().map(|v| v.norm()).collect();
         let (fp, _) = refine_peak(&grid_hz, &mags, |f| {
             Ok(sensitivity_at(plant, controller, f)?[(k, k)].norm())
         })?;
