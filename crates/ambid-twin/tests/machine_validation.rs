@@ -2,7 +2,9 @@
 //! truth: the true plant reproduces a noise-free record to rounding, its σ̄(S), per-axis ISO
 //! peaks and closed-loop poles equal the twin's; a 5 % gain error scores visibly lower; the
 //! "within 1 point of the true plant's fit" quantity on independent records (helper
-//! [`fits_against_truth`]); random rigs; typed errors.
+//! [`fits_against_truth`], demonstrated with an N4SID model and the exact plant in a random
+//! basis); random rigs; typed errors. Debug run times (idle machine): 0.7, 6.6, 5.0, 0.01 and
+//! 5.2 s.
 //!
 //! Records: 6000 samples (0.3 s at 20 kHz) of seeded white-noise excitation (0.05 A RMS) on all
 //! four axes, seeds 1000 + s (different from every identification design), the twin's sensor
@@ -411,4 +413,36 @@ fn bad_input_is_refused_with_typed_errors() {
         ambid_core::validate::closed_loop::simulate_loop_mimo(p, c, None, Some(&r), None),
         Err(Error::DimensionMismatch { .. })
     ));
+}
+
+/// The helper with an identified model: N4SID (order 24, 10 block rows, CVA) on a noise-free
+/// closed-loop record of the twin at 15 000 rpm (excitation seed 1099, not a validation seed)
+/// recovers the unstable plant (4 unstable poles, as the truth), and on the five independent
+/// noisy validation records its per-axis fits equal the true plant's to 1e-6 points (≈ 1e-10
+/// measured): the bar's "within 1 point", met by a model made without the MIMO fitter.
+#[test]
+fn n4sid_model_meets_the_bar() {
+    use ambid_core::estimate::subspace::{n4sid, SubspaceOptions};
+    let m = at_speed(15_000.0);
+    let id = record(&m, 99, false);
+    let (y, u) = (id.y_matrix(0).unwrap(), id.u_matrix(0).unwrap());
+    let opts = SubspaceOptions {
+        order: Some(24),
+        block_rows: Some(10),
+        ..SubspaceOptions::new(m.ts())
+    };
+    let p = n4sid(y.as_ref(), u.as_ref(), &opts).unwrap().model;
+    let unstable = |p: &StateSpace| p.poles().unwrap().iter().filter(|z| z.norm() > 1.0).count();
+    assert_eq!(unstable(&p), unstable(m.plant()));
+    assert_eq!(unstable(&p), 4);
+    for seed in 0..5 {
+        let fits = fits_against_truth(&m, &p, seed);
+        eprintln!("seed {seed}: n4sid vs truth {fits:?}");
+        for (model, truth) in fits {
+            assert!(
+                (model - truth).abs() < 1e-6,
+                "seed {seed}: {model} vs {truth}"
+            );
+        }
+    }
 }
