@@ -5,6 +5,7 @@ pub mod closed_loop;
 pub mod compare;
 pub mod fit;
 pub mod iso;
+pub mod machine;
 pub mod margins;
 pub mod predict;
 pub mod pz;
