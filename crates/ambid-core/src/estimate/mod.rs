@@ -4,10 +4,12 @@
 pub mod arx;
 pub mod arx_mimo;
 pub mod freqfit;
+pub mod freqfit_mimo;
 pub mod freqfit_ss;
 pub mod order;
 pub mod pem;
 mod qr_stream;
+pub mod scheduled;
 pub mod ss_pem;
 pub mod subspace;
 

@@ -1,0 +1,1638 @@
+//! MIMO state-space models fitted to matrix frequency-response data: a frequency-domain subspace
+//! start refined by Levenberg–Marquardt on the weighted complex error of every entry (discrete
+//! time, $n_y \times n_u$, open-loop unstable plants admitted and never stabilised).
+//!
+//! # Criterion
+//! [`ss_frd_mimo`] minimises, over the $n$-th order models
+//! $\hat G(z) = C (zI - A)^{-1} B + D$ ($D = 0$ unless [`MimoFreqOptions::feedthrough`]),
+//! $$ V = \sum_{k=1}^{L} \sum_{i=1}^{n_y} \sum_{j=1}^{n_u} w_{k,ij}\,
+//!     \bigl| \hat G_{ij}(z_k) - G_{k,ij} \bigr|^2 , \qquad z_k = e^{j\omega_k T}, $$
+//! with $w_{k,ij} = 1/\sigma^2_{k,ij}$, the inverse of the variance $\sigma^2 = E|\hat G - G|^2$
+//! that a nonparametric estimate carries ([`MimoWeights::InverseVariance`], the default when
+//! the [`Frd`] has variances). With those weights $V$ is a sum of $L n_y n_u$ unit-variance
+//! complex residuals at the true model, so $V \approx L n_y n_u - n_\theta/2$ when the model
+//! class holds the plant (a check of the fit, [`MimoFreqFit::normalised_cost`]). Without
+//! variances the entries are weighted by $1/(a_i b_j)^2$, $a_i b_j$ a rank-one fit of their RMS
+//! over the band ([`MimoWeights::Uniform`]), so that an output in metres and one in volts count
+//! alike.
+//!
+//! # 1. Subspace start
+//! The frequency-domain subspace method of McKelvey, Akçay and Ljung (1996), with several inputs
+//! and outputs: with $X_k = (\zeta_k I - A)^{-1} B$ ($n \times n_u$), $\zeta_k^p G_k = C A^p X_k +
+//! \sum_{i<p} C A^{p-1-i} B \zeta_k^i + D\zeta_k^p$, so the $q n_y \times L n_u$ matrix
+//! $\mathbf G = [W_q(\zeta_k) \otimes G_k]_k$ and the $q n_u \times L n_u$ matrix
+//! $\mathbf U = [W_q(\zeta_k) \otimes I_{n_u}]_k$, $W_q(\zeta) = [1, \zeta, \dots, \zeta^{q-1}]^\top$,
+//! satisfy $\mathbf G = \mathcal O_q \mathbf X + \Gamma_q \mathbf U$. The block column of line
+//! $k$ is scaled by $\sqrt{\bar w_k}$ (a scalar per line, the mean weight of its entries in the
+//! channel scaling above), real and imaginary parts are put side by side, and the LQ
+//! factorisation of $[\mathbf U; \mathbf G]$ removes the input part:
+//! $\mathbf G \Pi^\perp_{\mathbf U} = L_{22} Q_2^\top$. The $n$ leading left singular vectors of
+//! $L_{22}$ span $\mathcal O_q$ (its singular values, [`MimoFreqFit::singular_values`] and
+//! [`subspace_singular_values`], show the order); $C$ is its first block row and $A$ follows from
+//! the shift invariance by least squares. The step runs in the warped variable
+//! $\zeta = (z - a)/(1 - a z)$ of [`freqfit_ss`](super::freqfit_ss), which maps the band's
+//! geometric centre to $\zeta = j$ (the poles of an AMB plant at 20 kHz sit near $z = 1$, where
+//! the powers $z^p$ are nearly collinear). The pair $(A_\zeta, C_\zeta)$ is mapped back exactly:
+//! $$ A_z = (I + a A_\zeta)^{-1} (aI + A_\zeta), \qquad C_z = C_\zeta (I - a A_z), $$
+//! because $C_\zeta(\zeta I - A_\zeta)^{-1} = C_\zeta (1 - az)(zI - A_z)^{-1}(I + aA_\zeta)^{-1}$ and
+//! $(1 - az)(zI - A_z)^{-1} = -aI + (I - aA_z)(zI - A_z)^{-1}$; the constant goes into $D$ and the
+//! factor on the right into $B$, both of which are estimated next.
+//!
+//! # 2. Modal block form and the linear step
+//! $A_z$ is brought to block-diagonal form by its eigenvectors: a complex pair $\lambda, \bar\lambda$
+//! with eigenvector $v$ spans $[\operatorname{Re} v, \operatorname{Im} v]$; each real pole is a
+//! $1 \times 1$ block (two real poles of different planes have no output that sees both, so a
+//! $2 \times 2$ companion block of them would be singular). Each $2 \times 2$
+//! block is put in the **delta-operator companion form**
+//! $$ A_b = I + h M_b, \quad M_b = \begin{bmatrix} 0 & 1 \\ -\alpha_{b,2} & -\alpha_{b,1}\end{bmatrix},
+//! \qquad \delta = \frac{z - 1}{h}, \quad h = \bigl|e^{j\omega_c T} - 1\bigr|, $$
+//! with the row $o_b$ of $C_b$ whose transform below is best conditioned ($|\det \mathcal O|$ largest) fixed at $[1\;0]$ (by
+//! $x' = \mathcal O x$, $\mathcal O = [c;\, c(A_b - I)/h]$, $c = C_{o_b}$), so that
+//! $$ \hat G(z) = D + \sum_b C_b\, (\delta I - M_b)^{-1}\, \beta_b , \qquad
+//! (\delta I - M_b)^{-1} = \frac{1}{\delta^2 + \alpha_{b,1}\delta + \alpha_{b,2}}
+//! \begin{bmatrix} \delta + \alpha_{b,1} & 1 \\ -\alpha_{b,2} & \delta \end{bmatrix}, $$
+//! and $B_b = h \beta_b$ (a $1 \times 1$ block: $A_b = 1 + h\lambda_b$, $C_{o_b, b} = 1$). The
+//! oversampled poles near $z = 1$ make the shift-form coefficients nearly collinear; the
+//! delta-form ones are not (see [`ss_pem`](super::ss_pem)). With the poles and $C$ fixed,
+//! $\hat G$ is linear in $(\beta, D)$, which are fitted by weighted linear least squares (one
+//! problem per input column).
+//!
+//! # 3. Refinement
+//! Levenberg–Marquardt ([`minimize`]) over $\theta = (\alpha_b, \beta_b, \text{free rows of }
+//! C_b)_b$ and $D$; per block $\dim_b(1 + n_u + n_y - 1)$ parameters, the dimension of a
+//! McMillan-degree-$\dim_b$ block with given poles, so the parameterisation is locally
+//! identifiable for distinct poles (repeated poles, e.g. the two identical planes of a rotor at
+//! standstill, leave a mixing of their blocks free; the damped step handles the flat
+//! directions). With $Y_b = C_b R_b$ and $X_b = R_b \beta_b$, $R_b = (\delta I - M_b)^{-1}$, the
+//! Jacobian is analytic:
+//! $\partial \hat G / \partial \beta_b[r, j] = Y_b[:, r]\, e_j^\top$,
+//! $\partial \hat G / \partial C_b[i, r] = e_i\, X_b[r, :]$,
+//! $\partial \hat G / \partial \alpha_{b,1} = -Y_b[:, 2]\, X_b[2, :]$,
+//! $\partial \hat G / \partial \alpha_{b,2} = -Y_b[:, 2]\, X_b[1, :]$,
+//! $\partial \hat G / \partial \lambda_b = Y_b X_b$. The residuals are the real and imaginary
+//! parts of $\sqrt{w_{k,ij}}(\hat G_{ij}(z_k) - G_{k,ij})$.
+//!
+//! Unstable poles are admitted (the AMB plant has one per rigid-body degree of freedom and
+//! axis). [`MimoFreqOptions::max_unstable_poles`] holds the fit to at most that many poles on or
+//! outside the unit circle: the start mirrors ($z \mapsto 1/\bar z$) the unstable blocks whose
+//! mirroring costs least until the count is met, refits the linear parameters, and
+//! Levenberg–Marquardt rejects every trial with more unstable poles; nothing is reflected after
+//! the fit, so the result is the best model in the admissible set.
+//!
+//! # Requirements on the problem
+//! * a discrete-time [`Frd`] (its sample time is the model's) with at least one line in the
+//!   band, finite values, and positive variances when inverse-variance weights are used;
+//! * more real equations $2 L n_y n_u$ than parameters, and $2 L n_u \ge q (n_u + n_y)$ for the
+//!   projection of the subspace step (the horizon $q$ defaults to
+//!   $\min(\lceil n/n_y \rceil + \lceil n / (2 n_y) \rceil + 2, \cdot)$, bounded by the lines);
+//! * the order at most $q n_y$; distinct (or diagonalisable repeated) poles for the block form.
+//!
+//! # Reference
+//! T. McKelvey, H. Akçay, L. Ljung, "Subspace-based multivariable system identification from
+//! frequency response data", *IEEE Trans. Automatic Control* 41(7), 1996;
+//! R. Pintelon, J. Schoukens, *System Identification: A Frequency Domain Approach*, 2nd ed.,
+//! Wiley–IEEE Press, 2012 (chapter 9: the weighted least-squares criterion with the
+//! nonparametric variance as weight, and its $\chi^2$ check);
+//! R. H. Middleton, G. C. Goodwin, *Digital Control and Estimation: A Unified Approach*,
+//! Prentice Hall, 1990 (the delta operator).
+//!
+//! # Example
+//! A $2 \times 2$ plant with an unstable real pole and a lightly damped pair, recovered from its
+//! exact response on 80 lines:
+//! ```
+//! use ambid_core::estimate::freqfit_mimo::{ss_frd_mimo, MimoFreqOptions};
+//! use ambid_core::lti::{Frd, StateSpace};
+//! use faer::mat;
+//! let (r, w) = (0.995f64, 0.05f64);
+//! let truth = StateSpace::discrete(
+//!     mat![[1.01, 0.0, 0.0], [0.0, r * w.cos(), r * w.sin()], [0.0, -r * w.sin(), r * w.cos()]],
+//!     mat![[1.0, 0.5], [0.0, 1.0], [1.0, -0.3]],
+//!     mat![[1.0, 0.2, 0.0], [0.4, 0.0, 1.0]],
+//!     mat![[0.0, 0.0], [0.0, 0.0]],
+//!     1e-3,
+//! ).unwrap();
+//! let f: Vec<f64> = (1..=80).map(|k| 2.0 * k as f64).collect();
+//! let frd = Frd::from_model(&truth, &f).unwrap();
+//! let fit = ss_frd_mimo(&frd, 3, &MimoFreqOptions::default()).unwrap();
+//! assert!(fit.errors.median_norm_relative < 1e-9);
+//! let unstable = fit.model.poles().unwrap().iter().filter(|z| z.norm() > 1.0).count();
+//! assert_eq!(unstable, 1);
+//! ```
+
+// the loops index several parallel arrays (data, weights, channel scales) by line and entry
+#![allow(clippy::needless_range_loop)]
+
+use super::pem::lm::{minimize, LeastSquaresProblem, LmOptions};
+use crate::error::{Error, Result};
+use crate::linalg;
+use crate::lti::{Frd, StateSpace};
+use faer::{c64, Mat};
+
+const CTX: &str = "ss_frd_mimo";
+
+/// The refinement stops when the Gauss–Newton step is shorter than this many standard errors
+/// (the statistical rule of [`LmOptions::with_significance_tol`], as the prediction-error
+/// estimators use it).
+pub const SIGNIFICANCE_TOL: f64 = 0.1;
+
+/// How the entries of the FRF are weighted (module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum MimoWeights {
+    /// Inverse variances when the [`Frd`] has them, else [`MimoWeights::Uniform`] (default).
+    #[default]
+    Auto,
+    /// $w_{k,ij} = 1/\sigma^2_{k,ij}$; an error when the [`Frd`] has no variance or a zero one.
+    InverseVariance,
+    /// $w_{k,ij} = 1/(a_i b_j)^2$ with $a_i b_j$ a rank-one fit of the entries' RMS on the band.
+    Uniform,
+}
+
+/// Options of [`ss_frd_mimo`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MimoFreqOptions {
+    /// Band $[f_{\min}, f_{\max}]$ in Hz (inclusive); `None` uses every line.
+    pub band_hz: Option<(f64, f64)>,
+    /// Weights of the entries (default [`MimoWeights::Auto`]).
+    pub weights: MimoWeights,
+    /// Iteration limit of the Levenberg–Marquardt refinement (default 100; 0 keeps the start).
+    pub max_iterations: usize,
+    /// At most this many poles on or outside the unit circle (default `None`: unconstrained).
+    /// Never a repair: the start mirrors the surplus and the refinement stays admissible.
+    pub max_unstable_poles: Option<usize>,
+    /// Estimate a feedthrough $D$ (default `false`: strictly proper).
+    pub feedthrough: bool,
+    /// Block rows $q$ of the subspace step (default: module docs).
+    pub horizon: Option<usize>,
+}
+
+impl Default for MimoFreqOptions {
+    fn default() -> Self {
+        Self {
+            band_hz: None,
+            weights: MimoWeights::Auto,
+            max_iterations: 100,
+            max_unstable_poles: None,
+            feedthrough: false,
+            horizon: None,
+        }
+    }
+}
+
+/// Unweighted error measures of a fitted model on the lines it was fitted to.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MimoFreqErrors {
+    /// Median over the lines of $\lVert \hat G(z_k) - G_k \rVert_2 / \lVert G_k \rVert_2$
+    /// (spectral norms).
+    pub median_norm_relative: f64,
+    /// Largest over the lines of the same ratio.
+    pub max_norm_relative: f64,
+    /// Per entry (row-major $i n_u + j$): median over the lines of
+    /// $|\hat G_{ij} - G_{ij}| / |G_{ij}|$.
+    pub median_entry_relative: Vec<f64>,
+}
+
+/// A fitted MIMO state-space model (see [`ss_frd_mimo`]).
+#[derive(Debug, Clone)]
+pub struct MimoFreqFit {
+    /// The model (discrete, at the data's sample time; never stabilised).
+    pub model: StateSpace,
+    /// Number of free real parameters.
+    pub n_params: usize,
+    /// The weighted cost $V$ at the result.
+    pub cost: f64,
+    /// Number of real equations $2 L n_y n_u$.
+    pub n_equations: usize,
+    /// Accepted refinement steps.
+    pub iterations: usize,
+    /// Whether the refinement met a convergence test.
+    pub converged: bool,
+    /// Unweighted error measures on the lines used.
+    pub errors: MimoFreqErrors,
+    /// Singular values of the subspace step's projected data (descending).
+    pub singular_values: Vec<f64>,
+    /// The frequencies used \[Hz\].
+    pub f_hz: Vec<f64>,
+}
+
+impl MimoFreqFit {
+    /// $2V / (2 L n_y n_u - n_\theta)$: about 1 when inverse-variance weights are right and the
+    /// model class holds the plant; much larger when the model is too simple.
+    pub fn normalised_cost(&self) -> f64 {
+        2.0 * self.cost / (self.n_equations.saturating_sub(self.n_params).max(1)) as f64
+    }
+
+    /// Bayesian information criterion of the weighted cost,
+    /// $2V + n_\theta \ln(2 L n_y n_u)$ (the $-2\log$-likelihood of unit-variance complex
+    /// residuals up to a constant; valid with inverse-variance weights).
+    pub fn bic(&self) -> f64 {
+        2.0 * self.cost + self.n_params as f64 * (self.n_equations as f64).ln()
+    }
+
+    /// Number of poles on or outside the unit circle.
+    ///
+    /// # Errors
+    /// [`Error::Numerical`] when the eigenvalues cannot be computed.
+    pub fn unstable_poles(&self) -> Result<usize> {
+        Ok(self
+            .model
+            .poles()?
+            .iter()
+            .filter(|z| z.norm() >= 1.0)
+            .count())
+    }
+}
+
+/// The lines of a matrix [`Frd`] a fit uses, in channel-scaled units (module docs).
+struct Data {
+    f_hz: Vec<f64>,
+    z: Vec<c64>,
+    /// Scaled response, line-major, column-major per line: `g[k * ny * nu + j * ny + i]`.
+    g: Vec<c64>,
+    /// Weights in scaled units, same layout.
+    w: Vec<f64>,
+    ny: usize,
+    nu: usize,
+    ts: f64,
+    /// Output scales $a_i$ and input scales $b_j$: $G = \operatorname{diag}(a) G' \operatorname{diag}(b)$.
+    a: Vec<f64>,
+    b: Vec<f64>,
+}
+
+impl Data {
+    fn new(frd: &Frd, opts: &MimoFreqOptions) -> Result<Self> {
+        let ts = frd.ts().ok_or_else(|| {
+            Error::invalid(
+                "frd",
+                "the FRF has no sample time; frequency-domain fits are discrete-time at the data's sample time",
+            )
+        })?;
+        let (ny, nu) = (frd.ny(), frd.nu());
+        let (lo, hi) = match opts.band_hz {
+            Some((lo, hi)) if !(lo.is_finite() && hi.is_finite() && lo <= hi) => {
+                return Err(Error::invalid(
+                    "band_hz",
+                    format!("the band must be finite with f_min <= f_max, got [{lo}, {hi}] Hz"),
+                ))
+            }
+            Some(b) => b,
+            None => (f64::NEG_INFINITY, f64::INFINITY),
+        };
+        let var = frd.variance();
+        let use_var = match opts.weights {
+            MimoWeights::Auto => var.is_some(),
+            MimoWeights::InverseVariance => {
+                if var.is_none() {
+                    return Err(Error::invalid(
+                        "weights",
+                        "inverse-variance weights need an FRF with variances; use uniform weights or an estimate with its variance",
+                    ));
+                }
+                true
+            }
+            MimoWeights::Uniform => false,
+        };
+        let e = ny * nu;
+        let (mut f_hz, mut g, mut v) = (Vec::new(), Vec::new(), Vec::new());
+        for (k, &f) in frd.f_hz().iter().enumerate() {
+            if f < lo || f > hi {
+                continue;
+            }
+            if f <= 0.0 || f >= 0.5 / ts {
+                return Err(Error::invalid(
+                    "band_hz",
+                    format!("the line at {f} Hz is not strictly between 0 and the Nyquist frequency {} Hz; narrow the band", 0.5 / ts),
+                ));
+            }
+            let vals = &frd.values()[k * e..(k + 1) * e];
+            if vals.iter().any(|x| !(x.re.is_finite() && x.im.is_finite())) {
+                return Err(Error::NonFinite {
+                    what: "frd values",
+                    index: k,
+                });
+            }
+            f_hz.push(f);
+            g.extend_from_slice(vals);
+            if use_var {
+                if let Some(var) = var {
+                    let vv = &var[k * e..(k + 1) * e];
+                    if let Some(bad) = vv.iter().find(|x| !(x.is_finite() && **x > 0.0)) {
+                        return Err(Error::invalid(
+                            "weights",
+                            format!("the variance at {f} Hz is {bad}; inverse-variance weights need positive, finite variances (narrow the band or use uniform weights)"),
+                        ));
+                    }
+                    v.extend_from_slice(vv);
+                }
+            }
+        }
+        let l = f_hz.len();
+        if l == 0 {
+            return Err(Error::invalid(
+                "band_hz",
+                "no line of the FRF lies in the band; widen the band",
+            ));
+        }
+        // channel scales: rank-one fit of the entries' typical size (σ or RMS)
+        let size = |i: usize, j: usize| -> f64 {
+            let mut s: Vec<f64> = (0..l)
+                .map(|k| {
+                    if use_var {
+                        v[k * e + j * ny + i].sqrt()
+                    } else {
+                        g[k * e + j * ny + i].norm()
+                    }
+                })
+                .collect();
+            s.sort_by(f64::total_cmp);
+            s[l / 2]
+        };
+        let mut ln = Mat::<f64>::zeros(ny, nu);
+        let mut floor = f64::INFINITY;
+        let mut top = 0.0f64;
+        for i in 0..ny {
+            for j in 0..nu {
+                let s = size(i, j);
+                if s > 0.0 && s.is_finite() {
+                    floor = floor.min(s);
+                    top = top.max(s);
+                }
+                ln[(i, j)] = s;
+            }
+        }
+        if top == 0.0 {
+            return Err(Error::numerical(
+                CTX,
+                "the response is zero on every line of the band; there is nothing to fit",
+            ));
+        }
+        let floor = floor.max(1e-12 * top);
+        for i in 0..ny {
+            for j in 0..nu {
+                ln[(i, j)] = ln[(i, j)].max(floor).ln();
+            }
+        }
+        let mean_all = (0..ny)
+            .flat_map(|i| (0..nu).map(move |j| (i, j)))
+            .map(|(i, j)| ln[(i, j)])
+            .sum::<f64>()
+            / e as f64;
+        let a: Vec<f64> = (0..ny)
+            .map(|i| ((0..nu).map(|j| ln[(i, j)]).sum::<f64>() / nu as f64).exp())
+            .collect();
+        let b: Vec<f64> = (0..nu)
+            .map(|j| ((0..ny).map(|i| ln[(i, j)]).sum::<f64>() / ny as f64 - mean_all).exp())
+            .collect();
+        let mut w = vec![0.0; l * e];
+        for k in 0..l {
+            for j in 0..nu {
+                for i in 0..ny {
+                    let s = a[i] * b[j];
+                    let idx = k * e + j * ny + i;
+                    g[idx] /= s;
+                    w[idx] = if use_var { s * s / v[idx] } else { 1.0 };
+                }
+            }
+        }
+        let z = f_hz
+            .iter()
+            .map(|f| c64::from_polar(1.0, 2.0 * std::f64::consts::PI * f * ts))
+            .collect();
+        Ok(Self {
+            f_hz,
+            z,
+            g,
+            w,
+            ny,
+            nu,
+            ts,
+            a,
+            b,
+        })
+    }
+
+    fn len(&self) -> usize {
+        self.f_hz.len()
+    }
+
+    fn entries(&self) -> usize {
+        self.ny * self.nu
+    }
+}
+
+/// The all-pass warp of the subspace step and the delta scale (module docs).
+#[derive(Debug, Clone, Copy)]
+struct Warp {
+    a: f64,
+    h: f64,
+}
+
+impl Warp {
+    fn new(f_hz: &[f64], ts: f64) -> Self {
+        let f_hi = f_hz.iter().copied().fold(0.0, f64::max);
+        let f_lo = f_hz.iter().copied().fold(f_hi, f64::min).max(1e-3 * f_hi);
+        let pi = std::f64::consts::PI;
+        let theta_c = (2.0 * pi * (f_lo * f_hi).sqrt() * ts).min(0.9 * pi);
+        let t = (theta_c / 2.0).tan();
+        Self {
+            a: (1.0 - t) / (1.0 + t),
+            h: 2.0 * (theta_c / 2.0).sin(),
+        }
+    }
+    fn warp(&self, z: c64) -> c64 {
+        (z - self.a) / (c64::new(1.0, 0.0) - z * self.a)
+    }
+}
+
+/// The default horizon of the subspace step for `order` states and `ny` outputs.
+fn default_horizon(order: usize, ny: usize) -> usize {
+    let per = order.div_ceil(ny);
+    per + order.div_ceil(2 * ny) + 2
+}
+
+/// The horizon to use (validated against the data).
+fn horizon(data: &Data, order: usize, given: Option<usize>) -> Result<usize> {
+    let (l, ny, nu) = (data.len(), data.ny, data.nu);
+    // the projection needs at least q(nu + ny) real columns: 2 L nu ≥ q (nu + ny)
+    let q_max = (2 * l * nu) / (nu + ny);
+    let q_min = order.div_ceil(ny) + 1;
+    let q = given.unwrap_or_else(|| default_horizon(order, ny).min(q_max));
+    if q < q_min || q > q_max {
+        return Err(Error::invalid(
+            "horizon",
+            format!(
+                "the subspace step with {order} states needs a horizon in [{q_min}, {q_max}] block rows for {l} lines of a {ny}x{nu} FRF, got {q}; lower the order or widen the band"
+            ),
+        ));
+    }
+    Ok(q)
+}
+
+/// The projected data $L_{22}$ of the subspace step and its SVD: (singular values, left singular
+/// vectors).
+fn projected(data: &Data, warp: &Warp, q: usize) -> Result<(Vec<f64>, Mat<f64>)> {
+    let (l, ny, nu, e) = (data.len(), data.ny, data.nu, data.entries());
+    let zeta: Vec<c64> = data.z.iter().map(|&z| warp.warp(z)).collect();
+    // scalar line weights: the mean of the entries' weights
+    let sw: Vec<f64> = (0..l)
+        .map(|k| (data.w[k * e..(k + 1) * e].iter().sum::<f64>() / e as f64).sqrt())
+        .collect();
+    let (ru, rg) = (q * nu, q * ny);
+    let cols = 2 * l * nu;
+    // the transpose [U; G]ᵀ: a row per real column (Re of (k, j), then Im)
+    let mut mt = Mat::<f64>::zeros(cols, ru + rg);
+    for k in 0..l {
+        let mut pw = c64::new(sw[k], 0.0);
+        for p in 0..q {
+            for j in 0..nu {
+                let (row_re, row_im) = (k * nu + j, l * nu + k * nu + j);
+                mt[(row_re, p * nu + j)] = pw.re;
+                mt[(row_im, p * nu + j)] = pw.im;
+                for i in 0..ny {
+                    let y = pw * data.g[k * e + j * ny + i];
+                    mt[(row_re, ru + p * ny + i)] = y.re;
+                    mt[(row_im, ru + p * ny + i)] = y.im;
+                }
+            }
+            pw *= zeta[k];
+        }
+    }
+    let r = mt.qr().thin_R().to_owned();
+    let l22 = Mat::from_fn(
+        rg,
+        rg,
+        |i, j| if i >= j { r[(ru + j, ru + i)] } else { 0.0 },
+    );
+    let svd = l22.thin_svd().map_err(|e| {
+        Error::numerical(
+            CTX,
+            format!("the SVD of the projected data failed ({e:?}); check the data"),
+        )
+    })?;
+    let s: Vec<f64> = svd.S().column_vector().iter().copied().collect();
+    if !(s[0] > 0.0 && s[0].is_finite()) {
+        return Err(Error::numerical(
+            CTX,
+            "the projected data vanish: the response is a constant (or a polynomial) on the band's lines; no dynamics to fit",
+        ));
+    }
+    Ok((s, svd.U().to_owned()))
+}
+
+/// The singular values of the subspace step's projected data (descending), for choosing the
+/// order: a gap after the $n$-th shows $n$ states (module docs). `max_order` sets the horizon
+/// as for a fit of that order.
+///
+/// # Errors
+/// As [`ss_frd_mimo`] for the data and the horizon.
+///
+/// ```
+/// use ambid_core::estimate::freqfit_mimo::{subspace_singular_values, MimoFreqOptions};
+/// use ambid_core::lti::{Frd, StateSpace};
+/// use faer::mat;
+/// let truth = StateSpace::discrete(mat![[0.9, 0.2], [-0.2, 0.9]], mat![[1.0, 0.0], [0.0, 1.0]],
+///     mat![[1.0, 0.0], [0.3, 1.0]], mat![[0.0, 0.0], [0.0, 0.0]], 1e-3).unwrap();
+/// let f: Vec<f64> = (1..=60).map(|k| 5.0 * k as f64).collect();
+/// let sv = subspace_singular_values(&Frd::from_model(&truth, &f).unwrap(), 6,
+///     &MimoFreqOptions::default()).unwrap();
+/// assert!(sv[2] < 1e-9 * sv[1]); // two states
+/// ```
+pub fn subspace_singular_values(
+    frd: &Frd,
+    max_order: usize,
+    opts: &MimoFreqOptions,
+) -> Result<Vec<f64>> {
+    if max_order == 0 {
+        return Err(Error::invalid("order", "the order must be at least 1"));
+    }
+    let data = Data::new(frd, opts)?;
+    let q = horizon(&data, max_order, opts.horizon)?;
+    let warp = Warp::new(&data.f_hz, data.ts);
+    Ok(projected(&data, &warp, q)?.0)
+}
+
+/// Fits an `order`-th order discrete-time $n_y \times n_u$ state-space model to the matrix FRF
+/// `frd` (module docs): subspace start, modal delta blocks, Levenberg–Marquardt on the weighted
+/// complex error of every entry. A $1 \times 1$ [`Frd`] is the single-input single-output case.
+///
+/// # Errors
+/// * [`Error::InvalidArgument`] for order 0, a continuous [`Frd`], a bad band, missing or zero
+///   variances with inverse-variance weights, a horizon outside its range, fewer real equations
+///   than parameters, or a start with fewer stable poles than
+///   [`MimoFreqOptions::max_unstable_poles`] requires that cannot be mirrored;
+/// * [`Error::NonFinite`] for a non-finite response in the band;
+/// * [`Error::Numerical`] when the subspace step is degenerate (a response without dynamics, a
+///   rank-deficient shift equation, a pole at infinity, defective repeated poles, a mode that
+///   no output sees) or the refinement fails; the message says what may help (usually: lower
+///   the order or widen the band).
+pub fn ss_frd_mimo(frd: &Frd, order: usize, opts: &MimoFreqOptions) -> Result<MimoFreqFit> {
+    fit(frd, order, opts, None)
+}
+
+/// [`ss_frd_mimo`] held to models whose loop with `controller` is stable: the measured closed
+/// loop $u = -C y + r$ was stable, so a model whose loop with the same controller is not
+/// contradicts the data (typically through spurious fast unstable poles outside the band). The
+/// constraint is part of the fit, as [`MimoFreqOptions::max_unstable_poles`] is: the start
+/// mirrors ($z \mapsto 1/\bar z$) the unstable blocks whose mirroring leaves the fewest unstable
+/// closed-loop poles at the lowest cost until the loop is stable, and the refinement rejects
+/// every trial whose loop is unstable. The plant itself is never stabilised: its unstable poles
+/// stay wherever the data put them.
+///
+/// # Errors
+/// As [`ss_frd_mimo`]; also [`Error::DimensionMismatch`] or [`Error::SampleTimeMismatch`] for a
+/// controller that is not $n_u \times n_y$ at the data's sample time, and [`Error::Numerical`]
+/// when no admissible start exists (check the controller, or raise the order).
+///
+/// ```
+/// use ambid_core::estimate::freqfit_mimo::{ss_frd_mimo_in_loop, MimoFreqOptions};
+/// use ambid_core::lti::{Frd, StateSpace};
+/// use faer::mat;
+/// // an unstable first-order plant under a proportional controller (closed-loop pole 0.61)
+/// let p = StateSpace::discrete(mat![[1.01]], mat![[1.0]], mat![[1.0]], mat![[0.0]], 1e-3).unwrap();
+/// let c = StateSpace::discrete(mat![[0.0]], mat![[0.0]], mat![[0.0]], mat![[0.4]], 1e-3).unwrap();
+/// let f: Vec<f64> = (1..=40).map(|k| 10.0 * k as f64).collect();
+/// let fit = ss_frd_mimo_in_loop(&Frd::from_model(&p, &f).unwrap(), 1, &MimoFreqOptions::default(), &c)
+///     .unwrap();
+/// assert!(fit.model.feedback(&c).unwrap().is_stable().unwrap());
+/// assert!((fit.model.poles().unwrap()[0].re - 1.01).abs() < 1e-9); // still unstable
+/// ```
+pub fn ss_frd_mimo_in_loop(
+    frd: &Frd,
+    order: usize,
+    opts: &MimoFreqOptions,
+    controller: &StateSpace,
+) -> Result<MimoFreqFit> {
+    if controller.ninputs() != frd.ny() || controller.noutputs() != frd.nu() {
+        return Err(Error::DimensionMismatch {
+            context: "ss_frd_mimo_in_loop: the controller maps the plant's outputs to its inputs",
+            expected: format!("{} outputs x {} inputs", frd.nu(), frd.ny()),
+            got: format!(
+                "{} outputs x {} inputs",
+                controller.noutputs(),
+                controller.ninputs()
+            ),
+        });
+    }
+    match (controller.ts(), frd.ts()) {
+        (Some(a), Some(b)) if (a - b).abs() <= 1e-12 * b.abs() => {}
+        (a, b) => {
+            return Err(Error::invalid(
+                "controller",
+                format!("the controller's sample time {a:?} s differs from the FRF's {b:?} s; give a discrete controller at the data's sample time"),
+            ))
+        }
+    }
+    fit(frd, order, opts, Some(controller))
+}
+
+fn fit(
+    frd: &Frd,
+    order: usize,
+    opts: &MimoFreqOptions,
+    controller: Option<&StateSpace>,
+) -> Result<MimoFreqFit> {
+    if order == 0 {
+        return Err(Error::invalid(
+            "order",
+            "the model order must be at least 1",
+        ));
+    }
+    let data = Data::new(frd, opts)?;
+    let (l, ny, nu) = (data.len(), data.ny, data.nu);
+    let n_eq = 2 * l * ny * nu;
+    let n_params_est = order * (nu + ny) + if opts.feedthrough { ny * nu } else { 0 };
+    if n_eq <= n_params_est {
+        return Err(Error::invalid(
+            "order",
+            format!(
+                "{n_params_est} parameters for {n_eq} real equations ({l} lines of a {ny}x{nu} FRF); lower the order or widen the band"
+            ),
+        ));
+    }
+    let q = horizon(&data, order, opts.horizon)?;
+    if order > q * ny {
+        return Err(Error::invalid(
+            "order",
+            format!(
+                "the order {order} exceeds the subspace dimension {} (horizon {q} x {ny} outputs); raise the horizon",
+                q * ny
+            ),
+        ));
+    }
+    let warp = Warp::new(&data.f_hz, data.ts);
+    let (sv, u) = projected(&data, &warp, q)?;
+
+    // (A, C) in ζ, then in z
+    let o = u.subcols(0, order);
+    let o_up = o.subrows(0, (q - 1) * ny).to_owned();
+    let o_dn = o.subrows(ny, (q - 1) * ny).to_owned();
+    let a_zeta = linalg::lstsq(o_up.as_ref(), o_dn.as_ref()).map_err(|e| {
+        Error::numerical(
+            CTX,
+            format!("the shift equation of the subspace step is degenerate ({e}); lower the order or raise the horizon"),
+        )
+    })?;
+    let c_zeta = o.subrows(0, ny).to_owned();
+    let eye = Mat::<f64>::identity(order, order);
+    let den = &eye + &a_zeta * warp.a;
+    let num = &a_zeta + &eye * warp.a;
+    let a_z = linalg::solve(den.as_ref(), num.as_ref()).map_err(|_| {
+        Error::numerical(
+            CTX,
+            "the subspace step placed a pole at infinity; lower the order or narrow the band",
+        )
+    })?;
+    let c_z = &c_zeta * (&eye - &a_z * warp.a);
+    if a_z
+        .col_iter()
+        .flat_map(|c| c.iter().copied())
+        .any(|v| !v.is_finite())
+    {
+        return Err(Error::numerical(
+            CTX,
+            "the subspace step produced a non-finite state matrix; lower the order",
+        ));
+    }
+
+    let (layout, mut theta) = to_blocks(&a_z, &c_z, warp.h, ny, nu, opts.feedthrough)?;
+    let mut prob = Problem {
+        data: &data,
+        layout: &layout,
+        delta: data.z.iter().map(|&z| (z - 1.0) / warp.h).collect(),
+        limit: opts.max_unstable_poles,
+        controller,
+    };
+    prob.fit_linear(&mut theta)?;
+    if let Some(lim) = opts.max_unstable_poles {
+        prob.constrain_start(&mut theta, lim)?;
+    }
+    let (mut iterations, mut converged) = (0, true);
+    let lm = LmOptions::default()
+        .with_max_iterations(opts.max_iterations.max(1))?
+        .with_significance_tol(SIGNIFICANCE_TOL)?;
+    if controller.is_some() && opts.max_iterations > 0 {
+        // stage 1 without the loop constraint: the path from the subspace start to the optimum
+        // crosses loop-unstable models, and a trust region held on the admissible set stalls
+        // on its boundary; stage 2 mirrors what the loop cannot have and refines inside it
+        prob.controller = None;
+        let (th, report) = minimize(&mut prob, &theta, &lm)?;
+        theta = th;
+        iterations += report.iterations;
+        prob.controller = controller;
+    }
+    if controller.is_some() {
+        prob.stable_loop_start(&mut theta)?;
+    }
+    if opts.max_iterations > 0 {
+        let (th, report) = minimize(&mut prob, &theta, &lm)?;
+        theta = th;
+        iterations += report.iterations;
+        converged = report.reason.converged();
+    }
+    let r = prob.residuals(&theta).ok_or_else(|| {
+        Error::numerical(
+            CTX,
+            "the fitted model's response is not finite on the data's lines (a pole on a line); lower the order",
+        )
+    })?;
+    let cost = r.iter().map(|x| x * x).sum::<f64>();
+    let model = layout.realise(&theta, &data)?;
+    let errors = errors_of(&model, &data)?;
+    Ok(MimoFreqFit {
+        model,
+        n_params: layout.n_theta,
+        cost,
+        n_equations: n_eq,
+        iterations,
+        converged,
+        errors,
+        singular_values: sv,
+        f_hz: data.f_hz.clone(),
+    })
+}
+
+/// The unweighted error measures of `model` on the data's lines, in the original units.
+fn errors_of(model: &StateSpace, data: &Data) -> Result<MimoFreqErrors> {
+    let (l, ny, nu, e) = (data.len(), data.ny, data.nu, data.entries());
+    let resp = model.freq_response(&data.f_hz)?;
+    let mut norm_rel = Vec::with_capacity(l);
+    let mut entry_rel = vec![Vec::with_capacity(l); e];
+    for k in 0..l {
+        let gk = Mat::<c64>::from_fn(ny, nu, |i, j| {
+            data.g[k * e + j * ny + i] * (data.a[i] * data.b[j])
+        });
+        let diff = Mat::<c64>::from_fn(ny, nu, |i, j| resp[k][(i, j)] - gk[(i, j)]);
+        let nd = spectral_norm(&diff)?;
+        let ng = spectral_norm(&gk)?;
+        norm_rel.push(if ng > 0.0 { nd / ng } else { f64::INFINITY });
+        for i in 0..ny {
+            for j in 0..nu {
+                let g = gk[(i, j)].norm();
+                entry_rel[i * nu + j].push(if g > 0.0 {
+                    diff[(i, j)].norm() / g
+                } else {
+                    f64::INFINITY
+                });
+            }
+        }
+    }
+    let max_norm_relative = norm_rel.iter().copied().fold(0.0, f64::max);
+    Ok(MimoFreqErrors {
+        median_norm_relative: median(&mut norm_rel),
+        max_norm_relative,
+        median_entry_relative: entry_rel.iter_mut().map(|v| median(v)).collect(),
+    })
+}
+
+/// Median of a non-empty slice (sorted in place); NaN for an empty one.
+fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// Largest singular value of a complex matrix.
+pub(crate) fn spectral_norm(m: &Mat<c64>) -> Result<f64> {
+    let sv = m
+        .singular_values()
+        .map_err(|e| Error::numerical(CTX, format!("singular values failed: {e:?}")))?;
+    Ok(sv.iter().fold(0.0f64, |a, v| a.max(*v)))
+}
+
+/// One block of the modal form.
+#[derive(Debug, Clone, Copy)]
+struct Block {
+    /// 1 or 2 states.
+    dim: usize,
+    /// First parameter of the block in θ: α (dim), β (dim × nu, row-major), free C rows.
+    off: usize,
+    /// Output row of $C_b$ fixed at $[1\;0]$ (or 1).
+    fixed_row: usize,
+}
+
+/// Where everything lives in θ.
+#[derive(Debug, Clone)]
+struct Layout {
+    blocks: Vec<Block>,
+    n: usize,
+    ny: usize,
+    nu: usize,
+    h: f64,
+    d_off: Option<usize>,
+    n_theta: usize,
+}
+
+impl Layout {
+    fn beta_idx(&self, b: &Block, r: usize, j: usize) -> usize {
+        b.off + b.dim + r * self.nu + j
+    }
+    fn c_idx(&self, b: &Block, o: usize, r: usize) -> Option<usize> {
+        if o == b.fixed_row {
+            return None;
+        }
+        let rank = if o < b.fixed_row { o } else { o - 1 };
+        Some(b.off + b.dim + b.dim * self.nu + rank * b.dim + r)
+    }
+    fn c_val(&self, th: &[f64], b: &Block, o: usize, r: usize) -> f64 {
+        match self.c_idx(b, o, r) {
+            Some(i) => th[i],
+            None => f64::from(u8::from(r == 0)),
+        }
+    }
+    fn d_val(&self, th: &[f64], i: usize, j: usize) -> f64 {
+        self.d_off.map_or(0.0, |off| th[off + i * self.nu + j])
+    }
+    /// Poles in $z$ of a block.
+    fn block_poles(&self, th: &[f64], b: &Block) -> [Option<c64>; 2] {
+        if b.dim == 2 {
+            let (a1, a2) = (th[b.off], th[b.off + 1]);
+            let disc = a1 * a1 - 4.0 * a2;
+            let (d1, d2) = if disc >= 0.0 {
+                let s = disc.sqrt();
+                (
+                    c64::new((-a1 + s) / 2.0, 0.0),
+                    c64::new((-a1 - s) / 2.0, 0.0),
+                )
+            } else {
+                let s = (-disc).sqrt();
+                (c64::new(-a1 / 2.0, s / 2.0), c64::new(-a1 / 2.0, -s / 2.0))
+            };
+            [Some(d1 * self.h + 1.0), Some(d2 * self.h + 1.0)]
+        } else {
+            [Some(c64::new(1.0 + self.h * th[b.off], 0.0)), None]
+        }
+    }
+    fn unstable(&self, th: &[f64]) -> usize {
+        self.blocks
+            .iter()
+            .flat_map(|b| self.block_poles(th, b))
+            .flatten()
+            .filter(|z| z.norm() >= 1.0)
+            .count()
+    }
+    /// The model of θ in the original units.
+    fn realise(&self, th: &[f64], data: &Data) -> Result<StateSpace> {
+        let (n, ny, nu, h) = (self.n, self.ny, self.nu, self.h);
+        let mut a = Mat::<f64>::zeros(n, n);
+        let mut bm = Mat::<f64>::zeros(n, nu);
+        let mut c = Mat::<f64>::zeros(ny, n);
+        let mut s = 0;
+        for b in &self.blocks {
+            if b.dim == 2 {
+                a[(s, s)] = 1.0;
+                a[(s, s + 1)] = h;
+                a[(s + 1, s)] = -h * th[b.off + 1];
+                a[(s + 1, s + 1)] = 1.0 - h * th[b.off];
+            } else {
+                a[(s, s)] = 1.0 + h * th[b.off];
+            }
+            for r in 0..b.dim {
+                for j in 0..nu {
+                    bm[(s + r, j)] = h * th[self.beta_idx(b, r, j)] * data.b[j];
+                }
+                for o in 0..ny {
+                    c[(o, s + r)] = self.c_val(th, b, o, r) * data.a[o];
+                }
+            }
+            s += b.dim;
+        }
+        let d = Mat::from_fn(ny, nu, |i, j| self.d_val(th, i, j) * data.a[i] * data.b[j]);
+        if th.iter().any(|v| !v.is_finite()) {
+            return Err(Error::numerical(
+                CTX,
+                "the refinement produced non-finite parameters; lower the order or narrow the band",
+            ));
+        }
+        StateSpace::discrete(a, bm, c, d, data.ts)
+    }
+}
+
+/// Block decomposition of $(A, C)$ (module docs): the layout and θ with $\beta = 0$, $D = 0$.
+fn to_blocks(
+    a: &Mat<f64>,
+    c: &Mat<f64>,
+    h: f64,
+    ny: usize,
+    nu: usize,
+    feedthrough: bool,
+) -> Result<(Layout, Vec<f64>)> {
+    let n = a.nrows();
+    let eig = a.eigen().map_err(|e| {
+        Error::numerical(
+            CTX,
+            format!("the eigendecomposition of the start failed ({e:?}); lower the order"),
+        )
+    })?;
+    let (vecs, vals) = (eig.U(), eig.S());
+    let scale = (0..n).map(|k| vals[k].norm()).fold(1.0f64, f64::max);
+    let tol = 1e-10 * scale;
+    let mut complex: Vec<usize> = (0..n).filter(|&k| vals[k].im > tol).collect();
+    complex.sort_by(|&x, &y| vals[x].im.total_cmp(&vals[y].im));
+    let n_neg = (0..n).filter(|&k| vals[k].im < -tol).count();
+    if n_neg != complex.len() {
+        return Err(Error::numerical(
+            CTX,
+            "the eigenvalues of the start do not come in conjugate pairs; lower the order",
+        ));
+    }
+    let mut real: Vec<usize> = (0..n).filter(|&k| vals[k].im.abs() <= tol).collect();
+    real.sort_by(|&x, &y| vals[x].re.total_cmp(&vals[y].re));
+    // basis columns, grouped per block
+    let mut t = Mat::<f64>::zeros(n, n);
+    let mut dims = Vec::new();
+    let mut col = 0;
+    for &k in &complex {
+        let v = vecs.col(k);
+        let nv = v
+            .iter()
+            .map(|x| x.norm_sqr())
+            .sum::<f64>()
+            .sqrt()
+            .max(f64::MIN_POSITIVE);
+        for r in 0..n {
+            t[(r, col)] = v[r].re / nv;
+            t[(r, col + 1)] = v[r].im / nv;
+        }
+        col += 2;
+        dims.push(2);
+    }
+    // real poles: one 1 × 1 block each (a pair of real poles of different planes has no output
+    // that sees both, so a 2 × 2 companion block of them would be singular)
+    for &k in &real {
+        let v = vecs.col(k);
+        let nv = v.iter().map(|x| x.re * x.re).sum::<f64>().sqrt();
+        if nv.is_nan() || nv <= 0.0 {
+            return Err(Error::numerical(
+                CTX,
+                "a real pole of the start has a complex eigenvector; lower the order",
+            ));
+        }
+        for r in 0..n {
+            t[(r, col)] = v[r].re / nv;
+        }
+        col += 1;
+        dims.push(1);
+    }
+    let sv = linalg::singular_values(t.as_ref())?;
+    if sv.last().copied().unwrap_or(0.0) <= 1e-10 * sv[0] {
+        return Err(Error::numerical(
+            CTX,
+            "the start has (nearly) defective repeated poles, so it cannot be put in modal block form; lower the order",
+        ));
+    }
+    let tinv = linalg::solve(t.as_ref(), Mat::<f64>::identity(n, n).as_ref())?;
+    let ab = &tinv * a * &t;
+    let cb = c * &t;
+    let mut blocks = Vec::new();
+    let mut theta = Vec::new();
+    let mut state = 0;
+    for &dim in &dims {
+        let ad = ab.submatrix(state, state, dim, dim);
+        let cbk = cb.subcols(state, dim);
+        // the output row whose companion transform is best conditioned: |det O| for a pair
+        // (zero when the row does not see the mode), |c| for a real pole
+        let score = |row: usize| -> f64 {
+            if dim == 2 {
+                let c0 = [cbk[(row, 0)], cbk[(row, 1)]];
+                let c1 = [
+                    c0[0] * (ad[(0, 0)] - 1.0) + c0[1] * ad[(1, 0)],
+                    c0[0] * ad[(0, 1)] + c0[1] * (ad[(1, 1)] - 1.0),
+                ];
+                (c0[0] * c1[1] - c0[1] * c1[0]).abs()
+            } else {
+                cbk[(row, 0)].abs()
+            }
+        };
+        let fixed_row = (0..ny)
+            .max_by(|&x, &y| score(x).total_cmp(&score(y)))
+            .unwrap_or(0);
+        let o = if dim == 2 {
+            let c0 = [cbk[(fixed_row, 0)], cbk[(fixed_row, 1)]];
+            let c1 = [
+                (c0[0] * (ad[(0, 0)] - 1.0) + c0[1] * ad[(1, 0)]) / h,
+                (c0[0] * ad[(0, 1)] + c0[1] * (ad[(1, 1)] - 1.0)) / h,
+            ];
+            faer::mat![[c0[0], c0[1]], [c1[0], c1[1]]]
+        } else {
+            faer::mat![[cbk[(fixed_row, 0)]]]
+        };
+        let osv = linalg::singular_values(o.as_ref())?;
+        if osv.last().copied().unwrap_or(0.0) <= 1e-9 * osv[0].max(f64::MIN_POSITIVE) {
+            return Err(Error::numerical(
+                CTX,
+                "a mode of the start is (nearly) unobservable from every output; lower the order",
+            ));
+        }
+        let oinv = linalg::solve(o.as_ref(), Mat::<f64>::identity(dim, dim).as_ref())?;
+        let off = theta.len();
+        if dim == 2 {
+            // M = (A_b − I)/h: α1 = −tr M, α2 = det M
+            let m00 = (ad[(0, 0)] - 1.0) / h;
+            let m11 = (ad[(1, 1)] - 1.0) / h;
+            let m01 = ad[(0, 1)] / h;
+            let m10 = ad[(1, 0)] / h;
+            theta.push(-(m00 + m11));
+            theta.push(m00 * m11 - m01 * m10);
+        } else {
+            theta.push((ad[(0, 0)] - 1.0) / h);
+        }
+        theta.extend(std::iter::repeat_n(0.0, dim * nu));
+        let cnew = cbk * &oinv;
+        for oo in 0..ny {
+            if oo != fixed_row {
+                for r in 0..dim {
+                    theta.push(cnew[(oo, r)]);
+                }
+            }
+        }
+        blocks.push(Block {
+            dim,
+            off,
+            fixed_row,
+        });
+        state += dim;
+    }
+    let d_off = if feedthrough {
+        let off = theta.len();
+        theta.extend(std::iter::repeat_n(0.0, ny * nu));
+        Some(off)
+    } else {
+        None
+    };
+    let n_theta = theta.len();
+    Ok((
+        Layout {
+            blocks,
+            n,
+            ny,
+            nu,
+            h,
+            d_off,
+            n_theta,
+        },
+        theta,
+    ))
+}
+
+/// The weighted least-squares problem of the refinement (module docs).
+struct Problem<'a> {
+    data: &'a Data,
+    layout: &'a Layout,
+    delta: Vec<c64>,
+    limit: Option<usize>,
+    /// Trials whose loop with this controller is unstable are inadmissible.
+    controller: Option<&'a StateSpace>,
+}
+
+/// $R_b(\delta)$ of a block as a row-major 2×2 (or 1×1 in `[0]`).
+fn resolvent(th: &[f64], b: &Block, delta: c64) -> Option<[c64; 4]> {
+    if b.dim == 2 {
+        let (a1, a2) = (th[b.off], th[b.off + 1]);
+        let d = delta * delta + delta * a1 + a2;
+        if d.norm() == 0.0 {
+            return None;
+        }
+        let inv = c64::new(1.0, 0.0) / d;
+        Some([
+            (delta + a1) * inv,
+            inv,
+            c64::new(-a2, 0.0) * inv,
+            delta * inv,
+        ])
+    } else {
+        let d = delta - th[b.off];
+        if d.norm() == 0.0 {
+            return None;
+        }
+        Some([
+            c64::new(1.0, 0.0) / d,
+            c64::default(),
+            c64::default(),
+            c64::default(),
+        ])
+    }
+}
+
+impl Problem<'_> {
+    /// $Y_b = C_b R_b$ ($n_y \times \dim$, column-major `y[r * ny + i]`) at line `k`.
+    fn y_block(&self, th: &[f64], b: &Block, rb: &[c64; 4], out: &mut [c64]) {
+        let ny = self.layout.ny;
+        for i in 0..ny {
+            if b.dim == 2 {
+                let (c0, c1) = (
+                    self.layout.c_val(th, b, i, 0),
+                    self.layout.c_val(th, b, i, 1),
+                );
+                out[i] = rb[0] * c0 + rb[2] * c1;
+                out[ny + i] = rb[1] * c0 + rb[3] * c1;
+            } else {
+                out[i] = rb[0] * self.layout.c_val(th, b, i, 0);
+            }
+        }
+    }
+
+    /// $X_b = R_b \beta_b$ ($\dim \times n_u$, row-major `x[r * nu + j]`).
+    fn x_block(&self, th: &[f64], b: &Block, rb: &[c64; 4], out: &mut [c64]) {
+        let nu = self.layout.nu;
+        for j in 0..nu {
+            if b.dim == 2 {
+                let (b0, b1) = (
+                    th[self.layout.beta_idx(b, 0, j)],
+                    th[self.layout.beta_idx(b, 1, j)],
+                );
+                out[j] = rb[0] * b0 + rb[1] * b1;
+                out[nu + j] = rb[2] * b0 + rb[3] * b1;
+            } else {
+                out[j] = rb[0] * th[self.layout.beta_idx(b, 0, j)];
+            }
+        }
+    }
+
+    /// The model's response at every line (scaled units), same layout as the data.
+    fn response(&self, th: &[f64]) -> Option<Vec<c64>> {
+        let (ny, nu) = (self.layout.ny, self.layout.nu);
+        let e = ny * nu;
+        let mut out = vec![c64::default(); self.data.len() * e];
+        let mut yb = vec![c64::default(); 2 * ny];
+        for (k, &dk) in self.delta.iter().enumerate() {
+            let g = &mut out[k * e..(k + 1) * e];
+            for i in 0..ny {
+                for j in 0..nu {
+                    g[j * ny + i] = c64::new(self.layout.d_val(th, i, j), 0.0);
+                }
+            }
+            for b in &self.layout.blocks {
+                let rb = resolvent(th, b, dk)?;
+                self.y_block(th, b, &rb, &mut yb);
+                // Y_b β_b
+                for j in 0..nu {
+                    for i in 0..ny {
+                        let mut acc = c64::default();
+                        for r in 0..b.dim {
+                            acc += yb[r * ny + i] * th[self.layout.beta_idx(b, r, j)];
+                        }
+                        g[j * ny + i] += acc;
+                    }
+                }
+            }
+        }
+        out.iter()
+            .all(|v| v.re.is_finite() && v.im.is_finite())
+            .then_some(out)
+    }
+
+    /// Fits β and D by weighted linear least squares with the poles and $C$ fixed.
+    fn fit_linear(&self, th: &mut [f64]) -> Result<()> {
+        let lay = self.layout;
+        let (ny, nu, l) = (lay.ny, lay.nu, self.data.len());
+        let e = ny * nu;
+        let nd = if lay.d_off.is_some() { ny } else { 0 };
+        let ncol = lay.n + nd;
+        // Y_b per line, once
+        let mut ys = vec![c64::default(); l * ny * lay.n];
+        let mut yb = vec![c64::default(); 2 * ny];
+        for (k, &dk) in self.delta.iter().enumerate() {
+            let mut s = 0;
+            for b in &lay.blocks {
+                let rb = resolvent(th, b, dk).ok_or_else(|| {
+                    Error::numerical(
+                        CTX,
+                        "a pole of the start lies on a line of the data; lower the order",
+                    )
+                })?;
+                self.y_block(th, b, &rb, &mut yb);
+                for r in 0..b.dim {
+                    for i in 0..ny {
+                        ys[(k * lay.n + s + r) * ny + i] = yb[r * ny + i];
+                    }
+                }
+                s += b.dim;
+            }
+        }
+        for j in 0..nu {
+            let mut m = Mat::<f64>::zeros(2 * l * ny, ncol);
+            let mut rhs = Mat::<f64>::zeros(2 * l * ny, 1);
+            for k in 0..l {
+                for i in 0..ny {
+                    let idx = k * e + j * ny + i;
+                    let sw = self.data.w[idx].sqrt();
+                    let row = 2 * (k * ny + i);
+                    for s in 0..lay.n {
+                        let v = ys[(k * lay.n + s) * ny + i] * sw;
+                        m[(row, s)] = v.re;
+                        m[(row + 1, s)] = v.im;
+                    }
+                    if nd > 0 {
+                        m[(row, lay.n + i)] = sw;
+                    }
+                    rhs[(row, 0)] = self.data.g[idx].re * sw;
+                    rhs[(row + 1, 0)] = self.data.g[idx].im * sw;
+                }
+            }
+            let x = linalg::lstsq(m.as_ref(), rhs.as_ref()).map_err(|e| {
+                Error::numerical(
+                    CTX,
+                    format!(
+                        "the linear step (numerators) is rank deficient ({e}); lower the order"
+                    ),
+                )
+            })?;
+            let mut s = 0;
+            for b in &lay.blocks {
+                for r in 0..b.dim {
+                    th[lay.beta_idx(b, r, j)] = x[(s + r, 0)];
+                }
+                s += b.dim;
+            }
+            if let Some(off) = lay.d_off {
+                for i in 0..ny {
+                    th[off + i * nu + j] = x[(lay.n + i, 0)];
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Number of unstable poles of the loop of θ's model with the controller (0 without one);
+    /// `None` when the loop cannot be formed.
+    fn loop_unstable(&self, th: &[f64]) -> Option<usize> {
+        let Some(c) = self.controller else {
+            return Some(0);
+        };
+        let model = self.layout.realise(th, self.data).ok()?;
+        let poles = model.feedback(c).ok()?.poles().ok()?;
+        Some(poles.iter().filter(|z| z.norm() >= 1.0).count())
+    }
+
+    /// Mirrors unstable blocks of the start until its loop with the controller is stable: each
+    /// round the mirroring that leaves the fewest unstable loop poles, then the lowest cost.
+    fn stable_loop_start(&mut self, th: &mut Vec<f64>) -> Result<()> {
+        let lay = self.layout;
+        let none = || {
+            Error::numerical(
+                CTX,
+                "no start gives a stable loop with the controller (the measured loop was stable): check that the controller is the one of the measurement, or change the order",
+            )
+        };
+        let mut now = self.loop_unstable(th).ok_or_else(none)?;
+        while now > 0 {
+            let mut best: Option<(usize, f64, Vec<f64>)> = None;
+            for b in &lay.blocks {
+                let poles = lay.block_poles(th, b);
+                if !poles.iter().flatten().any(|z| z.norm() >= 1.0) {
+                    continue;
+                }
+                let mut trial = th.clone();
+                mirror_block(&mut trial, lay, b, &poles);
+                if self.fit_linear(&mut trial).is_err() {
+                    continue;
+                }
+                let Some(u) = self.loop_unstable(&trial) else {
+                    continue;
+                };
+                let saved = self.controller.take();
+                let r = self.residuals(&trial);
+                self.controller = saved;
+                if let Some(r) = r {
+                    let cost = r.iter().map(|x| x * x).sum::<f64>();
+                    if best
+                        .as_ref()
+                        .is_none_or(|(bu, bc, _)| (u, cost) < (*bu, *bc))
+                    {
+                        best = Some((u, cost, trial));
+                    }
+                }
+            }
+            match best {
+                Some((u, _, t)) if u < now => {
+                    now = u;
+                    *th = t;
+                }
+                _ => return Err(none()),
+            }
+        }
+        Ok(())
+    }
+
+    /// Mirrors unstable blocks of the start (cheapest first) until at most `lim` poles are on or
+    /// outside the unit circle, refitting the linear parameters after each.
+    fn constrain_start(&mut self, th: &mut Vec<f64>, lim: usize) -> Result<()> {
+        let lay = self.layout;
+        while lay.unstable(th) > lim {
+            let mut best: Option<(f64, Vec<f64>)> = None;
+            for b in &lay.blocks {
+                let poles = lay.block_poles(th, b);
+                if !poles.iter().flatten().any(|z| z.norm() >= 1.0) {
+                    continue;
+                }
+                let mut trial = th.clone();
+                mirror_block(&mut trial, lay, b, &poles);
+                if self.fit_linear(&mut trial).is_err() {
+                    continue;
+                }
+                if let Some(r) = self.residuals(&trial) {
+                    let cost = r.iter().map(|x| x * x).sum::<f64>();
+                    if best.as_ref().is_none_or(|(c, _)| cost < *c) {
+                        best = Some((cost, trial));
+                    }
+                }
+            }
+            match best {
+                Some((_, t)) => *th = t,
+                None => {
+                    return Err(Error::numerical(
+                        CTX,
+                        format!("the start has more than {lim} unstable poles and none of its unstable blocks can be mirrored; raise the order or check max_unstable_poles"),
+                    ))
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Replaces the poles of block `b` by their mirror images (the stable ones stay).
+fn mirror_block(th: &mut [f64], lay: &Layout, b: &Block, poles: &[Option<c64>; 2]) {
+    let mirrored: Vec<c64> = poles.iter().flatten().map(|&z| mirror(z)).collect();
+    let ds: Vec<c64> = mirrored.iter().map(|z| (z - 1.0) / lay.h).collect();
+    if b.dim == 2 {
+        // δ² + α1 δ + α2 = (δ − d1)(δ − d2)
+        th[b.off] = -(ds[0] + ds[1]).re;
+        th[b.off + 1] = (ds[0] * ds[1]).re;
+    } else {
+        th[b.off] = ds[0].re;
+    }
+}
+
+/// $z \mapsto 1/\bar z$ for $|z| \ge 1$, pulled just inside the unit circle.
+fn mirror(z: c64) -> c64 {
+    let r = z.norm();
+    let out = if r >= 1.0 { z / (r * r) } else { z };
+    if out.norm() >= 1.0 - 1e-9 {
+        out * ((1.0 - 1e-6) / out.norm())
+    } else {
+        out
+    }
+}
+
+impl LeastSquaresProblem for Problem<'_> {
+    fn residuals(&mut self, th: &[f64]) -> Option<Vec<f64>> {
+        if let Some(lim) = self.limit {
+            if self.layout.unstable(th) > lim {
+                return None;
+            }
+        }
+        if self.controller.is_some() && self.loop_unstable(th)? > 0 {
+            return None;
+        }
+        let resp = self.response(th)?;
+        let mut r = Vec::with_capacity(2 * resp.len());
+        for (idx, g) in resp.iter().enumerate() {
+            let sw = self.data.w[idx].sqrt();
+            let e = (g - self.data.g[idx]) * sw;
+            r.push(e.re);
+            r.push(e.im);
+        }
+        Some(r)
+    }
+
+    fn jacobian(&mut self, th: &[f64]) -> Option<Mat<f64>> {
+        let lay = self.layout;
+        let (ny, nu) = (lay.ny, lay.nu);
+        let e = ny * nu;
+        let m = 2 * self.data.len() * e;
+        let mut jac = Mat::<f64>::zeros(m, lay.n_theta);
+        let mut yb = vec![c64::default(); 2 * ny];
+        let mut xb = vec![c64::default(); 2 * nu];
+        for (k, &dk) in self.delta.iter().enumerate() {
+            let base = k * e;
+            let sw = |i: usize, j: usize| self.data.w[base + j * ny + i].sqrt();
+            let put = |jac: &mut Mat<f64>, i: usize, j: usize, col: usize, v: c64| {
+                let row = 2 * (base + j * ny + i);
+                let s = sw(i, j);
+                jac[(row, col)] = v.re * s;
+                jac[(row + 1, col)] = v.im * s;
+            };
+            for b in &lay.blocks {
+                let rb = resolvent(th, b, dk)?;
+                self.y_block(th, b, &rb, &mut yb);
+                self.x_block(th, b, &rb, &mut xb);
+                // α
+                if b.dim == 2 {
+                    for i in 0..ny {
+                        for j in 0..nu {
+                            put(&mut jac, i, j, b.off, -(yb[ny + i] * xb[nu + j]));
+                            put(&mut jac, i, j, b.off + 1, -(yb[ny + i] * xb[j]));
+                        }
+                    }
+                } else {
+                    for i in 0..ny {
+                        for j in 0..nu {
+                            put(&mut jac, i, j, b.off, yb[i] * xb[j]);
+                        }
+                    }
+                }
+                // β_b[r, j]: column j, every output
+                for r in 0..b.dim {
+                    for j in 0..nu {
+                        let col = lay.beta_idx(b, r, j);
+                        for i in 0..ny {
+                            put(&mut jac, i, j, col, yb[r * ny + i]);
+                        }
+                    }
+                }
+                // C_b[o, r]: row o, every input
+                for o in 0..ny {
+                    for r in 0..b.dim {
+                        if let Some(col) = lay.c_idx(b, o, r) {
+                            for j in 0..nu {
+                                put(&mut jac, o, j, col, xb[r * nu + j]);
+                            }
+                        }
+                    }
+                }
+            }
+            if let Some(off) = lay.d_off {
+                for i in 0..ny {
+                    for j in 0..nu {
+                        put(&mut jac, i, j, off + i * nu + j, c64::new(1.0, 0.0));
+                    }
+                }
+            }
+        }
+        Some(jac)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use faer::mat;
+
+    fn plant() -> StateSpace {
+        let (r, w) = (0.99f64, 0.08f64);
+        StateSpace::discrete(
+            mat![
+                [1.02, 0.0, 0.0, 0.0],
+                [0.0, r * w.cos(), r * w.sin(), 0.0],
+                [0.0, -r * w.sin(), r * w.cos(), 0.0],
+                [0.0, 0.0, 0.0, 0.6]
+            ],
+            mat![[1.0, 0.5], [0.0, 1.0], [1.0, -0.3], [0.2, 0.7]],
+            mat![
+                [1.0, 0.2, 0.0, 0.5],
+                [0.4, 0.0, 1.0, -0.2],
+                [0.1, 0.3, 0.2, 1.0]
+            ],
+            mat![[0.0, 0.0], [0.0, 0.0], [0.0, 0.0]],
+            1e-3,
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn jacobian_matches_finite_differences() {
+        let truth = plant();
+        let f: Vec<f64> = (1..=40).map(|k| 4.0 * k as f64).collect();
+        let frd = Frd::from_model(&truth, &f).unwrap();
+        for feedthrough in [false, true] {
+            let opts = MimoFreqOptions {
+                feedthrough,
+                max_iterations: 0,
+                ..Default::default()
+            };
+            let data = Data::new(&frd, &opts).unwrap();
+            let warp = Warp::new(&data.f_hz, data.ts);
+            let a = truth.a().to_owned();
+            let c = Mat::from_fn(3, 4, |i, j| truth.c()[(i, j)] / data.a[i]);
+            let (layout, mut th) = to_blocks(&a, &c, warp.h, 3, 2, feedthrough).unwrap();
+            let mut prob = Problem {
+                data: &data,
+                layout: &layout,
+                delta: data.z.iter().map(|&z| (z - 1.0) / warp.h).collect(),
+                limit: None,
+                controller: None,
+            };
+            prob.fit_linear(&mut th).unwrap();
+            // move off the optimum so every column is exercised
+            for (i, v) in th.iter_mut().enumerate() {
+                *v *= 1.0 + 0.01 * ((i * 7 % 5) as f64 - 2.0);
+            }
+            let jac = prob.jacobian(&th).unwrap();
+            for p in 0..th.len() {
+                let hstep = 1e-6 * th[p].abs().max(1e-3);
+                let mut tp = th.clone();
+                tp[p] += hstep;
+                let mut tm = th.clone();
+                tm[p] -= hstep;
+                let rp = prob.residuals(&tp).unwrap();
+                let rm = prob.residuals(&tm).unwrap();
+                let scale = (0..rp.len())
+                    .map(|i| jac[(i, p)].abs())
+                    .fold(1e-12, f64::max);
+                for i in 0..rp.len() {
+                    let fd = (rp[i] - rm[i]) / (2.0 * hstep);
+                    assert!(
+                        (fd - jac[(i, p)]).abs() <= 1e-5 * scale,
+                        "param {p} row {i}: fd {fd} vs {}",
+                        jac[(i, p)]
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn exact_data_is_recovered_with_and_without_feedthrough() {
+        let truth = plant();
+        let f: Vec<f64> = (1..=60).map(|k| 3.0 * k as f64).collect();
+        let frd = Frd::from_model(&truth, &f).unwrap();
+        let fit = ss_frd_mimo(&frd, 4, &MimoFreqOptions::default()).unwrap();
+        assert!(fit.errors.median_norm_relative < 1e-9, "{:?}", fit.errors);
+        assert_eq!(fit.unstable_poles().unwrap(), 1);
+        let mut pt = truth.poles().unwrap();
+        let mut pf = fit.model.poles().unwrap();
+        let key = |z: &c64| (z.re * 1e6).round() as i64 * 1000 + (z.im * 1e3).round() as i64;
+        pt.sort_by_key(key);
+        pf.sort_by_key(key);
+        for (a, b) in pt.iter().zip(&pf) {
+            assert!((a - b).norm() < 1e-8, "{a:?} {b:?}");
+        }
+        // with a feedthrough in the truth
+        let with_d = StateSpace::discrete(
+            truth.a().to_owned(),
+            truth.b().to_owned(),
+            truth.c().to_owned(),
+            mat![[0.1, 0.0], [0.0, -0.2], [0.05, 0.3]],
+            1e-3,
+        )
+        .unwrap();
+        let frd = Frd::from_model(&with_d, &f).unwrap();
+        let opts = MimoFreqOptions {
+            feedthrough: true,
+            ..Default::default()
+        };
+        let fit = ss_frd_mimo(&frd, 4, &opts).unwrap();
+        assert!(fit.errors.median_norm_relative < 1e-9, "{:?}", fit.errors);
+        assert!((fit.model.d()[(2, 1)] - 0.3).abs() < 1e-8);
+    }
+
+    #[test]
+    fn the_unstable_limit_holds_and_nothing_is_reflected_without_it() {
+        let truth = plant();
+        let f: Vec<f64> = (1..=60).map(|k| 3.0 * k as f64).collect();
+        let frd = Frd::from_model(&truth, &f).unwrap();
+        let opts = MimoFreqOptions {
+            max_unstable_poles: Some(0),
+            ..Default::default()
+        };
+        let fit = ss_frd_mimo(&frd, 4, &opts).unwrap();
+        assert_eq!(fit.unstable_poles().unwrap(), 0);
+        // the best stable model cannot reproduce an unstable plant
+        assert!(fit.errors.median_norm_relative > 1e-3, "{:?}", fit.errors);
+    }
+
+    #[test]
+    fn bad_input_is_refused() {
+        let truth = plant();
+        let f: Vec<f64> = (1..=10).map(|k| 3.0 * k as f64).collect();
+        let frd = Frd::from_model(&truth, &f).unwrap();
+        let o = MimoFreqOptions::default();
+        assert!(matches!(
+            ss_frd_mimo(&frd, 0, &o),
+            Err(Error::InvalidArgument { .. })
+        ));
+        // 10 lines of a 3×2 FRF: 120 equations, order 30 has 150 parameters
+        assert!(matches!(
+            ss_frd_mimo(&frd, 30, &o),
+            Err(Error::InvalidArgument { .. })
+        ));
+        let iv = MimoFreqOptions {
+            weights: MimoWeights::InverseVariance,
+            ..Default::default()
+        };
+        let err = ss_frd_mimo(&frd, 2, &iv).unwrap_err();
+        assert!(err.to_string().contains("variances"), "{err}");
+        let band = MimoFreqOptions {
+            band_hz: Some((1000.0, 2000.0)),
+            ..Default::default()
+        };
+        assert!(ss_frd_mimo(&frd, 2, &band).is_err());
+        let cont = Frd::new_matrix(
+            f.clone(),
+            1,
+            1,
+            f.iter().map(|_| c64::new(1.0, 0.0)).collect(),
+            None,
+            None,
+        )
+        .unwrap();
+        assert!(ss_frd_mimo(&cont, 1, &o).is_err());
+    }
+}
