@@ -1,0 +1,600 @@
+//! The whole machine's parametric models ([`FrequencyFitter`], the default [`MachineModels`] of
+//! `ambid run` with `[machine]`): per speed, MIMO state-space models of the 4×4 plant fitted to
+//! the measured matrix FRF ([`ambid_core::estimate::freqfit_mimo`]: frequency-domain subspace,
+//! then weighted nonlinear least squares on all 16 entries with inverse-variance weights, never
+//! stabilised) over a scan of orders; the comparison table; the chosen model's closed-loop
+//! validation with the controllers, its σ̄(S) and per-axis ISO 14839-3 zones; the closed-loop
+//! modes with their whirl direction (the Campbell diagram's measured points); and across speeds
+//! the speed-scheduled model ([`ambid_core::estimate::scheduled`]) whose modes on a dense speed
+//! grid are the Campbell diagram's curves.
+//!
+//! # Rules (docs/workflow.md, "Whole machine: models")
+//! * **Band.** The lines where the measured plant is precise: the relative standard deviation
+//!   $\sqrt{\sum_{ij}\sigma^2_{ij}} / \lVert \hat P \rVert_F \le 0.102$ (a 95 % interval within
+//!   ±20 %, the rule of the single-axis `fit frf.csv`), from the first to the last run of three
+//!   such lines, clipped to the quality band (`[machine] quality_band_hz`, default 10–1000 Hz).
+//! * **Orders.** Every order of the candidate list (default 16, 20, 22: on the twin's 4×4 plant
+//!   at 20 kHz the 10–1000 Hz band needs about 20 states for a 1 % model — the rigid-body and
+//!   bending modes of both planes, the amplifiers, sensors and the computation delay; 12 states
+//!   leave 7 %).
+//! * **Loop.** With the controllers known (the twin), every fit is held to models whose loop
+//!   with them is stable ([`ss_frd_mimo_in_loop`]): the measured loop was stable, and an
+//!   unconstrained fit puts spurious fast unstable poles outside the band.
+//! * **Choice.** Among the rows whose model gives a stable closed loop with the controllers (when
+//!   they are known), the smallest BIC of the inverse-variance-weighted cost
+//!   ($2V + n_\theta \ln 2 L n_y n_u$); without a valid row, no model is chosen and a note says
+//!   why.
+//! * **Whirl.** A closed-loop mode's eigenvector $v$ seen at the outputs, $y = C_{cl} v$, is split
+//!   per bearing into its forward and backward circular parts
+//!   $|y_x \mp j y_y|$ (the twin's rule, [`ambid_twin::Machine::closed_loop_pole_pairs`], with
+//!   the sensors in place of the bearings); forward when the forward share exceeds one half, and
+//!   planar at standstill.
+
+use super::machine::{
+    AxisValidationRow, ComparisonRow, IsoRow, MachineModelInput, MachineModelOutput, MachineModels,
+    ModePoint, SpeedMeasurement, SpeedModel,
+};
+use crate::error::Error;
+use ambid_core::data::{IoData, AXES};
+use ambid_core::estimate::freqfit_mimo::{
+    ss_frd_mimo, ss_frd_mimo_in_loop, MimoFreqFit, MimoFreqOptions,
+};
+use ambid_core::estimate::scheduled::{
+    fit_scheduled, ScheduleOptions, SpeedData, SpeedScheduledModel,
+};
+use ambid_core::lti::{Frd, StateSpace};
+use ambid_core::signal::{noise::Distribution, NoiseSpec};
+use ambid_core::validate::machine::{validate_machine, MachineValidationOptions};
+use ambid_twin::{c64, Machine, MachineConfig, MachineSimOptions, Whirl};
+use rayon::prelude::*;
+
+/// Relative standard deviation of a line below which it is precise enough to fit (a 95 %
+/// interval within ±20 %).
+pub const MAX_RELATIVE_STD: f64 = 0.102;
+
+/// Damping ratio below which a closed-loop mode enters the Campbell diagram (the twin's
+/// `LIGHTLY_DAMPED`).
+pub const CAMPBELL_DAMPING: f64 = ambid_twin::LIGHTLY_DAMPED;
+
+/// Samples of the twin's independent validation record (0.3 s at 20 kHz).
+pub const VALIDATION_SAMPLES: usize = 6000;
+
+/// RMS of the white-noise excitation of the validation record on every axis \[A\].
+pub const VALIDATION_RMS_A: f64 = 0.05;
+
+/// The default [`MachineModels`]: MIMO state-space models fitted to the measured 4×4 FRF (module
+/// docs).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrequencyFitter {
+    /// Candidate orders (default 16, 20, 22).
+    pub orders: Vec<usize>,
+    /// Iteration limit of the nonlinear refinement (default 100).
+    pub max_iterations: usize,
+}
+
+impl Default for FrequencyFitter {
+    fn default() -> Self {
+        Self {
+            orders: vec![16, 20, 22],
+            max_iterations: 100,
+        }
+    }
+}
+
+/// One fitted candidate of one speed.
+#[derive(Debug, Clone)]
+pub struct Candidate {
+    /// State dimension.
+    pub order: usize,
+    /// The fit, or why it failed.
+    pub fit: Result<MimoFreqFit, String>,
+    /// Whether the model's loop with the controllers is stable (`None`: no controller known).
+    pub loop_stable: Option<bool>,
+}
+
+/// The band of a measured plant FRF that a fit uses (module docs, "Band"): `None` when no run of
+/// three precise lines lies in the quality band.
+///
+/// # Errors
+/// [`Error`] when the FRF has no variance.
+pub fn fit_band(plant: &Frd, quality_band_hz: [f64; 2]) -> Result<Option<(f64, f64)>, Error> {
+    let var = plant.variance().ok_or_else(|| {
+        Error::input("the measured plant FRF has no variance; the MIMO fit weights every entry by its inverse variance")
+    })?;
+    let e = plant.ny() * plant.nu();
+    let good: Vec<bool> = (0..plant.len())
+        .map(|k| {
+            let f = plant.f_hz()[k];
+            let v: f64 = var[k * e..(k + 1) * e].iter().sum();
+            let g: f64 = plant.values()[k * e..(k + 1) * e]
+                .iter()
+                .map(|x| x.norm_sqr())
+                .sum();
+            f >= quality_band_hz[0]
+                && f <= quality_band_hz[1]
+                && g > 0.0
+                && (v / g).sqrt() <= MAX_RELATIVE_STD
+        })
+        .collect();
+    let runs: Vec<usize> = (0..good.len().saturating_sub(2))
+        .filter(|&k| good[k] && good[k + 1] && good[k + 2])
+        .collect();
+    Ok(match (runs.first(), runs.last()) {
+        (Some(&a), Some(&b)) => Some((plant.f_hz()[a], plant.f_hz()[b + 2])),
+        _ => None,
+    })
+}
+
+/// Fits every candidate order to one speed's plant FRF (in parallel), with the loop check
+/// against `controller`.
+pub fn scan(
+    plant: &Frd,
+    band: (f64, f64),
+    orders: &[usize],
+    max_iterations: usize,
+    controller: Option<&StateSpace>,
+) -> Vec<Candidate> {
+    orders
+        .par_iter()
+        .map(|&order| {
+            let opts = MimoFreqOptions {
+                band_hz: Some(band),
+                max_iterations,
+                ..Default::default()
+            };
+            let fit = match controller {
+                Some(c) => ss_frd_mimo_in_loop(plant, order, &opts, c),
+                None => ss_frd_mimo(plant, order, &opts),
+            }
+            .map_err(|e| e.to_string());
+            let loop_stable = match (&fit, controller) {
+                (Ok(f), Some(c)) => Some(
+                    f.model
+                        .feedback(c)
+                        .and_then(|cl| cl.is_stable())
+                        .unwrap_or(false),
+                ),
+                _ => None,
+            };
+            Candidate {
+                order,
+                fit,
+                loop_stable,
+            }
+        })
+        .collect()
+}
+
+/// The index of the chosen candidate (module docs, "Choice").
+pub fn choose(cands: &[Candidate]) -> Option<usize> {
+    cands
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| c.fit.is_ok() && c.loop_stable != Some(false))
+        .min_by(|(_, a), (_, b)| {
+            let ba = a.fit.as_ref().map_or(f64::INFINITY, MimoFreqFit::bic);
+            let bb = b.fit.as_ref().map_or(f64::INFINITY, MimoFreqFit::bic);
+            ba.total_cmp(&bb)
+        })
+        .map(|(i, _)| i)
+}
+
+/// The closed-loop modes of `plant` under `controller` (damping below [`CAMPBELL_DAMPING`],
+/// natural frequency in `band_hz`), with the whirl direction read from the outputs (module
+/// docs, "Whirl"; outputs in axis order `xa, xb, ya, yb`).
+///
+/// # Errors
+/// [`Error`] when the loop cannot be formed or its eigendecomposition fails.
+pub fn closed_loop_modes(
+    plant: &StateSpace,
+    controller: &StateSpace,
+    speed_rpm: f64,
+    band_hz: [f64; 2],
+) -> Result<Vec<ModePoint>, Error> {
+    let cl = plant
+        .feedback(controller)
+        .map_err(|e| Error::computation(format!("closed loop of the model: {e}")))?;
+    let ts = cl
+        .ts()
+        .ok_or_else(|| Error::computation("the model is continuous; a discrete model is needed"))?;
+    let a = cl.a().to_owned();
+    let eig = a
+        .eigen()
+        .map_err(|e| Error::computation(format!("closed-loop eigendecomposition: {e:?}")))?;
+    let (u, s) = (eig.U(), eig.S());
+    let c = cl.c();
+    let n = a.nrows();
+    let mut out = Vec::new();
+    for k in 0..n {
+        let z = s[k];
+        if !(z.im > 1e-12 && z.norm() > 1e-12) {
+            continue;
+        }
+        let sc = z.ln() / ts;
+        let freq_hz = sc.norm() / (2.0 * std::f64::consts::PI);
+        let damping = -sc.re / sc.norm();
+        if !(damping < CAMPBELL_DAMPING && freq_hz >= band_hz[0] && freq_hz <= band_hz[1]) {
+            continue;
+        }
+        let y: Vec<c64> = (0..c.nrows())
+            .map(|i| (0..n).map(|j| u[(j, k)] * c[(i, j)]).sum())
+            .collect();
+        let j = c64::new(0.0, 1.0);
+        let (mut ef, mut eb) = (0.0, 0.0);
+        // bearings A and B: (xa, ya) and (xb, yb)
+        for (ix, iy) in [(0usize, 2usize), (1, 3)] {
+            if iy < y.len() {
+                ef += (y[ix] + j * y[iy]).norm_sqr();
+                eb += (y[ix] - j * y[iy]).norm_sqr();
+            }
+        }
+        let frac = if ef + eb > 0.0 { ef / (ef + eb) } else { 0.5 };
+        let whirl = if speed_rpm == 0.0 || (frac - 0.5).abs() < 1e-9 {
+            Whirl::None
+        } else if frac > 0.5 {
+            Whirl::Forward
+        } else {
+            Whirl::Backward
+        };
+        out.push(ModePoint {
+            speed_rpm,
+            freq_hz,
+            damping,
+            whirl,
+        });
+    }
+    out.sort_by(|a, b| a.freq_hz.total_cmp(&b.freq_hz));
+    Ok(out)
+}
+
+/// The twin's independent validation record at one speed: [`VALIDATION_SAMPLES`] samples of
+/// seeded Gaussian white noise ([`VALIDATION_RMS_A`] RMS, `NoiseSpec` seeds `s + 16 + axis`) on all
+/// four axes, the loop settled for 4000 samples first, sensor-noise seed `s + 1`, with
+/// `s = seed ^ 0x5EED_0FF1`, so the record shares no random number with the identification
+/// experiments.
+///
+/// # Errors
+/// [`Error`] from the twin.
+pub fn twin_validation_record(
+    cfg: &MachineConfig,
+    mode: ambid_twin::Mode,
+    speed_rpm: f64,
+    noise: bool,
+    seed: u64,
+) -> Result<(Machine, IoData), Error> {
+    let m = Machine::new(MachineConfig {
+        speed_rpm,
+        ..cfg.clone()
+    })
+    .map_err(Error::from)?;
+    let s = seed ^ 0x5EED_0FF1;
+    let r: Vec<Vec<f64>> = (0..4u64)
+        .map(|a| {
+            NoiseSpec {
+                distribution: Distribution::Gaussian,
+                rms: VALIDATION_RMS_A,
+                n_samples: VALIDATION_SAMPLES,
+                band_hz: None,
+                seed: s.wrapping_add(16 + a),
+            }
+            .generate(m.ts())
+            .map(|e| e.values)
+            .map_err(|e| Error::computation(format!("validation excitation: {e}")))
+        })
+        .collect::<Result<_, _>>()?;
+    let opts = MachineSimOptions {
+        mode,
+        seed: s.wrapping_add(1),
+        noise,
+        w: None,
+        settle_samples: 4000,
+    };
+    let rec = m
+        .simulate([&r[0], &r[1], &r[2], &r[3]], &opts)
+        .map_err(Error::from)?;
+    let data = rec.to_iodata(None).map_err(Error::from)?;
+    Ok((m, data))
+}
+
+/// One speed's result.
+struct SpeedResult {
+    cands: Vec<Candidate>,
+    chosen: Option<usize>,
+    band: Option<(f64, f64)>,
+    validation: Vec<AxisValidationRow>,
+    iso: Vec<IsoRow>,
+    sigma: Option<(f64, f64, f64)>,
+    modes: Vec<ModePoint>,
+    notes: Vec<String>,
+}
+
+impl FrequencyFitter {
+    fn speed(
+        &self,
+        input: &MachineModelInput<'_>,
+        k: usize,
+        sp: &SpeedMeasurement,
+    ) -> Result<SpeedResult, Error> {
+        let controller = input.controller;
+        let mut notes = Vec::new();
+        let band = fit_band(&sp.frf.plant, input.quality_band_hz)?;
+        let Some(band) = band else {
+            notes.push(format!(
+                "{} rpm: no run of three lines in {}–{} Hz has a plant estimate within ±20 % (95 %); no model was fitted — raise the excitation level or record more periods",
+                sp.speed_rpm, input.quality_band_hz[0], input.quality_band_hz[1]
+            ));
+            return Ok(SpeedResult {
+                cands: Vec::new(),
+                chosen: None,
+                band: None,
+                validation: Vec::new(),
+                iso: Vec::new(),
+                sigma: None,
+                modes: Vec::new(),
+                notes,
+            });
+        };
+        let cands = scan(
+            &sp.frf.plant,
+            band,
+            &self.orders,
+            self.max_iterations,
+            controller,
+        );
+        let chosen = choose(&cands);
+        if chosen.is_none() {
+            notes.push(format!(
+                "{} rpm: no candidate model gives a stable closed loop with the controllers; none was chosen (the table lists why each failed)",
+                sp.speed_rpm
+            ));
+        }
+        let mut validation = Vec::new();
+        let mut iso = Vec::new();
+        let mut sigma = None;
+        let mut modes = Vec::new();
+        if let (Some(ci), Some(ctl)) = (chosen, controller) {
+            if let Ok(fit) = &cands[ci].fit {
+                modes = closed_loop_modes(&fit.model, ctl, sp.speed_rpm, input.quality_band_hz)?;
+                // validation: an independent twin record, or (files) the first experiment
+                let record = match input.twin {
+                    Some((cfg, mode)) => Some((
+                        twin_validation_record(
+                            cfg,
+                            mode,
+                            sp.speed_rpm,
+                            input.noise,
+                            input.seed.wrapping_add(k as u64),
+                        )?
+                        .1,
+                        true,
+                    )),
+                    None => sp.records.first().cloned().map(|r| (r, false)),
+                };
+                if let Some((rec, independent)) = record {
+                    if !independent {
+                        notes.push(format!(
+                            "{} rpm: validated on the first identification experiment (no independent record was given); the fit is optimistic",
+                            sp.speed_rpm
+                        ));
+                    }
+                    let opts = MachineValidationOptions {
+                        zones: input.zones,
+                        ..Default::default()
+                    };
+                    match validate_machine(&fit.model, ctl, &rec, &opts) {
+                        Ok(v) => {
+                            let truth = input
+                                .truth
+                                .and_then(|t| t.get(k))
+                                .and_then(|t| validate_machine(&t.plant, ctl, &rec, &opts).ok());
+                            for (a, ax) in v.axes.iter().enumerate() {
+                                validation.push(AxisValidationRow {
+                                    speed_rpm: sp.speed_rpm,
+                                    axis: ax.axis.clone(),
+                                    fit_y_pct: ax.fit_y,
+                                    fit_i_pct: ax.fit_i,
+                                    truth_fit_y_pct: truth.as_ref().map(|t| t.axes[a].fit_y),
+                                    whiteness_ok: None,
+                                    independence_ok: ax.residuals.as_ref().map(|r| r.pass),
+                                });
+                                iso.push(IsoRow {
+                                    speed_rpm: sp.speed_rpm,
+                                    axis: ax.axis.clone(),
+                                    from: "model".into(),
+                                    peak: ax.iso.peak,
+                                    f_hz: ax.iso.f_peak_hz,
+                                    zone: ax.iso.zone,
+                                });
+                            }
+                            sigma = Some((sp.speed_rpm, v.sigma_max_peak, v.sigma_max_f_hz));
+                        }
+                        Err(e) => notes.push(format!(
+                            "{} rpm: the chosen model could not be validated: {e}",
+                            sp.speed_rpm
+                        )),
+                    }
+                }
+            }
+        } else if chosen.is_some() {
+            notes.push(format!(
+                "{} rpm: no controller is known (recorded files), so the model is not validated in closed loop and has no closed-loop modes",
+                sp.speed_rpm
+            ));
+        }
+        Ok(SpeedResult {
+            cands,
+            chosen,
+            band: Some(band),
+            validation,
+            iso,
+            sigma,
+            modes,
+            notes,
+        })
+    }
+}
+
+/// Speeds of the Campbell curves' grid, minus one.
+pub const SCHEDULE_GRID: usize = 24;
+
+impl FrequencyFitter {
+    /// The speed-scheduled model of the per-speed fits (`None` with fewer than two speeds of the
+    /// common order).
+    fn scheduled(
+        &self,
+        input: &MachineModelInput<'_>,
+        results: &[SpeedResult],
+    ) -> Result<Option<SpeedScheduledModel>, Error> {
+        let chosen: Vec<usize> = results
+            .iter()
+            .filter_map(|r| r.chosen.map(|c| r.cands[c].order))
+            .collect();
+        let Some(&order) = chosen.get(chosen.len() / 2) else {
+            return Ok(None);
+        };
+        let mut data = Vec::new();
+        let mut band = (f64::INFINITY, f64::NEG_INFINITY);
+        for (sp, r) in input.speeds.iter().zip(results) {
+            let Some(fit) = r
+                .cands
+                .iter()
+                .find(|c| c.order == order)
+                .and_then(|c| c.fit.as_ref().ok())
+            else {
+                continue;
+            };
+            if let Some(b) = r.band {
+                band = (band.0.min(b.0), band.1.max(b.1));
+            }
+            data.push(SpeedData {
+                speed_rpm: sp.speed_rpm,
+                model: &fit.model,
+                frd: &sp.frf.plant,
+            });
+        }
+        if data.len() < 2 {
+            return Ok(None);
+        }
+        let opts = ScheduleOptions {
+            band_hz: Some(band),
+            ..Default::default()
+        };
+        fit_scheduled(&data, &opts)
+            .map(Some)
+            .map_err(|e| Error::computation(format!("speed-scheduled model: {e}")))
+    }
+}
+
+impl MachineModels for FrequencyFitter {
+    fn identify(&self, input: &MachineModelInput<'_>) -> Result<MachineModelOutput, Error> {
+        let results: Vec<SpeedResult> = input
+            .speeds
+            .par_iter()
+            .enumerate()
+            .map(|(k, sp)| self.speed(input, k, sp))
+            .collect::<Result<_, _>>()?;
+        let mut out = MachineModelOutput::default();
+        for (sp, res) in input.speeds.iter().zip(&results) {
+            for (i, c) in res.cands.iter().enumerate() {
+                let chosen = res.chosen == Some(i);
+                match &c.fit {
+                    Ok(fit) => {
+                        let unstable = fit.unstable_poles().unwrap_or(usize::MAX);
+                        let max_entry = fit
+                            .errors
+                            .median_entry_relative
+                            .iter()
+                            .copied()
+                            .filter(|v| v.is_finite())
+                            .fold(0.0, f64::max);
+                        out.comparison.push(ComparisonRow {
+                            speed_rpm: sp.speed_rpm,
+                            model: format!(
+                                "freq ss {}{}",
+                                c.order,
+                                if c.loop_stable == Some(false) {
+                                    " (unstable loop)"
+                                } else {
+                                    ""
+                                }
+                            ),
+                            order: c.order,
+                            unstable_poles: unstable,
+                            median_norm_error_pct: 100.0 * fit.errors.median_norm_relative,
+                            max_entry_error_pct: 100.0 * max_entry,
+                            bic: Some(fit.bic()),
+                            fit_y_pct: if chosen && res.validation.len() == 4 {
+                                Some(std::array::from_fn(|a| res.validation[a].fit_y_pct))
+                            } else {
+                                None
+                            },
+                            chosen,
+                        });
+                        if chosen {
+                            let name = format!("ss{}_{}rpm", c.order, sp.speed_rpm.round());
+                            out.models.push(SpeedModel {
+                                speed_rpm: sp.speed_rpm,
+                                name,
+                                model: fit.model.clone(),
+                                meta: serde_json::json!({
+                                    "structure": "ss",
+                                    "method": "frequency-domain subspace + weighted least squares on the 4x4 FRF (inverse-variance weights)",
+                                    "order": c.order,
+                                    "band_hz": res.band.map(|b| [b.0, b.1]),
+                                    "lines": fit.f_hz.len(),
+                                    "bic": fit.bic(),
+                                    "normalised_cost": fit.normalised_cost(),
+                                    "median_norm_error": fit.errors.median_norm_relative,
+                                    "unstable_poles": unstable,
+                                    "iterations": fit.iterations,
+                                    "converged": fit.converged,
+                                }),
+                            });
+                        }
+                    }
+                    Err(e) => out.notes.push(format!(
+                        "{} rpm, order {}: not fitted: {e}",
+                        sp.speed_rpm, c.order
+                    )),
+                }
+            }
+            out.validation.extend(res.validation.iter().cloned());
+            out.iso.extend(res.iso.iter().cloned());
+            out.sigma_max_s.extend(res.sigma);
+            out.campbell_points.extend(res.modes.iter().copied());
+            out.notes.extend(res.notes.iter().cloned());
+        }
+        // the speed-scheduled model: the middle speed's chosen order at every speed that has
+        // a fit of that order; its closed-loop modes on a dense speed grid are the curves
+        if let Some(ctl) = input.controller {
+            match self.scheduled(input, &results) {
+                Ok(Some(sched)) => {
+                    let (lo, hi) = sched.range_rpm();
+                    for g in 0..=SCHEDULE_GRID {
+                        let speed = lo + (hi - lo) * g as f64 / SCHEDULE_GRID as f64;
+                        let model = sched.at(speed).map_err(|e| {
+                            Error::computation(format!("speed-scheduled model at {speed} rpm: {e}"))
+                        })?;
+                        match closed_loop_modes(&model, ctl, speed, input.quality_band_hz) {
+                            Ok(m) => out.campbell_curves.extend(m),
+                            Err(e) => out.notes.push(format!(
+                                "speed-scheduled model at {speed:.0} rpm: no closed-loop modes ({e})"
+                            )),
+                        }
+                    }
+                    out.notes.push(format!(
+                        "Speed-scheduled model: order {}, A(Ω) polynomial of degree {} in the speed over {:.0}–{:.0} rpm, B, C, D common (estimate::scheduled); its closed-loop modes are the Campbell diagram's curves.",
+                        sched.b().nrows(),
+                        sched.degree(),
+                        lo,
+                        hi
+                    ));
+                }
+                Ok(None) => {}
+                Err(e) => out.notes.push(format!("No speed-scheduled model: {e}")),
+            }
+        }
+        let _ = AXES;
+        Ok(out)
+    }
+}
