@@ -27,6 +27,8 @@
 //! alone already meets the 1 % bar at 15 000 rpm, so the bar does not discriminate here; the
 //! tests therefore also ask the exact schedule to be 100 times better than that and the noisy one
 //! twice as good. Whole file: about 10 s in the debug profile.
+mod common;
+use common::random_basis;
 
 use ambid_core::estimate::scheduled::{
     fit_scheduled, ScheduleOptions, SpeedData, SpeedScheduledModel,
@@ -52,31 +54,6 @@ fn lines(fs: f64) -> Vec<f64> {
         .skip_while(|&f| f < 10.0)
         .take_while(|&f| f <= 1000.0)
         .collect()
-}
-
-/// The plant in a random state basis $T$ ($T^{-1}AT$, $T^{-1}B$, $CT$), as in
-/// machine_validation.rs.
-fn random_basis(p: &StateSpace, seed: u64) -> StateSpace {
-    let n = p.order();
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let t = Mat::<f64>::from_fn(n, n, |i, j| {
-        let g: f64 = StandardNormal.sample(&mut rng);
-        if i == j {
-            1.0 + 0.3 * g
-        } else {
-            0.3 * g / (n as f64).sqrt()
-        }
-    });
-    use faer::linalg::solvers::DenseSolveCore;
-    let ti = t.partial_piv_lu().inverse();
-    StateSpace::discrete(
-        &ti * p.a() * &t,
-        &ti * p.b(),
-        p.c() * &t,
-        p.d().to_owned(),
-        p.ts().unwrap(),
-    )
-    .unwrap()
 }
 
 /// $A = I + \Delta$ with every entry of $\Delta$ times $1 + 0.003 g$ (structural zeros stay

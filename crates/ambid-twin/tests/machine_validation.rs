@@ -9,6 +9,8 @@
 //! Records: 6000 samples (0.3 s at 20 kHz) of seeded white-noise excitation (0.05 A RMS) on all
 //! four axes, seeds 1000 + s (different from every identification design), the twin's sensor
 //! noise from seed 2000 + s; the loop runs 4000 samples before the record.
+mod common;
+use common::random_basis;
 
 use ambid_core::data::IoData;
 use ambid_core::lti::StateSpace;
@@ -67,31 +69,6 @@ pub fn fits_against_truth(m: &Machine, p_hat: &StateSpace, seed: u64) -> [(f64, 
     let model = validate(m, p_hat, &data);
     let truth = validate(m, m.plant(), &data);
     std::array::from_fn(|k| (model.axes[k].fit_y, truth.axes[k].fit_y))
-}
-
-/// The exact plant in a random state basis $T$ ($A' = T^{-1}AT$, $B' = T^{-1}B$, $C' = CT$): an
-/// identified model that is right up to rounding but shares no matrix with the truth.
-fn random_basis(p: &StateSpace, seed: u64) -> StateSpace {
-    let n = p.order();
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let t = Mat::<f64>::from_fn(n, n, |i, j| {
-        let g: f64 = StandardNormal.sample(&mut rng);
-        if i == j {
-            1.0 + 0.3 * g
-        } else {
-            0.3 * g / (n as f64).sqrt()
-        }
-    });
-    use faer::linalg::solvers::DenseSolveCore;
-    let ti = t.partial_piv_lu().inverse();
-    StateSpace::discrete(
-        &ti * p.a() * &t,
-        &ti * p.b(),
-        p.c() * &t,
-        p.d().to_owned(),
-        p.ts().unwrap(),
-    )
-    .unwrap()
 }
 
 /// The plant with every output scaled by `g` (a gain error).

@@ -1270,10 +1270,27 @@ impl Problem<'_> {
         Some(poles.iter().filter(|z| z.norm() >= 1.0).count())
     }
 
+    /// One trial per block of θ with a pole on or outside the unit circle: that block's poles
+    /// mirrored and the linear parameters refitted (blocks whose refit fails are left out).
+    fn mirrored_trials(&self, th: &[f64]) -> Vec<Vec<f64>> {
+        let lay = self.layout;
+        lay.blocks
+            .iter()
+            .filter_map(|b| {
+                let poles = lay.block_poles(th, b);
+                if !poles.iter().flatten().any(|z| z.norm() >= 1.0) {
+                    return None;
+                }
+                let mut trial = th.to_vec();
+                mirror_block(&mut trial, lay, b, &poles);
+                self.fit_linear(&mut trial).ok().map(|()| trial)
+            })
+            .collect()
+    }
+
     /// Mirrors unstable blocks of the start until its loop with the controller is stable: each
     /// round the mirroring that leaves the fewest unstable loop poles, then the lowest cost.
     fn stable_loop_start(&mut self, th: &mut Vec<f64>) -> Result<()> {
-        let lay = self.layout;
         let none = || {
             Error::numerical(
                 CTX,
@@ -1283,16 +1300,7 @@ impl Problem<'_> {
         let mut now = self.loop_unstable(th).ok_or_else(none)?;
         while now > 0 {
             let mut best: Option<(usize, f64, Vec<f64>)> = None;
-            for b in &lay.blocks {
-                let poles = lay.block_poles(th, b);
-                if !poles.iter().flatten().any(|z| z.norm() >= 1.0) {
-                    continue;
-                }
-                let mut trial = th.clone();
-                mirror_block(&mut trial, lay, b, &poles);
-                if self.fit_linear(&mut trial).is_err() {
-                    continue;
-                }
+            for trial in self.mirrored_trials(th) {
                 let Some(u) = self.loop_unstable(&trial) else {
                     continue;
                 };
@@ -1326,16 +1334,7 @@ impl Problem<'_> {
         let lay = self.layout;
         while lay.unstable(th) > lim {
             let mut best: Option<(f64, Vec<f64>)> = None;
-            for b in &lay.blocks {
-                let poles = lay.block_poles(th, b);
-                if !poles.iter().flatten().any(|z| z.norm() >= 1.0) {
-                    continue;
-                }
-                let mut trial = th.clone();
-                mirror_block(&mut trial, lay, b, &poles);
-                if self.fit_linear(&mut trial).is_err() {
-                    continue;
-                }
+            for trial in self.mirrored_trials(th) {
                 if let Some(r) = self.residuals(&trial) {
                     let cost = r.iter().map(|x| x * x).sum::<f64>();
                     if best.as_ref().is_none_or(|(c, _)| cost < *c) {

@@ -48,3 +48,31 @@ pub fn run_design(
         })
         .collect()
 }
+
+/// The plant in a random state basis $T$ ($A' = T^{-1}AT$, $B' = T^{-1}B$, $C' = CT$), $T$ near
+/// the identity with seeded Gaussian entries: a model that is right up to rounding but shares
+/// no matrix with the truth.
+pub fn random_basis(p: &ambid_core::lti::StateSpace, seed: u64) -> ambid_core::lti::StateSpace {
+    use faer::linalg::solvers::DenseSolveCore;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
+    let n = p.order();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let t = faer::Mat::<f64>::from_fn(n, n, |i, j| {
+        let g: f64 = StandardNormal.sample(&mut rng);
+        if i == j {
+            1.0 + 0.3 * g
+        } else {
+            0.3 * g / (n as f64).sqrt()
+        }
+    });
+    let ti = t.partial_piv_lu().inverse();
+    ambid_core::lti::StateSpace::discrete(
+        &ti * p.a() * &t,
+        &ti * p.b(),
+        p.c() * &t,
+        p.d().to_owned(),
+        p.ts().unwrap(),
+    )
+    .unwrap()
+}
