@@ -2,7 +2,7 @@
 //! twin at three speeds ≤ 10 s on the project machine): `ambid run wf.toml` with a `[machine]`
 //! section, defaults otherwise (0, 15 000, 30 000 rpm, the orthogonal PRBS design, n = 10, 5
 //! samples per bit, 12 periods per experiment, nonlinear twin with noise), and the same with
-//! `mode = "linear"`. Median of `AMBID_BENCH_REPS` runs (default 5); prints a Markdown table for
+//! `mode = "linear"`, and with the MIMO fitter (`models = "fit"`). Median of `AMBID_BENCH_REPS` runs (default 5); prints a Markdown table for
 //! docs/benchmarks.md.
 //!
 //! Run: `cargo bench -p ambid --bench machine_workflow`.
@@ -48,6 +48,10 @@ fn main() {
         (
             "[machine] mode = \"linear\" (3 speeds)",
             "[machine]\nmode = \"linear\"\n",
+        ),
+        (
+            "[machine] models = \"fit\" (3 speeds, nonlinear)",
+            "[machine]\nmodels = \"fit\"\n",
         ),
     ] {
         let wf = root.join("wf.toml");

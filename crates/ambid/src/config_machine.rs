@@ -86,6 +86,11 @@ pub struct MachineSection {
     pub quality_band_hz: [f64; 2],
     /// Recorded experiments, one entry per speed (default: none, the twin runs).
     pub files: Vec<MachineFile>,
+    /// Parametric models of the plant: `none` (default: the measured FRFs only) or `fit` (the
+    /// MIMO state-space fitter, `workflow::machine_fit::FrequencyFitter`: per speed orders 20,
+    /// 22, 24, closed-loop validation, Campbell diagram from the models; about 20–40 s per
+    /// speed on 2 cores).
+    pub models: String,
 }
 
 /// One speed's recorded experiments (`[[machine.files]]`).
@@ -122,6 +127,7 @@ impl Default for MachineSection {
             period_s: 0.25575,
             quality_band_hz: [10.0, 1000.0],
             files: Vec::new(),
+            models: "none".into(),
         }
     }
 }
@@ -217,6 +223,13 @@ impl MachineSection {
                 "machine.design = \"{}\" is not one of \"orthogonal\" (default), \"sequential\", \
                  \"zipper\"",
                 self.design
+            ));
+        }
+        if !["none", "fit"].contains(&self.models.as_str()) {
+            return Err(format!(
+                "machine.models = \"{}\" is not one of \"none\" (default: the measured FRFs \
+                 only), \"fit\" (MIMO state-space models of the plant per speed)",
+                self.models
             ));
         }
         if !["nonlinear", "linear"].contains(&self.mode.as_str()) {

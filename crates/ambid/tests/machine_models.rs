@@ -1,17 +1,18 @@
 //! Issue 21's first bar on the 4-axis twin (15 000 rpm, linear, default sensor noise, the
 //! `[machine]` defaults: orthogonal PRBS design, 12 periods): the chosen MIMO model of
-//! [`FrequencyFitter`] (the default of `ambid run` with `[machine]`) has a plant error, median
-//! over the measured lines in 10–1000 Hz of ‖P̂ − P‖₂/‖P‖₂ against the twin's exact plant,
-//! ≤ 1 %; the true number of unstable poles; and a per-axis closed-loop validation fit within
-//! 1 point of the exact plant's fit on the same independent record. Seeds 1–5 of the twin's
-//! noise (each seed also changes the validation record).
+//! [`FrequencyFitter`] has a plant error, median over the measured lines in 10–1000 Hz of
+//! ‖P̂ − P‖₂/‖P‖₂ against the twin's exact plant, ≤ 1 %; the true number of unstable poles; and
+//! a per-axis closed-loop validation fit within 1 point of the exact plant's fit on the same
+//! independent record. Seeds 1–5 of the twin's noise (each seed also changes the validation
+//! record).
 //!
-//! **The bar is not met yet**: `chosen_model_meets_the_plant_bar_on_five_seeds` is `#[ignore]`d
-//! because it fails (the numbers per seed are in docs/estimation.md, "MIMO state space fitted to
-//! a matrix FRF"; reproduce with `AMBID_REPORT_ONLY=1 cargo test -p ambid --test machine_models
-//! -- --ignored --nocapture`). `seed_one_plant_error_and_unstable_poles` pins what holds on
-//! seed 1 only (plant error 0.76 %, the 4 unstable poles, a stable loop): a regression check of
-//! the estimator, not evidence for other seeds.
+//! `chosen_model_meets_the_plant_bar_on_five_seeds` checks all five (about 4 minutes in a
+//! release build, longer in the test profile, so it is `#[ignore]`d by default; run it with
+//! `cargo test --release -p ambid --test machine_models -- --ignored --nocapture`, per-seed
+//! numbers in docs/estimation.md). `seed_one_meets_the_whole_bar` runs by default on seed 1, the
+//! seed whose lowest-BIC fit (order 22) carries a spurious 4.4 kHz closed-loop mode that the
+//! out-of-band check must reject. These are figures of the nominal twin only; random rigs are
+//! reported in docs/estimation.md.
 
 use ambid::config::MachineSection;
 use ambid::workflow::machine::{acquire_twin, MachineModelInput, MachineModels};
@@ -51,8 +52,8 @@ fn unstable(m: &StateSpace) -> usize {
         .count()
 }
 
-/// The chosen model of seed `seed`: (median plant error, unstable poles of model and truth,
-/// the fitter's output).
+/// The chosen model of seed `seed` on the nominal twin at 15 000 rpm: (median plant error,
+/// unstable poles of model and truth, the fitter's output).
 fn identify(
     seed: u64,
 ) -> (
@@ -66,7 +67,20 @@ fn identify(
         mode: "linear".into(),
         ..Default::default()
     };
-    let data = acquire_twin(&m, Path::new("."), seed).unwrap();
+    identify_on(&m, seed)
+}
+
+/// As [`identify`], for the machine section `m` (one speed, linear).
+fn identify_on(
+    m: &MachineSection,
+    seed: u64,
+) -> (
+    f64,
+    usize,
+    usize,
+    ambid::workflow::machine::MachineModelOutput,
+) {
+    let data = acquire_twin(m, Path::new("."), seed).unwrap();
     let truth = data.truth.as_ref().unwrap();
     let input = MachineModelInput {
         speeds: &data.speeds,
@@ -95,58 +109,71 @@ fn identify(
 }
 
 #[test]
-fn seed_one_plant_error_and_unstable_poles() {
+fn seed_one_meets_the_whole_bar() {
     let (err, nu_model, nu_truth, out) = identify(1);
     eprintln!(
         "seed 1: {} median plant error {:.3} %",
         out.models[0].name,
         100.0 * err
     );
-    assert!(err <= 0.01, "median plant error {err}");
-    assert_eq!((nu_model, nu_truth), (4, 4));
-    // held to a stable loop with the controllers, validated, with its closed-loop modes
-    assert_eq!(out.validation.len(), 4, "{:?}", out.notes);
-    assert!(!out.campbell_points.is_empty());
+    check_bar(1, err, nu_model, nu_truth, &out);
     assert!(out.comparison.iter().filter(|r| r.chosen).count() == 1);
+    // the order-22 fit is the one with the spurious mode above the band; it is in the table,
+    // marked, and not chosen
+    assert!(
+        out.comparison
+            .iter()
+            .any(|r| r.order == 22 && !r.chosen && r.model.contains("contradicts")),
+        "{:?}",
+        out.comparison.iter().map(|r| &r.model).collect::<Vec<_>>()
+    );
+}
+
+/// The bar's checks on one seed's result.
+fn check_bar(
+    seed: u64,
+    err: f64,
+    nu_model: usize,
+    nu_truth: usize,
+    out: &ambid::workflow::machine::MachineModelOutput,
+) {
+    assert!(err <= 0.01, "seed {seed}: median plant error {err}");
+    assert_eq!(nu_model, nu_truth, "seed {seed}");
+    assert_eq!(out.validation.len(), 4, "seed {seed}: {:?}", out.notes);
+    for r in &out.validation {
+        let d = (r.fit_y_pct - r.truth_fit_y_pct.unwrap()).abs();
+        assert!(
+            d <= 1.0,
+            "seed {seed} axis {}: fit {} vs truth {:?}",
+            r.axis,
+            r.fit_y_pct,
+            r.truth_fit_y_pct
+        );
+    }
+    // the closed-loop modes of the model are reported with their whirl
+    assert!(!out.campbell_points.is_empty(), "seed {seed}");
 }
 
 #[test]
-#[ignore = "issue 21's bar is not met yet (docs/estimation.md): fails on seeds 2-5"]
+#[ignore = "about 4 minutes in release (longer in the test profile); seed 1 runs by default"]
 fn chosen_model_meets_the_plant_bar_on_five_seeds() {
     let mut worst = 0.0f64;
     for seed in seeds() {
         let (err, nu_model, nu_truth, out) = identify(seed);
-        let rows: Vec<_> = out.validation.iter().collect();
         eprintln!(
             "seed {seed}: {} median plant error {:.3} %, unstable poles {nu_model} (truth {nu_truth}), fits {:?}",
             out.models[0].name,
             100.0 * err,
-            rows.iter()
+            out.validation
+                .iter()
                 .map(|r| (r.axis.clone(), r.fit_y_pct, r.truth_fit_y_pct.unwrap()))
                 .collect::<Vec<_>>()
         );
-        if std::env::var("AMBID_REPORT_ONLY").is_ok() {
-            continue;
-        }
-        assert!(err <= 0.01, "seed {seed}: median plant error {err}");
-        assert_eq!(nu_model, nu_truth, "seed {seed}");
-        assert_eq!(rows.len(), 4, "seed {seed}: {:?}", out.notes);
-        for r in rows {
-            let d = (r.fit_y_pct - r.truth_fit_y_pct.unwrap()).abs();
-            assert!(
-                d <= 1.0,
-                "seed {seed} axis {}: fit {} vs truth {:?}",
-                r.axis,
-                r.fit_y_pct,
-                r.truth_fit_y_pct
-            );
-        }
-        // the closed-loop modes of the model are reported with their whirl
-        assert!(!out.campbell_points.is_empty());
+        check_bar(seed, err, nu_model, nu_truth, &out);
         worst = worst.max(err);
     }
     eprintln!(
-        "worst median plant error over seeds 1-5: {:.3} %",
+        "worst median plant error over the seeds: {:.3} %",
         100.0 * worst
     );
 }
@@ -156,4 +183,53 @@ fn seeds() -> Vec<u64> {
         .ok()
         .map(|s| s.split(',').filter_map(|x| x.parse().ok()).collect())
         .unwrap_or_else(|| (1..=5).collect())
+}
+
+/// The same defaults on random rigs (`random_rig(seed)` lifted to four axes, at
+/// `(7919·seed) mod 30 000` rpm): what holds there is asserted (a model is chosen, its
+/// closed-loop validation fit is within 1 point of the exact plant's on every axis); the plant
+/// error and the unstable-pole count are printed, because the 1 % bar is **not** met on these
+/// rigs (docs/estimation.md: 1.1–4.8 %, a fifth unstable pole on rig 3). About 2 minutes in
+/// release: `cargo test --release -p ambid --test machine_models random_rigs -- --ignored --nocapture`.
+#[test]
+#[ignore = "about 2 minutes in release; a report of the random rigs (the 1 % bar is not met there)"]
+fn random_rigs_report() {
+    let dir = std::env::temp_dir().join(format!("ambid-machine-models-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for seed in [1u64, 2, 3] {
+        let speed = ((seed * 7919) % 30_000) as f64;
+        let path = dir.join(format!("rig{seed}.toml"));
+        std::fs::write(
+            &path,
+            ambid_twin::random_rig(seed)
+                .unwrap()
+                .to_toml_string()
+                .unwrap(),
+        )
+        .unwrap();
+        let m = MachineSection {
+            speeds_rpm: Some(vec![speed]),
+            mode: "linear".into(),
+            config: Some(path),
+            ..Default::default()
+        };
+        let (err, nu_model, nu_truth, out) = identify_on(&m, seed);
+        eprintln!(
+            "rig {seed} at {speed} rpm: {} median plant error {:.3} %, unstable poles {} (truth {}), fits {:?}",
+            out.models[0].name,
+            100.0 * err,
+            nu_model,
+            nu_truth,
+            out.validation
+                .iter()
+                .map(|r| (r.axis.clone(), r.fit_y_pct, r.truth_fit_y_pct.unwrap()))
+                .collect::<Vec<_>>()
+        );
+        assert_eq!(out.validation.len(), 4, "rig {seed}");
+        for r in &out.validation {
+            let d = (r.fit_y_pct - r.truth_fit_y_pct.unwrap()).abs();
+            assert!(d <= 1.0, "rig {seed} axis {}: {d}", r.axis);
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -466,3 +466,44 @@ fn recorded_directories_and_frf_files_give_the_same_plant() {
     assert!(!dir.join("out").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `[machine] models = "fit"` runs the MIMO fitter inside `ambid run` (short records, one
+/// speed): the comparison table has the three default orders, one chosen model with its
+/// closed-loop validation on every axis and its closed-loop modes, the report renders the
+/// model sections. Its accuracy is `tests/machine_models.rs`'s subject; an unknown value of the
+/// key is refused with the accepted ones.
+#[test]
+fn models_fit_runs_the_mimo_fitter_in_the_workflow() {
+    let c = cfg("seed = 7\n[machine]\nspeeds_rpm = [15000]\nmode = \"linear\"\nprbs_order = 8\nperiods = 6\nmodels = \"fit\"\n");
+    let out =
+        ambid::workflow::run(&c, Path::new("."), &mut Progress::new(Verbosity::Quiet)).unwrap();
+    let m = &out.summary["machine"];
+    let rows = m["comparison"].as_array().unwrap();
+    let orders: Vec<u64> = rows.iter().map(|r| r["order"].as_u64().unwrap()).collect();
+    assert_eq!(orders, vec![20, 22, 24], "{rows:?}");
+    let chosen: Vec<_> = rows.iter().filter(|r| r["chosen"] == true).collect();
+    assert_eq!(chosen.len(), 1, "{rows:?}");
+    assert_eq!(m["models"].as_array().unwrap().len(), 1);
+    let val = m["validation"].as_array().unwrap();
+    assert_eq!(val.len(), 4, "{val:?}");
+    for r in val {
+        // the model's fit beside the exact plant's on the same independent record
+        let (fit, truth) = (
+            r["fit_y_pct"].as_f64().unwrap(),
+            r["truth_fit_y_pct"].as_f64().unwrap(),
+        );
+        assert!(
+            fit.is_finite() && truth.is_finite() && fit <= truth + 5.0,
+            "{r}"
+        );
+    }
+    assert!(!m["campbell_points"].as_array().unwrap().is_empty());
+    let html = out.report.to_html();
+    assert!(html.contains("MIMO model comparison"));
+
+    let bad =
+        WorkflowConfig::from_toml_str("[machine]\nmodels = \"exact\"\n", Path::new("wf.toml"))
+            .unwrap_err()
+            .to_string();
+    assert!(bad.contains("\"none\"") && bad.contains("\"fit\""), "{bad}");
+}

@@ -1,5 +1,6 @@
 //! MIMO state-space models fitted to matrix frequency-response data: a frequency-domain subspace
-//! start refined by Levenberg–Marquardt on the weighted complex error of every entry (discrete
+//! step, vector-fitting starts from its poles and from poles spread over the band, each refined
+//! by Levenberg–Marquardt on the weighted complex error of every entry, the best kept (discrete
 //! time, $n_y \times n_u$, open-loop unstable plants admitted and never stabilised).
 //!
 //! # Criterion
@@ -37,6 +38,19 @@
 //! because $C_\zeta(\zeta I - A_\zeta)^{-1} = C_\zeta (1 - az)(zI - A_z)^{-1}(I + aA_\zeta)^{-1}$ and
 //! $(1 - az)(zI - A_z)^{-1} = -aI + (I - aA_z)(zI - A_z)^{-1}$; the constant goes into $D$ and the
 //! factor on the right into $B$, both of which are estimated next.
+//!
+//! # 1b. Vector-fitting starts
+//! On noisy data the subspace poles are biased (on the 4-axis twin the start is 25–55 % off and
+//! the refinement from it stops in poor local minima). The poles are therefore relocated by
+//! vector fitting with poles common to all entries (Gustavsen & Semlyen 1999, the weights
+//! above, unstable poles **not** flipped), twice: from the subspace step's $n$ poles and from
+//! $n$ poles spread log-uniformly over the band as lightly damped pairs. For the relocated poles
+//! the residues are full $n_y \times n_u$ matrices; the start of order $n$ keeps their dominant
+//! rank-one parts (a repeated pole of a minimal model, e.g. four identical amplifiers, is one
+//! pole with a residue of rank up to four) — details in the private `vf` module. Both starts are
+//! refined (steps 2–3) and the fit of lowest weighted cost is returned; the subspace start is
+//! used only when no vector-fitting start can be formed. On the twin the vector-fitting starts
+//! are 6.6–6.8 % off (weighted cost 80 000 against 4–18 million for the subspace start).
 //!
 //! # 2. Modal block form and the linear step
 //! $A_z$ is brought to block-diagonal form by its eigenvectors: a complex pair $\lambda, \bar\lambda$
@@ -88,6 +102,10 @@
 //! * the order at most $q n_y$; distinct (or diagonalisable repeated) poles for the block form.
 //!
 //! # Reference
+//! B. Gustavsen, A. Semlyen, "Rational approximation of frequency domain responses by vector
+//! fitting", *IEEE Trans. Power Delivery* 14(3), 1999 (the relocation; its "fast" form, with
+//! each entry's own unknowns projected out, is D. Deschrijver et al., *IEEE Microwave and
+//! Wireless Components Letters* 18(6), 2008);
 //! T. McKelvey, H. Akçay, L. Ljung, "Subspace-based multivariable system identification from
 //! frequency response data", *IEEE Trans. Automatic Control* 41(7), 1996;
 //! R. Pintelon, J. Schoukens, *System Identification: A Frequency Domain Approach*, 2nd ed.,
@@ -127,6 +145,8 @@ use crate::error::{Error, Result};
 use crate::linalg;
 use crate::lti::{Frd, StateSpace};
 use faer::{c64, Mat};
+
+mod vf;
 
 const CTX: &str = "ss_frd_mimo";
 
@@ -551,8 +571,10 @@ pub fn subspace_singular_values(
 }
 
 /// Fits an `order`-th order discrete-time $n_y \times n_u$ state-space model to the matrix FRF
-/// `frd` (module docs): subspace start, modal delta blocks, Levenberg–Marquardt on the weighted
-/// complex error of every entry. A $1 \times 1$ [`Frd`] is the single-input single-output case.
+/// `frd` (module docs): subspace step, two vector-fitting starts (from its poles and from poles
+/// spread over the band), modal delta blocks, Levenberg–Marquardt on the weighted complex error
+/// of every entry from each start, the lower final cost kept. A $1 \times 1$ [`Frd`] is the
+/// single-input single-output case.
 ///
 /// # Errors
 /// * [`Error::InvalidArgument`] for order 0, a continuous [`Frd`], a bad band, missing or zero
@@ -693,48 +715,36 @@ fn fit(
         ));
     }
 
-    let (layout, mut theta) = to_blocks(&a_z, &c_z, warp.h, ny, nu, opts.feedthrough)?;
-    let mut prob = Problem {
-        data: &data,
-        layout: &layout,
-        delta: data.z.iter().map(|&z| (z - 1.0) / warp.h).collect(),
-        limit: opts.max_unstable_poles,
-        controller,
-    };
-    prob.fit_linear(&mut theta)?;
-    if let Some(lim) = opts.max_unstable_poles {
-        prob.constrain_start(&mut theta, lim)?;
-    }
-    let (mut iterations, mut converged) = (0, true);
+    let delta: Vec<c64> = data.z.iter().map(|&z| (z - 1.0) / warp.h).collect();
+    let starts = starts(&data, &delta, &a_z, &c_z, order, warp.h, opts)?;
     let lm = LmOptions::default()
         .with_max_iterations(opts.max_iterations.max(1))?
         .with_significance_tol(SIGNIFICANCE_TOL)?;
-    if controller.is_some() && opts.max_iterations > 0 {
-        // stage 1 without the loop constraint: the path from the subspace start to the optimum
-        // crosses loop-unstable models, and a trust region held on the admissible set stalls
-        // on its boundary; stage 2 mirrors what the loop cannot have and refines inside it
-        prob.controller = None;
-        let (th, report) = minimize(&mut prob, &theta, &lm)?;
-        theta = th;
-        iterations += report.iterations;
-        prob.controller = controller;
+    // every start refined; the lowest final cost wins (the first error when none succeeds)
+    let mut best: Option<(f64, Layout, Vec<f64>, usize, bool)> = None;
+    let mut first_err = None;
+    for (layout, theta) in starts {
+        match refine(&data, &delta, layout, theta, opts, controller, &lm) {
+            Ok(r) => {
+                if best.as_ref().is_none_or(|b| r.0 < b.0) {
+                    best = Some(r);
+                }
+            }
+            Err(e) => {
+                first_err.get_or_insert(e);
+            }
+        }
     }
-    if controller.is_some() {
-        prob.stable_loop_start(&mut theta)?;
-    }
-    if opts.max_iterations > 0 {
-        let (th, report) = minimize(&mut prob, &theta, &lm)?;
-        theta = th;
-        iterations += report.iterations;
-        converged = report.reason.converged();
-    }
-    let r = prob.residuals(&theta).ok_or_else(|| {
-        Error::numerical(
-            CTX,
-            "the fitted model's response is not finite on the data's lines (a pole on a line); lower the order",
-        )
-    })?;
-    let cost = r.iter().map(|x| x * x).sum::<f64>();
+    let (cost, layout, theta, iterations, converged) = match (best, first_err) {
+        (Some(b), _) => b,
+        (None, Some(e)) => return Err(e),
+        (None, None) => {
+            return Err(Error::numerical(
+                CTX,
+                "no start was formed; lower the order",
+            ))
+        }
+    };
     let model = layout.realise(&theta, &data)?;
     let errors = errors_of(&model, &data)?;
     Ok(MimoFreqFit {
@@ -748,6 +758,140 @@ fn fit(
         singular_values: sv,
         f_hz: data.f_hz.clone(),
     })
+}
+
+/// The refinement of one start: the unstable-pole limit imposed, then (with a controller) an
+/// unconstrained stage, the mirroring to a stable loop and the constrained stage, else one
+/// stage. Returns (cost, layout, θ, iterations, converged).
+fn refine(
+    data: &Data,
+    delta: &[c64],
+    layout: Layout,
+    mut theta: Vec<f64>,
+    opts: &MimoFreqOptions,
+    controller: Option<&StateSpace>,
+    lm: &LmOptions,
+) -> Result<(f64, Layout, Vec<f64>, usize, bool)> {
+    let mut prob = Problem {
+        data,
+        layout: &layout,
+        delta: delta.to_vec(),
+        limit: opts.max_unstable_poles,
+        controller,
+    };
+    if let Some(lim) = opts.max_unstable_poles {
+        prob.constrain_start(&mut theta, lim)?;
+    }
+    let (mut iterations, mut converged) = (0, true);
+    if controller.is_some() && opts.max_iterations > 0 {
+        // stage 1 without the loop constraint: the path from the start to the optimum crosses
+        // loop-unstable models, and a trust region held on the admissible set stalls on its
+        // boundary; stage 2 mirrors what the loop cannot have and refines inside it
+        prob.controller = None;
+        let (th, report) = minimize(&mut prob, &theta, lm)?;
+        theta = th;
+        iterations += report.iterations;
+        prob.controller = controller;
+    }
+    if controller.is_some() {
+        prob.stable_loop_start(&mut theta)?;
+    }
+    if opts.max_iterations > 0 {
+        let (th, report) = minimize(&mut prob, &theta, lm)?;
+        theta = th;
+        iterations += report.iterations;
+        converged = report.reason.converged();
+    }
+    let r = prob.residuals(&theta).ok_or_else(|| {
+        Error::numerical(
+            CTX,
+            "the fitted model's response is not finite on the data's lines (a pole on a line); lower the order",
+        )
+    })?;
+    let cost = r.iter().map(|x| x * x).sum::<f64>();
+    Ok((cost, layout, theta, iterations, converged))
+}
+
+/// Least squares with unit-norm columns; when the scaled regressor is still rank deficient
+/// (repeated poles that no output tells apart), the minimum-norm solution of its numerically
+/// visible part.
+fn robust_lstsq(m: &Mat<f64>, rhs: &Mat<f64>) -> Result<Mat<f64>> {
+    let scale: Vec<f64> = (0..m.ncols())
+        .map(|c| {
+            let n = m.col(c).norm_l2();
+            if n > 0.0 && n.is_finite() {
+                1.0 / n
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    let ms = Mat::<f64>::from_fn(m.nrows(), m.ncols(), |r, c| m[(r, c)] * scale[c]);
+    let x = match linalg::lstsq(ms.as_ref(), rhs.as_ref()) {
+        Ok(x) => x,
+        Err(e) => {
+            let mut x = Mat::<f64>::zeros(m.ncols(), rhs.ncols());
+            for k in 0..rhs.ncols() {
+                let col = rhs.subcols(k, 1);
+                let v = linalg::lstsq_min_norm(ms.as_ref(), col, 1e-10).map_err(|_| e.clone())?;
+                for (r, val) in v.into_iter().enumerate() {
+                    x[(r, k)] = val;
+                }
+            }
+            x
+        }
+    };
+    Ok(Mat::from_fn(x.nrows(), x.ncols(), |r, c| {
+        x[(r, c)] * scale[r]
+    }))
+}
+
+/// Relocations of the vector-fitting start.
+const VF_ITERATIONS: usize = 30;
+
+/// The starts of the refinement, each in block form with its numerators fitted: the
+/// vector-fitting starts from the subspace step's poles and from poles spread over the band
+/// (module docs, "Start"); the subspace start itself only when neither can be formed.
+fn starts(
+    data: &Data,
+    delta: &[c64],
+    a_z: &Mat<f64>,
+    c_z: &Mat<f64>,
+    order: usize,
+    h: f64,
+    opts: &MimoFreqOptions,
+) -> Result<Vec<(Layout, Vec<f64>)>> {
+    let blocks = |(a, c): (Mat<f64>, Mat<f64>)| -> Result<(Layout, Vec<f64>)> {
+        let (layout, mut theta) = to_blocks(&a, &c, h, data.ny, data.nu, opts.feedthrough)?;
+        Problem {
+            data,
+            layout: &layout,
+            delta: delta.to_vec(),
+            limit: None,
+            controller: None,
+        }
+        .fit_linear(&mut theta)?;
+        Ok((layout, theta))
+    };
+    let sub_poles = linalg::eigenvalues(a_z.as_ref())?;
+    let spread = vf::spread_poles(data, order);
+    let mut out = Vec::new();
+    let mut first_err = None;
+    for poles in [&sub_poles, &spread] {
+        match vf::start(data, order, poles, VF_ITERATIONS).and_then(blocks) {
+            Ok(s) => out.push(s),
+            Err(e) => {
+                first_err.get_or_insert(e);
+            }
+        }
+    }
+    if out.is_empty() {
+        match blocks((a_z.clone(), c_z.clone())) {
+            Ok(s) => out.push(s),
+            Err(e) => return Err(first_err.unwrap_or(e)),
+        }
+    }
+    Ok(out)
 }
 
 /// The unweighted error measures of `model` on the data's lines, in the original units.
@@ -1235,7 +1379,7 @@ impl Problem<'_> {
                     rhs[(row + 1, 0)] = self.data.g[idx].im * sw;
                 }
             }
-            let x = linalg::lstsq(m.as_ref(), rhs.as_ref()).map_err(|e| {
+            let x = robust_lstsq(&m, &rhs).map_err(|e| {
                 Error::numerical(
                     CTX,
                     format!(

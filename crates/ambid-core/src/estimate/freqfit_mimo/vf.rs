@@ -1,0 +1,469 @@
+//! The vector-fitting start of [`super::fit`]: common poles relocated by the
+//! Sanathanan–Koerner iteration of vector fitting (Gustavsen & Semlyen 1999) on every entry at
+//! once, matrix residues fitted for the relocated poles, and a realisation of the requested order
+//! from the residues' dominant rank-one parts.
+//!
+//! # Method
+//! The model in partial fractions is $G(z) \approx D + \sum_m R_m \varphi_m(z)$ with a real basis
+//! $\varphi_m$: $1/(z - a)$ for a real pole, and for a pair $p, \bar p$ the two functions
+//! $1/(z-p) + 1/(z-\bar p)$ and $j/(z-p) - j/(z-\bar p)$. One relocation step fits, for every
+//! entry $(i, j)$ with its weights, $\sum_m c_{ij,m}\varphi_m + d_{ij} - G_{ij}\sum_m \tilde c_m
+//! \varphi_m = G_{ij}$ with the scaling function $\sigma = 1 + \sum_m \tilde c_m \varphi_m$
+//! common to all entries; the entries' own unknowns are eliminated by projection (the "fast"
+//! form), so only $\tilde c$ is solved jointly. The zeros of $\sigma$, the eigenvalues of
+//! $A_\varphi - b_\varphi \tilde c^{\mathsf T}$ for the basis' realisation $(A_\varphi,
+//! b_\varphi)$, are the new poles. Unstable poles are **not** flipped: the plant is unstable.
+//!
+//! A pole of multiplicity $r$ in a minimal MIMO model (the four identical amplifiers of an AMB,
+//! the x and y planes of a symmetric rotor) has a residue of rank $r$; the poles here are
+//! distinct and their residues full matrices. The realisation keeps, over all poles, the
+//! rank-one parts $\sigma_{m,r} u_{m,r} v_{m,r}^{\mathsf H}$ of largest size in the band
+//! ($\sigma_{m,r}$ times the RMS of $|\varphi_m|$ over the lines), one state per real pole's
+//! part and two per pair's, until the order is reached; its output matrix holds the parts'
+//! left singular vectors. The numerators are then refitted by the caller.
+use super::{Data, CTX};
+use crate::error::{Error, Result};
+use crate::linalg;
+use faer::{c64, Mat};
+
+/// A pole of the partial-fraction basis.
+#[derive(Debug, Clone, Copy)]
+enum Pole {
+    Real(f64),
+    /// The member with positive imaginary part.
+    Pair(c64),
+}
+
+fn poles_of(vals: &[c64]) -> Vec<Pole> {
+    let scale = vals.iter().map(|v| v.norm()).fold(1.0f64, f64::max);
+    let tol = 1e-9 * scale;
+    let mut out = Vec::new();
+    for v in vals {
+        if v.im.abs() <= tol {
+            out.push(Pole::Real(v.re));
+        } else if v.im > 0.0 {
+            out.push(Pole::Pair(*v));
+        }
+    }
+    out
+}
+
+fn n_basis(poles: &[Pole]) -> usize {
+    poles
+        .iter()
+        .map(|p| match p {
+            Pole::Real(_) => 1,
+            Pole::Pair(_) => 2,
+        })
+        .sum()
+}
+
+/// The basis functions at `z` (appended to `out`); `None` when a pole lies on `z`.
+fn basis(poles: &[Pole], z: c64, out: &mut Vec<c64>) -> Option<()> {
+    let j = c64::new(0.0, 1.0);
+    for p in poles {
+        match *p {
+            Pole::Real(a) => {
+                let d = z - a;
+                if d.norm() == 0.0 {
+                    return None;
+                }
+                out.push(d.inv());
+            }
+            Pole::Pair(p) => {
+                let (d1, d2) = (z - p, z - p.conj());
+                if d1.norm() == 0.0 || d2.norm() == 0.0 {
+                    return None;
+                }
+                let (f1, f2) = (d1.inv(), d2.inv());
+                out.push(f1 + f2);
+                out.push(j * f1 - j * f2);
+            }
+        }
+    }
+    Some(())
+}
+
+/// $(A_\varphi, b_\varphi)$ with $(zI - A_\varphi)^{-1} b_\varphi$ = the basis.
+fn basis_realisation(poles: &[Pole]) -> (Mat<f64>, Vec<f64>) {
+    let n = n_basis(poles);
+    let mut a = Mat::<f64>::zeros(n, n);
+    let mut b = vec![0.0; n];
+    let mut s = 0;
+    for p in poles {
+        b[s] = if matches!(p, Pole::Real(_)) { 1.0 } else { 2.0 };
+        s += put_block(&mut a, s, *p);
+    }
+    (a, b)
+}
+
+/// The basis at every line, line-major (`None`: a pole on a line).
+fn basis_table(poles: &[Pole], data: &Data) -> Option<Vec<c64>> {
+    let mut out = Vec::with_capacity(data.len() * n_basis(poles));
+    for &z in &data.z {
+        basis(poles, z, &mut out)?;
+    }
+    Some(out)
+}
+
+fn degenerate(what: &str) -> Error {
+    Error::numerical(
+        CTX,
+        format!("the vector-fitting start is degenerate ({what}); lower the order"),
+    )
+}
+
+/// One relocation step: the zeros of σ.
+fn relocate(poles: &[Pole], data: &Data) -> Result<Vec<Pole>> {
+    let (l, e) = (data.len(), data.entries());
+    let nb = n_basis(poles);
+    let phi = basis_table(poles, data).ok_or_else(|| degenerate("a pole on a line"))?;
+    let mut big_a = Mat::<f64>::zeros(2 * l * e, nb);
+    let mut big_b = Mat::<f64>::zeros(2 * l * e, 1);
+    for ent in 0..e {
+        // [Φ 1] (own unknowns) and [−G Φ | G] (shared unknowns, right-hand side), weighted
+        let mut own = Mat::<f64>::zeros(2 * l, nb + 1);
+        let mut rest = Mat::<f64>::zeros(2 * l, nb + 1);
+        for k in 0..l {
+            let idx = k * e + ent;
+            let sw = data.w[idx].sqrt();
+            let g = data.g[idx];
+            for m in 0..nb {
+                let v = phi[k * nb + m] * sw;
+                own[(2 * k, m)] = v.re;
+                own[(2 * k + 1, m)] = v.im;
+                let u = -g * v;
+                rest[(2 * k, m)] = u.re;
+                rest[(2 * k + 1, m)] = u.im;
+            }
+            own[(2 * k, nb)] = sw;
+            rest[(2 * k, nb)] = g.re * sw;
+            rest[(2 * k + 1, nb)] = g.im * sw;
+        }
+        let x = linalg::lstsq(own.as_ref(), rest.as_ref())
+            .map_err(|_| degenerate("a rank-deficient basis"))?;
+        let proj = &rest - &own * &x;
+        for r in 0..2 * l {
+            for m in 0..nb {
+                big_a[(ent * 2 * l + r, m)] = proj[(r, m)];
+            }
+            big_b[(ent * 2 * l + r, 0)] = proj[(r, nb)];
+        }
+    }
+    let ct = linalg::lstsq(big_a.as_ref(), big_b.as_ref())
+        .map_err(|_| degenerate("a rank-deficient relocation"))?;
+    let (a, b) = basis_realisation(poles);
+    let h = Mat::<f64>::from_fn(nb, nb, |r, c| a[(r, c)] - b[r] * ct[(c, 0)]);
+    let vals = linalg::eigenvalues(h.as_ref()).map_err(|_| degenerate("eigenvalues failed"))?;
+    if vals.iter().any(|v| !(v.re.is_finite() && v.im.is_finite())) {
+        return Err(degenerate("a non-finite pole"));
+    }
+    Ok(poles_of(&vals))
+}
+
+/// Matrix residues for fixed poles: per basis function an $n_y \times n_u$ real coefficient
+/// matrix (column-major), and $D$.
+fn residues(poles: &[Pole], data: &Data) -> Result<Vec<Mat<f64>>> {
+    let (l, e, ny) = (data.len(), data.entries(), data.ny);
+    let nb = n_basis(poles);
+    let phi = basis_table(poles, data).ok_or_else(|| degenerate("a pole on a line"))?;
+    let mut out = vec![Mat::<f64>::zeros(data.ny, data.nu); nb];
+    for ent in 0..e {
+        let (i, j) = (ent % ny, ent / ny);
+        let mut m = Mat::<f64>::zeros(2 * l, nb + 1);
+        let mut rhs = Mat::<f64>::zeros(2 * l, 1);
+        for k in 0..l {
+            let idx = k * e + ent;
+            let sw = data.w[idx].sqrt();
+            for c in 0..nb {
+                let v = phi[k * nb + c] * sw;
+                m[(2 * k, c)] = v.re;
+                m[(2 * k + 1, c)] = v.im;
+            }
+            m[(2 * k, nb)] = sw;
+            rhs[(2 * k, 0)] = data.g[idx].re * sw;
+            rhs[(2 * k + 1, 0)] = data.g[idx].im * sw;
+        }
+        let x = linalg::lstsq(m.as_ref(), rhs.as_ref())
+            .map_err(|_| degenerate("rank-deficient residues"))?;
+        for (c, r) in out.iter_mut().enumerate() {
+            r[(i, j)] = x[(c, 0)];
+        }
+    }
+    Ok(out)
+}
+
+/// The vector-fitting start: $(A, C)$ of dimension `order` in $z$, channel-scaled units, from
+/// `start` (poles in $z$, conjugate pairs complete) after at most `iterations` relocations.
+pub(super) fn start(
+    data: &Data,
+    order: usize,
+    start: &[c64],
+    iterations: usize,
+) -> Result<(Mat<f64>, Mat<f64>)> {
+    let mut poles = poles_of(start);
+    for _ in 0..iterations {
+        let new = relocate(&poles, data)?;
+        let change = max_change(&poles, &new);
+        poles = new;
+        if change < 1e-9 {
+            break;
+        }
+    }
+    realise(&poles, data, order)
+}
+
+fn sorted(p: &[Pole]) -> Vec<c64> {
+    let mut v: Vec<c64> = p
+        .iter()
+        .map(|p| match *p {
+            Pole::Real(x) => c64::new(x, 0.0),
+            Pole::Pair(z) => z,
+        })
+        .collect();
+    v.sort_by(|a, b| a.re.total_cmp(&b.re).then(a.im.total_cmp(&b.im)));
+    v
+}
+
+fn max_change(a: &[Pole], b: &[Pole]) -> f64 {
+    let (a, b) = (sorted(a), sorted(b));
+    if a.len() != b.len() {
+        return f64::INFINITY;
+    }
+    a.iter()
+        .zip(&b)
+        .map(|(x, y)| (x - y).norm())
+        .fold(0.0, f64::max)
+}
+
+/// The realisation of the dominant rank-one parts (module docs).
+fn realise(poles: &[Pole], data: &Data, order: usize) -> Result<(Mat<f64>, Mat<f64>)> {
+    let res = residues(poles, data)?;
+    let (l, ny) = (data.len() as f64, data.ny);
+    let j = c64::new(0.0, 1.0);
+    // (importance, pole index, left singular vector)
+    let mut parts: Vec<(f64, usize, Vec<c64>)> = Vec::new();
+    let mut s = 0;
+    for (pi, p) in poles.iter().enumerate() {
+        let (pz, r) = match *p {
+            Pole::Real(x) => {
+                let r = Mat::<c64>::from_fn(ny, data.nu, |a, b| c64::new(res[s][(a, b)], 0.0));
+                s += 1;
+                (c64::new(x, 0.0), r)
+            }
+            Pole::Pair(z) => {
+                let r = Mat::<c64>::from_fn(ny, data.nu, |a, b| {
+                    c64::new(res[s][(a, b)], 0.0) + j * res[s + 1][(a, b)]
+                });
+                s += 2;
+                (z, r)
+            }
+        };
+        let gain = (data
+            .z
+            .iter()
+            .map(|&z| (z - pz).inv().norm_sqr())
+            .sum::<f64>()
+            / l)
+            .sqrt();
+        let svd = r.svd().map_err(|_| degenerate("SVD of a residue failed"))?;
+        let sv = svd.S().column_vector();
+        for k in 0..sv.nrows().min(ny) {
+            let u: Vec<c64> = (0..ny).map(|i| svd.U()[(i, k)]).collect();
+            parts.push((sv[k].re * gain, pi, u));
+        }
+    }
+    parts.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let mut chosen: Vec<&(f64, usize, Vec<c64>)> = Vec::new();
+    let mut dim = 0;
+    for part in &parts {
+        let d = match poles[part.1] {
+            Pole::Real(_) => 1,
+            Pole::Pair(_) => 2,
+        };
+        if dim + d <= order && part.0 > 0.0 {
+            chosen.push(part);
+            dim += d;
+        }
+        if dim == order {
+            break;
+        }
+    }
+    if dim < order {
+        return Err(degenerate("fewer significant modes than the order"));
+    }
+    let mut a = Mat::<f64>::zeros(order, order);
+    let mut c = Mat::<f64>::zeros(ny, order);
+    let mut s = 0;
+    for (_, pi, u) in chosen {
+        let d = put_block(&mut a, s, poles[*pi]);
+        for i in 0..ny {
+            c[(i, s)] = u[i].re;
+            if d == 2 {
+                c[(i, s + 1)] = u[i].im;
+            }
+        }
+        s += d;
+    }
+    Ok((a, c))
+}
+
+/// Writes the real block of `pole` into `a` at state `s` ($[a]$, or
+/// $\begin{bmatrix}\operatorname{Re} p & \operatorname{Im} p \\ -\operatorname{Im} p &
+/// \operatorname{Re} p\end{bmatrix}$, whose eigenvector $[1, j]^{\mathsf T}$ belongs to $p$);
+/// returns its dimension.
+fn put_block(a: &mut Mat<f64>, s: usize, pole: Pole) -> usize {
+    match pole {
+        Pole::Real(x) => {
+            a[(s, s)] = x;
+            1
+        }
+        Pole::Pair(p) => {
+            a[(s, s)] = p.re;
+            a[(s, s + 1)] = p.im;
+            a[(s + 1, s)] = -p.im;
+            a[(s + 1, s + 1)] = p.re;
+            2
+        }
+    }
+}
+
+/// Starting poles spread over the band: `n` poles as pairs at the band's frequencies
+/// (log-spaced) with 1 % damping, and one real pole at the band's centre when `n` is odd.
+pub(super) fn spread_poles(data: &Data, n: usize) -> Vec<c64> {
+    let (lo, hi) = (
+        data.f_hz.first().copied().unwrap_or(1.0),
+        data.f_hz.last().copied().unwrap_or(1.0),
+    );
+    let pairs = n / 2;
+    let mut out = Vec::with_capacity(n);
+    for k in 0..pairs {
+        let f = if pairs > 1 {
+            lo * (hi / lo).powf(k as f64 / (pairs - 1) as f64)
+        } else {
+            (lo * hi).sqrt()
+        };
+        let w = 2.0 * std::f64::consts::PI * f;
+        let s = c64::new(-0.01 * w, w);
+        let z = (s * data.ts).exp();
+        out.push(z);
+        out.push(z.conj());
+    }
+    if n % 2 == 1 {
+        let w = 2.0 * std::f64::consts::PI * (lo * hi).sqrt();
+        out.push(c64::new((-w * data.ts).exp(), 0.0));
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{to_blocks, Data, MimoFreqOptions, Problem, Warp};
+    use super::*;
+    use crate::lti::{Frd, StateSpace};
+    use faer::mat;
+
+    /// 2 × 2, poles 1.02 (unstable), 0.6, and the pair 0.99 e^{±0.08j} twice (two blocks with
+    /// different input and output directions: a residue of rank 2).
+    fn plant() -> StateSpace {
+        let (r, w) = (0.99f64, 0.08f64);
+        let (c, s) = (r * w.cos(), r * w.sin());
+        StateSpace::discrete(
+            mat![
+                [1.02, 0.0, 0.0, 0.0, 0.0, 0.0],
+                [0.0, c, s, 0.0, 0.0, 0.0],
+                [0.0, -s, c, 0.0, 0.0, 0.0],
+                [0.0, 0.0, 0.0, c, s, 0.0],
+                [0.0, 0.0, 0.0, -s, c, 0.0],
+                [0.0, 0.0, 0.0, 0.0, 0.0, 0.6]
+            ],
+            mat![
+                [1.0, 0.5],
+                [0.0, 1.0],
+                [1.0, -0.3],
+                [0.7, 0.1],
+                [-0.4, 0.6],
+                [0.2, 0.7]
+            ],
+            mat![
+                [1.0, 0.2, 0.0, 0.9, -0.3, 0.5],
+                [0.4, 0.0, 1.0, 0.1, 0.8, -0.2]
+            ],
+            mat![[0.0, 0.0], [0.0, 0.0]],
+            1e-3,
+        )
+        .unwrap()
+    }
+
+    fn data() -> Data {
+        let f: Vec<f64> = (1..=60).map(|k| 3.0 * k as f64).collect();
+        let frd = Frd::from_model(&plant(), &f).unwrap();
+        Data::new(&frd, &MimoFreqOptions::default()).unwrap()
+    }
+
+    #[test]
+    fn relocation_finds_the_poles_and_keeps_the_unstable_one() {
+        let data = data();
+        // four distinct poles (as pairs spread over the band) for the 1 + 1 + pair of the truth
+        let mut poles = poles_of(&spread_poles(&data, 4));
+        for _ in 0..30 {
+            poles = relocate(&poles, &data).unwrap();
+        }
+        let got = sorted(&poles);
+        let (r, w) = (0.99f64, 0.08f64);
+        let want = [
+            c64::new(0.6, 0.0),
+            c64::from_polar(r, w),
+            c64::new(1.02, 0.0),
+        ];
+        assert_eq!(got.len(), 3, "{got:?}");
+        for (g, t) in got.iter().zip(&want) {
+            assert!((g - t).norm() < 1e-8, "{got:?} vs {want:?}");
+        }
+    }
+
+    #[test]
+    fn the_rank_two_residue_is_realised_with_two_blocks_and_reproduces_the_data() {
+        let data = data();
+        let truth = plant();
+        let (a, c) = start(&data, 6, &spread_poles(&data, 4), 30).unwrap();
+        let mut ev = linalg::eigenvalues(a.as_ref()).unwrap();
+        ev.sort_by(|x, y| x.re.total_cmp(&y.re).then(x.im.total_cmp(&y.im)));
+        assert_eq!(ev.len(), 6);
+        // the pair appears twice
+        let pair = c64::from_polar(0.99, 0.08);
+        assert_eq!(ev.iter().filter(|z| (*z - pair).norm() < 1e-8).count(), 2);
+        // with the numerators fitted, the start reproduces the response exactly
+        let warp = Warp::new(&data.f_hz, data.ts);
+        let (layout, mut th) = to_blocks(&a, &c, warp.h, 2, 2, false).unwrap();
+        let prob = Problem {
+            data: &data,
+            layout: &layout,
+            delta: data.z.iter().map(|&z| (z - 1.0) / warp.h).collect(),
+            limit: None,
+            controller: None,
+        };
+        prob.fit_linear(&mut th).unwrap();
+        let model = layout.realise(&th, &data).unwrap();
+        let (got, want) = (
+            model.freq_response(&data.f_hz).unwrap(),
+            truth.freq_response(&data.f_hz).unwrap(),
+        );
+        for (g, w) in got.iter().zip(&want) {
+            for i in 0..2 {
+                for j in 0..2 {
+                    let d = (g[(i, j)] - w[(i, j)]).norm();
+                    assert!(d <= 1e-8 * w[(i, j)].norm().max(1.0), "{d}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_start_with_too_few_modes_is_a_typed_error() {
+        let data = data();
+        // two poles cannot carry a 12th-order model (at most 2 × rank 2 × 2 states)
+        let err = start(&data, 12, &spread_poles(&data, 2), 5).unwrap_err();
+        assert!(err.to_string().contains("vector-fitting start"), "{err}");
+    }
+}
