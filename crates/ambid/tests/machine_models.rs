@@ -52,16 +52,17 @@ fn unstable(m: &StateSpace) -> usize {
         .count()
 }
 
-/// The chosen model of seed `seed` on the nominal twin at 15 000 rpm: (median plant error,
-/// unstable poles of model and truth, the fitter's output).
-fn identify(
-    seed: u64,
-) -> (
+/// (median plant error over 10–1000 Hz, unstable poles of model and truth, the fitter's output).
+type Identified = (
     f64,
     usize,
     usize,
     ambid::workflow::machine::MachineModelOutput,
-) {
+);
+
+/// The chosen model of seed `seed` on the nominal twin at 15 000 rpm: (median plant error,
+/// unstable poles of model and truth, the fitter's output).
+fn identify(seed: u64) -> Identified {
     let m = MachineSection {
         speeds_rpm: Some(vec![15_000.0]),
         mode: "linear".into(),
@@ -97,15 +98,7 @@ fn fitted(
 }
 
 /// As [`identify`], for the machine section `m` (one speed, linear).
-fn identify_on(
-    m: &MachineSection,
-    seed: u64,
-) -> (
-    f64,
-    usize,
-    usize,
-    ambid::workflow::machine::MachineModelOutput,
-) {
+fn identify_on(m: &MachineSection, seed: u64) -> Identified {
     let (data, out) = fitted(m, seed);
     let truth = data.truth.as_ref().unwrap();
     assert_eq!(out.models.len(), 1, "seed {seed}: {:?}", out.notes);
