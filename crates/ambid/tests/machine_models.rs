@@ -193,10 +193,12 @@ fn seeds() -> Vec<u64> {
 }
 
 /// The same defaults on random rigs (`random_rig(seed)` lifted to four axes, at
-/// `(7919·seed) mod 30 000` rpm): what holds there is asserted (a model is chosen, its
-/// closed-loop validation fit is within 1 point of the exact plant's on every axis); the plant
-/// error and the unstable-pole count are printed, because the 1 % bar is **not** met on these
-/// rigs (docs/estimation.md: 1.1–4.8 %, a fifth unstable pole on rig 3). About 2 minutes in
+/// `(7919·seed) mod 30 000` rpm): what holds there is asserted (a chosen model has the true
+/// unstable-pole count and a closed-loop validation fit within 1 point of the exact plant's on
+/// every axis; a rig without an admissible candidate says so in a note); the plant error is
+/// printed, because the 1 % bar is **not** met on these rigs (docs/estimation.md: 1.1 and
+/// 4.8 % on rigs 1 and 2; rig 3's candidates all contradict the measured loop, so no model is
+/// chosen there). About 2 minutes in
 /// release: `cargo test --release -p ambid --test machine_models random_rigs -- --ignored --nocapture`.
 #[test]
 #[ignore = "about 2 minutes in release; a report of the random rigs (the 1 % bar is not met there)"]
@@ -220,7 +222,38 @@ fn random_rigs_report() {
             config: Some(path),
             ..Default::default()
         };
-        let (err, nu_model, nu_truth, out) = identify_on(&m, seed);
+        let (data, out) = fitted(&m, seed);
+        if out.models.is_empty() {
+            // no candidate passed every check: the note says so, and the table says why
+            eprintln!(
+                "rig {seed} at {speed} rpm: no model chosen: {:?}",
+                out.notes
+            );
+            for r in &out.comparison {
+                eprintln!(
+                    "    {}: {:.3} %, {} unstable",
+                    r.model, r.median_norm_error_pct, r.unstable_poles
+                );
+            }
+            assert!(
+                out.notes.iter().any(|n| n.contains("none was chosen")),
+                "rig {seed}: {:?}",
+                out.notes
+            );
+            continue;
+        }
+        let truth = &data.truth.as_ref().unwrap()[0];
+        let model = &out.models[0].model;
+        let f: Vec<f64> = data.speeds[0]
+            .frf
+            .plant
+            .f_hz()
+            .iter()
+            .copied()
+            .filter(|f| (10.0..=1000.0).contains(f))
+            .collect();
+        let err = median_plant_error(model, &truth.plant, &f);
+        let (nu_model, nu_truth) = (unstable(model), unstable(&truth.plant));
         eprintln!(
             "rig {seed} at {speed} rpm: {} median plant error {:.3} %, unstable poles {} (truth {}), fits {:?}",
             out.models[0].name,
@@ -232,6 +265,8 @@ fn random_rigs_report() {
                 .map(|r| (r.axis.clone(), r.fit_y_pct, r.truth_fit_y_pct.unwrap()))
                 .collect::<Vec<_>>()
         );
+        // the Nyquist count of the measured loop holds the chosen model to the true count
+        assert_eq!(nu_model, nu_truth, "rig {seed}");
         assert_eq!(out.validation.len(), 4, "rig {seed}");
         for r in &out.validation {
             let d = (r.fit_y_pct - r.truth_fit_y_pct.unwrap()).abs();

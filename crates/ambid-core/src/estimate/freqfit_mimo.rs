@@ -600,9 +600,12 @@ pub fn ss_frd_mimo(frd: &Frd, order: usize, opts: &MimoFreqOptions) -> Result<Mi
 /// stay wherever the data put them.
 ///
 /// # Errors
-/// As [`ss_frd_mimo`]; also [`Error::DimensionMismatch`] or [`Error::SampleTimeMismatch`] for a
-/// controller that is not $n_u \times n_y$ at the data's sample time, and [`Error::Numerical`]
+/// As [`ss_frd_mimo`]; also [`Error::DimensionMismatch`] for a controller that is not
+/// $n_u \times n_y$, [`Error::InvalidArgument`] for one at another sample time, and [`Error::Numerical`]
 /// when no admissible start exists (check the controller, or raise the order).
+/// [`Error::InvalidArgument`] when the FRF's lines give a reliable count of the loop's unstable
+/// poles ([`crate::validate::nyquist::loop_unstable_poles`]: lines from near DC to near Nyquist)
+/// and `order` or `max_unstable_poles` is below it.
 ///
 /// ```
 /// use ambid_core::estimate::freqfit_mimo::{ss_frd_mimo_in_loop, MimoFreqOptions};
@@ -641,6 +644,29 @@ pub fn ss_frd_mimo_in_loop(
                 "controller",
                 format!("the controller's sample time {a:?} s differs from the FRF's {b:?} s; give a discrete controller at the data's sample time"),
             ))
+        }
+    }
+    // the unstable poles the measured loop shows (generalised Nyquist): an order or a limit
+    // below that count cannot describe the plant
+    if let Some(k) = crate::validate::nyquist::loop_unstable_poles(frd, controller)
+        .ok()
+        .and_then(|w| w.unstable_poles)
+    {
+        if order < k {
+            return Err(Error::invalid(
+                "order",
+                format!(
+                    "the order {order} is below the {k} unstable poles the measured loop shows (the winding of det(I + P C) over the FRF's lines, validate::nyquist); use an order of at least {k}, plus the states of the stable modes"
+                ),
+            ));
+        }
+        if let Some(m) = opts.max_unstable_poles.filter(|&m| m < k) {
+            return Err(Error::invalid(
+                "max_unstable_poles",
+                format!(
+                    "max_unstable_poles = {m} but the measured loop shows {k} unstable poles (the winding of det(I + P C), validate::nyquist); raise it to {k} or leave it unset"
+                ),
+            ));
         }
     }
     fit(frd, order, opts, Some(controller))
@@ -1739,6 +1765,41 @@ mod tests {
         assert_eq!(fit.unstable_poles().unwrap(), 0);
         // the best stable model cannot reproduce an unstable plant
         assert!(fit.errors.median_norm_relative > 1e-3, "{:?}", fit.errors);
+    }
+
+    #[test]
+    fn an_order_below_the_measured_unstable_count_is_refused() {
+        // two unstable real poles coupled through B, a PI controller per axis (stable loop)
+        let ts = 1e-3;
+        let p = StateSpace::discrete(
+            mat![[1.02, 0.0, 0.0], [0.0, 1.01, 0.0], [0.0, 0.0, 0.7]],
+            mat![[1.0, 0.3], [0.2, 1.0], [1.0, 1.0]],
+            mat![[0.02, 0.0, 0.01], [0.0, 0.02, -0.01]],
+            mat![[0.0, 0.0], [0.0, 0.0]],
+            ts,
+        )
+        .unwrap();
+        let diag = |v: f64| mat![[v, 0.0], [0.0, v]];
+        let c = StateSpace::discrete(diag(1.0), diag(0.02), diag(3.0), diag(3.0), ts).unwrap();
+        assert!(p.feedback(&c).unwrap().is_stable().unwrap());
+        let f: Vec<f64> = (1..1000).map(|k| k as f64 * 0.5).collect();
+        let frd = Frd::from_model(&p, &f).unwrap();
+        let e = ss_frd_mimo_in_loop(&frd, 1, &MimoFreqOptions::default(), &c).unwrap_err();
+        assert!(
+            matches!(e, Error::InvalidArgument { name: "order", .. }),
+            "{e}"
+        );
+        assert!(e.to_string().contains("at least 2"), "{e}");
+        let lim = MimoFreqOptions {
+            max_unstable_poles: Some(1),
+            ..Default::default()
+        };
+        let e = ss_frd_mimo_in_loop(&frd, 3, &lim, &c).unwrap_err();
+        assert!(e.to_string().contains("raise it to 2"), "{e}");
+        // the order that can hold the count is fitted, with both unstable poles
+        let fit = ss_frd_mimo_in_loop(&frd, 3, &MimoFreqOptions::default(), &c).unwrap();
+        assert_eq!(fit.unstable_poles().unwrap(), 2);
+        assert!(fit.errors.median_norm_relative < 1e-6, "{:?}", fit.errors);
     }
 
     #[test]

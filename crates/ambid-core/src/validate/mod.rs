@@ -7,6 +7,7 @@ pub mod fit;
 pub mod iso;
 pub mod machine;
 pub mod margins;
+pub mod nyquist;
 pub mod predict;
 pub mod pz;
 pub mod residuals;

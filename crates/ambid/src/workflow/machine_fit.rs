@@ -30,8 +30,19 @@
 //!   undamped closed-loop modes a fit can place above its band (on the twin, seed 1, order 22:
 //!   a mode at 4.4 kHz with ζ = 10⁻⁴, $X = 570$, which ruins the closed-loop simulation while
 //!   the plant error in the band is 0.7 %).
-//! * **Choice.** Among the rows whose model gives a stable closed loop with the controllers and
-//!   passes the out-of-band check (when they can be made), the smallest BIC of the
+//! * **Unstable poles.** With the controllers known, the measured loop itself says how many
+//!   unstable poles the plant has: the generalised Nyquist count of $\det(I + \hat P C)$ over
+//!   the FRF's lines ([`loop_unstable_poles`], when the lines support a count). A candidate
+//!   with another number contradicts the measurement (its loop is stable, so its
+//!   $\det(I + P C)$ winds differently from the measured one somewhere) and is not chosen.
+//!   A fit with more unstable poles than the count is refitted once with the count as its
+//!   limit (`max_unstable_poles`; the start's surplus unstable blocks are mirrored, the
+//!   measured ones stay), and the refit replaces it when it succeeds.
+//!   On the twin the count is right on the nominal rig at 0/15 000/30 000 rpm and on random
+//!   rigs 1–5 (`tests/machine_nyquist.rs`).
+//! * **Choice.** Among the rows whose model gives a stable closed loop with the controllers,
+//!   passes the out-of-band check and has the measured loop's unstable-pole count (when they
+//!   can be made), the smallest BIC of the
 //!   inverse-variance-weighted cost ($2V + n_\theta \ln 2 L n_y n_u$); without a valid row, no
 //!   model is chosen and a note says why.
 //! * **Whirl.** A closed-loop mode's eigenvector $v$ seen at the outputs, $y = C_{cl} v$, is split
@@ -55,6 +66,7 @@ use ambid_core::estimate::scheduled::{
 use ambid_core::lti::{Frd, StateSpace};
 use ambid_core::signal::{noise::Distribution, NoiseSpec};
 use ambid_core::validate::machine::{validate_machine, MachineValidationOptions};
+use ambid_core::validate::nyquist::loop_unstable_poles;
 use ambid_twin::{c64, Machine, MachineConfig, MachineSimOptions, Whirl};
 use rayon::prelude::*;
 
@@ -108,6 +120,9 @@ pub struct Candidate {
     /// (module docs; `None`: no controller, no $\hat T_{ry}$ with variances, or no line above
     /// the band).
     pub out_of_band: Option<f64>,
+    /// The plant's unstable poles as the measured loop shows them
+    /// ([`loop_unstable_poles`]; `None`: no controller, or the lines do not support a count).
+    pub measured_unstable: Option<usize>,
 }
 
 impl Candidate {
@@ -117,6 +132,15 @@ impl Candidate {
         self.fit.is_ok()
             && self.loop_stable != Some(false)
             && self.out_of_band.is_none_or(|x| x <= MAX_OUT_OF_BAND_MISFIT)
+            && !self.contradicts_the_unstable_count()
+    }
+
+    /// Whether the model's unstable poles differ from the count the measured loop shows.
+    pub fn contradicts_the_unstable_count(&self) -> bool {
+        match (&self.fit, self.measured_unstable) {
+            (Ok(f), Some(k)) => !f.unstable_poles().is_ok_and(|n| n == k),
+            _ => false,
+        }
     }
 }
 
@@ -191,7 +215,8 @@ pub fn fit_band(plant: &Frd, quality_band_hz: [f64; 2]) -> Result<Option<(f64, f
 }
 
 /// Fits every candidate order to one speed's plant FRF (in parallel), with the loop check
-/// against `controller` and the out-of-band check against the measured `t_ry` (module docs).
+/// against `controller`, the out-of-band check against the measured `t_ry` and the unstable-pole
+/// count of the measured loop (module docs).
 pub fn scan(
     plant: &Frd,
     band: (f64, f64),
@@ -200,6 +225,9 @@ pub fn scan(
     controller: Option<&StateSpace>,
     t_ry: Option<&Frd>,
 ) -> Vec<Candidate> {
+    let measured_unstable = controller
+        .and_then(|c| loop_unstable_poles(plant, c).ok())
+        .and_then(|w| w.unstable_poles);
     orders
         .par_iter()
         .map(|&order| {
@@ -208,11 +236,24 @@ pub fn scan(
                 max_iterations,
                 ..Default::default()
             };
-            let fit = match controller {
+            let mut fit = match controller {
                 Some(c) => ss_frd_mimo_in_loop(plant, order, &opts, c),
                 None => ss_frd_mimo(plant, order, &opts),
+            };
+            // more unstable poles than the measured loop shows: refit held to that count (the
+            // data's own unstable poles stay; module docs, "Unstable poles")
+            if let (Ok(f), Some(k), Some(c)) = (&fit, measured_unstable, controller) {
+                if f.unstable_poles().is_ok_and(|n| n > k) {
+                    let held = MimoFreqOptions {
+                        max_unstable_poles: Some(k),
+                        ..opts
+                    };
+                    if let Ok(g) = ss_frd_mimo_in_loop(plant, order, &held, c) {
+                        fit = Ok(g);
+                    }
+                }
             }
-            .map_err(|e| e.to_string());
+            let fit = fit.map_err(|e| e.to_string());
             let loop_stable = match (&fit, controller) {
                 (Ok(f), Some(c)) => Some(
                     f.model
@@ -233,6 +274,7 @@ pub fn scan(
                 fit,
                 loop_stable,
                 out_of_band,
+                measured_unstable,
             }
         })
         .collect()
@@ -418,7 +460,7 @@ impl FrequencyFitter {
         let chosen = choose(&cands);
         if chosen.is_none() {
             notes.push(format!(
-                "{} rpm: no candidate model gives a stable closed loop with the controllers that agrees with the measured closed loop above the fitted band (misfit ≤ {MAX_OUT_OF_BAND_MISFIT}); none was chosen (the table lists why each failed) — try other orders",
+                "{} rpm: no candidate model gives a stable closed loop with the controllers that agrees with the measured closed loop above the fitted band (misfit ≤ {MAX_OUT_OF_BAND_MISFIT}) and has the measured loop's number of unstable poles; none was chosen (the table lists why each failed) — try other orders",
                 sp.speed_rpm
             ));
         }
@@ -586,10 +628,13 @@ impl MachineModels for FrequencyFitter {
                             model: format!(
                                 "freq ss {}{}",
                                 c.order,
-                                match (c.loop_stable, c.out_of_band) {
-                                    (Some(false), _) => " (unstable loop)".to_string(),
-                                    (_, Some(x)) if x > MAX_OUT_OF_BAND_MISFIT => format!(
+                                match (c.loop_stable, c.out_of_band, c.measured_unstable) {
+                                    (Some(false), _, _) => " (unstable loop)".to_string(),
+                                    (_, Some(x), _) if x > MAX_OUT_OF_BAND_MISFIT => format!(
                                         " (contradicts the closed loop above the band: misfit {x:.1})"
+                                    ),
+                                    (_, _, Some(k)) if c.contradicts_the_unstable_count() => format!(
+                                        " (contradicts the measured loop: {unstable} unstable poles, its Nyquist count is {k})"
                                     ),
                                     _ => String::new(),
                                 }
