@@ -14,6 +14,8 @@
 //! out-of-band check must reject. These are figures of the nominal twin only; random rigs are
 //! reported in docs/estimation.md.
 
+mod common;
+
 use ambid::config::MachineSection;
 use ambid::workflow::machine::{acquire_twin, MachineModelInput, MachineModels};
 use ambid::workflow::machine_fit::FrequencyFitter;
@@ -100,8 +102,18 @@ fn fitted(
 /// As [`identify`], for the machine section `m` (one speed, linear).
 fn identify_on(m: &MachineSection, seed: u64) -> Identified {
     let (data, out) = fitted(m, seed);
-    let truth = data.truth.as_ref().unwrap();
     assert_eq!(out.models.len(), 1, "seed {seed}: {:?}", out.notes);
+    let (err, nu_model, nu_truth) = chosen_error(&data, &out);
+    (err, nu_model, nu_truth, out)
+}
+
+/// The first chosen model's median plant error over the measured lines in 10–1000 Hz, and the
+/// unstable poles of model and truth.
+fn chosen_error(
+    data: &ambid::workflow::machine::MachineData,
+    out: &ambid::workflow::machine::MachineModelOutput,
+) -> (f64, usize, usize) {
+    let truth = &data.truth.as_ref().unwrap()[0];
     let model = &out.models[0].model;
     let f: Vec<f64> = data.speeds[0]
         .frf
@@ -111,8 +123,8 @@ fn identify_on(m: &MachineSection, seed: u64) -> Identified {
         .copied()
         .filter(|f| (10.0..=1000.0).contains(f))
         .collect();
-    let err = median_plant_error(model, &truth[0].plant, &f);
-    (err, unstable(model), unstable(&truth[0].plant), out)
+    let err = median_plant_error(model, &truth.plant, &f);
+    (err, unstable(model), unstable(&truth.plant))
 }
 
 #[test]
@@ -203,25 +215,10 @@ fn seeds() -> Vec<u64> {
 #[test]
 #[ignore = "about 2 minutes in release; a report of the random rigs (the 1 % bar is not met there)"]
 fn random_rigs_report() {
-    let dir = std::env::temp_dir().join(format!("ambid-machine-models-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::tmpdir("machine-models");
     for seed in [1u64, 2, 3] {
         let speed = ((seed * 7919) % 30_000) as f64;
-        let path = dir.join(format!("rig{seed}.toml"));
-        std::fs::write(
-            &path,
-            ambid_twin::random_rig(seed)
-                .unwrap()
-                .to_toml_string()
-                .unwrap(),
-        )
-        .unwrap();
-        let m = MachineSection {
-            speeds_rpm: Some(vec![speed]),
-            mode: "linear".into(),
-            config: Some(path),
-            ..Default::default()
-        };
+        let m = common::random_machine_rig(&dir, seed);
         let (data, out) = fitted(&m, seed);
         if out.models.is_empty() {
             // no candidate passed every check: the note says so, and the table says why
@@ -242,18 +239,7 @@ fn random_rigs_report() {
             );
             continue;
         }
-        let truth = &data.truth.as_ref().unwrap()[0];
-        let model = &out.models[0].model;
-        let f: Vec<f64> = data.speeds[0]
-            .frf
-            .plant
-            .f_hz()
-            .iter()
-            .copied()
-            .filter(|f| (10.0..=1000.0).contains(f))
-            .collect();
-        let err = median_plant_error(model, &truth.plant, &f);
-        let (nu_model, nu_truth) = (unstable(model), unstable(&truth.plant));
+        let (err, nu_model, nu_truth) = chosen_error(&data, &out);
         eprintln!(
             "rig {seed} at {speed} rpm: {} median plant error {:.3} %, unstable poles {} (truth {}), fits {:?}",
             out.models[0].name,
@@ -273,7 +259,6 @@ fn random_rigs_report() {
             assert!(d <= 1.0, "rig {seed} axis {}: {d}", r.axis);
         }
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Issue 21's Campbell bar: from the models identified at 5 speeds (0–30 000 rpm, nominal twin,

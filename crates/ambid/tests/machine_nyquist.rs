@@ -4,6 +4,8 @@
 //! `(7919·seed) mod 30 000` rpm, with the seed's own noise), the `[machine]` defaults
 //! (orthogonal PRBS design, 12 periods, linear twin, default sensor noise).
 
+mod common;
+
 use ambid::config::MachineSection;
 use ambid::workflow::machine::acquire_twin;
 use ambid_core::lti::Frd;
@@ -55,26 +57,12 @@ fn the_count_from_the_measured_loop_is_the_plants_on_the_nominal_rig() {
 
 #[test]
 fn the_count_from_the_measured_loop_is_the_plants_on_random_rigs() {
-    let dir = std::env::temp_dir().join(format!("ambid-machine-nyquist-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::tmpdir("machine-nyquist");
     for seed in 1u64..=5 {
-        let speed = ((seed * 7919) % 30_000) as f64;
-        let path = dir.join(format!("rig{seed}.toml"));
-        std::fs::write(
-            &path,
-            ambid_twin::random_rig(seed)
-                .unwrap()
-                .to_toml_string()
-                .unwrap(),
-        )
-        .unwrap();
-        let m = MachineSection {
-            speeds_rpm: Some(vec![speed]),
-            mode: "linear".into(),
-            config: Some(path),
-            ..Default::default()
-        };
-        check(&m, seed, &format!("random rig {seed}"));
+        check(
+            &common::random_machine_rig(&dir, seed),
+            seed,
+            &format!("random rig {seed}"),
+        );
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -162,3 +162,24 @@ pub fn exact_loop_fit(twin: &ambid_twin::Twin, r: &[f64], y: &[f64]) -> f64 {
     let yt: Vec<f64> = (0..yt.nrows()).map(|k| yt[(k, 0)]).collect();
     ambid_core::validate::fit::fit_percent(y, &yt).unwrap()
 }
+
+/// The `[machine]` section of random rig `seed` (`ambid_twin::random_rig(seed)` lifted to four
+/// axes, its config written into `dir`) at `(7919·seed) mod 30 000` rpm, linear, every other
+/// setting at its default.
+pub fn random_machine_rig(dir: &Path, seed: u64) -> ambid::config::MachineSection {
+    let path = dir.join(format!("rig{seed}.toml"));
+    std::fs::write(
+        &path,
+        ambid_twin::random_rig(seed)
+            .unwrap()
+            .to_toml_string()
+            .unwrap(),
+    )
+    .unwrap();
+    ambid::config::MachineSection {
+        speeds_rpm: Some(vec![((seed * 7919) % 30_000) as f64]),
+        mode: "linear".into(),
+        config: Some(path),
+        ..Default::default()
+    }
+}
