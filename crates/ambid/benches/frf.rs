@@ -113,3 +113,37 @@ fn nineteen_period_ffts(b: Bencher) {
         black_box(&buf);
     });
 }
+
+/// What `ambid frf --period-samples 5115 --skip-periods 1` computes on the record in memory
+/// (`ambid::analysis::analyze`: bands, FRF, quality), without the screening of abnormal
+/// samples; the Python package's `ambid.frf(..., screen=False)` calls exactly this (issue 22's
+/// overhead bar compares the two, docs/benchmarks.md).
+#[divan::bench]
+fn analysis_periodic_unscreened(b: Bencher) {
+    let rec = seed_record();
+    let mut settings = ambid::analysis::FrfSettings::periodic(N, 1);
+    settings.screen = false;
+    let r = ambid::analysis::Record {
+        r: &rec.r,
+        u: &rec.u,
+        y: &rec.y,
+        i: None,
+        fs: 20_000.0,
+    };
+    b.bench_local(|| black_box(ambid::analysis::analyze(&r, &settings, None).expect("frf")));
+}
+
+/// The same with the default screening (Hampel filter on `y` and `u − r`): `ambid.frf(...)`.
+#[divan::bench]
+fn analysis_periodic_screened(b: Bencher) {
+    let rec = seed_record();
+    let settings = ambid::analysis::FrfSettings::periodic(N, 1);
+    let r = ambid::analysis::Record {
+        r: &rec.r,
+        u: &rec.u,
+        y: &rec.y,
+        i: None,
+        fs: 20_000.0,
+    };
+    b.bench_local(|| black_box(ambid::analysis::analyze(&r, &settings, None).expect("frf")));
+}

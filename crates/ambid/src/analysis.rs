@@ -321,7 +321,7 @@ pub fn analyze(
         .chain(rec.i.map(|i| ("i", i)))
     {
         if x.len() != n {
-            return Err(Error::other(format!(
+            return Err(Error::input(format!(
                 "channel `{name}` has {} samples but the excitation has {n}; all channels must be \
                  recorded together",
                 x.len()

@@ -469,8 +469,9 @@ impl Ctx<'_> {
     }
 }
 
-/// An error's message with its sources, `a: b: c` (how the error chain was always printed).
-fn chain_message(e: &dyn std::error::Error) -> String {
+/// An error's message with its sources, `a: b: c` (how the error chain was always printed;
+/// the Python package raises the same text).
+pub fn chain_message(e: &dyn std::error::Error) -> String {
     let mut msg = e.to_string();
     let mut src = e.source();
     while let Some(s) = src {
@@ -877,12 +878,18 @@ fn run_steps(
     Ok(())
 }
 
-/// The four files of a MIMO model (the whole machine's): channel names and speed from its
-/// `meta` (`inputs`, `outputs`, `speed_rpm`; `u1…`, `y1…` when absent).
-fn mimo_files(m: &ModelOut) -> Result<[(String, Vec<u8>); 4], crate::io::export::ExportError> {
-    use crate::io::export::mimo::{
-        mimo_json, mimo_mat_bytes, mimo_matlab_script, mimo_npz_bytes, MimoNames,
-    };
+/// A single-input single-output model's JSON, as `models/<name>.json` holds it.
+fn siso_model_json(m: &ModelOut) -> Value {
+    use crate::io::model::{polynomial_json, state_space_json};
+    match &m.poly {
+        Some(p) => polynomial_json(p, "u", "y", m.meta.clone()),
+        None => state_space_json(&m.ss, "u", "y", m.meta.clone()),
+    }
+}
+
+/// A MIMO model's channel names and speed from its `meta` (`inputs`, `outputs`, `speed_rpm`;
+/// `u1…`, `y1…` when absent).
+fn mimo_names(m: &ModelOut) -> crate::io::export::mimo::MimoNames {
     let list = |key: &str, prefix: &str, n: usize| -> Vec<String> {
         m.meta[key]
             .as_array()
@@ -893,12 +900,19 @@ fn mimo_files(m: &ModelOut) -> Result<[(String, Vec<u8>); 4], crate::io::export:
             })
             .unwrap_or_else(|| (1..=n).map(|k| format!("{prefix}{k}")).collect())
     };
-    let names = MimoNames {
+    crate::io::export::mimo::MimoNames {
         name: m.name.clone(),
         inputs: list("inputs", "u", m.ss.ninputs()),
         outputs: list("outputs", "y", m.ss.noutputs()),
         speed_rpm: m.meta["speed_rpm"].as_f64(),
-    };
+    }
+}
+
+/// The four files of a MIMO model (the whole machine's): channel names and speed from its
+/// `meta` (`inputs`, `outputs`, `speed_rpm`; `u1…`, `y1…` when absent).
+fn mimo_files(m: &ModelOut) -> Result<[(String, Vec<u8>); 4], crate::io::export::ExportError> {
+    use crate::io::export::mimo::{mimo_json, mimo_mat_bytes, mimo_matlab_script, mimo_npz_bytes};
+    let names = mimo_names(m);
     let json = mimo_json(&m.ss, &names, m.meta.clone())?;
     let text = serde_json::to_string_pretty(&json).unwrap_or_default();
     Ok([
@@ -925,6 +939,26 @@ pub(crate) enum StepStatus {
 }
 
 impl Outcome {
+    /// Every model's JSON as [`Outcome::write`] writes it to `models/<name>.json`, by name.
+    ///
+    /// # Errors
+    /// A MIMO model whose JSON cannot be formed (an [`FailureClass::Output`] error, as in
+    /// [`Outcome::write`]).
+    pub fn model_jsons(&self) -> Result<Vec<(String, Value)>, Error> {
+        self.models
+            .iter()
+            .map(|m| {
+                let v = if m.ss.ninputs() > 1 || m.ss.noutputs() > 1 {
+                    crate::io::export::mimo::mimo_json(&m.ss, &mimo_names(m), m.meta.clone())
+                        .map_err(|e| output(Error::other(chain_message(&e))))?
+                } else {
+                    siso_model_json(m)
+                };
+                Ok((m.name.clone(), v))
+            })
+            .collect()
+    }
+
     /// Writes `report.html`, `summary.json`, `figures/<id>.csv`, `tables/<id>.csv` and
     /// `models/<name>.{json,m,mat,npz}` into `dir`, atomically: everything goes to a temporary
     /// directory beside `dir` that is renamed into place at the end, so a failure leaves nothing
@@ -934,7 +968,6 @@ impl Outcome {
     /// [`FailureClass::Output`] errors.
     pub fn write(&self, dir: &Path, force: bool) -> Result<Vec<PathBuf>, Error> {
         use crate::io::export::{mat_bytes, matlab_script, npz_bytes, ExportModel, ExportNames};
-        use crate::io::model::{polynomial_json, state_space_json};
         use rayon::prelude::*;
         let out = OutputDir::create(dir, force)?;
         let json_error = |e: serde_json::Error| output(Error::other(chain_message(&e)));
@@ -981,15 +1014,10 @@ impl Outcome {
                                     output: "y".into(),
                                     noise_variance: m.meta["noise_variance"].as_f64(),
                                 };
-                                let (json, em) = match &m.poly {
-                                    Some(p) => (
-                                        polynomial_json(p, "u", "y", m.meta.clone()),
-                                        ExportModel::Poly(p),
-                                    ),
-                                    None => (
-                                        state_space_json(&m.ss, "u", "y", m.meta.clone()),
-                                        ExportModel::StateSpace(&m.ss, m.kalman.as_deref()),
-                                    ),
+                                let json = siso_model_json(m);
+                                let em = match &m.poly {
+                                    Some(p) => ExportModel::Poly(p),
+                                    None => ExportModel::StateSpace(&m.ss, m.kalman.as_deref()),
                                 };
                                 let text =
                                     serde_json::to_string_pretty(&json).map_err(json_error)?;

@@ -1,0 +1,627 @@
+//! # ambid-py
+//!
+//! The native part of the Python package `ambid` (module `ambid._native`, built by maturin as
+//! one abi3 wheel). It is a thin layer: every function converts numpy arrays to slices, calls
+//! the same library function the command line calls (so the numbers are the CLI's, bit for
+//! bit), releases the GIL while it computes, and converts the result back to numpy arrays.
+//! The Python-facing API, its docstrings and stubs live in `python/ambid/` (docs/python.md).
+//!
+//! Input rules (every array argument): a 1-D, C-contiguous `float64` numpy array; anything else
+//! (another dtype, 2-D, a strided view, a list) raises `ambid.InputError` naming the argument
+//! and the fix (`np.ascontiguousarray(x, dtype=float)`). NaN and length mismatches are the
+//! library's typed errors, raised as the exception of their class:
+//!
+//! | library error class | Python exception |
+//! |---|---|
+//! | configuration / usage (exit 2) | `ambid.UsageError` |
+//! | input data (exit 3) | `ambid.InputError` |
+//! | computation (exit 4) | `ambid.ComputationError` |
+//! | output (exit 5) | `ambid.OutputError` |
+//! | anything else | `ambid.AmbidError` |
+
+use ambid::analysis::{analyze, FrfSettings, Record};
+use ambid::error::{Error as AppError, FailureClass};
+use ambid_core::estimate::arx::{arx, ArxOrders};
+use ambid_core::estimate::pem::{pem, Orders, PemOptions};
+use ambid_core::lti::{PolyModel, StateSpace, Structure};
+use num_complex::Complex64;
+use numpy::ndarray::{Array2, Array3};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayMethods, PyUntypedArrayMethods};
+use pyo3::create_exception;
+use pyo3::exceptions::PyException;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::PathBuf;
+
+create_exception!(
+    _native,
+    AmbidError,
+    PyException,
+    "Base of every ambid error."
+);
+create_exception!(
+    _native,
+    UsageError,
+    AmbidError,
+    "A setting or option is wrong (the CLI's exit code 2)."
+);
+create_exception!(
+    _native,
+    InputError,
+    AmbidError,
+    "The input data are wrong: type, shape, NaN, length, file (the CLI's exit code 3)."
+);
+create_exception!(
+    _native,
+    ComputationError,
+    AmbidError,
+    "A computation failed on valid input, e.g. an unstable or rank-deficient fit (exit code 4)."
+);
+create_exception!(
+    _native,
+    OutputError,
+    AmbidError,
+    "An output could not be written (the CLI's exit code 5)."
+);
+
+/// The Python exception of a library error: its class decides the type, the message is the
+/// library's (the CLI prints the same text).
+fn to_py(e: impl Into<AppError>) -> PyErr {
+    let e: AppError = e.into();
+    let msg = ambid::workflow::chain_message(&e);
+    match e.class() {
+        Some(FailureClass::Config) => UsageError::new_err(msg),
+        Some(FailureClass::Input) => InputError::new_err(msg),
+        Some(FailureClass::Computation) => ComputationError::new_err(msg),
+        Some(FailureClass::Output) => OutputError::new_err(msg),
+        None => AmbidError::new_err(msg),
+    }
+}
+
+/// A 1-D, C-contiguous float64 array as an owned vector, or `InputError` naming `name`.
+fn vec1(name: &str, obj: &Bound<'_, PyAny>) -> PyResult<Vec<f64>> {
+    let Ok(arr) = obj.cast::<numpy::PyArrayDyn<f64>>() else {
+        let what = match obj.cast::<numpy::PyUntypedArray>() {
+            Ok(a) => format!("a numpy array of dtype {}", a.dtype()),
+            Err(_) => format!("a {}", obj.get_type().name()?),
+        };
+        return Err(InputError::new_err(format!(
+            "`{name}` must be a 1-D float64 numpy array, got {what}; convert it with np.ascontiguousarray({name}, dtype=float)"
+        )));
+    };
+    if arr.ndim() != 1 {
+        return Err(InputError::new_err(format!(
+            "`{name}` must be 1-D, got an array of shape {:?}; pass one channel (e.g. {name}[:, k]) as np.ascontiguousarray",
+            arr.shape()
+        )));
+    }
+    let ro = arr.readonly();
+    let slice = ro.as_slice().map_err(|_| {
+        InputError::new_err(format!(
+            "`{name}` is not C-contiguous (a strided view); pass np.ascontiguousarray({name})"
+        ))
+    })?;
+    Ok(slice.to_vec())
+}
+
+fn finite_positive(name: &str, v: f64) -> PyResult<f64> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(UsageError::new_err(format!(
+            "`{name}` must be a finite positive number, got {v}"
+        )))
+    }
+}
+
+fn band_of(name: &str, b: Option<(f64, f64)>) -> PyResult<Option<(f64, f64)>> {
+    match b {
+        Some((lo, hi)) if !(lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo < hi) => {
+            Err(UsageError::new_err(format!(
+                "`{name}` must be (f_min, f_max) in Hz with 0 <= f_min < f_max, got ({lo}, {hi})"
+            )))
+        }
+        b => Ok(b),
+    }
+}
+
+fn complex_array<'py>(py: Python<'py>, v: &[Complex64]) -> Bound<'py, PyArray1<Complex64>> {
+    v.to_vec().into_pyarray(py)
+}
+
+/// Nonparametric closed-loop FRFs of one axis (the computation of `ambid frf`).
+#[pyfunction]
+#[pyo3(signature = (r, u, y, fs, *, period_samples=None, skip_periods=1, nperseg=None, band=None, quality_band=None, i_sat=None, screen=true, noise=None, current=None))]
+#[allow(clippy::too_many_arguments)]
+fn frf<'py>(
+    py: Python<'py>,
+    r: &Bound<'py, PyAny>,
+    u: &Bound<'py, PyAny>,
+    y: &Bound<'py, PyAny>,
+    fs: f64,
+    period_samples: Option<usize>,
+    skip_periods: usize,
+    nperseg: Option<usize>,
+    band: Option<(f64, f64)>,
+    quality_band: Option<(f64, f64)>,
+    i_sat: Option<f64>,
+    screen: bool,
+    noise: Option<&Bound<'py, PyAny>>,
+    current: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (r, u, y) = (vec1("r", r)?, vec1("u", u)?, vec1("y", y)?);
+    let noise = noise.map(|n| vec1("noise", n)).transpose()?;
+    let current = current.map(|c| vec1("current", c)).transpose()?;
+    let fs = finite_positive("fs", fs)?;
+    let mut settings = match (period_samples, nperseg) {
+        (Some(_), Some(_)) => {
+            return Err(UsageError::new_err(
+                "give period_samples (period averaging) or nperseg (Welch), not both",
+            ))
+        }
+        (Some(p), None) => FrfSettings::periodic(p, skip_periods),
+        (None, Some(n)) => FrfSettings::welch(n),
+        (None, None) => FrfSettings::welch(FrfSettings::default_nperseg(r.len())),
+    };
+    settings.band = band_of("band", band)?;
+    settings.quality_band = band_of("quality_band", quality_band)?;
+    settings.i_sat = i_sat.map(|v| finite_positive("i_sat", v)).transpose()?;
+    settings.screen = screen;
+    let out = py
+        .detach(|| {
+            let rec = Record {
+                r: &r,
+                u: &u,
+                y: &y,
+                i: current.as_deref(),
+                fs,
+            };
+            analyze(&rec, &settings, noise.as_deref())
+        })
+        .map_err(to_py)?;
+    let d = PyDict::new(py);
+    let fr = &out.frf;
+    d.set_item("f_hz", fr.f_hz().to_vec().into_pyarray(py))?;
+    for (key, frd) in [
+        ("plant", &fr.plant),
+        ("t_ry", &fr.t_ry),
+        ("s", &fr.t_ru),
+        ("controller", &fr.controller),
+    ] {
+        d.set_item(key, complex_array(py, frd.values()))?;
+        if let Some(v) = frd.variance() {
+            let s: Vec<f64> = v.iter().map(|x| x.sqrt()).collect();
+            d.set_item(format!("{key}_std"), s.into_pyarray(py))?;
+        }
+    }
+    if let Some(p) = &fr.plant_indirect {
+        d.set_item("plant_indirect", complex_array(py, p.values()))?;
+    }
+    d.set_item("coh_ry", fr.coh_ry.clone().into_pyarray(py))?;
+    d.set_item("coh_ru", fr.coh_ru.clone().into_pyarray(py))?;
+    d.set_item("dof", fr.dof)?;
+    let q = PyDict::new(py);
+    let qu = &out.quality;
+    q.set_item("band_hz", qu.band)?;
+    q.set_item("lines", qu.lines)?;
+    q.set_item("mean_coherence_ry", qu.mean_coherence_ry)?;
+    q.set_item("mean_coherence_ru", qu.mean_coherence_ru)?;
+    q.set_item("mean_plant_variance", qu.mean_plant_variance)?;
+    q.set_item("mean_plant_rel_variance", qu.mean_plant_rel_variance)?;
+    q.set_item("output_snr_db", qu.output_snr_db)?;
+    d.set_item("quality", q)?;
+    d.set_item("band_hz", out.bands.band)?;
+    d.set_item("quality_band_hz", out.bands.quality_band)?;
+    d.set_item("warnings", out.warnings.clone())?;
+    Ok(d)
+}
+
+/// A fitted linear model: state space (always), and the polynomials when it is one.
+#[pyclass(frozen, module = "ambid._native", name = "Model")]
+struct PyModel {
+    ss: StateSpace,
+    poly: Option<PolyModel>,
+    structure: String,
+    params: Vec<f64>,
+    std: Option<Vec<f64>>,
+    loss: f64,
+    noise_variance: f64,
+    n_samples: usize,
+}
+
+fn mat2<'py>(py: Python<'py>, m: faer::MatRef<'_, f64>) -> Bound<'py, PyArray2<f64>> {
+    Array2::from_shape_fn((m.nrows(), m.ncols()), |(i, j)| m[(i, j)]).into_pyarray(py)
+}
+
+#[pymethods]
+impl PyModel {
+    /// The structure: `arx`, `fir`, `armax`, `oe`, `bj` or `ss`.
+    #[getter]
+    fn structure(&self) -> &str {
+        &self.structure
+    }
+    /// Sample time in seconds.
+    #[getter]
+    fn ts(&self) -> f64 {
+        self.ss.ts().unwrap_or(0.0)
+    }
+    /// Number of states of the state-space form.
+    #[getter]
+    fn order(&self) -> usize {
+        self.ss.order()
+    }
+    #[getter]
+    fn a<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        mat2(py, self.ss.a())
+    }
+    #[getter]
+    fn b<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        mat2(py, self.ss.b())
+    }
+    #[getter]
+    fn c<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        mat2(py, self.ss.c())
+    }
+    #[getter]
+    fn d<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        mat2(py, self.ss.d())
+    }
+    /// The estimated parameter vector θ (ordering as the Rust estimator documents).
+    #[getter]
+    fn params<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        self.params.clone().into_pyarray(py)
+    }
+    /// Standard deviations of θ, or `None` when no covariance was computed.
+    #[getter]
+    fn params_std<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray1<f64>>> {
+        self.std.clone().map(|s| s.into_pyarray(py))
+    }
+    /// Loss V_N (mean squared prediction error on the estimation data).
+    #[getter]
+    fn loss(&self) -> f64 {
+        self.loss
+    }
+    /// Estimated innovation variance.
+    #[getter]
+    fn noise_variance(&self) -> f64 {
+        self.noise_variance
+    }
+    /// Samples used in the criterion.
+    #[getter]
+    fn n_samples(&self) -> usize {
+        self.n_samples
+    }
+    /// The polynomials `{"a", "b", "c", "d", "f"}` (ascending powers of q⁻¹) of a polynomial
+    /// model, `None` for a state-space one.
+    #[getter]
+    fn polynomials<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(p) = &self.poly else { return Ok(None) };
+        let d = PyDict::new(py);
+        d.set_item("a", p.a().to_vec().into_pyarray(py))?;
+        d.set_item("b", p.b().to_vec().into_pyarray(py))?;
+        d.set_item("c", p.c().to_vec().into_pyarray(py))?;
+        d.set_item("d", p.d().to_vec().into_pyarray(py))?;
+        d.set_item("f", p.f().to_vec().into_pyarray(py))?;
+        Ok(Some(d))
+    }
+    /// Poles (eigenvalues of A, discrete time).
+    fn poles<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<Complex64>>> {
+        let p = self.ss.poles().map_err(to_py)?;
+        Ok(p.into_pyarray(py))
+    }
+    /// Frequency response at `f_hz` as an `(L, ny, nu)` complex array.
+    fn freq_response<'py>(
+        &self,
+        py: Python<'py>,
+        f_hz: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyArray3<Complex64>>> {
+        let f = vec1("f_hz", f_hz)?;
+        let resp = py.detach(|| self.ss.freq_response(&f)).map_err(to_py)?;
+        let (ny, nu) = (self.ss.noutputs(), self.ss.ninputs());
+        Ok(Array3::from_shape_fn((f.len(), ny, nu), |(k, i, j)| resp[k][(i, j)]).into_pyarray(py))
+    }
+    /// The model as a python-control `StateSpace` (discrete, sample time `ts`); needs the
+    /// package `control` (`pip install control`).
+    fn to_control<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let control = py.import("control").map_err(|e| {
+            pyo3::exceptions::PyImportError::new_err(format!(
+                "to_control() needs python-control: pip install control ({e})"
+            ))
+        })?;
+        control.call_method1(
+            "ss",
+            (self.a(py), self.b(py), self.c(py), self.d(py), self.ts()),
+        )
+    }
+    /// The model as the JSON text `ambid fit` writes (`kind` = `state_space` or `polynomial`).
+    fn to_json(&self) -> PyResult<String> {
+        let meta = serde_json::json!({ "structure": self.structure });
+        let v = match &self.poly {
+            Some(p) => ambid::io::model::polynomial_json(p, "u", "y", meta),
+            None => ambid::io::model::state_space_json(&self.ss, "u", "y", meta),
+        };
+        serde_json::to_string_pretty(&v).map_err(|e| AmbidError::new_err(e.to_string()))
+    }
+    fn __repr__(&self) -> String {
+        format!(
+            "Model(structure='{}', order={}, ts={}, inputs={}, outputs={})",
+            self.structure,
+            self.ss.order(),
+            self.ss.ts().unwrap_or(0.0),
+            self.ss.ninputs(),
+            self.ss.noutputs()
+        )
+    }
+}
+
+fn poly_model(
+    fitted: ambid_core::estimate::Fitted<PolyModel>,
+    structure: &str,
+) -> PyResult<PyModel> {
+    let ss = fitted
+        .model
+        .g()
+        .and_then(|g| g.to_state_space())
+        .map_err(to_py)?;
+    let std = fitted.std();
+    Ok(PyModel {
+        ss,
+        structure: structure.to_string(),
+        std,
+        params: fitted.params,
+        loss: fitted.loss,
+        noise_variance: fitted.noise_variance,
+        n_samples: fitted.n_samples,
+        poly: Some(fitted.model),
+    })
+}
+
+/// Least-squares ARX(na, nb, nk) model of `u → y` (the computation of `ambid fit --structure
+/// arx`).
+#[pyfunction]
+#[pyo3(signature = (u, y, ts, *, na, nb, nk=1))]
+fn fit_arx<'py>(
+    py: Python<'py>,
+    u: &Bound<'py, PyAny>,
+    y: &Bound<'py, PyAny>,
+    ts: f64,
+    na: usize,
+    nb: usize,
+    nk: usize,
+) -> PyResult<PyModel> {
+    let (u, y) = (vec1("u", u)?, vec1("y", y)?);
+    let ts = finite_positive("ts", ts)?;
+    let f = py
+        .detach(|| {
+            let f = arx(&y, &[&u], &ArxOrders::siso(na, nb, nk), ts)?;
+            Ok::<_, ambid_core::Error>(ambid_core::estimate::Fitted {
+                model: f.model.to_poly(0)?,
+                params: f.params,
+                covariance: f.covariance,
+                loss: f.loss,
+                noise_variance: f.noise_variance,
+                n_samples: f.n_samples,
+            })
+        })
+        .map_err(to_py)?;
+    poly_model(f, if na == 0 { "fir" } else { "arx" })
+}
+
+/// Prediction-error model (ARMAX, OE, BJ) of `u → y` with the library's default options.
+#[pyfunction]
+#[pyo3(signature = (u, y, ts, structure, *, na=0, nb=1, nc=0, nd=0, nf=0, nk=1, max_iterations=100))]
+#[allow(clippy::too_many_arguments)]
+fn fit_pem<'py>(
+    py: Python<'py>,
+    u: &Bound<'py, PyAny>,
+    y: &Bound<'py, PyAny>,
+    ts: f64,
+    structure: &str,
+    na: usize,
+    nb: usize,
+    nc: usize,
+    nd: usize,
+    nf: usize,
+    nk: usize,
+    max_iterations: usize,
+) -> PyResult<PyModel> {
+    let (u, y) = (vec1("u", u)?, vec1("y", y)?);
+    let ts = finite_positive("ts", ts)?;
+    let (s, orders) = match structure {
+        "armax" => (Structure::Armax, Orders::armax(na, nb, nc, nk)),
+        "oe" => (Structure::Oe, Orders::oe(nb, nf, nk)),
+        "bj" => (Structure::Bj, Orders::bj(nb, nc, nd, nf, nk)),
+        other => {
+            return Err(UsageError::new_err(format!(
+                "unknown structure `{other}`: fit_pem takes \"armax\", \"oe\" or \"bj\" (fit_arx for ARX/FIR, fit_ss for state space)"
+            )))
+        }
+    };
+    let opts = PemOptions::default()
+        .with_max_iterations(max_iterations)
+        .map_err(to_py)?;
+    let (f, _) = py
+        .detach(|| pem(&y, &u, s, &orders, ts, &opts))
+        .map_err(to_py)?;
+    poly_model(f, structure)
+}
+
+/// The twin's seed experiment (or one of its random test rigs): the recorded signals and the
+/// exact linearised truth on the record's DFT grid.
+#[pyfunction]
+#[pyo3(signature = (*, seed=1, rig_seed=None, mode="nonlinear", noise=true, prbs_order=10, samples_per_bit=5, periods=20, level=0.1))]
+#[allow(clippy::too_many_arguments)]
+fn simulate<'py>(
+    py: Python<'py>,
+    seed: u64,
+    rig_seed: Option<u64>,
+    mode: &str,
+    noise: bool,
+    prbs_order: u32,
+    samples_per_bit: usize,
+    periods: usize,
+    level: f64,
+) -> PyResult<Bound<'py, PyDict>> {
+    let mode = match mode {
+        "linear" => ambid_twin::Mode::Linear,
+        "nonlinear" => ambid_twin::Mode::Nonlinear,
+        other => {
+            return Err(UsageError::new_err(format!(
+                "unknown mode `{other}`: use \"linear\" or \"nonlinear\""
+            )))
+        }
+    };
+    let twin = match rig_seed {
+        Some(s) => ambid_twin::random_rig(s).map_err(to_py)?,
+        None => ambid_twin::TwinConfig::default(),
+    };
+    let exp = ambid::experiment::Experiment {
+        twin,
+        excitation: ambid::experiment::ExcitationPlan {
+            prbs_order,
+            samples_per_bit,
+            periods,
+            amplitude_frac: level,
+            ..Default::default()
+        },
+        mode,
+        seed,
+        noise,
+        record_b: false,
+    };
+    let out = py.detach(|| ambid::experiment::run(&exp)).map_err(to_py)?;
+    let rec = &out.record;
+    let d = PyDict::new(py);
+    d.set_item("fs", 1.0 / rec.ts)?;
+    d.set_item("period_samples", out.excitation.period_samples)?;
+    for (k, v) in [
+        ("t", &rec.t),
+        ("r", &rec.r),
+        ("u", &rec.u),
+        ("i", &rec.i),
+        ("y", &rec.y),
+        ("w", &rec.w),
+    ] {
+        d.set_item(k, v.clone().into_pyarray(py))?;
+    }
+    Ok(d)
+}
+
+/// The twin's exact linearised plant, T_ry, S and controller at `f_hz` (nominal rig or random
+/// rig `rig_seed`).
+#[pyfunction]
+#[pyo3(signature = (f_hz, *, rig_seed=None))]
+fn truth<'py>(
+    py: Python<'py>,
+    f_hz: &Bound<'py, PyAny>,
+    rig_seed: Option<u64>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let f = vec1("f_hz", f_hz)?;
+    let cfg = match rig_seed {
+        Some(s) => ambid_twin::random_rig(s).map_err(to_py)?,
+        None => ambid_twin::TwinConfig::default(),
+    };
+    let tr = py
+        .detach(|| {
+            let twin = ambid_twin::Twin::new(cfg).map_err(AppError::from)?;
+            ambid::experiment::truth(&twin, &f)
+        })
+        .map_err(to_py)?;
+    let d = PyDict::new(py);
+    d.set_item("f_hz", tr.f_hz.into_pyarray(py))?;
+    d.set_item("plant", tr.plant.into_pyarray(py))?;
+    d.set_item("t_ry", tr.t_ry.into_pyarray(py))?;
+    d.set_item("s", tr.t_ru.into_pyarray(py))?;
+    d.set_item("controller", tr.controller.into_pyarray(py))?;
+    Ok(d)
+}
+
+/// The outcome of the whole workflow.
+#[pyclass(frozen, module = "ambid._native", name = "Outcome")]
+struct PyOutcome {
+    inner: ambid::workflow::Outcome,
+}
+
+#[pymethods]
+impl PyOutcome {
+    /// The run's summary as JSON text (what `ambid run` writes as `summary.json`).
+    fn summary_json(&self) -> PyResult<String> {
+        serde_json::to_string(&self.inner.summary).map_err(|e| AmbidError::new_err(e.to_string()))
+    }
+    /// The offline HTML report.
+    fn html(&self, py: Python<'_>) -> String {
+        py.detach(|| self.inner.report.to_html())
+    }
+    /// Writes the report, summary, figures, tables and models into `out` (atomically; an
+    /// existing directory only with `force`). Returns the written paths.
+    #[pyo3(signature = (out, *, force=false))]
+    fn write(&self, py: Python<'_>, out: PathBuf, force: bool) -> PyResult<Vec<PathBuf>> {
+        py.detach(|| self.inner.write(&out, force)).map_err(to_py)
+    }
+    /// The exported models as `(name, json text)` pairs: the text of `models/<name>.json`.
+    fn models(&self) -> PyResult<Vec<(String, String)>> {
+        self.inner
+            .model_jsons()
+            .map_err(to_py)?
+            .into_iter()
+            .map(|(name, v)| {
+                serde_json::to_string(&v)
+                    .map(|t| (name, t))
+                    .map_err(|e| AmbidError::new_err(e.to_string()))
+            })
+            .collect()
+    }
+}
+
+/// Runs the workflow of a workflow file's text (`ambid run`): `config` is the TOML text,
+/// `base` the directory its relative paths are read from.
+#[pyfunction]
+#[pyo3(signature = (config="", *, base=None))]
+fn run(py: Python<'_>, config: &str, base: Option<PathBuf>) -> PyResult<PyOutcome> {
+    let base = base.unwrap_or_else(|| PathBuf::from("."));
+    let cfg = ambid::workflow::WorkflowConfig::from_toml_str(config, &base.join("workflow.toml"))
+        .map_err(to_py)?;
+    let out = py
+        .detach(|| {
+            let mut progress = ambid::workflow::Progress::new(ambid::workflow::Verbosity::Quiet);
+            ambid::workflow::run(&cfg, &base, &mut progress)
+        })
+        .map_err(to_py)?;
+    Ok(PyOutcome { inner: out })
+}
+
+/// Random test rig `seed`'s twin configuration as TOML (what `ambid config --rig-seed N`
+/// prints): a workflow's `[twin] config` file.
+#[pyfunction]
+fn rig_config(seed: u64) -> PyResult<String> {
+    ambid_twin::random_rig(seed)
+        .and_then(|c| c.to_toml_string())
+        .map_err(to_py)
+}
+
+/// The ambid version.
+#[pyfunction]
+fn version() -> &'static str {
+    env!("CARGO_PKG_VERSION")
+}
+
+#[pymodule]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    m.add("AmbidError", py.get_type::<AmbidError>())?;
+    m.add("UsageError", py.get_type::<UsageError>())?;
+    m.add("InputError", py.get_type::<InputError>())?;
+    m.add("ComputationError", py.get_type::<ComputationError>())?;
+    m.add("OutputError", py.get_type::<OutputError>())?;
+    m.add_class::<PyModel>()?;
+    m.add_class::<PyOutcome>()?;
+    m.add_function(wrap_pyfunction!(version, m)?)?;
+    m.add_function(wrap_pyfunction!(frf, m)?)?;
+    m.add_function(wrap_pyfunction!(fit_arx, m)?)?;
+    m.add_function(wrap_pyfunction!(fit_pem, m)?)?;
+    m.add_function(wrap_pyfunction!(simulate, m)?)?;
+    m.add_function(wrap_pyfunction!(truth, m)?)?;
+    m.add_function(wrap_pyfunction!(run, m)?)?;
+    m.add_function(wrap_pyfunction!(rig_config, m)?)?;
+    Ok(())
+}
