@@ -23,7 +23,7 @@ use ambid::analysis::{analyze, FrfSettings, Record};
 use ambid::error::{Error as AppError, FailureClass};
 use ambid_core::estimate::arx::{arx, ArxOrders};
 use ambid_core::estimate::pem::{pem, Orders, PemOptions};
-use ambid_core::lti::{PolyModel, StateSpace, Structure};
+use ambid_core::lti::{Frd, PolyModel, StateSpace, Structure};
 use num_complex::Complex64;
 use numpy::ndarray::{Array2, Array3};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayMethods, PyUntypedArrayMethods};
@@ -590,6 +590,221 @@ fn run(py: Python<'_>, config: &str, base: Option<PathBuf>) -> PyResult<PyOutcom
     Ok(PyOutcome { inner: out })
 }
 
+/// A complex128 array of shape `(L,)` (one entry) or `(L, ny, nu)` as `(values in the Frd's
+/// column-major layout per line, ny, nu)`, or `InputError` naming `name`.
+fn frd_values(name: &str, obj: &Bound<'_, PyAny>) -> PyResult<(Vec<Complex64>, usize, usize, usize)> {
+    let Ok(arr) = obj.cast::<numpy::PyArrayDyn<Complex64>>() else {
+        return Err(InputError::new_err(format!(
+            "`{name}` must be a complex128 numpy array of shape (L,) or (L, ny, nu); convert it with np.ascontiguousarray({name}, dtype=complex)"
+        )));
+    };
+    let shape = arr.shape().to_vec();
+    let ro = arr.readonly();
+    let flat = ro.as_slice().map_err(|_| {
+        InputError::new_err(format!("`{name}` is not C-contiguous; pass np.ascontiguousarray({name})"))
+    })?;
+    match shape.as_slice() {
+        [l] => Ok((flat.to_vec(), *l, 1, 1)),
+        [l, ny, nu] => {
+            let (l, ny, nu) = (*l, *ny, *nu);
+            // numpy is row-major (k, i, j); the Frd stores line k column-major (k e + j ny + i)
+            let mut v = vec![Complex64::new(0.0, 0.0); l * ny * nu];
+            for k in 0..l {
+                for i in 0..ny {
+                    for j in 0..nu {
+                        v[k * ny * nu + j * ny + i] = flat[(k * ny + i) * nu + j];
+                    }
+                }
+            }
+            Ok((v, l, ny, nu))
+        }
+        other => Err(InputError::new_err(format!(
+            "`{name}` must have shape (L,) or (L, ny, nu), got {other:?}"
+        ))),
+    }
+}
+
+/// A state-space model of order `order` fitted to frequency-response data (the weighted
+/// complex-error fit of `ambid_core::estimate::freqfit_mimo`, any number of inputs and outputs;
+/// one entry is the 1×1 case).
+#[pyfunction]
+#[pyo3(signature = (f_hz, g, ts, order, *, std=None, band=None, max_unstable_poles=None, feedthrough=false, max_iterations=100))]
+#[allow(clippy::too_many_arguments)]
+fn fit_frf(
+    py: Python<'_>,
+    f_hz: &Bound<'_, PyAny>,
+    g: &Bound<'_, PyAny>,
+    ts: f64,
+    order: usize,
+    std: Option<&Bound<'_, PyAny>>,
+    band: Option<(f64, f64)>,
+    max_unstable_poles: Option<usize>,
+    feedthrough: bool,
+    max_iterations: usize,
+) -> PyResult<PyModel> {
+    use ambid_core::estimate::freqfit_mimo::{ss_frd_mimo, MimoFreqOptions};
+    let f = vec1("f_hz", f_hz)?;
+    let (values, l, ny, nu) = frd_values("g", g)?;
+    if l != f.len() {
+        return Err(InputError::new_err(format!(
+            "`g` has {l} lines but `f_hz` has {}; give one response per frequency",
+            f.len()
+        )));
+    }
+    let variance = match std {
+        Some(s) => {
+            let s = vec1("std", s)?;
+            if s.len() != values.len() {
+                return Err(InputError::new_err(format!(
+                    "`std` must be flat with one value per entry and line ({}), got {}; pass std.ravel() of an (L,) or (L, ny, nu) array",
+                    values.len(),
+                    s.len()
+                )));
+            }
+            // the same (k, i, j) → Frd layout as the values
+            let mut v = vec![0.0; s.len()];
+            for k in 0..l {
+                for i in 0..ny {
+                    for j in 0..nu {
+                        let x = s[(k * ny + i) * nu + j];
+                        v[k * ny * nu + j * ny + i] = x * x;
+                    }
+                }
+            }
+            Some(v)
+        }
+        None => None,
+    };
+    let ts = finite_positive("ts", ts)?;
+    let opts = MimoFreqOptions {
+        band_hz: band_of("band", band)?,
+        max_unstable_poles,
+        feedthrough,
+        max_iterations,
+        ..Default::default()
+    };
+    let fit = py
+        .detach(|| {
+            let frd = Frd::new_matrix(f, ny, nu, values, variance, Some(ts))?;
+            ss_frd_mimo(&frd, order, &opts)
+        })
+        .map_err(to_py)?;
+    Ok(PyModel {
+        ss: fit.model,
+        poly: None,
+        structure: "ss".into(),
+        params: Vec::new(),
+        std: None,
+        loss: fit.cost,
+        noise_variance: f64::NAN,
+        n_samples: fit.n_equations,
+    })
+}
+
+/// A state-space model of `u → y` from time data: subspace identification (order from the
+/// singular values unless given) refined by the prediction-error method
+/// (`ambid::fitting::identify_state_space`, as `ambid fit --structure ss`).
+#[pyfunction]
+#[pyo3(signature = (u, y, ts, *, order=None, feedthrough=false, max_iterations=100))]
+fn fit_ss(
+    py: Python<'_>,
+    u: &Bound<'_, PyAny>,
+    y: &Bound<'_, PyAny>,
+    ts: f64,
+    order: Option<usize>,
+    feedthrough: bool,
+    max_iterations: usize,
+) -> PyResult<PyModel> {
+    let (u, y) = (vec1("u", u)?, vec1("y", y)?);
+    let ts = finite_positive("ts", ts)?;
+    let opts = ambid::fitting::SsFitOptions {
+        order,
+        feedthrough,
+        max_iterations,
+        ..Default::default()
+    };
+    let id = py
+        .detach(|| ambid::fitting::identify_state_space(&u, &y, ts, &opts))
+        .map_err(to_py)?;
+    Ok(PyModel {
+        ss: id.model,
+        poly: None,
+        structure: "ss".into(),
+        params: Vec::new(),
+        std: None,
+        loss: f64::NAN,
+        noise_variance: f64::NAN,
+        n_samples: u.len(),
+    })
+}
+
+/// An excitation signal (`ambid_core::signal`, the computation of `ambid excite`): `kind` is
+/// `prbs`, `chirp`, `noise` or `multisine`, `params` a JSON object of the spec's fields (PRBS
+/// fields default to the seed paper's; the others must be given). Returns the samples, the
+/// period and the band report.
+#[pyfunction]
+fn excite<'py>(
+    py: Python<'py>,
+    kind: &str,
+    fs: f64,
+    params: &str,
+) -> PyResult<Bound<'py, PyDict>> {
+    use ambid_core::signal::{ExcitationSpec, PrbsSpec};
+    let fs = finite_positive("fs", fs)?;
+    let given: serde_json::Map<String, serde_json::Value> = serde_json::from_str(params)
+        .map_err(|e| UsageError::new_err(format!("the excitation parameters are not a JSON object: {e}")))?;
+    let mut obj = match kind {
+        "prbs" => match serde_json::to_value(PrbsSpec::default()) {
+            Ok(serde_json::Value::Object(m)) => m,
+            _ => serde_json::Map::new(),
+        },
+        "chirp" | "noise" | "multisine" => serde_json::Map::new(),
+        other => {
+            return Err(UsageError::new_err(format!(
+                "unknown excitation `{other}`: use \"prbs\", \"chirp\", \"noise\" or \"multisine\""
+            )))
+        }
+    };
+    for (k, v) in &given {
+        obj.insert(k.clone(), v.clone());
+    }
+    obj.insert("kind".into(), serde_json::Value::String(kind.into()));
+    let spec: ExcitationSpec = serde_json::from_value(serde_json::Value::Object(obj))
+        .map_err(|e| UsageError::new_err(format!("{kind}: {e}")))?;
+    // serde ignores unknown fields: a misspelt option would pass silently, so compare
+    let known = match serde_json::to_value(&spec) {
+        Ok(serde_json::Value::Object(m)) => m,
+        _ => serde_json::Map::new(),
+    };
+    if let Some(bad) = given.keys().find(|k| !known.contains_key(*k)) {
+        let mut names: Vec<&String> = known.keys().filter(|k| *k != "kind").collect();
+        names.sort();
+        return Err(UsageError::new_err(format!(
+            "unknown option `{bad}` for a {kind}; its options are {names:?}"
+        )));
+    }
+    let ts = 1.0 / fs;
+    let (exc, rep) = py
+        .detach(|| Ok::<_, ambid_core::Error>((spec.generate(ts)?, spec.report(ts)?)))
+        .map_err(to_py)?;
+    let d = PyDict::new(py);
+    d.set_item("values", exc.values.into_pyarray(py))?;
+    d.set_item("ts", exc.ts)?;
+    d.set_item("period_samples", exc.period_samples)?;
+    d.set_item("periods", exc.periods)?;
+    let r = PyDict::new(py);
+    r.set_item("f_min_hz", rep.f_min_hz)?;
+    r.set_item("f_max_hz", rep.f_max_hz)?;
+    r.set_item("resolution_hz", rep.resolution_hz)?;
+    r.set_item("duration_s", rep.duration_s)?;
+    r.set_item("n_samples", rep.n_samples)?;
+    r.set_item("rms", rep.rms)?;
+    r.set_item("peak", rep.peak)?;
+    r.set_item("crest_factor", rep.crest_factor)?;
+    d.set_item("report", r)?;
+    Ok(d)
+}
+
 /// Random test rig `seed`'s twin configuration as TOML (what `ambid config --rig-seed N`
 /// prints): a workflow's `[twin] config` file.
 #[pyfunction]
@@ -623,5 +838,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(truth, m)?)?;
     m.add_function(wrap_pyfunction!(run, m)?)?;
     m.add_function(wrap_pyfunction!(rig_config, m)?)?;
+    m.add_function(wrap_pyfunction!(excite, m)?)?;
+    m.add_function(wrap_pyfunction!(fit_frf, m)?)?;
+    m.add_function(wrap_pyfunction!(fit_ss, m)?)?;
     Ok(())
 }

@@ -242,3 +242,75 @@ def test_batch_on_dask_equals_serial(serial):
         skip_visibly("dask.distributed is not installed: the Dask batch check was not run")
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as lc, Client(lc) as c:
         _same(batch.identify(_records(), engine="dask", client=c), serial)
+
+
+# ---- excitation ------------------------------------------------------------------------------
+
+def test_prbs_equals_the_cli_and_is_an_m_sequence(cli, tmp_path):
+    cli("excite", "prbs", "--level", 10, "--i-sat", 2, "--out", tmp_path / "prbs.csv")
+    ref = read_csv(tmp_path / "prbs.csv")
+    e = ambid.excite("prbs", 20000.0, amplitude=0.2)
+    np.testing.assert_array_equal(e["values"], ref["r"])
+    assert e["period_samples"] == 5115 and e["periods"] == 20
+    rep = e["report"]
+    assert rep["crest_factor"] == 1.0 and abs(rep["resolution_hz"] - 20000.0 / 5115) < 1e-12
+    # independent: an m-sequence of order 10 has 1023 bits per period, 512 of one sign and
+    # 511 of the other, and a two-valued circular autocorrelation (1023 at lag 0, -1 elsewhere)
+    bits = np.sign(e["values"][: 5115 : 5])
+    assert len(bits) == 1023 and sorted([np.sum(bits > 0), np.sum(bits < 0)]) == [511, 512]
+    ac = np.array([np.dot(bits, np.roll(bits, k)) for k in range(1023)])
+    assert ac[0] == 1023 and np.all(ac[1:] == -1)
+
+
+def test_excitation_options_are_checked():
+    with pytest.raises(ambid.UsageError, match="unknown option `ordr`"):
+        ambid.excite("prbs", 20000.0, ordr=9)
+    with pytest.raises(ambid.UsageError, match="unknown excitation"):
+        ambid.excite("square", 20000.0)
+    with pytest.raises(ambid.UsageError, match="missing field"):
+        ambid.excite("chirp", 20000.0)
+    with pytest.raises(ambid.AmbidError):
+        ambid.excite("prbs", 20000.0, order=1)
+
+
+# ---- state-space fits -----------------------------------------------------------------------
+
+def _response(a, b, c, f, ts):
+    """C (zI - A)^{-1} B at f (numpy, the oracle): shape (L, ny, nu)."""
+    z = np.exp(2j * np.pi * f * ts)
+    return np.array([c @ np.linalg.solve(zk * np.eye(a.shape[0]) - a, b) for zk in z])
+
+
+def test_fit_frf_recovers_an_unstable_two_by_two_plant():
+    r, w = 0.995, 0.05
+    a = np.array([[1.01, 0, 0], [0, r * np.cos(w), r * np.sin(w)], [0, -r * np.sin(w), r * np.cos(w)]])
+    b = np.array([[1.0, 0.5], [0.0, 1.0], [1.0, -0.3]])
+    c = np.array([[1.0, 0.2, 0.0], [0.4, 0.0, 1.0]])
+    f = np.arange(1, 81) * 2.0
+    g = _response(a, b, c, f, 1e-3)
+    m = ambid.fit_frf(f, np.ascontiguousarray(g), 1e-3, 3)
+    assert rel(m.freq_response(f), g) < 1e-8
+    assert np.sum(np.abs(m.poles()) >= 1.0) == 1
+    # the 1x1 case of the same function
+    m1 = ambid.fit_frf(f, np.ascontiguousarray(g[:, 0, 0]), 1e-3, 3)
+    assert rel(m1.freq_response(f)[:, 0, 0], g[:, 0, 0]) < 1e-8
+    with pytest.raises(ambid.InputError, match="lines"):
+        ambid.fit_frf(f[:10], np.ascontiguousarray(g), 1e-3, 3)
+    with pytest.raises(ambid.InputError, match="complex128"):
+        ambid.fit_frf(f, np.abs(g), 1e-3, 3)
+
+
+def test_fit_ss_recovers_a_noise_free_system():
+    rng = np.random.default_rng(11)
+    a = np.array([[1.6, -0.8], [1.0, 0.0]])
+    b = np.array([[1.0], [0.0]])
+    c = np.array([[0.3, 0.2]])
+    u = rng.standard_normal(3000)
+    x = np.zeros(2)
+    y = np.zeros_like(u)
+    for k in range(len(u)):
+        y[k] = (c @ x)[0]
+        x = a @ x + b[:, 0] * u[k]
+    m = ambid.fit_ss(u, y, 1.0, order=2)
+    f = np.linspace(0.01, 0.45, 40)
+    assert rel(m.freq_response(f), _response(a, b, c, f, 1.0)) < 1e-6

@@ -31,6 +31,8 @@ from ._native import (
     Model,
     OutputError,
     UsageError,
+    fit_frf,
+    fit_ss,
     frf,
     simulate,
     truth,
@@ -44,9 +46,12 @@ __all__ = [
     "OutputError",
     "Model",
     "Outcome",
+    "excite",
     "frf",
     "fit_arx",
     "fit_pem",
+    "fit_ss",
+    "fit_frf",
     "simulate",
     "truth",
     "run",
@@ -81,6 +86,21 @@ def fit_pem(u, y, ts: float, structure: str, **orders: int) -> Model:
     """Prediction-error model of ``u -> y``: ``structure`` is ``"armax"``, ``"oe"`` or
     ``"bj"``; the orders as keywords (``na, nb, nc, nd, nf, nk``) and ``max_iterations``."""
     return _native.fit_pem(u, y, ts, structure, **orders)
+
+
+def excite(kind: str, fs: float = 20000.0, **params) -> dict:
+    """An excitation signal (``ambid excite``): ``kind`` is ``"prbs"``, ``"chirp"``,
+    ``"noise"`` or ``"multisine"``; ``params`` are the Rust spec's fields (``PrbsSpec``:
+    ``order, samples_per_bit, periods, amplitude, offset``, defaulting to the seed paper's
+    n = 10, Nb = 5, 20 periods, amplitude 1). Returns ``values``, ``ts``, ``period_samples``,
+    ``periods`` and the band ``report`` (band, resolution, duration, RMS, peak, crest factor).
+
+    >>> import ambid
+    >>> e = ambid.excite("prbs", 20000.0, order=10, amplitude=0.2)
+    >>> e["period_samples"], e["report"]["crest_factor"]
+    (5115, 1.0)
+    """
+    return _native.excite(kind, fs, json.dumps(params))
 
 
 class Outcome:

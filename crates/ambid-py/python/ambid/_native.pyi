@@ -99,3 +99,25 @@ def simulate(
 def truth(f_hz: F64, *, rig_seed: Optional[int] = None) -> dict[str, Any]: ...
 def rig_config(seed: int) -> str: ...
 def run(config: str = "", *, base: "Optional[str | PathLike[str]]" = None) -> Outcome: ...
+def excite(kind: str, fs: float, params: str) -> dict[str, Any]: ...
+def fit_frf(
+    f_hz: F64,
+    g: C128,
+    ts: float,
+    order: int,
+    *,
+    std: Optional[F64] = None,
+    band: Optional[Tuple[float, float]] = None,
+    max_unstable_poles: Optional[int] = None,
+    feedthrough: bool = False,
+    max_iterations: int = 100,
+) -> Model: ...
+def fit_ss(
+    u: F64,
+    y: F64,
+    ts: float,
+    *,
+    order: Optional[int] = None,
+    feedthrough: bool = False,
+    max_iterations: int = 100,
+) -> Model: ...
