@@ -78,8 +78,10 @@ fn to_py(e: impl Into<AppError>) -> PyErr {
     }
 }
 
-/// A 1-D, C-contiguous float64 array as an owned vector, or `InputError` naming `name`.
-fn vec1(name: &str, obj: &Bound<'_, PyAny>) -> PyResult<Vec<f64>> {
+/// A 1-D, C-contiguous float64 array borrowed read-only (no copy), or `InputError` naming
+/// `name`. The data are read while the GIL is released: another Python thread must not write
+/// to the array during the call (as with any numpy function that releases the GIL).
+fn ro1<'py>(name: &str, obj: &Bound<'py, PyAny>) -> PyResult<numpy::PyReadonlyArrayDyn<'py, f64>> {
     let Ok(arr) = obj.cast::<numpy::PyArrayDyn<f64>>() else {
         let what = match obj.cast::<numpy::PyUntypedArray>() {
             Ok(a) => format!("a numpy array of dtype {}", a.dtype()),
@@ -95,13 +97,30 @@ fn vec1(name: &str, obj: &Bound<'_, PyAny>) -> PyResult<Vec<f64>> {
             arr.shape()
         )));
     }
-    let ro = arr.readonly();
-    let slice = ro.as_slice().map_err(|_| {
+    let ro = arr.try_readonly().map_err(|e| {
+        InputError::new_err(format!("`{name}` cannot be borrowed for reading ({e})"))
+    })?;
+    if !ro.is_c_contiguous() {
+        return Err(InputError::new_err(format!(
+            "`{name}` is not C-contiguous (a strided view); pass np.ascontiguousarray({name})"
+        )));
+    }
+    Ok(ro)
+}
+
+/// The samples of an array [`ro1`] accepted.
+fn samples<'a>(name: &str, a: &'a numpy::PyReadonlyArrayDyn<'_, f64>) -> PyResult<&'a [f64]> {
+    a.as_slice().map_err(|_| {
         InputError::new_err(format!(
             "`{name}` is not C-contiguous (a strided view); pass np.ascontiguousarray({name})"
         ))
-    })?;
-    Ok(slice.to_vec())
+    })
+}
+
+/// A 1-D, C-contiguous float64 array as an owned vector (small arguments: frequencies).
+fn vec1(name: &str, obj: &Bound<'_, PyAny>) -> PyResult<Vec<f64>> {
+    let ro = ro1(name, obj)?;
+    Ok(samples(name, &ro)?.to_vec())
 }
 
 fn finite_positive(name: &str, v: f64) -> PyResult<f64> {
@@ -149,9 +168,15 @@ fn frf<'py>(
     noise: Option<&Bound<'py, PyAny>>,
     current: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let (r, u, y) = (vec1("r", r)?, vec1("u", u)?, vec1("y", y)?);
-    let noise = noise.map(|n| vec1("noise", n)).transpose()?;
-    let current = current.map(|c| vec1("current", c)).transpose()?;
+    let (r, u, y) = (ro1("r", r)?, ro1("u", u)?, ro1("y", y)?);
+    let noise = noise.map(|n| ro1("noise", n)).transpose()?;
+    let current = current.map(|c| ro1("current", c)).transpose()?;
+    let (r, u, y) = (samples("r", &r)?, samples("u", &u)?, samples("y", &y)?);
+    let noise = noise.as_ref().map(|n| samples("noise", n)).transpose()?;
+    let current = current
+        .as_ref()
+        .map(|c| samples("current", c))
+        .transpose()?;
     let fs = finite_positive("fs", fs)?;
     let mut settings = match (period_samples, nperseg) {
         (Some(_), Some(_)) => {
@@ -170,13 +195,13 @@ fn frf<'py>(
     let out = py
         .detach(|| {
             let rec = Record {
-                r: &r,
-                u: &u,
-                y: &y,
-                i: current.as_deref(),
+                r,
+                u,
+                y,
+                i: current,
                 fs,
             };
-            analyze(&rec, &settings, noise.as_deref())
+            analyze(&rec, &settings, noise)
         })
         .map_err(to_py)?;
     let d = PyDict::new(py);
@@ -389,11 +414,12 @@ fn fit_arx<'py>(
     nb: usize,
     nk: usize,
 ) -> PyResult<PyModel> {
-    let (u, y) = (vec1("u", u)?, vec1("y", y)?);
+    let (u, y) = (ro1("u", u)?, ro1("y", y)?);
+    let (u, y) = (samples("u", &u)?, samples("y", &y)?);
     let ts = finite_positive("ts", ts)?;
     let f = py
         .detach(|| {
-            let f = arx(&y, &[&u], &ArxOrders::siso(na, nb, nk), ts)?;
+            let f = arx(y, &[u], &ArxOrders::siso(na, nb, nk), ts)?;
             Ok::<_, ambid_core::Error>(ambid_core::estimate::Fitted {
                 model: f.model.to_poly(0)?,
                 params: f.params,
@@ -425,7 +451,8 @@ fn fit_pem<'py>(
     nk: usize,
     max_iterations: usize,
 ) -> PyResult<PyModel> {
-    let (u, y) = (vec1("u", u)?, vec1("y", y)?);
+    let (u, y) = (ro1("u", u)?, ro1("y", y)?);
+    let (u, y) = (samples("u", &u)?, samples("y", &y)?);
     let ts = finite_positive("ts", ts)?;
     let (s, orders) = match structure {
         "armax" => (Structure::Armax, Orders::armax(na, nb, nc, nk)),
@@ -441,7 +468,7 @@ fn fit_pem<'py>(
         .with_max_iterations(max_iterations)
         .map_err(to_py)?;
     let (f, _) = py
-        .detach(|| pem(&y, &u, s, &orders, ts, &opts))
+        .detach(|| pem(y, u, s, &orders, ts, &opts))
         .map_err(to_py)?;
     poly_model(f, structure)
 }
@@ -592,7 +619,10 @@ fn run(py: Python<'_>, config: &str, base: Option<PathBuf>) -> PyResult<PyOutcom
 
 /// A complex128 array of shape `(L,)` (one entry) or `(L, ny, nu)` as `(values in the Frd's
 /// column-major layout per line, ny, nu)`, or `InputError` naming `name`.
-fn frd_values(name: &str, obj: &Bound<'_, PyAny>) -> PyResult<(Vec<Complex64>, usize, usize, usize)> {
+fn frd_values(
+    name: &str,
+    obj: &Bound<'_, PyAny>,
+) -> PyResult<(Vec<Complex64>, usize, usize, usize)> {
     let Ok(arr) = obj.cast::<numpy::PyArrayDyn<Complex64>>() else {
         return Err(InputError::new_err(format!(
             "`{name}` must be a complex128 numpy array of shape (L,) or (L, ny, nu); convert it with np.ascontiguousarray({name}, dtype=complex)"
@@ -601,7 +631,9 @@ fn frd_values(name: &str, obj: &Bound<'_, PyAny>) -> PyResult<(Vec<Complex64>, u
     let shape = arr.shape().to_vec();
     let ro = arr.readonly();
     let flat = ro.as_slice().map_err(|_| {
-        InputError::new_err(format!("`{name}` is not C-contiguous; pass np.ascontiguousarray({name})"))
+        InputError::new_err(format!(
+            "`{name}` is not C-contiguous; pass np.ascontiguousarray({name})"
+        ))
     })?;
     match shape.as_slice() {
         [l] => Ok((flat.to_vec(), *l, 1, 1)),
@@ -715,7 +747,8 @@ fn fit_ss(
     feedthrough: bool,
     max_iterations: usize,
 ) -> PyResult<PyModel> {
-    let (u, y) = (vec1("u", u)?, vec1("y", y)?);
+    let (u, y) = (ro1("u", u)?, ro1("y", y)?);
+    let (u, y) = (samples("u", &u)?, samples("y", &y)?);
     let ts = finite_positive("ts", ts)?;
     let opts = ambid::fitting::SsFitOptions {
         order,
@@ -724,7 +757,7 @@ fn fit_ss(
         ..Default::default()
     };
     let id = py
-        .detach(|| ambid::fitting::identify_state_space(&u, &y, ts, &opts))
+        .detach(|| ambid::fitting::identify_state_space(u, y, ts, &opts))
         .map_err(to_py)?;
     Ok(PyModel {
         ss: id.model,
@@ -743,16 +776,15 @@ fn fit_ss(
 /// fields default to the seed paper's; the others must be given). Returns the samples, the
 /// period and the band report.
 #[pyfunction]
-fn excite<'py>(
-    py: Python<'py>,
-    kind: &str,
-    fs: f64,
-    params: &str,
-) -> PyResult<Bound<'py, PyDict>> {
+fn excite<'py>(py: Python<'py>, kind: &str, fs: f64, params: &str) -> PyResult<Bound<'py, PyDict>> {
     use ambid_core::signal::{ExcitationSpec, PrbsSpec};
     let fs = finite_positive("fs", fs)?;
-    let given: serde_json::Map<String, serde_json::Value> = serde_json::from_str(params)
-        .map_err(|e| UsageError::new_err(format!("the excitation parameters are not a JSON object: {e}")))?;
+    let given: serde_json::Map<String, serde_json::Value> =
+        serde_json::from_str(params).map_err(|e| {
+            UsageError::new_err(format!(
+                "the excitation parameters are not a JSON object: {e}"
+            ))
+        })?;
     let mut obj = match kind {
         "prbs" => match serde_json::to_value(PrbsSpec::default()) {
             Ok(serde_json::Value::Object(m)) => m,

@@ -190,6 +190,14 @@ def _job(args: tuple) -> tuple:
     return run_record(*args)
 
 
+def _job_in_worker(args: tuple) -> tuple:
+    # in a pool, the records are the parallelism: one thread per job, as Dask's workers set
+    # OMP/MKL/OpenBLAS to one thread (the Rust thread pool reads this at its first use in the
+    # worker process; a value the user set is kept)
+    os.environ.setdefault("RAYON_NUM_THREADS", "1")
+    return run_record(*args)
+
+
 def identify(
     records: Iterable[Record],
     *,
@@ -228,13 +236,13 @@ def identify(
         # the child's pool without its threads (the child would wait for them forever)
         ctx = multiprocessing.get_context("spawn")
         with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as ex:
-            outs = list(ex.map(_job, jobs))
+            outs = list(ex.map(_job_in_worker, jobs))
     elif engine == "dask":
         if client is None:
             from . import UsageError
 
             raise UsageError('engine="dask" needs client=dask.distributed.Client(...)')
-        futures = client.map(_job, jobs, pure=False)
+        futures = client.map(_job_in_worker, jobs, pure=False)
         outs = client.gather(futures)
     else:
         from . import UsageError
