@@ -13,15 +13,14 @@
 //!
 //! | library error class | Python exception |
 //! |---|---|
-//! | configuration / usage (exit 2) | `ambid.UsageError` |
-//! | input data (exit 3) | `ambid.InputError` |
-//! | computation (exit 4) | `ambid.ComputationError` |
-//! | output (exit 5) | `ambid.OutputError` |
+//! | configuration / usage (exit 2) | `ambid.UsageError` (also a `ValueError`) |
+//! | input data (exit 3) | `ambid.InputError` (also a `ValueError`) |
+//! | computation (exit 4) | `ambid.ComputationError` (also a `RuntimeError`) |
+//! | output (exit 5) | `ambid.OutputError` (also an `OSError`) |
 //! | anything else | `ambid.AmbidError` |
 
 use ambid::analysis::{analyze, FrfSettings, Record};
 use ambid::error::{Error as AppError, FailureClass};
-use ambid_core::estimate::arx::{arx, ArxOrders};
 use ambid_core::estimate::pem::{pem, Orders, PemOptions};
 use ambid_core::lti::{Frd, PolyModel, StateSpace, Structure};
 use num_complex::Complex64;
@@ -39,30 +38,69 @@ create_exception!(
     PyException,
     "Base of every ambid error."
 );
-create_exception!(
-    _native,
-    UsageError,
-    AmbidError,
-    "A setting or option is wrong (the CLI's exit code 2)."
-);
-create_exception!(
-    _native,
-    InputError,
-    AmbidError,
-    "The input data are wrong: type, shape, NaN, length, file (the CLI's exit code 3)."
-);
-create_exception!(
-    _native,
-    ComputationError,
-    AmbidError,
-    "A computation failed on valid input, e.g. an unstable or rank-deficient fit (exit code 4)."
-);
-create_exception!(
-    _native,
-    OutputError,
-    AmbidError,
-    "An output could not be written (the CLI's exit code 5)."
-);
+
+/// The four error classes below `AmbidError`; each is also the built-in exception a Python user
+/// would catch for it (`ValueError`, `ValueError`, `RuntimeError`, `OSError`).
+#[derive(Clone, Copy)]
+enum Kind {
+    Usage,
+    Input,
+    Computation,
+    Output,
+}
+
+const KINDS: [(&str, &str, &str); 4] = [
+    (
+        "UsageError",
+        "ValueError",
+        "A setting or option is wrong (the CLI's exit code 2).",
+    ),
+    (
+        "InputError",
+        "ValueError",
+        "The input data are wrong: type, shape, NaN, length, file (the CLI's exit code 3).",
+    ),
+    (
+        "ComputationError",
+        "RuntimeError",
+        "A computation failed on valid input, e.g. an unstable or rank-deficient fit (exit code 4).",
+    ),
+    (
+        "OutputError",
+        "OSError",
+        "An output could not be written (the CLI's exit code 5).",
+    ),
+];
+
+/// The classes of [`KINDS`], made once at import: `type(name, (AmbidError, builtin), {...})`.
+static TYPES: pyo3::sync::PyOnceLock<Vec<Py<pyo3::types::PyType>>> = pyo3::sync::PyOnceLock::new();
+
+fn make_types(py: Python<'_>) -> PyResult<Vec<Py<pyo3::types::PyType>>> {
+    let builtins = py.import("builtins")?;
+    let ty = builtins.getattr("type")?;
+    KINDS
+        .iter()
+        .map(|(name, base, doc)| {
+            let d = PyDict::new(py);
+            d.set_item("__doc__", *doc)?;
+            d.set_item("__module__", "ambid")?;
+            let bases = (py.get_type::<AmbidError>(), builtins.getattr(*base)?);
+            Ok(ty
+                .call1((*name, bases, d))?
+                .cast_into::<pyo3::types::PyType>()?
+                .unbind())
+        })
+        .collect()
+}
+
+/// The exception of `kind` with `msg`.
+fn err(kind: Kind, msg: impl Into<String>) -> PyErr {
+    let msg = msg.into();
+    Python::attach(|py| match TYPES.get(py) {
+        Some(t) => PyErr::from_type(t[kind as usize].bind(py).clone(), msg),
+        None => AmbidError::new_err(msg),
+    })
+}
 
 /// The Python exception of a library error: its class decides the type, the message is the
 /// library's (the CLI prints the same text).
@@ -70,10 +108,10 @@ fn to_py(e: impl Into<AppError>) -> PyErr {
     let e: AppError = e.into();
     let msg = ambid::workflow::chain_message(&e);
     match e.class() {
-        Some(FailureClass::Config) => UsageError::new_err(msg),
-        Some(FailureClass::Input) => InputError::new_err(msg),
-        Some(FailureClass::Computation) => ComputationError::new_err(msg),
-        Some(FailureClass::Output) => OutputError::new_err(msg),
+        Some(FailureClass::Config) => err(Kind::Usage, msg),
+        Some(FailureClass::Input) => err(Kind::Input, msg),
+        Some(FailureClass::Computation) => err(Kind::Computation, msg),
+        Some(FailureClass::Output) => err(Kind::Output, msg),
         None => AmbidError::new_err(msg),
     }
 }
@@ -87,23 +125,29 @@ fn ro1<'py>(name: &str, obj: &Bound<'py, PyAny>) -> PyResult<numpy::PyReadonlyAr
             Ok(a) => format!("a numpy array of dtype {}", a.dtype()),
             Err(_) => format!("a {}", obj.get_type().name()?),
         };
-        return Err(InputError::new_err(format!(
+        return Err(err(Kind::Input, format!(
             "`{name}` must be a 1-D float64 numpy array, got {what}; convert it with np.ascontiguousarray({name}, dtype=float)"
         )));
     };
     if arr.ndim() != 1 {
-        return Err(InputError::new_err(format!(
+        return Err(err(Kind::Input, format!(
             "`{name}` must be 1-D, got an array of shape {:?}; pass one channel (e.g. {name}[:, k]) as np.ascontiguousarray",
             arr.shape()
         )));
     }
     let ro = arr.try_readonly().map_err(|e| {
-        InputError::new_err(format!("`{name}` cannot be borrowed for reading ({e})"))
+        err(
+            Kind::Input,
+            format!("`{name}` cannot be borrowed for reading ({e})"),
+        )
     })?;
     if !ro.is_c_contiguous() {
-        return Err(InputError::new_err(format!(
-            "`{name}` is not C-contiguous (a strided view); pass np.ascontiguousarray({name})"
-        )));
+        return Err(err(
+            Kind::Input,
+            format!(
+                "`{name}` is not C-contiguous (a strided view); pass np.ascontiguousarray({name})"
+            ),
+        ));
     }
     Ok(ro)
 }
@@ -111,9 +155,12 @@ fn ro1<'py>(name: &str, obj: &Bound<'py, PyAny>) -> PyResult<numpy::PyReadonlyAr
 /// The samples of an array [`ro1`] accepted.
 fn samples<'a>(name: &str, a: &'a numpy::PyReadonlyArrayDyn<'_, f64>) -> PyResult<&'a [f64]> {
     a.as_slice().map_err(|_| {
-        InputError::new_err(format!(
-            "`{name}` is not C-contiguous (a strided view); pass np.ascontiguousarray({name})"
-        ))
+        err(
+            Kind::Input,
+            format!(
+                "`{name}` is not C-contiguous (a strided view); pass np.ascontiguousarray({name})"
+            ),
+        )
     })
 }
 
@@ -127,19 +174,21 @@ fn finite_positive(name: &str, v: f64) -> PyResult<f64> {
     if v.is_finite() && v > 0.0 {
         Ok(v)
     } else {
-        Err(UsageError::new_err(format!(
-            "`{name}` must be a finite positive number, got {v}"
-        )))
+        Err(err(
+            Kind::Usage,
+            format!("`{name}` must be a finite positive number, got {v}"),
+        ))
     }
 }
 
 fn band_of(name: &str, b: Option<(f64, f64)>) -> PyResult<Option<(f64, f64)>> {
     match b {
-        Some((lo, hi)) if !(lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo < hi) => {
-            Err(UsageError::new_err(format!(
+        Some((lo, hi)) if !(lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo < hi) => Err(err(
+            Kind::Usage,
+            format!(
                 "`{name}` must be (f_min, f_max) in Hz with 0 <= f_min < f_max, got ({lo}, {hi})"
-            )))
-        }
+            ),
+        )),
         b => Ok(b),
     }
 }
@@ -180,7 +229,8 @@ fn frf<'py>(
     let fs = finite_positive("fs", fs)?;
     let mut settings = match (period_samples, nperseg) {
         (Some(_), Some(_)) => {
-            return Err(UsageError::new_err(
+            return Err(err(
+                Kind::Usage,
                 "give period_samples (period averaging) or nperseg (Welch), not both",
             ))
         }
@@ -418,17 +468,7 @@ fn fit_arx<'py>(
     let (u, y) = (samples("u", &u)?, samples("y", &y)?);
     let ts = finite_positive("ts", ts)?;
     let f = py
-        .detach(|| {
-            let f = arx(y, &[u], &ArxOrders::siso(na, nb, nk), ts)?;
-            Ok::<_, ambid_core::Error>(ambid_core::estimate::Fitted {
-                model: f.model.to_poly(0)?,
-                params: f.params,
-                covariance: f.covariance,
-                loss: f.loss,
-                noise_variance: f.noise_variance,
-                n_samples: f.n_samples,
-            })
-        })
+        .detach(|| ambid::fitting::arx_fitted(y, u, na, nb, nk, ts))
         .map_err(to_py)?;
     poly_model(f, if na == 0 { "fir" } else { "arx" })
 }
@@ -459,7 +499,7 @@ fn fit_pem<'py>(
         "oe" => (Structure::Oe, Orders::oe(nb, nf, nk)),
         "bj" => (Structure::Bj, Orders::bj(nb, nc, nd, nf, nk)),
         other => {
-            return Err(UsageError::new_err(format!(
+            return Err(err(Kind::Usage, format!(
                 "unknown structure `{other}`: fit_pem takes \"armax\", \"oe\" or \"bj\" (fit_arx for ARX/FIR, fit_ss for state space)"
             )))
         }
@@ -493,9 +533,10 @@ fn simulate<'py>(
         "linear" => ambid_twin::Mode::Linear,
         "nonlinear" => ambid_twin::Mode::Nonlinear,
         other => {
-            return Err(UsageError::new_err(format!(
-                "unknown mode `{other}`: use \"linear\" or \"nonlinear\""
-            )))
+            return Err(err(
+                Kind::Usage,
+                format!("unknown mode `{other}`: use \"linear\" or \"nonlinear\""),
+            ))
         }
     };
     let twin = match rig_seed {
@@ -624,16 +665,17 @@ fn frd_values(
     obj: &Bound<'_, PyAny>,
 ) -> PyResult<(Vec<Complex64>, usize, usize, usize)> {
     let Ok(arr) = obj.cast::<numpy::PyArrayDyn<Complex64>>() else {
-        return Err(InputError::new_err(format!(
+        return Err(err(Kind::Input, format!(
             "`{name}` must be a complex128 numpy array of shape (L,) or (L, ny, nu); convert it with np.ascontiguousarray({name}, dtype=complex)"
         )));
     };
     let shape = arr.shape().to_vec();
     let ro = arr.readonly();
     let flat = ro.as_slice().map_err(|_| {
-        InputError::new_err(format!(
-            "`{name}` is not C-contiguous; pass np.ascontiguousarray({name})"
-        ))
+        err(
+            Kind::Input,
+            format!("`{name}` is not C-contiguous; pass np.ascontiguousarray({name})"),
+        )
     })?;
     match shape.as_slice() {
         [l] => Ok((flat.to_vec(), *l, 1, 1)),
@@ -650,9 +692,10 @@ fn frd_values(
             }
             Ok((v, l, ny, nu))
         }
-        other => Err(InputError::new_err(format!(
-            "`{name}` must have shape (L,) or (L, ny, nu), got {other:?}"
-        ))),
+        other => Err(err(
+            Kind::Input,
+            format!("`{name}` must have shape (L,) or (L, ny, nu), got {other:?}"),
+        )),
     }
 }
 
@@ -678,16 +721,19 @@ fn fit_frf(
     let f = vec1("f_hz", f_hz)?;
     let (values, l, ny, nu) = frd_values("g", g)?;
     if l != f.len() {
-        return Err(InputError::new_err(format!(
-            "`g` has {l} lines but `f_hz` has {}; give one response per frequency",
-            f.len()
-        )));
+        return Err(err(
+            Kind::Input,
+            format!(
+                "`g` has {l} lines but `f_hz` has {}; give one response per frequency",
+                f.len()
+            ),
+        ));
     }
     let variance = match std {
         Some(s) => {
             let s = vec1("std", s)?;
             if s.len() != values.len() {
-                return Err(InputError::new_err(format!(
+                return Err(err(Kind::Input, format!(
                     "`std` must be flat with one value per entry and line ({}), got {}; pass std.ravel() of an (L,) or (L, ny, nu) array",
                     values.len(),
                     s.len()
@@ -781,9 +827,10 @@ fn excite<'py>(py: Python<'py>, kind: &str, fs: f64, params: &str) -> PyResult<B
     let fs = finite_positive("fs", fs)?;
     let given: serde_json::Map<String, serde_json::Value> =
         serde_json::from_str(params).map_err(|e| {
-            UsageError::new_err(format!(
-                "the excitation parameters are not a JSON object: {e}"
-            ))
+            err(
+                Kind::Usage,
+                format!("the excitation parameters are not a JSON object: {e}"),
+            )
         })?;
     let mut obj = match kind {
         "prbs" => match serde_json::to_value(PrbsSpec::default()) {
@@ -792,9 +839,12 @@ fn excite<'py>(py: Python<'py>, kind: &str, fs: f64, params: &str) -> PyResult<B
         },
         "chirp" | "noise" | "multisine" => serde_json::Map::new(),
         other => {
-            return Err(UsageError::new_err(format!(
+            return Err(err(
+                Kind::Usage,
+                format!(
                 "unknown excitation `{other}`: use \"prbs\", \"chirp\", \"noise\" or \"multisine\""
-            )))
+            ),
+            ))
         }
     };
     for (k, v) in &given {
@@ -802,7 +852,7 @@ fn excite<'py>(py: Python<'py>, kind: &str, fs: f64, params: &str) -> PyResult<B
     }
     obj.insert("kind".into(), serde_json::Value::String(kind.into()));
     let spec: ExcitationSpec = serde_json::from_value(serde_json::Value::Object(obj))
-        .map_err(|e| UsageError::new_err(format!("{kind}: {e}")))?;
+        .map_err(|e| err(Kind::Usage, format!("{kind}: {e}")))?;
     // serde ignores unknown fields: a misspelt option would pass silently, so compare
     let known = match serde_json::to_value(&spec) {
         Ok(serde_json::Value::Object(m)) => m,
@@ -811,9 +861,10 @@ fn excite<'py>(py: Python<'py>, kind: &str, fs: f64, params: &str) -> PyResult<B
     if let Some(bad) = given.keys().find(|k| !known.contains_key(*k)) {
         let mut names: Vec<&String> = known.keys().filter(|k| *k != "kind").collect();
         names.sort();
-        return Err(UsageError::new_err(format!(
-            "unknown option `{bad}` for a {kind}; its options are {names:?}"
-        )));
+        return Err(err(
+            Kind::Usage,
+            format!("unknown option `{bad}` for a {kind}; its options are {names:?}"),
+        ));
     }
     let ts = 1.0 / fs;
     let (exc, rep) = py
@@ -856,10 +907,10 @@ fn version() -> &'static str {
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
     m.add("AmbidError", py.get_type::<AmbidError>())?;
-    m.add("UsageError", py.get_type::<UsageError>())?;
-    m.add("InputError", py.get_type::<InputError>())?;
-    m.add("ComputationError", py.get_type::<ComputationError>())?;
-    m.add("OutputError", py.get_type::<OutputError>())?;
+    let types = TYPES.get_or_try_init(py, || make_types(py))?;
+    for ((name, _, _), t) in KINDS.iter().zip(types) {
+        m.add(*name, t.bind(py))?;
+    }
     m.add_class::<PyModel>()?;
     m.add_class::<PyOutcome>()?;
     m.add_function(wrap_pyfunction!(version, m)?)?;

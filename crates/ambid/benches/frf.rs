@@ -120,24 +120,20 @@ fn nineteen_period_ffts(b: Bencher) {
 /// overhead bar compares the two, docs/benchmarks.md).
 #[divan::bench]
 fn analysis_periodic_unscreened(b: Bencher) {
-    let rec = seed_record();
-    let mut settings = ambid::analysis::FrfSettings::periodic(N, 1);
-    settings.screen = false;
-    let r = ambid::analysis::Record {
-        r: &rec.r,
-        u: &rec.u,
-        y: &rec.y,
-        i: None,
-        fs: 20_000.0,
-    };
-    b.bench_local(|| black_box(ambid::analysis::analyze(&r, &settings, None).expect("frf")));
+    analysis_periodic(b, false);
 }
 
 /// The same with the default screening (Hampel filter on `y` and `u − r`): `ambid.frf(...)`.
 #[divan::bench]
 fn analysis_periodic_screened(b: Bencher) {
+    analysis_periodic(b, true);
+}
+
+/// `ambid::analysis::analyze` with period averaging on the seed record, screening on or off.
+fn analysis_periodic(b: Bencher, screen: bool) {
     let rec = seed_record();
-    let settings = ambid::analysis::FrfSettings::periodic(N, 1);
+    let mut settings = ambid::analysis::FrfSettings::periodic(N, 1);
+    settings.screen = screen;
     let r = ambid::analysis::Record {
         r: &rec.r,
         u: &rec.u,

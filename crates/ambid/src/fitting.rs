@@ -3,12 +3,51 @@
 //! model scaled back) and the fit figures of a polynomial model.
 
 use crate::error::{Context, Error, Result};
+use ambid_core::estimate::arx::{arx, ArxOrders};
 use ambid_core::estimate::pem::Focus;
 use ambid_core::estimate::ss_pem::{refine_ss, SsPemOptions};
 use ambid_core::estimate::subspace::{n4sid_detailed, HorizonCriterion, SubspaceOptions};
+use ambid_core::estimate::Fitted;
 use ambid_core::lti::{PolyModel, StateSpace};
 use ambid_core::validate::predict::{fit_from, poly_one_step, poly_simulate, InitialState};
 use faer::Mat;
+
+/// The least-squares ARX(na, nb, nk) model of `u → y` as a polynomial [`Fitted`] (the FIR and
+/// ARX structures of `ambid fit`, the model it writes when an ARMAX/OE/BJ estimate fails, and
+/// the Python package's `fit_arx`).
+///
+/// # Errors
+/// As [`ambid_core::estimate::arx::arx`].
+///
+/// # Example
+/// ```
+/// // y(k) = 0.5 y(k-1) + 2 u(k-1), noise free: recovered exactly
+/// let u: Vec<f64> = (0..200).map(|k| ((k * 7919) % 13) as f64 - 6.0).collect();
+/// let mut y = vec![0.0; 200];
+/// for k in 1..200 {
+///     y[k] = 0.5 * y[k - 1] + 2.0 * u[k - 1];
+/// }
+/// let f = ambid::fitting::arx_fitted(&y, &u, 1, 1, 1, 1.0).unwrap();
+/// assert!((f.params[0] + 0.5).abs() < 1e-12 && (f.params[1] - 2.0).abs() < 1e-12);
+/// ```
+pub fn arx_fitted(
+    y: &[f64],
+    u: &[f64],
+    na: usize,
+    nb: usize,
+    nk: usize,
+    ts: f64,
+) -> ambid_core::Result<Fitted<PolyModel>> {
+    let f = arx(y, &[u], &ArxOrders::siso(na, nb, nk), ts)?;
+    Ok(Fitted {
+        model: f.model.to_poly(0)?,
+        params: f.params,
+        covariance: f.covariance,
+        loss: f.loss,
+        noise_variance: f.noise_variance,
+        n_samples: f.n_samples,
+    })
+}
 
 /// What the prediction-error refinement did.
 #[derive(Debug, Clone)]

@@ -13,9 +13,10 @@ Quick start::
     out = ambid.run()                                 # the whole workflow on the twin
     out.write("report")                               # report.html, summary.json, models/
 
-Errors are typed: :class:`UsageError` (a setting), :class:`InputError` (the data: dtype, shape,
-NaN, lengths), :class:`ComputationError` (a fit that failed), :class:`OutputError` (a write),
-all subclasses of :class:`AmbidError`; each message says what is wrong and what to do.
+Errors are typed: :class:`UsageError` (a setting; a ``ValueError``), :class:`InputError` (the
+data: dtype, shape, NaN, lengths; a ``ValueError``), :class:`ComputationError` (a fit that
+failed; a ``RuntimeError``), :class:`OutputError` (a write; an ``OSError``), all subclasses of
+:class:`AmbidError`; each message says what is wrong and what to do.
 """
 
 from __future__ import annotations

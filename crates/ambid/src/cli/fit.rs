@@ -9,7 +9,6 @@ use ambid::io::output::write_file;
 use ambid::io::read_controller;
 use ambid::io::OutputSet;
 use ambid::stage::{frf_candidates, unstable_pole_rule, FrfCandidates};
-use ambid_core::estimate::arx::{arx, ArxOrders};
 use ambid_core::estimate::pem::{self, Focus, Orders, PemOptions};
 use ambid_core::estimate::Fitted;
 use ambid_core::lti::{PolyModel, Structure};
@@ -189,27 +188,6 @@ fn rms_error(fit: Option<f64>, y: &[f64], skip: usize) -> Option<f64> {
     fit.map(|f| (1.0 - f / 100.0) * sd)
 }
 
-/// The least-squares ARX(na, nb, nk) model of `u → y` as a polynomial [`Fitted`] (the FIR and
-/// ARX structures, and the model written when an ARMAX/OE/BJ estimate fails).
-fn arx_fitted(
-    y: &[f64],
-    u: &[f64],
-    na: usize,
-    nb: usize,
-    nk: usize,
-    ts: f64,
-) -> Result<Fitted<PolyModel>> {
-    let f = arx(y, &[u], &ArxOrders::siso(na, nb, nk), ts)?;
-    Ok(Fitted {
-        model: f.model.to_poly(0)?,
-        params: f.params,
-        covariance: f.covariance,
-        loss: f.loss,
-        noise_variance: f.noise_variance,
-        n_samples: f.n_samples,
-    })
-}
-
 /// The names of a polynomial model's parameters in the order of θ, as MATLAB's `idpoly`
 /// displays them: `a1 … a_na` (A), `b_nk … b_{nk+nb−1}` (B, indexed by the power of
 /// $q^{-1}$), `c1 …` (C), `d1 …` (D), `f1 …` (F). `None` when `theta` is not the model's
@@ -352,7 +330,10 @@ pub fn fit(a: FitArgs) -> Result<()> {
             } else {
                 a.na
             };
-            (arx_fitted(&y, &u, na, a.nb, a.nk, ts)?, None)
+            (
+                ambid::fitting::arx_fitted(&y, &u, na, a.nb, a.nk, ts)?,
+                None,
+            )
         }
         Structure::Ss => return fit_ss(&a, &u, &y, ts, (mu, my), open_loop),
         s => {
@@ -396,7 +377,10 @@ pub fn fit(a: FitArgs) -> Result<()> {
                         problems.push("the data were taken as open-loop (--loop); for data measured around an unstable plant in closed loop use --loop closed".to_string());
                     }
                     fallback = true;
-                    (arx_fitted(&y, &u, na, a.nb, a.nk, ts)?, None)
+                    (
+                        ambid::fitting::arx_fitted(&y, &u, na, a.nb, a.nk, ts)?,
+                        None,
+                    )
                 }
                 Err(e) => return Err(anyhow::Error::new(e).context("prediction-error estimation")),
             }
