@@ -291,6 +291,85 @@ fn frf<'py>(
     Ok(d)
 }
 
+/// Closed-loop FRFs of one record by a local method (the computation of `ambid frf --method
+/// lpm|lrm`): the Local Polynomial Method (window chosen from the record by leave-one-out
+/// cross-validation unless `degree` or `half_width` is given; periodic records detected from
+/// the line pattern) or the Local Rational Method (`lrm_degrees` = (Rn, Rd, Rm)).
+#[pyfunction]
+#[pyo3(signature = (r, u, y, fs, *, method="lpm", band=None, degree=None, half_width=None, lrm_degrees=(2, 2, 2)))]
+#[allow(clippy::too_many_arguments)]
+fn frf_local<'py>(
+    py: Python<'py>,
+    r: &Bound<'py, PyAny>,
+    u: &Bound<'py, PyAny>,
+    y: &Bound<'py, PyAny>,
+    fs: f64,
+    method: &str,
+    band: Option<(f64, f64)>,
+    degree: Option<usize>,
+    half_width: Option<usize>,
+    lrm_degrees: (usize, usize, usize),
+) -> PyResult<Bound<'py, PyDict>> {
+    use ambid_core::frf::lpm::{lpm_closed_loop, LpmOptions};
+    use ambid_core::frf::lrm::{lrm_closed_loop, LrmOptions};
+    let (r, u, y) = (ro1("r", r)?, ro1("u", u)?, ro1("y", y)?);
+    let (r, u, y) = (samples("r", &r)?, samples("u", &u)?, samples("y", &y)?);
+    let fs = finite_positive("fs", fs)?;
+    let band = band_of("band", band)?.unwrap_or((1.0, 0.5 * fs));
+    let (t_ry, t_ru, plant, dof) = match method {
+        "lpm" => {
+            let opts = match (degree, half_width) {
+                (None, None) => LpmOptions::auto(),
+                (deg, half) => {
+                    let o = LpmOptions::default()
+                        .with_degree(deg.unwrap_or(2))
+                        .map_err(to_py)?;
+                    match half {
+                        Some(n) => o.with_half_width(n).map_err(to_py)?,
+                        None => o,
+                    }
+                }
+            };
+            let c = py
+                .detach(|| lpm_closed_loop(r, u, y, fs, band, &opts))
+                .map_err(to_py)?;
+            let dof = c.dof();
+            (c.t_ry, c.t_ru, c.plant, dof)
+        }
+        "lrm" => {
+            let (rn, rd, rm) = lrm_degrees;
+            let mut opts = LrmOptions::default()
+                .with_degrees(rn, rd, rm)
+                .map_err(to_py)?;
+            if let Some(n) = half_width {
+                opts = opts.with_half_width(n).map_err(to_py)?;
+            }
+            let c = py
+                .detach(|| lrm_closed_loop(r, u, y, fs, band, &opts))
+                .map_err(to_py)?;
+            let dof = c.dof();
+            (c.t_ry, c.t_ru, c.plant, dof)
+        }
+        other => {
+            return Err(err(
+                Kind::Usage,
+                format!("unknown method `{other}`: use \"lpm\" or \"lrm\" (frf() for period averaging and Welch)"),
+            ))
+        }
+    };
+    let d = PyDict::new(py);
+    d.set_item("f_hz", plant.f_hz().to_vec().into_pyarray(py))?;
+    for (key, frd) in [("plant", &plant), ("t_ry", &t_ry), ("s", &t_ru)] {
+        d.set_item(key, complex_array(py, frd.values()))?;
+        if let Some(v) = frd.variance() {
+            let s: Vec<f64> = v.iter().map(|x| x.sqrt()).collect();
+            d.set_item(format!("{key}_std"), s.into_pyarray(py))?;
+        }
+    }
+    d.set_item("dof", dof)?;
+    Ok(d)
+}
+
 /// A fitted linear model: state space (always), and the polynomials when it is one.
 #[pyclass(frozen, module = "ambid._native", name = "Model")]
 struct PyModel {
@@ -924,5 +1003,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(excite, m)?)?;
     m.add_function(wrap_pyfunction!(fit_frf, m)?)?;
     m.add_function(wrap_pyfunction!(fit_ss, m)?)?;
+    m.add_function(wrap_pyfunction!(frf_local, m)?)?;
     Ok(())
 }

@@ -336,3 +336,31 @@ def test_machine_workflow_equals_the_cli(cli, tmp_path):
     ref.pop("timing", None)
     got.pop("timing", None)
     assert got == ref
+
+
+@pytest.mark.parametrize("method,args", [("lpm", dict(degree=2, half_width=3)), ("lrm", dict(lrm_degrees=(2, 2, 2)))])
+def test_local_methods_equal_the_cli(cli, seed_experiment, tmp_path, method, args):
+    _, data = seed_experiment
+    n = 20000  # not a whole number of periods: the non-periodic local method
+    cols = {k: np.ascontiguousarray(data[k][:n]) for k in ("t", "r", "u", "y")}
+    np.savetxt(tmp_path / "rec.csv", np.column_stack([cols[k] for k in ("t", "r", "u", "y")]),
+               fmt="%.17e", delimiter=",", header="t,r,u,y", comments="")
+    flags = ["--method", method, "--band", "10:1000"]
+    if method == "lpm":
+        flags += ["--lpm-degree", 2, "--lpm-half-width", 3]
+    else:
+        flags += ["--lrm-degrees", "2,2,2"]
+    cli("frf", tmp_path / "rec.csv", *flags, "--out", tmp_path / "local.csv")
+    ref = read_csv(tmp_path / "local.csv")
+    f = ambid.frf_local(cols["r"], cols["u"], cols["y"], 20000.0, method=method, band=(10.0, 1000.0), **args)
+    np.testing.assert_array_equal(f["f_hz"], ref["f_hz"])
+    for py_key, cli_key in (("plant", "plant"), ("t_ry", "t_ry"), ("s", "t_ru")):
+        assert rel(f[py_key], ref[cli_key + "_re"] + 1j * ref[cli_key + "_im"]) <= RTOL, py_key
+        assert rel(f[py_key + "_std"], ref[cli_key + "_std"]) <= RTOL, py_key
+    # and consistent with the exact plant within its own stated uncertainty (median over the
+    # band of |P - P_true| / std; the nonlinear twin adds a small bias)
+    t = ambid.truth(f["f_hz"])
+    z = np.median(np.abs(f["plant"] - t["plant"]) / f["plant_std"])
+    assert z < 3.0, z
+    with pytest.raises(ambid.UsageError, match="unknown method"):
+        ambid.frf_local(cols["r"], cols["u"], cols["y"], 20000.0, method="spline")

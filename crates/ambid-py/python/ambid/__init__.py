@@ -35,6 +35,7 @@ from ._native import (
     fit_frf,
     fit_ss,
     frf,
+    frf_local,
     simulate,
     truth,
 )
@@ -49,6 +50,7 @@ __all__ = [
     "Outcome",
     "excite",
     "frf",
+    "frf_local",
     "fit_arx",
     "fit_pem",
     "fit_ss",

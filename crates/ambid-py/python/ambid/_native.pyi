@@ -121,3 +121,15 @@ def fit_ss(
     feedthrough: bool = False,
     max_iterations: int = 100,
 ) -> Model: ...
+def frf_local(
+    r: F64,
+    u: F64,
+    y: F64,
+    fs: float,
+    *,
+    method: str = "lpm",
+    band: Optional[Tuple[float, float]] = None,
+    degree: Optional[int] = None,
+    half_width: Optional[int] = None,
+    lrm_degrees: Tuple[int, int, int] = (2, 2, 2),
+) -> dict[str, Any]: ...
