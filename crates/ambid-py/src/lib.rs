@@ -370,6 +370,76 @@ fn frf_local<'py>(
     Ok(d)
 }
 
+/// The ARX order scan of `u → y` (the computation of `ambid order`): every ARX(na, nb, nk) with
+/// 1 ≤ na ≤ `na_max`, 1 ≤ nb ≤ `nb_max`, nk in `nk`, from one least-squares factorisation; loss,
+/// AIC, BIC, FPE and (with `validation = (u_val, y_val)`) the validation loss and 1-step fit per
+/// model, and the indices of the best models by each criterion. The data are used as given
+/// (`ambid order` removes the estimation data's means first).
+#[pyfunction]
+#[pyo3(signature = (u, y, *, na_max=10, nb_max=10, nk=vec![1], validation=None))]
+fn order_scan<'py>(
+    py: Python<'py>,
+    u: &Bound<'py, PyAny>,
+    y: &Bound<'py, PyAny>,
+    na_max: usize,
+    nb_max: usize,
+    nk: Vec<usize>,
+    validation: Option<(Bound<'py, PyAny>, Bound<'py, PyAny>)>,
+) -> PyResult<Bound<'py, PyDict>> {
+    use ambid_core::estimate::order::{arx_order_scan, ArxScanSpec};
+    let (u, y) = (ro1("u", u)?, ro1("y", y)?);
+    let (u, y) = (samples("u", &u)?, samples("y", &y)?);
+    let val = match &validation {
+        Some((uv, yv)) => Some((ro1("validation[0] (u)", uv)?, ro1("validation[1] (y)", yv)?)),
+        None => None,
+    };
+    let val = match &val {
+        Some((uv, yv)) => Some((samples("validation u", uv)?, samples("validation y", yv)?)),
+        None => None,
+    };
+    if na_max == 0 || nb_max == 0 || nk.is_empty() {
+        return Err(err(
+            Kind::Usage,
+            "na_max and nb_max must be at least 1 and nk must name at least one delay",
+        ));
+    }
+    let spec = ArxScanSpec::new(1..=na_max, 1..=nb_max, nk);
+    let scan = py
+        .detach(|| arx_order_scan(y, u, &spec, val.map(|(uv, yv)| (yv, uv))))
+        .map_err(to_py)?;
+    let d = PyDict::new(py);
+    let col = |f: &dyn Fn(&ambid_core::estimate::order::OrderRow) -> f64| -> Vec<f64> {
+        scan.rows.iter().map(f).collect()
+    };
+    let icol = |f: &dyn Fn(&ambid_core::estimate::order::OrderRow) -> usize| -> Vec<usize> {
+        scan.rows.iter().map(f).collect()
+    };
+    d.set_item("na", icol(&|r| r.na).into_pyarray(py))?;
+    d.set_item("nb", icol(&|r| r.nb).into_pyarray(py))?;
+    d.set_item("nk", icol(&|r| r.nk).into_pyarray(py))?;
+    d.set_item("n_params", icol(&|r| r.n_params).into_pyarray(py))?;
+    d.set_item("loss", col(&|r| r.loss).into_pyarray(py))?;
+    d.set_item("aic", col(&|r| r.aic).into_pyarray(py))?;
+    d.set_item("bic", col(&|r| r.bic).into_pyarray(py))?;
+    d.set_item("fpe", col(&|r| r.fpe).into_pyarray(py))?;
+    d.set_item(
+        "val_loss",
+        col(&|r| r.val_loss.unwrap_or(f64::NAN)).into_pyarray(py),
+    )?;
+    d.set_item(
+        "val_fit",
+        col(&|r| r.val_fit.unwrap_or(f64::NAN)).into_pyarray(py),
+    )?;
+    d.set_item("best_aic", scan.best_aic)?;
+    d.set_item("best_bic", scan.best_bic)?;
+    d.set_item("best_val", scan.best_val)?;
+    d.set_item("parsimonious", scan.parsimonious)?;
+    d.set_item("knee", scan.knee)?;
+    d.set_item("n_samples", scan.n_samples)?;
+    d.set_item("k0", scan.k0)?;
+    Ok(d)
+}
+
 /// A fitted linear model: state space (always), and the polynomials when it is one.
 #[pyclass(frozen, module = "ambid._native", name = "Model")]
 struct PyModel {
@@ -1004,5 +1074,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fit_frf, m)?)?;
     m.add_function(wrap_pyfunction!(fit_ss, m)?)?;
     m.add_function(wrap_pyfunction!(frf_local, m)?)?;
+    m.add_function(wrap_pyfunction!(order_scan, m)?)?;
     Ok(())
 }

@@ -364,3 +364,34 @@ def test_local_methods_equal_the_cli(cli, seed_experiment, tmp_path, method, arg
     assert z < 3.0, z
     with pytest.raises(ambid.UsageError, match="unknown method"):
         ambid.frf_local(cols["r"], cols["u"], cols["y"], 20000.0, method="spline")
+
+
+def test_order_scan_on_real_data_equals_the_cli_and_the_direct_fit(cli, real_data, tmp_path):
+    path = os.path.join(real_data, "daisy-dryer", "dryer.dat")
+    cli("order", path, "--fs", 12.5, "--input", "col1", "--output", "col2",
+        "--na-max", 4, "--nb-max", 4, "--nk", 3, "--out", tmp_path / "order.csv")
+    ref = read_csv(tmp_path / "order.csv")
+    raw = np.loadtxt(path)
+    u = np.ascontiguousarray(raw[:, 0] - raw[:, 0].mean())
+    y = np.ascontiguousarray(raw[:, 1] - raw[:, 1].mean())
+    s = ambid.order_scan(u, y, na_max=4, nb_max=4, nk=[3])
+    assert len(s["loss"]) == 16
+    np.testing.assert_array_equal(s["na"], ref["na"])
+    np.testing.assert_array_equal(s["nb"], ref["nb"])
+    for k in ("loss", "aic", "bic", "fpe"):
+        assert rel(s[k], ref[k]) <= 1e-11, k
+    # the scan's ARX(2,2,3) loss against a naive numpy least-squares oracle on the same
+    # samples (every model of the scan starts at the common k0)
+    k = int(np.flatnonzero((s["na"] == 2) & (s["nb"] == 2))[0])
+    k0 = s["k0"]
+    t = np.arange(k0, len(y))
+    phi = np.column_stack([-y[t - 1], -y[t - 2], u[t - 3], u[t - 4]])
+    theta, *_ = np.linalg.lstsq(phi, y[t], rcond=None)
+    loss = np.mean((y[t] - phi @ theta) ** 2)
+    assert abs(s["loss"][k] - loss) <= 1e-9 * loss
+    # validation columns on the second half
+    h = len(u) // 2
+    sv = ambid.order_scan(u[:h].copy(), y[:h].copy(), na_max=3, nb_max=3, nk=[3],
+                          validation=(u[h:].copy(), y[h:].copy()))
+    assert np.all(np.isfinite(sv["val_fit"])) and sv["best_val"] is not None
+    assert 80.0 < sv["val_fit"][sv["best_val"]] < 100.0

@@ -36,6 +36,7 @@ from ._native import (
     fit_ss,
     frf,
     frf_local,
+    order_scan,
     simulate,
     truth,
 )
@@ -52,6 +53,7 @@ __all__ = [
     "frf",
     "frf_local",
     "fit_arx",
+    "order_scan",
     "fit_pem",
     "fit_ss",
     "fit_frf",

@@ -133,3 +133,12 @@ def frf_local(
     half_width: Optional[int] = None,
     lrm_degrees: Tuple[int, int, int] = (2, 2, 2),
 ) -> dict[str, Any]: ...
+def order_scan(
+    u: F64,
+    y: F64,
+    *,
+    na_max: int = 10,
+    nb_max: int = 10,
+    nk: list[int] = [1],
+    validation: Optional[Tuple[F64, F64]] = None,
+) -> dict[str, Any]: ...
