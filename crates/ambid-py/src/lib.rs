@@ -440,6 +440,139 @@ fn order_scan<'py>(
     Ok(d)
 }
 
+/// A state-space model as a [`PyModel`] (no parameters of its own: the twin's exact plant or a
+/// controller).
+fn ss_model(ss: StateSpace, structure: &str) -> PyModel {
+    PyModel {
+        ss,
+        poly: None,
+        structure: structure.into(),
+        params: Vec::new(),
+        std: None,
+        loss: f64::NAN,
+        noise_variance: f64::NAN,
+        n_samples: 0,
+    }
+}
+
+fn twin_of(rig_seed: Option<u64>) -> PyResult<ambid_twin::Twin> {
+    let cfg = match rig_seed {
+        Some(s) => ambid_twin::random_rig(s).map_err(to_py)?,
+        None => ambid_twin::TwinConfig::default(),
+    };
+    ambid_twin::Twin::new(cfg).map_err(to_py)
+}
+
+/// The twin's exact linearised plant u → y (discrete, at the twin's sample rate; unstable) as a
+/// `Model`, nominal rig or random test rig `rig_seed`.
+#[pyfunction]
+#[pyo3(signature = (*, rig_seed=None))]
+fn twin_plant(rig_seed: Option<u64>) -> PyResult<PyModel> {
+    Ok(ss_model(twin_of(rig_seed)?.plant().clone(), "ss"))
+}
+
+/// A controller as a `Model` (its state space, u = −C y + r): from a controller file (TOML PID,
+/// transfer function or state space, docs/formats.md) or, without a path, the twin's
+/// (`rig_seed` for a random test rig).
+#[pyfunction]
+#[pyo3(signature = (path=None, *, rig_seed=None))]
+fn controller(path: Option<PathBuf>, rig_seed: Option<u64>) -> PyResult<PyModel> {
+    match path {
+        Some(p) => {
+            let c = ambid::io::read_controller(&p).map_err(to_py)?;
+            Ok(ss_model(c.state_space().clone(), "controller"))
+        }
+        None => Ok(ss_model(
+            twin_of(rig_seed)?.controller().clone(),
+            "controller",
+        )),
+    }
+}
+
+/// Closed-loop validation of a plant model with its controller on a record (the computation of
+/// `ambid validate`): the loop simulated from r (and w) from the initial state that best
+/// explains the record; fits of y and u, the output-error residual test (independence from the
+/// excitation), the closed-loop poles' stability, margins and the model's ISO 14839-3 zone.
+#[pyfunction]
+#[pyo3(signature = (model, controller, r, u, y, fs, *, w=None, skip=0, lags=25, windows=20))]
+#[allow(clippy::too_many_arguments)]
+fn validate<'py>(
+    py: Python<'py>,
+    model: &PyModel,
+    controller: &PyModel,
+    r: &Bound<'py, PyAny>,
+    u: &Bound<'py, PyAny>,
+    y: &Bound<'py, PyAny>,
+    fs: f64,
+    w: Option<&Bound<'py, PyAny>>,
+    skip: usize,
+    lags: usize,
+    windows: usize,
+) -> PyResult<Bound<'py, PyDict>> {
+    use ambid::validation::{validate_closed_loop, MeasuredLoop, ValidationSettings};
+    let (r, u, y) = (ro1("r", r)?, ro1("u", u)?, ro1("y", y)?);
+    let (r, u, y) = (samples("r", &r)?, samples("u", &u)?, samples("y", &y)?);
+    let fs = finite_positive("fs", fs)?;
+    let n = y.len();
+    for (name, x) in [("r", r), ("u", u)] {
+        if x.len() != n {
+            return Err(err(
+                Kind::Input,
+                format!("`{name}` has {} samples but `y` has {n}; all channels must be recorded together", x.len()),
+            ));
+        }
+    }
+    let w_arr = w.map(|w| ro1("w", w)).transpose()?;
+    let zeros = vec![0.0; n];
+    let w = match &w_arr {
+        Some(a) => samples("w", a)?,
+        None => &zeros,
+    };
+    if w.len() != n {
+        return Err(err(
+            Kind::Input,
+            format!("`w` has {} samples but `y` has {n}", w.len()),
+        ));
+    }
+    let settings = ValidationSettings {
+        skip,
+        lags,
+        windows,
+        ..Default::default()
+    };
+    let rec = MeasuredLoop {
+        w,
+        r: Some(r),
+        y,
+        u,
+        ts: 1.0 / fs,
+    };
+    let out = py
+        .detach(|| validate_closed_loop(&model.ss, &controller.ss, &rec, &settings))
+        .map_err(to_py)?;
+    let d = PyDict::new(py);
+    d.set_item("fit_y_pct", out.fit_y)?;
+    d.set_item("fit_u_pct", out.fit_u)?;
+    d.set_item("rmse_y", out.rmse_y)?;
+    d.set_item("max_error_y", out.max_error_y)?;
+    d.set_item("samples", out.samples)?;
+    d.set_item(
+        "y_simulated",
+        out.reconstruction.simulated.y.clone().into_pyarray(py),
+    )?;
+    if let Some(t) = &out.residuals.independence {
+        d.set_item("independence_pass", t.pass)?;
+        d.set_item("independence_statistic", t.statistic)?;
+        d.set_item("independence_threshold", t.threshold)?;
+    }
+    let poles: Vec<Complex64> = out.closed_loop.poles.iter().map(|p| p.z).collect();
+    d.set_item("closed_loop_poles", poles.into_pyarray(py))?;
+    d.set_item("peak_sensitivity", out.margins.peak_sensitivity.0)?;
+    d.set_item("peak_sensitivity_hz", out.margins.peak_sensitivity.1)?;
+    d.set_item("iso_zone", format!("{:?}", out.iso_model.zone))?;
+    Ok(d)
+}
+
 /// A fitted linear model: state space (always), and the polynomials when it is one.
 #[pyclass(frozen, module = "ambid._native", name = "Model")]
 struct PyModel {
@@ -1075,5 +1208,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fit_ss, m)?)?;
     m.add_function(wrap_pyfunction!(frf_local, m)?)?;
     m.add_function(wrap_pyfunction!(order_scan, m)?)?;
+    m.add_function(wrap_pyfunction!(twin_plant, m)?)?;
+    m.add_function(wrap_pyfunction!(controller, m)?)?;
+    m.add_function(wrap_pyfunction!(validate, m)?)?;
     Ok(())
 }

@@ -142,3 +142,18 @@ def order_scan(
     nk: list[int] = [1],
     validation: Optional[Tuple[F64, F64]] = None,
 ) -> dict[str, Any]: ...
+def twin_plant(*, rig_seed: Optional[int] = None) -> Model: ...
+def controller(path: "Optional[str | PathLike[str]]" = None, *, rig_seed: Optional[int] = None) -> Model: ...
+def validate(
+    model: Model,
+    controller: Model,
+    r: F64,
+    u: F64,
+    y: F64,
+    fs: float,
+    *,
+    w: Optional[F64] = None,
+    skip: int = 0,
+    lags: int = 25,
+    windows: int = 20,
+) -> dict[str, Any]: ...
