@@ -23,7 +23,7 @@ def main() -> None:
     steps = ["frf", "order", "models", "pole_zero", "validation", "iso"]
     reference_run = batch.identify([batch.Record.twin("reference", seed=1, steps=steps)])
     row = reference_run.rows[0]
-    reference = reference_run.models["reference"][row["chosen_model"].lower().replace(" ", "")]
+    reference = reference_run.models["reference"][batch.model_key(row["chosen_model"])]
 
     records = [
         batch.Record.twin(f"rig{rig:02d}-run{run}", seed=100 * rig + run, rig_seed=rig, steps=steps)

@@ -197,6 +197,20 @@ fn complex_array<'py>(py: Python<'py>, v: &[Complex64]) -> Bound<'py, PyArray1<C
     v.to_vec().into_pyarray(py)
 }
 
+/// Each FRF's values as `key` (complex) and, when it has variances, its standard deviations as
+/// `key_std`.
+fn put_frds(d: &Bound<'_, PyDict>, frds: &[(&str, &Frd)]) -> PyResult<()> {
+    let py = d.py();
+    for (key, frd) in frds {
+        d.set_item(*key, complex_array(py, frd.values()))?;
+        if let Some(v) = frd.variance() {
+            let s: Vec<f64> = v.iter().map(|x| x.sqrt()).collect();
+            d.set_item(format!("{key}_std"), s.into_pyarray(py))?;
+        }
+    }
+    Ok(())
+}
+
 /// Nonparametric closed-loop FRFs of one axis (the computation of `ambid frf`).
 #[pyfunction]
 #[pyo3(signature = (r, u, y, fs, *, period_samples=None, skip_periods=1, nperseg=None, band=None, quality_band=None, i_sat=None, screen=true, noise=None, current=None))]
@@ -257,18 +271,15 @@ fn frf<'py>(
     let d = PyDict::new(py);
     let fr = &out.frf;
     d.set_item("f_hz", fr.f_hz().to_vec().into_pyarray(py))?;
-    for (key, frd) in [
-        ("plant", &fr.plant),
-        ("t_ry", &fr.t_ry),
-        ("s", &fr.t_ru),
-        ("controller", &fr.controller),
-    ] {
-        d.set_item(key, complex_array(py, frd.values()))?;
-        if let Some(v) = frd.variance() {
-            let s: Vec<f64> = v.iter().map(|x| x.sqrt()).collect();
-            d.set_item(format!("{key}_std"), s.into_pyarray(py))?;
-        }
-    }
+    put_frds(
+        &d,
+        &[
+            ("plant", &fr.plant),
+            ("t_ry", &fr.t_ry),
+            ("s", &fr.t_ru),
+            ("controller", &fr.controller),
+        ],
+    )?;
     if let Some(p) = &fr.plant_indirect {
         d.set_item("plant_indirect", complex_array(py, p.values()))?;
     }
@@ -359,13 +370,7 @@ fn frf_local<'py>(
     };
     let d = PyDict::new(py);
     d.set_item("f_hz", plant.f_hz().to_vec().into_pyarray(py))?;
-    for (key, frd) in [("plant", &plant), ("t_ry", &t_ry), ("s", &t_ru)] {
-        d.set_item(key, complex_array(py, frd.values()))?;
-        if let Some(v) = frd.variance() {
-            let s: Vec<f64> = v.iter().map(|x| x.sqrt()).collect();
-            d.set_item(format!("{key}_std"), s.into_pyarray(py))?;
-        }
-    }
+    put_frds(&d, &[("plant", &plant), ("t_ry", &t_ry), ("s", &t_ru)])?;
     d.set_item("dof", dof)?;
     Ok(d)
 }
@@ -455,12 +460,16 @@ fn ss_model(ss: StateSpace, structure: &str) -> PyModel {
     }
 }
 
+/// The nominal rig's configuration, or random test rig `rig_seed`'s.
+fn rig_of(rig_seed: Option<u64>) -> PyResult<ambid_twin::TwinConfig> {
+    match rig_seed {
+        Some(s) => ambid_twin::random_rig(s).map_err(to_py),
+        None => Ok(ambid_twin::TwinConfig::default()),
+    }
+}
+
 fn twin_of(rig_seed: Option<u64>) -> PyResult<ambid_twin::Twin> {
-    let cfg = match rig_seed {
-        Some(s) => ambid_twin::random_rig(s).map_err(to_py)?,
-        None => ambid_twin::TwinConfig::default(),
-    };
-    ambid_twin::Twin::new(cfg).map_err(to_py)
+    ambid_twin::Twin::new(rig_of(rig_seed)?).map_err(to_py)
 }
 
 /// The twin's exact linearised plant u → y (discrete, at the twin's sample rate; unstable) as a
@@ -821,10 +830,7 @@ fn simulate<'py>(
             ))
         }
     };
-    let twin = match rig_seed {
-        Some(s) => ambid_twin::random_rig(s).map_err(to_py)?,
-        None => ambid_twin::TwinConfig::default(),
-    };
+    let twin = rig_of(rig_seed)?;
     let exp = ambid::experiment::Experiment {
         twin,
         excitation: ambid::experiment::ExcitationPlan {
@@ -867,10 +873,7 @@ fn truth<'py>(
     rig_seed: Option<u64>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let f = vec1("f_hz", f_hz)?;
-    let cfg = match rig_seed {
-        Some(s) => ambid_twin::random_rig(s).map_err(to_py)?,
-        None => ambid_twin::TwinConfig::default(),
-    };
+    let cfg = rig_of(rig_seed)?;
     let tr = py
         .detach(|| {
             let twin = ambid_twin::Twin::new(cfg).map_err(AppError::from)?;
@@ -1050,14 +1053,9 @@ fn fit_frf(
         })
         .map_err(to_py)?;
     Ok(PyModel {
-        ss: fit.model,
-        poly: None,
-        structure: "ss".into(),
-        params: Vec::new(),
-        std: None,
         loss: fit.cost,
-        noise_variance: f64::NAN,
         n_samples: fit.n_equations,
+        ..ss_model(fit.model, "ss")
     })
 }
 
@@ -1088,14 +1086,8 @@ fn fit_ss(
         .detach(|| ambid::fitting::identify_state_space(u, y, ts, &opts))
         .map_err(to_py)?;
     Ok(PyModel {
-        ss: id.model,
-        poly: None,
-        structure: "ss".into(),
-        params: Vec::new(),
-        std: None,
-        loss: f64::NAN,
-        noise_variance: f64::NAN,
         n_samples: u.len(),
+        ..ss_model(id.model, "ss")
     })
 }
 

@@ -25,7 +25,7 @@ from typing import Any, Callable, Iterable, Optional, Sequence
 
 import numpy as np
 
-__all__ = ["Record", "Result", "identify", "run_record", "drift"]
+__all__ = ["Record", "Result", "identify", "run_record", "drift", "model_key"]
 
 
 @dataclass(frozen=True)
@@ -33,12 +33,14 @@ class Record:
     """One identification job: a name, the workflow TOML text, the base directory of its
     relative paths, and optionally arrays (``r``, ``u``, ``y``, ``i``; ``fs`` in the
     workflow's ``[data] fs_hz``) that the job writes to a temporary ``.npz`` named
-    ``record.npz`` in the base directory's place."""
+    ``record.npz``, and text files (name -> text, e.g. a twin configuration) written beside
+    it; with either, that temporary directory is the base."""
 
     name: str
     config: str = ""
     base: Optional[str] = None
     arrays: Optional[dict] = None
+    files: Optional[dict] = None
 
     @staticmethod
     def twin(
@@ -60,11 +62,11 @@ class Record:
         lines.append('source = "twin"')
         lines.append("[twin]")
         lines.append(f'mode = "{mode}"')
-        arrays = None
+        files = None
         if rig_seed is not None:
             lines.append('config = "rig.toml"')
-            arrays = {"__rig.toml": _native.rig_config(int(rig_seed))}
-        return Record(name, "\n".join(lines) + "\n" + extra, None, arrays)
+            files = {"rig.toml": _native.rig_config(int(rig_seed))}
+        return Record(name, "\n".join(lines) + "\n" + extra, None, None, files)
 
     @staticmethod
     def from_arrays(
@@ -103,6 +105,12 @@ class Result:
         return pd.DataFrame(self.rows)
 
 
+def model_key(chosen: str) -> str:
+    """The key in ``Result.models`` (the file name ``models/<key>.json``) of a model named as the
+    summary's ``chosen_model`` names it: ``"SS 9"`` -> ``"ss9"``."""
+    return chosen.lower().replace(" ", "")
+
+
 def _get(d: Any, *path: str) -> Any:
     for p in path:
         if not isinstance(d, dict) or p not in d:
@@ -138,25 +146,23 @@ def drift(model: dict, reference: dict, band_hz: tuple, lines: int = 200) -> flo
 
 def run_record(record: Record, reference: Optional[dict] = None) -> tuple:
     """Runs one record; never raises. Returns ``(row, models)``."""
-    from . import AmbidError, run
+    from . import run
 
     row: dict = {"record": record.name, "status": "ok", "error_type": None, "error": None}
     models: dict = {}
     try:
         with tempfile.TemporaryDirectory(prefix="ambid-batch-") as tmp:
             base = record.base
-            if record.arrays is not None:
+            if record.arrays is not None or record.files is not None:
                 base = tmp
-                files = {k: v for k, v in record.arrays.items() if not k.startswith("__")}
-                if files:
-                    np.savez(
-                        os.path.join(tmp, "record.npz"),
-                        **{k: np.ascontiguousarray(v, dtype=float) for k, v in files.items()},
-                    )
-                for k, v in record.arrays.items():
-                    if k.startswith("__"):
-                        with open(os.path.join(tmp, k[2:]), "w", encoding="utf-8") as fh:
-                            fh.write(v)
+            if record.arrays:
+                np.savez(
+                    os.path.join(tmp, "record.npz"),
+                    **{k: np.ascontiguousarray(v, dtype=float) for k, v in record.arrays.items()},
+                )
+            for fname, text in (record.files or {}).items():
+                with open(os.path.join(tmp, fname), "w", encoding="utf-8") as fh:
+                    fh.write(text)
             out = run(record.config, base=base)
         s = out.summary
         chosen = _get(s, "models", "chosen")
@@ -175,13 +181,11 @@ def run_record(record: Record, reference: Optional[dict] = None) -> tuple:
         )
         models = out.models()
         if reference is not None and chosen is not None:
-            key = chosen.lower().replace(" ", "")
+            key = model_key(chosen)
             lo, hi = _get(s, "frf", "quality_band_lo_hz"), _get(s, "frf", "quality_band_hi_hz")
             if key in models and lo is not None and hi is not None:
                 row["drift"] = drift(models[key], reference, (lo, hi))
-    except AmbidError as e:
-        row.update({"status": "error", "error_type": type(e).__name__, "error": str(e)})
-    except Exception as e:  # a job must not take the batch down; the row says what failed
+    except Exception as e:  # a job must not take the batch down: its row says what failed
         row.update({"status": "error", "error_type": type(e).__name__, "error": str(e)})
     return row, models
 
