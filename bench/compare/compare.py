@@ -119,6 +119,31 @@ def median(x):
     return float(statistics.median(x))
 
 
+AMBID = None  # the `ambid` Python package, imported by main() with --python
+
+
+def contiguous(*xs):
+    return [np.ascontiguousarray(x, dtype=float) for x in xs]
+
+
+def markov_params(a, b, c, k=60):
+    """The first k Markov parameters C A^j B (a realisation-independent comparison)."""
+    a, b, c = (np.atleast_2d(np.asarray(m, dtype=float)) for m in (a, b, c))
+    out, x = [], b
+    for _ in range(k):
+        out.append(c @ x)
+        x = a @ x
+    return np.array(out)
+
+
+def markov_agree(ra, model):
+    """Largest difference of the Markov parameters of Rust's (a, b, c) and a Python Model,
+    relative to the largest one."""
+    h_r = markov_params(ra["a"], ra["b"], ra["c"])
+    h_p = markov_params(model.a, model.b, model.c)
+    return float(np.max(np.abs(h_r - h_p)) / np.max(np.abs(h_r)))
+
+
 # ----------------------------------------------------------------------------------------------
 # data
 
@@ -221,26 +246,52 @@ class Runner:
             r = json.load(fh)
         return r["times_s"][0], r["result"]
 
-    def compare(self, reps, ambid_task, ambid_opts, peer, warmup=True):
+    def compare(self, reps, ambid_task, ambid_opts, peer, warmup=True, py=None, py_agree=None):
         """Alternates ambid and the peer `reps` times; returns (times_a, res_a, times_p, res_p).
         `peer` is a callable that computes and returns the peer's result (timed around the call).
-        Short tasks get one untimed warm-up on both sides."""
+        Short tasks (`warmup`) get an untimed warm-up run right before every timed run, on every
+        side (the Rust program's `--warmup 1`).
+
+        With --python and a `py` callable (the same library call through the `ambid` Python
+        package, in this process), the Python side runs third in every round (Rust, Python,
+        peer); its median time and `py_agree(rust_result, python_result)` (how far the Python
+        result is from the Rust one) go into the next row."""
+        py = py if self.args.python else None
         if warmup:
             quiet(peer)
-        ta, tp = [], []
-        ra = rp = None
+            if py is not None:
+                py()
+        ta, tp, ty = [], [], []
+        ra = rp = ry = None
         while len(ta) < reps:
+            # a short task is timed warm on every side: the Rust program runs it once untimed
+            # before its timed run, and so do the Python side and the peer here
             t, ra = self.ambid(ambid_task, ambid_opts, 1 if warmup else 0)
             ta.append(t)
+            if py is not None:
+                if warmup:
+                    py()
+                t0 = time.perf_counter()
+                ry = py()
+                ty.append(time.perf_counter() - t0)
+            if warmup:
+                quiet(peer)
             t0 = time.perf_counter()
             rp = quiet(peer)
             tp.append(time.perf_counter() - t0)
             if tp[0] > 10.0:
                 reps = min(reps, self.args.reps_slow)
+        self.pending_py = (median(ty), py_agree(ra, ry)) if py is not None else None
         return ta, ra, tp, rp
 
     def row(self, **kw):
         kw["ratio"] = kw["t_peer"] / kw["t_ambid"]
+        if getattr(self, "pending_py", None) is not None:
+            kw["t_py"], kw["py_agree"] = self.pending_py
+            kw["ratio_py"] = kw["t_peer"] / kw["t_py"]
+            log(f"    from Python: {kw['t_py'] * 1e3:.2f} ms (Python / Rust {kw['t_py'] / kw['t_ambid']:.2f}), "
+                f"ratio {kw['ratio_py']:.1f}, result vs Rust {kw['py_agree']:.1e}")
+        self.pending_py = None
         log(f"  {kw['task']} / {kw['data']} / {kw['peer']}: ambid {kw['t_ambid'] * 1e3:.2f} ms "
             f"({kw['acc_ambid']}), peer {kw['t_peer'] * 1e3:.2f} ms ({kw['acc_peer']}), "
             f"ratio {kw['ratio']:.1f}")
@@ -266,8 +317,18 @@ def task_welch(run, data, args):
             coh = np.abs(pxy[:2]) ** 2 / (pxx[0] * pxx[1:3])
             return f, pxx, pxy, coh
 
+        xs = contiguous(*x)
+
+        def agree(ra, ry):
+            names = ["r", "u", "y"]
+            auto = [cplx(ra["csd"][n + n]).real for n in names]
+            return max(float(np.max(np.abs(ry["csd"][i, j] - cplx(ra["csd"][names[i] + names[j]]))
+                                    / np.sqrt(auto[i] * auto[j])))
+                       for i in range(3) for j in range(i, 3))
+
         ta, ra, tp, (f, pxx, pxy, coh) = run.compare(
-            args.reps, "welch", ["--data", path, "--channels", "r,u,y", "--nperseg", nper], peer)
+            args.reps, "welch", ["--data", path, "--channels", "r,u,y", "--nperseg", nper], peer,
+            py=lambda: AMBID.spectra(xs, fs, nperseg=nper), py_agree=agree)
         # agreement: |P_ambid - P_scipy| / sqrt(P_ii P_jj), max over lines and the 6 spectra
         names = ["r", "u", "y"]
         dev = 0.0
@@ -329,9 +390,19 @@ def task_frf(run, data, args):
     for label, path in [("twin seed, 102 300", data.seed), ("twin long, 10^6", data.long)]:
         d = Data.load_csv(path)
         r, u, y = d["r"], d["u"], d["y"]
+        rc, uc, yc = contiguous(r, u, y)
+
+        def agree(ra, ry):
+            if not np.array_equal(np.asarray(ra["f"]), ry["f_hz"]):
+                return float("inf")
+            return max(float(np.max(np.abs(ry[k] - cplx(ra[k]["value"])) / np.abs(cplx(ra[k]["value"]))))
+                       for k in ("t_ry", "s", "plant"))
+
         ta, ra, tp, rp = run.compare(
             args.reps, "frf", ["--data", path, "--period", 5115, "--skip", 1],
-            lambda: numpy_frf(r, u, y, 5115, 1))
+            lambda: numpy_frf(r, u, y, 5115, 1),
+            py=lambda: AMBID.periodic_frf(rc, uc, yc, 20000.0, period_samples=5115, skip_periods=1),
+            py_agree=agree)
         ea = frf_errors(ra["f"], cplx(ra["t_ry"]["value"]), cplx(ra["plant"]["value"]), data.truth)
         ep = frf_errors(rp[0], rp[1], rp[5], data.truth)
         fmt = "T_ry {:.3f} %, plant {:.3f} %"
@@ -368,10 +439,20 @@ def task_arx(run, data, args):
             return system_identification(s["y"], s["u"], "ARX", IC="BIC", na_ord=[1, g],
                                          nb_ord=[1, g], delays=[0, 0], tsample=1.0 / s["fs"])
 
+        uc, yc = contiguous(s["u"], s["y"])
+
+        def agree(ra, ry):
+            k = ry["best_bic"]
+            if (ry["na"][k], ry["nb"][k]) != (ra["na"], ra["nb"]):
+                return float("inf")
+            th = np.asarray(ra["params"])
+            return float(np.max(np.abs(ry["params"][k] - th)) / np.max(np.abs(th)))
+
         ta, ra, tp, rp = run.compare(
             args.reps, "arx-scan",
             ["--data", s["path"], "--fs", s["fs"], "--na-max", g, "--nb-max", g, "--nk", 1],
-            peer, warmup=False)
+            peer, warmup=False,
+            py=lambda: AMBID.order_scan(uc, yc, na_max=g, nb_max=g, nk=[1]), py_agree=agree)
         na, nb = ra["na"], ra["nb"]
         th = ra["params"]
         a_amb = np.concatenate([[1.0], th[:na]])
@@ -434,8 +515,12 @@ def task_n4sid(run, data, args):
                 if best is None or fit > best[1]:
                     best = (h, fit, dt)
         h = best[0]
+        uc, yc = contiguous(s["u"], s["y"])
+        agree = lambda ra, ry: markov_agree(ra, ry["model"])  # noqa: E731
         ta, ra, tp, rp = run.compare(args.reps, "n4sid", amb_opts,
-                                     lambda: sippy(h), warmup=best[2] < 2)
+                                     lambda: sippy(h), warmup=best[2] < 2,
+                                     py=lambda: AMBID.n4sid(uc, yc, ts, order=order),
+                                     py_agree=agree)
         fa, txa = ss_scores(ra["a"], ra["b"], ra["c"], ra["d"], s, name, data)
         fp, txp = ss_scores(rp.A, rp.B, rp.C, rp.D, s, name, data)
         run.row(task=f"N4SID order {order}", data=f"{name}, {len(s['u'])}",
@@ -447,7 +532,9 @@ def task_n4sid(run, data, args):
             # ambid's recommended route: subspace at i = 120 + PEM with the simulation focus
             ta2, ra2, _, _ = run.compare(
                 args.reps, "n4sid", amb_opts + ["--block-rows", 120, "--pem", "simulation"],
-                lambda: None, warmup=True)
+                lambda: None, warmup=True,
+                py=lambda: AMBID.n4sid(uc, yc, ts, order=order, block_rows=120, refine="simulation"),
+                py_agree=agree)
             fa2, txa2 = ss_scores(ra2["a"], ra2["b"], ra2["c"], ra2["d"], s, name, data)
             run.row(task=f"N4SID order {order}", data=f"{name}, {len(s['u'])}",
                     ambid="subspace i = 120 + PEM (simulation focus)",
@@ -478,8 +565,11 @@ def task_n4sid(run, data, args):
                 best = (i, fit, dt)
         i = best[0]
         opts = ["--data", sub["path"], "--fs", s["fs"], "--order", order]
+        us, ys = contiguous(sub["u"], sub["y"])
         ta, ra, tp, rp = run.compare(args.reps, "n4sid", opts, lambda: nfs(i),
-                                     warmup=best[2] < 2)
+                                     warmup=best[2] < 2,
+                                     py=lambda: AMBID.n4sid(us, ys, ts, order=order),
+                                     py_agree=agree)
         fa, txa = ss_scores(ra["a"], ra["b"], ra["c"], ra["d"], s, name, data)
         fp, txp = ss_scores(rp.a, rp.b, rp.c, rp.d, s, name, data)
         run.row(task=f"N4SID order {order}", data=f"{name}, first {n_nf}",
@@ -500,10 +590,23 @@ def task_oe(run, data, args):
             return system_identification(s["y"], s["u"], "OE", OE_orders=[n, n, 0],
                                          tsample=1.0 / s["fs"], max_iterations=args.oe_iterations)
 
+        uc, yc = contiguous(s["u"], s["y"])
+
+        def agree(ra, ry):
+            p = ry.polynomials
+            b, f = np.asarray(ra["b"]), np.asarray(ra["f"])
+            if p["b"].shape != b.shape or p["f"].shape != f.shape:
+                return float("inf")
+            return max(float(np.max(np.abs(p["b"] - b)) / np.max(np.abs(b))),
+                       float(np.max(np.abs(p["f"] - f)) / np.max(np.abs(f))))
+
         ta, ra, tp, rp = run.compare(
             args.reps, "oe", ["--data", s["path"], "--fs", s["fs"], "--nb", n,
                                          "--nf", n, "--nk", 1, "--max-iterations",
-                                         args.oe_iterations], peer, warmup=name == "robot-arm")
+                                         args.oe_iterations], peer, warmup=name == "robot-arm",
+            py=lambda: AMBID.fit_pem(uc, yc, 1.0 / s["fs"], "oe", nb=n, nf=n, nk=1,
+                                     max_iterations=args.oe_iterations),
+            py_agree=agree)
         res = []
         for b, f in [(ra["b"], ra["f"]), tf_to_qinv(rp.G.num[0][0], rp.G.den[0][0])]:
             if not poly_stable(f):
@@ -562,7 +665,14 @@ def task_freqresp(run, data, args):
         def peer():
             return control.frequency_response(sys_c, w)
 
-        ta, ra, tp, rp = run.compare(args.reps, "freqresp", ["--model", path, "--nfreq", nf], peer)
+        model = AMBID.ss(a, b, c, d, ts) if args.python else None
+
+        def agree(ra, ry):
+            ha = cplx(ra["h"])
+            return float(np.max(np.abs(ry[:, 0, 0] - ha) / np.abs(ha)))
+
+        ta, ra, tp, rp = run.compare(args.reps, "freqresp", ["--model", path, "--nfreq", nf], peer,
+                                     py=lambda: model.freq_response(f), py_agree=agree)
         ref = ss_freq(a, b, c, d, f, ts)
         ha = cplx(ra["h"])
         hp = np.asarray(rp.complex).reshape(-1)
@@ -596,6 +706,20 @@ def table(rows):
             ratio += " (ambid less accurate)"
         out.append(f"| {r['task']} | {r['data']} | {r['ambid']} | {r['peer']} | {fmt_t(r['t_ambid'])} | "
                    f"{fmt_t(r['t_peer'])} | {ratio} | {r['acc_ambid']} | {r['acc_peer']} | {r['n']} |")
+    return "\n".join(out)
+
+
+def table_py(rows):
+    """The rows that also ran through the Python package: its time and ratio beside Rust's."""
+    out = ["| task | data | ambid (Rust) median | ambid (Python) median | Python / Rust | peer median "
+           "| peer / ambid from Rust | peer / ambid from Python | Python result vs Rust |",
+           "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        if "t_py" not in r:
+            continue
+        out.append(f"| {r['task']} | {r['data']} | {fmt_t(r['t_ambid'])} | {fmt_t(r['t_py'])} | "
+                   f"{r['t_py'] / r['t_ambid']:.2f} | {fmt_t(r['t_peer'])} | {r['ratio']:.1f}× | "
+                   f"{r['ratio_py']:.1f}× | {r['py_agree']:.1e} |")
     return "\n".join(out)
 
 
@@ -647,7 +771,15 @@ def main():
     ap.add_argument("--oe-silverbox", type=int, default=10000)
     ap.add_argument("--doc", default=os.path.join(ROOT, "docs", "benchmarks.md"))
     ap.add_argument("--no-doc", action="store_true", help="print the table, do not rewrite the doc")
+    ap.add_argument("--python", action="store_true",
+                    help="also run every ambid task through the `ambid` Python package (installed in "
+                         "this interpreter) and write its table between `<!-- compare-py:begin -->` "
+                         "and `<!-- compare-py:end -->`")
     args = ap.parse_args()
+    if args.python:
+        global AMBID
+        import ambid as AMBID  # noqa: N811
+        log(f"the ambid Python package {AMBID.__version__} from {os.path.dirname(AMBID.__file__)}")
 
     data = Data(args)
     data.prepare()
@@ -662,20 +794,30 @@ def main():
         json.dump(run.rows, fh, indent=1, default=str)
     stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     body = (f"Produced by `bench/compare/run.sh` on {stamp}. Machine: {machine()}.\n"
-            f"Medians of R alternating runs (ambid, peer, ambid, …); times exclude process start-up "
+            f"Medians of R alternating runs (ambid, peer, ambid, …); short tasks are timed warm on both sides (one untimed run right before each timed one); times exclude process start-up "
             f"and file reading on both sides.\n\n{table(run.rows)}\n")
     print(body)
+    blocks = [("<!-- compare:begin -->", "<!-- compare:end -->", body)]
+    if args.python:
+        body_py = (f"Produced by `bench/compare/run.sh --python` on {stamp}, the same run as the table "
+                   f"above. Each round runs the Rust timing program, the same library call through "
+                   f"the `ambid` Python package in the driver's process (timed around the call, "
+                   f"numpy arrays in and out), and the peer. Machine: {machine()}.\n\n"
+                   f"{table_py(run.rows)}\n")
+        print(body_py)
+        blocks.append(("<!-- compare-py:begin -->", "<!-- compare-py:end -->", body_py))
     if not args.no_doc:
         with open(args.doc) as fh:
             doc = fh.read()
-        begin, end = "<!-- compare:begin -->", "<!-- compare:end -->"
-        if begin not in doc or end not in doc:
-            sys.exit(f"{args.doc} has no {begin} … {end} markers")
-        pre, rest = doc.split(begin, 1)
-        _, post = rest.split(end, 1)
+        for begin, end, text in blocks:
+            if begin not in doc or end not in doc:
+                sys.exit(f"{args.doc} has no {begin} … {end} markers")
+            pre, rest = doc.split(begin, 1)
+            _, post = rest.split(end, 1)
+            doc = pre + begin + "\n" + text + end + post
         with open(args.doc, "w") as fh:
-            fh.write(pre + begin + "\n" + body + end + post)
-        log(f"rewrote the table in {args.doc}")
+            fh.write(doc)
+        log(f"rewrote the table(s) in {args.doc}")
 
 
 if __name__ == "__main__":

@@ -32,6 +32,17 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;
 
+/// The extension's allocator for everything Rust allocates (arrays handed to numpy are freed
+/// by it too): glibc's malloc in a Python process gives the analyses' large buffers back to the
+/// system after every call and page-faults them in again on the next, which cost 1.4–1.6× on a
+/// 4 ms FRF; mimalloc keeps them (docs/benchmarks.md, "The Python package").
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
+mod lowlevel;
+mod machine;
+mod studies;
+
 create_exception!(
     _native,
     AmbidError,
@@ -435,6 +446,12 @@ fn order_scan<'py>(
         "val_fit",
         col(&|r| r.val_fit.unwrap_or(f64::NAN)).into_pyarray(py),
     )?;
+    let params: Vec<_> = scan
+        .rows
+        .iter()
+        .map(|r| r.params.clone().into_pyarray(py))
+        .collect();
+    d.set_item("params", params)?;
     d.set_item("best_aic", scan.best_aic)?;
     d.set_item("best_bic", scan.best_bic)?;
     d.set_item("best_val", scan.best_val)?;
@@ -1203,5 +1220,14 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(twin_plant, m)?)?;
     m.add_function(wrap_pyfunction!(controller, m)?)?;
     m.add_function(wrap_pyfunction!(validate, m)?)?;
+    m.add_function(wrap_pyfunction!(lowlevel::spectra, m)?)?;
+    m.add_function(wrap_pyfunction!(lowlevel::n4sid, m)?)?;
+    m.add_function(wrap_pyfunction!(lowlevel::ss, m)?)?;
+    m.add_function(wrap_pyfunction!(lowlevel::periodic_frf, m)?)?;
+    m.add_function(wrap_pyfunction!(machine::machine_experiments, m)?)?;
+    m.add_function(wrap_pyfunction!(machine::frf_mimo, m)?)?;
+    m.add_function(wrap_pyfunction!(studies::bla, m)?)?;
+    m.add_function(wrap_pyfunction!(studies::bla_study, m)?)?;
+    m.add_function(wrap_pyfunction!(studies::amplitude_study, m)?)?;
     Ok(())
 }

@@ -389,6 +389,8 @@ def test_order_scan_on_real_data_equals_the_cli_and_the_direct_fit(cli, real_dat
     theta, *_ = np.linalg.lstsq(phi, y[t], rcond=None)
     loss = np.mean((y[t] - phi @ theta) ** 2)
     assert abs(s["loss"][k] - loss) <= 1e-9 * loss
+    # its parameters [a1, a2, b1, b2] are the oracle's
+    np.testing.assert_allclose(s["params"][k], theta, rtol=1e-8)
     # validation columns on the second half
     h = len(u) // 2
     sv = ambid.order_scan(u[:h].copy(), y[:h].copy(), na_max=3, nb_max=3, nk=[3],

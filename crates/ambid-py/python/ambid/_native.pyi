@@ -157,3 +157,71 @@ def validate(
     lags: int = 25,
     windows: int = 20,
 ) -> dict[str, Any]: ...
+def spectra(
+    channels: list[F64],
+    fs: float,
+    *,
+    nperseg: int = 4096,
+    noverlap: Optional[int] = None,
+    window: str = "hann",
+    detrend: str = "constant",
+    scaling: str = "density",
+) -> dict[str, Any]: ...
+def n4sid(
+    u: F64,
+    y: F64,
+    ts: float,
+    *,
+    order: Optional[int] = None,
+    max_order: int = 10,
+    block_rows: Optional[int] = None,
+    feedthrough: bool = False,
+    refine: Optional[str] = None,
+) -> dict[str, Any]: ...
+def ss(a: F64, b: F64, c: F64, d: F64, ts: float) -> Model: ...
+def periodic_frf(
+    r: F64,
+    u: F64,
+    y: F64,
+    fs: float,
+    *,
+    period_samples: int,
+    skip_periods: int = 1,
+    threshold: float = 1e-6,
+) -> dict[str, Any]: ...
+def machine_experiments(machine: str = "", *, seed: int = 1) -> list[dict[str, Any]]: ...
+def frf_mimo(
+    experiments: list[dict[str, F64]],
+    fs: float,
+    *,
+    period_samples: int,
+    skip_periods: int = 1,
+    band: Optional[Tuple[float, float]] = None,
+    speed_rpm: float = 0.0,
+) -> dict[str, Any]: ...
+def bla(
+    realisations: list[dict[str, F64]],
+    fs: float,
+    *,
+    period_samples: int,
+    skip_periods: int = 1,
+    band: Optional[Tuple[float, float]] = None,
+    level_pct: Optional[float] = None,
+) -> dict[str, Any]: ...
+def bla_study(
+    levels: dict[float, list[dict[str, F64]]],
+    fs: float,
+    *,
+    period_samples: int,
+    skip_periods: int = 1,
+    band: Optional[Tuple[float, float]] = None,
+) -> dict[str, Any]: ...
+def amplitude_study(
+    records: list[dict[str, Any]],
+    fs: float,
+    *,
+    period_samples: int,
+    skip_periods: int = 1,
+    band: Optional[Tuple[float, float]] = None,
+    noise: Optional[F64] = None,
+) -> dict[str, Any]: ...

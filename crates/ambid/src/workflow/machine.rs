@@ -604,14 +604,37 @@ fn ruy(rec: &IoData, period: usize, what: &str) -> Result<IoData, Error> {
 }
 
 /// One speed's FRF, its experiments (1× removed) and the 1× frequency removed.
-type Measured = (MeasuredFrf, Vec<IoData>, Option<f64>);
+pub type Measured = (MeasuredFrf, Vec<IoData>, Option<f64>);
 
-/// The 4×4 FRF of the experiments `records` (one speed): the 1× line removed at `speed_rpm`
-/// (when > 0), then the period average.
+/// The 4×4 FRF of the experiments `records` (one speed) with the section's settings
+/// ([`measure_records`]; the band only for the zippered design).
 fn measure(
     records: Vec<IoData>,
     period: usize,
     m: &MachineSection,
+    speed_rpm: f64,
+    what: &str,
+) -> Result<Measured, Error> {
+    let band = (m.design == "zipper").then_some((m.band_hz[0], m.band_hz[1]));
+    measure_records(records, period, m.skip_periods, band, speed_rpm, what)
+}
+
+/// The 4×4 FRF of the experiments `records` of one speed (channels `r_*`, `u_*`, `y_*` of the
+/// four axes, any others kept in the returned records): the 1× line at `speed_rpm`/60 Hz
+/// estimated and removed from every channel when `speed_rpm` > 0 (and below Nyquist), then the
+/// period average over the periods after the first `skip` ([`mimo::estimate`]: several
+/// experiments are solved per line, one zippered experiment column by column on its lines;
+/// `band` limits the lines). Returns the FRF (plant, T_ry, S with variances), the experiments
+/// with the 1× line removed and the 1× frequency removed. `what` names the data in errors.
+///
+/// # Errors
+/// A missing channel, experiments that do not fit together, a 1× line or an FRF that cannot be
+/// estimated (each naming `what`).
+pub fn measure_records(
+    records: Vec<IoData>,
+    period: usize,
+    skip: usize,
+    band: Option<(f64, f64)>,
     speed_rpm: f64,
     what: &str,
 ) -> Result<Measured, Error> {
@@ -623,9 +646,7 @@ fn measure(
     let full = IoData::from_experiments(records)?;
     let f1 = speed_rpm / 60.0;
     let (data, full, sync) = if speed_rpm > 0.0 && f1 < 0.5 * data.fs() {
-        let opts = SynchronousOptions::new()
-            .period(period)
-            .skip(m.skip_periods);
+        let opts = SynchronousOptions::new().period(period).skip(skip);
         let line = synchronous(&data, f1, &opts)
             .map_err(|e| Error::from(e).context(format!("{what}: the 1× line at {f1} Hz")))?;
         let clean = line.remove(&data)?;
@@ -634,9 +655,9 @@ fn measure(
     } else {
         (data, full, None)
     };
-    let mut opts = MimoOptions::new().period(period).skip(m.skip_periods);
-    if m.design == "zipper" {
-        opts = opts.band(m.band_hz[0], m.band_hz[1]);
+    let mut opts = MimoOptions::new().period(period).skip(skip);
+    if let Some((lo, hi)) = band {
+        opts = opts.band(lo, hi);
     }
     let est = mimo::estimate(&data, &opts)
         .map_err(|e| Error::from(e).context(format!("{what}: the MIMO FRF")))?;
