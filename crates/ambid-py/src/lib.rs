@@ -725,6 +725,36 @@ impl PyModel {
         };
         serde_json::to_string_pretty(&v).map_err(|e| AmbidError::new_err(e.to_string()))
     }
+    /// Writes the model as `ambid fit` and `ambid export` do: `path` (`.json`, the model file)
+    /// and beside it `.m` (a MATLAB script building `idpoly`/`idss`), `.mat` (MATLAB v5) and
+    /// `.npz` (numpy), all or nothing (an existing file is replaced only with `force`).
+    /// Returns the paths written.
+    #[pyo3(signature = (path, *, force=false))]
+    fn save(&self, py: Python<'_>, path: PathBuf, force: bool) -> PyResult<Vec<PathBuf>> {
+        if path.extension().and_then(|e| e.to_str()) != Some("json") {
+            return Err(err(
+                Kind::Usage,
+                format!(
+                    "`{}`: the model file's name must end in .json (the .m, .mat and .npz \
+                     exports are written beside it)",
+                    path.display()
+                ),
+            ));
+        }
+        let text = self.to_json()?;
+        py.detach(|| -> Result<Vec<PathBuf>, AppError> {
+            for ext in ["json", "m", "mat", "npz"] {
+                ambid::io::OutputSet::check(&path.with_extension(ext), force)?;
+            }
+            let mut set = ambid::io::OutputSet::new(force);
+            set.write(&path, text.as_bytes())?;
+            set.commit()?;
+            let mut out = vec![path.clone()];
+            out.extend(ambid::io::model::write_model_exports(&path)?);
+            Ok(out)
+        })
+        .map_err(to_py)
+    }
     fn __repr__(&self) -> String {
         format!(
             "Model(structure='{}', order={}, ts={}, inputs={}, outputs={})",

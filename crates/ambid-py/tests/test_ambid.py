@@ -111,6 +111,35 @@ def test_model_frequency_response_matches_python_control():
     assert rel(g, g_tf) < 1e-10
 
 
+def test_model_save_writes_exports_that_other_readers_load(tmp_path):
+    """The .npz read by numpy, the .mat by scipy.io and the .json by json give back the model;
+    the MATLAB script builds an idpoly with the same coefficients."""
+    sio = pytest.importorskip("scipy.io")
+    rng = np.random.default_rng(4)
+    u = rng.standard_normal(1500)
+    y = np.zeros_like(u)
+    for k in range(2, len(u)):
+        y[k] = 1.2 * y[k - 1] - 0.5 * y[k - 2] + 0.3 * u[k - 1] + 1e-3 * rng.standard_normal()
+    m = ambid.fit_arx(u, y, 1e-3, na=2, nb=1)
+    paths = m.save(tmp_path / "arx.json")
+    assert sorted(os.path.basename(p) for p in paths) == ["arx.json", "arx.m", "arx.mat", "arx.npz"]
+    a = m.polynomials["a"]
+    np.testing.assert_allclose(a, [1.0, *m.params[:2]], rtol=1e-15)
+    npz = np.load(tmp_path / "arx.npz")
+    mat = sio.loadmat(tmp_path / "arx.mat")
+    for store in (npz, mat):
+        keys = [k for k in store.keys() if not k.startswith("__")]
+        akey = next(k for k in keys if k.lower() in ("a", "a_poly", "poly_a"))
+        np.testing.assert_allclose(np.ravel(store[akey]), a, rtol=1e-15)
+    assert "idpoly" in (tmp_path / "arx.m").read_text()
+    assert json.loads((tmp_path / "arx.json").read_text())["kind"] == "polynomial"
+    with pytest.raises(ambid.OutputError):
+        m.save(tmp_path / "arx.json")  # exists, no force
+    assert m.save(tmp_path / "arx.json", force=True)
+    with pytest.raises(ambid.UsageError, match=".json"):
+        m.save(tmp_path / "arx.txt")
+
+
 def test_oe_recovers_a_known_system():
     rng = np.random.default_rng(7)
     u = rng.standard_normal(3000)
