@@ -223,6 +223,19 @@ fn put_frds(d: &Bound<'_, PyDict>, frds: &[(&str, &Frd)]) -> PyResult<()> {
 }
 
 /// Nonparametric closed-loop FRFs of one axis (the computation of `ambid frf`).
+///
+/// # Example
+///
+/// ```python
+/// >>> import numpy as np, ambid
+/// >>> rec = ambid.simulate(seed=1, mode="linear")
+/// >>> f = ambid.frf(rec["r"], rec["u"], rec["y"], rec["fs"], period_samples=rec["period_samples"])
+/// >>> p = ambid.truth(f["f_hz"])["plant"]
+/// >>> band = (f["f_hz"] > 10) & (f["f_hz"] < 1000)
+/// >>> bool(np.median(np.abs(f["plant"] - p)[band] / np.abs(p[band])) < 0.05)
+/// True
+///
+/// ```
 #[pyfunction]
 #[pyo3(signature = (r, u, y, fs, *, period_samples=None, skip_periods=1, nperseg=None, band=None, quality_band=None, i_sat=None, screen=true, noise=None, current=None))]
 #[allow(clippy::too_many_arguments)]
@@ -317,6 +330,18 @@ fn frf<'py>(
 /// lpm|lrm`): the Local Polynomial Method (window chosen from the record by leave-one-out
 /// cross-validation unless `degree` or `half_width` is given; periodic records detected from
 /// the line pattern) or the Local Rational Method (`lrm_degrees` = (Rn, Rd, Rm)).
+///
+/// # Example
+///
+/// ```python
+/// >>> import numpy as np, ambid
+/// >>> rec = ambid.simulate(seed=2, mode="linear", periods=4)
+/// >>> out = ambid.frf_local(rec["r"], rec["u"], rec["y"], rec["fs"], method="lpm", band=(20.0, 500.0))
+/// >>> p = ambid.truth(out["f_hz"])["plant"]
+/// >>> bool(np.median(np.abs(out["plant"] - p) / out["plant_std"]) < 3.0)
+/// True
+///
+/// ```
 #[pyfunction]
 #[pyo3(signature = (r, u, y, fs, *, method="lpm", band=None, degree=None, half_width=None, lrm_degrees=(2, 2, 2)))]
 #[allow(clippy::too_many_arguments)]
@@ -391,6 +416,21 @@ fn frf_local<'py>(
 /// AIC, BIC, FPE and (with `validation = (u_val, y_val)`) the validation loss and 1-step fit per
 /// model, and the indices of the best models by each criterion. The data are used as given
 /// (`ambid order` removes the estimation data's means first).
+///
+/// # Example
+///
+/// ```python
+/// >>> import numpy as np, ambid
+/// >>> rng = np.random.default_rng(0)
+/// >>> u = rng.standard_normal(3000)
+/// >>> y = np.zeros(3000)
+/// >>> for k in range(2, 3000):
+/// ...     y[k] = 1.2 * y[k - 1] - 0.5 * y[k - 2] + u[k - 1] + 0.01 * rng.standard_normal()
+/// >>> s = ambid.order_scan(u, y, na_max=4, nb_max=3)
+/// >>> int(s["na"][s["best_bic"]]), int(s["nb"][s["best_bic"]])
+/// (2, 1)
+///
+/// ```
 #[pyfunction]
 #[pyo3(signature = (u, y, *, na_max=10, nb_max=10, nk=vec![1], validation=None))]
 fn order_scan<'py>(
@@ -491,6 +531,16 @@ fn twin_of(rig_seed: Option<u64>) -> PyResult<ambid_twin::Twin> {
 
 /// The twin's exact linearised plant u → y (discrete, at the twin's sample rate; unstable) as a
 /// `Model`, nominal rig or random test rig `rig_seed`.
+///
+/// # Example
+///
+/// ```python
+/// >>> import numpy as np, ambid
+/// >>> p = ambid.twin_plant()
+/// >>> int(np.sum(np.abs(p.poles()) > 1.0))  # the magnet's negative stiffness: one unstable pole
+/// 1
+///
+/// ```
 #[pyfunction]
 #[pyo3(signature = (*, rig_seed=None))]
 fn twin_plant(rig_seed: Option<u64>) -> PyResult<PyModel> {
@@ -500,6 +550,16 @@ fn twin_plant(rig_seed: Option<u64>) -> PyResult<PyModel> {
 /// A controller as a `Model` (its state space, u = −C y + r): from a controller file (TOML PID,
 /// transfer function or state space, docs/formats.md) or, without a path, the twin's
 /// (`rig_seed` for a random test rig).
+///
+/// # Example
+///
+/// ```python
+/// >>> import ambid
+/// >>> c = ambid.controller()
+/// >>> c.b.shape[1], c.c.shape[0]
+/// (1, 1)
+///
+/// ```
 #[pyfunction]
 #[pyo3(signature = (path=None, *, rig_seed=None))]
 fn controller(path: Option<PathBuf>, rig_seed: Option<u64>) -> PyResult<PyModel> {
@@ -519,6 +579,17 @@ fn controller(path: Option<PathBuf>, rig_seed: Option<u64>) -> PyResult<PyModel>
 /// `ambid validate`): the loop simulated from r (and w) from the initial state that best
 /// explains the record; fits of y and u, the output-error residual test (independence from the
 /// excitation), the closed-loop poles' stability, margins and the model's ISO 14839-3 zone.
+///
+/// # Example
+///
+/// ```python
+/// >>> import ambid
+/// >>> rec = ambid.simulate(seed=1, mode="linear", noise=False, periods=4)
+/// >>> v = ambid.validate(ambid.twin_plant(), ambid.controller(), rec["r"], rec["u"], rec["y"], rec["fs"])
+/// >>> v["fit_y_pct"] > 99.9
+/// True
+///
+/// ```
 #[pyfunction]
 #[pyo3(signature = (model, controller, r, u, y, fs, *, w=None, skip=0, lags=25, windows=20))]
 #[allow(clippy::too_many_arguments)]
@@ -853,6 +924,16 @@ fn fit_pem<'py>(
 
 /// The twin's seed experiment (or one of its random test rigs): the recorded signals and the
 /// exact linearised truth on the record's DFT grid.
+///
+/// # Example
+///
+/// ```python
+/// >>> import ambid
+/// >>> rec = ambid.simulate(seed=1, mode="linear", periods=4)
+/// >>> rec["fs"], rec["period_samples"], rec["y"].shape
+/// (20000.0, 5115, (20460,))
+///
+/// ```
 #[pyfunction]
 #[pyo3(signature = (*, seed=1, rig_seed=None, mode="nonlinear", noise=true, prbs_order=10, samples_per_bit=5, periods=20, level=0.1))]
 #[allow(clippy::too_many_arguments)]
@@ -912,6 +993,16 @@ fn simulate<'py>(
 
 /// The twin's exact linearised plant, T_ry, S and controller at `f_hz` (nominal rig or random
 /// rig `rig_seed`).
+///
+/// # Example
+///
+/// ```python
+/// >>> import numpy as np, ambid
+/// >>> t = ambid.truth(np.array([50.0, 500.0]))
+/// >>> t["plant"].shape, t["plant"].dtype
+/// ((2,), dtype('complex128'))
+///
+/// ```
 #[pyfunction]
 #[pyo3(signature = (f_hz, *, rig_seed=None))]
 fn truth<'py>(
@@ -975,6 +1066,16 @@ impl PyOutcome {
 
 /// Runs the workflow of a workflow file's text (`ambid run`): `config` is the TOML text,
 /// `base` the directory its relative paths are read from.
+///
+/// # Example
+///
+/// ```python
+/// >>> import ambid
+/// >>> out = ambid.run('steps = ["frf", "order", "models"]')
+/// >>> "chosen" in out.summary["models"]
+/// True
+///
+/// ```
 #[pyfunction]
 #[pyo3(signature = (config="", *, base=None))]
 fn run(py: Python<'_>, config: &str, base: Option<PathBuf>) -> PyResult<PyOutcome> {
@@ -1034,6 +1135,19 @@ fn frd_values(
 /// A state-space model of order `order` fitted to frequency-response data (the weighted
 /// complex-error fit of `ambid_core::estimate::freqfit_mimo`, any number of inputs and outputs;
 /// one entry is the 1×1 case).
+///
+/// # Example
+///
+/// ```python
+/// >>> import numpy as np, ambid
+/// >>> true = ambid.ss(np.array([[1.05, 0.0], [0.3, 0.6]]), np.array([[1.0], [0.0]]),
+/// ...                 np.array([[0.0, 1.0]]), np.array([[0.0]]), 1e-3)
+/// >>> f = np.linspace(1.0, 450.0, 200)
+/// >>> m = ambid.fit_frf(f, true.freq_response(f)[:, 0, 0].copy(), 1e-3, 2)
+/// >>> sorted(round(float(abs(p)), 6) for p in m.poles())  # the unstable pole is kept
+/// [0.6, 1.05]
+///
+/// ```
 #[pyfunction]
 #[pyo3(signature = (f_hz, g, ts, order, *, std=None, band=None, max_unstable_poles=None, feedthrough=false, max_iterations=100))]
 #[allow(clippy::too_many_arguments)]
@@ -1109,6 +1223,21 @@ fn fit_frf(
 /// A state-space model of `u → y` from time data: subspace identification (order from the
 /// singular values unless given) refined by the prediction-error method
 /// (`ambid::fitting::identify_state_space`, as `ambid fit --structure ss`).
+///
+/// # Example
+///
+/// ```python
+/// >>> import numpy as np, ambid
+/// >>> rng = np.random.default_rng(1)
+/// >>> u = rng.standard_normal(3000)
+/// >>> y = np.zeros(3000)
+/// >>> for k in range(1, 3000):
+/// ...     y[k] = 0.9 * y[k - 1] + u[k - 1]
+/// >>> m = ambid.fit_ss(u, y, 1.0, order=1)
+/// >>> round(float(m.poles()[0].real), 6)
+/// 0.9
+///
+/// ```
 #[pyfunction]
 #[pyo3(signature = (u, y, ts, *, order=None, feedthrough=false, max_iterations=100))]
 fn fit_ss(
@@ -1211,6 +1340,15 @@ fn excite<'py>(py: Python<'py>, kind: &str, fs: f64, params: &str) -> PyResult<B
 
 /// Random test rig `seed`'s twin configuration as TOML (what `ambid config --rig-seed N`
 /// prints): a workflow's `[twin] config` file.
+///
+/// # Example
+///
+/// ```python
+/// >>> import ambid
+/// >>> "[rotor]" in ambid.rig_config(3) or "mass" in ambid.rig_config(3)
+/// True
+///
+/// ```
 #[pyfunction]
 fn rig_config(seed: u64) -> PyResult<String> {
     ambid_twin::random_rig(seed)

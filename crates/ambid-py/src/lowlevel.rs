@@ -62,6 +62,17 @@ impl<'py> Columns<'py> {
 /// Welch auto and cross spectral densities of several channels (`welch_spectra`, as
 /// `ambid frf --method welch` uses them), with scipy's conventions: periodic window, one-sided,
 /// mean of the segments.
+///
+/// # Example
+///
+/// ```python
+/// >>> import numpy as np, ambid
+/// >>> x = np.random.default_rng(0).standard_normal(8192)
+/// >>> s = ambid.spectra([x, 2.0 * x], 1000.0, nperseg=1024)
+/// >>> s["csd"].shape, round(float(s["coherence"][0, 1].min()), 9)
+/// ((2, 2, 513), 1.0)
+///
+/// ```
 #[pyfunction]
 #[pyo3(signature = (channels, fs, *, nperseg=4096, noverlap=None, window="hann", detrend="constant", scaling="density"))]
 #[allow(clippy::too_many_arguments)]
@@ -159,6 +170,21 @@ pub(crate) fn spectra<'py>(
 /// per channel (1-D for one channel, `N × m` for several), optionally refined by state-space
 /// PEM (`refine` = `"simulation"` or `"prediction"`). Returns `{"model", "block_rows",
 /// "order", "singular_values"}`.
+///
+/// # Example
+///
+/// ```python
+/// >>> import numpy as np, ambid
+/// >>> rng = np.random.default_rng(1)
+/// >>> u = rng.standard_normal(2000)
+/// >>> y = np.zeros(2000)
+/// >>> for k in range(1, 2000):
+/// ...     y[k] = 0.9 * y[k - 1] + u[k - 1]
+/// >>> out = ambid.n4sid(u, y, 1.0, order=1)
+/// >>> out["order"], round(float(out["model"].poles()[0].real), 6)
+/// (1, 0.9)
+///
+/// ```
 #[pyfunction]
 #[pyo3(signature = (u, y, ts, *, order=None, max_order=10, block_rows=None, feedthrough=false, refine=None))]
 #[allow(clippy::too_many_arguments)]
@@ -238,6 +264,16 @@ fn mat_arg(name: &str, obj: &Bound<'_, PyAny>) -> PyResult<Mat<f64>> {
 
 /// A discrete state-space `Model` x⁺ = A x + B u, y = C x + D u with sample time `ts` (shapes
 /// n×n, n×m, p×n, p×m); stable or not, as given.
+///
+/// # Example
+///
+/// ```python
+/// >>> import numpy as np, ambid
+/// >>> m = ambid.ss(np.array([[1.1]]), np.array([[1.0]]), np.array([[1.0]]), np.array([[0.0]]), 1e-3)
+/// >>> m.order, bool(abs(m.poles()[0]) > 1.0)
+/// (1, True)
+///
+/// ```
 #[pyfunction]
 pub(crate) fn ss(
     a: &Bound<'_, PyAny>,
@@ -264,6 +300,18 @@ pub(crate) fn ss(
 /// plant T_ry/S and the controller (r − u)/y with standard deviations from the spread over
 /// periods, and the coherences, on the lines where r has power (amplitude above `threshold`
 /// times the largest non-DC line).
+///
+/// # Example
+///
+/// ```python
+/// >>> import numpy as np, ambid
+/// >>> rec = ambid.simulate(seed=1, mode="linear")
+/// >>> out = ambid.periodic_frf(rec["r"], rec["u"], rec["y"], rec["fs"], period_samples=5115)
+/// >>> p = ambid.truth(out["f_hz"])["plant"]
+/// >>> bool(np.median(np.abs(out["plant"] - p) / out["plant_std"]) < 2.0)
+/// True
+///
+/// ```
 #[pyfunction]
 #[pyo3(signature = (r, u, y, fs, *, period_samples, skip_periods=1, threshold=1e-6))]
 #[allow(clippy::too_many_arguments)]

@@ -85,6 +85,19 @@ fn section(text: &str) -> PyResult<MachineSection> {
 /// The 4-axis twin's experiments at every speed of the `[machine]` settings `machine` (TOML
 /// text; empty: the defaults, 0, 15 000 and 30 000 rpm, orthogonal PRBS design), with the MIMO
 /// FRF of each speed, exactly as `ambid run` acquires them. Returns one dict per speed.
+///
+/// # Example
+///
+/// ```python
+/// >>> import numpy as np, ambid
+/// >>> (s,) = ambid.machine_experiments('speeds_rpm = [0.0]\nmode = "linear"\nnoise = false\nperiods = 4')
+/// >>> s["plant"].shape[1:], len(s["experiments"])
+/// ((4, 4), 4)
+/// >>> p = s["plant_true"].freq_response(s["f_hz"])
+/// >>> bool(np.max(np.abs(s["plant"] - p)) < 1e-6 * np.max(np.abs(p)))
+/// True
+///
+/// ```
 #[pyfunction]
 #[pyo3(signature = (machine="", *, seed=1))]
 pub(crate) fn machine_experiments<'py>(
@@ -162,6 +175,18 @@ fn columns(e: usize, q: &str, obj: &Bound<'_, PyAny>) -> PyResult<Vec<Vec<f64>>>
 /// orthogonal designs) are solved per line; one experiment exciting every axis on its own
 /// lines (zippered) column by column. With `speed_rpm` > 0 the 1× line is estimated and
 /// removed first. The same function as the data stage of `ambid run` with `[machine]`.
+///
+/// # Example
+///
+/// ```python
+/// >>> import numpy as np, ambid
+/// >>> (s,) = ambid.machine_experiments('speeds_rpm = [0.0]\nmode = "linear"\nperiods = 4')
+/// >>> exps = [{k: e[k] for k in ("r", "u", "y")} for e in s["experiments"]]
+/// >>> out = ambid.frf_mimo(exps, s["fs"], period_samples=s["period_samples"])
+/// >>> bool(np.array_equal(out["plant"], s["plant"]))
+/// True
+///
+/// ```
 #[pyfunction]
 #[pyo3(signature = (experiments, fs, *, period_samples, skip_periods=1, band=None, speed_rpm=0.0))]
 pub(crate) fn frf_mimo<'py>(

@@ -130,6 +130,23 @@ fn put_bla(d: &Bound<'_, PyDict>, key: &str, b: &BlaEstimate) -> PyResult<()> {
 /// as `ambid bla --records` with one level. Returns the per-line BLA (`f_hz`, `g` with `g_std`,
 /// `g_std_noise`, `g_std_nl`; closed loop also `t_ry…`, `s…`), the detection-line levels and
 /// the band figures of the level (`figures`).
+///
+/// # Example
+///
+/// ```python
+/// >>> import numpy as np, ambid
+/// >>> rng = np.random.default_rng(0)
+/// >>> n = 128
+/// >>> def realisation():
+/// ...     x = np.zeros(n // 2 + 1, complex)
+/// ...     x[1:40:2] = np.exp(2j * np.pi * rng.random(20))
+/// ...     u = np.tile(np.fft.irfft(x, n), 4)
+/// ...     return {"u": u, "y": 2.0 * u + 1e-6 * rng.standard_normal(4 * n)}
+/// >>> b = ambid.bla([realisation() for _ in range(4)], 1000.0, period_samples=n, band=(1.0, 300.0))
+/// >>> bool(np.allclose(b["g"], 2.0, rtol=1e-3))
+/// True
+///
+/// ```
 #[pyfunction]
 #[pyo3(signature = (realisations, fs, *, period_samples, skip_periods=1, band=None, level_pct=None))]
 pub(crate) fn bla<'py>(
@@ -178,6 +195,24 @@ pub(crate) fn bla<'py>(
 /// `levels` maps a level in % of i_sat to its realisations (as for [`bla`]). Returns the rows
 /// (one dict per level: noise and nonlinear variance relative to |G|², their sum, the
 /// detection-line levels), the recommended level and the reasoning.
+///
+/// # Example
+///
+/// ```python
+/// >>> import numpy as np, ambid
+/// >>> rng = np.random.default_rng(0)
+/// >>> n = 128
+/// >>> def realisation(level):
+/// ...     x = np.zeros(n // 2 + 1, complex)
+/// ...     x[1:40:2] = np.exp(2j * np.pi * rng.random(20))
+/// ...     u = np.tile(np.fft.irfft(x, n), 4) * level
+/// ...     return {"u": u, "y": 2.0 * u + 1e-4 * rng.standard_normal(4 * n)}
+/// >>> st = ambid.bla_study({1.0: [realisation(0.01) for _ in range(4)],
+/// ...                       10.0: [realisation(0.1) for _ in range(4)]}, 1000.0, period_samples=n)
+/// >>> st["recommended_pct"]
+/// 10.0
+///
+/// ```
 #[pyfunction]
 #[pyo3(signature = (levels, fs, *, period_samples, skip_periods=1, band=None))]
 pub(crate) fn bla_study<'py>(
@@ -227,6 +262,20 @@ pub(crate) fn bla_study<'py>(
 /// output record without excitation (for the SNR). Per level the band averages of the
 /// coherences and of the plant's single-period variance, the SNR and the saturation; the
 /// recommended range of levels and why; the plant FRF of each level.
+///
+/// # Example
+///
+/// ```python
+/// >>> import ambid
+/// >>> recs = []
+/// >>> for k, lvl in enumerate((0.02, 0.08)):
+/// ...     r = ambid.simulate(seed=10 + k, mode="linear", level=lvl, periods=6)
+/// ...     recs.append({"level_pct": 100 * lvl, "r": r["r"], "u": r["u"], "y": r["y"]})
+/// >>> out = ambid.amplitude_study(recs, 20000.0, period_samples=5115, band=(10.0, 1000.0))
+/// >>> [r["level_pct"] for r in out["rows"]]
+/// [2.0, 8.0]
+///
+/// ```
 #[pyfunction]
 #[pyo3(signature = (records, fs, *, period_samples, skip_periods=1, band=None, noise=None))]
 #[allow(clippy::too_many_arguments)]

@@ -102,10 +102,10 @@ def fit_arx(u, y, ts: float, *, na: int, nb: int, nk: int = 1) -> Model:
     >>> rng = np.random.default_rng(0)
     >>> u = rng.standard_normal(500)
     >>> y = np.zeros(500)
-    >>> for k in range(2, 500):
+    >>> for k in range(1, 500):
     ...     y[k] = 0.5 * y[k - 1] + 2.0 * u[k - 1]
     >>> m = ambid.fit_arx(u, y, 1.0, na=1, nb=1)
-    >>> [round(v, 6) for v in m.params]
+    >>> [round(float(v), 6) for v in m.params]
     [-0.5, 2.0]
     """
     return _native.fit_arx(u, y, ts, na=na, nb=nb, nk=nk)
@@ -113,7 +113,18 @@ def fit_arx(u, y, ts: float, *, na: int, nb: int, nk: int = 1) -> Model:
 
 def fit_pem(u, y, ts: float, structure: str, **orders: int) -> Model:
     """Prediction-error model of ``u -> y``: ``structure`` is ``"armax"``, ``"oe"`` or
-    ``"bj"``; the orders as keywords (``na, nb, nc, nd, nf, nk``) and ``max_iterations``."""
+    ``"bj"``; the orders as keywords (``na, nb, nc, nd, nf, nk``) and ``max_iterations``.
+
+    >>> import numpy as np, ambid
+    >>> rng = np.random.default_rng(0)
+    >>> u = rng.standard_normal(2000)
+    >>> x = np.zeros(2000)
+    >>> for k in range(1, 2000):
+    ...     x[k] = 0.8 * x[k - 1] + 0.5 * u[k - 1]
+    >>> m = ambid.fit_pem(u, x + 0.01 * rng.standard_normal(2000), 1.0, "oe", nb=1, nf=1)
+    >>> [round(float(v), 2) for v in m.polynomials["f"]]
+    [1.0, -0.8]
+    """
     return _native.fit_pem(u, y, ts, structure, **orders)
 
 
@@ -157,7 +168,13 @@ class Outcome:
 def run(config: Optional[str] = None, *, base: Optional[str] = None) -> Outcome:
     """The whole workflow (``ambid run``). ``config`` is the workflow file's TOML text, or a
     path to it; ``None`` runs the default workflow on the embedded twin. Relative paths in the
-    file are read from ``base`` (default: the file's directory, else the working directory)."""
+    file are read from ``base`` (default: the file's directory, else the working directory).
+
+    >>> import ambid
+    >>> out = ambid.run('steps = ["frf", "order", "models"]')
+    >>> "chosen" in out.summary["models"]
+    True
+    """
     import os
 
     text = ""
