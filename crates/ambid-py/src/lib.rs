@@ -146,6 +146,15 @@ fn ro1<'py>(name: &str, obj: &Bound<'py, PyAny>) -> PyResult<numpy::PyReadonlyAr
             arr.shape()
         )));
     }
+    readonly_contiguous(name, arr)
+}
+
+/// `arr` borrowed read-only, or `InputError` when it is borrowed mutably elsewhere or not
+/// C-contiguous (the rule of every array argument, 1-D or 2-D).
+fn readonly_contiguous<'py>(
+    name: &str,
+    arr: &Bound<'py, numpy::PyArrayDyn<f64>>,
+) -> PyResult<numpy::PyReadonlyArrayDyn<'py, f64>> {
     let ro = arr.try_readonly().map_err(|e| {
         err(
             Kind::Input,

@@ -3,7 +3,10 @@
 //! `Model` built from given matrices. They are what a script composes when the whole-workflow
 //! functions do too much, and what the peer comparison (`bench/compare`) times from Python.
 
-use super::{err, finite_positive, put_frds, ro1, samples, ss_model, to_py, Kind, PyModel};
+use super::{
+    err, finite_positive, put_frds, readonly_contiguous, ro1, samples, ss_model, to_py, Kind,
+    PyModel,
+};
 use ambid_core::estimate::pem::Focus;
 use ambid_core::estimate::ss_pem::{refine_ss, SsPemOptions};
 use ambid_core::estimate::subspace::{n4sid_detailed, SubspaceOptions};
@@ -21,28 +24,18 @@ use pyo3::types::{PyDict, PyList};
 
 /// A float64 array of one channel (1-D, `N`) or of several (2-D C-contiguous, `N × m`, one
 /// column per channel), borrowed without a copy.
-struct Columns<'py> {
+pub(crate) struct Columns<'py> {
     ro: numpy::PyReadonlyArrayDyn<'py, f64>,
     rows: usize,
     cols: usize,
 }
 
 impl<'py> Columns<'py> {
-    fn of(name: &str, obj: &Bound<'py, PyAny>) -> PyResult<Self> {
+    pub(crate) fn of(name: &str, obj: &Bound<'py, PyAny>) -> PyResult<Self> {
         if let Ok(a) = obj.cast::<numpy::PyArrayDyn<f64>>() {
             if a.ndim() == 2 {
                 let (rows, cols) = (a.shape()[0], a.shape()[1]);
-                let ro = a.try_readonly().map_err(|e| {
-                    err(
-                        Kind::Input,
-                        format!("`{name}` cannot be borrowed for reading ({e})"),
-                    )
-                })?;
-                if !ro.is_c_contiguous() {
-                    return Err(err(Kind::Input, format!(
-                        "`{name}` is not C-contiguous (a strided view); pass np.ascontiguousarray({name})"
-                    )));
-                }
+                let ro = readonly_contiguous(name, a)?;
                 return Ok(Self { ro, rows, cols });
             }
         }
@@ -53,7 +46,7 @@ impl<'py> Columns<'py> {
     }
 
     /// The data as an `N × m` matrix view (row-major storage, no copy).
-    fn mat(&self, name: &str) -> PyResult<MatRef<'_, f64>> {
+    pub(crate) fn mat(&self, name: &str) -> PyResult<MatRef<'_, f64>> {
         let s = samples(name, &self.ro)?;
         Ok(MatRef::from_row_major_slice(s, self.rows, self.cols))
     }
@@ -128,20 +121,18 @@ pub(crate) fn spectra<'py>(
     let (s, coh) = py
         .detach(|| -> ambid_core::Result<_> {
             let s = welch_spectra(&slices, &opts)?;
-            let mut coh = vec![Vec::new(); nc * nc];
-            for i in 0..nc {
-                for j in i + 1..nc {
-                    let c = s.coherence(i, j)?;
-                    coh[j * nc + i].clone_from(&c);
-                    coh[i * nc + j] = c;
-                }
-            }
+            // each pair i < j once, in the order the fill below reads them
+            let coh = (0..nc)
+                .flat_map(|i| (i + 1..nc).map(move |j| (i, j)))
+                .map(|(i, j)| s.coherence(i, j))
+                .collect::<ambid_core::Result<Vec<_>>>()?;
             Ok((s, coh))
         })
         .map_err(to_py)?;
     let l = s.f_hz().len();
     let mut csd = Array3::<Complex64>::zeros((nc, nc, l));
     let mut cohm = Array3::<f64>::ones((nc, nc, l));
+    let mut pairs = coh.iter();
     for i in 0..nc {
         for j in i..nc {
             let v = s.get(i, j).map_err(to_py)?;
@@ -149,10 +140,13 @@ pub(crate) fn spectra<'py>(
                 csd[[i, j, k]] = *z;
                 csd[[j, i, k]] = z.conj();
             }
-            if i != j {
-                for k in 0..l {
-                    cohm[[i, j, k]] = coh[i * nc + j][k];
-                    cohm[[j, i, k]] = coh[i * nc + j][k];
+            if i == j {
+                continue;
+            }
+            if let Some(c) = pairs.next() {
+                for (k, v) in c.iter().enumerate() {
+                    cohm[[i, j, k]] = *v;
+                    cohm[[j, i, k]] = *v;
                 }
             }
         }

@@ -8,7 +8,7 @@
 
 use super::{err, finite_positive, ss_model, to_py, Kind};
 use ambid::config::MachineSection;
-use ambid::workflow::machine::{acquire_twin, measure_records};
+use ambid::workflow::machine::{acquire_twin, measure_records, MeasuredFrf};
 use ambid_core::data::{IoData, AXES};
 use ambid_core::lti::Frd;
 use numpy::ndarray::{Array2, Array3};
@@ -38,6 +38,20 @@ fn put_matrix(d: &Bound<'_, PyDict>, frds: &[(&str, &Frd)]) -> PyResult<()> {
         }
     }
     Ok(())
+}
+
+/// One speed's measured FRFs: `f_hz`, `plant` and, when present, `t_ry` and `s`, each with
+/// `*_std`.
+fn put_measured(d: &Bound<'_, PyDict>, m: &MeasuredFrf) -> PyResult<()> {
+    d.set_item("f_hz", m.plant.f_hz().to_vec().into_pyarray(d.py()))?;
+    let mut frds = vec![("plant", &m.plant)];
+    if let Some(t) = &m.t_ry {
+        frds.push(("t_ry", t));
+    }
+    if let Some(t) = &m.s {
+        frds.push(("s", t));
+    }
+    put_matrix(d, &frds)
 }
 
 /// One experiment's channels as `N × 4` arrays per quantity (`r`, `u`, `y`, and `i` when
@@ -118,15 +132,7 @@ pub(crate) fn machine_experiments<'py>(
         d.set_item("period_samples", s.period_samples)?;
         d.set_item("sync_removed_hz", s.sync_removed_hz)?;
         d.set_item("axes", AXES.to_vec())?;
-        d.set_item("f_hz", s.frf.plant.f_hz().to_vec().into_pyarray(py))?;
-        let mut frds = vec![("plant", &s.frf.plant)];
-        if let Some(t) = &s.frf.t_ry {
-            frds.push(("t_ry", t));
-        }
-        if let Some(t) = &s.frf.s {
-            frds.push(("s", t));
-        }
-        put_matrix(&d, &frds)?;
+        put_measured(&d, &s.frf)?;
         let exps = PyList::empty(py);
         for rec in &s.records {
             exps.append(experiment_dict(py, rec)?)?;
@@ -170,8 +176,8 @@ fn columns(e: usize, q: &str, obj: &Bound<'_, PyAny>) -> PyResult<Vec<Vec<f64>>>
 }
 
 /// The MIMO closed-loop FRF of periodic multi-axis experiments given as arrays: each
-/// experiment a dict with `r`, `u`, `y` as `N × k` arrays (column j = axis `xa, xb, ya, yb`[j];
-/// r added to the controller outputs). Several experiments (k or more: sequential or
+/// experiment a dict with `r`, `u`, `y` as `N × 4` arrays (columns `xa, xb, ya, yb`; r added
+/// to the controller outputs). Several experiments (4 or more: sequential or
 /// orthogonal designs) are solved per line; one experiment exciting every axis on its own
 /// lines (zippered) column by column. With `speed_rpm` > 0 the 1× line is estimated and
 /// removed first. The same function as the data stage of `ambid run` with `[machine]`.
@@ -250,15 +256,7 @@ pub(crate) fn frf_mimo<'py>(
         })
         .map_err(to_py)?;
     let d = PyDict::new(py);
-    d.set_item("f_hz", measured.plant.f_hz().to_vec().into_pyarray(py))?;
-    let mut frds = vec![("plant", &measured.plant)];
-    if let Some(t) = &measured.t_ry {
-        frds.push(("t_ry", t));
-    }
-    if let Some(t) = &measured.s {
-        frds.push(("s", t));
-    }
-    put_matrix(&d, &frds)?;
+    put_measured(&d, &measured)?;
     d.set_item("sync_removed_hz", sync)?;
     Ok(d)
 }

@@ -4,7 +4,7 @@
 //! function the CLI calls; the per-level figures come back as dicts with the keys of the
 //! library's serialised rows (`summary.json`).
 
-use super::{band_of, err, finite_positive, put_frds, ro1, samples, to_py, Kind};
+use super::{band_of, err, finite_positive, put_frds, to_py, vec1, Kind};
 use ambid::analysis::FrfSettings;
 use ambid::bla::{
     amplitude_study_from_records, bla_of_level, figures_of, Realisation, RecordedLevel,
@@ -50,16 +50,24 @@ fn row_dict<'py, T: serde::Serialize>(py: Python<'py>, row: &T) -> PyResult<Boun
     json_to_py(py, &v)
 }
 
+/// Serialisable rows as a list of dicts.
+fn rows_list<'py, T: serde::Serialize>(
+    py: Python<'py>,
+    rows: &[T],
+) -> PyResult<Bound<'py, PyList>> {
+    let l = PyList::empty(py);
+    for r in rows {
+        l.append(row_dict(py, r)?)?;
+    }
+    Ok(l)
+}
+
 /// A 1-D array of a dict entry, copied (`what` names it in errors).
 fn entry(d: &Bound<'_, PyDict>, key: &str, what: &str) -> PyResult<Option<Vec<f64>>> {
     match d.get_item(key)? {
         None => Ok(None),
         Some(o) if o.is_none() => Ok(None),
-        Some(o) => {
-            let name = format!("{what}[\"{key}\"]");
-            let ro = ro1(&name, &o)?;
-            Ok(Some(samples(&name, &ro)?.to_vec()))
-        }
+        Some(o) => Ok(Some(vec1(&format!("{what}[\"{key}\"]"), &o)?)),
     }
 }
 
@@ -247,11 +255,7 @@ pub(crate) fn bla_study<'py>(
         .detach(|| amplitude_study_from_records(&grouped, &plan))
         .map_err(to_py)?;
     let d = PyDict::new(py);
-    let rows = PyList::empty(py);
-    for r in &study.rows {
-        rows.append(row_dict(py, r)?)?;
-    }
-    d.set_item("rows", rows)?;
+    d.set_item("rows", rows_list(py, &study.rows)?)?;
     d.set_item("recommended_pct", study.recommended_pct)?;
     d.set_item("reasoning", study.reasoning)?;
     Ok(d)
@@ -318,10 +322,7 @@ pub(crate) fn amplitude_study<'py>(
         });
     }
     let noise = match &noise {
-        Some(n) if !n.is_none() => {
-            let ro = ro1("noise", n)?;
-            Some(samples("noise", &ro)?.to_vec())
-        }
+        Some(n) if !n.is_none() => Some(vec1("noise", n)?),
         _ => None,
     };
     let mut settings = FrfSettings::periodic(period_samples, skip_periods);
@@ -340,11 +341,7 @@ pub(crate) fn amplitude_study<'py>(
         })
         .map_err(to_py)?;
     let d = PyDict::new(py);
-    let rows = PyList::empty(py);
-    for r in &out.rows {
-        rows.append(row_dict(py, r)?)?;
-    }
-    d.set_item("rows", rows)?;
+    d.set_item("rows", rows_list(py, &out.rows)?)?;
     let plants = PyList::empty(py);
     for p in &out.plants {
         let pd = PyDict::new(py);
