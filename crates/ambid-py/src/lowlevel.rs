@@ -7,6 +7,7 @@ use super::{
     err, finite_positive, put_frds, readonly_contiguous, ro1, samples, ss_model, to_py, Kind,
     PyModel,
 };
+use ambid::analysis::FrfSettings;
 use ambid_core::estimate::pem::Focus;
 use ambid_core::estimate::ss_pem::{refine_ss, SsPemOptions};
 use ambid_core::estimate::subspace::{n4sid_detailed, SubspaceOptions};
@@ -54,7 +55,8 @@ impl<'py> Columns<'py> {
 
 /// Welch auto and cross spectral densities of several channels (`welch_spectra`, as
 /// `ambid frf --method welch` uses them), with scipy's conventions: periodic window, one-sided,
-/// mean of the segments.
+/// mean of the segments. Without `nperseg` the segment comes from the record length by the rule
+/// of `ambid frf` (the largest power of two ≤ N/8, clamped to 64 … 8192 samples).
 ///
 /// # Example
 ///
@@ -67,13 +69,13 @@ impl<'py> Columns<'py> {
 ///
 /// ```
 #[pyfunction]
-#[pyo3(signature = (channels, fs, *, nperseg=4096, noverlap=None, window="hann", detrend="constant", scaling="density"))]
+#[pyo3(signature = (channels, fs, *, nperseg=None, noverlap=None, window="hann", detrend="constant", scaling="density"))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn spectra<'py>(
     py: Python<'py>,
     channels: &Bound<'py, PyList>,
     fs: f64,
-    nperseg: usize,
+    nperseg: Option<usize>,
     noverlap: Option<usize>,
     window: &str,
     detrend: &str,
@@ -81,6 +83,25 @@ pub(crate) fn spectra<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let fs = finite_positive("fs", fs)?;
     let usage = |m: String| err(Kind::Usage, m);
+    let arrays = channels
+        .iter()
+        .enumerate()
+        .map(|(k, c)| ro1(&format!("channels[{k}]"), &c))
+        .collect::<PyResult<Vec<_>>>()?;
+    let slices = arrays
+        .iter()
+        .enumerate()
+        .map(|(k, a)| samples(&format!("channels[{k}]"), a))
+        .collect::<PyResult<Vec<_>>>()?;
+    // the segment from the record when not given: the one rule of `ambid frf` (n/8 rounded
+    // down to a power of two, 64 … 8192 samples)
+    let Some(n) = slices.first().map(|c| c.len()) else {
+        return Err(err(
+            Kind::Input,
+            "`channels` is empty: give at least one channel (a 1-D float64 array)",
+        ));
+    };
+    let nperseg = nperseg.unwrap_or_else(|| FrfSettings::default_nperseg(n));
     let mut opts = WelchOptions::new(fs, nperseg);
     if let Some(o) = noverlap {
         opts.noverlap = o;
@@ -107,16 +128,6 @@ pub(crate) fn spectra<'py>(
             )))
         }
     };
-    let arrays = channels
-        .iter()
-        .enumerate()
-        .map(|(k, c)| ro1(&format!("channels[{k}]"), &c))
-        .collect::<PyResult<Vec<_>>>()?;
-    let slices = arrays
-        .iter()
-        .enumerate()
-        .map(|(k, a)| samples(&format!("channels[{k}]"), a))
-        .collect::<PyResult<Vec<_>>>()?;
     let nc = slices.len();
     let (s, coh) = py
         .detach(|| -> ambid_core::Result<_> {

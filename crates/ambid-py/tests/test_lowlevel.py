@@ -36,6 +36,15 @@ def test_spectra_equal_scipy_welch_csd_and_coherence():
         np.testing.assert_array_equal(s["coherence"][2, 2], 1.0)
 
 
+def test_spectra_segment_comes_from_the_record_length():
+    # the rule of `ambid frf`: the largest power of two <= N/8, clamped to 64 ... 8192
+    rng = np.random.default_rng(1)
+    for n, nper in ((20_000, 2048), (300, 64), (200_000, 8192)):
+        s = ambid.spectra([rng.standard_normal(n)], 1000.0)
+        assert len(s["f_hz"]) == nper // 2 + 1, n
+        assert s["segments"] == (n - nper // 2) // (nper - nper // 2), n
+
+
 def test_spectra_refuse_bad_settings():
     x = np.random.default_rng(0).standard_normal(1000)
     with pytest.raises(ambid.UsageError, match="detrend"):
@@ -46,6 +55,8 @@ def test_spectra_refuse_bad_settings():
         ambid.spectra([x, x.astype(np.float32)], 100.0, nperseg=128)
     with pytest.raises(ambid.AmbidError):
         ambid.spectra([x, x[:999]], 100.0, nperseg=128)
+    with pytest.raises(ambid.InputError, match="empty"):
+        ambid.spectra([], 100.0)
 
 
 def random_system(rng, n, m, p, unstable=False):

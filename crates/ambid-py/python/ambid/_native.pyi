@@ -162,7 +162,7 @@ def spectra(
     channels: list[F64],
     fs: float,
     *,
-    nperseg: int = 4096,
+    nperseg: Optional[int] = None,
     noverlap: Optional[int] = None,
     window: str = "hann",
     detrend: str = "constant",
