@@ -87,9 +87,9 @@ pub struct MachineSection {
     /// Recorded experiments, one entry per speed (default: none, the twin runs).
     pub files: Vec<MachineFile>,
     /// Parametric models of the plant: `none` (default: the measured FRFs only) or `fit` (the
-    /// MIMO state-space fitter, `workflow::machine_fit::FrequencyFitter`: per speed orders 20,
-    /// 22, 24, closed-loop validation, Campbell diagram from the models; about 20–40 s per
-    /// speed on 2 cores).
+    /// MIMO state-space fitter, `workflow::machine_fit::FrequencyFitter`: per speed orders 16,
+    /// 20, 24, closed-loop validation, Campbell diagram from the models; about 30 s per speed
+    /// on 2 cores).
     pub models: String,
 }
 

@@ -480,7 +480,7 @@ fn models_fit_runs_the_mimo_fitter_in_the_workflow() {
     let m = &out.summary["machine"];
     let rows = m["comparison"].as_array().unwrap();
     let orders: Vec<u64> = rows.iter().map(|r| r["order"].as_u64().unwrap()).collect();
-    assert_eq!(orders, vec![20, 22, 24], "{rows:?}");
+    assert_eq!(orders, vec![16, 20, 24], "{rows:?}");
     let chosen: Vec<_> = rows.iter().filter(|r| r["chosen"] == true).collect();
     assert_eq!(chosen.len(), 1, "{rows:?}");
     assert_eq!(m["models"].as_array().unwrap().len(), 1);

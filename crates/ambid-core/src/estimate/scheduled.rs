@@ -1061,7 +1061,7 @@ impl Gauge {
 /// $W_o = \operatorname{Re}\sum_k F_k^{\mathsf H} F_k$ are equal and diagonal, by the square-root
 /// method (triangular factors from QR factorisations of the stacked real and imaginary parts).
 /// `None` if a gramian is singular to working precision or a line sits on a pole.
-fn band_balanced(m: &StateSpace, z: &[c64]) -> Option<StateSpace> {
+pub(crate) fn band_balanced(m: &StateSpace, z: &[c64]) -> Option<StateSpace> {
     let (a, b, c) = (m.a(), m.b(), m.c());
     let (n, ny, nu) = (a.nrows(), c.nrows(), b.ncols());
     let l = z.len();

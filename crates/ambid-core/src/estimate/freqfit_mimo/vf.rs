@@ -1,7 +1,8 @@
-//! The vector-fitting start of [`super::fit`]: common poles relocated by the
+//! The vector-fitting starts of [`super::fit`]: common poles relocated by the
 //! Sanathanan–Koerner iteration of vector fitting (Gustavsen & Semlyen 1999) on every entry at
-//! once, matrix residues fitted for the relocated poles, and a realisation of the requested order
-//! from the residues' dominant rank-one parts.
+//! once, matrix residues fitted for the relocated poles, and two realisations of the requested
+//! order: the band-balanced truncation of the whole model, and the residues' dominant rank-one
+//! parts.
 //!
 //! # Method
 //! The model in partial fractions is $G(z) \approx D + \sum_m R_m \varphi_m(z)$ with a real basis
@@ -16,7 +17,10 @@
 //!
 //! A pole of multiplicity $r$ in a minimal MIMO model (the four identical amplifiers of an AMB,
 //! the x and y planes of a symmetric rotor) has a residue of rank $r$; the poles here are
-//! distinct and their residues full matrices. The realisation keeps, over all poles, the
+//! distinct and their residues full matrices. The band-balanced realisation writes every
+//! rank-one part of every residue as states (Gilbert's realisation: one per part of a real pole,
+//! two per part of a pair), balances the whole on the data's lines and keeps the `order` states
+//! of largest band Hankel singular values. The rank-one realisation keeps, over all poles, the
 //! rank-one parts $\sigma_{m,r} u_{m,r} v_{m,r}^{\mathsf H}$ of largest size in the band
 //! ($\sigma_{m,r}$ times the RMS of $|\varphi_m|$ over the lines), one state per real pole's
 //! part and two per pair's, until the order is reached; its output matrix holds the parts'
@@ -193,14 +197,16 @@ fn residues(poles: &[Pole], data: &Data) -> Result<Vec<Mat<f64>>> {
     Ok(out)
 }
 
-/// The vector-fitting start: $(A, C)$ of dimension `order` in $z$, channel-scaled units, from
-/// `start` (poles in $z$, conjugate pairs complete) after at most `iterations` relocations.
+/// The vector-fitting starts: $(A, C)$ of dimension `order` in $z$, channel-scaled units, from
+/// `start` (poles in $z$, conjugate pairs complete) after at most `iterations` relocations,
+/// realised twice: the band-balanced truncation of the whole fit (when it can be formed) and
+/// the dominant rank-one parts (when there are enough); an error when neither can be.
 pub(super) fn start(
     data: &Data,
     order: usize,
     start: &[c64],
     iterations: usize,
-) -> Result<(Mat<f64>, Mat<f64>)> {
+) -> Result<Vec<(Mat<f64>, Mat<f64>)>> {
     let mut poles = poles_of(start);
     for _ in 0..iterations {
         let new = relocate(&poles, data)?;
@@ -210,7 +216,113 @@ pub(super) fn start(
             break;
         }
     }
-    realise(&poles, data, order)
+    let res = residues(&poles, data)?;
+    let mut out = Vec::new();
+    if let Some(r) = realise_balanced(&poles, &res, data, order)? {
+        out.push(r);
+    }
+    match realise(&poles, &res, data, order) {
+        Ok(r) => out.push(r),
+        Err(e) if out.is_empty() => return Err(e),
+        Err(_) => {}
+    }
+    Ok(out)
+}
+
+/// The band-balanced truncation of the whole partial-fraction model (module docs): every pole
+/// with its whole residue (Gilbert's realisation: a state per rank-one part of a real pole's
+/// residue, two per part of a pair's), balanced on the data's lines
+/// ([`band_balanced`](crate::estimate::scheduled::band_balanced)) and truncated to `order`
+/// states; `None` when the realisation has fewer states than `order` or cannot be balanced.
+fn realise_balanced(
+    poles: &[Pole],
+    res: &[Mat<f64>],
+    data: &Data,
+    order: usize,
+) -> Result<Option<(Mat<f64>, Mat<f64>)>> {
+    let (ny, nu) = (data.ny, data.nu);
+    let j = c64::new(0.0, 1.0);
+    // (pole, u, σ v̄): the part σ u vᴴ of the pole's residue
+    let mut parts: Vec<(Pole, Vec<c64>, Vec<c64>)> = Vec::new();
+    let mut top = 0.0f64;
+    let mut s = 0;
+    for p in poles {
+        let r = match *p {
+            Pole::Real(_) => {
+                let r = Mat::<c64>::from_fn(ny, nu, |a, b| c64::new(res[s][(a, b)], 0.0));
+                s += 1;
+                r
+            }
+            Pole::Pair(_) => {
+                let r = Mat::<c64>::from_fn(ny, nu, |a, b| {
+                    c64::new(res[s][(a, b)], 0.0) + j * res[s + 1][(a, b)]
+                });
+                s += 2;
+                r
+            }
+        };
+        let svd = r.svd().map_err(|_| degenerate("SVD of a residue failed"))?;
+        let sv = svd.S().column_vector();
+        for k in 0..sv.nrows().min(ny).min(nu) {
+            let sg = sv[k].re;
+            top = top.max(sg);
+            let u: Vec<c64> = (0..ny).map(|i| svd.U()[(i, k)]).collect();
+            let v: Vec<c64> = (0..nu).map(|i| svd.V()[(i, k)].conj() * sg).collect();
+            parts.push((*p, u, v));
+        }
+    }
+    // parts at rounding level of the largest carry no state
+    parts.retain(|(_, _, v)| v.iter().map(|x| x.norm_sqr()).sum::<f64>().sqrt() > 1e-12 * top);
+    let big: usize = parts
+        .iter()
+        .map(|(p, _, _)| if matches!(p, Pole::Real(_)) { 1 } else { 2 })
+        .sum();
+    if big < order {
+        return Ok(None);
+    }
+    let mut a = Mat::<f64>::zeros(big, big);
+    let mut b = Mat::<f64>::zeros(big, nu);
+    let mut c = Mat::<f64>::zeros(ny, big);
+    let mut st = 0;
+    for (p, u, v) in &parts {
+        match *p {
+            Pole::Real(x) => {
+                a[(st, st)] = x;
+                for q in 0..nu {
+                    b[(st, q)] = v[q].re;
+                }
+                for i in 0..ny {
+                    c[(i, st)] = u[i].re;
+                }
+                st += 1;
+            }
+            Pole::Pair(z) => {
+                // u v̄ᵀ/(z − p) + its conjugate, with the state x = (Re ξ, Im ξ) of the
+                // complex state ξ' = p ξ + v̄ᵀ w and y = 2 Re(u ξ)
+                a[(st, st)] = z.re;
+                a[(st, st + 1)] = -z.im;
+                a[(st + 1, st)] = z.im;
+                a[(st + 1, st + 1)] = z.re;
+                for q in 0..nu {
+                    b[(st, q)] = v[q].re;
+                    b[(st + 1, q)] = v[q].im;
+                }
+                for i in 0..ny {
+                    c[(i, st)] = 2.0 * u[i].re;
+                    c[(i, st + 1)] = -2.0 * u[i].im;
+                }
+                st += 2;
+            }
+        }
+    }
+    let full = crate::lti::StateSpace::discrete(a, b, c, Mat::zeros(ny, nu), data.ts)?;
+    let Some(bal) = crate::estimate::scheduled::band_balanced(&full, &data.z) else {
+        return Ok(None);
+    };
+    Ok(Some((
+        bal.a().submatrix(0, 0, order, order).to_owned(),
+        bal.c().subcols(0, order).to_owned(),
+    )))
 }
 
 fn sorted(p: &[Pole]) -> Vec<c64> {
@@ -237,8 +349,12 @@ fn max_change(a: &[Pole], b: &[Pole]) -> f64 {
 }
 
 /// The realisation of the dominant rank-one parts (module docs).
-fn realise(poles: &[Pole], data: &Data, order: usize) -> Result<(Mat<f64>, Mat<f64>)> {
-    let res = residues(poles, data)?;
+fn realise(
+    poles: &[Pole],
+    res: &[Mat<f64>],
+    data: &Data,
+    order: usize,
+) -> Result<(Mat<f64>, Mat<f64>)> {
     let (l, ny) = (data.len() as f64, data.ny);
     let j = c64::new(0.0, 1.0);
     // (importance, pole index, left singular vector)
@@ -423,37 +539,57 @@ mod tests {
     }
 
     #[test]
-    fn the_rank_two_residue_is_realised_with_two_blocks_and_reproduces_the_data() {
+    fn both_realisations_hold_the_rank_two_residue_and_reproduce_the_data() {
         let data = data();
         let truth = plant();
-        let (a, c) = start(&data, 6, &spread_poles(&data, 4), 30).unwrap();
-        let mut ev = linalg::eigenvalues(a.as_ref()).unwrap();
-        ev.sort_by(|x, y| x.re.total_cmp(&y.re).then(x.im.total_cmp(&y.im)));
-        assert_eq!(ev.len(), 6);
-        // the pair appears twice
+        // first the band-balanced truncation, then the rank-one parts
+        let starts = start(&data, 6, &spread_poles(&data, 4), 30).unwrap();
+        assert_eq!(starts.len(), 2);
         let pair = c64::from_polar(0.99, 0.08);
-        assert_eq!(ev.iter().filter(|z| (*z - pair).norm() < 1e-8).count(), 2);
-        // with the numerators fitted, the start reproduces the response exactly
-        let warp = Warp::new(&data.f_hz, data.ts);
-        let (layout, mut th) = to_blocks(&a, &c, warp.h, 2, 2, false).unwrap();
-        let prob = Problem {
-            data: &data,
-            layout: &layout,
-            delta: data.z.iter().map(|&z| (z - 1.0) / warp.h).collect(),
-            limit: None,
-            controller: None,
-        };
-        prob.fit_linear(&mut th).unwrap();
-        let model = layout.realise(&th, &data).unwrap();
-        let (got, want) = (
-            model.freq_response(&data.f_hz).unwrap(),
-            truth.freq_response(&data.f_hz).unwrap(),
-        );
-        for (g, w) in got.iter().zip(&want) {
-            for i in 0..2 {
-                for j in 0..2 {
-                    let d = (g[(i, j)] - w[(i, j)]).norm();
-                    assert!(d <= 1e-8 * w[(i, j)].norm().max(1.0), "{d}");
+        for (a, c) in starts {
+            let mut ev = linalg::eigenvalues(a.as_ref()).unwrap();
+            ev.sort_by(|x, y| x.re.total_cmp(&y.re).then(x.im.total_cmp(&y.im)));
+            assert_eq!(ev.len(), 6);
+            // the pair appears twice, the real poles once
+            assert_eq!(
+                ev.iter().filter(|z| (*z - pair).norm() < 1e-7).count(),
+                2,
+                "{ev:?}"
+            );
+            for p in [1.02, 0.6] {
+                assert_eq!(
+                    ev.iter()
+                        .filter(|z| (*z - c64::new(p, 0.0)).norm() < 1e-7)
+                        .count(),
+                    1,
+                    "{ev:?}"
+                );
+            }
+            // with the numerators fitted, each start reproduces the response exactly
+            let warp = Warp::new(&data.f_hz, data.ts);
+            let (layout, mut th) = to_blocks(&a, &c, warp.h, 2, 2, false).unwrap();
+            let prob = Problem::new(
+                &data,
+                &layout,
+                &data
+                    .z
+                    .iter()
+                    .map(|&z| (z - 1.0) / warp.h)
+                    .collect::<Vec<_>>(),
+                None,
+            );
+            prob.fit_linear(&mut th).unwrap();
+            let model = layout.realise(&th, &data).unwrap();
+            let (got, want) = (
+                model.freq_response(&data.f_hz).unwrap(),
+                truth.freq_response(&data.f_hz).unwrap(),
+            );
+            for (g, w) in got.iter().zip(&want) {
+                for i in 0..2 {
+                    for j in 0..2 {
+                        let d = (g[(i, j)] - w[(i, j)]).norm();
+                        assert!(d <= 1e-8 * w[(i, j)].norm().max(1.0), "{d}");
+                    }
                 }
             }
         }
