@@ -1743,6 +1743,12 @@ impl LeastSquaresProblem for Problem<'_> {
     }
 }
 
+/// δ at the data's lines for the warp's scale (tests of this module and of `vf`).
+#[cfg(test)]
+fn deltas(data: &Data, warp: &Warp) -> Vec<c64> {
+    data.z.iter().map(|&z| (z - 1.0) / warp.h).collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1785,16 +1791,8 @@ mod tests {
             let a = truth.a().to_owned();
             let c = Mat::from_fn(3, 4, |i, j| truth.c()[(i, j)] / data.a[i]);
             let (layout, mut th) = to_blocks(&a, &c, warp.h, 3, 2, feedthrough).unwrap();
-            let mut prob = Problem::new(
-                &data,
-                &layout,
-                &data
-                    .z
-                    .iter()
-                    .map(|&z| (z - 1.0) / warp.h)
-                    .collect::<Vec<_>>(),
-                None,
-            );
+            let delta = deltas(&data, &warp);
+            let mut prob = Problem::new(&data, &layout, &delta, None);
             prob.fit_linear(&mut th).unwrap();
             // move off the optimum so every column is exercised
             for (i, v) in th.iter_mut().enumerate() {

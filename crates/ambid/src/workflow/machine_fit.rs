@@ -30,9 +30,12 @@
 //!   1 for the true plant (noise only) and grows with the model's error there;
 //!   $X \le$ [`MAX_OUT_OF_BAND_MISFIT`] $= 5$ (the model's closed-loop error above the band has
 //!   an RMS of at most 2σ of the measurement) is required. It rejects the spurious, nearly
-//!   undamped closed-loop modes a fit can place above its band (on the twin, seed 1, order 22:
-//!   a mode at 4.4 kHz with ζ = 10⁻⁴, $X = 570$, which ruins the closed-loop simulation while
-//!   the plant error in the band is 0.7 %).
+//!   undamped closed-loop modes a fit can place above its band (on the twin, seed 1, with the
+//!   former rank-one starts, order 22: a mode at 4.4 kHz with ζ = 10⁻⁴, $X = 570$, which ruined
+//!   the closed-loop simulation while the plant error in the band was 0.7 %). It sees only
+//!   errors far outside the measurement's noise: $\hat T_{ry}$ above the band is noisy (relative
+//!   σ near 80 % at 2.5 kHz on that record) and $X$ averages over all lines above the band, so
+//!   a broad 20 % plant error above 1.5 kHz leaves $X$ at 1.0 (measured, 2026-11-28).
 //! * **Unstable poles.** With the controllers known, the measured loop itself says how many
 //!   unstable poles the plant has: the generalised Nyquist count of $\det(I + \hat P C)$ over
 //!   the FRF's lines ([`loop_unstable_poles`], when the lines support a count). A candidate

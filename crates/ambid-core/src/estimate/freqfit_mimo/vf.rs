@@ -474,7 +474,7 @@ pub(super) fn spread_poles(data: &Data, n: usize) -> Vec<c64> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::{to_blocks, Data, MimoFreqOptions, Problem, Warp};
+    use super::super::{deltas, to_blocks, Data, MimoFreqOptions, Problem, Warp};
     use super::*;
     use crate::lti::{Frd, StateSpace};
     use faer::mat;
@@ -568,16 +568,7 @@ mod tests {
             // with the numerators fitted, each start reproduces the response exactly
             let warp = Warp::new(&data.f_hz, data.ts);
             let (layout, mut th) = to_blocks(&a, &c, warp.h, 2, 2, false).unwrap();
-            let prob = Problem::new(
-                &data,
-                &layout,
-                &data
-                    .z
-                    .iter()
-                    .map(|&z| (z - 1.0) / warp.h)
-                    .collect::<Vec<_>>(),
-                None,
-            );
+            let prob = Problem::new(&data, &layout, &deltas(&data, &warp), None);
             prob.fit_linear(&mut th).unwrap();
             let model = layout.realise(&th, &data).unwrap();
             let (got, want) = (
