@@ -1112,6 +1112,7 @@ fn stop_reason_text(r: ambid_core::estimate::pem::lm::StopReason) -> &'static st
         StopReason::StepSize => "converged: step below the numerical tolerance",
         StopReason::Gradient => "converged: gradient zero",
         StopReason::MaxIterations => "iteration limit reached",
+        StopReason::Abandoned => "abandoned: a better optimum was known",
     }
 }
 

@@ -100,6 +100,13 @@ pub trait LeastSquaresProblem {
     fn residuals(&mut self, x: &[f64]) -> Option<Vec<f64>>;
     /// Jacobian $\partial r_i / \partial x_j$ ($m \times n$) at an admissible $x$.
     fn jacobian(&mut self, x: &[f64]) -> Option<Mat<f64>>;
+    /// Whether to end the iteration now ([`StopReason::Abandoned`]), asked once per iteration
+    /// with the loss $\tfrac12\lVert r\rVert^2$ and the Gauss–Newton step's predicted reduction
+    /// of it, $\tfrac12\lVert z\rVert^2$ (e.g. a multi-start search that knows a better optimum
+    /// than this start can reach). Never, by default.
+    fn abandon(&mut self, _cost: f64, _predicted_reduction: f64) -> bool {
+        false
+    }
 }
 
 /// Why [`minimize`] stopped.
@@ -124,12 +131,15 @@ pub enum StopReason {
     Stagnation,
     /// The iteration limit was reached before any tolerance was met.
     MaxIterations,
+    /// The problem asked to stop ([`LeastSquaresProblem::abandon`]) before convergence.
+    Abandoned,
 }
 
 impl StopReason {
-    /// Whether the stop means convergence (every reason except [`StopReason::MaxIterations`]).
+    /// Whether the stop means convergence (every reason except [`StopReason::MaxIterations`]
+    /// and [`StopReason::Abandoned`]).
     pub fn converged(self) -> bool {
-        self != StopReason::MaxIterations
+        !matches!(self, StopReason::MaxIterations | StopReason::Abandoned)
     }
 }
 
@@ -725,6 +735,12 @@ pub fn minimize<P: LeastSquaresProblem + ?Sized>(
                 break StopReason::Stagnation;
             }
         }
+        if problem.abandon(
+            0.5 * fnorm * fnorm,
+            0.5 * z.iter().map(|v| v * v).sum::<f64>(),
+        ) {
+            break StopReason::Abandoned;
+        }
         for j in 0..n {
             diag[j] = diag[j].max(colnorm[j]);
         }
@@ -843,7 +859,7 @@ pub fn minimize<P: LeastSquaresProblem + ?Sized>(
     report.ended_on_boundary = match reason {
         StopReason::Gradient => false,
         // not at a minimum: the Gauss–Newton step says nothing, keep the last trial's verdict
-        StopReason::MaxIterations => report.ended_on_boundary,
+        StopReason::MaxIterations | StopReason::Abandoned => report.ended_on_boundary,
         StopReason::LossChange
         | StopReason::StepSize
         | StopReason::Significance
@@ -1023,6 +1039,31 @@ mod tests {
         fn jacobian(&mut self, _x: &[f64]) -> Option<Mat<f64>> {
             Some(self.a.clone())
         }
+    }
+
+    #[test]
+    fn a_problem_that_abandons_stops_unconverged_where_it_asked() {
+        // Rosenbrock from the classic start, abandoned at its fourth iteration
+        struct Quits(usize);
+        impl LeastSquaresProblem for Quits {
+            fn residuals(&mut self, x: &[f64]) -> Option<Vec<f64>> {
+                Some(vec![10.0 * (x[1] - x[0] * x[0]), 1.0 - x[0]])
+            }
+            fn jacobian(&mut self, x: &[f64]) -> Option<Mat<f64>> {
+                Some(faer::mat![[-20.0 * x[0], 10.0], [-1.0, 0.0]])
+            }
+            fn abandon(&mut self, cost: f64, predicted: f64) -> bool {
+                assert!(cost > 0.0 && predicted >= 0.0 && predicted <= cost * (1.0 + 1e-12));
+                self.0 += 1;
+                self.0 > 3
+            }
+        }
+        let mut p = Quits(0);
+        let (x, rep) = minimize(&mut p, &[-1.2, 1.0], &LmOptions::default()).unwrap();
+        assert_eq!(rep.reason, StopReason::Abandoned);
+        assert!(!rep.reason.converged());
+        assert_eq!(rep.iterations, 3);
+        assert!((x[0] - 1.0).abs() > 1e-3, "stopped before the minimum");
     }
 
     #[test]
