@@ -36,20 +36,18 @@ fn median_plant_error(model: &StateSpace, truth: &StateSpace, f: &[f64]) -> f64 
     e[e.len() / 2]
 }
 
+/// A comma-separated argument (or its default) as numbers; unparsable items are skipped.
+fn list<T: std::str::FromStr>(arg: Option<&String>, default: &str) -> Vec<T> {
+    arg.map_or(default, String::as_str)
+        .split(',')
+        .filter_map(|x| x.parse().ok())
+        .collect()
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let rigs: Vec<u64> = args
-        .get(1)
-        .map_or("0", String::as_str)
-        .split(',')
-        .filter_map(|x| x.parse().ok())
-        .collect();
-    let orders: Vec<usize> = args
-        .get(2)
-        .map_or("16,20,24", String::as_str)
-        .split(',')
-        .filter_map(|x| x.parse().ok())
-        .collect();
+    let rigs: Vec<u64> = list(args.get(1), "0");
+    let orders: Vec<usize> = list(args.get(2), "16,20,24");
     let dir = std::env::temp_dir().join(format!("ambid-mimo-sweep-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("tmp dir");
     for rig in rigs {

@@ -200,6 +200,7 @@ use crate::linalg;
 use crate::lti::{Frd, StateSpace};
 use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::{c64, Mat};
+use rayon::prelude::*;
 
 mod vf;
 
@@ -210,9 +211,12 @@ const CTX: &str = "ss_frd_mimo";
 /// of [`LmOptions::with_significance_tol`] with $\kappa$ = `SIGNIFICANCE_FRACTION` $\sqrt{n_\theta}$.
 pub const SIGNIFICANCE_FRACTION: f64 = 0.1;
 
-/// $\kappa$ of the stopping rule for `n_theta` parameters.
-fn significance_tol(n_theta: usize) -> f64 {
-    SIGNIFICANCE_FRACTION * (n_theta as f64).sqrt()
+/// The refinement's options for a run in `layout` of at most `iterations` steps (at least 1):
+/// the stopping rule with $\kappa$ = [`SIGNIFICANCE_FRACTION`] $\sqrt{n_\theta}$.
+fn lm_options(layout: &Layout, iterations: usize) -> Result<LmOptions> {
+    LmOptions::default()
+        .with_max_iterations(iterations.max(1))?
+        .with_significance_tol(SIGNIFICANCE_FRACTION * (layout.n_theta as f64).sqrt())
 }
 
 /// How the entries of the FRF are weighted (module docs).
@@ -330,6 +334,8 @@ struct Data {
     g: Vec<c64>,
     /// Weights in scaled units, same layout.
     w: Vec<f64>,
+    /// Their square roots (the residuals' factors), same layout.
+    sw: Vec<f64>,
     ny: usize,
     nu: usize,
     ts: f64,
@@ -477,11 +483,13 @@ impl Data {
             .iter()
             .map(|f| c64::from_polar(1.0, 2.0 * std::f64::consts::PI * f * ts))
             .collect();
+        let sw = w.iter().map(|v| v.sqrt()).collect();
         Ok(Self {
             f_hz,
             z,
             g,
             w,
+            sw,
             ny,
             nu,
             ts,
@@ -805,17 +813,13 @@ fn fit(
     let delta: Vec<c64> = data.z.iter().map(|&z| (z - 1.0) / warp.h).collect();
     let starts = starts(&data, &delta, &a_z, &c_z, order, warp.h, opts)?;
     let limit = opts.max_unstable_poles.or(measured_unstable);
-    let lm_probe = LmOptions::default()
-        .with_max_iterations(PROBE_ITERATIONS.min(opts.max_iterations).max(1))?
-        .with_significance_tol(significance_tol(n_params_est))?;
     // every start probed; the most promising ones refined to the end; the lowest final cost
     // wins (the first error when none succeeds); the starts run in parallel, each on its own
     // data, so the result does not depend on the number of threads
-    use rayon::prelude::*;
     let mut first_err = None;
     let probed: Vec<Result<Run>> = starts
         .into_par_iter()
-        .map(|(layout, theta)| probe(&data, &delta, layout, theta, opts, limit, &lm_probe))
+        .map(|(layout, theta)| probe(&data, &delta, layout, theta, opts, limit))
         .collect();
     let mut runs = Vec::new();
     for r in probed {
@@ -904,8 +908,8 @@ fn probe(
     mut theta: Vec<f64>,
     opts: &MimoFreqOptions,
     limit: Option<usize>,
-    lm: &LmOptions,
 ) -> Result<Run> {
+    let lm = lm_options(&layout, PROBE_ITERATIONS.min(opts.max_iterations))?;
     let mut prob = Problem::new(data, &layout, delta, limit);
     if let Some(lim) = limit {
         prob.constrain_start(&mut theta, lim)?;
@@ -913,7 +917,7 @@ fn probe(
     let mut iterations = 0;
     let mut converged = true;
     if opts.max_iterations > 0 {
-        let (th, report) = minimize_projected(&mut prob, &theta, lm, None)?;
+        let (th, report) = minimize_projected(&mut prob, &theta, &lm, None)?;
         theta = th;
         iterations = report.iterations;
         converged = report.reason.converged();
@@ -957,11 +961,7 @@ fn refine(
     let rest = opts
         .max_iterations
         .saturating_sub(iterations.min(PROBE_ITERATIONS));
-    let lm = |n: usize| -> Result<LmOptions> {
-        LmOptions::default()
-            .with_max_iterations(n.max(1))?
-            .with_significance_tol(significance_tol(layout.n_theta))
-    };
+    let lm = |n: usize| lm_options(&layout, n);
     let race = |budget: usize| bound.map(|b| Race::new(b, budget));
     if rest > 0 {
         // the stage without the loop constraint, continued: the path from the start to the
@@ -1113,7 +1113,6 @@ fn starts(
         Problem::new(data, &layout, delta, None).fit_linear(&mut theta)?;
         Ok((layout, theta))
     };
-    use rayon::prelude::*;
     let sub_poles = linalg::eigenvalues(a_z.as_ref())?;
     let spread = vf::spread_poles(data, order);
     // the two vector-fitting runs and their starts in parallel, collected in a fixed order
@@ -1633,7 +1632,7 @@ impl<'a> Problem<'a> {
             for k in 0..l {
                 for i in 0..ny {
                     let idx = k * e + j * ny + i;
-                    let sw = self.data.w[idx].sqrt();
+                    let sw = self.data.sw[idx];
                     let row = 2 * (k * ny + i);
                     for s in 0..lay.n {
                         let v = ys[(k * lay.n + s) * ny + i] * sw;
@@ -1819,7 +1818,7 @@ impl LeastSquaresProblem for Problem<'_> {
             for k in 0..l {
                 for i in 0..ny {
                     let idx = k * e + j * ny + i;
-                    let sw = self.data.w[idx].sqrt();
+                    let sw = self.data.sw[idx];
                     let d = (resp[idx] - self.data.g[idx]) * sw;
                     r.push(d.re);
                     r.push(d.im);
@@ -1851,7 +1850,7 @@ impl Problem<'_> {
             let put = |jac: &mut Mat<f64>, i: usize, j: usize, t: usize, v: c64| {
                 if let Some(col) = cols[t] {
                     let row = 2 * ((j * l + k) * ny + i);
-                    let s = self.data.w[base + j * ny + i].sqrt();
+                    let s = self.data.sw[base + j * ny + i];
                     jac[(row, col)] = v.re * s;
                     jac[(row + 1, col)] = v.im * s;
                 }
@@ -1923,7 +1922,7 @@ struct Projected<'p, 'a> {
     nl: Vec<usize>,
     /// ψ's column of each θ index (`None` for the linear parameters).
     cols: Vec<Option<usize>>,
-    /// θ with the linear parameters of the last evaluation.
+    /// θ of the start; every entry outside ψ is a linear parameter, refitted at each evaluation.
     theta: Vec<f64>,
     /// The abandonment rule, when a better start has finished.
     race: Option<Race>,
@@ -1982,7 +1981,6 @@ impl LeastSquaresProblem for Projected<'_, '_> {
         // the bases too: an accepted trial's Jacobian is asked for next
         let (th, bases) = self.theta_of(psi, true)?;
         let r = self.prob.residuals(&th)?;
-        self.theta.clone_from(&th);
         self.last = Some((psi.to_vec(), th, bases));
         Some(r)
     }
@@ -2007,7 +2005,6 @@ impl LeastSquaresProblem for Projected<'_, '_> {
                 faer::Par::Seq,
             );
         }
-        self.theta = th;
         Some(jac)
     }
 

@@ -130,7 +130,7 @@ fn relocate(poles: &[Pole], data: &Data) -> Result<Vec<Pole>> {
         let mut rest = Mat::<f64>::zeros(2 * l, nb + 1);
         for k in 0..l {
             let idx = k * e + ent;
-            let sw = data.w[idx].sqrt();
+            let sw = data.sw[idx];
             let g = data.g[idx];
             for m in 0..nb {
                 let v = phi[k * nb + m] * sw;
@@ -178,7 +178,7 @@ fn residues(poles: &[Pole], data: &Data) -> Result<Vec<Mat<f64>>> {
         let mut rhs = Mat::<f64>::zeros(2 * l, 1);
         for k in 0..l {
             let idx = k * e + ent;
-            let sw = data.w[idx].sqrt();
+            let sw = data.sw[idx];
             for c in 0..nb {
                 let v = phi[k * nb + c] * sw;
                 m[(2 * k, c)] = v.re;
