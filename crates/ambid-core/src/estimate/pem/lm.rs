@@ -164,6 +164,7 @@ pub struct LmOptions {
     significance_tol: f64,
     initial_radius: f64,
     extrapolate: bool,
+    part_rows: usize,
 }
 
 impl Default for LmOptions {
@@ -178,6 +179,7 @@ impl Default for LmOptions {
             significance_tol: 0.0,
             initial_radius: 100.0,
             extrapolate: false,
+            part_rows: TRIANGLE_PART_ROWS,
         }
     }
 }
@@ -303,6 +305,24 @@ impl LmOptions {
         self.extrapolate = on;
         self
     }
+    /// Rows per part of the QR of $[J\;r]$ (default 16 384): a tall $[J\;r]$ is cut into
+    /// $\min(8, \lfloor m / \text{rows} \rfloor)$ contiguous parts whose triangles are computed
+    /// side by side and reduced by one QR of the stacked triangles. The cut depends on $m$ and
+    /// this option only, never on the number of threads, so the estimate is the same on any
+    /// machine; a smaller value lets a problem of a few thousand residuals use several cores.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for 0.
+    pub fn with_triangle_part_rows(mut self, rows: usize) -> Result<Self> {
+        if rows == 0 {
+            return Err(Error::invalid(
+                "triangle_part_rows",
+                "a part needs at least one row",
+            ));
+        }
+        self.part_rows = rows;
+        Ok(self)
+    }
     /// Whether [`with_extrapolation`](Self::with_extrapolation) is on.
     pub fn extrapolation(&self) -> bool {
         self.extrapolate
@@ -409,10 +429,10 @@ fn full_rank(u: &Mat<f64>) -> bool {
 /// $[J\;r]^\top[J\;r]$ is the sum over the parts, so the result is the same triangle up to
 /// rounding and row signs). The cut depends on $m$ only, never on the number of threads, so an
 /// estimate is the same on any machine.
-fn triangle_of(jac: &Mat<f64>, r: &[f64]) -> Mat<f64> {
+fn triangle_of(jac: &Mat<f64>, r: &[f64], part_rows: usize) -> Mat<f64> {
     use rayon::prelude::*;
     let (m, n) = (jac.nrows(), jac.ncols());
-    let parts = triangle_parts(m);
+    let parts = triangle_parts(m, part_rows);
     if parts < 2 {
         return triangle_rows(jac, r, 0, m);
     }
@@ -425,9 +445,10 @@ fn triangle_of(jac: &Mat<f64>, r: &[f64]) -> Mat<f64> {
     qr_triangle(&stacked)
 }
 
-/// Row ranges of [`triangle_of`]: one per [`TRIANGLE_PART_ROWS`] rows, at most 8.
-fn triangle_parts(m: usize) -> usize {
-    (m / TRIANGLE_PART_ROWS).clamp(1, 8)
+/// Row ranges of [`triangle_of`]: one per `part_rows` rows (default [`TRIANGLE_PART_ROWS`]),
+/// at most 8.
+fn triangle_parts(m: usize, part_rows: usize) -> usize {
+    (m / part_rows.max(1)).clamp(1, 8)
 }
 
 /// Rows per part of [`triangle_of`] (small problems stay in one part).
@@ -627,6 +648,32 @@ pub fn minimize<P: LeastSquaresProblem + ?Sized>(
     x0: &[f64],
     opts: &LmOptions,
 ) -> Result<(Vec<f64>, LmReport)> {
+    minimize_resumed(problem, x0, opts, None).map(|(x, report, _)| (x, report))
+}
+
+/// The trust-region state of a [`minimize_resumed`] run where it stopped: the radius
+/// $\Delta$, the damping $\lambda$ and the scaling $D$.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LmState {
+    delta: f64,
+    par: f64,
+    diag: Vec<f64>,
+}
+
+/// [`minimize`], continued from the trust-region state of an earlier run on the same problem
+/// (`resume`), and returning its own final state. A run stopped at its iteration limit and
+/// resumed from its last point with its state takes the same steps the uninterrupted run would
+/// have; started afresh, the radius would begin at `initial_radius` again and the first steps
+/// would be spent shrinking it. A `resume` of another dimension is ignored.
+///
+/// # Errors
+/// As [`minimize`].
+pub fn minimize_resumed<P: LeastSquaresProblem + ?Sized>(
+    problem: &mut P,
+    x0: &[f64],
+    opts: &LmOptions,
+    resume: Option<LmState>,
+) -> Result<(Vec<f64>, LmReport, LmState)> {
     const CTX: &str = "levenberg_marquardt";
     let n = x0.len();
     let mut x = x0.to_vec();
@@ -651,7 +698,12 @@ pub fn minimize<P: LeastSquaresProblem + ?Sized>(
         ended_on_boundary: false,
     };
     if n == 0 {
-        return Ok((x, report));
+        let state = LmState {
+            delta: 0.0,
+            par: 0.0,
+            diag: Vec::new(),
+        };
+        return Ok((x, report, state));
     }
     if m < n {
         return Err(Error::invalid(
@@ -666,6 +718,12 @@ pub fn minimize<P: LeastSquaresProblem + ?Sized>(
     let mut delta = 0.0;
     let mut par = 0.0;
     let mut first = true;
+    if let Some(st) = resume.filter(|st| st.diag.len() == n && st.delta > 0.0) {
+        diag = st.diag;
+        delta = st.delta;
+        par = st.par;
+        first = false;
+    }
     // ½‖r‖² after each accepted step (index = iterations), for the stagnation test
     let mut costs = vec![0.5 * fnorm * fnorm];
     let reason = 'outer: loop {
@@ -692,7 +750,7 @@ pub fn minimize<P: LeastSquaresProblem + ?Sized>(
         if fnorm == 0.0 {
             break StopReason::Gradient;
         }
-        let t = triangle_of(&jac, &r);
+        let t = triangle_of(&jac, &r, opts.part_rows);
         let rmat = Mat::from_fn(n, n, |i, j| t[(i, j)]);
         let z: Vec<f64> = (0..n).map(|i| t[(i, n)]).collect();
         let colnorm: Vec<f64> = (0..n)
@@ -856,6 +914,11 @@ pub fn minimize<P: LeastSquaresProblem + ?Sized>(
     };
     report.reason = reason;
     report.cost = 0.5 * fnorm * fnorm;
+    let state = LmState {
+        delta,
+        par,
+        diag: diag.clone(),
+    };
     report.ended_on_boundary = match reason {
         StopReason::Gradient => false,
         // not at a minimum: the Gauss–Newton step says nothing, keep the last trial's verdict
@@ -871,7 +934,7 @@ pub fn minimize<P: LeastSquaresProblem + ?Sized>(
             None => report.ended_on_boundary,
         },
     };
-    Ok((x, report))
+    Ok((x, report, state))
 }
 
 /// Whether the full Gauss–Newton step from the final point leaves the admissible set. At an
@@ -888,7 +951,7 @@ fn gauss_newton_leaves<P: LeastSquaresProblem + ?Sized>(
     if jac.nrows() != m || jac.ncols() != n {
         return None;
     }
-    let t = triangle_of(&jac, r);
+    let t = triangle_of(&jac, r, TRIANGLE_PART_ROWS);
     let rmat = Mat::from_fn(n, n, |i, j| t[(i, j)]);
     if !full_rank(&rmat) {
         return None;
@@ -915,13 +978,13 @@ mod tests {
         use rand_chacha::ChaCha8Rng;
         let mut rng = ChaCha8Rng::seed_from_u64(17);
         for &(m, n) in &[(40_000, 3), (100_003, 9), (3 * TRIANGLE_PART_ROWS + 1, 14)] {
-            assert!(triangle_parts(m) >= 2);
+            assert!(triangle_parts(m, TRIANGLE_PART_ROWS) >= 2);
             // badly scaled columns, as Jacobians of polynomial coefficients are
             let jac = Mat::from_fn(m, n, |_, j| {
                 rng.random_range(-1.0..1.0) * 10f64.powi(j as i32 - 3)
             });
             let r: Vec<f64> = (0..m).map(|_| rng.random_range(-1.0..1.0)).collect();
-            let parts = triangle_of(&jac, &r);
+            let parts = triangle_of(&jac, &r, TRIANGLE_PART_ROWS);
             let whole = triangle_rows(&jac, &r, 0, m);
             let gram = |t: &Mat<f64>| t.transpose() * t;
             let (gp, gw) = (gram(&parts), gram(&whole));
@@ -940,8 +1003,15 @@ mod tests {
                 }
             }
         }
-        assert_eq!(triangle_parts(TRIANGLE_PART_ROWS * 2 - 1), 1);
-        assert_eq!(triangle_parts(usize::MAX / 2), 8);
+        assert_eq!(
+            triangle_parts(TRIANGLE_PART_ROWS * 2 - 1, TRIANGLE_PART_ROWS),
+            1
+        );
+        assert_eq!(triangle_parts(usize::MAX / 2, TRIANGLE_PART_ROWS), 8);
+        // a smaller part size cuts a problem of a few thousand rows (the MIMO frequency fit's
+        // 8 096 residuals into four parts of one input column each)
+        assert_eq!(triangle_parts(8096, 2024), 4);
+        assert_eq!(triangle_parts(8096, 1), 8);
     }
 
     /// Dennis & Schnabel's large-residual example: $r = [x + 1,\; \lambda x^2 + x - 1]$, minimum
@@ -1099,6 +1169,30 @@ mod tests {
                 [-(-x[0]).exp(), -(-x[1]).exp()]
             ])
         }
+    }
+
+    #[test]
+    fn a_resumed_run_takes_the_steps_of_the_uninterrupted_one() {
+        let opts = |n: usize| LmOptions::exhaustive(n).unwrap();
+        let (whole, rep) = minimize(&mut Powell, &[0.0, 1.0], &opts(12)).unwrap();
+        assert_eq!(rep.iterations, 12, "{rep:?}");
+        let (x5, rep5, state) = minimize_resumed(&mut Powell, &[0.0, 1.0], &opts(5), None).unwrap();
+        assert_eq!(rep5.reason, StopReason::MaxIterations);
+        let (resumed, rep7, _) = minimize_resumed(&mut Powell, &x5, &opts(7), Some(state)).unwrap();
+        assert_eq!(rep7.iterations, 7);
+        assert_eq!(resumed, whole, "the same steps, bit for bit");
+        // started afresh from the same point, the radius begins at the initial one again and
+        // the path differs (the reason to resume)
+        let (fresh, _) = minimize(&mut Powell, &x5, &opts(7)).unwrap();
+        assert_ne!(fresh, whole);
+        // a state of another dimension is ignored: the run is the fresh one
+        let other = LmState {
+            delta: 1.0,
+            par: 0.0,
+            diag: vec![1.0; 3],
+        };
+        let (ignored, _, _) = minimize_resumed(&mut Powell, &x5, &opts(7), Some(other)).unwrap();
+        assert_eq!(ignored, fresh);
     }
 
     #[test]
