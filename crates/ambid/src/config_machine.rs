@@ -86,10 +86,10 @@ pub struct MachineSection {
     pub quality_band_hz: [f64; 2],
     /// Recorded experiments, one entry per speed (default: none, the twin runs).
     pub files: Vec<MachineFile>,
-    /// Parametric models of the plant: `none` (default: the measured FRFs only) or `fit` (the
+    /// Parametric models of the plant: `none` (default: the measured FRFs only), `fit` (the
     /// MIMO state-space fitter, `workflow::machine_fit::FrequencyFitter`: per speed orders 16,
-    /// 20, 24, closed-loop validation, Campbell diagram from the models; about 30 s per speed
-    /// on 2 cores).
+    /// 20, 24 in turn until one is at the noise level, closed-loop validation, Campbell diagram
+    /// from the models) or `fit-all` (the same with every order fitted and BIC choosing).
     pub models: String,
 }
 
@@ -225,10 +225,11 @@ impl MachineSection {
                 self.design
             ));
         }
-        if !["none", "fit"].contains(&self.models.as_str()) {
+        if !["none", "fit", "fit-all"].contains(&self.models.as_str()) {
             return Err(format!(
                 "machine.models = \"{}\" is not one of \"none\" (default: the measured FRFs \
-                 only), \"fit\" (MIMO state-space models of the plant per speed)",
+                 only), \"fit\" (MIMO state-space models of the plant per speed, orders up to \
+                 the first at the noise level), \"fit-all\" (every candidate order fitted)",
                 self.models
             ));
         }

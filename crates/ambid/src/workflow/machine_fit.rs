@@ -20,6 +20,18 @@
 //!   rig and random rigs 1 and 2, where the noise hides the rest; on a quieter record (random
 //!   rig 3) the sensor and delay lag is above the noise and order 16 stays at 6.5 %, 20 reaches
 //!   1.1 % — hence the span up to the full 24, with BIC to choose.
+//!   The orders are fitted in increasing order, and the scan ends at the first admissible
+//!   candidate (below) whose weighted cost is at the noise level, $2V/\nu \le 1 + 2.326
+//!   \sqrt{2/\nu}$ with $\nu = 2Ln_yn_u - n_\theta$ ([`at_noise_level`]: the one-sided 99 %
+//!   point of $\chi^2_\nu/\nu$, which $2V/\nu$ follows when the model holds the plant and the
+//!   inverse-variance weights are right). A higher order could then lower $2V$ by about one
+//!   unit per added parameter (the noise it fits), while BIC charges $\ln 2Ln_yn_u \approx 9$:
+//!   BIC would not choose it, and fitting it only costs time. A report note names the orders
+//!   left out. When no candidate reaches the noise level every order is fitted and BIC
+//!   chooses, as before. The test is only as good as the variances: too small ones (few
+//!   periods) keep $2V/\nu$ above the bound and the scan goes on (time lost, choice as
+//!   before); too large ones let a model that is not at the noise level pass. `models =
+//!   "fit-all"` ([`FrequencyFitter::stop_at_noise_level`] `false`) fits every order.
 //! * **Loop.** With the controllers known (the twin), every fit is held to models whose loop
 //!   with them is stable ([`ss_frd_mimo_in_loop`]): the measured loop was stable, and an
 //!   unconstrained fit puts spurious fast unstable poles outside the band.
@@ -102,6 +114,10 @@ pub struct FrequencyFitter {
     pub orders: Vec<usize>,
     /// Iteration limit of the nonlinear refinement (default 100).
     pub max_iterations: usize,
+    /// Fit the orders in increasing order and stop at the first admissible one whose
+    /// weighted cost is at the noise level ([`at_noise_level`]; module docs, "Orders"); with
+    /// `false`, every order is fitted. Default `true`.
+    pub stop_at_noise_level: bool,
 }
 
 impl Default for FrequencyFitter {
@@ -109,8 +125,34 @@ impl Default for FrequencyFitter {
         Self {
             orders: vec![16, 20, 24],
             max_iterations: 100,
+            stop_at_noise_level: true,
         }
     }
+}
+
+/// Quantile of the standard normal distribution for [`at_noise_level`]: one-sided 99 %.
+pub const NOISE_LEVEL_QUANTILE: f64 = 2.326;
+
+/// Whether a fit's inverse-variance-weighted cost is at the noise level (module docs,
+/// "Orders"): with the model class holding the plant and the weights right, $2V$ is
+/// $\chi^2$-distributed with $\nu = 2 L n_y n_u - n_\theta$ degrees of freedom, so
+/// $2V/\nu$ ([`MimoFreqFit::normalised_cost`]) has mean 1 and standard deviation
+/// $\sqrt{2/\nu}$; the fit is at the noise level when
+/// $2V/\nu \le 1 + $ [`NOISE_LEVEL_QUANTILE`] $\sqrt{2/\nu}$ (the one-sided 99 % point). A model
+/// of higher order can then lower $2V$ only by about its $\chi^2$ share of noise (one unit per
+/// added parameter), less than BIC charges for it ($\ln 2Ln_yn_u \approx 9$ per parameter at
+/// 253 lines of a 4×4 FRF), so BIC would not choose it either.
+///
+/// # Example
+/// ```
+/// use ambid::workflow::machine_fit::at_noise_level;
+/// // 8 096 real equations, 128 parameters: 2V/ν ≤ 1 + 2.326·√(2/7 968) = 1.0368
+/// assert!(at_noise_level(3984.0, 8096, 128));
+/// assert!(!at_noise_level(4200.0, 8096, 128));
+/// ```
+pub fn at_noise_level(cost: f64, n_equations: usize, n_params: usize) -> bool {
+    let nu = n_equations.saturating_sub(n_params).max(1) as f64;
+    2.0 * cost / nu <= 1.0 + NOISE_LEVEL_QUANTILE * (2.0 / nu).sqrt()
 }
 
 /// One fitted candidate of one speed.
@@ -139,6 +181,13 @@ impl Candidate {
             && self.loop_stable != Some(false)
             && self.out_of_band.is_none_or(|x| x <= MAX_OUT_OF_BAND_MISFIT)
             && !self.contradicts_the_unstable_count()
+    }
+
+    /// Whether the fit's weighted cost is at the noise level ([`at_noise_level`]).
+    pub fn is_at_noise_level(&self) -> bool {
+        self.fit
+            .as_ref()
+            .is_ok_and(|f| at_noise_level(f.cost, f.n_equations, f.n_params))
     }
 
     /// Whether the model's unstable poles differ from the count the measured loop shows.
@@ -220,9 +269,11 @@ pub fn fit_band(plant: &Frd, quality_band_hz: [f64; 2]) -> Result<Option<(f64, f
     })
 }
 
-/// Fits every candidate order to one speed's plant FRF (in parallel), with the loop check
-/// against `controller`, the out-of-band check against the measured `t_ry` and the unstable-pole
-/// count of the measured loop (module docs).
+/// Fits the candidate orders to one speed's plant FRF, with the loop check against
+/// `controller`, the out-of-band check against the measured `t_ry` and the unstable-pole count
+/// of the measured loop (module docs). With `stop_at_noise_level` the orders are fitted in
+/// increasing order and the scan ends at the first admissible candidate whose cost is at the
+/// noise level ([`at_noise_level`]); else every order is fitted (in parallel).
 pub fn scan(
     plant: &Frd,
     band: (f64, f64),
@@ -230,49 +281,63 @@ pub fn scan(
     max_iterations: usize,
     controller: Option<&StateSpace>,
     t_ry: Option<&Frd>,
+    stop_at_noise_level: bool,
 ) -> Vec<Candidate> {
     let measured_unstable = controller
         .and_then(|c| loop_unstable_poles(plant, c).ok())
         .and_then(|w| w.unstable_poles);
-    orders
-        .par_iter()
-        .map(|&order| {
-            let opts = MimoFreqOptions {
-                band_hz: Some(band),
-                max_iterations,
-                ..Default::default()
-            };
-            // with a controller the fit holds itself to the measured loop's unstable-pole
-            // count (module docs, "Unstable poles")
-            let fit = match controller {
-                Some(c) => ss_frd_mimo_in_loop(plant, order, &opts, c),
-                None => ss_frd_mimo(plant, order, &opts),
+    let candidate = |order: usize| {
+        let opts = MimoFreqOptions {
+            band_hz: Some(band),
+            max_iterations,
+            ..Default::default()
+        };
+        // with a controller the fit holds itself to the measured loop's unstable-pole
+        // count (module docs, "Unstable poles")
+        let fit = match controller {
+            Some(c) => ss_frd_mimo_in_loop(plant, order, &opts, c),
+            None => ss_frd_mimo(plant, order, &opts),
+        }
+        .map_err(|e| e.to_string());
+        let loop_stable = match (&fit, controller) {
+            (Ok(f), Some(c)) => Some(
+                f.model
+                    .feedback(c)
+                    .and_then(|cl| cl.is_stable())
+                    .unwrap_or(false),
+            ),
+            _ => None,
+        };
+        let out_of_band = match (&fit, controller, t_ry) {
+            (Ok(f), Some(c), Some(t)) if loop_stable == Some(true) => {
+                out_of_band_misfit(&f.model, c, t, band.1)
             }
-            .map_err(|e| e.to_string());
-            let loop_stable = match (&fit, controller) {
-                (Ok(f), Some(c)) => Some(
-                    f.model
-                        .feedback(c)
-                        .and_then(|cl| cl.is_stable())
-                        .unwrap_or(false),
-                ),
-                _ => None,
-            };
-            let out_of_band = match (&fit, controller, t_ry) {
-                (Ok(f), Some(c), Some(t)) if loop_stable == Some(true) => {
-                    out_of_band_misfit(&f.model, c, t, band.1)
-                }
-                _ => None,
-            };
-            Candidate {
-                order,
-                fit,
-                loop_stable,
-                out_of_band,
-                measured_unstable,
-            }
-        })
-        .collect()
+            _ => None,
+        };
+        Candidate {
+            order,
+            fit,
+            loop_stable,
+            out_of_band,
+            measured_unstable,
+        }
+    };
+    if !stop_at_noise_level {
+        return orders.par_iter().map(|&order| candidate(order)).collect();
+    }
+    let mut sorted = orders.to_vec();
+    sorted.sort_unstable();
+    sorted.dedup();
+    let mut out = Vec::new();
+    for order in sorted {
+        let c = candidate(order);
+        let done = c.admissible() && c.is_at_noise_level();
+        out.push(c);
+        if done {
+            break;
+        }
+    }
+    out
 }
 
 /// The index of the chosen candidate (module docs, "Choice").
@@ -451,8 +516,30 @@ impl FrequencyFitter {
             self.max_iterations,
             controller,
             sp.frf.t_ry.as_ref(),
+            self.stop_at_noise_level,
         );
         let chosen = choose(&cands);
+        if let Some(last) = cands.last() {
+            let skipped: Vec<String> = self
+                .orders
+                .iter()
+                .filter(|&&o| o > last.order)
+                .map(|o| o.to_string())
+                .collect();
+            if !skipped.is_empty() {
+                if let Ok(f) = &last.fit {
+                    notes.push(format!(
+                        "{} rpm: order {} is at the noise level (2V/ν = {:.3} ≤ {:.3}, the one-sided 99 % point of χ²/ν with ν = {}); orders {} were not fitted (a higher order could not lower BIC) — set `stop_at_noise_level = false` to fit them",
+                        sp.speed_rpm,
+                        last.order,
+                        f.normalised_cost(),
+                        1.0 + NOISE_LEVEL_QUANTILE * (2.0 / (f.n_equations - f.n_params) as f64).sqrt(),
+                        f.n_equations - f.n_params,
+                        skipped.join(", ")
+                    ));
+                }
+            }
+        }
         if chosen.is_none() {
             notes.push(format!(
                 "{} rpm: no candidate model gives a stable closed loop with the controllers that agrees with the measured closed loop above the fitted band (misfit ≤ {MAX_OUT_OF_BAND_MISFIT}) and has the measured loop's number of unstable poles; none was chosen (the table lists why each failed) — try other orders",

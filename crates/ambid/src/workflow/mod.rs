@@ -549,13 +549,16 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
         // through its seam, `machine::MachineModels`: `[machine] models = "fit"` selects the
         // MIMO fitter; the default stays `MeasuredOnly` because the fitter takes 20–40 s per
         // speed and meets issue 21's 1 % bar on the nominal rig only (docs/estimation.md)
-        let fit = cfg.machine.as_ref().is_some_and(|m| m.models == "fit");
-        return if fit {
+        let models = cfg.machine.as_ref().map(|m| m.models.as_str());
+        return if let Some(kind @ ("fit" | "fit-all")) = models {
             machine::run_with(
                 cfg,
                 base,
                 progress,
-                &machine_fit::FrequencyFitter::default(),
+                &machine_fit::FrequencyFitter {
+                    stop_at_noise_level: kind == "fit",
+                    ..Default::default()
+                },
             )
         } else {
             machine::run_with(cfg, base, progress, &machine::MeasuredOnly)
