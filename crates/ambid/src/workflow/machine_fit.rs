@@ -271,9 +271,10 @@ pub fn fit_band(plant: &Frd, quality_band_hz: [f64; 2]) -> Result<Option<(f64, f
 
 /// Fits the candidate orders to one speed's plant FRF, with the loop check against
 /// `controller`, the out-of-band check against the measured `t_ry` and the unstable-pole count
-/// of the measured loop (module docs). With `stop_at_noise_level` the orders are fitted in
-/// increasing order and the scan ends at the first admissible candidate whose cost is at the
-/// noise level ([`at_noise_level`]); else every order is fitted (in parallel).
+/// of the measured loop (module docs). With `stop_at_noise_level` the candidates end at the
+/// first admissible one, in increasing order, whose cost is at the noise level
+/// ([`at_noise_level`]): the lowest order is fitted alone, and only when it is not such a
+/// candidate are the others fitted (side by side); else every order is fitted (in parallel).
 pub fn scan(
     plant: &Frd,
     band: (f64, f64),
@@ -328,14 +329,25 @@ pub fn scan(
     let mut sorted = orders.to_vec();
     sorted.sort_unstable();
     sorted.dedup();
-    let mut out = Vec::new();
-    for order in sorted {
-        let c = candidate(order);
-        let done = c.admissible() && c.is_at_noise_level();
-        out.push(c);
-        if done {
-            break;
-        }
+    // the lowest order alone; when it is not valid at the noise level, the others side by side,
+    // kept up to the first that is (the same table as one order after the other)
+    let Some((&first, rest)) = sorted.split_first() else {
+        return Vec::new();
+    };
+    let mut out = vec![candidate(first)];
+    if out[0].admissible() && out[0].is_at_noise_level() {
+        return out;
+    }
+    out.extend(
+        rest.par_iter()
+            .map(|&order| candidate(order))
+            .collect::<Vec<_>>(),
+    );
+    if let Some(k) = out
+        .iter()
+        .position(|c| c.admissible() && c.is_at_noise_level())
+    {
+        out.truncate(k + 1);
     }
     out
 }

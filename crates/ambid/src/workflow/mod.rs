@@ -547,8 +547,8 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
     if cfg.machine.is_some() {
         // the whole-machine procedure (docs/workflow.md, "Whole machine"); the models come
         // through its seam, `machine::MachineModels`: `[machine] models = "fit"` selects the
-        // MIMO fitter; the default stays `MeasuredOnly` because the fitter takes 20–40 s per
-        // speed and meets issue 21's 1 % bar on the nominal rig only (docs/estimation.md)
+        // MIMO fitter (`"fit-all"`: every candidate order); the default stays `MeasuredOnly`
+        // because the fitter takes about 10–25 s per speed on 2 cores (docs/benchmarks.md)
         let models = cfg.machine.as_ref().map(|m| m.models.as_str());
         return if let Some(kind @ ("fit" | "fit-all")) = models {
             machine::run_with(
