@@ -778,7 +778,7 @@ fn fit(
     }
     let data = Data::new(frd, opts)?;
     let (l, ny, nu) = (data.len(), data.ny, data.nu);
-    let n_eq = 2 * l * ny * nu;
+    let n_eq = data.rows();
     let n_params_est = order * (nu + ny) + if opts.feedthrough { ny * nu } else { 0 };
     if n_eq <= n_params_est {
         return Err(Error::invalid(
@@ -2038,12 +2038,18 @@ impl LeastSquaresProblem for Projected<'_, '_> {
         let mut jac = self.prob.jacobian_cols(&th, &self.cols, self.nl.len())?;
         let rows = jac.nrows() / bases.len().max(1);
         // the rows of input column j are contiguous and ordered as its regressor's; the
-        // columns' projections side by side
-        let projected: Vec<Mat<f64>> = bases
-            .par_iter()
-            .enumerate()
-            .map(|(j, q)| {
-                let mut block = jac.as_ref().subrows(j * rows, rows).to_owned();
+        // columns' projections side by side, each in place on its own rows
+        let mut blocks = Vec::with_capacity(bases.len());
+        let mut rest = jac.as_mut();
+        for _ in 0..bases.len() {
+            let (block, tail) = rest.split_at_row_mut(rows);
+            blocks.push(block);
+            rest = tail;
+        }
+        blocks
+            .into_par_iter()
+            .zip(bases.par_iter())
+            .for_each(|(mut block, q)| {
                 let t = q.transpose() * block.as_ref();
                 faer::linalg::matmul::matmul(
                     block.as_mut(),
@@ -2053,12 +2059,7 @@ impl LeastSquaresProblem for Projected<'_, '_> {
                     -1.0,
                     faer::Par::Seq,
                 );
-                block
-            })
-            .collect();
-        for (j, block) in projected.iter().enumerate() {
-            jac.as_mut().subrows_mut(j * rows, rows).copy_from(block);
-        }
+            });
         Some(jac)
     }
 

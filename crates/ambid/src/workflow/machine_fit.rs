@@ -151,8 +151,18 @@ pub const NOISE_LEVEL_QUANTILE: f64 = 2.326;
 /// assert!(!at_noise_level(4200.0, 8096, 128));
 /// ```
 pub fn at_noise_level(cost: f64, n_equations: usize, n_params: usize) -> bool {
-    let nu = n_equations.saturating_sub(n_params).max(1) as f64;
-    2.0 * cost / nu <= 1.0 + NOISE_LEVEL_QUANTILE * (2.0 / nu).sqrt()
+    let nu = noise_level_dof(n_equations, n_params);
+    2.0 * cost / nu as f64 <= noise_level_bound(nu)
+}
+
+/// The degrees of freedom $\nu = 2Ln_yn_u - n_\theta$ of [`at_noise_level`] (at least 1).
+fn noise_level_dof(n_equations: usize, n_params: usize) -> usize {
+    n_equations.saturating_sub(n_params).max(1)
+}
+
+/// The bound of [`at_noise_level`] on $2V/\nu$: $1 + $ [`NOISE_LEVEL_QUANTILE`] $\sqrt{2/\nu}$.
+fn noise_level_bound(nu: usize) -> f64 {
+    1.0 + NOISE_LEVEL_QUANTILE * (2.0 / nu as f64).sqrt()
 }
 
 /// One fitted candidate of one speed.
@@ -540,13 +550,13 @@ impl FrequencyFitter {
                 .collect();
             if !skipped.is_empty() {
                 if let Ok(f) = &last.fit {
+                    let nu = noise_level_dof(f.n_equations, f.n_params);
                     notes.push(format!(
-                        "{} rpm: order {} is at the noise level (2V/ν = {:.3} ≤ {:.3}, the one-sided 99 % point of χ²/ν with ν = {}); orders {} were not fitted (a higher order could not lower BIC) — set `stop_at_noise_level = false` to fit them",
+                        "{} rpm: order {} is at the noise level (2V/ν = {:.3} ≤ {:.3}, the one-sided 99 % point of χ²/ν with ν = {nu}); orders {} were not fitted (a higher order could not lower BIC) — set `[machine] models = \"fit-all\"` to fit them",
                         sp.speed_rpm,
                         last.order,
                         f.normalised_cost(),
-                        1.0 + NOISE_LEVEL_QUANTILE * (2.0 / (f.n_equations - f.n_params) as f64).sqrt(),
-                        f.n_equations - f.n_params,
+                        noise_level_bound(nu),
                         skipped.join(", ")
                     ));
                 }
