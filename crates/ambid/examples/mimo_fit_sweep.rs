@@ -4,7 +4,9 @@
 //! iterations, the weighted cost and the median plant error against the exact plant.
 //!
 //! The fits are `ss_frd_mimo_in_loop` with the workflow's band rule (`machine_fit::fit_band`)
-//! and default options; `ITERS=n` sets the iteration limit per stage (default 100).
+//! and default options; `ITERS=n` sets the iteration limit per stage (default 100);
+//! `MODE=nonlinear` simulates the nonlinear twin (the workflow's default) instead of the linear
+//! one (the plant error is then against the linearised plant, which the BLA differs from).
 //!
 //! Run: `cargo run --release -p ambid --example mimo_fit_sweep -- 0,1,2 16,20,24`.
 use ambid::config::MachineSection;
@@ -48,13 +50,14 @@ fn main() {
     let args: Vec<String> = std::env::args().collect();
     let rigs: Vec<u64> = list(args.get(1), "0");
     let orders: Vec<usize> = list(args.get(2), "16,20,24");
+    let mode = std::env::var("MODE").unwrap_or_else(|_| "linear".into());
     let dir = std::env::temp_dir().join(format!("ambid-mimo-sweep-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("tmp dir");
     for rig in rigs {
         let m = if rig == 0 {
             MachineSection {
                 speeds_rpm: Some(vec![15_000.0]),
-                mode: "linear".into(),
+                mode: mode.clone(),
                 ..Default::default()
             }
         } else {
@@ -69,7 +72,7 @@ fn main() {
             .expect("write rig");
             MachineSection {
                 speeds_rpm: Some(vec![((rig * 7919) % 30_000) as f64]),
-                mode: "linear".into(),
+                mode: mode.clone(),
                 config: Some(path),
                 ..Default::default()
             }
