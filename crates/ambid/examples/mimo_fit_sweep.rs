@@ -5,7 +5,7 @@
 //!
 //! The fits are `ss_frd_mimo_in_loop` with the workflow's band rule (`machine_fit::fit_band`)
 //! and default options; `ITERS=n` sets the iteration limit per stage (default 100);
-//! `MODE=nonlinear` simulates the nonlinear twin (the workflow's default) instead of the linear
+//! `FEEDTHROUGH=1` fits a feed-through term; `MODE=nonlinear` simulates the nonlinear twin (the workflow's default) instead of the linear
 //! one (the plant error is then against the linearised plant, which the BLA differs from).
 //!
 //! Run: `cargo run --release -p ambid --example mimo_fit_sweep -- 0,1,2 16,20,24`.
@@ -140,6 +140,7 @@ fn main() {
                     .ok()
                     .and_then(|v| v.parse().ok())
                     .unwrap_or(100),
+                feedthrough: std::env::var("FEEDTHROUGH").is_ok(),
                 ..Default::default()
             };
             let t = Instant::now();
