@@ -234,12 +234,12 @@ fn mat_v73_and_non_mat_files_are_explained() {
     let mut v73 = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Mon Jan  1 00:00:00 2024 HDF5 schema 1.00 .".to_vec();
     v73.resize(512, b' ');
     v73.extend_from_slice(b"\x89HDF\r\n\x1a\n");
+    // the header of a v7.3 file and the HDF5 signature, but nothing after it: damaged
     let p = s.file("big.mat", &v73);
     let e = read_table(&p, &ReadOptions::default()).unwrap_err();
-    assert!(matches!(e, DataFileError::MatV73 { .. }), "{e:?}");
     let m = e.to_string();
     assert!(
-        m.contains("big.mat") && m.contains("v7.3") && m.contains("-v7") && m.contains("CSV"),
+        m.contains("big.mat") && m.contains("damaged") && m.contains("save it again"),
         "{m}"
     );
 

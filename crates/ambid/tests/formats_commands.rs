@@ -1,6 +1,9 @@
 //! One reader behind every command (issue 19): the same closed-loop twin record, written as
 //! `.csv`, `.npy`, `.npz`, `.mat` and `.parquet` (tests/fixtures/formats, made by
-//! `make_format_files.py` with numpy, scipy and pyarrow from `ambid simulate` output), gives
+//! `make_format_files.py` with numpy, scipy and pyarrow from `ambid simulate` output), and as a
+//! MATLAB `-v7.3` MAT-file (`_v73.mat`, hdf5storage/h5py) and an NI TDMS file (`.tdms`, npTDMS,
+//! three segments, sample time from `wf_increment`; issue 24, made by `make_v73_tdms_files.py`
+//! from the CSV record), gives
 //! IDENTICAL results in `frf`, `fit`, `order`, `validate`, `compare-models`, `bla` and `run`: the
 //! CSV outputs byte for byte, the JSON outputs (which name the input file) number for number to
 //! 1e-12 relative with the file names normalised. The CSV record is the reference: its text
@@ -18,17 +21,22 @@ use common::{ambid, text, tmpdir};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 
-const FORMATS: [&str; 5] = ["csv", "npy", "npz", "mat", "parquet"];
+const FORMATS: [&str; 7] = ["csv", "npy", "npz", "mat", "v73", "tdms", "parquet"];
 
 fn fixtures() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/formats")
 }
 
+/// The file name of record `k` in format `fmt` (`v73`: the MAT v7.3 file).
+fn file_name(k: usize, fmt: &str) -> String {
+    match fmt {
+        "v73" => format!("rec_m{k}_v73.mat"),
+        _ => format!("rec_m{k}.{fmt}"),
+    }
+}
+
 fn rec(k: usize, fmt: &str) -> String {
-    fixtures()
-        .join(format!("rec_m{k}.{fmt}"))
-        .display()
-        .to_string()
+    fixtures().join(file_name(k, fmt)).display().to_string()
 }
 
 fn controller() -> String {
@@ -56,6 +64,21 @@ fn formats(what: &str) -> Vec<&'static str> {
 /// The column options of a format: none where the file names its columns t, r, u, i, y;
 /// positions in the `.npy` array (columns t, r, u, i, y in that order).
 fn columns(fmt: &str, which: &[&str]) -> Vec<String> {
+    if fmt == "tdms" {
+        // channels `group/channel`, no time channel (the sample time is wf_increment)
+        let mut v = Vec::new();
+        for w in which {
+            let opt = match *w {
+                "r" => "--excitation",
+                "u" => "--input",
+                "i" => "--current",
+                "y" => "--output",
+                _ => unreachable!(),
+            };
+            v.extend([opt.to_string(), format!("rec/{w}")]);
+        }
+        return v;
+    }
     if fmt != "npy" {
         return Vec::new();
     }
@@ -88,8 +111,8 @@ fn s(v: &[&str]) -> Vec<String> {
 /// `text` with the format's file names and the output directory written format-free.
 fn normalise(text: &str, fmt: &str, dir: &Path) -> String {
     text.replace(&dir.display().to_string(), "<out>")
-        .replace(&format!("rec_m1.{fmt}"), "rec_m1.<fmt>")
-        .replace(&format!("rec_m2.{fmt}"), "rec_m2.<fmt>")
+        .replace(&file_name(1, fmt), "rec_m1.<fmt>")
+        .replace(&file_name(2, fmt), "rec_m2.<fmt>")
 }
 
 fn read(p: &Path) -> Vec<u8> {
@@ -136,16 +159,19 @@ fn json_diff(path: &str, got: &Value, want: &Value, out: &mut Vec<String>) {
 }
 
 /// The JSON file `p` (written from format `fmt` into `dir`) with its strings normalised; a
-/// model file names its signals as they were selected, `#3`/`#5` in the `.npy` array: written
-/// `u`/`y` here.
+/// model file names its signals as they were selected, `#3`/`#5` in the `.npy` array and
+/// `rec/u`/`rec/y` in the TDMS file: written `u`/`y` here.
 fn json(p: &Path, fmt: &str, dir: &Path) -> Value {
     let t = String::from_utf8(read(p)).unwrap();
     let mut v: Value = serde_json::from_str(&normalise(&t, fmt, dir)).unwrap();
-    if fmt == "npy" {
-        for (k, pos, name) in [("input", "#3", "u"), ("output", "#5", "y")] {
-            if v.get(k).and_then(Value::as_str) == Some(pos) {
-                v[k] = Value::from(name);
-            }
+    let sel = match fmt {
+        "npy" => [("input", "#3", "u"), ("output", "#5", "y")],
+        "tdms" => [("input", "rec/u", "u"), ("output", "rec/y", "y")],
+        _ => return v,
+    };
+    for (k, col, name) in sel {
+        if v.get(k).and_then(Value::as_str) == Some(col) {
+            v[k] = Value::from(name);
         }
     }
     v
@@ -361,10 +387,10 @@ fn bla_reads_every_format_alike() {
 
 /// The workflow file of `run` on the records in format `fmt`.
 fn workflow(fmt: &str, dir: &Path) -> PathBuf {
-    let cols = if fmt == "npy" {
-        "time = \"#1\"\nr = \"#2\"\nu = \"#3\"\ni = \"#4\"\ny = \"#5\"\n"
-    } else {
-        ""
+    let cols = match fmt {
+        "npy" => "time = \"#1\"\nr = \"#2\"\nu = \"#3\"\ni = \"#4\"\ny = \"#5\"\n",
+        "tdms" => "r = \"rec/r\"\nu = \"rec/u\"\ni = \"rec/i\"\ny = \"rec/y\"\n",
+        _ => "",
     };
     let text = format!(
         "title = \"formats\"\nsource = \"files\"\nsteps = [\"frf\", \"order\", \"models\", \"validation\"]\n\n\

@@ -23,6 +23,7 @@
 //! malformed values are usage errors (exit code 2) naming the option.
 
 use ambid::io::table::{ColumnRef, Format, ReadOptions};
+use ambid::io::time::{Bound, Window};
 use ambid::io::{read_time, TimeData, TimeOptions};
 use clap::Args;
 use std::path::Path;
@@ -43,14 +44,21 @@ pub struct DataFileArgs {
 /// means more).
 #[derive(Args, Clone, Debug, Default)]
 pub struct FileFormatArgs {
-    /// Format of the data files: csv (any delimited text), npy, npz, mat (v5) or parquet
-    /// (default: from the extension, else from the file's first bytes).
+    /// Format of the data files: csv (any delimited text), npy, npz, mat (v5 or v7.3), tdms
+    /// or parquet (default: from the extension, else from the file's first bytes).
     #[arg(long, value_parser = parse_format)]
     pub format: Option<Format>,
     /// `.mat`/`.npz` data files: read only this variable (a 2-D variable `v` gives the columns
-    /// `v1` … `vk`).
+    /// `v1` … `vk`); `.tdms`: only this group.
     #[arg(long)]
     pub variable: Option<String>,
+    /// Start of the part of the record to use: seconds after the first sample (`2.5`, `2.5s`)
+    /// or a 0-based sample index (`#50000`). TDMS and MAT v7.3 files read only that part.
+    #[arg(long, value_parser = parse_bound)]
+    pub from: Option<Bound>,
+    /// End (excluded) of the part of the record to use, as `--from`.
+    #[arg(long, value_parser = parse_bound)]
+    pub to: Option<Bound>,
     /// The time column of the data files, seconds: a name, or `#k` for the k-th column
     /// (default: the column `t` when there is one).
     #[arg(long)]
@@ -58,6 +66,10 @@ pub struct FileFormatArgs {
 }
 
 fn parse_format(s: &str) -> Result<Format, String> {
+    s.parse()
+}
+
+fn parse_bound(s: &str) -> Result<Bound, String> {
     s.parse()
 }
 
@@ -72,7 +84,25 @@ impl FileFormatArgs {
                 variable: self.variable.clone(),
                 ..ReadOptions::default()
             },
+            window: (self.from.is_some() || self.to.is_some()).then_some(Window {
+                from: self.from,
+                to: self.to,
+            }),
+            columns: None,
         }
+    }
+
+    /// Reads only the columns `columns` (names or `#k`; those the file lacks are left out) of
+    /// the record `path`, with sample rate `fs_hz`: TDMS and MAT v7.3 files read nothing else.
+    pub fn read_columns(
+        &self,
+        path: &Path,
+        fs_hz: Option<f64>,
+        columns: &[&str],
+    ) -> anyhow::Result<TimeData> {
+        let mut o = self.options(fs_hz);
+        o.columns = Some(columns.iter().map(|c| c.to_string()).collect());
+        Ok(read_time(path, &o)?)
     }
 
     /// Reads the record `path` with sample rate `fs_hz` (for a file without a time column).

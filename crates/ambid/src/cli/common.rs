@@ -227,7 +227,9 @@ pub fn read_io(
     (input, output): (&str, &str),
     excitation: &str,
 ) -> Result<Recording> {
-    let d = file.read(p)?;
+    let d = file
+        .file
+        .read_columns(p, file.fs, &[input, output, excitation])?;
     let r = if d.has(excitation) {
         Some(d.column_raw(excitation)?.to_vec())
     } else {

@@ -255,6 +255,8 @@ pub fn frf(mut a: FrfArgs) -> Result<()> {
     // (the same arithmetic in bounded memory, frf_stream), everything else is read whole
     let streamable = Format::of_file(&a.data, a.file.file.format)? == Format::Text
         && a.file.file.time.is_none()
+        && a.file.file.from.is_none()
+        && a.file.file.to.is_none()
         && [&a.r.excitation, &a.u.input, &a.y.output, &a.cur.current]
             .iter()
             .all(|c| !c.starts_with('#'));
@@ -279,7 +281,12 @@ pub fn frf(mut a: FrfArgs) -> Result<()> {
 /// The FRF with the whole record in memory (LPM/LRM, or a noise record for the SNR). `None`
 /// when a local method wrote its output itself.
 fn frf_in_memory(a: &FrfArgs) -> Result<Option<FrfAnalysis>> {
-    let data = a.file.read(&a.data)?;
+    // only the four columns (TDMS and MAT v7.3 files read nothing else)
+    let data = a.file.file.read_columns(
+        &a.data,
+        a.file.fs,
+        &[&a.r.excitation, &a.u.input, &a.y.output, &a.cur.current],
+    )?;
     ambid::analysis::check_fs_matches(a.file.fs, data.ts)?;
     // missing samples are kept for the screening; without it every sample must be a number
     let col = |name: &str| {

@@ -1,20 +1,27 @@
 //! Reading recorded data files into named numeric columns: CSV and whitespace-separated text,
-//! NumPy `.npy`/`.npz`, MATLAB `.mat` (v5) and Parquet (cargo feature `parquet`).
+//! NumPy `.npy`/`.npz`, MATLAB `.mat` (v5, and v7.3 = HDF5), NI TDMS and Parquet (cargo feature
+//! `parquet`).
 //!
 //! [`read_table`] is the one entry point; it picks the reader from [`ReadOptions::format`] or the
-//! file extension and returns a [`Table`] of equally long `f64` columns. The rules (delimiter and
-//! header detection, column naming, errors) are described in `docs/data-files.md`.
+//! file extension and returns a [`Table`] of equally long `f64` columns. A subset of the columns
+//! ([`ReadOptions::columns`]) and of the rows ([`ReadOptions::rows`]) can be asked for: the TDMS
+//! and MAT v7.3 readers then read only those bytes of the file, the others read the file and
+//! keep them. The rules (delimiter and header detection, column naming, errors) are described
+//! in `docs/data-files.md`.
 
 mod arrays;
 pub use arrays::MAX_DECODED_BYTES;
 pub use text::{TextRows, MAX_LINE_BYTES};
 mod mat;
+mod mat73;
 mod npy;
 #[cfg(feature = "parquet")]
 mod parquet;
+mod tdms;
 mod text;
 
 use std::fmt;
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 /// File formats [`read_table`] understands.
@@ -26,8 +33,10 @@ pub enum Format {
     Npy,
     /// NumPy `.npz` (several arrays).
     Npz,
-    /// MATLAB `.mat` version 5.
+    /// MATLAB `.mat`: version 5 (`-v6`, `-v7`) or 7.3 (HDF5), told apart by the header.
     Mat,
+    /// NI LabVIEW TDMS (`.tdms`).
+    Tdms,
     /// Apache Parquet (needs the cargo feature `parquet`).
     Parquet,
 }
@@ -49,6 +58,7 @@ impl Format {
             "npz" => Some(Format::Npz),
             "mat" => Some(Format::Mat),
             "parquet" | "pq" => Some(Format::Parquet),
+            "tdms" => Some(Format::Tdms),
             _ => None,
         }
     }
@@ -95,6 +105,8 @@ impl Format {
             Format::Mat
         } else if start.starts_with(b"PAR1") {
             Format::Parquet
+        } else if start.starts_with(b"TDSm") {
+            Format::Tdms
         } else {
             Format::Text
         })
@@ -109,6 +121,7 @@ impl fmt::Display for Format {
             Format::Npz => "npz",
             Format::Mat => "mat",
             Format::Parquet => "parquet",
+            Format::Tdms => "tdms",
         })
     }
 }
@@ -116,13 +129,15 @@ impl fmt::Display for Format {
 impl std::str::FromStr for Format {
     type Err = String;
 
-    /// Parses `text` (also `csv`, `txt`, `dat`, `tsv`), `npy`, `npz`, `mat`, `parquet`.
+    /// Parses `text` (also `csv`, `txt`, `dat`, `tsv`), `npy`, `npz`, `mat`, `tdms`, `parquet`.
     fn from_str(s: &str) -> Result<Format, String> {
         if s.eq_ignore_ascii_case("text") {
             return Ok(Format::Text);
         }
         Format::from_extension(s).ok_or_else(|| {
-            format!("unknown data-file format `{s}`; use one of text, csv, npy, npz, mat, parquet")
+            format!(
+                "unknown data-file format `{s}`; use one of text, csv, npy, npz, mat, tdms, parquet"
+            )
         })
     }
 }
@@ -137,8 +152,14 @@ pub struct ReadOptions {
     pub delimiter: Option<char>,
     /// Text: whether the first non-comment line is a header; `None` detects it (non-numeric cells).
     pub header: Option<bool>,
-    /// `.mat`/`.npz`: only read this variable (others are ignored).
+    /// `.mat`/`.npz`: only read this variable (others are ignored); `.tdms`: only this group.
     pub variable: Option<String>,
+    /// Only these columns, in this order (names, or `#k` counted over every column of the
+    /// file); `None` reads every column. TDMS and MAT v7.3 files read nothing else.
+    pub columns: Option<Vec<ColumnRef>>,
+    /// Only these rows (0-based samples, end exclusive; clipped to the record); `None` reads
+    /// all. TDMS and MAT v7.3 files read nothing else.
+    pub rows: Option<Range<usize>>,
 }
 
 /// A column reference: by name, or by 1-based position (`"#3"` or the integer 3 in TOML).
@@ -195,6 +216,8 @@ pub struct Table {
     pub names: Vec<String>,
     /// Columns (all of the same length).
     pub columns: Vec<Vec<f64>>,
+    /// The sample time the file's own metadata give (TDMS `wf_increment`), if any.
+    pub ts_metadata: Option<f64>,
 }
 
 impl Table {
@@ -414,12 +437,6 @@ pub enum DataFileError {
         /// `name: length` for every variable.
         lengths: String,
     },
-    /// A MATLAB v7.3 (HDF5) file.
-    #[error("{path}: this is a MATLAB v7.3 MAT-file (HDF5), which ambid does not read; save it in MATLAB with `save(filename, 'var', '-v7')` or export the signals to CSV")]
-    MatV73 {
-        /// The file.
-        path: PathBuf,
-    },
     /// A Parquet file, but ambid was built without the `parquet` feature.
     #[error("{path}: reading Parquet files needs ambid built with the cargo feature `parquet`; rebuild with `cargo build --release --features parquet` (or `cargo install ... --features parquet`), or export the data to CSV")]
     ParquetDisabled {
@@ -493,10 +510,267 @@ pub fn read_table(path: &Path, opts: &ReadOptions) -> Result<Table, DataFileErro
         Format::Text => text::read(path, opts)?,
         Format::Npy => npy::read_npy(path, opts)?,
         Format::Npz => npy::read_npz(path, opts)?,
+        Format::Mat if mat_v73(path)? => {
+            return read_lazy(
+                Lazy::Mat(mat73::Mat73File::open(path, opts.variable.as_deref())?),
+                path,
+                opts,
+            )
+        }
         Format::Mat => mat::read(path, opts)?,
+        Format::Tdms => return read_lazy(Lazy::Tdms(tdms::TdmsFile::open(path)?), path, opts),
         Format::Parquet => read_parquet(path, opts)?,
     };
-    check_table(table)
+    select(check_table(table)?, opts)
+}
+
+/// Whether a `.mat` file is version 7.3 (HDF5): its header text says so.
+fn mat_v73(path: &Path) -> Result<bool, DataFileError> {
+    use std::io::Read;
+    let mut start = [0u8; 16];
+    let mut file = std::fs::File::open(path).map_err(|e| DataFileError::open(path, &e))?;
+    let mut n = 0;
+    while n < start.len() {
+        match file.read(&mut start[n..]) {
+            Ok(0) => break,
+            Ok(k) => n += k,
+            Err(e) => return Err(DataFileError::open(path, &e)),
+        }
+    }
+    Ok(mat73::is_v73(&start[..n]))
+}
+
+/// The columns and rows of `opts` of a whole table.
+fn select(table: Table, opts: &ReadOptions) -> Result<Table, DataFileError> {
+    if opts.columns.is_none() && opts.rows.is_none() {
+        return Ok(table);
+    }
+    let idx: Vec<usize> = match &opts.columns {
+        None => (0..table.columns.len()).collect(),
+        Some(c) => c
+            .iter()
+            .map(|c| table.index_of(c))
+            .collect::<Result<_, _>>()?,
+    };
+    let n = table.len();
+    let rows = clip(opts.rows.clone(), n, &table.path)?;
+    let names = idx.iter().map(|&k| table.names[k].clone()).collect();
+    let columns = idx
+        .iter()
+        .map(|&k| table.columns[k][rows.clone()].to_vec())
+        .collect();
+    Ok(Table {
+        names,
+        columns,
+        ..table
+    })
+}
+
+/// `rows` clipped to a record of `n` rows; an empty result is an error.
+fn clip(rows: Option<Range<usize>>, n: usize, path: &Path) -> Result<Range<usize>, DataFileError> {
+    let r = rows.unwrap_or(0..n);
+    let r = r.start.min(n)..r.end.min(n);
+    if r.is_empty() {
+        return Err(DataFileError::no_data(
+            path,
+            format!(
+                "the window selects no samples (the record has {n}); choose --from/--to inside the record"
+            ),
+        ));
+    }
+    Ok(r)
+}
+
+/// A file read column by column (TDMS, MAT v7.3).
+enum Lazy {
+    Tdms(tdms::TdmsFile),
+    Mat(mat73::Mat73File),
+}
+
+impl Lazy {
+    fn names(&self) -> Vec<String> {
+        match self {
+            Lazy::Tdms(t) => t.names(),
+            Lazy::Mat(m) => m.names(),
+        }
+    }
+
+    fn len(&self, k: usize) -> u64 {
+        match self {
+            Lazy::Tdms(t) => t.len(k),
+            Lazy::Mat(m) => m.len(k),
+        }
+    }
+
+    fn read(&mut self, k: usize, rows: Range<u64>) -> Result<Vec<f64>, DataFileError> {
+        match self {
+            Lazy::Tdms(t) => t.read(k, rows),
+            Lazy::Mat(m) => m.read(k, rows),
+        }
+    }
+}
+
+/// The columns of a TDMS or MAT v7.3 file (after `opts.variable`) and the sample time its
+/// metadata give for each (TDMS `wf_increment`), without reading any sample; `None` for the
+/// other formats, which are read whole.
+pub(crate) fn list_columns(
+    path: &Path,
+    opts: &ReadOptions,
+) -> Result<Option<Vec<(String, Option<f64>)>>, DataFileError> {
+    let format = match opts.format {
+        Some(f) => f,
+        None => Format::detect(path)?,
+    };
+    let src = match format {
+        Format::Tdms => Lazy::Tdms(tdms::TdmsFile::open(path)?),
+        Format::Mat if mat_v73(path)? => {
+            Lazy::Mat(mat73::Mat73File::open(path, opts.variable.as_deref())?)
+        }
+        _ => return Ok(None),
+    };
+    let names = src.names();
+    Ok(Some(
+        names
+            .into_iter()
+            .enumerate()
+            .filter_map(|(k, n)| match &src {
+                Lazy::Tdms(t) => opts
+                    .variable
+                    .as_deref()
+                    .is_none_or(|g| t.group(k) == g)
+                    .then(|| (n, t.sample_time(k))),
+                Lazy::Mat(_) => Some((n, None)),
+            })
+            .collect(),
+    ))
+}
+
+/// [`read_table`] of a file read column by column: only the columns and rows asked for.
+fn read_lazy(mut src: Lazy, path: &Path, opts: &ReadOptions) -> Result<Table, DataFileError> {
+    let all = src.names();
+    // TDMS: `variable` names the group; every listed column is a candidate, strings included
+    // (reading one is then an error that says why)
+    let listed: Vec<usize> = (0..all.len())
+        .filter(|&k| match &src {
+            Lazy::Tdms(t) => opts.variable.as_deref().is_none_or(|g| t.group(k) == g),
+            Lazy::Mat(_) => true,
+        })
+        .collect();
+    let probe = Table {
+        path: path.to_path_buf(),
+        names: listed.iter().map(|&k| all[k].clone()).collect(),
+        columns: vec![Vec::new(); listed.len()],
+        ts_metadata: None,
+    };
+    let wanted: Vec<usize> = match &opts.columns {
+        Some(c) => c
+            .iter()
+            .map(|c| probe.index_of(c).map(|i| listed[i]))
+            .collect::<Result<_, _>>()
+            .map_err(|e| match (&src, e) {
+                (
+                    Lazy::Mat(m),
+                    DataFileError::MissingColumn {
+                        path,
+                        wanted,
+                        available,
+                    },
+                ) => match m.unusable.iter().find(|u| u.name == wanted) {
+                    Some(u) => DataFileError::invalid(
+                        &path,
+                        format!(
+                            "variable `{}` is {}, not a signal; select a numeric variable",
+                            u.name, u.reason
+                        ),
+                    ),
+                    None => DataFileError::MissingColumn {
+                        path,
+                        wanted,
+                        available,
+                    },
+                },
+                (_, e) => e,
+            })?,
+        // every numeric column
+        None => listed
+            .iter()
+            .copied()
+            .filter(|&k| match &src {
+                Lazy::Tdms(t) => t.is_numeric(k) && t.len(k) > 0,
+                Lazy::Mat(_) => true,
+            })
+            .collect(),
+    };
+    if wanted.is_empty() {
+        let why = match &src {
+            Lazy::Mat(m) if !m.unusable.is_empty() => format!(
+                "no numeric signals; the file has {}",
+                m.unusable
+                    .iter()
+                    .map(|u| format!("`{}` ({})", u.name, u.reason))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+            _ => "no numeric signals; check that this is the right file (and --variable)".into(),
+        };
+        return Err(DataFileError::no_data(path, why));
+    }
+    let lens: Vec<u64> = wanted.iter().map(|&k| src.len(k)).collect();
+    if lens.iter().any(|&l| l != lens[0]) {
+        let lengths = wanted
+            .iter()
+            .zip(&lens)
+            .map(|(&k, l)| format!("{}: {l}", all[k]))
+            .collect::<Vec<_>>()
+            .join(", ");
+        return Err(DataFileError::LengthMismatch {
+            path: path.to_path_buf(),
+            lengths,
+        });
+    }
+    let n = usize::try_from(lens[0]).unwrap_or(usize::MAX);
+    let rows = clip(opts.rows.clone(), n, path)?;
+    let bytes = 8 * (rows.end - rows.start) as u64 * wanted.len() as u64;
+    if bytes > MAX_DECODED_BYTES {
+        return Err(DataFileError::invalid(
+            path,
+            arrays::too_big("the selected columns and rows", bytes),
+        ));
+    }
+    let mut columns = Vec::with_capacity(wanted.len());
+    for &k in &wanted {
+        columns.push(src.read(k, rows.start as u64..rows.end as u64)?);
+    }
+    let ts_metadata = match &src {
+        Lazy::Tdms(t) => {
+            let ts: Vec<Option<f64>> = wanted.iter().map(|&k| t.sample_time(k)).collect();
+            match ts.first().copied().flatten() {
+                Some(t0) if ts.iter().all(|t| t.is_some_and(|t| ((t - t0) / t0).abs() <= 1e-9)) => Some(t0),
+                Some(_) if ts.iter().any(|t| t.is_some_and(|t| ts[0].is_some_and(|t0| ((t - t0) / t0).abs() > 1e-9))) => {
+                    return Err(DataFileError::SampleTime {
+                        path: path.to_path_buf(),
+                        message: format!(
+                            "the selected channels have different sample times (wf_increment: {}); select channels recorded at one rate",
+                            wanted
+                                .iter()
+                                .zip(&ts)
+                                .map(|(&k, t)| format!("{} {}", all[k], t.map_or("none".into(), |t| format!("{t:e} s"))))
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                    })
+                }
+                _ => None,
+            }
+        }
+        Lazy::Mat(_) => None,
+    };
+    Ok(Table {
+        path: path.to_path_buf(),
+        names: wanted.iter().map(|&k| all[k].clone()).collect(),
+        columns,
+        ts_metadata,
+    })
 }
 
 #[cfg(feature = "parquet")]
@@ -545,6 +819,7 @@ mod tests {
             path: PathBuf::from("mem.csv"),
             names: names.iter().map(|s| s.to_string()).collect(),
             columns,
+            ts_metadata: None,
         }
     }
 

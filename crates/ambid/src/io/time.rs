@@ -25,6 +25,12 @@ pub struct TimeData {
     /// The 0-based position of the time column in the file, if it had one (a column `#k`
     /// counts the file's columns, the time column included).
     pub time_column: Option<usize>,
+    /// Column specs (`#k` or names) that [`TimeOptions::columns`] asked for, with the index
+    /// into [`TimeData::names`] each was read into (a file read in part no longer has every
+    /// column, so `#k` cannot be counted in `names`).
+    pub aliases: Vec<(String, usize)>,
+    /// The first row of the record that was read (0 unless a window was asked for).
+    pub first_row: usize,
 }
 
 /// The largest magnitude a signal sample may have: sums of squares of up to 2²⁸ samples of
@@ -94,6 +100,13 @@ impl TimeData {
         if let Some(k) = self.names.iter().position(|n| n == name) {
             return Some(k);
         }
+        if let Some((_, k)) = self.aliases.iter().find(|(a, _)| a == name) {
+            return Some(*k);
+        }
+        if !self.aliases.is_empty() {
+            // read in part: positions in the file are known only through the aliases
+            return None;
+        }
         match ColumnRef::parse(name) {
             ColumnRef::Index(k) if k >= 1 => {
                 let file = k - 1;
@@ -119,6 +132,87 @@ pub struct TimeOptions {
     pub time: Option<ColumnRef>,
     /// Format, and the text dialect or the `.mat`/`.npz` variable ([`read_table`]).
     pub read: ReadOptions,
+    /// The part of the record to keep (`--from`/`--to`); `None`: all of it.
+    pub window: Option<Window>,
+    /// The signal columns a command needs (names or `#k`; columns the file does not have are
+    /// left out, so optional ones may be listed). TDMS and MAT v7.3 files then read only these
+    /// and the time column; other formats are read whole. `None`: every column.
+    pub columns: Option<Vec<String>>,
+}
+
+/// One end of a [`Window`]: seconds from the record's first sample, or a 0-based sample index.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Bound {
+    /// Seconds after the first sample (the sample whose time is the first at or after it).
+    Seconds(f64),
+    /// A 0-based sample index.
+    Sample(usize),
+}
+
+impl std::str::FromStr for Bound {
+    type Err = String;
+
+    /// `2.5` or `2.5s`: seconds; `#50000`: the sample with 0-based index 50000.
+    ///
+    /// ```
+    /// use ambid::io::time::Bound;
+    /// assert_eq!("2.5".parse::<Bound>(), Ok(Bound::Seconds(2.5)));
+    /// assert_eq!("10s".parse::<Bound>(), Ok(Bound::Seconds(10.0)));
+    /// assert_eq!("#400".parse::<Bound>(), Ok(Bound::Sample(400)));
+    /// assert!("-1".parse::<Bound>().is_err());
+    /// ```
+    fn from_str(s: &str) -> Result<Bound, String> {
+        let s = s.trim();
+        if let Some(k) = s.strip_prefix('#') {
+            return k.parse().map(Bound::Sample).map_err(|_| {
+                format!("`{s}` is not a sample index; write `#` and a whole number, e.g. `#20000`")
+            });
+        }
+        let v: f64 = s.strip_suffix('s').unwrap_or(s).trim().parse().map_err(|_| {
+            format!("`{s}` is not a time; write seconds (`2.5` or `2.5s`) or a sample index (`#20000`)")
+        })?;
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(format!(
+                "`{s}`: a time must be zero or positive (seconds from the first sample)"
+            ));
+        }
+        Ok(Bound::Seconds(v))
+    }
+}
+
+/// The part of a record to read: from `from` (included) to `to` (excluded); a missing end is the
+/// record's start or end.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Window {
+    /// Start (default: the first sample).
+    pub from: Option<Bound>,
+    /// End, excluded (default: after the last sample).
+    pub to: Option<Bound>,
+}
+
+impl Window {
+    /// The rows of a record of `n` samples with sample time `ts`: seconds $s$ become the sample
+    /// $\lceil s/T_s - 10^{-9}\rceil$ (the first at or after $s$).
+    fn rows(&self, n: usize, ts: f64) -> std::ops::Range<usize> {
+        let idx = |b: Bound| match b {
+            Bound::Sample(k) => k,
+            Bound::Seconds(s) => {
+                let k = (s / ts - 1e-9).ceil().max(0.0);
+                if k >= n as f64 {
+                    n
+                } else {
+                    k as usize
+                }
+            }
+        };
+        let a = self.from.map_or(0, idx).min(n);
+        let b = self.to.map_or(n, idx).min(n);
+        a..b.max(a)
+    }
+
+    fn in_seconds(&self) -> bool {
+        matches!(self.from, Some(Bound::Seconds(_))) || matches!(self.to, Some(Bound::Seconds(_)))
+    }
 }
 
 impl TimeOptions {
@@ -189,7 +283,171 @@ impl TimeData {
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 pub fn read_time(path: &Path, opts: &TimeOptions) -> Result<TimeData, DataFileError> {
-    let table = read_table(path, &opts.read)?;
+    let Some(listing) = super::table::list_columns(path, &opts.read)? else {
+        // read whole; the window is cut from the columns in memory
+        let table = read_table(path, &opts.read)?;
+        return assemble(path, table, opts, None);
+    };
+    // TDMS / MAT v7.3: the column names first (nothing is read but the metadata), then only
+    // the time column (for a window in seconds) and the wanted columns' rows
+    let listed: Vec<String> = listing.iter().map(|(n, _)| n.clone()).collect();
+    let time = match &opts.time {
+        Some(c) => Some(c.clone()),
+        None => listed
+            .iter()
+            .any(|n| n == "t")
+            .then(|| ColumnRef::Name("t".into())),
+    };
+    let mut cols: Vec<ColumnRef> = Vec::new();
+    if let Some(t) = &time {
+        cols.push(t.clone());
+    }
+    let mut aliases = Vec::new();
+    match &opts.columns {
+        Some(wanted) => {
+            let probe = super::table::Table {
+                path: path.to_path_buf(),
+                names: listed.clone(),
+                columns: vec![Vec::new(); listed.len()],
+                ts_metadata: None,
+            };
+            for w in wanted {
+                let c = ColumnRef::parse(w);
+                if let Ok(i) = probe.index_of(&c) {
+                    let c = ColumnRef::Name(listed[i].clone());
+                    if !cols.contains(&c) {
+                        cols.push(c.clone());
+                    }
+                    aliases.push((w.clone(), c));
+                }
+            }
+        }
+        None => cols.clear(),
+    }
+    let with_cols = |rows| ReadOptions {
+        columns: opts.columns.as_ref().map(|_| cols.clone()),
+        rows,
+        ..opts.read.clone()
+    };
+    let rows = match opts.window {
+        None => None,
+        Some(w) if !w.in_seconds() => Some(w.rows(usize::MAX, 1.0)),
+        Some(w) => {
+            // the sample time: the time column, else the file's metadata, else --fs
+            let ts = match &time {
+                Some(t) => {
+                    let tt = read_table(
+                        path,
+                        &ReadOptions {
+                            columns: Some(vec![t.clone()]),
+                            rows: None,
+                            ..opts.read.clone()
+                        },
+                    )?;
+                    tt.sample_time(Some(&ColumnRef::Index(1)), None)?
+                }
+                None => {
+                    // the metadata of the wanted columns (of every column without a choice)
+                    let meta = listing
+                        .iter()
+                        .filter(|(n, _)| {
+                            opts.columns.is_none()
+                                || cols
+                                    .iter()
+                                    .any(|c| matches!(c, ColumnRef::Name(m) if m == n))
+                        })
+                        .find_map(|(_, ts)| *ts);
+                    match (meta, opts.fs_hz) {
+                        (Some(ts), _) => ts,
+                        (None, Some(fs)) if fs.is_finite() && fs > 0.0 => 1.0 / fs,
+                        _ => {
+                            return Err(DataFileError::SampleTime {
+                                path: path.to_path_buf(),
+                                message: "a window in seconds needs the sample time: the file has no time column and no wf_increment; give --fs, or the window in samples (`#k`)".into(),
+                            })
+                        }
+                    }
+                }
+            };
+            Some(w.rows(usize::MAX, ts))
+        }
+    };
+    let table = read_table(path, &with_cols(rows.clone()))?;
+    let first = rows.map_or(0, |r| r.start);
+    let mut d = assemble(path, table, opts, Some(first))?;
+    if opts.columns.is_some() {
+        d.aliases = aliases
+            .into_iter()
+            .filter_map(|(w, c)| {
+                let ColumnRef::Name(n) = c else { return None };
+                d.names.iter().position(|m| *m == n).map(|k| (w, k))
+            })
+            .collect();
+        if d.aliases.is_empty() {
+            // nothing asked for is in the file: keep the names for the error messages
+            d.aliases.push((String::new(), usize::MAX));
+        }
+    }
+    Ok(d)
+}
+
+/// [`TimeData`] from a table: the time column (or metadata or `fs`) gives the sample time, the
+/// window (when the table is whole, `first` = `None`) is cut, every signal sample is checked.
+fn assemble(
+    path: &Path,
+    mut table: super::table::Table,
+    opts: &TimeOptions,
+    first: Option<usize>,
+) -> Result<TimeData, DataFileError> {
+    let n = table.len();
+    let t_idx = match &opts.time {
+        Some(c) => Some(table.index_of(c)?),
+        None => table.names.iter().position(|h| h == "t"),
+    };
+    let ts = match (t_idx, table.ts_metadata, opts.fs_hz) {
+        (Some(k), _, _) if n >= 2 => table.sample_time(Some(&ColumnRef::Index(k + 1)), None)?,
+        (None, Some(ts), fs) => {
+            if let Some(fs) = fs {
+                if !(fs.is_finite() && fs > 0.0) || ((ts * fs) - 1.0).abs() > 1e-4 {
+                    return Err(DataFileError::SampleTime {
+                        path: path.to_path_buf(),
+                        message: format!(
+                            "the file's metadata give Ts = {ts:e} s (wf_increment) but fs = {} Hz was given; leave out --fs, or correct it",
+                            crate::config::fmt_num(fs)
+                        ),
+                    });
+                }
+            }
+            ts
+        }
+        (None, None, Some(fs)) => table.sample_time(None, Some(fs))?,
+        (Some(_), _, _) => f64::NAN,
+        (None, None, None) => {
+            return Err(DataFileError::SampleTime {
+                path: path.to_path_buf(),
+                message: "no `t` column; give the sample rate (--fs) to read this file".into(),
+            })
+        }
+    };
+    let first_row = match first {
+        Some(f) => f,
+        None => match opts.window {
+            Some(w) => {
+                let r = w.rows(n, ts);
+                if r.is_empty() {
+                    return Err(DataFileError::NoData {
+                        path: path.to_path_buf(),
+                        message: format!("the window selects no samples (the record has {n}, Ts = {ts:e} s); choose --from/--to inside the record"),
+                    });
+                }
+                for c in &mut table.columns {
+                    *c = c[r.clone()].to_vec();
+                }
+                r.start
+            }
+            None => 0,
+        },
+    };
     let n = table.len();
     if n < 2 {
         return Err(DataFileError::NoData {
@@ -197,19 +455,10 @@ pub fn read_time(path: &Path, opts: &TimeOptions) -> Result<TimeData, DataFileEr
             message: format!("needs at least 2 data rows, found {n}"),
         });
     }
-    let t_idx = match &opts.time {
-        Some(c) => Some(table.index_of(c)?),
-        None => table.names.iter().position(|h| h == "t"),
-    };
-    let ts = match (t_idx, opts.fs_hz) {
-        (Some(k), _) => table.sample_time(Some(&ColumnRef::Index(k + 1)), None)?,
-        (None, Some(fs)) => table.sample_time(None, Some(fs))?,
-        (None, None) => {
-            return Err(DataFileError::SampleTime {
-                path: path.to_path_buf(),
-                message: "no `t` column; give the sample rate (--fs) to read this file".into(),
-            })
-        }
+    // the sample time of a windowed time column is checked on the window
+    let ts = match t_idx {
+        Some(k) => table.sample_time(Some(&ColumnRef::Index(k + 1)), None)?,
+        None => ts,
     };
     let mut names = Vec::new();
     let mut columns = Vec::new();
@@ -238,6 +487,8 @@ pub fn read_time(path: &Path, opts: &TimeOptions) -> Result<TimeData, DataFileEr
         names,
         columns,
         time_column: t_idx,
+        aliases: Vec::new(),
+        first_row,
     })
 }
 

@@ -258,8 +258,14 @@ pub fn load_file(
                 .join(", ")
         )]
     };
+    // the sample rate: the time column, `fs`, else the file's own metadata (TDMS wf_increment)
+    let fs = d.fs_hz.or(if time.is_none() {
+        table.ts_metadata.map(|ts| 1.0 / ts)
+    } else {
+        None
+    });
     let ts = table
-        .sample_time(time.as_ref().map(ColumnSpec::to_ref).as_ref(), d.fs_hz)
+        .sample_time(time.as_ref().map(ColumnSpec::to_ref).as_ref(), fs)
         .map_err(input)?;
     let col = |name: &str, spec: &ColumnSpec| -> Result<Vec<f64>, Error> {
         let x = table.column(&spec.to_ref()).map_err(input)?;

@@ -242,6 +242,7 @@ pub(super) fn assemble(
         path: path.to_path_buf(),
         names,
         columns,
+        ts_metadata: None,
     })
 }
 

@@ -5,7 +5,7 @@
 //! interpreted: array flags (class, complex), dimensions, name and real part. Everything is
 //! bounds-checked; a damaged file gives an error, never a panic.
 //!
-//! v7.3 files are HDF5 and are recognised only to say so.
+//! v7.3 files are HDF5 and are read by the sibling module `mat73`.
 
 use std::io::Read;
 use std::path::Path;
@@ -51,9 +51,11 @@ pub(super) fn read(path: &Path, opts: &ReadOptions) -> Result<Table, DataFileErr
     }
     let bytes = std::fs::read(path).map_err(|e| DataFileError::open(path, &e))?;
     let vars = parse(&bytes).map_err(|e| match e {
-        MatError::V73 => DataFileError::MatV73 {
-            path: path.to_path_buf(),
-        },
+        // read_table sends v7.3 files to the HDF5 reader before this one
+        MatError::V73 => DataFileError::invalid(
+            path,
+            "a MATLAB v7.3 (HDF5) MAT-file: read it through read_table (format `mat`), which detects the version",
+        ),
         MatError::Bad(m) => DataFileError::invalid(path, m),
     })?;
     assemble(path, vars, opts.variable.as_deref())

@@ -141,6 +141,7 @@ fn read_checked(path: &Path, _opts: &ReadOptions) -> Result<Table, DataFileError
         path: path.to_path_buf(),
         names: wanted.into_iter().map(|(_, n)| n).collect(),
         columns,
+        ts_metadata: None,
     })
 }
 

@@ -322,6 +322,7 @@ fn parse<R: std::io::BufRead>(
         path: path.to_path_buf(),
         names,
         columns,
+        ts_metadata: None,
     })
 }
 
