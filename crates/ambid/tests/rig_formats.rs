@@ -94,14 +94,21 @@ fn whole_files_list_their_signals() {
         },
     )
     .unwrap();
-    assert!(v.names.iter().all(|n| n.starts_with("sim.")), "{:?}", v.names);
+    assert!(
+        v.names.iter().all(|n| n.starts_with("sim.")),
+        "{:?}",
+        v.names
+    );
     // the format from the first bytes when the extension says nothing
     let tmp = std::env::temp_dir().join(format!("ambid-rigfmt-{}", std::process::id()));
     std::fs::create_dir_all(&tmp).unwrap();
     let p = tmp.join("log.bin");
     std::fs::copy(dir().join("float32_i32.tdms"), &p).unwrap();
     assert_eq!(Format::of_file(&p, None).unwrap(), Format::Tdms);
-    assert_eq!(read_table(&p, &ReadOptions::default()).unwrap().names, ["g/a", "g/b"]);
+    assert_eq!(
+        read_table(&p, &ReadOptions::default()).unwrap().names,
+        ["g/a", "g/b"]
+    );
 }
 
 /// A window in samples or seconds and a column subset read exactly those rows of those
@@ -132,7 +139,11 @@ fn windows_and_column_subsets() {
                 ..TimeOptions::default()
             };
             let d = read_time(&dir().join(file), &opts).unwrap_or_else(|e| panic!("{file}: {e}"));
-            assert_eq!(d.column(col).unwrap(), &all[lo..hi], "{file} {col} {from:?}");
+            assert_eq!(
+                d.column(col).unwrap(),
+                &all[lo..hi],
+                "{file} {col} {from:?}"
+            );
             assert!((d.ts - 5e-5).abs() < 1e-15, "{file}: {}", d.ts);
             assert_eq!(d.first_row, lo);
             // only the column asked for (and the time column) was read
@@ -151,7 +162,10 @@ fn windows_and_column_subsets() {
     let e = read_time(&dir().join("float32_i32.tdms"), &opts)
         .unwrap_err()
         .to_string();
-    assert!(e.contains("float32_i32.tdms") && e.contains("no samples"), "{e}");
+    assert!(
+        e.contains("float32_i32.tdms") && e.contains("no samples"),
+        "{e}"
+    );
     // --fs that contradicts wf_increment
     let opts = TimeOptions {
         fs_hz: Some(500.0),
@@ -177,9 +191,15 @@ fn malformed_files_and_wrong_selections_are_explained() {
         ..ReadOptions::default()
     };
     let m = err("truncated_v73.mat", &none).to_string();
-    assert!(m.contains("truncated_v73.mat") && m.contains("damaged or truncated"), "{m}");
+    assert!(
+        m.contains("truncated_v73.mat") && m.contains("damaged or truncated"),
+        "{m}"
+    );
     let m = err("not_hdf5_v73.mat", &none).to_string();
-    assert!(m.contains("not_hdf5_v73.mat") && m.contains("no HDF5"), "{m}");
+    assert!(
+        m.contains("not_hdf5_v73.mat") && m.contains("no HDF5"),
+        "{m}"
+    );
     let m = err("bad_leadin.tdms", &none).to_string();
     assert!(m.contains("bad_leadin.tdms") && m.contains("TDSm"), "{m}");
     let e = err("truncated.tdms", &none);
@@ -196,7 +216,10 @@ fn malformed_files_and_wrong_selections_are_explained() {
     let e = err("struct_v73.mat", &col("rec.x"));
     assert!(matches!(e, DataFileError::MissingColumn { .. }), "{e:?}");
     let m = e.to_string();
-    assert!(m.contains("no column `rec.x`") && m.contains("rec.meta.gain"), "{m}");
+    assert!(
+        m.contains("no column `rec.x`") && m.contains("rec.meta.gain"),
+        "{m}"
+    );
     // text and single numbers are not signals
     let m = err("struct_v73.mat", &col("note")).to_string();
     assert!(m.contains("`note` is text"), "{m}");

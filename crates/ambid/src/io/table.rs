@@ -610,13 +610,16 @@ impl Lazy {
     }
 }
 
+/// A column of a file read in part: its name and the sample time its metadata give.
+pub(crate) type Listed = (String, Option<f64>);
+
 /// The columns of a TDMS or MAT v7.3 file (after `opts.variable`) and the sample time its
 /// metadata give for each (TDMS `wf_increment`), without reading any sample; `None` for the
 /// other formats, which are read whole.
 pub(crate) fn list_columns(
     path: &Path,
     opts: &ReadOptions,
-) -> Result<Option<Vec<(String, Option<f64>)>>, DataFileError> {
+) -> Result<Option<Vec<Listed>>, DataFileError> {
     let format = match opts.format {
         Some(f) => f,
         None => Format::detect(path)?,

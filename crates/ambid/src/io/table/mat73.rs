@@ -83,15 +83,11 @@ const NUMERIC: [&str; 11] = [
     "logical",
 ];
 
-/// Reads a dataset (or a hyperslab of it) as `f64`, whatever its numeric type.
-fn read_f64(ds: &Dataset, sel: Option<&SliceInfo>) -> Result<Vec<f64>, String> {
+/// Reads a hyperslab of a dataset as `f64`, whatever its numeric type.
+fn read_f64(ds: &Dataset, sel: &SliceInfo) -> Result<Vec<f64>, String> {
     macro_rules! rd {
         ($t:ty) => {{
-            let a = match sel {
-                Some(s) => ds.read_slice::<$t>(s),
-                None => ds.read_array::<$t>(),
-            }
-            .map_err(|e| e.to_string())?;
+            let a = ds.read_slice::<$t>(sel).map_err(|e| e.to_string())?;
             a.iter().map(|&v| v as f64).collect()
         }};
     }
@@ -137,7 +133,7 @@ struct Walker<'a> {
 #[derive(Clone)]
 enum Obj {
     Group(Group),
-    Dataset(Dataset),
+    Dataset(Box<Dataset>),
 }
 
 impl Walker<'_> {
@@ -152,7 +148,7 @@ impl Walker<'_> {
     fn numeric(&mut self, name: &str, ds: &Dataset) {
         let shape = ds.shape().to_vec();
         let dims: Vec<u64> = shape.iter().copied().filter(|&d| d != 1).collect();
-        if shape.iter().any(|&d| d == 0) {
+        if shape.contains(&0) {
             self.unusable(name, "an empty array");
             return;
         }
@@ -292,7 +288,7 @@ impl Walker<'_> {
             .map(|e| match (find(e, &NAME), find(e, &DATA)) {
                 (Some(Obj::Dataset(n)), Some(Obj::Dataset(d))) => {
                     let label = read_char(&n)?;
-                    (!label.is_empty()).then_some((label, d))
+                    (!label.is_empty()).then_some((label, *d))
                 }
                 _ => None,
             })
@@ -352,7 +348,7 @@ impl Mat73File {
                 w.refs.insert(g.address(), Obj::Group(g));
             }
             for d in rd {
-                w.refs.insert(d.address(), Obj::Dataset(d));
+                w.refs.insert(d.address(), Obj::Dataset(Box::new(d)));
             }
         }
         let keep = |n: &str| variable.is_none_or(|v| v == n);
@@ -414,7 +410,7 @@ impl Mat73File {
                 })
                 .collect(),
         };
-        read_f64(&c.ds, Some(&sel)).map_err(|e| {
+        read_f64(&c.ds, &sel).map_err(|e| {
             DataFileError::invalid(
                 &self.path,
                 format!(

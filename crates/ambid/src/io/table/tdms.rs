@@ -231,11 +231,6 @@ impl<'a> Cursor<'a> {
 
     /// A property value of type `t`.
     fn prop(&mut self, t: u32) -> Result<Prop, String> {
-        let num = |b: &[u8], f: fn([u8; 8]) -> f64| {
-            let mut a = [0u8; 8];
-            a[..b.len()].copy_from_slice(b);
-            f(a)
-        };
         let big = self.big;
         let int = |b: &[u8], signed: bool| -> f64 {
             let mut v: u64 = 0;
@@ -257,7 +252,6 @@ impl<'a> Cursor<'a> {
                 v as f64
             }
         };
-        let _ = num;
         Ok(match DataType::from_code(t) {
             DataType::I8 => Prop::Num(int(self.take(1)?, true)),
             DataType::I16 => Prop::Num(int(self.take(2)?, true)),
@@ -358,8 +352,6 @@ impl TdmsFile {
         let mut list: Vec<usize> = Vec::new();
         let mut pos = 0u64;
         let mut segment = 0usize;
-        let mut interleaved_prev = false;
-        let mut big_prev = false;
         while pos < size {
             segment += 1;
             let mut lead = [0u8; LEAD_IN as usize];
@@ -438,7 +430,7 @@ impl TdmsFile {
                 file.seek(SeekFrom::Start(body))
                     .and_then(|_| file.read_exact(&mut meta))
                     .map_err(|e| DataFileError::open(path, &e))?;
-                me.metadata(&meta, big, toc, segment, &mut by_path, &mut list)
+                me.metadata(&meta, big, toc, &mut by_path, &mut list)
                     .map_err(|m| me.err(format!("segment {segment} at byte {pos}: {m}")))?;
             } else if segment == 1 && toc & TOC_RAW != 0 {
                 return Err(me.err(
@@ -456,10 +448,7 @@ impl TdmsFile {
                     incomplete,
                 )
                 .map_err(|m| me.err(format!("segment {segment} at byte {pos}: {m}")))?;
-                interleaved_prev = interleaved;
-                big_prev = big;
             }
-            let _ = (interleaved_prev, big_prev);
             if next <= pos {
                 return Err(me.err(format!(
                     "segment {segment} at byte {pos}: a next-segment offset that does not move forward (damaged lead-in)"
@@ -479,7 +468,6 @@ impl TdmsFile {
         meta: &[u8],
         big: bool,
         toc: u32,
-        _segment: usize,
         by_path: &mut HashMap<String, usize>,
         list: &mut Vec<usize>,
     ) -> Result<(), String> {
@@ -635,7 +623,7 @@ impl TdmsFile {
                 );
             }
         }
-        let mut chunks = raw_len / chunk;
+        let chunks = raw_len / chunk;
         let rest = raw_len % chunk;
         if rest != 0 && interleaved && incomplete {
             // an interrupted interleaved segment: the whole rows that were written
@@ -663,9 +651,6 @@ impl TdmsFile {
             return Err(format!(
                 "{raw_len} bytes of raw data are not a whole number of {chunk}-byte chunks (damaged file)"
             ));
-        }
-        if chunks == 0 && rest == 0 {
-            chunks = 0;
         }
         let mut off = 0u64;
         let row: u64 = if interleaved {
@@ -978,13 +963,12 @@ mod tests {
         }
     }
 
-    /// One segment: objects (path, Some((type, count)) or None, f64 properties), raw bytes.
-    fn segment(
-        toc: u32,
-        objects: &[(&str, Option<(u32, u64)>, &[(&str, f64)])],
-        raw: &[u8],
-        incomplete: bool,
-    ) -> Vec<u8> {
+    /// An object of [`segment`]: path, `Some((type, count))` (type 0: reuse the previous
+    /// index) or `None` (no data), f64 properties.
+    type Object<'a> = (&'a str, Option<(u32, u64)>, &'a [(&'a str, f64)]);
+
+    /// One segment: objects, raw bytes.
+    fn segment(toc: u32, objects: &[Object], raw: &[u8], incomplete: bool) -> Vec<u8> {
         let big = toc & TOC_BIG_ENDIAN != 0;
         let mut m = W {
             big,
