@@ -137,6 +137,26 @@ impl ColumnSpec {
     }
 }
 
+/// A window bound in a workflow file: a number (seconds) or a string (`"2.5s"`, `"#50000"`).
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(untagged)]
+pub enum BoundSpec {
+    /// Seconds after the first sample.
+    Seconds(f64),
+    /// `"2.5"`, `"2.5s"` or `"#50000"`.
+    Text(String),
+}
+
+impl BoundSpec {
+    /// The reader's bound, or what is wrong with it.
+    pub fn to_bound(&self) -> Result<crate::io::time::Bound, String> {
+        match self {
+            BoundSpec::Seconds(v) => format!("{v}").parse(),
+            BoundSpec::Text(t) => t.parse(),
+        }
+    }
+}
+
 /// The whole workflow file.
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(default, deny_unknown_fields)]
@@ -258,6 +278,12 @@ pub struct DataSection {
     pub scale: std::collections::BTreeMap<String, f64>,
     /// Leading samples dropped (start-up, lift-off).
     pub skip_samples: usize,
+    /// Start of the part of each record to use: seconds after its first sample (a number, or
+    /// `"2.5s"`) or a 0-based sample index (`"#50000"`); TDMS and MAT v7.3 files read only that
+    /// part (docs/data-files.md). `skip_samples` then counts from this start.
+    pub from: Option<BoundSpec>,
+    /// End (excluded) of the part of each record to use, as `from`.
+    pub to: Option<BoundSpec>,
     /// `mean` (default), `linear` or `none`.
     pub detrend: String,
     /// Whose trend is removed: `estimation` (default: the estimation part's, from both parts),
@@ -298,6 +324,8 @@ impl Default for DataSection {
             w: None,
             scale: Default::default(),
             skip_samples: 0,
+            from: None,
+            to: None,
             detrend: "mean".into(),
             detrend_scope: "estimation".into(),
             split: 0.5,

@@ -387,6 +387,11 @@ fn bla_reads_every_format_alike() {
 
 /// The workflow file of `run` on the records in format `fmt`.
 fn workflow(fmt: &str, dir: &Path) -> PathBuf {
+    workflow_with(fmt, dir, "")
+}
+
+/// [`workflow`] with `extra` lines in `[data]`.
+fn workflow_with(fmt: &str, dir: &Path, extra: &str) -> PathBuf {
     let cols = match fmt {
         "npy" => "time = \"#1\"\nr = \"#2\"\nu = \"#3\"\ni = \"#4\"\ny = \"#5\"\n",
         "tdms" => "r = \"rec/r\"\nu = \"rec/u\"\ni = \"rec/i\"\ny = \"rec/y\"\n",
@@ -395,7 +400,7 @@ fn workflow(fmt: &str, dir: &Path) -> PathBuf {
     let text = format!(
         "title = \"formats\"\nsource = \"files\"\nsteps = [\"frf\", \"order\", \"models\", \"validation\"]\n\n\
          [data]\nidentification = \"{}\"\nvalidation = \"{}\"\ncontroller = \"{}\"\n\
-         period_samples = 400\n{cols}\n\
+         period_samples = 400\n{cols}{extra}\n\
          [order]\nna_max = 4\nnb_max = 4\n\n\
          [models]\nstructures = [\"arx\", \"ss\"]\norders = [4]\n",
         rec(1, fmt),
@@ -432,6 +437,51 @@ fn run_reads_every_format_alike() {
             Some(want) => assert_json_equal("run summary.json", fmt, &summary, want),
         }
     }
+}
+
+/// `[data] from`/`to` cut the same window from every format (TDMS and MAT v7.3 read only it):
+/// 4 of the 5 periods, from sample 400 to 0.1 s.
+#[test]
+fn run_reads_the_same_window_of_every_format() {
+    let root = tmpdir("formats-run-window");
+    let mut reference: Option<Value> = None;
+    let mut whole: Option<Value> = None;
+    for fmt in formats("run-window") {
+        let dir = root.join(fmt);
+        std::fs::create_dir_all(&dir).unwrap();
+        let run = |wf: PathBuf, name: &str| {
+            let out = dir.join(name);
+            ok(&s(&[
+                "run",
+                &wf.display().to_string(),
+                "--out",
+                &out.display().to_string(),
+                "--quiet",
+            ]));
+            let mut v = json(&out.join("summary.json"), fmt, &dir);
+            if let Value::Object(m) = &mut v {
+                m.remove(ambid::workflow::TIMING_KEY);
+            }
+            v
+        };
+        let summary = run(
+            workflow_with(fmt, &dir, "from = \"#400\"\nto = 0.1\n"),
+            "window",
+        );
+        match &reference {
+            None => {
+                // the window changes the result (it is applied), against the whole record
+                let w = run(workflow(fmt, &dir), "whole");
+                let mut d = Vec::new();
+                json_diff("window vs whole", &summary, &w, &mut d);
+                assert!(!d.is_empty(), "the window did not change the summary");
+                whole = Some(w);
+                reference = Some(summary);
+            }
+            Some(want) => assert_json_equal("run window summary.json", fmt, &summary, want),
+        }
+    }
+    assert!(whole.is_some());
 }
 
 /// The positions `#k` count the file's columns, the time column included, in every format.

@@ -283,10 +283,64 @@ impl TimeData {
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 pub fn read_time(path: &Path, opts: &TimeOptions) -> Result<TimeData, DataFileError> {
+    let part = read_part(path, opts)?;
+    let mut d = assemble(path, part.table, opts)?;
+    d.first_row = part.first_row;
+    if let Some(aliases) = part.aliases {
+        // positions in the table read (time column included) → in `names` (without it)
+        let t = d.time_column;
+        d.aliases = aliases
+            .into_iter()
+            .filter(|&(_, k)| Some(k) != t)
+            .map(|(w, k)| (w, k - usize::from(t.is_some_and(|t| t < k))))
+            .collect();
+        if d.aliases.is_empty() {
+            // nothing asked for is in the file: lookups by position find nothing
+            d.aliases.push((String::new(), usize::MAX));
+        }
+    }
+    Ok(d)
+}
+
+/// The part of a record that `opts` asks for ([`TimeOptions::window`],
+/// [`TimeOptions::columns`]): the table (the window's rows; for TDMS and MAT v7.3 only the
+/// asked-for columns and the time column, read from the file alone), the index of its first row
+/// in the record, and, when columns were asked for, each asked-for spec with its column in the
+/// table.
+pub(crate) struct Part {
+    pub table: super::table::Table,
+    pub first_row: usize,
+    pub aliases: Option<Vec<(String, usize)>>,
+}
+
+/// See [`Part`]. The sample time of a window in seconds: the time column, else the file's
+/// metadata (TDMS `wf_increment`), else `opts.fs_hz`.
+pub(crate) fn read_part(path: &Path, opts: &TimeOptions) -> Result<Part, DataFileError> {
     let Some(listing) = super::table::list_columns(path, &opts.read)? else {
         // read whole; the window is cut from the columns in memory
-        let table = read_table(path, &opts.read)?;
-        return assemble(path, table, opts, None);
+        let mut table = read_table(path, &opts.read)?;
+        let mut first_row = 0;
+        if let Some(w) = opts.window {
+            let n = table.len();
+            let t_idx = time_index(&table, opts)?;
+            let ts = sample_time(path, &table, t_idx, opts.fs_hz)?;
+            let r = w.rows(n, ts);
+            if r.is_empty() {
+                return Err(DataFileError::NoData {
+                    path: path.to_path_buf(),
+                    message: format!("the window selects no samples (the record has {n}, Ts = {ts:e} s); choose --from/--to inside the record"),
+                });
+            }
+            for c in &mut table.columns {
+                *c = c[r.clone()].to_vec();
+            }
+            first_row = r.start;
+        }
+        return Ok(Part {
+            table,
+            first_row,
+            aliases: None,
+        });
     };
     // TDMS / MAT v7.3: the column names first (nothing is read but the metadata), then only
     // the time column (for a window in seconds) and the wanted columns' rows
@@ -373,39 +427,44 @@ pub fn read_time(path: &Path, opts: &TimeOptions) -> Result<TimeData, DataFileEr
         }
     };
     let table = read_table(path, &with_cols(rows.clone()))?;
-    let first = rows.map_or(0, |r| r.start);
-    let mut d = assemble(path, table, opts, Some(first))?;
-    if opts.columns.is_some() {
-        d.aliases = aliases
+    let first_row = rows.map_or(0, |r| r.start);
+    let aliases = opts.columns.as_ref().map(|_| {
+        aliases
             .into_iter()
             .filter_map(|(w, c)| {
                 let ColumnRef::Name(n) = c else { return None };
-                d.names.iter().position(|m| *m == n).map(|k| (w, k))
+                table.names.iter().position(|m| *m == n).map(|k| (w, k))
             })
-            .collect();
-        if d.aliases.is_empty() {
-            // nothing asked for is in the file: keep the names for the error messages
-            d.aliases.push((String::new(), usize::MAX));
-        }
-    }
-    Ok(d)
+            .collect()
+    });
+    Ok(Part {
+        table,
+        first_row,
+        aliases,
+    })
 }
 
-/// [`TimeData`] from a table: the time column (or metadata or `fs`) gives the sample time, the
-/// window (when the table is whole, `first` = `None`) is cut, every signal sample is checked.
-fn assemble(
-    path: &Path,
-    mut table: super::table::Table,
+/// The index of the time column: `opts.time`, else a column `t`.
+fn time_index(
+    table: &super::table::Table,
     opts: &TimeOptions,
-    first: Option<usize>,
-) -> Result<TimeData, DataFileError> {
-    let n = table.len();
-    let t_idx = match &opts.time {
+) -> Result<Option<usize>, DataFileError> {
+    Ok(match &opts.time {
         Some(c) => Some(table.index_of(c)?),
         None => table.names.iter().position(|h| h == "t"),
-    };
-    let ts = match (t_idx, table.ts_metadata, opts.fs_hz) {
-        (Some(k), _, _) if n >= 2 => table.sample_time(Some(&ColumnRef::Index(k + 1)), None)?,
+    })
+}
+
+/// The sample time of a table: its time column `t_idx`, else its metadata (checked against
+/// `fs`), else `fs`.
+fn sample_time(
+    path: &Path,
+    table: &super::table::Table,
+    t_idx: Option<usize>,
+    fs_hz: Option<f64>,
+) -> Result<f64, DataFileError> {
+    match (t_idx, table.ts_metadata, fs_hz) {
+        (Some(k), _, _) => table.sample_time(Some(&ColumnRef::Index(k + 1)), None),
         (None, Some(ts), fs) => {
             if let Some(fs) = fs {
                 if !(fs.is_finite() && fs > 0.0) || ((ts * fs) - 1.0).abs() > 1e-4 {
@@ -418,36 +477,23 @@ fn assemble(
                     });
                 }
             }
-            ts
+            Ok(ts)
         }
-        (None, None, Some(fs)) => table.sample_time(None, Some(fs))?,
-        (Some(_), _, _) => f64::NAN,
-        (None, None, None) => {
-            return Err(DataFileError::SampleTime {
-                path: path.to_path_buf(),
-                message: "no `t` column; give the sample rate (--fs) to read this file".into(),
-            })
-        }
-    };
-    let first_row = match first {
-        Some(f) => f,
-        None => match opts.window {
-            Some(w) => {
-                let r = w.rows(n, ts);
-                if r.is_empty() {
-                    return Err(DataFileError::NoData {
-                        path: path.to_path_buf(),
-                        message: format!("the window selects no samples (the record has {n}, Ts = {ts:e} s); choose --from/--to inside the record"),
-                    });
-                }
-                for c in &mut table.columns {
-                    *c = c[r.clone()].to_vec();
-                }
-                r.start
-            }
-            None => 0,
-        },
-    };
+        (None, None, Some(fs)) => table.sample_time(None, Some(fs)),
+        (None, None, None) => Err(DataFileError::SampleTime {
+            path: path.to_path_buf(),
+            message: "no `t` column; give the sample rate (--fs) to read this file".into(),
+        }),
+    }
+}
+
+/// [`TimeData`] from a (windowed) table: the time column (or metadata or `fs`) gives the sample
+/// time, every signal sample is checked.
+fn assemble(
+    path: &Path,
+    table: super::table::Table,
+    opts: &TimeOptions,
+) -> Result<TimeData, DataFileError> {
     let n = table.len();
     if n < 2 {
         return Err(DataFileError::NoData {
@@ -455,11 +501,8 @@ fn assemble(
             message: format!("needs at least 2 data rows, found {n}"),
         });
     }
-    // the sample time of a windowed time column is checked on the window
-    let ts = match t_idx {
-        Some(k) => table.sample_time(Some(&ColumnRef::Index(k + 1)), None)?,
-        None => ts,
-    };
+    let t_idx = time_index(&table, opts)?;
+    let ts = sample_time(path, &table, t_idx, opts.fs_hz)?;
     let mut names = Vec::new();
     let mut columns = Vec::new();
     for (k, (h, c)) in table.names.into_iter().zip(table.columns).enumerate() {
@@ -488,7 +531,7 @@ fn assemble(
         columns,
         time_column: t_idx,
         aliases: Vec::new(),
-        first_row,
+        first_row: 0,
     })
 }
 

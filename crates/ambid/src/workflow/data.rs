@@ -3,7 +3,7 @@
 use super::config::{ColumnSpec, SourceKind, WorkflowConfig};
 use super::{computation, input, Ctx, Error};
 use crate::error::Context;
-use crate::io::table::{read_table, ReadOptions, Table};
+use crate::io::table::{ReadOptions, Table};
 use crate::io::ControllerModel;
 use crate::report::{Block, NoteKind, Section, Table as RTable};
 use ambid_core::data::{detrend, Detrend};
@@ -221,7 +221,56 @@ pub fn load_file(
         variable: d.variable.clone(),
         ..ReadOptions::default()
     };
-    let table = read_table(&path, &opts).map_err(input)?;
+    // the window ([data] from/to) and, for TDMS and MAT v7.3 files, only the columns named in
+    // [data] and those taken by name below (nothing else of the file is read)
+    let bound = |b: &Option<crate::config::BoundSpec>, key: &str| -> Result<_, Error> {
+        b.as_ref()
+            .map(|b| {
+                b.to_bound()
+                    .map_err(|e| Error::input(format!("[data] {key}: {e}")))
+            })
+            .transpose()
+    };
+    let (from, to) = (bound(&d.from, "from")?, bound(&d.to, "to")?);
+    let specs: Vec<&ColumnSpec> = [&d.time, &d.r, &d.i, &d.w]
+        .into_iter()
+        .flatten()
+        .chain([&d.u, &d.y])
+        .collect();
+    let mut wanted: Vec<String> = specs.iter().map(|s| spec_name(s)).collect();
+    wanted.extend(["t", "r", "i", "w"].map(String::from));
+    let part = crate::io::time::read_part(
+        &path,
+        &crate::io::TimeOptions {
+            fs_hz: d.fs_hz,
+            time: d.time.as_ref().map(ColumnSpec::to_ref),
+            read: opts,
+            window: (from.is_some() || to.is_some())
+                .then_some(crate::io::time::Window { from, to }),
+            columns: Some(wanted),
+        },
+    )
+    .map_err(input)?;
+    let table = part.table;
+    // rows are counted in the file: the window's first row is added to positions in messages
+    let row0 = part.first_row;
+    // a file read in part has only some columns: `#k` specs become the names they selected
+    let aliases = part.aliases.unwrap_or_default();
+    let fix = |s: &ColumnSpec| -> ColumnSpec {
+        match aliases.iter().find(|(w, _)| *w == spec_name(s)) {
+            Some((_, k)) => ColumnSpec::Name(table.names[*k].clone()),
+            None => s.clone(),
+        }
+    };
+    let fixed = |s: &Option<ColumnSpec>| s.as_ref().map(fix);
+    let (d_time, d_r, d_i, d_w, d_u, d_y) = (
+        fixed(&d.time),
+        fixed(&d.r),
+        fixed(&d.i),
+        fixed(&d.w),
+        fix(&d.u),
+        fix(&d.y),
+    );
     // a channel not named in [data] is taken from a column with exactly its name, when there is one
     let mut notes = Vec::new();
     let has = |name: &str| {
@@ -240,11 +289,11 @@ pub fn load_file(
         }
     };
     let time = if d.fs_hz.is_none() {
-        auto("t", &d.time)
+        auto("t", &d_time)
     } else {
-        d.time.clone()
+        d_time.clone()
     };
-    let (r_spec, i_spec, w_spec) = (auto("r", &d.r), auto("i", &d.i), auto("w", &d.w));
+    let (r_spec, i_spec, w_spec) = (auto("r", &d_r), auto("i", &d_i), auto("w", &d_w));
     let notes = if notes.is_empty() {
         Vec::new()
     } else {
@@ -284,7 +333,7 @@ pub fn load_file(
                 "{}: column `{}` (`{name}`), data row {} (counted after the header, without comment lines): the value is {}; repair the sample, or cut the record with [data] skip_samples",
                 path.display(),
                 spec_name(spec),
-                k + skip + 1,
+                k + skip + row0 + 1,
                 if x[k + skip].is_nan() { "missing or NaN".to_string() } else { format!("{}", x[k + skip]) }
             )));
         }
@@ -294,7 +343,7 @@ pub fn load_file(
                 "{}: column `{}` (`{name}`), data row {}: {:.6e} is beyond ±{max:e}, where sums of squares overflow; check the column's units or [data] scale",
                 path.display(),
                 spec_name(spec),
-                k + skip + 1,
+                k + skip + row0 + 1,
                 v[k]
             )));
         }
@@ -310,8 +359,8 @@ pub fn load_file(
             d.period_samples,
             Signals {
                 r: opt("r", &r_spec)?,
-                u: col("u", &d.u)?,
-                y: col("y", &d.y)?,
+                u: col("u", &d_u)?,
+                y: col("y", &d_y)?,
                 i: opt("i", &i_spec)?,
                 w: opt("w", &w_spec)?,
             },
