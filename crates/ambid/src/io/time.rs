@@ -2,7 +2,9 @@
 //! (`frf`, `fit`, `order`, `validate`, `compare-models`, `bla`, `study amplitude`).
 //!
 //! [`read_time`] reads the file through [`read_table`] (delimited text, NumPy `.npy`/`.npz`,
-//! MATLAB `.mat` v5, Parquet; the format from [`TimeOptions::read`] or the extension), takes the
+//! MATLAB `.mat` v5 and v7.3, NI TDMS, Parquet; the format from [`TimeOptions::read`] or the
+//! extension; a window [`TimeOptions::window`] and, for TDMS and MAT v7.3, only the columns
+//! [`TimeOptions::columns`] read from the file), takes the
 //! sample time from the time column (`t`, or [`TimeOptions::time`]) or from
 //! [`TimeOptions::fs_hz`], and returns a [`TimeData`]: the signal columns by name. A column is
 //! selected by name or by its 1-based position in the file (`#3`), the same in every format and
