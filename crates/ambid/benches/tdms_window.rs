@@ -19,7 +19,9 @@
 //! values the reader must reproduce, tests/rig_formats.rs; here only the size matters). The
 //! log is deleted at the end. Needs `/usr/bin/time` (GNU time).
 //!
-//! Options by environment: `AMBID_BENCH_MINUTES=10` (length of the log).
+//! Options by environment: `AMBID_BENCH_MINUTES=10` (length of the log),
+//! `AMBID_BENCH_SEGMENT=20000` (samples per segment; 1000 gives 12 000 segments of 50 ms, as a
+//! LabVIEW loop that writes every iteration).
 
 use std::io::{BufWriter, Write};
 use std::path::Path;
@@ -36,8 +38,8 @@ fn string(w: &mut impl Write, s: &str) -> std::io::Result<()> {
 }
 
 /// The metadata of the first segment: the file, the group and every channel with its raw-data
-/// index (f64, `FS` values per chunk) and `wf_increment`.
-fn metadata(names: &[String]) -> std::io::Result<Vec<u8>> {
+/// index (f64, `seg` values per chunk) and `wf_increment`.
+fn metadata(names: &[String], seg: usize) -> std::io::Result<Vec<u8>> {
     let mut m = Vec::new();
     m.write_all(&((names.len() + 2) as u32).to_le_bytes())?;
     for (path, channel) in [("/".to_string(), false), ("/'log'".to_string(), false)]
@@ -49,7 +51,7 @@ fn metadata(names: &[String]) -> std::io::Result<Vec<u8>> {
             m.write_all(&20u32.to_le_bytes())?;
             m.write_all(&10u32.to_le_bytes())?; // tdsTypeDoubleFloat
             m.write_all(&1u32.to_le_bytes())?;
-            m.write_all(&(FS as u64).to_le_bytes())?;
+            m.write_all(&(seg as u64).to_le_bytes())?;
             m.write_all(&1u32.to_le_bytes())?;
             string(&mut m, "wf_increment")?;
             m.write_all(&10u32.to_le_bytes())?;
@@ -62,8 +64,8 @@ fn metadata(names: &[String]) -> std::io::Result<Vec<u8>> {
     Ok(m)
 }
 
-/// Writes `seconds` one-second segments to `path`.
-fn write_log(path: &Path, seconds: usize) -> std::io::Result<()> {
+/// Writes `seconds` of log in segments of `seg` samples to `path` (`seg` divides `FS`).
+fn write_log(path: &Path, seconds: usize, seg: usize) -> std::io::Result<()> {
     let names: Vec<String> = ["r", "u", "y"]
         .iter()
         .map(|s| s.to_string())
@@ -79,14 +81,14 @@ fn write_log(path: &Path, seconds: usize) -> std::io::Result<()> {
     let base: Vec<f64> = (0..PERIOD)
         .map(|_| if rnd() > 0.0 { 0.1 } else { -0.1 })
         .collect();
-    let meta = metadata(&names)?;
-    let raw_len = (FS * CHANNELS * 8) as u64;
+    let meta = metadata(&names, seg)?;
+    let raw_len = (seg * CHANNELS * 8) as u64;
     let mut w = BufWriter::with_capacity(1 << 22, std::fs::File::create(path)?);
     let (mut y1, mut y2, mut u1) = (0.0f64, 0.0f64, 0.0f64);
-    let mut cols = vec![vec![0.0f64; FS]; CHANNELS];
-    for s in 0..seconds {
-        for j in 0..FS {
-            let k = s * FS + j;
+    let mut cols = vec![vec![0.0f64; seg]; CHANNELS];
+    for s in 0..seconds * FS / seg {
+        for j in 0..seg {
+            let k = s * seg + j;
             let r = base[k % PERIOD];
             let y = 1.9 * y1 - 0.95 * y2 + 2e-6 * u1 + 1e-8 * rnd();
             let u = r - 2000.0 * y;
@@ -158,15 +160,20 @@ fn main() {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(10);
+    let seg: usize = std::env::var("AMBID_BENCH_SEGMENT")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .filter(|&s: &usize| s > 0 && FS % s == 0)
+        .unwrap_or(FS);
     let dir = std::env::temp_dir().join(format!("ambid-bench-tdms-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("a temporary directory");
     let log = dir.join("log.tdms");
-    write_log(&log, minutes * 60).expect("the log is written");
+    write_log(&log, minutes * 60, seg).expect("the log is written");
     let size = std::fs::metadata(&log).map(|m| m.len()).unwrap_or(0);
     println!(
-        "log: {minutes} min, {CHANNELS} channels, {FS} Hz, {:.2} GB, {} segments",
+        "log: {minutes} min, {CHANNELS} channels, {FS} Hz, {:.2} GB, {} segments of {seg} samples",
         size as f64 / 1e9,
-        minutes * 60
+        minutes * 60 * FS / seg
     );
     let out = dir.join("frf.csv");
     let (l, o) = (log.display().to_string(), out.display().to_string());

@@ -162,6 +162,8 @@ struct Channel {
     group: String,
     props: HashMap<String, Prop>,
     runs: Vec<Run>,
+    /// Values in `runs`.
+    total: u64,
     dtype: Option<DataType>,
     /// The index of the last segment that had data for it (for `0x00000000`).
     last_index: Option<Index>,
@@ -169,7 +171,14 @@ struct Channel {
 
 impl Channel {
     fn len(&self) -> u64 {
-        self.runs.iter().map(Run::len).sum()
+        self.total
+    }
+
+    /// Appends a run after the channel's last value (`run.start` is set here).
+    fn push(&mut self, mut run: Run) {
+        run.start = self.total;
+        self.total += run.len();
+        self.runs.push(run);
     }
 }
 
@@ -625,94 +634,50 @@ impl TdmsFile {
         }
         let chunks = raw_len / chunk;
         let rest = raw_len % chunk;
-        if rest != 0 && interleaved && incomplete {
-            // an interrupted interleaved segment: the whole rows that were written
-            let row: u64 = idx.iter().map(|i| i.dtype.size().unwrap_or(0)).sum();
-            let rows = rest / row.max(1);
-            if rows > 0 {
-                let mut off = 0;
-                for (&k, i) in list.iter().zip(&idx) {
-                    let ch = &mut self.channels[k];
-                    let start = ch.len();
-                    ch.runs.push(Run {
-                        start,
-                        first: raw_start + chunks * chunk + off,
-                        chunk_step: chunk,
-                        chunks: 1,
-                        count: rows,
-                        stride: row,
-                        dtype: i.dtype,
-                        big_endian: big,
-                    });
-                    off += i.dtype.size().unwrap_or(0);
-                }
-            }
-        } else if rest != 0 && !incomplete {
+        if rest != 0 && !incomplete {
             return Err(format!(
                 "{raw_len} bytes of raw data are not a whole number of {chunk}-byte chunks (damaged file)"
             ));
         }
+        // bytes per row of interleaved data (every value of one sample index)
+        let row: u64 = idx.iter().map(|i| i.dtype.size().unwrap_or(0)).sum();
         let mut off = 0u64;
-        let row: u64 = if interleaved {
-            idx.iter().map(|i| i.dtype.size().unwrap_or(0)).sum()
-        } else {
-            0
-        };
         for (&k, i) in list.iter().zip(&idx) {
             let ch = &mut self.channels[k];
-            // an incomplete contiguous chunk at the end: the values of each channel that are
-            // wholly inside the file
-            let start = ch.len();
+            let size = i.dtype.size().unwrap_or(0);
             if chunks > 0 {
-                ch.runs.push(Run {
-                    start,
+                ch.push(Run {
+                    start: 0,
                     first: raw_start + off,
                     chunk_step: chunk,
                     chunks,
                     count: i.count,
-                    stride: if interleaved {
-                        row
-                    } else {
-                        i.dtype.size().unwrap_or(0)
-                    },
+                    stride: if interleaved { row } else { size },
                     dtype: i.dtype,
                     big_endian: big,
                 });
             }
-            if !interleaved && incomplete && rest > off {
-                if let Some(s) = i.dtype.size() {
-                    let have = ((rest - off) / s).min(i.count);
-                    if have > 0 {
-                        let start = ch.len();
-                        ch.runs.push(Run {
-                            start,
-                            first: raw_start + chunks * chunk + off,
-                            chunk_step: chunk,
-                            chunks: 1,
-                            count: have,
-                            stride: s,
-                            dtype: i.dtype,
-                            big_endian: big,
-                        });
-                    }
-                }
-            }
-            off += if interleaved {
-                i.dtype.size().unwrap_or(0)
-            } else {
-                i.bytes
+            // the last segment of an interrupted recording: the values wholly inside the file
+            // (interleaved: the whole rows; contiguous: each channel's part of the last chunk)
+            let have = match (incomplete && rest > 0, interleaved) {
+                (false, _) => 0,
+                (true, true) => rest / row.max(1),
+                (true, false) if rest > off && size > 0 => ((rest - off) / size).min(i.count),
+                (true, false) => 0,
             };
-        }
-        // interleaved rows of an interrupted segment were pushed before the whole chunks: keep
-        // each channel's runs in sample order
-        for &k in list {
-            let ch = &mut self.channels[k];
-            ch.runs.sort_by_key(|r| (r.first, r.start));
-            let mut s = 0;
-            for r in &mut ch.runs {
-                r.start = s;
-                s += r.len();
+            if have > 0 {
+                ch.push(Run {
+                    start: 0,
+                    first: raw_start + chunks * chunk + off,
+                    chunk_step: chunk,
+                    chunks: 1,
+                    count: have,
+                    stride: if interleaved { row } else { size },
+                    dtype: i.dtype,
+                    big_endian: big,
+                });
             }
+            off += if interleaved { size } else { i.bytes };
         }
         Ok(())
     }
