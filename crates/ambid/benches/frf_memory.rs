@@ -16,7 +16,6 @@
 
 use std::io::{BufWriter, Write};
 use std::path::Path;
-use std::process::Command;
 
 const EXE: &str = env!("CARGO_BIN_EXE_ambid");
 const PERIOD: usize = 5115;
@@ -47,34 +46,8 @@ fn write_record(path: &Path, periods: usize) -> std::io::Result<()> {
     w.flush()
 }
 
-/// (peak RSS in MiB, wall time in s) of `ambid args…`.
-fn measure(args: &[&str]) -> Result<(f64, f64), String> {
-    let out = Command::new("/usr/bin/time")
-        .arg("-v")
-        .arg(EXE)
-        .args(args)
-        .output()
-        .map_err(|e| format!("cannot run /usr/bin/time: {e}"))?;
-    let err = String::from_utf8_lossy(&out.stderr);
-    if !out.status.success() {
-        return Err(err.lines().take(3).collect::<Vec<_>>().join(" / "));
-    }
-    let field = |name: &str| {
-        err.lines()
-            .find_map(|l| l.trim().strip_prefix(name))
-            .map(str::trim)
-            .map(str::to_string)
-    };
-    let kb: f64 = field("Maximum resident set size (kbytes):")
-        .and_then(|v| v.parse().ok())
-        .ok_or("no maximum resident set size in the output of /usr/bin/time -v")?;
-    let wall = field("Elapsed (wall clock) time (h:mm:ss or m:ss):").unwrap_or_default();
-    let secs = wall
-        .split(':')
-        .filter_map(|p| p.parse::<f64>().ok())
-        .fold(0.0, |acc, v| acc * 60.0 + v);
-    Ok((kb / 1024.0, secs))
-}
+#[path = "common/time_v.rs"]
+mod time_v;
 
 fn main() {
     let periods: Vec<usize> = std::env::var("AMBID_BENCH_PERIODS")
@@ -103,7 +76,7 @@ fn main() {
         ] {
             let mut args = vec!["frf", d.as_str(), "--out", o.as_str(), "--force"];
             args.extend(extra);
-            match measure(&args) {
+            match time_v::measure(EXE, &args) {
                 Ok((mib, s)) => println!("| {n} | {label} | {mib:.1} | {s:.2} |"),
                 Err(e) => println!("| {n} | {label} | failed: {e} | |"),
             }

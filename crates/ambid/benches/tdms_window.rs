@@ -5,6 +5,7 @@
 //! the CLI as a whole process on it, under `/usr/bin/time -v` (maximum resident set size and
 //! wall time, printed as a Markdown table for docs/benchmarks.md):
 //! `ambid frf log.tdms --excitation log/r --input log/u --output log/y --from 300 --to 305`
+//! (the 5 s in the middle of the log)
 //! (the Welch FRF at its defaults of the window, 100 000 samples: the reader plus everything
 //! `frf` does after it),
 //! once right after the log was written (the file in the page cache) and, when the bench may
@@ -120,34 +121,8 @@ fn write_log(path: &Path, seconds: usize, seg: usize) -> std::io::Result<()> {
     w.flush()
 }
 
-/// (peak RSS in MiB, wall time in s) of `ambid args…`.
-fn measure(args: &[&str]) -> Result<(f64, f64), String> {
-    let out = Command::new("/usr/bin/time")
-        .arg("-v")
-        .arg(EXE)
-        .args(args)
-        .output()
-        .map_err(|e| format!("cannot run /usr/bin/time: {e}"))?;
-    let err = String::from_utf8_lossy(&out.stderr);
-    if !out.status.success() {
-        return Err(err.lines().take(3).collect::<Vec<_>>().join(" / "));
-    }
-    let field = |name: &str| {
-        err.lines()
-            .find_map(|l| l.trim().strip_prefix(name))
-            .map(str::trim)
-            .map(str::to_string)
-    };
-    let kb: f64 = field("Maximum resident set size (kbytes):")
-        .and_then(|v| v.parse().ok())
-        .ok_or("no maximum resident set size in the output of /usr/bin/time -v")?;
-    let wall = field("Elapsed (wall clock) time (h:mm:ss or m:ss):").unwrap_or_default();
-    let secs = wall
-        .split(':')
-        .filter_map(|p| p.parse::<f64>().ok())
-        .fold(0.0, |acc, v| acc * 60.0 + v);
-    Ok((kb / 1024.0, secs))
-}
+#[path = "common/time_v.rs"]
+mod time_v;
 
 /// Drops the page cache (root only); whether it did.
 fn drop_caches() -> bool {
@@ -177,6 +152,8 @@ fn main() {
     );
     let out = dir.join("frf.csv");
     let (l, o) = (log.display().to_string(), out.display().to_string());
+    // 5 s in the middle of the log (300–305 s of 10 minutes)
+    let (from, to) = ((minutes * 30).to_string(), (minutes * 30 + 5).to_string());
     let args = [
         "frf",
         l.as_str(),
@@ -187,9 +164,9 @@ fn main() {
         "--output",
         "log/y",
         "--from",
-        "300",
+        from.as_str(),
         "--to",
-        "305",
+        to.as_str(),
         "--out",
         o.as_str(),
         "--force",
@@ -204,7 +181,7 @@ fn main() {
             println!("| cold | not measured: cannot drop the page cache (needs root) | |");
             continue;
         }
-        match measure(&args) {
+        match time_v::measure(EXE, &args) {
             Ok((mib, s)) => println!("| {label} | {mib:.1} | {s:.3} |"),
             Err(e) => println!("| {label} | failed: {e} | |"),
         }

@@ -82,21 +82,7 @@ impl Format {
         {
             return Ok(f);
         }
-        let mut start = [0u8; 8];
-        let n = {
-            use std::io::Read;
-            let mut file = std::fs::File::open(path).map_err(|e| DataFileError::open(path, &e))?;
-            let mut n = 0;
-            while n < start.len() {
-                match file.read(&mut start[n..]) {
-                    Ok(0) => break,
-                    Ok(k) => n += k,
-                    Err(e) => return Err(DataFileError::open(path, &e)),
-                }
-            }
-            n
-        };
-        let start = &start[..n];
+        let start = first_bytes(path, 8)?;
         Ok(if start.starts_with(b"\x93NUMPY") {
             Format::Npy
         } else if start.starts_with(b"PK\x03\x04") || start.starts_with(b"PK\x05\x06") {
@@ -526,18 +512,17 @@ pub fn read_table(path: &Path, opts: &ReadOptions) -> Result<Table, DataFileErro
 
 /// Whether a `.mat` file is version 7.3 (HDF5): its header text says so.
 fn mat_v73(path: &Path) -> Result<bool, DataFileError> {
+    Ok(mat73::is_v73(&first_bytes(path, 16)?))
+}
+
+/// The first `n` bytes of a file (fewer if it is shorter).
+fn first_bytes(path: &Path, n: usize) -> Result<Vec<u8>, DataFileError> {
     use std::io::Read;
-    let mut start = [0u8; 16];
-    let mut file = std::fs::File::open(path).map_err(|e| DataFileError::open(path, &e))?;
-    let mut n = 0;
-    while n < start.len() {
-        match file.read(&mut start[n..]) {
-            Ok(0) => break,
-            Ok(k) => n += k,
-            Err(e) => return Err(DataFileError::open(path, &e)),
-        }
-    }
-    Ok(mat73::is_v73(&start[..n]))
+    let mut start = Vec::with_capacity(n);
+    std::fs::File::open(path)
+        .and_then(|f| f.take(n as u64).read_to_end(&mut start))
+        .map_err(|e| DataFileError::open(path, &e))?;
+    Ok(start)
 }
 
 /// The columns and rows of `opts` of a whole table.
