@@ -155,7 +155,8 @@ impl Walker<'_> {
         match (shape.len(), dims.len()) {
             (_, 0) => self.unusable(name, "a single number, not a signal"),
             (_, 1) => {
-                let axis = shape.iter().position(|&d| d != 1).expect("one axis");
+                // the one dimension that is not 1 (dims.len() == 1)
+                let axis = shape.iter().position(|&d| d != 1).unwrap_or(0);
                 let other = (shape.len() == 2).then_some(0);
                 self.cols.push(Col {
                     name: name.to_string(),

@@ -209,8 +209,15 @@ impl<'a> Cursor<'a> {
         Ok(s)
     }
 
+    /// The next `N` bytes as an array.
+    fn arr<const N: usize>(&mut self) -> Result<[u8; N], String> {
+        let mut a = [0u8; N];
+        a.copy_from_slice(self.take(N)?);
+        Ok(a)
+    }
+
     fn u32(&mut self) -> Result<u32, String> {
-        let b: [u8; 4] = self.take(4)?.try_into().expect("4 bytes");
+        let b: [u8; 4] = self.arr()?;
         Ok(if self.big {
             u32::from_be_bytes(b)
         } else {
@@ -219,7 +226,7 @@ impl<'a> Cursor<'a> {
     }
 
     fn u64(&mut self) -> Result<u64, String> {
-        let b: [u8; 8] = self.take(8)?.try_into().expect("8 bytes");
+        let b: [u8; 8] = self.arr()?;
         Ok(if self.big {
             u64::from_be_bytes(b)
         } else {
@@ -271,7 +278,7 @@ impl<'a> Cursor<'a> {
             DataType::U32 => Prop::Num(int(self.take(4)?, false)),
             DataType::U64 => Prop::Num(int(self.take(8)?, false)),
             DataType::F32 => {
-                let b: [u8; 4] = self.take(4)?.try_into().expect("4 bytes");
+                let b: [u8; 4] = self.arr()?;
                 Prop::Num(if big {
                     f32::from_be_bytes(b)
                 } else {
@@ -279,7 +286,7 @@ impl<'a> Cursor<'a> {
                 } as f64)
             }
             DataType::F64 => {
-                let b: [u8; 8] = self.take(8)?.try_into().expect("8 bytes");
+                let b: [u8; 8] = self.arr()?;
                 Prop::Num(if big {
                     f64::from_be_bytes(b)
                 } else {
@@ -386,7 +393,7 @@ impl TdmsFile {
                     )
                 }));
             }
-            let toc = u32::from_le_bytes(lead[4..8].try_into().expect("4"));
+            let toc = u32::from_le_bytes([lead[4], lead[5], lead[6], lead[7]]);
             let big = toc & TOC_BIG_ENDIAN != 0;
             let mut c = Cursor {
                 buf: &lead[8..],
@@ -610,11 +617,14 @@ impl TdmsFile {
         let idx: Vec<Index> = list
             .iter()
             .map(|&k| {
-                self.channels[k]
-                    .last_index
-                    .expect("listed channels have an index")
+                self.channels[k].last_index.ok_or_else(|| {
+                    format!(
+                        "the channel {} has data but no raw-data index (damaged file)",
+                        self.channels[k].name
+                    )
+                })
             })
-            .collect();
+            .collect::<Result<_, _>>()?;
         let chunk: u64 = idx.iter().map(|i| i.bytes).sum();
         if chunk == 0 {
             return Ok(());
@@ -801,7 +811,9 @@ impl TdmsFile {
             if b <= rows.start || a >= rows.end {
                 continue;
             }
-            let size = run.dtype.size().expect("numeric types have a size");
+            let Some(size) = run.dtype.size() else {
+                return Err(self.err(format!("channel `{name}`: values without a fixed size")));
+            };
             let lo = rows.start.max(a) - a;
             let hi = rows.end.min(b) - a;
             // chunk by chunk (one read per chunk, or one for a contiguous single-chunk run)
@@ -846,7 +858,8 @@ impl TdmsFile {
 fn decode(b: &[u8], t: DataType, big: bool) -> f64 {
     macro_rules! n {
         ($ty:ty) => {{
-            let a = b.try_into().expect("size");
+            let mut a = [0u8; std::mem::size_of::<$ty>()];
+            a.copy_from_slice(b);
             (if big {
                 <$ty>::from_be_bytes(a)
             } else {
