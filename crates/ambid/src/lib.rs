@@ -19,5 +19,6 @@ pub mod report;
 pub mod stage;
 pub mod stepped_sine;
 pub mod study;
+pub mod uncertainty;
 pub mod validation;
 pub mod workflow;

@@ -11,3 +11,6 @@ pub mod nyquist;
 pub mod predict;
 pub mod pz;
 pub mod residuals;
+pub mod robust;
+pub mod uncertainty;
+pub mod weight;

@@ -1,0 +1,417 @@
+//! Robust stability of the current controller against a multiplicative uncertainty weight:
+//! $P = \hat P (1 + W\Delta)$, $\lVert\Delta\rVert_\infty \le 1$, in the loop $u = -C y + r$.
+//!
+//! # The one-block test
+//! With $L = \hat P C$ and $T = L/(1 + L)$, the loop is stable for every admissible $\Delta$ iff
+//! the nominal loop is stable and (small gain; for one full complex block the structured
+//! singular value is $|W T|$ itself)
+//! $$ \mu(\omega) = |W(e^{j\omega T_s}) T(e^{j\omega T_s})| < 1 \quad \forall \omega . $$
+//! The **robust stability margin** is $1/\max_\omega \mu$: the factor by which the uncertainty
+//! could grow before some admissible plant destabilises the loop.
+//!
+//! # Robust gain margins
+//! A commissioning engineer asks a different question: by how much can the controller's gain
+//! be raised (or lowered) with the loop stable for every admissible plant? For $C \to gC$,
+//! $|W g L| < |1 + g L|$ is, at each frequency, the quadratic inequality
+//! $$ q_\omega(g) = |L|^2(|W|^2 - 1)\,g^2 - 2\operatorname{Re}(L)\, g - 1 < 0 , $$
+//! whose solution set in $g > 0$ is known exactly from its roots. The robust upper gain
+//! margin $g_+$ is the smallest root above 1 over the frequency grid (the end of the interval
+//! around $g = 1$), the lower one $g_-$ the largest root below 1, intersected with the nominal
+//! loop's gain interval found from its closed-loop poles (the gain stepped by 1 % until a pole
+//! leaves the unit circle, the edge refined by bisection), so that a phase crossover between
+//! grid points is not missed. For any $g \in (g_-, g_+)$ the
+//! loop with $gC$ is stable for every plant of the set (the nominal loop stays stable on the
+//! way because a closed-loop pole reaching the unit circle at $e^{j\omega T}$ makes
+//! $|1 + gL| = 0$ there).
+//!
+//! # Grid
+//! 4 000 points log-spaced from $10^{-4} f_s$ to the Nyquist frequency $f_N$, and 9 points within
+//! $\pm 2\zeta\omega_n$ around every lightly damped pole of $\hat P$, $C$ and $W$ (where $|T|$ and
+//! $|W|$ change fastest). The weight is fitted on the measured band; outside it the bound is its
+//! extrapolation, and the margins rest on the model there.
+//!
+//! # Example
+//! ```
+//! use ambid_core::lti::StateSpace;
+//! use ambid_core::validate::robust::robust_stability;
+//! use ambid_core::validate::weight::Weight;
+//! use faer::mat;
+//! // a stable first-order loop, weight 0: the robust margins are the nominal ones
+//! let p = StateSpace::discrete(mat![[0.9]], mat![[1.0]], mat![[0.1]], mat![[0.0]], 1e-3).unwrap();
+//! let c = StateSpace::discrete(mat![[0.0]], mat![[0.0]], mat![[0.0]], mat![[2.0]], 1e-3).unwrap();
+//! let w = Weight { ts: 1e-3, gain: 1e-9, numerator: vec![], denominator: vec![] };
+//! let r = robust_stability(&p, &c, &w).unwrap();
+//! assert!(r.nominal_stable && r.robustly_stable);
+//! // L(-1) = 0.2 * (-1) / (-1.9): the gain can rise to 1 + 0.9 * ... (pole at z = 0.9 - 0.1 g)
+//! let g_true = 19.0 / 2.0; // 0.9 - 0.1 * 2 g = -1  →  g = 9.5
+//! assert!((r.upper_gain_margin.unwrap() - g_true).abs() < 0.05 * g_true, "{r:?}");
+//! ```
+
+use super::weight::Weight;
+use crate::error::{Error, Result};
+use crate::lti::StateSpace;
+use faer::c64;
+use std::f64::consts::PI;
+
+/// What [`robust_stability`] finds.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct RobustStability {
+    /// The nominal closed loop ($\hat P$ with $C$) is stable.
+    pub nominal_stable: bool,
+    /// $\max_\omega |W T|$ on the grid.
+    pub mu_peak: f64,
+    /// Where \[Hz\].
+    pub mu_peak_hz: f64,
+    /// $1 / \mu_{\text{peak}}$ (0 when the nominal loop is unstable).
+    pub stability_margin: f64,
+    /// Nominally stable and $\mu < 1$ everywhere.
+    pub robustly_stable: bool,
+    /// $g_+$: the controller gain factor up to which every plant of the set stays stable
+    /// (`None` when not robustly stable at $g = 1$; infinite when nothing limits it).
+    pub upper_gain_margin: Option<f64>,
+    /// $g_-$: the factor down to which it stays stable (`None` when not robustly stable).
+    pub lower_gain_margin: Option<f64>,
+    /// The frequency grid \[Hz\].
+    pub f_hz: Vec<f64>,
+    /// $\mu$ on the grid.
+    pub mu: Vec<f64>,
+}
+
+/// The robust-stability analysis of the loop of `plant` ($\hat P$) and `controller` ($C$,
+/// $u = -Cy + r$) against the multiplicative weight `weight` (module docs). All discrete-time,
+/// SISO, with one sample time.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] for a model that is not SISO or not discrete, or sample times that
+/// differ; [`Error::Numerical`] when the closed loop's poles cannot be computed.
+pub fn robust_stability(
+    plant: &StateSpace,
+    controller: &StateSpace,
+    weight: &Weight,
+) -> Result<RobustStability> {
+    for (name, m) in [("plant", plant), ("controller", controller)] {
+        if m.ninputs() != 1 || m.noutputs() != 1 {
+            return Err(Error::invalid(name, "must be SISO"));
+        }
+    }
+    let ts = match (plant.ts(), controller.ts()) {
+        (Some(a), Some(b)) if (a - b).abs() <= 1e-9 * a && (a - weight.ts).abs() <= 1e-9 * a => a,
+        _ => return Err(Error::invalid(
+            "controller",
+            "the plant, the controller and the weight must be discrete-time with one sample time",
+        )),
+    };
+    let cl = plant.feedback(controller)?;
+    let nominal_stable = cl.poles()?.iter().all(|p| p.norm() < 1.0);
+    let f = grid(&[plant, controller], weight, ts)?;
+    let pl = plant.freq_response_siso(&f)?;
+    let cr = controller.freq_response_siso(&f)?;
+    let wr = weight.magnitude(&f);
+    let mut mu = Vec::with_capacity(f.len());
+    let (mut peak, mut peak_hz) = (0.0f64, f[0]);
+    let (mut g_hi, mut g_lo) = (f64::INFINITY, 0.0f64);
+    for k in 0..f.len() {
+        let l = pl[k] * cr[k];
+        let t = l / (c64::new(1.0, 0.0) + l);
+        let m = wr[k] * t.norm();
+        if m > peak || !m.is_finite() {
+            peak = if m.is_finite() { m } else { f64::INFINITY };
+            peak_hz = f[k];
+        }
+        mu.push(m);
+        let (lo, hi) = gain_interval(l, wr[k]);
+        g_hi = g_hi.min(hi);
+        g_lo = g_lo.max(lo);
+    }
+    let robustly_stable = nominal_stable && peak < 1.0;
+    let (upper, lower) = if robustly_stable {
+        let (n_lo, n_hi) = nominal_gain_interval(plant, controller)?;
+        (Some(g_hi.min(n_hi)), Some(g_lo.max(n_lo)))
+    } else {
+        (None, None)
+    };
+    Ok(RobustStability {
+        nominal_stable,
+        mu_peak: peak,
+        mu_peak_hz: peak_hz,
+        stability_margin: if nominal_stable && peak > 0.0 {
+            1.0 / peak
+        } else if nominal_stable {
+            f64::INFINITY
+        } else {
+            0.0
+        },
+        robustly_stable,
+        upper_gain_margin: upper,
+        lower_gain_margin: lower,
+        f_hz: f,
+        mu,
+    })
+}
+
+/// The loop with the controller's gain scaled by $g$, $u = -gCy + r$.
+fn with_gain(controller: &StateSpace, g: f64) -> Result<StateSpace> {
+    StateSpace::new(
+        controller.a().to_owned(),
+        controller.b().to_owned(),
+        controller.c().to_owned() * g,
+        controller.d().to_owned() * g,
+        controller.ts(),
+    )
+}
+
+/// Whether the loop of `plant` with `controller` scaled by `g` ($u = -gCy + r$) is stable: all
+/// its closed-loop poles inside the unit circle.
+///
+/// # Errors
+/// When the loop is not well posed or its poles cannot be computed.
+pub fn loop_stable(plant: &StateSpace, controller: &StateSpace, g: f64) -> Result<bool> {
+    Ok(plant
+        .feedback(&with_gain(controller, g)?)?
+        .poles()?
+        .iter()
+        .all(|p| p.norm() < 1.0))
+}
+
+/// The nominal loop's gain interval around 1 from its closed-loop poles: the gain is stepped by
+/// 1 % from 1 up to $10^3$ (down to $10^{-3}$) until the loop is unstable, and the edge is found
+/// by bisection to $10^{-6}$ relative (a pole leaving and re-entering within one step is missed);
+/// $\infty$ (0) when nothing limits it there. Returns `(lower, upper)`.
+///
+/// # Errors
+/// As [`loop_stable`].
+pub fn nominal_gain_interval(plant: &StateSpace, controller: &StateSpace) -> Result<(f64, f64)> {
+    let edge = |up: bool| -> Result<f64> {
+        let step: f64 = if up { 1.01 } else { 1.0 / 1.01 };
+        let mut good = 1.0;
+        loop {
+            let next = good * step;
+            if !(1e-3..=1e3).contains(&next) {
+                return Ok(if up { f64::INFINITY } else { 0.0 });
+            }
+            if !loop_stable(plant, controller, next)? {
+                let (mut a, mut b) = (good, next);
+                while (b - a).abs() > 1e-6 * a {
+                    let m = 0.5 * (a + b);
+                    if loop_stable(plant, controller, m)? {
+                        a = m;
+                    } else {
+                        b = m;
+                    }
+                }
+                return Ok(a);
+            }
+            good = next;
+        }
+    };
+    Ok((edge(false)?, edge(true)?))
+}
+
+/// The interval $(g_-, g_+) \ni 1$ of gains with $|W g L| < |1 + gL|$ at one frequency
+/// ($q(1) < 0$ assumed; a degenerate interval $(1, 1)$ otherwise).
+fn gain_interval(l: c64, w: f64) -> (f64, f64) {
+    let a = l.norm_sqr() * (w * w - 1.0);
+    let b = -2.0 * l.re;
+    let c = -1.0;
+    let q = |g: f64| a * g * g + b * g + c;
+    if q(1.0) >= 0.0 || !q(1.0).is_finite() {
+        return (1.0, 1.0);
+    }
+    let mut roots = Vec::new();
+    if a.abs() < 1e-300 {
+        if b != 0.0 {
+            roots.push(-c / b);
+        }
+    } else {
+        let disc = b * b - 4.0 * a * c;
+        if disc >= 0.0 {
+            let s = disc.sqrt();
+            // stable form of the two roots
+            let qq = -0.5 * (b + b.signum() * s);
+            if qq != 0.0 {
+                roots.push(qq / a);
+                roots.push(c / qq);
+            } else {
+                roots.push((-b + s) / (2.0 * a));
+                roots.push((-b - s) / (2.0 * a));
+            }
+        }
+    }
+    let hi = roots
+        .iter()
+        .copied()
+        .filter(|r| *r > 1.0)
+        .fold(f64::INFINITY, f64::min);
+    let lo = roots
+        .iter()
+        .copied()
+        .filter(|r| *r < 1.0 && *r > 0.0)
+        .fold(0.0f64, f64::max);
+    (lo, hi)
+}
+
+/// The frequency grid of the module docs.
+fn grid(models: &[&StateSpace], weight: &Weight, ts: f64) -> Result<Vec<f64>> {
+    let fs = 1.0 / ts;
+    let (lo, hi) = (1e-4 * fs, 0.5 * fs);
+    let n = 4000;
+    let mut f: Vec<f64> = (0..n)
+        .map(|i| (lo.ln() + (hi.ln() - lo.ln()) * i as f64 / (n - 1) as f64).exp())
+        .collect();
+    let mut poles = Vec::new();
+    for m in models {
+        poles.extend(m.poles()?);
+    }
+    poles.extend(weight.poles());
+    for p in poles {
+        if p.norm() == 0.0 || p.im.abs() < 1e-12 {
+            continue;
+        }
+        let s = p.ln() / ts;
+        let wn = s.norm();
+        let zeta = (-s.re / wn).abs();
+        let fc = s.im.abs() / (2.0 * PI);
+        if zeta > 0.3 || fc <= lo || fc >= hi {
+            continue;
+        }
+        let half = (2.0 * zeta * wn / (2.0 * PI)).max(1e-6 * fc);
+        for i in -4..=4 {
+            let x = fc + half * i as f64 / 4.0;
+            if x > lo && x < hi {
+                f.push(x);
+            }
+        }
+    }
+    f.sort_by(f64::total_cmp);
+    f.dedup_by(|a, b| (*a - *b).abs() <= 1e-12 * b.abs());
+    Ok(f)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::validate::weight::Factor;
+    use faer::mat;
+
+    /// A naive oracle: the closed-loop poles of the loop with gain g, stable or not.
+    fn stable_with_gain(p: &StateSpace, c: &StateSpace, g: f64) -> bool {
+        let cg = StateSpace::discrete(
+            c.a().to_owned(),
+            c.b().to_owned(),
+            c.c().to_owned() * g,
+            c.d().to_owned() * g,
+            c.ts().unwrap(),
+        )
+        .unwrap();
+        p.feedback(&cg)
+            .unwrap()
+            .poles()
+            .unwrap()
+            .iter()
+            .all(|z| z.norm() < 1.0)
+    }
+
+    /// An unstable plant (a magnetic-bearing-like real pole pair) under a PD-like controller:
+    /// with a tiny weight the robust gain margins are the nominal ones of the pole oracle; with
+    /// a 20 % weight they shrink, every gain inside them keeps the loop stable for the members
+    /// P̂(1 ± 0.2) of the set, and they do not reach beyond where those members fail.
+    #[test]
+    fn gain_margins_agree_with_the_closed_loop_poles() {
+        let ts = 1e-4;
+        // P(s) = 1 / (s^2 - 400^2) discretised by ZOH
+        let pc = StateSpace::continuous(
+            mat![[0.0, 1.0], [160_000.0, 0.0]],
+            mat![[0.0], [1.0]],
+            mat![[1.0, 0.0]],
+            mat![[0.0]],
+        )
+        .unwrap();
+        let p = pc.c2d_zoh(ts).unwrap();
+        // C(s) = k (1 + s/wd) / (1 + s/(10 wd)), tustin
+        let (k, wd) = (4.0e5, 300.0);
+        let cc = StateSpace::continuous(
+            mat![[-10.0 * wd]],
+            mat![[1.0]],
+            mat![[k * 10.0 * wd * (1.0 - 10.0)]],
+            mat![[k * 10.0]],
+        )
+        .unwrap();
+        let c = cc.c2d_tustin(ts, None).unwrap();
+        assert!(stable_with_gain(&p, &c, 1.0));
+        // the nominal gain margins by bisection on the pole oracle
+        let edge = |mut a: f64, mut b: f64| {
+            for _ in 0..60 {
+                let m = 0.5 * (a + b);
+                if stable_with_gain(&p, &c, m) {
+                    a = m
+                } else {
+                    b = m
+                }
+            }
+            0.5 * (a + b)
+        };
+        let g_up = edge(1.0, 100.0);
+        let g_dn = edge(1.0, 0.0);
+        let tiny = Weight {
+            ts,
+            gain: 1e-9,
+            numerator: vec![],
+            denominator: vec![],
+        };
+        let r = robust_stability(&p, &c, &tiny).unwrap();
+        assert!(r.robustly_stable);
+        let (gu, gl) = (r.upper_gain_margin.unwrap(), r.lower_gain_margin.unwrap());
+        assert!((gu - g_up).abs() < 0.01 * g_up, "{gu} vs {g_up}");
+        assert!((gl - g_dn).abs() < 0.01 * g_dn, "{gl} vs {g_dn}");
+        // a 20 % weight: margins inside the nominal ones; plants P̂(1 ± 0.2) stay stable with
+        // any gain inside them
+        let w = Weight {
+            ts,
+            gain: 0.2,
+            numerator: vec![Factor::First { omega: 1.0 }],
+            denominator: vec![Factor::First { omega: 1.0 }],
+        };
+        let r = robust_stability(&p, &c, &w).unwrap();
+        let (ru, rl) = (r.upper_gain_margin.unwrap(), r.lower_gain_margin.unwrap());
+        assert!(ru < gu && rl > gl && ru > 1.0 && rl < 1.0, "{ru} {rl}");
+        for scale in [0.8, 1.2] {
+            let ps = StateSpace::discrete(
+                p.a().to_owned(),
+                p.b().to_owned(),
+                p.c().to_owned() * scale,
+                p.d().to_owned(),
+                ts,
+            )
+            .unwrap();
+            for g in [rl * 1.001, 1.0, ru * 0.999] {
+                assert!(stable_with_gain(&ps, &c, g), "scale {scale}, gain {g}");
+            }
+        }
+        // members of the set bound it from outside: P̂·1.2 loses stability at g_up / 1.2 and
+        // P̂·0.8 at g_dn / 0.8, so the robust margins cannot reach beyond those
+        assert!(ru <= g_up / 1.2 * (1.0 + 1e-3), "{ru} vs {}", g_up / 1.2);
+        assert!(rl >= g_dn / 0.8 * (1.0 - 1e-3), "{rl} vs {}", g_dn / 0.8);
+        assert!(r.stability_margin > 1.0 && r.mu_peak < 1.0);
+    }
+
+    #[test]
+    fn an_unstable_nominal_loop_is_reported() {
+        let ts = 1e-3;
+        let p =
+            StateSpace::discrete(mat![[1.1]], mat![[1.0]], mat![[1.0]], mat![[0.0]], ts).unwrap();
+        let c =
+            StateSpace::discrete(mat![[0.0]], mat![[0.0]], mat![[0.0]], mat![[0.01]], ts).unwrap();
+        let w = Weight {
+            ts,
+            gain: 0.1,
+            numerator: vec![],
+            denominator: vec![],
+        };
+        let r = robust_stability(&p, &c, &w).unwrap();
+        assert!(!r.nominal_stable && !r.robustly_stable);
+        assert_eq!(r.stability_margin, 0.0);
+        assert!(r.upper_gain_margin.is_none());
+        let other = Weight { ts: 2e-3, ..w };
+        assert!(robust_stability(&p, &c, &other).is_err());
+    }
+}

@@ -1,0 +1,251 @@
+//! From identification to robust control (issue 23, SISO): the uncertainty of a nominal plant
+//! model over frequency, the low-order weight that overbounds it, and the robust stability of the
+//! current controller against it — one call for `ambid uncertainty`, the workflow and the
+//! Python package ([`analyse`]); and the twin check of the same chain on a random rig
+//! ([`UncertaintyRun`]), which the tests and the `uncertainty_rigs` example run.
+//!
+//! The terms, the weight and the margins are documented in
+//! [`ambid_core::validate::uncertainty`], [`ambid_core::validate::weight`] and
+//! [`ambid_core::validate::robust`].
+
+use crate::error::{Context, Error, Result};
+use crate::experiment::{run, ExcitationPlan, Experiment};
+use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
+use ambid_core::estimate::freqfit_ss::{ss_frd, SsFreqOptions};
+use ambid_core::lti::{Frd, StateSpace};
+use ambid_core::validate::compare::unstable_poles_from_loop;
+pub use ambid_core::validate::robust::{loop_stable, nominal_gain_interval};
+use ambid_core::validate::robust::{robust_stability, RobustStability};
+use ambid_core::validate::uncertainty::{
+    uncertainty, ExtraTerms, UncertaintyOptions, UncertaintyTerms,
+};
+use ambid_core::validate::weight::{fit_weight, WeightFit, DEFAULT_COVER, MAX_WEIGHT_ORDER};
+use ambid_twin::{random_rig, Mode, TwinConfig};
+
+/// What [`analyse`] returns.
+#[derive(Debug, Clone)]
+pub struct UncertaintyAnalysis {
+    /// The terms and the bounds per line.
+    pub terms: UncertaintyTerms,
+    /// The weight overbounding the multiplicative bound.
+    pub weight: WeightFit,
+    /// The controller's robust stability against it.
+    pub robust: RobustStability,
+}
+
+/// The uncertainty of `nominal` around the measured plant FRF `frd` (with variances), its weight
+/// of order ≤ `max_weight_order` overbounding the fraction `cover` of the lines, and the robust stability of `controller` against it.
+///
+/// # Errors
+/// Those of [`uncertainty`], [`fit_weight`] and [`robust_stability`], with the step named.
+///
+/// # Example
+/// ```
+/// use ambid::uncertainty::analyse;
+/// use ambid_core::lti::{Frd, StateSpace};
+/// use ambid_core::validate::uncertainty::{ExtraTerms, UncertaintyOptions};
+/// use faer::mat;
+/// let ts = 1e-3;
+/// let p = StateSpace::discrete(mat![[0.9]], mat![[1.0]], mat![[0.1]], mat![[0.0]], ts).unwrap();
+/// let c = StateSpace::discrete(mat![[0.0]], mat![[0.0]], mat![[0.0]], mat![[2.0]], ts).unwrap();
+/// let f: Vec<f64> = (1..=100).map(|k| 4.0 * k as f64).collect();
+/// let exact = Frd::from_model(&p, &f).unwrap();
+/// let var: Vec<f64> = exact.values().iter().map(|g| 1e-4 * g.norm_sqr()).collect();
+/// let frd = Frd::new(f, exact.values().to_vec(), Some(var), Some(ts)).unwrap();
+/// let a = analyse(&p, &frd, &c, &ExtraTerms::default(), &UncertaintyOptions::default(), 4, 1.0)
+///     .unwrap();
+/// assert!(a.robust.robustly_stable);
+/// assert!(a.weight.weight.order() <= 4);
+/// ```
+pub fn analyse(
+    nominal: &StateSpace,
+    frd: &Frd,
+    controller: &StateSpace,
+    extra: &ExtraTerms<'_>,
+    opts: &UncertaintyOptions,
+    max_weight_order: usize,
+    cover: f64,
+) -> Result<UncertaintyAnalysis> {
+    let terms = uncertainty(nominal, frd, extra, opts).context("the uncertainty terms")?;
+    let ts = nominal
+        .ts()
+        .ok_or_else(|| Error::other("the nominal model must be discrete-time"))?;
+    // a line where every term is 0 (no noise, no misfit) cannot be overbounded in log scale:
+    // the floor is 1e-12 of the largest bound
+    let top = terms.multiplicative.iter().copied().fold(0.0f64, f64::max);
+    let bound: Vec<f64> = terms
+        .multiplicative
+        .iter()
+        .map(|b| b.max(1e-12 * top).max(f64::MIN_POSITIVE))
+        .collect();
+    let weight = fit_weight(
+        &terms.f_hz,
+        &bound,
+        ts,
+        max_weight_order.min(MAX_WEIGHT_ORDER),
+        cover,
+    )
+    .context("fitting the uncertainty weight")?;
+    let robust = robust_stability(nominal, controller, &weight.weight)
+        .context("the robust-stability check")?;
+    Ok(UncertaintyAnalysis {
+        terms,
+        weight,
+        robust,
+    })
+}
+
+/// The orders a twin run's nominal model is chosen from (by BIC).
+pub const TWIN_ORDERS: std::ops::RangeInclusive<usize> = 6..=12;
+
+/// The band of a twin run's FRF and fit \[Hz\]: the seed excitation's lines up to 3 kHz (its
+/// power falls to the sinc null at 4 kHz).
+pub const TWIN_BAND_HZ: (f64, f64) = (3.0, 3000.0);
+
+/// One run of the whole chain on the twin: the seed experiment on rig `rig` (0 = nominal) with
+/// noise seed `seed`, the period-averaged plant FRF, the nominal model (the BIC choice among
+/// [`TWIN_ORDERS`] of inverse-variance frequency-domain state-space fits with the loop's unstable
+/// pole count), [`analyse`], and the truth to check it against.
+#[derive(Debug, Clone)]
+pub struct UncertaintyRun {
+    /// The measured plant FRF.
+    pub frd: Frd,
+    /// The nominal model.
+    pub nominal: StateSpace,
+    /// The analysis.
+    pub analysis: UncertaintyAnalysis,
+    /// The twin's exact plant.
+    pub truth_plant: StateSpace,
+    /// The twin's controller.
+    pub controller: StateSpace,
+}
+
+/// How well a run's bound and weight cover the true error (see [`UncertaintyRun::coverage`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Coverage {
+    /// Lines in the band.
+    pub lines: usize,
+    /// Fraction of them where $\ell_k \ge |P - \hat P| / |\hat P|$.
+    pub bound_coverage: f64,
+    /// Fraction where $|W| \ge |P - \hat P| / |\hat P|$.
+    pub weight_coverage: f64,
+    /// Median of the true relative error.
+    pub median_error: f64,
+    /// Median of $|W|$.
+    pub median_weight: f64,
+    /// Median of $|W|$ over the median of the true relative error.
+    pub median_ratio: f64,
+}
+
+impl UncertaintyRun {
+    /// Runs the chain on the twin (type docs).
+    ///
+    /// # Errors
+    /// Any step's error.
+    pub fn on_twin(rig: u64, seed: u64, mode: Mode) -> Result<Self> {
+        let twin = if rig == 0 {
+            TwinConfig::default()
+        } else {
+            random_rig(rig).context("drawing the rig")?
+        };
+        let exp = Experiment {
+            twin,
+            excitation: ExcitationPlan::default(),
+            mode,
+            seed,
+            noise: true,
+            record_b: false,
+        };
+        let out = run(&exp)?;
+        let controller = out.twin.controller().clone();
+        let cl = out.periodic_frf(TWIN_BAND_HZ, None)?;
+        let frd = cl.plant;
+        let nominal = nominal_by_bic(&frd, &controller)?;
+        let analysis = analyse(
+            &nominal,
+            &frd,
+            &controller,
+            &ExtraTerms::default(),
+            &UncertaintyOptions::default(),
+            MAX_WEIGHT_ORDER,
+            DEFAULT_COVER,
+        )?;
+        Ok(Self {
+            frd,
+            nominal,
+            analysis,
+            truth_plant: out.twin.plant().clone(),
+            controller,
+        })
+    }
+
+    /// The coverage of the true relative error on the lines of `band_hz`.
+    ///
+    /// # Errors
+    /// When the true plant's response cannot be evaluated on the lines.
+    pub fn coverage(&self, band_hz: (f64, f64)) -> Result<Coverage> {
+        let t = &self.analysis.terms;
+        let idx: Vec<usize> = (0..t.f_hz.len())
+            .filter(|&k| (band_hz.0..=band_hz.1).contains(&t.f_hz[k]))
+            .collect();
+        let f: Vec<f64> = idx.iter().map(|&k| t.f_hz[k]).collect();
+        let truth = self.truth_plant.freq_response_siso(&f)?;
+        let w = self.analysis.weight.weight.magnitude(&f);
+        let mut err = Vec::with_capacity(f.len());
+        let (mut cb, mut cw) = (0usize, 0usize);
+        for (i, &k) in idx.iter().enumerate() {
+            let e = (truth[i] - t.nominal[k]).norm() / t.nominal[k].norm();
+            cb += usize::from(t.multiplicative[k] >= e);
+            cw += usize::from(w[i] >= e);
+            err.push(e);
+        }
+        let med = |v: &mut Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+        };
+        let n = f.len().max(1) as f64;
+        let (me, mw) = (med(&mut err), med(&mut w.clone()));
+        Ok(Coverage {
+            lines: f.len(),
+            bound_coverage: cb as f64 / n,
+            weight_coverage: cw as f64 / n,
+            median_error: me,
+            median_weight: mw,
+            median_ratio: mw / me,
+        })
+    }
+}
+
+/// The nominal model of a twin run (type docs of [`UncertaintyRun`]).
+fn nominal_by_bic(frd: &Frd, controller: &StateSpace) -> Result<StateSpace> {
+    let unstable = unstable_poles_from_loop(frd, controller, None).ok();
+    let opts = FreqFitOptions {
+        weights: FreqWeights::InverseVariance,
+        max_unstable_poles: unstable,
+        ..FreqFitOptions::default()
+    };
+    let n_eq = 2.0 * frd.len() as f64;
+    let var = frd
+        .variance()
+        .ok_or_else(|| Error::other("the FRF has no variances"))?;
+    let mut best: Option<(f64, StateSpace)> = None;
+    for order in TWIN_ORDERS {
+        let Ok(fit) = ss_frd(frd, order, &opts, &SsFreqOptions::default()) else {
+            continue;
+        };
+        // the fit's cost has weights of mean 1: the χ² of the inverse-variance misfit instead
+        let resp = fit.model.freq_response_siso(frd.f_hz())?;
+        let chi2: f64 = resp
+            .iter()
+            .zip(frd.values())
+            .zip(var)
+            .map(|((m, g), v)| (m - g).norm_sqr() / v)
+            .sum();
+        let bic = 2.0 * chi2 + fit.n_params as f64 * n_eq.ln();
+        if best.as_ref().is_none_or(|b| bic < b.0) {
+            best = Some((bic, fit.model));
+        }
+    }
+    best.map(|b| b.1)
+        .ok_or_else(|| Error::other("no nominal model could be fitted to the twin's FRF"))
+}
