@@ -9,8 +9,7 @@
 //!
 //! Run with `-- --nocapture` to see the measured numbers.
 
-mod common;
-
+use crate::common;
 use ambid_core::estimate::arx::{arx, arx_with, fir, ArxModel, ArxOptions, ArxOrders};
 use ambid_core::lti::Structure;
 use ambid_core::validate::fit::fit_percent;

@@ -3,8 +3,7 @@
 //! poles it finds; OE (whose predictor simulates the plant) either returns a model or fails with a
 //! typed `Unstable` error that says what to do — never a panic, never a silently stabilised model.
 
-mod common;
-
+use crate::common;
 use ambid_core::estimate::arx::{arx, ArxOrders};
 use ambid_core::estimate::pem::{oe, PemOptions};
 use ambid_core::linalg::roots;

@@ -4,8 +4,7 @@
 //!
 //! Run with `-- --nocapture` to see the measured agreement.
 
-mod common;
-
+use crate::common;
 use ambid_core::estimate::arx::{arx_with, ArxOptions};
 use ambid_core::estimate::order::{
     arx_order_scan, ArxScanSpec, OrderScan, ScanMethod, ScanSolver, BIC_TOLERANCE,

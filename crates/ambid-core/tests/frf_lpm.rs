@@ -2,8 +2,7 @@
 //! systems (noise-free, with transients), FdiTools' LPM on a committed fixture, and the typed
 //! errors of bad input.
 
-#[path = "../../ambid/tests/common/skip.rs"]
-mod skip;
+use crate::skip;
 
 use ambid_core::c64;
 use ambid_core::frf::lpm::{lpm, lpm_closed_loop, LpmOptions};

@@ -16,8 +16,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Uniform};
 
-#[path = "common/mimo_loop.rs"]
-mod mimo_loop;
+use crate::mimo_loop;
 use mimo_loop::{build, Loop, FS};
 
 /// One period of a random-phase multisine on `lines` (amplitude `amp` per line), repeated.

@@ -9,8 +9,7 @@
 //! first-order std from the per-period covariance) on all 267 × 3 entries to 1e-9.
 //! Skips visibly when the data folder or python3/numpy is missing.
 
-#[path = "../../ambid/tests/common/skip.rs"]
-mod skip;
+use crate::skip;
 
 use ambid_core::data::{IoData, Role};
 use ambid_core::frf::mimo::{periodic, MimoOptions};

@@ -2,8 +2,7 @@
 //! the exact truth of the discrete 4-axis closed loop of `common/mimo_loop.rs`, against the SISO
 //! `lpm_closed_loop` for the 1×1 case, and its errors.
 
-#[path = "common/mimo_loop.rs"]
-mod mimo_loop;
+use crate::mimo_loop;
 
 use ambid_core::data::IoData;
 use ambid_core::frf::closed_loop::band_radius_factor;

@@ -10,7 +10,7 @@
 //!
 //! Per entry-line, over the seeds: the empirical variance of the estimate, the mean of its own
 //! σ², and the bias |mean − truth| relative to the empirical σ. The table (`cargo test -p
-//! ambid-twin --test design_comparison -- --nocapture`) gives medians over the entry-lines of
+//! ambid-twin --test all design_comparison:: -- --nocapture`) gives medians over the entry-lines of
 //! each group (quantity, diagonal or cross term, band). Asserted: orthogonal variance ≈
 //! sequential / 4 and zippered (measured entries) ≈ sequential / 16 on the same lines; the
 //! estimates' own σ² agree with the empirical variance; in linear mode no design is biased
@@ -19,8 +19,7 @@
 // entry-line loops index several parallel arrays (values, truth, flags) by the same index
 #![allow(clippy::needless_range_loop)]
 
-mod common;
-
+use crate::common;
 use ambid_core::data::IoData;
 use ambid_core::frf::mimo::{estimate, MimoClosedLoopFrf, MimoOptions};
 use ambid_core::lti::Frd;

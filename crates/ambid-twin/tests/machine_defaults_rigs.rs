@@ -5,8 +5,7 @@
 //! 3 000–30 000 rpm from `ChaCha8Rng::seed_from_u64(seed)`; a draw whose closed loop is unstable
 //! at that speed is skipped and printed.
 
-mod common;
-
+use crate::common;
 use ambid_core::frf::mimo::{periodic, MimoOptions};
 use ambid_core::frf::mimo_lpm::{local_polynomial, MimoLpmOptions};
 use ambid_core::frf::synchronous::{synchronous, SynchronousOptions};

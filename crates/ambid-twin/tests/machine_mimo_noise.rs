@@ -10,7 +10,6 @@
 //! 16 measured periods after a cyclic pre-roll of 20 periods (0.51 s; 4 periods left transients of 1e-4 on random rigs) (`settle_samples`), so every
 //! experiment is 8 160 recorded samples (0.41 s) and ν = 15 degrees of freedom.
 
-mod common;
 mod common_noise {
     use ambid_core::data::IoData;
     use ambid_core::frf::mimo::{periodic, MimoClosedLoopFrf, MimoOptions};

@@ -5,7 +5,7 @@
 //! and P, and so in its error against the machine's exact truth, to 1e-9 relative. Skips visibly
 //! (the project's skip mechanism) without python3/numpy.
 
-mod common;
+use crate::common;
 #[path = "../../ambid/tests/common/skip.rs"]
 mod skip;
 

@@ -27,8 +27,7 @@
 //! alone already meets the 1 % bar at 15 000 rpm, so the bar does not discriminate here; the
 //! tests therefore also ask the exact schedule to be 100 times better than that and the noisy one
 //! twice as good. Whole file: about 10 s in the debug profile.
-mod common;
-use common::random_basis;
+use crate::common::random_basis;
 
 use ambid_core::estimate::scheduled::{
     fit_scheduled, ScheduleOptions, SpeedData, SpeedScheduledModel,

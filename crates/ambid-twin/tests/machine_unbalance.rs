@@ -18,7 +18,7 @@
 //! **on** the even (unexcited) period line 6 (234.375 Hz, 14 062.5 rpm) and **off** the grid at
 //! line 6.3 (246.09 Hz, 14 765.6 rpm).
 
-mod common;
+use crate::common;
 use ambid_core::data::IoData;
 use ambid_core::data::Role;
 use ambid_core::frf::closed_loop::band_radius_factor;

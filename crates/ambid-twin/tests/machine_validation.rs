@@ -9,8 +9,7 @@
 //! Records: 6000 samples (0.3 s at 20 kHz) of seeded white-noise excitation (0.05 A RMS) on all
 //! four axes, seeds 1000 + s (different from every identification design), the twin's sensor
 //! noise from seed 2000 + s; the loop runs 4000 samples before the record.
-mod common;
-use common::random_basis;
+use crate::common::random_basis;
 
 use ambid_core::data::IoData;
 use ambid_core::lti::StateSpace;

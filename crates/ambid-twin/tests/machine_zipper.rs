@@ -11,7 +11,7 @@
 //!   (no variance blow-up).
 //!
 //! Errors are relative to the largest truth entry of the line (so a zero cross term is measured
-//! against the line's scale). `cargo test -p ambid-twin --test machine_zipper -- --nocapture`
+//! against the line's scale). `cargo test -p ambid-twin --test all machine_zipper:: -- --nocapture`
 //! prints the tables.
 
 // entry-line loops index several parallel arrays (values, truth, flags) by the same index

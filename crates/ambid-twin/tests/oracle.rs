@@ -12,7 +12,7 @@
 //! closed-loop modes and the bending mode), the unstable pole of P and the 18 closed-loop poles
 //! (matched one-to-one by nearest neighbour, in both directions). Measured agreement (see the
 //! tolerances below): FRFs <= 5.6e-12, closed-loop poles <= 4e-13, unstable pole <= 3.5e-15,
-//! k_i, k_x exact to rounding. Details in the `eprintln!` output (`cargo test -p ambid-twin --test oracle --
+//! k_i, k_x exact to rounding. Details in the `eprintln!` output (`cargo test -p ambid-twin --test all oracle:: --
 //! --nocapture`).
 
 use ambid_twin::{c64, Twin, TwinConfig};

@@ -1,11 +1,9 @@
 //! Simulation against the truth: self-consistency of the linear twin (noise off and on),
 //! nonlinear vs linear, saturation reporting, reproducibility.
 
-mod common;
-
+use crate::common::averaged_dft;
 use ambid_core::signal::PrbsSpec;
 use ambid_twin::{c64, Mode, SimOptions, Twin, TwinConfig};
-use common::averaged_dft;
 
 const NB: usize = 5;
 /// The seed experiment's number of PRBS periods.

@@ -4,9 +4,8 @@
 //! `ambid bla --record PCT:PATH …` (or the workflow's `[bla] files`) estimates the BLA. The
 //! estimates are checked against the twin's exact linearised plant.
 
-mod common;
+use crate::common::{ambid, s, text, tmpdir};
 use ambid::workflow::{self, Progress, Verbosity, WorkflowConfig};
-use common::{ambid, s, text, tmpdir};
 use std::path::{Path, PathBuf};
 
 /// Samples per multisine period (20 Hz lines at 20 kHz).

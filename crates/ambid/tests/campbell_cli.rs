@@ -2,9 +2,8 @@
 //! the 4-axis twin's exact model (`ambid_twin::campbell`, `Machine::closed_loop_modes`), the
 //! whirl split at speed, and the usage errors.
 
-mod common;
+use crate::common::{ambid, s, text, tmpdir};
 use ambid_twin::{Machine, MachineConfig, Whirl};
-use common::{ambid, s, text, tmpdir};
 use std::path::Path;
 
 /// One CSV row: (speed_rpm, sync_hz, mode, freq_hz, damping, whirl).

@@ -1,8 +1,7 @@
 //! End-to-end tests of the `ambid` binary: exit codes, messages and written files.
 
+use crate::common::{ambid, text, tmpdir};
 use std::path::PathBuf;
-mod common;
-use common::{ambid, text, tmpdir};
 
 #[test]
 fn no_arguments_prints_help_and_fails() {

@@ -5,10 +5,9 @@
 //! and a malformed value exits with code 2 and a message naming the option. The levels are also
 //! checked against an independent value: the twin's i_sat (2 A, `ambid config`) times the level.
 
+use crate::common::{ambid, s, text, tmpdir, CONTROLLER};
 use std::path::{Path, PathBuf};
 use std::process::Output;
-mod common;
-use common::{ambid, s, text, tmpdir, CONTROLLER};
 
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()

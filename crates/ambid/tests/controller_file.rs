@@ -1,7 +1,7 @@
 //! Controller files (`ambid::io::controller`) and `PidSpec` against the twin's controller, and
 //! every error a controller file can raise.
 //!
-//! `AMBID_UPDATE_FIXTURES=1 cargo test -p ambid --test controller_file` rewrites
+//! `AMBID_UPDATE_FIXTURES=1 cargo test -p ambid --test all controller_file::` rewrites
 //! `tests/fixtures/twin_controller.toml` from `controller_toml_from_twin`.
 
 use ambid::io::controller::{

@@ -2,7 +2,7 @@
 //! by `tests/fixtures/make_data_files.py`), the real measured data sets in `shared/data/real/`
 //! (skipped with a note when absent), and error messages with exact line numbers.
 
-mod common;
+use crate::common;
 use std::path::{Path, PathBuf};
 
 use ambid::io::table::{read_table, ColumnRef, DataFileError, Format, ReadOptions, Table};

@@ -3,11 +3,11 @@
 //! excitation, checked on 20 random rigs of the twin against each rig's exact sensitivity, on the
 //! nominal twin, and on the real F-16 and Silverbox records.
 
-mod common;
+use crate::common;
+use crate::common::{ambid, s, text, tmpdir};
 use ambid::workflow::{self, Outcome, Progress, Verbosity, WorkflowConfig};
 use ambid_core::validate::iso::IsoZones;
 use ambid_twin::{random_rig, Twin};
-use common::{ambid, s, text, tmpdir};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 

@@ -9,8 +9,7 @@
 //! * the numbers of the MATLAB script parsed back bit for bit, and the script run in Octave when
 //!   `octave` is installed (skipped otherwise).
 
-mod common;
-
+use crate::common;
 use ambid::io::export::{
     mat_bytes, matlab_script, npz_bytes, ExportError, ExportModel, ExportNames,
 };

@@ -1,8 +1,7 @@
 //! `ambid fit` and `ambid order` end to end on the DaISy dryer (read from ../shared/data/real).
 
+use crate::common::{ambid, text, CONTROLLER};
 use std::path::{Path, PathBuf};
-mod common;
-use common::{ambid, text, CONTROLLER};
 
 /// Writes the dryer's halves as CSV (u, y) into a temporary directory.
 fn dryer_halves(name: &str) -> (PathBuf, PathBuf, PathBuf) {

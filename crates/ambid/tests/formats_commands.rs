@@ -16,8 +16,8 @@
 //! Parquet is read only with the cargo feature `parquet`; without it the Parquet checks are
 //! skipped loudly (tests/common/skip.rs), the other formats still run.
 
-mod common;
-use common::{ambid, text, tmpdir};
+use crate::common;
+use crate::common::{ambid, text, tmpdir};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 
@@ -53,7 +53,7 @@ fn formats(what: &str) -> Vec<&'static str> {
             if !on {
                 common::skip(
                     &format!("formats_commands::{what} on .parquet"),
-                    "ambid is built without the cargo feature `parquet`; run `cargo test -p ambid --features parquet --test formats_commands`",
+                    "ambid is built without the cargo feature `parquet`; run `cargo test -p ambid --features parquet --test all formats_commands::`",
                 );
             }
             on

@@ -12,8 +12,7 @@
 //! 10–1000 Hz, and the median error it reports against the FRF measures the FRF's noise on
 //! the band (≤ the rule's 20 %, ≤ 1.25 × the FRF's own error there).
 
-mod common;
-use common::{median, rig_experiment};
+use crate::common::{median, rig_experiment};
 
 use ambid::analysis::{analyze, FrfSettings, Record};
 use ambid::experiment::{run, ExcitationPlan};

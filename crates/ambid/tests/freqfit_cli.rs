@@ -1,8 +1,7 @@
 //! `ambid fit <frf.csv> --quantity plant` and `ambid compare-models` end to end on the twin:
 //! simulate → frf → fit / compare (with the closed-loop validation on an independent record).
 
-mod common;
-use common::{ambid, s, text, tmpdir, CONTROLLER};
+use crate::common::{ambid, s, text, tmpdir, CONTROLLER};
 
 #[test]
 fn fit_and_compare_models_on_the_twin_plant_frf() {

@@ -5,8 +5,7 @@
 //! rig, no fit (ARX, OE, SS at orders 6–10) carries more unstable poles than the plant, and the
 //! chosen model of the default comparison (orders 6–9) is valid and close to the exact plant.
 
-mod common;
-use common::{median, rig_experiment};
+use crate::common::{median, rig_experiment};
 
 use ambid::experiment::{run, ExcitationPlan};
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};

@@ -1,14 +1,13 @@
 //! End to end: the twin's seed experiment → period-averaged plant FRF → state-space model fitted
 //! to it (`estimate::freqfit_ss`) → compared with the twin's exact plant over 10–1000 Hz.
 
+use crate::common::percentile;
 use ambid::experiment::{run, Experiment};
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::estimate::freqfit_ss::{ss_frd, SsFreqOptions};
 use ambid_core::frf::closed_loop::ClosedLoopFrf;
 use ambid_core::lti::StateSpace;
 use ambid_twin::{Mode, Twin};
-mod common;
-use common::percentile;
 
 const PERIOD: usize = 1023 * 5;
 

@@ -1,9 +1,8 @@
 //! `ambid frf` and `ambid study` end to end: files written, numbers against the twin's truth,
 //! and the bad-input messages issue 3 asks for.
 
+use crate::common::{ambid, s, text, tmpdir, CONTROLLER};
 use std::path::Path;
-mod common;
-use common::{ambid, s, text, tmpdir, CONTROLLER};
 
 /// Simulates the linear seed experiment into `dir` (data.csv, truth.csv).
 fn simulate(dir: &Path) {

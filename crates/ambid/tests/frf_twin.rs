@@ -1,12 +1,11 @@
 //! End to end: the twin's seed experiment → nonparametric closed-loop FRFs → compared with the
 //! twin's exact linearised truth (issue 3's accuracy, coverage and indirect-method bars).
 
+use crate::common::percentile;
 use ambid::experiment::{run, Experiment};
 use ambid_core::frf::closed_loop::ClosedLoopFrf;
 use ambid_core::lti::StateSpace;
 use ambid_twin::{Mode, Twin, TwinConfig};
-mod common;
-use common::percentile;
 
 fn seed_config() -> TwinConfig {
     let mut cfg = TwinConfig::default();

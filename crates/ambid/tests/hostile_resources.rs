@@ -6,9 +6,8 @@
 //! allocation (a `ulimit -v` of 1 GB makes an allocation attempt an abort, which fails the
 //! test).
 
-mod common;
-
-use common::{s, tmpdir};
+use crate::common;
+use crate::common::{s, tmpdir};
 use std::io::Write;
 use std::path::Path;
 use std::process::{Command, Stdio};

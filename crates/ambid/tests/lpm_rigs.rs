@@ -13,8 +13,7 @@
 //! period dropped) for (c). Errors are medians of |Ĝ − G|/|G| over each estimator's lines in
 //! 10–2000 Hz, the band where every record has power.
 
-mod common;
-
+use crate::common::{ambid, s, text, tmpdir};
 use ambid::analysis::{analyze, FrfSettings, Record};
 use ambid::experiment::{run, ExcitationKind, ExcitationPlan, Experiment, ExperimentOutput};
 use ambid_core::c64;
@@ -22,7 +21,6 @@ use ambid_core::frf::lpm::{lpm_closed_loop, LpmClosedLoop, LpmOptions};
 use ambid_core::frf::lrm::{lrm_closed_loop, LrmOptions};
 use ambid_core::Error;
 use ambid_twin::{random_rig, Mode};
-use common::{ambid, s, text, tmpdir};
 
 /// Where the errors are compared: every record excites 1–2000 Hz.
 const EVAL: (f64, f64) = (10.0, 2000.0);

@@ -6,9 +6,8 @@
 //! Records are short (PRBS order 7, 5 samples per bit: a period of 635 samples, 63 lines up to
 //! 2 kHz; 3 periods per experiment): the bar is noise-free exactness, which needs no averaging.
 
-mod common;
+use crate::common::{ambid, s, text, tmpdir};
 use ambid_twin::{Machine, MachineConfig, AXES};
-use common::{ambid, s, text, tmpdir};
 use num_complex::Complex64;
 use std::collections::HashMap;
 use std::path::Path;

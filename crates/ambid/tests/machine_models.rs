@@ -8,13 +8,12 @@
 //!
 //! `chosen_model_meets_the_plant_bar_on_five_seeds` checks all five (about 4 minutes in a
 //! release build, longer in the test profile, so it is `#[ignore]`d by default; run it with
-//! `cargo test --release -p ambid --test machine_models -- --ignored --nocapture`, per-seed
+//! `cargo test --release -p ambid --test all machine_models:: -- --ignored --nocapture`, per-seed
 //! numbers in docs/estimation.md). `seed_one_meets_the_whole_bar` runs by default on seed 1.
 //! These are figures of the nominal twin only; `random_rigs_meet_the_plant_bar` checks the same
 //! bar on random rigs.
 
-mod common;
-
+use crate::common;
 use ambid::config::MachineSection;
 use ambid::workflow::machine::{acquire_twin, MachineModelInput, MachineModels};
 use ambid::workflow::machine_fit::FrequencyFitter;
@@ -271,7 +270,7 @@ fn seeds() -> Vec<u64> {
 /// unstable-pole count and a closed-loop validation fit within 1 point of the exact plant's on
 /// every axis. Rigs 1–3 by default (those seen while the fitter's starts and orders were
 /// chosen); `AMBID_RIGS=4,5,6` runs others (docs/estimation.md has both). About 2 minutes in
-/// release: `cargo test --release -p ambid --test machine_models random_rigs -- --ignored --nocapture`.
+/// release: `cargo test --release -p ambid --test all machine_models::random_rigs -- --ignored --nocapture`.
 #[test]
 #[ignore = "about 2 minutes in release"]
 fn random_rigs_meet_the_plant_bar() {
@@ -325,7 +324,7 @@ fn random_rigs_meet_the_plant_bar() {
 /// the same whirl where the speed splits the pair (a pair within 0.01 % of each other is a double
 /// eigenvalue whose whirl label is arbitrary, in the exact model too; the split pairs here are
 /// 0.98–4 % apart). About 4 minutes in release:
-/// `cargo test --release -p ambid --test machine_models campbell -- --ignored --nocapture`.
+/// `cargo test --release -p ambid --test all machine_models::campbell -- --ignored --nocapture`.
 #[test]
 #[ignore = "about 4 minutes in release"]
 fn campbell_from_identified_models_at_five_speeds() {

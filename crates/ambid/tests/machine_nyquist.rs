@@ -4,8 +4,7 @@
 //! `(7919·seed) mod 30 000` rpm, with the seed's own noise), the `[machine]` defaults
 //! (orthogonal PRBS design, 12 periods, linear twin, default sensor noise).
 
-mod common;
-
+use crate::common;
 use ambid::config::MachineSection;
 use ambid::workflow::machine::acquire_twin;
 use ambid_core::lti::Frd;

@@ -4,8 +4,7 @@
 //! model-dependent sections, the exports and their frequency response are checked end to end);
 //! the refusals of bad recorded files; numpy/scipy reading the MIMO exports.
 
-mod common;
-
+use crate::common;
 use ambid::config::WorkflowConfig;
 use ambid::workflow::machine::{
     run_with, ComparisonRow, MachineModelInput, MachineModelOutput, MachineModels, MeasuredOnly,

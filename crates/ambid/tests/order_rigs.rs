@@ -9,14 +9,14 @@
 //!   recommendation is a small order (≤ 6, not "near 50") whose range contains the chosen
 //!   model's order (SS 3).
 
-mod common;
+use crate::common;
+use crate::common::{ambid, s, text, tmpdir};
 use ambid::workflow::{self, Progress, Verbosity, WorkflowConfig};
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::lti::Frd;
 use ambid_core::lti::Structure;
 use ambid_core::validate::compare::{compare_models, CompareSpec};
 use ambid_twin::{random_rig, Twin, TwinConfig};
-use common::{ambid, s, text, tmpdir};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 

@@ -22,8 +22,7 @@
 //! The full sweep with timings: `PEM_REFERENCE=1 cargo run --release -p ambid --example
 //! pem_rig_sweep -- 1 20` (docs/estimation.md).
 
-mod common;
-use common::{exact_loop_fit, mean, seed_record_on_rig};
+use crate::common::{exact_loop_fit, mean, seed_record_on_rig};
 
 use ambid_core::estimate::pem::lm::{LmOptions, StopReason};
 use ambid_core::estimate::pem::{pem, Orders, PemOptions};

@@ -3,9 +3,9 @@
 //! baselines, the best published linear figures), plus order sweeps that must write a model at
 //! every order (no isolated refusal) and runs that must not abort on an unstable model.
 
+use crate::common;
+use crate::common::{ambid, s, text, tmpdir};
 use std::path::{Path, PathBuf};
-mod common;
-use common::{ambid, s, text, tmpdir};
 
 /// A file of the shared real data sets: `shared/data/real/<rel>` in the first ancestor of the
 /// crate that has it (the workspace's sibling `../shared`, also from a git worktree).

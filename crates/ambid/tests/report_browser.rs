@@ -8,8 +8,7 @@
 //! Also: a deliberately broken page must be flagged (so the check can fail), and a large report
 //! (25 figures of 5000-point series) must stay small and render fast.
 
-mod common;
-
+use crate::common;
 use std::path::PathBuf;
 use std::time::Instant;
 

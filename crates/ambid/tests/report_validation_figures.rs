@@ -12,7 +12,7 @@
 //!   reconstruction's worst window is one whose displacement is well above the sensor noise
 //!   (≥ 3× its RMS), and the chirp frequency of that window agrees with the linear chirp's.
 
-mod common;
+use crate::common::tmpdir;
 use ambid::experiment::{run as run_experiment, ExcitationPlan, Experiment};
 use ambid::validation::{
     residual_lags, validate_closed_loop, LagBasis, MeasuredLoop, ValidationSettings,
@@ -21,7 +21,6 @@ use ambid::validation::{
 use ambid::workflow::{self, Progress, Step, Verbosity, WorkflowConfig};
 use ambid_core::lti::StateSpace;
 use ambid_twin::{random_rig, Mode, Twin, TwinConfig};
-use common::tmpdir;
 use serde_json::Value;
 
 /// The closed-loop response r → y to a unit impulse at r, simulated the naive way:

@@ -8,9 +8,8 @@
 //! The CSV is simulated again here with the binary under test; the fixtures must hold its
 //! columns exactly, or the test says that they are stale and how to rewrite them.
 
-mod common;
+use crate::common::{ambid, s, text, tmpdir};
 use ambid::io::table::{read_table, ReadOptions};
-use common::{ambid, s, text, tmpdir};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 

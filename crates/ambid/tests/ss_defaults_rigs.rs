@@ -16,8 +16,7 @@
 //! 40-rig sweep is `cargo run --release -p ambid --example ss_rig_sweep -- 1 40`
 //! (docs/estimation.md).
 
-mod common;
-use common::{exact_loop_fit, mean, seed_record_on_rig};
+use crate::common::{exact_loop_fit, mean, seed_record_on_rig};
 
 use ambid::fitting::{identify_state_space, SsFitOptions};
 use ambid_core::estimate::pem::Focus;

@@ -1,6 +1,6 @@
 //! The amplitude and operating-point studies on the twin.
 
-mod common;
+use crate::common;
 use ambid::experiment::ExcitationPlan;
 use ambid::study::{amplitude_on_twin, operating_point_on_twin, seed_cases, TwinAmplitudeStudy};
 use ambid_twin::{Mode, TwinConfig};

@@ -5,10 +5,10 @@
 //! `timing` object is the only part left out: it differs between any two runs.
 //!
 //! A change that legitimately moves a number must be named (with its reason) in the issue note
-//! and the fixture re-made with `AMBID_BLESS=1 cargo test -p ambid --test summary_golden`,
+//! and the fixture re-made with `AMBID_BLESS=1 cargo test -p ambid --test all summary_golden::`,
 //! which writes the fixtures and then fails, so a blessing run never passes silently.
 
-mod common;
+use crate::common;
 use ambid::workflow::{self, Progress, Verbosity, WorkflowConfig};
 use serde_json::Value;
 use std::path::{Path, PathBuf};

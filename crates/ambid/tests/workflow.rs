@@ -1,10 +1,10 @@
 //! The seed workflow end to end (`ambid run`): on the twin against its exact linearised plant,
 //! on the measured files under ../shared/data/real, and with bad input.
 
-mod common;
+use crate::common;
+use crate::common::{ambid, s, text, tmpdir};
 use ambid::report::Block;
 use ambid::workflow::{self, Outcome, Progress, Verbosity, WorkflowConfig};
-use common::{ambid, s, text, tmpdir};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 

@@ -14,11 +14,10 @@
 //! No number of the nominal rig enters: bands, orders and the unstable-pole count come from the
 //! data.
 
-mod common;
+use crate::common::{ambid, median, s, text, tmpdir};
 use ambid::workflow::{self, Progress, Verbosity, WorkflowConfig};
 use ambid_core::validate::iso::IsoZones;
 use ambid_twin::{random_rig, Twin};
-use common::{ambid, median, s, text, tmpdir};
 use std::path::Path;
 
 fn simulate(dir: &Path, rig: u64, extra: &[&str]) {

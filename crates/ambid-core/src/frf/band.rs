@@ -372,7 +372,7 @@ impl FitBand {
 ///
 /// Why: a PRBS (or any excitation) leaves lines where $\hat q$ is a ratio of noise terms (above
 /// its main lobe, near its nulls); a fit or an error figure over them measures the noise, not the
-/// model. Evidence (docs/estimation.md; `cargo test -p ambid --test freqfit_band_rigs`): on 20
+/// model. Evidence (docs/estimation.md; `cargo test -p ambid --test all freqfit_band_rigs::`): on 20
 /// random rigs with two noise seeds each (seed experiment) the derived plant band is 3.9 Hz to
 /// 0.9–1.7 kHz, and the models fitted over it are as close to the exact plant over 10–1000 Hz as
 /// those fitted over the nominal 10–1000 Hz; with ±10 % instead, one rig's band ended at 790 Hz,

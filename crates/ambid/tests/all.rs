@@ -1,0 +1,56 @@
+//! Every integration test of `ambid` in one binary: one link instead of 51, and libtest
+//! runs the tests of all files side by side. Each file is a module, so one file's tests run with
+//! `cargo test -p ambid --test all <file>::` (e.g. `--test all analysis::`).
+
+mod analysis;
+mod bla_files;
+mod bla_twin;
+mod campbell_cli;
+mod cli;
+mod cli_conventions;
+mod common;
+mod controller_file;
+mod data_files;
+mod defaults_rigs;
+mod estimate_twin;
+mod export;
+mod fit_cli;
+mod formats_commands;
+mod freqfit_band_rigs;
+mod freqfit_cli;
+mod freqfit_rigs;
+mod freqfit_twin;
+mod frf_cli;
+mod frf_reference;
+mod frf_twin;
+mod hostile_input;
+mod hostile_outputs;
+mod hostile_resources;
+mod iso_twin;
+mod lpm_rigs;
+mod lpm_twin;
+mod machine_cli;
+mod machine_models;
+mod machine_nyquist;
+mod machine_workflow;
+mod models_stage;
+mod order_rigs;
+mod parallel_levels;
+mod pem_rigs;
+mod real_data_defaults;
+mod reconstruct_twin;
+mod report_browser;
+mod report_validation_figures;
+mod residuals_rigs;
+mod rig_formats;
+mod seed_formats;
+mod ss_defaults_rigs;
+mod stage_frf_order;
+mod stages;
+mod stepped_sine;
+mod study;
+mod summary_golden;
+mod validation_stages;
+mod workflow;
+mod workflow_rigs;
+mod x0_rigs;
