@@ -617,6 +617,17 @@ mod tests {
         (r * t.cos(), r * t.sin())
     }
 
+    /// `exact`'s lines and values with the variances `var`, at sample time `ts`.
+    fn with_var(exact: &Frd, var: Option<Vec<f64>>, ts: f64) -> Frd {
+        Frd::new(
+            exact.f_hz().to_vec(),
+            exact.values().to_vec(),
+            var,
+            Some(ts),
+        )
+        .unwrap()
+    }
+
     fn model() -> StateSpace {
         // an unstable real pole and a lightly damped pair
         let (r, w) = (0.995f64, 0.2f64);
@@ -700,13 +711,7 @@ mod tests {
         let f: Vec<f64> = (1..=150).map(|k| k as f64 * 1.5).collect();
         let exact = Frd::from_model(&m, &f).unwrap();
         let var: Vec<f64> = exact.values().iter().map(|g| 1e-3 * g.norm_sqr()).collect();
-        let frd = Frd::new(
-            f.clone(),
-            exact.values().to_vec(),
-            Some(var.clone()),
-            Some(1e-3),
-        )
-        .unwrap();
+        let frd = with_var(&exact, Some(var.clone()), 1e-3);
         let pr = PoleResidue::of(&m).unwrap();
         let ts = 1e-3;
         let mut fm = Mat::<f64>::zeros(6, 6);
@@ -789,7 +794,7 @@ mod tests {
         let m = model();
         let f: Vec<f64> = (1..=50).map(|k| k as f64).collect();
         let exact = Frd::from_model(&m, &f).unwrap();
-        let plain = Frd::new(f.clone(), exact.values().to_vec(), None, Some(1e-3)).unwrap();
+        let plain = with_var(&exact, None, 1e-3);
         let e = uncertainty(
             &m,
             &plain,
@@ -799,13 +804,7 @@ mod tests {
         .unwrap_err();
         assert!(e.to_string().contains("no variances"), "{e}");
         let var = vec![1e-6; 50];
-        let frd = Frd::new(
-            f.clone(),
-            exact.values().to_vec(),
-            Some(var.clone()),
-            Some(1e-3),
-        )
-        .unwrap();
+        let frd = with_var(&exact, Some(var.clone()), 1e-3);
         let short = vec![0.0; 3];
         let ext = ExtraTerms {
             nonlinear_std: Some(&short),
@@ -817,13 +816,7 @@ mod tests {
             ..Default::default()
         };
         assert!(uncertainty(&m, &frd, &ExtraTerms::default(), &opts).is_err());
-        let other_ts = Frd::new(
-            f.clone(),
-            exact.values().to_vec(),
-            Some(var.clone()),
-            Some(2e-3),
-        )
-        .unwrap();
+        let other_ts = with_var(&exact, Some(var.clone()), 2e-3);
         assert!(uncertainty(
             &m,
             &other_ts,
