@@ -16,7 +16,7 @@ mod interconnect;
 pub mod pid;
 mod poly;
 mod ss;
-mod tf;
+pub(crate) mod tf;
 
 pub use frd::Frd;
 pub use interconnect::FeedbackSign;

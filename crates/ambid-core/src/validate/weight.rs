@@ -53,7 +53,8 @@
 
 use crate::error::{Error, Result};
 use crate::estimate::pem::lm::{minimize, LeastSquaresProblem, LmOptions};
-use crate::lti::StateSpace;
+use crate::lti::tf::poly_mul;
+use crate::lti::{StateSpace, TransferFunction};
 use faer::{c64, Mat};
 use std::f64::consts::PI;
 
@@ -176,39 +177,18 @@ impl Weight {
         self.response(f_hz).iter().map(|w| w.norm()).collect()
     }
 
-    /// A state-space realisation (controllable canonical form of the product of the factors'
-    /// polynomials; the transfer function is $W$ exactly, up to rounding).
+    /// A state-space realisation ([`TransferFunction::to_state_space`] of the product of the
+    /// factors' polynomials; the transfer function is $W$ exactly, up to rounding).
     ///
     /// # Errors
     /// Those of [`StateSpace::discrete`].
     pub fn to_state_space(&self) -> Result<StateSpace> {
-        let num = poly_product(&self.numerator, self.ts);
+        let num: Vec<f64> = poly_product(&self.numerator, self.ts)
+            .iter()
+            .map(|c| c * self.gain)
+            .collect();
         let den = poly_product(&self.denominator, self.ts);
-        let n = den.len() - 1;
-        let g = self.gain;
-        if n == 0 {
-            return StateSpace::discrete(
-                Mat::zeros(0, 0),
-                Mat::zeros(0, 1),
-                Mat::zeros(1, 0),
-                Mat::from_fn(1, 1, |_, _| g * num[0]),
-                self.ts,
-            );
-        }
-        // W = g num / den, both monic of degree n: g + g (num - den) / den
-        let a = Mat::from_fn(n, n, |i, j| {
-            if i == 0 {
-                -den[j + 1]
-            } else if i == j + 1 {
-                1.0
-            } else {
-                0.0
-            }
-        });
-        let b = Mat::from_fn(n, 1, |i, _| if i == 0 { 1.0 } else { 0.0 });
-        let c = Mat::from_fn(1, n, |_, j| g * (num[j + 1] - den[j + 1]));
-        let d = Mat::from_fn(1, 1, |_, _| g);
-        StateSpace::discrete(a, b, c, d, self.ts)
+        TransferFunction::new(num, den, self.ts)?.to_state_space()
     }
 }
 
@@ -236,19 +216,11 @@ fn poly_value(factors: &[Factor], ts: f64, z: c64) -> c64 {
 
 /// The monic polynomial (descending powers) of the product of the factors.
 fn poly_product(factors: &[Factor], ts: f64) -> Vec<f64> {
-    let mut p = vec![1.0];
-    for f in factors {
+    factors.iter().fold(vec![1.0], |p, f| {
         let mut c = vec![1.0];
         c.extend(f.z_coefficients(ts));
-        let mut out = vec![0.0; p.len() + c.len() - 1];
-        for (i, a) in p.iter().enumerate() {
-            for (j, b) in c.iter().enumerate() {
-                out[i + j] += a * b;
-            }
-        }
-        p = out;
-    }
-    p
+        poly_mul(&p, &c)
+    })
 }
 
 /// What [`fit_weight`] returns.
