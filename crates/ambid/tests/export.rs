@@ -101,7 +101,7 @@ fn write_all(
     .unwrap();
 }
 
-fn has_octave() -> bool {
+pub(crate) fn has_octave() -> bool {
     Command::new("octave")
         .args(["--no-gui", "--quiet", "--eval", "exit(0)"])
         .output()
@@ -117,7 +117,7 @@ fn python_has_numpy() -> bool {
         .unwrap_or(false)
 }
 
-fn python_has_scipy() -> bool {
+pub(crate) fn python_has_scipy() -> bool {
     Command::new("python3")
         .args(["-c", "import scipy, numpy"])
         .output()
@@ -256,7 +256,7 @@ fn read_mat(bytes: &[u8]) -> BTreeMap<String, MatVar> {
     vars
 }
 
-fn bits(v: &[f64]) -> Vec<u64> {
+pub(crate) fn bits(v: &[f64]) -> Vec<u64> {
     v.iter().map(|x| x.to_bits()).collect()
 }
 
@@ -287,7 +287,7 @@ fn mat_matches_scipy_savemat() {
 }
 
 /// Numeric assignments `X = …;` of an ambid MATLAB script: name → (rows, values row by row).
-fn script_numbers(text: &str) -> BTreeMap<String, (usize, Vec<f64>)> {
+pub(crate) fn script_numbers(text: &str) -> BTreeMap<String, (usize, Vec<f64>)> {
     let mut out = BTreeMap::new();
     let mut lines = text.lines();
     while let Some(line) = lines.next() {
@@ -319,8 +319,9 @@ fn script_numbers(text: &str) -> BTreeMap<String, (usize, Vec<f64>)> {
                 .map(|x| x.trim().parse::<f64>().unwrap())
                 .collect();
             out.insert(name.to_string(), (rows.len(), values));
-        } else {
-            out.insert(name.to_string(), (1, vec![rhs.parse::<f64>().unwrap()]));
+        } else if let Ok(x) = rhs.parse::<f64>() {
+            // other right-hand sides (`complex(…)`, calls) are not numbers of the export
+            out.insert(name.to_string(), (1, vec![x]));
         }
     }
     out

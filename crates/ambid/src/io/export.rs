@@ -23,6 +23,7 @@ mod mat5;
 pub mod mimo;
 mod npz;
 mod script;
+pub mod uncertain;
 
 use ambid_core::lti::{PolyModel, StateSpace};
 
@@ -98,6 +99,16 @@ pub enum ExportError {
     ChannelName {
         /// The name.
         name: String,
+    },
+    /// Two per-line vectors of an export differ in length.
+    #[error("{what} has {got} entries, but the export has {expected} frequency lines: give one value per line")]
+    Length {
+        /// Which variable.
+        what: &'static str,
+        /// Entries given.
+        got: usize,
+        /// Lines.
+        expected: usize,
     },
     /// Writing the `.npz` archive failed.
     #[error("cannot write the .npz archive: {0}")]
