@@ -77,6 +77,12 @@ enum Command {
     /// Campbell diagram of the 4-axis twin: the true closed-loop modes (frequency, damping,
     /// forward/backward whirl) against rotor speed, with the 1× line; writes the CSV.
     Campbell(campbell::CampbellArgs),
+    /// The uncertainty of a nominal plant model over frequency (FRF confidence carried through
+    /// the fit, significant model error), the stable minimum-phase weight W of order <= 4 that
+    /// overbounds it, the robust stability of the controller against P = Pnom (1 + W Delta), and
+    /// the uncertain model for MATLAB (ultidyn x W) and Python; writes uncertainty.csv,
+    /// robust.csv, summary.json and uncertain.{m,mat,npz,json}.
+    Uncertainty(uncertainty::UncertaintyArgs),
 }
 
 fn main() {
@@ -122,5 +128,6 @@ fn dispatch(cli: Cli) -> Result<()> {
         Command::Validate(a) => validate::validate(a),
         Command::Bla(a) => bla::bla(a),
         Command::Campbell(a) => campbell::campbell(a),
+        Command::Uncertainty(a) => uncertainty::uncertainty(a),
     }
 }

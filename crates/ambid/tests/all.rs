@@ -50,6 +50,7 @@ mod stages;
 mod stepped_sine;
 mod study;
 mod summary_golden;
+mod uncertainty_cli;
 mod uncertainty_export;
 mod validation_stages;
 mod workflow;

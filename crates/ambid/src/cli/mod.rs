@@ -23,4 +23,5 @@ pub mod run;
 pub mod simulate;
 pub mod simulate4;
 pub mod study;
+pub mod uncertainty;
 pub mod validate;

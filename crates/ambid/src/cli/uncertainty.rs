@@ -1,0 +1,301 @@
+//! `ambid uncertainty`: the uncertainty of a nominal plant model around the measured plant FRF
+//! (terms (a)–(d) per line, docs/uncertainty.md), the stable minimum-phase weight of order ≤ 4
+//! that overbounds it, the robust stability of the loop's controller against it, and the
+//! uncertain model exported for MATLAB and Python.
+
+use super::args::parse_band;
+use super::common::{frf_input, WeightsArg};
+use ambid::io::export::uncertain::{
+    uncertain_json, uncertain_mat_bytes, uncertain_matlab_script, uncertain_npz_bytes,
+    UncertainModel, UncertainNames,
+};
+use ambid::io::model::read_model_json;
+use ambid::io::{read_controller, OutputSet};
+use ambid::uncertainty::analyse;
+use ambid_core::validate::uncertainty::{ExtraTerms, UncertaintyOptions};
+use ambid_core::validate::weight::{DEFAULT_COVER, MAX_WEIGHT_ORDER};
+use anyhow::Result;
+use clap::Args;
+use serde_json::json;
+use std::path::{Path, PathBuf};
+
+#[derive(Args)]
+pub struct UncertaintyArgs {
+    /// FRF CSV (as written by `ambid frf`) with the measured plant and its standard deviations.
+    frf: PathBuf,
+    /// The nominal model JSON (`ambid fit`, `compare-models`, or a workflow's models/<name>.json);
+    /// its input is the plant input u, its output y; unstable poles are kept.
+    #[arg(long)]
+    model: PathBuf,
+    /// Controller file (TOML/JSON) of the loop, for the robust-stability check.
+    #[arg(long)]
+    controller: PathBuf,
+    /// Quantity of the FRF file that is the plant.
+    #[arg(long, default_value = "plant")]
+    quantity: String,
+    /// Sample rate of the data in Hz (default: the `fs_hz` column of the FRF file).
+    #[arg(long)]
+    fs: Option<f64>,
+    /// Band `f_min:f_max` in Hz (default: where the file measures the plant reliably, the rule of
+    /// `compare-models`; printed).
+    #[arg(long, value_parser = parse_band)]
+    band: Option<(f64, f64)>,
+    /// Probability that the bound covers the error at one line (the terms' quantile).
+    #[arg(long, default_value_t = 0.95)]
+    line_coverage: f64,
+    /// Highest order of the weight (0–4).
+    #[arg(long, default_value_t = MAX_WEIGHT_ORDER)]
+    max_order: usize,
+    /// Fraction of the lines the weight overbounds (1: all; the default leaves out the 2 % that
+    /// stand out most, the narrow peaks at the plant's anti-resonances, which are listed).
+    #[arg(long, default_value_t = DEFAULT_COVER)]
+    cover: f64,
+    /// Output directory: uncertainty.csv, robust.csv, summary.json and the uncertain model
+    /// (uncertain.m, uncertain.mat, uncertain.npz, uncertain.json).
+    #[arg(long, default_value = "uncertainty")]
+    out: PathBuf,
+    /// Replace those files if they exist (other files in the directory are left alone).
+    #[arg(long)]
+    force: bool,
+}
+
+/// The files `uncertainty` writes into `--out`.
+const FILES: [&str; 7] = [
+    "uncertainty.csv",
+    "robust.csv",
+    "summary.json",
+    "uncertain.m",
+    "uncertain.mat",
+    "uncertain.npz",
+    "uncertain.json",
+];
+
+fn csv_bytes(header: &[String], columns: &[&[f64]]) -> Result<Vec<u8>> {
+    let mut w = csv::Writer::from_writer(Vec::new());
+    w.write_record(header)?;
+    let n = columns.first().map_or(0, |c| c.len());
+    for k in 0..n {
+        w.write_record(columns.iter().map(|c| format!("{:.17e}", c[k])))?;
+    }
+    w.into_inner().map_err(|e| anyhow::anyhow!("{}", e.error()))
+}
+
+fn path_in(dir: &Path, f: &str) -> PathBuf {
+    dir.join(f)
+}
+
+pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
+    for f in FILES {
+        OutputSet::check(&path_in(&a.out, f), a.force)?;
+    }
+    if !(a.line_coverage > 0.0 && a.line_coverage < 1.0) {
+        return Err(ambid::error::Error::usage(format!(
+            "--line-coverage must lie in (0, 1), e.g. 0.95; got {}",
+            a.line_coverage
+        ))
+        .into());
+    }
+    if !(a.cover > 0.0 && a.cover <= 1.0) {
+        return Err(ambid::error::Error::usage(format!(
+            "--cover must lie in (0, 1], e.g. 0.98 or 1 (every line); got {}",
+            a.cover
+        ))
+        .into());
+    }
+    if a.max_order > MAX_WEIGHT_ORDER {
+        return Err(ambid::error::Error::usage(format!(
+            "--max-order is at most {MAX_WEIGHT_ORDER} (a low-order weight for controller design); got {}",
+            a.max_order
+        ))
+        .into());
+    }
+    let input = frf_input(&a.frf, &a.quantity, a.fs, a.band, WeightsArg::Variance, 1)?;
+    if input.frd.variance().is_none() {
+        return Err(ambid::error::Error::input(format!(
+            "{}: `{}_std` is zero everywhere; the uncertainty needs the FRF's standard deviations (an FRF of `ambid frf` from several periods or realisations)",
+            a.frf.display(),
+            a.quantity
+        ))
+        .into());
+    }
+    let band = input.opts.band_hz.unwrap_or((0.0, f64::INFINITY));
+    let frd = input.frd.band(band.0, band.1)?;
+    let model = read_model_json(&a.model)?;
+    let ctrl = read_controller(&a.controller)?;
+    let ts = frd.ts().unwrap_or(1.0 / ctrl.fs_hz());
+    ctrl.check_ts(ts)?;
+    let analysis = analyse(
+        &model,
+        &frd,
+        ctrl.state_space(),
+        &ExtraTerms::default(),
+        &UncertaintyOptions {
+            line_coverage: a.line_coverage,
+            ..UncertaintyOptions::default()
+        },
+        a.max_order,
+        a.cover,
+    )?;
+    let t = &analysis.terms;
+    let w = &analysis.weight;
+    let r = &analysis.robust;
+
+    // the per-line table
+    let wmag = w.weight.magnitude(&t.f_hz);
+    let cols: Vec<Vec<f64>> = vec![
+        t.f_hz.clone(),
+        t.nominal.iter().map(|x| x.re).collect(),
+        t.nominal.iter().map(|x| x.im).collect(),
+        t.measured.iter().map(|x| x.re).collect(),
+        t.measured.iter().map(|x| x.im).collect(),
+        t.misfit.clone(),
+        t.frf_confidence.clone(),
+        t.model_error.clone(),
+        t.additive.clone(),
+        t.multiplicative.clone(),
+        wmag.clone(),
+    ];
+    let header: Vec<String> = [
+        "f_hz",
+        "nominal_re",
+        "nominal_im",
+        "measured_re",
+        "measured_im",
+        "misfit",
+        "term_frf_confidence",
+        "term_model_error",
+        "bound_additive",
+        "bound_multiplicative",
+        "weight_mag",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    let refs: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
+    let table = csv_bytes(&header, &refs)?;
+    let robust_csv = csv_bytes(&["f_hz".into(), "mu".into()], &[&r.f_hz, &r.mu])?;
+
+    let names = UncertainNames {
+        name: "uncertain_plant".into(),
+        input: "u".into(),
+        output: "y".into(),
+    };
+    let u = UncertainModel {
+        nominal: &model,
+        weight: w,
+        terms: t,
+        robust: Some(r),
+    };
+    let fin = |x: Option<f64>| x.filter(|x| x.is_finite());
+    let covered = wmag
+        .iter()
+        .zip(&t.multiplicative)
+        .filter(|(m, l)| *m >= *l)
+        .count();
+    let summary = json!({
+        "frf": a.frf.display().to_string(),
+        "model": a.model.display().to_string(),
+        "controller": a.controller.display().to_string(),
+        "band_hz": [band.0, band.1],
+        "band_from_file": a.band.is_none(),
+        "lines": t.f_hz.len(),
+        "line_coverage": t.line_coverage,
+        "window_half_lines": t.window_half_lines,
+        "weight": {
+            "order": w.weight.order(),
+            "looseness": w.looseness,
+            "per_order": w.per_order,
+            "cover": a.cover,
+            "lines_covered": covered,
+            "uncovered_hz": w.uncovered_hz,
+        },
+        "robust": {
+            "nominal_stable": r.nominal_stable,
+            "robustly_stable": r.robustly_stable,
+            "stability_margin": r.stability_margin,
+            "mu_peak": r.mu_peak,
+            "mu_peak_hz": r.mu_peak_hz,
+            "upper_gain_margin": fin(r.upper_gain_margin),
+            "upper_gain_margin_unlimited": r.upper_gain_margin == Some(f64::INFINITY),
+            "lower_gain_margin": fin(r.lower_gain_margin),
+        },
+    });
+
+    let mut set = OutputSet::new(a.force);
+    set.write(&path_in(&a.out, "uncertainty.csv"), &table)?;
+    set.write(&path_in(&a.out, "robust.csv"), &robust_csv)?;
+    set.write(
+        &path_in(&a.out, "summary.json"),
+        serde_json::to_string_pretty(&summary)?.as_bytes(),
+    )?;
+    set.write(
+        &path_in(&a.out, "uncertain.m"),
+        uncertain_matlab_script(&u, &names)?.as_bytes(),
+    )?;
+    set.write(
+        &path_in(&a.out, "uncertain.mat"),
+        &uncertain_mat_bytes(&u, &names)?,
+    )?;
+    set.write(
+        &path_in(&a.out, "uncertain.npz"),
+        &uncertain_npz_bytes(&u, &names)?,
+    )?;
+    set.write(
+        &path_in(&a.out, "uncertain.json"),
+        serde_json::to_string_pretty(&uncertain_json(&u, &names)?)?.as_bytes(),
+    )?;
+
+    println!(
+        "uncertainty over {} lines in {:.4}–{:.4} Hz (line coverage {:.0} %, misfit window ±{} lines)",
+        t.f_hz.len(),
+        band.0,
+        band.1,
+        100.0 * t.line_coverage,
+        t.window_half_lines
+    );
+    println!(
+        "weight: order {}, looseness {:.2} (median |W|/bound), covers {} of {} lines{}",
+        w.weight.order(),
+        w.looseness,
+        covered,
+        t.f_hz.len(),
+        if w.uncovered_hz.is_empty() {
+            String::new()
+        } else {
+            format!(
+                " (above it: {})",
+                w.uncovered_hz
+                    .iter()
+                    .map(|f| format!("{f:.1} Hz"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        }
+    );
+    let margin = |x: Option<f64>| match x {
+        Some(g) if g.is_infinite() => "unlimited".to_string(),
+        Some(g) => format!("{g:.3}"),
+        None => "-".to_string(),
+    };
+    println!(
+        "robust stability: {} (max |W T| = {:.3} at {:.1} Hz, margin {:.3}); robust gain margins: down to {}, up to {}",
+        if r.robustly_stable {
+            "yes"
+        } else if r.nominal_stable {
+            "NO (the nominal loop is stable, the uncertain set is not)"
+        } else {
+            "NO (the nominal loop is unstable)"
+        },
+        r.mu_peak,
+        r.mu_peak_hz,
+        r.stability_margin,
+        margin(r.lower_gain_margin),
+        margin(r.upper_gain_margin),
+    );
+    let written = set.commit()?;
+    println!("written: {}", written.len());
+    for p in written {
+        println!("  {}", p.display());
+    }
+    Ok(())
+}

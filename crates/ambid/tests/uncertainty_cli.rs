@@ -1,0 +1,231 @@
+//! `ambid uncertainty` end to end on a random rig of the twin that the uncertainty rules were not
+//! developed on (rig 11; development rigs: nominal and 1–8): simulate → frf → fit (state space of
+//! order 8, the loop's unstable pole count) → uncertainty. Checked against the twin's exact
+//! linearised plant and controller (independent of the whole identification chain):
+//!
+//! * the robust upper gain margin is conservative and useful (issue 23's bar): the true loop is
+//!   stable with the gain raised by 90 % of it, and it is at least half the true plant's margin;
+//!   the same for the lower margin;
+//! * the files agree with each other: the weight of `uncertain.m` (zero–pole–gain) evaluated on
+//!   the lines equals `weight_mag` of `uncertainty.csv` to 1e-12, and the lines where it lies
+//!   below the bound are exactly the ones the summary lists (at most 2 % + 1 of them);
+//! * bad input: an FRF without standard deviations, a model of another sample rate, and options
+//!   out of range give a clear error and write nothing.
+
+use crate::common::{self, ambid, text};
+use crate::export::script_numbers;
+use ambid::uncertainty::{loop_stable, nominal_gain_interval};
+use ambid_core::c64;
+use std::f64::consts::PI;
+use std::path::Path;
+
+const RIG: &str = "11";
+
+fn ok(args: &[&str]) -> String {
+    let o = ambid(args);
+    let t = text(&o);
+    assert!(o.status.success(), "ambid {args:?}: {t}");
+    t
+}
+
+/// simulate → frf → fit in `dir`; returns nothing, the files are `sim/`, `frf.csv`, `model.json`.
+fn identify(dir: &Path) {
+    let d = |f: &str| dir.join(f).to_str().unwrap().to_string();
+    ok(&["simulate", "--rig-seed", RIG, "--out", &d("sim")]);
+    ok(&[
+        "frf",
+        &d("sim/data.csv"),
+        "--controller",
+        &d("sim/controller.toml"),
+        "--out",
+        &d("frf.csv"),
+    ]);
+    ok(&[
+        "fit",
+        &d("frf.csv"),
+        "--quantity",
+        "plant",
+        "--structure",
+        "ss",
+        "--order",
+        "8",
+        "--controller",
+        &d("sim/controller.toml"),
+        "--out",
+        &d("model.json"),
+    ]);
+}
+
+fn column(csv: &str, name: &str) -> Vec<f64> {
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let k = header.iter().position(|h| *h == name).unwrap();
+    lines
+        .map(|l| l.split(',').nth(k).unwrap().parse().unwrap())
+        .collect()
+}
+
+#[test]
+fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
+    let dir = common::tmpdir("uncertainty-cli");
+    identify(&dir);
+    let d = |f: &str| dir.join(f).to_str().unwrap().to_string();
+    let out = ok(&[
+        "uncertainty",
+        &d("frf.csv"),
+        "--model",
+        &d("model.json"),
+        "--controller",
+        &d("sim/controller.toml"),
+        "--out",
+        &d("unc"),
+    ]);
+    println!("{out}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("unc/summary.json")).unwrap())
+            .unwrap();
+    let r = &summary["robust"];
+    assert_eq!(r["nominal_stable"], true, "{summary}");
+    assert_eq!(r["robustly_stable"], true, "{summary}");
+
+    // the twin's exact plant and controller
+    let rig = ambid_twin::random_rig(RIG.parse().unwrap()).unwrap();
+    let twin = ambid_twin::Twin::new(rig).unwrap();
+    let (plant, ctrl) = (twin.plant(), twin.controller());
+    let (true_lo, true_hi) = nominal_gain_interval(plant, ctrl).unwrap();
+    let g_hi = r["upper_gain_margin"].as_f64().unwrap();
+    let g_lo = r["lower_gain_margin"].as_f64().unwrap();
+    println!("robust gain margins {g_lo:.3}..{g_hi:.3}, true {true_lo:.3}..{true_hi:.3}");
+    assert!(g_hi > 1.0 && g_lo < 1.0);
+    assert!(loop_stable(plant, ctrl, 1.0 + 0.9 * (g_hi - 1.0)).unwrap());
+    assert!(loop_stable(plant, ctrl, 1.0 - 0.9 * (1.0 - g_lo)).unwrap());
+    assert!(g_hi - 1.0 >= 0.5 * (true_hi - 1.0), "{g_hi} vs {true_hi}");
+    assert!(1.0 - g_lo >= 0.5 * (1.0 - true_lo), "{g_lo} vs {true_lo}");
+
+    // the files agree: the script's weight on the lines is the table's weight_mag
+    let table = std::fs::read_to_string(dir.join("unc/uncertainty.csv")).unwrap();
+    let f = column(&table, "f_hz");
+    let wmag = column(&table, "weight_mag");
+    let bound = column(&table, "bound_multiplicative");
+    let v = script_numbers(&std::fs::read_to_string(dir.join("unc/uncertain.m")).unwrap());
+    let ts = v["Ts"].1[0];
+    let zs: Vec<c64> = v["W_zeros_re"]
+        .1
+        .iter()
+        .zip(&v["W_zeros_im"].1)
+        .map(|(a, b)| c64::new(*a, *b))
+        .collect();
+    let ps: Vec<c64> = v["W_poles_re"]
+        .1
+        .iter()
+        .zip(&v["W_poles_im"].1)
+        .map(|(a, b)| c64::new(*a, *b))
+        .collect();
+    assert_eq!(zs.len(), ps.len());
+    assert!(ps.len() <= 4 && ps.iter().chain(&zs).all(|q| q.norm() < 1.0));
+    for (fk, m) in f.iter().zip(&wmag) {
+        let z = c64::from_polar(1.0, 2.0 * PI * fk * ts);
+        let w = zs
+            .iter()
+            .fold(c64::new(v["W_gain"].1[0], 0.0), |a, q| a * (z - q))
+            / ps.iter().fold(c64::new(1.0, 0.0), |a, q| a * (z - q));
+        assert!(
+            (w.norm() - m).abs() <= 1e-12 * m,
+            "{fk} Hz: {} vs {m}",
+            w.norm()
+        );
+    }
+    let below: Vec<f64> = f
+        .iter()
+        .zip(wmag.iter().zip(&bound))
+        .filter(|(_, (m, l))| m < l)
+        .map(|(f, _)| *f)
+        .collect();
+    let listed: Vec<f64> = summary["weight"]["uncovered_hz"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    assert_eq!(below.len(), listed.len(), "{below:?} vs {listed:?}");
+    assert!(below.iter().zip(&listed).all(|(a, b)| (a - b).abs() < 1e-9));
+    assert!(below.len() as f64 <= 0.02 * f.len() as f64 + 1.0);
+    assert_eq!(summary["lines"].as_u64().unwrap() as usize, f.len());
+
+    // how much of the true error the weight covers here (printed: the coverage bar is over
+    // ≥ 100 runs, docs/uncertainty.md)
+    let nom_re = column(&table, "nominal_re");
+    let nom_im = column(&table, "nominal_im");
+    let truth = plant.freq_response_siso(&f).unwrap();
+    let covered = (0..f.len())
+        .filter(|&k| {
+            let p = c64::new(nom_re[k], nom_im[k]);
+            (truth[k] - p).norm() / p.norm() <= wmag[k]
+        })
+        .count();
+    println!(
+        "rig {RIG}: |W| covers the true relative error on {covered} of {} lines",
+        f.len()
+    );
+}
+
+#[test]
+fn uncertainty_refuses_bad_input_and_writes_nothing() {
+    let dir = common::tmpdir("uncertainty-cli-bad");
+    identify(&dir);
+    let d = |f: &str| dir.join(f).to_str().unwrap().to_string();
+    let run = |extra: &[&str], frf: &str, model: &str| {
+        let mut args = vec![
+            "uncertainty".to_string(),
+            frf.to_string(),
+            "--model".into(),
+            model.to_string(),
+            "--controller".into(),
+            d("sim/controller.toml"),
+            "--out".into(),
+            d("bad"),
+        ];
+        args.extend(extra.iter().map(|s| s.to_string()));
+        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+        let o = ambid(&refs);
+        assert!(!o.status.success(), "{extra:?} should fail");
+        assert!(!dir.join("bad").exists(), "{extra:?} wrote files");
+        text(&o)
+    };
+    // an FRF whose standard deviations are all zero
+    let frf = std::fs::read_to_string(dir.join("frf.csv")).unwrap();
+    let mut lines = frf.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let mut zeroed = header.join(",") + "\n";
+    for l in lines {
+        let row: Vec<String> = l
+            .split(',')
+            .zip(&header)
+            .map(|(v, h)| {
+                if h.ends_with("_std") {
+                    "0".to_string()
+                } else {
+                    v.to_string()
+                }
+            })
+            .collect();
+        zeroed.push_str(&(row.join(",") + "\n"));
+    }
+    std::fs::write(dir.join("frf0.csv"), zeroed).unwrap();
+    let t = run(&["--band", "10:1000"], &d("frf0.csv"), &d("model.json"));
+    assert!(t.contains("standard deviations"), "{t}");
+    // a model of another sample rate
+    let m = std::fs::read_to_string(dir.join("model.json")).unwrap();
+    let mut j: serde_json::Value = serde_json::from_str(&m).unwrap();
+    j["ts"] = serde_json::json!(1e-4);
+    std::fs::write(dir.join("model_ts.json"), j.to_string()).unwrap();
+    let t = run(&[], &d("frf.csv"), &d("model_ts.json"));
+    assert!(t.contains("sample time"), "{t}");
+    // options out of range
+    let t = run(&["--cover", "1.5"], &d("frf.csv"), &d("model.json"));
+    assert!(t.contains("--cover"), "{t}");
+    let t = run(&["--max-order", "5"], &d("frf.csv"), &d("model.json"));
+    assert!(t.contains("--max-order"), "{t}");
+    let t = run(&["--line-coverage", "1"], &d("frf.csv"), &d("model.json"));
+    assert!(t.contains("--line-coverage"), "{t}");
+}
