@@ -15,6 +15,7 @@ pub mod experiment;
 pub mod fitting;
 pub mod frf_stream;
 pub mod io;
+pub mod physical;
 pub mod report;
 pub mod stage;
 pub mod stepped_sine;

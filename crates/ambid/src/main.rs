@@ -83,6 +83,11 @@ enum Command {
     /// the uncertain model for MATLAB (ultidyn x W) and Python; writes uncertainty.csv,
     /// robust.csv, summary.json and uncertain.{m,mat,npz,json}.
     Uncertainty(uncertainty::UncertaintyArgs),
+    /// Physical parameters from the measured plant (gray box): k_i and k_x, the bending mode's
+    /// frequency, damping and mode shape with confidence intervals, from the FRF, an identified
+    /// black-box model (for the starts), the controller and the drawing (rotor mass, inertia,
+    /// bearing positions, amplifier and sensor); writes physical.json.
+    Physical(physical::PhysicalArgs),
 }
 
 fn main() {
@@ -129,5 +134,6 @@ fn dispatch(cli: Cli) -> Result<()> {
         Command::Bla(a) => bla::bla(a),
         Command::Campbell(a) => campbell::campbell(a),
         Command::Uncertainty(a) => uncertainty::uncertainty(a),
+        Command::Physical(a) => physical::physical(a),
     }
 }

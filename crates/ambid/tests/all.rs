@@ -37,6 +37,8 @@ mod models_stage;
 mod order_rigs;
 mod parallel_levels;
 mod pem_rigs;
+mod physical_cli;
+mod physical_twin;
 mod real_data_defaults;
 mod reconstruct_twin;
 mod report_browser;

@@ -6,6 +6,7 @@ pub mod arx_mimo;
 pub mod freqfit;
 pub mod freqfit_mimo;
 pub mod freqfit_ss;
+pub mod graybox;
 pub mod order;
 pub mod pem;
 mod qr_stream;

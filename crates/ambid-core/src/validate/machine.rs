@@ -753,7 +753,7 @@ fn refine_peak(
 
 /// Quantile $z_p$ of the standard normal distribution (Acklam's rational approximation,
 /// relative error below $1.2 \cdot 10^{-9}$), for $0 < p < 1$.
-fn normal_quantile(p: f64) -> f64 {
+pub(crate) fn normal_quantile(p: f64) -> f64 {
     const A: [f64; 6] = [
         -3.969_683_028_665_376e1,
         2.209_460_984_245_205e2,

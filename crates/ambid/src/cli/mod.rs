@@ -19,6 +19,7 @@ pub mod frf4;
 pub mod info;
 pub mod init;
 pub mod order;
+pub mod physical;
 pub mod run;
 pub mod simulate;
 pub mod simulate4;

@@ -1,0 +1,136 @@
+//! Physical parameters from the identified plant (issue 23, gray box): one call for
+//! `ambid physical` ([`estimate`]) and the twin check of the same chain on a rig
+//! ([`PhysicalRun`]), which the tests and the `physical_rigs` example run. The model, the starts
+//! and the intervals are documented in [`ambid_core::estimate::graybox`].
+
+use crate::error::{Context, Error, Result};
+use crate::experiment::{run, ExcitationPlan, Experiment};
+use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
+use ambid_core::estimate::freqfit_ss::{ss_frd, SsFreqOptions};
+pub use ambid_core::estimate::graybox::{
+    fit_physical, Drawing, Hints, PhysicalFit, PhysicalOptions, PhysicalParams, PARAMETER_NAMES,
+};
+use ambid_core::lti::{Frd, StateSpace};
+use ambid_core::validate::compare::unstable_poles_from_loop;
+use ambid_twin::{random_rig, Mode, TwinConfig};
+
+/// The physical parameters from the plant FRF `frd` with the drawing, loop B's controller and
+/// the starts taken from the identified black-box `model` ([`Hints::from_model`]).
+///
+/// # Errors
+/// Those of [`Hints::from_model`] and [`fit_physical`], with the step named.
+pub fn estimate(
+    frd: &Frd,
+    model: &StateSpace,
+    drawing: &Drawing,
+    controller_b: &StateSpace,
+    opts: &PhysicalOptions,
+) -> Result<PhysicalFit> {
+    let hints = Hints::from_model(model).context("the starting values from the black-box model")?;
+    fit_physical(frd, drawing, controller_b, &hints, opts).context("the gray-box fit")
+}
+
+/// The drawing of a twin rig: what its configuration says about the rotor, bearings, amplifier
+/// and sensor (gains 1: the twin's records are in A and m), one sample of computation delay.
+pub fn twin_drawing(cfg: &TwinConfig) -> Drawing {
+    Drawing {
+        mass_kg: cfg.rotor.mass_kg,
+        inertia_kgm2: cfg.rotor.inertia(),
+        bearing_a_m: cfg.rotor.bearing_a_m,
+        bearing_b_m: cfg.rotor.bearing_b_m,
+        amplifier_bandwidth_hz: cfg.amplifier.bandwidth_hz,
+        sensor_bandwidth_hz: cfg.sensor.bandwidth_hz,
+        amplifier_gain: 1.0,
+        sensor_gain: 1.0,
+        delay_samples: 1,
+    }
+}
+
+/// The band of a twin run's FRF \[Hz\] (as the uncertainty run's).
+pub const TWIN_BAND_HZ: (f64, f64) = crate::uncertainty::TWIN_BAND_HZ;
+
+/// One run of the chain on the twin: the seed experiment on rig `rig` (0 = nominal) with noise
+/// seed `seed`, the period-averaged plant FRF, a black-box state-space fit of order 8 with the
+/// loop's unstable pole count (for the starts), [`estimate`], and the truth.
+#[derive(Debug, Clone)]
+pub struct PhysicalRun {
+    /// The estimate.
+    pub fit: PhysicalFit,
+    /// The twin's linearisation and rotor values, in the same form.
+    pub truth: PhysicalParams,
+}
+
+impl PhysicalRun {
+    /// Runs the chain (type docs).
+    ///
+    /// # Errors
+    /// Any step's error.
+    pub fn on_twin(rig: u64, seed: u64, mode: Mode) -> Result<Self> {
+        let twin = if rig == 0 {
+            TwinConfig::default()
+        } else {
+            random_rig(rig).context("drawing the rig")?
+        };
+        let exp = Experiment {
+            twin,
+            excitation: ExcitationPlan::default(),
+            mode,
+            seed,
+            noise: true,
+            record_b: false,
+        };
+        let out = run(&exp)?;
+        let controller = out.twin.controller().clone();
+        let frd = out.periodic_frf(TWIN_BAND_HZ, None)?.plant;
+        let unstable = unstable_poles_from_loop(&frd, &controller, None).ok();
+        let opts = FreqFitOptions {
+            weights: FreqWeights::InverseVariance,
+            max_unstable_poles: unstable,
+            ..FreqFitOptions::default()
+        };
+        let model = ss_frd(&frd, 8, &opts, &SsFreqOptions::default())
+            .map_err(|e| Error::other(format!("the black-box model: {e}")))?
+            .model;
+        let cfg = out.twin.config();
+        let fit = estimate(
+            &frd,
+            &model,
+            &twin_drawing(cfg),
+            &controller,
+            &PhysicalOptions::default(),
+        )?;
+        let lp = out.twin.linear_params();
+        // the mode shape's sign is reported with φ_A > 0
+        let sign = if cfg.rotor.mode_shape_a < 0.0 {
+            -1.0
+        } else {
+            1.0
+        };
+        let truth = PhysicalParams {
+            k_i: lp.k_i,
+            k_x: lp.k_x,
+            bending_hz: cfg.rotor.bending_freq_hz,
+            bending_damping: cfg.rotor.bending_damping,
+            mode_shape_a: sign * cfg.rotor.mode_shape_a,
+            mode_shape_b: sign * cfg.rotor.mode_shape_b,
+        };
+        Ok(Self { fit, truth })
+    }
+
+    /// The truth as an array in the order of [`PARAMETER_NAMES`].
+    pub fn truth_array(&self) -> [f64; 6] {
+        as_array(&self.truth)
+    }
+}
+
+/// The parameters as an array in the order of [`PARAMETER_NAMES`].
+pub fn as_array(p: &PhysicalParams) -> [f64; 6] {
+    [
+        p.k_i,
+        p.k_x,
+        p.bending_hz,
+        p.bending_damping,
+        p.mode_shape_a,
+        p.mode_shape_b,
+    ]
+}
