@@ -32,6 +32,11 @@ pub enum Step {
     Reconstruction,
     /// ISO 14839-3 sensitivity zone.
     Iso,
+    /// The chosen model's uncertainty bound, its weight and the controller's robust stability
+    /// (issue 23; not in the default list: `steps = [..., "uncertainty"]`).
+    Uncertainty,
+    /// Physical parameters by a gray-box fit (issue 23; not in the default list).
+    Physical,
 }
 
 impl Step {
@@ -41,6 +46,7 @@ impl Step {
     pub fn prerequisites(self) -> &'static [Step] {
         match self {
             Step::Order | Step::Models | Step::Iso => &[Step::Frf],
+            Step::Uncertainty | Step::Physical => &[Step::Frf, Step::Models],
             Step::PoleZero | Step::Validation | Step::Reconstruction => &[Step::Models],
             _ => &[],
         }
@@ -73,7 +79,8 @@ impl Step {
         (all, added)
     }
 
-    /// Every step, in order.
+    /// The steps a workflow runs when it names none, in order (every step but the
+    /// [`Step::OPTIONAL`] ones).
     pub const ALL: [Step; 11] = [
         Step::Excitation,
         Step::Amplitude,
@@ -102,8 +109,14 @@ impl Step {
             Step::Validation => "validation",
             Step::Reconstruction => "reconstruction",
             Step::Iso => "iso",
+            Step::Uncertainty => "uncertainty",
+            Step::Physical => "physical",
         }
     }
+
+    /// The steps that run only when named (they add seconds to the main job and need what the
+    /// default steps give: the FRF and the chosen model).
+    pub const OPTIONAL: [Step; 2] = [Step::Uncertainty, Step::Physical];
 }
 
 /// Where the data come from.
@@ -197,6 +210,10 @@ pub struct WorkflowConfig {
     /// the whole-machine procedure instead of the single-axis one.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub machine: Option<MachineSection>,
+    /// The drawing for the `physical` step with recorded files (on the twin its configuration
+    /// gives it): `ambid_core::estimate::graybox::Drawing`'s keys, docs/physical.md.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub physical: Option<ambid_core::estimate::graybox::Drawing>,
 }
 
 impl Default for WorkflowConfig {
@@ -219,6 +236,7 @@ impl Default for WorkflowConfig {
             reconstruction: ReconstructionSection::default(),
             iso: IsoSection::default(),
             machine: None,
+            physical: None,
         }
     }
 }

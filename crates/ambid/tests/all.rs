@@ -57,4 +57,5 @@ mod uncertainty_export;
 mod validation_stages;
 mod workflow;
 mod workflow_rigs;
+mod workflow_robust;
 mod x0_rigs;

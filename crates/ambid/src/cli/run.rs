@@ -49,11 +49,17 @@ pub fn run(a: RunArgs) -> Result<()> {
         for s in steps {
             let step = Step::ALL
                 .into_iter()
+                .chain(Step::OPTIONAL)
                 .find(|x| x.name() == s.trim())
                 .ok_or_else(|| {
                     config_failure(format!(
                         "--steps: unknown step `{s}` (steps: {})",
-                        Step::ALL.map(|x| x.name()).join(", ")
+                        Step::ALL
+                            .into_iter()
+                            .chain(Step::OPTIONAL)
+                            .map(|x| x.name())
+                            .collect::<Vec<_>>()
+                            .join(", ")
                     ))
                 })?;
             v.push(step);

@@ -27,6 +27,7 @@ mod render_signal;
 mod render_validation;
 mod steps_frf;
 mod steps_models;
+mod steps_robust;
 mod steps_signal;
 mod steps_validate;
 mod summary;
@@ -804,6 +805,8 @@ fn dispatch(ctx: &mut Ctx<'_>, step: Step) -> Result<StepStatus, Error> {
         Step::Validation => steps_validate::validation(ctx),
         Step::Reconstruction => steps_validate::reconstruction(ctx),
         Step::Iso => steps_validate::iso(ctx),
+        Step::Uncertainty => steps_robust::uncertainty(ctx),
+        Step::Physical => steps_robust::physical(ctx),
     }
 }
 

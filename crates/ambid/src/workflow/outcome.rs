@@ -49,6 +49,12 @@ pub struct Summary {
     /// The ISO 14839-3 verdict (`iso.*`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub iso: Option<IsoSummary>,
+    /// The chosen model's uncertainty and robust stability (`uncertainty.*`, optional step).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<super::steps_robust::UncertaintySummary>,
+    /// The gray-box physical parameters (`physical.*`, optional step).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub physical: Option<super::steps_robust::PhysicalSummary>,
     /// The amplitude study (`amplitude.*`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub amplitude: Option<crate::stage::AmplitudeStage>,

@@ -1,0 +1,116 @@
+//! The optional workflow steps of issue 23, `uncertainty` and `physical`, on the default twin
+//! (nonlinear, the workflow's own record and chosen model), checked against the twin's exact
+//! linearisation (independent truth):
+//!
+//! * naming them runs the FRF and models steps they need;
+//! * `uncertainty`: the report section and `summary.json`'s entry; the robust gain margins are
+//!   conservative and useful against the true loop (stable with the gain moved 90 % of the way to
+//!   either margin, each margin at least half the true one);
+//! * `physical`: k_i and k_x within 2 %, the bending frequency within 0.5 % of the twin's values,
+//!   which the section shows beside the estimates;
+//! * with recorded files and no `[physical]` drawing the step is skipped with the reason; with
+//!   the drawing it runs and meets the same bars.
+
+use ambid::uncertainty::loop_stable;
+use ambid::workflow::{run, Progress, Step, Verbosity, WorkflowConfig};
+use ambid_twin::{Twin, TwinConfig};
+use std::path::Path;
+
+#[test]
+fn uncertainty_and_physical_steps_on_the_twin() {
+    let (all, _) = Step::with_prerequisites(&[Step::Uncertainty, Step::Physical]);
+    assert_eq!(
+        all,
+        vec![Step::Frf, Step::Models, Step::Uncertainty, Step::Physical]
+    );
+    let cfg = WorkflowConfig {
+        steps: Some(all),
+        ..WorkflowConfig::default()
+    };
+    let out = run(&cfg, Path::new("."), &mut Progress::new(Verbosity::Quiet)).unwrap();
+    let sm = &out.summary;
+    let ids: Vec<&str> = out.report.sections.iter().map(|s| s.id.as_str()).collect();
+    assert!(
+        ids.contains(&"uncertainty") && ids.contains(&"physical"),
+        "{ids:?}"
+    );
+
+    let twin = Twin::new(TwinConfig::default()).unwrap();
+    let u = &sm["uncertainty"];
+    println!("{}", serde_json::to_string_pretty(u).unwrap());
+    assert_eq!(u["robustly_stable"], true);
+    let (g_lo, g_hi) = (
+        u["lower_gain_margin"].as_f64().unwrap(),
+        u["upper_gain_margin"].as_f64().unwrap(),
+    );
+    let t = u["twin_gain_interval"].as_array().unwrap();
+    let (t_lo, t_hi) = (t[0].as_f64().unwrap(), t[1].as_f64().unwrap());
+    assert!(loop_stable(twin.plant(), twin.controller(), 1.0 + 0.9 * (g_hi - 1.0)).unwrap());
+    assert!(loop_stable(twin.plant(), twin.controller(), 1.0 - 0.9 * (1.0 - g_lo)).unwrap());
+    assert!(g_hi - 1.0 >= 0.5 * (t_hi - 1.0) && 1.0 - g_lo >= 0.5 * (1.0 - t_lo));
+
+    let p = &sm["physical"]["parameters"];
+    println!("{}", serde_json::to_string_pretty(p).unwrap());
+    let lp = twin.linear_params();
+    for (k, truth, tol) in [
+        (0, lp.k_i, 0.02),
+        (1, lp.k_x, 0.02),
+        (2, TwinConfig::default().rotor.bending_freq_hz, 0.005),
+    ] {
+        let e = p[k]["estimate"].as_f64().unwrap();
+        assert!(
+            ((e - truth) / truth).abs() < tol,
+            "{}: {e} vs {truth}",
+            p[k]["name"]
+        );
+        assert_eq!(p[k]["twin"].as_f64().unwrap(), truth);
+    }
+}
+
+#[test]
+fn physical_with_files_needs_the_drawing_section() {
+    // the seed record of the twin, written as files (the workflow then knows no drawing)
+    let dir = crate::common::tmpdir("workflow-physical-files");
+    let d = |f: &str| dir.join(f).to_str().unwrap().to_string();
+    let o = crate::common::ambid(&["simulate", "--out", &d("sim")]);
+    assert!(o.status.success(), "{}", crate::common::text(&o));
+    let wf = "steps = [\"frf\", \"models\", \"physical\"]\nsource = \"files\"\n[data]\nidentification = \"sim/data.csv\"\ncontroller = \"sim/controller.toml\"\nperiod_samples = 5115\n";
+    std::fs::write(dir.join("wf.toml"), wf).unwrap();
+    let o = crate::common::ambid(&["run", &d("wf.toml"), "--out", &d("out"), "-q"]);
+    let t = crate::common::text(&o);
+    assert!(o.status.success(), "{t}");
+    let read = |f: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(dir.join(f)).unwrap()).unwrap()
+    };
+    assert!(read("out/summary.json").get("physical").is_none());
+    let html = std::fs::read_to_string(dir.join("out/report.html")).unwrap();
+    assert!(
+        html.contains("no drawing: add a [physical] section"),
+        "the skip reason is in the report"
+    );
+    // with the drawing (the nominal twin's) the step runs and meets the bars
+    let cfg = TwinConfig::default();
+    let r = &cfg.rotor;
+    let drawing = format!(
+        "[physical]\nmass_kg = {:?}\ninertia_kgm2 = {:?}\nbearing_a_m = {:?}\nbearing_b_m = {:?}\namplifier_bandwidth_hz = {:?}\nsensor_bandwidth_hz = {:?}\n",
+        r.mass_kg, r.inertia(), r.bearing_a_m, r.bearing_b_m, cfg.amplifier.bandwidth_hz, cfg.sensor.bandwidth_hz
+    );
+    std::fs::write(dir.join("wf2.toml"), format!("{wf}{drawing}")).unwrap();
+    let o = crate::common::ambid(&["run", &d("wf2.toml"), "--out", &d("out2"), "-q"]);
+    assert!(o.status.success(), "{}", crate::common::text(&o));
+    let p = read("out2/summary.json")["physical"]["parameters"].clone();
+    let lp = Twin::new(cfg.clone()).unwrap().linear_params();
+    for (k, truth, tol) in [
+        (0, lp.k_i, 0.02),
+        (1, lp.k_x, 0.02),
+        (2, r.bending_freq_hz, 0.005),
+    ] {
+        let e = p[k]["estimate"].as_f64().unwrap();
+        assert!(
+            ((e - truth) / truth).abs() < tol,
+            "{}: {e} vs {truth}",
+            p[k]["name"]
+        );
+        assert!(p[k].get("twin").is_none(), "files: no twin values");
+    }
+}
