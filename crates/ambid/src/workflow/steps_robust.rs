@@ -373,6 +373,67 @@ pub fn physical(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         e.get(e.len() / 2).copied().unwrap_or(f64::NAN)
     };
     let (eg, eb) = (med(&fit.model), med(&model));
+    // |P| in dB: the measured FRF, the gray box, the chosen black box (and the twin's plant)
+    let f = frd.f_hz().to_vec();
+    let db = |v: &[ambid_core::c64]| -> Vec<f64> {
+        v.iter()
+            .map(|x| 20.0 * x.norm().max(1e-300).log10())
+            .collect()
+    };
+    let mut curves = vec![Series {
+        name: "measured FRF".into(),
+        x: f.clone(),
+        y: db(frd.values()),
+        style: Style::Markers(Marker::Dot),
+        color: Some(0),
+    }];
+    for (label, m, style, color) in [
+        ("gray box", &fit.model, Style::Line, 1),
+        ("chosen black-box model", &model, Style::Dashed, 2),
+    ] {
+        if let Ok(r) = m.freq_response_siso(&f) {
+            curves.push(Series {
+                name: label.into(),
+                x: f.clone(),
+                y: db(&r),
+                style,
+                color: Some(color),
+            });
+        }
+    }
+    if let Some(tw) = ctx.twin.as_ref() {
+        if let Ok(r) = tw.twin.plant().freq_response_siso(&f) {
+            curves.push(Series {
+                name: "twin: exact plant".into(),
+                x: f.clone(),
+                y: db(&r),
+                style: Style::Dashed,
+                color: Some(4),
+            });
+        }
+    }
+    let figure = Block::Figure(Figure {
+        id: "physical_bode".into(),
+        title: "Gray box against the FRF and the black-box model".into(),
+        caption: "|P| in dB on the models' band: the measured plant FRF, the gray-box model at the estimated parameters and the chosen black-box model.".into(),
+        panels: vec![Panel {
+            title: String::new(),
+            x: Axis {
+                label: "frequency [Hz]".into(),
+                scale: Scale::Log,
+                range: None,
+            },
+            y: Axis {
+                label: "|P| [dB]".into(),
+                scale: Scale::Linear,
+                range: None,
+            },
+            content: PanelContent::Xy(curves),
+            spans: vec![],
+            equal_aspect: false,
+        }],
+        columns: 1,
+    });
     let (ratio, (rlo, rhi)) = fit.ratio();
     let blocks = vec![
         Block::Text(format!(
@@ -384,6 +445,7 @@ pub fn physical(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             100.0 * eg,
             100.0 * eb
         )),
+        figure,
         Block::Table(Table {
             id: "physical".into(),
             caption: "Physical parameters with their 95 % intervals (the mode shape with φ_A > 0)."
