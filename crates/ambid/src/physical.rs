@@ -12,7 +12,7 @@ pub use ambid_core::estimate::graybox::{
 };
 use ambid_core::lti::{Frd, StateSpace};
 use ambid_core::validate::compare::unstable_poles_from_loop;
-use ambid_twin::{random_rig, Mode, TwinConfig};
+use ambid_twin::{random_rig, Mode, Twin, TwinConfig};
 
 /// The physical parameters from the plant FRF `frd` with the drawing, loop B's controller and
 /// the starts taken from the identified black-box `model` ([`Hints::from_model`]).
@@ -44,6 +44,37 @@ pub fn twin_drawing(cfg: &TwinConfig) -> Drawing {
         sensor_gain: 1.0,
         delay_samples: 1,
     }
+}
+
+/// The twin's true values of the parameters: $k_i$, $k_x$ of its linearisation and its rotor's
+/// bending mode, the mode shape with $\varphi_A > 0$ (as the estimate reports it).
+pub fn twin_truth(twin: &Twin) -> PhysicalParams {
+    let (lp, r) = (twin.linear_params(), &twin.config().rotor);
+    let sign = if r.mode_shape_a < 0.0 { -1.0 } else { 1.0 };
+    PhysicalParams {
+        k_i: lp.k_i,
+        k_x: lp.k_x,
+        bending_hz: r.bending_freq_hz,
+        bending_damping: r.bending_damping,
+        mode_shape_a: sign * r.mode_shape_a,
+        mode_shape_b: sign * r.mode_shape_b,
+    }
+}
+
+/// The median over the FRF's lines of $|M - G|/|G|$, the comparison of a model with the
+/// measured plant (`NaN` for an empty FRF).
+///
+/// # Errors
+/// When the model's response cannot be evaluated on the lines.
+pub fn median_rel_error(model: &StateSpace, frd: &Frd) -> Result<f64> {
+    let r = model.freq_response_siso(frd.f_hz())?;
+    let mut e: Vec<f64> = r
+        .iter()
+        .zip(frd.values())
+        .map(|(a, g)| (a - g).norm() / g.norm())
+        .collect();
+    e.sort_by(f64::total_cmp);
+    Ok(e.get(e.len() / 2).copied().unwrap_or(f64::NAN))
 }
 
 /// The band of a twin run's FRF \[Hz\] (as the uncertainty run's).
@@ -91,30 +122,17 @@ impl PhysicalRun {
         let model = ss_frd(&frd, 8, &opts, &SsFreqOptions::default())
             .map_err(|e| Error::other(format!("the black-box model: {e}")))?
             .model;
-        let cfg = out.twin.config();
         let fit = estimate(
             &frd,
             &model,
-            &twin_drawing(cfg),
+            &twin_drawing(out.twin.config()),
             &controller,
             &PhysicalOptions::default(),
         )?;
-        let lp = out.twin.linear_params();
-        // the mode shape's sign is reported with φ_A > 0
-        let sign = if cfg.rotor.mode_shape_a < 0.0 {
-            -1.0
-        } else {
-            1.0
-        };
-        let truth = PhysicalParams {
-            k_i: lp.k_i,
-            k_x: lp.k_x,
-            bending_hz: cfg.rotor.bending_freq_hz,
-            bending_damping: cfg.rotor.bending_damping,
-            mode_shape_a: sign * cfg.rotor.mode_shape_a,
-            mode_shape_b: sign * cfg.rotor.mode_shape_b,
-        };
-        Ok(Self { fit, truth })
+        Ok(Self {
+            fit,
+            truth: twin_truth(&out.twin),
+        })
     }
 
     /// The truth as an array in the order of [`PARAMETER_NAMES`].

@@ -7,9 +7,9 @@ use super::common::{frf_input, twin_config, TwinArgs, WeightsArg};
 use ambid::io::model::{read_model_json, state_space_json};
 use ambid::io::{read_controller, OutputSet};
 use ambid::physical::{
-    as_array, estimate, twin_drawing, Drawing, PhysicalOptions, PARAMETER_NAMES,
+    as_array, estimate, median_rel_error, twin_drawing, twin_truth, Drawing, PhysicalOptions,
+    PARAMETER_NAMES,
 };
-use ambid_core::lti::{Frd, StateSpace};
 use anyhow::{Context, Result};
 use clap::Args;
 use serde_json::json;
@@ -58,18 +58,6 @@ pub struct PhysicalArgs {
 
 const UNITS: [&str; 6] = ["N/A", "N/m", "Hz", "-", "kg^-1/2", "kg^-1/2"];
 
-/// Median over the lines of |M − G| / |G|.
-fn median_rel_error(m: &StateSpace, frd: &Frd) -> Result<f64> {
-    let r = m.freq_response_siso(frd.f_hz())?;
-    let mut e: Vec<f64> = r
-        .iter()
-        .zip(frd.values())
-        .map(|(a, g)| (a - g).norm() / g.norm())
-        .collect();
-    e.sort_by(f64::total_cmp);
-    Ok(e.get(e.len() / 2).copied().unwrap_or(f64::NAN))
-}
-
 pub fn physical(a: PhysicalArgs) -> Result<()> {
     OutputSet::check(&a.out, a.force)?;
     if !(a.confidence > 0.0 && a.confidence < 1.0) {
@@ -92,18 +80,11 @@ pub fn physical(a: PhysicalArgs) -> Result<()> {
             (d, None)
         }
         None => {
-            let cfg = twin_config(&a.twin)?;
-            let twin = ambid_twin::Twin::new(cfg.clone())?;
-            let lp = twin.linear_params();
-            let t = [
-                lp.k_i,
-                lp.k_x,
-                cfg.rotor.bending_freq_hz,
-                cfg.rotor.bending_damping,
-                cfg.rotor.mode_shape_a.abs(),
-                cfg.rotor.mode_shape_b * cfg.rotor.mode_shape_a.signum(),
-            ];
-            (twin_drawing(&cfg), Some(t))
+            let twin = ambid_twin::Twin::new(twin_config(&a.twin)?)?;
+            (
+                twin_drawing(twin.config()),
+                Some(as_array(&twin_truth(&twin))),
+            )
         }
     };
     let input = frf_input(&a.frf, &a.quantity, a.fs, a.band, WeightsArg::Variance, 1)?;

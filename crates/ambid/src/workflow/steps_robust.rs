@@ -5,7 +5,8 @@
 use super::{Ctx, StepStatus};
 use crate::error::Error;
 use crate::physical::{
-    as_array, estimate, twin_drawing, Drawing, PhysicalOptions, PARAMETER_NAMES,
+    as_array, estimate, median_rel_error, twin_drawing, twin_truth, Drawing, PhysicalOptions,
+    PARAMETER_NAMES,
 };
 use crate::report::{
     Axis, Block, Figure, Marker, NoteKind, Panel, PanelContent, Scale, Section, Series, Style,
@@ -301,22 +302,7 @@ pub fn physical(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     };
     let (drawing, truth): (Drawing, Option<[f64; 6]>) = match (&ctx.twin, &ctx.cfg.physical) {
         (_, Some(d)) => (*d, None),
-        (Some(tw), None) => {
-            let lp = tw.twin.linear_params();
-            let r = &tw.cfg.rotor;
-            let sign = if r.mode_shape_a < 0.0 { -1.0 } else { 1.0 };
-            (
-                twin_drawing(&tw.cfg),
-                Some([
-                    lp.k_i,
-                    lp.k_x,
-                    r.bending_freq_hz,
-                    r.bending_damping,
-                    sign * r.mode_shape_a,
-                    sign * r.mode_shape_b,
-                ]),
-            )
-        }
+        (Some(tw), None) => (twin_drawing(&tw.cfg), Some(as_array(&twin_truth(&tw.twin)))),
         (None, None) => {
             return Ok(StepStatus::Skipped(
                 "no drawing: add a [physical] section (docs/physical.md)".into(),
@@ -360,18 +346,7 @@ pub fn physical(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     if truth.is_some() {
         header.push("twin".into());
     }
-    let med = |m: &StateSpace| -> f64 {
-        let Ok(r) = m.freq_response_siso(frd.f_hz()) else {
-            return f64::NAN;
-        };
-        let mut e: Vec<f64> = r
-            .iter()
-            .zip(frd.values())
-            .map(|(a, g)| (a - g).norm() / g.norm())
-            .collect();
-        e.sort_by(f64::total_cmp);
-        e.get(e.len() / 2).copied().unwrap_or(f64::NAN)
-    };
+    let med = |m: &StateSpace| median_rel_error(m, &frd).unwrap_or(f64::NAN);
     let (eg, eb) = (med(&fit.model), med(&model));
     // |P| in dB: the measured FRF, the gray box, the chosen black box (and the twin's plant)
     let f = frd.f_hz().to_vec();
