@@ -19,37 +19,7 @@ fn ok(args: &[&str]) -> String {
 fn physical_on_rig_12_meets_the_bars_with_the_twin_or_a_drawing_file() {
     let dir = common::tmpdir("physical-cli");
     let d = |f: &str| dir.join(f).to_str().unwrap().to_string();
-    ok(&[
-        "simulate",
-        "--rig-seed",
-        "12",
-        "--mode",
-        "linear",
-        "--out",
-        &d("sim"),
-    ]);
-    ok(&[
-        "frf",
-        &d("sim/data.csv"),
-        "--controller",
-        &d("sim/controller.toml"),
-        "--out",
-        &d("frf.csv"),
-    ]);
-    ok(&[
-        "fit",
-        &d("frf.csv"),
-        "--quantity",
-        "plant",
-        "--structure",
-        "ss",
-        "--order",
-        "8",
-        "--controller",
-        &d("sim/controller.toml"),
-        "--out",
-        &d("model.json"),
-    ]);
+    common::identify_on_twin(&dir, &["--rig-seed", "12", "--mode", "linear"]);
     let out = ok(&[
         "physical",
         &d("frf.csv"),

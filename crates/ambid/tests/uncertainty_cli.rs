@@ -17,7 +17,6 @@ use crate::export::script_numbers;
 use ambid::uncertainty::{loop_stable, nominal_gain_interval};
 use ambid_core::c64;
 use std::f64::consts::PI;
-use std::path::Path;
 
 const RIG: &str = "11";
 
@@ -26,34 +25,6 @@ fn ok(args: &[&str]) -> String {
     let t = text(&o);
     assert!(o.status.success(), "ambid {args:?}: {t}");
     t
-}
-
-/// simulate → frf → fit in `dir`; returns nothing, the files are `sim/`, `frf.csv`, `model.json`.
-fn identify(dir: &Path) {
-    let d = |f: &str| dir.join(f).to_str().unwrap().to_string();
-    ok(&["simulate", "--rig-seed", RIG, "--out", &d("sim")]);
-    ok(&[
-        "frf",
-        &d("sim/data.csv"),
-        "--controller",
-        &d("sim/controller.toml"),
-        "--out",
-        &d("frf.csv"),
-    ]);
-    ok(&[
-        "fit",
-        &d("frf.csv"),
-        "--quantity",
-        "plant",
-        "--structure",
-        "ss",
-        "--order",
-        "8",
-        "--controller",
-        &d("sim/controller.toml"),
-        "--out",
-        &d("model.json"),
-    ]);
 }
 
 fn column(csv: &str, name: &str) -> Vec<f64> {
@@ -68,7 +39,7 @@ fn column(csv: &str, name: &str) -> Vec<f64> {
 #[test]
 fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
     let dir = common::tmpdir("uncertainty-cli");
-    identify(&dir);
+    common::identify_on_twin(&dir, &["--rig-seed", RIG]);
     let d = |f: &str| dir.join(f).to_str().unwrap().to_string();
     let out = ok(&[
         "uncertainty",
@@ -172,7 +143,7 @@ fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
 #[test]
 fn uncertainty_refuses_bad_input_and_writes_nothing() {
     let dir = common::tmpdir("uncertainty-cli-bad");
-    identify(&dir);
+    common::identify_on_twin(&dir, &["--rig-seed", RIG]);
     let d = |f: &str| dir.join(f).to_str().unwrap().to_string();
     let run = |extra: &[&str], frf: &str, model: &str| {
         let mut args = vec![

@@ -304,3 +304,45 @@ pub fn check_model_size(n: usize, params: usize, what: &str) -> Result<()> {
     }
     Ok(())
 }
+
+/// What `uncertainty` and `physical` read: the plant FRF with its standard deviations on the band
+/// (given, or where the file measures it reliably), the nominal model and the loop's controller,
+/// its sample time checked against the FRF's.
+pub struct ModelOnFrf {
+    pub frd: ambid_core::lti::Frd,
+    pub band: (f64, f64),
+    pub model: ambid_core::lti::StateSpace,
+    pub controller: ambid::io::ControllerModel,
+}
+
+/// Reads [`ModelOnFrf`]; `needs` says what the standard deviations are needed for (the error
+/// when they are all zero).
+pub fn model_on_frf(
+    frf: &Path,
+    quantity: &str,
+    fs: Option<f64>,
+    band: Option<(f64, f64)>,
+    model: &Path,
+    controller: &Path,
+    needs: &str,
+) -> Result<ModelOnFrf> {
+    let input = frf_input(frf, quantity, fs, band, WeightsArg::Variance, 1)?;
+    if input.frd.variance().is_none() {
+        return Err(ambid::error::Error::input(format!(
+            "{}: `{quantity}_std` is zero everywhere; {needs}",
+            frf.display()
+        ))
+        .into());
+    }
+    let band = input.opts.band_hz.unwrap_or((0.0, f64::INFINITY));
+    let frd = input.frd.band(band.0, band.1)?;
+    let model = ambid::io::model::read_model_json(model)?;
+    let controller = ambid::io::read_controller(controller)?;
+    controller.check_ts(frd.ts().unwrap_or(1.0 / controller.fs_hz()))?;
+    Ok(ModelOnFrf {
+        frd,
+        band,
+        model,
+        controller,
+    })
+}

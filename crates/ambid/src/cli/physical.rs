@@ -3,9 +3,9 @@
 //! box, docs/physical.md); the gray-box model beside the black-box one.
 
 use super::args::parse_band;
-use super::common::{frf_input, twin_config, TwinArgs, WeightsArg};
-use ambid::io::model::{read_model_json, state_space_json};
-use ambid::io::{read_controller, OutputSet};
+use super::common::{model_on_frf, twin_config, ModelOnFrf, TwinArgs};
+use ambid::io::model::state_space_json;
+use ambid::io::OutputSet;
 use ambid::physical::{
     as_array, estimate, median_rel_error, twin_drawing, twin_truth, Drawing, PhysicalOptions,
     PARAMETER_NAMES,
@@ -87,21 +87,20 @@ pub fn physical(a: PhysicalArgs) -> Result<()> {
             )
         }
     };
-    let input = frf_input(&a.frf, &a.quantity, a.fs, a.band, WeightsArg::Variance, 1)?;
-    if input.frd.variance().is_none() {
-        return Err(ambid::error::Error::input(format!(
-            "{}: `{}_std` is zero everywhere; the gray-box fit weights the lines by the FRF's standard deviations",
-            a.frf.display(),
-            a.quantity
-        ))
-        .into());
-    }
-    let band = input.opts.band_hz.unwrap_or((0.0, f64::INFINITY));
-    let frd = input.frd.band(band.0, band.1)?;
-    let model = read_model_json(&a.model)?;
-    let ctrl = read_controller(&a.controller)?;
-    let ts = frd.ts().unwrap_or(1.0 / ctrl.fs_hz());
-    ctrl.check_ts(ts)?;
+    let ModelOnFrf {
+        frd,
+        band,
+        model,
+        controller: ctrl,
+    } = model_on_frf(
+        &a.frf,
+        &a.quantity,
+        a.fs,
+        a.band,
+        &a.model,
+        &a.controller,
+        "the gray-box fit weights the lines by the FRF's standard deviations",
+    )?;
     let fit = estimate(
         &frd,
         &model,

@@ -4,13 +4,12 @@
 //! uncertain model exported for MATLAB and Python.
 
 use super::args::parse_band;
-use super::common::{frf_input, WeightsArg};
+use super::common::{model_on_frf, ModelOnFrf};
 use ambid::io::export::uncertain::{
     uncertain_json, uncertain_mat_bytes, uncertain_matlab_script, uncertain_npz_bytes,
     UncertainModel, UncertainNames,
 };
-use ambid::io::model::read_model_json;
-use ambid::io::{read_controller, OutputSet};
+use ambid::io::OutputSet;
 use ambid::uncertainty::analyse;
 use ambid_core::validate::uncertainty::{ExtraTerms, UncertaintyOptions};
 use ambid_core::validate::weight::{DEFAULT_COVER, MAX_WEIGHT_ORDER};
@@ -109,21 +108,20 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         ))
         .into());
     }
-    let input = frf_input(&a.frf, &a.quantity, a.fs, a.band, WeightsArg::Variance, 1)?;
-    if input.frd.variance().is_none() {
-        return Err(ambid::error::Error::input(format!(
-            "{}: `{}_std` is zero everywhere; the uncertainty needs the FRF's standard deviations (an FRF of `ambid frf` from several periods or realisations)",
-            a.frf.display(),
-            a.quantity
-        ))
-        .into());
-    }
-    let band = input.opts.band_hz.unwrap_or((0.0, f64::INFINITY));
-    let frd = input.frd.band(band.0, band.1)?;
-    let model = read_model_json(&a.model)?;
-    let ctrl = read_controller(&a.controller)?;
-    let ts = frd.ts().unwrap_or(1.0 / ctrl.fs_hz());
-    ctrl.check_ts(ts)?;
+    let ModelOnFrf {
+        frd,
+        band,
+        model,
+        controller: ctrl,
+    } = model_on_frf(
+        &a.frf,
+        &a.quantity,
+        a.fs,
+        a.band,
+        &a.model,
+        &a.controller,
+        "the uncertainty needs the FRF's standard deviations (an FRF of `ambid frf` from several periods or realisations)",
+    )?;
     let analysis = analyse(
         &model,
         &frd,

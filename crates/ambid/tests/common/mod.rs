@@ -183,3 +183,41 @@ pub fn random_machine_rig(dir: &Path, seed: u64) -> ambid::config::MachineSectio
         ..Default::default()
     }
 }
+
+/// The single-axis chain on the twin in `dir`: `ambid simulate <simulate_args> --out sim`, `ambid
+/// frf` with the rig's controller, and a state-space fit of order 8 to the plant FRF with the
+/// loop's unstable pole count: `sim/`, `frf.csv`, `model.json` (the inputs of `uncertainty` and
+/// `physical`).
+pub fn identify_on_twin(dir: &Path, simulate_args: &[&str]) {
+    let d = |f: &str| dir.join(f).to_str().unwrap().to_string();
+    let run = |args: &[&str]| {
+        let o = ambid(args);
+        assert!(o.status.success(), "ambid {args:?}: {}", text(&o));
+    };
+    let sim = d("sim");
+    let mut args = vec!["simulate"];
+    args.extend_from_slice(simulate_args);
+    args.extend_from_slice(&["--out", &sim]);
+    run(&args);
+    let (data, ctrl, frf, model) = (
+        d("sim/data.csv"),
+        d("sim/controller.toml"),
+        d("frf.csv"),
+        d("model.json"),
+    );
+    run(&["frf", &data, "--controller", &ctrl, "--out", &frf]);
+    run(&[
+        "fit",
+        &frf,
+        "--quantity",
+        "plant",
+        "--structure",
+        "ss",
+        "--order",
+        "8",
+        "--controller",
+        &ctrl,
+        "--out",
+        &model,
+    ]);
+}
