@@ -4,7 +4,6 @@
 //! and the intervals are documented in [`ambid_core::estimate::graybox`].
 
 use crate::error::{Context, Error, Result};
-use crate::experiment::{run, ExcitationPlan, Experiment};
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::estimate::freqfit_ss::{ss_frd, SsFreqOptions};
 pub use ambid_core::estimate::graybox::{
@@ -12,7 +11,7 @@ pub use ambid_core::estimate::graybox::{
 };
 use ambid_core::lti::{Frd, StateSpace};
 use ambid_core::validate::compare::unstable_poles_from_loop;
-use ambid_twin::{random_rig, Mode, Twin, TwinConfig};
+use ambid_twin::{Mode, Twin, TwinConfig};
 
 /// The physical parameters from the plant FRF `frd` with the drawing, loop B's controller and
 /// the starts taken from the identified black-box `model` ([`Hints::from_model`]).
@@ -97,22 +96,8 @@ impl PhysicalRun {
     /// # Errors
     /// Any step's error.
     pub fn on_twin(rig: u64, seed: u64, mode: Mode) -> Result<Self> {
-        let twin = if rig == 0 {
-            TwinConfig::default()
-        } else {
-            random_rig(rig).context("drawing the rig")?
-        };
-        let exp = Experiment {
-            twin,
-            excitation: ExcitationPlan::default(),
-            mode,
-            seed,
-            noise: true,
-            record_b: false,
-        };
-        let out = run(&exp)?;
+        let (out, frd) = crate::uncertainty::twin_seed_frf(rig, seed, mode)?;
         let controller = out.twin.controller().clone();
-        let frd = out.periodic_frf(TWIN_BAND_HZ, None)?.plant;
         let unstable = unstable_poles_from_loop(&frd, &controller, None).ok();
         let opts = FreqFitOptions {
             weights: FreqWeights::InverseVariance,

@@ -143,23 +143,8 @@ impl UncertaintyRun {
     /// # Errors
     /// Any step's error.
     pub fn on_twin(rig: u64, seed: u64, mode: Mode) -> Result<Self> {
-        let twin = if rig == 0 {
-            TwinConfig::default()
-        } else {
-            random_rig(rig).context("drawing the rig")?
-        };
-        let exp = Experiment {
-            twin,
-            excitation: ExcitationPlan::default(),
-            mode,
-            seed,
-            noise: true,
-            record_b: false,
-        };
-        let out = run(&exp)?;
+        let (out, frd) = twin_seed_frf(rig, seed, mode)?;
         let controller = out.twin.controller().clone();
-        let cl = out.periodic_frf(TWIN_BAND_HZ, None)?;
-        let frd = cl.plant;
         let nominal = nominal_by_bic(&frd, &controller)?;
         let analysis = analyse(
             &nominal,
@@ -214,6 +199,35 @@ impl UncertaintyRun {
             median_ratio: mw / me,
         })
     }
+}
+
+/// The seed experiment on twin rig `rig` (0 = nominal, else `random_rig(rig)`) with noise seed
+/// `seed`, and its period-averaged plant FRF on [`TWIN_BAND_HZ`] (the twin checks of
+/// [`UncertaintyRun`] and [`crate::physical::PhysicalRun`]).
+///
+/// # Errors
+/// Drawing the rig, the simulation or the FRF.
+pub fn twin_seed_frf(
+    rig: u64,
+    seed: u64,
+    mode: Mode,
+) -> Result<(crate::experiment::ExperimentOutput, Frd)> {
+    let twin = if rig == 0 {
+        TwinConfig::default()
+    } else {
+        random_rig(rig).context("drawing the rig")?
+    };
+    let exp = Experiment {
+        twin,
+        excitation: ExcitationPlan::default(),
+        mode,
+        seed,
+        noise: true,
+        record_b: false,
+    };
+    let out = run(&exp)?;
+    let frd = out.periodic_frf(TWIN_BAND_HZ, None)?.plant;
+    Ok((out, frd))
 }
 
 /// The nominal model of a twin run (type docs of [`UncertaintyRun`]).

@@ -6,7 +6,7 @@
 use super::args::parse_band;
 use super::common::{model_on_frf, ModelOnFrf};
 use ambid::io::export::uncertain::{
-    uncertain_json, uncertain_mat_bytes, uncertain_matlab_script, uncertain_npz_bytes,
+    robust_json, uncertain_json, uncertain_mat_bytes, uncertain_matlab_script, uncertain_npz_bytes,
     UncertainModel, UncertainNames,
 };
 use ambid::io::OutputSet;
@@ -184,7 +184,6 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         terms: t,
         robust: Some(r),
     };
-    let fin = |x: Option<f64>| x.filter(|x| x.is_finite());
     let covered = wmag
         .iter()
         .zip(&t.multiplicative)
@@ -207,16 +206,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             "lines_covered": covered,
             "uncovered_hz": w.uncovered_hz,
         },
-        "robust": {
-            "nominal_stable": r.nominal_stable,
-            "robustly_stable": r.robustly_stable,
-            "stability_margin": r.stability_margin,
-            "mu_peak": r.mu_peak,
-            "mu_peak_hz": r.mu_peak_hz,
-            "upper_gain_margin": fin(r.upper_gain_margin),
-            "upper_gain_margin_unlimited": r.upper_gain_margin == Some(f64::INFINITY),
-            "lower_gain_margin": fin(r.lower_gain_margin),
-        },
+        "robust": robust_json(r),
     });
 
     let mut set = OutputSet::new(a.force);

@@ -305,19 +305,7 @@ pub fn uncertain_json(u: &UncertainModel<'_>, names: &UncertainNames) -> Result<
     let w = &u.weight.weight;
     let pairs = |v: Vec<ambid_core::c64>| v.iter().map(|x| [x.re, x.im]).collect::<Vec<_>>();
     let t = u.terms;
-    let robust = u.robust.map(|r| {
-        let fin = |x: Option<f64>| x.filter(|x| x.is_finite());
-        json!({
-            "nominal_stable": r.nominal_stable,
-            "robustly_stable": r.robustly_stable,
-            "stability_margin": r.stability_margin,
-            "mu_peak": r.mu_peak,
-            "mu_peak_hz": r.mu_peak_hz,
-            "upper_gain_margin": fin(r.upper_gain_margin),
-            "upper_gain_margin_unlimited": r.upper_gain_margin == Some(f64::INFINITY),
-            "lower_gain_margin": fin(r.lower_gain_margin),
-        })
-    });
+    let robust = u.robust.map(robust_json);
     Ok(json!({
         "kind": "uncertain_plant",
         "uncertainty": "multiplicative",
@@ -346,4 +334,21 @@ pub fn uncertain_json(u: &UncertainModel<'_>, names: &UncertainNames) -> Result<
         },
         "robust": robust,
     }))
+}
+
+/// The robust-stability figures as JSON (`summary.json` of `ambid uncertainty` and the `robust`
+/// object of [`uncertain_json`]): an unlimited gain margin is `null` with
+/// `upper_gain_margin_unlimited: true`.
+pub fn robust_json(r: &RobustStability) -> Json {
+    let fin = |x: Option<f64>| x.filter(|x| x.is_finite());
+    json!({
+        "nominal_stable": r.nominal_stable,
+        "robustly_stable": r.robustly_stable,
+        "stability_margin": r.stability_margin,
+        "mu_peak": r.mu_peak,
+        "mu_peak_hz": r.mu_peak_hz,
+        "upper_gain_margin": fin(r.upper_gain_margin),
+        "upper_gain_margin_unlimited": r.upper_gain_margin == Some(f64::INFINITY),
+        "lower_gain_margin": fin(r.lower_gain_margin),
+    })
 }
