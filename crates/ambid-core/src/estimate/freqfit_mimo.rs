@@ -137,6 +137,21 @@
 //! band (it gained $2\hat\sigma^2$ in 100 steps on the nominal twin) without changing the plant
 //! error.
 //!
+//! **Crawl stop.** Where the model class cannot hold the data (the nonlinear twin's best
+//! linear approximation, whose periodic distortion the variances do not show; a poor local
+//! minimum) the Gauss–Newton model keeps promising a large gain along a nearly flat direction
+//! while each trust-region step delivers a sliver of it, and the rule above never fires
+//! (nominal nonlinear twin, order 16: 200 steps, $\lVert z\rVert^2 \approx 1\,800\hat\sigma^2$
+//! promised to the end). The iteration therefore also stops when the last [`CRAWL_WINDOW`]
+//! $= 10$ accepted steps together gained less than $\kappa^2\hat\sigma^2/2$ in
+//! $\tfrac12\lVert r\rVert^2$ ([`StopReason::Crawl`]): as many steps again at that pace
+//! would gain less than the significance rule calls invisible. Measured 2026-11-29 with
+//! `mimo_fit_sweep` (nominal twin and random rigs 1, 2, 3, 5; orders 16, 20, 24; linear and
+//! nonlinear; seed 1): the 30 fits took 29 % less time in total (linear) and 37 % less
+//! (nonlinear); the plant error of the order BIC chooses did not change by more than
+//! 0.05 points on any of them, and the nominal nonlinear order-24 fit improved
+//! (5.4 % → 1.1 %, its probes ranked differently).
+//!
 //! **Continuation and parallel steps.** A refinement continues its probe with the probe's trust
 //! region ([`minimize_resumed`]; restarted, the radius began at its initial size and the first
 //! ten steps were spent shrinking it). Within a step the four input columns' linear problems,
@@ -235,7 +250,12 @@ fn lm_options(layout: &Layout, data: &Data, iterations: usize) -> Result<LmOptio
         .with_max_iterations(iterations.max(1))?
         .with_significance_tol(significance_kappa2(layout.n_theta).sqrt())?
         .with_triangle_part_rows((data.rows() / data.nu.max(1)).max(1))
+        .map(|o| o.with_crawl_window(CRAWL_WINDOW))
 }
+
+/// Accepted steps over which the refinement's progress is measured for the crawl stop
+/// ([`StopReason::Crawl`]; module docs, "Stopping").
+pub const CRAWL_WINDOW: usize = 10;
 
 /// How the entries of the FRF are weighted (module docs).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -678,7 +698,7 @@ pub fn subspace_singular_values(
 ///   no output sees) or the refinement fails; the message says what may help (usually: lower
 ///   the order or widen the band).
 pub fn ss_frd_mimo(frd: &Frd, order: usize, opts: &MimoFreqOptions) -> Result<MimoFreqFit> {
-    fit(frd, order, opts, None, None)
+    fit(frd, order, opts, None, None, None)
 }
 
 /// [`ss_frd_mimo`] held to models whose loop with `controller` is stable: the measured closed
@@ -717,6 +737,73 @@ pub fn ss_frd_mimo_in_loop(
     opts: &MimoFreqOptions,
     controller: &StateSpace,
 ) -> Result<MimoFreqFit> {
+    in_loop(frd, order, opts, controller, None)
+}
+
+/// [`ss_frd_mimo_in_loop`] from one given start, `start` (a model of another record of the same
+/// plant, e.g. the fit at a neighbouring speed): its $A$ and $C$ (in the data's channel
+/// scaling) are put in modal block form, the numerators fitted to `frd` by the linear step, and
+/// that single start is probed and refined as in the module docs; no vector-fitting starts, no
+/// race. The order is the start's. Meant for a sequence of records of one machine whose
+/// dynamics move a little from one to the next (the speeds of a Campbell run): the refinement
+/// from the neighbour's optimum is short, and the models of the sequence stay in one basin.
+/// Whether the result is as good as a fit from scratch is the caller's question (compare
+/// [`MimoFreqFit::normalised_cost`]).
+///
+/// # Errors
+/// As [`ss_frd_mimo_in_loop`]; also [`Error::DimensionMismatch`] for a start that is not
+/// $n_y \times n_u$, and [`Error::InvalidArgument`] for one at another sample time.
+///
+/// ```
+/// use ambid_core::estimate::freqfit_mimo::{ss_frd_mimo_in_loop, ss_frd_mimo_in_loop_from, MimoFreqOptions};
+/// use ambid_core::lti::{Frd, StateSpace};
+/// use faer::mat;
+/// // an unstable plant whose pole moves from 1.010 to 1.012, under a proportional controller
+/// let plant = |p: f64| StateSpace::discrete(mat![[p]], mat![[1.0]], mat![[1.0]], mat![[0.0]], 1e-3).unwrap();
+/// let c = StateSpace::discrete(mat![[0.0]], mat![[0.0]], mat![[0.0]], mat![[0.4]], 1e-3).unwrap();
+/// let f: Vec<f64> = (1..=40).map(|k| 10.0 * k as f64).collect();
+/// let o = MimoFreqOptions::default();
+/// let first = ss_frd_mimo_in_loop(&Frd::from_model(&plant(1.010), &f).unwrap(), 1, &o, &c).unwrap();
+/// let next = ss_frd_mimo_in_loop_from(&Frd::from_model(&plant(1.012), &f).unwrap(), &o, &c, &first.model)
+///     .unwrap();
+/// assert!((next.model.poles().unwrap()[0].re - 1.012).abs() < 1e-9);
+/// ```
+pub fn ss_frd_mimo_in_loop_from(
+    frd: &Frd,
+    opts: &MimoFreqOptions,
+    controller: &StateSpace,
+    start: &StateSpace,
+) -> Result<MimoFreqFit> {
+    if start.noutputs() != frd.ny() || start.ninputs() != frd.nu() {
+        return Err(Error::DimensionMismatch {
+            context: "ss_frd_mimo_in_loop_from: the start has the FRF's shape",
+            expected: format!("{} outputs x {} inputs", frd.ny(), frd.nu()),
+            got: format!("{} outputs x {} inputs", start.noutputs(), start.ninputs()),
+        });
+    }
+    same_sample_time("start", "model", start, frd)?;
+    in_loop(frd, start.order(), opts, controller, Some(start))
+}
+
+/// An error unless `model` (the argument `name`, a `kind`) is discrete at the FRF's sample time.
+fn same_sample_time(name: &'static str, kind: &str, model: &StateSpace, frd: &Frd) -> Result<()> {
+    match (model.ts(), frd.ts()) {
+        (Some(a), Some(b)) if (a - b).abs() <= 1e-12 * b.abs() => Ok(()),
+        (a, b) => Err(Error::invalid(
+            name,
+            format!("the {name}'s sample time {a:?} s differs from the FRF's {b:?} s; give a discrete {kind} at the data's sample time"),
+        )),
+    }
+}
+
+/// The checks of [`ss_frd_mimo_in_loop`], then the fit (from `warm` alone when given).
+fn in_loop(
+    frd: &Frd,
+    order: usize,
+    opts: &MimoFreqOptions,
+    controller: &StateSpace,
+    warm: Option<&StateSpace>,
+) -> Result<MimoFreqFit> {
     if controller.ninputs() != frd.ny() || controller.noutputs() != frd.nu() {
         return Err(Error::DimensionMismatch {
             context: "ss_frd_mimo_in_loop: the controller maps the plant's outputs to its inputs",
@@ -728,15 +815,7 @@ pub fn ss_frd_mimo_in_loop(
             ),
         });
     }
-    match (controller.ts(), frd.ts()) {
-        (Some(a), Some(b)) if (a - b).abs() <= 1e-12 * b.abs() => {}
-        (a, b) => {
-            return Err(Error::invalid(
-                "controller",
-                format!("the controller's sample time {a:?} s differs from the FRF's {b:?} s; give a discrete controller at the data's sample time"),
-            ))
-        }
-    }
+    same_sample_time("controller", "controller", controller, frd)?;
     // the unstable poles the measured loop shows (generalised Nyquist): an order or a limit
     // below that count cannot describe the plant
     let measured = crate::validate::nyquist::loop_unstable_poles(frd, controller)
@@ -760,7 +839,7 @@ pub fn ss_frd_mimo_in_loop(
             ));
         }
     }
-    fit(frd, order, opts, Some(controller), measured)
+    fit(frd, order, opts, Some(controller), measured, warm)
 }
 
 fn fit(
@@ -769,6 +848,7 @@ fn fit(
     opts: &MimoFreqOptions,
     controller: Option<&StateSpace>,
     measured_unstable: Option<usize>,
+    warm: Option<&StateSpace>,
 ) -> Result<MimoFreqFit> {
     if order == 0 {
         return Err(Error::invalid(
@@ -834,7 +914,23 @@ fn fit(
     }
 
     let delta: Vec<c64> = data.z.iter().map(|&z| (z - 1.0) / warp.h).collect();
-    let starts = starts(&data, &delta, &a_z, &c_z, order, warp.h, opts)?;
+    let starts = match warm {
+        Some(m) => {
+            // the given model in the data's channel scaling: C' = diag(1/a) C
+            let c = Mat::from_fn(m.noutputs(), m.order(), |i, j| m.c()[(i, j)] / data.a[i]);
+            let (layout, mut theta) = to_blocks(
+                &m.a().to_owned(),
+                &c,
+                warp.h,
+                data.ny,
+                data.nu,
+                opts.feedthrough,
+            )?;
+            Problem::new(&data, &layout, &delta, None).fit_linear(&mut theta)?;
+            vec![(layout, theta)]
+        }
+        None => starts(&data, &delta, &a_z, &c_z, order, warp.h, opts)?,
+    };
     let limit = opts.max_unstable_poles.or(measured_unstable);
     // every start probed; the most promising ones refined to the end; the lowest final cost
     // wins (the first error when none succeeds); the starts run in parallel, each on its own
@@ -2351,6 +2447,63 @@ mod tests {
         let fit = ss_frd_mimo_in_loop(&frd, 3, &MimoFreqOptions::default(), &c).unwrap();
         assert_eq!(fit.unstable_poles().unwrap(), 2);
         assert!(fit.errors.median_norm_relative < 1e-6, "{:?}", fit.errors);
+    }
+
+    /// A fit from a neighbour's model (the same two-unstable-pole plant with its poles and
+    /// one input gain moved a few per cent, as a speed moves a rotor's modes): the moved plant
+    /// is recovered to the exact data's precision from the neighbour's model alone, and a start
+    /// of another shape or sample time is refused.
+    #[test]
+    fn a_fit_from_a_neighbours_model_recovers_the_moved_plant() {
+        let ts = 1e-3;
+        let plant = |p1: f64, p2: f64, g: f64| {
+            StateSpace::discrete(
+                mat![[p1, 0.0, 0.0], [0.0, p2, 0.0], [0.0, 0.0, 0.7]],
+                mat![[1.0, 0.3], [0.2, g], [1.0, 1.0]],
+                mat![[0.02, 0.0, 0.01], [0.0, 0.02, -0.01]],
+                mat![[0.0, 0.0], [0.0, 0.0]],
+                ts,
+            )
+            .unwrap()
+        };
+        let diag = |v: f64| mat![[v, 0.0], [0.0, v]];
+        let c = StateSpace::discrete(diag(1.0), diag(0.02), diag(3.0), diag(3.0), ts).unwrap();
+        let f: Vec<f64> = (1..1000).map(|k| k as f64 * 0.5).collect();
+        let o = MimoFreqOptions::default();
+        let first = ss_frd_mimo_in_loop(
+            &Frd::from_model(&plant(1.02, 1.01, 1.0), &f).unwrap(),
+            3,
+            &o,
+            &c,
+        )
+        .unwrap();
+        let moved = plant(1.025, 1.008, 1.05);
+        assert!(moved.feedback(&c).unwrap().is_stable().unwrap());
+        let frd = Frd::from_model(&moved, &f).unwrap();
+        let next = ss_frd_mimo_in_loop_from(&frd, &o, &c, &first.model).unwrap();
+        assert_eq!(next.model.order(), 3);
+        assert_eq!(next.unstable_poles().unwrap(), 2);
+        assert!(next.errors.median_norm_relative < 1e-6, "{:?}", next.errors);
+        let mut poles: Vec<f64> = next.model.poles().unwrap().iter().map(|p| p.re).collect();
+        poles.sort_by(f64::total_cmp);
+        for (p, t) in poles.iter().zip([0.7, 1.008, 1.025]) {
+            assert!((p - t).abs() < 1e-6, "{poles:?}");
+        }
+        // a start of another shape, or at another sample time
+        let siso =
+            StateSpace::discrete(mat![[0.5]], mat![[1.0]], mat![[1.0]], mat![[0.0]], ts).unwrap();
+        let e = ss_frd_mimo_in_loop_from(&frd, &o, &c, &siso).unwrap_err();
+        assert!(matches!(e, Error::DimensionMismatch { .. }), "{e}");
+        let slow = StateSpace::discrete(
+            first.model.a().to_owned(),
+            first.model.b().to_owned(),
+            first.model.c().to_owned(),
+            first.model.d().to_owned(),
+            2.0 * ts,
+        )
+        .unwrap();
+        let e = ss_frd_mimo_in_loop_from(&frd, &o, &c, &slow).unwrap_err();
+        assert!(e.to_string().contains("sample time"), "{e}");
     }
 
     #[test]

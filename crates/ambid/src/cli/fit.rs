@@ -1108,6 +1108,9 @@ fn stop_reason_text(r: ambid_core::estimate::pem::lm::StopReason) -> &'static st
         StopReason::Stagnation => {
             "converged: within 0.5 standard errors of the optimum and no visible progress"
         }
+        StopReason::Crawl => {
+            "converged: the last steps gained less than the significance rule's threshold"
+        }
         StopReason::LossChange => "converged: loss change below the numerical tolerance",
         StopReason::StepSize => "converged: step below the numerical tolerance",
         StopReason::Gradient => "converged: gradient zero",

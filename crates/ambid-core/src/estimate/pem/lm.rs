@@ -54,6 +54,10 @@
 //! * [`StopReason::Stagnation`] (only with $\kappa > 0$): that step is shorter than
 //!   [`STAGNATION_SIGMA`] standard errors and the last [`STAGNATION_WINDOW`] accepted steps
 //!   lowered $\tfrac12\lVert r\rVert^2$ by less than $\kappa^2\hat\sigma^2/2$ in total;
+//! * [`StopReason::Crawl`] (only with $\kappa > 0$ and a crawl window $w > 0$,
+//!   [`LmOptions::with_crawl_window`]): the last $w$ accepted steps lowered
+//!   $\tfrac12\lVert r\rVert^2$ by less than $\kappa^2\hat\sigma^2/2$ in total, however much the
+//!   Gauss–Newton model still promises;
 //! * [`StopReason::MaxIterations`]: `max_iterations` accepted steps.
 //!
 //! Complexity per iteration: one Jacobian, one $O(m n^2)$ QR, a few $O(n^3)$ small QRs.
@@ -129,6 +133,12 @@ pub enum StopReason {
     /// half a standard error, and the trust region's progress towards it is too small to be
     /// seen in the data (a curved valley of the polynomial coefficients).
     Stagnation,
+    /// The last [`LmOptions::with_crawl_window`] accepted steps together lowered the loss by
+    /// less than the significance rule's $\kappa^2\hat\sigma^2/2$, while the Gauss–Newton model
+    /// still promised more: the iterate moves along a nearly flat direction whose promised gain
+    /// the steps do not deliver; as many steps again at that pace would gain less than the
+    /// significance rule calls invisible.
+    Crawl,
     /// The iteration limit was reached before any tolerance was met.
     MaxIterations,
     /// The problem asked to stop ([`LeastSquaresProblem::abandon`]) before convergence.
@@ -165,6 +175,7 @@ pub struct LmOptions {
     initial_radius: f64,
     extrapolate: bool,
     part_rows: usize,
+    crawl_window: usize,
 }
 
 impl Default for LmOptions {
@@ -180,6 +191,7 @@ impl Default for LmOptions {
             initial_radius: 100.0,
             extrapolate: false,
             part_rows: TRIANGLE_PART_ROWS,
+            crawl_window: 0,
         }
     }
 }
@@ -322,6 +334,26 @@ impl LmOptions {
         }
         self.part_rows = rows;
         Ok(self)
+    }
+    /// The crawl stop ([`StopReason::Crawl`]): with `significance_tol` $\kappa > 0$, stop when
+    /// the last `window` accepted steps together lowered $\tfrac12\lVert r\rVert^2$ by less
+    /// than $\kappa^2\hat\sigma^2/2$, whatever the Gauss–Newton step still promises. 0 (the
+    /// default) turns it off. For ill-conditioned problems whose model error is not noise (a
+    /// plant the model class cannot hold): the promised gain lies along a nearly flat
+    /// direction and the trust region delivers a sliver of it per step.
+    ///
+    /// # Example
+    /// ```
+    /// use ambid_core::estimate::pem::lm::LmOptions;
+    /// assert_eq!(LmOptions::default().with_crawl_window(10).crawl_window(), 10);
+    /// ```
+    pub fn with_crawl_window(mut self, window: usize) -> Self {
+        self.crawl_window = window;
+        self
+    }
+    /// The crawl window (0: off).
+    pub fn crawl_window(&self) -> usize {
+        self.crawl_window
     }
     /// Whether [`with_extrapolation`](Self::with_extrapolation) is on.
     pub fn extrapolation(&self) -> bool {
@@ -792,6 +824,10 @@ pub fn minimize_resumed<P: LeastSquaresProblem + ?Sized>(
             {
                 break StopReason::Stagnation;
             }
+            let w = opts.crawl_window;
+            if w > 0 && it >= w && costs[it - w] - costs[it] <= 0.5 * k2 * sigma2 {
+                break StopReason::Crawl;
+            }
         }
         if problem.abandon(
             0.5 * fnorm * fnorm,
@@ -922,7 +958,9 @@ pub fn minimize_resumed<P: LeastSquaresProblem + ?Sized>(
     report.ended_on_boundary = match reason {
         StopReason::Gradient => false,
         // not at a minimum: the Gauss–Newton step says nothing, keep the last trial's verdict
-        StopReason::MaxIterations | StopReason::Abandoned => report.ended_on_boundary,
+        StopReason::MaxIterations | StopReason::Abandoned | StopReason::Crawl => {
+            report.ended_on_boundary
+        }
         StopReason::LossChange
         | StopReason::StepSize
         | StopReason::Significance
