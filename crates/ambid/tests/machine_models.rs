@@ -336,6 +336,31 @@ fn campbell_from_identified_models_at_five_speeds() {
     };
     let (data, out) = fitted(&m, 1);
     assert_eq!(out.models.len(), speeds.len(), "{:?}", out.notes);
+    // the orders are scanned at the reference speed (the middle one); every other speed fits
+    // its choice, and scans the rest only where that choice is not admissible (with a note)
+    let reference = out
+        .comparison
+        .iter()
+        .find(|r| r.chosen && r.speed_rpm == 15_000.0)
+        .map(|r| r.order)
+        .expect("a model at the reference speed");
+    for &s in speeds.iter().filter(|&&s| s != 15_000.0) {
+        let rows: Vec<usize> = out
+            .comparison
+            .iter()
+            .filter(|r| r.speed_rpm == s)
+            .map(|r| r.order)
+            .collect();
+        let fell_back = out
+            .notes
+            .iter()
+            .any(|n| n.starts_with(&format!("{s} rpm: order {reference} (the reference")));
+        assert!(
+            rows == vec![reference] || (fell_back && rows.contains(&reference)),
+            "{s} rpm: orders {rows:?}, reference order {reference}, notes {:?}",
+            out.notes
+        );
+    }
     let cfg = data.twin.as_ref().unwrap();
     let mut worst = 0.0f64;
     for &s in &speeds {

@@ -549,7 +549,8 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
         // the whole-machine procedure (docs/workflow.md, "Whole machine"); the models come
         // through its seam, `machine::MachineModels`: `[machine] models = "fit"` selects the
         // MIMO fitter (`"fit-all"`: every candidate order); the default stays `MeasuredOnly`
-        // because the fitter takes about 10–25 s per speed on 2 cores (docs/benchmarks.md)
+        // because the fitter takes 17–20 s for the default three speeds of the nonlinear twin on 2
+        // cores (docs/benchmarks.md)
         let models = cfg.machine.as_ref().map(|m| m.models.as_str());
         return if let Some(kind @ ("fit" | "fit-all")) = models {
             machine::run_with(
@@ -558,6 +559,7 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
                 progress,
                 &machine_fit::FrequencyFitter {
                     stop_at_noise_level: kind == "fit",
+                    order_from_reference_speed: kind == "fit",
                     ..Default::default()
                 },
             )
