@@ -800,7 +800,7 @@ impl FrequencyFitter {
         others.extend(above?);
         if let Some(o) = order {
             notes.push(format!(
-                "Orders: {} scanned at the reference speed {} rpm (the middle of the list), which chose order {o}; the other speeds fit order {o} (the plant has the same states at every speed) and scan the rest only where it gives no admissible model — `[machine] models = \"fit-all\"` scans every order at every speed",
+                "Orders: {} scanned at the reference speed {} rpm (the middle of the list), which chose order {o}; every other speed fits order {o} (the plant has the same states at every speed) starting from its inner neighbour's model, from scratch where that fit is not admissible, and scans the rest only where no fit of order {o} is admissible — `[machine] models = \"fit-all\"` scans every order at every speed, each from scratch",
                 self.orders.iter().map(ToString::to_string).collect::<Vec<_>>().join(", "),
                 input.speeds[kr].speed_rpm
             ));
