@@ -881,38 +881,6 @@ fn fit(
     let warp = Warp::new(&data.f_hz, data.ts);
     let (sv, u) = projected(&data, &warp, q)?;
 
-    // (A, C) in ζ, then in z
-    let o = u.subcols(0, order);
-    let o_up = o.subrows(0, (q - 1) * ny).to_owned();
-    let o_dn = o.subrows(ny, (q - 1) * ny).to_owned();
-    let a_zeta = linalg::lstsq(o_up.as_ref(), o_dn.as_ref()).map_err(|e| {
-        Error::numerical(
-            CTX,
-            format!("the shift equation of the subspace step is degenerate ({e}); lower the order or raise the horizon"),
-        )
-    })?;
-    let c_zeta = o.subrows(0, ny).to_owned();
-    let eye = Mat::<f64>::identity(order, order);
-    let den = &eye + &a_zeta * warp.a;
-    let num = &a_zeta + &eye * warp.a;
-    let a_z = linalg::solve(den.as_ref(), num.as_ref()).map_err(|_| {
-        Error::numerical(
-            CTX,
-            "the subspace step placed a pole at infinity; lower the order or narrow the band",
-        )
-    })?;
-    let c_z = &c_zeta * (&eye - &a_z * warp.a);
-    if a_z
-        .col_iter()
-        .flat_map(|c| c.iter().copied())
-        .any(|v| !v.is_finite())
-    {
-        return Err(Error::numerical(
-            CTX,
-            "the subspace step produced a non-finite state matrix; lower the order",
-        ));
-    }
-
     let delta: Vec<c64> = data.z.iter().map(|&z| (z - 1.0) / warp.h).collect();
     let starts = match warm {
         Some(m) => {
@@ -929,7 +897,10 @@ fn fit(
             Problem::new(&data, &layout, &delta, None).fit_linear(&mut theta)?;
             vec![(layout, theta)]
         }
-        None => starts(&data, &delta, &a_z, &c_z, order, warp.h, opts)?,
+        None => {
+            let (a_z, c_z) = subspace_pair(&u, order, q, ny, &warp)?;
+            starts(&data, &delta, &a_z, &c_z, order, warp.h, opts)?
+        }
     };
     let limit = opts.max_unstable_poles.or(measured_unstable);
     // every start probed; the most promising ones refined to the end; the lowest final cost
@@ -998,6 +969,48 @@ fn fit(
         singular_values: sv,
         f_hz: data.f_hz.clone(),
     })
+}
+
+/// The subspace step's $(A_z, C_z)$ (module docs, step 1): the shift invariance of the
+/// `order` leading left singular vectors `u` of the projected data in $\zeta$, mapped back to $z$.
+fn subspace_pair(
+    u: &Mat<f64>,
+    order: usize,
+    q: usize,
+    ny: usize,
+    warp: &Warp,
+) -> Result<(Mat<f64>, Mat<f64>)> {
+    let o = u.subcols(0, order);
+    let o_up = o.subrows(0, (q - 1) * ny).to_owned();
+    let o_dn = o.subrows(ny, (q - 1) * ny).to_owned();
+    let a_zeta = linalg::lstsq(o_up.as_ref(), o_dn.as_ref()).map_err(|e| {
+        Error::numerical(
+            CTX,
+            format!("the shift equation of the subspace step is degenerate ({e}); lower the order or raise the horizon"),
+        )
+    })?;
+    let c_zeta = o.subrows(0, ny).to_owned();
+    let eye = Mat::<f64>::identity(order, order);
+    let den = &eye + &a_zeta * warp.a;
+    let num = &a_zeta + &eye * warp.a;
+    let a_z = linalg::solve(den.as_ref(), num.as_ref()).map_err(|_| {
+        Error::numerical(
+            CTX,
+            "the subspace step placed a pole at infinity; lower the order or narrow the band",
+        )
+    })?;
+    let c_z = &c_zeta * (&eye - &a_z * warp.a);
+    if a_z
+        .col_iter()
+        .flat_map(|c| c.iter().copied())
+        .any(|v| !v.is_finite())
+    {
+        return Err(Error::numerical(
+            CTX,
+            "the subspace step produced a non-finite state matrix; lower the order",
+        ));
+    }
+    Ok((a_z, c_z))
 }
 
 /// Levenberg–Marquardt iterations every start gets before the most promising are kept.

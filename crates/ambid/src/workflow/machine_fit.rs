@@ -318,8 +318,19 @@ pub fn scan(
     t_ry: Option<&Frd>,
     stop_at_noise_level: bool,
 ) -> Vec<Candidate> {
-    let candidate =
-        |order: usize| fit_candidate(plant, band, order, max_iterations, controller, t_ry, None);
+    let measured_unstable = measured_unstable_of(plant, controller);
+    let candidate = |order: usize| {
+        fit_candidate(
+            plant,
+            band,
+            order,
+            max_iterations,
+            controller,
+            t_ry,
+            measured_unstable,
+            None,
+        )
+    };
     if !stop_at_noise_level {
         return orders.par_iter().map(|&order| candidate(order)).collect();
     }
@@ -349,21 +360,28 @@ pub fn scan(
     out
 }
 
+/// The plant's unstable poles as the measured loop with `controller` shows them (module docs,
+/// "Unstable poles"; `None` without a controller or when the lines do not support a count).
+fn measured_unstable_of(plant: &Frd, controller: Option<&StateSpace>) -> Option<usize> {
+    controller
+        .and_then(|c| loop_unstable_poles(plant, c).ok())
+        .and_then(|w| w.unstable_poles)
+}
+
 /// One candidate of [`scan`]: the fit of `order` (from `warm` alone when given,
-/// [`ss_frd_mimo_in_loop_from`]), its loop and out-of-band checks.
-pub fn fit_candidate(
+/// [`ss_frd_mimo_in_loop_from`]), its loop and out-of-band checks; `measured_unstable` is
+/// [`measured_unstable_of`] the same plant and controller.
+#[allow(clippy::too_many_arguments)]
+fn fit_candidate(
     plant: &Frd,
     band: (f64, f64),
     order: usize,
     max_iterations: usize,
     controller: Option<&StateSpace>,
     t_ry: Option<&Frd>,
+    measured_unstable: Option<usize>,
     warm: Option<&StateSpace>,
 ) -> Candidate {
-    let measured_unstable = controller
-        .and_then(|c| loop_unstable_poles(plant, c).ok())
-        .and_then(|w| w.unstable_poles);
-
     let opts = MimoFreqOptions {
         band_hz: Some(band),
         max_iterations,
@@ -597,6 +615,7 @@ impl FrequencyFitter {
                     self.max_iterations,
                     controller,
                     sp.frf.t_ry.as_ref(),
+                    measured_unstable_of(&sp.frf.plant, controller),
                     Some(w),
                 );
                 if c.admissible() {
@@ -621,8 +640,8 @@ impl FrequencyFitter {
             notes.push(format!(
                 "{} rpm: order {} (the reference speed's choice) gives no admissible model here; orders {} were scanned as well",
                 sp.speed_rpm,
-                orders.iter().map(ToString::to_string).collect::<Vec<_>>().join(", "),
-                fallback.iter().map(ToString::to_string).collect::<Vec<_>>().join(", ")
+                list(orders),
+                list(fallback)
             ));
             cands.extend(scan_of(fallback));
             cands.sort_by_key(|c| c.order);
@@ -766,6 +785,12 @@ impl FrequencyFitter {
             .and_then(|c| reference.cands[c].fit.as_ref().ok())
             .map(|f| f.model.clone());
         let order = reference.chosen.map(|c| reference.cands[c].order);
+        let rest: Vec<usize> = self
+            .orders
+            .iter()
+            .copied()
+            .filter(|&x| Some(x) != order)
+            .collect();
         // outwards from the reference, each speed from its inner neighbour's model: the
         // speeds below and those above side by side
         let chain = |ks: Vec<usize>| -> Result<Vec<(usize, SpeedResult)>, Error> {
@@ -774,11 +799,7 @@ impl FrequencyFitter {
             for k in ks {
                 let sp = &input.speeds[k];
                 let r = match order {
-                    Some(o) => {
-                        let rest: Vec<usize> =
-                            self.orders.iter().copied().filter(|&x| x != o).collect();
-                        self.speed(input, k, sp, &[o], &rest, warm.as_ref())?
-                    }
+                    Some(o) => self.speed(input, k, sp, &[o], &rest, warm.as_ref())?,
                     None => self.speed(input, k, sp, &self.orders, &[], None)?,
                 };
                 if let Some(f) = r
@@ -801,7 +822,7 @@ impl FrequencyFitter {
         if let Some(o) = order {
             notes.push(format!(
                 "Orders: {} scanned at the reference speed {} rpm (the middle of the list), which chose order {o}; every other speed fits order {o} (the plant has the same states at every speed) starting from its inner neighbour's model, from scratch where that fit is not admissible, and scans the rest only where no fit of order {o} is admissible — `[machine] models = \"fit-all\"` scans every order at every speed, each from scratch",
-                self.orders.iter().map(ToString::to_string).collect::<Vec<_>>().join(", "),
+                list(&self.orders),
                 input.speeds[kr].speed_rpm
             ));
         }
@@ -809,6 +830,15 @@ impl FrequencyFitter {
         others.sort_by_key(|(k, _)| *k);
         Ok(others.into_iter().map(|(_, r)| r).collect())
     }
+}
+
+/// Orders as a comma-separated list, for the notes.
+fn list(orders: &[usize]) -> String {
+    orders
+        .iter()
+        .map(ToString::to_string)
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// Speeds of the Campbell curves' grid, minus one.
