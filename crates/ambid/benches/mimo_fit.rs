@@ -2,8 +2,9 @@
 //! ≤ 1 s on the project machine): `ss_frd_mimo_in_loop` with default options and the
 //! workflow's band rule on the nominal 4-axis twin's plant FRF (15 000 rpm, linear, default
 //! noise, seed 1: 253 lines in 11.7–997 Hz), orders 16, 20 and 24 as `FrequencyFitter` scans
-//! them. Wall time of each fit (the fit uses both cores for its starts and probes), median of
-//! `AMBID_BENCH_REPS` runs (default 3); prints a Markdown table for docs/benchmarks.md.
+//! them (`AMBID_BENCH_ORDERS=16,20` picks others). Wall time of each fit (the fit uses both
+//! cores for its starts and probes), median of `AMBID_BENCH_REPS` runs (default 3); prints a
+//! Markdown table for docs/benchmarks.md.
 //!
 //! Run: `cargo bench -p ambid --bench mimo_fit`.
 use ambid::config::MachineSection;
@@ -36,7 +37,11 @@ fn main() {
     };
     println!("| order | median wall [s] | runs | iterations |");
     println!("|---|---|---|---|");
-    for order in [16, 20, 24] {
+    let orders: Vec<usize> = std::env::var("AMBID_BENCH_ORDERS")
+        .ok()
+        .map(|v| v.split(',').filter_map(|o| o.trim().parse().ok()).collect())
+        .unwrap_or_else(|| vec![16, 20, 24]);
+    for order in orders {
         let mut times = Vec::new();
         let mut iterations = 0;
         for _ in 0..reps {

@@ -859,29 +859,10 @@ pub(crate) fn equilibrate(z: &mut Mat<f64>, d: usize) -> (Vec<f64>, Option<usize
     (scale, zero)
 }
 
-/// Householder QR of `a` in place (no copy); returns the upper triangle $R$ (`ncols` square).
-pub(crate) fn qr_r_in_place(mut a: Mat<f64>) -> Mat<f64> {
-    use faer::dyn_stack::{MemBuffer, MemStack};
-    use faer::linalg::qr::no_pivoting::factor;
-    let (m, n) = (a.nrows(), a.ncols());
-    let size = m.min(n);
-    let bs = factor::recommended_block_size::<f64>(m, n);
-    let mut q_coeff = Mat::<f64>::zeros(bs, size);
-    let mut mem = MemBuffer::new(factor::qr_in_place_scratch::<f64>(
-        m,
-        n,
-        bs,
-        Par::Seq,
-        Default::default(),
-    ));
-    factor::qr_in_place(
-        a.as_mut(),
-        q_coeff.as_mut(),
-        Par::Seq,
-        MemStack::new(&mut mem),
-        Default::default(),
-    );
-    Mat::from_fn(size, n, |i, j| if j >= i { a[(i, j)] } else { 0.0 })
+/// Householder QR of `a` in place (no copy); returns the upper triangle $R$ (`ncols` square),
+/// triangular also when columns are dependent.
+pub(crate) fn qr_r_in_place(a: Mat<f64>) -> Mat<f64> {
+    crate::estimate::qr_stream::r_factor_in_place(a)
 }
 
 /// Column-equilibrated QR least squares of the last column of `z` on its other columns, with an

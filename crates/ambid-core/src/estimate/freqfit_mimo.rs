@@ -627,7 +627,7 @@ fn projected(data: &Data, warp: &Warp, q: usize) -> Result<(Vec<f64>, Mat<f64>)>
             pw *= zeta[k];
         }
     }
-    let r = mt.qr().thin_R().to_owned();
+    let r = crate::estimate::qr_stream::r_factor(mt.as_ref());
     let l22 = Mat::from_fn(
         rg,
         rg,

@@ -332,7 +332,7 @@ fn subspace_poles(data: &FreqData, warp: &Warp, n: usize, q: usize) -> Result<Ve
             pw *= zeta[k];
         }
     }
-    let r = mt.qr().thin_R().to_owned();
+    let r = crate::estimate::qr_stream::r_factor(mt.as_ref());
     // G Π⊥ = L22 Q2ᵀ with L22 = R22ᵀ
     let l22 = Mat::from_fn(q, q, |i, j| if i >= j { r[(q + j, q + i)] } else { 0.0 });
     let svd = l22.thin_svd().map_err(|e| {

@@ -340,7 +340,7 @@ pub fn arx_order_scan(
             idx.push(layout.d_full);
             let m = na + nb_max;
             let sub = Mat::from_fn(est.r.nrows(), m + 1, |i, j| est.r[(i, idx[j])]);
-            let rp = sub.qr().thin_R().to_owned();
+            let rp = crate::estimate::qr_stream::r_factor(sub.as_ref());
             let z: Vec<f64> = (0..=m).map(|i| rp[(i, m)]).collect();
             for nb in spec.nb.clone() {
                 let k = na + nb;

@@ -1130,8 +1130,8 @@ pub(crate) fn band_balanced(m: &StateSpace, z: &[c64]) -> Option<StateSpace> {
         *z = ext;
     }
     // W_c = R_cᵀ R_c, W_o = R_oᵀ R_o; R_o R_cᵀ = U Σ Vᵀ; T = R_cᵀ V Σ^{-1/2}, T⁻¹ = Σ^{-1/2} Uᵀ R_o
-    let rc = zc.qr().thin_R().to_owned();
-    let ro = zo.qr().thin_R().to_owned();
+    let rc = crate::estimate::qr_stream::r_factor(zc.as_ref());
+    let ro = crate::estimate::qr_stream::r_factor(zo.as_ref());
     let x = &ro * rc.transpose();
     let svd = x.svd().ok()?;
     let sv = svd.S().column_vector();

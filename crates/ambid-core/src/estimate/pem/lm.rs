@@ -450,7 +450,6 @@ fn full_rank(u: &Mat<f64>) -> bool {
     dmax > 0.0 && (0..n).all(|i| u[(i, i)].abs() > dmax * 1e-14 * n as f64)
 }
 
-/// The top triangle of the QR factor of `a` (at least as many rows as columns).
 /// The $(n+1) \times (n+1)$ triangle $\begin{bmatrix} R & z \\ 0 & \rho \end{bmatrix}$ of the QR
 /// factorisation of $[J \;\, r]$ ($m \times (n+1)$), computed in row chunks
 /// ([`StreamingQr`](crate::estimate::qr_stream::StreamingQr)) so that $[J\;r]$ is never copied
@@ -517,11 +516,18 @@ fn triangle_rows(jac: &Mat<f64>, r: &[f64], k_start: usize, k_end: usize) -> Mat
     Mat::from_fn(p, p, |i, j| if j >= i { t[(i, j)] } else { 0.0 })
 }
 
+/// The $n \times n$ upper triangle $R$ of the QR factorisation of `a` ($m \ge n$ rows),
+/// triangular also when columns are dependent ([`r_factor`](crate::estimate::qr_stream::r_factor)).
 fn qr_triangle(a: &Mat<f64>) -> Mat<f64> {
     let n = a.ncols();
-    let qr = a.qr();
-    let r = qr.thin_R();
-    Mat::from_fn(n, n, |i, j| if j >= i { r[(i, j)] } else { 0.0 })
+    let r = crate::estimate::qr_stream::r_factor(a.as_ref());
+    Mat::from_fn(n, n, |i, j| {
+        if i < r.nrows() && j >= i {
+            r[(i, j)]
+        } else {
+            0.0
+        }
+    })
 }
 
 /// Step in scaled variables for damping `par`: least squares of
@@ -1050,6 +1056,44 @@ mod tests {
         // 8 096 residuals into four parts of one input column each)
         assert_eq!(triangle_parts(8096, 2024), 4);
         assert_eq!(triangle_parts(8096, 1), 8);
+    }
+
+    /// A Jacobian with an exactly dependent column (a flat direction, e.g. two blocks of equal
+    /// poles): the triangle of $[J\;r]$ is upper triangular in one part and in parts, and its
+    /// $\lVert z\rVert^2$ is what the Gauss–Newton step can gain, $\lVert P_J r\rVert^2$
+    /// (oracle: the normal equations of the independent columns). faer's own factor is in
+    /// row-echelon form here and read $\rho = 0$, $\lVert z\rVert^2 = \lVert r\rVert^2$.
+    #[test]
+    fn a_dependent_jacobian_column_leaves_the_gauss_newton_gain_right() {
+        use rand::{RngExt, SeedableRng};
+        use rand_chacha::ChaCha8Rng;
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let (m, n) = (8096, 10);
+        let mut jac = Mat::from_fn(m, n, |_, _| rng.random_range(-1.0..1.0));
+        for i in 0..m {
+            jac[(i, 4)] = 0.5 * jac[(i, 1)] - 2.0 * jac[(i, 7)];
+        }
+        let r: Vec<f64> = (0..m).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let keep: Vec<usize> = (0..n).filter(|&j| j != 4).collect();
+        let x = Mat::from_fn(m, keep.len(), |i, c| jac[(i, keep[c])]);
+        let y = Mat::from_fn(m, 1, |i, _| r[i]);
+        let coef =
+            faer::prelude::Solve::solve(&(x.transpose() * &x).partial_piv_lu(), x.transpose() * &y);
+        let fitted = &x * &coef;
+        let gain: f64 = (0..m).map(|i| fitted[(i, 0)] * y[(i, 0)]).sum();
+        let rr: f64 = r.iter().map(|v| v * v).sum();
+        for t in [triangle_rows(&jac, &r, 0, m), triangle_of(&jac, &r, m / 4)] {
+            for i in 0..=n {
+                for j in 0..i {
+                    assert_eq!(t[(i, j)], 0.0);
+                }
+            }
+            let zz: f64 = (0..n).map(|i| t[(i, n)] * t[(i, n)]).sum();
+            assert!((zz - gain).abs() < 1e-9 * rr, "‖z‖² {zz} against {gain}");
+            assert!((t[(n, n)].powi(2) - (rr - gain)).abs() < 1e-9 * rr);
+            // column 7 is the one in the span of those before it
+            assert!(t[(7, 7)].abs() < 1e-9 * t[(0, 0)].abs());
+        }
     }
 
     /// Dennis & Schnabel's large-residual example: $r = [x + 1,\; \lambda x^2 + x - 1]$, minimum
