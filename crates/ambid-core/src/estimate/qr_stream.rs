@@ -36,9 +36,9 @@ use faer::{Mat, MatMut, MatRef, Par};
 /// the column's norm down to that row; the entries above a row are final once it is placed);
 /// each placed row then moves down to its column's row, the rows of skipped columns are zero
 /// and the skipped columns' heads (below the tolerance) are dropped. $R^\top R$ is unchanged up
-/// to that tolerance. Returns `false` (and leaves `r` as it was) when the replay does not
-/// count `rank` placed columns.
-pub(crate) fn retriangulate(mut r: MatMut<'_, f64>, m: usize, rank: usize) -> bool {
+/// to that tolerance. When the replay does not count `rank` placed columns, `r` is left as it
+/// was.
+pub(crate) fn retriangulate(mut r: MatMut<'_, f64>, m: usize, rank: usize) {
     let (k, n) = (r.nrows(), r.ncols());
     let eps = f64::EPSILON;
     // pivot column of each placed row
@@ -60,7 +60,7 @@ pub(crate) fn retriangulate(mut r: MatMut<'_, f64>, m: usize, rank: usize) -> bo
         }
     }
     if piv.len() != rank {
-        return false;
+        return;
     }
     // rows move down only (piv[i] >= i), so the last one first
     for i in (0..piv.len()).rev() {
@@ -73,7 +73,6 @@ pub(crate) fn retriangulate(mut r: MatMut<'_, f64>, m: usize, rank: usize) -> bo
             }
         }
     }
-    true
 }
 
 /// The upper-triangular $R$ ($\min(m, n) \times n$) of a QR factorisation of `a`

@@ -519,15 +519,7 @@ fn triangle_rows(jac: &Mat<f64>, r: &[f64], k_start: usize, k_end: usize) -> Mat
 /// The $n \times n$ upper triangle $R$ of the QR factorisation of `a` ($m \ge n$ rows),
 /// triangular also when columns are dependent ([`r_factor`](crate::estimate::qr_stream::r_factor)).
 fn qr_triangle(a: &Mat<f64>) -> Mat<f64> {
-    let n = a.ncols();
-    let r = crate::estimate::qr_stream::r_factor(a.as_ref());
-    Mat::from_fn(n, n, |i, j| {
-        if i < r.nrows() && j >= i {
-            r[(i, j)]
-        } else {
-            0.0
-        }
-    })
+    crate::estimate::qr_stream::r_factor(a.as_ref())
 }
 
 /// Step in scaled variables for damping `par`: least squares of
