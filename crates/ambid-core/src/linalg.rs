@@ -336,6 +336,35 @@ pub fn lstsq(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> Result<Mat<f64>> {
 /// [`Error::DimensionMismatch`] for a `b` that is not one column of `A`'s rows; [`Error::NonFinite`];
 /// [`Error::Numerical`] if the SVD fails.
 pub fn lstsq_min_norm(a: MatRef<'_, f64>, b: MatRef<'_, f64>, rtol: f64) -> Result<Vec<f64>> {
+    lstsq_min_norm_range(a, b, rtol, false).map(|(x, _)| x)
+}
+
+/// [`lstsq_min_norm`] and, with `range`, an orthonormal basis of $A$'s numerical range: the
+/// left singular vectors $u_k$ with $\sigma_k > \tau \sigma_1$, the same ones the solution
+/// uses, so that $U U^{\mathsf T}$ is the projection onto the part of the range the solution
+/// sees. (A Householder $Q$ of a rank-deficient $A$ is no such basis: its columns span the
+/// range plus one spurious direction per dependent column.)
+///
+/// # Example
+/// ```
+/// use ambid_core::linalg::lstsq_min_norm_range;
+/// let a = faer::mat![[1.0, 1.0], [2.0, 2.0], [0.0, 0.0]];
+/// let b = faer::mat![[2.0], [4.0], [1.0]];
+/// let (x, u) = lstsq_min_norm_range(a.as_ref(), b.as_ref(), 1e-12, true).unwrap();
+/// let u = u.unwrap();
+/// assert_eq!(u.ncols(), 1); // rank one
+/// assert!((u[(0, 0)].abs() - 1.0 / 5f64.sqrt()).abs() < 1e-12);
+/// assert!((x[0] - 1.0).abs() < 1e-12 && (x[1] - 1.0).abs() < 1e-12);
+/// ```
+///
+/// # Errors
+/// As [`lstsq_min_norm`].
+pub fn lstsq_min_norm_range(
+    a: MatRef<'_, f64>,
+    b: MatRef<'_, f64>,
+    rtol: f64,
+    range: bool,
+) -> Result<(Vec<f64>, Option<Mat<f64>>)> {
     if a.nrows() != b.nrows() || b.ncols() != 1 {
         return Err(Error::DimensionMismatch {
             context: "lstsq_min_norm",
@@ -347,7 +376,7 @@ pub fn lstsq_min_norm(a: MatRef<'_, f64>, b: MatRef<'_, f64>, rtol: f64) -> Resu
     check_finite_mat("lstsq_min_norm", b)?;
     let n = a.ncols();
     if a.nrows() == 0 || n == 0 {
-        return Ok(vec![0.0; n]);
+        return Ok((vec![0.0; n], range.then(|| Mat::zeros(a.nrows(), 0))));
     }
     let svd = a
         .thin_svd()
@@ -355,19 +384,18 @@ pub fn lstsq_min_norm(a: MatRef<'_, f64>, b: MatRef<'_, f64>, rtol: f64) -> Resu
     let sv = svd.S().column_vector();
     let smax = (0..sv.nrows()).map(|k| sv[k]).fold(0.0, f64::max);
     let mut x = vec![0.0; n];
-    if smax == 0.0 {
-        return Ok(x);
-    }
+    let kept: Vec<usize> = (0..sv.nrows())
+        .filter(|&k| smax > 0.0 && sv[k] > rtol * smax)
+        .collect();
     let utb = svd.U().transpose() * b;
-    for k in 0..sv.nrows() {
-        if sv[k] > rtol * smax {
-            let c = utb[(k, 0)] / sv[k];
-            for (j, xj) in x.iter_mut().enumerate() {
-                *xj += svd.V()[(j, k)] * c;
-            }
+    for &k in &kept {
+        let c = utb[(k, 0)] / sv[k];
+        for (j, xj) in x.iter_mut().enumerate() {
+            *xj += svd.V()[(j, k)] * c;
         }
     }
-    Ok(x)
+    let basis = range.then(|| Mat::from_fn(a.nrows(), kept.len(), |r, c| svd.U()[(r, kept[c])]));
+    Ok((x, basis))
 }
 
 /// Solves the square real system $A X = B$ by LU with partial pivoting.

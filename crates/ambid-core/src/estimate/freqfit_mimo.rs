@@ -122,6 +122,23 @@
 //! unknowns of each step (64 instead of 128) and, on the nominal twin, took the fit from 14 s
 //! to about 4 s with the stopping rule and the race of that time (2026-11-29 morning).
 //!
+//! **Structured triangle.** All that a Levenberg–Marquardt step uses of the Jacobian is the
+//! triangle of $[J\;r]$ ([`LeastSquaresProblem::triangle`]), and the projected $J$ is never
+//! formed: for input column $j$ the triangle of $[\Phi_j\;\tilde J_j\;r_j]$ ($\tilde J_j$ the
+//! unprojected ψ-columns) holds the triangle of $[(I - Q_jQ_j^{\mathsf T})\tilde J_j\;r_j]$ as
+//! its trailing block (the Schur complement of $\Phi_j^{\mathsf T}\Phi_j$ in the Gram matrix;
+//! $r_j$ is already orthogonal to $\Phi_j$). The rows of output $i$ see only that output's
+//! free $C$ entries (and $D_{ij}$), so they are factored per output — those columns first,
+//! then the poles', the regressor's and $r$ — and the $n_y$ small triangles are stacked and
+//! factored once more in the order $[\Phi_j \mid \psi \mid r]$; the input columns' trailing
+//! blocks are stacked and factored last. Every factor is a Householder QR (no Gram matrix, no
+//! squared condition number); a rank-deficient $\Phi_j$ (repeated poles) gives a zero row in
+//! its part of the triangle and leaves the trailing block right (tested against the dense
+//! projected Jacobian, full-rank and rank-deficient). At order 16 on the 4×4 twin (253 lines)
+//! this replaces the $8\,096 \times 65$ QR, the thin $Q$ of every regressor and the projection
+//! ($\approx 110$ Mflop per step) by sixteen $506 \times 46$ QRs and small ones ($\approx 45$
+//! Mflop).
+//!
 //! **Stopping.** The statistical rule of [`LmOptions::with_significance_tol`] with
 //! $\kappa^2 = $ [`significance_kappa2`] $= \sqrt{n_\theta/2}$: stop when what the Gauss–Newton
 //! step could still gain, $\lVert z\rVert^2$, is below $\sqrt{n_\theta/2}\,\hat\sigma^2$. At
@@ -154,9 +171,9 @@
 //!
 //! **Continuation and parallel steps.** A refinement continues its probe with the probe's trust
 //! region ([`minimize_resumed`]; restarted, the radius began at its initial size and the first
-//! ten steps were spent shrinking it). Within a step the four input columns' linear problems,
-//! their projections and the QR of the Jacobian (one part per input column,
-//! [`LmOptions::with_triangle_part_rows`]) run side by side; the cut depends on the data only.
+//! ten steps were spent shrinking it). Within a step the input columns' linear problems and
+//! their parts of the structured triangle run side by side; the cut is by input column, so it
+//! depends on the data only.
 //!
 //! Unstable poles are admitted (the AMB plant has one per rigid-body degree of freedom and
 //! axis). [`MimoFreqOptions::max_unstable_poles`] holds the fit to at most that many poles on or
@@ -222,9 +239,10 @@
 
 use super::pem::lm::{minimize_resumed, LeastSquaresProblem, LmOptions, LmState, StopReason};
 use crate::error::{Error, Result};
+use crate::estimate::qr_stream::r_factor_in_place;
 use crate::linalg;
 use crate::lti::{Frd, StateSpace};
-use faer::{c64, Mat};
+use faer::{c64, Mat, MatRef};
 use rayon::prelude::*;
 
 mod vf;
@@ -245,11 +263,10 @@ pub fn significance_kappa2(n_theta: usize) -> f64 {
 /// least 1): the stopping rule with $\kappa^2$ = [`significance_kappa2`], and the QR of each
 /// step's Jacobian cut into one part per input column (computed side by side; the cut depends
 /// on the data only, so the result does not depend on the number of threads).
-fn lm_options(layout: &Layout, data: &Data, iterations: usize) -> Result<LmOptions> {
+fn lm_options(layout: &Layout, iterations: usize) -> Result<LmOptions> {
     LmOptions::default()
         .with_max_iterations(iterations.max(1))?
-        .with_significance_tol(significance_kappa2(layout.n_theta).sqrt())?
-        .with_triangle_part_rows((data.rows() / data.nu.max(1)).max(1))
+        .with_significance_tol(significance_kappa2(layout.n_theta).sqrt())
         .map(|o| o.with_crawl_window(CRAWL_WINDOW))
 }
 
@@ -1043,7 +1060,7 @@ fn probe(
     opts: &MimoFreqOptions,
     limit: Option<usize>,
 ) -> Result<Run> {
-    let lm = lm_options(&layout, data, PROBE_ITERATIONS.min(opts.max_iterations))?;
+    let lm = lm_options(&layout, PROBE_ITERATIONS.min(opts.max_iterations))?;
     let mut prob = Problem::new(data, &layout, delta, limit);
     if let Some(lim) = limit {
         prob.constrain_start(&mut theta, lim)?;
@@ -1099,7 +1116,7 @@ fn refine(
     let rest = opts
         .max_iterations
         .saturating_sub(iterations.min(PROBE_ITERATIONS));
-    let lm = |n: usize| lm_options(&layout, data, n);
+    let lm = |n: usize| lm_options(&layout, n);
     // a run that cannot end more than the stopping rule's κ²σ̂² below the best one cannot be
     // told apart from it (the best one itself stopped up to that far above its minimum)
     let dof = data.rows().saturating_sub(layout.n_theta).max(1) as f64;
@@ -1183,53 +1200,73 @@ impl Race {
     }
 }
 
-/// A solution of [`scaled_lstsq`] and, when asked for, the thin $Q$ of its regressor.
+/// A solution of [`scaled_lstsq`] and, when asked for, an orthonormal basis of its regressor's
+/// range.
 type Solved = (Vec<f64>, Option<Mat<f64>>);
 
 /// Least squares of one right-hand side with unit-norm columns, by Householder QR; when the
 /// scaled regressor is numerically rank deficient (repeated poles that no output tells apart),
-/// the minimum-norm solution of its numerically visible part. With `basis`, also the thin $Q$
-/// of the QR (it spans the regressor's range).
-fn scaled_lstsq(m: &Mat<f64>, rhs: &Mat<f64>, basis: bool) -> Result<Solved> {
-    let nc = m.ncols();
-    if m.nrows() < nc {
+/// the minimum-norm solution of its numerically visible part. With `basis`, also an orthonormal
+/// basis of the regressor's range: the thin $Q$ of the QR, or in the rank-deficient case the
+/// left singular vectors the minimum-norm solution keeps.
+fn scaled_lstsq(mut ms: Mat<f64>, rhs: &Mat<f64>, basis: bool) -> Result<Solved> {
+    let nc = ms.ncols();
+    if ms.nrows() < nc {
         return Err(Error::invalid(
             "order",
             "fewer equations than numerator parameters",
         ));
     }
-    let scale: Vec<f64> = (0..nc)
-        .map(|c| {
-            let n = m.col(c).norm_l2();
-            if n > 0.0 && n.is_finite() {
-                1.0 / n
-            } else {
-                1.0
-            }
-        })
-        .collect();
-    let ms = Mat::<f64>::from_fn(m.nrows(), nc, |r, c| m[(r, c)] * scale[c]);
+    let mut scale = vec![1.0; nc];
+    for (c, sc) in scale.iter_mut().enumerate() {
+        let n = ms.col(c).norm_l2();
+        if n > 0.0 && n.is_finite() {
+            *sc = 1.0 / n;
+            ms.col_mut(c).iter_mut().for_each(|v| *v *= *sc);
+        }
+    }
     if ms
         .col_iter()
+        .chain(rhs.col_iter())
         .flat_map(|c| c.iter().copied())
         .any(|v| !v.is_finite())
     {
         return Err(Error::numerical(CTX, "a non-finite regressor"));
     }
-    let qr = ms.qr();
-    let r = qr.thin_R();
     // the unit-norm columns make |R_ii| the distance of column i from the span of the others
     // before it: a tiny one is a (numerically) repeated column
-    let rmin = (0..nc)
-        .map(|i| r[(i, i)].abs())
-        .fold(f64::INFINITY, f64::min);
-    let x = if rmin > 1e-10 {
-        let x = faer::linalg::solvers::SolveLstsq::solve_lstsq(&qr, rhs);
-        x.col(0).iter().copied().collect()
+    let tiny = |r: MatRef<'_, f64>| (0..nc).any(|i| r[(i, i)].abs() <= 1e-10);
+    // the basis of the rank-deficient case is the kept left singular vectors: faer's thin Q
+    // of a rank-deficient matrix spans its range plus one spurious direction per dependent
+    // column, which the projection would remove from the Jacobian too
+    let (x, q) = if basis {
+        let qr = ms.qr();
+        if tiny(qr.thin_R()) {
+            linalg::lstsq_min_norm_range(ms.as_ref(), rhs.as_ref(), 1e-10, true)?
+        } else {
+            let x = faer::linalg::solvers::SolveLstsq::solve_lstsq(&qr, rhs);
+            (
+                x.col(0).iter().copied().collect(),
+                Some(qr.compute_thin_Q()),
+            )
+        }
     } else {
-        linalg::lstsq_min_norm(ms.as_ref(), rhs.as_ref(), 1e-10)?
+        // the triangle of [Φ g]: R x = z (its last column) when Φ has full numerical rank
+        let mut aug = Mat::<f64>::zeros(ms.nrows(), nc + 1);
+        aug.as_mut().subcols_mut(0, nc).copy_from(ms.as_ref());
+        aug.col_mut(nc).copy_from(rhs.col(0));
+        let t = r_factor_in_place(aug);
+        if tiny(t.as_ref()) {
+            linalg::lstsq_min_norm_range(ms.as_ref(), rhs.as_ref(), 1e-10, false)?
+        } else {
+            let mut x = vec![0.0; nc];
+            for i in (0..nc).rev() {
+                let acc: f64 = (i + 1..nc).map(|c| t[(i, c)] * x[c]).sum();
+                x[i] = (t[(i, nc)] - acc) / t[(i, i)];
+            }
+            (x, None)
+        }
     };
-    let q = basis.then(|| qr.compute_thin_Q());
     if x.iter().any(|v| !v.is_finite()) {
         return Err(Error::numerical(CTX, "a non-finite solution"));
     }
@@ -1776,26 +1813,37 @@ impl<'a> Problem<'a> {
         let solved: Vec<Result<Solved>> = (0..nu)
             .into_par_iter()
             .map(|j| {
+                // filled column by column (rows: line, output, re/im)
                 let mut m = Mat::<f64>::zeros(2 * l * ny, ncol);
                 let mut rhs = Mat::<f64>::zeros(2 * l * ny, 1);
-                for k in 0..l {
-                    for i in 0..ny {
-                        let idx = k * e + j * ny + i;
-                        let sw = self.data.sw[idx];
-                        let row = 2 * (k * ny + i);
-                        for s in 0..lay.n {
-                            let v = ys[(k * lay.n + s) * ny + i] * sw;
-                            m[(row, s)] = v.re;
-                            m[(row + 1, s)] = v.im;
+                let sw = |k: usize, i: usize| self.data.sw[k * e + j * ny + i];
+                for s in 0..lay.n {
+                    let col = m.col_as_slice_mut(s);
+                    for k in 0..l {
+                        for i in 0..ny {
+                            let v = ys[(k * lay.n + s) * ny + i] * sw(k, i);
+                            let row = 2 * (k * ny + i);
+                            col[row] = v.re;
+                            col[row + 1] = v.im;
                         }
-                        if nd > 0 {
-                            m[(row, lay.n + i)] = sw;
-                        }
-                        rhs[(row, 0)] = self.data.g[idx].re * sw;
-                        rhs[(row + 1, 0)] = self.data.g[idx].im * sw;
                     }
                 }
-                scaled_lstsq(&m, &rhs, basis)
+                for i in 0..nd {
+                    let col = m.col_as_slice_mut(lay.n + i);
+                    for k in 0..l {
+                        col[2 * (k * ny + i)] = sw(k, i);
+                    }
+                }
+                let col = rhs.col_as_slice_mut(0);
+                for k in 0..l {
+                    for i in 0..ny {
+                        let v = self.data.g[k * e + j * ny + i] * sw(k, i);
+                        let row = 2 * (k * ny + i);
+                        col[row] = v.re;
+                        col[row + 1] = v.im;
+                    }
+                }
+                scaled_lstsq(m, &rhs, basis)
             })
             .collect();
         let mut bases = Vec::with_capacity(if basis { nu } else { 0 });
@@ -2060,8 +2108,155 @@ impl Problem<'_> {
     }
 }
 
-/// ψ, θ and the projection's bases of one evaluation of [`Projected`].
-type Evaluated = (Vec<f64>, Vec<f64>, Vec<Mat<f64>>);
+impl Problem<'_> {
+    /// The upper triangle ($(n_\psi + 1) \times (n_\psi + 1)$) of the variable projection's
+    /// $[J\;r]$, where $J$ holds the columns `cols` (ψ, of `ncols`) of the Jacobian at θ
+    /// projected per input column onto the orthogonal complement of that column's regressor
+    /// $\Phi_j$, and `r` the residuals at θ (already orthogonal to every $\Phi_j$), without
+    /// forming $J$ (module docs, "Structured triangle").
+    ///
+    /// For input column $j$, the triangle of $[\Phi_j\;J_j\;r_j]$ holds that of the
+    /// projected $[P_j J_j\;r_j]$ as its trailing block (the Schur complement of
+    /// $\Phi_j^\top\Phi_j$ in the Gram matrix). Its rows of output $i$ see only the $C$
+    /// parameters (and $D_{ij}$) of that output, so the rows are factored per output — the
+    /// parameters of output $i$, then the columns every output sees — and the stacked factors
+    /// once more in the order $[\Phi_j \mid \psi \mid r]$; the trailing blocks of the input
+    /// columns are stacked and factored last. Every step is a Householder QR
+    /// ([`r_factor_in_place`]), so the Gram matrix is that of the dense projected $[J\;r]$ up to
+    /// rounding, with $n_y$ times fewer rows per factor for the output-specific columns.
+    fn projected_triangle(
+        &self,
+        th: &[f64],
+        cols: &[Option<usize>],
+        ncols: usize,
+        r: &[f64],
+    ) -> Option<Mat<f64>> {
+        let lay = self.layout;
+        let (ny, nu, l, n) = (lay.ny, lay.nu, self.data.len(), lay.n);
+        let e = ny * nu;
+        let nd = if lay.d_off.is_some() { ny } else { 0 };
+        // columns of the factor of one input column: [D (ny) | Φ (n) | ψ (ncols) | r]
+        let n_lin = nd + n;
+        let kk = n_lin + ncols + 1;
+        let rcol = kk - 1;
+        // per output: its own columns (D_i, the free C entries of row i) first, then the ones
+        // every output sees (Φ, α, r); each as (global column, source)
+        #[derive(Clone, Copy)]
+        enum Src {
+            D,
+            Phi(usize),
+            /// ∂/∂α: (state of Y, state of X, sign) of −Y[:, s]X[s', :] (or +Y X for a real pole)
+            Alpha(usize, usize, f64),
+            /// ∂/∂C[i, s]: X[s, :]
+            C(usize),
+            R,
+        }
+        let mut shared: Vec<(usize, Src)> = (0..n).map(|s| (nd + s, Src::Phi(s))).collect();
+        let mut own: Vec<Vec<(usize, Src)>> = vec![Vec::new(); ny];
+        let mut s0 = 0;
+        for b in &lay.blocks {
+            if b.dim == 2 {
+                if let Some(c) = cols[b.off] {
+                    shared.push((n_lin + c, Src::Alpha(s0 + 1, s0 + 1, -1.0)));
+                }
+                if let Some(c) = cols[b.off + 1] {
+                    shared.push((n_lin + c, Src::Alpha(s0 + 1, s0, -1.0)));
+                }
+            } else if let Some(c) = cols[b.off] {
+                shared.push((n_lin + c, Src::Alpha(s0, s0, 1.0)));
+            }
+            for (o, own_o) in own.iter_mut().enumerate() {
+                for rr in 0..b.dim {
+                    if let Some(c) = lay.c_idx(b, o, rr).and_then(|t| cols[t]) {
+                        own_o.push((n_lin + c, Src::C(s0 + rr)));
+                    }
+                }
+            }
+            s0 += b.dim;
+        }
+        shared.push((rcol, Src::R));
+        for (i, own_i) in own.iter_mut().enumerate() {
+            if nd > 0 {
+                own_i.insert(0, (i, Src::D));
+            }
+            own_i.extend_from_slice(&shared);
+        }
+        // Y (line, state, output) and X (line, state, input) once
+        let mut ys = vec![c64::default(); l * n * ny];
+        let mut xs = vec![c64::default(); l * n * nu];
+        let mut yb = vec![c64::default(); 2 * ny];
+        let mut xb = vec![c64::default(); 2 * nu];
+        for (k, &dk) in self.delta.iter().enumerate() {
+            let mut s = 0;
+            for b in &lay.blocks {
+                let rb = resolvent(th, b, dk)?;
+                self.y_block(th, b, &rb, &mut yb);
+                self.x_block(th, b, &rb, &mut xb);
+                for rr in 0..b.dim {
+                    ys[(k * n + s + rr) * ny..(k * n + s + rr + 1) * ny]
+                        .copy_from_slice(&yb[rr * ny..(rr + 1) * ny]);
+                    xs[(k * n + s + rr) * nu..(k * n + s + rr + 1) * nu]
+                        .copy_from_slice(&xb[rr * nu..(rr + 1) * nu]);
+                }
+                s += b.dim;
+            }
+        }
+        let p = ncols + 1;
+        let tails: Vec<Mat<f64>> = (0..nu)
+            .into_par_iter()
+            .map(|j| {
+                let mut stacked: Vec<Mat<f64>> = Vec::with_capacity(ny);
+                for (i, own_i) in own.iter().enumerate() {
+                    let mut w = Mat::<f64>::zeros(2 * l, own_i.len());
+                    for (c, &(_, src)) in own_i.iter().enumerate() {
+                        let col = w.col_as_slice_mut(c);
+                        for (k, pair) in col.chunks_exact_mut(2).enumerate() {
+                            let sw = self.data.sw[k * e + j * ny + i];
+                            let v = match src {
+                                Src::D => c64::new(sw, 0.0),
+                                Src::Phi(s) => ys[(k * n + s) * ny + i] * sw,
+                                Src::Alpha(sy, sx, sign) => {
+                                    ys[(k * n + sy) * ny + i]
+                                        * xs[(k * n + sx) * nu + j]
+                                        * (sign * sw)
+                                }
+                                Src::C(s) => xs[(k * n + s) * nu + j] * sw,
+                                Src::R => {
+                                    let at = 2 * ((j * l + k) * ny + i);
+                                    c64::new(r[at], r[at + 1])
+                                }
+                            };
+                            pair[0] = v.re;
+                            pair[1] = v.im;
+                        }
+                    }
+                    stacked.push(r_factor_in_place(w));
+                }
+                let rows: usize = stacked.iter().map(|t| t.nrows()).sum();
+                let mut big = Mat::<f64>::zeros(rows.max(kk), kk);
+                let mut at = 0;
+                for (t, own_i) in stacked.iter().zip(&own) {
+                    for row in 0..t.nrows() {
+                        for (c, &(g, _)) in own_i.iter().enumerate() {
+                            big[(at + row, g)] = t[(row, c)];
+                        }
+                    }
+                    at += t.nrows();
+                }
+                let tri = r_factor_in_place(big);
+                Mat::from_fn(p, p, |a, b| tri[(n_lin + a, n_lin + b)])
+            })
+            .collect();
+        let all = Mat::<f64>::from_fn(nu * p, p, |a, b| tails[a / p][(a % p, b)]);
+        let t = r_factor_in_place(all);
+        (0..p)
+            .all(|c| t.col(c).iter().all(|v| v.is_finite()))
+            .then_some(t)
+    }
+}
+
+/// ψ and θ of one evaluation of [`Projected`].
+type Evaluated = (Vec<f64>, Vec<f64>);
 
 /// The refinement's problem in the nonlinear parameters alone (variable projection, Golub &
 /// Pereyra 1973): ψ = (α, free rows of $C$); β and $D$ are the weighted least-squares solution
@@ -2080,7 +2275,7 @@ struct Projected<'p, 'a> {
     theta: Vec<f64>,
     /// The abandonment rule, when a better start has finished.
     race: Option<Race>,
-    /// ψ, θ and the projection's bases of the last residual evaluation.
+    /// ψ and θ of the last residual evaluation.
     last: Option<Evaluated>,
 }
 
@@ -2132,18 +2327,17 @@ impl<'p, 'a> Projected<'p, 'a> {
 
 impl LeastSquaresProblem for Projected<'_, '_> {
     fn residuals(&mut self, psi: &[f64]) -> Option<Vec<f64>> {
-        // the bases too: an accepted trial's Jacobian is asked for next
-        let (th, bases) = self.theta_of(psi, true)?;
+        // θ kept: an accepted trial's triangle is asked for next
+        let (th, _) = self.theta_of(psi, false)?;
         let r = self.prob.residuals(&th)?;
-        self.last = Some((psi.to_vec(), th, bases));
+        self.last = Some((psi.to_vec(), th));
         Some(r)
     }
 
+    /// The dense projected Jacobian (the reference of [`Self::triangle`], which the
+    /// iteration uses instead).
     fn jacobian(&mut self, psi: &[f64]) -> Option<Mat<f64>> {
-        let (th, bases) = match self.last.take() {
-            Some((p, th, b)) if p == psi => (th, b),
-            _ => self.theta_of(psi, true)?,
-        };
+        let (th, bases) = self.theta_of(psi, true)?;
         let mut jac = self.prob.jacobian_cols(&th, &self.cols, self.nl.len())?;
         let rows = jac.nrows() / bases.len().max(1);
         // the rows of input column j are contiguous and ordered as its regressor's; the
@@ -2170,6 +2364,27 @@ impl LeastSquaresProblem for Projected<'_, '_> {
                 );
             });
         Some(jac)
+    }
+
+    /// The triangle of the projected $[J\;r]$ from the structure of the unprojected
+    /// Jacobian ([`Problem::projected_triangle`]), without forming $J$ or the bases.
+    fn triangle(&mut self, psi: &[f64], r: &[f64], _part_rows: usize) -> Result<Mat<f64>> {
+        let th = match self.last.take() {
+            Some((p, th)) if p == psi => th,
+            _ => {
+                self.theta_of(psi, false)
+                    .ok_or_else(|| {
+                        Error::numerical(
+                            CTX,
+                            "the numerators cannot be fitted at an accepted point",
+                        )
+                    })?
+                    .0
+            }
+        };
+        self.prob
+            .projected_triangle(&th, &self.cols, self.nl.len(), r)
+            .ok_or_else(|| Error::numerical(CTX, "the Jacobian is not finite at an accepted point"))
     }
 
     fn abandon(&mut self, cost: f64, predicted_reduction: f64) -> bool {
@@ -2211,6 +2426,9 @@ fn deltas(data: &Data, warp: &Warp) -> Vec<c64> {
 mod tests {
     use super::*;
     use faer::mat;
+    use faer::prelude::Solve;
+    use rand::{RngExt, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
 
     fn plant() -> StateSpace {
         let (r, w) = (0.99f64, 0.08f64);
@@ -2307,6 +2525,77 @@ mod tests {
             let r0n = r0.iter().map(|v| v * v).sum::<f64>().sqrt();
             assert!(r0n < 1e-9, "exact data: the projected residual is {r0n}");
             check_jacobian(&mut proj, &psi);
+        }
+    }
+
+    /// Gram matrix of the upper triangle `t`.
+    fn gram(t: &Mat<f64>) -> Mat<f64> {
+        t.transpose() * t
+    }
+
+    #[test]
+    fn the_structured_triangle_has_the_gram_matrix_of_the_dense_projected_jacobian() {
+        // off the optimum (ψ moved) and, in the last case, with two blocks of equal poles and
+        // equal C (a rank-deficient regressor): TᵀT = [J r]ᵀ[J r] of the dense projected
+        // Jacobian (the oracle: Kaufman's columns projected with explicit bases)
+        for (feedthrough, repeated) in [(false, false), (true, false), (false, true)] {
+            let (data, layout, mut th, delta) = true_blocks(feedthrough);
+            let mut prob = Problem::new(&data, &layout, &delta, None);
+            prob.fit_linear(&mut th).unwrap();
+            let mut proj = Projected::new(&mut prob, &th);
+            let mut psi = proj.psi(&th);
+            for (k, v) in psi.iter_mut().enumerate() {
+                *v *= 1.0 + 0.03 * ((k as f64) * 1.7).sin();
+            }
+            if repeated {
+                // the two real poles' blocks made proportional (equal α, C columns
+                // proportional; their fixed entries sit in different rows)
+                let real: Vec<&Block> = layout.blocks.iter().filter(|b| b.dim == 1).collect();
+                let (b0, b1) = (real[0], real[1]);
+                let map = |t: usize| proj.cols[t].unwrap();
+                psi[map(b1.off)] = psi[map(b0.off)];
+                let v: Vec<f64> = (0..layout.ny)
+                    .map(|o| layout.c_idx(b0, o, 0).map_or(1.0, |t| psi[map(t)]))
+                    .collect();
+                for o in 0..layout.ny {
+                    if let Some(t) = layout.c_idx(b1, o, 0) {
+                        psi[map(t)] = v[o] / v[b1.fixed_row];
+                    }
+                }
+            }
+            let (_, bases) = proj.theta_of(&psi, true).unwrap();
+            let nd = if feedthrough { layout.ny } else { 0 };
+            let rank = layout.n + nd - usize::from(repeated);
+            assert!(
+                bases.iter().all(|q| q.ncols() == rank),
+                "the regressor's rank"
+            );
+            let r = proj.residuals(&psi).unwrap();
+            let rn = r.iter().map(|v| v * v).sum::<f64>().sqrt();
+            assert!(rn > 1e-3, "off the optimum: ‖r‖ = {rn}");
+            let jac = proj.jacobian(&psi).unwrap();
+            let dense = Mat::from_fn(jac.nrows(), jac.ncols() + 1, |i, j| {
+                if j < jac.ncols() {
+                    jac[(i, j)]
+                } else {
+                    r[i]
+                }
+            });
+            let want = dense.transpose() * &dense;
+            let t = proj.triangle(&psi, &r, 1 << 20).unwrap();
+            assert_eq!((t.nrows(), t.ncols()), (psi.len() + 1, psi.len() + 1));
+            for i in 0..t.nrows() {
+                for j in 0..i {
+                    assert_eq!(t[(i, j)], 0.0, "upper triangular");
+                }
+            }
+            let got = gram(&t);
+            let scale = (0..want.nrows()).map(|i| want[(i, i)]).fold(0.0, f64::max);
+            let err = (&got - &want).norm_max() / scale;
+            assert!(
+                err < 1e-10,
+                "feedthrough {feedthrough}, repeated {repeated}: Gram error {err:e}"
+            );
         }
     }
 
@@ -2517,6 +2806,39 @@ mod tests {
         .unwrap();
         let e = ss_frd_mimo_in_loop_from(&frd, &o, &c, &slow).unwrap_err();
         assert!(e.to_string().contains("sample time"), "{e}");
+    }
+
+    #[test]
+    fn the_projection_basis_of_a_rank_deficient_regressor_spans_its_range_only() {
+        // 300 × 6 with column 4 = column 1 − 2 · column 2: the projection onto the range is
+        // that of the five independent columns (normal equations, the oracle)
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let mut a = Mat::<f64>::from_fn(300, 6, |_, _| rng.random::<f64>() - 0.5);
+        for r in 0..300 {
+            a[(r, 4)] = a[(r, 1)] - 2.0 * a[(r, 2)];
+        }
+        let rhs = Mat::<f64>::from_fn(300, 1, |_, _| rng.random::<f64>() - 0.5);
+        let (x, q) = scaled_lstsq(a.clone(), &rhs, true).unwrap();
+        let (x2, none) = scaled_lstsq(a.clone(), &rhs, false).unwrap();
+        assert!(none.is_none());
+        for (u, v) in x.iter().zip(&x2) {
+            assert!((u - v).abs() < 1e-10 * (1.0 + u.abs()), "{u} against {v}");
+        }
+        let q = q.unwrap();
+        assert_eq!(q.ncols(), 5, "one basis vector per independent column");
+        let ind = Mat::<f64>::from_fn(300, 5, |r, c| a[(r, [0, 1, 2, 3, 5][c])]);
+        let gram = ind.transpose() * &ind;
+        let v = Mat::<f64>::from_fn(300, 1, |_, _| rng.random::<f64>() - 0.5);
+        let coef = gram.partial_piv_lu().solve(ind.transpose() * &v);
+        let oracle = &ind * coef;
+        let ours = &q * (q.transpose() * &v);
+        let err = (&ours - &oracle).norm_l2() / v.norm_l2();
+        assert!(err < 1e-10, "projection error {err:e}");
+        // the solution is a least-squares one: its residual is orthogonal to the range
+        let xm = Mat::<f64>::from_fn(6, 1, |r, _| x[r]);
+        let res = &rhs - &a * xm;
+        let along = (ind.transpose() * &res).norm_l2() / rhs.norm_l2();
+        assert!(along < 1e-10, "residual along the range {along:e}");
     }
 
     #[test]

@@ -11,7 +11,11 @@
 //! entry $(i, j)$ with its weights, $\sum_m c_{ij,m}\varphi_m + d_{ij} - G_{ij}\sum_m \tilde c_m
 //! \varphi_m = G_{ij}$ with the scaling function $\sigma = 1 + \sum_m \tilde c_m \varphi_m$
 //! common to all entries; the entries' own unknowns are eliminated by projection (the "fast"
-//! form), so only $\tilde c$ is solved jointly. The zeros of $\sigma$, the eigenvalues of
+//! form), so only $\tilde c$ is solved jointly: each entry's weighted
+//! $[\Phi\,\,1 \mid -G\Phi\,\,G]$ is QR-factored, the trailing block of its triangle (the
+//! shared columns projected onto the complement of its own) is stacked with the other
+//! entries', and one more QR and a back substitution give $\tilde c$; the projected rows
+//! themselves are never formed. The zeros of $\sigma$, the eigenvalues of
 //! $A_\varphi - b_\varphi \tilde c^{\mathsf T}$ for the basis' realisation $(A_\varphi,
 //! b_\varphi)$, are the new poles. Unstable poles are **not** flipped: the plant is unstable.
 //!
@@ -27,6 +31,7 @@
 //! left singular vectors. The numerators are then refitted by the caller.
 use super::{Data, CTX};
 use crate::error::{Error, Result};
+use crate::estimate::qr_stream::r_factor_in_place;
 use crate::linalg;
 use faer::{c64, Mat};
 
@@ -117,52 +122,110 @@ fn degenerate(what: &str) -> Error {
     )
 }
 
+/// Unit-norm scaling of the columns of `m` in place; the scales (1 for a zero column).
+fn unit_columns(m: &mut Mat<f64>) -> Vec<f64> {
+    (0..m.ncols())
+        .map(|c| {
+            let n = m.col(c).norm_l2();
+            let s = if n > 0.0 && n.is_finite() {
+                1.0 / n
+            } else {
+                1.0
+            };
+            m.col_mut(c).iter_mut().for_each(|v| *v *= s);
+            s
+        })
+        .collect()
+}
+
+/// Smallest $|R_{ii}|$ of the first `k` columns of a factor of unit-norm columns below which
+/// a column counts as a combination of the ones before it.
+const DEPENDENT: f64 = 1e-11;
+
 /// One relocation step: the zeros of σ.
+///
+/// Each entry's own unknowns are eliminated by the QR factorisation of its
+/// $[\Phi\,\,1 \mid -G\Phi\,\,G]$ (weighted, real and imaginary parts stacked): the
+/// trailing block of the triangle is the triangle of the shared columns projected onto the
+/// orthogonal complement of the entry's own ones. The entries' trailing blocks are stacked
+/// and factored once more, and $\tilde c$ follows by back substitution; the projected rows are
+/// never formed.
 fn relocate(poles: &[Pole], data: &Data) -> Result<Vec<Pole>> {
-    let (l, e) = (data.len(), data.entries());
     let nb = n_basis(poles);
-    let phi = basis_table(poles, data).ok_or_else(|| degenerate("a pole on a line"))?;
-    let mut big_a = Mat::<f64>::zeros(2 * l * e, nb);
-    let mut big_b = Mat::<f64>::zeros(2 * l * e, 1);
-    for ent in 0..e {
-        // [Φ 1] (own unknowns) and [−G Φ | G] (shared unknowns, right-hand side), weighted
-        let mut own = Mat::<f64>::zeros(2 * l, nb + 1);
-        let mut rest = Mat::<f64>::zeros(2 * l, nb + 1);
-        for k in 0..l {
-            let idx = k * e + ent;
-            let sw = data.sw[idx];
-            let g = data.g[idx];
-            for m in 0..nb {
-                let v = phi[k * nb + m] * sw;
-                own[(2 * k, m)] = v.re;
-                own[(2 * k + 1, m)] = v.im;
-                let u = -g * v;
-                rest[(2 * k, m)] = u.re;
-                rest[(2 * k + 1, m)] = u.im;
-            }
-            own[(2 * k, nb)] = sw;
-            rest[(2 * k, nb)] = g.re * sw;
-            rest[(2 * k + 1, nb)] = g.im * sw;
-        }
-        let x = linalg::lstsq(own.as_ref(), rest.as_ref())
-            .map_err(|_| degenerate("a rank-deficient basis"))?;
-        let proj = &rest - &own * &x;
-        for r in 0..2 * l {
-            for m in 0..nb {
-                big_a[(ent * 2 * l + r, m)] = proj[(r, m)];
-            }
-            big_b[(ent * 2 * l + r, 0)] = proj[(r, nb)];
-        }
-    }
-    let ct = linalg::lstsq(big_a.as_ref(), big_b.as_ref())
-        .map_err(|_| degenerate("a rank-deficient relocation"))?;
+    let ct = sigma_coefficients(poles, data)?;
     let (a, b) = basis_realisation(poles);
-    let h = Mat::<f64>::from_fn(nb, nb, |r, c| a[(r, c)] - b[r] * ct[(c, 0)]);
+    let h = Mat::<f64>::from_fn(nb, nb, |r, c| a[(r, c)] - b[r] * ct[c]);
     let vals = linalg::eigenvalues(h.as_ref()).map_err(|_| degenerate("eigenvalues failed"))?;
     if vals.iter().any(|v| !(v.re.is_finite() && v.im.is_finite())) {
         return Err(degenerate("a non-finite pole"));
     }
     Ok(poles_of(&vals))
+}
+
+/// The coefficients $\tilde c$ of σ of one relocation step ([`relocate`]).
+fn sigma_coefficients(poles: &[Pole], data: &Data) -> Result<Vec<f64>> {
+    let (l, e) = (data.len(), data.entries());
+    let nb = n_basis(poles);
+    let phi = basis_table(poles, data).ok_or_else(|| degenerate("a pole on a line"))?;
+    let p = nb + 1;
+    let mut stacked = Mat::<f64>::zeros(e * p, p);
+    for ent in 0..e {
+        // [Φ 1] (own unknowns) and [−G Φ | G] (shared unknowns, right-hand side), weighted,
+        // filled column by column
+        let mut m = Mat::<f64>::zeros(2 * l, 2 * p);
+        for c in 0..nb {
+            for k in 0..l {
+                let idx = k * e + ent;
+                let v = phi[k * nb + c] * data.sw[idx];
+                let u = -data.g[idx] * v;
+                let own = m.col_as_slice_mut(c);
+                own[2 * k] = v.re;
+                own[2 * k + 1] = v.im;
+                let rest = m.col_as_slice_mut(p + c);
+                rest[2 * k] = u.re;
+                rest[2 * k + 1] = u.im;
+            }
+        }
+        for k in 0..l {
+            let idx = k * e + ent;
+            let sw = data.sw[idx];
+            m.col_as_slice_mut(nb)[2 * k] = sw;
+            let rhs = m.col_as_slice_mut(2 * p - 1);
+            rhs[2 * k] = data.g[idx].re * sw;
+            rhs[2 * k + 1] = data.g[idx].im * sw;
+        }
+        // unit-norm own columns: |R_ii| is the distance from the span of the ones before
+        let mut own = m.as_mut().subcols_mut(0, p).to_owned();
+        unit_columns(&mut own);
+        m.as_mut().subcols_mut(0, p).copy_from(own.as_ref());
+        let r = r_factor_in_place(m);
+        if r.nrows() < 2 * p || (0..p).any(|i| r[(i, i)].abs() <= DEPENDENT) {
+            return Err(degenerate("a rank-deficient basis"));
+        }
+        stacked
+            .as_mut()
+            .subrows_mut(ent * p, p)
+            .copy_from(r.as_ref().submatrix(p, p, p, p));
+    }
+    let mut shared = stacked.as_ref().subcols(0, nb).to_owned();
+    let scale = unit_columns(&mut shared);
+    stacked
+        .as_mut()
+        .subcols_mut(0, nb)
+        .copy_from(shared.as_ref());
+    let t = r_factor_in_place(stacked);
+    if (0..nb).any(|i| t[(i, i)].abs() <= DEPENDENT) {
+        return Err(degenerate("a rank-deficient relocation"));
+    }
+    let mut ct = vec![0.0; nb];
+    for i in (0..nb).rev() {
+        let acc: f64 = (i + 1..nb).map(|c| t[(i, c)] * ct[c]).sum();
+        ct[i] = (t[(i, nb)] - acc) / t[(i, i)];
+    }
+    for (c, s) in ct.iter_mut().zip(&scale) {
+        *c *= s;
+    }
+    Ok(ct)
 }
 
 /// Matrix residues for fixed poles: per basis function an $n_y \times n_u$ real coefficient
@@ -584,6 +647,64 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn the_relocation_solves_the_dense_projected_least_squares_problem() {
+        // oracle: every entry's own unknowns projected out explicitly (normal equations of
+        // the entry's [Φ 1]), the projected rows of all entries stacked and solved by the
+        // normal equations of the whole
+        let data = data();
+        let poles = poles_of(&spread_poles(&data, 4));
+        let (l, e) = (data.len(), data.entries());
+        let nb = n_basis(&poles);
+        let phi = basis_table(&poles, &data).unwrap();
+        let mut big_a = Mat::<f64>::zeros(2 * l * e, nb);
+        let mut big_b = Mat::<f64>::zeros(2 * l * e, 1);
+        for ent in 0..e {
+            let own = Mat::<f64>::from_fn(2 * l, nb + 1, |row, c| {
+                let (k, idx) = (row / 2, (row / 2) * e + ent);
+                let v = if c < nb {
+                    phi[k * nb + c] * data.sw[idx]
+                } else {
+                    c64::new(data.sw[idx], 0.0)
+                };
+                if row % 2 == 0 {
+                    v.re
+                } else {
+                    v.im
+                }
+            });
+            let rest = Mat::<f64>::from_fn(2 * l, nb + 1, |row, c| {
+                let (k, idx) = (row / 2, (row / 2) * e + ent);
+                let g = data.g[idx] * data.sw[idx];
+                let v = if c < nb { -g * phi[k * nb + c] } else { g };
+                if row % 2 == 0 {
+                    v.re
+                } else {
+                    v.im
+                }
+            });
+            let gram = own.transpose() * &own;
+            let x = linalg::solve(gram.as_ref(), (own.transpose() * &rest).as_ref()).unwrap();
+            let proj = &rest - &own * &x;
+            for r in 0..2 * l {
+                for m in 0..nb {
+                    big_a[(ent * 2 * l + r, m)] = proj[(r, m)];
+                }
+                big_b[(ent * 2 * l + r, 0)] = proj[(r, nb)];
+            }
+        }
+        let gram = big_a.transpose() * &big_a;
+        let want = linalg::solve(gram.as_ref(), (big_a.transpose() * &big_b).as_ref()).unwrap();
+        let got = sigma_coefficients(&poles, &data).unwrap();
+        let norm = want.norm_l2();
+        let err = (0..nb)
+            .map(|c| (got[c] - want[(c, 0)]).powi(2))
+            .sum::<f64>()
+            .sqrt()
+            / norm;
+        assert!(err < 1e-8, "relative error {err:e} of σ's coefficients");
     }
 
     #[test]

@@ -111,6 +111,42 @@ pub trait LeastSquaresProblem {
     fn abandon(&mut self, _cost: f64, _predicted_reduction: f64) -> bool {
         false
     }
+    /// The upper triangle $T$ ($(n + 1) \times (n + 1)$) of a QR factorisation of $[J\;r]$ at
+    /// an admissible $x$, $T^\top T = [J\;r]^\top [J\;r]$, where `r` are the residuals last
+    /// returned for $x$: all that a step uses of the Jacobian. By default from
+    /// [`Self::jacobian`], its rows cut into parts of `part_rows` rows
+    /// ([`LmOptions::with_triangle_part_rows`]). A problem whose Jacobian has structure (a
+    /// variable projection, rows that see few columns) can form $T$ without the dense $J$; it
+    /// must return the same Gram matrix.
+    ///
+    /// # Errors
+    /// [`Error::Numerical`] when the Jacobian is undefined or not finite;
+    /// [`Error::DimensionMismatch`] when it is not $m \times n$.
+    fn triangle(&mut self, x: &[f64], r: &[f64], part_rows: usize) -> Result<Mat<f64>> {
+        const CTX: &str = "levenberg_marquardt";
+        let (m, n) = (r.len(), x.len());
+        let jac = self.jacobian(x).ok_or_else(|| {
+            Error::numerical(CTX, "the Jacobian is undefined at an admissible point")
+        })?;
+        if jac.nrows() != m || jac.ncols() != n {
+            return Err(Error::DimensionMismatch {
+                context: "levenberg_marquardt: Jacobian",
+                expected: format!("{m}×{n}"),
+                got: format!("{}×{}", jac.nrows(), jac.ncols()),
+            });
+        }
+        for j in 0..n {
+            let col = jac.col_as_slice(j);
+            if !all_finite(col) {
+                let i = col.iter().position(|v| !v.is_finite()).unwrap_or(0);
+                return Err(Error::numerical(
+                    CTX,
+                    format!("Jacobian entry ({i}, {j}) is not finite"),
+                ));
+            }
+        }
+        Ok(triangle_of(&jac, r, part_rows))
+    }
 }
 
 /// Why [`minimize`] stopped.
@@ -757,30 +793,20 @@ pub fn minimize_resumed<P: LeastSquaresProblem + ?Sized>(
     // ½‖r‖² after each accepted step (index = iterations), for the stagnation test
     let mut costs = vec![0.5 * fnorm * fnorm];
     let reason = 'outer: loop {
-        let jac = problem.jacobian(&x).ok_or_else(|| {
-            Error::numerical(CTX, "the Jacobian is undefined at an admissible point")
-        })?;
-        if jac.nrows() != m || jac.ncols() != n {
+        let t = problem.triangle(&x, &r, opts.part_rows)?;
+        if t.nrows() != n + 1 || t.ncols() != n + 1 {
             return Err(Error::DimensionMismatch {
-                context: "levenberg_marquardt: Jacobian",
-                expected: format!("{m}×{n}"),
-                got: format!("{}×{}", jac.nrows(), jac.ncols()),
+                context: "levenberg_marquardt: triangle of [J r]",
+                expected: format!("{}×{}", n + 1, n + 1),
+                got: format!("{}×{}", t.nrows(), t.ncols()),
             });
         }
-        for j in 0..n {
-            let col = jac.col_as_slice(j);
-            if !all_finite(col) {
-                let i = col.iter().position(|v| !v.is_finite()).unwrap_or(0);
-                return Err(Error::numerical(
-                    CTX,
-                    format!("Jacobian entry ({i}, {j}) is not finite"),
-                ));
-            }
+        if !(0..=n).all(|j| all_finite(t.col_as_slice(j))) {
+            return Err(Error::numerical(CTX, "the Jacobian is not finite"));
         }
         if fnorm == 0.0 {
             break StopReason::Gradient;
         }
-        let t = triangle_of(&jac, &r, opts.part_rows);
         let rmat = Mat::from_fn(n, n, |i, j| t[(i, j)]);
         let z: Vec<f64> = (0..n).map(|i| t[(i, n)]).collect();
         let colnorm: Vec<f64> = (0..n)
@@ -983,11 +1009,10 @@ fn gauss_newton_leaves<P: LeastSquaresProblem + ?Sized>(
     m: usize,
 ) -> Option<bool> {
     let n = x.len();
-    let jac = problem.jacobian(x)?;
-    if jac.nrows() != m || jac.ncols() != n {
+    let t = problem.triangle(x, r, TRIANGLE_PART_ROWS).ok()?;
+    if r.len() != m || t.nrows() != n + 1 || t.ncols() != n + 1 {
         return None;
     }
-    let t = triangle_of(&jac, r, TRIANGLE_PART_ROWS);
     let rmat = Mat::from_fn(n, n, |i, j| t[(i, j)]);
     if !full_rank(&rmat) {
         return None;
