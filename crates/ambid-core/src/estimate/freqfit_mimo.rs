@@ -259,10 +259,9 @@ pub fn significance_kappa2(n_theta: usize) -> f64 {
     (n_theta as f64 / 2.0).sqrt()
 }
 
-/// The refinement's options for a run in `layout` on `data` of at most `iterations` steps (at
-/// least 1): the stopping rule with $\kappa^2$ = [`significance_kappa2`], and the QR of each
-/// step's Jacobian cut into one part per input column (computed side by side; the cut depends
-/// on the data only, so the result does not depend on the number of threads).
+/// The refinement's options for a run in `layout` of at most `iterations` steps (at least 1):
+/// the stopping rule with $\kappa^2$ = [`significance_kappa2`] and the crawl stop. (The
+/// triangle of each step is [`Projected`]'s own, cut by input column.)
 fn lm_options(layout: &Layout, iterations: usize) -> Result<LmOptions> {
     LmOptions::default()
         .with_max_iterations(iterations.max(1))?
