@@ -227,16 +227,23 @@ impl SynchronousLine {
         let mut exps = Vec::with_capacity(data.n_experiments());
         for e in 0..data.n_experiments() {
             let mut exp = data.experiment(e)?;
+            // the phase's cosine and sine once per experiment, shared by its channels
+            let mut cs: Vec<(f64, f64)> = Vec::new();
             for ch in self.channels.iter().filter(|c| c.experiment == e) {
                 let (a, b) = (ch.amplitude.re, -ch.amplitude.im);
-                let x: Vec<f64> = exp
-                    .channel(&ch.name)?
+                let v = exp.channel(&ch.name)?;
+                if cs.len() != v.len() {
+                    cs = (0..v.len())
+                        .map(|t| {
+                            let ph = w * t as f64;
+                            (ph.cos(), ph.sin())
+                        })
+                        .collect();
+                }
+                let x: Vec<f64> = v
                     .iter()
-                    .enumerate()
-                    .map(|(t, v)| {
-                        let ph = w * t as f64;
-                        v - a * ph.cos() - b * ph.sin()
-                    })
+                    .zip(&cs)
+                    .map(|(v, &(c, s))| v - a * c - b * s)
                     .collect();
                 exp = exp.with_channel(ch.name.clone(), x)?;
             }
@@ -460,8 +467,15 @@ pub fn synchronous(
                 let mut pow = 0.0;
                 for &k in &bins {
                     let mut acc = c64::new(0.0, 0.0);
-                    for (t, v) in res.iter().enumerate() {
-                        acc += tw[(k * t) % l] * *v;
+                    // the twiddle index k·t mod L, stepped (no division per sample)
+                    let step = k % l;
+                    let mut at = 0;
+                    for v in &res {
+                        acc += tw[at] * *v;
+                        at += step;
+                        if at >= l {
+                            at -= l;
+                        }
                     }
                     pow += acc.norm_sqr();
                 }

@@ -623,9 +623,14 @@ pub fn estimate_loop_initial_state_mimo(
     let per = ny + nu;
     let mut psi = faer::Mat::<f64>::zeros(per * h, nx);
     let mut next = vec![0.0; nx];
+    // row ← row A_cl as a sum of A_cl's rows (contiguous, independent sums: this loop is the
+    // estimate's main cost on long records)
     let times = |row: &[f64], out: &mut Vec<f64>| {
-        for (j, o) in out.iter_mut().enumerate() {
-            *o = (0..nx).map(|i| row[i] * a_cl[i * nx + j]).sum();
+        out.iter_mut().for_each(|o| *o = 0.0);
+        for (i, &ri) in row.iter().enumerate() {
+            for (o, &a) in out.iter_mut().zip(&a_cl[i * nx..(i + 1) * nx]) {
+                *o += ri * a;
+            }
         }
     };
     for t in 0..h {

@@ -38,7 +38,9 @@
 //!   analysis can read the plant part of every eigenvector) and its poles.
 //!
 //! A model that makes the loop unstable is not simulated: [`validate_machine`] returns
-//! [`Error::Unstable`] with the unstable closed-loop poles.
+//! [`Error::Unstable`] with the unstable closed-loop poles. [`machine_output_fits`] gives the
+//! displacement fits alone (the same closed-loop simulation without the grid, the tests and
+//! the current fits), for a reference plant whose fits are compared with a model's.
 //!
 //! # Example
 //! ```
@@ -339,30 +341,25 @@ fn check_models(plant: &StateSpace, controller: &StateSpace, n_axes: usize, ts: 
     Ok(())
 }
 
-/// Validates the identified plant `plant` ($n \times n$, discrete) with the `controller`
-/// ($n \times n$, mapping $w - y$ to the controller output) on the independent record `data`
-/// (module docs). The record's axes are its output channels (`y_<axis>` in
-/// [`IoData::role_names`] order); each needs `u_<axis>`, and `r_<axis>`, `w_<axis>` (zero when
-/// absent) and `i_<axis>` (current fit) are used when present.
-///
-/// # Errors
-/// * [`Error::InvalidArgument`]: a record of several experiments, without outputs, with an
-///   output without its input, or without any nonzero excitation or reference; too few samples
-///   after `skip` for the residual tests; bad options (`windows`, grid).
-/// * [`Error::DimensionMismatch`]: a plant or controller whose shape is not one input and one
-///   output per axis of the record.
-/// * [`Error::SampleTimeMismatch`], [`Error::TimeDomain`]: a model at another sample time than
-///   the record, or a continuous one.
-/// * [`Error::Unstable`]: the model does not give a stable closed loop with the controller (the
-///   unstable poles are listed; nothing is simulated).
-/// * [`Error::NonFinite`]: a NaN or infinite sample in a used channel.
-/// * the errors of the amplifier fit (e.g. a constant current).
-pub fn validate_machine(
+/// The closed loop of `plant` and `controller` simulated against the record `data` (the part of
+/// [`validate_machine`] before the fits; its checks and errors).
+struct Simulated<'d> {
+    ch: Channels<'d>,
+    k0: usize,
+    n_axes: usize,
+    ts: f64,
+    n: usize,
+    closed_loop: StateSpace,
+    closed_loop_poles: Vec<c64>,
+    reconstruction: ReconstructionMimo,
+}
+
+fn simulate_against<'d>(
     plant: &StateSpace,
     controller: &StateSpace,
-    data: &IoData,
+    data: &'d IoData,
     opts: &MachineValidationOptions,
-) -> Result<MachineValidation> {
+) -> Result<Simulated<'d>> {
     let ch = channels(data)?;
     let (n_axes, ts, n) = (ch.axes.len(), data.ts(), data.len());
     check_models(plant, controller, n_axes, ts)?;
@@ -431,6 +428,105 @@ pub fn validate_machine(
     {
         *x *= d;
     }
+    Ok(Simulated {
+        ch,
+        k0,
+        n_axes,
+        ts,
+        n,
+        closed_loop,
+        closed_loop_poles,
+        reconstruction,
+    })
+}
+
+/// The displacement fit $\mathrm{fit}_y$ of every axis ([`AxisValidation::fit_y`]) alone: the
+/// closed-loop simulation of [`validate_machine`] without its sensitivity grid, residual tests
+/// and current fits (for a reference plant whose fit is compared with a model's; the same
+/// numbers as [`validate_machine`]'s).
+///
+/// # Errors
+/// As [`validate_machine`] before its fits.
+///
+/// # Example
+/// ```
+/// use ambid_core::data::IoData;
+/// use ambid_core::lti::StateSpace;
+/// use ambid_core::validate::closed_loop::simulate_loop_mimo;
+/// use ambid_core::validate::machine::{machine_output_fits, validate_machine, MachineValidationOptions};
+/// use faer::mat;
+/// let ts = 1e-3;
+/// let plant = |a: f64| StateSpace::discrete(mat![[a, 0.05], [0.05, 0.9]],
+///     mat![[1.0, 0.0], [0.0, 1.0]], mat![[1.0, 0.0], [0.0, 1.0]], mat![[0.0, 0.0], [0.0, 0.0]], ts).unwrap();
+/// let c = StateSpace::discrete(faer::Mat::zeros(0, 0), faer::Mat::zeros(0, 2),
+///     faer::Mat::zeros(2, 0), mat![[0.5, 0.0], [0.0, 0.3]], ts).unwrap();
+/// let r0: Vec<f64> = (0..2000).map(|k| ((k * 7919 % 13) as f64 - 6.0)).collect();
+/// let r1: Vec<f64> = (0..2000).map(|k| ((k * 104_729 % 11) as f64 - 5.0)).collect();
+/// let sim = simulate_loop_mimo(&plant(1.02), &c, None, Some(&[&r0[..], &r1[..]]), None).unwrap();
+/// let rec = IoData::new(vec![
+///     ("r_xa".into(), r0), ("r_xb".into(), r1),
+///     ("u_xa".into(), sim.u[0].clone()), ("u_xb".into(), sim.u[1].clone()),
+///     ("y_xa".into(), sim.y[0].clone()), ("y_xb".into(), sim.y[1].clone()),
+/// ], ts, None).unwrap();
+/// // a model with the unstable pole off: the same fits as the whole validation's, below 100 %
+/// let opts = MachineValidationOptions::default();
+/// let fits = machine_output_fits(&plant(1.01), &c, &rec, &opts).unwrap();
+/// let full = validate_machine(&plant(1.01), &c, &rec, &opts).unwrap();
+/// assert_eq!(fits, full.axes.iter().map(|a| a.fit_y).collect::<Vec<_>>());
+/// assert!(fits[0] < 99.0);
+/// ```
+pub fn machine_output_fits(
+    plant: &StateSpace,
+    controller: &StateSpace,
+    data: &IoData,
+    opts: &MachineValidationOptions,
+) -> Result<Vec<f64>> {
+    let Simulated {
+        ch,
+        k0,
+        reconstruction,
+        ..
+    } = simulate_against(plant, controller, data, opts)?;
+    ch.y.iter()
+        .zip(&reconstruction.simulated.y)
+        .map(|(y, s)| fit_percent(&y[k0..], &s[k0..]))
+        .collect()
+}
+
+/// Validates the identified plant `plant` ($n \times n$, discrete) with the `controller`
+/// ($n \times n$, mapping $w - y$ to the controller output) on the independent record `data`
+/// (module docs). The record's axes are its output channels (`y_<axis>` in
+/// [`IoData::role_names`] order); each needs `u_<axis>`, and `r_<axis>`, `w_<axis>` (zero when
+/// absent) and `i_<axis>` (current fit) are used when present.
+///
+/// # Errors
+/// * [`Error::InvalidArgument`]: a record of several experiments, without outputs, with an
+///   output without its input, or without any nonzero excitation or reference; too few samples
+///   after `skip` for the residual tests; bad options (`windows`, grid).
+/// * [`Error::DimensionMismatch`]: a plant or controller whose shape is not one input and one
+///   output per axis of the record.
+/// * [`Error::SampleTimeMismatch`], [`Error::TimeDomain`]: a model at another sample time than
+///   the record, or a continuous one.
+/// * [`Error::Unstable`]: the model does not give a stable closed loop with the controller (the
+///   unstable poles are listed; nothing is simulated).
+/// * [`Error::NonFinite`]: a NaN or infinite sample in a used channel.
+/// * the errors of the amplifier fit (e.g. a constant current).
+pub fn validate_machine(
+    plant: &StateSpace,
+    controller: &StateSpace,
+    data: &IoData,
+    opts: &MachineValidationOptions,
+) -> Result<MachineValidation> {
+    let Simulated {
+        ch,
+        k0,
+        n_axes,
+        ts,
+        n,
+        closed_loop,
+        closed_loop_poles,
+        reconstruction,
+    } = simulate_against(plant, controller, data, opts)?;
     // the excitations the residuals are tested against: every nonzero r (w without any)
     let nonzero = |x: &&[f64]| x.iter().any(|v| *v != 0.0);
     let mut drivers: Vec<(String, &[f64])> = ch

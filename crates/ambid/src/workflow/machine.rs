@@ -745,14 +745,28 @@ pub fn acquire_twin(m: &MachineSection, base: &Path, seed: u64) -> Result<Machin
     for ((k, _), r) in jobs.iter().zip(recs) {
         per_speed[*k].push(r?);
     }
-    let measured: Vec<Result<Measured, Error>> = per_speed
-        .into_par_iter()
-        .zip(speeds.par_iter())
-        .map(|(recs, &s)| measure(recs, period, m, s, &format!("the twin at {s} rpm")))
-        .collect();
+    // the measurements, and beside them the true loops' peak sensitivities (a dense frequency
+    // grid each)
+    let (measured, peaks): (Vec<Result<Measured, Error>>, Vec<Result<_, Error>>) = rayon::join(
+        || {
+            per_speed
+                .into_par_iter()
+                .zip(speeds.par_iter())
+                .map(|(recs, &s)| measure(recs, period, m, s, &format!("the twin at {s} rpm")))
+                .collect()
+        },
+        || {
+            machines
+                .par_iter()
+                .map(|mc| mc.peak_sensitivity().map_err(Error::from))
+                .collect()
+        },
+    );
     let mut out = Vec::with_capacity(speeds.len());
     let mut truth = Vec::with_capacity(speeds.len());
-    for ((res, &speed_rpm), mc) in measured.into_iter().zip(&speeds).zip(&machines) {
+    for (((res, &speed_rpm), mc), peak) in
+        measured.into_iter().zip(&speeds).zip(&machines).zip(peaks)
+    {
         let (frf, records, sync) = res?;
         out.push(SpeedMeasurement {
             speed_rpm,
@@ -766,7 +780,7 @@ pub fn acquire_twin(m: &MachineSection, base: &Path, seed: u64) -> Result<Machin
             speed_rpm,
             plant: mc.plant().clone(),
             controller: mc.controller().clone(),
-            peak_sensitivity: mc.peak_sensitivity()?,
+            peak_sensitivity: peak?,
         });
     }
     Ok(MachineData {

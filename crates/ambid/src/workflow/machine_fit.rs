@@ -50,6 +50,13 @@
 //!   reached 0.98 and 0.22 % (nonlinear: 1.53, 0.73 %) in a third of the time; at 0 rpm both
 //!   ways were alike (linear 0.20 % against 0.18 %; nonlinear 0.86 % against 0.53 %).
 //!   `models = "fit-all"` scans every order at every speed, each from scratch.
+//! * **Side by side.** What does not depend on each other overlaps (each computation is the
+//!   one of a sequential run, so the numbers do not depend on the thread count): the reference
+//!   speed's validation runs beside the other speeds' fits; the other speeds' validations
+//!   beside the speed-scheduled model; within a validation the model's closed-loop simulation
+//!   beside the true plant's (on the twin, whose displacement fits alone are computed:
+//!   `machine_output_fits`). On the default nonlinear twin this took the fitted workflow from
+//!   13.3–15.3 s to 11.1–12.2 s wall (docs/benchmarks.md, 2026-11-30).
 //! * **Loop.** With the controllers known (the twin), every fit is held to models whose loop
 //!   with them is stable ([`ss_frd_mimo_in_loop`]): the measured loop was stable, and an
 //!   unconstrained fit puts spurious fast unstable poles outside the band.
@@ -101,7 +108,9 @@ use ambid_core::estimate::scheduled::{
 };
 use ambid_core::lti::{Frd, StateSpace};
 use ambid_core::signal::{noise::Distribution, NoiseSpec};
-use ambid_core::validate::machine::{validate_machine, MachineValidationOptions};
+use ambid_core::validate::machine::{
+    machine_output_fits, validate_machine, MachineValidationOptions,
+};
 use ambid_core::validate::nyquist::loop_unstable_poles;
 use ambid_twin::{c64, Machine, MachineConfig, MachineSimOptions, Whirl};
 use rayon::prelude::*;
@@ -550,11 +559,17 @@ pub fn twin_validation_record(
     Ok((m, data))
 }
 
-/// One speed's result.
+/// One speed's fits.
 struct SpeedResult {
     cands: Vec<Candidate>,
     chosen: Option<usize>,
     band: Option<(f64, f64)>,
+    notes: Vec<String>,
+}
+
+/// One speed's validation of its chosen model ([`FrequencyFitter::validate`]).
+#[derive(Default)]
+struct SpeedValidation {
     validation: Vec<AxisValidationRow>,
     iso: Vec<IsoRow>,
     sigma: Option<(f64, f64, f64)>,
@@ -563,12 +578,12 @@ struct SpeedResult {
 }
 
 impl FrequencyFitter {
-    /// One speed: the `orders` fitted (the scan), then, when none of them can be chosen, the
-    /// `fallback` orders (module docs, "Orders").
+    /// One speed's fits: the `orders` fitted (the scan), then, when none of them can be chosen,
+    /// the `fallback` orders (module docs, "Orders"); [`FrequencyFitter::validate`] adds the
+    /// chosen model's validation.
     fn speed(
         &self,
         input: &MachineModelInput<'_>,
-        k: usize,
         sp: &SpeedMeasurement,
         orders: &[usize],
         fallback: &[usize],
@@ -586,10 +601,6 @@ impl FrequencyFitter {
                 cands: Vec::new(),
                 chosen: None,
                 band: None,
-                validation: Vec::new(),
-                iso: Vec::new(),
-                sigma: None,
-                modes: Vec::new(),
                 notes,
             });
         };
@@ -673,13 +684,37 @@ impl FrequencyFitter {
                 sp.speed_rpm
             ));
         }
-        let mut validation = Vec::new();
-        let mut iso = Vec::new();
-        let mut sigma = None;
-        let mut modes = Vec::new();
+        Ok(SpeedResult {
+            cands,
+            chosen,
+            band: Some(band),
+            notes,
+        })
+    }
+
+    /// The validation of the chosen model of speed `k` (its fits `r` from
+    /// [`FrequencyFitter::speed`]): its closed-loop modes, then the closed-loop simulation
+    /// of it and, on the twin, of the true plant against an independent record (side by side).
+    fn validate(
+        &self,
+        input: &MachineModelInput<'_>,
+        k: usize,
+        sp: &SpeedMeasurement,
+        r: &SpeedResult,
+    ) -> Result<SpeedValidation, Error> {
+        let controller = input.controller;
+        let (cands, chosen) = (&r.cands, r.chosen);
+        let mut out = SpeedValidation::default();
+        let SpeedValidation {
+            validation,
+            iso,
+            sigma,
+            modes,
+            notes,
+        } = &mut out;
         if let (Some(ci), Some(ctl)) = (chosen, controller) {
             if let Ok(fit) = &cands[ci].fit {
-                modes = closed_loop_modes(&fit.model, ctl, sp.speed_rpm, input.quality_band_hz)?;
+                *modes = closed_loop_modes(&fit.model, ctl, sp.speed_rpm, input.quality_band_hz)?;
                 // validation: an independent twin record, or (files) the first experiment
                 let record = match input.twin {
                     Some((cfg, mode)) => Some((
@@ -706,19 +741,24 @@ impl FrequencyFitter {
                         zones: input.zones,
                         ..Default::default()
                     };
-                    match validate_machine(&fit.model, ctl, &rec, &opts) {
-                        Ok(v) => {
-                            let truth = input
+                    let (model_validation, truth) = rayon::join(
+                        || validate_machine(&fit.model, ctl, &rec, &opts),
+                        || {
+                            input
                                 .truth
                                 .and_then(|t| t.get(k))
-                                .and_then(|t| validate_machine(&t.plant, ctl, &rec, &opts).ok());
+                                .and_then(|t| machine_output_fits(&t.plant, ctl, &rec, &opts).ok())
+                        },
+                    );
+                    match model_validation {
+                        Ok(v) => {
                             for (a, ax) in v.axes.iter().enumerate() {
                                 validation.push(AxisValidationRow {
                                     speed_rpm: sp.speed_rpm,
                                     axis: ax.axis.clone(),
                                     fit_y_pct: ax.fit_y,
                                     fit_i_pct: ax.fit_i,
-                                    truth_fit_y_pct: truth.as_ref().map(|t| t.axes[a].fit_y),
+                                    truth_fit_y_pct: truth.as_ref().and_then(|t| t.get(a).copied()),
                                     whiteness_ok: None,
                                     independence_ok: ax.residuals.as_ref().map(|r| r.pass),
                                 });
@@ -731,7 +771,7 @@ impl FrequencyFitter {
                                     zone: ax.iso.zone,
                                 });
                             }
-                            sigma = Some((sp.speed_rpm, v.sigma_max_peak, v.sigma_max_f_hz));
+                            *sigma = Some((sp.speed_rpm, v.sigma_max_peak, v.sigma_max_f_hz));
                         }
                         Err(e) => notes.push(format!(
                             "{} rpm: the chosen model could not be validated: {e}",
@@ -746,40 +786,68 @@ impl FrequencyFitter {
                 sp.speed_rpm
             ));
         }
-        Ok(SpeedResult {
-            cands,
-            chosen,
-            band: Some(band),
-            validation,
-            iso,
-            sigma,
-            modes,
-            notes,
-        })
+        Ok(out)
     }
 }
 
+/// Every speed's fits and validations and the speed-scheduled model
+/// ([`FrequencyFitter::all_speeds`]).
+struct AllSpeeds {
+    results: Vec<SpeedResult>,
+    validations: Vec<SpeedValidation>,
+    /// `None` without a controller (recorded files).
+    schedule: Option<Result<Option<SpeedScheduledModel>, Error>>,
+}
+
 impl FrequencyFitter {
-    /// Every speed's result (module docs, "Orders"): with [`FrequencyFitter::order_from_reference_speed`]
-    /// and more than one speed, the orders are scanned at the reference speed (the middle one
-    /// of the list) and the other speeds fit its chosen order, scanning the rest only where
-    /// that order gives no admissible model; else every speed scans every order.
+    /// Every speed's fits (module docs, "Orders"): with
+    /// [`FrequencyFitter::order_from_reference_speed`] and more than one speed, the orders are
+    /// scanned at the reference speed (the middle one of the list) and the other speeds fit its
+    /// chosen order, scanning the rest only where that order gives no admissible model; else
+    /// every speed scans every order. Then every speed's validation and (with a controller) the
+    /// speed-scheduled model. What does not depend on each other runs side by side: the
+    /// reference speed's validation beside the other speeds' fits, the other validations
+    /// beside the speed-scheduled model (each computation is the same as one after the other,
+    /// so the result does not depend on the number of threads).
     fn all_speeds(
         &self,
         input: &MachineModelInput<'_>,
         notes: &mut Vec<String>,
-    ) -> Result<Vec<SpeedResult>, Error> {
+    ) -> Result<AllSpeeds, Error> {
         let n = input.speeds.len();
-        if !self.order_from_reference_speed || n < 2 || self.orders.len() < 2 {
-            return input
+        let schedule =
+            |results: &[SpeedResult]| input.controller.map(|_| self.scheduled(input, results));
+        let validate_all = |results: &[SpeedResult], skip: Option<usize>| {
+            input
                 .speeds
                 .par_iter()
+                .zip(results)
                 .enumerate()
-                .map(|(k, sp)| self.speed(input, k, sp, &self.orders, &[], None))
-                .collect();
+                .map(|(k, (sp, r))| {
+                    if Some(k) == skip {
+                        Ok(SpeedValidation::default())
+                    } else {
+                        self.validate(input, k, sp, r)
+                    }
+                })
+                .collect::<Result<Vec<_>, Error>>()
+        };
+        if !self.order_from_reference_speed || n < 2 || self.orders.len() < 2 {
+            let results = input
+                .speeds
+                .par_iter()
+                .map(|sp| self.speed(input, sp, &self.orders, &[], None))
+                .collect::<Result<Vec<_>, Error>>()?;
+            let (validations, schedule) =
+                rayon::join(|| validate_all(&results, None), || schedule(&results));
+            return Ok(AllSpeeds {
+                validations: validations?,
+                results,
+                schedule,
+            });
         }
         let kr = n / 2;
-        let reference = self.speed(input, kr, &input.speeds[kr], &self.orders, &[], None)?;
+        let reference = self.speed(input, &input.speeds[kr], &self.orders, &[], None)?;
         let ref_model = reference
             .chosen
             .and_then(|c| reference.cands[c].fit.as_ref().ok())
@@ -799,8 +867,8 @@ impl FrequencyFitter {
             for k in ks {
                 let sp = &input.speeds[k];
                 let r = match order {
-                    Some(o) => self.speed(input, k, sp, &[o], &rest, warm.as_ref())?,
-                    None => self.speed(input, k, sp, &self.orders, &[], None)?,
+                    Some(o) => self.speed(input, sp, &[o], &rest, warm.as_ref())?,
+                    None => self.speed(input, sp, &self.orders, &[], None)?,
                 };
                 if let Some(f) = r
                     .chosen
@@ -813,12 +881,20 @@ impl FrequencyFitter {
             }
             Ok(out)
         };
-        let (below, above) = rayon::join(
-            || chain((0..kr).rev().collect()),
-            || chain((kr + 1..n).collect()),
+        let (ref_validation, others) = rayon::join(
+            || self.validate(input, kr, &input.speeds[kr], &reference),
+            || {
+                let (below, above) = rayon::join(
+                    || chain((0..kr).rev().collect()),
+                    || chain((kr + 1..n).collect()),
+                );
+                let mut others = below?;
+                others.extend(above?);
+                Ok::<_, Error>(others)
+            },
         );
-        let mut others = below?;
-        others.extend(above?);
+        let ref_validation = ref_validation?;
+        let mut others = others?;
         if let Some(o) = order {
             notes.push(format!(
                 "Orders: {} scanned at the reference speed {} rpm (the middle of the list), which chose order {o}; every other speed fits order {o} (the plant has the same states at every speed) starting from its inner neighbour's model, from scratch where that fit is not admissible, and scans the rest only where no fit of order {o} is admissible — `[machine] models = \"fit-all\"` scans every order at every speed, each from scratch",
@@ -828,7 +904,16 @@ impl FrequencyFitter {
         }
         others.push((kr, reference));
         others.sort_by_key(|(k, _)| *k);
-        Ok(others.into_iter().map(|(_, r)| r).collect())
+        let results: Vec<SpeedResult> = others.into_iter().map(|(_, r)| r).collect();
+        let (validations, schedule) =
+            rayon::join(|| validate_all(&results, Some(kr)), || schedule(&results));
+        let mut validations = validations?;
+        validations[kr] = ref_validation;
+        Ok(AllSpeeds {
+            results,
+            validations,
+            schedule,
+        })
     }
 }
 
@@ -895,8 +980,12 @@ impl FrequencyFitter {
 impl MachineModels for FrequencyFitter {
     fn identify(&self, input: &MachineModelInput<'_>) -> Result<MachineModelOutput, Error> {
         let mut out = MachineModelOutput::default();
-        let results = self.all_speeds(input, &mut out.notes)?;
-        for (sp, res) in input.speeds.iter().zip(&results) {
+        let AllSpeeds {
+            results,
+            validations,
+            schedule,
+        } = self.all_speeds(input, &mut out.notes)?;
+        for ((sp, res), val) in input.speeds.iter().zip(&results).zip(&validations) {
             for (i, c) in res.cands.iter().enumerate() {
                 let chosen = res.chosen == Some(i);
                 match &c.fit {
@@ -930,8 +1019,8 @@ impl MachineModels for FrequencyFitter {
                             median_norm_error_pct: 100.0 * fit.errors.median_norm_relative,
                             max_entry_error_pct: 100.0 * max_entry,
                             bic: Some(fit.bic()),
-                            fit_y_pct: if chosen && res.validation.len() == 4 {
-                                Some(std::array::from_fn(|a| res.validation[a].fit_y_pct))
+                            fit_y_pct: if chosen && val.validation.len() == 4 {
+                                Some(std::array::from_fn(|a| val.validation[a].fit_y_pct))
                             } else {
                                 None
                             },
@@ -965,16 +1054,17 @@ impl MachineModels for FrequencyFitter {
                     )),
                 }
             }
-            out.validation.extend(res.validation.iter().cloned());
-            out.iso.extend(res.iso.iter().cloned());
-            out.sigma_max_s.extend(res.sigma);
-            out.campbell_points.extend(res.modes.iter().copied());
+            out.validation.extend(val.validation.iter().cloned());
+            out.iso.extend(val.iso.iter().cloned());
+            out.sigma_max_s.extend(val.sigma);
+            out.campbell_points.extend(val.modes.iter().copied());
             out.notes.extend(res.notes.iter().cloned());
+            out.notes.extend(val.notes.iter().cloned());
         }
         // the speed-scheduled model: the middle speed's chosen order at every speed that has
         // a fit of that order; its closed-loop modes on a dense speed grid are the curves
-        if let Some(ctl) = input.controller {
-            match self.scheduled(input, &results) {
+        if let (Some(ctl), Some(schedule)) = (input.controller, schedule) {
+            match schedule {
                 Ok(Some(sched)) => {
                     let (lo, hi) = sched.range_rpm();
                     for g in 0..=SCHEDULE_GRID {
