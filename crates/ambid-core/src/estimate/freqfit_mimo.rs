@@ -237,7 +237,9 @@
 // the loops index several parallel arrays (data, weights, channel scales) by line and entry
 #![allow(clippy::needless_range_loop)]
 
-use super::pem::lm::{minimize_resumed, LeastSquaresProblem, LmOptions, LmState, StopReason};
+use super::pem::lm::{
+    all_finite, minimize_resumed, LeastSquaresProblem, LmOptions, LmState, StopReason,
+};
 use crate::error::{Error, Result};
 use crate::estimate::qr_stream::r_factor_in_place;
 use crate::linalg;
@@ -1224,11 +1226,8 @@ fn scaled_lstsq(mut ms: Mat<f64>, rhs: &Mat<f64>, basis: bool) -> Result<Solved>
             ms.col_mut(c).iter_mut().for_each(|v| *v *= *sc);
         }
     }
-    if ms
-        .col_iter()
-        .chain(rhs.col_iter())
-        .flat_map(|c| c.iter().copied())
-        .any(|v| !v.is_finite())
+    if !(0..nc).all(|c| all_finite(ms.col_as_slice(c)))
+        || !(0..rhs.ncols()).all(|c| all_finite(rhs.col_as_slice(c)))
     {
         return Err(Error::numerical(CTX, "a non-finite regressor"));
     }
