@@ -525,3 +525,45 @@ fn models_fit_runs_the_mimo_fitter_in_the_workflow() {
     WorkflowConfig::from_toml_str("[machine]\nmodels = \"fit-all\"\n", Path::new("wf.toml"))
         .unwrap();
 }
+
+/// `[machine] models = "fit"` on two speeds runs its independent parts side by side (the
+/// reference speed's validation beside the other speed's fit, that speed's validation beside
+/// the speed-scheduled model, a model's and the true plant's closed-loop simulations together):
+/// every number of the machine summary is the same on one thread and on three (its JSON values
+/// compared exactly), and the parts all ran (both speeds validated against the true plant, the
+/// speed-scheduled model built).
+#[test]
+fn the_fitted_workflow_is_independent_of_the_threads() {
+    let c = cfg(&format!("{SHORT}models = \"fit\"\n"));
+    let run_on = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| {
+                let out =
+                    ambid::workflow::run(&c, Path::new("."), &mut Progress::new(Verbosity::Quiet))
+                        .unwrap();
+                let html = out.report.to_html();
+                (
+                    out.summary["machine"].clone(),
+                    html.contains("Speed-scheduled model: order"),
+                )
+            })
+    };
+    let (one, scheduled) = run_on(1);
+    let (three, _) = run_on(3);
+    assert!(
+        one == three,
+        "the fitted workflow depends on the number of threads:\n{one}\n{three}"
+    );
+    let val = one["validation"].as_array().unwrap();
+    assert_eq!(val.len(), 8, "{val:?}");
+    assert!(
+        val.iter()
+            .all(|r| r["truth_fit_y_pct"].as_f64().is_some_and(f64::is_finite)),
+        "{val:?}"
+    );
+    assert_eq!(one["models"].as_array().unwrap().len(), 2);
+    assert!(scheduled, "no speed-scheduled model");
+}
