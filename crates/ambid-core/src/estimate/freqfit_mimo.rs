@@ -1705,6 +1705,37 @@ impl<'a> Problem<'a> {
         }
     }
 
+    /// $Y = C_b R_b$ and (with `with_x`) $X = R_b \beta_b$ of every block at every line, flat:
+    /// `ys[(k n + s) n_y + i]`, `xs[(k n + s) n_u + j]` for line $k$ and state $s$ (`xs` empty
+    /// without `with_x`); `None` when a pole lies on a line.
+    fn line_tables(&self, th: &[f64], with_x: bool) -> Option<(Vec<c64>, Vec<c64>)> {
+        let lay = self.layout;
+        let (ny, nu, n, l) = (lay.ny, lay.nu, lay.n, self.data.len());
+        let mut ys = vec![c64::default(); l * n * ny];
+        let mut xs = vec![c64::default(); if with_x { l * n * nu } else { 0 }];
+        let mut yb = vec![c64::default(); 2 * ny];
+        let mut xb = vec![c64::default(); 2 * nu];
+        for (k, &dk) in self.delta.iter().enumerate() {
+            let mut s = 0;
+            for b in &lay.blocks {
+                let rb = resolvent(th, b, dk)?;
+                self.y_block(th, b, &rb, &mut yb);
+                if with_x {
+                    self.x_block(th, b, &rb, &mut xb);
+                }
+                for rr in 0..b.dim {
+                    let at = k * n + s + rr;
+                    ys[at * ny..(at + 1) * ny].copy_from_slice(&yb[rr * ny..(rr + 1) * ny]);
+                    if with_x {
+                        xs[at * nu..(at + 1) * nu].copy_from_slice(&xb[rr * nu..(rr + 1) * nu]);
+                    }
+                }
+                s += b.dim;
+            }
+        }
+        Some((ys, xs))
+    }
+
     /// $Y_b = C_b R_b$ ($n_y \times \dim$, column-major `y[r * ny + i]`) at line `k`.
     fn y_block(&self, th: &[f64], b: &Block, rb: &[c64; 4], out: &mut [c64]) {
         let ny = self.layout.ny;
@@ -1786,27 +1817,12 @@ impl<'a> Problem<'a> {
         let e = ny * nu;
         let nd = if lay.d_off.is_some() { ny } else { 0 };
         let ncol = lay.n + nd;
-        // Y_b per line, once
-        let mut ys = vec![c64::default(); l * ny * lay.n];
-        let mut yb = vec![c64::default(); 2 * ny];
-        for (k, &dk) in self.delta.iter().enumerate() {
-            let mut s = 0;
-            for b in &lay.blocks {
-                let rb = resolvent(th, b, dk).ok_or_else(|| {
-                    Error::numerical(
-                        CTX,
-                        "a pole of the start lies on a line of the data; lower the order",
-                    )
-                })?;
-                self.y_block(th, b, &rb, &mut yb);
-                for r in 0..b.dim {
-                    for i in 0..ny {
-                        ys[(k * lay.n + s + r) * ny + i] = yb[r * ny + i];
-                    }
-                }
-                s += b.dim;
-            }
-        }
+        let (ys, _) = self.line_tables(th, false).ok_or_else(|| {
+            Error::numerical(
+                CTX,
+                "a pole of the start lies on a line of the data; lower the order",
+            )
+        })?;
         // one weighted least-squares problem per input column, side by side
         let solved: Vec<Result<Solved>> = (0..nu)
             .into_par_iter()
@@ -2179,26 +2195,7 @@ impl Problem<'_> {
             }
             own_i.extend_from_slice(&shared);
         }
-        // Y (line, state, output) and X (line, state, input) once
-        let mut ys = vec![c64::default(); l * n * ny];
-        let mut xs = vec![c64::default(); l * n * nu];
-        let mut yb = vec![c64::default(); 2 * ny];
-        let mut xb = vec![c64::default(); 2 * nu];
-        for (k, &dk) in self.delta.iter().enumerate() {
-            let mut s = 0;
-            for b in &lay.blocks {
-                let rb = resolvent(th, b, dk)?;
-                self.y_block(th, b, &rb, &mut yb);
-                self.x_block(th, b, &rb, &mut xb);
-                for rr in 0..b.dim {
-                    ys[(k * n + s + rr) * ny..(k * n + s + rr + 1) * ny]
-                        .copy_from_slice(&yb[rr * ny..(rr + 1) * ny]);
-                    xs[(k * n + s + rr) * nu..(k * n + s + rr + 1) * nu]
-                        .copy_from_slice(&xb[rr * nu..(rr + 1) * nu]);
-                }
-                s += b.dim;
-            }
-        }
+        let (ys, xs) = self.line_tables(th, true)?;
         let p = ncols + 1;
         let tails: Vec<Mat<f64>> = (0..nu)
             .into_par_iter()
