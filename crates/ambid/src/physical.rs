@@ -4,10 +4,12 @@
 //! and the intervals are documented in [`ambid_core::estimate::graybox`].
 
 use crate::error::{Context, Error, Result};
+use crate::experiment::ExcitationPlan;
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::estimate::freqfit_ss::{ss_frd, SsFreqOptions};
 pub use ambid_core::estimate::graybox::{
-    fit_physical, Drawing, Hints, PhysicalFit, PhysicalOptions, PhysicalParams, PARAMETER_NAMES,
+    extrapolate_to_zero_amplitude, fit_physical, AtLevel, Drawing, Hints, PhysicalFit,
+    PhysicalOptions, PhysicalParams, ZeroAmplitude, PARAMETER_NAMES,
 };
 use ambid_core::lti::{Frd, StateSpace};
 use ambid_core::validate::compare::unstable_poles_from_loop;
@@ -96,7 +98,15 @@ impl PhysicalRun {
     /// # Errors
     /// Any step's error.
     pub fn on_twin(rig: u64, seed: u64, mode: Mode) -> Result<Self> {
-        let (out, frd) = crate::uncertainty::twin_seed_frf(rig, seed, mode)?;
+        Self::on_twin_at(rig, seed, mode, ExcitationPlan::default().amplitude_frac)
+    }
+
+    /// [`Self::on_twin`] with the seed experiment's PRBS at `amplitude_frac` of $i_\text{sat}$.
+    ///
+    /// # Errors
+    /// Any step's error.
+    pub fn on_twin_at(rig: u64, seed: u64, mode: Mode, amplitude_frac: f64) -> Result<Self> {
+        let (out, frd) = crate::uncertainty::twin_seed_frf_at(rig, seed, mode, amplitude_frac)?;
         let controller = out.twin.controller().clone();
         let unstable = unstable_poles_from_loop(&frd, &controller, None).ok();
         let opts = FreqFitOptions {
@@ -126,14 +136,68 @@ impl PhysicalRun {
     }
 }
 
+/// The estimates at several excitation levels as the input of
+/// [`extrapolate_to_zero_amplitude`]: `(level, fit)` pairs.
+pub fn at_levels(fits: &[(f64, PhysicalFit)]) -> Vec<AtLevel> {
+    fits.iter()
+        .map(|(level, fit)| AtLevel {
+            level: *level,
+            params: fit.params,
+            std: fit.std,
+        })
+        .collect()
+}
+
+/// The chain of [`PhysicalRun`] at several excitation levels on one twin rig, and the
+/// parameters extrapolated to zero amplitude ([`extrapolate_to_zero_amplitude`], module docs of
+/// `ambid_core::estimate::graybox::amplitude`): the small-signal $k_x$ of the nonlinear twin,
+/// whose estimate at a finite level is the best linear approximation's.
+#[derive(Debug, Clone)]
+pub struct ExtrapolatedRun {
+    /// The estimate at each level, in the order of the levels.
+    pub at_levels: Vec<(f64, PhysicalFit)>,
+    /// The extrapolation to zero amplitude.
+    pub zero: ZeroAmplitude,
+    /// The twin's linearisation and rotor values.
+    pub truth: PhysicalParams,
+}
+
+impl ExtrapolatedRun {
+    /// Runs [`PhysicalRun::on_twin_at`] at each of `levels` (fractions of $i_\text{sat}$) on
+    /// rig `rig`, level $l$ (from 0) with noise seed `seed + 1000 l` so that the levels'
+    /// records are independent, and extrapolates at the fits' confidence level.
+    ///
+    /// # Errors
+    /// Any run's error, with its level named; those of [`extrapolate_to_zero_amplitude`].
+    pub fn on_twin(rig: u64, seed: u64, mode: Mode, levels: &[f64]) -> Result<Self> {
+        if levels.len() < 2 {
+            // refused before any simulation
+            return Err(Error::usage(format!(
+                "{} level(s): the extrapolation to zero amplitude needs two or more excitation levels",
+                levels.len()
+            )));
+        }
+        let mut at = Vec::with_capacity(levels.len());
+        let mut truth = None;
+        for (l, &a) in levels.iter().enumerate() {
+            let run = PhysicalRun::on_twin_at(rig, seed + 1000 * l as u64, mode, a)
+                .with_context(|| format!("the run at level {a}"))?;
+            truth = Some(run.truth);
+            at.push((a, run.fit));
+        }
+        let confidence = at.first().map_or(0.95, |(_, f)| f.confidence);
+        let zero = extrapolate_to_zero_amplitude(&at_levels(&at), confidence)
+            .context("the extrapolation to zero amplitude")?;
+        let truth = truth.ok_or_else(|| Error::other("no level was given"))?;
+        Ok(Self {
+            at_levels: at,
+            zero,
+            truth,
+        })
+    }
+}
+
 /// The parameters as an array in the order of [`PARAMETER_NAMES`].
 pub fn as_array(p: &PhysicalParams) -> [f64; 6] {
-    [
-        p.k_i,
-        p.k_x,
-        p.bending_hz,
-        p.bending_damping,
-        p.mode_shape_a,
-        p.mode_shape_b,
-    ]
+    p.to_array()
 }

@@ -212,6 +212,21 @@ pub fn twin_seed_frf(
     seed: u64,
     mode: Mode,
 ) -> Result<(crate::experiment::ExperimentOutput, Frd)> {
+    twin_seed_frf_at(rig, seed, mode, ExcitationPlan::default().amplitude_frac)
+}
+
+/// [`twin_seed_frf`] with the seed experiment's PRBS at `amplitude_frac` of $i_\text{sat}$
+/// instead of its default 10 % (the amplitude extrapolation of
+/// [`crate::physical::ExtrapolatedRun::on_twin`]).
+///
+/// # Errors
+/// Drawing the rig, the simulation or the FRF.
+pub fn twin_seed_frf_at(
+    rig: u64,
+    seed: u64,
+    mode: Mode,
+    amplitude_frac: f64,
+) -> Result<(crate::experiment::ExperimentOutput, Frd)> {
     let twin = if rig == 0 {
         TwinConfig::default()
     } else {
@@ -219,7 +234,10 @@ pub fn twin_seed_frf(
     };
     let exp = Experiment {
         twin,
-        excitation: ExcitationPlan::default(),
+        excitation: ExcitationPlan {
+            amplitude_frac,
+            ..ExcitationPlan::default()
+        },
         mode,
         seed,
         noise: true,

@@ -96,7 +96,7 @@
 //! problem per input column).
 //!
 //! # 3. Refinement
-//! Levenberg–Marquardt ([`minimize`]) over $\theta = (\alpha_b, \beta_b, \text{free rows of }
+//! Levenberg–Marquardt ([`minimize_resumed`]) over $\theta = (\alpha_b, \beta_b, \text{free rows of }
 //! C_b)_b$ and $D$; per block $\dim_b(1 + n_u + n_y - 1)$ parameters, the dimension of a
 //! McMillan-degree-$\dim_b$ block with given poles, so the parameterisation is locally
 //! identifiable for distinct poles (repeated poles, e.g. the two identical planes of a rotor at

@@ -48,6 +48,15 @@
 //! $k_x$ by one factor leaves the rigid-body part unchanged, so $k_i$ and $k_x$ themselves need
 //! the mass (and inertia) from the drawing; [`PhysicalFit::ratio`] gives the ratio with its
 //! interval.
+//!
+//! # Zero amplitude
+//! On a nonlinear magnet the FRF at a finite excitation is the best linear approximation, whose
+//! $k_x$ lies above the small-signal one by an amount proportional to the level squared;
+//! [`extrapolate_to_zero_amplitude`] combines estimates at several levels (module
+//! `amplitude`).
+
+mod amplitude;
+pub use amplitude::{extrapolate_to_zero_amplitude, AtLevel, ZeroAmplitude};
 
 use crate::error::{Error, Result};
 use crate::estimate::pem::lm::{minimize, LeastSquaresProblem, LmOptions, StopReason};
@@ -99,6 +108,20 @@ pub struct PhysicalParams {
     pub mode_shape_a: f64,
     /// The same at bearing B.
     pub mode_shape_b: f64,
+}
+
+impl PhysicalParams {
+    /// The parameters as an array in the order of [`PARAMETER_NAMES`].
+    pub fn to_array(&self) -> [f64; 6] {
+        [
+            self.k_i,
+            self.k_x,
+            self.bending_hz,
+            self.bending_damping,
+            self.mode_shape_a,
+            self.mode_shape_b,
+        ]
+    }
 }
 
 /// The names of the parameters, in the order of [`PhysicalFit::intervals`].

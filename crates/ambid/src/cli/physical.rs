@@ -7,8 +7,8 @@ use super::common::{model_on_frf, twin_config, ModelOnFrf, TwinArgs};
 use ambid::io::model::state_space_json;
 use ambid::io::OutputSet;
 use ambid::physical::{
-    as_array, estimate, median_rel_error, twin_drawing, twin_truth, Drawing, PhysicalOptions,
-    PARAMETER_NAMES,
+    as_array, at_levels, estimate, extrapolate_to_zero_amplitude, median_rel_error, twin_drawing,
+    twin_truth, Drawing, PhysicalFit, PhysicalOptions, PARAMETER_NAMES,
 };
 use anyhow::{Context, Result};
 use clap::Args;
@@ -47,6 +47,15 @@ pub struct PhysicalArgs {
     /// Two-sided confidence level of the intervals.
     #[arg(long, default_value_t = 0.95)]
     confidence: f64,
+    /// The excitation level of FRF (any unit proportional to the amplitude, e.g. % of i_sat);
+    /// needed with --also.
+    #[arg(long)]
+    level: Option<f64>,
+    /// Another FRF of the same axis at another excitation level, `LEVEL=FILE` (repeat for more
+    /// levels): the parameters are estimated at every level and extrapolated to zero amplitude
+    /// (the small-signal k_i, k_x of a nonlinear magnet; docs/physical.md). Read on FRF's band.
+    #[arg(long, value_parser = parse_level_file)]
+    also: Vec<(f64, PathBuf)>,
     /// Output JSON: estimates, standard deviations, intervals, the ratio k_i/k_x, the gray-box
     /// model and its comparison with the black-box model.
     #[arg(long, default_value = "physical.json")]
@@ -58,6 +67,24 @@ pub struct PhysicalArgs {
 
 const UNITS: [&str; 6] = ["N/A", "N/m", "Hz", "-", "kg^-1/2", "kg^-1/2"];
 
+/// `LEVEL=FILE` of `--also`.
+fn parse_level_file(s: &str) -> std::result::Result<(f64, PathBuf), String> {
+    let (l, f) = s
+        .split_once('=')
+        .ok_or_else(|| format!("`{s}`: expected LEVEL=FILE, e.g. 14=frf14.csv"))?;
+    let level: f64 =
+        l.trim().trim_end_matches('%').parse().map_err(|_| {
+            format!("`{l}` is not a number: expected LEVEL=FILE, e.g. 14=frf14.csv")
+        })?;
+    if !(level.is_finite() && level > 0.0) {
+        return Err(format!("the level must be positive, got {level}"));
+    }
+    if f.is_empty() {
+        return Err(format!("`{s}`: the file is missing; expected LEVEL=FILE"));
+    }
+    Ok((level, PathBuf::from(f)))
+}
+
 pub fn physical(a: PhysicalArgs) -> Result<()> {
     OutputSet::check(&a.out, a.force)?;
     if !(a.confidence > 0.0 && a.confidence < 1.0) {
@@ -67,6 +94,20 @@ pub fn physical(a: PhysicalArgs) -> Result<()> {
         ))
         .into());
     }
+    let level = match (a.level, a.also.is_empty()) {
+        (Some(l), _) if !(l.is_finite() && l > 0.0) => {
+            return Err(
+                ambid::error::Error::usage(format!("--level must be positive, got {l}")).into(),
+            )
+        }
+        (None, false) => {
+            return Err(ambid::error::Error::usage(
+                "--also needs --level, the excitation level of FRF (e.g. --level 10 for 10 % of i_sat), to extrapolate to zero amplitude",
+            )
+            .into())
+        }
+        (l, _) => l,
+    };
     let (drawing, truth) = match &a.drawing {
         Some(p) => {
             let text = std::fs::read_to_string(p)
@@ -101,16 +142,38 @@ pub fn physical(a: PhysicalArgs) -> Result<()> {
         &a.controller,
         "the gray-box fit weights the lines by the FRF's standard deviations",
     )?;
-    let fit = estimate(
-        &frd,
-        &model,
-        &drawing,
-        ctrl.state_space(),
-        &PhysicalOptions {
-            confidence: a.confidence,
-            ..PhysicalOptions::default()
-        },
-    )?;
+    let popts = PhysicalOptions {
+        confidence: a.confidence,
+        ..PhysicalOptions::default()
+    };
+    let fit = estimate(&frd, &model, &drawing, ctrl.state_space(), &popts)?;
+    // the other levels, on the same band (everything is estimated before anything is written)
+    let mut levels: Vec<(f64, PhysicalFit)> = Vec::new();
+    if let Some(l) = level {
+        levels.push((l, fit.clone()));
+    }
+    for (l, file) in &a.also {
+        let other = model_on_frf(
+            file,
+            &a.quantity,
+            a.fs,
+            Some(band),
+            &a.model,
+            &a.controller,
+            "the gray-box fit weights the lines by the FRF's standard deviations",
+        )?;
+        let f = estimate(&other.frd, &model, &drawing, ctrl.state_space(), &popts)
+            .with_context(|| format!("the estimate at level {l} ({})", file.display()))?;
+        levels.push((*l, f));
+    }
+    let zero = if levels.len() > 1 {
+        Some(extrapolate_to_zero_amplitude(
+            &at_levels(&levels),
+            a.confidence,
+        )?)
+    } else {
+        None
+    };
     let est = as_array(&fit.params);
     let pct = 100.0 * a.confidence;
     println!(
@@ -166,6 +229,63 @@ pub fn physical(a: PhysicalArgs) -> Result<()> {
         model.order(),
         100.0 * e_black
     );
+    let mut zero_json = serde_json::Value::Null;
+    if let Some(z) = &zero {
+        let top = levels.iter().map(|(l, _)| *l).fold(0.0f64, f64::max);
+        let change = z.change_at(top);
+        let ze = z.params_array();
+        println!(
+            "extrapolated to zero amplitude from {} levels ({}; the line in level² per parameter, module docs of ambid_core::estimate::graybox::amplitude):",
+            levels.len(),
+            levels
+                .iter()
+                .map(|(l, _)| format!("{l}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+        let mut zrows = Vec::new();
+        for k in 0..6 {
+            let (lo, hi) = z.intervals[k];
+            println!(
+                "{:>16} {:>14.6e} {:>12.3e} {:>14.6e}..{:<14.6e} {:>14} {} (change at level {top}: {:+.3} %)",
+                PARAMETER_NAMES[k],
+                ze[k],
+                z.std[k],
+                lo,
+                hi,
+                truth.map_or(String::new(), |t| format!("{:.6e}", t[k])),
+                UNITS[k],
+                100.0 * change[k]
+            );
+            zrows.push(json!({
+                "name": PARAMETER_NAMES[k],
+                "unit": UNITS[k],
+                "estimate": ze[k],
+                "std": z.std[k],
+                "interval": [lo, hi],
+                "slope_per_level_squared": z.slope[k],
+                "relative_change_at_top_level": change[k],
+                "chi2": z.chi2[k],
+                "variance_scale": z.variance_scale[k],
+                "twin": truth.map(|t| t[k]),
+            }));
+        }
+        zero_json = json!({
+            "levels": levels.iter().map(|(l, f)| json!({
+                "level": l,
+                "estimate": as_array(&f.params),
+                "std": f.std,
+                "chi2": f.chi2,
+                "dof": f.dof,
+            })).collect::<Vec<_>>(),
+            "files": std::iter::once(a.frf.display().to_string())
+                .chain(a.also.iter().map(|(_, f)| f.display().to_string()))
+                .collect::<Vec<_>>(),
+            "parameter_order": PARAMETER_NAMES,
+            "dof": z.dof,
+            "parameters": zrows,
+        });
+    }
     let summary = json!({
         "frf": a.frf.display().to_string(),
         "model": a.model.display().to_string(),
@@ -190,6 +310,7 @@ pub fn physical(a: PhysicalArgs) -> Result<()> {
             "blackbox_states": model.order(),
         },
         "graybox_model": state_space_json(&fit.model, "u", "y", json!({"kind": "graybox"})),
+        "zero_amplitude": zero_json,
     });
     let mut set = OutputSet::new(a.force);
     set.write(&a.out, serde_json::to_string_pretty(&summary)?.as_bytes())?;
