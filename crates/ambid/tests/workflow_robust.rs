@@ -114,3 +114,52 @@ fn physical_with_files_needs_the_drawing_section() {
         assert!(p[k].get("twin").is_none(), "files: no twin values");
     }
 }
+
+/// The `physical` step after the `amplitude` step on the nominal (nonlinear) twin: the gray box
+/// at every level of the amplitude study, extrapolated to zero amplitude. The estimate of the
+/// identification record (10 %) has k_x above the twin's linearisation by more than three of
+/// its standard deviations (the best linear approximation stiffens with the level); at zero
+/// amplitude it is within 0.5 % and three standard deviations of it, k_i within 2 %, the
+/// bending frequency within 0.5 %, and the report has the table.
+#[test]
+fn physical_after_the_amplitude_study_extrapolates_to_zero_amplitude() {
+    let (all, _) = Step::with_prerequisites(&[Step::Amplitude, Step::Physical]);
+    let cfg = WorkflowConfig {
+        steps: Some(all),
+        ..WorkflowConfig::default()
+    };
+    let out = run(&cfg, Path::new("."), &mut Progress::new(Verbosity::Quiet)).unwrap();
+    let ph = &out.summary["physical"];
+    let z = &ph["zero_amplitude"];
+    println!("{}", serde_json::to_string_pretty(z).unwrap());
+    assert!(z["levels_pct"].as_array().unwrap().len() >= 3, "{z}");
+    let lp = Twin::new(TwinConfig::default()).unwrap().linear_params();
+    let f = |v: &serde_json::Value| v.as_f64().unwrap();
+    let (at, zr) = (&ph["parameters"][1], &z["parameters"][1]);
+    assert_eq!(at["name"], "k_x");
+    assert!(f(&at["estimate"]) - lp.k_x > 3.0 * f(&at["std"]), "{at}");
+    let e = f(&zr["estimate"]) - lp.k_x;
+    assert!(
+        e.abs() < 5e-3 * lp.k_x && e.abs() < 3.0 * f(&zr["std"]),
+        "{zr}"
+    );
+    assert!(f(&z["change_at_top_level"][1]) > 0.0);
+    assert!((f(&z["parameters"][0]["estimate"]) / lp.k_i - 1.0).abs() < 0.02);
+    let fb = TwinConfig::default().rotor.bending_freq_hz;
+    assert!((f(&z["parameters"][2]["estimate"]) / fb - 1.0).abs() < 0.005);
+    let section = out
+        .report
+        .sections
+        .iter()
+        .find(|s| s.id == "physical")
+        .unwrap();
+    let html = format!("{:?}", section.blocks);
+    println!(
+        "{}",
+        &html[html.find("At zero amplitude").unwrap_or(0)..]
+            .chars()
+            .take(900)
+            .collect::<String>()
+    );
+    assert!(html.contains("physical_zero_amplitude"));
+}

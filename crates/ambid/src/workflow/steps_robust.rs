@@ -5,8 +5,8 @@
 use super::{Ctx, StepStatus};
 use crate::error::Error;
 use crate::physical::{
-    as_array, estimate, median_rel_error, twin_drawing, twin_truth, Drawing, PhysicalOptions,
-    PARAMETER_NAMES,
+    as_array, at_levels, estimate, extrapolate_to_zero_amplitude, median_rel_error, twin_drawing,
+    twin_truth, Drawing, PhysicalFit, PhysicalOptions, PARAMETER_NAMES,
 };
 use crate::report::{
     Axis, Block, Figure, Marker, NoteKind, Panel, PanelContent, Scale, Section, Series, Style,
@@ -59,6 +59,23 @@ pub struct PhysicalSummary {
     pub graybox_median_rel_error: f64,
     /// The same for the chosen black-box model.
     pub blackbox_median_rel_error: f64,
+    /// The parameters extrapolated to zero excitation amplitude from the amplitude study's
+    /// plant FRFs (when that step ran and two or more levels could be estimated).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub zero_amplitude: Option<ZeroAmplitudeSummary>,
+}
+
+/// `summary.json`'s `physical.zero_amplitude`.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ZeroAmplitudeSummary {
+    /// The levels whose estimate entered the extrapolation \[% of i_sat\].
+    pub levels_pct: Vec<f64>,
+    /// Per parameter at zero amplitude (as [`PhysicalSummary::parameters`]).
+    pub parameters: Vec<PhysicalRow>,
+    /// Per parameter: the relative change from zero amplitude to the highest level.
+    pub change_at_top_level: Vec<f64>,
+    /// The line's degrees of freedom (levels − 2).
+    pub dof: usize,
 }
 
 /// One parameter of [`PhysicalSummary`].
@@ -314,38 +331,8 @@ pub fn physical(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         Err(e) => return Ok(StepStatus::Skipped(format!("{e}"))),
     };
     let est = as_array(&fit.params);
-    const UNITS: [&str; 6] = ["N/A", "N/m", "Hz", "–", "kg^-½", "kg^-½"];
-    let mut rows = Vec::new();
-    let mut prow = Vec::new();
-    for k in 0..6 {
-        let (lo, hi) = fit.intervals[k];
-        let mut row = vec![
-            format!("{} [{}]", PARAMETER_NAMES[k], UNITS[k]),
-            format!("{:.5e}", est[k]),
-            format!("{:.2e}", fit.std[k]),
-            format!("{lo:.5e} … {hi:.5e}"),
-        ];
-        if let Some(t) = truth {
-            row.push(format!("{:.5e}", t[k]));
-        }
-        rows.push(row);
-        prow.push(PhysicalRow {
-            name: PARAMETER_NAMES[k],
-            estimate: est[k],
-            std: fit.std[k],
-            interval: (lo, hi),
-            twin: truth.map(|t| t[k]),
-        });
-    }
-    let mut header = vec![
-        "parameter".into(),
-        "estimate".into(),
-        "std".into(),
-        "95 % interval".into(),
-    ];
-    if truth.is_some() {
-        header.push("twin".into());
-    }
+    let (header, rows, prow) =
+        parameter_table("estimate", &est, &fit.std, &fit.intervals, None, truth);
     let med = |m: &StateSpace| median_rel_error(m, &frd).unwrap_or(f64::NAN);
     let (eg, eb) = (med(&fit.model), med(&model));
     // |P| in dB: the measured FRF, the gray box, the chosen black box (and the twin's plant)
@@ -430,6 +417,8 @@ pub fn physical(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             ..Table::default()
         }),
     ];
+    let (zero_blocks, zero_amplitude) = zero_amplitude(ctx, &frd, &model, &drawing, &ctrl, truth);
+    let blocks = [blocks, zero_blocks].concat();
     if fit.variance_scale > 2.0 {
         ctx.sections.push(Section {
             id: "physical".into(),
@@ -459,6 +448,177 @@ pub fn physical(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         chi2_per_dof: fit.chi2 / fit.dof as f64,
         graybox_median_rel_error: eg,
         blackbox_median_rel_error: eb,
+        zero_amplitude,
     });
     Ok(StepStatus::Done)
+}
+
+/// The report table and the summary rows of the physical parameters: per parameter (with its
+/// unit) the value under the heading `what`, the standard deviation, the 95 % interval, an
+/// `extra` column when given, and the twin's value when known.
+fn parameter_table(
+    what: &str,
+    est: &[f64; 6],
+    std: &[f64; 6],
+    intervals: &[(f64, f64); 6],
+    extra: Option<(String, Vec<String>)>,
+    truth: Option<[f64; 6]>,
+) -> (Vec<String>, Vec<Vec<String>>, Vec<PhysicalRow>) {
+    const UNITS: [&str; 6] = ["N/A", "N/m", "Hz", "–", "kg^-½", "kg^-½"];
+    let mut rows = Vec::new();
+    let mut prow = Vec::new();
+    for k in 0..6 {
+        let (lo, hi) = intervals[k];
+        let mut row = vec![
+            format!("{} [{}]", PARAMETER_NAMES[k], UNITS[k]),
+            format!("{:.5e}", est[k]),
+            format!("{:.2e}", std[k]),
+            format!("{lo:.5e} … {hi:.5e}"),
+        ];
+        if let Some((_, col)) = &extra {
+            row.push(col[k].clone());
+        }
+        if let Some(t) = truth {
+            row.push(format!("{:.5e}", t[k]));
+        }
+        rows.push(row);
+        prow.push(PhysicalRow {
+            name: PARAMETER_NAMES[k],
+            estimate: est[k],
+            std: std[k],
+            interval: (lo, hi),
+            twin: truth.map(|t| t[k]),
+        });
+    }
+    let mut header = vec![
+        "parameter".into(),
+        what.into(),
+        "std".into(),
+        "95 % interval".into(),
+    ];
+    if let Some((h, _)) = extra {
+        header.push(h);
+    }
+    if truth.is_some() {
+        header.push("twin".into());
+    }
+    (header, rows, prow)
+}
+
+/// A level in % for the report, without the rounding noise of its computation (`14`, not
+/// `14.000000000000002`).
+fn level_text(pct: f64) -> String {
+    format!("{}", (pct * 1e6).round() / 1e6)
+}
+
+/// The physical parameters at zero excitation amplitude (docs/physical.md, "Zero amplitude")
+/// from the amplitude study's plant FRFs, each on the models' band of `frd`, estimated side by
+/// side from the same starts; the report blocks and the summary. No blocks when the amplitude
+/// step did not run; a note when fewer than two levels could be estimated.
+fn zero_amplitude(
+    ctx: &Ctx<'_>,
+    frd: &Frd,
+    model: &StateSpace,
+    drawing: &Drawing,
+    ctrl: &StateSpace,
+    truth: Option<[f64; 6]>,
+) -> (Vec<Block>, Option<ZeroAmplitudeSummary>) {
+    use rayon::prelude::*;
+    let Some(stage) = ctx.typed.amplitude.as_ref() else {
+        return (Vec::new(), None);
+    };
+    let band = (frd.f_hz()[0], frd.f_hz()[frd.len() - 1]);
+    let tried: Vec<(f64, Result<PhysicalFit, String>)> = stage
+        .levels
+        .iter()
+        .map(|l| (l.level_pct, l.saturated_pct))
+        .zip(&stage.outcome.plants)
+        .collect::<Vec<_>>()
+        .into_par_iter()
+        .map(|((pct, saturated), plant)| {
+            // a saturated record is outside the small-amplitude law
+            let fit = if saturated > 0.0 {
+                Err(format!("{saturated:.2e} % of its samples saturated"))
+            } else if plant.variance().is_none() {
+                Err("no variances".to_string())
+            } else {
+                plant
+                    .band(band.0, band.1)
+                    .map_err(|e| e.to_string())
+                    .and_then(|p| {
+                        estimate(&p, model, drawing, ctrl, &PhysicalOptions::default())
+                            .map_err(|e| e.to_string())
+                    })
+            };
+            (pct, fit)
+        })
+        .collect();
+    let mut levels = Vec::new();
+    let mut skipped = Vec::new();
+    for (pct, fit) in tried {
+        match fit {
+            Ok(f) => levels.push((pct, f)),
+            Err(e) => skipped.push(format!("{} %: {e}", level_text(pct))),
+        }
+    }
+    let skipped_text = if skipped.is_empty() {
+        String::new()
+    } else {
+        format!(" Levels left out: {}.", skipped.join("; "))
+    };
+    let z = match extrapolate_to_zero_amplitude(&at_levels(&levels), 0.95) {
+        Ok(z) => z,
+        Err(e) => {
+            return (
+                vec![Ctx::note(
+                    NoteKind::Info,
+                    format!("No extrapolation to zero amplitude from the amplitude study: {e}.{skipped_text}"),
+                )],
+                None,
+            )
+        }
+    };
+    let top = levels.iter().map(|(l, _)| *l).fold(0.0f64, f64::max);
+    // the levels are in %, the change at the top level in the same unit
+    let change = z.change_at(top);
+    let changes: Vec<String> = change
+        .iter()
+        .map(|c| format!("{:+.3} %", 100.0 * c))
+        .collect();
+    let (header, rows, prow) = parameter_table(
+        "at zero amplitude",
+        &z.params_array(),
+        &z.std,
+        &z.intervals,
+        Some((format!("change at {} %", level_text(top)), changes)),
+        truth,
+    );
+    let levels_pct: Vec<f64> = levels.iter().map(|(l, _)| *l).collect();
+    let blocks = vec![
+        Block::Text(format!(
+            "At zero amplitude: the gray box fitted to the amplitude study's plant FRF at each of {} levels ({} % of i_sat) on the same lines, and each parameter's weighted straight line in level² (in ln p for the positive ones) extrapolated to zero. A nonlinear magnet's FRF at a finite level is its best linear approximation, whose k_x lies above the small-signal one by an amount proportional to the level squared; the table gives the small-signal values and how far the top level moved them (docs/physical.md, \"Zero amplitude\").{skipped_text}",
+            levels.len(),
+            levels_pct
+                .iter()
+                .map(|&l| level_text(l))
+                .collect::<Vec<_>>()
+                .join(", ")
+        )),
+        Block::Table(Table {
+            id: "physical_zero_amplitude".into(),
+            caption: "Physical parameters extrapolated to zero excitation amplitude, with their 95 % intervals.".into(),
+            header,
+            rows,
+            ..Table::default()
+        }),
+    ];
+    (
+        blocks,
+        Some(ZeroAmplitudeSummary {
+            levels_pct,
+            parameters: prow,
+            change_at_top_level: change.to_vec(),
+            dof: z.dof,
+        }),
+    )
 }
