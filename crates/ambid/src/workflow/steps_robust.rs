@@ -508,7 +508,12 @@ fn parameter_table(
 /// A level in % for the report, without the rounding noise of its computation (`14`, not
 /// `14.000000000000002`).
 fn level_text(pct: f64) -> String {
-    format!("{}", (pct * 1e6).round() / 1e6)
+    format!("{}", level_clean(pct))
+}
+
+/// `pct` rounded to 1e-6 % (see [`level_text`]).
+fn level_clean(pct: f64) -> f64 {
+    (pct * 1e6).round() / 1e6
 }
 
 /// The physical parameters at zero excitation amplitude (docs/physical.md, "Zero amplitude")
@@ -593,7 +598,8 @@ fn zero_amplitude(
         Some((format!("change at {} %", level_text(top)), changes)),
         truth,
     );
-    let levels_pct: Vec<f64> = levels.iter().map(|(l, _)| *l).collect();
+    // without the rounding noise of their computation (14, not 14.000000000000002)
+    let levels_pct: Vec<f64> = levels.iter().map(|(l, _)| level_clean(*l)).collect();
     let blocks = vec![
         Block::Text(format!(
             "At zero amplitude: the gray box fitted to the amplitude study's plant FRF at each of {} levels ({} % of i_sat) on the same lines, and each parameter's weighted straight line in level² (in ln p for the positive ones) extrapolated to zero. A nonlinear magnet's FRF at a finite level is its best linear approximation, whose k_x lies above the small-signal one by an amount proportional to the level squared; the table gives the small-signal values and how far the top level moved them (docs/physical.md, \"Zero amplitude\").{skipped_text}",
