@@ -180,7 +180,7 @@ impl ExtrapolatedRun {
         let mut at = Vec::with_capacity(levels.len());
         let mut truth = None;
         for (l, &a) in levels.iter().enumerate() {
-            let run = PhysicalRun::on_twin_at(rig, seed + 1000 * l as u64, mode, a)
+            let run = PhysicalRun::on_twin_at(rig, seed.wrapping_add(1000 * l as u64), mode, a)
                 .with_context(|| format!("the run at level {a}"))?;
             truth = Some(run.truth);
             at.push((a, run.fit));

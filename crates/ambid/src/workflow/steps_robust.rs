@@ -532,7 +532,10 @@ fn zero_amplitude(
     let Some(stage) = ctx.typed.amplitude.as_ref() else {
         return (Vec::new(), None);
     };
-    let band = (frd.f_hz()[0], frd.f_hz()[frd.len() - 1]);
+    let (Some(&f0), Some(&f1)) = (frd.f_hz().first(), frd.f_hz().last()) else {
+        return (Vec::new(), None);
+    };
+    let band = (f0, f1);
     let tried: Vec<(f64, Result<PhysicalFit, String>)> = stage
         .levels
         .iter()
