@@ -315,6 +315,28 @@ pub struct ModelOnFrf {
     pub controller: ambid::io::ControllerModel,
 }
 
+/// The FRF file's `quantity` on `band` (or the file's reliable band) and that band; an FRF whose
+/// standard deviations are all zero is refused (`needs` says what they are needed for).
+pub fn frf_with_variance(
+    frf: &Path,
+    quantity: &str,
+    fs: Option<f64>,
+    band: Option<(f64, f64)>,
+    needs: &str,
+) -> Result<(ambid_core::lti::Frd, (f64, f64))> {
+    let input = frf_input(frf, quantity, fs, band, WeightsArg::Variance, 1)?;
+    if input.frd.variance().is_none() {
+        return Err(ambid::error::Error::input(format!(
+            "{}: `{quantity}_std` is zero everywhere; {needs}",
+            frf.display()
+        ))
+        .into());
+    }
+    let band = input.opts.band_hz.unwrap_or((0.0, f64::INFINITY));
+    let frd = input.frd.band(band.0, band.1)?;
+    Ok((frd, band))
+}
+
 /// Reads [`ModelOnFrf`]; `needs` says what the standard deviations are needed for (the error
 /// when they are all zero).
 pub fn model_on_frf(
@@ -326,16 +348,7 @@ pub fn model_on_frf(
     controller: &Path,
     needs: &str,
 ) -> Result<ModelOnFrf> {
-    let input = frf_input(frf, quantity, fs, band, WeightsArg::Variance, 1)?;
-    if input.frd.variance().is_none() {
-        return Err(ambid::error::Error::input(format!(
-            "{}: `{quantity}_std` is zero everywhere; {needs}",
-            frf.display()
-        ))
-        .into());
-    }
-    let band = input.opts.band_hz.unwrap_or((0.0, f64::INFINITY));
-    let frd = input.frd.band(band.0, band.1)?;
+    let (frd, band) = frf_with_variance(frf, quantity, fs, band, needs)?;
     let model = ambid::io::model::read_model_json(model)?;
     let controller = ambid::io::read_controller(controller)?;
     controller.check_ts(frd.ts().unwrap_or(1.0 / controller.fs_hz()))?;

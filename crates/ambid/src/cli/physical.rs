@@ -3,7 +3,7 @@
 //! box, docs/physical.md); the gray-box model beside the black-box one.
 
 use super::args::parse_band;
-use super::common::{model_on_frf, twin_config, ModelOnFrf, TwinArgs};
+use super::common::{frf_with_variance, model_on_frf, twin_config, ModelOnFrf, TwinArgs};
 use ambid::io::model::state_space_json;
 use ambid::io::OutputSet;
 use ambid::physical::{
@@ -64,6 +64,9 @@ pub struct PhysicalArgs {
     #[arg(long)]
     force: bool,
 }
+
+/// What the FRF's standard deviations are needed for (the error when they are all zero).
+const NEEDS: &str = "the gray-box fit weights the lines by the FRF's standard deviations";
 
 const UNITS: [&str; 6] = ["N/A", "N/m", "Hz", "-", "kg^-1/2", "kg^-1/2"];
 
@@ -140,7 +143,7 @@ pub fn physical(a: PhysicalArgs) -> Result<()> {
         a.band,
         &a.model,
         &a.controller,
-        "the gray-box fit weights the lines by the FRF's standard deviations",
+        NEEDS,
     )?;
     let popts = PhysicalOptions {
         confidence: a.confidence,
@@ -153,16 +156,9 @@ pub fn physical(a: PhysicalArgs) -> Result<()> {
         levels.push((l, fit.clone()));
     }
     for (l, file) in &a.also {
-        let other = model_on_frf(
-            file,
-            &a.quantity,
-            a.fs,
-            Some(band),
-            &a.model,
-            &a.controller,
-            "the gray-box fit weights the lines by the FRF's standard deviations",
-        )?;
-        let f = estimate(&other.frd, &model, &drawing, ctrl.state_space(), &popts)
+        let (other, _) = frf_with_variance(file, &a.quantity, a.fs, Some(band), NEEDS)?;
+        ctrl.check_ts(other.ts().unwrap_or(1.0 / ctrl.fs_hz()))?;
+        let f = estimate(&other, &model, &drawing, ctrl.state_space(), &popts)
             .with_context(|| format!("the estimate at level {l} ({})", file.display()))?;
         levels.push((*l, f));
     }

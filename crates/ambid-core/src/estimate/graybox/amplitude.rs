@@ -77,14 +77,14 @@ pub struct ZeroAmplitude {
 impl ZeroAmplitude {
     /// The estimate as an array in the order of [`PARAMETER_NAMES`].
     pub fn params_array(&self) -> [f64; 6] {
-        as_array(&self.params)
+        self.params.to_array()
     }
 
     /// The relative change of each parameter from $a = 0$ to level `a` predicted by the line
     /// (e.g. $+0.0073$ for $k_x$ 0.73 % above its small-signal value at `a`); for the mode
     /// shape relative to its value at $a = 0$.
     pub fn change_at(&self, a: f64) -> [f64; 6] {
-        let p = as_array(&self.params);
+        let p = self.params.to_array();
         let mut out = [0.0; 6];
         for k in 0..6 {
             out[k] = if k < 4 {
@@ -95,10 +95,6 @@ impl ZeroAmplitude {
         }
         out
     }
-}
-
-fn as_array(p: &PhysicalParams) -> [f64; 6] {
-    p.to_array()
 }
 
 fn invalid(why: String) -> Error {
@@ -151,7 +147,7 @@ pub fn extrapolate_to_zero_amplitude(points: &[AtLevel], confidence: f64) -> Res
                 p.level
             )));
         }
-        let v = as_array(&p.params);
+        let v = p.params.to_array();
         for k in 0..6 {
             if !(p.std[k].is_finite() && p.std[k] > 0.0) {
                 return Err(invalid(format!(
@@ -189,7 +185,7 @@ pub fn extrapolate_to_zero_amplitude(points: &[AtLevel], confidence: f64) -> Res
         let (th, sd): (Vec<f64>, Vec<f64>) = points
             .iter()
             .map(|p| {
-                let v = as_array(&p.params)[k];
+                let v = p.params.to_array()[k];
                 if k < 4 {
                     (v.ln(), p.std[k] / v)
                 } else {
@@ -277,7 +273,7 @@ mod tests {
 
     /// The point at level `a` on the exact lines, moved by `noise[k]` standard deviations.
     fn point(a: f64, rel_sd: f64, noise: [f64; 6]) -> AtLevel {
-        let t = as_array(&TRUTH);
+        let t = TRUTH.to_array();
         let mut v = [0.0; 6];
         let mut sd = [0.0; 6];
         for k in 0..6 {
@@ -312,7 +308,7 @@ mod tests {
             .map(|&a| point(a, 1e-3, [0.0; 6]))
             .collect();
         let z = extrapolate_to_zero_amplitude(&pts, 0.95).unwrap();
-        let (e, t) = (as_array(&z.params), as_array(&TRUTH));
+        let (e, t) = (z.params.to_array(), TRUTH.to_array());
         for k in 0..6 {
             assert!(
                 (e[k] - t[k]).abs() < 1e-10 * t[k].abs(),
@@ -342,7 +338,7 @@ mod tests {
         }
         let z = extrapolate_to_zero_amplitude(&[p1, p2], 0.95).unwrap();
         let (x1, x2) = (a1 * a1, a2 * a2);
-        let (v1, v2) = (as_array(&p1.params), as_array(&p2.params));
+        let (v1, v2) = (p1.params.to_array(), p2.params.to_array());
         for k in 0..6 {
             let (t1, t2, s1, s2) = if k < 4 {
                 (v1[k].ln(), v2[k].ln(), p1.std[k] / v1[k], p2.std[k] / v2[k])
@@ -373,7 +369,7 @@ mod tests {
         let n = 4000;
         let mut covered = [0usize; 6];
         let mut chi2 = 0.0;
-        let t = as_array(&TRUTH);
+        let t = TRUTH.to_array();
         for _ in 0..n {
             let pts: Vec<AtLevel> = [0.07, 0.1, 0.14]
                 .iter()
