@@ -4,7 +4,10 @@
 //! margin against the true loop's.
 //!
 //! `cargo run --release -p ambid --example uncertainty_rigs -- RIGS SEEDS` (e.g. `1-20 1-5`;
-//! rig 0 is the nominal twin).
+//! rig 0 is the nominal twin). Each row also gives the joint raise and the coverage and ratio of
+//! the weight before it (`W0`). Diagnostics: `DUMP=dir` writes each run's per-line bound, true
+//! error and weight; `BAND_FIT=1` also fits a weight on the 10–1000 Hz lines alone (not a rule of
+//! the tool: docs/uncertainty.md, "Why the looseness bar is not met").
 
 use ambid::uncertainty::{loop_stable, nominal_gain_interval, UncertaintyRun};
 use ambid_twin::Mode;
@@ -34,6 +37,35 @@ fn main() {
                 }
             };
             let c = run.coverage((10.0, 1000.0)).unwrap();
+            let c0 = {
+                let mut r0 = run.clone();
+                r0.analysis.weight.weight.gain /= run.analysis.joint_raise;
+                r0.coverage((10.0, 1000.0)).unwrap()
+            };
+            if std::env::var("BAND_FIT").is_ok() {
+                // diagnostic: the weight fitted on the judgement band's lines alone
+                let t = &run.analysis.terms;
+                let idx: Vec<usize> = (0..t.f_hz.len())
+                    .filter(|&k| (10.0..=1000.0).contains(&t.f_hz[k]))
+                    .collect();
+                let f: Vec<f64> = idx.iter().map(|&k| t.f_hz[k]).collect();
+                let b: Vec<f64> = idx
+                    .iter()
+                    .map(|&k| t.multiplicative[k].max(1e-15))
+                    .collect();
+                let ts = run.nominal.ts().unwrap();
+                if let Ok(wf) = ambid_core::validate::weight::fit_weight(&f, &b, ts, 4, 0.98) {
+                    let mut r2 = run.clone();
+                    r2.analysis.weight.weight = wf.weight;
+                    let c2 = r2.coverage((10.0, 1000.0)).unwrap();
+                    println!(
+                        "    band-fitted weight: cov {:.3} ratio {:.2} order {}",
+                        c2.weight_coverage,
+                        c2.median_ratio,
+                        r2.analysis.weight.weight.order()
+                    );
+                }
+            }
             if let Ok(dir) = std::env::var("DUMP") {
                 let t = &run.analysis.terms;
                 let truth = run.truth_plant.freq_response_siso(&t.f_hz).unwrap();
@@ -71,7 +103,7 @@ fn main() {
             rs_ok += usize::from(stable);
             rs_half += usize::from(half);
             println!(
-                "{rig:3} {seed:3} {:2} | {:.3} {:.3} | {:.2e} {:.2e} {:.2} | {:.3} {:.3} | {} {} | W order {} loose {:.2} | {:.1}s",
+                "{rig:3} {seed:3} {:2} | {:.3} {:.3} | {:.2e} {:.2e} {:.2} | {:.3} {:.3} | {} {} | W order {} loose {:.2} | raise {:.2} W0 cov {:.3} ratio {:.2} | {:.1}s",
                 run.nominal.order(),
                 c.bound_coverage,
                 c.weight_coverage,
@@ -84,6 +116,9 @@ fn main() {
                 half,
                 run.analysis.weight.weight.order(),
                 run.analysis.weight.looseness,
+                run.analysis.joint_raise,
+                c0.weight_coverage,
+                c0.median_ratio,
                 t.elapsed().as_secs_f64()
             );
         }

@@ -31,10 +31,18 @@ pub struct UncertaintyAnalysis {
     pub weight: WeightFit,
     /// The controller's robust stability against it.
     pub robust: RobustStability,
+    /// The factor the weight's gain was raised by so that it overbounds the model's error on
+    /// the fraction `cover` of the band in the fraction `run_coverage` of the runs
+    /// ([`ErrorModel::joint_factor`](ambid_core::validate::uncertainty::ErrorModel::joint_factor); 1: the per-line overbound already did).
+    pub joint_raise: f64,
 }
 
 /// The uncertainty of `nominal` around the measured plant FRF `frd` (with variances), its weight
-/// of order ≤ `max_weight_order` overbounding the fraction `cover` of the lines, and the robust stability of `controller` against it.
+/// of order ≤ `max_weight_order` overbounding the fraction `cover` of the lines — its gain then
+/// raised, where needed, until it also overbounds the fitted model's error on `cover` of the lines
+/// in `opts.run_coverage` of `opts.draws` seeded draws
+/// ([`ErrorModel::joint_factor`](ambid_core::validate::uncertainty::ErrorModel::joint_factor),
+/// [`UncertaintyAnalysis::joint_raise`]) — and the robust stability of `controller` against it.
 ///
 /// # Errors
 /// Those of [`uncertainty`], [`fit_weight`] and [`robust_stability`], with the step named.
@@ -78,7 +86,7 @@ pub fn analyse(
         .iter()
         .map(|b| b.max(1e-12 * top).max(f64::MIN_POSITIVE))
         .collect();
-    let weight = fit_weight(
+    let mut weight = fit_weight(
         &terms.f_hz,
         &bound,
         ts,
@@ -86,12 +94,25 @@ pub fn analyse(
         cover,
     )
     .context("fitting the uncertainty weight")?;
+    let joint = terms
+        .errors
+        .joint_factor(
+            &weight.weight.magnitude(&terms.f_hz),
+            cover,
+            opts.run_coverage,
+            opts.draws,
+            opts.seed,
+        )
+        .context("the weight's joint coverage")?;
+    let joint_raise = joint.max(1.0);
+    weight.raise(joint_raise, &terms.f_hz, &bound);
     let robust = robust_stability(nominal, controller, &weight.weight)
         .context("the robust-stability check")?;
     Ok(UncertaintyAnalysis {
         terms,
         weight,
         robust,
+        joint_raise,
     })
 }
 

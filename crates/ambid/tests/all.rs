@@ -54,6 +54,7 @@ mod study;
 mod summary_golden;
 mod uncertainty_cli;
 mod uncertainty_export;
+mod uncertainty_rigs;
 mod validation_stages;
 mod workflow;
 mod workflow_rigs;

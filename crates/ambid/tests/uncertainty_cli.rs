@@ -122,6 +122,10 @@ fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
     assert!(below.iter().zip(&listed).all(|(a, b)| (a - b).abs() < 1e-9));
     assert!(below.len() as f64 <= 0.02 * f.len() as f64 + 1.0);
     assert_eq!(summary["lines"].as_u64().unwrap() as usize, f.len());
+    // the joint raise is reported and was applied (≥ 1)
+    let raise = summary["weight"]["joint_raise"].as_f64().unwrap();
+    assert!((1.0..2.0).contains(&raise), "{raise}");
+    assert_eq!(summary["weight"]["run_coverage"].as_f64(), Some(0.95));
 
     // how much of the true error the weight covers here (printed: the coverage bar is over
     // ≥ 100 runs, docs/uncertainty.md)
@@ -199,4 +203,6 @@ fn uncertainty_refuses_bad_input_and_writes_nothing() {
     assert!(t.contains("--max-order"), "{t}");
     let t = run(&["--line-coverage", "1"], &d("frf.csv"), &d("model.json"));
     assert!(t.contains("--line-coverage"), "{t}");
+    let t = run(&["--run-coverage", "0"], &d("frf.csv"), &d("model.json"));
+    assert!(t.contains("--run-coverage"), "{t}");
 }

@@ -20,7 +20,7 @@ use ambid::io::export::uncertain::{
 };
 use ambid_core::c64;
 use ambid_core::lti::StateSpace;
-use ambid_core::validate::uncertainty::UncertaintyTerms;
+use ambid_core::validate::uncertainty::{ErrorModel, UncertaintyTerms};
 use ambid_core::validate::weight::{Factor, Weight, WeightFit};
 use faer::mat;
 use serde_json::Value;
@@ -192,6 +192,7 @@ fn terms(r: &Reference) -> UncertaintyTerms {
         window_half_lines: 2,
         n_params: 4,
         line_coverage: 0.95,
+        errors: ErrorModel::default(),
     }
 }
 

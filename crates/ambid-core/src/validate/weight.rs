@@ -377,6 +377,24 @@ pub fn fit_weight(
     })
 }
 
+impl WeightFit {
+    /// Raises the weight's gain by `factor` ($\ge 1$; a smaller one is taken as 1) and updates
+    /// the looseness and the uncovered lines against `bound` on `f_hz` (the fit's lines).
+    pub fn raise(&mut self, factor: f64, f_hz: &[f64], bound: &[f64]) {
+        self.weight.gain *= factor.max(1.0);
+        let m = self.weight.magnitude(f_hz);
+        let mut ratio: Vec<f64> = m.iter().zip(bound).map(|(w, b)| w / b).collect();
+        self.uncovered_hz = f_hz
+            .iter()
+            .zip(&ratio)
+            .filter(|(_, r)| **r < 1.0 - 1e-12)
+            .map(|(f, _)| *f)
+            .collect();
+        ratio.sort_by(f64::total_cmp);
+        self.looseness = ratio.get(ratio.len() / 2).copied().unwrap_or(f64::NAN);
+    }
+}
+
 /// `w` with its gain raised to overbound the fraction `cover` of `bound`, and its looseness
 /// (the median of $|W_k|/\ell_k$).
 fn raised(mut w: Weight, f_hz: &[f64], bound: &[f64], cover: f64) -> (Weight, f64) {

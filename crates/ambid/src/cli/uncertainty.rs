@@ -49,6 +49,10 @@ pub struct UncertaintyArgs {
     /// stand out most, the narrow peaks at the plant's anti-resonances, which are listed).
     #[arg(long, default_value_t = DEFAULT_COVER)]
     cover: f64,
+    /// Fraction of the fitted model's error draws (2 000, seeded) in which the weight must
+    /// overbound the error on `--cover` of the lines; the weight's gain is raised until it does.
+    #[arg(long, default_value_t = 0.95)]
+    run_coverage: f64,
     /// Output directory: uncertainty.csv, robust.csv, summary.json and the uncertain model
     /// (uncertain.m, uncertain.mat, uncertain.npz, uncertain.json).
     #[arg(long, default_value = "uncertainty")]
@@ -101,6 +105,13 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         ))
         .into());
     }
+    if !(a.run_coverage > 0.0 && a.run_coverage <= 1.0) {
+        return Err(ambid::error::Error::usage(format!(
+            "--run-coverage must lie in (0, 1], e.g. 0.95; got {}",
+            a.run_coverage
+        ))
+        .into());
+    }
     if a.max_order > MAX_WEIGHT_ORDER {
         return Err(ambid::error::Error::usage(format!(
             "--max-order is at most {MAX_WEIGHT_ORDER} (a low-order weight for controller design); got {}",
@@ -129,6 +140,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         &ExtraTerms::default(),
         &UncertaintyOptions {
             line_coverage: a.line_coverage,
+            run_coverage: a.run_coverage,
             ..UncertaintyOptions::default()
         },
         a.max_order,
@@ -203,6 +215,8 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             "looseness": w.looseness,
             "per_order": w.per_order,
             "cover": a.cover,
+            "run_coverage": a.run_coverage,
+            "joint_raise": analysis.joint_raise,
             "lines_covered": covered,
             "uncovered_hz": w.uncovered_hz,
         },
@@ -242,9 +256,11 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         t.window_half_lines
     );
     println!(
-        "weight: order {}, looseness {:.2} (median |W|/bound), covers {} of {} lines{}",
+        "weight: order {}, looseness {:.2} (median |W|/bound; gain raised ×{:.3} for {:.0} % of the model's error draws), covers {} of {} lines{}",
         w.weight.order(),
         w.looseness,
+        analysis.joint_raise,
+        100.0 * a.run_coverage,
         covered,
         t.f_hz.len(),
         if w.uncovered_hz.is_empty() {

@@ -28,6 +28,9 @@ pub struct UncertaintySummary {
     pub weight_order: usize,
     /// Looseness.
     pub weight_looseness: f64,
+    /// The factor the weight's gain was raised by to overbound the model's error draws
+    /// ([`crate::uncertainty::UncertaintyAnalysis::joint_raise`]).
+    pub weight_joint_raise: f64,
     /// Lines left above the weight \[Hz\].
     pub uncovered_hz: Vec<f64>,
     /// Robustly stable.
@@ -213,9 +216,10 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         vec![
             "weight".into(),
             format!(
-                "order {}, looseness {:.2}, {} of {} lines above it",
+                "order {}, looseness {:.2} (gain ×{:.2} to cover 95 % of the model's error draws), {} of {} lines above it",
                 a.weight.weight.order(),
                 a.weight.looseness,
+                a.joint_raise,
                 a.weight.uncovered_hz.len(),
                 t.f_hz.len()
             ),
@@ -300,6 +304,7 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         band_hz: band,
         weight_order: a.weight.weight.order(),
         weight_looseness: a.weight.looseness,
+        weight_joint_raise: a.joint_raise,
         uncovered_hz: a.weight.uncovered_hz.clone(),
         robustly_stable: r.robustly_stable,
         stability_margin: r.stability_margin,
