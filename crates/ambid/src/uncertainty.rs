@@ -116,6 +116,89 @@ pub fn analyse(
     })
 }
 
+/// Term (d) of the bound on the lines `f_hz` from an operating-point study's plant FRFs
+/// `plants` (the nominal case first, all on the same lines): per study line $j$, the largest
+/// distance of another case from the nominal one, corrected for the two estimates' noise where
+/// they carry variances,
+/// $$ r_j = \max_{c \ge 1} \frac{\sqrt{\max(0,\ |P_{c,j} - P_{0,j}|^2 - \sigma_{c,j}^2 -
+///    \sigma_{0,j}^2)}}{|P_{0,j}|} , $$
+/// carried to `f_hz` by linear interpolation of $r$ in frequency (the end line's value outside
+/// the study's band) and scaled by `nominal_abs` $= |\hat P(f_k)|$: $s_k = r(f_k)\,|\hat P(f_k)|$.
+/// The relative spread is what moves from one set of lines to another: the study and the
+/// identification record need not share lines or a nominal estimate.
+///
+/// # Errors
+/// Fewer than two plants, plants on other lines than the nominal one's, no line, lengths of
+/// `f_hz` and `nominal_abs` that differ, or a nominal value of zero.
+///
+/// # Example
+/// ```
+/// use ambid::uncertainty::operating_spread;
+/// use ambid_core::{c64, lti::Frd};
+/// let f = vec![10.0, 20.0, 30.0];
+/// let nom = Frd::new(f.clone(), vec![c64::new(1.0, 0.0); 3], None, Some(1e-3)).unwrap();
+/// let hi = Frd::new(f.clone(), vec![c64::new(1.1, 0.0); 3], None, Some(1e-3)).unwrap();
+/// let s = operating_spread(&[nom, hi], &[5.0, 15.0], &[2.0, 2.0]).unwrap();
+/// assert!((s[0] - 0.2).abs() < 1e-12 && (s[1] - 0.2).abs() < 1e-12);
+/// ```
+pub fn operating_spread(plants: &[Frd], f_hz: &[f64], nominal_abs: &[f64]) -> Result<Vec<f64>> {
+    let Some((nom, others)) = plants.split_first() else {
+        return Err(Error::other(
+            "an operating-point spread needs the nominal plant and another",
+        ));
+    };
+    if others.is_empty() || nom.is_empty() {
+        return Err(Error::other(
+            "an operating-point spread needs the nominal plant and at least one other, on at least one line",
+        ));
+    }
+    if f_hz.len() != nominal_abs.len() {
+        return Err(Error::other(format!(
+            "{} lines but {} nominal magnitudes",
+            f_hz.len(),
+            nominal_abs.len()
+        )));
+    }
+    let g0 = nom.values();
+    let v0 = nom.variance();
+    let mut rel = vec![0.0f64; nom.len()];
+    for p in others {
+        if p.f_hz() != nom.f_hz() {
+            return Err(Error::other(
+                "the operating points' plant FRFs are on other lines than the nominal one's; estimate them with the same excitation",
+            ));
+        }
+        for (j, r) in rel.iter_mut().enumerate() {
+            if g0[j].norm() == 0.0 {
+                return Err(Error::other(format!(
+                    "the nominal plant FRF is zero at {} Hz",
+                    nom.f_hz()[j]
+                )));
+            }
+            let noise = v0.map_or(0.0, |v| v[j]) + p.variance().map_or(0.0, |v| v[j]);
+            let d = ((p.values()[j] - g0[j]).norm_sqr() - noise).max(0.0).sqrt();
+            *r = r.max(d / g0[j].norm());
+        }
+    }
+    let fs = nom.f_hz();
+    Ok(f_hz
+        .iter()
+        .zip(nominal_abs)
+        .map(|(&f, &m)| {
+            let i = fs.partition_point(|&x| x < f);
+            let r = if i == 0 {
+                rel[0]
+            } else if i >= fs.len() {
+                rel[fs.len() - 1]
+            } else {
+                let t = (f - fs[i - 1]) / (fs[i] - fs[i - 1]);
+                rel[i - 1] + t * (rel[i] - rel[i - 1])
+            };
+            r * m
+        })
+        .collect())
+}
+
 /// The orders a twin run's nominal model is chosen from (by BIC).
 pub const TWIN_ORDERS: std::ops::RangeInclusive<usize> = 6..=12;
 

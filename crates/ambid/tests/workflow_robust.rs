@@ -163,3 +163,84 @@ fn physical_after_the_amplitude_study_extrapolates_to_zero_amplitude() {
     );
     assert!(html.contains("physical_zero_amplitude"));
 }
+
+/// With the operating-point step, the uncertainty step adds term (d): its relative spread
+/// matches the twin's exact linearised plants at the five operating points (independent truth:
+/// each case's `Twin::plant`), and the robust margins stay conservative against the nominal
+/// true loop.
+#[test]
+fn the_operating_point_study_enters_the_bound_as_term_d() {
+    use ambid::report::{Block, PanelContent};
+    let (all, _) = Step::with_prerequisites(&[Step::OperatingPoint, Step::Uncertainty]);
+    let cfg = WorkflowConfig {
+        steps: Some(all),
+        ..WorkflowConfig::default()
+    };
+    let out = run(&cfg, Path::new("."), &mut Progress::new(Verbosity::Quiet)).unwrap();
+    let u = &out.summary["uncertainty"];
+    println!("{}", serde_json::to_string_pretty(u).unwrap());
+    let cases: Vec<&str> = u["operating_cases"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c.as_str().unwrap())
+        .collect();
+    assert_eq!(cases, ["bias-20%", "bias+20%", "gap-10um", "gap+10um"]);
+    // term (d) per line, from the report's figure
+    let series = out
+        .report
+        .sections
+        .iter()
+        .filter(|s| s.id == "uncertainty")
+        .flat_map(|s| &s.blocks)
+        .find_map(|b| match b {
+            Block::Figure(f) => match &f.panels[0].content {
+                PanelContent::Xy(s) => s.iter().find(|s| s.name.starts_with("(d)")).cloned(),
+                _ => None,
+            },
+            _ => None,
+        })
+        .expect("the (d) series");
+    // the truth: the largest relative distance of the exact plants from the nominal one
+    let nominal = TwinConfig::default();
+    let plant_at = |bias: f64, gap: f64| {
+        let mut c = nominal.clone();
+        c.operating_point.bias_current_a = nominal.operating_point.bias_current_a * bias;
+        c.operating_point.air_gap_m = nominal.operating_point.air_gap_m + gap;
+        Twin::new(c)
+            .unwrap()
+            .plant()
+            .freq_response_siso(&series.x)
+            .unwrap()
+    };
+    let p0 = plant_at(1.0, 0.0);
+    let others = [
+        plant_at(0.8, 0.0),
+        plant_at(1.2, 0.0),
+        plant_at(1.0, -10e-6),
+        plant_at(1.0, 10e-6),
+    ];
+    let mut ratios = Vec::new();
+    for (k, f) in series.x.iter().enumerate() {
+        if !(20.0..=1000.0).contains(f) {
+            continue;
+        }
+        let truth = others
+            .iter()
+            .map(|p| (p[k] - p0[k]).norm() / p0[k].norm())
+            .fold(0.0f64, f64::max);
+        ratios.push(series.y[k] / truth);
+    }
+    ratios.sort_by(f64::total_cmp);
+    let n = ratios.len();
+    let (q10, q50, q90) = (ratios[n / 10], ratios[n / 2], ratios[9 * n / 10]);
+    println!("term (d) / true spread over {n} lines: q10 {q10:.3} median {q50:.3} q90 {q90:.3}");
+    assert!(n > 100 && (0.9..1.1).contains(&q50), "{q10} {q50} {q90}");
+    assert!(q10 > 0.7 && q90 < 1.4, "{q10} {q50} {q90}");
+    // the bound now holds the operating points too: still robustly stable here, and its margins
+    // stay inside the nominal true loop's
+    assert_eq!(u["robustly_stable"], true);
+    let twin = Twin::new(nominal).unwrap();
+    let g_hi = u["upper_gain_margin"].as_f64().unwrap();
+    assert!(loop_stable(twin.plant(), twin.controller(), g_hi).unwrap());
+}

@@ -848,8 +848,8 @@ fn finish_step(
 }
 
 /// Runs `steps` in order; on the twin the operating-point study runs beside the steps after it
-/// (it depends only on the identification level, which the amplitude step fixed before). An
-/// error comes with the index of its step.
+/// up to the `uncertainty` step, which uses it (it depends only on the identification level,
+/// which the amplitude step fixed before). An error comes with the index of its step.
 fn run_steps(
     ctx: &mut Ctx<'_>,
     steps: &[(usize, Step)],
@@ -861,9 +861,16 @@ fn run_steps(
         if step == Step::OperatingPoint && !tail.is_empty() {
             if let Some(input) = steps_signal::operating_point_input(ctx) {
                 progress.start(step.name());
+                // the uncertainty step uses the study (term (d)): the steps before it run beside
+                // the study, the rest after it
+                let split = tail
+                    .iter()
+                    .position(|(_, s)| *s == Step::Uncertainty)
+                    .unwrap_or(tail.len());
+                let (beside, after) = tail.split_at(split);
                 let ((op, op_s), chain) = rayon::join(
                     || timed(|| crate::stage::operating_point_twin(&input)),
-                    || run_steps(ctx, tail, progress, timings),
+                    || run_steps(ctx, beside, progress, timings),
                 );
                 let t = Instant::now();
                 let n_before = ctx.sections.len();
@@ -872,7 +879,8 @@ fn run_steps(
                     steps_signal::operating_point(ctx, Some((op, input))).map_err(|e| (k, e))?;
                 let dt = op_s + t.elapsed().as_secs_f64();
                 finish_step(ctx, progress, timings, (k, step), n_before, status, dt);
-                return chain;
+                chain?;
+                return run_steps(ctx, after, progress, timings);
             }
         }
         let t = Instant::now();
