@@ -170,7 +170,6 @@ fn physical_after_the_amplitude_study_extrapolates_to_zero_amplitude() {
 /// true loop.
 #[test]
 fn the_operating_point_study_enters_the_bound_as_term_d() {
-    use ambid::report::{Block, PanelContent};
     let (all, _) = Step::with_prerequisites(&[Step::OperatingPoint, Step::Uncertainty]);
     let cfg = WorkflowConfig {
         steps: Some(all),
@@ -189,17 +188,8 @@ fn the_operating_point_study_enters_the_bound_as_term_d() {
     // term (d) per line, from the report's figure
     let series = out
         .report
-        .sections
-        .iter()
-        .filter(|s| s.id == "uncertainty")
-        .flat_map(|s| &s.blocks)
-        .find_map(|b| match b {
-            Block::Figure(f) => match &f.panels[0].content {
-                PanelContent::Xy(s) => s.iter().find(|s| s.name.starts_with("(d)")).cloned(),
-                _ => None,
-            },
-            _ => None,
-        })
+        .series("uncertainty", "(d)")
+        .cloned()
         .expect("the (d) series");
     // the truth: the largest relative distance of the exact plants from the nominal one
     let nominal = TwinConfig::default();

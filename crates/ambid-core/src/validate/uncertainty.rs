@@ -11,7 +11,9 @@
 //! * **(a) the FRF's confidence region carried through the fit**, $\delta\hat P_k$: the noise on
 //!   the FRF moves the fitted model. The model is written in pole–residue form
 //!   $\hat P(z) = D + \sum_i r_i/(z - p_i)$ (conjugate pairs by real and imaginary parts, $2n$
-//!   real parameters $\theta$, $+1$ with a feed-through), and the inverse-variance weighted
+//!   real parameters $\theta$, $+1$ with a feed-through; poles at the origin — pure delays, a
+//!   Jordan block without eigenvectors — become $\sum_m c_m z^{-m}$ with one real parameter
+//!   each), and the inverse-variance weighted
 //!   frequency-domain fit has, to first order, $\operatorname{Cov}\theta = F^{-1}$ with
 //!   $F = \sum_k 2\operatorname{Re}(J_k^{\mathsf H} J_k)/\sigma_k^2$, $J_k = \partial \hat
 //!   P(z_k)/\partial\theta$ (analytic: $1/(z - p_i)$ and $r_i/(z-p_i)^2$). The error
@@ -271,7 +273,8 @@ impl ErrorModel {
 /// non-positive one, fewer lines than parameters, a model of another sample time or that is not
 /// SISO, extra terms of the wrong length or with non-finite values, or coverage levels outside
 /// (0, 1); [`Error::Numerical`] when the model's poles cannot be put in pole–residue form (a
-/// defective pole) or the information matrix is singular.
+/// repeated pole away from the origin, or poles so clustered that the form does not reproduce
+/// the model) or the information matrix is singular.
 pub fn uncertainty(
     nominal: &StateSpace,
     frd: &Frd,
@@ -602,17 +605,26 @@ fn sym_inverse(f: &Mat<f64>) -> Result<(Mat<f64>, Mat<f64>)> {
 /// its conjugate) and the feed-through.
 struct PoleResidue {
     poles: Vec<(c64, c64, bool)>,
+    /// $c_1, \dots, c_M$ of the poles at the origin (pure delays), $\sum_m c_m z^{-m}$.
+    fir: Vec<f64>,
     d: f64,
     has_d: bool,
 }
 
+/// Eigenvalues of $A$ below this magnitude are poles at the origin (delays; a Jordan block at 0
+/// is perturbed by rounding to about $\varepsilon^{1/m}$, $10^{-5}$ for $m = 3$).
+const ORIGIN_POLE: f64 = 1e-4;
+
 impl PoleResidue {
+    /// The form from $A$'s eigenvectors (residue $C u_k\,(U^{-1}B)_k$ per simple pole), or, with
+    /// poles at the origin, [`PoleResidue::fitted`].
     fn of(m: &StateSpace) -> Result<Self> {
         let n = m.order();
         let d = m.d()[(0, 0)];
         if n == 0 {
             return Ok(Self {
                 poles: Vec::new(),
+                fir: Vec::new(),
                 d,
                 has_d: true,
             });
@@ -625,6 +637,10 @@ impl PoleResidue {
             )
         })?;
         let (u, s) = (eig.U(), eig.S());
+        if (0..n).any(|k| s[k].norm() <= ORIGIN_POLE) {
+            let eigs: Vec<c64> = (0..n).map(|k| s[k]).collect();
+            return Self::fitted(m, &eigs, d);
+        }
         let bc = Mat::<c64>::from_fn(n, 1, |i, _| c64::new(m.b()[(i, 0)], 0.0));
         let vb = linalg::solve_c64(u, bc.as_ref()).map_err(|_| {
             Error::numerical(
@@ -660,6 +676,90 @@ impl PoleResidue {
         }
         Ok(Self {
             poles,
+            fir: Vec::new(),
+            d,
+            has_d: d != 0.0,
+        })
+    }
+
+    /// A model with poles at the origin (`eigs` holds all of $A$'s eigenvalues): those make the
+    /// terms $\sum_m c_m z^{-m}$ (a Jordan block at 0 has no eigenvector basis), the others keep
+    /// their residues; residues and $c_m$ by linear least squares on $4(n + 1)$ points of the
+    /// unit circle, where the model is evaluated exactly (the caller checks that the form
+    /// reproduces the model on the lines).
+    fn fitted(m: &StateSpace, eigs: &[c64], d: f64) -> Result<Self> {
+        let n = eigs.len();
+        let ts = m
+            .ts()
+            .ok_or_else(|| Error::numerical(CTX, "the model must be discrete-time"))?;
+        let scale = eigs.iter().map(|p| p.norm()).fold(1.0f64, f64::max);
+        let tol = 1e-10 * scale;
+        let mut poles: Vec<(c64, c64, bool)> = Vec::new();
+        let mut n_origin = 0;
+        for &p in eigs {
+            if p.norm() <= ORIGIN_POLE {
+                n_origin += 1;
+            } else if p.im.abs() <= tol {
+                poles.push((c64::new(p.re, 0.0), c64::new(0.0, 0.0), false));
+            } else if p.im > 0.0 {
+                poles.push((p, c64::new(0.0, 0.0), true));
+            }
+        }
+        let count = n_origin + poles.iter().map(|t| if t.2 { 2 } else { 1 }).sum::<usize>();
+        if count != n {
+            return Err(Error::numerical(
+                CTX,
+                "the model's poles do not come in conjugate pairs",
+            ));
+        }
+        let n_pts = 4 * (n + 1);
+        let f: Vec<f64> = (0..n_pts)
+            .map(|j| (j as f64 + 0.5) / n_pts as f64 * 0.5 / ts)
+            .collect();
+        let resp = m.freq_response_siso(&f)?;
+        let n_unk = poles.iter().map(|t| if t.2 { 2 } else { 1 }).sum::<usize>() + n_origin;
+        let mut amat = Mat::<f64>::zeros(2 * n_pts, n_unk);
+        let mut rhs = Mat::<f64>::zeros(2 * n_pts, 1);
+        let j = c64::new(0.0, 1.0);
+        for (row, (&fk, g)) in f.iter().zip(&resp).enumerate() {
+            let z = c64::from_polar(1.0, 2.0 * std::f64::consts::PI * fk * ts);
+            let mut cols: Vec<c64> = Vec::with_capacity(n_unk);
+            for &(p, _, pair) in &poles {
+                let a = c64::new(1.0, 0.0) / (z - p);
+                if pair {
+                    let ab = c64::new(1.0, 0.0) / (z - p.conj());
+                    cols.push(a + ab);
+                    cols.push(j * a - j * ab);
+                } else {
+                    cols.push(a);
+                }
+            }
+            for k in 1..=n_origin {
+                cols.push(z.powi(-(k as i32)));
+            }
+            for (c, v) in cols.iter().enumerate() {
+                amat[(2 * row, c)] = v.re;
+                amat[(2 * row + 1, c)] = v.im;
+            }
+            let y = g - d;
+            rhs[(2 * row, 0)] = y.re;
+            rhs[(2 * row + 1, 0)] = y.im;
+        }
+        let x = linalg::lstsq(amat.as_ref(), rhs.as_ref())?;
+        let mut i = 0;
+        for t in &mut poles {
+            if t.2 {
+                t.1 = c64::new(x[(i, 0)], x[(i + 1, 0)]);
+                i += 2;
+            } else {
+                t.1 = c64::new(x[(i, 0)], 0.0);
+                i += 1;
+            }
+        }
+        let fir = (0..n_origin).map(|k| x[(i + k, 0)]).collect();
+        Ok(Self {
+            poles,
+            fir,
             d,
             has_d: d != 0.0,
         })
@@ -670,6 +770,7 @@ impl PoleResidue {
             .iter()
             .map(|t| if t.2 { 4 } else { 2 })
             .sum::<usize>()
+            + self.fir.len()
             + usize::from(self.has_d)
     }
 
@@ -681,11 +782,14 @@ impl PoleResidue {
                 v += r.conj() / (z - p.conj());
             }
         }
+        for (k, c) in self.fir.iter().enumerate() {
+            v += z.powi(-(k as i32 + 1)) * *c;
+        }
         v
     }
 
     /// $\partial \hat P(z) / \partial \theta$ in the order (per pole: re p, [im p], re r, [im r]),
-    /// then $D$.
+    /// then the delay terms' $c_m$, then $D$.
     fn jacobian(&self, z: c64) -> Vec<c64> {
         let j = c64::new(0.0, 1.0);
         let mut out = Vec::with_capacity(self.n_params());
@@ -702,6 +806,9 @@ impl PoleResidue {
                 out.push(r * a * a);
                 out.push(a);
             }
+        }
+        for k in 0..self.fir.len() {
+            out.push(z.powi(-(k as i32 + 1)));
         }
         if self.has_d {
             out.push(c64::new(1.0, 0.0));
@@ -842,11 +949,13 @@ mod tests {
                     let h = 1e-7;
                     let mut plus = PoleResidue {
                         poles: pr.poles.clone(),
+                        fir: pr.fir.clone(),
                         d: pr.d,
                         has_d: pr.has_d,
                     };
                     let mut minus = PoleResidue {
                         poles: pr.poles.clone(),
+                        fir: pr.fir.clone(),
                         d: pr.d,
                         has_d: pr.has_d,
                     };
@@ -911,6 +1020,43 @@ mod tests {
         let u = default_terms(&m, &frd);
         assert_eq!(u.n_params, 6);
         assert!(u.model_error.iter().all(|&b| b == 0.0));
+    }
+
+    /// A model with two delay poles at the origin (a Jordan block: no eigenvector basis) is
+    /// written as its other poles' residues plus $c_1 z^{-1} + c_2 z^{-2}$; the form reproduces
+    /// the model and the terms are computed.
+    #[test]
+    fn a_model_with_delay_poles_gets_its_delay_terms() {
+        let m0 = model();
+        let n0 = m0.order();
+        let n = n0 + 2;
+        // u → x_d1 → x_d2 → the base model's input
+        let a = Mat::<f64>::from_fn(n, n, |i, j| match (i < n0, j < n0) {
+            (true, true) => m0.a()[(i, j)],
+            (true, false) if j == n0 + 1 => m0.b()[(i, 0)],
+            (false, false) => f64::from(i == n0 + 1 && j == n0),
+            _ => 0.0,
+        });
+        let b = Mat::<f64>::from_fn(n, 1, |i, _| f64::from(i == n0));
+        let c = Mat::<f64>::from_fn(1, n, |_, j| if j < n0 { m0.c()[(0, j)] } else { 0.0 });
+        let m = StateSpace::discrete(a, b, c, mat![[0.0]], 1e-3).unwrap();
+        let pr = PoleResidue::of(&m).unwrap();
+        assert_eq!(pr.fir.len(), 2);
+        assert_eq!(pr.n_params(), 8);
+        let f: Vec<f64> = (1..=150).map(|k| k as f64 * 1.5).collect();
+        let exact = m.freq_response_siso(&f).unwrap();
+        let base = m0.freq_response_siso(&f).unwrap();
+        for (k, fk) in f.iter().enumerate() {
+            let z = c64::from_polar(1.0, 2.0 * std::f64::consts::PI * fk * 1e-3);
+            // the delayed model is the base one times z^-2
+            assert!((exact[k] - base[k] * z.powi(-2)).norm() < 1e-12 * base[k].norm());
+            assert!((pr.value(z) - exact[k]).norm() < 1e-9 * exact[k].norm());
+        }
+        let var: Vec<f64> = exact.iter().map(|g| 1e-3 * g.norm_sqr()).collect();
+        let frd = Frd::new(f, exact, Some(var), Some(1e-3)).unwrap();
+        let u = default_terms(&m, &frd);
+        assert_eq!(u.n_params, 8);
+        assert!(u.frf_confidence.iter().all(|q| q.is_finite() && *q > 0.0));
     }
 
     /// The draws of the model's error reproduce the exact per-line quantile of term (a) at every

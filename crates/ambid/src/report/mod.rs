@@ -247,6 +247,41 @@ pub fn format_number(v: f64) -> String {
 }
 
 impl Report {
+    /// The first x–y series whose name starts with `prefix` in the figures of the section `id`
+    /// (tests and rig sweeps read a figure's numbers back this way).
+    ///
+    /// ```
+    /// use ambid::report::{Axis, Block, Figure, Panel, PanelContent, Report, Scale, Section,
+    ///     Series, Style};
+    /// let axis = || Axis { label: String::new(), scale: Scale::Linear, range: None };
+    /// let s = Series { name: "(d) spread".into(), x: vec![1.0], y: vec![2.0], style: Style::Line,
+    ///     color: None };
+    /// let fig = Figure { id: "f".into(), title: String::new(), caption: String::new(), columns: 1,
+    ///     panels: vec![Panel { title: String::new(), x: axis(), y: axis(),
+    ///         content: PanelContent::Xy(vec![s]), spans: vec![], equal_aspect: false }] };
+    /// let r = Report { title: String::new(), subtitle: String::new(), sections: vec![Section {
+    ///     id: "u".into(), blocks: vec![Block::Figure(fig)], ..Section::default() }] };
+    /// assert_eq!(r.series("u", "(d)").unwrap().y, [2.0]);
+    /// assert!(r.series("u", "(c)").is_none());
+    /// ```
+    pub fn series(&self, id: &str, prefix: &str) -> Option<&Series> {
+        self.sections
+            .iter()
+            .filter(|s| s.id == id)
+            .flat_map(|s| &s.blocks)
+            .filter_map(|b| match b {
+                Block::Figure(f) => Some(f),
+                _ => None,
+            })
+            .flat_map(|f| &f.panels)
+            .filter_map(|p| match &p.content {
+                PanelContent::Xy(s) => Some(s),
+                _ => None,
+            })
+            .flatten()
+            .find(|s| s.name.starts_with(prefix))
+    }
+
     /// Renders the report as one self-contained HTML5 document: inline CSS, a header, a table of
     /// contents, and each section's blocks; figures as inline SVG. No JavaScript and no
     /// external resources, so the file opens offline. All text is HTML-escaped.
