@@ -35,6 +35,9 @@ fn uncertainty_and_physical_steps_on_the_twin() {
         "{ids:?}"
     );
 
+    // no operating-point step: no term (d), neither plotted nor in the summary
+    assert!(out.report.series("uncertainty", "(d)").is_none());
+    assert!(sm["uncertainty"].get("operating_cases").is_none());
     let twin = Twin::new(TwinConfig::default()).unwrap();
     let u = &sm["uncertainty"];
     println!("{}", serde_json::to_string_pretty(u).unwrap());

@@ -151,11 +151,14 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     let mut spread_note = None;
     let spread = match ctx.operating_point.as_ref() {
         Some(op) => {
-            let m = model
+            let spread = model
                 .freq_response_siso(frd.f_hz())
-                .map_err(|e| super::computation(Error::from(e)))?;
-            let abs: Vec<f64> = m.iter().map(|p| p.norm()).collect();
-            match operating_spread(&op.plants, frd.f_hz(), &abs) {
+                .map_err(Error::from)
+                .and_then(|m| {
+                    let abs: Vec<f64> = m.iter().map(|p| p.norm()).collect();
+                    operating_spread(&op.plants, frd.f_hz(), &abs)
+                });
+            match spread {
                 Ok(s) => Some((
                     s,
                     op.cases
@@ -212,13 +215,6 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             color: Some(2),
         },
         Series {
-            name: "(d) operating-point spread / |P̂|".into(),
-            x: t.f_hz.clone(),
-            y: t.operating.as_deref().map(&rel).unwrap_or_default(),
-            style: Style::Line,
-            color: Some(5),
-        },
-        Series {
             name: "bound ℓ".into(),
             x: t.f_hz.clone(),
             y: t.multiplicative.clone(),
@@ -233,6 +229,18 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             color: Some(3),
         },
     ];
+    if let Some(o) = t.operating.as_deref() {
+        series.insert(
+            2,
+            Series {
+                name: "(d) operating-point spread / |P̂|".into(),
+                x: t.f_hz.clone(),
+                y: rel(o),
+                style: Style::Line,
+                color: Some(5),
+            },
+        );
+    }
     let mut twin_interval = None;
     let mut twin_cov = None;
     if let Some(tw) = ctx.twin.as_ref() {
