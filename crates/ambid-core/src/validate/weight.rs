@@ -362,13 +362,7 @@ pub fn fit_weight(
         .into_iter()
         .find(|r| r.1 <= best * 1.1)
         .ok_or_else(|| Error::numerical("fit_weight", "no weight could be fitted"))?;
-    let m = weight.magnitude(f_hz);
-    let uncovered = f_hz
-        .iter()
-        .zip(bound.iter().zip(&m))
-        .filter(|(_, (b, w))| **w < **b * (1.0 - 1e-12))
-        .map(|(f, _)| *f)
-        .collect();
+    let uncovered = lines_above(f_hz, bound, &weight.magnitude(f_hz));
     Ok(WeightFit {
         weight,
         looseness,
@@ -383,16 +377,20 @@ impl WeightFit {
     pub fn raise(&mut self, factor: f64, f_hz: &[f64], bound: &[f64]) {
         self.weight.gain *= factor.max(1.0);
         let m = self.weight.magnitude(f_hz);
+        self.uncovered_hz = lines_above(f_hz, bound, &m);
         let mut ratio: Vec<f64> = m.iter().zip(bound).map(|(w, b)| w / b).collect();
-        self.uncovered_hz = f_hz
-            .iter()
-            .zip(&ratio)
-            .filter(|(_, r)| **r < 1.0 - 1e-12)
-            .map(|(f, _)| *f)
-            .collect();
         ratio.sort_by(f64::total_cmp);
         self.looseness = ratio.get(ratio.len() / 2).copied().unwrap_or(f64::NAN);
     }
+}
+
+/// The frequencies where the weight's magnitude `m` lies below `bound` (to rounding).
+fn lines_above(f_hz: &[f64], bound: &[f64], m: &[f64]) -> Vec<f64> {
+    f_hz.iter()
+        .zip(bound.iter().zip(m))
+        .filter(|(_, (b, w))| **w < **b * (1.0 - 1e-12))
+        .map(|(f, _)| *f)
+        .collect()
 }
 
 /// `w` with its gain raised to overbound the fraction `cover` of `bound`, and its looseness
