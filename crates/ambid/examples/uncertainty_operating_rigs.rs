@@ -3,10 +3,13 @@
 //! (and their prerequisites) on `random_rig(rig)` with noise seed `rig`; term (d) over the
 //! twin's exact linearised plants at the five operating points (median and 10–90 % of the ratio
 //! on the 20–1000 Hz lines), and whether the true loop of every operating point stays stable
-//! with the controller gain moved 90 % of the way to each reported robust gain margin.
+//! with the controller gain moved 90 % of the way to each reported robust gain margin; and the
+//! chosen model's true error (against the nominal plant) on 10–1000 Hz: the fraction of lines
+//! the weight and the bound ℓ cover, and the weight's median over the error's median.
 //!
 //! `cargo run --release -p ambid --example uncertainty_operating_rigs -- RIGS [linear|nonlinear]`
-//! (e.g. `61-80`).
+//! (e.g. `61-80`). `SHOW_U=1` prints each rig's uncertainty summary, `SHOW_MODEL=1` the model
+//! JSONs of a rig where the step did not run.
 
 use ambid::report::Block;
 use ambid::uncertainty::loop_stable;
@@ -23,8 +26,8 @@ fn main() {
     let dir = std::env::temp_dir().join(format!("ambid-unc-op-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let (all, _) = Step::with_prerequisites(&[Step::OperatingPoint, Step::Uncertainty]);
-    let (mut runs, mut all_stable, mut medians) = (0, 0, Vec::new());
-    println!("rig | (d)/truth q10 median q90 | spread median | margins lo hi | every case stable at 90 %");
+    let (mut runs, mut all_stable, mut medians, mut covered) = (0, 0, Vec::new(), 0);
+    println!("rig | (d)/truth q10 median q90 | spread median | margins lo hi | every case stable at 90 % | chosen model: cov_W cov_l medW/med_err");
     for rig in rigs {
         let cfg = random_rig(rig).unwrap();
         let path = dir.join(format!("rig{rig}.toml"));
@@ -44,6 +47,20 @@ fn main() {
             }
         };
         let u = &out.summary["uncertainty"];
+        if std::env::var("SHOW_U").is_ok() {
+            println!("{rig}: {u}");
+            for pre in ["(a)", "(b)", "bound", "|W|", "(d)"] {
+                if let Some(sr) = out.report.series("uncertainty", pre) {
+                    let pts: Vec<String> =
+                        sr.x.iter()
+                            .zip(&sr.y)
+                            .step_by(20)
+                            .map(|(x, y)| format!("{x:.0}:{y:.2e}"))
+                            .collect();
+                    println!("{pre} {}", pts.join(" "));
+                }
+            }
+        }
         let Some(series) = out
             .report
             .series("uncertainty", "(d)")
@@ -116,6 +133,25 @@ fn main() {
         }
         ratios.sort_by(f64::total_cmp);
         let n = ratios.len();
+        // the chosen model's true error against the weight and the bound on 10–1000 Hz
+        let pick = |prefix: &str| out.report.series("uncertainty", prefix).cloned();
+        let (w, ell, err) = (pick("|W|"), pick("bound ℓ"), pick("twin: true"));
+        let (mut cov_w, mut cov_l, mut med) = (f64::NAN, f64::NAN, f64::NAN);
+        if let (Some(w), Some(ell), Some(err)) = (w, ell, err) {
+            let idx: Vec<usize> = (0..err.x.len())
+                .filter(|&k| (10.0..=1000.0).contains(&err.x[k]))
+                .collect();
+            let m = idx.len().max(1) as f64;
+            cov_w = idx.iter().filter(|&&k| w.y[k] >= err.y[k]).count() as f64 / m;
+            cov_l = idx.iter().filter(|&&k| ell.y[k] >= err.y[k]).count() as f64 / m;
+            let median = |mut v: Vec<f64>| {
+                v.sort_by(f64::total_cmp);
+                v[v.len() / 2]
+            };
+            med = median(idx.iter().map(|&k| w.y[k]).collect())
+                / median(idx.iter().map(|&k| err.y[k]).collect());
+            covered += usize::from(cov_w >= 0.95);
+        }
         let (lo, hi) = (
             u["lower_gain_margin"].as_f64(),
             u["upper_gain_margin"].as_f64(),
@@ -133,7 +169,7 @@ fn main() {
         all_stable += usize::from(stable);
         medians.push(ratios[n / 2]);
         println!(
-            "{rig} | {:.3} {:.3} {:.3} | {:.3} | {:?} {:?} | {stable}",
+            "{rig} | {:.3} {:.3} {:.3} | {:.3} | {:?} {:?} | {stable} | {} {cov_w:.3} {cov_l:.3} {med:.2}",
             ratios[n / 10],
             ratios[n / 2],
             ratios[9 * n / 10],
@@ -141,12 +177,13 @@ fn main() {
                 .as_f64()
                 .unwrap_or(f64::NAN),
             lo,
-            hi
+            hi,
+            out.summary["models"]["chosen"]
         );
     }
     medians.sort_by(f64::total_cmp);
     println!(
-        "runs {runs}: median (d)/truth from {:.3} to {:.3}; every operating point stable at 90 % of both margins in {all_stable}",
+        "runs {runs}: median (d)/truth from {:.3} to {:.3}; every operating point stable at 90 % of both margins in {all_stable}; the weight covers >= 95 % of the chosen model's 10-1000 Hz true error in {covered}",
         medians.first().copied().unwrap_or(f64::NAN),
         medians.last().copied().unwrap_or(f64::NAN)
     );
