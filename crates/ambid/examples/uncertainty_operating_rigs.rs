@@ -5,7 +5,8 @@
 //! on the 20–1000 Hz lines), and whether the true loop of every operating point stays stable
 //! with the controller gain moved 90 % of the way to each reported robust gain margin; and the
 //! chosen model's true error (against the nominal plant) on 10–1000 Hz: the fraction of lines
-//! the weight and the bound ℓ cover, and the weight's median over the error's median.
+//! the weight and the bound ℓ cover, and the weight's median over the error's median; and the
+//! same margins check for the robust-stability check on the lines (no weight fit).
 //!
 //! `cargo run --release -p ambid --example uncertainty_operating_rigs -- RIGS [linear|nonlinear]`
 //! (e.g. `61-80`). `SHOW_U=1` prints each rig's uncertainty summary, `SHOW_MODEL=1` the model
@@ -27,6 +28,7 @@ fn main() {
     std::fs::create_dir_all(&dir).unwrap();
     let (all, _) = Step::with_prerequisites(&[Step::OperatingPoint, Step::Uncertainty]);
     let (mut runs, mut all_stable, mut medians, mut covered) = (0, 0, Vec::new(), 0);
+    let (mut lines_robust, mut weight_robust, mut lines_all_stable) = (0, 0, 0);
     println!("rig | (d)/truth q10 median q90 | spread median | margins lo hi | every case stable at 90 % | chosen model: cov_W cov_l medW/med_err");
     for rig in rigs {
         let cfg = random_rig(rig).unwrap();
@@ -156,20 +158,32 @@ fn main() {
             u["lower_gain_margin"].as_f64(),
             u["upper_gain_margin"].as_f64(),
         );
-        let stable = twins.iter().all(|t| {
-            [
-                lo.map(|g| 1.0 - 0.9 * (1.0 - g)),
-                hi.map(|g| 1.0 + 0.9 * (g - 1.0)),
-            ]
-            .into_iter()
-            .flatten()
-            .all(|gain| loop_stable(t.plant(), t.controller(), gain).unwrap_or(false))
-        });
+        let stable_at = |lo: Option<f64>, hi: Option<f64>| {
+            twins.iter().all(|t| {
+                [
+                    lo.map(|g| 1.0 - 0.9 * (1.0 - g)),
+                    hi.map(|g| 1.0 + 0.9 * (g - 1.0)),
+                ]
+                .into_iter()
+                .flatten()
+                .all(|gain| loop_stable(t.plant(), t.controller(), gain).unwrap_or(false))
+            })
+        };
+        let stable = stable_at(lo, hi);
+        // the check on the lines (no weight fit)
+        let (l_lo, l_hi) = (
+            u["lines_lower_gain_margin"].as_f64(),
+            u["lines_upper_gain_margin"].as_f64(),
+        );
+        let l_stable = stable_at(l_lo, l_hi);
+        lines_robust += usize::from(u["lines_robustly_stable"] == true);
+        weight_robust += usize::from(u["robustly_stable"] == true);
+        lines_all_stable += usize::from(l_stable);
         runs += 1;
         all_stable += usize::from(stable);
         medians.push(ratios[n / 2]);
         println!(
-            "{rig} | {:.3} {:.3} {:.3} | {:.3} | {:?} {:?} | {stable} | {} {cov_w:.3} {cov_l:.3} {med:.2}",
+            "{rig} | {:.3} {:.3} {:.3} | {:.3} | {:?} {:?} | {stable} | {} {cov_w:.3} {cov_l:.3} {med:.2} | lines {l_lo:?} {l_hi:?} {l_stable}",
             ratios[n / 10],
             ratios[n / 2],
             ratios[9 * n / 10],
@@ -183,7 +197,7 @@ fn main() {
     }
     medians.sort_by(f64::total_cmp);
     println!(
-        "runs {runs}: median (d)/truth from {:.3} to {:.3}; every operating point stable at 90 % of both margins in {all_stable}; the weight covers >= 95 % of the chosen model's 10-1000 Hz true error in {covered}",
+        "runs {runs}: median (d)/truth from {:.3} to {:.3}; every operating point stable at 90 % of both margins in {all_stable}; the weight covers >= 95 % of the chosen model's 10-1000 Hz true error in {covered}; robustly stable against the weight in {weight_robust}, against the bound on the lines in {lines_robust} (every operating point stable at 90 % of those margins in {lines_all_stable})",
         medians.first().copied().unwrap_or(f64::NAN),
         medians.last().copied().unwrap_or(f64::NAN)
     );

@@ -1,7 +1,8 @@
 //! The uncertainty bound and the robust gain margin on random rigs of the twin (issue 23):
 //! per rig and noise seed, the identified plant's error against the exact one, the bound's and
-//! the weight's coverage of it on 10–1000 Hz, the weight's looseness, and the robust upper gain
-//! margin against the true loop's.
+//! the weight's coverage of it on 10–1000 Hz, the weight's looseness, the robust upper gain
+//! margin against the true loop's, and both robust gain margins of the check on the lines
+//! (`on_lines`) against the true ones.
 //!
 //! `cargo run --release -p ambid --example uncertainty_rigs -- RIGS SEEDS [linear|nonlinear]`
 //! (e.g. `1-20 1-5`; rig 0 is the nominal twin; the truth is the twin's linearised plant in
@@ -31,6 +32,7 @@ fn main() {
     };
     let (mut runs, mut ok_runs, mut ratios) = (0, 0, Vec::new());
     let (mut rs_ok, mut rs_half) = (0, 0);
+    let (mut lines_ok, mut lines_half, mut lines_within) = (0, 0, 0);
     println!("rig seed order | cov_l cov_W | med_err med_W ratio | g_rob g_true | stable@90% half");
     for &rig in &rigs {
         for &seed in &seeds {
@@ -101,15 +103,28 @@ fn main() {
             }
             ratios.push(c.median_ratio);
             let (g_lo, g_hi) = nominal_gain_interval(&run.truth_plant, &run.controller).unwrap();
-            let _ = g_lo;
             let g = run.analysis.robust.upper_gain_margin.unwrap_or(f64::NAN);
             let test_gain = 1.0 + 0.9 * (g - 1.0);
             let stable = loop_stable(&run.truth_plant, &run.controller, test_gain).unwrap_or(false);
             let half = (g - 1.0) >= 0.5 * (g_hi - 1.0);
             rs_ok += usize::from(stable);
             rs_half += usize::from(half);
+            // the check on the lines (both margins): stable at 90 % of each, at least half of
+            // each true one, and never beyond it
+            let ol = &run.analysis.on_lines;
+            let (lu, ll) = (
+                ol.upper_gain_margin.unwrap_or(f64::NAN),
+                ol.lower_gain_margin.unwrap_or(f64::NAN),
+            );
+            let l_stable = [1.0 + 0.9 * (lu - 1.0), 1.0 - 0.9 * (1.0 - ll)]
+                .iter()
+                .all(|g| loop_stable(&run.truth_plant, &run.controller, *g).unwrap_or(false));
+            let l_half = (lu - 1.0) >= 0.5 * (g_hi - 1.0) && (1.0 - ll) >= 0.5 * (1.0 - g_lo);
+            lines_ok += usize::from(l_stable);
+            lines_half += usize::from(l_half);
+            lines_within += usize::from(lu <= g_hi * (1.0 + 1e-3) && ll >= g_lo * (1.0 - 1e-3));
             println!(
-                "{rig:3} {seed:3} {:2} | {:.3} {:.3} | {:.2e} {:.2e} {:.2} | {:.3} {:.3} | {} {} | W order {} loose {:.2} | raise {:.2} W0 cov {:.3} ratio {:.2} | {:.1}s",
+                "{rig:3} {seed:3} {:2} | {:.3} {:.3} | {:.2e} {:.2e} {:.2} | {:.3} {:.3} | {} {} | W order {} loose {:.2} | raise {:.2} W0 cov {:.3} ratio {:.2} | lines {ll:.3} {lu:.3} (true {g_lo:.3} {g_hi:.3}) {l_stable} {l_half} | {:.1}s",
                 run.nominal.order(),
                 c.bound_coverage,
                 c.weight_coverage,
@@ -131,7 +146,7 @@ fn main() {
     }
     ratios.sort_by(f64::total_cmp);
     println!(
-        "runs {runs}: weight covers ≥95 % of lines in {ok_runs} ({:.1} %); ratio median {:.2}, max {:.2}; RS stable at 90 %: {rs_ok}, margin ≥ half: {rs_half}",
+        "runs {runs}: weight covers ≥95 % of lines in {ok_runs} ({:.1} %); ratio median {:.2}, max {:.2}; RS stable at 90 %: {rs_ok}, margin ≥ half: {rs_half}; on the lines (both margins): stable at 90 % {lines_ok}, ≥ half {lines_half}, within the true {lines_within}",
         100.0 * ok_runs as f64 / runs.max(1) as f64,
         ratios.get(ratios.len() / 2).copied().unwrap_or(f64::NAN),
         ratios.last().copied().unwrap_or(f64::NAN)

@@ -72,6 +72,19 @@ fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
     assert!(loop_stable(plant, ctrl, 1.0 - 0.9 * (1.0 - g_lo)).unwrap());
     assert!(g_hi - 1.0 >= 0.5 * (true_hi - 1.0), "{g_hi} vs {true_hi}");
     assert!(1.0 - g_lo >= 0.5 * (1.0 - true_lo), "{g_lo} vs {true_lo}");
+    // the check on the lines (the bound itself, no weight fit): the same two bars
+    let ol = &summary["robust_on_lines"]["check"];
+    assert_eq!(ol["robustly_stable"], true, "{summary}");
+    assert!(summary["robust_on_lines"]["raise"].as_f64().unwrap() >= 1.0);
+    let (l_lo, l_hi) = (
+        ol["lower_gain_margin"].as_f64().unwrap(),
+        ol["upper_gain_margin"].as_f64().unwrap(),
+    );
+    println!("on the lines {l_lo:.3}..{l_hi:.3}");
+    assert!(loop_stable(plant, ctrl, 1.0 + 0.9 * (l_hi - 1.0)).unwrap());
+    assert!(loop_stable(plant, ctrl, 1.0 - 0.9 * (1.0 - l_lo)).unwrap());
+    assert!(l_hi - 1.0 >= 0.5 * (true_hi - 1.0), "{l_hi} vs {true_hi}");
+    assert!(1.0 - l_lo >= 0.5 * (1.0 - true_lo), "{l_lo} vs {true_lo}");
 
     // the files agree: the script's weight on the lines is the table's weight_mag
     let table = std::fs::read_to_string(dir.join("unc/uncertainty.csv")).unwrap();

@@ -51,6 +51,16 @@ fn uncertainty_and_physical_steps_on_the_twin() {
     assert!(loop_stable(twin.plant(), twin.controller(), 1.0 + 0.9 * (g_hi - 1.0)).unwrap());
     assert!(loop_stable(twin.plant(), twin.controller(), 1.0 - 0.9 * (1.0 - g_lo)).unwrap());
     assert!(g_hi - 1.0 >= 0.5 * (t_hi - 1.0) && 1.0 - g_lo >= 0.5 * (1.0 - t_lo));
+    // the check on the lines (no weight fit): the same bars on the nominal twin
+    assert_eq!(u["lines_robustly_stable"], true);
+    assert!(u["lines_raise"].as_f64().unwrap() >= 1.0);
+    let (l_lo, l_hi) = (
+        u["lines_lower_gain_margin"].as_f64().unwrap(),
+        u["lines_upper_gain_margin"].as_f64().unwrap(),
+    );
+    assert!(loop_stable(twin.plant(), twin.controller(), 1.0 + 0.9 * (l_hi - 1.0)).unwrap());
+    assert!(loop_stable(twin.plant(), twin.controller(), 1.0 - 0.9 * (1.0 - l_lo)).unwrap());
+    assert!(l_hi - 1.0 >= 0.5 * (t_hi - 1.0) && 1.0 - l_lo >= 0.5 * (1.0 - t_lo));
 
     let p = &sm["physical"]["parameters"];
     println!("{}", serde_json::to_string_pretty(p).unwrap());

@@ -221,6 +221,10 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             "uncovered_hz": w.uncovered_hz,
         },
         "robust": robust_json(r),
+        "robust_on_lines": {
+            "raise": analysis.lines_raise,
+            "check": robust_json(&analysis.on_lines),
+        },
     });
 
     let mut set = OutputSet::new(a.force);
@@ -295,6 +299,16 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         r.stability_margin,
         margin(r.lower_gain_margin),
         margin(r.upper_gain_margin),
+    );
+    let ol = &analysis.on_lines;
+    println!(
+        "on the lines (the bound itself ×{:.3}, no weight fit; the band only): {} (max ℓ|T| = {:.3} at {:.1} Hz); robust gain margins: down to {}, up to {}",
+        analysis.lines_raise,
+        if ol.robustly_stable { "robustly stable" } else { "NOT robustly stable" },
+        ol.mu_peak,
+        ol.mu_peak_hz,
+        margin(ol.lower_gain_margin),
+        margin(ol.upper_gain_margin),
     );
     let written = set.commit()?;
     println!("written: {}", written.len());

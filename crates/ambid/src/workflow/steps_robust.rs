@@ -54,6 +54,14 @@ pub struct UncertaintySummary {
     /// On the twin: the fraction of the band's lines where |W| covers the true relative error.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub twin_weight_coverage: Option<f64>,
+    /// The check against the bound on the lines itself (no weight fit): robustly stable?
+    pub lines_robustly_stable: bool,
+    /// Its robust gain margins (on the band only).
+    pub lines_lower_gain_margin: Option<f64>,
+    /// Upper of the same.
+    pub lines_upper_gain_margin: Option<f64>,
+    /// The factor the bound was raised by for it.
+    pub lines_raise: f64,
 }
 
 /// `summary.json`'s `physical`.
@@ -294,6 +302,19 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             ),
         ],
     ];
+    let ol = &a.on_lines;
+    rows.push(vec![
+        "on the lines (the bound ℓ itself, no weight fit)".into(),
+        format!(
+            "{}, max ℓ|T| = {:.3} at {:.1} Hz (ℓ raised ×{:.2}); robust gain margins {} … {} (the band only)",
+            if ol.robustly_stable { "robustly stable" } else { "not robustly stable" },
+            ol.mu_peak,
+            ol.mu_peak_hz,
+            a.lines_raise,
+            fmt_margin(ol.lower_gain_margin),
+            fmt_margin(ol.upper_gain_margin)
+        ),
+    ]);
     if let Some((lo, hi)) = twin_interval {
         rows.push(vec![
             "twin: true gain interval".into(),
@@ -372,6 +393,10 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         }),
         twin_gain_interval: twin_interval,
         twin_weight_coverage: twin_cov,
+        lines_robustly_stable: a.on_lines.robustly_stable,
+        lines_lower_gain_margin: a.on_lines.lower_gain_margin.filter(|g| g.is_finite()),
+        lines_upper_gain_margin: a.on_lines.upper_gain_margin.filter(|g| g.is_finite()),
+        lines_raise: a.lines_raise,
     });
     Ok(StepStatus::Done)
 }
