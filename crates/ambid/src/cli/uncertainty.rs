@@ -4,13 +4,13 @@
 //! uncertain model exported for MATLAB and Python.
 
 use super::args::parse_band;
-use super::common::{model_on_frf, ModelOnFrf};
+use super::common::{frf_with_variance, model_on_frf, ModelOnFrf};
 use ambid::io::export::uncertain::{
     robust_json, uncertain_json, uncertain_mat_bytes, uncertain_matlab_script, uncertain_npz_bytes,
     UncertainModel, UncertainNames,
 };
 use ambid::io::OutputSet;
-use ambid::uncertainty::analyse;
+use ambid::uncertainty::{analyse, operating_spread};
 use ambid_core::validate::uncertainty::{ExtraTerms, UncertaintyOptions};
 use ambid_core::validate::weight::{DEFAULT_COVER, MAX_WEIGHT_ORDER};
 use anyhow::Result;
@@ -53,6 +53,12 @@ pub struct UncertaintyArgs {
     /// overbound the error on `--cover` of the lines; the weight's gain is raised until it does.
     #[arg(long, default_value_t = 0.95)]
     run_coverage: f64,
+    /// Term (d): the plant FRF CSV of the same experiment at another operating point (bias
+    /// current, air gap; `ambid frf` of a record with the same excitation, so the same lines).
+    /// Repeat it for each; the bound then holds the largest noise-corrected distance of them from
+    /// the nominal FRF (docs/uncertainty.md).
+    #[arg(long = "operating", value_name = "FRF")]
+    operating: Vec<PathBuf>,
     /// Output directory: uncertainty.csv, robust.csv, summary.json and the uncertain model
     /// (uncertain.m, uncertain.mat, uncertain.npz, uncertain.json).
     #[arg(long, default_value = "uncertainty")]
@@ -133,11 +139,41 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         &a.controller,
         "the uncertainty needs the FRF's standard deviations (an FRF of `ambid frf` from several periods or realisations)",
     )?;
+    // term (d) from the other operating points' FRFs, on the nominal FRF's lines
+    let spread = if a.operating.is_empty() {
+        None
+    } else {
+        let mut plants = vec![frd.clone()];
+        for path in &a.operating {
+            let (other, _) = frf_with_variance(
+                path,
+                &a.quantity,
+                a.fs,
+                Some(band),
+                "term (d) needs each operating point's standard deviations, like the nominal FRF's",
+            )?;
+            plants.push(other);
+        }
+        let abs: Vec<f64> = model
+            .freq_response_siso(frd.f_hz())?
+            .iter()
+            .map(|p| p.norm())
+            .collect();
+        Some(operating_spread(&plants, frd.f_hz(), &abs).map_err(|e| {
+            ambid::error::Error::input(format!(
+                "--operating: {e}; record every operating point with the nominal experiment's excitation and sample rate"
+            ))
+        })?)
+    };
+    let extra = ExtraTerms {
+        operating_spread: spread.as_deref(),
+        ..ExtraTerms::default()
+    };
     let analysis = analyse(
         &model,
         &frd,
         ctrl.state_space(),
-        &ExtraTerms::default(),
+        &extra,
         &UncertaintyOptions {
             line_coverage: a.line_coverage,
             run_coverage: a.run_coverage,
@@ -181,6 +217,11 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
     .iter()
     .map(|s| s.to_string())
     .collect();
+    let (mut cols, mut header) = (cols, header);
+    if let Some(o) = &t.operating {
+        cols.push(o.clone());
+        header.push("term_operating".into());
+    }
     let refs: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
     let table = csv_bytes(&header, &refs)?;
     let robust_csv = csv_bytes(&["f_hz".into(), "mu".into()], &[&r.f_hz, &r.mu])?;
@@ -220,6 +261,14 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             "lines_covered": covered,
             "uncovered_hz": w.uncovered_hz,
         },
+        "operating": t.operating.as_ref().map(|o| {
+            let mut rel: Vec<f64> = o.iter().zip(&t.nominal).map(|(x, p)| x / p.norm()).collect();
+            rel.sort_by(f64::total_cmp);
+            json!({
+                "files": a.operating.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+                "spread_median_rel": rel[rel.len() / 2],
+            })
+        }),
         "robust": robust_json(r),
         "robust_on_lines": {
             "raise": analysis.lines_raise,
