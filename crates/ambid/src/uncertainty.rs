@@ -104,25 +104,21 @@ pub fn analyse(
         cover,
     )
     .context("fitting the uncertainty weight")?;
-    let joint = terms
+    // the weight's and the bound's joint factors from one set of draws
+    let factors = terms
         .errors
-        .joint_factor(
-            &weight.weight.magnitude(&terms.f_hz),
+        .joint_factors(
+            &[&weight.weight.magnitude(&terms.f_hz), &bound],
             cover,
             opts.run_coverage,
             opts.draws,
             opts.seed,
         )
-        .context("the weight's joint coverage")?;
-    let joint_raise = joint.max(1.0);
+        .context("the joint coverage of the weight and the bound")?;
+    let (joint_raise, lines_raise) = (factors[0].max(1.0), factors[1].max(1.0));
     weight.raise(joint_raise, &terms.f_hz, &bound);
     let robust = robust_stability(nominal, controller, &weight.weight)
         .context("the robust-stability check")?;
-    let lines_raise = terms
-        .errors
-        .joint_factor(&bound, cover, opts.run_coverage, opts.draws, opts.seed)
-        .context("the bound's joint coverage")?
-        .max(1.0);
     let raised: Vec<f64> = bound.iter().map(|b| b * lines_raise).collect();
     let on_lines = robust_stability_on_lines(nominal, controller, &terms.f_hz, &raised)
         .context("the robust-stability check on the lines")?;
@@ -134,6 +130,20 @@ pub fn analyse(
         on_lines,
         lines_raise,
     })
+}
+
+/// Term (d) of the bound around the model `nominal` on the lines `f_hz`: [`operating_spread`]
+/// with $|\hat P(f_k)|$ evaluated from the model.
+///
+/// # Errors
+/// Those of [`operating_spread`], or a model that cannot be evaluated on the lines.
+pub fn operating_term(plants: &[Frd], f_hz: &[f64], nominal: &StateSpace) -> Result<Vec<f64>> {
+    let abs: Vec<f64> = nominal
+        .freq_response_siso(f_hz)?
+        .iter()
+        .map(|p| p.norm())
+        .collect();
+    operating_spread(plants, f_hz, &abs)
 }
 
 /// Term (d) of the bound on the lines `f_hz` from an operating-point study's plant FRFs

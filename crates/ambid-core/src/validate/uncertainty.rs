@@ -180,6 +180,20 @@ pub struct UncertaintyTerms {
     pub errors: ErrorModel,
 }
 
+impl UncertaintyTerms {
+    /// The median over the lines of term (d) relative to $|\hat P|$, when the term is present.
+    pub fn operating_median_rel(&self) -> Option<f64> {
+        let o = self.operating.as_deref()?;
+        let mut rel: Vec<f64> = o
+            .iter()
+            .zip(&self.nominal)
+            .map(|(x, p)| x / p.norm().max(f64::MIN_POSITIVE))
+            .collect();
+        rel.sort_by(f64::total_cmp);
+        rel.get(rel.len() / 2).copied()
+    }
+}
+
 /// The nominal model's error over all lines at once (module docs, "Joint coverage"): to first
 /// order $\delta\hat P_k = J_k R\,\xi$ with $R R^{\mathsf T} = F^{-1}$ and $\xi \sim
 /// N(0, I)$, plus the nonlinear distortion (independent per line, circular, of standard deviation
@@ -236,19 +250,37 @@ impl ErrorModel {
         draws: usize,
         seed: u64,
     ) -> Result<f64> {
+        Ok(self.joint_factors(&[magnitude], cover, run_coverage, draws, seed)?[0])
+    }
+
+    /// [`ErrorModel::joint_factor`] of several magnitudes from one set of draws (each factor
+    /// equals the one a separate call with the same seed gives).
+    ///
+    /// # Errors
+    /// As [`ErrorModel::joint_factor`], for any of the magnitudes.
+    pub fn joint_factors(
+        &self,
+        magnitudes: &[&[f64]],
+        cover: f64,
+        run_coverage: f64,
+        draws: usize,
+        seed: u64,
+    ) -> Result<Vec<f64>> {
         use rand::SeedableRng;
         let l = self.lines();
-        if magnitude.len() != l {
-            return Err(Error::invalid(
-                "magnitude",
-                format!("needs one value per line ({l}), got {}", magnitude.len()),
-            ));
-        }
-        if magnitude.iter().any(|v| !(*v > 0.0 && v.is_finite())) {
-            return Err(Error::invalid(
-                "magnitude",
-                "every magnitude must be positive and finite",
-            ));
+        for magnitude in magnitudes {
+            if magnitude.len() != l {
+                return Err(Error::invalid(
+                    "magnitude",
+                    format!("needs one value per line ({l}), got {}", magnitude.len()),
+                ));
+            }
+            if magnitude.iter().any(|v| !(*v > 0.0 && v.is_finite())) {
+                return Err(Error::invalid(
+                    "magnitude",
+                    "every magnitude must be positive and finite",
+                ));
+            }
         }
         for (name, v) in [("cover", cover), ("run_coverage", run_coverage)] {
             if !(v > 0.0 && v <= 1.0) {
@@ -260,21 +292,28 @@ impl ErrorModel {
         }
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let mut e = Vec::with_capacity(l);
-        let mut need = Vec::with_capacity(draws);
+        let mut need: Vec<Vec<f64>> = vec![Vec::with_capacity(draws); magnitudes.len()];
         let mut ratio = vec![0.0; l];
         // the k-th smallest need ratio covers k of the l lines
         let at = ((cover * l as f64).ceil() as usize).clamp(1, l) - 1;
         for _ in 0..draws {
             self.draw_relative(&mut rng, &mut e);
-            for k in 0..l {
-                ratio[k] = e[k] / magnitude[k];
+            for (magnitude, need) in magnitudes.iter().zip(&mut need) {
+                for k in 0..l {
+                    ratio[k] = e[k] / magnitude[k];
+                }
+                ratio.sort_by(f64::total_cmp);
+                need.push(ratio[at]);
             }
-            ratio.sort_by(f64::total_cmp);
-            need.push(ratio[at]);
         }
-        need.sort_by(f64::total_cmp);
         let i = ((run_coverage * draws as f64).ceil() as usize).clamp(1, draws) - 1;
-        Ok(need[i])
+        Ok(need
+            .into_iter()
+            .map(|mut n| {
+                n.sort_by(f64::total_cmp);
+                n[i]
+            })
+            .collect())
     }
 }
 
@@ -1089,6 +1128,12 @@ mod tests {
         let (g_all, g_half) = (g(&q, 1.0, 1), g(&q, 0.5, 1));
         assert!(g_all > 1.05 && g_half < 1.0, "{g_all} {g_half}");
         assert_eq!(g(&q, 0.95, 3), g(&q, 0.95, 3));
+        // several magnitudes from one set of draws: each as a call of its own
+        let both = u
+            .errors
+            .joint_factors(&[&one, &q], 1.0, 0.95, 4000, 1)
+            .unwrap();
+        assert_eq!(both, vec![g_one, g_all]);
         assert!(u.errors.joint_factor(&q[1..], 0.95, 0.95, 10, 0).is_err());
         assert!(u.errors.joint_factor(&q, 0.95, 1.5, 10, 0).is_err());
         assert!(u.errors.joint_factor(&q, 0.95, 0.95, 0, 0).is_err());

@@ -10,7 +10,7 @@ use ambid::io::export::uncertain::{
     UncertainModel, UncertainNames,
 };
 use ambid::io::OutputSet;
-use ambid::uncertainty::{analyse, operating_spread};
+use ambid::uncertainty::{analyse, operating_term};
 use ambid_core::validate::uncertainty::{ExtraTerms, UncertaintyOptions};
 use ambid_core::validate::weight::{DEFAULT_COVER, MAX_WEIGHT_ORDER};
 use anyhow::Result;
@@ -154,12 +154,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             )?;
             plants.push(other);
         }
-        let abs: Vec<f64> = model
-            .freq_response_siso(frd.f_hz())?
-            .iter()
-            .map(|p| p.norm())
-            .collect();
-        Some(operating_spread(&plants, frd.f_hz(), &abs).map_err(|e| {
+        Some(operating_term(&plants, frd.f_hz(), &model).map_err(|e| {
             ambid::error::Error::input(format!(
                 "--operating: {e}; record every operating point with the nominal experiment's excitation and sample rate"
             ))
@@ -261,14 +256,10 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             "lines_covered": covered,
             "uncovered_hz": w.uncovered_hz,
         },
-        "operating": t.operating.as_ref().map(|o| {
-            let mut rel: Vec<f64> = o.iter().zip(&t.nominal).map(|(x, p)| x / p.norm()).collect();
-            rel.sort_by(f64::total_cmp);
-            json!({
-                "files": a.operating.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
-                "spread_median_rel": rel[rel.len() / 2],
-            })
-        }),
+        "operating": t.operating_median_rel().map(|m| json!({
+            "files": a.operating.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+            "spread_median_rel": m,
+        })),
         "robust": robust_json(r),
         "robust_on_lines": {
             "raise": analysis.lines_raise,

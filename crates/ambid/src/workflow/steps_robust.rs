@@ -12,7 +12,7 @@ use crate::report::{
     Axis, Block, Figure, Marker, NoteKind, Panel, PanelContent, Scale, Section, Series, Style,
     Table,
 };
-use crate::uncertainty::{analyse, nominal_gain_interval, operating_spread};
+use crate::uncertainty::{analyse, nominal_gain_interval, operating_term};
 use ambid_core::lti::{Frd, StateSpace};
 use ambid_core::validate::uncertainty::{ExtraTerms, UncertaintyOptions};
 use ambid_core::validate::weight::{DEFAULT_COVER, MAX_WEIGHT_ORDER};
@@ -158,29 +158,20 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     // term (d) from the operating-point study, when it ran
     let mut spread_note = None;
     let spread = match ctx.operating_point.as_ref() {
-        Some(op) => {
-            let spread = model
-                .freq_response_siso(frd.f_hz())
-                .map_err(Error::from)
-                .and_then(|m| {
-                    let abs: Vec<f64> = m.iter().map(|p| p.norm()).collect();
-                    operating_spread(&op.plants, frd.f_hz(), &abs)
-                });
-            match spread {
-                Ok(s) => Some((
-                    s,
-                    op.cases
-                        .iter()
-                        .skip(1)
-                        .map(|c| c.name.clone())
-                        .collect::<Vec<_>>(),
-                )),
-                Err(e) => {
-                    spread_note = Some(format!("operating-point spread left out: {e}"));
-                    None
-                }
+        Some(op) => match operating_term(&op.plants, frd.f_hz(), &model) {
+            Ok(s) => Some((
+                s,
+                op.cases
+                    .iter()
+                    .skip(1)
+                    .map(|c| c.name.clone())
+                    .collect::<Vec<_>>(),
+            )),
+            Err(e) => {
+                spread_note = Some(format!("operating-point spread left out: {e}"));
+                None
             }
-        }
+        },
         None => None,
     };
     let extra = ExtraTerms {
@@ -386,11 +377,7 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         lower_gain_margin: r.lower_gain_margin.filter(|g| g.is_finite()),
         upper_gain_margin: r.upper_gain_margin.filter(|g| g.is_finite()),
         operating_cases: spread.as_ref().map(|s| s.1.clone()),
-        operating_spread_median_rel: t.operating.as_deref().map(|o| {
-            let mut r = rel(o);
-            r.sort_by(f64::total_cmp);
-            r[r.len() / 2]
-        }),
+        operating_spread_median_rel: t.operating_median_rel(),
         twin_gain_interval: twin_interval,
         twin_weight_coverage: twin_cov,
         lines_robustly_stable: a.on_lines.robustly_stable,
