@@ -9,7 +9,8 @@
 //! same margins check for the robust-stability check on the lines (no weight fit).
 //!
 //! `cargo run --release -p ambid --example uncertainty_operating_rigs -- RIGS [linear|nonlinear]`
-//! (e.g. `61-80`). `SHOW_U=1` prints each rig's uncertainty summary, `SHOW_MODEL=1` the model
+//! (e.g. `61-80`). `AMPLITUDE=1` adds the amplitude step (its chosen identification level, and
+//! term (e) from its levels). `SHOW_U=1` prints each rig's uncertainty summary, `SHOW_MODEL=1` the model
 //! JSONs of a rig where the step did not run.
 
 use ambid::report::Block;
@@ -26,7 +27,14 @@ fn main() {
     let mode = args.get(2).cloned().unwrap_or_else(|| "linear".into());
     let dir = std::env::temp_dir().join(format!("ambid-unc-op-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let (all, _) = Step::with_prerequisites(&[Step::OperatingPoint, Step::Uncertainty]);
+    // AMPLITUDE=1: the amplitude step too (the identification level its choice, term (e) from
+    // its levels)
+    let wanted: Vec<Step> = if std::env::var("AMPLITUDE").is_ok() {
+        vec![Step::Amplitude, Step::OperatingPoint, Step::Uncertainty]
+    } else {
+        vec![Step::OperatingPoint, Step::Uncertainty]
+    };
+    let (all, _) = Step::with_prerequisites(&wanted);
     let (mut runs, mut all_stable, mut medians, mut covered) = (0, 0, Vec::new(), 0);
     let (mut lines_robust, mut weight_robust, mut lines_all_stable) = (0, 0, 0);
     println!("rig | (d)/truth q10 median q90 | spread median | margins lo hi | every case stable at 90 % | chosen model: cov_W cov_l medW/med_err");
@@ -51,7 +59,7 @@ fn main() {
         let u = &out.summary["uncertainty"];
         if std::env::var("SHOW_U").is_ok() {
             println!("{rig}: {u}");
-            for pre in ["(a)", "(b)", "bound", "|W|", "(d)"] {
+            for pre in ["(a)", "(b)", "bound", "|W|", "(d)", "(e)"] {
                 if let Some(sr) = out.report.series("uncertainty", pre) {
                     let pts: Vec<String> =
                         sr.x.iter()
@@ -183,7 +191,7 @@ fn main() {
         all_stable += usize::from(stable);
         medians.push(ratios[n / 2]);
         println!(
-            "{rig} | {:.3} {:.3} {:.3} | {:.3} | {:?} {:?} | {stable} | {} {cov_w:.3} {cov_l:.3} {med:.2} | lines {l_lo:?} {l_hi:?} {l_stable}",
+            "{rig} | {:.3} {:.3} {:.3} | {:.3} | {:?} {:?} | {stable} | {} {cov_w:.3} {cov_l:.3} {med:.2} | lines {l_lo:?} {l_hi:?} {l_stable} | (e) {:?} {:?}",
             ratios[n / 10],
             ratios[n / 2],
             ratios[9 * n / 10],
@@ -192,7 +200,9 @@ fn main() {
                 .unwrap_or(f64::NAN),
             lo,
             hi,
-            out.summary["models"]["chosen"]
+            out.summary["models"]["chosen"],
+            u["amplitude_shift_median_rel"].as_f64(),
+            u["amplitude_levels_pct"].as_array().map(Vec::len)
         );
     }
     medians.sort_by(f64::total_cmp);

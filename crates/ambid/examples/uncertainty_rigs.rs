@@ -4,8 +4,9 @@
 //! margin against the true loop's, and both robust gain margins of the check on the lines
 //! (`on_lines`) against the true ones.
 //!
-//! `cargo run --release -p ambid --example uncertainty_rigs -- RIGS SEEDS [linear|nonlinear]`
-//! (e.g. `1-20 1-5`; rig 0 is the nominal twin; the truth is the twin's linearised plant in
+//! `cargo run --release -p ambid --example uncertainty_rigs -- RIGS SEEDS [linear|nonlinear] [LEVELS]`
+//! (e.g. `1-20 1-5`; `LEVELS` such as `0.05,0.16` adds an amplitude study at those fractions of
+//! $i_\text{sat}$ and its term (e); rig 0 is the nominal twin; the truth is the twin's linearised plant in
 //! both modes, so with `nonlinear` the distortion the chain does not model is part of the
 //! error). Each row also gives the joint raise and the coverage and ratio of
 //! the weight before it (`W0`). Diagnostics: `DUMP=dir` writes each run's per-line bound, true
@@ -30,6 +31,11 @@ fn main() {
         "nonlinear" => Mode::Nonlinear,
         _ => Mode::Linear,
     };
+    // the amplitude study's extra levels (fractions of i_sat), e.g. `0.05,0.16`: term (e)
+    let levels: Vec<f64> = args
+        .get(4)
+        .map(|s| s.split(',').map(|x| x.parse().unwrap()).collect())
+        .unwrap_or_default();
     let (mut runs, mut ok_runs, mut ratios) = (0, 0, Vec::new());
     let (mut rs_ok, mut rs_half) = (0, 0);
     let (mut lines_ok, mut lines_half, mut lines_within) = (0, 0, 0);
@@ -37,7 +43,7 @@ fn main() {
     for &rig in &rigs {
         for &seed in &seeds {
             let t = std::time::Instant::now();
-            let run = match UncertaintyRun::on_twin(rig, seed, mode) {
+            let run = match UncertaintyRun::on_twin_with_levels(rig, seed, mode, &levels) {
                 Ok(r) => r,
                 Err(e) => {
                     println!("{rig} {seed}: {e}");
@@ -78,12 +84,12 @@ fn main() {
                 let t = &run.analysis.terms;
                 let truth = run.truth_plant.freq_response_siso(&t.f_hz).unwrap();
                 let w = run.analysis.weight.weight.magnitude(&t.f_hz);
-                let mut out = String::from("f,ell,err,W,conf,bias,absP,misfit,sigma\n");
+                let mut out = String::from("f,ell,err,W,conf,bias,absP,misfit,sigma,amp\n");
                 let var = run.frd.variance().unwrap();
                 for k in 0..t.f_hz.len() {
                     let e = (truth[k] - t.nominal[k]).norm() / t.nominal[k].norm();
                     out += &format!(
-                        "{},{},{},{},{},{},{},{},{}\n",
+                        "{},{},{},{},{},{},{},{},{},{}\n",
                         t.f_hz[k],
                         t.multiplicative[k],
                         e,
@@ -92,7 +98,8 @@ fn main() {
                         t.model_error[k] / t.nominal[k].norm(),
                         t.nominal[k].norm(),
                         t.misfit[k] / t.nominal[k].norm(),
-                        var[k].sqrt() / t.nominal[k].norm()
+                        var[k].sqrt() / t.nominal[k].norm(),
+                        t.amplitude.as_ref().map_or(0.0, |a| a[k]) / t.nominal[k].norm()
                     );
                 }
                 std::fs::write(format!("{dir}/u_{rig}_{seed}.csv"), out).unwrap();
@@ -124,7 +131,7 @@ fn main() {
             lines_half += usize::from(l_half);
             lines_within += usize::from(lu <= g_hi * (1.0 + 1e-3) && ll >= g_lo * (1.0 - 1e-3));
             println!(
-                "{rig:3} {seed:3} {:2} | {:.3} {:.3} | {:.2e} {:.2e} {:.2} | {:.3} {:.3} | {} {} | W order {} loose {:.2} | raise {:.2} W0 cov {:.3} ratio {:.2} | lines {ll:.3} {lu:.3} (true {g_lo:.3} {g_hi:.3}) {l_stable} {l_half} | {:.1}s",
+                "{rig:3} {seed:3} {:2} | {:.3} {:.3} | {:.2e} {:.2e} {:.2} | {:.3} {:.3} | {} {} | W order {} loose {:.2} | raise {:.2} W0 cov {:.3} ratio {:.2} | lines {ll:.3} {lu:.3} (true {g_lo:.3} {g_hi:.3}) {l_stable} {l_half} | (e) on {} lines | {:.1}s",
                 run.nominal.order(),
                 c.bound_coverage,
                 c.weight_coverage,
@@ -140,6 +147,11 @@ fn main() {
                 run.analysis.joint_raise,
                 c0.weight_coverage,
                 c0.median_ratio,
+                run.analysis
+                    .terms
+                    .amplitude
+                    .as_ref()
+                    .map_or(0, |e| e.iter().filter(|x| **x > 0.0).count()),
                 t.elapsed().as_secs_f64()
             );
         }

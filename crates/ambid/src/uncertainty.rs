@@ -17,7 +17,7 @@ use ambid_core::validate::compare::unstable_poles_from_loop;
 pub use ambid_core::validate::robust::{loop_stable, nominal_gain_interval};
 use ambid_core::validate::robust::{robust_stability, robust_stability_on_lines, RobustStability};
 use ambid_core::validate::uncertainty::{
-    uncertainty, ExtraTerms, UncertaintyOptions, UncertaintyTerms,
+    uncertainty, window_half_lines_for, ExtraTerms, UncertaintyOptions, UncertaintyTerms,
 };
 use ambid_core::validate::weight::{fit_weight, WeightFit, DEFAULT_COVER, MAX_WEIGHT_ORDER};
 use ambid_twin::{random_rig, Mode, TwinConfig};
@@ -210,9 +210,14 @@ pub fn operating_spread(plants: &[Frd], f_hz: &[f64], nominal_abs: &[f64]) -> Re
             *r = r.max(d / g0[j].norm());
         }
     }
-    let fs = nom.f_hz();
-    Ok(f_hz
-        .iter()
+    Ok(carry_relative(nom.f_hz(), &rel, f_hz, nominal_abs))
+}
+
+/// A relative term `rel` on the study's lines `fs` carried to the lines `f_hz` by linear
+/// interpolation in frequency (the end line's value outside the study's band) and scaled by
+/// `nominal_abs` $= |\hat P(f_k)|$.
+fn carry_relative(fs: &[f64], rel: &[f64], f_hz: &[f64], nominal_abs: &[f64]) -> Vec<f64> {
+    f_hz.iter()
         .zip(nominal_abs)
         .map(|(&f, &m)| {
             let i = fs.partition_point(|&x| x < f);
@@ -226,8 +231,189 @@ pub fn operating_spread(plants: &[Frd], f_hz: &[f64], nominal_abs: &[f64]) -> Re
             };
             r * m
         })
-        .collect())
+        .collect()
 }
+
+/// Term (e) of the bound around the model `nominal` on the lines `f_hz`: the systematic shift of
+/// the best linear approximation (BLA) at the identification experiment's excitation level
+/// `level` from its extrapolation to zero amplitude, from an amplitude study's plant FRFs
+/// `levels` (level, FRF with variances; two or more distinct levels, all on the same lines, in
+/// the same unit as `level`, e.g. the fraction of $i_\text{sat}$).
+///
+/// A magnetic bearing's force is not linear in current and gap, so the FRF of an experiment
+/// converges to the BLA at its amplitude, not to the small-signal linearisation a controller is
+/// designed on; the model fits that BLA, so terms (a) and (b) cannot see the difference. For an
+/// odd, smooth nonlinearity the BLA moves with the square of the amplitude to leading order (the
+/// rule of [`ambid_core::estimate::graybox::extrapolate_to_zero_amplitude`]), so per study line
+/// $j$ the weighted line $G_{i,j} = G_{0,j} + c_j a_i^2$ (weights $1/\sigma_{i,j}^2$) gives the
+/// shift at the level $a_e$ relative to the model and its variance
+/// $$ \rho_j = \frac{c_j a_e^2}{\hat P(f_j)}, \qquad v_j = \frac{a_e^4}{S_{xx,j}\,|\hat P(f_j)|^2},
+///    \qquad S_{xx,j} = \sum_i \frac{(a_i^2 - \bar x_j)^2}{\sigma_{i,j}^2} . $$
+/// (the model, not the noisy $G_{0,j}$, in the denominator keeps $\rho_j$ linear in the data and
+/// its noise Gaussian: a ratio of two noisy FRFs has heavy tails where the noise is large). The
+/// shift is smooth in frequency while each line's estimate is about as noisy as the FRF,
+/// so it is averaged over the window of term (b) ($2M + 1$ lines, never wider than the model's
+/// sharpest resonance): the plain mean $\bar\rho_j$ with the pooled variance $\bar v_j = \sum_i
+/// v_i / (2M+1)^2$ (weights $1/v_i$ would let one line whose variance estimate came out low take
+/// the window over: on random rigs of the *linear* twin that gave terms as large as the plant on
+/// single lines where the FRF's noise exceeds it). Where it is significant,
+/// $|\bar\rho_j|^2 > \ln(W/\alpha_e)\,\bar v_j$ with $W = L/(2M+1)$ independent windows among
+/// the $L$ lines and $\alpha_e$ = [`AMPLITUDE_RUN_ALPHA`] (so a plant whose BLA does not move
+/// gets a term anywhere in about 5 % of the runs), the term is its upper bound at
+/// `line_coverage`, $r_j = |\bar\rho_j| + \sqrt{\bar v_j \ln(1/(1 - c))}$ (the quantile of the
+/// circular complex noise, added by the triangle inequality); elsewhere 0.
+/// $r$ is carried to `f_hz` as term (d) is and scaled by $|\hat P(f_k)|$. A curvature beyond
+/// $a^2$ over the study's levels is not modelled: keep the levels within the range where the
+/// amplitude study's coherence is not yet saturated by distortion.
+///
+/// # Errors
+/// Fewer than two distinct levels, a level that is not finite and positive, FRFs on other lines
+/// than the first one's or without finite, positive variances, a model response of zero, a
+/// `line_coverage` outside (0, 1), or a model that is not discrete-time — each message names
+/// the fix.
+///
+/// # Example
+/// ```
+/// use ambid::uncertainty::amplitude_term;
+/// use ambid_core::{c64, lti::{Frd, StateSpace}};
+/// use faer::mat;
+/// let f: Vec<f64> = (1..=50).map(|k| k as f64 * 4.0).collect();
+/// // the BLA 1 % below the plant 1 at level 0.1 and 4 % below it at level 0.2
+/// let at = |a: f64| {
+///     let g = vec![c64::new(1.0 - a * a, 0.0); 50];
+///     Frd::new(f.clone(), g, Some(vec![1e-8; 50]), Some(1e-3)).unwrap()
+/// };
+/// let (lo, hi) = (at(0.1), at(0.2));
+/// let m = StateSpace::discrete(mat![[0.5]], mat![[1.0]], mat![[0.5]], mat![[0.0]], 1e-3).unwrap();
+/// let nominal_abs = m.freq_response_siso(&f).unwrap()[10].norm();
+/// let e = amplitude_term(&[(0.1, &lo), (0.2, &hi)], 0.1, &f, &m, 0.95).unwrap();
+/// assert!((e[10] / nominal_abs - 0.01).abs() < 1e-3); // the 1 % shift at level 0.1
+/// ```
+pub fn amplitude_term(
+    levels: &[(f64, &Frd)],
+    level: f64,
+    f_hz: &[f64],
+    nominal: &StateSpace,
+    line_coverage: f64,
+) -> Result<Vec<f64>> {
+    let bad = |why: String| Error::other(format!("the amplitude term: {why}"));
+    if !(line_coverage > 0.0 && line_coverage < 1.0) {
+        return Err(bad(format!(
+            "the coverage per line must lie in (0, 1), got {line_coverage}"
+        )));
+    }
+    if !(level.is_finite() && level > 0.0) {
+        return Err(bad(format!(
+            "the identification experiment's level {level} is not a positive number: give its excitation amplitude in the unit of the study's levels"
+        )));
+    }
+    let Some(((_, first), _)) = levels.split_first() else {
+        return Err(bad(
+            "no level: record the plant FRF at two or more excitation levels".into(),
+        ));
+    };
+    let fs = first.f_hz();
+    let mut x = Vec::with_capacity(levels.len());
+    for (a, frd) in levels {
+        if !(a.is_finite() && *a > 0.0) {
+            return Err(bad(format!(
+                "the level {a} is not a positive number: give each FRF's excitation amplitude"
+            )));
+        }
+        if frd.f_hz() != fs {
+            return Err(bad(format!(
+                "the FRF at level {a} is on other lines than the one at level {}: record every level with the same excitation (period, band)",
+                levels[0].0
+            )));
+        }
+        match frd.variance() {
+            Some(v) if v.iter().all(|v| v.is_finite() && *v > 0.0) => {}
+            _ => {
+                return Err(bad(format!(
+                    "the FRF at level {a} has no finite, positive variances: estimate it from two or more periods"
+                )))
+            }
+        }
+        x.push(a * a);
+    }
+    let (xlo, xhi) = x
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |(l, h), v| (l.min(*v), h.max(*v)));
+    if levels.len() < 2 || xhi - xlo <= 1e-9 * xhi {
+        return Err(bad(
+            "the extrapolation to zero amplitude needs the plant FRF at two or more distinct levels".into(),
+        ));
+    }
+    let ae2 = level * level;
+    let l = fs.len();
+    let p_study = nominal.freq_response_siso(fs)?;
+    if let Some(j) = p_study
+        .iter()
+        .position(|p| !(p.norm() > 0.0 && p.norm().is_finite()))
+    {
+        return Err(bad(format!(
+            "the model's response is zero or not finite at {} Hz",
+            fs[j]
+        )));
+    }
+    let (mut rho, mut var) = (Vec::with_capacity(l), Vec::with_capacity(l));
+    for j in 0..l {
+        let (mut sw, mut sx, mut sy) = (0.0, 0.0, ambid_core::c64::new(0.0, 0.0));
+        for ((_, frd), xi) in levels.iter().zip(&x) {
+            let w = 1.0 / frd.variance().map_or(1.0, |v| v[j]);
+            sw += w;
+            sx += w * xi;
+            sy += frd.values()[j] * w;
+        }
+        let (xm, ym) = (sx / sw, sy / sw);
+        let (mut sxx, mut sxy) = (0.0, ambid_core::c64::new(0.0, 0.0));
+        for ((_, frd), xi) in levels.iter().zip(&x) {
+            let w = 1.0 / frd.variance().map_or(1.0, |v| v[j]);
+            sxx += w * (xi - xm) * (xi - xm);
+            sxy += (frd.values()[j] - ym) * (w * (xi - xm));
+        }
+        // relative to the model (noise-free), so that ρ stays linear in the data
+        let c = sxy / sxx;
+        let p = p_study[j];
+        rho.push(c * ae2 / p);
+        var.push(ae2 * ae2 / (sxx * p.norm_sqr()));
+    }
+    let m_half = window_half_lines_for(nominal, fs)?;
+    // the significance level per window: 5 % over the run's independent windows
+    let windows = (l as f64 / (2 * m_half + 1) as f64).max(1.0);
+    let thr = (windows / AMPLITUDE_RUN_ALPHA).ln();
+    let q = (1.0 / (1.0 - line_coverage)).ln();
+    let rel: Vec<f64> = (0..l)
+        .map(|j| {
+            let (lo, hi) = (j.saturating_sub(m_half), (j + m_half).min(l - 1));
+            // the plain mean and its pooled variance: a line whose variance estimate came out
+            // low does not take the window over
+            let n = (hi - lo + 1) as f64;
+            let (mut sv, mut s) = (0.0, ambid_core::c64::new(0.0, 0.0));
+            for i in lo..=hi {
+                sv += var[i];
+                s += rho[i];
+            }
+            let (mean, v) = (s / n, sv / (n * n));
+            if mean.norm_sqr() > thr * v {
+                mean.norm() + (q * v).sqrt()
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let abs: Vec<f64> = nominal
+        .freq_response_siso(f_hz)?
+        .iter()
+        .map(|p| p.norm())
+        .collect();
+    Ok(carry_relative(fs, &rel, f_hz, &abs))
+}
+
+/// The probability that term (e) appears anywhere on a plant whose BLA does not move with the
+/// amplitude ([`amplitude_term`]: the significance level per window is this over the number of
+/// independent windows).
+pub const AMPLITUDE_RUN_ALPHA: f64 = 0.05;
 
 /// The orders a twin run's nominal model is chosen from (by BIC).
 pub const TWIN_ORDERS: std::ops::RangeInclusive<usize> = 6..=12;
@@ -277,14 +463,48 @@ impl UncertaintyRun {
     /// # Errors
     /// Any step's error.
     pub fn on_twin(rig: u64, seed: u64, mode: Mode) -> Result<Self> {
+        Self::on_twin_with_levels(rig, seed, mode, &[])
+    }
+
+    /// [`UncertaintyRun::on_twin`] with an amplitude study: the seed experiment repeated at each
+    /// of `levels` (fractions of $i_\text{sat}$; level $l$ from 0 with noise seed
+    /// `seed + 1000 (l + 1)`), which with the seed experiment's own FRF at its level give term
+    /// (e) ([`amplitude_term`]). No level: no term, the same run as [`UncertaintyRun::on_twin`].
+    ///
+    /// # Errors
+    /// Those of [`UncertaintyRun::on_twin`], a level's run (named) and [`amplitude_term`].
+    pub fn on_twin_with_levels(rig: u64, seed: u64, mode: Mode, levels: &[f64]) -> Result<Self> {
         let (out, frd) = twin_seed_frf(rig, seed, mode)?;
         let controller = out.twin.controller().clone();
         let nominal = nominal_by_bic(&frd, &controller)?;
+        let own = ExcitationPlan::default().amplitude_frac;
+        let mut study = vec![(own, frd.clone())];
+        for (l, &a) in levels.iter().enumerate() {
+            let (_, g) = twin_seed_frf_at(rig, seed.wrapping_add(1000 * (l as u64 + 1)), mode, a)
+                .with_context(|| format!("the run at level {a}"))?;
+            study.push((a, g));
+        }
+        let amplitude = if levels.is_empty() {
+            None
+        } else {
+            let refs: Vec<(f64, &Frd)> = study.iter().map(|(a, g)| (*a, g)).collect();
+            let opts = UncertaintyOptions::default();
+            Some(amplitude_term(
+                &refs,
+                own,
+                frd.f_hz(),
+                &nominal,
+                opts.line_coverage,
+            )?)
+        };
         let analysis = analyse(
             &nominal,
             &frd,
             &controller,
-            &ExtraTerms::default(),
+            &ExtraTerms {
+                amplitude_shift: amplitude.as_deref(),
+                ..ExtraTerms::default()
+            },
             &UncertaintyOptions::default(),
             MAX_WEIGHT_ORDER,
             DEFAULT_COVER,

@@ -186,6 +186,7 @@ fn terms(r: &Reference) -> UncertaintyTerms {
             .collect(),
         nonlinear: None,
         operating: Some(vec![1e-9; n]),
+        amplitude: None,
         additive: ell.iter().zip(&p).map(|(l, g)| l * g.norm()).collect(),
         multiplicative: ell,
         nominal: p,

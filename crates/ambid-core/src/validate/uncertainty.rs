@@ -3,7 +3,7 @@
 //!
 //! With the measured plant FRF $G_k$ (variance $\sigma_k^2 = E|G_k - P_k|^2$) on the lines
 //! $z_k = e^{j\omega_k T}$ and the nominal model $\hat P$, the bound at line $k$ is
-//! $$ \Delta_k = q_{1-\alpha}\bigl(\delta\hat P_k + \nu_k\bigr) + b_k + s_k , \qquad
+//! $$ \Delta_k = q_{1-\alpha}\bigl(\delta\hat P_k + \nu_k\bigr) + b_k + s_k + a_k , \qquad
 //!    \ell_k = \Delta_k / |\hat P(z_k)| , $$
 //! so that $P = \hat P + \Delta_a$, $|\Delta_a(z_k)| \le \Delta_k$, and
 //! $P = \hat P\,(1 + \Delta_m)$, $|\Delta_m(z_k)| \le \ell_k$. Its terms, each kept:
@@ -53,6 +53,12 @@
 //!   complex error added to (a) before the quantile.
 //! * **(d) operating-point spread**, $s_k$: the largest distance of the plant FRFs measured at
 //!   other operating points (bias current, air gap) from the nominal one, given per line.
+//! * **(e) amplitude shift**, $a_k$: the systematic part of the nonlinear distortion — the best
+//!   linear approximation at the experiment's excitation level moved from its extrapolation to
+//!   zero amplitude (the small-signal plant a controller is designed on), given per line
+//!   (`ambid::uncertainty::amplitude_term` estimates it from an amplitude study). Term (c) is the
+//!   BLA's *stochastic* part and does not hold it; the model fits the BLA, so (a) and (b) do not
+//!   see it.
 //!
 //! $q_{1-\alpha}(x)$ is the $(1-\alpha)$ quantile of $|x|$ for the Gaussian $x$ of covariance
 //! $C = \operatorname{cov}(\delta \hat P_k) + \tfrac12\sigma_{\mathrm{nl},k}^2 I$, exact:
@@ -72,7 +78,7 @@
 //! the runs. [`ErrorModel`] draws the whole error curve instead: with $R R^{\mathsf T} = F^{-1}$
 //! (from the tangent basis of term (a)) and $\xi \sim N(0, I)$ (seeded
 //! `ChaCha8Rng`), $\delta\hat P_k = J_k R\,\xi$, plus a circular draw of the nonlinear term per
-//! line and the deterministic $b_k + s_k$ added in magnitude. For a candidate weight magnitude
+//! line and the deterministic $b_k + s_k + a_k$ added in magnitude. For a candidate weight magnitude
 //! $m_k$, each draw needs the factor $g_d$ = the $\lceil cL\rceil$-th smallest of
 //! $e_{d,k}/m_k$ to be overbounded on the fraction $c$ of the $L$ lines;
 //! [`ErrorModel::joint_factor`] returns the `run_coverage` quantile of $g_d$ over the draws. A
@@ -136,13 +142,16 @@ impl Default for UncertaintyOptions {
     }
 }
 
-/// The terms (c) and (d) of the module docs, per line of the FRF (absolute, plant units).
+/// The terms (c), (d) and (e) of the module docs, per line of the FRF (absolute, plant units).
 #[derive(Debug, Clone, Copy, Default)]
 pub struct ExtraTerms<'a> {
     /// $\sigma_{\mathrm{nl},k}$: the nonlinear distortion's standard deviation (robust BLA).
     pub nonlinear_std: Option<&'a [f64]>,
     /// $s_k$: the operating-point study's largest distance from the nominal plant.
     pub operating_spread: Option<&'a [f64]>,
+    /// $a_k$: the amplitude study's systematic shift of the best linear approximation at the
+    /// experiment's level from its extrapolation to zero amplitude (term (e)).
+    pub amplitude_shift: Option<&'a [f64]>,
 }
 
 /// The uncertainty of a nominal model over the FRF's lines (module docs). Absolute terms are in
@@ -165,6 +174,8 @@ pub struct UncertaintyTerms {
     pub nonlinear: Option<Vec<f64>>,
     /// (d) The operating-point spread, when given.
     pub operating: Option<Vec<f64>>,
+    /// (e) The amplitude shift, when given.
+    pub amplitude: Option<Vec<f64>>,
     /// $\Delta_k$: the additive bound.
     pub additive: Vec<f64>,
     /// $\ell_k = \Delta_k / |\hat P(z_k)|$: the multiplicative bound.
@@ -183,8 +194,16 @@ pub struct UncertaintyTerms {
 impl UncertaintyTerms {
     /// The median over the lines of term (d) relative to $|\hat P|$, when the term is present.
     pub fn operating_median_rel(&self) -> Option<f64> {
-        let o = self.operating.as_deref()?;
-        let mut rel: Vec<f64> = o
+        self.median_rel(self.operating.as_deref()?)
+    }
+
+    /// The median over the lines of term (e) relative to $|\hat P|$, when the term is present.
+    pub fn amplitude_median_rel(&self) -> Option<f64> {
+        self.median_rel(self.amplitude.as_deref()?)
+    }
+
+    fn median_rel(&self, term: &[f64]) -> Option<f64> {
+        let mut rel: Vec<f64> = term
             .iter()
             .zip(&self.nominal)
             .map(|(x, p)| x / p.norm().max(f64::MIN_POSITIVE))
@@ -197,7 +216,7 @@ impl UncertaintyTerms {
 /// The nominal model's error over all lines at once (module docs, "Joint coverage"): to first
 /// order $\delta\hat P_k = J_k R\,\xi$ with $R R^{\mathsf T} = F^{-1}$ and $\xi \sim
 /// N(0, I)$, plus the nonlinear distortion (independent per line, circular, of standard deviation
-/// $\sigma_{\mathrm{nl},k}$) and the deterministic terms $b_k + s_k$ added in magnitude. The
+/// $\sigma_{\mathrm{nl},k}$) and the deterministic terms $b_k + s_k + a_k$ added in magnitude. The
 /// default has no lines (terms built by hand, e.g. for an export).
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct ErrorModel {
@@ -214,7 +233,7 @@ impl ErrorModel {
         self.sens.len()
     }
 
-    /// One draw of the relative error $(|\delta\hat P_k + \nu_k| + b_k + s_k)/|\hat P_k|$ at every line,
+    /// One draw of the relative error $(|\delta\hat P_k + \nu_k| + b_k + s_k + a_k)/|\hat P_k|$ at every line,
     /// written to `out`.
     pub fn draw_relative<R: rand::Rng>(&self, rng: &mut R, out: &mut Vec<f64>) {
         use rand_distr::{Distribution, StandardNormal};
@@ -378,6 +397,7 @@ pub fn uncertainty(
     for (name, v) in [
         ("nonlinear_std", extra.nonlinear_std),
         ("operating_spread", extra.operating_spread),
+        ("amplitude_shift", extra.amplitude_shift),
     ] {
         if let Some(v) = v {
             if v.len() != l || v.iter().any(|x| !(x.is_finite() && *x >= 0.0)) {
@@ -460,8 +480,7 @@ pub fn uncertainty(
             crr += 0.5 * s[k] * s[k];
             cii += 0.5 * s[k] * s[k];
         }
-        let spread = extra.operating_spread.map_or(0.0, |s| s[k]);
-        additive.push(abs_quantile(crr, cii, cri, alpha) + bias[k] + spread);
+        additive.push(abs_quantile(crr, cii, cri, alpha) + bias[k] + fixed_extra(extra, k));
     }
     let multiplicative = additive
         .iter()
@@ -471,9 +490,7 @@ pub fn uncertainty(
     let errors = ErrorModel {
         sens,
         nonlinear_std: extra.nonlinear_std.map(<[f64]>::to_vec),
-        fixed: (0..l)
-            .map(|k| bias[k] + extra.operating_spread.map_or(0.0, |s| s[k]))
-            .collect(),
+        fixed: (0..l).map(|k| bias[k] + fixed_extra(extra, k)).collect(),
         nominal_abs: p_hat
             .iter()
             .map(|p| p.norm().max(f64::MIN_POSITIVE))
@@ -488,6 +505,7 @@ pub fn uncertainty(
         model_error: bias,
         nonlinear,
         operating: extra.operating_spread.map(<[f64]>::to_vec),
+        amplitude: extra.amplitude_shift.map(<[f64]>::to_vec),
         additive,
         multiplicative,
         window_half_lines: m_half,
@@ -495,6 +513,38 @@ pub fn uncertainty(
         line_coverage: opts.line_coverage,
         errors,
     })
+}
+
+/// The deterministic terms (d) and (e) at line `k`, added in magnitude.
+fn fixed_extra(extra: &ExtraTerms<'_>, k: usize) -> f64 {
+    extra.operating_spread.map_or(0.0, |s| s[k]) + extra.amplitude_shift.map_or(0.0, |s| s[k])
+}
+
+/// The half-width $M$ of term (b)'s window, in lines of `f_hz`, for the model `model` (module
+/// docs: half the half-power bandwidth of its most lightly damped pole in the band, clamped to
+/// $[1, 8]$ lines; 8 when no pole lies in the band). Other smoothed terms use it so that no
+/// window is wider than a resonance.
+///
+/// # Errors
+/// A continuous-time model, or one whose poles cannot be computed.
+///
+/// # Example
+/// ```
+/// use ambid_core::lti::StateSpace;
+/// use ambid_core::validate::uncertainty::window_half_lines_for;
+/// use faer::mat;
+/// // poles 0.9 ± 0.3j at 1 kHz sampling: ζ ≈ 0.16 at 52 Hz, a half-power band of ≈ 17 Hz
+/// let m = StateSpace::discrete(
+///     mat![[1.8, -0.9], [1.0, 0.0]], mat![[1.0], [0.0]], mat![[1.0, 0.0]], mat![[0.0]], 1e-3,
+/// ).unwrap();
+/// let f: Vec<f64> = (1..=200).map(|k| k as f64).collect();
+/// assert_eq!(window_half_lines_for(&m, &f).unwrap(), 8); // 17 Hz / 2 on 1 Hz lines, clamped
+/// ```
+pub fn window_half_lines_for(model: &StateSpace, f_hz: &[f64]) -> Result<usize> {
+    let ts = model
+        .ts()
+        .ok_or_else(|| Error::invalid("model", "needs a discrete-time model"))?;
+    Ok(window_half_lines(&model.poles()?, f_hz, ts))
 }
 
 /// $M$ of the misfit window (module docs): half the half-power bandwidth of the most lightly
@@ -1166,14 +1216,17 @@ mod tests {
         rel.sort_by(f64::total_cmp);
         assert!((rel[75] - 0.05).abs() < 0.01, "{}", rel[75]);
         let spread = vec![1e-3; f.len()];
+        let shift = vec![2e-3; f.len()];
         let nl: Vec<f64> = exact.values().iter().map(|v| 0.05 * v.norm()).collect();
         let ext = ExtraTerms {
             nonlinear_std: Some(&nl),
             operating_spread: Some(&spread),
+            amplitude_shift: Some(&shift),
         };
         let more = uncertainty(&m, &frd, &ext, &UncertaintyOptions::default()).unwrap();
+        assert_eq!(more.amplitude.as_deref(), Some(shift.as_slice()));
         for k in 0..f.len() {
-            assert!(more.additive[k] >= base.additive[k] + 1e-3 * (1.0 - 1e-12));
+            assert!(more.additive[k] >= base.additive[k] + 3e-3 * (1.0 - 1e-12));
             let q = more.nonlinear.as_ref().unwrap()[k];
             assert!((q - 0.05 * exact.values()[k].norm() * 20f64.ln().sqrt()).abs() < 1e-9 * q);
         }
@@ -1198,9 +1251,16 @@ mod tests {
         let short = vec![0.0; 3];
         let ext = ExtraTerms {
             nonlinear_std: Some(&short),
-            operating_spread: None,
+            ..ExtraTerms::default()
         };
         assert!(uncertainty(&m, &frd, &ext, &UncertaintyOptions::default()).is_err());
+        let negative = vec![-1e-3; 50];
+        let ext = ExtraTerms {
+            amplitude_shift: Some(&negative),
+            ..ExtraTerms::default()
+        };
+        let e = uncertainty(&m, &frd, &ext, &UncertaintyOptions::default()).unwrap_err();
+        assert!(e.to_string().contains("amplitude_shift"), "{e}");
         let opts = UncertaintyOptions {
             line_coverage: 1.0,
             ..Default::default()

@@ -1,5 +1,5 @@
 //! `ambid uncertainty`: the uncertainty of a nominal plant model around the measured plant FRF
-//! (terms (a)–(d) per line, docs/uncertainty.md), the stable minimum-phase weight of order ≤ 4
+//! (terms (a)–(e) per line, docs/uncertainty.md), the stable minimum-phase weight of order ≤ 4
 //! that overbounds it, the robust stability of the loop's controller against it, and the
 //! uncertain model exported for MATLAB and Python.
 
@@ -10,7 +10,7 @@ use ambid::io::export::uncertain::{
     UncertainModel, UncertainNames,
 };
 use ambid::io::OutputSet;
-use ambid::uncertainty::{analyse, operating_term};
+use ambid::uncertainty::{amplitude_term, analyse, operating_term};
 use ambid_core::validate::uncertainty::{ExtraTerms, UncertaintyOptions};
 use ambid_core::validate::weight::{DEFAULT_COVER, MAX_WEIGHT_ORDER};
 use anyhow::Result;
@@ -59,6 +59,15 @@ pub struct UncertaintyArgs {
     /// the nominal FRF (docs/uncertainty.md).
     #[arg(long = "operating", value_name = "FRF")]
     operating: Vec<PathBuf>,
+    /// Term (e): the plant FRF CSV of the same experiment at another excitation level, as
+    /// `LEVEL=FRF` (LEVEL in the unit of `--level`, e.g. % of i_sat). Repeat it for each level;
+    /// with the nominal FRF at `--level`, the bound then holds the shift of the best linear
+    /// approximation at `--level` from its extrapolation to zero amplitude (docs/uncertainty.md).
+    #[arg(long = "amplitude", value_name = "LEVEL=FRF", value_parser = parse_level_frf)]
+    amplitude: Vec<(f64, PathBuf)>,
+    /// The excitation level of the nominal FRF (needed with `--amplitude`, in its unit).
+    #[arg(long)]
+    level: Option<f64>,
     /// Output directory: uncertainty.csv, robust.csv, summary.json and the uncertain model
     /// (uncertain.m, uncertain.mat, uncertain.npz, uncertain.json).
     #[arg(long, default_value = "uncertainty")]
@@ -160,8 +169,45 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             ))
         })?)
     };
+    // term (e) from the other excitation levels' FRFs, with the nominal FRF at --level
+    let amplitude = match (a.amplitude.is_empty(), a.level) {
+        (true, None) => None,
+        (true, Some(_)) => {
+            return Err(ambid::error::Error::usage(
+                "--level without --amplitude: give the other levels' FRFs as --amplitude LEVEL=FRF, or leave out --level",
+            )
+            .into())
+        }
+        (false, None) => {
+            return Err(ambid::error::Error::usage(
+                "--amplitude needs --level, the nominal FRF's excitation level in the same unit",
+            )
+            .into())
+        }
+        (false, Some(level)) => {
+            let mut levels = vec![(level, frd.clone())];
+            for (l, path) in &a.amplitude {
+                let (other, _) = frf_with_variance(
+                    path,
+                    &a.quantity,
+                    a.fs,
+                    Some(band),
+                    "term (e) needs each level's standard deviations, like the nominal FRF's",
+                )?;
+                levels.push((*l, other));
+            }
+            let refs: Vec<(f64, &ambid_core::lti::Frd)> =
+                levels.iter().map(|(l, g)| (*l, g)).collect();
+            Some(
+                amplitude_term(&refs, level, frd.f_hz(), &model, a.line_coverage).map_err(
+                    |e| ambid::error::Error::input(format!("--amplitude: {e}")),
+                )?,
+            )
+        }
+    };
     let extra = ExtraTerms {
         operating_spread: spread.as_deref(),
+        amplitude_shift: amplitude.as_deref(),
         ..ExtraTerms::default()
     };
     let analysis = analyse(
@@ -217,6 +263,10 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         cols.push(o.clone());
         header.push("term_operating".into());
     }
+    if let Some(e) = &t.amplitude {
+        cols.push(e.clone());
+        header.push("term_amplitude".into());
+    }
     let refs: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
     let table = csv_bytes(&header, &refs)?;
     let robust_csv = csv_bytes(&["f_hz".into(), "mu".into()], &[&r.f_hz, &r.mu])?;
@@ -259,6 +309,11 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         "operating": t.operating_median_rel().map(|m| json!({
             "files": a.operating.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
             "spread_median_rel": m,
+        })),
+        "amplitude": t.amplitude_median_rel().map(|m| json!({
+            "level": a.level,
+            "levels": a.amplitude.iter().map(|(l, p)| json!({"level": l, "file": p.display().to_string()})).collect::<Vec<_>>(),
+            "shift_median_rel": m,
         })),
         "robust": robust_json(r),
         "robust_on_lines": {
@@ -356,4 +411,24 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         println!("  {}", p.display());
     }
     Ok(())
+}
+
+/// `LEVEL=FRF` of `--amplitude`.
+fn parse_level_frf(s: &str) -> Result<(f64, PathBuf), String> {
+    let (l, p) = s.split_once('=').ok_or_else(|| {
+        format!("`{s}`: give a level and its FRF as LEVEL=FRF, e.g. 16=frf_16pct.csv")
+    })?;
+    let level: f64 = l
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{l}` in `{s}` is not a number: give the level as LEVEL=FRF"))?;
+    if !(level.is_finite() && level > 0.0) {
+        return Err(format!(
+            "the level {level} in `{s}` must be a positive number"
+        ));
+    }
+    if p.is_empty() {
+        return Err(format!("`{s}`: the FRF file after `=` is missing"));
+    }
+    Ok((level, PathBuf::from(p)))
 }

@@ -21,7 +21,7 @@
 //! | `W_poles_re`, `W_poles_im` | the poles $p_i$ (inside the unit circle) |
 //! | `f_hz` | the FRF lines the bound is given on \[Hz\] |
 //! | `bound_multiplicative`, `bound_additive` | $\ell_k$ and $\Delta_k = \ell_k\lvert\hat P_k\rvert$ |
-//! | `term_frf_confidence`, `term_model_error`, `term_nonlinear`, `term_operating` | the terms (a)–(d) (the last two only when given) |
+//! | `term_frf_confidence`, `term_model_error`, `term_nonlinear`, `term_operating`, `term_amplitude` | the terms (a)–(e) (the last three only when given) |
 //! | `stability_margin`, `mu_peak`, `mu_peak_hz` | $1/\max\mu$, $\max\lvert WT\rvert$ and where |
 //! | `upper_gain_margin`, `lower_gain_margin` | the robust gain margins, when finite |
 //!
@@ -130,6 +130,7 @@ pub(crate) fn uncertain_variables(
     for (what, v) in [
         ("term_nonlinear", &t.nonlinear),
         ("term_operating", &t.operating),
+        ("term_amplitude", &t.amplitude),
     ] {
         if let Some(v) = v {
             if v.len() != t.f_hz.len() {
@@ -244,7 +245,7 @@ pub fn uncertain_matlab_script(u: &UncertainModel<'_>, names: &UncertainNames) -
     );
     let _ = writeln!(
         s,
-        "%         bound_additive and the terms (a) FRF confidence, (b) model error, (c)-(d) when given"
+        "%         bound_additive and the terms (a) FRF confidence, (b) model error, (c)-(e) when given"
     );
     let _ = writeln!(
         s,
@@ -330,6 +331,7 @@ pub fn uncertain_json(u: &UncertainModel<'_>, names: &UncertainNames) -> Result<
             "term_model_error": t.model_error,
             "term_nonlinear": t.nonlinear,
             "term_operating": t.operating,
+            "term_amplitude": t.amplitude,
             "line_coverage": t.line_coverage,
         },
         "robust": robust,
