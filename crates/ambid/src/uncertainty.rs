@@ -234,6 +234,81 @@ fn carry_relative(fs: &[f64], rel: &[f64], f_hz: &[f64], nominal_abs: &[f64]) ->
         .collect()
 }
 
+/// Term (c)'s input on the lines `f_hz`: the standard deviation $\sigma_{\mathrm{nl},k}$ of the
+/// stochastic nonlinear contributions of a robust BLA measurement (`ambid bla --level`: its
+/// lines `bla_f_hz`, the BLA `bla` and `nl_std` per line), relative to $|G_{\mathrm{BLA}}|$,
+/// carried to `f_hz` as term (d) is (linear interpolation in frequency, the end line's value
+/// outside the BLA's band) and scaled by $|\hat P(f_k)|$. The relative value is what moves
+/// between the BLA's multisine lines and the identification record's lines.
+///
+/// # Errors
+/// Lengths that differ, no line, lines that are not finite and ascending, a standard deviation
+/// that is not finite and non-negative, a BLA of zero, or a model that cannot be evaluated.
+///
+/// # Example
+/// ```
+/// use ambid::uncertainty::nonlinear_term;
+/// use ambid_core::{c64, lti::StateSpace};
+/// use faer::mat;
+/// let m = StateSpace::discrete(mat![[0.5]], mat![[1.0]], mat![[0.5]], mat![[0.0]], 1e-3).unwrap();
+/// // 2 % of the BLA at 10 Hz, 4 % at 30 Hz: 3 % at 20 Hz, times |P̂(20 Hz)|
+/// let s = nonlinear_term(
+///     &[10.0, 30.0],
+///     &[c64::new(2.0, 0.0), c64::new(0.0, 1.0)],
+///     &[0.04, 0.04],
+///     &[20.0],
+///     &m,
+/// )
+/// .unwrap();
+/// let p = m.freq_response_siso(&[20.0]).unwrap()[0].norm();
+/// assert!((s[0] / p - 0.03).abs() < 1e-12);
+/// ```
+pub fn nonlinear_term(
+    bla_f_hz: &[f64],
+    bla: &[ambid_core::c64],
+    nl_std: &[f64],
+    f_hz: &[f64],
+    nominal: &StateSpace,
+) -> Result<Vec<f64>> {
+    let bad = |why: String| Error::other(format!("the nonlinear term: {why}"));
+    let l = bla_f_hz.len();
+    if l == 0 || bla.len() != l || nl_std.len() != l {
+        return Err(bad(format!(
+            "{l} lines, {} BLA values and {} standard deviations: give one of each per line",
+            bla.len(),
+            nl_std.len()
+        )));
+    }
+    if bla_f_hz.iter().any(|f| !f.is_finite()) || bla_f_hz.windows(2).any(|w| w[1] <= w[0]) {
+        return Err(bad(
+            "the BLA's frequencies must be finite and ascending".into()
+        ));
+    }
+    let mut rel = Vec::with_capacity(l);
+    for k in 0..l {
+        if !(nl_std[k].is_finite() && nl_std[k] >= 0.0) {
+            return Err(bad(format!(
+                "the standard deviation {} at {} Hz is not a finite, non-negative number",
+                nl_std[k], bla_f_hz[k]
+            )));
+        }
+        let g = bla[k].norm();
+        if !(g > 0.0 && g.is_finite()) {
+            return Err(bad(format!(
+                "the BLA is zero or not finite at {} Hz",
+                bla_f_hz[k]
+            )));
+        }
+        rel.push(nl_std[k] / g);
+    }
+    let abs: Vec<f64> = nominal
+        .freq_response_siso(f_hz)?
+        .iter()
+        .map(|p| p.norm())
+        .collect();
+    Ok(carry_relative(bla_f_hz, &rel, f_hz, &abs))
+}
+
 /// Term (e) of the bound around the model `nominal` on the lines `f_hz`: the systematic shift of
 /// the best linear approximation (BLA) at the identification experiment's excitation level
 /// `level` from its extrapolation to zero amplitude, from an amplitude study's plant FRFs

@@ -340,7 +340,9 @@ fn uncertainty_takes_the_operating_points_as_term_d() {
 /// twin's exact linearised plant, the weight covers the model's true 10–1000 Hz error on fewer
 /// than 95 % of the lines without term (e) and on ≥ 95 % with it; below 60 Hz, where the BLA's
 /// shift is the largest part of the error, the term is 0.8–2× the true error; the summary names
-/// the levels; the options' misuse is refused with the fix named and nothing written.
+/// the levels; the options' misuse is refused with the fix named and nothing written. On the
+/// same record, `--nonlinear BLA` (term (c)) from a hand-written BLA CSV: the term equals the
+/// closed-form quantile on every line.
 #[test]
 fn uncertainty_takes_the_amplitude_levels_as_term_e() {
     let dir = common::tmpdir("uncertainty-cli-amp");
@@ -440,8 +442,42 @@ fn uncertainty_takes_the_amplitude_levels_as_term_e() {
         (0.8..=2.0).contains(&median),
         "term (e) / true error {median}"
     );
+    // term (c) from a robust BLA's per-line CSV (written here: 1 % of |BLA| on lines that do
+    // not coincide with the FRF's): on every line the 95 % quantile of a circular complex
+    // Gaussian of that standard deviation, σ √ln 20, times |P̂|
+    let mut bla = String::from("f_hz,bla_re,bla_im,bla_std,noise_std,nl_std,var_nl\n");
+    for k in 0..400 {
+        let fk = 1.5 + 7.3 * k as f64;
+        let (re, im) = (2.0 + (fk / 500.0).sin(), -1.0);
+        let nl: f64 = 0.01 * (re * re + im * im).sqrt();
+        bla += &format!("{fk},{re},{im},0,0,{nl},0\n");
+    }
+    std::fs::write(dir.join("bla.csv"), bla).unwrap();
+    let args = uncertainty_args(&dir, &["--nonlinear", &d("bla.csv")], "unc_nl");
+    ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let t = std::fs::read_to_string(dir.join("unc_nl/uncertainty.csv")).unwrap();
+    let (tn, re, im) = (
+        column(&t, "term_nonlinear"),
+        column(&t, "nominal_re"),
+        column(&t, "nominal_im"),
+    );
+    let want = 0.01 * 20f64.ln().sqrt();
+    for k in 0..tn.len() {
+        let got = tn[k] / c64::new(re[k], im[k]).norm();
+        assert!(
+            (got - want).abs() <= 1e-9 * want,
+            "line {k}: {got} vs {want}"
+        );
+    }
+    assert_eq!(
+        summary_of(&dir, "unc_nl")["nonlinear"]["file"],
+        d("bla.csv").as_str()
+    );
+    std::fs::write(dir.join("bla_bad.csv"), "f_hz,bla_re,bla_im\n10,1,0\n").unwrap();
     // misuse: refused, nothing written
+    let bla_bad = d("bla_bad.csv");
     for (extra, want) in [
+        (vec!["--nonlinear", bla_bad.as_str()], "nl_std"),
         (vec!["--amplitude", a5.as_str()], "--level"),
         (vec!["--level", "10"], "--amplitude"),
         (

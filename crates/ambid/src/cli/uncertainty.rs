@@ -10,7 +10,7 @@ use ambid::io::export::uncertain::{
     UncertainModel, UncertainNames,
 };
 use ambid::io::OutputSet;
-use ambid::uncertainty::{amplitude_term, analyse, operating_term};
+use ambid::uncertainty::{amplitude_term, analyse, nonlinear_term, operating_term};
 use ambid_core::validate::uncertainty::{ExtraTerms, UncertaintyOptions};
 use ambid_core::validate::weight::{DEFAULT_COVER, MAX_WEIGHT_ORDER};
 use anyhow::Result;
@@ -68,6 +68,11 @@ pub struct UncertaintyArgs {
     /// The excitation level of the nominal FRF (needed with `--amplitude`, in its unit).
     #[arg(long)]
     level: Option<f64>,
+    /// Term (c): the per-line CSV of a robust BLA measurement (`ambid bla --level`, columns
+    /// `f_hz`, `bla_re`, `bla_im`, `nl_std`); its relative nonlinear standard deviation is
+    /// carried to the FRF's lines (docs/uncertainty.md).
+    #[arg(long, value_name = "BLA")]
+    nonlinear: Option<PathBuf>,
     /// Output directory: uncertainty.csv, robust.csv, summary.json and the uncertain model
     /// (uncertain.m, uncertain.mat, uncertain.npz, uncertain.json).
     #[arg(long, default_value = "uncertainty")]
@@ -205,10 +210,22 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             )
         }
     };
+    // term (c) from a robust BLA's per-line nonlinear standard deviation
+    let nonlinear = match &a.nonlinear {
+        None => None,
+        Some(path) => {
+            let (bf, bla, nl) = read_bla(path)?;
+            Some(
+                nonlinear_term(&bf, &bla, &nl, frd.f_hz(), &model).map_err(|e| {
+                    ambid::error::Error::input(format!("--nonlinear {}: {e}", path.display()))
+                })?,
+            )
+        }
+    };
     let extra = ExtraTerms {
+        nonlinear_std: nonlinear.as_deref(),
         operating_spread: spread.as_deref(),
         amplitude_shift: amplitude.as_deref(),
-        ..ExtraTerms::default()
     };
     let analysis = analyse(
         &model,
@@ -259,6 +276,10 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
     .map(|s| s.to_string())
     .collect();
     let (mut cols, mut header) = (cols, header);
+    if let Some(o) = &t.nonlinear {
+        cols.push(o.clone());
+        header.push("term_nonlinear".into());
+    }
     if let Some(o) = &t.operating {
         cols.push(o.clone());
         header.push("term_operating".into());
@@ -309,6 +330,9 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         "operating": t.operating_median_rel().map(|m| json!({
             "files": a.operating.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
             "spread_median_rel": m,
+        })),
+        "nonlinear": a.nonlinear.as_ref().map(|p| json!({
+            "file": p.display().to_string(),
         })),
         "amplitude": t.amplitude_median_rel().map(|m| json!({
             "level": a.level,
@@ -431,4 +455,39 @@ fn parse_level_frf(s: &str) -> Result<(f64, PathBuf), String> {
         return Err(format!("`{s}`: the FRF file after `=` is missing"));
     }
     Ok((level, PathBuf::from(p)))
+}
+
+/// The per-line CSV of `ambid bla --level`: lines, BLA and the nonlinear standard deviation.
+fn read_bla(path: &Path) -> Result<(Vec<f64>, Vec<ambid_core::c64>, Vec<f64>)> {
+    let bad =
+        |why: String| ambid::error::Error::input(format!("--nonlinear {}: {why}", path.display()));
+    let mut rd = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .from_path(path)
+        .map_err(|e| bad(format!("cannot read it ({e})")))?;
+    let headers = rd
+        .headers()
+        .map_err(|e| bad(format!("no header line ({e})")))?
+        .clone();
+    let col = |name: &str| {
+        headers.iter().position(|h| h == name).ok_or_else(|| {
+            bad(format!(
+                "no column `{name}`: give the per-line CSV of `ambid bla --level` (f_hz, bla_re, bla_im, nl_std)"
+            ))
+        })
+    };
+    let (cf, cr, ci, cn) = (col("f_hz")?, col("bla_re")?, col("bla_im")?, col("nl_std")?);
+    let (mut f, mut g, mut nl) = (Vec::new(), Vec::new(), Vec::new());
+    for (row, rec) in rd.records().enumerate() {
+        let rec = rec.map_err(|e| bad(format!("row {}: {e}", row + 2)))?;
+        let num = |c: usize| -> Result<f64, ambid::error::Error> {
+            let v = rec.get(c).unwrap_or("");
+            v.parse::<f64>()
+                .map_err(|_| bad(format!("row {}: `{v}` is not a number", row + 2)))
+        };
+        f.push(num(cf)?);
+        g.push(ambid_core::c64::new(num(cr)?, num(ci)?));
+        nl.push(num(cn)?);
+    }
+    Ok((f, g, nl))
 }
