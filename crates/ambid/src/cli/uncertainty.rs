@@ -457,37 +457,26 @@ fn parse_level_frf(s: &str) -> Result<(f64, PathBuf), String> {
     Ok((level, PathBuf::from(p)))
 }
 
-/// The per-line CSV of `ambid bla --level`: lines, BLA and the nonlinear standard deviation.
+/// The per-line CSV of `ambid bla --level`: lines, BLA and the nonlinear standard deviation
+/// (read by the data-file reader; their values are checked by `nonlinear_term`).
 fn read_bla(path: &Path) -> Result<(Vec<f64>, Vec<ambid_core::c64>, Vec<f64>)> {
-    let bad =
-        |why: String| ambid::error::Error::input(format!("--nonlinear {}: {why}", path.display()));
-    let mut rd = csv::ReaderBuilder::new()
-        .trim(csv::Trim::All)
-        .from_path(path)
-        .map_err(|e| bad(format!("cannot read it ({e})")))?;
-    let headers = rd
-        .headers()
-        .map_err(|e| bad(format!("no header line ({e})")))?
-        .clone();
-    let col = |name: &str| {
-        headers.iter().position(|h| h == name).ok_or_else(|| {
-            bad(format!(
-                "no column `{name}`: give the per-line CSV of `ambid bla --level` (f_hz, bla_re, bla_im, nl_std)"
-            ))
-        })
+    use ambid::io::table::{read_table, ColumnRef, ReadOptions};
+    let bad = |e: ambid::io::table::DataFileError| {
+        ambid::error::Error::input(format!(
+            "--nonlinear: {e}; give the per-line CSV of `ambid bla --level` (f_hz, bla_re, bla_im, nl_std)"
+        ))
     };
-    let (cf, cr, ci, cn) = (col("f_hz")?, col("bla_re")?, col("bla_im")?, col("nl_std")?);
-    let (mut f, mut g, mut nl) = (Vec::new(), Vec::new(), Vec::new());
-    for (row, rec) in rd.records().enumerate() {
-        let rec = rec.map_err(|e| bad(format!("row {}: {e}", row + 2)))?;
-        let num = |c: usize| -> Result<f64, ambid::error::Error> {
-            let v = rec.get(c).unwrap_or("");
-            v.parse::<f64>()
-                .map_err(|_| bad(format!("row {}: `{v}` is not a number", row + 2)))
-        };
-        f.push(num(cf)?);
-        g.push(ambid_core::c64::new(num(cr)?, num(ci)?));
-        nl.push(num(cn)?);
-    }
+    let t = read_table(path, &ReadOptions::default()).map_err(bad)?;
+    let col = |name: &str| {
+        t.column(&ColumnRef::parse(name))
+            .map(<[f64]>::to_vec)
+            .map_err(bad)
+    };
+    let (f, re, im, nl) = (col("f_hz")?, col("bla_re")?, col("bla_im")?, col("nl_std")?);
+    let g = re
+        .iter()
+        .zip(&im)
+        .map(|(r, i)| ambid_core::c64::new(*r, *i))
+        .collect();
     Ok((f, g, nl))
 }
