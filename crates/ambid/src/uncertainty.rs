@@ -138,12 +138,7 @@ pub fn analyse(
 /// # Errors
 /// Those of [`operating_spread`], or a model that cannot be evaluated on the lines.
 pub fn operating_term(plants: &[Frd], f_hz: &[f64], nominal: &StateSpace) -> Result<Vec<f64>> {
-    let abs: Vec<f64> = nominal
-        .freq_response_siso(f_hz)?
-        .iter()
-        .map(|p| p.norm())
-        .collect();
-    operating_spread(plants, f_hz, &abs)
+    operating_spread(plants, f_hz, &model_abs(nominal, f_hz)?)
 }
 
 /// Term (d) of the bound on the lines `f_hz` from an operating-point study's plant FRFs
@@ -211,6 +206,15 @@ pub fn operating_spread(plants: &[Frd], f_hz: &[f64], nominal_abs: &[f64]) -> Re
         }
     }
     Ok(carry_relative(nom.f_hz(), &rel, f_hz, nominal_abs))
+}
+
+/// $|\hat P(f_k)|$ of the model on the lines `f_hz`, which the relative terms (c)–(e) are scaled by.
+fn model_abs(nominal: &StateSpace, f_hz: &[f64]) -> Result<Vec<f64>> {
+    Ok(nominal
+        .freq_response_siso(f_hz)?
+        .iter()
+        .map(|p| p.norm())
+        .collect())
 }
 
 /// A relative term `rel` on the study's lines `fs` carried to the lines `f_hz` by linear
@@ -301,12 +305,12 @@ pub fn nonlinear_term(
         }
         rel.push(nl_std[k] / g);
     }
-    let abs: Vec<f64> = nominal
-        .freq_response_siso(f_hz)?
-        .iter()
-        .map(|p| p.norm())
-        .collect();
-    Ok(carry_relative(bla_f_hz, &rel, f_hz, &abs))
+    Ok(carry_relative(
+        bla_f_hz,
+        &rel,
+        f_hz,
+        &model_abs(nominal, f_hz)?,
+    ))
 }
 
 /// Term (e) of the bound around the model `nominal` on the lines `f_hz`: the systematic shift of
@@ -477,12 +481,7 @@ pub fn amplitude_term(
             }
         })
         .collect();
-    let abs: Vec<f64> = nominal
-        .freq_response_siso(f_hz)?
-        .iter()
-        .map(|p| p.norm())
-        .collect();
-    Ok(carry_relative(fs, &rel, f_hz, &abs))
+    Ok(carry_relative(fs, &rel, f_hz, &model_abs(nominal, f_hz)?))
 }
 
 /// The probability that term (e) appears anywhere on a plant whose BLA does not move with the
