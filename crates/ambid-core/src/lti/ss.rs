@@ -230,6 +230,43 @@ impl StateSpace {
         self.c.nrows()
     }
 
+    /// The SISO channel from input $j$ to output $i$: $(A, B_{:,j}, C_{i,:}, D_{ij})$, with all
+    /// the model's states (so its poles are the model's).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for an index outside $n_y \times n_u$.
+    ///
+    /// # Example
+    /// ```
+    /// use ambid_core::lti::StateSpace;
+    /// use faer::mat;
+    /// let m = StateSpace::discrete(mat![[0.5]], mat![[1.0, 2.0]], mat![[1.0], [3.0]],
+    ///     mat![[0.0, 0.1], [0.0, 0.0]], 1e-3).unwrap();
+    /// let e = m.entry(0, 1).unwrap();
+    /// // 2 / (z - 0.5) + 0.1 at z = 1
+    /// assert!((e.freq_response_siso(&[0.0]).unwrap()[0].re - 4.1).abs() < 1e-12);
+    /// ```
+    pub fn entry(&self, i: usize, j: usize) -> Result<StateSpace> {
+        if i >= self.noutputs() || j >= self.ninputs() {
+            return Err(Error::invalid(
+                "entry",
+                format!(
+                    "entry ({i}, {j}) is outside the {}×{} model",
+                    self.noutputs(),
+                    self.ninputs()
+                ),
+            ));
+        }
+        let n = self.order();
+        StateSpace::new(
+            self.a.clone(),
+            Mat::from_fn(n, 1, |r, _| self.b[(r, j)]),
+            Mat::from_fn(1, n, |_, c| self.c[(i, c)]),
+            Mat::from_fn(1, 1, |_, _| self.d[(i, j)]),
+            self.ts,
+        )
+    }
+
     fn lambda(&self, f_hz: f64) -> c64 {
         let w = 2.0 * std::f64::consts::PI * f_hz;
         match self.ts {

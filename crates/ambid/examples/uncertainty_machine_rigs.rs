@@ -1,0 +1,314 @@
+//! Diagnostic sweep of the MIMO uncertainty bound (issue 23, MIMO entries) on the 4-axis twin:
+//! per rig (0 = the nominal twin at 15 000 rpm, k > 0 = `random_rig(k)` at `(7919 k) mod 30 000`
+//! rpm), default noise, the `[machine]` defaults and the default fitter's chosen model (as `ambid
+//! run` with a `[machine]` section), the element-wise bound of
+//! `ambid_core::validate::uncertainty::uncertainty_matrix` on the plant FRF's lines of the fit's
+//! band (`machine_fit::fit_band`: its precise lines in the quality band), judged
+//! against the twin's exact plant on 10–1000 Hz:
+//!
+//! * `cov_e`: the fraction of (line, entry) pairs with $|P_{ij} - \hat P_{ij}| \le L_{ij}$;
+//! * `cov_n`: the fraction of lines with $\bar\sigma(P - \hat P) \le \lVert L\rVert_2$;
+//! * `cov_w`: the fraction of lines with $\bar\sigma(\hat P^{-1}(P - \hat P)) \le |w_I|$, the
+//!   input-multiplicative weight fitted over `input_multiplicative_bound`;
+//! * `loose`: median $\lVert L\rVert_2$ / median $\bar\sigma(P - \hat P)$;
+//! * robust gain margins (all four controllers' gains together) on the lines (element-wise) and
+//!   against the weight, each with the bars: the exact loop stable at 90 % of the margin, and the
+//!   margin at least half the exact one (`nominal_gain_interval` of the exact plant).
+//!
+//! `MODE=nonlinear` simulates the nonlinear twin (the exact plant is then the linearisation).
+//!
+//! Run: `cargo run --release -p ambid --example uncertainty_machine_rigs -- 0,1,2,3`.
+use ambid::config::MachineSection;
+use ambid::workflow::machine::{acquire_twin, MachineModelInput, MachineModels};
+use ambid::workflow::machine_fit::{fit_band, FrequencyFitter};
+use ambid_core::lti::Frd;
+use ambid_core::validate::iso::IsoZones;
+use ambid_core::validate::robust::{
+    loop_stable, nominal_gain_interval, robust_stability_matrix_on_lines,
+    robust_stability_matrix_weight, LineBound, RobustStability,
+};
+use ambid_core::validate::uncertainty::{uncertainty_matrix, UncertaintyOptions};
+use ambid_core::validate::weight::{fit_weight, DEFAULT_COVER};
+use faer::Mat;
+use std::path::Path;
+use std::time::Instant;
+
+fn sigma_max(m: &Mat<f64>) -> f64 {
+    ambid_core::linalg::singular_values(m.as_ref())
+        .map(|s| s.into_iter().fold(0.0, f64::max))
+        .unwrap_or(f64::NAN)
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// The two bars on one robust-stability result: (stable at 90 % of both margins, both margins
+/// at least half the exact ones); `None` when no margin was reported.
+fn bars(
+    r: &RobustStability,
+    truth: &ambid_core::lti::StateSpace,
+    c: &ambid_core::lti::StateSpace,
+    exact: (f64, f64),
+) -> Option<(bool, bool)> {
+    let (hi, lo) = (r.upper_gain_margin?, r.lower_gain_margin?);
+    let up = if hi.is_finite() {
+        1.0 + 0.9 * (hi - 1.0)
+    } else {
+        1e3
+    };
+    let stable = [up, 1.0 - 0.9 * (1.0 - lo)]
+        .iter()
+        .all(|g| loop_stable(truth, c, *g).unwrap_or(false));
+    let half = (hi - 1.0) >= 0.5 * (exact.1 - 1.0) && (1.0 - lo) >= 0.5 * (1.0 - exact.0);
+    Some((stable, half))
+}
+
+/// One rig's figures: coverages, looseness and the two sets of bars.
+type Row = (
+    f64,
+    f64,
+    f64,
+    f64,
+    Option<(bool, bool)>,
+    Option<(bool, bool)>,
+);
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let rigs: Vec<u64> = args
+        .get(1)
+        .map_or("0", String::as_str)
+        .split(',')
+        .filter_map(|x| x.parse().ok())
+        .collect();
+    let mode = std::env::var("MODE").unwrap_or_else(|_| "linear".into());
+    let dir = std::env::temp_dir().join(format!("ambid-unc-machine-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("tmp dir");
+    let mut summary = Vec::new();
+    println!("rig rpm | lines | cov_e cov_n cov_w | loose_n | lines: g- g+ (exact g- g+) stable half | weight: order g- g+ stable half | s");
+    for rig in rigs {
+        let t0 = Instant::now();
+        let m = if rig == 0 {
+            MachineSection {
+                speeds_rpm: Some(vec![15_000.0]),
+                mode: mode.clone(),
+                ..Default::default()
+            }
+        } else {
+            let path = dir.join(format!("rig{rig}.toml"));
+            std::fs::write(
+                &path,
+                ambid_twin::random_rig(rig)
+                    .expect("rig")
+                    .to_toml_string()
+                    .expect("toml"),
+            )
+            .expect("write rig");
+            MachineSection {
+                speeds_rpm: Some(vec![((rig * 7919) % 30_000) as f64]),
+                mode: mode.clone(),
+                config: Some(path),
+                ..Default::default()
+            }
+        };
+        let data = acquire_twin(&m, Path::new("."), 1).expect("twin");
+        let truth = data.truth.as_ref().expect("truth");
+        let input = MachineModelInput {
+            speeds: &data.speeds,
+            controller: Some(&truth[0].controller),
+            truth: Some(truth),
+            twin: data.twin.as_ref().zip(data.mode),
+            noise: true,
+            ts: data.ts,
+            quality_band_hz: m.quality_band_hz,
+            zones: IsoZones::default(),
+            seed: 1,
+        };
+        let out = FrequencyFitter::default().identify(&input).expect("fit");
+        let Some(model) = out.models.first() else {
+            println!("rig {rig}: no model ({:?})", out.notes);
+            continue;
+        };
+        // the lines the fit used: the plant FRF's precise lines in the quality band
+        let measured = &data.speeds[0].frf.plant;
+        let Some(band) = fit_band(measured, m.quality_band_hz).expect("band") else {
+            println!("rig {rig}: no band");
+            continue;
+        };
+        let plant = &measured.band(band.0, band.1).expect("band");
+        let u = match uncertainty_matrix(&model.model, plant, &[], &UncertaintyOptions::default()) {
+            Ok(u) => u,
+            Err(e) => {
+                println!("rig {rig}: no bound: {e}");
+                continue;
+            }
+        };
+        let raise = u
+            .joint_raise(DEFAULT_COVER, 0.95, 2000, 0)
+            .expect("joint raise")
+            .max(1.0);
+        let u = if std::env::var("NO_RAISE").is_ok() {
+            u
+        } else {
+            let mut u = u;
+            for e in &mut u.entries {
+                for b in &mut e.additive {
+                    *b *= raise;
+                }
+            }
+            u
+        };
+        let f = u.f_hz().to_vec();
+        let exact = Frd::from_model(&truth[0].plant, &f).expect("exact");
+        let norm = u.norm_bound();
+        let rel = u
+            .input_multiplicative_bound()
+            .expect("input-multiplicative bound");
+        let wfit = fit_weight(
+            &f,
+            &rel.iter().map(|v| v.max(1e-300)).collect::<Vec<f64>>(),
+            data.ts,
+            4,
+            DEFAULT_COVER,
+        )
+        .expect("weight");
+        let wmag = wfit.weight.magnitude(&f);
+        // the true input-multiplicative error σ̄(P̂⁻¹(P − P̂)) on the lines
+        let rel_err = |k: usize, p: &Mat<faer::c64>| -> f64 {
+            let ph = u.nominal_at(k);
+            let d = Mat::from_fn(4, 4, |i, j| p[(i, j)] - ph[(i, j)]);
+            let x = ambid_core::linalg::solve_c64(ph.as_ref(), d.as_ref()).expect("solve");
+            x.singular_values()
+                .map(|s| s.into_iter().fold(0.0, f64::max))
+                .unwrap_or(f64::NAN)
+        };
+        let (mut pairs, mut pairs_ok, mut n_lines, mut n_ok, mut w_ok) = (0, 0, 0, 0, 0);
+        let (mut errs, mut bnds) = (Vec::new(), Vec::new());
+        for (k, fk) in f.iter().enumerate() {
+            if !(10.0..=1000.0).contains(fk) {
+                continue;
+            }
+            let p = exact.at(k).expect("line");
+            let ph = u.nominal_at(k);
+            let l = u.bound_at(k);
+            let d = Mat::from_fn(4, 4, |i, j| (p[(i, j)] - ph[(i, j)]).norm());
+            let dc = Mat::from_fn(4, 4, |i, j| p[(i, j)] - ph[(i, j)]);
+            for i in 0..4 {
+                for j in 0..4 {
+                    pairs += 1;
+                    pairs_ok += usize::from(d[(i, j)] <= l[(i, j)]);
+                }
+            }
+            let e = dc
+                .singular_values()
+                .map(|s| s.into_iter().fold(0.0, f64::max))
+                .unwrap_or(f64::NAN);
+            n_lines += 1;
+            n_ok += usize::from(e <= norm[k]);
+            if std::env::var("DEBUG_LINES").is_ok() && k % 8 == 0 {
+                let t = u.entry(0, 0).expect("entry");
+                println!(
+                    "   {fk:7.1} Hz: σ̄ err {e:.3e} ‖L‖ {:.3e} | (0,0) err {:.3e} a {:.3e} b {:.3e} misfit {:.3e} |P̂| {:.3e}",
+                    norm[k], d[(0, 0)], t.frf_confidence[k], t.model_error[k], t.misfit[k], t.nominal[k].norm()
+                );
+            }
+            w_ok += usize::from(rel_err(k, &p) <= wmag[k]);
+            errs.push(e);
+            bnds.push(sigma_max(&l));
+        }
+        let cov_e = pairs_ok as f64 / pairs as f64;
+        let cov_n = n_ok as f64 / n_lines as f64;
+        let cov_w = w_ok as f64 / n_lines as f64;
+        let loose = median(bnds) / median(errs);
+        let c = &truth[0].controller;
+        let tp = &truth[0].plant;
+        let exact_g = nominal_gain_interval(tp, c).expect("exact margins");
+        let bounds = u.bounds();
+        let on_lines =
+            robust_stability_matrix_on_lines(&model.model, c, &f, LineBound::Elementwise(&bounds))
+                .expect("robust on lines");
+        let on_w = robust_stability_matrix_weight(&model.model, c, &wfit.weight, true)
+            .expect("robust weight");
+        let bl = bars(&on_lines, tp, c, exact_g);
+        if std::env::var("DEBUG").is_ok() {
+            if let Some(g) = on_lines.upper_gain_margin.filter(|g| g.is_finite()) {
+                let cg = ambid_core::lti::StateSpace::new(
+                    c.a().to_owned(),
+                    c.b().to_owned(),
+                    c.c().to_owned() * (g * 1.001),
+                    c.d().to_owned() * (g * 1.001),
+                    c.ts(),
+                )
+                .expect("scaled");
+                let r = robust_stability_matrix_on_lines(
+                    &model.model,
+                    &cg,
+                    &f,
+                    LineBound::Elementwise(&bounds),
+                )
+                .expect("robust");
+                let k = f.iter().position(|x| *x == r.mu_peak_hz).unwrap_or(0);
+                println!(
+                    "  at g+ {g:.3}: mu {:.3} at {:.1} Hz (line {k} of {})",
+                    r.mu_peak,
+                    r.mu_peak_hz,
+                    f.len()
+                );
+                for (i, j) in [(0, 0), (1, 1), (2, 2), (3, 3), (0, 1), (0, 2)] {
+                    let e = u.entry(i, j).expect("entry");
+                    let p = exact.at(k).expect("line");
+                    println!(
+                        "   ({i},{j}) |P̂| {:.3e} |err| {:.3e} L {:.3e}: (a) {:.3e} (b) {:.3e} misfit {:.3e}",
+                        e.nominal[k].norm(),
+                        (p[(i, j)] - e.nominal[k]).norm(),
+                        e.additive[k],
+                        e.frf_confidence[k],
+                        e.model_error[k],
+                        e.misfit[k]
+                    );
+                }
+            }
+        }
+        let bw = bars(&on_w, tp, c, exact_g);
+        let fmt = |r: &RobustStability| {
+            format!(
+                "[mu {:.2} at {:.0} Hz] {:.3} {:.3}",
+                r.mu_peak,
+                r.mu_peak_hz,
+                r.lower_gain_margin.unwrap_or(f64::NAN),
+                r.upper_gain_margin.unwrap_or(f64::NAN)
+            )
+        };
+        println!(
+            "{rig:3} {:5.0} | {} ({:.1}-{:.0} Hz) raise {raise:.2} | {cov_e:.3} {cov_n:.3} {cov_w:.3} | {loose:.2} | {} ({:.3} {:.3}) {:?} | {} {} {:?} | {:.1}",
+            truth[0].speed_rpm,
+            f.len(),
+            f[0],
+            f[f.len() - 1],
+            fmt(&on_lines),
+            exact_g.0,
+            exact_g.1,
+            bl,
+            wfit.weight.order(),
+            fmt(&on_w),
+            bw,
+            t0.elapsed().as_secs_f64()
+        );
+        summary.push((cov_e, cov_n, cov_w, loose, bl, bw));
+    }
+    let n = summary.len();
+    let count = |p: &dyn Fn(&Row) -> bool| summary.iter().filter(|s| p(s)).count();
+    println!(
+        "runs {n}: element-wise ≥95 % of pairs {}; norm ≥95 % of lines {}; weight ≥95 % {}; looseness median {:.2}; lines: stable@90 % {} half {}; weight: stable@90 % {} half {}",
+        count(&|s| s.0 >= 0.95),
+        count(&|s| s.1 >= 0.95),
+        count(&|s| s.2 >= 0.95),
+        if n > 0 { median(summary.iter().map(|s| s.3).collect()) } else { f64::NAN },
+        count(&|s| s.4.is_some_and(|b| b.0)),
+        count(&|s| s.4.is_some_and(|b| b.1)),
+        count(&|s| s.5.is_some_and(|b| b.0)),
+        count(&|s| s.5.is_some_and(|b| b.1)),
+    );
+}
