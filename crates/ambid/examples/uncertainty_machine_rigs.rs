@@ -207,11 +207,34 @@ fn main() {
                 .unwrap_or(f64::NAN);
             n_lines += 1;
             n_ok += usize::from(e <= norm[k]);
+            if std::env::var("DEBUG_ENTRIES").is_ok() && k % 40 == 0 {
+                println!(
+                    "   {fk:7.1} Hz (window ±{} lines):",
+                    u.entries[0].window_half_lines
+                );
+                for i in 0..4 {
+                    let row: Vec<String> = (0..4)
+                        .map(|j| {
+                            let t = u.entry(i, j).expect("entry");
+                            format!(
+                                "{:.1e}/{:.1e}/{:.1e}",
+                                d[(i, j)],
+                                t.additive[k],
+                                plant
+                                    .variance()
+                                    .map_or(f64::NAN, |v| v[k * 16 + j * 4 + i].sqrt())
+                            )
+                        })
+                        .collect();
+                    println!("     {}", row.join("  "));
+                }
+            }
             if std::env::var("DEBUG_LINES").is_ok() && k % 8 == 0 {
                 let t = u.entry(0, 0).expect("entry");
                 println!(
-                    "   {fk:7.1} Hz: σ̄ err {e:.3e} ‖L‖ {:.3e} | (0,0) err {:.3e} a {:.3e} b {:.3e} misfit {:.3e} |P̂| {:.3e}",
-                    norm[k], d[(0, 0)], t.frf_confidence[k], t.model_error[k], t.misfit[k], t.nominal[k].norm()
+                    "   {fk:7.1} Hz: σ̄ err {e:.3e} ‖L‖ {:.3e} | (0,0) err {:.3e} a {:.3e} b {:.3e} misfit {:.3e} σ {:.3e} |P̂| {:.3e}",
+                    norm[k], d[(0, 0)], t.frf_confidence[k], t.model_error[k], t.misfit[k],
+                    plant.variance().map_or(f64::NAN, |v| v[k * 16].sqrt()), t.nominal[k].norm()
                 );
             }
             w_ok += usize::from(rel_err(k, &p) <= wmag[k]);
