@@ -133,22 +133,7 @@ pub fn robust_stability_on_lines(
     magnitude: &[f64],
 ) -> Result<RobustStability> {
     let ts = loop_ts(plant, controller, None)?;
-    if f_hz.is_empty() || magnitude.len() != f_hz.len() {
-        return Err(Error::invalid(
-            "magnitude",
-            format!(
-                "needs one bound per line and at least one line (got {} lines, {} bounds)",
-                f_hz.len(),
-                magnitude.len()
-            ),
-        ));
-    }
-    if f_hz.iter().any(|f| !(*f > 0.0 && *f < 0.5 / ts)) {
-        return Err(Error::invalid(
-            "f_hz",
-            "every line must lie between 0 and the Nyquist frequency",
-        ));
-    }
+    check_lines("magnitude", f_hz, magnitude.len(), ts)?;
     if magnitude.iter().any(|m| !(*m >= 0.0 && m.is_finite())) {
         return Err(Error::invalid(
             "magnitude",
@@ -300,22 +285,7 @@ pub fn robust_stability_matrix_on_lines(
     bound: LineBound<'_>,
 ) -> Result<RobustStability> {
     let ts = matrix_loop_ts(plant, controller)?;
-    if f_hz.is_empty() || bound.len() != f_hz.len() {
-        return Err(Error::invalid(
-            "bound",
-            format!(
-                "needs one bound per line and at least one line (got {} lines, {} bounds)",
-                f_hz.len(),
-                bound.len()
-            ),
-        ));
-    }
-    if f_hz.iter().any(|f| !(*f > 0.0 && *f < 0.5 / ts)) {
-        return Err(Error::invalid(
-            "f_hz",
-            "every line must lie between 0 and the Nyquist frequency",
-        ));
-    }
+    check_lines("bound", f_hz, bound.len(), ts)?;
     bound.check(plant.noutputs(), plant.ninputs())?;
     assess_matrix(plant, controller, f_hz.to_vec(), bound)
 }
@@ -414,41 +384,11 @@ fn assess_matrix(
     let robustly_stable = nominal_stable && peak < 1.0;
     let (upper, lower) = if robustly_stable {
         let (n_lo, n_hi) = nominal_gain_interval(plant, controller)?;
-        let ok = |g: f64| peak_of(&mu_at(g)) < 1.0;
-        let edge = |up: bool| -> f64 {
-            let (limit, step) = if up {
-                (n_hi.min(1e3), 1.02)
-            } else {
-                (n_lo.max(1e-3), 1.0 / 1.02)
-            };
-            let mut good = 1.0f64;
-            loop {
-                let next = good * step;
-                let past = if up { next >= limit } else { next <= limit };
-                let probe = if past { limit } else { next };
-                if !ok(probe) {
-                    let (mut a, mut b) = (good, probe);
-                    while (b - a).abs() > 1e-6 * a {
-                        let m = 0.5 * (a + b);
-                        if ok(m) {
-                            a = m;
-                        } else {
-                            b = m;
-                        }
-                    }
-                    return a;
-                }
-                if past {
-                    return match (up, limit) {
-                        (true, l) if l >= 1e3 => f64::INFINITY,
-                        (false, l) if l <= 1e-3 => 0.0,
-                        (_, l) => l,
-                    };
-                }
-                good = next;
-            }
-        };
-        (Some(edge(true)), Some(edge(false)))
+        let ok = |g: f64| Ok(peak_of(&mu_at(g)) < 1.0);
+        (
+            Some(gain_edge(ok, true, 1.02, n_hi.min(1e3))?),
+            Some(gain_edge(ok, false, 1.02, n_lo.max(1e-3))?),
+        )
     } else {
         (None, None)
     };
@@ -456,19 +396,33 @@ fn assess_matrix(
         nominal_stable,
         mu_peak: peak,
         mu_peak_hz: peak_hz,
-        stability_margin: if nominal_stable && peak > 0.0 {
-            1.0 / peak
-        } else if nominal_stable {
-            f64::INFINITY
-        } else {
-            0.0
-        },
+        stability_margin: stability_margin(nominal_stable, peak),
         robustly_stable,
         upper_gain_margin: upper,
         lower_gain_margin: lower,
         f_hz: f,
         mu,
     })
+}
+
+/// At least one line, one bound (`name`) per line, every line in $(0, f_N)$.
+fn check_lines(name: &'static str, f_hz: &[f64], bounds: usize, ts: f64) -> Result<()> {
+    if f_hz.is_empty() || bounds != f_hz.len() {
+        return Err(Error::invalid(
+            name,
+            format!(
+                "needs one bound per line and at least one line (got {} lines, {bounds} bounds)",
+                f_hz.len()
+            ),
+        ));
+    }
+    if f_hz.iter().any(|f| !(*f > 0.0 && *f < 0.5 / ts)) {
+        return Err(Error::invalid(
+            "f_hz",
+            "every line must lie between 0 and the Nyquist frequency",
+        ));
+    }
+    Ok(())
 }
 
 /// The common sample time of a SISO `plant`, `controller` (and weight).
@@ -529,19 +483,24 @@ fn assess(
         nominal_stable,
         mu_peak: peak,
         mu_peak_hz: peak_hz,
-        stability_margin: if nominal_stable && peak > 0.0 {
-            1.0 / peak
-        } else if nominal_stable {
-            f64::INFINITY
-        } else {
-            0.0
-        },
+        stability_margin: stability_margin(nominal_stable, peak),
         robustly_stable,
         upper_gain_margin: upper,
         lower_gain_margin: lower,
         f_hz: f,
         mu,
     })
+}
+
+/// $1/\max\mu$: infinite without uncertainty, 0 when the nominal loop is unstable.
+fn stability_margin(nominal_stable: bool, peak: f64) -> f64 {
+    if nominal_stable && peak > 0.0 {
+        1.0 / peak
+    } else if nominal_stable {
+        f64::INFINITY
+    } else {
+        0.0
+    }
 }
 
 /// The loop with the controller's gain scaled by $g$, $u = -gCy + r$.
@@ -576,30 +535,52 @@ pub fn loop_stable(plant: &StateSpace, controller: &StateSpace, g: f64) -> Resul
 /// # Errors
 /// As [`loop_stable`].
 pub fn nominal_gain_interval(plant: &StateSpace, controller: &StateSpace) -> Result<(f64, f64)> {
-    let edge = |up: bool| -> Result<f64> {
-        let step: f64 = if up { 1.01 } else { 1.0 / 1.01 };
-        let mut good = 1.0;
-        loop {
-            let next = good * step;
-            if !(1e-3..=1e3).contains(&next) {
-                return Ok(if up { f64::INFINITY } else { 0.0 });
-            }
-            if !loop_stable(plant, controller, next)? {
-                let (mut a, mut b) = (good, next);
-                while (b - a).abs() > 1e-6 * a {
-                    let m = 0.5 * (a + b);
-                    if loop_stable(plant, controller, m)? {
-                        a = m;
-                    } else {
-                        b = m;
-                    }
+    let stable = |g: f64| loop_stable(plant, controller, g);
+    Ok((
+        gain_edge(stable, false, 1.01, 1e-3)?,
+        gain_edge(stable, true, 1.01, 1e3)?,
+    ))
+}
+
+/// The edge of the gain interval around 1 where `ok` holds: the gain stepped by the factor
+/// `step` up (`up`) or down from 1 until `ok` fails or `limit` is passed, the edge refined by
+/// bisection to $10^{-6}$ relative; $\infty$ (0) when `ok` still holds at the limit $10^3$
+/// ($10^{-3}$), the limit itself for a nearer limit.
+fn gain_edge(
+    mut ok: impl FnMut(f64) -> Result<bool>,
+    up: bool,
+    step: f64,
+    limit: f64,
+) -> Result<f64> {
+    let step = if up { step } else { 1.0 / step };
+    let mut good = 1.0f64;
+    loop {
+        let next = good * step;
+        let past = if up { next >= limit } else { next <= limit };
+        let probe = if past { limit } else { next };
+        if !ok(probe)? {
+            let (mut a, mut b) = (good, probe);
+            while (b - a).abs() > 1e-6 * a {
+                let m = 0.5 * (a + b);
+                if ok(m)? {
+                    a = m;
+                } else {
+                    b = m;
                 }
-                return Ok(a);
             }
-            good = next;
+            return Ok(a);
         }
-    };
-    Ok((edge(false)?, edge(true)?))
+        if past {
+            return Ok(if up && limit >= 1e3 {
+                f64::INFINITY
+            } else if !up && limit <= 1e-3 {
+                0.0
+            } else {
+                limit
+            });
+        }
+        good = next;
+    }
 }
 
 /// The interval $(g_-, g_+) \ni 1$ of gains with $|W g L| < |1 + gL|$ at one frequency
