@@ -138,6 +138,7 @@ fn main() {
             continue;
         };
         let plant = &measured.band(band.0, band.1).expect("band");
+        let t_unc = Instant::now();
         let u = match uncertainty_matrix(&model.model, plant, &[], &UncertaintyOptions::default()) {
             Ok(u) => u,
             Err(e) => {
@@ -145,10 +146,12 @@ fn main() {
                 continue;
             }
         };
+        let t_bound = t_unc.elapsed().as_secs_f64();
         let raise = u
             .joint_raise(DEFAULT_COVER, 0.95, 2000, 0)
             .expect("joint raise")
             .max(1.0);
+        let t_raise = t_unc.elapsed().as_secs_f64() - t_bound;
         let u = if std::env::var("NO_RAISE").is_ok() {
             u
         } else {
@@ -254,6 +257,10 @@ fn main() {
                 .expect("robust on lines");
         let on_w = robust_stability_matrix_weight(&model.model, c, &wfit.weight, true)
             .expect("robust weight");
+        let t_robust = t_unc.elapsed().as_secs_f64() - t_bound - t_raise;
+        if std::env::var("TIMING").is_ok() {
+            println!("  bound {t_bound:.2} s, raise {t_raise:.2} s, bound + raise + weight + exact margins + robust {t_robust:.2} s");
+        }
         let bl = bars(&on_lines, tp, c, exact_g);
         if std::env::var("DEBUG").is_ok() {
             if let Some(g) = on_lines.upper_gain_margin.filter(|g| g.is_finite()) {

@@ -91,6 +91,11 @@ pub struct MachineSection {
     /// 20, 24 in turn until one is at the noise level, closed-loop validation, Campbell diagram
     /// from the models) or `fit-all` (the same with every order fitted and BIC choosing).
     pub models: String,
+    /// With `models = "fit"`/`"fit-all"`: the chosen model's uncertainty per speed, entry by
+    /// entry (`validate::uncertainty::uncertainty_matrix`, raised by its joint factor), and the
+    /// four controllers' robust stability against it on the fit's lines (default: off; about
+    /// 3 s per speed, docs/uncertainty.md "MIMO entries").
+    pub uncertainty: bool,
 }
 
 /// One speed's recorded experiments (`[[machine.files]]`).
@@ -128,6 +133,7 @@ impl Default for MachineSection {
             quality_band_hz: [10.0, 1000.0],
             files: Vec::new(),
             models: "none".into(),
+            uncertainty: false,
         }
     }
 }
@@ -232,6 +238,12 @@ impl MachineSection {
                  the first at the noise level), \"fit-all\" (every candidate order fitted)",
                 self.models
             ));
+        }
+        if self.uncertainty && self.models == "none" {
+            return Err(
+                "machine.uncertainty = true needs a model: set machine.models = \"fit\" (or \"fit-all\")"
+                    .into(),
+            );
         }
         if !["nonlinear", "linear"].contains(&self.mode.as_str()) {
             return Err(format!(

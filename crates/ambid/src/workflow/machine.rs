@@ -217,8 +217,44 @@ pub struct MachineModelOutput {
     pub iso: Vec<IsoRow>,
     /// Largest singular value of S per speed: (speed \[rpm\], peak σ̄(S), frequency \[Hz\]).
     pub sigma_max_s: Vec<(f64, f64, f64)>,
+    /// The chosen model's uncertainty and robust stability per speed (`[machine] uncertainty`).
+    pub uncertainty: Vec<UncertaintyRow>,
     /// Notes for the report (e.g. why a speed has no model).
     pub notes: Vec<String>,
+}
+
+/// The chosen model's uncertainty at one speed (`[machine] uncertainty = true`): the
+/// element-wise bound of `ambid_core::validate::uncertainty::uncertainty_matrix` on the fit's
+/// lines, raised by its joint factor, and the robust stability of the four decentralised
+/// controllers against it on those lines (`robust_stability_matrix_on_lines`).
+#[derive(Debug, Clone, Serialize)]
+pub struct UncertaintyRow {
+    /// The speed \[rpm\].
+    pub speed_rpm: f64,
+    /// The fit's band \[Hz\] and its lines.
+    pub band_hz: [f64; 2],
+    /// Lines.
+    pub lines: usize,
+    /// The joint raise applied (98 % of the (line, entry) pairs in 95 % of 2 000 draws; ≥ 1).
+    pub raise: f64,
+    /// Median over the lines of ‖L‖₂ / σ̄(P̂) \[%\].
+    pub median_rel_pct: f64,
+    /// Largest over the lines of ‖L‖₂ / σ̄(P̂) \[%\].
+    pub max_rel_pct: f64,
+    /// Nominally stable and ρ(L|M|) < 1 on every line.
+    pub robustly_stable: bool,
+    /// max ρ(L|M|) and where \[Hz\].
+    pub mu_peak: f64,
+    /// Where \[Hz\].
+    pub mu_peak_hz: f64,
+    /// Robust gain margins of all four controllers together (`None`: not robustly stable).
+    pub gain_margins: Option<[f64; 2]>,
+    /// The exact loop's gain interval (twin).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub exact_gain_margins: Option<[f64; 2]>,
+    /// Twin: the fraction of the lines in 10–1000 Hz where ‖L‖₂ ≥ σ̄(P − P̂).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub truth_coverage: Option<f64>,
 }
 
 /// The seam between the measurement and the MIMO models: one call that takes every speed's FRF
@@ -459,6 +495,9 @@ pub struct MachineSummary {
     /// Exported model names.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub models: Vec<String>,
+    /// The chosen models' uncertainty per speed (`[machine] uncertainty`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub uncertainty: Vec<UncertaintyRow>,
 }
 
 /// SplitMix64 of `seed` and `stream`: independent seeds per speed and experiment.

@@ -560,6 +560,7 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
                 &machine_fit::FrequencyFitter {
                     stop_at_noise_level: kind == "fit",
                     order_from_reference_speed: kind == "fit",
+                    uncertainty: cfg.machine.as_ref().is_some_and(|m| m.uncertainty),
                     ..Default::default()
                 },
             )
