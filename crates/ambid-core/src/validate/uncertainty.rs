@@ -413,18 +413,7 @@ fn uncertainty_with(
             ))
         }
     };
-    let var = frd.variance().ok_or_else(|| {
-        Error::invalid(
-            "frd",
-            "the FRF has no variances: estimate it from at least two periods (or realisations) so that its confidence region is known",
-        )
-    })?;
-    if var.iter().any(|v| !(*v > 0.0 && v.is_finite())) {
-        return Err(Error::invalid(
-            "frd",
-            "every line's variance must be positive and finite",
-        ));
-    }
+    let var = positive_variances(frd)?;
     let l = frd.len();
     for (name, v) in [
         ("nonlinear_std", extra.nonlinear_std),
@@ -992,18 +981,7 @@ fn joint_tangent_sensitivities(
     let ts = model
         .ts()
         .ok_or_else(|| Error::invalid("nominal", "needs a discrete-time model"))?;
-    let var = frd.variance().ok_or_else(|| {
-        Error::invalid(
-            "frd",
-            "the FRF has no variances: estimate it from at least two periods (or realisations) so that its confidence region is known",
-        )
-    })?;
-    if var.iter().any(|v| !(*v > 0.0 && v.is_finite())) {
-        return Err(Error::invalid(
-            "frd",
-            "every line's variance of every entry must be positive and finite",
-        ));
-    }
+    let var = positive_variances(frd)?;
     let has_d = (0..ny).any(|i| (0..nu).any(|j| model.d()[(i, j)] != 0.0));
     let n_cols = n * n + n * nu + ny * n + if has_d { e } else { 0 };
     let dim = (n * (ny + nu) + if has_d { e } else { 0 }).min(n_cols);
@@ -1107,6 +1085,23 @@ fn joint_tangent_sensitivities(
         })
         .collect();
     Ok((sens, rank))
+}
+
+/// The FRF's variances, every one positive and finite.
+fn positive_variances(frd: &Frd) -> Result<&[f64]> {
+    let var = frd.variance().ok_or_else(|| {
+        Error::invalid(
+            "frd",
+            "the FRF has no variances: estimate it from at least two periods (or realisations) so that its confidence region is known",
+        )
+    })?;
+    if var.iter().any(|v| !(*v > 0.0 && v.is_finite())) {
+        return Err(Error::invalid(
+            "frd",
+            "every line's variance (of every entry) must be positive and finite",
+        ));
+    }
+    Ok(var)
 }
 
 fn tangent_dim(poles: &[c64], has_d: bool) -> usize {
