@@ -263,7 +263,8 @@ impl LineBound<'_> {
 ///
 /// # Example
 /// Two decoupled first-order loops with no uncertainty: the margins are the nominal ones, set by
-/// the faster loop (pole $0.9 - 0.1g \cdot 2$ reaches $-1$ at $g = 9.5$).
+/// the loop that fails first (poles $0.9 - 0.2g$ and $0.5 - 0.2g$ reach $-1$ at $g = 9.5$ and
+/// $g = 7.5$); no lower limit (the plants are stable).
 /// ```
 /// use ambid_core::lti::StateSpace;
 /// use ambid_core::validate::robust::{robust_stability_matrix_on_lines, LineBound};
@@ -276,7 +277,8 @@ impl LineBound<'_> {
 /// let none = vec![Mat::<f64>::zeros(2, 2); f.len()];
 /// let r = robust_stability_matrix_on_lines(&p, &c, &f, LineBound::Elementwise(&none)).unwrap();
 /// assert!(r.robustly_stable);
-/// assert!((r.upper_gain_margin.unwrap() - 9.5).abs() < 1e-3, "{r:?}");
+/// assert!((r.upper_gain_margin.unwrap() - 7.5).abs() < 1e-3, "{r:?}");
+/// assert_eq!(r.lower_gain_margin, Some(0.0));
 /// ```
 pub fn robust_stability_matrix_on_lines(
     plant: &StateSpace,
