@@ -1002,7 +1002,7 @@ fn joint_tangent_sensitivities(
         });
         let b = faer::Mat::from_fn(n, nu, |r, c| c64::new(model.b()[(r, c)], 0.0));
         let ct = faer::Mat::from_fn(n, ny, |r, c| c64::new(model.c()[(c, r)], 0.0));
-        let x = crate::linalg::solve_c64(zi_a.as_ref(), b.as_ref()).map_err(|_| {
+        let on_pole = |_| {
             Error::numerical(
                 CTX,
                 format!(
@@ -1010,17 +1010,10 @@ fn joint_tangent_sensitivities(
                     frd.f_hz()[k]
                 ),
             )
-        })?;
+        };
+        let x = crate::linalg::solve_c64(zi_a.as_ref(), b.as_ref()).map_err(on_pole)?;
         let yt = crate::linalg::solve_c64(zi_a.transpose().to_owned().as_ref(), ct.as_ref())
-            .map_err(|_| {
-                Error::numerical(
-                    CTX,
-                    format!(
-                        "a pole of the model lies on the line at {} Hz",
-                        frd.f_hz()[k]
-                    ),
-                )
-            })?;
+            .map_err(on_pole)?;
         for j in 0..nu {
             for i in 0..ny {
                 let w = (2.0 / var[k * e + j * ny + i]).sqrt();
