@@ -29,6 +29,12 @@ pub const MIN_SCREENSHOT_BYTES: u64 = 55_000;
 /// How long one Chromium run may take before it is killed.
 const TIMEOUT: Duration = Duration::from_secs(90);
 
+/// How many times a Chromium run that hung (was killed after [`TIMEOUT`]) is started again with
+/// a fresh profile. Headless Chromium occasionally never exits after writing its screenshot on
+/// a loaded machine (seen once in CI with the test suite on both cores); a crash or a non-zero
+/// exit is never retried, and every retry is logged on stderr.
+const HANG_RETRIES: usize = 1;
+
 /// The outcome of [`browser_check`].
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum BrowserCheck {
@@ -286,6 +292,7 @@ pub(crate) fn debug_text(text: &str) -> Vec<String> {
 }
 
 /// Output of one Chromium run.
+#[derive(Debug)]
 struct RunOutput {
     stdout: String,
     stderr: String,
@@ -318,20 +325,66 @@ impl Drop for TempDir {
     }
 }
 
-/// Runs Chromium headless with a fresh profile; stdout and stderr go to files (no pipe can
-/// fill up), the run is killed after [`TIMEOUT`].
+/// Why one Chromium run failed.
+enum RunError {
+    /// Killed after its time limit.
+    Hung(String),
+    /// Could not start, or exited with an error.
+    Failed(String),
+}
+
+/// [`run_chromium_once`], started again (at most [`HANG_RETRIES`] times) when it hangs.
 fn run_chromium(
     chromium: &Path,
     work: &Path,
     tag: &str,
     args: &[String],
 ) -> Result<RunOutput, String> {
+    run_chromium_within(chromium, work, tag, args, TIMEOUT)
+}
+
+/// [`run_chromium`] with the time limit of one run given.
+fn run_chromium_within(
+    chromium: &Path,
+    work: &Path,
+    tag: &str,
+    args: &[String],
+    timeout: Duration,
+) -> Result<RunOutput, String> {
+    let mut attempt = 0;
+    loop {
+        let attempt_tag = if attempt == 0 {
+            tag.to_string()
+        } else {
+            format!("{tag}-retry{attempt}")
+        };
+        match run_chromium_once(chromium, work, &attempt_tag, args, timeout) {
+            Ok(out) => return Ok(out),
+            Err(RunError::Hung(msg)) if attempt < HANG_RETRIES => {
+                eprintln!("browser check: {msg}; starting it again with a fresh profile");
+                attempt += 1;
+            }
+            Err(RunError::Hung(msg) | RunError::Failed(msg)) => return Err(msg),
+        }
+    }
+}
+
+/// Runs Chromium headless with a fresh profile; stdout and stderr go to files (no pipe can
+/// fill up), the run is killed after `timeout`.
+fn run_chromium_once(
+    chromium: &Path,
+    work: &Path,
+    tag: &str,
+    args: &[String],
+    timeout: Duration,
+) -> Result<RunOutput, RunError> {
+    let fail = RunError::Failed;
     let profile = work.join(format!("profile-{tag}"));
-    fs::create_dir_all(&profile).map_err(|e| format!("cannot create profile dir: {e}"))?;
+    fs::create_dir_all(&profile).map_err(|e| fail(format!("cannot create profile dir: {e}")))?;
     let out_path = work.join(format!("{tag}.stdout"));
     let err_path = work.join(format!("{tag}.stderr"));
-    let out = fs::File::create(&out_path).map_err(|e| format!("temp file: {e}"))?;
-    let err = fs::File::create(&err_path).map_err(|e| format!("temp file: {e}"))?;
+    let out = fs::File::create(&out_path).map_err(|e| fail(format!("temp file: {e}")))?;
+    let err = fs::File::create(&err_path).map_err(|e| fail(format!("temp file: {e}")))?;
     let mut child = Command::new(chromium)
         .args([
             "--headless",
@@ -349,28 +402,30 @@ fn run_chromium(
         .stdout(out)
         .stderr(err)
         .spawn()
-        .map_err(|e| format!("cannot start {}: {e}", chromium.display()))?;
+        .map_err(|e| fail(format!("cannot start {}: {e}", chromium.display())))?;
     let start = Instant::now();
     let status = loop {
         match child.try_wait() {
             Ok(Some(status)) => break status,
-            Ok(None) if start.elapsed() > TIMEOUT => {
+            Ok(None) if start.elapsed() > timeout => {
                 let _ = child.kill();
                 let _ = child.wait();
-                return Err(format!("chromium ({tag}) timed out after {TIMEOUT:?}"));
+                return Err(RunError::Hung(format!(
+                    "chromium ({tag}) timed out after {timeout:?}"
+                )));
             }
             Ok(None) => std::thread::sleep(Duration::from_millis(20)),
-            Err(e) => return Err(format!("waiting for chromium: {e}")),
+            Err(e) => return Err(fail(format!("waiting for chromium: {e}"))),
         }
     };
     let stdout = String::from_utf8_lossy(&fs::read(&out_path).unwrap_or_default()).into_owned();
     let stderr = String::from_utf8_lossy(&fs::read(&err_path).unwrap_or_default()).into_owned();
     if !status.success() {
         let tail: Vec<&str> = stderr.lines().rev().take(8).collect();
-        return Err(format!(
+        return Err(fail(format!(
             "chromium ({tag}) failed with {status}: {}",
             tail.into_iter().rev().collect::<Vec<_>>().join(" | ")
-        ));
+        )));
     }
     Ok(RunOutput { stdout, stderr })
 }
@@ -508,6 +563,58 @@ fn has_drawn_element(body: &str) -> bool {
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+
+    /// A fake browser: a shell script that counts its starts in `calls` and does what `body`
+    /// says.
+    fn fake_browser(dir: &Path, body: &str) -> PathBuf {
+        use std::os::unix::fs::PermissionsExt;
+        let script = dir.join("fake-chromium");
+        let calls = dir.join("calls");
+        fs::write(
+            &script,
+            format!(
+                "#!/bin/sh\necho x >> '{}'\nn=$(wc -l < '{}')\n{body}\n",
+                calls.display(),
+                calls.display()
+            ),
+        )
+        .unwrap();
+        fs::set_permissions(&script, fs::Permissions::from_mode(0o755)).unwrap();
+        script
+    }
+
+    fn starts(dir: &Path) -> usize {
+        fs::read_to_string(dir.join("calls"))
+            .map(|s| s.lines().count())
+            .unwrap_or(0)
+    }
+
+    #[test]
+    fn a_hung_run_is_started_once_more_and_a_failed_one_is_not() {
+        let short = Duration::from_millis(1500);
+        // Hangs on its first start, answers on the second.
+        let dir = TempDir::new().unwrap();
+        let fake = fake_browser(
+            &dir.0,
+            "if [ \"$n\" -eq 1 ]; then exec sleep 30; fi\necho rendered",
+        );
+        let out = run_chromium_within(&fake, &dir.0, "t", &[], short).unwrap();
+        assert_eq!(out.stdout.trim(), "rendered");
+        assert_eq!(starts(&dir.0), 2);
+        // Hangs every time: one retry, then the time-out is the error.
+        let dir = TempDir::new().unwrap();
+        let fake = fake_browser(&dir.0, "exec sleep 30");
+        let err = run_chromium_within(&fake, &dir.0, "t", &[], short).unwrap_err();
+        assert!(err.contains("timed out"), "{err}");
+        assert_eq!(starts(&dir.0), 1 + HANG_RETRIES);
+        // Fails: no retry, the exit status and the log's tail are the error.
+        let dir = TempDir::new().unwrap();
+        let fake = fake_browser(&dir.0, "echo broken >&2\nexit 3");
+        let err = run_chromium_within(&fake, &dir.0, "t", &[], short).unwrap_err();
+        assert!(err.contains("failed") && err.contains("broken"), "{err}");
+        assert_eq!(starts(&dir.0), 1);
+    }
 
     #[test]
     fn debug_text_finds_rust_debug_output_and_not_plain_words() {
@@ -526,8 +633,6 @@ mod tests {
             assert!(debug_text(fine).is_empty(), "{fine}");
         }
     }
-
-    use super::*;
 
     #[test]
     fn svg_counting() {
