@@ -8,8 +8,9 @@
 //!
 //! * `cov_e`: the fraction of (line, entry) pairs with $|P_{ij} - \hat P_{ij}| \le L_{ij}$;
 //! * `cov_n`: the fraction of lines with $\bar\sigma(P - \hat P) \le \lVert L\rVert_2$;
-//! * `cov_w`: the fraction of lines with $\bar\sigma(\hat P^{-1}(P - \hat P)) \le |w_I|$, the
-//!   input-multiplicative weight fitted over `input_multiplicative_bound`;
+//! * `cov_w`: the fraction of lines with $\bar\sigma(P - \hat P) \le \lVert\,|\hat P|\circ|W|\,\rVert_2$,
+//!   the structured weight (`MatrixUncertainty::entry_weights`: one relative weight of order
+//!   ≤ 4 per entry over its raised bound), and `loose_w` its looseness as `loose` below;
 //! * `loose`: median $\lVert L\rVert_2$ / median $\bar\sigma(P - \hat P)$;
 //! * robust gain margins (all four controllers' gains together) on the lines (element-wise) and
 //!   against the weight, each with the bars: the exact loop stable at 90 % of the margin, and the
@@ -25,10 +26,10 @@ use ambid_core::lti::Frd;
 use ambid_core::validate::iso::IsoZones;
 use ambid_core::validate::robust::{
     loop_stable, nominal_gain_interval, robust_stability_matrix_on_lines,
-    robust_stability_matrix_weight, LineBound, RobustStability,
+    robust_stability_matrix_weight, LineBound, MatrixWeight, RobustStability,
 };
-use ambid_core::validate::uncertainty::{uncertainty_matrix, UncertaintyOptions};
-use ambid_core::validate::weight::{fit_weight, DEFAULT_COVER};
+use ambid_core::validate::uncertainty::{uncertainty_matrix, EntryForm, UncertaintyOptions};
+use ambid_core::validate::weight::{Weight, DEFAULT_COVER};
 use faer::Mat;
 use std::path::Path;
 use std::time::Instant;
@@ -87,7 +88,7 @@ fn main() {
     let dir = std::env::temp_dir().join(format!("ambid-unc-machine-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("tmp dir");
     let mut summary = Vec::new();
-    println!("rig rpm | lines | cov_e cov_n cov_w | loose_n | lines: g- g+ (exact g- g+) stable half | weight: order g- g+ stable half | s");
+    println!("rig rpm | lines | cov_e cov_n cov_w | loose_n loose_w | lines: g- g+ (exact g- g+) stable half | entry weights: max order g- g+ stable half | s");
     for rig in rigs {
         let t0 = Instant::now();
         let m = if rig == 0 {
@@ -166,27 +167,28 @@ fn main() {
         let f = u.f_hz().to_vec();
         let exact = Frd::from_model(&truth[0].plant, &f).expect("exact");
         let norm = u.norm_bound();
-        let rel = u
-            .input_multiplicative_bound()
-            .expect("input-multiplicative bound");
-        let wfit = fit_weight(
-            &f,
-            &rel.iter().map(|v| v.max(1e-300)).collect::<Vec<f64>>(),
-            data.ts,
-            4,
-            DEFAULT_COVER,
-        )
-        .expect("weight");
-        let wmag = wfit.weight.magnitude(&f);
-        // the true input-multiplicative error σ̄(P̂⁻¹(P − P̂)) on the lines
-        let rel_err = |k: usize, p: &Mat<faer::c64>| -> f64 {
-            let ph = u.nominal_at(k);
-            let d = Mat::from_fn(4, 4, |i, j| p[(i, j)] - ph[(i, j)]);
-            let x = ambid_core::linalg::solve_c64(ph.as_ref(), d.as_ref()).expect("solve");
-            x.singular_values()
-                .map(|s| s.into_iter().fold(0.0, f64::max))
-                .unwrap_or(f64::NAN)
+        let t_w = Instant::now();
+        let additive = std::env::var("ADDITIVE").is_ok();
+        let form = if additive {
+            EntryForm::Additive
+        } else {
+            EntryForm::Relative
         };
+        let wfits = u
+            .entry_weights(data.ts, 4, DEFAULT_COVER, form)
+            .expect("entry weights");
+        let t_weights = t_w.elapsed().as_secs_f64();
+        let weights: Vec<Weight> = wfits.iter().map(|w| w.weight.clone()).collect();
+        let wmags: Vec<Vec<f64>> = weights.iter().map(|w| w.magnitude(&f)).collect();
+        // the structured weight's element-wise bound |P̂_ij||W_ij| at line k
+        let wbound = |k: usize| {
+            let ph = u.nominal_at(k);
+            Mat::from_fn(4, 4, |i, j| {
+                let scale = if additive { 1.0 } else { ph[(i, j)].norm() };
+                scale * wmags[i + j * 4][k]
+            })
+        };
+        let mut wbnds = Vec::new();
         let (mut pairs, mut pairs_ok, mut n_lines, mut n_ok, mut w_ok) = (0, 0, 0, 0, 0);
         let (mut errs, mut bnds) = (Vec::new(), Vec::new());
         for (k, fk) in f.iter().enumerate() {
@@ -240,13 +242,16 @@ fn main() {
                     plant.variance().map_or(f64::NAN, |v| v[k * 16].sqrt()), t.nominal[k].norm()
                 );
             }
-            w_ok += usize::from(rel_err(k, &p) <= wmag[k]);
+            let wb = sigma_max(&wbound(k));
+            w_ok += usize::from(e <= wb);
+            wbnds.push(wb);
             errs.push(e);
             bnds.push(sigma_max(&l));
         }
         let cov_e = pairs_ok as f64 / pairs as f64;
         let cov_n = n_ok as f64 / n_lines as f64;
         let cov_w = w_ok as f64 / n_lines as f64;
+        let loose_w = median(wbnds) / median(errs.clone());
         let loose = median(bnds) / median(errs);
         let c = &truth[0].controller;
         let tp = &truth[0].plant;
@@ -255,11 +260,19 @@ fn main() {
         let on_lines =
             robust_stability_matrix_on_lines(&model.model, c, &f, LineBound::Elementwise(&bounds))
                 .expect("robust on lines");
-        let on_w = robust_stability_matrix_weight(&model.model, c, &wfit.weight, true)
-            .expect("robust weight");
+        let on_w = robust_stability_matrix_weight(
+            &model.model,
+            c,
+            if additive {
+                MatrixWeight::EntryAdditive(&weights)
+            } else {
+                MatrixWeight::EntryRelative(&weights)
+            },
+        )
+        .expect("robust weight");
         let t_robust = t_unc.elapsed().as_secs_f64() - t_bound - t_raise;
         if std::env::var("TIMING").is_ok() {
-            println!("  bound {t_bound:.2} s, raise {t_raise:.2} s, bound + raise + weight + exact margins + robust {t_robust:.2} s");
+            println!("  bound {t_bound:.2} s, raise {t_raise:.2} s, entry weights {t_weights:.2} s, bound + raise + weights + exact margins + robust {t_robust:.2} s");
         }
         let bl = bars(&on_lines, tp, c, exact_g);
         if std::env::var("DEBUG").is_ok() {
@@ -301,6 +314,34 @@ fn main() {
                 }
             }
         }
+        if std::env::var("DEBUG_W").is_ok() {
+            let k = f
+                .iter()
+                .enumerate()
+                .min_by(|a, b| {
+                    (a.1 - on_w.mu_peak_hz)
+                        .abs()
+                        .total_cmp(&(b.1 - on_w.mu_peak_hz).abs())
+                })
+                .map_or(0, |x| x.0);
+            let wb = wbound(k);
+            let l = u.bound_at(k);
+            let ph = u.nominal_at(k);
+            println!("  weight μ peak {:.1} Hz, line {k} at {:.1} Hz: |P̂_ij| / (|P̂||W|)/L / uncovered lines", on_w.mu_peak_hz, f[k]);
+            for i in 0..4 {
+                let row: Vec<String> = (0..4)
+                    .map(|j| {
+                        format!(
+                            "{:.1e}/{:6.2}/{}",
+                            ph[(i, j)].norm(),
+                            wb[(i, j)] / l[(i, j)],
+                            wfits[i + j * 4].uncovered_hz.len()
+                        )
+                    })
+                    .collect();
+                println!("     {}", row.join("  "));
+            }
+        }
         let bw = bars(&on_w, tp, c, exact_g);
         let fmt = |r: &RobustStability| {
             format!(
@@ -312,7 +353,7 @@ fn main() {
             )
         };
         println!(
-            "{rig:3} {:5.0} | {} ({:.1}-{:.0} Hz) raise {raise:.2} | {cov_e:.3} {cov_n:.3} {cov_w:.3} | {loose:.2} | {} ({:.3} {:.3}) {:?} | {} {} {:?} | {:.1}",
+            "{rig:3} {:5.0} | {} ({:.1}-{:.0} Hz) raise {raise:.2} | {cov_e:.3} {cov_n:.3} {cov_w:.3} | {loose:.2} {loose_w:.2} | {} ({:.3} {:.3}) {:?} | {} {} {:?} | {:.1}",
             truth[0].speed_rpm,
             f.len(),
             f[0],
@@ -321,7 +362,7 @@ fn main() {
             exact_g.0,
             exact_g.1,
             bl,
-            wfit.weight.order(),
+            weights.iter().map(Weight::order).max().unwrap_or(0),
             fmt(&on_w),
             bw,
             t0.elapsed().as_secs_f64()

@@ -97,7 +97,7 @@ pub fn robust_stability(
     weight: &Weight,
 ) -> Result<RobustStability> {
     let ts = loop_ts(plant, controller, Some(weight.ts))?;
-    let f = grid(&[plant, controller], weight, ts)?;
+    let f = grid(&[plant, controller], &[weight], ts)?;
     let wr = weight.magnitude(&f);
     assess(plant, controller, f, &wr)
 }
@@ -292,40 +292,128 @@ pub fn robust_stability_matrix_on_lines(
     assess_matrix(plant, controller, f_hz.to_vec(), bound)
 }
 
-/// [`robust_stability_matrix_on_lines`] against an unstructured weight $w$ (SISO, scaling the
-/// identity) on the grid of [`robust_stability`] (module docs): additive, $P = \hat P + w\Delta$
-/// ($w$ in the plant's units, fitted over
-/// [`MatrixUncertainty::norm_bound`](super::uncertainty::MatrixUncertainty::norm_bound)), or
-/// input-multiplicative, $P = \hat P(I + w\Delta)$ (fitted over
-/// [`MatrixUncertainty::input_multiplicative_bound`](super::uncertainty::MatrixUncertainty::input_multiplicative_bound)),
-/// $\bar\sigma(\Delta) \le 1$. Outside the band it was fitted on, the weight is its
-/// extrapolation: a rising additive weight meets $\bar\sigma(M) \approx \bar\sigma(C)$, large for
-/// a PID controller, while $T_I$ rolls off, so the input-multiplicative form is the one whose
-/// verdict rests on the band.
+/// The uncertainty weight of a plant with several inputs and outputs, for
+/// [`robust_stability_matrix_weight`]; every $\Delta$ stable.
+#[derive(Debug, Clone, Copy)]
+pub enum MatrixWeight<'a> {
+    /// Additive and unstructured, $P = \hat P + w\Delta$, $\bar\sigma(\Delta) \le 1$ ($w$ in
+    /// the plant's units, fitted over
+    /// [`MatrixUncertainty::norm_bound`](super::uncertainty::MatrixUncertainty::norm_bound)).
+    Additive(&'a Weight),
+    /// Input-multiplicative and unstructured, $P = \hat P(I + w\Delta)$,
+    /// $\bar\sigma(\Delta) \le 1$ (fitted over
+    /// [`MatrixUncertainty::input_multiplicative_bound`](super::uncertainty::MatrixUncertainty::input_multiplicative_bound)).
+    InputMultiplicative(&'a Weight),
+    /// Relative per entry, structured: $P_{ij} = \hat P_{ij}(1 + W_{ij}\delta_{ij})$ with
+    /// independent $|\delta_{ij}| \le 1$ (the weights of
+    /// [`MatrixUncertainty::entry_weights`](super::uncertainty::MatrixUncertainty::entry_weights),
+    /// entry $(i, j)$ at index $i + j\,n_y$). The additive perturbation is bounded element-wise
+    /// by $|\hat P_{ij}|\,|W_{ij}|$, so the test is the element-wise one,
+    /// $\mu = \rho\big((|\hat P| \circ |W|)\,|M|\big)$; for a $1\times 1$ plant
+    /// $|W|\,|T|$, the test of [`robust_stability`]. Relative weights follow the model's
+    /// roll-off outside the band they were fitted on (an additive weight flattens there, where
+    /// $M \approx C$ is large).
+    EntryRelative(&'a [Weight]),
+    /// Additive per entry, structured: $P_{ij} = \hat P_{ij} + W_{ij}\delta_{ij}$ with
+    /// independent $|\delta_{ij}| \le 1$; $\mu = \rho(|W|\,|M|)$.
+    EntryAdditive(&'a [Weight]),
+}
+
+impl MatrixWeight<'_> {
+    fn weights(&self) -> Vec<&Weight> {
+        match self {
+            MatrixWeight::Additive(w) | MatrixWeight::InputMultiplicative(w) => vec![w],
+            MatrixWeight::EntryRelative(w) | MatrixWeight::EntryAdditive(w) => w.iter().collect(),
+        }
+    }
+}
+
+/// [`robust_stability_matrix_on_lines`] against a rational weight ([`MatrixWeight`]) on the grid
+/// of [`robust_stability`] (module docs, "Grid", with the lightly damped poles of every weight).
+/// Outside the band it was fitted on, a weight is its extrapolation: a rising additive weight
+/// meets $\bar\sigma(M) \approx \bar\sigma(C)$, large for a PID controller, while $T_I$ and
+/// $|\hat P_{ij}|$ roll off, so the input-multiplicative and the entry-relative forms are the
+/// ones whose verdict rests on the band.
 ///
 /// # Errors
-/// As [`robust_stability_matrix_on_lines`], and a weight of another sample time.
+/// As [`robust_stability_matrix_on_lines`], a weight of another sample time, and for
+/// [`MatrixWeight::EntryRelative`] a number of weights other than $n_y n_u$.
+///
+/// # Example
+/// A decoupled 2×2 loop with a flat 10 % relative weight on every entry: the margin is
+/// $1/\max_k(0.1\,\max_i |T_{ii}|)$, set by the loop whose $|T|$ peaks highest.
+/// ```
+/// use ambid_core::lti::StateSpace;
+/// use ambid_core::validate::robust::{robust_stability_matrix_weight, MatrixWeight};
+/// use ambid_core::validate::weight::Weight;
+/// use faer::{mat, Mat};
+/// let p = StateSpace::discrete(mat![[0.9, 0.0], [0.0, 0.5]], mat![[1.0, 0.0], [0.0, 1.0]],
+///     mat![[0.1, 0.0], [0.0, 0.1]], mat![[0.0, 0.0], [0.0, 0.0]], 1e-3).unwrap();
+/// let c = StateSpace::discrete(Mat::zeros(0, 0), Mat::zeros(0, 2), Mat::zeros(2, 0),
+///     mat![[2.0, 0.0], [0.0, 2.0]], 1e-3).unwrap();
+/// let w = Weight { ts: 1e-3, gain: 0.1, numerator: vec![], denominator: vec![] };
+/// let ws = vec![w; 4];
+/// let r = robust_stability_matrix_weight(&p, &c, MatrixWeight::EntryRelative(&ws)).unwrap();
+/// // T_ii = 0.2 / (z − 0.7) and 0.2 / (z − 0.3) peak at z → 1 (the grid's lowest line):
+/// // 0.2 / 0.3 = 0.667 and 0.2 / 0.7 = 0.286, so μ peaks at 0.1 · 0.667
+/// assert!((r.mu_peak - 0.1 * 0.2 / 0.3).abs() < 1e-3, "{}", r.mu_peak);
+/// assert!(r.robustly_stable);
+/// ```
 pub fn robust_stability_matrix_weight(
     plant: &StateSpace,
     controller: &StateSpace,
-    weight: &Weight,
-    input_multiplicative: bool,
+    weight: MatrixWeight<'_>,
 ) -> Result<RobustStability> {
     let ts = matrix_loop_ts(plant, controller)?;
-    if (weight.ts - ts).abs() > 1e-9 * ts {
+    let weights = weight.weights();
+    if weights.iter().any(|w| (w.ts - ts).abs() > 1e-9 * ts) {
         return Err(Error::invalid(
             "weight",
-            "the weight must have the plant's sample time",
+            "every weight must have the plant's sample time",
         ));
     }
-    let f = grid(&[plant, controller], weight, ts)?;
-    let s = weight.magnitude(&f);
-    let bound = if input_multiplicative {
-        LineBound::InputMultiplicative(&s)
-    } else {
-        LineBound::Additive(&s)
-    };
-    assess_matrix(plant, controller, f, bound)
+    let (ny, nu) = (plant.noutputs(), plant.ninputs());
+    if weights.len() != 1 && weights.len() != ny * nu {
+        return Err(Error::invalid(
+            "weight",
+            format!(
+                "an entry-relative weight needs one weight per entry ({} for a {ny}×{nu} plant), got {}",
+                ny * nu,
+                weights.len()
+            ),
+        ));
+    }
+    let f = grid(&[plant, controller], &weights, ts)?;
+    match weight {
+        MatrixWeight::Additive(w) => {
+            let s = w.magnitude(&f);
+            assess_matrix(plant, controller, f, LineBound::Additive(&s))
+        }
+        MatrixWeight::InputMultiplicative(w) => {
+            let s = w.magnitude(&f);
+            assess_matrix(plant, controller, f, LineBound::InputMultiplicative(&s))
+        }
+        MatrixWeight::EntryRelative(ws) | MatrixWeight::EntryAdditive(ws) => {
+            let relative = matches!(weight, MatrixWeight::EntryRelative(_));
+            if ws.len() != ny * nu {
+                return Err(Error::invalid(
+                    "weight",
+                    format!("needs {} entry weights, got {}", ny * nu, ws.len()),
+                ));
+            }
+            let mags: Vec<Vec<f64>> = ws.iter().map(|w| w.magnitude(&f)).collect();
+            let pl = plant.freq_response(&f)?;
+            let bounds: Vec<faer::Mat<f64>> = (0..f.len())
+                .map(|k| {
+                    faer::Mat::from_fn(ny, nu, |i, j| {
+                        let scale = if relative { pl[k][(i, j)].norm() } else { 1.0 };
+                        scale * mags[i + j * ny][k]
+                    })
+                })
+                .collect();
+            assess_matrix(plant, controller, f, LineBound::Elementwise(&bounds))
+        }
+    }
 }
 
 /// The common sample time of a plant and a controller of the transposed size.
@@ -629,7 +717,7 @@ fn gain_interval(l: c64, w: f64) -> (f64, f64) {
 }
 
 /// The frequency grid of the module docs.
-fn grid(models: &[&StateSpace], weight: &Weight, ts: f64) -> Result<Vec<f64>> {
+fn grid(models: &[&StateSpace], weights: &[&Weight], ts: f64) -> Result<Vec<f64>> {
     let fs = 1.0 / ts;
     let (lo, hi) = (1e-4 * fs, 0.5 * fs);
     let n = 4000;
@@ -640,7 +728,9 @@ fn grid(models: &[&StateSpace], weight: &Weight, ts: f64) -> Result<Vec<f64>> {
     for m in models {
         poles.extend(m.poles()?);
     }
-    poles.extend(weight.poles());
+    for w in weights {
+        poles.extend(w.poles());
+    }
     for p in poles {
         if p.norm() == 0.0 || p.im.abs() < 1e-12 {
             continue;
@@ -900,6 +990,63 @@ mod tests {
         let wrong = vec![Mat::<f64>::zeros(2, 2); f.len()];
         assert!(
             robust_stability_matrix_on_lines(&p, &c, &f, LineBound::Elementwise(&wrong)).is_err()
+        );
+    }
+
+    /// For a SISO loop the per-entry weight forms are the SISO weight test: the relative entry
+    /// weight gives $\mu = |W||T|$ of [`robust_stability`] on the same grid, and its margins;
+    /// the additive entry weight $|\hat P|\,|W|$ — here checked against the additive weight
+    /// $w$ of constant magnitude, $\mu = w|M|$ — equals the unstructured additive form. A
+    /// weight of another sample time or the wrong number of weights is refused.
+    #[test]
+    fn the_entry_weights_of_a_siso_loop_are_the_siso_weight_test() {
+        let ts = 1e-4;
+        let (p, c) = bearing_loop(ts);
+        let w = Weight {
+            ts,
+            gain: 0.15,
+            numerator: vec![Factor::Second {
+                omega: 2.0e4,
+                zeta: 0.7,
+            }],
+            denominator: vec![Factor::Second {
+                omega: 6.0e3,
+                zeta: 0.5,
+            }],
+        };
+        let siso = robust_stability(&p, &c, &w).unwrap();
+        assert!(siso.robustly_stable, "{}", siso.mu_peak);
+        let ws = [w.clone()];
+        let r = robust_stability_matrix_weight(&p, &c, MatrixWeight::EntryRelative(&ws)).unwrap();
+        assert_eq!(r.f_hz, siso.f_hz);
+        for (a, b) in r.mu.iter().zip(&siso.mu) {
+            assert!((a - b).abs() <= 1e-9 * b.max(1e-12), "{a} {b}");
+        }
+        for (a, b) in [
+            (r.upper_gain_margin, siso.upper_gain_margin),
+            (r.lower_gain_margin, siso.lower_gain_margin),
+        ] {
+            let (a, b) = (a.unwrap(), b.unwrap());
+            assert!((a - b).abs() <= 1e-4 * b, "{a} {b}");
+        }
+        let flat = Weight {
+            ts,
+            gain: 1e-6,
+            numerator: vec![],
+            denominator: vec![],
+        };
+        let fs = [flat.clone()];
+        let ra = robust_stability_matrix_weight(&p, &c, MatrixWeight::EntryAdditive(&fs)).unwrap();
+        let ru = robust_stability_matrix_weight(&p, &c, MatrixWeight::Additive(&flat)).unwrap();
+        for (a, b) in ra.mu.iter().zip(&ru.mu) {
+            assert!((a - b).abs() <= 1e-9 * b.max(1e-12), "{a} {b}");
+        }
+        assert_eq!(ra.upper_gain_margin, ru.upper_gain_margin);
+        let two = [w.clone(), w.clone()];
+        assert!(robust_stability_matrix_weight(&p, &c, MatrixWeight::EntryRelative(&two)).is_err());
+        let other = [Weight { ts: 2e-4, ..w }];
+        assert!(
+            robust_stability_matrix_weight(&p, &c, MatrixWeight::EntryRelative(&other)).is_err()
         );
     }
 

@@ -683,6 +683,73 @@ impl MatrixUncertainty {
         Ok(need[i])
     }
 
+    /// The relative bound of entry $(i, j)$ per line, $L_{ij,k}/|\hat P_{ij}(z_k)|$ (the current
+    /// `additive`, so after any raise; the `multiplicative` field is the one before it).
+    ///
+    /// # Errors
+    /// [`Error::Numerical`] where the model's entry is zero or the ratio is not finite.
+    pub fn entry_relative(&self, i: usize, j: usize) -> Result<Vec<f64>> {
+        let e = self
+            .entry(i, j)
+            .ok_or_else(|| Error::invalid("entry", format!("({i}, {j}) is outside the matrix")))?;
+        e.additive
+            .iter()
+            .zip(&e.nominal)
+            .zip(&e.f_hz)
+            .map(|((a, p), f)| {
+                let r = a / p.norm();
+                if r.is_finite() && r > 0.0 {
+                    Ok(r)
+                } else {
+                    Err(Error::numerical(
+                        CTX,
+                        format!(
+                            "entry ({i}, {j}) of the model is zero at {f} Hz: no relative bound there"
+                        ),
+                    ))
+                }
+            })
+            .collect()
+    }
+
+    /// A structured weight for robust-control design: per entry, the stable minimum-phase
+    /// weight of order at most `max_order` that overbounds the entry's relative bound
+    /// ([`MatrixUncertainty::entry_relative`]) on the fraction `cover` of its lines
+    /// ([`fit_weight`](super::weight::fit_weight)), entry $(i, j)$ at index $i + j\,n_y$. Together
+    /// they describe $P_{ij} = \hat P_{ij}(1 + W_{ij}\delta_{ij})$, $|\delta_{ij}| \le 1$
+    /// independent, the set
+    /// [`robust_stability_matrix_weight`](super::robust::robust_stability_matrix_weight) checks
+    /// with [`MatrixWeight::EntryRelative`](super::robust::MatrixWeight::EntryRelative). Relative
+    /// per entry, not additive: outside the band the weight is extrapolated, and a relative one
+    /// rolls off with the model's entry. The entries are fitted side by side.
+    ///
+    /// # Errors
+    /// As [`MatrixUncertainty::entry_relative`] and [`fit_weight`](super::weight::fit_weight),
+    /// naming the entry.
+    pub fn entry_weights(
+        &self,
+        ts: f64,
+        max_order: usize,
+        cover: f64,
+        form: EntryForm,
+    ) -> Result<Vec<super::weight::WeightFit>> {
+        use rayon::prelude::*;
+        let f = self.f_hz().to_vec();
+        (0..self.outputs * self.inputs)
+            .into_par_iter()
+            .map(|e| {
+                let (i, j) = (e % self.outputs, e / self.outputs);
+                let bound = match form {
+                    EntryForm::Relative => self.entry_relative(i, j)?,
+                    EntryForm::Additive => self.entries[e].additive.clone(),
+                };
+                super::weight::fit_weight(&f, &bound, ts, max_order, cover).map_err(|err| {
+                    Error::numerical(CTX, format!("the weight of entry ({i}, {j}): {err}"))
+                })
+            })
+            .collect()
+    }
+
     /// $\lVert L_k\rVert_2$ per line: a bound on $\bar\sigma(P - \hat P)$ (type docs), in the
     /// plant's units; for a SISO model the additive bound itself.
     pub fn norm_bound(&self) -> Vec<f64> {
@@ -729,6 +796,15 @@ impl MatrixUncertainty {
             })
             .collect()
     }
+}
+
+/// What the per-entry weights of [`MatrixUncertainty::entry_weights`] overbound.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub enum EntryForm {
+    /// $L_{ij}/|\hat P_{ij}|$: $P_{ij} = \hat P_{ij}(1 + W_{ij}\delta_{ij})$.
+    Relative,
+    /// $L_{ij}$ in the plant's units: $P_{ij} = \hat P_{ij} + W_{ij}\delta_{ij}$.
+    Additive,
 }
 
 /// $\lVert L\rVert_2$ of a real matrix (its largest singular value; 0 when it cannot be
@@ -1870,6 +1946,34 @@ mod tests {
             .joint_factor(&direct.multiplicative, 0.9, 0.95, 300, 7)
             .unwrap();
         assert!((raise - factor).abs() < 1e-9 * factor, "{raise} {factor}");
+        // the structured weight: per entry the weight of the entry's relative (or additive)
+        // bound, each covering 98 % of its lines; the 1×1 relative one is the SISO weight of
+        // the multiplicative bound
+        let ts = 1e-3;
+        for form in [EntryForm::Relative, EntryForm::Additive] {
+            let ws = u.entry_weights(ts, 2, 0.98, form).unwrap();
+            assert_eq!(ws.len(), 4);
+            for (e, w) in ws.iter().enumerate() {
+                let (i, j) = (e % 2, e / 2);
+                let bound = match form {
+                    EntryForm::Relative => u.entry_relative(i, j).unwrap(),
+                    EntryForm::Additive => u.entries[e].additive.clone(),
+                };
+                let direct = crate::validate::weight::fit_weight(&f, &bound, ts, 2, 0.98).unwrap();
+                assert_eq!(*w, direct);
+                let m = w.weight.magnitude(&f);
+                let below = m
+                    .iter()
+                    .zip(&bound)
+                    .filter(|(w, b)| **w < **b * (1.0 - 1e-12));
+                assert!(below.count() <= f.len() / 50, "entry ({i}, {j})");
+            }
+        }
+        let w1 = one.entry_weights(ts, 2, 0.98, EntryForm::Relative).unwrap();
+        let direct =
+            crate::validate::weight::fit_weight(&f, &direct.multiplicative, ts, 2, 0.98).unwrap();
+        assert_eq!(w1[0].weight, direct.weight);
+        assert!(u.entry_relative(2, 0).is_err());
         // the joint draws of the 2×2 bound: a factor near 1 (the bound is a per-pair 95 % quantile)
         let g = u.joint_raise(0.98, 0.95, 500, 1).unwrap();
         assert!(g > 0.3 && g < 3.0, "{g}");
