@@ -610,6 +610,46 @@ fn the_workflow_bounds_the_chosen_models_uncertainty_on_request() {
         .report
         .to_html()
         .contains("Uncertainty and robust stability"));
+    // the structured weight: 16 relative weights of order ≤ 4; covering the exact error as the
+    // line bound does, robustly stable, its margins inside the exact ones and no wider than
+    // the line test's by more than the grids differ
+    assert!(r["weight_max_order"].as_u64().unwrap() <= 4, "{r}");
+    assert!(r["weight_truth_coverage"].as_f64().unwrap() >= 0.95, "{r}");
+    assert_eq!(r["weight_robustly_stable"], true, "{r}");
+    let gw: Vec<f64> = r["weight_gain_margins"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert!(gw[0] < 1.0 && gw[1] > 1.0, "{r}");
+    assert!(
+        gw[0] >= e[0] * (1.0 - 1e-3) && gw[1] <= e[1] * (1.0 + 1e-3),
+        "{r}"
+    );
+    // the uncertain model's files, beside the model's
+    let dir = common::tmpdir("machine-uncertain-files");
+    let written = out.write(&dir.join("o"), false).unwrap();
+    let name = out.models[0].name.clone();
+    let base = dir.join("o/models").join(format!("{name}_uncertain"));
+    for ext in ["json", "m", "mat", "npz"] {
+        let p = base.with_extension(ext);
+        assert!(written.contains(&p) || p.is_file(), "{}", p.display());
+    }
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(base.with_extension("json")).unwrap())
+            .unwrap();
+    assert_eq!(j["kind"], "uncertain_plant_matrix");
+    let entries = j["entries"].as_array().unwrap();
+    assert_eq!(entries.len(), 16);
+    assert_eq!(entries[1]["output"], "y_xb");
+    assert_eq!(entries[1]["input"], "u_xa");
+    assert_eq!(
+        j["robust"]["weights"]["upper_gain_margin"].as_f64(),
+        Some(gw[1]),
+        "{}",
+        j["robust"]
+    );
     let bad =
         WorkflowConfig::from_toml_str("[machine]\nuncertainty = true\n", Path::new("wf.toml"))
             .unwrap_err()

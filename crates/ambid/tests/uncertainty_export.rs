@@ -246,6 +246,17 @@ fn write_exports(dir: &Path, r: &Reference) {
     .unwrap();
 }
 
+/// The numbers of the array `name` in an `.npz` archive.
+fn npz_array(zip: &mut zip::ZipArchive<std::io::Cursor<Vec<u8>>>, name: &str) -> Vec<f64> {
+    let mut buf = Vec::new();
+    std::io::Read::read_to_end(&mut zip.by_name(&format!("{name}.npy")).unwrap(), &mut buf)
+        .unwrap();
+    npyz::NpyFile::new(std::io::Cursor::new(buf))
+        .unwrap()
+        .into_vec()
+        .unwrap()
+}
+
 /// W_gain ∏(z − z_i)/∏(z − p_i) in double, as MATLAB's zpk evaluates it.
 fn zpk_response(k: f64, zeros: &[c64], poles: &[c64], ts: f64, f: &[f64]) -> Vec<c64> {
     f.iter()
@@ -308,13 +319,7 @@ fn the_exported_numbers_reproduce_the_weight() {
             "W_poles_re",
             "W_poles_im",
         ] {
-            let mut buf = Vec::new();
-            std::io::Read::read_to_end(&mut zip.by_name(&format!("{name}.npy")).unwrap(), &mut buf)
-                .unwrap();
-            let data: Vec<f64> = npyz::NpyFile::new(std::io::Cursor::new(buf))
-                .unwrap()
-                .into_vec()
-                .unwrap();
+            let data = npz_array(&mut zip, name);
             assert_eq!(bits(&data), bits(&v[name].1), "{}: {name}", r.name);
         }
         // and the JSON
@@ -424,4 +429,162 @@ fn scipy_reads_the_npz_and_mat_and_reproduces_the_weight() {
         }
     }
     assert_eq!(seen, 2 * refs.len(), "{stdout}");
+}
+
+/// A 2×2 nominal model of sample time `ts` (unstable, coupled).
+fn nominal_2x2(ts: f64) -> StateSpace {
+    StateSpace::discrete(
+        mat![[1.002, ts], [-0.01, 0.97]],
+        mat![[0.0, 0.3], [1.0, 0.8]],
+        mat![[2.0e-3, 0.0], [0.5e-3, 1.0e-3]],
+        mat![[0.0, 0.0], [0.0, 0.0]],
+        ts,
+    )
+    .unwrap()
+}
+
+/// A robust result with the given margins (the export copies its numbers).
+fn robust(lo: f64, hi: f64) -> ambid_core::validate::robust::RobustStability {
+    ambid_core::validate::robust::RobustStability {
+        nominal_stable: true,
+        mu_peak: 0.5,
+        mu_peak_hz: 100.0,
+        stability_margin: 2.0,
+        robustly_stable: true,
+        upper_gain_margin: Some(hi),
+        lower_gain_margin: Some(lo),
+        f_hz: vec![],
+        mu: vec![],
+    }
+}
+
+/// The uncertain MIMO export (`io::export::uncertain_matrix`): a 2×2 model whose four entries
+/// carry the two reference weights of one sample time (entries (0,0), (1,1): the order-3 one;
+/// (1,0), (0,1): the order-4 one). Every entry's weight, rebuilt from the script's padded
+/// zero–pole–gain rows, matches the 50-digit reference to 1e-12; the `.npz` holds the same
+/// numbers bit for bit; the JSON names each entry's channels; Octave runs the script and
+/// evaluates each entry to 1e-12 (skipped visibly without Octave).
+#[test]
+fn the_matrix_export_reproduces_every_entry_weight() {
+    use ambid::io::export::mimo::MimoNames;
+    use ambid::io::export::uncertain_matrix::{
+        uncertain_matrix_json, uncertain_matrix_matlab_script, uncertain_matrix_npz_bytes,
+        UncertainMatrixModel,
+    };
+    let refs = references();
+    let (a, b) = (&refs[0], &refs[1]);
+    assert_eq!((a.weight.ts, a.f_hz.clone()), (b.weight.ts, b.f_hz.clone()));
+    let per_entry = [a, b, b, a];
+    let ts = a.weight.ts;
+    let nom = nominal_2x2(ts);
+    let resp = nom.freq_response(&a.f_hz).unwrap();
+    let bounds: Vec<Vec<f64>> = (0..4)
+        .map(|e| {
+            let m = per_entry[e].weight.magnitude(&a.f_hz);
+            resp.iter()
+                .zip(&m)
+                .map(|(p, w)| 0.9 * w * p[(e % 2, e / 2)].norm())
+                .collect()
+        })
+        .collect();
+    let u = UncertainMatrixModel {
+        nominal: nom,
+        f_hz: a.f_hz.clone(),
+        bounds: bounds.clone(),
+        weights: per_entry.iter().map(|r| fit_of(&r.weight)).collect(),
+        on_lines: robust(0.4, 3.0),
+        on_weights: robust(0.45, 2.5),
+    };
+    let names = MimoNames::axes("P matrix", &["xa", "xb"], Some(12_000.0));
+    let dir = common::tmpdir("uncertain-matrix-export");
+    let script = uncertain_matrix_matlab_script(&u, &names).unwrap();
+    std::fs::write(dir.join("pm.m"), &script).unwrap();
+    let v = script_numbers(&script);
+    let order = &v["W_order"].1;
+    let gain = &v["W_gain"].1;
+    // the script's matrices are written row by row: entry (i, j) at i·2 + j; the padded root
+    // rows at e·4 + c with e = i + 2j
+    for e in 0..4 {
+        let (i, j) = (e % 2, e / 2);
+        let n = order[i * 2 + j] as usize;
+        assert_eq!(n, per_entry[e].weight.order());
+        let row = |name: &str| v[name].1[e * 4..e * 4 + n].to_vec();
+        let zeros = join(&row("W_zeros_re"), &row("W_zeros_im"));
+        let poles = join(&row("W_poles_re"), &row("W_poles_im"));
+        let got = zpk_response(gain[i * 2 + j], &zeros, &poles, ts, &a.f_hz);
+        let err = max_rel_error(&got, &per_entry[e].exact);
+        println!("entry ({i}, {j}): the script's zero-pole-gain form {err:.2e}");
+        assert!(err <= TOL, "entry ({i}, {j}): {err:e}");
+        // the bound, column e
+        let col: Vec<f64> = (0..a.f_hz.len())
+            .map(|k| v["bound_additive"].1[k * 4 + e])
+            .collect();
+        assert_eq!(bits(&col), bits(&bounds[e]));
+    }
+    assert_eq!(v["weight_upper_gain_margin"].1[0], 2.5);
+    assert_eq!(v["lines_lower_gain_margin"].1[0], 0.4);
+    // the .npz: the same numbers
+    let npz = uncertain_matrix_npz_bytes(&u, &names).unwrap();
+    let mut zip = zip::ZipArchive::new(std::io::Cursor::new(npz)).unwrap();
+    for name in [
+        "W_gain",
+        "W_order",
+        "W_zeros_re",
+        "W_poles_im",
+        "bound_additive",
+    ] {
+        let data = npz_array(&mut zip, name);
+        assert_eq!(bits(&data), bits(&v[name].1), "{name}");
+    }
+    // the JSON
+    let j = uncertain_matrix_json(&u, &names).unwrap();
+    assert_eq!(j["kind"], "uncertain_plant_matrix");
+    assert_eq!(j["entries"][1]["output"], "y_xb");
+    assert_eq!(j["entries"][1]["input"], "u_xa");
+    assert_eq!(j["entries"][1]["weight"]["order"], 4);
+    assert_eq!(j["robust"]["weights"]["upper_gain_margin"], 2.5);
+    // bad input: a weight missing
+    let mut short = u.clone();
+    short.weights.pop();
+    assert!(uncertain_matrix_matlab_script(&short, &names).is_err());
+    // Octave runs the script and evaluates every entry from its variables
+    if !has_octave() {
+        common::skip(
+            "uncertainty_export: the uncertain MIMO script in Octave",
+            "octave not installed (bash .ci/run installs it with apt-get)",
+        );
+        return;
+    }
+    let f: Vec<String> = a.f_hz.iter().map(|x| format!("{x:e}")).collect();
+    let code = format!(
+        "run('{}'); f = [{}]; z = exp(1i*2*pi*f*Ts); \
+         for j = 1:2, for i = 1:2, e = i + (j-1)*2; n = W_order(i, j); \
+         Wv = W_gain(i, j) * prod(z - W_zeros(e, 1:n).', 1) ./ prod(z - W_poles(e, 1:n).', 1); \
+         printf('%d %.17g %.17g\\n', [e*ones(1, numel(Wv)); real(Wv); imag(Wv)]); end, end",
+        dir.join("pm.m").display(),
+        f.join(", ")
+    );
+    let out = Command::new("octave")
+        .args(["--no-gui", "--quiet", "--eval", &code])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "octave failed: {stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mut got: Vec<Vec<c64>> = vec![Vec::new(); 4];
+    for l in stdout.lines() {
+        let x: Vec<f64> = l
+            .split_whitespace()
+            .map(|x| x.parse::<f64>().unwrap())
+            .collect();
+        got[x[0] as usize - 1].push(c64::new(x[1], x[2]));
+    }
+    for e in 0..4 {
+        let err = max_rel_error(&got[e], &per_entry[e].exact);
+        println!("entry {e}: Octave {err:.2e}");
+        assert!(err <= TOL, "entry {e}: {err:e}");
+    }
 }

@@ -24,6 +24,7 @@ pub mod mimo;
 mod npz;
 mod script;
 pub mod uncertain;
+pub mod uncertain_matrix;
 
 use ambid_core::lti::{PolyModel, StateSpace};
 

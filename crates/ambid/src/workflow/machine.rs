@@ -255,6 +255,24 @@ pub struct UncertaintyRow {
     /// Twin: the fraction of the lines in 10–1000 Hz where ‖L‖₂ ≥ σ̄(P − P̂).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub truth_coverage: Option<f64>,
+    /// The structured weight: the highest order of the per-entry relative weights.
+    pub weight_max_order: usize,
+    /// The median over the entries of their weights' looseness (median |W_ij| / ℓ_ij).
+    pub weight_looseness: f64,
+    /// Nominally stable and ρ((|P̂|∘|W|)|M|) < 1 on the grid.
+    pub weight_robustly_stable: bool,
+    /// max ρ((|P̂|∘|W|)|M|) on the grid.
+    pub weight_mu_peak: f64,
+    /// Where \[Hz\].
+    pub weight_mu_peak_hz: f64,
+    /// Robust gain margins against the weights (`None`: not robustly stable).
+    pub weight_gain_margins: Option<[f64; 2]>,
+    /// Twin: the fraction of the lines in 10–1000 Hz where ‖ |P̂|∘|W| ‖₂ ≥ σ̄(P − P̂).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub weight_truth_coverage: Option<f64>,
+    /// The uncertain model for export (`models/<model>_uncertain.{json,m,mat,npz}`).
+    #[serde(skip)]
+    pub export: Option<Box<crate::io::export::uncertain_matrix::UncertainMatrixModel>>,
 }
 
 /// The seam between the measurement and the MIMO models: one call that takes every speed's FRF
@@ -1195,11 +1213,35 @@ pub fn run_with(
         ),
         sections,
     };
+    let uncertain_models = models
+        .uncertainty
+        .iter()
+        .filter_map(|row| {
+            let u = row.export.as_ref()?;
+            let name = models
+                .models
+                .iter()
+                .find(|m| m.speed_rpm == row.speed_rpm)
+                .map_or_else(
+                    || format!("plant_{:.0}rpm", row.speed_rpm),
+                    |m| m.name.clone(),
+                );
+            Some((
+                crate::io::export::mimo::MimoNames::axes(
+                    &format!("{name}_uncertain"),
+                    &AXES,
+                    Some(row.speed_rpm),
+                ),
+                (**u).clone(),
+            ))
+        })
+        .collect();
     let outcome = Outcome {
         report,
         stages: typed,
         summary: json,
         models: model_outs,
+        uncertain_models,
         timings,
         excitation: None,
         operating_point: None,

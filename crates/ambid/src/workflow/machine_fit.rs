@@ -171,8 +171,11 @@ impl Default for FrequencyFitter {
 /// `uncertainty_matrix` on the measured plant FRF's lines in the fit's band `band`, raised by
 /// [`MatrixUncertainty::joint_raise`](ambid_core::validate::uncertainty::MatrixUncertainty::joint_raise)
 /// (98 % of the pairs in 95 % of 2 000 draws, seed 0; never lowered), and the robust stability of
-/// `controller` against it on those lines; with the twin's exact model `truth`, its gain interval
-/// and the bound's coverage of σ̄(P − P̂) on the lines in 10–1000 Hz.
+/// `controller` against it on those lines; the structured weight (one relative weight of order
+/// ≤ 4 per entry, `MatrixUncertainty::entry_weights`) and the robust stability against it on
+/// the dense grid (`MatrixWeight::EntryRelative`), kept with the bound for export; with the
+/// twin's exact model `truth`, its gain interval and the coverage of σ̄(P − P̂) on the lines in
+/// 10–1000 Hz by the bound and by the weights.
 ///
 /// # Errors
 /// The reason as text (the FRF has no variance on a line, the model is singular on a line, …).
@@ -185,15 +188,18 @@ pub fn speed_uncertainty(
     truth: Option<&StateSpace>,
 ) -> Result<UncertaintyRow, String> {
     use ambid_core::validate::robust::{
-        nominal_gain_interval, robust_stability_matrix_on_lines, LineBound,
+        nominal_gain_interval, robust_stability_matrix_on_lines, robust_stability_matrix_weight,
+        LineBound, MatrixWeight,
     };
-    use ambid_core::validate::uncertainty::{uncertainty_matrix, UncertaintyOptions};
-    let frd = plant.band(band.0, band.1).map_err(|e| e.to_string())?;
-    let mut u = uncertainty_matrix(model, &frd, &[], &UncertaintyOptions::default())
-        .map_err(|e| e.to_string())?;
+    use ambid_core::validate::uncertainty::{uncertainty_matrix, EntryForm, UncertaintyOptions};
+    use ambid_core::validate::weight::{Weight, DEFAULT_COVER, MAX_WEIGHT_ORDER};
+    let err = |e: ambid_core::Error| e.to_string();
+    let frd = plant.band(band.0, band.1).map_err(err)?;
+    let mut u =
+        uncertainty_matrix(model, &frd, &[], &UncertaintyOptions::default()).map_err(err)?;
     let raise = u
-        .joint_raise(ambid_core::validate::weight::DEFAULT_COVER, 0.95, 2000, 0)
-        .map_err(|e| e.to_string())?
+        .joint_raise(DEFAULT_COVER, 0.95, 2000, 0)
+        .map_err(err)?
         .max(1.0);
     for e in &mut u.entries {
         for b in &mut e.additive {
@@ -213,26 +219,57 @@ pub fn speed_uncertainty(
         .collect();
     rel.sort_by(f64::total_cmp);
     let bounds = u.bounds();
-    let r =
-        robust_stability_matrix_on_lines(model, controller, &f, LineBound::Elementwise(&bounds))
-            .map_err(|e| e.to_string())?;
-    let (exact_gain_margins, truth_coverage) = match truth {
+    let ts = model
+        .ts()
+        .ok_or_else(|| "the model must be discrete-time".to_string())?;
+    // the line test and the structured weight's fit are independent: side by side
+    let (r, weights) = rayon::join(
+        || robust_stability_matrix_on_lines(model, controller, &f, LineBound::Elementwise(&bounds)),
+        || u.entry_weights(ts, MAX_WEIGHT_ORDER, DEFAULT_COVER, EntryForm::Relative),
+    );
+    let (r, weights) = (r.map_err(err)?, weights.map_err(err)?);
+    let ws: Vec<Weight> = weights.iter().map(|w| w.weight.clone()).collect();
+    let rw = robust_stability_matrix_weight(model, controller, MatrixWeight::EntryRelative(&ws))
+        .map_err(err)?;
+    let wmag: Vec<Vec<f64>> = ws.iter().map(|w| w.magnitude(&f)).collect();
+    let ny = model.noutputs();
+    let weight_norm = |k: usize| {
+        let ph = u.nominal_at(k);
+        let b = faer::Mat::from_fn(ph.nrows(), ph.ncols(), |i, j| {
+            ph[(i, j)].norm() * wmag[i + j * ny][k]
+        });
+        ambid_core::linalg::singular_values(b.as_ref())
+            .ok()
+            .and_then(|v| v.into_iter().reduce(f64::max))
+            .unwrap_or(f64::NAN)
+    };
+    let mut loose: Vec<f64> = weights.iter().map(|w| w.looseness).collect();
+    loose.sort_by(f64::total_cmp);
+    let (exact_gain_margins, truth_coverage, weight_truth_coverage) = match truth {
         Some(t) => {
-            let (lo, hi) = nominal_gain_interval(t, controller).map_err(|e| e.to_string())?;
-            let exact = Frd::from_model(t, &f).map_err(|e| e.to_string())?;
-            let (mut n, mut ok) = (0usize, 0usize);
+            let (lo, hi) = nominal_gain_interval(t, controller).map_err(err)?;
+            let exact = Frd::from_model(t, &f).map_err(err)?;
+            let (mut n, mut ok, mut ok_w) = (0usize, 0usize, 0usize);
             for (k, fk) in f.iter().enumerate() {
                 if !(10.0..=1000.0).contains(fk) {
                     continue;
                 }
-                let (p, ph) = (exact.at(k).map_err(|e| e.to_string())?, u.nominal_at(k));
+                let (p, ph) = (exact.at(k).map_err(err)?, u.nominal_at(k));
                 let d = faer::Mat::from_fn(p.nrows(), p.ncols(), |i, j| p[(i, j)] - ph[(i, j)]);
+                let e = top(&d);
                 n += 1;
-                ok += usize::from(top(&d) <= norm[k]);
+                ok += usize::from(e <= norm[k]);
+                ok_w += usize::from(e <= weight_norm(k));
             }
-            (Some([lo, hi]), (n > 0).then(|| ok as f64 / n as f64))
+            let frac = |x: usize| (n > 0).then(|| x as f64 / n as f64);
+            (Some([lo, hi]), frac(ok), frac(ok_w))
         }
-        None => (None, None),
+        None => (None, None, None),
+    };
+    let margins = |r: &ambid_core::validate::robust::RobustStability| {
+        r.lower_gain_margin
+            .zip(r.upper_gain_margin)
+            .map(|(a, b)| [a, b])
     };
     Ok(UncertaintyRow {
         speed_rpm,
@@ -244,12 +281,26 @@ pub fn speed_uncertainty(
         robustly_stable: r.robustly_stable,
         mu_peak: r.mu_peak,
         mu_peak_hz: r.mu_peak_hz,
-        gain_margins: r
-            .lower_gain_margin
-            .zip(r.upper_gain_margin)
-            .map(|(a, b)| [a, b]),
+        gain_margins: margins(&r),
         exact_gain_margins,
         truth_coverage,
+        weight_max_order: ws.iter().map(Weight::order).max().unwrap_or(0),
+        weight_looseness: loose.get(loose.len() / 2).copied().unwrap_or(f64::NAN),
+        weight_robustly_stable: rw.robustly_stable,
+        weight_mu_peak: rw.mu_peak,
+        weight_mu_peak_hz: rw.mu_peak_hz,
+        weight_gain_margins: margins(&rw),
+        weight_truth_coverage,
+        export: Some(Box::new(
+            crate::io::export::uncertain_matrix::UncertainMatrixModel {
+                nominal: model.clone(),
+                f_hz: f.clone(),
+                bounds: u.entries.iter().map(|e| e.additive.clone()).collect(),
+                weights,
+                on_lines: r,
+                on_weights: rw,
+            },
+        )),
     })
 }
 

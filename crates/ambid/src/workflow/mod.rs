@@ -211,6 +211,12 @@ pub struct Outcome {
     pub summary: Value,
     /// Models to export (JSON, `.m`, `.mat`, `.npz`).
     pub models: Vec<ModelOut>,
+    /// Uncertain MIMO models to export as `models/<name>.{json,m,mat,npz}` (the whole machine's
+    /// `[machine] uncertainty`, one per speed; the name is the [`MimoNames`](crate::io::export::mimo::MimoNames)'s).
+    pub uncertain_models: Vec<(
+        crate::io::export::mimo::MimoNames,
+        crate::io::export::uncertain_matrix::UncertainMatrixModel,
+    )>,
     /// Time per step.
     pub timings: Vec<StepTime>,
     /// The excitation stage's result (when the step ran).
@@ -750,6 +756,7 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
         stages: ctx.typed,
         summary,
         models: ctx.models,
+        uncertain_models: Vec::new(),
         timings,
         excitation: ctx.excitation,
         operating_point: ctx.operating_point,
@@ -949,6 +956,29 @@ fn mimo_files(m: &ModelOut) -> Result<[(String, Vec<u8>); 4], crate::io::export:
     ])
 }
 
+/// The four files of an uncertain MIMO model, `models/<name>.{json,m,mat,npz}`.
+fn uncertain_matrix_files(
+    u: &crate::io::export::uncertain_matrix::UncertainMatrixModel,
+    names: &crate::io::export::mimo::MimoNames,
+) -> Result<[(String, Vec<u8>); 4], crate::io::export::ExportError> {
+    use crate::io::export::uncertain_matrix::{
+        uncertain_matrix_json, uncertain_matrix_mat_bytes, uncertain_matrix_matlab_script,
+        uncertain_matrix_npz_bytes,
+    };
+    let json = uncertain_matrix_json(u, names)?;
+    let text = serde_json::to_string_pretty(&json).unwrap_or_default();
+    let base = format!("models/{}", names.name);
+    Ok([
+        (format!("{base}.json"), text.into_bytes()),
+        (
+            format!("{base}.m"),
+            uncertain_matrix_matlab_script(u, names)?.into_bytes(),
+        ),
+        (format!("{base}.mat"), uncertain_matrix_mat_bytes(u, names)?),
+        (format!("{base}.npz"), uncertain_matrix_npz_bytes(u, names)?),
+    ])
+}
+
 /// What a step did.
 pub(crate) enum StepStatus {
     Done,
@@ -1068,6 +1098,11 @@ impl Outcome {
         }
         for files in models {
             for (name, bytes) in files? {
+                out.write(&name, &bytes)?;
+            }
+        }
+        for (names, u) in &self.uncertain_models {
+            for (name, bytes) in uncertain_matrix_files(u, names).map_err(export_error)? {
                 out.write(&name, &bytes)?;
             }
         }
