@@ -2,8 +2,10 @@
 //! twin at three speeds ≤ 10 s on the project machine): `ambid run wf.toml` with a `[machine]`
 //! section, defaults otherwise (0, 15 000, 30 000 rpm, the orthogonal PRBS design, n = 10, 5
 //! samples per bit, 12 periods per experiment, nonlinear twin with noise), and the same with
-//! `mode = "linear"`, and with the MIMO fitter (`models = "fit"`). Median of `AMBID_BENCH_REPS` runs (default 5); prints a Markdown table for
-//! docs/benchmarks.md.
+//! `mode = "linear"`, with the MIMO fitter (`models = "fit"`), and with the fitter and the
+//! uncertainty bound with its structured weight (`uncertainty = true`, issue 23). Median of
+//! `AMBID_BENCH_REPS` runs (default 5); `AMBID_BENCH_ONLY=<text>` runs only the workflows whose
+//! label contains the text. Prints a Markdown table for docs/benchmarks.md.
 //!
 //! Run: `cargo bench -p ambid --bench machine_workflow`.
 
@@ -53,7 +55,16 @@ fn main() {
             "[machine] models = \"fit\" (3 speeds, nonlinear)",
             "[machine]\nmodels = \"fit\"\n",
         ),
+        (
+            "[machine] models = \"fit\", uncertainty = true (3 speeds, nonlinear)",
+            "[machine]\nmodels = \"fit\"\nuncertainty = true\n",
+        ),
     ] {
+        if let Ok(only) = std::env::var("AMBID_BENCH_ONLY") {
+            if !label.contains(&only) {
+                continue;
+            }
+        }
         let wf = root.join("wf.toml");
         if let Err(e) = std::fs::write(&wf, toml) {
             eprintln!("cannot write {}: {e}", wf.display());
