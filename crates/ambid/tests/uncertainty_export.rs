@@ -462,8 +462,10 @@ fn robust(lo: f64, hi: f64) -> ambid_core::validate::robust::RobustStability {
 /// carry the two reference weights of one sample time (entries (0,0), (1,1): the order-3 one;
 /// (1,0), (0,1): the order-4 one). Every entry's weight, rebuilt from the script's padded
 /// zero–pole–gain rows, matches the 50-digit reference to 1e-12; the `.npz` holds the same
-/// numbers bit for bit; the JSON names each entry's channels; Octave runs the script and
-/// evaluates each entry to 1e-12 (skipped visibly without Octave).
+/// numbers bit for bit; scipy reads the `.npz` and `.mat` and evaluates each entry with
+/// `freqz_zpk` to 1e-12 (`check_uncertain_matrix_export.py`); the JSON names each entry's
+/// channels; Octave runs the script and evaluates each entry to 1e-12 (scipy and Octave skipped
+/// visibly when missing).
 #[test]
 fn the_matrix_export_reproduces_every_entry_weight() {
     use ambid::io::export::mimo::MimoNames;
@@ -543,6 +545,49 @@ fn the_matrix_export_reproduces_every_entry_weight() {
     assert_eq!(j["entries"][1]["input"], "u_xa");
     assert_eq!(j["entries"][1]["weight"]["order"], 4);
     assert_eq!(j["robust"]["weights"]["upper_gain_margin"], 2.5);
+    // scipy reads the .npz and .mat and evaluates every entry with freqz_zpk
+    if python_has_scipy() {
+        std::fs::write(
+            dir.join("pm.npz"),
+            uncertain_matrix_npz_bytes(&u, &names).unwrap(),
+        )
+        .unwrap();
+        std::fs::write(
+            dir.join("pm.mat"),
+            ambid::io::export::uncertain_matrix::uncertain_matrix_mat_bytes(&u, &names).unwrap(),
+        )
+        .unwrap();
+        let out = Command::new("python3")
+            .arg(fixture_dir().join("check_uncertain_matrix_export.py"))
+            .arg(&*dir)
+            .arg("pm")
+            .arg(fixture_dir().join("weight_reference.json"))
+            .args(per_entry.iter().map(|r| r.name.as_str()))
+            .output()
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        println!("{stdout}");
+        assert!(
+            out.status.success(),
+            "{stdout}{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let mut seen = 0;
+        for line in stdout.lines() {
+            let parts: Vec<&str> = line.split_whitespace().collect();
+            if parts.len() == 4 && parts[0] == "entry" {
+                let e: f64 = parts[3].parse().unwrap();
+                assert!(e <= TOL, "{line}");
+                seen += 1;
+            }
+        }
+        assert_eq!(seen, 8, "{stdout}");
+    } else {
+        common::skip(
+            "uncertainty_export: scipy reads the uncertain MIMO .npz/.mat",
+            "python3 with numpy and scipy not found (bash .ci/run installs them)",
+        );
+    }
     // bad input: a weight missing
     let mut short = u.clone();
     short.weights.pop();
