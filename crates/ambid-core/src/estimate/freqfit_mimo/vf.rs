@@ -31,7 +31,7 @@
 //! left singular vectors. The numerators are then refitted by the caller.
 use super::{Data, CTX};
 use crate::error::{Error, Result};
-use crate::estimate::qr_stream::r_factor_in_place;
+use crate::estimate::qr_stream::r_factor_tall;
 use crate::linalg;
 use faer::{c64, Mat};
 
@@ -198,7 +198,9 @@ fn sigma_coefficients(poles: &[Pole], data: &Data) -> Result<Vec<f64>> {
         let mut own = m.as_mut().subcols_mut(0, p).to_owned();
         unit_columns(&mut own);
         m.as_mut().subcols_mut(0, p).copy_from(own.as_ref());
-        let r = r_factor_in_place(m);
+        // the trailing block is read only when the leading one has full rank (checked here), so
+        // the unblocked factor's rounding-level reflectors of dependent columns never matter
+        let r = r_factor_tall(m);
         if r.nrows() < 2 * p || (0..p).any(|i| r[(i, i)].abs() <= DEPENDENT) {
             return Err(degenerate("a rank-deficient basis"));
         }
@@ -213,7 +215,7 @@ fn sigma_coefficients(poles: &[Pole], data: &Data) -> Result<Vec<f64>> {
         .as_mut()
         .subcols_mut(0, nb)
         .copy_from(shared.as_ref());
-    let t = r_factor_in_place(stacked);
+    let t = r_factor_tall(stacked);
     if (0..nb).any(|i| t[(i, i)].abs() <= DEPENDENT) {
         return Err(degenerate("a rank-deficient relocation"));
     }
