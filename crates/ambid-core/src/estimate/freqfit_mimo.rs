@@ -1249,10 +1249,12 @@ fn scaled_lstsq(mut aug: Mat<f64>, basis: bool) -> Result<Solved> {
             )
         }
     } else {
-        // the triangle of [Φ g]: R x = z (its last column) when Φ has full numerical rank
-        let t = r_factor_tall(aug.clone());
+        // the triangle [R z; 0 ρ] of [Φ g]: R x = z when Φ has full numerical rank; else the
+        // minimum-norm solution of the triangle's own system, which is the original one's
+        // (‖Φx − g‖² = ‖Rx − z‖² + ρ², and R has Φ's singular values)
+        let t = r_factor_tall(aug);
         if tiny(t.as_ref()) {
-            linalg::lstsq_min_norm_range(aug.subcols(0, nc), aug.subcols(nc, 1), 1e-10, false)?
+            linalg::lstsq_min_norm_range(t.subcols(0, nc), t.subcols(nc, 1), 1e-10, false)?
         } else {
             let mut x = vec![0.0; nc];
             for i in (0..nc).rev() {
