@@ -135,68 +135,138 @@ pub(crate) fn r_factor_in_place(mut w: Mat<f64>) -> Mat<f64> {
 /// The dot products sum in a fixed order over eight partial sums, with the same IEEE operations
 /// whether the AVX2 build of the loop runs or not, so the result is the same bits on every
 /// x86-64 CPU.
-pub(crate) fn r_factor_tall(mut w: Mat<f64>) -> Mat<f64> {
+pub(crate) fn r_factor_tall(w: Mat<f64>) -> Mat<f64> {
+    let (m, n) = (w.nrows(), w.ncols());
+    // column-major and contiguous, so that four columns can be borrowed at once
+    let mut buf: Vec<f64> = Vec::with_capacity(m * n);
+    for j in 0..n {
+        buf.extend_from_slice(w.col_as_slice(j));
+    }
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: AVX2 was detected on this CPU just above.
-        unsafe { householder_avx2(&mut w) };
-        return upper(&w);
+        unsafe { householder_avx2(&mut buf, m, n) };
+        return upper(&buf, m, n);
     }
-    householder_base(&mut w);
-    upper(&w)
+    householder_base(&mut buf, m, n);
+    upper(&buf, m, n)
 }
 
-/// The upper $\min(m, n) \times n$ part of a factored matrix, zeros below the diagonal.
-fn upper(w: &Mat<f64>) -> Mat<f64> {
-    let k = w.nrows().min(w.ncols());
-    Mat::from_fn(k, w.ncols(), |i, j| if j >= i { w[(i, j)] } else { 0.0 })
+/// The upper $\min(m, n) \times n$ part of a factored column-major $m \times n$ buffer, zeros
+/// below the diagonal.
+fn upper(w: &[f64], m: usize, n: usize) -> Mat<f64> {
+    Mat::from_fn(m.min(n), n, |i, j| if j >= i { w[j * m + i] } else { 0.0 })
 }
 
 /// [`householder_base`] compiled for AVX2, its dot products with 256-bit registers
-/// ([`dot8_avx2`]: the same operations in the same order, no FMA, so the same bits).
+/// ([`dot8x4_avx2`]: the same operations in the same order, no FMA, so the same bits).
 ///
 /// # Safety
 /// Only on a CPU with AVX2 (`is_x86_feature_detected!("avx2")`).
 #[cfg(target_arch = "x86_64")]
 #[inline(never)]
 #[target_feature(enable = "avx2")]
-unsafe fn householder_avx2(w: &mut Mat<f64>) {
+unsafe fn householder_avx2(w: &mut [f64], m: usize, n: usize) {
     // SAFETY: this function runs only where AVX2 was detected
-    householder_with(w, |a, b| unsafe { dot8_avx2(a, b) })
+    householder_with(w, m, n, |v, a| unsafe { dot8x4_avx2(v, a) })
 }
 
-/// The reflections of [`r_factor_tall`] applied in place (the $R$ on and above the diagonal).
-fn householder_base(w: &mut Mat<f64>) {
-    householder_with(w, dot8)
+/// The reflections of [`r_factor_tall`] applied in place to the column-major $m \times n$
+/// buffer `w` (the $R$ on and above the diagonal).
+fn householder_base(w: &mut [f64], m: usize, n: usize) {
+    householder_with(w, m, n, |v, a| a.map(|a| dot8(v, a)))
 }
 
-/// The reflections of [`r_factor_tall`] with the dot product `dot`.
+/// Reflectors per panel of [`householder_with`].
+const PANEL: usize = 4;
+
+/// The reflections of [`r_factor_tall`], by panels of [`PANEL`] columns: a panel's columns are
+/// reduced one after the other (each reflector applied at once to the panel's later columns),
+/// then the panel's reflectors are applied to the later columns, four columns at a time and
+/// all the panel's reflectors in order while those columns are in the first-level cache
+/// (`dot4` gives $v^\top a_t$ for four columns at once, each summed exactly as [`dot8`] sums
+/// it). Every column gets the same operations in the same order as when each reflector is
+/// applied to all later columns before the next is formed, so the same bits; the panels only
+/// save passes over the matrix.
 #[inline(always)]
-fn householder_with(w: &mut Mat<f64>, dot: impl Fn(&[f64], &[f64]) -> f64) {
-    let (m, n) = (w.nrows(), w.ncols());
-    let mut v = vec![0.0; m];
-    for c in 0..m.min(n) {
-        let col = &w.col_as_slice(c)[c..];
-        let norm = dot(col, col).sqrt();
-        if norm == 0.0 {
-            continue;
-        }
-        let x0 = col[0];
-        let alpha = if x0 >= 0.0 { -norm } else { norm };
-        let v = &mut v[..m - c];
-        v.copy_from_slice(col);
-        v[0] = x0 - alpha;
-        let tau = 1.0 / (norm * (norm + x0.abs()));
-        let head = w.col_as_slice_mut(c);
-        head[c] = alpha;
-        head[c + 1..].fill(0.0);
-        for j in c + 1..n {
-            let cj = &mut w.col_as_slice_mut(j)[c..];
-            let s = -tau * dot(v, cj);
-            for (y, x) in cj.iter_mut().zip(v.iter()) {
-                *y += s * *x;
+fn householder_with(
+    w: &mut [f64],
+    m: usize,
+    n: usize,
+    dot4: impl Fn(&[f64], [&[f64]; 4]) -> [f64; 4],
+) {
+    let kmax = m.min(n);
+    // the panel's reflectors: v_c (rows c..m) at vs[(c - p0) * m..][..m - c], and tau_c
+    let mut vs = vec![0.0; PANEL * m];
+    let mut taus = [0.0; PANEL];
+    let mut p0 = 0;
+    while p0 < kmax {
+        let p1 = (p0 + PANEL).min(kmax);
+        for c in p0..p1 {
+            let (head, tail) = w.split_at_mut((c + 1) * m);
+            let col = &mut head[c * m + c..];
+            let norm = dot8(col, col).sqrt();
+            let v = &mut vs[(c - p0) * m..][..m - c];
+            if norm == 0.0 {
+                // no reflection: a zero vector leaves every later column as it is
+                v.fill(0.0);
+                taus[c - p0] = 0.0;
+                continue;
+            }
+            let x0 = col[0];
+            let alpha = if x0 >= 0.0 { -norm } else { norm };
+            v.copy_from_slice(col);
+            v[0] = x0 - alpha;
+            let tau = 1.0 / (norm * (norm + x0.abs()));
+            taus[c - p0] = tau;
+            col[0] = alpha;
+            col[1..].fill(0.0);
+            // the panel's later columns
+            for a in tail[..(p1 - c - 1) * m].chunks_exact_mut(m) {
+                reflect(&mut a[c..], v, tau);
             }
         }
+        // the later columns, four at a time, every reflector of the panel in order
+        let rest = &mut w[p1 * m..];
+        let mut groups = rest.chunks_exact_mut(4 * m);
+        for g in &mut groups {
+            let (a0, g) = g.split_at_mut(m);
+            let (a1, g) = g.split_at_mut(m);
+            let (a2, a3) = g.split_at_mut(m);
+            for c in p0..p1 {
+                let tau = taus[c - p0];
+                if tau == 0.0 {
+                    continue;
+                }
+                let v = &vs[(c - p0) * m..][..m - c];
+                let (b0, b1, b2, b3) = (&mut a0[c..], &mut a1[c..], &mut a2[c..], &mut a3[c..]);
+                let d = dot4(v, [&*b0, &*b1, &*b2, &*b3]);
+                for (a, d) in [b0, b1, b2, b3].into_iter().zip(d) {
+                    let s = -tau * d;
+                    for (y, x) in a.iter_mut().zip(v) {
+                        *y += s * *x;
+                    }
+                }
+            }
+        }
+        for a in groups.into_remainder().chunks_exact_mut(m) {
+            for c in p0..p1 {
+                let tau = taus[c - p0];
+                if tau != 0.0 {
+                    reflect(&mut a[c..], &vs[(c - p0) * m..][..m - c], tau);
+                }
+            }
+        }
+        p0 = p1;
+    }
+}
+
+/// $a \mathrel{-}= \tau (v^\top a)\, v$: one reflector applied to one column's part.
+#[inline(always)]
+fn reflect(a: &mut [f64], v: &[f64], tau: f64) {
+    let s = -tau * dot8(v, a);
+    for (y, x) in a.iter_mut().zip(v) {
+        *y += s * *x;
     }
 }
 
@@ -224,38 +294,45 @@ fn finish8(acc: &[f64; 8], a: &[f64], b: &[f64]) -> f64 {
     s
 }
 
-/// [`dot8`] with its eight partial sums in two 256-bit registers (the same products and sums,
-/// so the same bits).
+/// [`dot8`] of `v` with four columns at once, each column's eight partial sums in two 256-bit
+/// registers (the same products and sums as [`dot8`], so the same bits).
 ///
 /// # Safety
 /// Only inlined into a function compiled with AVX2 ([`householder_avx2`]).
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-unsafe fn dot8_avx2(a: &[f64], b: &[f64]) -> f64 {
+unsafe fn dot8x4_avx2(v: &[f64], a: [&[f64]; 4]) -> [f64; 4] {
     use std::arch::x86_64::{
-        _mm256_add_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_setzero_pd, _mm256_storeu_pd,
+        __m256d, _mm256_add_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_setzero_pd, _mm256_storeu_pd,
     };
-    let n8 = a.len().min(b.len()) / 8 * 8;
-    let mut acc = [0.0f64; 8];
-    let (pa, pb) = (a.as_ptr(), b.as_ptr());
-    // SAFETY: every load reads a[i..i + 8] and b[i..i + 8] with i + 8 <= n8 <= both lengths
+    let len = a.iter().fold(v.len(), |l, c| l.min(c.len()));
+    let n8 = len / 8 * 8;
+    let pv = v.as_ptr();
+    let pa = a.map(|c| c.as_ptr());
+    let mut out = [0.0f64; 4];
+    // SAFETY: every load reads v[i..i + 8] and a[t][i..i + 8] with i + 8 <= n8 <= every length
     unsafe {
-        let (mut lo, mut hi) = (_mm256_setzero_pd(), _mm256_setzero_pd());
+        let mut lo: [__m256d; 4] = [_mm256_setzero_pd(); 4];
+        let mut hi: [__m256d; 4] = [_mm256_setzero_pd(); 4];
         let mut i = 0;
         while i < n8 {
-            let x = _mm256_mul_pd(_mm256_loadu_pd(pa.add(i)), _mm256_loadu_pd(pb.add(i)));
-            let y = _mm256_mul_pd(
-                _mm256_loadu_pd(pa.add(i + 4)),
-                _mm256_loadu_pd(pb.add(i + 4)),
-            );
-            lo = _mm256_add_pd(lo, x);
-            hi = _mm256_add_pd(hi, y);
+            let (x0, x1) = (_mm256_loadu_pd(pv.add(i)), _mm256_loadu_pd(pv.add(i + 4)));
+            for t in 0..4 {
+                let y0 = _mm256_mul_pd(x0, _mm256_loadu_pd(pa[t].add(i)));
+                let y1 = _mm256_mul_pd(x1, _mm256_loadu_pd(pa[t].add(i + 4)));
+                lo[t] = _mm256_add_pd(lo[t], y0);
+                hi[t] = _mm256_add_pd(hi[t], y1);
+            }
             i += 8;
         }
-        _mm256_storeu_pd(acc.as_mut_ptr(), lo);
-        _mm256_storeu_pd(acc.as_mut_ptr().add(4), hi);
+        for t in 0..4 {
+            let mut acc = [0.0f64; 8];
+            _mm256_storeu_pd(acc.as_mut_ptr(), lo[t]);
+            _mm256_storeu_pd(acc.as_mut_ptr().add(4), hi[t]);
+            out[t] = finish8(&acc, &v[n8..len], &a[t][n8..len]);
+        }
     }
-    finish8(&acc, &a[n8..], &b[n8..])
+    out
 }
 
 /// Streaming QR: push rows (or fill whole chunks), read the upper-triangular $R$.
@@ -383,10 +460,13 @@ mod tests {
                 a.nrows(),
                 a.ncols()
             );
-            // the portable loop gives the same bits as the dispatched one
-            let mut b = a.clone();
-            householder_base(&mut b);
-            assert_eq!(upper(&b), r);
+            // the portable loop gives the same bits as the dispatched one, and both the same
+            // bits as the reflections applied one column at a time (an in-test oracle)
+            let (m, n) = (a.nrows(), a.ncols());
+            let mut b: Vec<f64> = (0..n).flat_map(|j| a.col_as_slice(j).to_vec()).collect();
+            householder_base(&mut b, m, n);
+            assert_eq!(upper(&b, m, n), r);
+            assert_eq!(one_column_at_a_time(&a), r);
         }
         // a dependent column leaves its diagonal at the rounding level, as faer's factor does
         // after `retriangulate`
@@ -394,6 +474,37 @@ mod tests {
         let (r, rf) = (r_factor_tall(a.clone()), r_factor(a.as_ref()));
         assert!(r[(3, 3)].abs() < 1e-12 * r[(0, 0)].abs());
         assert!(rf[(3, 3)].abs() < 1e-12 * rf[(0, 0)].abs());
+    }
+
+    /// The unblocked Householder factor with every later column updated on its own (a dot
+    /// product and an update per column, [`dot8`] as the sum): the reference for the bits of
+    /// [`r_factor_tall`], which takes the columns four at a time.
+    fn one_column_at_a_time(a: &Mat<f64>) -> Mat<f64> {
+        let (m, n) = (a.nrows(), a.ncols());
+        let mut w = a.clone();
+        for c in 0..m.min(n) {
+            let col: Vec<f64> = w.col_as_slice(c)[c..].to_vec();
+            let norm = dot8(&col, &col).sqrt();
+            if norm == 0.0 {
+                continue;
+            }
+            let alpha = if col[0] >= 0.0 { -norm } else { norm };
+            let mut v = col.clone();
+            v[0] = col[0] - alpha;
+            let tau = 1.0 / (norm * (norm + col[0].abs()));
+            w[(c, c)] = alpha;
+            for i in c + 1..m {
+                w[(i, c)] = 0.0;
+            }
+            for j in c + 1..n {
+                let cj = &mut w.col_as_slice_mut(j)[c..];
+                let s = -tau * dot8(&v, cj);
+                for (y, x) in cj.iter_mut().zip(&v) {
+                    *y += s * *x;
+                }
+            }
+        }
+        Mat::from_fn(m.min(n), n, |i, j| if j >= i { w[(i, j)] } else { 0.0 })
     }
 
     /// A tall matrix whose column 3 is 2·col 0 − col 2 (exactly dependent) and whose other
