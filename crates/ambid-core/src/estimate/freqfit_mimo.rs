@@ -303,6 +303,53 @@ pub struct MimoFreqOptions {
     pub feedthrough: bool,
     /// Block rows $q$ of the subspace step (default: module docs).
     pub horizon: Option<usize>,
+    /// A level the caller needs the weighted cost to reach (default `None`: every refinement
+    /// runs to its stopping rule). A refinement is abandoned as soon as the race rule of the
+    /// module docs ("Refinement") says that it cannot end at or below the level; when every
+    /// refined start is abandoned, the result is the lowest-cost state reached, with
+    /// [`MimoFreqFit::abandoned`] set. For a caller that only uses the fit if it reaches the
+    /// level (a scan of orders that stops at the noise level, or compares by BIC with a fit
+    /// it already has), the rest of such a refinement is time lost.
+    pub abandon_unless: Option<CostTarget>,
+}
+
+/// A level of the weighted cost $V$ ([`MimoFreqOptions::abandon_unless`]), with
+/// $\nu = 2Ln_yn_u - n_\theta$ the residual degrees of freedom.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum CostTarget {
+    /// The noise level: $2V/\nu \le 1 + q\sqrt{2/\nu}$, the one-sided quantile $q$ of the
+    /// normal approximation of $\chi^2_\nu/\nu$, which $2V/\nu$ follows when the model holds
+    /// the plant and the inverse-variance weights are right ($q = 2.326$: 99 %).
+    NoiseLevel {
+        /// The quantile $q$.
+        quantile: f64,
+    },
+    /// The Bayesian information criterion ([`MimoFreqFit::bic`]) at most this value.
+    Bic(f64),
+}
+
+impl CostTarget {
+    /// The largest weighted cost $V$ that meets the level, for `n_equations` real equations
+    /// and `n_params` parameters.
+    ///
+    /// ```
+    /// use ambid_core::estimate::freqfit_mimo::CostTarget;
+    /// // ν = 1000: 2V/ν ≤ 1 + 2·√(2/1000)
+    /// let v = CostTarget::NoiseLevel { quantile: 2.0 }.cost_bound(1064, 64);
+    /// assert!((v - 500.0 * (1.0 + 2.0 * (0.002f64).sqrt())).abs() < 1e-9);
+    /// // BIC = 2V + n_θ ln(2 L n_y n_u)
+    /// let b = CostTarget::Bic(2000.0).cost_bound(1064, 64);
+    /// assert!((b - 0.5 * (2000.0 - 64.0 * 1064f64.ln())).abs() < 1e-9);
+    /// ```
+    pub fn cost_bound(&self, n_equations: usize, n_params: usize) -> f64 {
+        match *self {
+            CostTarget::NoiseLevel { quantile } => {
+                let nu = n_equations.saturating_sub(n_params).max(1) as f64;
+                0.5 * nu * (1.0 + quantile * (2.0 / nu).sqrt())
+            }
+            CostTarget::Bic(b) => 0.5 * (b - n_params as f64 * (n_equations as f64).ln()),
+        }
+    }
 }
 
 impl Default for MimoFreqOptions {
@@ -314,6 +361,7 @@ impl Default for MimoFreqOptions {
             max_unstable_poles: None,
             feedthrough: false,
             horizon: None,
+            abandon_unless: None,
         }
     }
 }
@@ -346,6 +394,12 @@ pub struct MimoFreqFit {
     pub iterations: usize,
     /// Whether the refinement met a convergence test.
     pub converged: bool,
+    /// Whether the fit was abandoned because it could not reach
+    /// [`MimoFreqOptions::abandon_unless`] (the model is then where it stopped).
+    pub abandoned: bool,
+    /// With [`MimoFreqFit::abandoned`]: the starts after their probe, to continue the same fit
+    /// ([`ss_frd_mimo_in_loop_resumed`]).
+    pub probed: Option<ProbedStarts>,
     /// Unweighted error measures on the lines used.
     pub errors: MimoFreqErrors,
     /// Singular values of the subspace step's projected data (descending).
@@ -716,7 +770,7 @@ pub fn subspace_singular_values(
 ///   no output sees) or the refinement fails; the message says what may help (usually: lower
 ///   the order or widen the band).
 pub fn ss_frd_mimo(frd: &Frd, order: usize, opts: &MimoFreqOptions) -> Result<MimoFreqFit> {
-    fit(frd, order, opts, None, None, None)
+    fit(frd, order, opts, None, None, Origin::Scratch)
 }
 
 /// [`ss_frd_mimo`] held to models whose loop with `controller` is stable: the measured closed
@@ -755,7 +809,7 @@ pub fn ss_frd_mimo_in_loop(
     opts: &MimoFreqOptions,
     controller: &StateSpace,
 ) -> Result<MimoFreqFit> {
-    in_loop(frd, order, opts, controller, None)
+    in_loop(frd, order, opts, controller, Origin::Scratch)
 }
 
 /// [`ss_frd_mimo_in_loop`] from one given start, `start` (a model of another record of the same
@@ -800,7 +854,7 @@ pub fn ss_frd_mimo_in_loop_from(
         });
     }
     same_sample_time("start", "model", start, frd)?;
-    in_loop(frd, start.order(), opts, controller, Some(start))
+    in_loop(frd, start.order(), opts, controller, Origin::Model(start))
 }
 
 /// An error unless `model` (the argument `name`, a `kind`) is discrete at the FRF's sample time.
@@ -814,13 +868,74 @@ fn same_sample_time(name: &'static str, kind: &str, model: &StateSpace, frd: &Fr
     }
 }
 
-/// The checks of [`ss_frd_mimo_in_loop`], then the fit (from `warm` alone when given).
+/// [`ss_frd_mimo_in_loop`] continued from the probed starts of a fit that was abandoned
+/// ([`MimoFreqFit::abandoned`], [`MimoFreqOptions::abandon_unless`]), on the same `frd`,
+/// `controller` and options other than `abandon_unless`: the refinements run exactly as they
+/// would have after the probe, so the result is the one of the same fit without a level (or,
+/// with another level it cannot reach, again abandoned), without repeating the starts and
+/// the probes.
+///
+/// # Errors
+/// As [`ss_frd_mimo_in_loop`]; [`Error::InvalidArgument`] when `from` carries no probed starts
+/// (it was not abandoned) or its starts do not fit this problem (another order or line count).
+///
+/// ```
+/// use ambid_core::estimate::freqfit_mimo::{
+///     ss_frd_mimo_in_loop, ss_frd_mimo_in_loop_resumed, CostTarget, MimoFreqOptions,
+/// };
+/// use ambid_core::lti::{Frd, StateSpace};
+/// use faer::mat;
+/// let plant = StateSpace::discrete(mat![[1.01]], mat![[1.0]], mat![[1.0]], mat![[0.0]], 1e-3).unwrap();
+/// let c = StateSpace::discrete(mat![[0.0]], mat![[0.0]], mat![[0.0]], mat![[0.4]], 1e-3).unwrap();
+/// let f: Vec<f64> = (1..=40).map(|k| 10.0 * k as f64).collect();
+/// let frd = Frd::from_model(&plant, &f).unwrap();
+/// let o = MimoFreqOptions::default();
+/// let fit = ss_frd_mimo_in_loop(&frd, 1, &o, &c).unwrap();
+/// // not abandoned: nothing to resume
+/// assert!(!fit.abandoned);
+/// assert!(ss_frd_mimo_in_loop_resumed(&frd, &o, &c, &fit).is_err());
+/// ```
+pub fn ss_frd_mimo_in_loop_resumed(
+    frd: &Frd,
+    opts: &MimoFreqOptions,
+    controller: &StateSpace,
+    from: &MimoFreqFit,
+) -> Result<MimoFreqFit> {
+    let probed = from.probed.as_ref().ok_or_else(|| {
+        Error::invalid(
+            "from",
+            "the fit carries no probed starts (only an abandoned fit does); fit from scratch",
+        )
+    })?;
+    in_loop(frd, probed.order, opts, controller, Origin::Probed(probed))
+}
+
+/// Where a fit starts.
+#[derive(Clone, Copy)]
+enum Origin<'a> {
+    /// The subspace and vector-fitting starts (module docs).
+    Scratch,
+    /// One given model ([`ss_frd_mimo_in_loop_from`]).
+    Model(&'a StateSpace),
+    /// The probed starts of an abandoned fit ([`ss_frd_mimo_in_loop_resumed`]).
+    Probed(&'a ProbedStarts),
+}
+
+/// The starts of an abandoned fit after their probe, for [`ss_frd_mimo_in_loop_resumed`].
+#[derive(Debug, Clone)]
+pub struct ProbedStarts {
+    order: usize,
+    n_equations: usize,
+    runs: Vec<Run>,
+}
+
+/// The checks of [`ss_frd_mimo_in_loop`], then the fit (from `warm`).
 fn in_loop(
     frd: &Frd,
     order: usize,
     opts: &MimoFreqOptions,
     controller: &StateSpace,
-    warm: Option<&StateSpace>,
+    warm: Origin<'_>,
 ) -> Result<MimoFreqFit> {
     if controller.ninputs() != frd.ny() || controller.noutputs() != frd.nu() {
         return Err(Error::DimensionMismatch {
@@ -866,7 +981,7 @@ fn fit(
     opts: &MimoFreqOptions,
     controller: Option<&StateSpace>,
     measured_unstable: Option<usize>,
-    warm: Option<&StateSpace>,
+    warm: Origin<'_>,
 ) -> Result<MimoFreqFit> {
     if order == 0 {
         return Err(Error::invalid(
@@ -901,7 +1016,8 @@ fn fit(
 
     let delta: Vec<c64> = data.z.iter().map(|&z| (z - 1.0) / warp.h).collect();
     let starts = match warm {
-        Some(m) => {
+        Origin::Probed(_) => Vec::new(),
+        Origin::Model(m) => {
             // the given model in the data's channel scaling: C' = diag(1/a) C
             let c = Mat::from_fn(m.noutputs(), m.order(), |i, j| m.c()[(i, j)] / data.a[i]);
             let (layout, mut theta) = to_blocks(
@@ -915,35 +1031,72 @@ fn fit(
             Problem::new(&data, &layout, &delta, None).fit_linear(&mut theta)?;
             vec![(layout, theta)]
         }
-        None => {
+        Origin::Scratch => {
             let (a_z, c_z) = subspace_pair(&u, order, q, ny, &warp)?;
             starts(&data, &delta, &a_z, &c_z, order, warp.h, opts)?
         }
     };
     let limit = opts.max_unstable_poles.or(measured_unstable);
+    // the caller's level as a bound on V (the parameter count of every start is the layout's)
+    let external = opts
+        .abandon_unless
+        .map(|t| t.cost_bound(n_eq, starts.first().map_or(n_params_est, |s| s.0.n_theta)));
+    // a single start (the warm one) is not ranked, so its probe is raced as well
+    let race_probe = matches!(warm, Origin::Model(_));
     // every start probed; the most promising ones refined to the end; the lowest final cost
     // wins (the first error when none succeeds); the starts run in parallel, each on its own
     // data, so the result does not depend on the number of threads
     let mut first_err = None;
-    let probed: Vec<Result<Run>> = starts
-        .into_par_iter()
-        .map(|(layout, theta)| probe(&data, &delta, layout, theta, opts, limit))
-        .collect();
-    let mut runs = Vec::new();
-    for r in probed {
-        match r {
-            Ok(r) => runs.push(r),
-            Err(e) => {
-                first_err.get_or_insert(e);
+    let runs: Vec<Run> = if let Origin::Probed(p) = warm {
+        if p.order != order || p.n_equations != n_eq {
+            return Err(Error::invalid(
+                "from",
+                format!(
+                    "the probed starts are of order {} on {} equations, this problem is order {order} on {n_eq}; resume on the FRF, band and options of the abandoned fit",
+                    p.order, p.n_equations
+                ),
+            ));
+        }
+        p.runs.clone()
+    } else {
+        let probed: Vec<Result<Run>> = starts
+            .into_par_iter()
+            .map(|(layout, theta)| {
+                let race = external.filter(|_| race_probe);
+                probe(&data, &delta, layout, theta, opts, limit, race)
+            })
+            .collect();
+        let mut runs = Vec::new();
+        for r in probed {
+            match r {
+                Ok(r) => runs.push(r),
+                Err(e) => {
+                    first_err.get_or_insert(e);
+                }
             }
         }
-    }
-    runs.sort_by(|a, b| a.cost.total_cmp(&b.cost));
-    runs.truncate(REFINED_STARTS);
+        runs.sort_by(|a, b| a.cost.total_cmp(&b.cost));
+        runs.truncate(REFINED_STARTS);
+        runs
+    };
+    let probed_runs = runs.clone();
     // refined in the order of the probe, each later one raced against the best final cost so
     // far (sequential, so that the result does not depend on timing)
+    // with the caller's level: a run is raced against it while no run has ended, and one
+    // abandoned there ends the fit (so the result is either the one without the level, or
+    // abandoned); the probed starts go with it, for a resumption
     let mut best: Option<Refined> = None;
+    let mut best_abandoned: Option<Refined> = None;
+    // a probe abandoned (a single start from a given model) leaves nothing to resume
+    let mut probe_abandoned = false;
     for run in runs {
+        if run.abandoned {
+            probe_abandoned = true;
+            best_abandoned =
+                refine(&data, &delta, run, opts, controller, limit, None, None)?.map(|(r, _)| r);
+            break;
+        }
+        let ext = external.filter(|_| best.is_none());
         match refine(
             &data,
             &delta,
@@ -952,19 +1105,25 @@ fn fit(
             controller,
             limit,
             best.as_ref().map(|b| b.0),
+            ext,
         ) {
-            Ok(Some(r)) => {
+            Ok(Some((r, false))) => {
                 if best.as_ref().is_none_or(|b| r.0 < b.0) {
                     best = Some(r);
                 }
             }
-            Ok(None) => {}
+            Ok(Some((r, true))) if ext.is_some() => {
+                best_abandoned = Some(r);
+                break;
+            }
+            Ok(_) => {}
             Err(e) => {
                 first_err.get_or_insert(e);
             }
         }
     }
-    let (cost, layout, theta, iterations, converged) = match (best, first_err) {
+    let abandoned = best_abandoned.is_some();
+    let (cost, layout, theta, iterations, converged) = match (best_abandoned.or(best), first_err) {
         (Some(b), _) => b,
         (None, Some(e)) => return Err(e),
         (None, None) => {
@@ -983,6 +1142,12 @@ fn fit(
         n_equations: n_eq,
         iterations,
         converged,
+        abandoned,
+        probed: (abandoned && !probe_abandoned).then_some(ProbedStarts {
+            order,
+            n_equations: n_eq,
+            runs: probed_runs,
+        }),
         errors,
         singular_values: sv,
         f_hz: data.f_hz.clone(),
@@ -1038,6 +1203,7 @@ pub const PROBE_ITERATIONS: usize = 20;
 pub const REFINED_STARTS: usize = 2;
 
 /// One start on its way through the refinement.
+#[derive(Debug, Clone)]
 struct Run {
     layout: Layout,
     theta: Vec<f64>,
@@ -1049,10 +1215,13 @@ struct Run {
     converged: bool,
     /// The trust region where the probe stopped, for the refinement to continue from.
     state: Option<LmState>,
+    /// Whether the probe was abandoned (raced against the caller's level).
+    abandoned: bool,
 }
 
 /// The probe of one start: the unstable-pole limit imposed, then [`PROBE_ITERATIONS`] steps
-/// without the loop constraint (module docs, "Refinement").
+/// without the loop constraint (module docs, "Refinement"); raced against the cost `race`
+/// when given (with the whole iteration budget as what is left).
 fn probe(
     data: &Data,
     delta: &[c64],
@@ -1060,6 +1229,7 @@ fn probe(
     mut theta: Vec<f64>,
     opts: &MimoFreqOptions,
     limit: Option<usize>,
+    race: Option<f64>,
 ) -> Result<Run> {
     let lm = lm_options(&layout, PROBE_ITERATIONS.min(opts.max_iterations))?;
     let mut prob = Problem::new(data, &layout, delta, limit);
@@ -1069,11 +1239,14 @@ fn probe(
     let mut iterations = 0;
     let mut converged = true;
     let mut state = None;
+    let mut abandoned = false;
     if opts.max_iterations > 0 {
-        let (th, report, st) = minimize_projected(&mut prob, &theta, &lm, None, None)?;
+        let race = race.map(|b| Race::new(b, opts.max_iterations));
+        let (th, report, st) = minimize_projected(&mut prob, &theta, &lm, race, None)?;
         theta = th;
         iterations = report.iterations;
-        converged = report.reason.converged();
+        abandoned = report.reason == StopReason::Abandoned;
+        converged = report.reason.converged() && !abandoned;
         state = Some(st);
     }
     let cost = prob
@@ -1086,6 +1259,7 @@ fn probe(
         cost,
         converged,
         state,
+        abandoned,
     })
 }
 
@@ -1094,8 +1268,10 @@ type Refined = (f64, Layout, Vec<f64>, usize, bool);
 
 /// The rest of the refinement of a probed start: (with a controller) the unconstrained stage
 /// continued, the mirroring to a stable loop and the constrained stage; else the one stage
-/// continued. `None` when the run was abandoned because it cannot reach `bound`, the final
-/// cost of a better-ranked start ([`Race`]).
+/// continued. The result and whether the run was abandoned (then the state where it stopped)
+/// because it cannot reach the final cost `bound` of a better-ranked start or the caller's
+/// level `external` ([`Race`]); `Ok(None)` when an abandoned run's state cannot be evaluated.
+#[allow(clippy::too_many_arguments)]
 fn refine(
     data: &Data,
     delta: &[c64],
@@ -1104,16 +1280,26 @@ fn refine(
     controller: Option<&StateSpace>,
     limit: Option<usize>,
     bound: Option<f64>,
-) -> Result<Option<Refined>> {
+    external: Option<f64>,
+) -> Result<Option<(Refined, bool)>> {
     let Run {
         layout,
         mut theta,
         mut iterations,
         mut converged,
         state,
+        abandoned,
         ..
     } = run;
     let mut prob = Problem::new(data, &layout, delta, limit);
+    let cost_of = |prob: &mut Problem<'_>, theta: &[f64]| {
+        prob.residuals(theta)
+            .map(|r| r.iter().map(|x| x * x).sum::<f64>())
+    };
+    if abandoned {
+        let c = cost_of(&mut prob, &theta);
+        return Ok(c.map(|c| ((c, layout, theta, iterations, false), true)));
+    }
     let rest = opts
         .max_iterations
         .saturating_sub(iterations.min(PROBE_ITERATIONS));
@@ -1122,7 +1308,11 @@ fn refine(
     // told apart from it (the best one itself stopped up to that far above its minimum)
     let dof = data.rows().saturating_sub(layout.n_theta).max(1) as f64;
     let margin = |b: f64| significance_kappa2(layout.n_theta) * b / dof;
-    let race = |budget: usize| bound.map(|b| Race::new(b - margin(b), budget));
+    let level = match (bound.map(|b| b - margin(b)), external) {
+        (Some(b), Some(e)) => Some(b.min(e)),
+        (b, e) => b.or(e),
+    };
+    let race = |budget: usize| level.map(|b| Race::new(b, budget));
     if rest > 0 {
         // the stage without the loop constraint, continued: the path from the start to the
         // optimum crosses loop-unstable models, and a trust region held on the admissible set
@@ -1131,7 +1321,9 @@ fn refine(
         // continued with the probe's trust region (a fresh one would first have to shrink)
         let (th, report, _) = minimize_projected(&mut prob, &theta, &lm(rest)?, race(rest), state)?;
         if report.reason == StopReason::Abandoned {
-            return Ok(None);
+            let c = cost_of(&mut prob, &th);
+            let it = iterations + report.iterations;
+            return Ok(c.map(|c| ((c, layout, th, it, false), true)));
         }
         theta = th;
         iterations += report.iterations;
@@ -1145,7 +1337,9 @@ fn refine(
             let (th, report, _) =
                 minimize_projected(&mut prob, &theta, &lm(budget)?, race(budget), None)?;
             if report.reason == StopReason::Abandoned {
-                return Ok(None);
+                let c = cost_of(&mut prob, &th);
+                let it = iterations + report.iterations;
+                return Ok(c.map(|c| ((c, layout, th, it, false), true)));
             }
             theta = th;
             iterations += report.iterations;
@@ -1159,7 +1353,7 @@ fn refine(
         )
     })?;
     let cost = r.iter().map(|x| x * x).sum::<f64>();
-    Ok(Some((cost, layout, theta, iterations, converged)))
+    Ok(Some(((cost, layout, theta, iterations, converged), false)))
 }
 
 /// Accepted steps over which [`Race`] measures a run's pace.
@@ -2756,35 +2950,39 @@ mod tests {
         assert!(fit.errors.median_norm_relative < 1e-6, "{:?}", fit.errors);
     }
 
+    /// A plant with two unstable poles `p1`, `p2` and an input gain `g` that move with the
+    /// speed (1 ms sample time).
+    fn moving_plant(p1: f64, p2: f64, g: f64) -> StateSpace {
+        StateSpace::discrete(
+            mat![[p1, 0.0, 0.0], [0.0, p2, 0.0], [0.0, 0.0, 0.7]],
+            mat![[1.0, 0.3], [0.2, g], [1.0, 1.0]],
+            mat![[0.02, 0.0, 0.01], [0.0, 0.02, -0.01]],
+            mat![[0.0, 0.0], [0.0, 0.0]],
+            1e-3,
+        )
+        .unwrap()
+    }
+
+    /// The stabilising controller of [`moving_plant`], the lines, and the in-loop fit of order
+    /// 3 at the first speed (exact data).
+    fn neighbour_case() -> (StateSpace, Vec<f64>, MimoFreqFit) {
+        let diag = |v: f64| mat![[v, 0.0], [0.0, v]];
+        let c = StateSpace::discrete(diag(1.0), diag(0.02), diag(3.0), diag(3.0), 1e-3).unwrap();
+        let f: Vec<f64> = (1..1000).map(|k| k as f64 * 0.5).collect();
+        let frd = Frd::from_model(&moving_plant(1.02, 1.01, 1.0), &f).unwrap();
+        let first = ss_frd_mimo_in_loop(&frd, 3, &MimoFreqOptions::default(), &c).unwrap();
+        (c, f, first)
+    }
+
     /// A fit from a neighbour's model (the same two-unstable-pole plant with its poles and
     /// one input gain moved a few per cent, as a speed moves a rotor's modes): the moved plant
     /// is recovered to the exact data's precision from the neighbour's model alone, and a start
     /// of another shape or sample time is refused.
     #[test]
     fn a_fit_from_a_neighbours_model_recovers_the_moved_plant() {
-        let ts = 1e-3;
-        let plant = |p1: f64, p2: f64, g: f64| {
-            StateSpace::discrete(
-                mat![[p1, 0.0, 0.0], [0.0, p2, 0.0], [0.0, 0.0, 0.7]],
-                mat![[1.0, 0.3], [0.2, g], [1.0, 1.0]],
-                mat![[0.02, 0.0, 0.01], [0.0, 0.02, -0.01]],
-                mat![[0.0, 0.0], [0.0, 0.0]],
-                ts,
-            )
-            .unwrap()
-        };
-        let diag = |v: f64| mat![[v, 0.0], [0.0, v]];
-        let c = StateSpace::discrete(diag(1.0), diag(0.02), diag(3.0), diag(3.0), ts).unwrap();
-        let f: Vec<f64> = (1..1000).map(|k| k as f64 * 0.5).collect();
-        let o = MimoFreqOptions::default();
-        let first = ss_frd_mimo_in_loop(
-            &Frd::from_model(&plant(1.02, 1.01, 1.0), &f).unwrap(),
-            3,
-            &o,
-            &c,
-        )
-        .unwrap();
-        let moved = plant(1.025, 1.008, 1.05);
+        let (ts, o) = (1e-3, MimoFreqOptions::default());
+        let (c, f, first) = neighbour_case();
+        let moved = moving_plant(1.025, 1.008, 1.05);
         assert!(moved.feedback(&c).unwrap().is_stable().unwrap());
         let frd = Frd::from_model(&moved, &f).unwrap();
         let next = ss_frd_mimo_in_loop_from(&frd, &o, &c, &first.model).unwrap();
@@ -2811,6 +3009,107 @@ mod tests {
         .unwrap();
         let e = ss_frd_mimo_in_loop_from(&frd, &o, &c, &slow).unwrap_err();
         assert!(e.to_string().contains("sample time"), "{e}");
+    }
+
+    /// [`MimoFreqOptions::abandon_unless`]: a level every state reaches changes nothing (the
+    /// same bits as without it); a level no model can reach ends the refinement after the
+    /// race's first window with the state where it stopped, marked abandoned; the bounds are
+    /// the closed forms of [`CostTarget`].
+    #[test]
+    fn a_fit_held_to_an_unreachable_level_is_abandoned_and_a_reachable_one_changes_nothing() {
+        let (ts, o) = (1e-3, MimoFreqOptions::default());
+        let (c, f, first) = neighbour_case();
+        let frd = Frd::from_model(&moving_plant(1.04, 1.0, 1.3), &f).unwrap();
+        let free = ss_frd_mimo_in_loop_from(&frd, &o, &c, &first.model).unwrap();
+        assert!(!free.abandoned);
+        // a level every state meets: the same computation
+        let easy = MimoFreqOptions {
+            abandon_unless: Some(CostTarget::Bic(f64::INFINITY)),
+            ..o
+        };
+        let same = ss_frd_mimo_in_loop_from(&frd, &easy, &c, &first.model).unwrap();
+        assert!(!same.abandoned);
+        assert_eq!(same.cost.to_bits(), free.cost.to_bits());
+        assert_eq!(same.model.a().to_owned(), free.model.a().to_owned());
+        assert_eq!(same.iterations, free.iterations);
+        // a level below every cost: abandoned after the race's window of steps (the fit from
+        // the neighbour's model takes more than that on its own)
+        assert!(free.iterations > RACE_WINDOW, "{}", free.iterations);
+        let hard = MimoFreqOptions {
+            abandon_unless: Some(CostTarget::Bic(-1e12)),
+            ..o
+        };
+        let given_up = ss_frd_mimo_in_loop_from(&frd, &hard, &c, &first.model).unwrap();
+        assert!(given_up.abandoned);
+        assert!(
+            given_up.iterations < free.iterations,
+            "{}",
+            given_up.iterations
+        );
+        assert!(
+            given_up.cost >= free.cost,
+            "{} vs {}",
+            given_up.cost,
+            free.cost
+        );
+        // a fit from a given model abandoned in its probe has no probed starts to resume
+        assert!(given_up.probed.is_none() || given_up.iterations > PROBE_ITERATIONS);
+        // from scratch: abandoned in a refinement, then resumed without the level, it is the
+        // fit without the level, to the bit
+        // (noisy lines with their variances, an order below the plant's: a long refinement)
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let noisy: Vec<c64> = frd
+            .values()
+            .iter()
+            .map(|v| {
+                let s = 0.02 * v.norm();
+                v + c64::new(
+                    s * rng.random_range(-1.0..1.0),
+                    s * rng.random_range(-1.0..1.0),
+                )
+            })
+            .collect();
+        let var: Vec<f64> = frd
+            .values()
+            .iter()
+            .map(|v| (0.02 * v.norm()).powi(2) / 1.5)
+            .collect();
+        let frd = Frd::new_matrix(f.clone(), 2, 2, noisy, Some(var), Some(ts)).unwrap();
+        let scratch = ss_frd_mimo_in_loop(&frd, 2, &o, &c).unwrap();
+        let held = ss_frd_mimo_in_loop(&frd, 2, &hard, &c).unwrap();
+        eprintln!(
+            "scratch {} steps, held {} steps (abandoned {})",
+            scratch.iterations, held.iterations, held.abandoned
+        );
+        assert!(held.abandoned && held.probed.is_some());
+        let resumed = ss_frd_mimo_in_loop_resumed(&frd, &o, &c, &held).unwrap();
+        assert!(!resumed.abandoned && resumed.probed.is_none());
+        assert_eq!(resumed.cost.to_bits(), scratch.cost.to_bits());
+        assert_eq!(resumed.model.a().to_owned(), scratch.model.a().to_owned());
+        assert_eq!(resumed.iterations, scratch.iterations);
+        // resumed against the level again: abandoned again; a finished fit has nothing to resume
+        assert!(
+            ss_frd_mimo_in_loop_resumed(&frd, &hard, &c, &held)
+                .unwrap()
+                .abandoned
+        );
+        let e = ss_frd_mimo_in_loop_resumed(&frd, &o, &c, &scratch).unwrap_err();
+        assert!(e.to_string().contains("no probed starts"), "{e}");
+        // another order's problem refuses the starts
+        let other = Frd::from_model(&moving_plant(1.04, 1.0, 1.3), &f[..500]).unwrap();
+        let e = ss_frd_mimo_in_loop_resumed(&other, &o, &c, &held).unwrap_err();
+        assert!(e.to_string().contains("equations"), "{e}");
+        // the closed forms
+        let (n_eq, n_p) = (free.n_equations, free.n_params);
+        let nu = (n_eq - n_p) as f64;
+        let v = CostTarget::NoiseLevel { quantile: 2.326 }.cost_bound(n_eq, n_p);
+        assert!((2.0 * v / nu - (1.0 + 2.326 * (2.0 / nu).sqrt())).abs() < 1e-12);
+        let b = CostTarget::Bic(free.bic()).cost_bound(n_eq, n_p);
+        assert!(
+            (b - free.cost).abs() <= 1e-9 * free.cost.max(1.0),
+            "{b} vs {}",
+            free.cost
+        );
     }
 
     #[test]
