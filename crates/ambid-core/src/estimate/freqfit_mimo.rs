@@ -1079,7 +1079,8 @@ fn fit(
         runs.truncate(REFINED_STARTS);
         runs
     };
-    let probed_runs = runs.clone();
+    // kept for a resumption only where the fit can be abandoned
+    let probed_runs = external.map(|_| runs.clone());
     // refined in the order of the probe, each later one raced against the best final cost so
     // far (sequential, so that the result does not depend on timing)
     // with the caller's level: a run is raced against it while no run has ended, and one
@@ -1143,11 +1144,13 @@ fn fit(
         iterations,
         converged,
         abandoned,
-        probed: (abandoned && !probe_abandoned).then_some(ProbedStarts {
-            order,
-            n_equations: n_eq,
-            runs: probed_runs,
-        }),
+        probed: probed_runs
+            .filter(|_| abandoned && !probe_abandoned)
+            .map(|runs| ProbedStarts {
+                order,
+                n_equations: n_eq,
+                runs,
+            }),
         errors,
         singular_values: sv,
         f_hz: data.f_hz.clone(),
