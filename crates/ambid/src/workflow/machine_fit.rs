@@ -339,8 +339,10 @@ pub const NOISE_LEVEL_QUANTILE: f64 = 2.326;
 /// assert!(!at_noise_level(4200.0, 8096, 128));
 /// ```
 pub fn at_noise_level(cost: f64, n_equations: usize, n_params: usize) -> bool {
-    let nu = noise_level_dof(n_equations, n_params);
-    2.0 * cost / nu as f64 <= noise_level_bound(nu)
+    cost <= CostTarget::NoiseLevel {
+        quantile: NOISE_LEVEL_QUANTILE,
+    }
+    .cost_bound(n_equations, n_params)
 }
 
 /// The degrees of freedom $\nu = 2Ln_yn_u - n_\theta$ of [`at_noise_level`] (at least 1).
