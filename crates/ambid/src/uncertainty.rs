@@ -19,7 +19,7 @@ use ambid_core::validate::robust::{robust_stability, robust_stability_on_lines, 
 use ambid_core::validate::uncertainty::{
     uncertainty, window_half_lines_for, ExtraTerms, UncertaintyOptions, UncertaintyTerms,
 };
-use ambid_core::validate::weight::{fit_weight, WeightFit, DEFAULT_COVER, MAX_WEIGHT_ORDER};
+use ambid_core::validate::weight::{fit_weight_shaped, WeightFit, DEFAULT_COVER, MAX_WEIGHT_ORDER};
 use ambid_twin::{random_rig, Mode, TwinConfig};
 
 /// What [`analyse`] returns.
@@ -55,7 +55,7 @@ pub struct UncertaintyAnalysis {
 /// ([`UncertaintyAnalysis::on_lines`]).
 ///
 /// # Errors
-/// Those of [`uncertainty`], [`fit_weight`] and [`robust_stability`], with the step named.
+/// Those of [`uncertainty`], [`fit_weight_shaped`] and [`robust_stability`], with the step named.
 ///
 /// # Example
 /// ```
@@ -96,12 +96,13 @@ pub fn analyse(
         .iter()
         .map(|b| b.max(1e-12 * top).max(f64::MIN_POSITIVE))
         .collect();
-    let mut weight = fit_weight(
+    let mut weight = fit_weight_shaped(
         &terms.f_hz,
         &bound,
         ts,
         max_weight_order.min(MAX_WEIGHT_ORDER),
         cover,
+        opts.weight_shape,
     )
     .context("fitting the uncertainty weight")?;
     // the weight's and the bound's joint factors from one set of draws
@@ -676,8 +677,13 @@ pub fn twin_seed_frf_at(
     Ok((out, frd))
 }
 
-/// The nominal model of a twin run (type docs of [`UncertaintyRun`]).
-fn nominal_by_bic(frd: &Frd, controller: &StateSpace) -> Result<StateSpace> {
+/// The nominal model of a twin run (type docs of [`UncertaintyRun`]): of the inverse-variance
+/// `ss_frd` fits of the orders 6–12 to `frd` (the loop's unstable pole count from `controller`
+/// kept), the one of least BIC $2\chi^2 + n_\theta \ln(2L)$.
+///
+/// # Errors
+/// An FRF without variances, or no order could be fitted.
+pub fn nominal_by_bic(frd: &Frd, controller: &StateSpace) -> Result<StateSpace> {
     let unstable = unstable_poles_from_loop(frd, controller, None).ok();
     let opts = FreqFitOptions {
         weights: FreqWeights::InverseVariance,

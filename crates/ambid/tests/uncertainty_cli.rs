@@ -59,6 +59,21 @@ fn summary_of(dir: &std::path::Path, out: &str) -> serde_json::Value {
         .unwrap()
 }
 
+/// Issue 23's two margin bars for robust gain margins `lo..hi` against the true `t_lo..t_hi`:
+/// the true loop is stable with the gain moved 90 % of the way to either, and each is at least
+/// half the true one.
+fn assert_margin_bars(
+    plant: &ambid_core::lti::StateSpace,
+    ctrl: &ambid_core::lti::StateSpace,
+    (lo, hi): (f64, f64),
+    (t_lo, t_hi): (f64, f64),
+) {
+    assert!(loop_stable(plant, ctrl, 1.0 + 0.9 * (hi - 1.0)).unwrap());
+    assert!(loop_stable(plant, ctrl, 1.0 - 0.9 * (1.0 - lo)).unwrap());
+    assert!(hi - 1.0 >= 0.5 * (t_hi - 1.0), "{hi} vs {t_hi}");
+    assert!(1.0 - lo >= 0.5 * (1.0 - t_lo), "{lo} vs {t_lo}");
+}
+
 #[test]
 fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
     let dir = common::tmpdir("uncertainty-cli");
@@ -80,10 +95,7 @@ fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
     let g_lo = r["lower_gain_margin"].as_f64().unwrap();
     println!("robust gain margins {g_lo:.3}..{g_hi:.3}, true {true_lo:.3}..{true_hi:.3}");
     assert!(g_hi > 1.0 && g_lo < 1.0);
-    assert!(loop_stable(plant, ctrl, 1.0 + 0.9 * (g_hi - 1.0)).unwrap());
-    assert!(loop_stable(plant, ctrl, 1.0 - 0.9 * (1.0 - g_lo)).unwrap());
-    assert!(g_hi - 1.0 >= 0.5 * (true_hi - 1.0), "{g_hi} vs {true_hi}");
-    assert!(1.0 - g_lo >= 0.5 * (1.0 - true_lo), "{g_lo} vs {true_lo}");
+    assert_margin_bars(plant, ctrl, (g_lo, g_hi), (true_lo, true_hi));
     // the check on the lines (the bound itself, no weight fit): the same two bars
     let ol = &summary["robust_on_lines"]["check"];
     assert_eq!(ol["robustly_stable"], true, "{summary}");
@@ -93,10 +105,7 @@ fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
         ol["upper_gain_margin"].as_f64().unwrap(),
     );
     println!("on the lines {l_lo:.3}..{l_hi:.3}");
-    assert!(loop_stable(plant, ctrl, 1.0 + 0.9 * (l_hi - 1.0)).unwrap());
-    assert!(loop_stable(plant, ctrl, 1.0 - 0.9 * (1.0 - l_lo)).unwrap());
-    assert!(l_hi - 1.0 >= 0.5 * (true_hi - 1.0), "{l_hi} vs {true_hi}");
-    assert!(1.0 - l_lo >= 0.5 * (1.0 - true_lo), "{l_lo} vs {true_lo}");
+    assert_margin_bars(plant, ctrl, (l_lo, l_hi), (true_lo, true_hi));
 
     // the files agree: the script's weight on the lines is the table's weight_mag
     let table = std::fs::read_to_string(dir.join("unc/uncertainty.csv")).unwrap();
@@ -167,6 +176,36 @@ fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
         "rig {RIG}: |W| covers the true relative error on {covered} of {} lines",
         f.len()
     );
+
+    // the mode-shaped family (`--weight-shape mode`): the same bars for its margins, an order
+    // ≤ 4 weight, and closer to the bound on the 10–1000 Hz lines than the smooth one
+    let args = uncertainty_args(&dir, &["--weight-shape", "mode"], "unc_mode");
+    ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let mode = summary_of(&dir, "unc_mode");
+    assert_eq!(mode["weight"]["shape"], "mode", "{mode}");
+    assert_eq!(summary["weight"]["shape"], "smooth", "{summary}");
+    assert!(mode["weight"]["order"].as_u64().unwrap() <= 4);
+    let r = &mode["robust"];
+    assert_eq!(r["robustly_stable"], true, "{mode}");
+    let (m_lo, m_hi) = (
+        r["lower_gain_margin"].as_f64().unwrap(),
+        r["upper_gain_margin"].as_f64().unwrap(),
+    );
+    println!("mode-shaped weight: robust gain margins {m_lo:.3}..{m_hi:.3}");
+    assert_margin_bars(plant, ctrl, (m_lo, m_hi), (true_lo, true_hi));
+    let mode_table = std::fs::read_to_string(dir.join("unc_mode/uncertainty.csv")).unwrap();
+    let mode_w = column(&mode_table, "weight_mag");
+    let in_band = |w: &[f64]| {
+        let mut r: Vec<f64> = (0..f.len())
+            .filter(|&k| (10.0..=1000.0).contains(&f[k]))
+            .map(|k| w[k] / bound[k])
+            .collect();
+        r.sort_by(f64::total_cmp);
+        r[r.len() / 2]
+    };
+    let (tight, smooth) = (in_band(&mode_w), in_band(&wmag));
+    println!("median |W|/bound on 10-1000 Hz: mode-shaped {tight:.2}, smooth {smooth:.2}");
+    assert!(tight < smooth, "{tight} vs {smooth}");
 }
 
 #[test]
@@ -230,6 +269,12 @@ fn uncertainty_refuses_bad_input_and_writes_nothing() {
     assert!(t.contains("--line-coverage"), "{t}");
     let t = run(&["--run-coverage", "0"], &d("frf.csv"), &d("model.json"));
     assert!(t.contains("--run-coverage"), "{t}");
+    let t = run(
+        &["--weight-shape", "peaky"],
+        &d("frf.csv"),
+        &d("model.json"),
+    );
+    assert!(t.contains("`smooth` or `mode`"), "{t}");
 }
 
 /// Term (d) through the command: the same rig recorded at bias −20 % and +20 % (`simulate

@@ -140,6 +140,9 @@ pub struct UncertaintyOptions {
     pub draws: usize,
     /// Seed of the draws (`ChaCha8Rng`, default 0).
     pub seed: u64,
+    /// The family of the fitted weight (default [`WeightShape::Smooth`]; docs/uncertainty.md,
+    /// "Mode-shaped weights", gives what each holds on random rigs).
+    pub weight_shape: super::weight::WeightShape,
 }
 
 impl Default for UncertaintyOptions {
@@ -150,6 +153,7 @@ impl Default for UncertaintyOptions {
             run_coverage: 0.95,
             draws: 2000,
             seed: 0,
+            weight_shape: super::weight::WeightShape::Smooth,
         }
     }
 }

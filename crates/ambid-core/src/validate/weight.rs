@@ -27,13 +27,35 @@
 //! of the lines: with `cover` = 1 at every line ($g$ raised by $\max_k \ell_k/|W_k|$), with the
 //! default [`DEFAULT_COVER`] = 98 % at all but the 2 % of lines that stand out most above the
 //! fitted shape. Those are the narrow peaks of a relative bound at the lightly damped zeros
-//! (anti-resonances) of $\hat P$, where $|\hat P|$ is small: a weight of order $\le 4$ that
-//! follows one of them is loose by the peak's height over the whole band (on the nominal twin
-//! 15× at order 7). The lines left above $W$ are reported ([`WeightFit::uncovered_hz`]); there
+//! (anti-resonances) of $\hat P$, where $|\hat P|$ is small: a smooth weight of order $\le 4$
+//! that follows one of them is loose by the peak's height over the whole band (on the nominal
+//! twin 15× at order 7; the mode-shaped family below can follow one). The lines left above $W$ are reported ([`WeightFit::uncovered_hz`]); there
 //! $|T|$ is small for an AMB loop (the plant's zeros are the loop's), so they rarely decide
 //! robust stability, and [`robust_stability`](super::robust::robust_stability) evaluates $W$
 //! itself. Of all starts and stages, the raised weight of least looseness is the order's. The *looseness* of a weight is the median over the lines
 //! of $|W_k|/\ell_k$ ($\ge 1$); the lowest order within 10 % of the best looseness is kept.
+//!
+//! # Mode-shaped weights
+//! [`fit_weight_shaped`] with [`WeightShape::ModeShaped`] adds, for each order $n \ge 2$, one
+//! more start: a relative bound peaks at an anti-resonance of $\hat P$ (where $|\hat P|$ dips)
+//! and dips at the resonance beside it (where $|\hat P|$ peaks), which is the magnitude of a
+//! lightly damped pole pair followed by a lightly damped zero pair. The start puts the
+//! denominator's first second-order factor at the bound's most prominent peak and the
+//! numerator's at the dip beside it, both at $\zeta = 0.03$ with the floor $\zeta \ge 0.01$
+//! (a peak at most 50 times its shoulders) instead of [`MIN_ZETA`]; for $n = 3, 4$ the other
+//! factor pair starts with its zero at 1.3 times the higher of the two and its pole at the
+//! top line (the rise of the relative bound above the band, where $|\hat P|$ falls). It is
+//! refined against the bound's envelope over $\pm 0.02$ decade (about a mode's half-power
+//! width) instead of $\pm 0.05$, by the same three stages, and competes with the other starts
+//! by the same looseness. *Peak*: the line of largest prominence — its envelope value over
+//! the median of the envelope within $\pm 0.2$ decade, for lines whose window lies inside the
+//! lines — if it is at least $\ln 2$ (twice its surroundings); *dip*: the line of least
+//! negative prominence within $\pm 0.25$ decade of it (else 1.25 times the peak's
+//! frequency). No such peak: the smooth family alone. With lightly damped factors the
+//! slope argument of docs/uncertainty.md ("Why the looseness bar is not met") no longer
+//! holds: a pole pair followed by a zero pair rises to a peak and falls back within a
+//! fraction of a decade. What this family holds on random rigs, and why it is not the
+//! default, is in docs/uncertainty.md, "Mode-shaped weights".
 //!
 //! # Example
 //! The bound is itself a first-order weight: it is found.
@@ -269,6 +291,87 @@ pub fn fit_weight(
     max_order: usize,
     cover: f64,
 ) -> Result<WeightFit> {
+    fit_weight_shaped(f_hz, bound, ts, max_order, cover, WeightShape::Smooth)
+}
+
+/// The family of weights [`fit_weight_shaped`] searches (module docs, "Mode-shaped weights").
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WeightShape {
+    /// Every second-order factor has $\zeta \ge$ [`MIN_ZETA`]: a weight without sharp peaks,
+    /// which stays near the bound's highest peak over the band around it (the default).
+    #[default]
+    Smooth,
+    /// Also the mode-shaped starts: a lightly damped pole pair at the bound's most prominent
+    /// peak and a zero pair at the dip beside it ($\zeta \ge 0.01$), so the weight follows a
+    /// relative bound's peak at an anti-resonance of $\hat P$ and falls back after it. The
+    /// weight of least looseness over both families is kept.
+    ModeShaped,
+}
+
+impl WeightShape {
+    /// Its name in the CLI and the files: `smooth` or `mode`.
+    pub fn name(self) -> &'static str {
+        match self {
+            WeightShape::Smooth => "smooth",
+            WeightShape::ModeShaped => "mode",
+        }
+    }
+
+    /// The shape of a name ([`WeightShape::name`]).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for any other name.
+    pub fn from_name(name: &str) -> Result<Self> {
+        match name {
+            "smooth" => Ok(WeightShape::Smooth),
+            "mode" => Ok(WeightShape::ModeShaped),
+            other => Err(Error::invalid(
+                "weight shape",
+                format!("is `smooth` or `mode`, got `{other}`"),
+            )),
+        }
+    }
+}
+
+/// [`fit_weight`] over the family `shape` (module docs, "Mode-shaped weights").
+///
+/// # Errors
+/// As [`fit_weight`].
+///
+/// # Example
+/// A bound with a narrow peak (a lightly damped pole pair at 560 Hz and zero pair at 700 Hz, on
+/// evenly spaced lines as an FRF has them): the mode-shaped family follows it, the smooth one
+/// stays near the peak's level around it.
+/// ```
+/// use ambid_core::validate::weight::{fit_weight_shaped, Factor, Weight, WeightShape};
+/// use std::f64::consts::PI;
+/// let ts = 5e-5;
+/// let f: Vec<f64> = (1..=400).map(|k| 3.91 * k as f64).collect();
+/// let pair = |hz: f64, zeta: f64| Factor::Second { omega: 2.0 * PI * hz, zeta };
+/// let truth = Weight { ts, gain: 1e-3, numerator: vec![pair(700.0, 0.04)], denominator: vec![pair(560.0, 0.03)] };
+/// let ell = truth.magnitude(&f);
+/// let mode = fit_weight_shaped(&f, &ell, ts, 4, 1.0, WeightShape::ModeShaped).unwrap();
+/// let smooth = fit_weight_shaped(&f, &ell, ts, 4, 1.0, WeightShape::Smooth).unwrap();
+/// // the median of |W|/ℓ over the lines of 300–1200 Hz, around the mode
+/// let near = |w: &Weight| {
+///     let m = w.magnitude(&f);
+///     let mut r: Vec<f64> = (0..f.len()).filter(|&k| f[k] > 300.0 && f[k] < 1200.0)
+///         .map(|k| m[k] / ell[k]).collect();
+///     r.sort_by(f64::total_cmp);
+///     r[r.len() / 2]
+/// };
+/// let (m, s) = (near(&mode.weight), near(&smooth.weight));
+/// assert!(m < 1.15 && s > 1.4 * m, "mode-shaped {m}, smooth {s}");
+/// ```
+pub fn fit_weight_shaped(
+    f_hz: &[f64],
+    bound: &[f64],
+    ts: f64,
+    max_order: usize,
+    cover: f64,
+    shape: WeightShape,
+) -> Result<WeightFit> {
     let l = f_hz.len();
     if !(cover > 0.0 && cover <= 1.0) {
         return Err(Error::invalid(
@@ -304,25 +407,46 @@ pub fn fit_weight(
             "every bound must be positive and finite (a zero bound cannot be overbounded in log scale)",
         ));
     }
-    let log_l = envelope(f_hz, &bound.iter().map(|b| b.ln()).collect::<Vec<f64>>());
+    let raw_l: Vec<f64> = bound.iter().map(|b| b.ln()).collect();
+    let log_l = envelope(f_hz, &raw_l, ENVELOPE_DECADES);
     let (wlo, whi) = (2.0 * PI * f_hz[0], 2.0 * PI * f_hz[l - 1]);
     let range = ((wlo / 10.0).ln(), (PI / ts).ln());
+    // the bound's most prominent peak and the dip beside it: the starts that place a lightly
+    // damped pole pair and zero pair there (module docs, "Mode-shaped starts")
+    let modes = match shape {
+        WeightShape::ModeShaped => bound_mode(f_hz, &raw_l),
+        WeightShape::Smooth => None,
+    };
+    let log_m = modes.map(|_| envelope(f_hz, &raw_l, MODE_ENVELOPE_DECADES));
     let mut per_order = Vec::new();
     let mut results: Vec<(Weight, f64)> = Vec::new();
-    let mut prev: Option<Vec<f64>> = None;
+    let mut prev: Option<(Vec<f64>, Floors)> = None;
     for n in 0..=max_order {
-        let mut starts = start_vectors(n, wlo, whi, &log_l);
-        if let Some(p) = &prev {
-            starts.push(extend(&to_natural(p, n - 1, range), n, wlo, whi));
+        let mut starts: Vec<(Vec<f64>, Floors, &[f64])> = start_vectors(n, wlo, whi, &log_l)
+            .into_iter()
+            .map(|x| (x, Floors::PLAIN, log_l.as_slice()))
+            .collect();
+        if let Some((p, floors)) = &prev {
+            let floors = if n > 2 { *floors } else { Floors::PLAIN };
+            starts.push((
+                extend(&to_natural(p, n - 1, range), n, wlo, whi, floors),
+                floors,
+                &log_l,
+            ));
+        }
+        if let (Some(mode), Some(log_m)) = (modes, &log_m) {
+            if n >= 2 {
+                starts.push((mode_start(n, mode, whi, &log_l), Floors::MODE, log_m));
+            }
         }
         // every start refined against a rising penalty below the envelope; each stage's
         // result judged by the looseness of its raised weight
-        let mut best: Option<(Weight, f64, Vec<f64>)> = None;
-        for natural in starts {
+        let mut best: Option<(Weight, f64, Vec<f64>, Floors)> = None;
+        for (natural, floors, target) in starts {
             let mut x = to_params(&natural, n, range);
             // the start's gain puts it on the envelope from above (no residual below it)
-            let shape = weight_of(&x, n, ts, range).magnitude(f_hz);
-            x[0] += log_l
+            let shape = weight_of(&x, n, ts, range, floors).magnitude(f_hz);
+            x[0] += target
                 .iter()
                 .zip(&shape)
                 .map(|(l, m)| l - m.ln())
@@ -331,11 +455,12 @@ pub fn fit_weight(
                 if n > 0 {
                     let mut prob = LogFit {
                         f: f_hz,
-                        log_l: &log_l,
+                        log_l: target,
                         ts,
                         n,
                         range,
                         below,
+                        floors,
                     };
                     let opts = LmOptions::default().with_max_iterations(200)?;
                     match minimize(&mut prob, &x, &opts) {
@@ -343,19 +468,21 @@ pub fn fit_weight(
                         Err(_) => break,
                     }
                 }
-                let (w, loose) = raised(weight_of(&x, n, ts, range), f_hz, bound, cover);
+                let (w, loose) = raised(weight_of(&x, n, ts, range, floors), f_hz, bound, cover);
                 if loose.is_finite() && best.as_ref().is_none_or(|b| loose < b.1) {
-                    best = Some((w, loose, x.clone()));
+                    best = Some((w, loose, x.clone(), floors));
                 }
                 if n == 0 {
                     break;
                 }
             }
         }
-        let Some((w, loose, x)) = best else { continue };
+        let Some((w, loose, x, floors)) = best else {
+            continue;
+        };
         per_order.push((n, loose));
         results.push((w, loose));
-        prev = Some(x);
+        prev = Some((x, floors));
     }
     let best = results.iter().map(|r| r.1).fold(f64::INFINITY, f64::min);
     let (weight, looseness) = results
@@ -417,16 +544,18 @@ fn cover_index(l: usize, cover: f64) -> usize {
 /// The parameter layout of order $n$: $\ln g$, then the numerator's, then the denominator's
 /// factor parameters ($p_\omega, \ln(\zeta - \zeta_{\min})$ per second-order factor, $p_\omega$
 /// for the first-order one), with $\ln\omega = a + (b - a)/(1 + e^{-p_\omega})$ inside
-/// `range` $= (a, b)$.
-fn weight_of(x: &[f64], n: usize, ts: f64, range: (f64, f64)) -> Weight {
+/// `range` $= (a, b)$; $\zeta_{\min}$ is [`MIN_ZETA`] but for each polynomial's first
+/// second-order factor, whose floor is given by `floors`.
+fn weight_of(x: &[f64], n: usize, ts: f64, range: (f64, f64), floors: Floors) -> Weight {
     let per = n; // parameters per polynomial
     let omega = |p: f64| (range.0 + (range.1 - range.0) / (1.0 + (-p).exp())).exp();
-    let factors = |p: &[f64]| -> Vec<Factor> {
+    let factors = |p: &[f64], first: f64| -> Vec<Factor> {
         let mut out = Vec::new();
         for i in 0..n / 2 {
+            let floor = if i == 0 { first } else { MIN_ZETA };
             out.push(Factor::Second {
                 omega: omega(p[2 * i]),
-                zeta: MIN_ZETA + p[2 * i + 1].exp(),
+                zeta: floor + p[2 * i + 1].exp(),
             });
         }
         if n % 2 == 1 {
@@ -439,8 +568,8 @@ fn weight_of(x: &[f64], n: usize, ts: f64, range: (f64, f64)) -> Weight {
     Weight {
         ts,
         gain: x[0].exp(),
-        numerator: factors(&x[1..1 + per]),
-        denominator: factors(&x[1 + per..1 + 2 * per]),
+        numerator: factors(&x[1..1 + per], floors.numerator),
+        denominator: factors(&x[1 + per..1 + 2 * per], floors.denominator),
     }
 }
 
@@ -517,10 +646,10 @@ fn start_vectors(n: usize, wlo: f64, whi: f64, log_l: &[f64]) -> Vec<Vec<f64>> {
 
 /// The order-$(n-1)$ result (natural parameters) as a start of order $n$ with a nearly cancelling factor added
 /// (an extra first-order pair, or the first-order factors raised to a second-order one).
-fn extend(prev: &[f64], n: usize, wlo: f64, whi: f64) -> Vec<f64> {
+fn extend(prev: &[f64], n: usize, wlo: f64, whi: f64, floors: Floors) -> Vec<f64> {
     let pn = n - 1;
     let mid = 0.5 * (wlo.ln() + whi.ln());
-    let poly = |p: &[f64]| -> Vec<f64> {
+    let poly = |p: &[f64], first: f64| -> Vec<f64> {
         let mut out: Vec<f64> = p[..2 * (pn / 2)].to_vec();
         if pn % 2 == 1 {
             // first-order factor + another first-order one = a second-order one with two real
@@ -528,16 +657,18 @@ fn extend(prev: &[f64], n: usize, wlo: f64, whi: f64) -> Vec<f64> {
             let (a, b) = (p[pn - 1], mid);
             let w0 = 0.5 * (a + b);
             let zeta = (0.5 * ((a - w0).exp() + (b - w0).exp())).max(1.0);
+            // the new factor is the polynomial's first second-order one only when it had none
+            let floor = if pn == 1 { first } else { MIN_ZETA };
             out.push(w0);
-            out.push((zeta - MIN_ZETA).ln());
+            out.push((zeta - floor).ln());
         } else {
             out.push(mid);
         }
         out
     };
     let mut x = vec![prev[0]];
-    x.extend(poly(&prev[1..1 + pn]));
-    x.extend(poly(&prev[1 + pn..1 + 2 * pn]));
+    x.extend(poly(&prev[1..1 + pn], floors.numerator));
+    x.extend(poly(&prev[1 + pn..1 + 2 * pn], floors.denominator));
     // separate zero and pole a little so the gradient sees them
     if n % 2 == 1 {
         x[n] += 0.05;
@@ -554,6 +685,7 @@ struct LogFit<'a> {
     n: usize,
     range: (f64, f64),
     below: f64,
+    floors: Floors,
 }
 
 /// Weights of the residuals below the envelope, one refinement stage each (module docs).
@@ -568,10 +700,102 @@ const ENVELOPE_DECADES: f64 = 0.05;
 /// The quantile of $\ln\ell$ within the window that the fit follows.
 const ENVELOPE_QUANTILE: f64 = 0.8;
 
+/// Half-width of the narrower window that the mode-shaped starts follow, in decades: about the
+/// half-power width $2\zeta$ of a mode with $\zeta \approx 0.02$ (module docs, "Mode-shaped
+/// starts").
+const MODE_ENVELOPE_DECADES: f64 = 0.02;
+
+/// Half-width of the window, in decades, whose median a line of the bound is compared with to
+/// find a peak or a dip.
+const PROMINENCE_DECADES: f64 = 0.2;
+
+/// The least prominence ($\ln$ of the ratio to the window's median) of a peak that gets
+/// mode-shaped starts: twice its surroundings.
+const MIN_PROMINENCE: f64 = std::f64::consts::LN_2;
+
+/// The damping floor of the mode-shaped factors (a peak of at most $1/(2\cdot 0.01) = 50$ times
+/// its shoulders) and their starting damping.
+const MODE_MIN_ZETA: f64 = 0.01;
+const MODE_START_ZETA: f64 = 0.03;
+
+/// The damping floors of the first second-order factor of the numerator and of the denominator
+/// (the others' is [`MIN_ZETA`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Floors {
+    numerator: f64,
+    denominator: f64,
+}
+
+impl Floors {
+    const PLAIN: Floors = Floors {
+        numerator: MIN_ZETA,
+        denominator: MIN_ZETA,
+    };
+    const MODE: Floors = Floors {
+        numerator: MODE_MIN_ZETA,
+        denominator: MODE_MIN_ZETA,
+    };
+}
+
+/// The bound's most prominent peak and the dip beside it, as $(\omega_\text{peak},
+/// \omega_\text{dip})$ \[rad/s\] (module docs, "Mode-shaped starts"), or `None` when no line
+/// with a full window on both sides stands [`MIN_PROMINENCE`] above its window's median.
+fn bound_mode(f: &[f64], raw_l: &[f64]) -> Option<(f64, f64)> {
+    let smooth = envelope(f, raw_l, MODE_ENVELOPE_DECADES);
+    let r = 10f64.powf(PROMINENCE_DECADES);
+    let (first, last) = (f[0], f[f.len() - 1]);
+    let median_around = |k: usize| {
+        let mut w: Vec<f64> = (0..f.len())
+            .filter(|&j| f[j] >= f[k] / r && f[j] <= f[k] * r)
+            .map(|j| smooth[j])
+            .collect();
+        w.sort_by(f64::total_cmp);
+        w[w.len() / 2]
+    };
+    let inner: Vec<usize> = (0..f.len())
+        .filter(|&k| f[k] / r >= first && f[k] * r <= last)
+        .collect();
+    let prominence: Vec<(usize, f64)> = inner
+        .iter()
+        .map(|&k| (k, smooth[k] - median_around(k)))
+        .collect();
+    let &(kp, pp) = prominence.iter().max_by(|a, b| a.1.total_cmp(&b.1))?;
+    if pp < MIN_PROMINENCE {
+        return None;
+    }
+    let near = 10f64.powf(1.25 * PROMINENCE_DECADES);
+    let dip = prominence
+        .iter()
+        .filter(|(k, p)| *k != kp && *p < 0.0 && f[*k] <= f[kp] * near && f[*k] >= f[kp] / near)
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map_or(f[kp] * 1.25, |(k, _)| f[*k]);
+    Some((2.0 * PI * f[kp], 2.0 * PI * dip))
+}
+
+/// The mode-shaped start of order $n \ge 2$ (natural parameters, with [`Floors::MODE`]): the
+/// denominator's first factor at the bound's peak and the numerator's at its dip, both lightly
+/// damped; for $n = 3$ a first-order zero above the dip and a first-order pole at the top line,
+/// for $n = 4$ second-order ones there.
+fn mode_start(n: usize, (peak, dip): (f64, f64), whi: f64, log_l: &[f64]) -> Vec<f64> {
+    let mut sorted = log_l.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let mut x = vec![sorted[sorted.len() / 2]];
+    let mode_zeta = (MODE_START_ZETA - MODE_MIN_ZETA).ln();
+    for (mode, extra) in [(dip, 1.3 * dip.max(peak)), (peak, whi)] {
+        x.extend([mode.ln(), mode_zeta]);
+        match n {
+            3 => x.push(extra.ln()),
+            4 => x.extend([extra.ln(), (0.7f64 - MIN_ZETA).ln()]),
+            _ => {}
+        }
+    }
+    x
+}
+
 /// The [`ENVELOPE_QUANTILE`] of $\ln\ell_j$ over the lines within [`ENVELOPE_DECADES`] of each
 /// line (module docs).
-fn envelope(f: &[f64], log_l: &[f64]) -> Vec<f64> {
-    let r = 10f64.powf(ENVELOPE_DECADES);
+fn envelope(f: &[f64], log_l: &[f64], decades: f64) -> Vec<f64> {
+    let r = 10f64.powf(decades);
     let mut out = Vec::with_capacity(f.len());
     let (mut lo, mut hi) = (0usize, 0usize);
     let mut buf = Vec::new();
@@ -596,7 +820,7 @@ impl LeastSquaresProblem for LogFit<'_> {
         if x.iter().any(|v| !v.is_finite() || v.abs() > 700.0) {
             return None;
         }
-        let w = weight_of(x, self.n, self.ts, self.range);
+        let w = weight_of(x, self.n, self.ts, self.range, self.floors);
         let m = w.magnitude(self.f);
         let r: Vec<f64> = m
             .iter()
@@ -670,6 +894,74 @@ mod tests {
             assert!(p.norm() < 1.0);
         }
         assert!(fit.weight.order() <= 4);
+    }
+
+    /// A relative bound shaped by a lightly damped mode of the model (a narrow peak at its
+    /// anti-resonance, a dip at its resonance, then a rise) on evenly spaced lines, as an FRF
+    /// gives them: the truth is itself an order-4 weight whose two lightly damped factors lie
+    /// below [`MIN_ZETA`]. The mode-shaped family finds it (looseness near 1); the smooth one
+    /// cannot follow the peak and ends looser.
+    #[test]
+    fn a_bound_shaped_by_a_lightly_damped_mode_is_followed() {
+        let ts = 5e-5;
+        let f: Vec<f64> = (1..=767).map(|k| 3.91 * k as f64).collect();
+        let pair = |hz: f64, zeta: f64| Factor::Second {
+            omega: 2.0 * PI * hz,
+            zeta,
+        };
+        let truth = Weight {
+            ts,
+            gain: 5e-4,
+            numerator: vec![pair(700.0, 0.04), pair(1000.0, 0.7)],
+            denominator: vec![pair(560.0, 0.03), pair(6000.0, 0.7)],
+        };
+        let ell = truth.magnitude(&f);
+        let peak = ell.iter().copied().fold(0.0, f64::max);
+        let low = ell[2];
+        assert!(
+            peak > 5.0 * low,
+            "the bound has a narrow peak: {peak} against {low}"
+        );
+        let fit = fit_weight_shaped(&f, &ell, ts, 4, 1.0, WeightShape::ModeShaped).unwrap();
+        assert!(fit.looseness < 1.15, "{fit:?}");
+        assert_eq!(fit.weight.order(), 4);
+        let m = fit.weight.magnitude(&f);
+        assert!(m.iter().zip(&ell).all(|(w, l)| *w >= *l * (1.0 - 1e-12)));
+        assert!(fit
+            .weight
+            .poles()
+            .iter()
+            .chain(fit.weight.zeros().iter())
+            .all(|p| p.norm() < 1.0));
+        // the fitted mode factors sit at the truth's (within 3 %: an upper-envelope fit)
+        let near = |fs: &[Factor], hz: f64| {
+            fs.iter().any(|x| {
+                matches!(x, Factor::Second { omega, zeta } if (omega / (2.0 * PI) / hz - 1.0).abs() < 0.03 && *zeta < MIN_ZETA)
+            })
+        };
+        assert!(
+            near(&fit.weight.denominator, 560.0) && near(&fit.weight.numerator, 700.0),
+            "{fit:?}"
+        );
+        // the bound's peak and dip are found (the rise moves the peak a little above the pole);
+        // with the plain starts only, the mode's peak sets the level elsewhere
+        let log_l: Vec<f64> = ell.iter().map(|b| b.ln()).collect();
+        assert!(bound_mode(&f, &log_l).is_some_and(|(p, d)| {
+            (p / (2.0 * PI) / 560.0 - 1.0).abs() < 0.05
+                && (d / (2.0 * PI) / 700.0 - 1.0).abs() < 0.05
+        }));
+        let plain = fit_weight(&f, &ell, ts, 4, 1.0).unwrap();
+        let near = |w: &Weight| {
+            let m = w.magnitude(&f);
+            let mut r: Vec<f64> = (0..f.len())
+                .filter(|&k| f[k] > 300.0 && f[k] < 1200.0)
+                .map(|k| m[k] / ell[k])
+                .collect();
+            r.sort_by(f64::total_cmp);
+            r[r.len() / 2]
+        };
+        let (m, p) = (near(&fit.weight), near(&plain.weight));
+        assert!(m < 1.25 && p > 1.8 * m, "mode-shaped {m}, smooth {p}");
     }
 
     /// The state-space realisation has the weight's response.

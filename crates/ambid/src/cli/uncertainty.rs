@@ -12,7 +12,7 @@ use ambid::io::export::uncertain::{
 use ambid::io::OutputSet;
 use ambid::uncertainty::{amplitude_term, analyse, nonlinear_term, operating_term};
 use ambid_core::validate::uncertainty::{ExtraTerms, UncertaintyOptions};
-use ambid_core::validate::weight::{DEFAULT_COVER, MAX_WEIGHT_ORDER};
+use ambid_core::validate::weight::{WeightShape, DEFAULT_COVER, MAX_WEIGHT_ORDER};
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
@@ -53,6 +53,11 @@ pub struct UncertaintyArgs {
     /// overbound the error on `--cover` of the lines; the weight's gain is raised until it does.
     #[arg(long, default_value_t = 0.95)]
     run_coverage: f64,
+    /// The weight's family: `smooth` (every factor damped, ζ ≥ 0.2) or `mode` (also a lightly
+    /// damped pole pair at the bound's peak and a zero pair at its dip: tighter, but on random
+    /// rigs it covers the true error less often; docs/uncertainty.md, "Mode-shaped weights").
+    #[arg(long, default_value = "smooth", value_parser = parse_shape)]
+    weight_shape: WeightShape,
     /// Term (d): the plant FRF CSV of the same experiment at another operating point (bias
     /// current, air gap; `ambid frf` of a record with the same excitation, so the same lines).
     /// Repeat it for each; the bound then holds the largest noise-corrected distance of them from
@@ -235,6 +240,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         &UncertaintyOptions {
             line_coverage: a.line_coverage,
             run_coverage: a.run_coverage,
+            weight_shape: a.weight_shape,
             ..UncertaintyOptions::default()
         },
         a.max_order,
@@ -323,6 +329,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             "per_order": w.per_order,
             "cover": a.cover,
             "run_coverage": a.run_coverage,
+            "shape": a.weight_shape.name(),
             "joint_raise": analysis.joint_raise,
             "lines_covered": covered,
             "uncovered_hz": w.uncovered_hz,
@@ -479,4 +486,9 @@ fn read_bla(path: &Path) -> Result<(Vec<f64>, Vec<ambid_core::c64>, Vec<f64>)> {
         .map(|(r, i)| ambid_core::c64::new(*r, *i))
         .collect();
     Ok((f, g, nl))
+}
+
+/// `--weight-shape`: [`WeightShape::from_name`].
+fn parse_shape(s: &str) -> std::result::Result<WeightShape, String> {
+    WeightShape::from_name(s).map_err(|e| e.to_string())
 }
