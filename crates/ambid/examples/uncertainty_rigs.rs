@@ -13,6 +13,11 @@
 //! error and weight; `BAND_FIT=1` also fits a weight on the 10–1000 Hz lines alone, and
 //! `ADDITIVE_FIT=1` an additive weight over the additive bound, judged as $|W_a|/|\hat P|$
 //! (neither is a rule of the tool: docs/uncertainty.md, "Why the looseness bar is not met").
+//! `CALIB=1` prints where the true error falls among draws of the first-order error model;
+//! `CALIB_SYNTH=1` first replaces the FRF by the exact plant plus circular Gaussian noise of the
+//! measured variances (docs/uncertainty.md, "Mode-shaped weights").
+//! `SHAPE=mode` refits the weight with the mode-shaped family (`WeightShape::ModeShaped`, runs
+//! without `LEVELS`; docs/uncertainty.md, "Mode-shaped weights").
 
 use ambid::uncertainty::{loop_stable, nominal_gain_interval, UncertaintyRun};
 use ambid_twin::Mode;
@@ -44,14 +49,136 @@ fn main() {
     for &rig in &rigs {
         for &seed in &seeds {
             let t = std::time::Instant::now();
-            let run = match UncertaintyRun::on_twin_with_levels(rig, seed, mode, &levels) {
+            let mut run = match UncertaintyRun::on_twin_with_levels(rig, seed, mode, &levels) {
                 Ok(r) => r,
                 Err(e) => {
                     println!("{rig} {seed}: {e}");
                     continue;
                 }
             };
+            if std::env::var("SHAPE").as_deref() == Ok("mode") {
+                // the mode-shaped weight family (without levels: term (e) is not re-added)
+                assert!(levels.is_empty(), "SHAPE=mode is for runs without LEVELS");
+                let opts = ambid_core::validate::uncertainty::UncertaintyOptions {
+                    weight_shape: ambid_core::validate::weight::WeightShape::ModeShaped,
+                    ..Default::default()
+                };
+                run.analysis = ambid::uncertainty::analyse(
+                    &run.nominal,
+                    &run.frd,
+                    &run.controller,
+                    &ambid_core::validate::uncertainty::ExtraTerms::default(),
+                    &opts,
+                    4,
+                    ambid_core::validate::weight::DEFAULT_COVER,
+                )
+                .unwrap();
+            }
+            if std::env::var("CALIB_SYNTH").is_ok() {
+                // diagnostic: the same chain on a synthetic FRF, the exact plant plus circular
+                // complex Gaussian noise of the measured FRF's variances, so that the
+                // first-order error model's assumptions hold but for the fit's linearisation
+                use rand::SeedableRng;
+                use rand_distr::{Distribution, StandardNormal};
+                let f = run.frd.f_hz().to_vec();
+                let var = run.frd.variance().unwrap().to_vec();
+                let exact = run.truth_plant.freq_response_siso(&f).unwrap();
+                let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+                let g: Vec<ambid_core::c64> = exact
+                    .iter()
+                    .zip(&var)
+                    .map(|(p, v)| {
+                        let s = (0.5 * v).sqrt();
+                        let (a, b): (f64, f64) = (
+                            StandardNormal.sample(&mut rng),
+                            StandardNormal.sample(&mut rng),
+                        );
+                        p + ambid_core::c64::new(s * a, s * b)
+                    })
+                    .collect();
+                let frd = ambid_core::lti::Frd::new(f, g, Some(var), run.frd.ts()).unwrap();
+                let nominal = ambid::uncertainty::nominal_by_bic(&frd, &run.controller).unwrap();
+                let opts = ambid_core::validate::uncertainty::UncertaintyOptions::default();
+                run.analysis = ambid::uncertainty::analyse(
+                    &nominal,
+                    &frd,
+                    &run.controller,
+                    &ambid_core::validate::uncertainty::ExtraTerms::default(),
+                    &opts,
+                    4,
+                    ambid_core::validate::weight::DEFAULT_COVER,
+                )
+                .unwrap();
+                run.nominal = nominal;
+                run.frd = frd;
+            }
             let c = run.coverage((10.0, 1000.0)).unwrap();
+            if std::env::var("CALIB").is_ok() {
+                // diagnostic: is the true error a typical draw of the first-order error model?
+                // T = the 95 % quantile over the 10-1000 Hz lines of e_k / ell_k, for the true
+                // error and for 2 000 draws
+                use rand::SeedableRng;
+                let t = &run.analysis.terms;
+                let band: Vec<usize> = (0..t.f_hz.len())
+                    .filter(|&k| (10.0..=1000.0).contains(&t.f_hz[k]))
+                    .collect();
+                let f: Vec<f64> = band.iter().map(|&k| t.f_hz[k]).collect();
+                let truth = run.truth_plant.freq_response_siso(&f).unwrap();
+                let stat = |e: &dyn Fn(usize, usize) -> f64| {
+                    let mut r: Vec<f64> = band
+                        .iter()
+                        .enumerate()
+                        .map(|(i, &k)| e(i, k) / t.multiplicative[k])
+                        .collect();
+                    r.sort_by(f64::total_cmp);
+                    r[(0.95 * r.len() as f64).ceil() as usize - 1]
+                };
+                let real = stat(&|i, k| (truth[i] - t.nominal[k]).norm() / t.nominal[k].norm());
+                let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+                let mut draws = Vec::new();
+                let mut e = Vec::new();
+                for _ in 0..2000 {
+                    t.errors.draw_relative(&mut rng, &mut e);
+                    draws.push(stat(&|_, k| e[k]));
+                }
+                draws.sort_by(f64::total_cmp);
+                let rank = draws.iter().filter(|d| **d < real).count() as f64 / 2000.0;
+                println!(
+                    "    calib: T_true {real:.3}, draws median {:.3}, 95 % {:.3}; percentile {rank:.3}",
+                    draws[1000], draws[1899]
+                );
+                // the FRF itself against the exact plant on the band's lines: chi2 per line
+                // (1 if its variances are right and it is unbiased), and the same of 16-line
+                // means of the normalised error (1 without a bias that is coherent over lines)
+                let var = run.frd.variance().unwrap();
+                let g = run.frd.values();
+                let z: Vec<ambid_core::c64> = band
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &k)| (g[k] - truth[i]) / var[k].sqrt())
+                    .collect();
+                let chi2 = z.iter().map(|v| v.norm_sqr()).sum::<f64>() / z.len() as f64;
+                let chunks: Vec<f64> = z
+                    .chunks_exact(16)
+                    .map(|c| (c.iter().sum::<ambid_core::c64>() / 16.0).norm_sqr() * 16.0)
+                    .collect();
+                let coherent = chunks.iter().sum::<f64>() / chunks.len() as f64;
+                // non-circularity: the mean of the squared error turned by the plant's phase
+                // (0 for circular noise; ±1 for noise along / across the plant's direction)
+                let pseudo = band
+                    .iter()
+                    .enumerate()
+                    .map(|(i, _)| {
+                        let u = z[i] * truth[i].conj() / truth[i].norm();
+                        u * u
+                    })
+                    .sum::<ambid_core::c64>()
+                    / z.iter().map(|v| v.norm_sqr()).sum::<f64>();
+                println!(
+                    "    frf: chi2 {chi2:.3}, 16-line means {coherent:.3}, pseudo {:.3}{:+.3}j",
+                    pseudo.re, pseudo.im
+                );
+            }
             let c0 = {
                 let mut r0 = run.clone();
                 r0.analysis.weight.weight.gain /= run.analysis.joint_raise;
