@@ -13,9 +13,13 @@
 //! error and weight; `BAND_FIT=1` also fits a weight on the 10–1000 Hz lines alone, and
 //! `ADDITIVE_FIT=1` an additive weight over the additive bound, judged as $|W_a|/|\hat P|$
 //! (neither is a rule of the tool: docs/uncertainty.md, "Why the looseness bar is not met").
-//! `CALIB=1` prints where the true error falls among draws of the first-order error model;
+//! `CALIB=1` prints where the true error falls among draws of the first-order error model, and
+//! statistics of the measured FRF's error against the exact plant (per line, over 16 lines,
+//! its circularity and its sums over the whole band);
 //! `CALIB_SYNTH=1` first replaces the FRF by the exact plant plus circular Gaussian noise of the
-//! measured variances (docs/uncertainty.md, "Mode-shaped weights").
+//! measured variances; `TWIN_NOISE=noquant` simulates without the ADC quantisation and
+//! `TWIN_NOISE=bias` also prints the noise-free record's FRF against the exact plant
+//! (docs/uncertainty.md, "Mode-shaped weights").
 //! `SHAPE=mode` refits the weight with the mode-shaped family (`WeightShape::ModeShaped`, runs
 //! without `LEVELS`; docs/uncertainty.md, "Mode-shaped weights").
 
@@ -73,6 +77,87 @@ fn main() {
                     ambid_core::validate::weight::DEFAULT_COVER,
                 )
                 .unwrap();
+            }
+            if let Ok(what) = std::env::var("TWIN_NOISE") {
+                // diagnostic: the same chain with the twin's measurement changed: `noquant`
+                // (no ADC quantisation), `nonoise` is not allowed (no variances)
+                use ambid::experiment::{run as simulate, ExcitationPlan, Experiment};
+                let mut twin = if rig == 0 {
+                    ambid_twin::TwinConfig::default()
+                } else {
+                    ambid_twin::random_rig(rig).unwrap()
+                };
+                assert!(
+                    what == "noquant" || what == "bias",
+                    "TWIN_NOISE=noquant|bias"
+                );
+                twin.sensor.quantize = false;
+                if what == "bias" {
+                    // the noise-free record's FRF against the exact plant, in units of the
+                    // noisy FRF's standard deviation: the simulation's own systematic error
+                    let exp = Experiment {
+                        twin: twin.clone(),
+                        excitation: ExcitationPlan::default(),
+                        mode,
+                        seed,
+                        noise: false,
+                        record_b: false,
+                    };
+                    let cl = simulate(&exp)
+                        .unwrap()
+                        .periodic_frf(ambid::uncertainty::TWIN_BAND_HZ, None)
+                        .unwrap();
+                    let g0 = cl.plant.values();
+                    let f = cl.plant.f_hz().to_vec();
+                    let truth = run.truth_plant.freq_response_siso(&f).unwrap();
+                    let var = run.frd.variance().unwrap();
+                    let band: Vec<usize> = (0..f.len())
+                        .filter(|&k| (10.0..=1000.0).contains(&f[k]))
+                        .collect();
+                    let mut zs: Vec<f64> = band
+                        .iter()
+                        .map(|&k| (g0[k] - truth[k]).norm() / var[k].sqrt())
+                        .collect();
+                    let mut rel: Vec<f64> = band
+                        .iter()
+                        .map(|&k| (g0[k] - truth[k]).norm() / truth[k].norm())
+                        .collect();
+                    zs.sort_by(f64::total_cmp);
+                    rel.sort_by(f64::total_cmp);
+                    println!(
+                        "    noise-free FRF - exact plant on 10-1000 Hz: |.|/sigma median {:.3} max {:.3}; relative median {:.2e} max {:.2e}",
+                        zs[zs.len() / 2],
+                        zs[zs.len() - 1],
+                        rel[rel.len() / 2],
+                        rel[rel.len() - 1]
+                    );
+                }
+                let exp = Experiment {
+                    twin,
+                    excitation: ExcitationPlan::default(),
+                    mode,
+                    seed,
+                    noise: true,
+                    record_b: false,
+                };
+                let out = simulate(&exp).unwrap();
+                let frd = out
+                    .periodic_frf(ambid::uncertainty::TWIN_BAND_HZ, None)
+                    .unwrap()
+                    .plant;
+                let nominal = ambid::uncertainty::nominal_by_bic(&frd, &run.controller).unwrap();
+                run.analysis = ambid::uncertainty::analyse(
+                    &nominal,
+                    &frd,
+                    &run.controller,
+                    &ambid_core::validate::uncertainty::ExtraTerms::default(),
+                    &ambid_core::validate::uncertainty::UncertaintyOptions::default(),
+                    4,
+                    ambid_core::validate::weight::DEFAULT_COVER,
+                )
+                .unwrap();
+                run.nominal = nominal;
+                run.frd = frd;
             }
             if std::env::var("CALIB_SYNTH").is_ok() {
                 // diagnostic: the same chain on a synthetic FRF, the exact plant plus circular
@@ -174,8 +259,18 @@ fn main() {
                     })
                     .sum::<ambid_core::c64>()
                     / z.iter().map(|v| v.norm_sqr()).sum::<f64>();
+                // correlation over the whole band: |sum z_k c_k|^2 / sum |c_k|^2 for a few
+                // smooth complex weightings c_k (1 for independent noise, on average)
+                let n = z.len() as f64;
+                let whole = |c: &dyn Fn(usize) -> ambid_core::c64| {
+                    let s: ambid_core::c64 = (0..z.len()).map(|i| z[i] * c(i)).sum();
+                    s.norm_sqr() / (0..z.len()).map(|i| c(i).norm_sqr()).sum::<f64>()
+                };
+                let flat = whole(&|_| ambid_core::c64::new(1.0, 0.0));
+                let along = whole(&|i| truth[i].conj() / truth[i].norm());
+                let ramp = whole(&|i| ambid_core::c64::new(i as f64 / n - 0.5, 0.0));
                 println!(
-                    "    frf: chi2 {chi2:.3}, 16-line means {coherent:.3}, pseudo {:.3}{:+.3}j",
+                    "    frf: chi2 {chi2:.3}, 16-line means {coherent:.3}, pseudo {:.3}{:+.3}j, whole-band sums flat {flat:.2} along-P {along:.2} ramp {ramp:.2}",
                     pseudo.re, pseudo.im
                 );
             }
