@@ -15,7 +15,7 @@
 //! (neither is a rule of the tool: docs/uncertainty.md, "Why the looseness bar is not met").
 //! `CALIB=1` prints where the true error falls among draws of the first-order error model, and
 //! statistics of the measured FRF's error against the exact plant (per line, over 16 lines,
-//! its circularity and its sums over the whole band);
+//! its circularity and its sums over the whole band; with `CALIB_LAGS=1` its lag correlations);
 //! `CALIB_SYNTH=1` first replaces the FRF by the exact plant plus circular Gaussian noise of the
 //! measured variances; `TWIN_NOISE=noquant` simulates without the ADC quantisation and
 //! `TWIN_NOISE=bias` also prints the noise-free record's FRF against the exact plant
@@ -266,6 +266,22 @@ fn main() {
                     let s: ambid_core::c64 = (0..z.len()).map(|i| z[i] * c(i)).sum();
                     s.norm_sqr() / (0..z.len()).map(|i| c(i).norm_sqr()).sum::<f64>()
                 };
+                if std::env::var("CALIB_LAGS").is_ok() {
+                    let m2 = z.iter().map(|v| v.norm_sqr()).sum::<f64>() / n;
+                    let lag = |m: usize| {
+                        let s: ambid_core::c64 =
+                            (0..z.len() - m).map(|i| z[i] * z[i + m].conj()).sum();
+                        s / ((z.len() - m) as f64 * m2)
+                    };
+                    let l: Vec<String> = [1, 2, 3, 5, 10, 20, 50]
+                        .iter()
+                        .map(|&m| {
+                            let r = lag(m);
+                            format!("{m}:{:+.3}{:+.3}j", r.re, r.im)
+                        })
+                        .collect();
+                    println!("    lags {}", l.join(" "));
+                }
                 let flat = whole(&|_| ambid_core::c64::new(1.0, 0.0));
                 let along = whole(&|i| truth[i].conj() / truth[i].norm());
                 let ramp = whole(&|i| ambid_core::c64::new(i as f64 / n - 0.5, 0.0));
