@@ -412,7 +412,7 @@ pub fn fit_weight_shaped(
     let (wlo, whi) = (2.0 * PI * f_hz[0], 2.0 * PI * f_hz[l - 1]);
     let range = ((wlo / 10.0).ln(), (PI / ts).ln());
     // the bound's most prominent peak and the dip beside it: the starts that place a lightly
-    // damped pole pair and zero pair there (module docs, "Mode-shaped starts")
+    // damped pole pair and zero pair there (module docs, "Mode-shaped weights")
     let modes = match shape {
         WeightShape::ModeShaped => bound_mode(f_hz, &raw_l),
         WeightShape::Smooth => None,
@@ -427,6 +427,8 @@ pub fn fit_weight_shaped(
             .map(|x| (x, Floors::PLAIN, log_l.as_slice()))
             .collect();
         if let Some((p, floors)) = &prev {
+            // order 2 from order 1 makes a new second-order factor, which gets the plain
+            // floor; from order 2 on the first factor is carried with its floor
             let floors = if n > 2 { *floors } else { Floors::PLAIN };
             starts.push((
                 extend(&to_natural(p, n - 1, range), n, wlo, whi, floors),
@@ -610,9 +612,7 @@ fn to_natural(x: &[f64], n: usize, range: (f64, f64)) -> Vec<f64> {
 /// Starts of order $n$ (natural parameters): corners spread log-uniformly over the band, the zeros' below the
 /// poles' and the reverse; the gain at the bound's median.
 fn start_vectors(n: usize, wlo: f64, whi: f64, log_l: &[f64]) -> Vec<Vec<f64>> {
-    let mut sorted = log_l.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    let lg = sorted[sorted.len() / 2];
+    let lg = median(log_l.to_vec());
     if n == 0 {
         return vec![vec![lg]];
     }
@@ -702,7 +702,7 @@ const ENVELOPE_QUANTILE: f64 = 0.8;
 
 /// Half-width of the narrower window that the mode-shaped starts follow, in decades: about the
 /// half-power width $2\zeta$ of a mode with $\zeta \approx 0.02$ (module docs, "Mode-shaped
-/// starts").
+/// weights").
 const MODE_ENVELOPE_DECADES: f64 = 0.02;
 
 /// Half-width of the window, in decades, whose median a line of the bound is compared with to
@@ -717,6 +717,12 @@ const MIN_PROMINENCE: f64 = std::f64::consts::LN_2;
 /// its shoulders) and their starting damping.
 const MODE_MIN_ZETA: f64 = 0.01;
 const MODE_START_ZETA: f64 = 0.03;
+
+/// The upper median of `v` (not empty).
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
 
 /// The damping floors of the first second-order factor of the numerator and of the denominator
 /// (the others' is [`MIN_ZETA`]).
@@ -738,19 +744,19 @@ impl Floors {
 }
 
 /// The bound's most prominent peak and the dip beside it, as $(\omega_\text{peak},
-/// \omega_\text{dip})$ \[rad/s\] (module docs, "Mode-shaped starts"), or `None` when no line
+/// \omega_\text{dip})$ \[rad/s\] (module docs, "Mode-shaped weights"), or `None` when no line
 /// with a full window on both sides stands [`MIN_PROMINENCE`] above its window's median.
 fn bound_mode(f: &[f64], raw_l: &[f64]) -> Option<(f64, f64)> {
     let smooth = envelope(f, raw_l, MODE_ENVELOPE_DECADES);
     let r = 10f64.powf(PROMINENCE_DECADES);
     let (first, last) = (f[0], f[f.len() - 1]);
     let median_around = |k: usize| {
-        let mut w: Vec<f64> = (0..f.len())
-            .filter(|&j| f[j] >= f[k] / r && f[j] <= f[k] * r)
-            .map(|j| smooth[j])
-            .collect();
-        w.sort_by(f64::total_cmp);
-        w[w.len() / 2]
+        median(
+            (0..f.len())
+                .filter(|&j| f[j] >= f[k] / r && f[j] <= f[k] * r)
+                .map(|j| smooth[j])
+                .collect(),
+        )
     };
     let inner: Vec<usize> = (0..f.len())
         .filter(|&k| f[k] / r >= first && f[k] * r <= last)
@@ -777,9 +783,7 @@ fn bound_mode(f: &[f64], raw_l: &[f64]) -> Option<(f64, f64)> {
 /// damped; for $n = 3$ a first-order zero above the dip and a first-order pole at the top line,
 /// for $n = 4$ second-order ones there.
 fn mode_start(n: usize, (peak, dip): (f64, f64), whi: f64, log_l: &[f64]) -> Vec<f64> {
-    let mut sorted = log_l.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    let mut x = vec![sorted[sorted.len() / 2]];
+    let mut x = vec![median(log_l.to_vec())];
     let mode_zeta = (MODE_START_ZETA - MODE_MIN_ZETA).ln();
     for (mode, extra) in [(dip, 1.3 * dip.max(peak)), (peak, whi)] {
         x.extend([mode.ln(), mode_zeta]);
