@@ -15,7 +15,8 @@
 //! (neither is a rule of the tool: docs/uncertainty.md, "Why the looseness bar is not met").
 //! `CALIB=1` prints where the true error falls among draws of the first-order error model, and
 //! statistics of the measured FRF's error against the exact plant (per line, over 16 lines,
-//! its circularity and its sums over the whole band; with `CALIB_LAGS=1` its lag correlations);
+//! its circularity and its sums over the whole band; with `CALIB_LAGS=1` its lag correlations;
+//! with `SPLIT=1` the models of the record's two halves against each other by the same test);
 //! `CALIB_SYNTH=1` first replaces the FRF by the exact plant plus circular Gaussian noise of the
 //! measured variances; `TWIN_NOISE=noquant` simulates without the ADC quantisation and
 //! `TWIN_NOISE=bias` also prints the noise-free record's FRF against the exact plant
@@ -227,6 +228,37 @@ fn main() {
                     draws.push(stat(&|_, k| e[k]));
                 }
                 draws.sort_by(f64::total_cmp);
+                if std::env::var("SPLIT").is_ok() {
+                    // the models of the record's two halves (periods 0-9 and 10-19, each with
+                    // its first period skipped) against each other, by the same statistic, the
+                    // draws scaled by the first-order ratio sqrt(2 * 19 / 9): the excess of the
+                    // true error seen from the data alone
+                    let half = |h: usize| {
+                        let (mut o, _) =
+                            ambid::uncertainty::twin_seed_frf(rig, seed, mode).unwrap();
+                        let per = o.excitation.period_samples;
+                        let (a, b) = (h * 10 * per, (h + 1) * 10 * per);
+                        o.record.r = o.record.r[a..b].to_vec();
+                        o.record.u = o.record.u[a..b].to_vec();
+                        o.record.y = o.record.y[a..b].to_vec();
+                        o.record.t = o.record.t[a..b].to_vec();
+                        o.record.w = o.record.w[a..b].to_vec();
+                        o.record.i = o.record.i[a..b].to_vec();
+                        o.excitation.values = o.excitation.values[a..b].to_vec();
+                        o.excitation.periods = 10;
+                        let g = o
+                            .periodic_frf(ambid::uncertainty::TWIN_BAND_HZ, None)
+                            .unwrap()
+                            .plant;
+                        let m = ambid::uncertainty::nominal_by_bic(&g, &run.controller).unwrap();
+                        m.freq_response_siso(&f).unwrap()
+                    };
+                    let (p1, p2) = (half(0), half(1));
+                    let scale = (2.0f64 * 19.0 / 9.0).sqrt();
+                    let td = stat(&|i, k| (p1[i] - p2[i]).norm() / t.nominal[k].norm() / scale);
+                    let rank_d = draws.iter().filter(|d| **d < td).count() as f64 / 2000.0;
+                    println!("    split: T_halves {td:.3} percentile {rank_d:.3}");
+                }
                 let rank = draws.iter().filter(|d| **d < real).count() as f64 / 2000.0;
                 println!(
                     "    calib: T_true {real:.3}, draws median {:.3}, 95 % {:.3}; percentile {rank:.3}",
