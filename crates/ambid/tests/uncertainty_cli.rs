@@ -59,6 +59,14 @@ fn summary_of(dir: &std::path::Path, out: &str) -> serde_json::Value {
         .unwrap()
 }
 
+/// The robust `(lower, upper)` gain margins of a robust check in `summary.json`.
+fn gain_margins(check: &serde_json::Value) -> (f64, f64) {
+    (
+        check["lower_gain_margin"].as_f64().unwrap(),
+        check["upper_gain_margin"].as_f64().unwrap(),
+    )
+}
+
 /// Issue 23's two margin bars for robust gain margins `lo..hi` against the true `t_lo..t_hi`:
 /// the true loop is stable with the gain moved 90 % of the way to either, and each is at least
 /// half the true one.
@@ -91,8 +99,7 @@ fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
     let twin = ambid_twin::Twin::new(rig).unwrap();
     let (plant, ctrl) = (twin.plant(), twin.controller());
     let (true_lo, true_hi) = nominal_gain_interval(plant, ctrl).unwrap();
-    let g_hi = r["upper_gain_margin"].as_f64().unwrap();
-    let g_lo = r["lower_gain_margin"].as_f64().unwrap();
+    let (g_lo, g_hi) = gain_margins(r);
     println!("robust gain margins {g_lo:.3}..{g_hi:.3}, true {true_lo:.3}..{true_hi:.3}");
     assert!(g_hi > 1.0 && g_lo < 1.0);
     assert_margin_bars(plant, ctrl, (g_lo, g_hi), (true_lo, true_hi));
@@ -100,10 +107,7 @@ fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
     let ol = &summary["robust_on_lines"]["check"];
     assert_eq!(ol["robustly_stable"], true, "{summary}");
     assert!(summary["robust_on_lines"]["raise"].as_f64().unwrap() >= 1.0);
-    let (l_lo, l_hi) = (
-        ol["lower_gain_margin"].as_f64().unwrap(),
-        ol["upper_gain_margin"].as_f64().unwrap(),
-    );
+    let (l_lo, l_hi) = gain_margins(ol);
     println!("on the lines {l_lo:.3}..{l_hi:.3}");
     assert_margin_bars(plant, ctrl, (l_lo, l_hi), (true_lo, true_hi));
 
@@ -187,10 +191,7 @@ fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
     assert!(mode["weight"]["order"].as_u64().unwrap() <= 4);
     let r = &mode["robust"];
     assert_eq!(r["robustly_stable"], true, "{mode}");
-    let (m_lo, m_hi) = (
-        r["lower_gain_margin"].as_f64().unwrap(),
-        r["upper_gain_margin"].as_f64().unwrap(),
-    );
+    let (m_lo, m_hi) = gain_margins(r);
     println!("mode-shaped weight: robust gain margins {m_lo:.3}..{m_hi:.3}");
     assert_margin_bars(plant, ctrl, (m_lo, m_hi), (true_lo, true_hi));
     let mode_table = std::fs::read_to_string(dir.join("unc_mode/uncertainty.csv")).unwrap();
@@ -349,10 +350,7 @@ fn uncertainty_takes_the_operating_points_as_term_d() {
     // every operating point's true loop at 90 % of the margins of the check on the lines
     let ol = &summary["robust_on_lines"]["check"];
     if ol["robustly_stable"] == true {
-        let (lo, hi) = (
-            ol["lower_gain_margin"].as_f64().unwrap(),
-            ol["upper_gain_margin"].as_f64().unwrap(),
-        );
+        let (lo, hi) = gain_margins(ol);
         for t in ops.iter().chain([&nominal_twin]) {
             for g in [1.0 - 0.9 * (1.0 - lo), 1.0 + 0.9 * (hi - 1.0)] {
                 assert!(
