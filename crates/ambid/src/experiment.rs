@@ -451,6 +451,45 @@ impl ExperimentOutput {
             controller,
         )?)
     }
+
+    /// The plant FRF's deviation in each analysed period on the lines of `frd` (a
+    /// [`periodic_frf`](Self::periodic_frf) of this record), `[period][line]`
+    /// ([`plant_period_deviations`](ambid_core::frf::closed_loop::plant_period_deviations)): what
+    /// term (a) of the uncertainty takes its covariance from
+    /// ([`ExtraTerms::frf_periods`](ambid_core::validate::uncertainty::ExtraTerms::frf_periods)).
+    ///
+    /// # Errors
+    /// A record that is not periodic, a line of `frd` that is not a line of the period, and
+    /// those of `plant_period_deviations`.
+    pub fn period_deviations(&self, frd: &ambid_core::lti::Frd) -> Result<Vec<Vec<Complex64>>> {
+        use ambid_core::frf::closed_loop::{plant_period_deviations, Channels};
+        use ambid_core::frf::periodic::PeriodicOptions;
+        let period = self.excitation.period_samples;
+        if self.excitation.periods < 2 {
+            return Err(Error::other(
+                "the excitation is not periodic (one period): no deviations across periods",
+            ));
+        }
+        let rec = &self.record;
+        let df = 1.0 / (rec.ts * period as f64);
+        let mut lines = Vec::with_capacity(frd.len());
+        for &f in frd.f_hz() {
+            let k = (f / df).round();
+            if (f / df - k).abs() > 1e-6 {
+                return Err(Error::other(format!(
+                    "{f} Hz is not a line of the {period}-sample period ({df} Hz apart)"
+                )));
+            }
+            lines.push(k as usize);
+        }
+        Ok(plant_period_deviations(
+            &[&rec.r, &rec.u, &rec.y],
+            1.0 / rec.ts,
+            Channels { r: 0, u: 1, y: 2 },
+            &PeriodicOptions::new(period).skip(1),
+            &lines,
+        )?)
+    }
 }
 
 #[cfg(test)]

@@ -666,6 +666,102 @@ pub fn from_periodic_iodata(
     from_periodic(&s, Channels { r: 0, u: 1, y: 2 }, &lines, controller)
 }
 
+/// The plant FRF's deviation in each period, to first order: with the period DFTs $U_p(k)$,
+/// $Y_p(k)$ and their means $\bar U(k)$, $\bar Y(k)$ over the $P$ analysed periods (the
+/// estimate $\hat P_k = \bar Y(k)/\bar U(k)$ of [`from_periodic`]),
+/// $$ d_{p,k} = \frac{Y_p(k) - \hat P_k\, U_p(k)}{\bar U(k)}, \qquad \sum_p d_{p,k} = 0, $$
+/// indexed `[period][line]` on `lines`. The error of $\hat P_k$ is the mean of the periods'
+/// errors, $\delta\hat P_k \approx \frac1P\sum_p (Y_p - P_k U_p)/\bar U$, so
+/// $\frac{1}{P(P-1)}\sum_p |d_{p,k}|^2$ is the variance [`from_periodic`] gives the plant FRF
+/// (the same linearisation), and $\frac{1}{P(P-1)}\sum_p d_{p,k}\,\overline{d_{p,j}}$ its
+/// covariance *between* lines, which the per-line variances do not hold: the sample
+/// covariance across periods of any linear functional of the FRF (e.g. a whole-band sum, or a
+/// fitted model's parameters to first order) is taken from them. docs/uncertainty.md uses them
+/// to test whether the FRF's error is correlated over the band.
+///
+/// # Errors
+/// Those of [`PeriodicAnalyzer::analyze`](super::periodic::PeriodicAnalyzer::analyze) and
+/// [`PeriodicAnalyzer::period_lines`](super::periodic::PeriodicAnalyzer::period_lines);
+/// [`Error::InvalidArgument`] for a channel index out of range, no line, line 0, fewer than 2
+/// analysed periods, or a line where $\bar U$ vanishes (not excited).
+///
+/// # Example
+/// A plant of gain 2 whose output carries a disturbance that changes from period to period:
+/// the deviations' sample variance is the one [`from_periodic`] reports.
+/// ```
+/// use ambid_core::frf::closed_loop::{from_periodic, plant_period_deviations, Channels};
+/// use ambid_core::frf::periodic::{PeriodicAnalyzer, PeriodicOptions};
+/// let n = 16;
+/// let u: Vec<f64> = (0..6 * n).map(|k| (2.0 * std::f64::consts::PI * 3.0 * k as f64 / n as f64).cos()).collect();
+/// let y: Vec<f64> = u.iter().enumerate().map(|(k, v)| 2.0 * v + 0.01 * ((k * k) % 7) as f64).collect();
+/// let (ch, opts) = (Channels { r: 0, u: 0, y: 1 }, PeriodicOptions::new(n));
+/// let d = plant_period_deviations(&[&u, &y], 1.0, ch, &opts, &[3]).unwrap();
+/// let p = d.len() as f64;
+/// let var = d.iter().map(|dp| dp[0].norm_sqr()).sum::<f64>() / (p * (p - 1.0));
+/// let s = PeriodicAnalyzer::new(n).unwrap().analyze(&[&u, &y], 1.0, &opts).unwrap();
+/// let frf = from_periodic(&s, ch, &[3], None).unwrap();
+/// let reported = frf.plant.variance().unwrap()[0];
+/// assert!((var - reported).abs() <= 1e-9 * reported, "{var} {reported}");
+/// ```
+pub fn plant_period_deviations(
+    channels: &[&[f64]],
+    fs: f64,
+    ch: Channels,
+    opts: &super::periodic::PeriodicOptions,
+    lines: &[usize],
+) -> Result<Vec<Vec<c64>>> {
+    let nc = channels.len();
+    for (name, c) in [("r", ch.r), ("u", ch.u), ("y", ch.y)] {
+        if c >= nc {
+            return Err(Error::invalid(
+                "channels",
+                format!("channel `{name}` has index {c} but only {nc} channels were given"),
+            ));
+        }
+    }
+    if lines.is_empty() || lines.contains(&0) {
+        return Err(Error::invalid(
+            "lines",
+            "needs at least one line, and not line 0 (DC is not used)",
+        ));
+    }
+    let per = super::periodic::PeriodicAnalyzer::new(opts.period_samples)?.period_lines(
+        &[channels[ch.u], channels[ch.y]],
+        fs,
+        opts,
+        lines,
+    )?;
+    let p = per.len();
+    if p < 2 {
+        return Err(Error::invalid(
+            "periods",
+            format!("{p} analysed period: deviations across periods need at least 2"),
+        ));
+    }
+    let mean = |c: usize, i: usize| per.iter().map(|x| x[c][i]).sum::<c64>() / p as f64;
+    let mut ratio = Vec::with_capacity(lines.len());
+    for (i, &k) in lines.iter().enumerate() {
+        let (ub, yb) = (mean(0, i), mean(1, i));
+        if ub.norm_sqr() == 0.0 {
+            return Err(Error::invalid(
+                "lines",
+                format!("`u` has no power on line {k}; select excited lines only"),
+            ));
+        }
+        ratio.push((yb / ub, c64::new(1.0, 0.0) / ub));
+    }
+    Ok(per
+        .iter()
+        .map(|x| {
+            ratio
+                .iter()
+                .enumerate()
+                .map(|(i, (ph, iu))| (x[1][i] - ph * x[0][i]) * iu)
+                .collect()
+        })
+        .collect())
+}
+
 /// Closed-loop FRFs from Welch spectra (channel indices into `spectra`), $r$ as the reference;
 /// frequencies restricted to `[f_min, f_max]` and to bins where $S_{rr}$ exceeds `rel_threshold`
 /// times its maximum.
@@ -782,5 +878,120 @@ mod tests {
         }
         assert!(band_radius_factor(1.0, 3.0).is_err());
         assert!(band_radius_factor(0.9, 0.0).is_err());
+    }
+
+    /// A noisy closed loop on a periodic record: the periods' deviations reproduce the plant
+    /// variance [`from_periodic`] computes from the accumulated covariances (another code path,
+    /// the delta method on the 3×3 covariance), sum to zero over the periods, and reconstruct
+    /// the period DFTs a naive in-test DFT gives.
+    #[test]
+    fn period_deviations_reproduce_the_plant_variance_and_a_naive_dft() {
+        use crate::frf::periodic::{PeriodicAnalyzer, PeriodicOptions};
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, StandardNormal};
+        let (n, periods) = (64usize, 7usize);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let base: Vec<f64> = (0..n).map(|_| StandardNormal.sample(&mut rng)).collect();
+        let len = n * periods;
+        let r: Vec<f64> = (0..len).map(|k| base[k % n]).collect();
+        // u = r - 0.4 y_prev, y = 0.8 y_prev + 0.5 u_prev + noise: a loop with memory
+        let (mut u, mut y) = (vec![0.0; len], vec![0.0; len]);
+        for k in 0..len {
+            let (yp, up) = if k > 0 {
+                (y[k - 1], u[k - 1])
+            } else {
+                (0.0, 0.0)
+            };
+            let e: f64 = StandardNormal.sample(&mut rng);
+            y[k] = 0.8 * yp + 0.5 * up + 0.05 * e;
+            u[k] = r[k] - 0.4 * y[k];
+        }
+        let opts = PeriodicOptions::new(n).skip(1);
+        let ch = Channels { r: 0, u: 1, y: 2 };
+        let lines: Vec<usize> = (1..n / 2).collect();
+        let d = plant_period_deviations(&[&r, &u, &y], 1.0, ch, &opts, &lines).unwrap();
+        assert_eq!(d.len(), periods - 1);
+        let s = PeriodicAnalyzer::new(n)
+            .unwrap()
+            .analyze(&[&r, &u, &y], 1.0, &opts)
+            .unwrap();
+        let frf = from_periodic(&s, ch, &lines, None).unwrap();
+        let var = frf.plant.variance().unwrap();
+        let p = d.len() as f64;
+        for (i, _) in lines.iter().enumerate() {
+            let v = d.iter().map(|dp| dp[i].norm_sqr()).sum::<f64>() / (p * (p - 1.0));
+            assert!(
+                (v - var[i]).abs() <= 1e-9 * var[i],
+                "line {i}: {v} {}",
+                var[i]
+            );
+            let sum: c64 = d.iter().map(|dp| dp[i]).sum();
+            assert!(sum.norm() <= 1e-12 * var[i].sqrt() * p, "line {i}: {sum}");
+        }
+        // the period DFTs against a naive DFT of period 3 (the fourth of the record), line 5
+        let per = PeriodicAnalyzer::new(n)
+            .unwrap()
+            .period_lines(&[&u], 1.0, &opts, &[5])
+            .unwrap();
+        let naive: c64 = (0..n)
+            .map(|j| {
+                let ph = -2.0 * std::f64::consts::PI * 5.0 * j as f64 / n as f64;
+                c64::new(ph.cos(), ph.sin()) * u[3 * n + j]
+            })
+            .sum();
+        assert!((per[2][0][0] - naive).norm() < 1e-10 * naive.norm());
+    }
+
+    #[test]
+    fn period_deviations_refuse_bad_input() {
+        use crate::frf::periodic::PeriodicOptions;
+        let x: Vec<f64> = (0..64).map(|k| ((k * 7) % 5) as f64).collect();
+        let ch = Channels { r: 0, u: 0, y: 1 };
+        let opts = PeriodicOptions::new(16);
+        let bad = |e: Result<Vec<Vec<c64>>>| matches!(e, Err(Error::InvalidArgument { .. }));
+        assert!(bad(plant_period_deviations(
+            &[&x, &x],
+            1.0,
+            Channels { r: 0, u: 2, y: 1 },
+            &opts,
+            &[1]
+        )));
+        assert!(bad(plant_period_deviations(
+            &[&x, &x],
+            1.0,
+            ch,
+            &opts,
+            &[0]
+        )));
+        assert!(bad(plant_period_deviations(&[&x, &x], 1.0, ch, &opts, &[])));
+        assert!(bad(plant_period_deviations(
+            &[&x, &x],
+            1.0,
+            ch,
+            &opts,
+            &[9]
+        )));
+        // one analysed period
+        assert!(bad(plant_period_deviations(
+            &[&x, &x],
+            1.0,
+            ch,
+            &opts.skip(3),
+            &[1]
+        )));
+        // a record that is not a whole number of periods
+        assert!(bad(plant_period_deviations(
+            &[&x[..60], &x[..60]],
+            1.0,
+            ch,
+            &opts,
+            &[1]
+        )));
+        let mut nan = x.clone();
+        nan[20] = f64::NAN;
+        assert!(matches!(
+            plant_period_deviations(&[&x, &nan], 1.0, ch, &opts, &[1]),
+            Err(Error::NonFinite { index: 20, .. })
+        ));
     }
 }

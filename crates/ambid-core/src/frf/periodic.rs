@@ -161,38 +161,15 @@ impl PeriodicAnalyzer {
         self.n
     }
 
-    /// Analyses `channels` (equal lengths, finite) sampled at `fs` Hz.
-    ///
-    /// # Errors
-    /// * [`Error::InvalidArgument`]: no channel, `fs` not positive, `opts.period_samples` different
-    ///   from the planned length, fewer than one period left after the skipped ones, or (strict)
-    ///   a record that is not an integer number of periods;
-    /// * [`Error::DimensionMismatch`]: channels of different lengths;
-    /// * [`Error::NonFinite`]: a NaN or infinite sample in the analysed periods (repair it with
-    ///   `data` first; samples of skipped periods and of an ignored tail are not read).
-    pub fn analyze(
-        &mut self,
+    /// Checks `channels` and `opts` against the plan and returns the analysed periods $P$ and
+    /// the first analysed sample (the errors of [`analyze`](Self::analyze) but for non-finite
+    /// samples).
+    fn layout(
+        &self,
         channels: &[&[f64]],
         fs: f64,
         opts: &PeriodicOptions,
-    ) -> Result<PeriodicSpectra> {
-        self.analyze_selected(channels, fs, opts, &|_, _| true, None)
-    }
-
-    /// [`analyze`](Self::analyze) computing the covariance only of the channel pairs
-    /// `(i, j)`, `i ≤ j`, with `need(i, j)` and (if given) only on the lines `k` with
-    /// `lines[k]`; the other pairs' and lines' covariances read as NaN. Means are computed on
-    /// every line. With two channels that are not exactly periodic (the SISO case) every pair
-    /// and line is computed (the fused path). The values computed are bit-identical to
-    /// `analyze`'s.
-    pub(crate) fn analyze_selected(
-        &mut self,
-        channels: &[&[f64]],
-        fs: f64,
-        opts: &PeriodicOptions,
-        need: &dyn Fn(usize, usize) -> bool,
-        lines: Option<&[bool]>,
-    ) -> Result<PeriodicSpectra> {
+    ) -> Result<(usize, usize)> {
         let n = self.n;
         if opts.period_samples != n {
             return Err(Error::invalid(
@@ -244,8 +221,101 @@ impl PeriodicAnalyzer {
                 ),
             ));
         }
-        let p_used = total_periods - opts.skip_periods;
-        let start = opts.skip_periods * n;
+        Ok((total_periods - opts.skip_periods, opts.skip_periods * n))
+    }
+
+    /// The DFT $X_p(k)$ of every analysed period on the given `lines` (module docs), indexed
+    /// `[period][channel][line]`: what the means and covariances of [`analyze`](Self::analyze)
+    /// summarise, for statistics across periods that need more than the second moments on each
+    /// line (e.g. the sample covariance of a fitted model's parameters,
+    /// [`crate::frf::closed_loop::plant_period_deviations`]). $O(C\,P\,N\log N)$ time and
+    /// $O(C\,P\,L)$ memory for $L$ lines.
+    ///
+    /// # Errors
+    /// Those of [`analyze`](Self::analyze), and [`Error::InvalidArgument`] for a line at or
+    /// beyond $N/2 + 1$.
+    ///
+    /// # Example
+    /// ```
+    /// use ambid_core::frf::periodic::{PeriodicAnalyzer, PeriodicOptions};
+    /// let n = 32;
+    /// // 4 periods of a cosine on line 3 whose amplitude grows by 1 per period
+    /// let x: Vec<f64> = (0..4 * n)
+    ///     .map(|k| (1 + k / n) as f64 * (2.0 * std::f64::consts::PI * 3.0 * k as f64 / n as f64).cos())
+    ///     .collect();
+    /// let mut an = PeriodicAnalyzer::new(n).unwrap();
+    /// let d = an.period_lines(&[&x], 1.0, &PeriodicOptions::new(n).skip(1), &[3]).unwrap();
+    /// assert_eq!(d.len(), 3);
+    /// // amplitude a on line 3 gives |X| = a N / 2
+    /// for (p, per) in d.iter().enumerate() {
+    ///     assert!((per[0][0].re - (p + 2) as f64 * 16.0).abs() < 1e-9);
+    /// }
+    /// ```
+    pub fn period_lines(
+        &mut self,
+        channels: &[&[f64]],
+        fs: f64,
+        opts: &PeriodicOptions,
+        lines: &[usize],
+    ) -> Result<Vec<Vec<Vec<c64>>>> {
+        let (p_used, start) = self.layout(channels, fs, opts)?;
+        let n = self.n;
+        if let Some(&k) = lines.iter().find(|&&k| k > n / 2) {
+            return Err(Error::invalid(
+                "lines",
+                format!(
+                    "line {k} is beyond the last line {} of a {n}-sample period",
+                    n / 2
+                ),
+            ));
+        }
+        let mut out = Vec::with_capacity(p_used);
+        for p in 0..p_used {
+            let off = start + p * n;
+            let mut per = Vec::with_capacity(channels.len());
+            for x in channels {
+                self.transform_pair(&x[off..off + n], None, off)?;
+                per.push(lines.iter().map(|&k| self.buf[k]).collect());
+            }
+            out.push(per);
+        }
+        Ok(out)
+    }
+
+    /// Analyses `channels` (equal lengths, finite) sampled at `fs` Hz.
+    ///
+    /// # Errors
+    /// * [`Error::InvalidArgument`]: no channel, `fs` not positive, `opts.period_samples` different
+    ///   from the planned length, fewer than one period left after the skipped ones, or (strict)
+    ///   a record that is not an integer number of periods;
+    /// * [`Error::DimensionMismatch`]: channels of different lengths;
+    /// * [`Error::NonFinite`]: a NaN or infinite sample in the analysed periods (repair it with
+    ///   `data` first; samples of skipped periods and of an ignored tail are not read).
+    pub fn analyze(
+        &mut self,
+        channels: &[&[f64]],
+        fs: f64,
+        opts: &PeriodicOptions,
+    ) -> Result<PeriodicSpectra> {
+        self.analyze_selected(channels, fs, opts, &|_, _| true, None)
+    }
+
+    /// [`analyze`](Self::analyze) computing the covariance only of the channel pairs
+    /// `(i, j)`, `i ≤ j`, with `need(i, j)` and (if given) only on the lines `k` with
+    /// `lines[k]`; the other pairs' and lines' covariances read as NaN. Means are computed on
+    /// every line. With two channels that are not exactly periodic (the SISO case) every pair
+    /// and line is computed (the fused path). The values computed are bit-identical to
+    /// `analyze`'s.
+    pub(crate) fn analyze_selected(
+        &mut self,
+        channels: &[&[f64]],
+        fs: f64,
+        opts: &PeriodicOptions,
+        need: &dyn Fn(usize, usize) -> bool,
+        lines: Option<&[bool]>,
+    ) -> Result<PeriodicSpectra> {
+        let (p_used, start) = self.layout(channels, fs, opts)?;
+        let (n, tail) = (self.n, channels[0].len() % self.n);
         let exact: Vec<bool> = channels
             .iter()
             .map(|x| {
