@@ -23,6 +23,15 @@
 //! (docs/uncertainty.md, "Mode-shaped weights").
 //! `SHAPE=mode` refits the weight with the mode-shaped family (`WeightShape::ModeShaped`, runs
 //! without `LEVELS`; docs/uncertainty.md, "Mode-shaped weights").
+//! `SEED_PER_RIG=1` gives each rig its own noise realisation (seed = rig + each of `SEEDS`);
+//! without it every rig runs with the same `SEEDS`, i.e. the same sensor-noise sequence
+//! (docs/uncertainty.md, "Independent noise realisations"). With `CALIB=1`: `CALIB_FLOOR=1`
+//! prints the looseness an ideal weight (the bound on the lines itself, raised for joint
+//! coverage) would have against the draws and the truth; `PERIOD_DIAG=1` the correlation of
+//! the FRF's deviations between neighbouring periods and the whole-band sum of the true error
+//! against the periods' prediction (`PERIOD_SEQ=1`: that sum per period, its mean's t
+//! statistics); `SYNTH_DOF=n` (with `CALIB_SYNTH=1`) hands the fit variances estimated with
+//! `n` complex degrees of freedom instead of the true ones.
 
 use ambid::uncertainty::{loop_stable, nominal_gain_interval, UncertaintyRun};
 use ambid_twin::Mode;
@@ -52,6 +61,13 @@ fn main() {
     let (mut lines_ok, mut lines_half, mut lines_within) = (0, 0, 0);
     println!("rig seed order | cov_l cov_W | med_err med_W ratio | g_rob g_true | stable@90% half");
     for &rig in &rigs {
+        // SEED_PER_RIG=1: the noise seed of each rig is the rig's number plus the given seed,
+        // so that no two rigs share a noise realisation
+        let seeds: Vec<u64> = if std::env::var("SEED_PER_RIG").is_ok() {
+            seeds.iter().map(|s| s + rig).collect()
+        } else {
+            seeds.clone()
+        };
         for &seed in &seeds {
             let t = std::time::Instant::now();
             let mut run = match UncertaintyRun::on_twin_with_levels(rig, seed, mode, &levels) {
@@ -182,6 +198,25 @@ fn main() {
                         p + ambid_core::c64::new(s * a, s * b)
                     })
                     .collect();
+                // SYNTH_DOF=n: the variances handed to the fit are estimates with n complex
+                // degrees of freedom (scaled chi-square), as the measured FRF's are
+                let var: Vec<f64> = match std::env::var("SYNTH_DOF") {
+                    Ok(n) => {
+                        let n: usize = n.parse().unwrap();
+                        var.iter()
+                            .map(|v| {
+                                let s: f64 = (0..2 * n)
+                                    .map(|_| {
+                                        let x: f64 = StandardNormal.sample(&mut rng);
+                                        x * x
+                                    })
+                                    .sum();
+                                v * s / (2 * n) as f64
+                            })
+                            .collect()
+                    }
+                    Err(_) => var,
+                };
                 let frd = ambid_core::lti::Frd::new(f, g, Some(var), run.frd.ts()).unwrap();
                 let nominal = ambid::uncertainty::nominal_by_bic(&frd, &run.controller).unwrap();
                 let opts = ambid_core::validate::uncertainty::UncertaintyOptions::default();
@@ -228,6 +263,36 @@ fn main() {
                     draws.push(stat(&|_, k| e[k]));
                 }
                 draws.sort_by(f64::total_cmp);
+                if std::env::var("CALIB_FLOOR").is_ok() {
+                    // the looseness an ideal weight would have: |W| = g_l * ell_k (the bound on
+                    // the lines raised for joint coverage, no order-4 compromise) over the
+                    // median of a draw's error, per draw of the error model and for the truth
+                    let med = |v: &mut Vec<f64>| {
+                        v.sort_by(f64::total_cmp);
+                        v[v.len() / 2]
+                    };
+                    let g = run.analysis.lines_raise;
+                    let mw = med(&mut band.iter().map(|&k| g * t.multiplicative[k]).collect());
+                    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+                    let mut ratios: Vec<f64> = (0..2000)
+                        .map(|_| {
+                            t.errors.draw_relative(&mut rng, &mut e);
+                            mw / med(&mut band.iter().map(|&k| e[k]).collect())
+                        })
+                        .collect();
+                    ratios.sort_by(f64::total_cmp);
+                    let under3 = ratios.iter().filter(|r| **r <= 3.0).count() as f64 / 2000.0;
+                    let truth_ratio = mw
+                        / med(&mut band
+                            .iter()
+                            .enumerate()
+                            .map(|(i, &k)| (truth[i] - t.nominal[k]).norm() / t.nominal[k].norm())
+                            .collect());
+                    println!(
+                        "    floor: ideal weight g_l*ell (g_l {g:.2}): median |W| / median error over draws: median {:.2}, q05 {:.2}, q95 {:.2}, <= 3 in {:.1} %; truth {truth_ratio:.2}",
+                        ratios[1000], ratios[100], ratios[1900], 100.0 * under3
+                    );
+                }
                 if std::env::var("SPLIT").is_ok() {
                     // the models of the record's two halves (periods 0-9 and 10-19, each with
                     // its first period skipped) against each other, by the same statistic, the
@@ -313,6 +378,105 @@ fn main() {
                         })
                         .collect();
                     println!("    lags {}", l.join(" "));
+                }
+                if std::env::var("PERIOD_DIAG").is_ok() {
+                    // the periods' deviations on the band: correlation between neighbouring
+                    // periods (-1/(P-1) for independent periods), and the along-P whole-band
+                    // sum of the true error against the periods' prediction of it
+                    let d = &run.frf_periods;
+                    let np = d.len();
+                    let (mut c1, mut c2, mut c0) = (
+                        ambid_core::c64::new(0.0, 0.0),
+                        ambid_core::c64::new(0.0, 0.0),
+                        0.0,
+                    );
+                    for &k in &band {
+                        for p in 0..np {
+                            c0 += d[p][k].norm_sqr();
+                            if p + 1 < np {
+                                c1 += d[p][k] * d[p + 1][k].conj();
+                            }
+                            if p + 2 < np {
+                                c2 += d[p][k] * d[p + 2][k].conj();
+                            }
+                        }
+                    }
+                    let cw: Vec<ambid_core::c64> = band
+                        .iter()
+                        .enumerate()
+                        .map(|(i, &k)| truth[i].conj() / truth[i].norm() / var[k].sqrt())
+                        .collect();
+                    let nc: f64 = cw
+                        .iter()
+                        .zip(&band)
+                        .map(|(c, &k)| c.norm_sqr() * var[k])
+                        .sum();
+                    let true_sum: ambid_core::c64 = band
+                        .iter()
+                        .enumerate()
+                        .map(|(i, &k)| (g[k] - truth[i]) * cw[i])
+                        .sum();
+                    // each period's deviation summed the same way
+                    let dev_sums: Vec<ambid_core::c64> = d
+                        .iter()
+                        .map(|dp| {
+                            band.iter()
+                                .enumerate()
+                                .map(|(i, &k)| dp[k] * cw[i])
+                                .sum::<ambid_core::c64>()
+                        })
+                        .collect();
+                    let pred: f64 =
+                        dev_sums.iter().map(|x| x.norm_sqr()).sum::<f64>() / (np * (np - 1)) as f64;
+                    if std::env::var("PERIOD_SEQ").is_ok() {
+                        // each period's error against the truth: its deviation plus the mean's
+                        let sv: Vec<ambid_core::c64> =
+                            dev_sums.iter().map(|x| x + true_sum).collect();
+                        let seq: Vec<String> = sv
+                            .iter()
+                            .map(|x| format!("{:+.1}", x.re / nc.sqrt()))
+                            .collect();
+                        println!(
+                            "    seq(re, along-P, per period, units of one line-sum sd): {}",
+                            seq.join(" ")
+                        );
+                        // t statistics of the per-period sums' mean, and their lag-1 correlation
+                        let m = sv.iter().sum::<ambid_core::c64>() / np as f64;
+                        let (mut vr, mut vi, mut l1) = (0.0, 0.0, 0.0);
+                        for p in 0..np {
+                            let x = sv[p] - m;
+                            vr += x.re * x.re;
+                            vi += x.im * x.im;
+                            if p + 1 < np {
+                                l1 += (x * (sv[p + 1] - m).conj()).re;
+                            }
+                        }
+                        let sdm = |v: f64| (v / ((np - 1) * np) as f64).sqrt();
+                        println!(
+                            "    tstat re {:+.2} im {:+.2} lag1 {:+.3}",
+                            m.re / sdm(vr),
+                            m.im / sdm(vi),
+                            l1 / (vr + vi)
+                        );
+                    }
+                    let bands = [(10.0, 100.0), (100.0, 400.0), (400.0, 1000.0)];
+                    let chis: Vec<String> = bands
+                        .iter()
+                        .map(|&(lo, hi)| {
+                            let v: Vec<f64> = band
+                                .iter()
+                                .enumerate()
+                                .filter(|(_, &k)| (lo..hi).contains(&t.f_hz[k]))
+                                .map(|(i, _)| z[i].norm_sqr())
+                                .collect();
+                            format!("{:.2}", v.iter().sum::<f64>() / v.len().max(1) as f64)
+                        })
+                        .collect();
+                    println!(
+                        "    periods: P {np} lag1 {:+.3}{:+.3}j lag2 {:+.3}{:+.3}j | along-P true {:.2} periods {:.2} (independent lines: 1) | chi2 bands {}",
+                        (c1 / c0).re, (c1 / c0).im, (c2 / c0).re, (c2 / c0).im,
+                        true_sum.norm_sqr() / nc, pred / nc,  chis.join(" ")
+                    );
                 }
                 let flat = whole(&|_| ambid_core::c64::new(1.0, 0.0));
                 let along = whole(&|i| truth[i].conj() / truth[i].norm());
@@ -416,6 +580,45 @@ fn main() {
             ratios.push(c.median_ratio);
             let (g_lo, g_hi) = nominal_gain_interval(&run.truth_plant, &run.controller).unwrap();
             let g = run.analysis.robust.upper_gain_margin.unwrap_or(f64::NAN);
+            if g.is_nan() || std::env::var("MU_PEAK").is_ok() {
+                let r = &run.analysis.robust;
+                let w = &run.analysis.weight.weight;
+                println!(
+                    "    not robustly stable: nominal stable {}, mu peak {:.3} at {:.1} Hz; |W| there {:.3}; FRF band {:.1}-{:.1} Hz; W poles/zeros Hz {:?}",
+                    r.nominal_stable,
+                    r.mu_peak,
+                    r.mu_peak_hz,
+                    w.magnitude(&[r.mu_peak_hz])[0],
+                    run.frd.f_hz()[0],
+                    run.frd.f_hz()[run.frd.len() - 1],
+                    w
+                );
+                let fp = [r.mu_peak_hz, 2500.0, 2900.0, 3100.0, 3300.0, 4000.0];
+                let tt = |p: &ambid_core::lti::StateSpace| -> Vec<String> {
+                    let pp = p.freq_response_siso(&fp).unwrap();
+                    let cc = run.controller.freq_response_siso(&fp).unwrap();
+                    pp.iter()
+                        .zip(&cc)
+                        .map(|(a, b)| format!("{:.2}", (a * b / (a * b + 1.0)).norm()))
+                        .collect()
+                };
+                println!(
+                    "    |T| at {:?} Hz: nominal {:?} true {:?}; nominal poles {:?}",
+                    fp,
+                    tt(&run.nominal),
+                    tt(&run.truth_plant),
+                    run.nominal
+                        .poles()
+                        .unwrap()
+                        .iter()
+                        .map(|z| format!(
+                            "{:.1}Hz|{:.3}",
+                            (z.ln().im / (2.0 * std::f64::consts::PI * 5e-5)).abs(),
+                            z.norm()
+                        ))
+                        .collect::<Vec<_>>()
+                );
+            }
             let test_gain = 1.0 + 0.9 * (g - 1.0);
             let stable = loop_stable(&run.truth_plant, &run.controller, test_gain).unwrap_or(false);
             let half = (g - 1.0) >= 0.5 * (g_hi - 1.0);
