@@ -31,7 +31,9 @@
 //! the FRF's deviations between neighbouring periods and the whole-band sum of the true error
 //! against the periods' prediction (`PERIOD_SEQ=1`: that sum per period, its mean's t
 //! statistics); `SYNTH_DOF=n` (with `CALIB_SYNTH=1`) hands the fit variances estimated with
-//! `n` complex degrees of freedom instead of the true ones.
+//! `n` complex degrees of freedom instead of the true ones. `SMOOTH_VAR=m` refits with the
+//! FRF's variances smoothed over ±m lines (as $\sigma_k^2|\bar U_k|^2$). `SHAPE=mode` applies
+//! to every refit.
 
 use ambid::uncertainty::{loop_stable, nominal_gain_interval, UncertaintyRun};
 use ambid_twin::Mode;
@@ -41,6 +43,45 @@ fn range(s: &str) -> Vec<u64> {
         Some((a, b)) => (a.parse().unwrap()..=b.parse().unwrap()).collect(),
         None => s.split(',').map(|x| x.parse().unwrap()).collect(),
     }
+}
+
+/// The options of every re-analysis here: the default ones with `SHAPE=mode`'s weight family.
+fn shape_opts() -> ambid_core::validate::uncertainty::UncertaintyOptions {
+    ambid_core::validate::uncertainty::UncertaintyOptions {
+        weight_shape: if std::env::var("SHAPE").as_deref() == Ok("mode") {
+            ambid_core::validate::weight::WeightShape::ModeShaped
+        } else {
+            ambid_core::validate::weight::WeightShape::Smooth
+        },
+        ..Default::default()
+    }
+}
+
+/// [`ambid::uncertainty::analyse`] of `nominal` on `frd` with [`shape_opts`] and no extra term.
+fn analyse_with_shape(
+    nominal: &ambid_core::lti::StateSpace,
+    frd: &ambid_core::lti::Frd,
+    controller: &ambid_core::lti::StateSpace,
+) -> ambid::uncertainty::UncertaintyAnalysis {
+    ambid::uncertainty::analyse(
+        nominal,
+        frd,
+        controller,
+        &ambid_core::validate::uncertainty::ExtraTerms::default(),
+        &shape_opts(),
+        4,
+        ambid_core::validate::weight::DEFAULT_COVER,
+    )
+    .unwrap()
+}
+
+/// The run's chain again from another FRF (the twin's truth kept): the BIC's nominal model and
+/// its analysis.
+fn refit(run: &mut UncertaintyRun, frd: ambid_core::lti::Frd) {
+    let nominal = ambid::uncertainty::nominal_by_bic(&frd, &run.controller).unwrap();
+    run.analysis = analyse_with_shape(&nominal, &frd, &run.controller);
+    run.nominal = nominal;
+    run.frd = frd;
 }
 
 fn main() {
@@ -80,20 +121,7 @@ fn main() {
             if std::env::var("SHAPE").as_deref() == Ok("mode") {
                 // the mode-shaped weight family (without levels: term (e) is not re-added)
                 assert!(levels.is_empty(), "SHAPE=mode is for runs without LEVELS");
-                let opts = ambid_core::validate::uncertainty::UncertaintyOptions {
-                    weight_shape: ambid_core::validate::weight::WeightShape::ModeShaped,
-                    ..Default::default()
-                };
-                run.analysis = ambid::uncertainty::analyse(
-                    &run.nominal,
-                    &run.frd,
-                    &run.controller,
-                    &ambid_core::validate::uncertainty::ExtraTerms::default(),
-                    &opts,
-                    4,
-                    ambid_core::validate::weight::DEFAULT_COVER,
-                )
-                .unwrap();
+                run.analysis = analyse_with_shape(&run.nominal, &run.frd, &run.controller);
             }
             if let Ok(what) = std::env::var("TWIN_NOISE") {
                 // diagnostic: the same chain with the twin's measurement changed: `noquant`
@@ -162,19 +190,51 @@ fn main() {
                     .periodic_frf(ambid::uncertainty::TWIN_BAND_HZ, None)
                     .unwrap()
                     .plant;
-                let nominal = ambid::uncertainty::nominal_by_bic(&frd, &run.controller).unwrap();
-                run.analysis = ambid::uncertainty::analyse(
-                    &nominal,
-                    &frd,
-                    &run.controller,
-                    &ambid_core::validate::uncertainty::ExtraTerms::default(),
-                    &ambid_core::validate::uncertainty::UncertaintyOptions::default(),
-                    4,
-                    ambid_core::validate::weight::DEFAULT_COVER,
+                refit(&mut run, frd);
+            }
+            if let Ok(m) = std::env::var("SMOOTH_VAR") {
+                // diagnostic: the FRF's variances smoothed over ±m lines before the fit and the
+                // bound, as the output-referred noise σ_k² |Ū_k|² (smooth where |Ū| is not)
+                let m: usize = m.parse().unwrap();
+                let (out, _) = ambid::uncertainty::twin_seed_frf(rig, seed, mode).unwrap();
+                let period = out.excitation.period_samples;
+                let df = 1.0 / (out.record.ts * period as f64);
+                let lines: Vec<usize> = run
+                    .frd
+                    .f_hz()
+                    .iter()
+                    .map(|f| (f / df).round() as usize)
+                    .collect();
+                let per = ambid_core::frf::periodic::PeriodicAnalyzer::new(period)
+                    .unwrap()
+                    .period_lines(
+                        &[&out.record.u],
+                        1.0 / out.record.ts,
+                        &ambid_core::frf::periodic::PeriodicOptions::new(period).skip(1),
+                        &lines,
+                    )
+                    .unwrap();
+                let np = per.len() as f64;
+                let u2: Vec<f64> = (0..lines.len())
+                    .map(|i| (per.iter().map(|x| x[0][i]).sum::<ambid_core::c64>() / np).norm_sqr())
+                    .collect();
+                let var = run.frd.variance().unwrap();
+                let sv: Vec<f64> = var.iter().zip(&u2).map(|(v, u)| v * u).collect();
+                let l = sv.len();
+                let smooth: Vec<f64> = (0..l)
+                    .map(|k| {
+                        let (lo, hi) = (k.saturating_sub(m), (k + m).min(l - 1));
+                        sv[lo..=hi].iter().sum::<f64>() / (hi - lo + 1) as f64 / u2[k]
+                    })
+                    .collect();
+                let frd = ambid_core::lti::Frd::new(
+                    run.frd.f_hz().to_vec(),
+                    run.frd.values().to_vec(),
+                    Some(smooth),
+                    run.frd.ts(),
                 )
                 .unwrap();
-                run.nominal = nominal;
-                run.frd = frd;
+                refit(&mut run, frd);
             }
             if std::env::var("CALIB_SYNTH").is_ok() {
                 // diagnostic: the same chain on a synthetic FRF, the exact plant plus circular
@@ -218,20 +278,7 @@ fn main() {
                     Err(_) => var,
                 };
                 let frd = ambid_core::lti::Frd::new(f, g, Some(var), run.frd.ts()).unwrap();
-                let nominal = ambid::uncertainty::nominal_by_bic(&frd, &run.controller).unwrap();
-                let opts = ambid_core::validate::uncertainty::UncertaintyOptions::default();
-                run.analysis = ambid::uncertainty::analyse(
-                    &nominal,
-                    &frd,
-                    &run.controller,
-                    &ambid_core::validate::uncertainty::ExtraTerms::default(),
-                    &opts,
-                    4,
-                    ambid_core::validate::weight::DEFAULT_COVER,
-                )
-                .unwrap();
-                run.nominal = nominal;
-                run.frd = frd;
+                refit(&mut run, frd);
             }
             let c = run.coverage((10.0, 1000.0)).unwrap();
             if std::env::var("CALIB").is_ok() {
