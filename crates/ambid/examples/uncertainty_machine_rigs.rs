@@ -17,6 +17,8 @@
 //!   margin at least half the exact one (`nominal_gain_interval` of the exact plant).
 //!
 //! `MODE=nonlinear` simulates the nonlinear twin (the exact plant is then the linearisation).
+//! `SEED_PER_RIG=1` gives each rig its own noise realisation (base seed rig + 1000); without it
+//! every rig's experiments use the seeds derived from 1, i.e. the same noise sequences.
 //!
 //! Run: `cargo run --release -p ambid --example uncertainty_machine_rigs -- 0,1,2,3`.
 use ambid::config::MachineSection;
@@ -114,7 +116,14 @@ fn main() {
                 ..Default::default()
             }
         };
-        let data = acquire_twin(&m, Path::new("."), 1).expect("twin");
+        // SEED_PER_RIG=1: each rig its own noise realisation (the experiments' seeds derive
+        // from rig + 1000 instead of 1 for every rig)
+        let noise_seed = if std::env::var("SEED_PER_RIG").is_ok() {
+            rig + 1000
+        } else {
+            1
+        };
+        let data = acquire_twin(&m, Path::new("."), noise_seed).expect("twin");
         let truth = data.truth.as_ref().expect("truth");
         let input = MachineModelInput {
             speeds: &data.speeds,
