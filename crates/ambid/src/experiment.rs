@@ -425,20 +425,11 @@ impl ExperimentOutput {
         controller: Option<&ambid_core::lti::StateSpace>,
     ) -> Result<ambid_core::frf::closed_loop::ClosedLoopFrf> {
         use ambid_core::frf::closed_loop::{from_periodic, Channels};
-        use ambid_core::frf::periodic::{PeriodicAnalyzer, PeriodicOptions};
-        let period = self.excitation.period_samples;
-        if self.excitation.periods < 2 {
-            return Err(Error::other(
-                "the excitation is not periodic (one period): use a Welch estimate instead",
-            ));
-        }
+        use ambid_core::frf::periodic::PeriodicAnalyzer;
+        let (period, opts) = self.periods("use a Welch estimate instead")?;
         let rec = &self.record;
         let mut an = PeriodicAnalyzer::new(period)?;
-        let s = an.analyze(
-            &[&rec.r, &rec.u, &rec.y],
-            1.0 / rec.ts,
-            &PeriodicOptions::new(period).skip(1),
-        )?;
+        let s = an.analyze(&[&rec.r, &rec.u, &rec.y], 1.0 / rec.ts, &opts)?;
         let lines: Vec<usize> = s
             .excited_lines(0, 1e-6)?
             .into_iter()
@@ -455,21 +446,16 @@ impl ExperimentOutput {
     /// The plant FRF's deviation in each analysed period on the lines of `frd` (a
     /// [`periodic_frf`](Self::periodic_frf) of this record), `[period][line]`
     /// ([`plant_period_deviations`](ambid_core::frf::closed_loop::plant_period_deviations)): what
-    /// term (a) of the uncertainty takes its covariance from
-    /// ([`ExtraTerms::frf_periods`](ambid_core::validate::uncertainty::ExtraTerms::frf_periods)).
+    /// the spread across periods that the per-line variances summarise
+    /// (docs/uncertainty.md, "Independent noise realisations", uses them to test whether the
+    /// FRF's error is correlated over the band).
     ///
     /// # Errors
     /// A record that is not periodic, a line of `frd` that is not a line of the period, and
     /// those of `plant_period_deviations`.
     pub fn period_deviations(&self, frd: &ambid_core::lti::Frd) -> Result<Vec<Vec<Complex64>>> {
         use ambid_core::frf::closed_loop::{plant_period_deviations, Channels};
-        use ambid_core::frf::periodic::PeriodicOptions;
-        let period = self.excitation.period_samples;
-        if self.excitation.periods < 2 {
-            return Err(Error::other(
-                "the excitation is not periodic (one period): no deviations across periods",
-            ));
-        }
+        let (period, opts) = self.periods("no deviations across periods")?;
         let rec = &self.record;
         let df = 1.0 / (rec.ts * period as f64);
         let mut lines = Vec::with_capacity(frd.len());
@@ -486,9 +472,29 @@ impl ExperimentOutput {
             &[&rec.r, &rec.u, &rec.y],
             1.0 / rec.ts,
             Channels { r: 0, u: 1, y: 2 },
-            &PeriodicOptions::new(period).skip(1),
+            &opts,
             &lines,
         )?)
+    }
+
+    /// The period length in samples and how the record is cut into periods (the first one
+    /// skipped as the transient) for [`periodic_frf`](Self::periodic_frf) and
+    /// [`period_deviations`](Self::period_deviations); an excitation of one period is refused
+    /// with `otherwise` as the advice.
+    fn periods(
+        &self,
+        otherwise: &str,
+    ) -> Result<(usize, ambid_core::frf::periodic::PeriodicOptions)> {
+        let period = self.excitation.period_samples;
+        if self.excitation.periods < 2 {
+            return Err(Error::other(format!(
+                "the excitation is not periodic (one period): {otherwise}"
+            )));
+        }
+        Ok((
+            period,
+            ambid_core::frf::periodic::PeriodicOptions::new(period).skip(1),
+        ))
     }
 }
 

@@ -722,8 +722,10 @@ pub fn nominal_by_bic(frd: &Frd, controller: &StateSpace) -> Result<StateSpace> 
     let var = frd
         .variance()
         .ok_or_else(|| Error::other("the FRF has no variances"))?;
-    let f = frd.f_hz();
-    let band = (f[0], f[f.len() - 1]);
+    let band = match (frd.f_hz().first(), frd.f_hz().last()) {
+        (Some(&lo), Some(&hi)) => (lo, hi),
+        _ => return Err(Error::other("the FRF has no lines")),
+    };
     let mut best: Option<(f64, StateSpace)> = None;
     for order in TWIN_ORDERS {
         let Ok(fit) = ss_frd(frd, order, &opts, &SsFreqOptions::default()) else {
