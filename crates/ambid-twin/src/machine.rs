@@ -41,9 +41,11 @@
 //!
 //! # Asymmetry
 //! [`AsymmetryConfig`] scales $k_i$ and $k_x$ of the two y magnets by $(1 + \delta_i)$ and
-//! $(1 + \delta_x)$ in the linear model (truth and linear simulation); the controllers are not
-//! retuned. The nonlinear simulation scales the force constant $k$ of the y magnets by
-//! $(1 + \delta_i)$, which changes their $k_i$ and $k_x$ alike (δ_x is not used there).
+//! $(1 + \delta_x)$, and those of the two bearing-B magnets by $(1 + \delta_{i,B})$ and
+//! $(1 + \delta_{x,B})$ (the factors multiply at `yb`), in the linear model (truth and linear
+//! simulation); the controllers are not retuned. The nonlinear simulation scales the force
+//! constant $k$ of each magnet by its $k_i$ factor, which changes its $k_i$ and $k_x$ alike
+//! (the $k_x$ factors are not used there).
 //!
 //! # Discrete model and truth
 //! The 20-state continuous model $\xi = (q_x, q_y, \dot q_x, \dot q_y, i, y_s)$ (currents and sensor
@@ -131,7 +133,9 @@ impl Default for UnbalanceConfig {
     }
 }
 
-/// A small x/y asymmetry of the magnets: relative changes of $k_i$ and $k_x$ of the y magnets.
+/// A small asymmetry of the magnets: relative changes of $k_i$ and $k_x$ of the y magnets
+/// (x/y asymmetry) and of the bearing-B magnets (A/B asymmetry, both planes). They multiply:
+/// the magnet at `yb` has $k_i (1 + \delta_i)(1 + \delta_{i,B})$.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct AsymmetryConfig {
@@ -139,6 +143,25 @@ pub struct AsymmetryConfig {
     pub ki_rel: f64,
     /// $\delta_x$: $k_{x,y} = (1 + \delta_x) k_x$ (dimensionless, $|\delta_x| < 0.5$).
     pub kx_rel: f64,
+    /// $\delta_{i,B}$: $k_{i,B} = (1 + \delta_{i,B}) k_i$ at bearing B (both planes;
+    /// dimensionless, $|\delta_{i,B}| < 0.5$; default 0).
+    pub ki_rel_b: f64,
+    /// $\delta_{x,B}$: $k_{x,B} = (1 + \delta_{x,B}) k_x$ at bearing B (default 0).
+    pub kx_rel_b: f64,
+}
+
+impl AsymmetryConfig {
+    /// The factors $(1 + \delta)$ of $k_i$ and $k_x$ of each axis, in the order [`AXES`].
+    pub fn factors(&self) -> ([f64; 4], [f64; 4]) {
+        let f = |d_y: f64, d_b: f64| {
+            std::array::from_fn(|a| {
+                let (plane, bearing) = (a / 2, a % 2);
+                (1.0 + if plane == 1 { d_y } else { 0.0 })
+                    * (1.0 + if bearing == 1 { d_b } else { 0.0 })
+            })
+        };
+        (f(self.ki_rel, self.ki_rel_b), f(self.kx_rel, self.kx_rel_b))
+    }
 }
 
 /// Configuration of the 4-axis machine. Every field is optional in TOML (defaults: the nominal
@@ -330,6 +353,8 @@ impl MachineConfig {
         for (f, v) in [
             ("asymmetry.ki_rel", self.asymmetry.ki_rel),
             ("asymmetry.kx_rel", self.asymmetry.kx_rel),
+            ("asymmetry.ki_rel_b", self.asymmetry.ki_rel_b),
+            ("asymmetry.kx_rel_b", self.asymmetry.kx_rel_b),
         ] {
             if !(v.is_finite() && v.abs() < 0.5) {
                 return Err(cfg_err(
@@ -379,8 +404,14 @@ fn ser_c64<S: serde::Serializer>(z: &c64, s: S) -> std::result::Result<S::Ok, S:
 /// The physics of the two planes and the gyroscopic constant, shared by truth and simulation.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Physics4 {
-    /// x plane, y plane (the y plane with the asymmetric magnets).
+    /// x plane, y plane (the y plane with the x/y-asymmetric magnets).
     pub pl: [Physics; 2],
+    /// $k_i$ of each axis (order [`AXES`], every asymmetry applied) \[N/A\].
+    pub ki: [f64; 4],
+    /// $k_x$ of each axis \[N/m\].
+    pub kx: [f64; 4],
+    /// The factor of each axis' magnet force constant $k$ (nonlinear simulation).
+    pub k_scale: [f64; 4],
     /// $J_p/J_t$.
     pub jp_over_jt: f64,
     pub omega: f64,
@@ -394,6 +425,7 @@ impl Physics4 {
         let mut py = px;
         py.ki *= 1.0 + cfg.asymmetry.ki_rel;
         py.kx *= 1.0 + cfg.asymmetry.kx_rel;
+        let (fi, fx) = cfg.asymmetry.factors();
         let omega = cfg.omega();
         let unb = cfg.unbalance.as_ref().map(|u| {
             (
@@ -404,6 +436,9 @@ impl Physics4 {
         });
         Physics4 {
             pl: [px, py],
+            ki: fi.map(|f| f * px.ki),
+            kx: fx.map(|f| f * px.kx),
+            k_scale: fi,
             jp_over_jt: cfg.polar_inertia() / px.j,
             omega,
             unb,
@@ -422,13 +457,15 @@ impl Physics4 {
             let (q0, v0) = (3 * p, 6 + 3 * p);
             let (ia, ib) = (I_CUR + 2 * p, I_CUR + 2 * p + 1);
             let (sa, sb) = (I_SEN + 2 * p, I_SEN + 2 * p + 1);
+            let (ki, kx) = (&self.ki[2 * p..2 * p + 2], &self.kx[2 * p..2 * p + 2]);
             for r in 0..3 {
                 a[(q0 + r, v0 + r)] = 1.0;
                 for c in 0..3 {
-                    a[(v0 + r, q0 + c)] = minv[r] * ph.kx * (ca[r] * ca[c] + cb[r] * cb[c]);
+                    a[(v0 + r, q0 + c)] =
+                        minv[r] * (kx[0] * ca[r] * ca[c] + kx[1] * cb[r] * cb[c]);
                 }
-                a[(v0 + r, ia)] = minv[r] * ca[r] * ph.ki;
-                a[(v0 + r, ib)] = minv[r] * cb[r] * ph.ki;
+                a[(v0 + r, ia)] = minv[r] * ca[r] * ki[0];
+                a[(v0 + r, ib)] = minv[r] * cb[r] * ki[1];
                 a[(sa, q0 + r)] = ph.ws * ca[r];
                 a[(sb, q0 + r)] = ph.ws * cb[r];
             }
@@ -637,6 +674,20 @@ impl Machine {
     /// Control-current saturation $i_\mathrm{sat}$ \[A\] (all axes).
     pub fn i_sat(&self) -> f64 {
         self.ph.pl[0].i_sat
+    }
+
+    /// The linearised magnets of the four axes (order [`AXES`], every asymmetry applied):
+    /// $(k_i, k_x)$ \[N/A\], \[N/m\].
+    ///
+    /// ```
+    /// use ambid_twin::{AsymmetryConfig, Machine, MachineConfig};
+    /// let asymmetry = AsymmetryConfig { ki_rel_b: 0.1, ..Default::default() };
+    /// let m = Machine::new(MachineConfig { asymmetry, ..Default::default() }).unwrap();
+    /// let (ki, kx) = m.axis_magnets();
+    /// assert!((ki[1] / ki[0] - 1.1).abs() < 1e-12 && ki[3] == ki[1] && kx[1] == kx[0]);
+    /// ```
+    pub fn axis_magnets(&self) -> ([f64; 4], [f64; 4]) {
+        (self.ph.ki, self.ph.kx)
     }
 
     /// The 20-state continuous model: inputs the four current references, outputs the four

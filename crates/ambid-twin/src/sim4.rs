@@ -362,7 +362,8 @@ struct NlModel {
     minv: [f64; 2],
     wb2: f64,
     dampb: f64,
-    k: [f64; 2],
+    /// The force constant of each axis' magnet (asymmetry applied).
+    k: [f64; 4],
     i0: f64,
     g0: f64,
     wa: f64,
@@ -380,15 +381,16 @@ impl NlModel {
     fn new(m: &Machine) -> NlModel {
         let [px, py] = m.ph.pl;
         let (f0, zu) = m.ph.unb.map(|u| (u.0, u.1)).unwrap_or((0.0, 0.0));
-        // the y magnets' asymmetry: k_i ∝ k and k_x ∝ k at a fixed operating point, so scaling
-        // k by (1 + δ_i) scales both by (1 + δ_i); δ_x is not used here (see crate::machine)
+        // the magnets' asymmetry: k_i ∝ k and k_x ∝ k at a fixed operating point, so scaling
+        // each k by its k_i factor scales both; the k_x factors are not used here (see
+        // crate::machine)
         let nsub = m.cfg.simulation.substeps.max(1);
         NlModel {
             c: [[px.c_a(), px.c_b()], [py.c_a(), py.c_b()]],
             minv: [1.0 / px.m, 1.0 / px.j],
             wb2: px.wb * px.wb,
             dampb: 2.0 * px.zb * px.wb,
-            k: [px.k, px.k * py.ki / px.ki],
+            k: m.ph.k_scale.map(|f| f * px.k),
             i0: px.i0,
             g0: px.g0,
             wa: px.wa,
@@ -425,7 +427,7 @@ impl NlModel {
             for b in 0..2 {
                 let a = 2 * p + b;
                 let i = x[I_CUR + a].clamp(-self.i_max, self.i_max);
-                let f = force_law(self.k[p], self.i0, self.g0, i, disp[a]);
+                let f = force_law(self.k[a], self.i0, self.g0, i, disp[a]);
                 for r in 0..3 {
                     gen[r] += self.c[p][b][r] * f;
                 }

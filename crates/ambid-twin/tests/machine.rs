@@ -312,6 +312,8 @@ fn linear_simulation_reproduces_t_ry_and_s_columns() {
         asymmetry: ambid_twin::AsymmetryConfig {
             ki_rel: 0.03,
             kx_rel: -0.02,
+            ki_rel_b: -0.05,
+            kx_rel_b: 0.04,
         },
         ..Default::default()
     };
@@ -572,6 +574,7 @@ fn bad_configurations_and_inputs_get_typed_errors() {
             asymmetry: ambid_twin::AsymmetryConfig {
                 ki_rel: 0.0,
                 kx_rel: f64::INFINITY,
+                ..Default::default()
             },
             ..d()
         },
@@ -754,4 +757,108 @@ fn position_reference_is_tracked_and_nonlinear_unbalance_matches_linear() {
             "axis {a}: {err:e} vs {rms:e}"
         );
     }
+}
+
+/// The static plant of one plane from the physics, independently of the machine's code:
+/// $K q = \Phi K_i i$ with $K = \operatorname{diag}(0, 0, \omega_b^2) - \Phi K_x \Phi^\top$ and
+/// $y = \Phi^\top q$ (amplifier, sensor, ZOH and delay have unit gain at DC), so
+/// $P(0) = \Phi^\top K^{-1}\Phi K_i$ (3 × 3 solved by Cramer's rule).
+fn static_plane(r: &ambid_twin::RotorConfig, ki: [f64; 2], kx: [f64; 2]) -> [[f64; 2]; 2] {
+    let phi = [
+        [1.0, -r.bearing_a_m, r.mode_shape_a],
+        [1.0, r.bearing_b_m, r.mode_shape_b],
+    ];
+    let wb = 2.0 * PI * r.bending_freq_hz;
+    let mut k = [[0.0f64; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            k[i][j] = -(kx[0] * phi[0][i] * phi[0][j] + kx[1] * phi[1][i] * phi[1][j]);
+        }
+    }
+    k[2][2] += wb * wb;
+    let det3 = |m: &[[f64; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let d = det3(&k);
+    let mut out = [[0.0; 2]; 2];
+    for col in 0..2 {
+        let rhs: Vec<f64> = (0..3).map(|i| phi[col][i] * ki[col]).collect();
+        let q: Vec<f64> = (0..3)
+            .map(|c| {
+                let mut m = k;
+                for i in 0..3 {
+                    m[i][c] = rhs[i];
+                }
+                det3(&m) / d
+            })
+            .collect();
+        for row in 0..2 {
+            out[row][col] = (0..3).map(|i| phi[row][i] * q[i]).sum();
+        }
+    }
+    out
+}
+
+#[test]
+fn bearing_asymmetry_sets_each_axis_magnet_and_the_static_plant() {
+    for (rig, speed) in [(0u64, 0.0), (7, 0.0), (23, 12_000.0)] {
+        let tc = if rig == 0 {
+            TwinConfig::default()
+        } else {
+            ambid_twin::random_rig(rig).unwrap()
+        };
+        let asymmetry = ambid_twin::AsymmetryConfig {
+            ki_rel: 0.04,
+            kx_rel: -0.03,
+            ki_rel_b: -0.08,
+            kx_rel_b: 0.06,
+        };
+        let cfg = MachineConfig {
+            asymmetry,
+            speed_rpm: speed,
+            ..MachineConfig::from_twin(&tc)
+        };
+        let m = Machine::new(cfg).unwrap();
+        let lp = ambid_twin::Twin::new(tc.clone()).unwrap().linear_params();
+        let (ki, kx) = m.axis_magnets();
+        let want_i = [1.0, 0.92, 1.04, 1.04 * 0.92].map(|f| f * lp.k_i);
+        let want_x = [1.0, 1.06, 0.97, 0.97 * 1.06].map(|f| f * lp.k_x);
+        for a in 0..4 {
+            assert!((ki[a] / want_i[a] - 1.0).abs() < 1e-12, "rig {rig} k_i[{a}]");
+            assert!((kx[a] / want_x[a] - 1.0).abs() < 1e-12, "rig {rig} k_x[{a}]");
+        }
+        // the static plant: gyroscopics act on velocities only, so also at speed
+        let p0 = m.plant_frf(&[1e-4]).unwrap().at(0).unwrap();
+        for plane in 0..2 {
+            let s = static_plane(
+                &tc.rotor,
+                [want_i[2 * plane], want_i[2 * plane + 1]],
+                [want_x[2 * plane], want_x[2 * plane + 1]],
+            );
+            for r in 0..2 {
+                for c in 0..2 {
+                    let got = p0[(2 * plane + r, 2 * plane + c)];
+                    // relative to the plane's largest static gain (the off-diagonal is ~0)
+                    let scale = s[0][0].abs().max(s[1][1].abs());
+                    let rel = (got.re - s[r][c]).abs() / scale;
+                    assert!(rel < 1e-6, "rig {rig} plane {plane} ({r},{c}): {got} vs {}", s[r][c]);
+                }
+            }
+            // the two planes do not couple at DC
+            let x = p0[(2 * plane, 2 - 2 * plane)].norm() / s[0][0].abs();
+            assert!(x < 1e-6, "rig {rig} plane {plane}: cross-plane {x:e}");
+        }
+    }
+    // out of range: typed error naming the field
+    let bad = MachineConfig {
+        asymmetry: ambid_twin::AsymmetryConfig {
+            kx_rel_b: 0.7,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let e = Machine::new(bad).unwrap_err().to_string();
+    assert!(e.contains("asymmetry.kx_rel_b"), "{e}");
 }

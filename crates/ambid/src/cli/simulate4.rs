@@ -179,6 +179,7 @@ fn machine_config(a: &SimulateArgs) -> Result<MachineConfig> {
         cfg.asymmetry = AsymmetryConfig {
             ki_rel: ki,
             kx_rel: kx,
+            ..AsymmetryConfig::default()
         };
     }
     cfg.validate()
