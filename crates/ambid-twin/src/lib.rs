@@ -90,7 +90,7 @@ pub use machine::{
     Whirl, AXES,
 };
 pub use model::{LinearParams, UnstablePolePrediction};
-pub use rig::random_rig;
+pub use rig::{random_machine_rig, random_rig, MACHINE_RIG_ASYMMETRY};
 pub use sim::{Channels, SimMeta, SimOptions, SimRecord};
 pub use sim4::{MachineRecord, MachineSimMeta, MachineSimOptions};
 pub use twin::{ClosedLoopMode, Twin, LIGHTLY_DAMPED};

@@ -461,8 +461,7 @@ impl Physics4 {
             for r in 0..3 {
                 a[(q0 + r, v0 + r)] = 1.0;
                 for c in 0..3 {
-                    a[(v0 + r, q0 + c)] =
-                        minv[r] * (kx[0] * ca[r] * ca[c] + kx[1] * cb[r] * cb[c]);
+                    a[(v0 + r, q0 + c)] = minv[r] * (kx[0] * ca[r] * ca[c] + kx[1] * cb[r] * cb[c]);
                 }
                 a[(v0 + r, ia)] = minv[r] * ca[r] * ki[0];
                 a[(v0 + r, ib)] = minv[r] * cb[r] * ki[1];

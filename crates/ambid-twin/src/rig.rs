@@ -77,6 +77,60 @@ pub fn random_rig(seed: u64) -> Result<TwinConfig> {
     })
 }
 
+/// Largest relative magnet asymmetry of [`random_machine_rig`] (each δ uniform in ±10 %).
+pub const MACHINE_RIG_ASYMMETRY: f64 = 0.1;
+
+/// A random 4-axis machine: [`random_rig`]`(seed)` in both planes, at standstill, with a random
+/// magnet asymmetry — $\delta_i$, $\delta_x$ (y magnets), $\delta_{i,B}$, $\delta_{x,B}$
+/// (bearing B) each uniform in $\pm$[`MACHINE_RIG_ASYMMETRY`], from a stream of its own — so
+/// every axis has its own $k_i$ and $k_x$. The draw is accepted when the machine's closed loop
+/// is stable with every pole inside $|z| <$ [`RIG_MAX_POLE`] (the controllers are those of the
+/// symmetric rig); otherwise the next asymmetry of the stream is tried.
+///
+/// # Errors
+/// Those of [`random_rig`]; [`TwinError::InvalidArgument`] if no asymmetry in 200 draws gave
+/// a stable machine.
+///
+/// ```
+/// use ambid_twin::{random_machine_rig, Machine};
+/// let cfg = random_machine_rig(5).unwrap();
+/// assert_eq!(cfg, random_machine_rig(5).unwrap());
+/// let (ki, _) = Machine::new(cfg).unwrap().axis_magnets();
+/// assert!(ki[0] != ki[1] && ki[0] != ki[2]);
+/// ```
+pub fn random_machine_rig(seed: u64) -> Result<crate::MachineConfig> {
+    let base = crate::MachineConfig::from_twin(&random_rig(seed)?);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x4d41_4348_494e_4531);
+    let p = MACHINE_RIG_ASYMMETRY;
+    for _ in 0..MAX_DRAWS {
+        let mut d = || rng.random_range(-p..=p);
+        let cfg = crate::MachineConfig {
+            asymmetry: crate::AsymmetryConfig {
+                ki_rel: d(),
+                kx_rel: d(),
+                ki_rel_b: d(),
+                kx_rel_b: d(),
+            },
+            ..base.clone()
+        };
+        let Ok(m) = crate::Machine::new(cfg.clone()) else {
+            continue;
+        };
+        let worst = m
+            .closed_loop_poles()?
+            .iter()
+            .map(|z| z.norm())
+            .fold(0.0, f64::max);
+        if worst < RIG_MAX_POLE {
+            return Ok(cfg);
+        }
+    }
+    Err(TwinError::InvalidArgument {
+        name: "rig_seed",
+        reason: format!("no stable asymmetric machine found for seed {seed} in {MAX_DRAWS} draws"),
+    })
+}
+
 /// A log-uniform factor in [1/(1+p), 1+p].
 fn factor(rng: &mut ChaCha8Rng, p: f64) -> f64 {
     let l = (1.0 + p).ln();

@@ -826,8 +826,14 @@ fn bearing_asymmetry_sets_each_axis_magnet_and_the_static_plant() {
         let want_i = [1.0, 0.92, 1.04, 1.04 * 0.92].map(|f| f * lp.k_i);
         let want_x = [1.0, 1.06, 0.97, 0.97 * 1.06].map(|f| f * lp.k_x);
         for a in 0..4 {
-            assert!((ki[a] / want_i[a] - 1.0).abs() < 1e-12, "rig {rig} k_i[{a}]");
-            assert!((kx[a] / want_x[a] - 1.0).abs() < 1e-12, "rig {rig} k_x[{a}]");
+            assert!(
+                (ki[a] / want_i[a] - 1.0).abs() < 1e-12,
+                "rig {rig} k_i[{a}]"
+            );
+            assert!(
+                (kx[a] / want_x[a] - 1.0).abs() < 1e-12,
+                "rig {rig} k_x[{a}]"
+            );
         }
         // the static plant: gyroscopics act on velocities only, so also at speed
         let p0 = m.plant_frf(&[1e-4]).unwrap().at(0).unwrap();
@@ -843,7 +849,11 @@ fn bearing_asymmetry_sets_each_axis_magnet_and_the_static_plant() {
                     // relative to the plane's largest static gain (the off-diagonal is ~0)
                     let scale = s[0][0].abs().max(s[1][1].abs());
                     let rel = (got.re - s[r][c]).abs() / scale;
-                    assert!(rel < 1e-6, "rig {rig} plane {plane} ({r},{c}): {got} vs {}", s[r][c]);
+                    assert!(
+                        rel < 1e-6,
+                        "rig {rig} plane {plane} ({r},{c}): {got} vs {}",
+                        s[r][c]
+                    );
                 }
             }
             // the two planes do not couple at DC

@@ -8,12 +8,14 @@ use crate::experiment::ExcitationPlan;
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::estimate::freqfit_ss::{ss_frd, SsFreqOptions};
 pub use ambid_core::estimate::graybox::{
-    extrapolate_to_zero_amplitude, fit_physical, AtLevel, Drawing, Hints, PhysicalFit,
-    PhysicalOptions, PhysicalParams, ZeroAmplitude, PARAMETER_NAMES,
+    extrapolate_to_zero_amplitude, fit_machine_physical, fit_physical, graybox_machine_plant,
+    AtLevel, Drawing, Hints, MachineParams, MachinePhysicalFit, PhysicalFit, PhysicalOptions,
+    PhysicalParams, Rotation, ZeroAmplitude, MACHINE_AXES, MACHINE_PARAMETER_NAMES,
+    PARAMETER_NAMES,
 };
 use ambid_core::lti::{Frd, StateSpace};
 use ambid_core::validate::compare::unstable_poles_from_loop;
-use ambid_twin::{Mode, Twin, TwinConfig};
+use ambid_twin::{Machine, MachineConfig, Mode, Twin, TwinConfig};
 
 /// The physical parameters from the plant FRF `frd` with the drawing, loop B's controller and
 /// the starts taken from the identified black-box `model` ([`Hints::from_model`]).
@@ -200,4 +202,97 @@ impl ExtrapolatedRun {
 /// The parameters as an array in the order of [`PARAMETER_NAMES`].
 pub fn as_array(p: &PhysicalParams) -> [f64; 6] {
     p.to_array()
+}
+
+/// The drawing of a machine configuration (as [`twin_drawing`] of its plane) and its rotation
+/// (speed and polar inertia).
+pub fn machine_drawing(cfg: &MachineConfig) -> (Drawing, Rotation) {
+    let d = Drawing {
+        mass_kg: cfg.rotor.mass_kg,
+        inertia_kgm2: cfg.rotor.inertia(),
+        bearing_a_m: cfg.rotor.bearing_a_m,
+        bearing_b_m: cfg.rotor.bearing_b_m,
+        amplifier_bandwidth_hz: cfg.amplifier.bandwidth_hz,
+        sensor_bandwidth_hz: cfg.sensor.bandwidth_hz,
+        amplifier_gain: 1.0,
+        sensor_gain: 1.0,
+        delay_samples: 1,
+    };
+    let rot = Rotation {
+        speed_rpm: cfg.speed_rpm,
+        polar_inertia_kgm2: cfg.polar_inertia(),
+    };
+    (d, rot)
+}
+
+/// The machine's true values: each axis' linearised magnet ([`Machine::axis_magnets`]) and the
+/// rotor's bending mode, the mode shape with $\varphi_A > 0$ (as the estimate reports it).
+pub fn machine_truth(machine: &Machine) -> MachineParams {
+    let (k_i, k_x) = machine.axis_magnets();
+    let r = &machine.config().rotor;
+    let sign = if r.mode_shape_a < 0.0 { -1.0 } else { 1.0 };
+    MachineParams {
+        k_i,
+        k_x,
+        bending_hz: r.bending_freq_hz,
+        bending_damping: r.bending_damping,
+        mode_shape_a: sign * r.mode_shape_a,
+        mode_shape_b: sign * r.mode_shape_b,
+    }
+}
+
+/// One run of the whole-rotor chain on the 4-axis twin: machine rig `rig` (0 = the nominal
+/// machine, symmetric; $k > 0$ = [`ambid_twin::random_machine_rig`]`(k)`, every axis its own
+/// magnet) at `speed_rpm`, the `[machine]` section's default experiment (orthogonal PRBS design,
+/// 12 periods, noise on) with noise seed `seed`, its 4×4 plant FRF on [`TWIN_BAND_HZ`], and
+/// [`fit_machine_physical`] with the rig's drawing and rotation (bending starts from the grid),
+/// beside the truth.
+#[derive(Debug, Clone)]
+pub struct MachinePhysicalRun {
+    /// The estimate.
+    pub fit: MachinePhysicalFit,
+    /// The machine's linearisation and rotor values.
+    pub truth: MachineParams,
+    /// The FRF's lines used.
+    pub lines: usize,
+}
+
+impl MachinePhysicalRun {
+    /// Runs the chain (type docs).
+    ///
+    /// # Errors
+    /// Any step's error.
+    pub fn on_twin(rig: u64, seed: u64, speed_rpm: f64, mode: Mode) -> Result<Self> {
+        let base = if rig == 0 {
+            MachineConfig::default()
+        } else {
+            ambid_twin::random_machine_rig(rig)?
+        };
+        let cfg = MachineConfig { speed_rpm, ..base };
+        let section = crate::config::MachineSection {
+            speeds_rpm: Some(vec![speed_rpm]),
+            mode: match mode {
+                Mode::Linear => "linear".into(),
+                Mode::Nonlinear => "nonlinear".into(),
+            },
+            ..Default::default()
+        };
+        let data = crate::workflow::machine::acquire_twin_config(cfg.clone(), &section, seed)
+            .context("the 4-axis experiment")?;
+        let frd = data
+            .speeds
+            .first()
+            .ok_or_else(|| Error::other("the experiment gave no speed"))?
+            .frf
+            .plant
+            .band(TWIN_BAND_HZ.0, TWIN_BAND_HZ.1)?;
+        let (drawing, rotation) = machine_drawing(&cfg);
+        let fit = fit_machine_physical(&frd, &drawing, &rotation, &[], &PhysicalOptions::default())
+            .context("the gray-box fit of the machine")?;
+        Ok(Self {
+            fit,
+            truth: machine_truth(&Machine::new(cfg)?),
+            lines: frd.len(),
+        })
+    }
 }

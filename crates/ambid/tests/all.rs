@@ -38,6 +38,7 @@ mod order_rigs;
 mod parallel_levels;
 mod pem_rigs;
 mod physical_cli;
+mod physical_machine;
 mod physical_twin;
 mod real_data_defaults;
 mod reconstruct_twin;

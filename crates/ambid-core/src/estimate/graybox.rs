@@ -54,9 +54,19 @@
 //! $k_x$ lies above the small-signal one by an amount proportional to the level squared;
 //! [`extrapolate_to_zero_amplitude`] combines estimates at several levels (module
 //! `amplitude`).
+//!
+//! # The whole machine
+//! [`fit_machine_physical`] estimates $k_i$, $k_x$ of each of the four axes' magnets (so per
+//! bearing and direction), the bending mode and its shape from the 4×4 plant FRF with all
+//! loops open, at standstill or at speed ([`graybox_machine_plant`]; module `machine`).
 
 mod amplitude;
+mod machine;
 pub use amplitude::{extrapolate_to_zero_amplitude, AtLevel, ZeroAmplitude};
+pub use machine::{
+    fit_machine_physical, graybox_machine_plant, MachineParams, MachinePhysicalFit, Rotation,
+    MACHINE_AXES, MACHINE_PARAMETER_NAMES,
+};
 
 use crate::error::{Error, Result};
 use crate::estimate::pem::lm::{minimize, LeastSquaresProblem, LmOptions, StopReason};

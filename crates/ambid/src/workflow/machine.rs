@@ -750,7 +750,18 @@ pub struct MachineData {
 /// Runs the design on the twin at every speed (speeds and experiments in parallel, each
 /// experiment from its own seed, so the numbers do not depend on the thread count).
 pub fn acquire_twin(m: &MachineSection, base: &Path, seed: u64) -> Result<MachineData, Error> {
-    let cfg0 = machine_config(m, base)?;
+    acquire_twin_config(machine_config(m, base)?, m, seed)
+}
+
+/// [`acquire_twin`] on the machine `cfg0` as given (the section's `config`, `unbalance`,
+/// `asymmetry` and `noise_rms_um` are not applied; its speeds, design, mode, noise switch and
+/// periods are).
+pub fn acquire_twin_config(
+    cfg0: MachineConfig,
+    m: &MachineSection,
+    seed: u64,
+) -> Result<MachineData, Error> {
+    cfg0.validate()?;
     let speeds = m.speeds();
     let mode = if m.mode == "linear" {
         Mode::Linear
