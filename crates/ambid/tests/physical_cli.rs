@@ -115,6 +115,33 @@ fn physical_on_rig_12_meets_the_bars_with_the_twin_or_a_drawing_file() {
         "{t}"
     );
     assert!(!dir.join("p_bad.json").exists());
+    // a single-axis FRF needs the black-box model; the machine's options do not apply
+    for (args, says) in [
+        (vec!["--controller", "sim/controller.toml"], "--model"),
+        (
+            vec![
+                "--model",
+                "model.json",
+                "--controller",
+                "sim/controller.toml",
+                "--speed-rpm",
+                "100",
+            ],
+            "--speed-rpm",
+        ),
+    ] {
+        let mut full = vec!["physical".to_string(), d("frf.csv")];
+        full.extend(
+            args.iter()
+                .map(|s| if s.contains('.') { d(s) } else { s.to_string() }),
+        );
+        full.extend(["--out".to_string(), d("p_bad.json")]);
+        let refs: Vec<&str> = full.iter().map(String::as_str).collect();
+        let o = ambid(&refs);
+        let t = text(&o);
+        assert!(!o.status.success() && t.contains(says), "{args:?}: {t}");
+        assert!(!dir.join("p_bad.json").exists());
+    }
 }
 
 /// `ambid physical --level … --also LEVEL=FILE` on random rig 77 of the *nonlinear* twin (not
@@ -235,4 +262,138 @@ fn physical_extrapolates_to_zero_amplitude_on_the_nonlinear_twin() {
         assert!(text(&o).contains(needle), "{extra:?}: {}", text(&o));
         assert!(!dir.join("bad.json").exists());
     }
+}
+
+/// The whole machine through the CLI: `simulate --axes 4` of a machine configuration with every
+/// axis' magnet its own (x/y and A/B asymmetry) at 12 000 rpm, linear physics → `frf` (the 4×4
+/// matrix FRF) → `physical` with the machine configuration (drawing, speed and polar inertia
+/// from it) and, equivalently, a drawing file with `--speed-rpm`/`--polar-inertia`. Against the
+/// machine's linearisation (`Machine::axis_magnets`, written independently in ambid-twin):
+/// every $k_i$, $k_x$ within 0.5 % (bar 2 %), $f_b$ within 0.1 % (bar 0.5 %); both ways equal;
+/// options of the single-axis path and a missing polar inertia refused with nothing written.
+#[test]
+fn physical_on_a_4x4_frf_gives_every_axis_magnet() {
+    let dir = common::tmpdir("physical-cli-machine");
+    let d = |f: &str| dir.join(f).to_str().unwrap().to_string();
+    let toml = "speed_rpm = 12000.0\n[asymmetry]\nki_rel = 0.03\nkx_rel = -0.04\nki_rel_b = -0.06\nkx_rel_b = 0.05\n";
+    std::fs::write(dir.join("machine.toml"), toml).unwrap();
+    ok(&[
+        "simulate",
+        "--axes",
+        "4",
+        "--config",
+        &d("machine.toml"),
+        "--mode",
+        "linear",
+        "--seed",
+        "31",
+        "--out",
+        &d("sim4"),
+    ]);
+    let exps: Vec<String> = (1..=4)
+        .map(|e| d(&format!("sim4/exp{e}/data.csv")))
+        .collect();
+    let mut frf_args = vec!["frf"];
+    frf_args.extend(exps.iter().map(String::as_str));
+    let frf_out = d("frf4.csv");
+    frf_args.extend(["--out", &frf_out]);
+    ok(&frf_args);
+    let out = ok(&[
+        "physical",
+        &d("frf4.csv"),
+        "--config",
+        &d("machine.toml"),
+        "--out",
+        &d("p.json"),
+    ]);
+    println!("{out}");
+    let read = |f: &str| -> Value {
+        serde_json::from_str(&std::fs::read_to_string(dir.join(f)).unwrap()).unwrap()
+    };
+    let cfg = ambid_twin::MachineConfig::from_toml_str(toml).unwrap();
+    let m = ambid_twin::Machine::new(cfg.clone()).unwrap();
+    let (ki, kx) = m.axis_magnets();
+    let j = read("p.json");
+    let est = |j: &Value, name: &str| {
+        j["parameters"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["name"] == name)
+            .unwrap()["estimate"]
+            .as_f64()
+            .unwrap()
+    };
+    for (a, ax) in ["xa", "xb", "ya", "yb"].iter().enumerate() {
+        for (name, truth) in [(format!("k_i_{ax}"), ki[a]), (format!("k_x_{ax}"), kx[a])] {
+            let e = est(&j, &name);
+            assert!(
+                ((e - truth) / truth).abs() < 0.005,
+                "{name}: {e} vs {truth}"
+            );
+        }
+    }
+    let fb = est(&j, "bending_hz");
+    assert!(
+        (fb / cfg.rotor.bending_freq_hz - 1.0).abs() < 0.001,
+        "f_b {fb}"
+    );
+    assert_eq!(j["rotation"]["speed_rpm"].as_f64(), Some(12_000.0));
+    // the same with a drawing file and the rotation given by hand
+    let dr = ambid::physical::machine_drawing(&cfg).0;
+    std::fs::write(dir.join("drawing.toml"), toml::to_string(&dr).unwrap()).unwrap();
+    let jp = format!("{}", cfg.polar_inertia());
+    ok(&[
+        "physical",
+        &d("frf4.csv"),
+        "--drawing",
+        &d("drawing.toml"),
+        "--speed-rpm",
+        "12000",
+        "--polar-inertia",
+        &jp,
+        "--out",
+        &d("p2.json"),
+    ]);
+    let j2 = read("p2.json");
+    for name in ambid::physical::MACHINE_PARAMETER_NAMES {
+        let (a, b) = (est(&j, name), est(&j2, name));
+        assert!((a / b - 1.0).abs() < 1e-12, "{name}: {a} vs {b}");
+    }
+    // refusals, nothing written
+    for (args, says) in [
+        (
+            vec!["--drawing", "drawing.toml", "--speed-rpm", "12000"],
+            "--polar-inertia",
+        ),
+        (vec!["--level", "10"], "--level"),
+        (vec!["--model", "m.json"], "--model"),
+    ] {
+        let mut full = vec!["physical".to_string(), d("frf4.csv")];
+        full.extend(args.iter().map(|s| {
+            if s.ends_with(".toml") || s.ends_with(".json") {
+                d(s)
+            } else {
+                s.to_string()
+            }
+        }));
+        full.extend(["--out".to_string(), d("bad.json")]);
+        let refs: Vec<&str> = full.iter().map(String::as_str).collect();
+        let o = ambid(&refs);
+        let t = text(&o);
+        assert!(!o.status.success() && t.contains(says), "{args:?}: {t}");
+        assert!(!dir.join("bad.json").exists());
+    }
+    // the exact truth.csv has standard deviations 0: no variances to weight the fit by
+    let o = ambid(&[
+        "physical",
+        &d("sim4/truth.csv"),
+        "--config",
+        &d("machine.toml"),
+        "--out",
+        &d("bad.json"),
+    ]);
+    let t = text(&o);
+    assert!(!o.status.success() && t.contains("variances"), "{t}");
+    assert!(!dir.join("bad.json").exists());
 }

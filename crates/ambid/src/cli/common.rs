@@ -42,6 +42,39 @@ pub struct TwinArgs {
     pub gap: Option<f64>,
 }
 
+/// The machine of the twin arguments: `--config` as a `MachineConfig` TOML (as `info --axes 4`
+/// and `campbell` read it) or a single-plane `TwinConfig` TOML lifted by
+/// [`MachineConfig::from_twin`]; else `--rig-seed` or the nominal rig lifted; `--bias` and
+/// `--gap` applied.
+pub fn machine_base(a: &TwinArgs) -> Result<ambid_twin::MachineConfig> {
+    use ambid_twin::MachineConfig;
+    let Some(p) = &a.config else {
+        return Ok(MachineConfig::from_twin(&twin_config(a)?));
+    };
+    let s = std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
+    let mut cfg = match MachineConfig::from_toml_str(&s) {
+        Ok(c) => c,
+        Err(em) => match TwinConfig::from_toml_str(&s) {
+            Ok(t) => MachineConfig::from_twin(&t),
+            Err(et) => {
+                return Err(ambid::error::Error::usage(format!(
+                    "{}: neither a machine configuration ({em}) nor a single-plane twin \
+                     configuration ({et}); see `ambid config` and docs/twin.md",
+                    p.display()
+                ))
+                .into())
+            }
+        },
+    };
+    if let Some(b) = a.bias {
+        cfg.operating_point.bias_current_a = b;
+    }
+    if let Some(g) = a.gap {
+        cfg.operating_point.air_gap_m = g;
+    }
+    Ok(cfg)
+}
+
 pub fn twin_config(a: &TwinArgs) -> Result<TwinConfig> {
     let mut cfg = match &a.config {
         Some(p) => {

@@ -20,6 +20,7 @@ pub mod info;
 pub mod init;
 pub mod order;
 pub mod physical;
+pub mod physical_machine;
 pub mod run;
 pub mod simulate;
 pub mod simulate4;

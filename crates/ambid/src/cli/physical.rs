@@ -15,54 +15,72 @@ use clap::Args;
 use serde_json::json;
 use std::path::PathBuf;
 
+/// Whether `path` is a matrix FRF CSV (a quantity `P_<out>_<in>`), the whole-machine path.
+fn is_matrix_frf(path: &std::path::Path) -> Result<bool> {
+    let file = ambid::io::csv::read_frf_csv(path)
+        .with_context(|| format!("cannot read the FRF {}", path.display()))?;
+    Ok(file.quantities.iter().any(|q| q.starts_with("P_")))
+}
+
 #[derive(Args)]
 pub struct PhysicalArgs {
     /// FRF CSV (as written by `ambid frf`) with the measured plant and its standard deviations.
-    frf: PathBuf,
+    pub(crate) frf: PathBuf,
     /// An identified black-box plant model JSON (`ambid fit … --structure ss` with the loop's
-    /// unstable pole count): its unstable pole and resonances start the fit.
+    /// unstable pole count): its unstable pole and resonances start the fit. Required for a
+    /// single-axis FRF; not used with a 4×4 matrix FRF (whose starts come from the data).
     #[arg(long)]
-    model: PathBuf,
-    /// Controller file (TOML/JSON) of the loop; the same controller holds bearing B.
+    pub(crate) model: Option<PathBuf>,
+    /// Controller file (TOML/JSON) of the loop; the same controller holds bearing B. Required
+    /// for a single-axis FRF; not used with a 4×4 matrix FRF (all loops open).
     #[arg(long)]
-    controller: PathBuf,
+    pub(crate) controller: Option<PathBuf>,
+    /// 4×4 matrix FRF only: the rotor speed the FRF was measured at, rpm (default: the
+    /// machine configuration's with --config, else 0). Above 0 the gyroscopic moments need
+    /// the polar inertia (--polar-inertia, or the machine configuration's).
+    #[arg(long)]
+    pub(crate) speed_rpm: Option<f64>,
+    /// 4×4 matrix FRF only: the rotor's polar moment of inertia, kg·m² (default: the machine
+    /// configuration's).
+    #[arg(long)]
+    pub(crate) polar_inertia: Option<f64>,
     /// The drawing as TOML (mass_kg, inertia_kgm2, bearing_a_m, bearing_b_m,
     /// amplifier_bandwidth_hz, sensor_bandwidth_hz; amplifier_gain, sensor_gain, delay_samples
     /// default to 1). Without it, the drawing of the twin (nominal, --config or --rig-seed), whose
     /// true values are then printed beside the estimates.
     #[arg(long)]
-    drawing: Option<PathBuf>,
+    pub(crate) drawing: Option<PathBuf>,
     #[command(flatten)]
-    twin: TwinArgs,
+    pub(crate) twin: TwinArgs,
     /// Quantity of the FRF file that is the plant.
     #[arg(long, default_value = "plant")]
-    quantity: String,
+    pub(crate) quantity: String,
     /// Sample rate of the data in Hz (default: the `fs_hz` column of the FRF file).
     #[arg(long)]
-    fs: Option<f64>,
+    pub(crate) fs: Option<f64>,
     /// Band `f_min:f_max` in Hz (default: where the file measures the plant reliably; printed).
     /// The bending mode must lie inside it.
     #[arg(long, value_parser = parse_band)]
-    band: Option<(f64, f64)>,
+    pub(crate) band: Option<(f64, f64)>,
     /// Two-sided confidence level of the intervals.
     #[arg(long, default_value_t = 0.95)]
-    confidence: f64,
+    pub(crate) confidence: f64,
     /// The excitation level of FRF (any unit proportional to the amplitude, e.g. % of i_sat);
     /// needed with --also.
     #[arg(long)]
-    level: Option<f64>,
+    pub(crate) level: Option<f64>,
     /// Another FRF of the same axis at another excitation level, `LEVEL=FILE` (repeat for more
     /// levels): the parameters are estimated at every level and extrapolated to zero amplitude
     /// (the small-signal k_i, k_x of a nonlinear magnet; docs/physical.md). Read on FRF's band.
     #[arg(long, value_parser = parse_level_file)]
-    also: Vec<(f64, PathBuf)>,
+    pub(crate) also: Vec<(f64, PathBuf)>,
     /// Output JSON: estimates, standard deviations, intervals, the ratio k_i/k_x, the gray-box
     /// model and its comparison with the black-box model.
     #[arg(long, default_value = "physical.json")]
-    out: PathBuf,
+    pub(crate) out: PathBuf,
     /// Replace the output file if it exists.
     #[arg(long)]
-    force: bool,
+    pub(crate) force: bool,
 }
 
 /// What the FRF's standard deviations are needed for (the error when they are all zero).
@@ -97,6 +115,21 @@ pub fn physical(a: PhysicalArgs) -> Result<()> {
         ))
         .into());
     }
+    if is_matrix_frf(&a.frf)? {
+        return super::physical_machine::physical_machine(&a);
+    }
+    if a.speed_rpm.is_some() || a.polar_inertia.is_some() {
+        return Err(ambid::error::Error::usage(
+            "--speed-rpm and --polar-inertia belong to a 4×4 matrix FRF (P_xa_xa_re, …); this file is a single-axis FRF",
+        )
+        .into());
+    }
+    let (Some(model_path), Some(controller_path)) = (&a.model, &a.controller) else {
+        return Err(ambid::error::Error::usage(
+            "a single-axis FRF needs --model (the black-box plant model JSON whose unstable pole and resonances start the fit) and --controller (the loop's controller, which holds bearing B)",
+        )
+        .into());
+    };
     let level = match (a.level, a.also.is_empty()) {
         (Some(l), _) if !(l.is_finite() && l > 0.0) => {
             return Err(
@@ -141,8 +174,8 @@ pub fn physical(a: PhysicalArgs) -> Result<()> {
         &a.quantity,
         a.fs,
         a.band,
-        &a.model,
-        &a.controller,
+        model_path,
+        controller_path,
         NEEDS,
     )?;
     let popts = PhysicalOptions {
@@ -284,8 +317,8 @@ pub fn physical(a: PhysicalArgs) -> Result<()> {
     }
     let summary = json!({
         "frf": a.frf.display().to_string(),
-        "model": a.model.display().to_string(),
-        "controller": a.controller.display().to_string(),
+        "model": model_path.display().to_string(),
+        "controller": controller_path.display().to_string(),
         "drawing": drawing,
         "band_hz": [band.0, band.1],
         "lines": frd.len(),

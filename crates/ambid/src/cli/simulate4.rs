@@ -18,7 +18,7 @@
 //! `ambid frf --skip-periods 0` is exact on noise-free linear data (the default
 //! `--skip-periods 1` drops one more period, as for the single-axis twin).
 
-use super::common::{level_frac, prbs_order_arg, twin_config};
+use super::common::{level_frac, machine_base, prbs_order_arg};
 use super::simulate::SimulateArgs;
 use ambid::error::Error;
 use ambid::io::{frf_csv_bytes, time_csv_to, FrfColumn, OutputSet};
@@ -26,8 +26,7 @@ use ambid_core::lti::Frd;
 use ambid_core::signal::multi::MultiInputDesign;
 use ambid_core::signal::{BaseSignal, Grid, MultisineSpec, Phases, PrbsSpec};
 use ambid_twin::{
-    AsymmetryConfig, Machine, MachineConfig, MachineSimOptions, Mode, TwinConfig, UnbalanceConfig,
-    AXES,
+    AsymmetryConfig, Machine, MachineConfig, MachineSimOptions, Mode, UnbalanceConfig, AXES,
 };
 use anyhow::{Context, Result};
 use clap::ValueEnum;
@@ -123,35 +122,7 @@ pub fn experiment_seed(seed: u64, e: usize) -> u64 {
 /// [`MachineConfig::from_twin`]; else `--rig-seed` or the nominal rig lifted; then `--bias`,
 /// `--gap`, `--speed-rpm`, `--unbalance`, `--asymmetry`.
 fn machine_config(a: &SimulateArgs) -> Result<MachineConfig> {
-    let mut cfg = match &a.twin.config {
-        Some(p) => {
-            let s = std::fs::read_to_string(p)
-                .with_context(|| format!("cannot read {}", p.display()))?;
-            match MachineConfig::from_toml_str(&s) {
-                Ok(c) => c,
-                Err(em) => match TwinConfig::from_toml_str(&s) {
-                    Ok(t) => MachineConfig::from_twin(&t),
-                    Err(et) => {
-                        return Err(Error::usage(format!(
-                            "{}: neither a machine configuration ({em}) nor a single-plane twin \
-                             configuration ({et}); see `ambid config` and docs/twin.md",
-                            p.display()
-                        ))
-                        .into())
-                    }
-                },
-            }
-        }
-        None => MachineConfig::from_twin(&twin_config(&a.twin)?),
-    };
-    if a.twin.config.is_some() {
-        if let Some(b) = a.twin.bias {
-            cfg.operating_point.bias_current_a = b;
-        }
-        if let Some(g) = a.twin.gap {
-            cfg.operating_point.air_gap_m = g;
-        }
-    }
+    let mut cfg = machine_base(&a.twin)?;
     if let Some(v) = a.speed_rpm {
         if !(v.is_finite() && v >= 0.0) {
             return Err(Error::usage(format!(

@@ -869,7 +869,7 @@ pub fn acquire_files(m: &MachineSection, base: &Path) -> Result<MachineData, Err
         let s = if path.is_dir() {
             read_experiment_dir(&path, f.speed_rpm, m)?
         } else {
-            read_frf_file(&path, f.speed_rpm)?
+            read_machine_frf(&path, f.speed_rpm)?
         };
         let t = s.frf.plant.ts().unwrap_or(f64::NAN);
         if let Some(t0) = ts {
@@ -1030,8 +1030,13 @@ fn matrix_from_file(
     )?))
 }
 
-/// A matrix FRF CSV as `ambid frf` writes it (P, T_ry, S of the 4 axes).
-fn read_frf_file(path: &Path, speed_rpm: f64) -> Result<SpeedMeasurement, Error> {
+/// A matrix FRF CSV as `ambid frf` writes it (P, T_ry, S of the 4 axes; P required, with the
+/// sample rate in its `fs_hz` column), measured at `speed_rpm`.
+///
+/// # Errors
+/// An input error naming the file and what is missing (the sample rate, entries of the 4×4
+/// plant), or the file's read error.
+pub fn read_machine_frf(path: &Path, speed_rpm: f64) -> Result<SpeedMeasurement, Error> {
     let file = crate::io::csv::read_frf_csv(path)
         .map_err(|e| Error::classified(FailureClass::Input, e))?;
     let fs = file

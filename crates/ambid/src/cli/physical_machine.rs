@@ -1,0 +1,226 @@
+//! `ambid physical` on a 4×4 matrix FRF (`P_<out>_<in>_re/_im/_std`, as `ambid frf` writes it
+//! from the experiments of `ambid simulate --axes 4` or a rig): $k_i$ and $k_x$ of every axis'
+//! magnet, the bending mode and its shape, with confidence intervals, from the plant with all
+//! loops open (docs/physical.md, "The whole machine").
+
+use super::common::machine_base;
+use super::physical::PhysicalArgs;
+use ambid::error::Error;
+use ambid::io::model::state_space_json;
+use ambid::io::OutputSet;
+use ambid::physical::{
+    fit_machine_physical, machine_drawing, machine_truth, Drawing, PhysicalOptions, Rotation,
+    MACHINE_AXES, MACHINE_PARAMETER_NAMES,
+};
+use ambid::workflow::machine::read_machine_frf;
+use ambid_core::lti::Frd;
+use ambid_core::lti::StateSpace;
+use ambid_twin::{Machine, MachineConfig};
+use anyhow::{Context, Result};
+use serde_json::json;
+
+const UNITS: [&str; 12] = [
+    "N/A", "N/A", "N/A", "N/A", "N/m", "N/m", "N/m", "N/m", "Hz", "-", "kg^-1/2", "kg^-1/2",
+];
+
+/// The median over the lines and the four diagonal entries of $|M_{jj} - G_{jj}|/|G_{jj}|$.
+fn median_diag_error(model: &StateSpace, frd: &Frd) -> Result<f64> {
+    let r = model.freq_response(frd.f_hz())?;
+    let mut e = Vec::with_capacity(4 * r.len());
+    for (k, m) in r.iter().enumerate() {
+        let g = frd.at(k)?;
+        for j in 0..4 {
+            e.push((m[(j, j)] - g[(j, j)]).norm() / g[(j, j)].norm());
+        }
+    }
+    e.sort_by(f64::total_cmp);
+    Ok(e.get(e.len() / 2).copied().unwrap_or(f64::NAN))
+}
+
+pub fn physical_machine(a: &PhysicalArgs) -> Result<()> {
+    let refuse = |what: &str| -> Result<()> {
+        Err(Error::usage(format!(
+            "{what} does not apply to a 4×4 matrix FRF (the whole-machine gray box, docs/physical.md)"
+        ))
+        .into())
+    };
+    if a.level.is_some() || !a.also.is_empty() {
+        return refuse("--level/--also (the extrapolation to zero amplitude, single-axis only)");
+    }
+    if a.model.is_some() || a.controller.is_some() {
+        return refuse(
+            "--model/--controller (the starts come from the data, and all loops are open)",
+        );
+    }
+    if a.quantity != "plant" {
+        return refuse("--quantity (the plant is the file's P_<out>_<in> entries)");
+    }
+    if a.fs.is_some() {
+        return refuse("--fs (the file's fs_hz column gives the sample rate)");
+    }
+    // the drawing: the file's, else the twin machine's (whose true values are printed beside)
+    let twin_cfg: Option<MachineConfig> = if a.drawing.is_none() {
+        Some(machine_base(&a.twin)?)
+    } else {
+        None
+    };
+    let drawing = match &a.drawing {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("cannot read the drawing {}", p.display()))?;
+            toml::from_str::<Drawing>(&text).map_err(|e| {
+                Error::input(format!(
+                    "{}: {e}; a drawing has mass_kg, inertia_kgm2, bearing_a_m, bearing_b_m, amplifier_bandwidth_hz, sensor_bandwidth_hz (and optionally amplifier_gain, sensor_gain, delay_samples); docs/physical.md",
+                    p.display()
+                ))
+            })?
+        }
+        None => twin_cfg
+            .as_ref()
+            .map(|c| machine_drawing(c).0)
+            .ok_or_else(|| Error::other("no drawing"))?,
+    };
+    let speed_rpm = a
+        .speed_rpm
+        .or(twin_cfg.as_ref().map(|c| c.speed_rpm))
+        .unwrap_or(0.0);
+    if !(speed_rpm.is_finite() && speed_rpm >= 0.0) {
+        return Err(Error::usage(format!(
+            "--speed-rpm {speed_rpm} must be finite and >= 0 (the speed the FRF was measured at)"
+        ))
+        .into());
+    }
+    let polar = a
+        .polar_inertia
+        .or(twin_cfg.as_ref().map(MachineConfig::polar_inertia));
+    let rotation = match polar {
+        Some(j) if j.is_finite() && j > 0.0 => Rotation {
+            speed_rpm,
+            polar_inertia_kgm2: j,
+        },
+        Some(j) => {
+            return Err(Error::usage(format!(
+                "--polar-inertia {j} must be positive and finite, kg·m²"
+            ))
+            .into())
+        }
+        None if speed_rpm > 0.0 => {
+            return Err(Error::usage(format!(
+                "at {speed_rpm} rpm the gyroscopic moments need the rotor's polar inertia: give --polar-inertia in kg·m² (a solid cylinder: m r²/2)"
+            ))
+            .into())
+        }
+        None => Rotation::STANDSTILL,
+    };
+    let full = read_machine_frf(&a.frf, speed_rpm)?.frf.plant;
+    let frd = match a.band {
+        Some((lo, hi)) => full.band(lo, hi).map_err(|e| {
+            Error::usage(format!(
+                "--band {lo}:{hi}: {e}; the file has lines in {:.2}–{:.2} Hz",
+                full.f_hz().first().copied().unwrap_or(f64::NAN),
+                full.f_hz().last().copied().unwrap_or(f64::NAN)
+            ))
+        })?,
+        None => full,
+    };
+    let band = (frd.f_hz()[0], frd.f_hz()[frd.len() - 1]);
+    let opts = PhysicalOptions {
+        confidence: a.confidence,
+        ..PhysicalOptions::default()
+    };
+    let fit = fit_machine_physical(&frd, &drawing, &rotation, &[], &opts)
+        .context("the whole-machine gray-box fit")?;
+    let truth = match &twin_cfg {
+        Some(c) => Some(
+            machine_truth(&Machine::new(MachineConfig {
+                speed_rpm,
+                ..c.clone()
+            })?)
+            .to_array(),
+        ),
+        None => None,
+    };
+    let est = fit.params.to_array();
+    let pct = 100.0 * a.confidence;
+    println!(
+        "whole-machine gray-box fit over {} lines × 16 entries in {:.1}–{:.1} Hz at {speed_rpm} rpm: chi2/dof {:.3} ({} iterations, {:?})",
+        frd.len(),
+        band.0,
+        band.1,
+        fit.chi2 / fit.dof as f64,
+        fit.iterations,
+        fit.stop
+    );
+    println!(
+        "{:>16} {:>14} {:>12} {:>30} {:>14}",
+        "parameter",
+        "estimate",
+        "std",
+        format!("{pct:.0} % interval"),
+        if truth.is_some() { "twin" } else { "" }
+    );
+    let mut rows = Vec::new();
+    for k in 0..12 {
+        let (lo, hi) = fit.intervals[k];
+        println!(
+            "{:>16} {:>14.6e} {:>12.3e} {:>14.6e}..{:<14.6e} {:>14} {}",
+            MACHINE_PARAMETER_NAMES[k],
+            est[k],
+            fit.std[k],
+            lo,
+            hi,
+            truth.map_or(String::new(), |t| format!("{:.6e}", t[k])),
+            UNITS[k]
+        );
+        rows.push(json!({
+            "name": MACHINE_PARAMETER_NAMES[k],
+            "unit": UNITS[k],
+            "estimate": est[k],
+            "std": fit.std[k],
+            "interval": [lo, hi],
+            "twin": truth.map(|t| t[k]),
+        }));
+    }
+    let ratios: Vec<_> = fit
+        .ratios()
+        .iter()
+        .zip(MACHINE_AXES)
+        .map(|((r, (lo, hi)), ax)| {
+            println!(
+                "identifiable without the drawing: k_i/k_x of {ax} = {r:.6e} m/A ({lo:.6e}..{hi:.6e})"
+            );
+            json!({"axis": ax, "estimate": r, "interval": [lo, hi], "unit": "m/A"})
+        })
+        .collect();
+    let e_gray = median_diag_error(&fit.model, &frd)?;
+    println!(
+        "median relative error of the gray box ({} states, 12 parameters) on the diagonal entries: {:.3} %",
+        fit.model.order(),
+        100.0 * e_gray
+    );
+    let summary = json!({
+        "frf": a.frf.display().to_string(),
+        "axes": MACHINE_AXES,
+        "drawing": drawing,
+        "rotation": rotation,
+        "band_hz": [band.0, band.1],
+        "lines": frd.len(),
+        "confidence": a.confidence,
+        "parameters": rows,
+        "parameter_order": MACHINE_PARAMETER_NAMES,
+        "covariance_log_theta": fit.covariance,
+        "chi2": fit.chi2,
+        "dof": fit.dof,
+        "variance_scale": fit.variance_scale,
+        "iterations": fit.iterations,
+        "stop": format!("{:?}", fit.stop),
+        "ratios_ki_kx": ratios,
+        "graybox_median_rel_error_diagonal": e_gray,
+        "graybox_model": state_space_json(&fit.model, "u", "y", json!({"kind": "graybox_machine", "axes": MACHINE_AXES})),
+    });
+    let mut set = OutputSet::new(a.force);
+    set.write(&a.out, serde_json::to_string_pretty(&summary)?.as_bytes())?;
+    set.commit()?;
+    println!("written: {}", a.out.display());
+    Ok(())
+}
