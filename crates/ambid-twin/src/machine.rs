@@ -43,9 +43,11 @@
 //! [`AsymmetryConfig`] scales $k_i$ and $k_x$ of the two y magnets by $(1 + \delta_i)$ and
 //! $(1 + \delta_x)$, and those of the two bearing-B magnets by $(1 + \delta_{i,B})$ and
 //! $(1 + \delta_{x,B})$ (the factors multiply at `yb`), in the linear model (truth and linear
-//! simulation); the controllers are not retuned. The nonlinear simulation scales the force
-//! constant $k$ of each magnet by its $k_i$ factor, which changes its $k_i$ and $k_x$ alike
-//! (the $k_x$ factors are not used there).
+//! simulation); the controllers are not retuned. The nonlinear simulation realises both
+//! factors $f_i$, $f_x$ of a magnet through its force constant and air gap: since
+//! $k_i = 4k i_0/g_0^2$ and $k_x = 4k i_0^2/g_0^3$, the gap $g_0 f_i/f_x$ and the force constant
+//! $k f_i (f_i/f_x)^2$ give exactly $f_i k_i$ and $f_x k_x$ at the bias current, so its
+//! linearisation is the linear model's.
 //!
 //! # Discrete model and truth
 //! The 20-state continuous model $\xi = (q_x, q_y, \dot q_x, \dot q_y, i, y_s)$ (currents and sensor
@@ -412,6 +414,8 @@ pub(crate) struct Physics4 {
     pub kx: [f64; 4],
     /// The factor of each axis' magnet force constant $k$ (nonlinear simulation).
     pub k_scale: [f64; 4],
+    /// The factor of each axis' magnet air gap $g_0$ (nonlinear simulation).
+    pub g_scale: [f64; 4],
     /// $J_p/J_t$.
     pub jp_over_jt: f64,
     pub omega: f64,
@@ -438,7 +442,10 @@ impl Physics4 {
             pl: [px, py],
             ki: fi.map(|f| f * px.ki),
             kx: fx.map(|f| f * px.kx),
-            k_scale: fi,
+            // k_i = 4k i0/g0², k_x = 4k i0²/g0³: the gap g0 f_i/f_x and the force constant
+            // k f_i (f_i/f_x)² give the factors f_i and f_x exactly
+            k_scale: std::array::from_fn(|a| fi[a] * (fi[a] / fx[a]).powi(2)),
+            g_scale: std::array::from_fn(|a| fi[a] / fx[a]),
             jp_over_jt: cfg.polar_inertia() / px.j,
             omega,
             unb,

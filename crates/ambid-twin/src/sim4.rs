@@ -309,13 +309,14 @@ impl Machine {
                 if !disp[a].is_finite() {
                     return Err(TwinError::Diverged { sample: k });
                 }
-                if disp[a].abs() >= g0 {
+                let gap = g0 * self.ph.g_scale[a];
+                if disp[a].abs() >= gap {
                     return Err(TwinError::Touchdown {
                         bearing: if a % 2 == 0 { 'A' } else { 'B' },
                         time_s: (k + 1) as f64 * ts,
                         sample: k,
                         displacement_m: disp[a],
-                        gap_m: g0,
+                        gap_m: gap,
                     });
                 }
                 if k >= 0 {
@@ -364,6 +365,8 @@ struct NlModel {
     dampb: f64,
     /// The force constant of each axis' magnet (asymmetry applied).
     k: [f64; 4],
+    /// The air gap of each axis' magnet (asymmetry applied).
+    g: [f64; 4],
     i0: f64,
     g0: f64,
     wa: f64,
@@ -381,9 +384,8 @@ impl NlModel {
     fn new(m: &Machine) -> NlModel {
         let [px, py] = m.ph.pl;
         let (f0, zu) = m.ph.unb.map(|u| (u.0, u.1)).unwrap_or((0.0, 0.0));
-        // the magnets' asymmetry: k_i ∝ k and k_x ∝ k at a fixed operating point, so scaling
-        // each k by its k_i factor scales both; the k_x factors are not used here (see
-        // crate::machine)
+        // the magnets' asymmetry: each magnet's force constant and air gap realise its k_i and
+        // k_x factors (see crate::machine)
         let nsub = m.cfg.simulation.substeps.max(1);
         NlModel {
             c: [[px.c_a(), px.c_b()], [py.c_a(), py.c_b()]],
@@ -391,6 +393,7 @@ impl NlModel {
             wb2: px.wb * px.wb,
             dampb: 2.0 * px.zb * px.wb,
             k: m.ph.k_scale.map(|f| f * px.k),
+            g: m.ph.g_scale.map(|f| f * px.g0),
             i0: px.i0,
             g0: px.g0,
             wa: px.wa,
@@ -427,7 +430,7 @@ impl NlModel {
             for b in 0..2 {
                 let a = 2 * p + b;
                 let i = x[I_CUR + a].clamp(-self.i_max, self.i_max);
-                let f = force_law(self.k[a], self.i0, self.g0, i, disp[a]);
+                let f = force_law(self.k[a], self.i0, self.g[a], i, disp[a]);
                 for r in 0..3 {
                     gen[r] += self.c[p][b][r] * f;
                 }

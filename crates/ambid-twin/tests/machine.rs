@@ -648,17 +648,24 @@ fn noise_streams_are_independent_and_reproducible_and_iodata_names() {
 
 #[test]
 fn nonlinear_mode_matches_linear_at_small_amplitude() {
+    // every magnet its own k_i and k_x (δ_x ≠ δ_i): the nonlinear force law realises both
     let cfg = MachineConfig {
         speed_rpm: 20_000.0,
+        asymmetry: ambid_twin::AsymmetryConfig {
+            ki_rel: 0.08,
+            kx_rel: -0.07,
+            ki_rel_b: -0.06,
+            kx_rel_b: 0.09,
+        },
         ..Default::default()
     };
     let m = Machine::new(cfg).unwrap();
     let n = 600;
     let r: Vec<f64> = (0..n).map(|k| 0.01 * (k as f64 * 0.05).sin()).collect();
-    let z = vec![0.0; n];
+    let r2: Vec<f64> = (0..n).map(|k| 0.01 * (k as f64 * 0.031).cos()).collect();
     let run = |mode| {
         m.simulate(
-            [&r, &z, &z, &r],
+            [&r, &r2, &r2, &r],
             &MachineSimOptions {
                 mode,
                 noise: false,

@@ -96,6 +96,19 @@ pub struct MachineSection {
     /// four controllers' robust stability against it on the fit's lines (default: off; about
     /// 3 s per speed, docs/uncertainty.md "MIMO entries").
     pub uncertainty: bool,
+    /// The whole-machine gray box per speed (default: off): $k_i$, $k_x$ of every axis' magnet,
+    /// the bending mode and its shape with 95 % intervals from the measured 4×4 plant FRF
+    /// (`ambid_core::estimate::graybox::fit_machine_physical`, docs/physical.md "The whole
+    /// machine"); on the twin the drawing is its configuration and its values stand beside.
+    pub physical: bool,
+    /// With `physical` and `files`: the drawing TOML (docs/physical.md), relative to the
+    /// workflow file.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub drawing: Option<PathBuf>,
+    /// With `physical`, `files` and a speed above 0: the rotor's polar inertia \[kg·m²\] (the
+    /// gyroscopic moments).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub polar_inertia_kgm2: Option<f64>,
 }
 
 /// One speed's recorded experiments (`[[machine.files]]`).
@@ -123,6 +136,9 @@ impl Default for MachineSection {
             config: None,
             unbalance: None,
             asymmetry: None,
+            physical: false,
+            drawing: None,
+            polar_inertia_kgm2: None,
             level_pct: 10.0,
             prbs_order: 10,
             samples_per_bit: 5,
@@ -242,6 +258,39 @@ impl MachineSection {
         if self.uncertainty && self.models == "none" {
             return Err(
                 "machine.uncertainty = true needs a model: set machine.models = \"fit\" (or \"fit-all\")"
+                    .into(),
+            );
+        }
+        if self.physical && !self.files.is_empty() {
+            if self.drawing.is_none() {
+                return Err(
+                    "machine.physical = true with [[machine.files]] needs machine.drawing, the \
+                     drawing TOML (mass_kg, inertia_kgm2, bearing_a_m, bearing_b_m, \
+                     amplifier_bandwidth_hz, sensor_bandwidth_hz; docs/physical.md)"
+                        .into(),
+                );
+            }
+            let spinning = self.files.iter().any(|f| f.speed_rpm > 0.0);
+            match self.polar_inertia_kgm2 {
+                Some(j) if !(j.is_finite() && j > 0.0) => {
+                    return Err(format!(
+                        "machine.polar_inertia_kgm2 = {} must be positive, kg·m²",
+                        fmt_num(j)
+                    ))
+                }
+                None if spinning => {
+                    return Err("machine.physical = true with files above 0 rpm needs \
+                                machine.polar_inertia_kgm2, the rotor's polar inertia in kg·m² \
+                                (the gyroscopic moments; a solid cylinder: m r²/2)"
+                        .into())
+                }
+                _ => {}
+            }
+        } else if self.drawing.is_some() || self.polar_inertia_kgm2.is_some() {
+            return Err(
+                "machine.drawing and machine.polar_inertia_kgm2 describe recorded \
+                        files for machine.physical = true; on the twin its configuration is \
+                        the drawing — remove them, or set physical = true with files"
                     .into(),
             );
         }

@@ -656,3 +656,81 @@ fn the_workflow_bounds_the_chosen_models_uncertainty_on_request() {
             .to_string();
     assert!(bad.contains("models = \"fit\""), "{bad}");
 }
+
+/// `[machine] physical = true` on an asymmetric linear twin (every axis its own magnet) at 0
+/// and 20 000 rpm with the default experiment: the gray box per speed in `summary.json` and the
+/// report; every $k_i$, $k_x$ within 0.5 % of the machine's linearisation
+/// (`Machine::axis_magnets`, computed here), $f_b$ within 0.1 %; the options' refusals.
+#[test]
+fn the_workflow_estimates_every_axis_magnet_on_request() {
+    let c = cfg("seed = 11\n[machine]\nspeeds_rpm = [0, 20000]\nmode = \"linear\"\nphysical = true\nasymmetry = { ki_rel = 0.03, kx_rel = -0.04, ki_rel_b = -0.06, kx_rel_b = 0.05 }\n");
+    let out =
+        ambid::workflow::run(&c, Path::new("."), &mut Progress::new(Verbosity::Quiet)).unwrap();
+    let rows = out.summary["machine"]["physical"].as_array().unwrap();
+    assert_eq!(rows.len(), 2, "{rows:?}");
+    let asym = ambid_twin::AsymmetryConfig {
+        ki_rel: 0.03,
+        kx_rel: -0.04,
+        ki_rel_b: -0.06,
+        kx_rel_b: 0.05,
+    };
+    for (r, speed) in rows.iter().zip([0.0, 20000.0]) {
+        assert_eq!(r["speed_rpm"].as_f64(), Some(speed));
+        assert!(r["error"].is_null(), "{r}");
+        let m = ambid_twin::Machine::new(ambid_twin::MachineConfig {
+            speed_rpm: speed,
+            asymmetry: asym.clone(),
+            ..Default::default()
+        })
+        .unwrap();
+        let (ki, kx) = m.axis_magnets();
+        let p = r["parameters"].as_array().unwrap();
+        let get = |name: &str| p.iter().find(|q| q["name"] == name).unwrap();
+        for (a, ax) in ["xa", "xb", "ya", "yb"].iter().enumerate() {
+            for (name, truth) in [(format!("k_i_{ax}"), ki[a]), (format!("k_x_{ax}"), kx[a])] {
+                let q = get(&name);
+                let e = q["estimate"].as_f64().unwrap();
+                assert!(
+                    ((e - truth) / truth).abs() < 0.005,
+                    "{speed} rpm {name}: {e} vs {truth}"
+                );
+                assert!((q["twin"].as_f64().unwrap() / truth - 1.0).abs() < 1e-12);
+            }
+        }
+        let fb = get("bending_hz")["estimate"].as_f64().unwrap();
+        assert!(
+            (fb / m.config().rotor.bending_freq_hz - 1.0).abs() < 0.001,
+            "{fb}"
+        );
+        let chi = r["chi2_per_dof"].as_f64().unwrap();
+        assert!(chi < 1.5, "{chi}");
+    }
+    assert!(out
+        .report
+        .sections
+        .iter()
+        .any(|s| s.id == "machine-physical" && !s.blocks.is_empty()));
+    assert!(out.summary["timing"]["machine_physical_s"]
+        .as_f64()
+        .is_some());
+    // refusals: files without a drawing; a drawing on the twin
+    let e = WorkflowConfig::from_toml_str(
+        "[machine]\nphysical = true\n[[machine.files]]\nspeed_rpm = 0\npath = \"frf.csv\"\n",
+        Path::new("wf.toml"),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("machine.drawing"), "{e}");
+    let e =
+        WorkflowConfig::from_toml_str("[machine]\ndrawing = \"d.toml\"\n", Path::new("wf.toml"))
+            .unwrap_err()
+            .to_string();
+    assert!(e.contains("machine.drawing"), "{e}");
+    let e = WorkflowConfig::from_toml_str(
+        "[machine]\nphysical = true\ndrawing = \"d.toml\"\n[[machine.files]]\nspeed_rpm = 9000\npath = \"frf.csv\"\n",
+        Path::new("wf.toml"),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("polar_inertia_kgm2"), "{e}");
+}

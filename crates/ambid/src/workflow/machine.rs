@@ -516,6 +516,9 @@ pub struct MachineSummary {
     /// The chosen models' uncertainty per speed (`[machine] uncertainty`).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub uncertainty: Vec<UncertaintyRow>,
+    /// The whole-machine gray box per speed (`[machine] physical`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub physical: Vec<super::machine_physical::MachinePhysicalRow>,
 }
 
 /// SplitMix64 of `seed` and `stream`: independent seeds per speed and experiment.
@@ -1107,7 +1110,7 @@ pub fn run_with(
         b: cfg.iso.b,
         c: cfg.iso.c,
     };
-    progress.total = 3;
+    progress.total = if m.physical { 4 } else { 3 };
     let t0 = Instant::now();
     progress.start("machine data");
     let data = if m.from_files() {
@@ -1140,9 +1143,20 @@ pub fn run_with(
     progress.finish("machine models", t_models, "done");
     let t2 = Instant::now();
     progress.start("machine report");
-    let (sections, summary) = super::machine_render::sections(&m, &data, &models, &zones)?;
+    let (mut sections, mut summary) = super::machine_render::sections(&m, &data, &models, &zones)?;
     let t_report = t2.elapsed().as_secs_f64();
     progress.finish("machine report", t_report, "done");
+    let mut t_physical = None;
+    if m.physical {
+        let t3 = Instant::now();
+        progress.start("machine physical");
+        let rows = super::machine_physical::machine_physical(&m, base, &data)?;
+        sections.push(super::machine_physical::physical_section(&rows));
+        summary.physical = rows;
+        let t = t3.elapsed().as_secs_f64();
+        progress.finish("machine physical", t, "done");
+        t_physical = Some(t);
+    }
     let timings = vec![
         StepTime {
             step: "machine_data".into(),
@@ -1160,6 +1174,14 @@ pub fn run_with(
             status: "done".into(),
         },
     ];
+    let mut timings = timings;
+    if let Some(t) = t_physical {
+        timings.push(StepTime {
+            step: "machine_physical".into(),
+            seconds: t,
+            status: "done".into(),
+        });
+    }
     let mut typed = super::Summary::default();
     let total: f64 = timings.iter().map(|t| t.seconds).sum();
     typed.timing.insert("total_s".into(), total);

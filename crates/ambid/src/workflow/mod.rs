@@ -19,6 +19,7 @@ mod data;
 pub mod figures;
 pub mod machine;
 pub mod machine_fit;
+pub mod machine_physical;
 mod machine_render;
 mod outcome;
 mod render_frf;
