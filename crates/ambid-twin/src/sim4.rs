@@ -368,7 +368,6 @@ struct NlModel {
     /// The air gap of each axis' magnet (asymmetry applied).
     g: [f64; 4],
     i0: f64,
-    g0: f64,
     wa: f64,
     ws: f64,
     i_max: f64,
@@ -395,7 +394,6 @@ impl NlModel {
             k: m.ph.k_scale.map(|f| f * px.k),
             g: m.ph.g_scale.map(|f| f * px.g0),
             i0: px.i0,
-            g0: px.g0,
             wa: px.wa,
             ws: px.ws,
             i_max: px.i_amp_max,
