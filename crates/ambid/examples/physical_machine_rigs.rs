@@ -3,10 +3,12 @@
 //! whether its interval covers the truth; at the end the fraction covered and the worst error
 //! per parameter.
 //!
-//! Run: `cargo run --release -p ambid --example physical_machine_rigs -- RIGS [SPEED_RPM] [linear|nonlinear]`
+//! Run: `cargo run --release -p ambid --example physical_machine_rigs -- RIGS [SPEED_RPM] [linear|nonlinear] [LEVELS]`
 //! (RIGS `a-b` or a list; noise seed = rig + 2000; rig 0 = the nominal symmetric machine;
-//! default speed 0, linear twin).
-use ambid::physical::{MachinePhysicalRun, MACHINE_PARAMETER_NAMES};
+//! default speed 0, linear twin, one run at the default 10 % of i_sat; LEVELS e.g. `7,10,14`
+//! (% of i_sat): a run per level, noise seed + 1000 per level, and the parameters
+//! extrapolated to zero amplitude are judged).
+use ambid::physical::{MachineExtrapolatedRun, MachinePhysicalRun, MACHINE_PARAMETER_NAMES};
 use ambid_twin::Mode;
 use std::time::Instant;
 
@@ -26,12 +28,41 @@ fn main() {
         Some("nonlinear") => Mode::Nonlinear,
         _ => Mode::Linear,
     };
+    let levels: Vec<f64> = args.get(4).map_or(Vec::new(), |s| {
+        s.split(',')
+            .map(|v| v.parse::<f64>().expect("level in %") / 100.0)
+            .collect()
+    });
     let mut covered = [0usize; 12];
     let mut worst = [0.0f64; 12];
     let mut runs = 0usize;
     for rig in list {
         let t = Instant::now();
-        let run = match MachinePhysicalRun::on_twin(rig, rig + 2000, speed, mode) {
+        // (estimate, intervals, truth, a label)
+        let got = if levels.is_empty() {
+            MachinePhysicalRun::on_twin(rig, rig + 2000, speed, mode).map(|run| {
+                (
+                    run.fit.params.to_array(),
+                    run.fit.intervals,
+                    run.truth.to_array(),
+                    format!(
+                        "lines {} chi2/dof {:.2}",
+                        run.lines,
+                        run.fit.chi2 / run.fit.dof as f64
+                    ),
+                )
+            })
+        } else {
+            MachineExtrapolatedRun::on_twin(rig, rig + 2000, speed, mode, &levels).map(|run| {
+                (
+                    run.zero.params.to_array(),
+                    run.zero.intervals,
+                    run.truth.to_array(),
+                    format!("levels {}", run.at_levels.len()),
+                )
+            })
+        };
+        let (est, intervals, tru, label) = match got {
             Ok(r) => r,
             Err(e) => {
                 println!("rig {rig}: {e}");
@@ -39,15 +70,9 @@ fn main() {
             }
         };
         runs += 1;
-        let est = run.fit.params.to_array();
-        let tru = run.truth.to_array();
-        let mut line = format!(
-            "rig {rig:>3} lines {} chi2/dof {:.2} |",
-            run.lines,
-            run.fit.chi2 / run.fit.dof as f64
-        );
+        let mut line = format!("rig {rig:>3} {label} |");
         for k in 0..12 {
-            let (lo, hi) = run.fit.intervals[k];
+            let (lo, hi) = intervals[k];
             let ok = lo <= tru[k] && tru[k] <= hi;
             covered[k] += usize::from(ok);
             let err = (est[k] / tru[k] - 1.0).abs();

@@ -8,10 +8,10 @@ use crate::experiment::ExcitationPlan;
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::estimate::freqfit_ss::{ss_frd, SsFreqOptions};
 pub use ambid_core::estimate::graybox::{
-    extrapolate_to_zero_amplitude, fit_machine_physical, fit_physical, graybox_machine_plant,
-    AtLevel, Drawing, Hints, MachineParams, MachinePhysicalFit, PhysicalFit, PhysicalOptions,
-    PhysicalParams, Rotation, ZeroAmplitude, MACHINE_AXES, MACHINE_PARAMETER_NAMES,
-    PARAMETER_NAMES,
+    extrapolate_machine_to_zero_amplitude, extrapolate_to_zero_amplitude, fit_machine_physical,
+    fit_physical, graybox_machine_plant, AtLevel, Drawing, Hints, MachineAtLevel, MachineParams,
+    MachinePhysicalFit, MachineZeroAmplitude, PhysicalFit, PhysicalOptions, PhysicalParams,
+    Rotation, ZeroAmplitude, MACHINE_AXES, MACHINE_PARAMETER_NAMES, PARAMETER_NAMES,
 };
 use ambid_core::lti::{Frd, StateSpace};
 use ambid_core::validate::compare::unstable_poles_from_loop;
@@ -263,6 +263,15 @@ impl MachinePhysicalRun {
     /// # Errors
     /// Any step's error.
     pub fn on_twin(rig: u64, seed: u64, speed_rpm: f64, mode: Mode) -> Result<Self> {
+        Self::on_twin_at(rig, seed, speed_rpm, mode, 0.1)
+    }
+
+    /// [`Self::on_twin`] with the excitation's peak at `level` of $i_\text{sat}$ per input
+    /// (the `[machine]` section's `level_pct` / 100; default 0.1).
+    ///
+    /// # Errors
+    /// Any step's error.
+    pub fn on_twin_at(rig: u64, seed: u64, speed_rpm: f64, mode: Mode, level: f64) -> Result<Self> {
         let base = if rig == 0 {
             MachineConfig::default()
         } else {
@@ -275,6 +284,7 @@ impl MachinePhysicalRun {
                 Mode::Linear => "linear".into(),
                 Mode::Nonlinear => "nonlinear".into(),
             },
+            level_pct: 100.0 * level,
             ..Default::default()
         };
         let data = crate::workflow::machine::acquire_twin_config(cfg.clone(), &section, seed)
@@ -293,6 +303,74 @@ impl MachinePhysicalRun {
             fit,
             truth: machine_truth(&Machine::new(cfg)?),
             lines: frd.len(),
+        })
+    }
+}
+
+/// The whole-machine chain at several excitation levels on one machine rig and the parameters
+/// extrapolated to zero amplitude ([`extrapolate_machine_to_zero_amplitude`]): the small-signal
+/// $k_x$ of every axis of the nonlinear twin.
+#[derive(Debug, Clone)]
+pub struct MachineExtrapolatedRun {
+    /// The estimate at each level, in the order of the levels.
+    pub at_levels: Vec<(f64, MachinePhysicalFit)>,
+    /// The extrapolation to zero amplitude.
+    pub zero: MachineZeroAmplitude,
+    /// The machine's linearisation and rotor values.
+    pub truth: MachineParams,
+}
+
+impl MachineExtrapolatedRun {
+    /// Runs [`MachinePhysicalRun::on_twin_at`] at each of `levels` (fractions of
+    /// $i_\text{sat}$), level $l$ (from 0) with noise seed `seed + 1000 l`, and extrapolates at
+    /// the fits' confidence level.
+    ///
+    /// # Errors
+    /// Fewer than two levels (before any simulation); any run's error with its level named;
+    /// those of [`extrapolate_machine_to_zero_amplitude`].
+    pub fn on_twin(
+        rig: u64,
+        seed: u64,
+        speed_rpm: f64,
+        mode: Mode,
+        levels: &[f64],
+    ) -> Result<Self> {
+        if levels.len() < 2 {
+            return Err(Error::usage(format!(
+                "{} level(s): the extrapolation to zero amplitude needs two or more excitation levels",
+                levels.len()
+            )));
+        }
+        let mut at = Vec::with_capacity(levels.len());
+        let mut truth = None;
+        for (l, &a) in levels.iter().enumerate() {
+            let run = MachinePhysicalRun::on_twin_at(
+                rig,
+                seed.wrapping_add(1000 * l as u64),
+                speed_rpm,
+                mode,
+                a,
+            )
+            .with_context(|| format!("the run at level {a}"))?;
+            truth = Some(run.truth);
+            at.push((a, run.fit));
+        }
+        let points: Vec<MachineAtLevel> = at
+            .iter()
+            .map(|(level, f)| MachineAtLevel {
+                level: *level,
+                params: f.params,
+                std: f.std,
+            })
+            .collect();
+        let confidence = at.first().map_or(0.95, |(_, f)| f.confidence);
+        let zero = extrapolate_machine_to_zero_amplitude(&points, confidence)
+            .context("the extrapolation to zero amplitude")?;
+        let truth = truth.ok_or_else(|| Error::other("no level was given"))?;
+        Ok(Self {
+            at_levels: at,
+            zero,
+            truth,
         })
     }
 }

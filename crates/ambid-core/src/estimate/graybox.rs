@@ -64,7 +64,8 @@ mod amplitude;
 mod machine;
 pub use amplitude::{extrapolate_to_zero_amplitude, AtLevel, ZeroAmplitude};
 pub use machine::{
-    fit_machine_physical, graybox_machine_plant, MachineParams, MachinePhysicalFit, Rotation,
+    extrapolate_machine_to_zero_amplitude, fit_machine_physical, graybox_machine_plant,
+    MachineAtLevel, MachineParams, MachinePhysicalFit, MachineZeroAmplitude, Rotation,
     MACHINE_AXES, MACHINE_PARAMETER_NAMES,
 };
 

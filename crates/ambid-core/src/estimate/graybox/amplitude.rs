@@ -97,8 +97,127 @@ impl ZeroAmplitude {
     }
 }
 
+/// One parameter's weighted line through the levels (module docs).
+pub(super) struct LineAtZero {
+    pub estimate: f64,
+    pub std: f64,
+    pub interval: (f64, f64),
+    pub slope: f64,
+    pub chi2: f64,
+    pub variance_scale: f64,
+}
+
+/// The weighted line of one parameter against $x = a^2$ (in $\ln p$ when `positive`), its
+/// intercept with the standard deviation and the interval at the normal quantile `z`; the
+/// variance inflated by $\chi^2/\text{dof}$ when the line's $\chi^2$ exceeds its 95 % point.
+/// The caller has checked the values, standard deviations and levels.
+pub(super) fn line_at_zero(
+    x: &[f64],
+    values: &[f64],
+    sds: &[f64],
+    positive: bool,
+    z: f64,
+) -> LineAtZero {
+    let dof = x.len() - 2;
+    // θ and its standard deviation per level: ln p and σ/p for the positive parameters
+    let (th, sd): (Vec<f64>, Vec<f64>) = values
+        .iter()
+        .zip(sds)
+        .map(|(&v, &s)| if positive { (v.ln(), s / v) } else { (v, s) })
+        .unzip();
+    // the normal equations of the weighted line, about the weighted mean of x (conditioned)
+    let w: Vec<f64> = sd.iter().map(|s| 1.0 / (s * s)).collect();
+    let sw: f64 = w.iter().sum();
+    let xm = w.iter().zip(x).map(|(w, x)| w * x).sum::<f64>() / sw;
+    let ym = w.iter().zip(&th).map(|(w, y)| w * y).sum::<f64>() / sw;
+    let sxx: f64 = w.iter().zip(x).map(|(w, x)| w * (x - xm).powi(2)).sum();
+    let sxy: f64 = w
+        .iter()
+        .zip(x)
+        .zip(&th)
+        .map(|((w, x), y)| w * (x - xm) * (y - ym))
+        .sum();
+    let c = sxy / sxx;
+    let b0 = ym - c * xm;
+    // var(b0) = 1/Σw + x̄²/Sxx
+    let var0 = 1.0 / sw + xm * xm / sxx;
+    let q: f64 = w
+        .iter()
+        .zip(x)
+        .zip(&th)
+        .map(|((w, x), y)| w * (y - b0 - c * x).powi(2))
+        .sum();
+    let s = if dof > 0 && q > chi2_95(dof) {
+        q / dof as f64
+    } else {
+        1.0
+    };
+    let sd0 = (s * var0).sqrt();
+    let (estimate, std, interval) = if positive {
+        let e = b0.exp();
+        (e, e * sd0, ((b0 - z * sd0).exp(), (b0 + z * sd0).exp()))
+    } else {
+        (b0, sd0, (b0 - z * sd0, b0 + z * sd0))
+    };
+    LineAtZero {
+        estimate,
+        std,
+        interval,
+        slope: c,
+        chi2: q,
+        variance_scale: s,
+    }
+}
+
 fn invalid(why: String) -> Error {
     Error::invalid("levels", why)
+}
+
+/// The squared levels $x = a^2$ of two or more estimates at two or more distinct, positive
+/// levels.
+pub(super) fn level_squares(levels: &[f64]) -> Result<Vec<f64>> {
+    if levels.len() < 2 {
+        return Err(invalid(format!(
+            "{} estimate(s): the extrapolation to zero amplitude needs estimates at two or more excitation levels",
+            levels.len()
+        )));
+    }
+    if let Some(l) = levels.iter().find(|l| !(l.is_finite() && **l > 0.0)) {
+        return Err(invalid(format!(
+            "the level {l} is not a positive number: give each estimate's excitation amplitude (e.g. its fraction of i_sat)"
+        )));
+    }
+    let x: Vec<f64> = levels.iter().map(|l| l * l).collect();
+    let (lo, hi) = x
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |(a, b), v| (a.min(*v), b.max(*v)));
+    if hi - lo <= 1e-9 * hi {
+        return Err(invalid(
+            "every estimate is at the same level: the extrapolation needs two or more distinct levels".into(),
+        ));
+    }
+    Ok(x)
+}
+
+/// One estimate's value and standard deviation are usable (module docs).
+pub(super) fn check_estimate(
+    name: &str,
+    v: f64,
+    sd: f64,
+    positive: bool,
+    level: f64,
+) -> Result<()> {
+    if !(sd.is_finite() && sd > 0.0) {
+        return Err(invalid(format!(
+            "the standard deviation of {name} at level {level} is {sd}: each estimate needs finite, positive standard deviations"
+        )));
+    }
+    if !v.is_finite() || (positive && v <= 0.0) {
+        return Err(invalid(format!(
+            "{name} = {v} at level {level} is not a valid estimate"
+        )));
+    }
+    Ok(())
 }
 
 /// The physical parameters at zero excitation amplitude from estimates at two or more levels
@@ -134,43 +253,12 @@ pub fn extrapolate_to_zero_amplitude(points: &[AtLevel], confidence: f64) -> Res
             format!("the confidence level must lie in (0, 1), got {confidence}"),
         ));
     }
-    if points.len() < 2 {
-        return Err(invalid(format!(
-            "{} estimate(s): the extrapolation to zero amplitude needs estimates at two or more excitation levels",
-            points.len()
-        )));
-    }
+    let x = level_squares(&points.iter().map(|p| p.level).collect::<Vec<_>>())?;
     for p in points {
-        if !(p.level.is_finite() && p.level > 0.0) {
-            return Err(invalid(format!(
-                "the level {} is not a positive number: give each estimate's excitation amplitude (e.g. its fraction of i_sat)",
-                p.level
-            )));
-        }
         let v = p.params.to_array();
         for k in 0..6 {
-            if !(p.std[k].is_finite() && p.std[k] > 0.0) {
-                return Err(invalid(format!(
-                    "the standard deviation of {} at level {} is {}: each estimate needs finite, positive standard deviations",
-                    PARAMETER_NAMES[k], p.level, p.std[k]
-                )));
-            }
-            if !v[k].is_finite() || (k < 4 && v[k] <= 0.0) {
-                return Err(invalid(format!(
-                    "{} = {} at level {} is not a valid estimate",
-                    PARAMETER_NAMES[k], v[k], p.level
-                )));
-            }
+            check_estimate(PARAMETER_NAMES[k], v[k], p.std[k], k < 4, p.level)?;
         }
-    }
-    let x: Vec<f64> = points.iter().map(|p| p.level * p.level).collect();
-    let (lo, hi) = x
-        .iter()
-        .fold((f64::INFINITY, 0.0f64), |(a, b), v| (a.min(*v), b.max(*v)));
-    if hi - lo <= 1e-9 * hi {
-        return Err(invalid(
-            "every estimate is at the same level: the extrapolation needs two or more distinct levels".into(),
-        ));
     }
     let dof = points.len() - 2;
     let z = normal_quantile(0.5 + 0.5 * confidence);
@@ -181,58 +269,11 @@ pub fn extrapolate_to_zero_amplitude(points: &[AtLevel], confidence: f64) -> Res
     let mut chi2 = [0.0; 6];
     let mut scale = [1.0; 6];
     for k in 0..6 {
-        // θ and its standard deviation per level: ln p and σ/p for the positive parameters
-        let (th, sd): (Vec<f64>, Vec<f64>) = points
-            .iter()
-            .map(|p| {
-                let v = p.params.to_array()[k];
-                if k < 4 {
-                    (v.ln(), p.std[k] / v)
-                } else {
-                    (v, p.std[k])
-                }
-            })
-            .unzip();
-        // the normal equations of the weighted line, about the weighted mean of x (conditioned)
-        let w: Vec<f64> = sd.iter().map(|s| 1.0 / (s * s)).collect();
-        let sw: f64 = w.iter().sum();
-        let xm = w.iter().zip(&x).map(|(w, x)| w * x).sum::<f64>() / sw;
-        let ym = w.iter().zip(&th).map(|(w, y)| w * y).sum::<f64>() / sw;
-        let sxx: f64 = w.iter().zip(&x).map(|(w, x)| w * (x - xm).powi(2)).sum();
-        let sxy: f64 = w
-            .iter()
-            .zip(&x)
-            .zip(&th)
-            .map(|((w, x), y)| w * (x - xm) * (y - ym))
-            .sum();
-        let c = sxy / sxx;
-        let b0 = ym - c * xm;
-        // var(b0) = 1/Σw + x̄²/Sxx
-        let var0 = 1.0 / sw + xm * xm / sxx;
-        let q: f64 = w
-            .iter()
-            .zip(&x)
-            .zip(&th)
-            .map(|((w, x), y)| w * (y - b0 - c * x).powi(2))
-            .sum();
-        let s = if dof > 0 && q > chi2_95(dof) {
-            q / dof as f64
-        } else {
-            1.0
-        };
-        let sd0 = (s * var0).sqrt();
-        slope[k] = c;
-        chi2[k] = q;
-        scale[k] = s;
-        if k < 4 {
-            est[k] = b0.exp();
-            std[k] = est[k] * sd0;
-            intervals[k] = ((b0 - z * sd0).exp(), (b0 + z * sd0).exp());
-        } else {
-            est[k] = b0;
-            std[k] = sd0;
-            intervals[k] = (b0 - z * sd0, b0 + z * sd0);
-        }
+        let values: Vec<f64> = points.iter().map(|p| p.params.to_array()[k]).collect();
+        let sds: Vec<f64> = points.iter().map(|p| p.std[k]).collect();
+        let l = line_at_zero(&x, &values, &sds, k < 4, z);
+        (est[k], std[k], intervals[k]) = (l.estimate, l.std, l.interval);
+        (slope[k], chi2[k], scale[k]) = (l.slope, l.chi2, l.variance_scale);
     }
     Ok(ZeroAmplitude {
         params: PhysicalParams {

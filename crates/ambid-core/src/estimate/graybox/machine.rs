@@ -685,3 +685,206 @@ pub fn fit_machine_physical(
         confidence: opts.confidence,
     })
 }
+
+/// One whole-machine estimate at an excitation level (as [`MachinePhysicalFit::params`] and
+/// [`MachinePhysicalFit::std`]); the level in any unit proportional to the amplitude.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MachineAtLevel {
+    /// The excitation level $a > 0$.
+    pub level: f64,
+    /// The estimate at that level.
+    pub params: MachineParams,
+    /// Its standard deviations, in the order of [`MACHINE_PARAMETER_NAMES`].
+    pub std: [f64; 12],
+}
+
+/// The machine's parameters extrapolated to zero amplitude (the single-axis
+/// [`super::extrapolate_to_zero_amplitude`]'s rule per parameter: a weighted line in $a^2$, in
+/// $\ln p$ for the positive parameters, module `amplitude`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct MachineZeroAmplitude {
+    /// The estimate at $a = 0$.
+    pub params: MachineParams,
+    /// Its standard deviations, in the order of [`MACHINE_PARAMETER_NAMES`].
+    pub std: [f64; 12],
+    /// Confidence intervals `(low, high)`, same order.
+    pub intervals: [(f64, f64); 12],
+    /// The slope per parameter: $\mathrm d\ln p/\mathrm d(a^2)$ (positive parameters),
+    /// $\mathrm dp/\mathrm d(a^2)$ (mode shape).
+    pub slope: [f64; 12],
+    /// The line's $\chi^2$ per parameter (0 with two levels).
+    pub chi2: [f64; 12],
+    /// Its degrees of freedom $L - 2$.
+    pub dof: usize,
+    /// The variance factor per parameter.
+    pub variance_scale: [f64; 12],
+    /// The confidence level.
+    pub confidence: f64,
+}
+
+/// The machine's physical parameters at zero excitation amplitude from estimates at two or more
+/// levels, with intervals at `confidence`: the small-signal $k_x$ of nonlinear magnets, whose
+/// estimate at a finite level is the best linear approximation's (docs/physical.md).
+///
+/// # Errors
+/// As [`super::extrapolate_to_zero_amplitude`]: fewer than two distinct positive levels, a
+/// standard deviation that is not finite and positive, a positive parameter that is not
+/// positive, a confidence outside (0, 1).
+///
+/// # Example
+/// ```
+/// use ambid_core::estimate::graybox::{
+///     extrapolate_machine_to_zero_amplitude, MachineAtLevel, MachineParams,
+/// };
+/// // every k_x 1 % and 2 % above 3e5 N/m at levels 0.1 and 0.1·√2: the line gives 3e5
+/// let at = |a: f64, up: f64| MachineAtLevel {
+///     level: a,
+///     params: MachineParams { k_i: [58.0; 4], k_x: [3e5 * up.exp(); 4], bending_hz: 730.0,
+///         bending_damping: 0.01, mode_shape_a: 0.6, mode_shape_b: 0.6 },
+///     std: [0.01; 12],
+/// };
+/// let z = extrapolate_machine_to_zero_amplitude(
+///     &[at(0.1, 0.01), at(0.1 * 2f64.sqrt(), 0.02)], 0.95).unwrap();
+/// assert!(z.params.k_x.iter().all(|k| (k / 3e5 - 1.0).abs() < 1e-12));
+/// assert!((z.slope[4] - 1.0).abs() < 1e-9);
+/// ```
+pub fn extrapolate_machine_to_zero_amplitude(
+    points: &[MachineAtLevel],
+    confidence: f64,
+) -> Result<MachineZeroAmplitude> {
+    if !(confidence > 0.0 && confidence < 1.0) {
+        return Err(Error::invalid(
+            "confidence",
+            format!("the confidence level must lie in (0, 1), got {confidence}"),
+        ));
+    }
+    let x = super::amplitude::level_squares(&points.iter().map(|p| p.level).collect::<Vec<_>>())?;
+    for p in points {
+        let v = p.params.to_array();
+        for k in 0..12 {
+            super::amplitude::check_estimate(
+                MACHINE_PARAMETER_NAMES[k],
+                v[k],
+                p.std[k],
+                k < 10,
+                p.level,
+            )?;
+        }
+    }
+    let z = normal_quantile(0.5 + 0.5 * confidence);
+    let mut est = [0.0; 12];
+    let mut std = [0.0; 12];
+    let mut intervals = [(0.0, 0.0); 12];
+    let mut slope = [0.0; 12];
+    let mut chi2 = [0.0; 12];
+    let mut scale = [1.0; 12];
+    for k in 0..12 {
+        let values: Vec<f64> = points.iter().map(|p| p.params.to_array()[k]).collect();
+        let sds: Vec<f64> = points.iter().map(|p| p.std[k]).collect();
+        let l = super::amplitude::line_at_zero(&x, &values, &sds, k < 10, z);
+        (est[k], std[k], intervals[k]) = (l.estimate, l.std, l.interval);
+        (slope[k], chi2[k], scale[k]) = (l.slope, l.chi2, l.variance_scale);
+    }
+    Ok(MachineZeroAmplitude {
+        params: MachineParams {
+            k_i: std::array::from_fn(|j| est[j]),
+            k_x: std::array::from_fn(|j| est[4 + j]),
+            bending_hz: est[8],
+            bending_damping: est[9],
+            mode_shape_a: est[10],
+            mode_shape_b: est[11],
+        },
+        std,
+        intervals,
+        slope,
+        chi2,
+        dof: points.len() - 2,
+        variance_scale: scale,
+        confidence,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{extrapolate_to_zero_amplitude, AtLevel, PhysicalParams};
+    use super::*;
+
+    /// Each machine parameter's line is the single-axis rule's on the same numbers.
+    #[test]
+    fn the_machine_extrapolation_is_the_single_axis_rule_per_parameter() {
+        let levels = [0.05, 0.08, 0.12];
+        let mach: Vec<MachineAtLevel> = levels
+            .iter()
+            .enumerate()
+            .map(|(l, &a)| {
+                let f = 1.0 + 0.3 * a * a + 1e-4 * (l as f64 - 1.0);
+                MachineAtLevel {
+                    level: a,
+                    params: MachineParams {
+                        k_i: [58.0 / f, 55.0, 60.0 * f, 57.0],
+                        k_x: [2.9e5 * f, 3.0e5 * f, 2.8e5, 3.1e5 * f * f],
+                        bending_hz: 730.0 * f,
+                        bending_damping: 0.01 * f,
+                        mode_shape_a: 0.6 * f,
+                        mode_shape_b: -0.5 / f,
+                    },
+                    std: std::array::from_fn(|k| 1e-3 * (k as f64 + 1.0) * (l as f64 + 1.0)),
+                }
+            })
+            .collect();
+        let z = extrapolate_machine_to_zero_amplitude(&mach, 0.9).unwrap();
+        let zarr = z.params.to_array();
+        for j in 0..4 {
+            // the single-axis rule on (k_i of axis j, k_x of axis j, the bending, the shape)
+            let pts: Vec<AtLevel> = mach
+                .iter()
+                .map(|m| AtLevel {
+                    level: m.level,
+                    params: PhysicalParams {
+                        k_i: m.params.k_i[j],
+                        k_x: m.params.k_x[j],
+                        bending_hz: m.params.bending_hz,
+                        bending_damping: m.params.bending_damping,
+                        mode_shape_a: m.params.mode_shape_a,
+                        mode_shape_b: m.params.mode_shape_b,
+                    },
+                    std: [
+                        m.std[j],
+                        m.std[4 + j],
+                        m.std[8],
+                        m.std[9],
+                        m.std[10],
+                        m.std[11],
+                    ],
+                })
+                .collect();
+            let s = extrapolate_to_zero_amplitude(&pts, 0.9).unwrap();
+            let sarr = s.params.to_array();
+            for (mk, sk) in [(j, 0), (4 + j, 1), (8, 2), (9, 3), (10, 4), (11, 5)] {
+                let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * a.abs().max(b.abs());
+                assert!(
+                    close(zarr[mk], sarr[sk]),
+                    "{mk}: {} vs {}",
+                    zarr[mk],
+                    sarr[sk]
+                );
+                assert!(close(z.std[mk], s.std[sk]));
+                assert!(close(z.intervals[mk].0, s.intervals[sk].0));
+                assert!(close(z.intervals[mk].1, s.intervals[sk].1));
+                assert!(close(z.slope[mk], s.slope[sk]));
+                assert!(close(z.variance_scale[mk], s.variance_scale[sk]));
+            }
+        }
+        // bad input: one level; a zero standard deviation; a negative k_x
+        assert!(extrapolate_machine_to_zero_amplitude(&mach[..1], 0.95).is_err());
+        let mut bad = mach.clone();
+        bad[1].std[7] = 0.0;
+        let e = extrapolate_machine_to_zero_amplitude(&bad, 0.95).unwrap_err();
+        assert!(e.to_string().contains("k_x_yb"), "{e}");
+        let mut bad = mach.clone();
+        bad[0].params.k_x[1] = -1.0;
+        let e = extrapolate_machine_to_zero_amplitude(&bad, 0.95).unwrap_err();
+        assert!(e.to_string().contains("k_x_xb"), "{e}");
+        assert!(extrapolate_machine_to_zero_amplitude(&mach, 1.5).is_err());
+    }
+}
