@@ -366,7 +366,8 @@ fn physical_on_a_4x4_frf_gives_every_axis_magnet() {
             vec!["--drawing", "drawing.toml", "--speed-rpm", "12000"],
             "--polar-inertia",
         ),
-        (vec!["--level", "10"], "--level"),
+        (vec!["--also", "14=frf4.csv"], "--level"),
+        (vec!["--level", "0"], "--level"),
         (vec!["--model", "m.json"], "--model"),
     ] {
         let mut full = vec!["physical".to_string(), d("frf4.csv")];
@@ -396,4 +397,91 @@ fn physical_on_a_4x4_frf_gives_every_axis_magnet() {
     let t = text(&o);
     assert!(!o.status.success() && t.contains("variances"), "{t}");
     assert!(!dir.join("bad.json").exists());
+}
+
+/// `ambid physical` on 4×4 matrix FRFs of the *nonlinear* twin at 5 and 10 % of i_sat (machine
+/// with x/y and A/B asymmetry, standstill, own noise seeds): at 10 % alone every axis' k_x is
+/// the best linear approximation's, above the linearisation (by 0.6–1.1 % here);
+/// `--level 10 --also 5=…` extrapolates to zero amplitude, which brings every axis' k_x within
+/// four of its standard deviations (about 0.17 % with two levels), inside the 2 % bar and
+/// closer than the 10 % estimate.
+#[test]
+fn physical_on_4x4_frfs_extrapolates_to_zero_amplitude() {
+    let dir = common::tmpdir("physical-cli-machine-levels");
+    let d = |f: &str| dir.join(f).to_str().unwrap().to_string();
+    let toml = "[asymmetry]\nki_rel = -0.04\nkx_rel = 0.05\nki_rel_b = 0.07\nkx_rel_b = -0.03\n";
+    std::fs::write(dir.join("machine.toml"), toml).unwrap();
+    for (level, seed) in [("10", "41"), ("5", "42")] {
+        let sim = d(&format!("sim{level}"));
+        ok(&[
+            "simulate",
+            "--axes",
+            "4",
+            "--config",
+            &d("machine.toml"),
+            "--mode",
+            "nonlinear",
+            "--level",
+            level,
+            "--seed",
+            seed,
+            "--out",
+            &sim,
+        ]);
+        let exps: Vec<String> = (1..=4).map(|e| format!("{sim}/exp{e}/data.csv")).collect();
+        let out = d(&format!("frf{level}.csv"));
+        let mut args = vec!["frf"];
+        args.extend(exps.iter().map(String::as_str));
+        args.extend(["--out", &out]);
+        ok(&args);
+    }
+    let also = format!("5={}", d("frf5.csv"));
+    let out = ok(&[
+        "physical",
+        &d("frf10.csv"),
+        "--config",
+        &d("machine.toml"),
+        "--level",
+        "10",
+        "--also",
+        &also,
+        "--out",
+        &d("p.json"),
+    ]);
+    println!("{out}");
+    let j: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("p.json")).unwrap()).unwrap();
+    let cfg = ambid_twin::MachineConfig::from_toml_str(toml).unwrap();
+    let (_, kx) = ambid_twin::Machine::new(cfg).unwrap().axis_magnets();
+    let find = |rows: &Value, name: &str| {
+        rows.as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["name"] == name)
+            .unwrap()["estimate"]
+            .as_f64()
+            .unwrap()
+    };
+    for (a, ax) in ["xa", "xb", "ya", "yb"].iter().enumerate() {
+        let name = format!("k_x_{ax}");
+        let at10 = find(&j["parameters"], &name) / kx[a] - 1.0;
+        let zero = find(&j["zero_amplitude"]["parameters"], &name) / kx[a] - 1.0;
+        let sd = j["zero_amplitude"]["parameters"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["name"] == name.as_str())
+            .unwrap()["std"]
+            .as_f64()
+            .unwrap()
+            / kx[a];
+        assert!(at10 > 0.002, "{name} at 10 %: {at10:+.4}");
+        // two levels, the lower one noisy: within four of its own standard deviations, inside
+        // the 2 % bar, and closer than the 10 % estimate
+        assert!(
+            zero.abs() < 4.0 * sd && zero.abs() < 0.02 && zero.abs() < at10,
+            "{name}: {zero:+.4} (sd {sd:.4}) vs {at10:+.4}"
+        );
+    }
+    assert_eq!(j["zero_amplitude"]["levels"].as_array().unwrap().len(), 2);
 }

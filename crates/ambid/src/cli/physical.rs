@@ -69,9 +69,10 @@ pub struct PhysicalArgs {
     /// needed with --also.
     #[arg(long)]
     pub(crate) level: Option<f64>,
-    /// Another FRF of the same axis at another excitation level, `LEVEL=FILE` (repeat for more
-    /// levels): the parameters are estimated at every level and extrapolated to zero amplitude
-    /// (the small-signal k_i, k_x of a nonlinear magnet; docs/physical.md). Read on FRF's band.
+    /// Another FRF of the same axis (or, with a 4×4 matrix FRF, of the same machine) at another
+    /// excitation level, `LEVEL=FILE` (repeat for more levels): the parameters are estimated at
+    /// every level and extrapolated to zero amplitude (the small-signal k_i, k_x of a nonlinear
+    /// magnet; docs/physical.md). Read on FRF's band.
     #[arg(long, value_parser = parse_level_file)]
     pub(crate) also: Vec<(f64, PathBuf)>,
     /// Output JSON: estimates, standard deviations, intervals, the ratio k_i/k_x, the gray-box

@@ -9,8 +9,9 @@ use ambid::error::Error;
 use ambid::io::model::state_space_json;
 use ambid::io::OutputSet;
 use ambid::physical::{
-    fit_machine_physical, machine_drawing, machine_truth, Drawing, PhysicalOptions, Rotation,
-    MACHINE_AXES, MACHINE_PARAMETER_NAMES,
+    extrapolate_machine_to_zero_amplitude, fit_machine_physical, machine_drawing, machine_truth,
+    Drawing, MachineAtLevel, MachinePhysicalFit, PhysicalOptions, Rotation, MACHINE_AXES,
+    MACHINE_PARAMETER_NAMES,
 };
 use ambid::workflow::machine::read_machine_frf;
 use ambid_core::lti::Frd;
@@ -44,9 +45,18 @@ pub fn physical_machine(a: &PhysicalArgs) -> Result<()> {
         ))
         .into())
     };
-    if a.level.is_some() || !a.also.is_empty() {
-        return refuse("--level/--also (the extrapolation to zero amplitude, single-axis only)");
-    }
+    let level = match (a.level, a.also.is_empty()) {
+        (Some(l), _) if !(l.is_finite() && l > 0.0) => {
+            return Err(Error::usage(format!("--level must be positive, got {l}")).into())
+        }
+        (None, false) => {
+            return Err(Error::usage(
+                "--also needs --level, the excitation level of FRF (e.g. --level 10 for 10 % of i_sat), to extrapolate to zero amplitude",
+            )
+            .into())
+        }
+        (l, _) => l,
+    };
     if a.model.is_some() || a.controller.is_some() {
         return refuse(
             "--model/--controller (the starts come from the data, and all loops are open)",
@@ -130,6 +140,36 @@ pub fn physical_machine(a: &PhysicalArgs) -> Result<()> {
     };
     let fit = fit_machine_physical(&frd, &drawing, &rotation, &[], &opts)
         .context("the whole-machine gray-box fit")?;
+    // the other levels on the same band (everything is estimated before anything is written)
+    let mut levels: Vec<(f64, MachinePhysicalFit)> = Vec::new();
+    if let Some(l) = level {
+        levels.push((l, fit.clone()));
+    }
+    for (l, file) in &a.also {
+        let other = read_machine_frf(file, speed_rpm)?
+            .frf
+            .plant
+            .band(band.0, band.1)?;
+        let f = fit_machine_physical(&other, &drawing, &rotation, &[], &opts)
+            .with_context(|| format!("the estimate at level {l} ({})", file.display()))?;
+        levels.push((*l, f));
+    }
+    let zero = if levels.len() > 1 {
+        let points: Vec<MachineAtLevel> = levels
+            .iter()
+            .map(|(l, f)| MachineAtLevel {
+                level: *l,
+                params: f.params,
+                std: f.std,
+            })
+            .collect();
+        Some(extrapolate_machine_to_zero_amplitude(
+            &points,
+            a.confidence,
+        )?)
+    } else {
+        None
+    };
     let truth = match &twin_cfg {
         Some(c) => Some(
             machine_truth(&Machine::new(MachineConfig {
@@ -194,10 +234,72 @@ pub fn physical_machine(a: &PhysicalArgs) -> Result<()> {
         .collect();
     let e_gray = median_diag_error(&fit.model, &frd)?;
     println!(
-        "median relative error of the gray box ({} states, 12 parameters) on the diagonal entries: {:.3} %",
+        "median relative difference of the gray box ({} states, 12 parameters) from the measured FRF on the diagonal entries (the FRF's noise included): {:.3} %",
         fit.model.order(),
         100.0 * e_gray
     );
+    let mut zero_json = serde_json::Value::Null;
+    if let Some(z) = &zero {
+        let top = levels.iter().map(|(l, _)| *l).fold(0.0f64, f64::max);
+        let ze = z.params.to_array();
+        println!(
+            "extrapolated to zero amplitude from {} levels ({}; a line in level² per parameter):",
+            levels.len(),
+            levels
+                .iter()
+                .map(|(l, _)| format!("{l}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+        let mut zrows = Vec::new();
+        for k in 0..12 {
+            let (lo, hi) = z.intervals[k];
+            // relative change from a = 0 to the top level predicted by the line
+            let change = if k < 10 {
+                (z.slope[k] * top * top).exp() - 1.0
+            } else {
+                z.slope[k] * top * top / ze[k]
+            };
+            println!(
+                "{:>16} {:>14.6e} {:>12.3e} {:>14.6e}..{:<14.6e} {:>14} {} (change at level {top}: {:+.3} %)",
+                MACHINE_PARAMETER_NAMES[k],
+                ze[k],
+                z.std[k],
+                lo,
+                hi,
+                truth.map_or(String::new(), |t| format!("{:.6e}", t[k])),
+                UNITS[k],
+                100.0 * change
+            );
+            zrows.push(json!({
+                "name": MACHINE_PARAMETER_NAMES[k],
+                "unit": UNITS[k],
+                "estimate": ze[k],
+                "std": z.std[k],
+                "interval": [lo, hi],
+                "slope_per_level_squared": z.slope[k],
+                "relative_change_at_top_level": change,
+                "chi2": z.chi2[k],
+                "variance_scale": z.variance_scale[k],
+                "twin": truth.map(|t| t[k]),
+            }));
+        }
+        zero_json = json!({
+            "levels": levels.iter().map(|(l, f)| json!({
+                "level": l,
+                "estimate": f.params.to_array(),
+                "std": f.std,
+                "chi2": f.chi2,
+                "dof": f.dof,
+            })).collect::<Vec<_>>(),
+            "files": std::iter::once(a.frf.display().to_string())
+                .chain(a.also.iter().map(|(_, f)| f.display().to_string()))
+                .collect::<Vec<_>>(),
+            "parameter_order": MACHINE_PARAMETER_NAMES,
+            "dof": z.dof,
+            "parameters": zrows,
+        });
+    }
     let summary = json!({
         "frf": a.frf.display().to_string(),
         "axes": MACHINE_AXES,
@@ -217,6 +319,7 @@ pub fn physical_machine(a: &PhysicalArgs) -> Result<()> {
         "ratios_ki_kx": ratios,
         "graybox_median_rel_error_diagonal": e_gray,
         "graybox_model": state_space_json(&fit.model, "u", "y", json!({"kind": "graybox_machine", "axes": MACHINE_AXES})),
+        "zero_amplitude": zero_json,
     });
     let mut set = OutputSet::new(a.force);
     set.write(&a.out, serde_json::to_string_pretty(&summary)?.as_bytes())?;
