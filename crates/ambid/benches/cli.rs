@@ -8,7 +8,8 @@
 //! table for docs/benchmarks.md. A command that fails is reported as failed with its message.
 //!
 //! On the nominal rig it also times the studies that simulate their own experiments (`study
-//! amplitude`, `study operating-point`, `bla` on the twin).
+//! amplitude`, `study operating-point`, `bla` on the twin) and the whole machine's gray box
+//! (`simulate --axes 4`, the 4×4 `frf`, `physical` on it).
 //!
 //! Options by environment: `AMBID_BENCH_RIGS=nominal,3,7` (default `nominal,3`),
 //! `AMBID_BENCH_REPS=5`, `AMBID_BENCH_FILTER=fit` (only commands whose label contains it).
@@ -300,6 +301,22 @@ fn main() {
                 (
                     "bla (defaults: 5 levels 2–32 %, M = 8, P = 4, twin)",
                     owned(&["bla", "--out", &o("bla.csv")]),
+                ),
+                // the whole machine's gray box: the 4-axis experiment (defaults: orthogonal
+                // PRBS design, 4 experiments, nonlinear twin), its 4×4 FRF, and `physical` on it
+                (
+                    "simulate --axes 4 (defaults: 4 experiments, nonlinear)",
+                    owned(&["simulate", "--axes", "4", "--out", &o("sim4")]),
+                ),
+                ("frf (4×4 matrix FRF of the 4 experiments)", {
+                    let mut v = vec!["frf".to_string()];
+                    v.extend((1..=4).map(|e| s(&dir.join(format!("sim4/exp{e}/data.csv")))));
+                    v.extend(["--out".to_string(), o("frf4.csv")]);
+                    v
+                }),
+                (
+                    "physical (4×4 FRF: k_i, k_x of every axis, the bending mode)",
+                    owned(&["physical", &o("frf4.csv"), "--out", &o("physical4.json")]),
                 ),
             ]);
         }

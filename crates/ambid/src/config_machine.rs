@@ -195,7 +195,7 @@ fn dedup_sorted(v: &[f64]) -> Vec<f64> {
 
 impl MachineSection {
     /// The speeds of the procedure \[rpm\]: the files' (in the order given) when there are
-    /// files, else `speeds_rpm`, else [`DEFAULT_MACHINE_SPEEDS_RPM`].
+    /// files, else `speeds_rpm`, else `DEFAULT_MACHINE_SPEEDS_RPM` (0, 15 000, 30 000 rpm).
     pub fn speeds(&self) -> Vec<f64> {
         if !self.files.is_empty() {
             return self.files.iter().map(|f| f.speed_rpm).collect();

@@ -33,6 +33,23 @@ pub fn estimate(
     fit_physical(frd, drawing, controller_b, &hints, opts).context("the gray-box fit")
 }
 
+/// Reads a drawing TOML (the keys of [`Drawing`]; docs/physical.md).
+///
+/// # Errors
+/// An input error naming the file: unreadable, or not a drawing (with the keys it needs).
+pub fn read_drawing(path: &std::path::Path) -> Result<Drawing> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| Error::input(format!("{}: cannot read the drawing ({e})", path.display())))?;
+    toml::from_str(&text).map_err(|e| {
+        Error::input(format!(
+            "{}: {e}; a drawing has mass_kg, inertia_kgm2, bearing_a_m, bearing_b_m, \
+             amplifier_bandwidth_hz, sensor_bandwidth_hz (and optionally amplifier_gain, \
+             sensor_gain, delay_samples); docs/physical.md",
+            path.display()
+        ))
+    })
+}
+
 /// The drawing of a twin rig: what its configuration says about the rotor, bearings, amplifier
 /// and sensor (gains 1: the twin's records are in A and m), one sample of computation delay.
 pub fn twin_drawing(cfg: &TwinConfig) -> Drawing {

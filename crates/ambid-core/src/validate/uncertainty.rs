@@ -140,7 +140,7 @@ pub struct UncertaintyOptions {
     pub draws: usize,
     /// Seed of the draws (`ChaCha8Rng`, default 0).
     pub seed: u64,
-    /// The family of the fitted weight (default [`WeightShape::Smooth`]; docs/uncertainty.md,
+    /// The family of the fitted weight (default [`WeightShape::Smooth`](crate::validate::weight::WeightShape::Smooth); docs/uncertainty.md,
     /// "Mode-shaped weights", gives what each holds on random rigs).
     pub weight_shape: super::weight::WeightShape,
 }

@@ -8,7 +8,7 @@ use ambid::io::model::state_space_json;
 use ambid::io::OutputSet;
 use ambid::physical::{
     as_array, at_levels, estimate, extrapolate_to_zero_amplitude, median_rel_error, twin_drawing,
-    twin_truth, Drawing, PhysicalFit, PhysicalOptions, PARAMETER_NAMES,
+    twin_truth, PhysicalFit, PhysicalOptions, PARAMETER_NAMES,
 };
 use anyhow::{Context, Result};
 use clap::Args;
@@ -146,17 +146,7 @@ pub fn physical(a: PhysicalArgs) -> Result<()> {
         (l, _) => l,
     };
     let (drawing, truth) = match &a.drawing {
-        Some(p) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("cannot read the drawing {}", p.display()))?;
-            let d: Drawing = toml::from_str(&text).map_err(|e| {
-                ambid::error::Error::input(format!(
-                    "{}: {e}; a drawing has mass_kg, inertia_kgm2, bearing_a_m, bearing_b_m, amplifier_bandwidth_hz, sensor_bandwidth_hz (and optionally amplifier_gain, sensor_gain, delay_samples); docs/physical.md",
-                    p.display()
-                ))
-            })?;
-            (d, None)
-        }
+        Some(p) => (ambid::physical::read_drawing(p)?, None),
         None => {
             let twin = ambid_twin::Twin::new(twin_config(&a.twin)?)?;
             (

@@ -10,7 +10,7 @@ use ambid::io::model::state_space_json;
 use ambid::io::OutputSet;
 use ambid::physical::{
     extrapolate_machine_to_zero_amplitude, fit_machine_physical, machine_drawing, machine_truth,
-    Drawing, MachineAtLevel, MachinePhysicalFit, PhysicalOptions, Rotation, MACHINE_AXES,
+    MachineAtLevel, MachinePhysicalFit, PhysicalOptions, Rotation, MACHINE_AXES,
     MACHINE_PARAMETER_NAMES,
 };
 use ambid::workflow::machine::read_machine_frf;
@@ -75,16 +75,7 @@ pub fn physical_machine(a: &PhysicalArgs) -> Result<()> {
         None
     };
     let drawing = match &a.drawing {
-        Some(p) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("cannot read the drawing {}", p.display()))?;
-            toml::from_str::<Drawing>(&text).map_err(|e| {
-                Error::input(format!(
-                    "{}: {e}; a drawing has mass_kg, inertia_kgm2, bearing_a_m, bearing_b_m, amplifier_bandwidth_hz, sensor_bandwidth_hz (and optionally amplifier_gain, sensor_gain, delay_samples); docs/physical.md",
-                    p.display()
-                ))
-            })?
-        }
+        Some(p) => ambid::physical::read_drawing(p)?,
         None => twin_cfg
             .as_ref()
             .map(|c| machine_drawing(c).0)

@@ -68,16 +68,7 @@ fn drawing_of(m: &MachineSection, base: &Path, data: &MachineData) -> Result<Dra
     let p = m.drawing.as_ref().map(|p| base.join(p)).ok_or_else(|| {
         Error::usage("machine.physical = true with files needs machine.drawing (docs/physical.md)")
     })?;
-    let text = std::fs::read_to_string(&p)
-        .map_err(|e| Error::input(format!("{}: cannot read the drawing ({e})", p.display())))?;
-    toml::from_str(&text).map_err(|e| {
-        Error::input(format!(
-            "{}: {e}; a drawing has mass_kg, inertia_kgm2, bearing_a_m, bearing_b_m, \
-             amplifier_bandwidth_hz, sensor_bandwidth_hz (and optionally amplifier_gain, \
-             sensor_gain, delay_samples); docs/physical.md",
-            p.display()
-        ))
-    })
+    crate::physical::read_drawing(&p)
 }
 
 /// The gray box at every speed of `data` (module docs). A fit that fails at one speed is

@@ -9,9 +9,9 @@
 //! mass normalised); the displacement at bearing A is $c_A^\top q_p$ with
 //! $c_A = (1, -a, \varphi_A)$, at B $c_B^\top q_p$ with $c_B = (1, b, \varphi_B)$. Each axis
 //! $j$ has its own magnet, $F_j = k_{i,j}\, i_j + k_{x,j}\, x_j$, so per plane
-//! $$ M\ddot q_p + \operatorname{diag}(0, 0, 2\zeta_b\omega_b)\dot q_p
-//!    + \operatorname{diag}(0, 0, \omega_b^2)\, q_p
-//!    = \sum_{B \in \{A, B\}} c_B \left(k_{x,pB}\, c_B^\top q_p + k_{i,pB}\, i_{pB}\right) $$
+//! $$ M\ddot q_p + \operatorname{diag}(0, 0, 2\zeta_b\omega_b)\dot q_p +
+//!    \operatorname{diag}(0, 0, \omega_b^2)\, q_p =
+//!    \sum_{B \in \{A, B\}} c_B \left(k_{x,pB}\, c_B^\top q_p + k_{i,pB}\, i_{pB}\right) $$
 //! with $M = \operatorname{diag}(m, J, 1)$; the spinning rotor ($\Omega$ about $+z$, polar
 //! inertia $J_p$) adds the gyroscopic moments
 //! $J\ddot\theta_x \mathrel{+}= -\Omega J_p\dot\theta_y$,
@@ -527,7 +527,7 @@ pub fn fit_machine_physical(
             for j in 0..4 {
                 let v = var[(i, j)];
                 let x = gk[(i, j)];
-                if !(v.is_finite() && v > 0.0) || !(x.re.is_finite() && x.im.is_finite()) {
+                if !(v.is_finite() && v > 0.0 && x.re.is_finite() && x.im.is_finite()) {
                     return Err(Error::invalid(
                         "frd",
                         format!(

@@ -103,7 +103,7 @@ impl<R: std::io::BufRead> Lines<R> {
 /// A delimited text table read one row at a time, in the dialect of the module docs: the first
 /// lines decide the delimiter and the header, then every row comes as numbers (NaN for an empty
 /// cell), checked against the header's width. Every reader of text data (the whole-table reader
-/// [`read`] and the streaming FRF reader `ambid::io::stream`) goes through it, so there is one
+/// `read` and the streaming FRF reader `ambid::io::stream`) goes through it, so there is one
 /// dialect.
 pub struct TextRows<R> {
     src: Lines<R>,
