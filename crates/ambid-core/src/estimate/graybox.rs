@@ -471,27 +471,109 @@ impl LeastSquaresProblem for Problem<'_> {
     }
 
     fn jacobian(&mut self, x: &[f64]) -> Option<Mat<f64>> {
-        let n = x.len();
-        let m = 2 * self.f.len();
-        let mut j = Mat::<f64>::zeros(m, n);
-        for c in 0..n {
-            let h = 1e-6 * x[c].abs().max(1.0);
-            let mut xp = x.to_vec();
-            let mut xm = x.to_vec();
-            xp[c] += h;
-            xm[c] -= h;
-            let (rp, rm) = (self.residuals(&xp)?, self.residuals(&xm)?);
-            for r in 0..m {
-                j[(r, c)] = (rp[r] - rm[r]) / (2.0 * h);
-            }
-        }
-        Some(j)
+        central_jacobian(self, x)
     }
 }
 
-fn cost(p: &mut Problem<'_>, x: &[f64]) -> f64 {
+/// The Jacobian of `p`'s residuals at `x` by central differences (step
+/// $10^{-6}\max(|x_c|, 1)$); `None` where a residual is not finite.
+fn central_jacobian<P: LeastSquaresProblem>(p: &mut P, x: &[f64]) -> Option<Mat<f64>> {
+    let mut j: Option<Mat<f64>> = None;
+    for c in 0..x.len() {
+        let h = 1e-6 * x[c].abs().max(1.0);
+        let mut xp = x.to_vec();
+        let mut xm = x.to_vec();
+        xp[c] += h;
+        xm[c] -= h;
+        let (rp, rm) = (p.residuals(&xp)?, p.residuals(&xm)?);
+        let jm = j.get_or_insert_with(|| Mat::zeros(rp.len(), x.len()));
+        for r in 0..rp.len() {
+            jm[(r, c)] = (rp[r] - rm[r]) / (2.0 * h);
+        }
+    }
+    j
+}
+
+/// The sum of squared residuals of `p` at `x` (infinite where the model is not finite).
+fn cost<P: LeastSquaresProblem>(p: &mut P, x: &[f64]) -> f64 {
     p.residuals(x)
         .map_or(f64::INFINITY, |r| r.iter().map(|v| v * v).sum())
+}
+
+/// The covariance of a gray-box estimate and what follows from it (module docs).
+struct Spread {
+    chi2: f64,
+    dof: usize,
+    scale: f64,
+    /// $\hat\sigma^2 (J^\top J)^{-1}$, row-major.
+    cov: Vec<f64>,
+    /// Standard deviations of the parameters themselves.
+    std: Vec<f64>,
+    /// Confidence intervals.
+    intervals: Vec<(f64, f64)>,
+}
+
+/// The spread of the estimate `x` of `p`: $\chi^2$, $\hat\sigma^2 = \max(1, \chi^2/\text{dof})$,
+/// the covariance $\hat\sigma^2(J^\top J)^{-1}$; the first `n_log` parameters are logarithms
+/// (standard deviation $e^{x}\sigma$, interval $e^{x \pm z\sigma}$), the others are the mode
+/// shape times `shape_scale` ($\sqrt m$).
+fn spread<P: LeastSquaresProblem>(
+    p: &mut P,
+    x: &[f64],
+    n_log: usize,
+    shape_scale: f64,
+    confidence: f64,
+) -> Result<Spread> {
+    let n = x.len();
+    let jac = central_jacobian(p, x).ok_or_else(|| {
+        Error::numerical(
+            "the gray-box fit",
+            "the Jacobian at the estimate is not finite",
+        )
+    })?;
+    let r = p.residuals(x).ok_or_else(|| {
+        Error::numerical(
+            "the gray-box fit",
+            "the residuals at the estimate are not finite",
+        )
+    })?;
+    let chi2: f64 = r.iter().map(|v| v * v).sum();
+    let dof = r.len().saturating_sub(n).max(1);
+    let scale = (chi2 / dof as f64).max(1.0);
+    let info = jac.transpose() * &jac;
+    let inv = invert_spd(&info).ok_or_else(|| {
+        Error::numerical(
+            "the gray-box covariance",
+            "the information matrix is singular: a parameter is not determined by these lines (is the bending mode inside the band?)",
+        )
+    })?;
+    let mut cov = vec![0.0; n * n];
+    for r in 0..n {
+        for c in 0..n {
+            cov[r * n + c] = scale * inv[(r, c)];
+        }
+    }
+    let z = normal_quantile(0.5 + 0.5 * confidence);
+    let mut std = vec![0.0; n];
+    let mut intervals = vec![(0.0, 0.0); n];
+    for k in 0..n {
+        let sd = cov[k * (n + 1)].max(0.0).sqrt();
+        if k < n_log {
+            std[k] = x[k].exp() * sd;
+            intervals[k] = ((x[k] - z * sd).exp(), (x[k] + z * sd).exp());
+        } else {
+            std[k] = sd / shape_scale;
+            intervals[k] = ((x[k] - z * sd) / shape_scale, (x[k] + z * sd) / shape_scale);
+        }
+    }
+    Ok(Spread {
+        chi2,
+        dof,
+        scale,
+        cov,
+        std,
+        intervals,
+    })
 }
 
 /// Estimates the physical parameters from the plant FRF `frd` (SISO, discrete, with variances;
@@ -617,49 +699,9 @@ pub fn fit_physical(
         x[4] = -x[4];
         x[5] = -x[5];
     }
-    let jac = prob.jacobian(&x).ok_or_else(|| {
-        Error::numerical(
-            "the gray-box fit",
-            "the Jacobian at the estimate is not finite",
-        )
-    })?;
-    let r = prob.residuals(&x).ok_or_else(|| {
-        Error::numerical(
-            "the gray-box fit",
-            "the residuals at the estimate are not finite",
-        )
-    })?;
-    let chi2: f64 = r.iter().map(|v| v * v).sum();
-    let dof = r.len() - 6;
-    let scale = (chi2 / dof as f64).max(1.0);
-    let info = jac.transpose() * &jac;
-    let inv = invert_spd(&info).ok_or_else(|| {
-        Error::numerical(
-            "the gray-box covariance",
-            "the information matrix is singular: a parameter is not determined by these lines (is the bending mode inside the band?)",
-        )
-    })?;
-    let mut cov = vec![0.0; 36];
-    for r in 0..6 {
-        for c in 0..6 {
-            cov[r * 6 + c] = scale * inv[(r, c)];
-        }
-    }
-    let params = prob.params(&x);
-    let z = normal_quantile(0.5 + 0.5 * opts.confidence);
-    let sd: Vec<f64> = (0..6).map(|k| cov[k * 7].max(0.0).sqrt()).collect();
     let sqrt_m = prob.sqrt_m;
-    let mut std = [0.0; 6];
-    let mut intervals = [(0.0, 0.0); 6];
-    for k in 0..4 {
-        let v = x[k].exp();
-        std[k] = v * sd[k];
-        intervals[k] = ((x[k] - z * sd[k]).exp(), (x[k] + z * sd[k]).exp());
-    }
-    for k in 4..6 {
-        std[k] = sd[k] / sqrt_m;
-        intervals[k] = ((x[k] - z * sd[k]) / sqrt_m, (x[k] + z * sd[k]) / sqrt_m);
-    }
+    let sp = spread(&mut prob, &x, 4, sqrt_m, opts.confidence)?;
+    let params = prob.params(&x);
     let model = graybox_plant(drawing, &params, controller)?;
     let ts = model.ts().unwrap_or(1.0);
     let unstable_pole_rad_s = model
@@ -670,12 +712,12 @@ pub fn fit_physical(
         .fold(f64::NAN, f64::max);
     Ok(PhysicalFit {
         params,
-        std,
-        intervals,
-        covariance: cov,
-        chi2,
-        dof,
-        variance_scale: scale,
+        std: std::array::from_fn(|k| sp.std[k]),
+        intervals: std::array::from_fn(|k| sp.intervals[k]),
+        covariance: sp.cov,
+        chi2: sp.chi2,
+        dof: sp.dof,
+        variance_scale: sp.scale,
         model,
         unstable_pole_rad_s,
         iterations: report.iterations,

@@ -107,6 +107,51 @@ fn parse_level_file(s: &str) -> std::result::Result<(f64, PathBuf), String> {
     Ok((level, PathBuf::from(f)))
 }
 
+/// Prints the table of estimates (heading with the confidence level, then one row per
+/// parameter with its unit, standard deviation, interval and the twin's value when known) and
+/// returns the rows for the JSON output.
+pub(crate) fn parameter_table(
+    names: &[&str],
+    units: &[&str],
+    est: &[f64],
+    std: &[f64],
+    intervals: &[(f64, f64)],
+    truth: Option<&[f64]>,
+    confidence: f64,
+) -> Vec<serde_json::Value> {
+    println!(
+        "{:>16} {:>14} {:>12} {:>30} {:>14}",
+        "parameter",
+        "estimate",
+        "std",
+        format!("{:.0} % interval", 100.0 * confidence),
+        if truth.is_some() { "twin" } else { "" }
+    );
+    let mut rows = Vec::with_capacity(names.len());
+    for k in 0..names.len() {
+        let (lo, hi) = intervals[k];
+        println!(
+            "{:>16} {:>14.6e} {:>12.3e} {:>14.6e}..{:<14.6e} {:>14} {}",
+            names[k],
+            est[k],
+            std[k],
+            lo,
+            hi,
+            truth.map_or(String::new(), |t| format!("{:.6e}", t[k])),
+            units[k]
+        );
+        rows.push(json!({
+            "name": names[k],
+            "unit": units[k],
+            "estimate": est[k],
+            "std": std[k],
+            "interval": [lo, hi],
+            "twin": truth.map(|t| t[k]),
+        }));
+    }
+    rows
+}
+
 pub fn physical(a: PhysicalArgs) -> Result<()> {
     OutputSet::check(&a.out, a.force)?;
     if !(a.confidence > 0.0 && a.confidence < 1.0) {
@@ -195,7 +240,6 @@ pub fn physical(a: PhysicalArgs) -> Result<()> {
         None
     };
     let est = as_array(&fit.params);
-    let pct = 100.0 * a.confidence;
     println!(
         "gray-box fit over {} lines in {:.1}–{:.1} Hz: chi2/dof {:.3} ({} iterations, {:?})",
         frd.len(),
@@ -205,36 +249,15 @@ pub fn physical(a: PhysicalArgs) -> Result<()> {
         fit.iterations,
         fit.stop
     );
-    println!(
-        "{:>16} {:>14} {:>12} {:>30} {:>14}",
-        "parameter",
-        "estimate",
-        "std",
-        format!("{pct:.0} % interval"),
-        if truth.is_some() { "twin" } else { "" }
+    let rows = parameter_table(
+        &PARAMETER_NAMES,
+        &UNITS,
+        &est,
+        &fit.std,
+        &fit.intervals,
+        truth.as_ref().map(|t| t.as_slice()),
+        a.confidence,
     );
-    let mut rows = Vec::new();
-    for k in 0..6 {
-        let (lo, hi) = fit.intervals[k];
-        println!(
-            "{:>16} {:>14.6e} {:>12.3e} {:>14.6e}..{:<14.6e} {:>14} {}",
-            PARAMETER_NAMES[k],
-            est[k],
-            fit.std[k],
-            lo,
-            hi,
-            truth.map_or(String::new(), |t| format!("{:.6e}", t[k])),
-            UNITS[k]
-        );
-        rows.push(json!({
-            "name": PARAMETER_NAMES[k],
-            "unit": UNITS[k],
-            "estimate": est[k],
-            "std": fit.std[k],
-            "interval": [lo, hi],
-            "twin": truth.map(|t| t[k]),
-        }));
-    }
     let (ratio, (rlo, rhi)) = fit.ratio();
     println!(
         "identifiable without the drawing: k_i/k_x = {ratio:.6e} m/A ({rlo:.6e}..{rhi:.6e}), unstable pole {:.2} rad/s",

@@ -4,7 +4,7 @@
 //! loops open (docs/physical.md, "The whole machine").
 
 use super::common::machine_base;
-use super::physical::PhysicalArgs;
+use super::physical::{parameter_table, PhysicalArgs};
 use ambid::error::Error;
 use ambid::io::model::state_space_json;
 use ambid::io::OutputSet;
@@ -172,7 +172,6 @@ pub fn physical_machine(a: &PhysicalArgs) -> Result<()> {
         None => None,
     };
     let est = fit.params.to_array();
-    let pct = 100.0 * a.confidence;
     println!(
         "whole-machine gray-box fit over {} lines × 16 entries in {:.1}–{:.1} Hz at {speed_rpm} rpm: chi2/dof {:.3} ({} iterations, {:?})",
         frd.len(),
@@ -182,36 +181,15 @@ pub fn physical_machine(a: &PhysicalArgs) -> Result<()> {
         fit.iterations,
         fit.stop
     );
-    println!(
-        "{:>16} {:>14} {:>12} {:>30} {:>14}",
-        "parameter",
-        "estimate",
-        "std",
-        format!("{pct:.0} % interval"),
-        if truth.is_some() { "twin" } else { "" }
+    let rows = parameter_table(
+        &MACHINE_PARAMETER_NAMES,
+        &UNITS,
+        &est,
+        &fit.std,
+        &fit.intervals,
+        truth.as_ref().map(|t| t.as_slice()),
+        a.confidence,
     );
-    let mut rows = Vec::new();
-    for k in 0..12 {
-        let (lo, hi) = fit.intervals[k];
-        println!(
-            "{:>16} {:>14.6e} {:>12.3e} {:>14.6e}..{:<14.6e} {:>14} {}",
-            MACHINE_PARAMETER_NAMES[k],
-            est[k],
-            fit.std[k],
-            lo,
-            hi,
-            truth.map_or(String::new(), |t| format!("{:.6e}", t[k])),
-            UNITS[k]
-        );
-        rows.push(json!({
-            "name": MACHINE_PARAMETER_NAMES[k],
-            "unit": UNITS[k],
-            "estimate": est[k],
-            "std": fit.std[k],
-            "interval": [lo, hi],
-            "twin": truth.map(|t| t[k]),
-        }));
-    }
     let ratios: Vec<_> = fit
         .ratios()
         .iter()

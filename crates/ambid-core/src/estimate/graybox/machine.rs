@@ -52,7 +52,7 @@
 //! $\Phi^{-1} M \Phi^{-\top}$ scales with $K_i$ and $K_x$ undetected, so the values
 //! themselves need $m$, $J$, $a$, $b$ from the drawing.
 
-use super::{check_drawing, invert_spd, Drawing, PhysicalOptions};
+use super::{central_jacobian, check_drawing, cost, spread, Drawing, PhysicalOptions};
 use crate::error::{Error, Result};
 use crate::estimate::pem::lm::{minimize, LeastSquaresProblem, LmOptions, StopReason};
 use crate::lti::{Frd, StateSpace};
@@ -376,21 +376,7 @@ impl LeastSquaresProblem for Problem<'_> {
     }
 
     fn jacobian(&mut self, x: &[f64]) -> Option<Mat<f64>> {
-        let n = x.len();
-        let m = 32 * self.f.len();
-        let mut jac = Mat::<f64>::zeros(m, n);
-        for c in 0..n {
-            let h = 1e-6 * x[c].abs().max(1.0);
-            let mut xp = x.to_vec();
-            let mut xm = x.to_vec();
-            xp[c] += h;
-            xm[c] -= h;
-            let (rp, rm) = (self.residuals(&xp)?, self.residuals(&xm)?);
-            for r in 0..m {
-                jac[(r, c)] = (rp[r] - rm[r]) / (2.0 * h);
-            }
-        }
-        Some(jac)
+        central_jacobian(self, x)
     }
 }
 
@@ -429,11 +415,6 @@ fn bending_candidates(
         .collect();
     ranked.sort_by(|a, b| a.0.total_cmp(&b.0));
     ranked.iter().take(4).map(|&(_, fb)| (fb, 0.02)).collect()
-}
-
-fn cost(p: &mut Problem<'_>, x: &[f64]) -> f64 {
-    p.residuals(x)
-        .map_or(f64::INFINITY, |r| r.iter().map(|v| v * v).sum())
 }
 
 /// Estimates the machine's physical parameters from its 4×4 plant FRF `frd` (discrete, with
@@ -625,59 +606,18 @@ pub fn fit_machine_physical(
         x[10] = -x[10];
         x[11] = -x[11];
     }
-    let jac = prob.jacobian(&x).ok_or_else(|| {
-        Error::numerical(
-            "the gray-box fit",
-            "the Jacobian at the estimate is not finite",
-        )
-    })?;
-    let r = prob.residuals(&x).ok_or_else(|| {
-        Error::numerical(
-            "the gray-box fit",
-            "the residuals at the estimate are not finite",
-        )
-    })?;
-    let chi2: f64 = r.iter().map(|v| v * v).sum();
-    let dof = r.len().saturating_sub(12).max(1);
-    let scale = (chi2 / dof as f64).max(1.0);
-    let info = jac.transpose() * &jac;
-    let inv = invert_spd(&info).ok_or_else(|| {
-        Error::numerical(
-            "the gray-box covariance",
-            "the information matrix is singular: a parameter is not determined by these lines (is the bending mode inside the band?)",
-        )
-    })?;
-    let mut cov = vec![0.0; 144];
-    for r in 0..12 {
-        for c in 0..12 {
-            cov[r * 12 + c] = scale * inv[(r, c)];
-        }
-    }
+    let sqrt_m = prob.sqrt_m;
+    let sp = spread(&mut prob, &x, 10, sqrt_m, opts.confidence)?;
     let params = prob.params(&x);
-    let z = normal_quantile(0.5 + 0.5 * opts.confidence);
-    let sd: Vec<f64> = (0..12).map(|k| cov[k * 13].max(0.0).sqrt()).collect();
-    let mut std = [0.0; 12];
-    let mut intervals = [(0.0, 0.0); 12];
-    for k in 0..10 {
-        std[k] = x[k].exp() * sd[k];
-        intervals[k] = ((x[k] - z * sd[k]).exp(), (x[k] + z * sd[k]).exp());
-    }
-    for k in 10..12 {
-        std[k] = sd[k] / prob.sqrt_m;
-        intervals[k] = (
-            (x[k] - z * sd[k]) / prob.sqrt_m,
-            (x[k] + z * sd[k]) / prob.sqrt_m,
-        );
-    }
     let model = graybox_machine_plant(drawing, &params, rotation, ts)?;
     Ok(MachinePhysicalFit {
         params,
-        std,
-        intervals,
-        covariance: cov,
-        chi2,
-        dof,
-        variance_scale: scale,
+        std: std::array::from_fn(|k| sp.std[k]),
+        intervals: std::array::from_fn(|k| sp.intervals[k]),
+        covariance: sp.cov,
+        chi2: sp.chi2,
+        dof: sp.dof,
+        variance_scale: sp.scale,
         model,
         rotation: *rotation,
         iterations: report.iterations,
