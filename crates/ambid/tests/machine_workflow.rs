@@ -734,3 +734,81 @@ fn the_workflow_estimates_every_axis_magnet_on_request() {
     .to_string();
     assert!(e.contains("polar_inertia_kgm2"), "{e}");
 }
+
+/// `[machine] physical = true` with a recorded matrix FRF file: the drawing from
+/// `machine.drawing`, the polar inertia from `machine.polar_inertia_kgm2` (the FRF at
+/// 12 000 rpm of `simulate --axes 4` with x/y and A/B asymmetry, linear physics): every $k_i$,
+/// $k_x$ within 0.5 % of the machine's linearisation (computed here), no twin column.
+#[test]
+fn the_workflow_estimates_every_axis_magnet_from_files() {
+    let dir = common::tmpdir("machine-physical-files");
+    let exe = env!("CARGO_BIN_EXE_ambid");
+    let toml = "speed_rpm = 12000.0\n[asymmetry]\nki_rel = -0.05\nkx_rel = 0.04\nki_rel_b = 0.06\nkx_rel_b = -0.07\n";
+    std::fs::write(dir.join("machine.toml"), toml).unwrap();
+    let sim = dir.join("sim");
+    let o = Command::new(exe)
+        .args([
+            "simulate", "--axes", "4", "--mode", "linear", "--seed", "23", "--config",
+        ])
+        .arg(dir.join("machine.toml"))
+        .arg("--out")
+        .arg(&sim)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let mut frf = Command::new(exe);
+    frf.arg("frf");
+    for e in 1..=4 {
+        frf.arg(sim.join(format!("exp{e}")).join("data.csv"));
+    }
+    let o = frf
+        .args(["--speed-rpm", "12000", "--out"])
+        .arg(dir.join("frf.csv"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let cfg = ambid_twin::MachineConfig::from_toml_str(toml).unwrap();
+    let (drawing, rot) = ambid::physical::machine_drawing(&cfg);
+    std::fs::write(dir.join("drawing.toml"), toml::to_string(&drawing).unwrap()).unwrap();
+    let c = WorkflowConfig::from_toml_str(
+        &format!(
+            "[machine]\nphysical = true\ndrawing = \"drawing.toml\"\npolar_inertia_kgm2 = {}\n[[machine.files]]\nspeed_rpm = 12000\npath = \"frf.csv\"\n",
+            rot.polar_inertia_kgm2
+        ),
+        &dir.join("wf.toml"),
+    )
+    .unwrap();
+    let out = ambid::workflow::run(&c, &dir, &mut Progress::new(Verbosity::Quiet)).unwrap();
+    let rows = out.summary["machine"]["physical"].as_array().unwrap();
+    assert_eq!(rows.len(), 1);
+    let r = &rows[0];
+    assert!(r["error"].is_null(), "{r}");
+    let (ki, kx) = ambid_twin::Machine::new(cfg).unwrap().axis_magnets();
+    let p = r["parameters"].as_array().unwrap();
+    for (a, ax) in ["xa", "xb", "ya", "yb"].iter().enumerate() {
+        for (name, truth) in [(format!("k_i_{ax}"), ki[a]), (format!("k_x_{ax}"), kx[a])] {
+            let q = p.iter().find(|q| q["name"] == name.as_str()).unwrap();
+            let e = q["estimate"].as_f64().unwrap();
+            assert!(
+                ((e - truth) / truth).abs() < 0.005,
+                "{name}: {e} vs {truth}"
+            );
+            assert!(q["twin"].is_null());
+        }
+    }
+    // a drawing that is not one: refused with the keys named
+    std::fs::write(dir.join("bad.toml"), "mass = 3\n").unwrap();
+    let c = WorkflowConfig::from_toml_str(
+        &format!(
+            "[machine]\nphysical = true\ndrawing = \"bad.toml\"\npolar_inertia_kgm2 = {}\n[[machine.files]]\nspeed_rpm = 12000\npath = \"frf.csv\"\n",
+            rot.polar_inertia_kgm2
+        ),
+        &dir.join("wf.toml"),
+    )
+    .unwrap();
+    let e = match ambid::workflow::run(&c, &dir, &mut Progress::new(Verbosity::Quiet)) {
+        Ok(_) => panic!("a bad drawing was accepted"),
+        Err(e) => e.to_string(),
+    };
+    assert!(e.contains("mass_kg") && e.contains("bad.toml"), "{e}");
+}
