@@ -53,13 +53,22 @@ pub fn read_drawing(path: &std::path::Path) -> Result<Drawing> {
 /// The drawing of a twin rig: what its configuration says about the rotor, bearings, amplifier
 /// and sensor (gains 1: the twin's records are in A and m), one sample of computation delay.
 pub fn twin_drawing(cfg: &TwinConfig) -> Drawing {
+    drawing_of(&cfg.rotor, &cfg.amplifier, &cfg.sensor)
+}
+
+/// The drawing of a rotor, amplifier and sensor configuration (gains 1, one sample of delay).
+fn drawing_of(
+    rotor: &ambid_twin::config::RotorConfig,
+    amplifier: &ambid_twin::config::AmplifierConfig,
+    sensor: &ambid_twin::config::SensorConfig,
+) -> Drawing {
     Drawing {
-        mass_kg: cfg.rotor.mass_kg,
-        inertia_kgm2: cfg.rotor.inertia(),
-        bearing_a_m: cfg.rotor.bearing_a_m,
-        bearing_b_m: cfg.rotor.bearing_b_m,
-        amplifier_bandwidth_hz: cfg.amplifier.bandwidth_hz,
-        sensor_bandwidth_hz: cfg.sensor.bandwidth_hz,
+        mass_kg: rotor.mass_kg,
+        inertia_kgm2: rotor.inertia(),
+        bearing_a_m: rotor.bearing_a_m,
+        bearing_b_m: rotor.bearing_b_m,
+        amplifier_bandwidth_hz: amplifier.bandwidth_hz,
+        sensor_bandwidth_hz: sensor.bandwidth_hz,
         amplifier_gain: 1.0,
         sensor_gain: 1.0,
         delay_samples: 1,
@@ -224,17 +233,7 @@ pub fn as_array(p: &PhysicalParams) -> [f64; 6] {
 /// The drawing of a machine configuration (as [`twin_drawing`] of its plane) and its rotation
 /// (speed and polar inertia).
 pub fn machine_drawing(cfg: &MachineConfig) -> (Drawing, Rotation) {
-    let d = Drawing {
-        mass_kg: cfg.rotor.mass_kg,
-        inertia_kgm2: cfg.rotor.inertia(),
-        bearing_a_m: cfg.rotor.bearing_a_m,
-        bearing_b_m: cfg.rotor.bearing_b_m,
-        amplifier_bandwidth_hz: cfg.amplifier.bandwidth_hz,
-        sensor_bandwidth_hz: cfg.sensor.bandwidth_hz,
-        amplifier_gain: 1.0,
-        sensor_gain: 1.0,
-        delay_samples: 1,
-    };
+    let d = drawing_of(&cfg.rotor, &cfg.amplifier, &cfg.sensor);
     let rot = Rotation {
         speed_rpm: cfg.speed_rpm,
         polar_inertia_kgm2: cfg.polar_inertia(),

@@ -500,6 +500,48 @@ fn cost<P: LeastSquaresProblem>(p: &mut P, x: &[f64]) -> f64 {
         .map_or(f64::INFINITY, |r| r.iter().map(|v| v * v).sum())
 }
 
+/// The mode-shape grid of the starts: $\varphi_A\sqrt m$ (positive: the sign is not
+/// identifiable) and $\varphi_B\sqrt m$ of either sign.
+const SHAPE_GRID: ([f64; 3], [f64; 6]) = ([0.7, 1.4, 2.8], [0.7, 1.4, 2.8, -0.7, -1.4, -2.8]);
+
+/// The least-cost start of `p` over the bending candidates `cands` `(f_b, ζ_b)` and the
+/// mode-shape grid (`start(f_b, ζ_b, φ_A√m, φ_B√m)` builds the parameter vector), refined by
+/// Levenberg–Marquardt; the mode shape (at `shape`, `shape + 1`) reported with $\varphi_A > 0$.
+fn start_and_refine<P: LeastSquaresProblem>(
+    p: &mut P,
+    cands: &[(f64, f64)],
+    start: impl Fn(f64, f64, f64, f64) -> Vec<f64>,
+    shape: usize,
+    max_iterations: usize,
+) -> Result<(Vec<f64>, crate::estimate::pem::lm::LmReport)> {
+    let mut best: Option<(f64, Vec<f64>)> = None;
+    for &(fb0, zb0) in cands {
+        for pa in SHAPE_GRID.0 {
+            for pb in SHAPE_GRID.1 {
+                let x = start(fb0, zb0, pa, pb);
+                let c = cost(p, &x);
+                if c.is_finite() && best.as_ref().is_none_or(|b| c < b.0) {
+                    best = Some((c, x));
+                }
+            }
+        }
+    }
+    let (_, x0) = best.ok_or_else(|| {
+        Error::numerical(
+            "the gray-box start",
+            "no starting point gives a finite gray-box model (check the drawing)",
+        )
+    })?;
+    let lm = LmOptions::default().with_max_iterations(max_iterations)?;
+    let (mut x, report) = minimize(p, &x0, &lm)?;
+    // the sign of the mode shape is not identifiable: report φ_A > 0
+    if x[shape] < 0.0 {
+        x[shape] = -x[shape];
+        x[shape + 1] = -x[shape + 1];
+    }
+    Ok((x, report))
+}
+
 /// The covariance of a gray-box estimate and what follows from it (module docs).
 struct Spread {
     chi2: f64,
@@ -674,31 +716,13 @@ pub fn fit_physical(
             .map(|k| (f_hi * 0.3 * (1.0f64 / 0.3).powf(k as f64 / 11.0), 0.02))
             .collect();
     }
-    let mut best: Option<(f64, Vec<f64>)> = None;
-    for (fb0, zb0) in cands {
-        for pa in [0.7, 1.4, 2.8] {
-            for pb in [0.7, 1.4, 2.8, -0.7, -1.4, -2.8] {
-                let x = vec![ki0.ln(), kx0.ln(), fb0.ln(), zb0.ln(), pa, pb];
-                let c = cost(&mut prob, &x);
-                if c.is_finite() && best.as_ref().is_none_or(|b| c < b.0) {
-                    best = Some((c, x));
-                }
-            }
-        }
-    }
-    let (_, x0) = best.ok_or_else(|| {
-        Error::numerical(
-            "the gray-box start",
-            "no starting point gives a finite gray-box model (check the drawing)",
-        )
-    })?;
-    let lm = LmOptions::default().with_max_iterations(opts.max_iterations)?;
-    let (mut x, report) = minimize(&mut prob, &x0, &lm)?;
-    // the sign of the mode shape is not identifiable: report φ_A > 0
-    if x[4] < 0.0 {
-        x[4] = -x[4];
-        x[5] = -x[5];
-    }
+    let (x, report) = start_and_refine(
+        &mut prob,
+        &cands,
+        |fb, zb, pa, pb| vec![ki0.ln(), kx0.ln(), fb.ln(), zb.ln(), pa, pb],
+        4,
+        opts.max_iterations,
+    )?;
     let sqrt_m = prob.sqrt_m;
     let sp = spread(&mut prob, &x, 4, sqrt_m, opts.confidence)?;
     let params = prob.params(&x);

@@ -152,6 +152,87 @@ pub(crate) fn parameter_table(
     rows
 }
 
+/// One level's estimate in the zero-amplitude section: the level, the estimate, its standard
+/// deviations, χ² and degrees of freedom.
+pub(crate) type LevelRow = (f64, Vec<f64>, Vec<f64>, f64, usize);
+
+/// One zero-amplitude extrapolation as the CLI prints and writes it.
+pub(crate) struct ZeroTable<'a> {
+    pub names: &'a [&'a str],
+    pub units: &'a [&'a str],
+    pub est: &'a [f64],
+    pub std: &'a [f64],
+    pub intervals: &'a [(f64, f64)],
+    pub slope: &'a [f64],
+    pub chi2: &'a [f64],
+    pub variance_scale: &'a [f64],
+    /// The relative change from zero amplitude to the top level.
+    pub change: &'a [f64],
+    pub dof: usize,
+    /// Per level ([`LevelRow`]).
+    pub levels: Vec<LevelRow>,
+    /// The FRF files in the order of the levels.
+    pub files: Vec<String>,
+}
+
+/// Prints the zero-amplitude table (`heading` names the rule) and returns its JSON section.
+pub(crate) fn zero_amplitude_table(
+    z: &ZeroTable<'_>,
+    truth: Option<&[f64]>,
+    heading: &str,
+) -> serde_json::Value {
+    let top = z.levels.iter().map(|l| l.0).fold(0.0f64, f64::max);
+    println!(
+        "extrapolated to zero amplitude from {} levels ({}; {heading}):",
+        z.levels.len(),
+        z.levels
+            .iter()
+            .map(|l| format!("{}", l.0))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    let mut rows = Vec::with_capacity(z.names.len());
+    for k in 0..z.names.len() {
+        let (lo, hi) = z.intervals[k];
+        println!(
+            "{:>16} {:>14.6e} {:>12.3e} {:>14.6e}..{:<14.6e} {:>14} {} (change at level {top}: {:+.3} %)",
+            z.names[k],
+            z.est[k],
+            z.std[k],
+            lo,
+            hi,
+            truth.map_or(String::new(), |t| format!("{:.6e}", t[k])),
+            z.units[k],
+            100.0 * z.change[k]
+        );
+        rows.push(json!({
+            "name": z.names[k],
+            "unit": z.units[k],
+            "estimate": z.est[k],
+            "std": z.std[k],
+            "interval": [lo, hi],
+            "slope_per_level_squared": z.slope[k],
+            "relative_change_at_top_level": z.change[k],
+            "chi2": z.chi2[k],
+            "variance_scale": z.variance_scale[k],
+            "twin": truth.map(|t| t[k]),
+        }));
+    }
+    json!({
+        "levels": z.levels.iter().map(|(l, e, s, c, d)| json!({
+            "level": l,
+            "estimate": e,
+            "std": s,
+            "chi2": c,
+            "dof": d,
+        })).collect::<Vec<_>>(),
+        "files": z.files,
+        "parameter_order": z.names,
+        "dof": z.dof,
+        "parameters": rows,
+    })
+}
+
 pub fn physical(a: PhysicalArgs) -> Result<()> {
     OutputSet::check(&a.out, a.force)?;
     if !(a.confidence > 0.0 && a.confidence < 1.0) {
@@ -272,63 +353,36 @@ pub fn physical(a: PhysicalArgs) -> Result<()> {
         model.order(),
         100.0 * e_black
     );
-    let mut zero_json = serde_json::Value::Null;
-    if let Some(z) = &zero {
-        let top = levels.iter().map(|(l, _)| *l).fold(0.0f64, f64::max);
-        let change = z.change_at(top);
-        let ze = z.params_array();
-        println!(
-            "extrapolated to zero amplitude from {} levels ({}; the line in level² per parameter, module docs of ambid_core::estimate::graybox::amplitude):",
-            levels.len(),
-            levels
-                .iter()
-                .map(|(l, _)| format!("{l}"))
-                .collect::<Vec<_>>()
-                .join(", ")
-        );
-        let mut zrows = Vec::new();
-        for k in 0..6 {
-            let (lo, hi) = z.intervals[k];
-            println!(
-                "{:>16} {:>14.6e} {:>12.3e} {:>14.6e}..{:<14.6e} {:>14} {} (change at level {top}: {:+.3} %)",
-                PARAMETER_NAMES[k],
-                ze[k],
-                z.std[k],
-                lo,
-                hi,
-                truth.map_or(String::new(), |t| format!("{:.6e}", t[k])),
-                UNITS[k],
-                100.0 * change[k]
-            );
-            zrows.push(json!({
-                "name": PARAMETER_NAMES[k],
-                "unit": UNITS[k],
-                "estimate": ze[k],
-                "std": z.std[k],
-                "interval": [lo, hi],
-                "slope_per_level_squared": z.slope[k],
-                "relative_change_at_top_level": change[k],
-                "chi2": z.chi2[k],
-                "variance_scale": z.variance_scale[k],
-                "twin": truth.map(|t| t[k]),
-            }));
+    let files: Vec<String> = std::iter::once(a.frf.display().to_string())
+        .chain(a.also.iter().map(|(_, f)| f.display().to_string()))
+        .collect();
+    let zero_json = match &zero {
+        None => serde_json::Value::Null,
+        Some(z) => {
+            let top = levels.iter().map(|(l, _)| *l).fold(0.0f64, f64::max);
+            zero_amplitude_table(
+                &ZeroTable {
+                    names: &PARAMETER_NAMES,
+                    units: &UNITS,
+                    est: &z.params_array(),
+                    std: &z.std,
+                    intervals: &z.intervals,
+                    slope: &z.slope,
+                    chi2: &z.chi2,
+                    variance_scale: &z.variance_scale,
+                    change: &z.change_at(top),
+                    dof: z.dof,
+                    levels: levels
+                        .iter()
+                        .map(|(l, f)| (*l, as_array(&f.params).to_vec(), f.std.to_vec(), f.chi2, f.dof))
+                        .collect(),
+                    files,
+                },
+                truth.as_ref().map(|t| t.as_slice()),
+                "the line in level² per parameter, module docs of ambid_core::estimate::graybox::amplitude",
+            )
         }
-        zero_json = json!({
-            "levels": levels.iter().map(|(l, f)| json!({
-                "level": l,
-                "estimate": as_array(&f.params),
-                "std": f.std,
-                "chi2": f.chi2,
-                "dof": f.dof,
-            })).collect::<Vec<_>>(),
-            "files": std::iter::once(a.frf.display().to_string())
-                .chain(a.also.iter().map(|(_, f)| f.display().to_string()))
-                .collect::<Vec<_>>(),
-            "parameter_order": PARAMETER_NAMES,
-            "dof": z.dof,
-            "parameters": zrows,
-        });
-    }
+    };
     let summary = json!({
         "frf": a.frf.display().to_string(),
         "model": model_path.display().to_string(),

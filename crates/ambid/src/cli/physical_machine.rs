@@ -4,7 +4,7 @@
 //! loops open (docs/physical.md, "The whole machine").
 
 use super::common::machine_base;
-use super::physical::{parameter_table, PhysicalArgs};
+use super::physical::{parameter_table, zero_amplitude_table, PhysicalArgs, ZeroTable};
 use ambid::error::Error;
 use ambid::io::model::state_space_json;
 use ambid::io::OutputSet;
@@ -207,68 +207,44 @@ pub fn physical_machine(a: &PhysicalArgs) -> Result<()> {
         fit.model.order(),
         100.0 * e_gray
     );
-    let mut zero_json = serde_json::Value::Null;
-    if let Some(z) = &zero {
-        let top = levels.iter().map(|(l, _)| *l).fold(0.0f64, f64::max);
-        let ze = z.params.to_array();
-        println!(
-            "extrapolated to zero amplitude from {} levels ({}; a line in level² per parameter):",
-            levels.len(),
-            levels
-                .iter()
-                .map(|(l, _)| format!("{l}"))
-                .collect::<Vec<_>>()
-                .join(", ")
-        );
-        let mut zrows = Vec::new();
-        for k in 0..12 {
-            let (lo, hi) = z.intervals[k];
-            // relative change from a = 0 to the top level predicted by the line
-            let change = if k < 10 {
-                (z.slope[k] * top * top).exp() - 1.0
-            } else {
-                z.slope[k] * top * top / ze[k]
-            };
-            println!(
-                "{:>16} {:>14.6e} {:>12.3e} {:>14.6e}..{:<14.6e} {:>14} {} (change at level {top}: {:+.3} %)",
-                MACHINE_PARAMETER_NAMES[k],
-                ze[k],
-                z.std[k],
-                lo,
-                hi,
-                truth.map_or(String::new(), |t| format!("{:.6e}", t[k])),
-                UNITS[k],
-                100.0 * change
-            );
-            zrows.push(json!({
-                "name": MACHINE_PARAMETER_NAMES[k],
-                "unit": UNITS[k],
-                "estimate": ze[k],
-                "std": z.std[k],
-                "interval": [lo, hi],
-                "slope_per_level_squared": z.slope[k],
-                "relative_change_at_top_level": change,
-                "chi2": z.chi2[k],
-                "variance_scale": z.variance_scale[k],
-                "twin": truth.map(|t| t[k]),
-            }));
+    let files: Vec<String> = std::iter::once(a.frf.display().to_string())
+        .chain(a.also.iter().map(|(_, f)| f.display().to_string()))
+        .collect();
+    let zero_json = match &zero {
+        None => serde_json::Value::Null,
+        Some(z) => {
+            let top = levels.iter().map(|(l, _)| *l).fold(0.0f64, f64::max);
+            zero_amplitude_table(
+                &ZeroTable {
+                    names: &MACHINE_PARAMETER_NAMES,
+                    units: &UNITS,
+                    est: &z.params.to_array(),
+                    std: &z.std,
+                    intervals: &z.intervals,
+                    slope: &z.slope,
+                    chi2: &z.chi2,
+                    variance_scale: &z.variance_scale,
+                    change: &z.change_at(top),
+                    dof: z.dof,
+                    levels: levels
+                        .iter()
+                        .map(|(l, f)| {
+                            (
+                                *l,
+                                f.params.to_array().to_vec(),
+                                f.std.to_vec(),
+                                f.chi2,
+                                f.dof,
+                            )
+                        })
+                        .collect(),
+                    files,
+                },
+                truth.as_ref().map(|t| t.as_slice()),
+                "a line in level² per parameter",
+            )
         }
-        zero_json = json!({
-            "levels": levels.iter().map(|(l, f)| json!({
-                "level": l,
-                "estimate": f.params.to_array(),
-                "std": f.std,
-                "chi2": f.chi2,
-                "dof": f.dof,
-            })).collect::<Vec<_>>(),
-            "files": std::iter::once(a.frf.display().to_string())
-                .chain(a.also.iter().map(|(_, f)| f.display().to_string()))
-                .collect::<Vec<_>>(),
-            "parameter_order": MACHINE_PARAMETER_NAMES,
-            "dof": z.dof,
-            "parameters": zrows,
-        });
-    }
+    };
     let summary = json!({
         "frf": a.frf.display().to_string(),
         "axes": MACHINE_AXES,

@@ -52,9 +52,11 @@
 //! $\Phi^{-1} M \Phi^{-\top}$ scales with $K_i$ and $K_x$ undetected, so the values
 //! themselves need $m$, $J$, $a$, $b$ from the drawing.
 
-use super::{central_jacobian, check_drawing, cost, spread, Drawing, PhysicalOptions};
+use super::{
+    central_jacobian, check_drawing, cost, spread, start_and_refine, Drawing, PhysicalOptions,
+};
 use crate::error::{Error, Result};
-use crate::estimate::pem::lm::{minimize, LeastSquaresProblem, LmOptions, StopReason};
+use crate::estimate::pem::lm::{LeastSquaresProblem, StopReason};
 use crate::lti::{Frd, StateSpace};
 use crate::validate::machine::normal_quantile;
 use faer::{c64, Mat};
@@ -582,30 +584,13 @@ pub fn fit_machine_physical(
     } else {
         given
     };
-    let mut best: Option<(f64, Vec<f64>)> = None;
-    for (fb0, zb0) in cands {
-        for pa in [0.7, 1.4, 2.8] {
-            for pb in [0.7, 1.4, 2.8, -0.7, -1.4, -2.8] {
-                let x = start(kappa, fb0, zb0, pa, pb);
-                let c = cost(&mut prob, &x);
-                if c.is_finite() && best.as_ref().is_none_or(|b| c < b.0) {
-                    best = Some((c, x));
-                }
-            }
-        }
-    }
-    let (_, x0) = best.ok_or_else(|| {
-        Error::numerical(
-            "the gray-box start",
-            "no starting point gives a finite gray-box model (check the drawing)",
-        )
-    })?;
-    let lm = LmOptions::default().with_max_iterations(opts.max_iterations)?;
-    let (mut x, report) = minimize(&mut prob, &x0, &lm)?;
-    if x[10] < 0.0 {
-        x[10] = -x[10];
-        x[11] = -x[11];
-    }
+    let (x, report) = start_and_refine(
+        &mut prob,
+        &cands,
+        |fb, zb, pa, pb| start(kappa, fb, zb, pa, pb),
+        10,
+        opts.max_iterations,
+    )?;
     let sqrt_m = prob.sqrt_m;
     let sp = spread(&mut prob, &x, 10, sqrt_m, opts.confidence)?;
     let params = prob.params(&x);
@@ -660,6 +645,22 @@ pub struct MachineZeroAmplitude {
     pub variance_scale: [f64; 12],
     /// The confidence level.
     pub confidence: f64,
+}
+
+impl MachineZeroAmplitude {
+    /// The relative change of each parameter from $a = 0$ to level `a` predicted by the line
+    /// (as [`super::ZeroAmplitude::change_at`]; for the mode shape relative to its value at
+    /// $a = 0$).
+    pub fn change_at(&self, a: f64) -> [f64; 12] {
+        let p = self.params.to_array();
+        std::array::from_fn(|k| {
+            if k < 10 {
+                (self.slope[k] * a * a).exp() - 1.0
+            } else {
+                self.slope[k] * a * a / p[k]
+            }
+        })
+    }
 }
 
 /// The machine's physical parameters at zero excitation amplitude from estimates at two or more
