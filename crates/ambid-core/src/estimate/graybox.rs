@@ -59,15 +59,23 @@
 //! [`fit_machine_physical`] estimates $k_i$, $k_x$ of each of the four axes' magnets (so per
 //! bearing and direction), the bending mode and its shape from the 4×4 plant FRF with all
 //! loops open, at standstill or at speed ([`graybox_machine_plant`]; module `machine`).
+//!
+//! # Operating points
+//! [`fit_magnet_law`] fits $k_i = 4k i_0/g^2$, $k_x = 4k i_0^2/g^3$ to the estimates at
+//! several bias currents and gap offsets (the operating-point study): the magnet constant $k$
+//! and the effective air gap $g_0$ with intervals, a $\chi^2$ test of the law, and $k_i$,
+//! $k_x$ at any operating point (module `magnet`).
 
 mod amplitude;
 mod machine;
+mod magnet;
 pub use amplitude::{extrapolate_to_zero_amplitude, AtLevel, ZeroAmplitude};
 pub use machine::{
     extrapolate_machine_to_zero_amplitude, fit_machine_physical, graybox_machine_plant,
     MachineAtLevel, MachineParams, MachinePhysicalFit, MachineZeroAmplitude, Rotation,
     MACHINE_AXES, MACHINE_PARAMETER_NAMES,
 };
+pub use magnet::{fit_magnet_law, AtOperatingPoint, MagnetLawFit, Predicted};
 
 use crate::error::{Error, Result};
 use crate::estimate::pem::lm::{minimize, LeastSquaresProblem, LmOptions, StopReason};
