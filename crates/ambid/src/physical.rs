@@ -3,6 +3,8 @@
 //! ([`PhysicalRun`]), which the tests and the `physical_rigs` example run. The model, the starts
 //! and the intervals are documented in [`ambid_core::estimate::graybox`].
 
+pub mod operating;
+
 use crate::error::{Context, Error, Result};
 use crate::experiment::ExcitationPlan;
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};

@@ -39,6 +39,7 @@ mod parallel_levels;
 mod pem_rigs;
 mod physical_cli;
 mod physical_machine;
+mod physical_operating;
 mod physical_twin;
 mod real_data_defaults;
 mod reconstruct_twin;

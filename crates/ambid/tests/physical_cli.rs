@@ -5,15 +5,8 @@
 //! within 2 %, the bending frequency within 0.5 % (issue 23's bars); both ways give the same
 //! numbers; a malformed drawing is refused with the keys named and nothing written.
 
-use crate::common::{self, ambid, text};
+use crate::common::{self, ambid, ok, text};
 use serde_json::Value;
-
-fn ok(args: &[&str]) -> String {
-    let o = ambid(args);
-    let t = text(&o);
-    assert!(o.status.success(), "ambid {args:?}: {t}");
-    t
-}
 
 #[test]
 fn physical_on_rig_12_meets_the_bars_with_the_twin_or_a_drawing_file() {

@@ -12,20 +12,13 @@
 //! * bad input: an FRF without standard deviations, a model of another sample rate, and options
 //!   out of range give a clear error and write nothing.
 
-use crate::common::{self, ambid, text};
+use crate::common::{self, ambid, ok, text};
 use crate::export::script_numbers;
 use ambid::uncertainty::{loop_stable, nominal_gain_interval};
 use ambid_core::c64;
 use std::f64::consts::PI;
 
 const RIG: &str = "11";
-
-fn ok(args: &[&str]) -> String {
-    let o = ambid(args);
-    let t = text(&o);
-    assert!(o.status.success(), "ambid {args:?}: {t}");
-    t
-}
 
 fn column(csv: &str, name: &str) -> Vec<f64> {
     let mut lines = csv.lines();

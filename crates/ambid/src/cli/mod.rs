@@ -21,6 +21,7 @@ pub mod init;
 pub mod order;
 pub mod physical;
 pub mod physical_machine;
+pub mod physical_operating;
 pub mod run;
 pub mod simulate;
 pub mod simulate4;

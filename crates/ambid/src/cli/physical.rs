@@ -75,6 +75,17 @@ pub struct PhysicalArgs {
     /// magnet; docs/physical.md). Read on FRF's band.
     #[arg(long, value_parser = parse_level_file)]
     pub(crate) also: Vec<(f64, PathBuf)>,
+    /// The bias current of FRF's operating point, A; needed with --operating.
+    #[arg(long)]
+    pub(crate) bias_current: Option<f64>,
+    /// An FRF of the same axis at another operating point of the operating-point study,
+    /// `BIAS:GAP_UM=FILE`: its bias current in A and its air-gap offset from FRF's gap in µm
+    /// (positive = wider), e.g. `1.6:0=frf_b16.csv` (repeat per operating point). The gray box
+    /// runs at each point and the magnet law k_i = 4k i0/g², k_x = 4k i0²/g³ through all of
+    /// them gives the magnet constant k and the effective air gap with intervals
+    /// (docs/physical.md). Read on FRF's band. Single-axis FRF only; not with --also.
+    #[arg(long, value_parser = super::physical_operating::parse_operating_file)]
+    pub(crate) operating: Vec<super::physical_operating::OperatingFile>,
     /// Output JSON: estimates, standard deviations, intervals, the ratio k_i/k_x, the gray-box
     /// model and its comparison with the black-box model.
     #[arg(long, default_value = "physical.json")]
@@ -245,6 +256,35 @@ pub fn physical(a: PhysicalArgs) -> Result<()> {
     if is_matrix_frf(&a.frf)? {
         return super::physical_machine::physical_machine(&a);
     }
+    if a.bias_current.is_some() || !a.operating.is_empty() {
+        if !a.also.is_empty() {
+            return Err(ambid::error::Error::usage(
+                "--operating and --also are not combined: estimate the operating points at one excitation level (the extrapolation to zero amplitude per operating point is not built)",
+            )
+            .into());
+        }
+        match a.bias_current {
+            None => {
+                return Err(ambid::error::Error::usage(
+                    "--operating needs --bias-current, the bias current of FRF's operating point in A (e.g. --bias-current 2.0)",
+                )
+                .into())
+            }
+            Some(b) if !(b.is_finite() && b > 0.0) => {
+                return Err(ambid::error::Error::usage(format!(
+                    "--bias-current must be positive (A), got {b}"
+                ))
+                .into())
+            }
+            Some(_) if a.operating.is_empty() => {
+                return Err(ambid::error::Error::usage(
+                    "--bias-current is used with --operating BIAS:GAP_UM=FILE (the other operating points); without them there is nothing to fit the magnet law to",
+                )
+                .into())
+            }
+            Some(_) => {}
+        }
+    }
     if a.speed_rpm.is_some() || a.polar_inertia.is_some() {
         return Err(ambid::error::Error::usage(
             "--speed-rpm and --polar-inertia belong to a 4×4 matrix FRF (P_xa_xa_re, …); this file is a single-axis FRF",
@@ -271,13 +311,14 @@ pub fn physical(a: PhysicalArgs) -> Result<()> {
         }
         (l, _) => l,
     };
-    let (drawing, truth) = match &a.drawing {
-        Some(p) => (ambid::physical::read_drawing(p)?, None),
+    let (drawing, truth, magnet_truth) = match &a.drawing {
+        Some(p) => (ambid::physical::read_drawing(p)?, None, None),
         None => {
             let twin = ambid_twin::Twin::new(twin_config(&a.twin)?)?;
             (
                 twin_drawing(twin.config()),
                 Some(as_array(&twin_truth(&twin))),
+                Some(ambid::physical::operating::twin_magnet_truth(&twin)),
             )
         }
     };
@@ -353,6 +394,27 @@ pub fn physical(a: PhysicalArgs) -> Result<()> {
         model.order(),
         100.0 * e_black
     );
+    let operating_json = match a.bias_current {
+        Some(nominal_bias) if !a.operating.is_empty() => {
+            Some(super::physical_operating::operating_section(
+                &super::physical_operating::OperatingInput {
+                    nominal: &fit,
+                    nominal_bias,
+                    files: &a.operating,
+                    band,
+                    quantity: &a.quantity,
+                    fs: a.fs,
+                    drawing: &drawing,
+                    controller: ctrl.state_space(),
+                    controller_ts: 1.0 / ctrl.fs_hz(),
+                    opts: &popts,
+                    truth: magnet_truth,
+                    needs: NEEDS,
+                },
+            )?)
+        }
+        _ => None,
+    };
     let files: Vec<String> = std::iter::once(a.frf.display().to_string())
         .chain(a.also.iter().map(|(_, f)| f.display().to_string()))
         .collect();
@@ -408,6 +470,7 @@ pub fn physical(a: PhysicalArgs) -> Result<()> {
         },
         "graybox_model": state_space_json(&fit.model, "u", "y", json!({"kind": "graybox"})),
         "zero_amplitude": zero_json,
+        "operating_points": operating_json,
     });
     let mut set = OutputSet::new(a.force);
     set.write(&a.out, serde_json::to_string_pretty(&summary)?.as_bytes())?;

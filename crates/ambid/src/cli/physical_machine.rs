@@ -57,6 +57,12 @@ pub fn physical_machine(a: &PhysicalArgs) -> Result<()> {
         }
         (l, _) => l,
     };
+    if a.bias_current.is_some() || !a.operating.is_empty() {
+        return Err(ambid::error::Error::usage(
+            "--bias-current and --operating belong to a single-axis FRF (the operating-point study of one axis); the magnet law from a 4×4 matrix FRF at several operating points is not built",
+        )
+        .into());
+    }
     if a.model.is_some() || a.controller.is_some() {
         return refuse(
             "--model/--controller (the starts come from the data, and all loops are open)",

@@ -25,6 +25,15 @@ pub fn text(o: &Output) -> String {
     )
 }
 
+/// Runs `ambid args`, asserts that it succeeded (the output in the message otherwise) and
+/// returns its output text.
+pub fn ok(args: &[&str]) -> String {
+    let o = ambid(args);
+    let t = text(&o);
+    assert!(o.status.success(), "ambid {args:?}: {t}");
+    t
+}
+
 /// A fresh, empty temporary directory for this test process and `name`, removed with
 /// everything in it when the returned guard is dropped (also when the test panics): the rig
 /// sweeps write hundreds of MB of records, and a test run used to leave about 1.8 GB in the
