@@ -478,6 +478,13 @@ pub struct CaseFile {
     pub name: String,
     /// The record (same columns as `[data]`).
     pub path: PathBuf,
+    /// Its bias current \[A\] (for the `physical` step's magnet law; optional).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bias_current_a: Option<f64>,
+    /// Its air-gap offset from the nominal record's gap \[µm\], positive = wider (for the
+    /// `physical` step's magnet law; optional).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gap_offset_um: Option<f64>,
 }
 
 /// `[frf]`

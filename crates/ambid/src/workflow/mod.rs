@@ -22,6 +22,7 @@ pub mod machine_fit;
 pub mod machine_physical;
 mod machine_render;
 mod outcome;
+mod physical_operating;
 mod render_frf;
 mod render_models;
 mod render_signal;
@@ -857,7 +858,7 @@ fn finish_step(
 }
 
 /// Runs `steps` in order; on the twin the operating-point study runs beside the steps after it
-/// up to the `uncertainty` step, which uses it (it depends only on the identification level,
+/// up to the `uncertainty` or `physical` step, which use it (it depends only on the identification level,
 /// which the amplitude step fixed before). An error comes with the index of its step.
 fn run_steps(
     ctx: &mut Ctx<'_>,
@@ -874,7 +875,7 @@ fn run_steps(
                 // the study, the rest after it
                 let split = tail
                     .iter()
-                    .position(|(_, s)| *s == Step::Uncertainty)
+                    .position(|(_, s)| matches!(s, Step::Uncertainty | Step::Physical))
                     .unwrap_or(tail.len());
                 let (beside, after) = tail.split_at(split);
                 let ((op, op_s), chain) = rayon::join(

@@ -89,6 +89,10 @@ pub struct PhysicalSummary {
     /// plant FRFs (when that step ran and two or more levels could be estimated).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub zero_amplitude: Option<ZeroAmplitudeSummary>,
+    /// The magnet constant and effective air gap from the operating-point study (when that
+    /// step ran and every operating point's bias and gap offset are known).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub operating: Option<super::physical_operating::MagnetLawSummary>,
 }
 
 /// `summary.json`'s `physical.zero_amplitude`.
@@ -547,7 +551,13 @@ pub fn physical(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         }),
     ];
     let (zero_blocks, zero_amplitude) = zero_amplitude(ctx, &frd, &model, &drawing, &ctrl, truth);
-    let blocks = [blocks, zero_blocks].concat();
+    let magnet_truth = ctx
+        .twin
+        .as_ref()
+        .map(|tw| crate::physical::operating::twin_magnet_truth(&tw.twin));
+    let (operating_blocks, operating) =
+        super::physical_operating::operating_blocks(ctx, &model, &drawing, &ctrl, magnet_truth);
+    let blocks = [blocks, zero_blocks, operating_blocks].concat();
     if fit.variance_scale > 2.0 {
         ctx.sections.push(Section {
             id: "physical".into(),
@@ -578,6 +588,7 @@ pub fn physical(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         graybox_median_rel_error: eg,
         blackbox_median_rel_error: eb,
         zero_amplitude,
+        operating,
     });
     Ok(StepStatus::Done)
 }
