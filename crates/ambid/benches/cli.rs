@@ -9,7 +9,8 @@
 //!
 //! On the nominal rig it also times the studies that simulate their own experiments (`study
 //! amplitude`, `study operating-point`, `bla` on the twin) and the whole machine's gray box
-//! (`simulate --axes 4`, the 4×4 `frf`, `physical` on it).
+//! (`simulate --axes 4`, the 4×4 `frf`, `physical` on it), and one axis' gray box alone and with
+//! two more operating points (`physical --bias-current … --operating …`).
 //!
 //! Options by environment: `AMBID_BENCH_RIGS=nominal,3,7` (default `nominal,3`),
 //! `AMBID_BENCH_REPS=5`, `AMBID_BENCH_FILTER=fit` (only commands whose label contains it).
@@ -317,6 +318,42 @@ fn main() {
                 (
                     "physical (4×4 FRF: k_i, k_x of every axis, the bending mode)",
                     owned(&["physical", &o("frf4.csv"), "--out", &o("physical4.json")]),
+                ),
+                // one axis' gray box, alone and with two more operating points (bias −20 %,
+                // gap +10 µm; linear records, period-synchronous FRFs) for the magnet law
+                (
+                    "simulate --mode linear --bias 1.6 (operating point)",
+                    owned(&["simulate", "--mode", "linear", "--bias", "1.6", "--seed", "3", "--out", &o("op_b")]),
+                ),
+                (
+                    "simulate --mode linear --gap 0.00041 (operating point)",
+                    owned(&["simulate", "--mode", "linear", "--gap", "0.00041", "--seed", "4", "--out", &o("op_g")]),
+                ),
+                (
+                    "frf op_b --period-samples 5115 --controller",
+                    owned(&["frf", &s(&dir.join("op_b/data.csv")), "--period-samples", "5115", "--controller", &ctrl, "--out", &o("frf_b.csv")]),
+                ),
+                (
+                    "frf op_g --period-samples 5115 --controller",
+                    owned(&["frf", &s(&dir.join("op_g/data.csv")), "--period-samples", "5115", "--controller", &ctrl, "--out", &o("frf_g.csv")]),
+                ),
+                (
+                    "fit frf.csv --quantity plant --structure ss --order 8 --controller (gray-box starts)",
+                    owned(&["fit", &frf, "--quantity", "plant", "--structure", "ss", "--order", "8", "--controller", &ctrl, "--out", &o("plant_c.json")]),
+                ),
+                (
+                    "physical frf.csv --model --controller (one axis)",
+                    owned(&["physical", &frf, "--model", &o("plant_c.json"), "--controller", &ctrl, "--out", &o("physical1.json")]),
+                ),
+                (
+                    "physical … --bias-current 2 --operating ×2 (magnet law, 3 operating points)",
+                    owned(&[
+                        "physical", &frf, "--model", &o("plant_c.json"), "--controller", &ctrl,
+                        "--bias-current", "2",
+                        "--operating", &format!("1.6:0={}", o("frf_b.csv")),
+                        "--operating", &format!("2:+10={}", o("frf_g.csv")),
+                        "--out", &o("physical_op.json"),
+                    ]),
                 ),
             ]);
         }
