@@ -9,7 +9,8 @@
 //!
 //! On the nominal rig it also times the studies that simulate their own experiments (`study
 //! amplitude`, `study operating-point`, `bla` on the twin) and the whole machine's gray box
-//! (`simulate --axes 4`, the 4×4 `frf`, `physical` on it), and one axis' gray box alone and with
+//! (`simulate --axes 4`, the 4×4 `frf`, `physical` on it, the `[machine]` workflow's 4×4 model
+//! and `uncertainty` of it on that FRF), and one axis' gray box alone and with
 //! two more operating points (`physical --bias-current … --operating …`).
 //!
 //! Options by environment: `AMBID_BENCH_RIGS=nominal,3,7` (default `nominal,3`),
@@ -33,6 +34,23 @@ fn run(args: &[&str]) -> Result<f64, String> {
         return Err(err.lines().take(3).collect::<Vec<_>>().join(" / "));
     }
     Ok(dt)
+}
+
+/// The placeholder for the `[machine]` workflow's model JSON in a command's arguments.
+const MACHINE_MODEL: &str = "@machine-model";
+
+/// The model JSON (not an uncertain model's) in a workflow's `models` directory.
+fn machine_model(dir: &Path) -> Option<String> {
+    std::fs::read_dir(dir)
+        .ok()?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .find(|p| {
+            p.extension().is_some_and(|x| x == "json")
+                && !p
+                    .file_name()
+                    .is_some_and(|n| n.to_string_lossy().contains("uncertain"))
+        })
+        .map(|p| s(&p))
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -319,6 +337,24 @@ fn main() {
                     "physical (4×4 FRF: k_i, k_x of every axis, the bending mode)",
                     owned(&["physical", &o("frf4.csv"), "--out", &o("physical4.json")]),
                 ),
+                // the 4×4 model of the `[machine]` workflow on the nominal twin at the speed of
+                // `simulate --axes 4`, and its uncertainty around the 4×4 FRF above
+                (
+                    "run wf_machine.toml ([machine] models = \"fit\", one speed)",
+                    {
+                        let wf = dir.join("wf_machine.toml");
+                        let speed = ambid_twin::MachineConfig::default().speed_rpm;
+                        let _ = std::fs::write(
+                            &wf,
+                            format!("[machine]\nspeeds_rpm = [{speed}]\nmodels = \"fit\"\n"),
+                        );
+                        owned(&["run", &s(&wf), "-q", "--out", &o("wf_machine")])
+                    },
+                ),
+                (
+                    "uncertainty frf4.csv --model (4×4: element-wise bound, weights, margins)",
+                    owned(&["uncertainty", &o("frf4.csv"), "--model", MACHINE_MODEL, "--out", &o("unc4")]),
+                ),
                 // one axis' gray box, alone and with two more operating points (bias −20 %,
                 // gap +10 µm; linear records, period-synchronous FRFs) for the magnet law
                 (
@@ -358,6 +394,17 @@ fn main() {
             ]);
         }
         for (label, args) in cases {
+            // the machine workflow's model file is named by the chosen order: found when needed
+            let args: Vec<String> = args
+                .into_iter()
+                .map(|a| {
+                    if a == MACHINE_MODEL {
+                        machine_model(&dir.join("wf_machine/models")).unwrap_or(a)
+                    } else {
+                        a
+                    }
+                })
+                .collect();
             // every repetition replaces the previous one's outputs
             let args: Vec<&str> = args
                 .iter()

@@ -269,6 +269,11 @@ fn uncertainty_refuses_bad_input_and_writes_nothing() {
         &d("model.json"),
     );
     assert!(t.contains("`smooth` or `mode`"), "{t}");
+    // the machine's options on a single-axis FRF
+    let t = run(&["--rig-seed", "3"], &d("frf.csv"), &d("model.json"));
+    assert!(t.contains("belong to a 4×4 matrix FRF"), "{t}");
+    let t = run(&["--speed-rpm", "100"], &d("frf.csv"), &d("model.json"));
+    assert!(t.contains("belong to a 4×4 matrix FRF"), "{t}");
 }
 
 /// Term (d) through the command: the same rig recorded at bias −20 % and +20 % (`simulate
@@ -527,5 +532,142 @@ fn uncertainty_takes_the_amplitude_levels_as_term_e() {
         assert!(!o.status.success(), "{t}");
         assert!(t.contains(want), "{extra:?}: {t}");
         assert!(!dir.join("unc_bad/summary.json").exists());
+    }
+}
+
+/// `ambid uncertainty` on a 4×4 matrix FRF: random machine rig 9 (lifted from `random_rig(9)`)
+/// at 9 000 rpm. The nominal model is the one `ambid run` with a `[machine]` section fits on the
+/// twin; the FRF is an independent measurement (`simulate --axes 4`, `frf`). The four
+/// controllers and the exact plant come from the same configuration (`--config`). Against
+/// independent truth, computed here from `ambid_twin::Machine`:
+/// - the exact gain margins printed are the exact loop's;
+/// - the robust margins on the lines and against the weight are conservative: the exact loop is
+///   stable with the gains moved 90 % of the way to each;
+/// - the weight covers σ̄(P − P̂) on ≥ 95 % of the lines in 10–1000 Hz.
+///
+/// The exports hold 16 entries. Single-axis options and a single-axis model are refused, with
+/// nothing written.
+#[test]
+fn uncertainty_on_a_4x4_frf_bounds_a_machine_model() {
+    use ambid_core::validate::robust::{loop_stable, nominal_gain_interval};
+    let dir = common::tmpdir("uncertainty-4x4");
+    let d = |f: &str| dir.join(f).to_str().unwrap().to_string();
+    std::fs::write(
+        dir.join("rig9.toml"),
+        ambid_twin::random_rig(9).unwrap().to_toml_string().unwrap(),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("wf.toml"),
+        "[machine]\nconfig = \"rig9.toml\"\nspeeds_rpm = [9000]\nmodels = \"fit\"\n",
+    )
+    .unwrap();
+    ok(&["run", &d("wf.toml"), "--out", &d("out"), "-q"]);
+    let model = std::fs::read_dir(dir.join("out/models"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| {
+            p.extension().is_some_and(|x| x == "json")
+                && !p
+                    .file_name()
+                    .unwrap()
+                    .to_string_lossy()
+                    .contains("uncertain")
+        })
+        .expect("the workflow's model JSON");
+    let model = model.to_str().unwrap().to_string();
+    ok(&[
+        "simulate",
+        "--axes",
+        "4",
+        "--config",
+        &d("rig9.toml"),
+        "--speed-rpm",
+        "9000",
+        "--seed",
+        "5",
+        "--out",
+        &d("sim4"),
+    ]);
+    let mut frf = vec!["frf".to_string()];
+    frf.extend((1..=4).map(|e| d(&format!("sim4/exp{e}/data.csv"))));
+    frf.extend(["--out".into(), d("frf4.csv")]);
+    ok(&frf.iter().map(String::as_str).collect::<Vec<_>>());
+    let base = [
+        "uncertainty".to_string(),
+        d("frf4.csv"),
+        "--model".into(),
+        model.clone(),
+        "--config".into(),
+        d("rig9.toml"),
+        "--speed-rpm".into(),
+        "9000".into(),
+    ];
+    let run = |extra: &[&str]| {
+        let mut v: Vec<String> = base.to_vec();
+        v.extend(extra.iter().map(|s| s.to_string()));
+        ambid(&v.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    let o = run(&["--out", &d("unc")]);
+    let t = text(&o);
+    println!("{t}");
+    assert!(o.status.success(), "{t}");
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("unc/summary.json")).unwrap())
+            .unwrap();
+    let u = &j["uncertainty"];
+    assert_eq!(j["nominal_loop_stable"], true);
+    // the truth: the configuration's machine at 9 000 rpm
+    let mut mc = ambid_twin::MachineConfig::from_twin(&ambid_twin::random_rig(9).unwrap());
+    mc.speed_rpm = 9000.0;
+    let m = ambid_twin::Machine::new(mc).unwrap();
+    let (lo, hi) = nominal_gain_interval(m.plant(), m.controller()).unwrap();
+    let f = |v: &serde_json::Value| v.as_f64().unwrap();
+    assert!((f(&u["exact_gain_margins"][0]) / lo - 1.0).abs() < 1e-9);
+    assert!((f(&u["exact_gain_margins"][1]) / hi - 1.0).abs() < 1e-9);
+    for key in ["gain_margins", "weight_gain_margins"] {
+        let (glo, ghi) = (f(&u[key][0]), f(&u[key][1]));
+        assert!(
+            glo >= lo && ghi <= hi,
+            "{key}: {glo}…{ghi} against the exact {lo}…{hi}"
+        );
+        for g in [1.0 + 0.9 * (ghi - 1.0), 1.0 - 0.9 * (1.0 - glo)] {
+            assert!(
+                loop_stable(m.plant(), m.controller(), g).unwrap(),
+                "{key}: gain {g}"
+            );
+        }
+    }
+    assert!(f(&u["weight_truth_coverage"]) >= 0.95, "{u}");
+    let ex: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("unc/uncertain.json")).unwrap())
+            .unwrap();
+    assert_eq!(ex["kind"], "uncertain_plant_matrix");
+    assert_eq!(ex["entries"].as_array().unwrap().len(), 16);
+    assert_eq!(
+        ex["robust"]["weights"]["upper_gain_margin"].as_f64(),
+        Some(f(&u["weight_gain_margins"][1]))
+    );
+    let csv = std::fs::read_to_string(dir.join("unc/uncertainty.csv")).unwrap();
+    assert_eq!(csv.lines().next().unwrap().split(',').count(), 33);
+    assert_eq!(
+        csv.lines().count() - 1,
+        u["lines"].as_u64().unwrap() as usize
+    );
+    for f in ["uncertain.m", "uncertain.mat", "uncertain.npz"] {
+        assert!(dir.join("unc").join(f).exists(), "{f}");
+    }
+    // refused, nothing written
+    for (extra, says) in [
+        (vec!["--controller", "c.toml"], "--controller"),
+        (vec!["--weight-shape", "mode"], "--weight-shape"),
+    ] {
+        let mut e = extra.clone();
+        let out = d("unc_bad");
+        e.extend(["--out", out.as_str()]);
+        let o = run(&e);
+        let t = text(&o);
+        assert!(!o.status.success() && t.contains(says), "{extra:?}: {t}");
+        assert!(!dir.join("unc_bad").exists());
     }
 }

@@ -27,4 +27,5 @@ pub mod simulate;
 pub mod simulate4;
 pub mod study;
 pub mod uncertainty;
+pub mod uncertainty_machine;
 pub mod validate;

@@ -16,7 +16,7 @@ use serde_json::json;
 use std::path::PathBuf;
 
 /// Whether `path` is a matrix FRF CSV (a quantity `P_<out>_<in>`), the whole-machine path.
-fn is_matrix_frf(path: &std::path::Path) -> Result<bool> {
+pub(crate) fn is_matrix_frf(path: &std::path::Path) -> Result<bool> {
     let file = ambid::io::csv::read_frf_csv(path)
         .with_context(|| format!("cannot read the FRF {}", path.display()))?;
     Ok(file.quantities.iter().any(|q| q.starts_with("P_")))

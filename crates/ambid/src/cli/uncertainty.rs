@@ -20,71 +20,84 @@ use std::path::{Path, PathBuf};
 
 #[derive(Args)]
 pub struct UncertaintyArgs {
-    /// FRF CSV (as written by `ambid frf`) with the measured plant and its standard deviations.
-    frf: PathBuf,
+    /// FRF CSV (as written by `ambid frf`) with the measured plant and its standard deviations
+    /// (a single-axis FRF, or a 4×4 matrix FRF `P_<out>_<in>_re/_im/_std`).
+    pub(crate) frf: PathBuf,
     /// The nominal model JSON (`ambid fit`, `compare-models`, or a workflow's models/<name>.json);
-    /// its input is the plant input u, its output y; unstable poles are kept.
+    /// its input is the plant input u, its output y; unstable poles are kept. With a 4×4 matrix
+    /// FRF a 4×4 model (inputs u_xa, u_xb, u_ya, u_yb), e.g. a `[machine]` workflow's
+    /// models/ssN_<speed>rpm.json.
     #[arg(long)]
-    model: PathBuf,
-    /// Controller file (TOML/JSON) of the loop, for the robust-stability check.
+    pub(crate) model: PathBuf,
+    /// Controller file (TOML/JSON) of the loop, for the robust-stability check. Required for a
+    /// single-axis FRF; with a 4×4 matrix FRF the four controllers come from the machine
+    /// configuration (--config machine.toml, --rig-seed, or the nominal machine).
     #[arg(long)]
-    controller: PathBuf,
+    pub(crate) controller: Option<PathBuf>,
+    /// 4×4 matrix FRF only: the machine configuration (its four controllers, and its exact
+    /// linearised plant, against which the bound's coverage and the margins are printed).
+    #[command(flatten)]
+    pub(crate) twin: super::common::TwinArgs,
+    /// 4×4 matrix FRF only: the rotor speed the FRF was measured at, rpm (default: the
+    /// configuration's).
+    #[arg(long)]
+    pub(crate) speed_rpm: Option<f64>,
     /// Quantity of the FRF file that is the plant.
     #[arg(long, default_value = "plant")]
-    quantity: String,
+    pub(crate) quantity: String,
     /// Sample rate of the data in Hz (default: the `fs_hz` column of the FRF file).
     #[arg(long)]
-    fs: Option<f64>,
+    pub(crate) fs: Option<f64>,
     /// Band `f_min:f_max` in Hz (default: where the file measures the plant reliably, the rule of
     /// `compare-models`; printed).
     #[arg(long, value_parser = parse_band)]
-    band: Option<(f64, f64)>,
+    pub(crate) band: Option<(f64, f64)>,
     /// Probability that the bound covers the error at one line (the terms' quantile).
     #[arg(long, default_value_t = 0.95)]
-    line_coverage: f64,
+    pub(crate) line_coverage: f64,
     /// Highest order of the weight (0–4).
     #[arg(long, default_value_t = MAX_WEIGHT_ORDER)]
-    max_order: usize,
+    pub(crate) max_order: usize,
     /// Fraction of the lines the weight overbounds (1: all; the default leaves out the 2 % that
     /// stand out most, the narrow peaks at the plant's anti-resonances, which are listed).
     #[arg(long, default_value_t = DEFAULT_COVER)]
-    cover: f64,
+    pub(crate) cover: f64,
     /// Fraction of the fitted model's error draws (2 000, seeded) in which the weight must
     /// overbound the error on `--cover` of the lines; the weight's gain is raised until it does.
     #[arg(long, default_value_t = 0.95)]
-    run_coverage: f64,
+    pub(crate) run_coverage: f64,
     /// The weight's family: `smooth` (every factor damped, ζ ≥ 0.2) or `mode` (also a lightly
     /// damped pole pair at the bound's peak and a zero pair at its dip: tighter, but on random
     /// rigs it covers the true error less often; docs/uncertainty.md, "Mode-shaped weights").
     #[arg(long, default_value = "smooth", value_parser = parse_shape)]
-    weight_shape: WeightShape,
+    pub(crate) weight_shape: WeightShape,
     /// Term (d): the plant FRF CSV of the same experiment at another operating point (bias
     /// current, air gap; `ambid frf` of a record with the same excitation, so the same lines).
     /// Repeat it for each; the bound then holds the largest noise-corrected distance of them from
     /// the nominal FRF (docs/uncertainty.md).
     #[arg(long = "operating", value_name = "FRF")]
-    operating: Vec<PathBuf>,
+    pub(crate) operating: Vec<PathBuf>,
     /// Term (e): the plant FRF CSV of the same experiment at another excitation level, as
     /// `LEVEL=FRF` (LEVEL in the unit of `--level`, e.g. % of i_sat). Repeat it for each level;
     /// with the nominal FRF at `--level`, the bound then holds the shift of the best linear
     /// approximation at `--level` from its extrapolation to zero amplitude (docs/uncertainty.md).
     #[arg(long = "amplitude", value_name = "LEVEL=FRF", value_parser = parse_level_frf)]
-    amplitude: Vec<(f64, PathBuf)>,
+    pub(crate) amplitude: Vec<(f64, PathBuf)>,
     /// The excitation level of the nominal FRF (needed with `--amplitude`, in its unit).
     #[arg(long)]
-    level: Option<f64>,
+    pub(crate) level: Option<f64>,
     /// Term (c): the per-line CSV of a robust BLA measurement (`ambid bla --level`, columns
     /// `f_hz`, `bla_re`, `bla_im`, `nl_std`); its relative nonlinear standard deviation is
     /// carried to the FRF's lines (docs/uncertainty.md).
     #[arg(long, value_name = "BLA")]
-    nonlinear: Option<PathBuf>,
+    pub(crate) nonlinear: Option<PathBuf>,
     /// Output directory: uncertainty.csv, robust.csv, summary.json and the uncertain model
     /// (uncertain.m, uncertain.mat, uncertain.npz, uncertain.json).
     #[arg(long, default_value = "uncertainty")]
-    out: PathBuf,
+    pub(crate) out: PathBuf,
     /// Replace those files if they exist (other files in the directory are left alone).
     #[arg(long)]
-    force: bool,
+    pub(crate) force: bool,
 }
 
 /// The files `uncertainty` writes into `--out`.
@@ -113,6 +126,9 @@ fn path_in(dir: &Path, f: &str) -> PathBuf {
 }
 
 pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
+    if super::physical::is_matrix_frf(&a.frf)? {
+        return super::uncertainty_machine::uncertainty_machine(&a);
+    }
     for f in FILES {
         OutputSet::check(&path_in(&a.out, f), a.force)?;
     }
@@ -144,6 +160,22 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         ))
         .into());
     }
+    let twin_given = a.twin.config.is_some()
+        || a.twin.rig.rig_seed.is_some()
+        || a.twin.bias.is_some()
+        || a.twin.gap.is_some();
+    if twin_given || a.speed_rpm.is_some() {
+        return Err(ambid::error::Error::usage(
+            "--config, --rig-seed, --bias, --gap and --speed-rpm belong to a 4×4 matrix FRF (P_xa_xa_re, …); this file is a single-axis FRF: give the loop's --controller",
+        )
+        .into());
+    }
+    let Some(controller_path) = &a.controller else {
+        return Err(ambid::error::Error::usage(
+            "a single-axis FRF needs --controller, the loop's controller file (TOML/JSON) for the robust-stability check",
+        )
+        .into());
+    };
     let ModelOnFrf {
         frd,
         band,
@@ -155,7 +187,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         a.fs,
         a.band,
         &a.model,
-        &a.controller,
+        controller_path,
         "the uncertainty needs the FRF's standard deviations (an FRF of `ambid frf` from several periods or realisations)",
     )?;
     // term (d) from the other operating points' FRFs, on the nominal FRF's lines
@@ -317,7 +349,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
     let summary = json!({
         "frf": a.frf.display().to_string(),
         "model": a.model.display().to_string(),
-        "controller": a.controller.display().to_string(),
+        "controller": controller_path.display().to_string(),
         "band_hz": [band.0, band.1],
         "band_from_file": a.band.is_none(),
         "lines": t.f_hz.len(),
