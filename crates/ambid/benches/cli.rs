@@ -337,6 +337,36 @@ fn main() {
                     "physical (4×4 FRF: k_i, k_x of every axis, the bending mode)",
                     owned(&["physical", &o("frf4.csv"), "--out", &o("physical4.json")]),
                 ),
+                // the whole machine at two more operating points, and each axis' magnet law
+                (
+                    "simulate --axes 4 --bias 1.6 (operating point)",
+                    owned(&["simulate", "--axes", "4", "--bias", "1.6", "--seed", "3", "--out", &o("sim4_b")]),
+                ),
+                (
+                    "simulate --axes 4 --gap 0.00041 (operating point)",
+                    owned(&["simulate", "--axes", "4", "--gap", "0.00041", "--seed", "4", "--out", &o("sim4_g")]),
+                ),
+                ("frf (4×4, bias 1.6 A)", {
+                    let mut v = vec!["frf".to_string()];
+                    v.extend((1..=4).map(|e| s(&dir.join(format!("sim4_b/exp{e}/data.csv")))));
+                    v.extend(["--out".to_string(), o("frf4_b.csv")]);
+                    v
+                }),
+                ("frf (4×4, gap 0.41 mm)", {
+                    let mut v = vec!["frf".to_string()];
+                    v.extend((1..=4).map(|e| s(&dir.join(format!("sim4_g/exp{e}/data.csv")))));
+                    v.extend(["--out".to_string(), o("frf4_g.csv")]);
+                    v
+                }),
+                (
+                    "physical frf4.csv --bias-current 2 --operating ×2 (each axis' magnet law)",
+                    owned(&[
+                        "physical", &o("frf4.csv"), "--bias-current", "2",
+                        "--operating", &format!("1.6:0={}", o("frf4_b.csv")),
+                        "--operating", &format!("2:+10={}", o("frf4_g.csv")),
+                        "--out", &o("physical4_op.json"),
+                    ]),
+                ),
                 // the 4×4 model of the `[machine]` workflow on the nominal twin at the speed of
                 // `simulate --axes 4`, and its uncertainty around the 4×4 FRF above
                 (

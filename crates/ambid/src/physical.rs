@@ -259,6 +259,26 @@ pub fn machine_truth(machine: &Machine) -> MachineParams {
     }
 }
 
+/// The `[machine]` experiment `section` on the machine `cfg` with seed `seed` (its one speed),
+/// and the plant FRF on the band of the physical runs ([`TWIN_BAND_HZ`]).
+///
+/// # Errors
+/// The experiment's errors; an experiment that gave no speed.
+pub fn twin_machine_frf(
+    cfg: MachineConfig,
+    section: &crate::config::MachineSection,
+    seed: u64,
+) -> Result<Frd> {
+    let data = crate::workflow::machine::acquire_twin_config(cfg, section, seed)?;
+    Ok(data
+        .speeds
+        .first()
+        .ok_or_else(|| Error::other("the experiment gave no speed"))?
+        .frf
+        .plant
+        .band(TWIN_BAND_HZ.0, TWIN_BAND_HZ.1)?)
+}
+
 /// One run of the whole-rotor chain on the 4-axis twin: machine rig `rig` (0 = the nominal
 /// machine, symmetric; $k > 0$ = [`ambid_twin::random_machine_rig`]`(k)`, every axis its own
 /// magnet) at `speed_rpm`, the `[machine]` section's default experiment (orthogonal PRBS design,
@@ -305,15 +325,7 @@ impl MachinePhysicalRun {
             level_pct: 100.0 * level,
             ..Default::default()
         };
-        let data = crate::workflow::machine::acquire_twin_config(cfg.clone(), &section, seed)
-            .context("the 4-axis experiment")?;
-        let frd = data
-            .speeds
-            .first()
-            .ok_or_else(|| Error::other("the experiment gave no speed"))?
-            .frf
-            .plant
-            .band(TWIN_BAND_HZ.0, TWIN_BAND_HZ.1)?;
+        let frd = twin_machine_frf(cfg.clone(), &section, seed).context("the 4-axis experiment")?;
         let (drawing, rotation) = machine_drawing(&cfg);
         let fit = fit_machine_physical(&frd, &drawing, &rotation, &[], &PhysicalOptions::default())
             .context("the gray-box fit of the machine")?;

@@ -266,3 +266,86 @@ fn physical_cli_fits_the_magnet_law_to_operating_points() {
         "positive",
     );
 }
+
+/// The whole machine at three operating points: machine rig 23 (lifted `random_rig(23)`) at
+/// 6 000 rpm on the linear twin, every axis' magnet its own (k_i and k_x scaled alike per axis,
+/// so each magnet keeps the nominal gap and its own constant), `simulate --axes 4` at nominal,
+/// bias −20 % and gap +10 µm (own seeds), the 4×4 FRFs, and `physical frf4.csv --bias-current …
+/// --operating …`. Each axis' magnet constant and gap within 0.5 % of the machine's
+/// linearisation (`Machine::axis_magnets`, computed here), and the four constants in the
+/// order of the configured asymmetry.
+#[test]
+fn physical_on_4x4_frfs_fits_each_axis_magnet_law() {
+    let dir = common::tmpdir("physical-operating-4x4");
+    let d = |f: &str| dir.join(f).to_str().unwrap().to_string();
+    let mut mc = ambid_twin::MachineConfig::from_twin(&ambid_twin::random_rig(23).unwrap());
+    mc.speed_rpm = 6000.0;
+    mc.asymmetry = ambid_twin::AsymmetryConfig {
+        ki_rel: 0.06,
+        kx_rel: 0.06,
+        ki_rel_b: -0.05,
+        kx_rel_b: -0.05,
+    };
+    std::fs::write(dir.join("m.toml"), mc.to_toml_string().unwrap()).unwrap();
+    let (i0, g0) = (
+        mc.operating_point.bias_current_a,
+        mc.operating_point.air_gap_m,
+    );
+    let (bias, gap) = (format!("{}", 0.8 * i0), format!("{}", g0 + 10e-6));
+    let config = d("m.toml");
+    for (name, extra, seed) in [
+        ("nominal", vec![], "1"),
+        ("bias", vec!["--bias", bias.as_str()], "2"),
+        ("gap", vec!["--gap", gap.as_str()], "3"),
+    ] {
+        let sim = d(&format!("sim_{name}"));
+        let mut s = vec![
+            "simulate", "--axes", "4", "--config", &config, "--mode", "linear", "--seed", seed,
+        ];
+        s.extend_from_slice(&extra);
+        s.extend_from_slice(&["--out", &sim]);
+        ok(&s);
+        let mut f = vec!["frf".to_string()];
+        f.extend((1..=4).map(|e| format!("{sim}/exp{e}/data.csv")));
+        f.extend(["--out".into(), d(&format!("frf_{name}.csv"))]);
+        ok(&f.iter().map(String::as_str).collect::<Vec<_>>());
+    }
+    let t = ok(&[
+        "physical",
+        &d("frf_nominal.csv"),
+        "--config",
+        &config,
+        "--bias-current",
+        &format!("{i0}"),
+        "--operating",
+        &format!("{bias}:0={}", d("frf_bias.csv")),
+        "--operating",
+        &format!("{i0}:+10={}", d("frf_gap.csv")),
+        "--out",
+        &d("p4.json"),
+    ]);
+    println!("{t}");
+    let j: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("p4.json")).unwrap()).unwrap();
+    let axes = j["operating_points"]["axes"].as_array().unwrap();
+    assert_eq!(axes.len(), 4);
+    // the truth: each axis' linearised magnet at the nominal bias
+    let m = ambid_twin::Machine::new(mc.clone()).unwrap();
+    let (ki, kx) = m.axis_magnets();
+    let mut k = [0.0; 4];
+    for (a, ax) in axes.iter().enumerate() {
+        let g_true = i0 * ki[a] / kx[a];
+        let k_true = ki[a] * g_true * g_true / (4.0 * i0);
+        assert!((g_true / g0 - 1.0).abs() < 1e-9, "the twin keeps each gap");
+        let p = ax["parameters"].as_array().unwrap();
+        for (row, truth) in p.iter().zip([k_true, g_true]) {
+            let e = row["estimate"].as_f64().unwrap();
+            assert!((row["twin"].as_f64().unwrap() / truth - 1.0).abs() < 1e-9);
+            assert!((e / truth - 1.0).abs() < 5e-3, "{}: {row}", ax["axis"]);
+        }
+        k[a] = p[0]["estimate"].as_f64().unwrap();
+        assert_eq!(ax["dof"].as_u64().unwrap(), 4);
+    }
+    // the y plane 6 % up, bearing B 5 % down (both planes): at each plane B below A
+    assert!(k[1] < k[0] && k[3] < k[2], "{k:?}");
+}

@@ -83,7 +83,8 @@ pub struct PhysicalArgs {
     /// (positive = wider), e.g. `1.6:0=frf_b16.csv` (repeat per operating point). The gray box
     /// runs at each point and the magnet law k_i = 4k i0/g², k_x = 4k i0²/g³ through all of
     /// them gives the magnet constant k and the effective air gap with intervals
-    /// (docs/physical.md). Read on FRF's band. Single-axis FRF only; not with --also.
+    /// (docs/physical.md). Read on FRF's band. With a 4×4 matrix FRF the other files are 4×4
+    /// too, and each axis gets its own law. Not with --also.
     #[arg(long, value_parser = super::physical_operating::parse_operating_file)]
     pub(crate) operating: Vec<super::physical_operating::OperatingFile>,
     /// Output JSON: estimates, standard deviations, intervals, the ratio k_i/k_x, the gray-box
@@ -256,35 +257,7 @@ pub fn physical(a: PhysicalArgs) -> Result<()> {
     if is_matrix_frf(&a.frf)? {
         return super::physical_machine::physical_machine(&a);
     }
-    if a.bias_current.is_some() || !a.operating.is_empty() {
-        if !a.also.is_empty() {
-            return Err(ambid::error::Error::usage(
-                "--operating and --also are not combined: estimate the operating points at one excitation level (the extrapolation to zero amplitude per operating point is not built)",
-            )
-            .into());
-        }
-        match a.bias_current {
-            None => {
-                return Err(ambid::error::Error::usage(
-                    "--operating needs --bias-current, the bias current of FRF's operating point in A (e.g. --bias-current 2.0)",
-                )
-                .into())
-            }
-            Some(b) if !(b.is_finite() && b > 0.0) => {
-                return Err(ambid::error::Error::usage(format!(
-                    "--bias-current must be positive (A), got {b}"
-                ))
-                .into())
-            }
-            Some(_) if a.operating.is_empty() => {
-                return Err(ambid::error::Error::usage(
-                    "--bias-current is used with --operating BIAS:GAP_UM=FILE (the other operating points); without them there is nothing to fit the magnet law to",
-                )
-                .into())
-            }
-            Some(_) => {}
-        }
-    }
+    super::physical_operating::check_operating_args(&a)?;
     if a.speed_rpm.is_some() || a.polar_inertia.is_some() {
         return Err(ambid::error::Error::usage(
             "--speed-rpm and --polar-inertia belong to a 4×4 matrix FRF (P_xa_xa_re, …); this file is a single-axis FRF",

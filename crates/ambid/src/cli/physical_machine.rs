@@ -57,12 +57,7 @@ pub fn physical_machine(a: &PhysicalArgs) -> Result<()> {
         }
         (l, _) => l,
     };
-    if a.bias_current.is_some() || !a.operating.is_empty() {
-        return Err(ambid::error::Error::usage(
-            "--bias-current and --operating belong to a single-axis FRF (the operating-point study of one axis); the magnet law from a 4×4 matrix FRF at several operating points is not built",
-        )
-        .into());
-    }
+    super::physical_operating::check_operating_args(a)?;
     if a.model.is_some() || a.controller.is_some() {
         return refuse(
             "--model/--controller (the starts come from the data, and all loops are open)",
@@ -213,6 +208,37 @@ pub fn physical_machine(a: &PhysicalArgs) -> Result<()> {
         fit.model.order(),
         100.0 * e_gray
     );
+    let operating_json = match a.bias_current {
+        Some(nominal_bias) if !a.operating.is_empty() => {
+            let magnet_truth = match &twin_cfg {
+                Some(c) => Some(ambid::physical::operating::machine_magnet_truth(
+                    &Machine::new(MachineConfig {
+                        speed_rpm,
+                        ..c.clone()
+                    })?,
+                )),
+                None => None,
+            };
+            let mut others = Vec::with_capacity(a.operating.len());
+            for (_, _, file) in &a.operating {
+                others.push(
+                    read_machine_frf(file, speed_rpm)?
+                        .frf
+                        .plant
+                        .band(band.0, band.1)?,
+                );
+            }
+            Some(super::physical_operating::machine_operating_section(
+                &fit,
+                nominal_bias,
+                &a.operating,
+                &others,
+                (&drawing, &rotation, &opts),
+                magnet_truth,
+            )?)
+        }
+        _ => None,
+    };
     let files: Vec<String> = std::iter::once(a.frf.display().to_string())
         .chain(a.also.iter().map(|(_, f)| f.display().to_string()))
         .collect();
@@ -271,6 +297,7 @@ pub fn physical_machine(a: &PhysicalArgs) -> Result<()> {
         "graybox_median_rel_error_diagonal": e_gray,
         "graybox_model": state_space_json(&fit.model, "u", "y", json!({"kind": "graybox_machine", "axes": MACHINE_AXES})),
         "zero_amplitude": zero_json,
+        "operating_points": operating_json,
     });
     let mut set = OutputSet::new(a.force);
     set.write(&a.out, serde_json::to_string_pretty(&summary)?.as_bytes())?;

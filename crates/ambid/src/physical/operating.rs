@@ -11,13 +11,15 @@ use crate::error::{Context, Error, Result};
 use crate::experiment::{run_batch, ExcitationPlan, Experiment};
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::estimate::freqfit_ss::{ss_frd, SsFreqOptions};
+use ambid_core::estimate::graybox::{
+    fit_machine_physical, fit_physical, Drawing, Hints, MachinePhysicalFit, Rotation,
+};
 pub use ambid_core::estimate::graybox::{
     fit_magnet_law, AtOperatingPoint, MagnetLawFit, Predicted,
 };
-use ambid_core::estimate::graybox::{fit_physical, Drawing, Hints};
 use ambid_core::lti::{Frd, StateSpace};
 use ambid_core::validate::compare::unstable_poles_from_loop;
-use ambid_twin::{random_rig, Mode, Twin, TwinConfig};
+use ambid_twin::{random_rig, Machine, Mode, Twin, TwinConfig};
 use rayon::prelude::*;
 
 /// One operating point other than the nominal one: its bias current, its gap offset from the
@@ -54,21 +56,8 @@ fn hints_at(nominal: &PhysicalFit, nominal_bias: f64, bias: f64, offset: f64) ->
     }
 }
 
-/// The gray box at each of `others` (starts from `nominal`: the unstable pole scaled through the law, the bending mode at the nominal estimate) and the magnet law
-/// through `nominal` (at bias `nominal_bias`, offset 0) and them, at `opts.confidence`.
-///
-/// # Errors
-/// A usage error for a bias that is not positive and finite or an offset that is not finite
-/// (naming the operating point); the gray box's errors at a point, naming it; those of
-/// [`fit_magnet_law`].
-pub fn estimate_at_operating_points(
-    nominal: &PhysicalFit,
-    nominal_bias: f64,
-    others: &[OperatingFrf<'_>],
-    drawing: &Drawing,
-    controller_b: &StateSpace,
-    opts: &PhysicalOptions,
-) -> Result<OperatingEstimate> {
+/// A usage error unless every bias is positive and finite and every offset finite.
+fn check_set_points(nominal_bias: f64, others: &[OperatingFrf<'_>]) -> Result<()> {
     let ok = |i: f64| i.is_finite() && i > 0.0;
     if !ok(nominal_bias) {
         return Err(Error::usage(format!(
@@ -86,6 +75,25 @@ pub fn estimate_at_operating_points(
             )));
         }
     }
+    Ok(())
+}
+
+/// The gray box at each of `others` (starts from `nominal`: the unstable pole scaled through the law, the bending mode at the nominal estimate) and the magnet law
+/// through `nominal` (at bias `nominal_bias`, offset 0) and them, at `opts.confidence`.
+///
+/// # Errors
+/// A usage error for a bias that is not positive and finite or an offset that is not finite
+/// (naming the operating point); the gray box's errors at a point, naming it; those of
+/// [`fit_magnet_law`].
+pub fn estimate_at_operating_points(
+    nominal: &PhysicalFit,
+    nominal_bias: f64,
+    others: &[OperatingFrf<'_>],
+    drawing: &Drawing,
+    controller_b: &StateSpace,
+    opts: &PhysicalOptions,
+) -> Result<OperatingEstimate> {
+    check_set_points(nominal_bias, others)?;
     let fits: Vec<PhysicalFit> = others
         .par_iter()
         .enumerate()
@@ -110,6 +118,81 @@ pub fn estimate_at_operating_points(
     );
     let law = fit_magnet_law(&points, opts.confidence).context("the magnet law")?;
     Ok(OperatingEstimate { fits, law })
+}
+
+/// The whole-machine gray box at each of `others` (its starts from the data, as for the
+/// nominal one) and one magnet law per axis through `nominal` (at bias `nominal_bias`, offset
+/// 0) and them ([`AtOperatingPoint::from_machine_fit`]): each bearing's magnet constant and
+/// effective gap, in the axis order xa, xb, ya, yb.
+///
+/// # Errors
+/// As [`estimate_at_operating_points`], with the axis named for the law.
+pub fn estimate_machine_at_operating_points(
+    nominal: &MachinePhysicalFit,
+    nominal_bias: f64,
+    others: &[OperatingFrf<'_>],
+    drawing: &Drawing,
+    rotation: &Rotation,
+    opts: &PhysicalOptions,
+) -> Result<MachineOperatingEstimate> {
+    check_set_points(nominal_bias, others)?;
+    let fits: Vec<MachinePhysicalFit> = others
+        .par_iter()
+        .enumerate()
+        .map(|(n, o)| {
+            fit_machine_physical(o.frd, drawing, rotation, &[], opts).with_context(|| {
+                format!(
+                    "the whole-machine gray box at operating point {} (bias {} A, gap offset {} m)",
+                    n + 1,
+                    o.bias_current_a,
+                    o.gap_offset_m
+                )
+            })
+        })
+        .collect::<Result<_>>()?;
+    let mut laws = Vec::with_capacity(4);
+    for (axis, name) in ambid_core::data::AXES.iter().enumerate() {
+        let mut points = vec![AtOperatingPoint::from_machine_fit(
+            nominal_bias,
+            0.0,
+            nominal,
+            axis,
+        )?];
+        for (o, f) in others.iter().zip(&fits) {
+            points.push(AtOperatingPoint::from_machine_fit(
+                o.bias_current_a,
+                o.gap_offset_m,
+                f,
+                axis,
+            )?);
+        }
+        laws.push(
+            fit_magnet_law(&points, opts.confidence)
+                .with_context(|| format!("the magnet law of axis {name}"))?,
+        );
+    }
+    Ok(MachineOperatingEstimate { fits, laws })
+}
+
+/// The whole-machine gray box at every other operating point and each axis' magnet law.
+#[derive(Debug, Clone)]
+pub struct MachineOperatingEstimate {
+    /// The gray-box fit at each other operating point, in the order given.
+    pub fits: Vec<MachinePhysicalFit>,
+    /// The magnet law of each axis, xa, xb, ya, yb.
+    pub laws: Vec<MagnetLawFit>,
+}
+
+/// Each axis' magnet constant and gap of a machine \[N m²/A², m\], from its linearised magnets
+/// ([`Machine::axis_magnets`]) at the configured bias $i_0$: $g = i_0 k_i/k_x$,
+/// $k = k_i g^2/(4 i_0)$.
+pub fn machine_magnet_truth(machine: &Machine) -> [(f64, f64); 4] {
+    let (ki, kx) = machine.axis_magnets();
+    let i0 = machine.config().operating_point.bias_current_a;
+    std::array::from_fn(|a| {
+        let g = i0 * ki[a] / kx[a];
+        (ki[a] * g * g / (4.0 * i0), g)
+    })
 }
 
 /// The twin's magnet constant and nominal air gap \[N m²/A², m\].
@@ -269,6 +352,94 @@ impl OperatingRun {
             law,
             truth_force_constant: k,
             truth_air_gap_m: g0,
+        })
+    }
+}
+
+/// The whole-machine operating-point chain on the 4-axis twin: machine rig `rig`
+/// ([`ambid_twin::random_machine_rig`], 0 = the nominal machine) at `speed_rpm`, with
+/// `same_gap` each magnet's $k_x$ factor set to its $k_i$ factor (so every magnet keeps the
+/// configured gap and differs only in its constant); three cases (nominal, bias −20 %, gap
+/// +10 µm), case $j$ with seed `seed + j`; the `[machine]` default experiment and the 4×4 FRF on
+/// the band of the physical runs for each; the whole-machine gray box at each; one magnet law
+/// per axis; and each axis' true constant and gap ([`machine_magnet_truth`]).
+///
+/// On the twin a magnet whose $k_x$ factor differs from its $k_i$ factor is realised with the
+/// gap $g_0 f_i/f_x$, so a gap change $\Delta$ moves it by $\Delta f_i/f_x$, not by $\Delta$; the
+/// law with the stated offsets then misfits by that ratio (docs/physical.md).
+#[derive(Debug, Clone)]
+pub struct MachineOperatingRun {
+    /// Each case's bias current \[A\] and gap offset \[m\], nominal first.
+    pub cases: Vec<(f64, f64)>,
+    /// The magnet law of each axis (xa, xb, ya, yb).
+    pub laws: Vec<MagnetLawFit>,
+    /// Each axis' true magnet constant and gap.
+    pub truth: [(f64, f64); 4],
+}
+
+impl MachineOperatingRun {
+    /// Runs the chain (type docs) on the linear or nonlinear twin.
+    ///
+    /// # Errors
+    /// Any step's error.
+    pub fn on_twin(
+        rig: u64,
+        seed: u64,
+        speed_rpm: f64,
+        mode: Mode,
+        same_gap: bool,
+    ) -> Result<Self> {
+        let mut base = if rig == 0 {
+            ambid_twin::MachineConfig::default()
+        } else {
+            ambid_twin::random_machine_rig(rig)?
+        };
+        base.speed_rpm = speed_rpm;
+        if same_gap {
+            base.asymmetry.kx_rel = base.asymmetry.ki_rel;
+            base.asymmetry.kx_rel_b = base.asymmetry.ki_rel_b;
+        }
+        let (i0, g0) = (
+            base.operating_point.bias_current_a,
+            base.operating_point.air_gap_m,
+        );
+        let cases = vec![(i0, 0.0), (0.8 * i0, 0.0), (i0, 10e-6)];
+        let section = crate::config::MachineSection {
+            speeds_rpm: Some(vec![speed_rpm]),
+            mode: match mode {
+                Mode::Linear => "linear".into(),
+                Mode::Nonlinear => "nonlinear".into(),
+            },
+            ..Default::default()
+        };
+        let (drawing, rotation) = super::machine_drawing(&base);
+        let opts = PhysicalOptions::default();
+        let fits: Vec<MachinePhysicalFit> = cases
+            .par_iter()
+            .enumerate()
+            .map(|(j, &(bias, offset))| {
+                let mut cfg = base.clone();
+                cfg.operating_point.bias_current_a = bias;
+                cfg.operating_point.air_gap_m = g0 + offset;
+                let frd = super::twin_machine_frf(cfg, &section, seed.wrapping_add(j as u64))
+                    .with_context(|| format!("the 4-axis experiment of operating point {j}"))?;
+                fit_machine_physical(&frd, &drawing, &rotation, &[], &opts)
+                    .with_context(|| format!("the gray box of operating point {j}"))
+            })
+            .collect::<Result<_>>()?;
+        let mut laws = Vec::with_capacity(4);
+        for axis in 0..4 {
+            let points = cases
+                .iter()
+                .zip(&fits)
+                .map(|(&(b, o), f)| AtOperatingPoint::from_machine_fit(b, o, f, axis))
+                .collect::<std::result::Result<Vec<_>, _>>()?;
+            laws.push(fit_magnet_law(&points, opts.confidence).context("the magnet law")?);
+        }
+        Ok(Self {
+            cases,
+            laws,
+            truth: machine_magnet_truth(&Machine::new(base)?),
         })
     }
 }

@@ -42,7 +42,7 @@
 //! (e.g. the bias that gives a wanted stiffness); at the nominal point it pools every operating
 //! point's information.
 
-use super::PhysicalFit;
+use super::{MachinePhysicalFit, PhysicalFit};
 use crate::error::{Error, Result};
 use crate::validate::machine::normal_quantile;
 use crate::validate::residuals::chi2_95;
@@ -74,6 +74,36 @@ impl AtOperatingPoint {
             k_x: fit.params.k_x,
             cov_ln: [c[0], c[1], c[6], c[7]],
         }
+    }
+
+    /// The point of axis `axis` (0–3: xa, xb, ya, yb) from a whole-machine gray-box fit at bias
+    /// `bias_current_a` and gap offset `gap_offset_m`: that axis' $k_i$, $k_x$ and the 2 × 2
+    /// block of the fit's covariance (rows and columns `axis` and `4 + axis`), so that each
+    /// bearing's magnet gets its own law.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for an axis above 3.
+    pub fn from_machine_fit(
+        bias_current_a: f64,
+        gap_offset_m: f64,
+        fit: &MachinePhysicalFit,
+        axis: usize,
+    ) -> Result<Self> {
+        if axis > 3 {
+            return Err(Error::invalid(
+                "axis",
+                format!("must be 0-3 (xa, xb, ya, yb), got {axis}"),
+            ));
+        }
+        let c = &fit.covariance;
+        let (i, x) = (axis, 4 + axis);
+        Ok(Self {
+            bias_current_a,
+            gap_offset_m,
+            k_i: fit.params.k_i[axis],
+            k_x: fit.params.k_x[axis],
+            cov_ln: [c[i * 12 + i], c[i * 12 + x], c[x * 12 + i], c[x * 12 + x]],
+        })
     }
 
     /// The point at zero excitation amplitude from gray-box fits at several excitation levels
