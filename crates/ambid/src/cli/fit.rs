@@ -1189,8 +1189,23 @@ pub fn fit_frf(
         &ambid_core::validate::pz::PzOptions::default(),
     )?;
     print!("{}", pz.table());
+    // a stable resonance the FRF's lines see only by its tail (docs/uncertainty.md, "A
+    // resonance beyond the band is not a nominal model")
+    let lines = input.frd.f_hz();
+    let fitted = input
+        .opts
+        .band_hz
+        .unwrap_or((lines[0], lines[lines.len() - 1]));
+    let beyond = ambid::uncertainty::out_of_band_resonance(model, fitted)?;
+    if let Some((f_n, zeta)) = beyond {
+        eprintln!(
+            "warning: the model has a stable resonance at {f_n:.1} Hz (damping {zeta:.2e}) outside the fitted band {:.1}–{:.1} Hz by more than its half-power bandwidth: the FRF sees only its tail, so neither its frequency nor its damping is identified, and a loop built on the model may show a peak the machine does not have; a lower order (or a band that holds the resonance) avoids it (docs/uncertainty.md)",
+            fitted.0, fitted.1
+        );
+    }
     let meta = json!({
         "method": format!("{}_frd", structure.name()),
+        "out_of_band_resonance": beyond.map(|(f, z)| json!({"f_hz": f, "damping": z})),
         "quantity": quantity,
         "order": order,
         "n_params": row.n_params,
