@@ -137,21 +137,10 @@ impl PhysicalRun {
     /// Any step's error.
     pub fn on_twin_at(rig: u64, seed: u64, mode: Mode, amplitude_frac: f64) -> Result<Self> {
         let (out, frd) = crate::uncertainty::twin_seed_frf_at(rig, seed, mode, amplitude_frac)?;
-        let controller = out.twin.controller().clone();
-        let unstable = unstable_poles_from_loop(&frd, &controller, None).ok();
-        let opts = FreqFitOptions {
-            weights: FreqWeights::InverseVariance,
-            max_unstable_poles: unstable,
-            ..FreqFitOptions::default()
-        };
-        let model = ss_frd(&frd, 8, &opts, &SsFreqOptions::default())
-            .map_err(|e| Error::other(format!("the black-box model: {e}")))?
-            .model;
-        let fit = estimate(
+        let fit = estimate_with_starts_from_data(
             &frd,
-            &model,
             &twin_drawing(out.twin.config()),
-            &controller,
+            out.twin.controller(),
             &PhysicalOptions::default(),
         )?;
         Ok(Self {
@@ -164,6 +153,30 @@ impl PhysicalRun {
     pub fn truth_array(&self) -> [f64; 6] {
         as_array(&self.truth)
     }
+}
+
+/// [`estimate`] with its starts from a black-box model fitted here: the inverse-variance
+/// state-space fit of order 8 to `frd` with the loop's unstable pole count (the Nyquist count
+/// of `frd` with `controller_b`), as the twin checks use it.
+///
+/// # Errors
+/// The black-box fit's errors, and those of [`estimate`].
+pub fn estimate_with_starts_from_data(
+    frd: &Frd,
+    drawing: &Drawing,
+    controller_b: &StateSpace,
+    opts: &PhysicalOptions,
+) -> Result<PhysicalFit> {
+    let unstable = unstable_poles_from_loop(frd, controller_b, None).ok();
+    let ffo = FreqFitOptions {
+        weights: FreqWeights::InverseVariance,
+        max_unstable_poles: unstable,
+        ..FreqFitOptions::default()
+    };
+    let model = ss_frd(frd, 8, &ffo, &SsFreqOptions::default())
+        .map_err(|e| Error::other(format!("the black-box model: {e}")))?
+        .model;
+    estimate(frd, &model, drawing, controller_b, opts)
 }
 
 /// The estimates at several excitation levels as the input of

@@ -6,11 +6,9 @@
 //! whole chain on a rig ([`OperatingRun`]), which the tests and the `physical_operating_rigs`
 //! example run.
 
-use super::{estimate, twin_drawing, twin_truth, PhysicalFit, PhysicalOptions, PhysicalParams};
+use super::{twin_drawing, twin_truth, PhysicalFit, PhysicalOptions, PhysicalParams};
 use crate::error::{Context, Error, Result};
 use crate::experiment::{run_batch, ExcitationPlan, Experiment};
-use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
-use ambid_core::estimate::freqfit_ss::{ss_frd, SsFreqOptions};
 use ambid_core::estimate::graybox::{
     fit_machine_physical, fit_physical, Drawing, Hints, MachinePhysicalFit, Rotation,
 };
@@ -18,7 +16,6 @@ pub use ambid_core::estimate::graybox::{
     fit_magnet_law, AtOperatingPoint, MagnetLawFit, Predicted,
 };
 use ambid_core::lti::{Frd, StateSpace};
-use ambid_core::validate::compare::unstable_poles_from_loop;
 use ambid_twin::{random_rig, Machine, Mode, Twin, TwinConfig};
 use rayon::prelude::*;
 
@@ -294,17 +291,8 @@ impl OperatingRun {
         let twin = &outs[0].twin;
         let controller = twin.controller().clone();
         let drawing = twin_drawing(twin.config());
-        let unstable = unstable_poles_from_loop(&frds[0], &controller, None).ok();
-        let ffo = FreqFitOptions {
-            weights: FreqWeights::InverseVariance,
-            max_unstable_poles: unstable,
-            ..FreqFitOptions::default()
-        };
-        let model = ss_frd(&frds[0], 8, &ffo, &SsFreqOptions::default())
-            .map_err(|e| Error::other(format!("the black-box model: {e}")))?
-            .model;
         let opts = PhysicalOptions::default();
-        let first = estimate(&frds[0], &model, &drawing, &controller, &opts)?;
+        let first = super::estimate_with_starts_from_data(&frds[0], &drawing, &controller, &opts)?;
         let bias0 = cases[0].0;
         let rest: Vec<PhysicalFit> = (1..nc * nl)
             .into_par_iter()
@@ -414,28 +402,33 @@ impl MachineOperatingRun {
         };
         let (drawing, rotation) = super::machine_drawing(&base);
         let opts = PhysicalOptions::default();
-        let fits: Vec<MachinePhysicalFit> = cases
+        // each case's experiment (in parallel), then the gray boxes and the laws as the CLI
+        let frds: Vec<Frd> = cases
             .par_iter()
             .enumerate()
             .map(|(j, &(bias, offset))| {
                 let mut cfg = base.clone();
                 cfg.operating_point.bias_current_a = bias;
                 cfg.operating_point.air_gap_m = g0 + offset;
-                let frd = super::twin_machine_frf(cfg, &section, seed.wrapping_add(j as u64))
-                    .with_context(|| format!("the 4-axis experiment of operating point {j}"))?;
-                fit_machine_physical(&frd, &drawing, &rotation, &[], &opts)
-                    .with_context(|| format!("the gray box of operating point {j}"))
+                super::twin_machine_frf(cfg, &section, seed.wrapping_add(j as u64))
+                    .with_context(|| format!("the 4-axis experiment of operating point {j}"))
             })
             .collect::<Result<_>>()?;
-        let mut laws = Vec::with_capacity(4);
-        for axis in 0..4 {
-            let points = cases
-                .iter()
-                .zip(&fits)
-                .map(|(&(b, o), f)| AtOperatingPoint::from_machine_fit(b, o, f, axis))
-                .collect::<std::result::Result<Vec<_>, _>>()?;
-            laws.push(fit_magnet_law(&points, opts.confidence).context("the magnet law")?);
-        }
+        let nominal = fit_machine_physical(&frds[0], &drawing, &rotation, &[], &opts)
+            .context("the gray box of the nominal operating point")?;
+        let others: Vec<OperatingFrf<'_>> = cases[1..]
+            .iter()
+            .zip(&frds[1..])
+            .map(|(&(bias_current_a, gap_offset_m), frd)| OperatingFrf {
+                bias_current_a,
+                gap_offset_m,
+                frd,
+            })
+            .collect();
+        let laws = estimate_machine_at_operating_points(
+            &nominal, cases[0].0, &others, &drawing, &rotation, &opts,
+        )?
+        .laws;
         Ok(Self {
             cases,
             laws,
