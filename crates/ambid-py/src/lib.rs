@@ -283,12 +283,20 @@ fn frf<'py>(
         }
         (Some(p), None) => FrfSettings::periodic(p, skip_periods),
         (None, Some(n)) => FrfSettings::welch(n),
-        (None, None) => FrfSettings::welch(FrfSettings::default_nperseg(r.len())),
+        // the period of `r` when it repeats (as `ambid frf` finds it), else Welch
+        (None, None) => {
+            FrfSettings::found_period(r.len(), ambid_core::signal::PeriodScan::of(r), skip_periods)
+                .unwrap_or_else(|| FrfSettings::welch(FrfSettings::default_nperseg(r.len())))
+        }
     };
     settings.band = band_of("band", band)?;
     settings.quality_band = band_of("quality_band", quality_band)?;
     settings.i_sat = i_sat.map(|v| finite_positive("i_sat", v)).transpose()?;
     settings.screen = screen;
+    let used_period = match settings.method {
+        ambid::analysis::FrfMethod::Periodic { period_samples, .. } => Some(period_samples),
+        ambid::analysis::FrfMethod::Welch { .. } => None,
+    };
     let out = py
         .detach(|| {
             let rec = Record {
@@ -331,6 +339,7 @@ fn frf<'py>(
     d.set_item("quality", q)?;
     d.set_item("band_hz", out.bands.band)?;
     d.set_item("quality_band_hz", out.bands.quality_band)?;
+    d.set_item("period_samples", used_period)?;
     d.set_item("warnings", out.warnings.clone())?;
     Ok(d)
 }

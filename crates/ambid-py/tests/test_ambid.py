@@ -67,6 +67,23 @@ def test_frf_equals_the_cli_and_is_near_the_exact_plant(cli, seed_experiment):
     assert rel(t["s"], 1.0 / (1.0 + t["plant"] * t["controller"])) < 1e-9
 
 
+def test_frf_finds_the_period_as_the_cli_does(cli, seed_experiment):
+    # no period given: the period of r is found (5115), as `ambid frf` without options finds it
+    d, data = seed_experiment
+    cli("frf", d / "sim" / "data.csv", "--out", d / "frf_found.csv")
+    ref = read_csv(d / "frf_found.csv")
+    col = lambda k: np.ascontiguousarray(data[k])
+    f = ambid.frf(col("r"), col("u"), col("y"), 20000.0)
+    assert f["period_samples"] == 5115
+    np.testing.assert_array_equal(f["f_hz"], ref["f_hz"])
+    assert rel(f["plant"], ref["plant_re"] + 1j * ref["plant_im"]) <= RTOL
+    given = ambid.frf(col("r"), col("u"), col("y"), 20000.0, period_samples=5115)
+    np.testing.assert_array_equal(f["plant"], given["plant"])
+    # a Welch option keeps Welch
+    w = ambid.frf(col("r"), col("u"), col("y"), 20000.0, nperseg=4096)
+    assert w["period_samples"] is None and len(w["f_hz"]) != len(f["f_hz"])
+
+
 def test_arx_on_real_data_equals_the_cli_and_the_reference(cli, real_data, tmp_path):
     path = os.path.join(real_data, "daisy-dryer", "dryer.dat")
     cli("fit", path, "--fs", 12.5, "--input", "col1", "--output", "col2",

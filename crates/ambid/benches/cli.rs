@@ -139,8 +139,19 @@ fn main() {
                 ],
             ),
             (
-                "frf (defaults: Welch)",
+                "frf (defaults: the period found in r)",
                 vec!["frf".into(), data.clone(), "--out".into(), frf_w.clone()],
+            ),
+            (
+                "frf --method welch",
+                vec![
+                    "frf".into(),
+                    data.clone(),
+                    "--method".into(),
+                    "welch".into(),
+                    "--out".into(),
+                    frf_w.clone(),
+                ],
             ),
             (
                 "fit --structure ss --order 8 --input r --output y",

@@ -71,8 +71,10 @@ fn main() {
                 "period averaging (--period-samples 5115)",
                 vec!["--period-samples", &per],
             ),
-            // no option: the default Welch segment (a power of two ≤ N/8, at most 8192)
-            ("Welch (defaults)", vec![]),
+            // no option: the period found in r while the file streams (PeriodScan)
+            ("defaults (the period found in r)", vec![]),
+            // Welch at its default segment (a power of two ≤ N/8, at most 8192)
+            ("Welch (--method welch)", vec!["--method", "welch"]),
         ] {
             let mut args = vec!["frf", d.as_str(), "--out", o.as_str(), "--force"];
             args.extend(extra);

@@ -37,6 +37,21 @@ pub enum FrfMethod {
     },
 }
 
+/// The period-averaging options of `settings`' periodic method (strict unless
+/// [`FrfSettings::incomplete_tail`]).
+pub(crate) fn periodic_options(
+    period: usize,
+    skip: usize,
+    incomplete_tail: bool,
+) -> PeriodicOptions {
+    let o = PeriodicOptions::new(period).skip(skip);
+    if incomplete_tail {
+        o.lenient()
+    } else {
+        o
+    }
+}
+
 /// Settings of one FRF analysis.
 #[derive(Debug, Clone)]
 pub struct FrfSettings {
@@ -61,6 +76,11 @@ pub struct FrfSettings {
     /// Screen `y` and the controller part `u − r` for NaN/Inf, spikes and stuck runs, and repair
     /// isolated bad samples by interpolation (default on).
     pub screen: bool,
+    /// Period averaging: ignore an incomplete last period instead of refusing the record
+    /// (default off: a given period must divide the record). On when the period was found in
+    /// the record ([`ambid_core::signal::PeriodScan`]), whose length need not be a multiple of
+    /// it; the ignored samples are reported in the spectra's `dropped_tail`.
+    pub incomplete_tail: bool,
 }
 
 impl FrfSettings {
@@ -94,6 +114,30 @@ impl FrfSettings {
         (1usize << (usize::BITS - 1 - target.leading_zeros())).min(n)
     }
 
+    /// Period averaging with the period `found` in a record of `n` samples (by
+    /// [`PeriodScan`](ambid_core::signal::PeriodScan) on its `r`), skipping `skip_periods`, the
+    /// incomplete last period ignored ([`Self::incomplete_tail`]); `None` when nothing was found
+    /// or fewer than two whole periods remain after the skipped ones (the fewest that give a
+    /// variance). The default estimator of `ambid frf`, the workflow on files and `ambid.frf`
+    /// when no period and no Welch option is given; Welch otherwise (docs/frf.md, "Which
+    /// estimator").
+    ///
+    /// # Example
+    /// ```
+    /// use ambid::analysis::{FrfMethod, FrfSettings};
+    /// let s = FrfSettings::found_period(20 * 5115 + 7, Some(5115), 1).unwrap();
+    /// assert!(s.incomplete_tail);
+    /// assert!(matches!(s.method, FrfMethod::Periodic { period_samples: 5115, skip_periods: 1 }));
+    /// assert!(FrfSettings::found_period(2 * 5115, Some(5115), 1).is_none()); // one period left
+    /// assert!(FrfSettings::found_period(1000, None, 1).is_none());
+    /// ```
+    pub fn found_period(n: usize, found: Option<usize>, skip_periods: usize) -> Option<Self> {
+        let p = found.filter(|&p| p > 0 && n / p >= skip_periods + 2)?;
+        let mut s = Self::periodic(p, skip_periods);
+        s.incomplete_tail = true;
+        Some(s)
+    }
+
     /// Welch with a Hann window of `nperseg` samples and 50 % overlap.
     pub fn welch(nperseg: usize) -> Self {
         Self::with_method(FrfMethod::Welch {
@@ -114,6 +158,7 @@ impl FrfSettings {
             controller: None,
             i_sat: None,
             screen: true,
+            incomplete_tail: false,
         }
     }
 }
@@ -379,7 +424,7 @@ pub fn analyze(
                 .analyze(
                     &[rec.r, &u, &y],
                     rec.fs,
-                    &PeriodicOptions::new(*period_samples).skip(*skip_periods),
+                    &periodic_options(*period_samples, *skip_periods, settings.incomplete_tail),
                 )
                 .context("period-synchronous averaging")?;
             Spectra::Periodic(s)

@@ -3,8 +3,8 @@
 //! sums, whatever the record's length.
 //!
 //! Three passes over the file ([`RowStream`], the CLI's table dialect):
-//! 1. the length, the time column's first and last values and the extremes of `u` and `i` (for
-//!    the saturation rails);
+//! 1. the length, the time column's first and last values, the extremes of `u` and `i` (for
+//!    the saturation rails) and the period of `r` ([`PeriodScan`]: one block's memory);
 //! 2. the uniform sampling of `t`, the saturation runs of `u` and `i` and, for period averaging,
 //!    which channels are exactly periodic;
 //! 3. the screening of `y` and `u − r` and the accumulation of the spectra
@@ -25,8 +25,9 @@ use crate::analysis::{analyze_spectra, Checks, FrfAnalysis, FrfMethod, FrfSettin
 use crate::error::{Context, Error, Result};
 use crate::io::stream::RowStream;
 use ambid_core::data::{AbnormalReport, LimitSource, SaturationOptions, SaturationReport};
-use ambid_core::frf::periodic::{PeriodicAccumulator, PeriodicOptions};
+use ambid_core::frf::periodic::PeriodicAccumulator;
 use ambid_core::frf::welch::WelchAccumulator;
+use ambid_core::signal::PeriodScan;
 use std::path::Path;
 
 /// Rows per block (screening block and read block): 2¹⁹ samples.
@@ -172,8 +173,10 @@ fn merge(a: &mut AbnormalReport, b: AbnormalReport, off: usize) {
     a.repaired += b.repaired;
 }
 
-/// The FRF analysis of the text record at `path`, streamed; `settings(n, ts)` gives the
-/// settings for a record of `n` samples at sample time `ts` (only Welch and period averaging).
+/// The FRF analysis of the text record at `path`, streamed; `settings(n, ts, period)` gives the
+/// settings for a record of `n` samples at sample time `ts` whose excitation `r` repeats every
+/// `period` samples (found in the first pass by [`PeriodScan`], `None` if it does not repeat;
+/// only Welch and period averaging).
 /// `fs` is the sampling rate when the file has no `t` column (and must agree with it when it
 /// has one).
 ///
@@ -196,7 +199,10 @@ fn merge(a: &mut AbnormalReport, b: AbnormalReport, off: usize) {
 /// let p = dir.join("data.csv");
 /// write_time_csv(&p, &[("t", &rec.t), ("r", &rec.r), ("u", &rec.u), ("y", &rec.y)]).unwrap();
 /// let cols = StreamColumns { r: "r", u: "u", y: "y", i: None };
-/// let streamed = analyze_csv(&p, &cols, None, |_n, _ts| Ok(FrfSettings::periodic(5115, 1)))
+/// let streamed = analyze_csv(&p, &cols, None, |_n, _ts, period| {
+///     assert_eq!(period, Some(5115)); // the excitation's period, found in the file
+///     Ok(FrfSettings::periodic(5115, 1))
+/// })
 ///     .unwrap();
 /// let d = read_time(&p, &TimeOptions::default()).unwrap();
 /// let whole = Record {
@@ -213,7 +219,7 @@ pub fn analyze_csv(
     path: &Path,
     cols: &StreamColumns<'_>,
     fs: Option<f64>,
-    settings: impl FnOnce(usize, f64) -> Result<FrfSettings>,
+    settings: impl FnOnce(usize, f64, Option<usize>) -> Result<FrfSettings>,
 ) -> Result<FrfAnalysis> {
     let open = || RowStream::open(path);
     let st0 = open()?;
@@ -243,6 +249,7 @@ pub fn analyze_csv(
     // pass 1: length, time span, extremes of u and i, finiteness
     let mut st = st0;
     let mut n = 0usize;
+    let mut scan = PeriodScan::new();
     let (mut t0, mut t1) = (f64::NAN, f64::NAN);
     let mut ext = [(f64::NEG_INFINITY, f64::INFINITY); 2];
     loop {
@@ -278,6 +285,7 @@ pub fn analyze_csv(
                 )));
             }
         }
+        scan.push(&out[0]);
         for (e, c) in ext.iter_mut().zip([Some(1), ii]) {
             if let Some(c) = c {
                 for &v in &out[c] {
@@ -320,7 +328,7 @@ pub fn analyze_csv(
         }
     };
     crate::analysis::check_fs_matches(fs, ts)?;
-    let settings = settings(n, ts)?;
+    let settings = settings(n, ts, scan.finish())?;
     let rate = 1.0 / ts;
 
     // exactly periodic channels (period averaging): found in pass 2 from the raw samples
@@ -421,7 +429,11 @@ pub fn analyze_csv(
                 .iter()
                 .map(|d| d.is_none_or(|p| p >= total.saturating_sub(*skip_periods)))
                 .collect();
-            let opts = PeriodicOptions::new(*period_samples).skip(*skip_periods);
+            let opts = crate::analysis::periodic_options(
+                *period_samples,
+                *skip_periods,
+                settings.incomplete_tail,
+            );
             Acc::Periodic(Box::new(
                 PeriodicAccumulator::new(3, &opts, exact)
                     .context("period-synchronous averaging")?,

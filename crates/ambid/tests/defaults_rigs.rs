@@ -53,7 +53,7 @@ fn the_file_workflow_gives_every_random_rig_its_true_iso_zone_in_a_band_from_the
     let zones = IsoZones::default();
     let base = tmpdir("rigs");
     let mut worst_dev: f64 = 0.0;
-    let mut welch_errors = Vec::new();
+    let mut cli_inside: [Vec<f64>; 2] = [Vec::new(), Vec::new()];
     for rig in 1..=20u64 {
         let (id, va) = (base.join(format!("r{rig}")), base.join(format!("r{rig}v")));
         // a different noise realisation per rig; the validation record as a user would record it
@@ -132,8 +132,21 @@ fn the_file_workflow_gives_every_random_rig_its_true_iso_zone_in_a_band_from_the
             on_lines >= ci_lo - 0.01 * peak && on_lines <= ci_hi + 0.01 * peak,
             "rig {rig}: truth on the lines {on_lines} outside [{ci_lo}, {ci_hi}]"
         );
-        // a user who does not know the period: Welch, same rule on the PSD of r
-        let welch = wf.replace("period_samples = 5115\n", "");
+        // a user who does not know the period: the period is found in r (the same FRF, so the
+        // same verdict to the last digit), and with `[frf] method = "welch"` Welch with the same
+        // band rule on the PSD of r
+        let found = wf.replace("period_samples = 5115\n", "");
+        let out = run(&found, &base);
+        assert!(
+            out.report.to_html().contains("repeats every 5115 samples"),
+            "rig {rig}: no note of the found period"
+        );
+        assert_eq!(
+            num(&out.summary, "iso.measured.peak"),
+            peak,
+            "rig {rig}: the found period's verdict"
+        );
+        let welch = found.replace("[data]", "[frf]\nmethod = \"welch\"\n[data]");
         let out = run(&welch, &base);
         let sm = &out.summary;
         let (lo, hi) = (num(sm, "frf.band_lo_hz"), num(sm, "frf.band_hi_hz"));
@@ -153,69 +166,84 @@ fn the_file_workflow_gives_every_random_rig_its_true_iso_zone_in_a_band_from_the
             lo <= f_true && f_true <= hi && hi < 4000.0,
             "rig {rig} (Welch): {lo}–{hi}"
         );
-        // `ambid frf` with every default (Welch, its default segment, the band from the
-        // excitation): the plant against the rig's truth on the lines it writes
-        let wcsv = base.join(format!("r{rig}-welch.csv"));
-        let o = ambid(&["frf", s(&id.join("data.csv")), "--out", s(&wcsv)]);
-        assert!(o.status.success(), "{}", text(&o));
-        let body = std::fs::read_to_string(&wcsv).unwrap();
-        let mut lines = body.lines();
-        let head: Vec<&str> = lines.next().unwrap().split(',').collect();
-        let col = |n: &str| head.iter().position(|c| *c == n).unwrap();
-        let (cf, cr, ci, cs) = (
-            col("f_hz"),
-            col("plant_re"),
-            col("plant_im"),
-            col("plant_std"),
-        );
-        let rows: Vec<Vec<f64>> = lines
-            .map(|l| {
-                l.split(',')
-                    .map(|x| x.parse().unwrap_or(f64::NAN))
-                    .collect()
-            })
-            .collect();
-        let f: Vec<f64> = rows.iter().map(|r| r[cf]).collect();
-        let truth = twin.plant_frf(&f).unwrap();
-        // the stated uncertainty holds: the truth inside the 95 % circle (radius √5.99 σ of a
-        // circular complex Gaussian) on ≈ 95 % of the lines
-        let inside = rows
-            .iter()
-            .zip(&truth)
-            .filter(|(r, t)| {
-                ((r[cr] - t.re).powi(2) + (r[ci] - t.im).powi(2)).sqrt() <= 5.99f64.sqrt() * r[cs]
-            })
-            .count() as f64
-            / rows.len() as f64;
-        // and the lines known to ±10 % (σ ≤ 5 % of |P|) are accurate
-        let mut rel: Vec<f64> = rows
-            .iter()
-            .zip(&truth)
-            .filter(|(r, t)| r[cs] <= 0.05 * t.norm())
-            .map(|(r, t)| ((r[cr] - t.re).powi(2) + (r[ci] - t.im).powi(2)).sqrt() / t.norm())
-            .collect();
-        rel.sort_by(f64::total_cmp);
-        let med = rel[rel.len() / 2];
-        welch_errors.push(inside);
-        println!(
-            "        frf (CLI defaults, Welch): {} lines {:.1}–{:.0} Hz, truth inside the 95 % interval on {:.1} %; {} lines known to ±10 %: median plant error {:.3} %",
-            rows.len(),
-            f[0],
-            f[f.len() - 1],
-            100.0 * inside,
-            rel.len(),
-            100.0 * med
-        );
-        assert!(inside > 0.85, "rig {rig}: CLI Welch coverage {inside}");
-        assert!(med < 0.03, "rig {rig}: CLI Welch plant error {med}");
+        // `ambid frf` with every default (the period found in r, the band from the excitation)
+        // and with `--method welch` (its default segment): the plant against the rig's truth on
+        // the lines it writes
+        for (k, extra) in [&[][..], &["--method", "welch"][..]]
+            .into_iter()
+            .enumerate()
+        {
+            let what = ["defaults", "Welch"][k];
+            let wcsv = base.join(format!("r{rig}-{k}.csv"));
+            let data = id.join("data.csv");
+            let mut args = vec!["frf", s(&data), "--out", s(&wcsv)];
+            args.extend_from_slice(extra);
+            let o = ambid(&args);
+            assert!(o.status.success(), "{}", text(&o));
+            let body = std::fs::read_to_string(&wcsv).unwrap();
+            let mut lines = body.lines();
+            let head: Vec<&str> = lines.next().unwrap().split(',').collect();
+            let col = |n: &str| head.iter().position(|c| *c == n).unwrap();
+            let (cf, cr, ci, cs) = (
+                col("f_hz"),
+                col("plant_re"),
+                col("plant_im"),
+                col("plant_std"),
+            );
+            let rows: Vec<Vec<f64>> = lines
+                .map(|l| {
+                    l.split(',')
+                        .map(|x| x.parse().unwrap_or(f64::NAN))
+                        .collect()
+                })
+                .collect();
+            let f: Vec<f64> = rows.iter().map(|r| r[cf]).collect();
+            let truth = twin.plant_frf(&f).unwrap();
+            // the stated uncertainty holds: the truth inside the 95 % circle (radius √5.99 σ of
+            // a circular complex Gaussian) on ≈ 95 % of the lines
+            let inside = rows
+                .iter()
+                .zip(&truth)
+                .filter(|(r, t)| {
+                    ((r[cr] - t.re).powi(2) + (r[ci] - t.im).powi(2)).sqrt()
+                        <= 5.99f64.sqrt() * r[cs]
+                })
+                .count() as f64
+                / rows.len() as f64;
+            // and the lines known to ±10 % (σ ≤ 5 % of |P|) are accurate
+            let mut rel: Vec<f64> = rows
+                .iter()
+                .zip(&truth)
+                .filter(|(r, t)| r[cs] <= 0.05 * t.norm())
+                .map(|(r, t)| ((r[cr] - t.re).powi(2) + (r[ci] - t.im).powi(2)).sqrt() / t.norm())
+                .collect();
+            rel.sort_by(f64::total_cmp);
+            let med = rel[rel.len() / 2];
+            cli_inside[k].push(inside);
+            println!(
+                "        frf ({what}): {} lines {:.1}–{:.0} Hz, truth inside the 95 % interval on {:.1} %; {} lines known to ±10 %: median plant error {:.3} %",
+                rows.len(),
+                f[0],
+                f[f.len() - 1],
+                100.0 * inside,
+                rel.len(),
+                100.0 * med
+            );
+            let least = [0.90, 0.85][k];
+            assert!(inside > least, "rig {rig}: CLI {what} coverage {inside}");
+            assert!(med < 0.03, "rig {rig}: CLI {what} plant error {med}");
+        }
     }
     println!("largest |truth − peak| in half-widths: {worst_dev:.2}");
-    welch_errors.sort_by(f64::total_cmp);
-    println!(
-        "CLI Welch: truth inside the 95 % interval on {:.1} % (worst rig) … {:.1} % (median rig) of the lines",
-        100.0 * welch_errors[0],
-        100.0 * welch_errors[welch_errors.len() / 2]
-    );
+    for (k, what) in ["defaults (period found)", "Welch"].iter().enumerate() {
+        let v = &mut cli_inside[k];
+        v.sort_by(f64::total_cmp);
+        println!(
+            "CLI {what}: truth inside the 95 % interval on {:.1} % (worst rig) … {:.1} % (median rig) of the lines",
+            100.0 * v[0],
+            100.0 * v[v.len() / 2]
+        );
+    }
 }
 
 #[test]

@@ -335,3 +335,148 @@ fn frf_by_the_local_polynomial_method_matches_the_twin() {
     assert!(text(&o).contains("denominator degree"), "{}", text(&o));
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// `ambid frf` without options on a periodic record finds the period in `r` and averages
+/// periods (the default since 2026-12-01): on random rig 47 with a PRBS and a multisine, the
+/// found period is the design's (meta.json), the output equals `--period-samples N`'s byte for
+/// byte, and the plant FRF's error against the twin's exact plant (truth.csv) is the noise its
+/// standard deviations state. A noise record keeps Welch; `--method welch` forces it; a
+/// record with fewer than two periods after `--skip-periods` falls back to Welch; conflicting
+/// options are refused with nothing written.
+#[test]
+fn frf_finds_the_period_of_a_periodic_record() {
+    let d = tmpdir("period-found");
+    for signal in ["prbs", "multisine"] {
+        let sim = d.join(signal);
+        let o = ambid(&[
+            "simulate",
+            "--rig-seed",
+            "47",
+            "--mode",
+            "linear",
+            "--signal",
+            signal,
+            "--seed",
+            "3",
+            "--out",
+            s(&sim),
+        ]);
+        assert!(o.status.success(), "{}", text(&o));
+        let meta: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(sim.join("meta.json")).unwrap()).unwrap();
+        let p = meta["period_samples"].as_u64().unwrap();
+        let data = sim.join("data.csv");
+        let auto = d.join(format!("{signal}_auto.csv"));
+        let t = text(&ambid(&["frf", s(&data), "--out", s(&auto)]));
+        assert!(
+            t.contains(&format!("repeats every {p} samples")) && t.contains("period averaging"),
+            "{signal}: {t}"
+        );
+        let given = d.join(format!("{signal}_given.csv"));
+        let ps = p.to_string();
+        let o = ambid(&["frf", s(&data), "--period-samples", &ps, "--out", s(&given)]);
+        assert!(o.status.success(), "{}", text(&o));
+        assert_eq!(
+            std::fs::read(&auto).unwrap(),
+            std::fs::read(&given).unwrap(),
+            "{signal}: the found period's FRF is the given period's"
+        );
+        // against the exact plant on the lines of 10–1000 Hz: mean |G − P|²/σ² near 1
+        let (h, rows) = read_csv(&auto);
+        let c = |n: &str| h.iter().position(|x| x == n).unwrap();
+        let (f, re, im, sd) = (c("f_hz"), c("plant_re"), c("plant_im"), c("plant_std"));
+        let rows: Vec<&Vec<f64>> = rows
+            .iter()
+            .filter(|r| (10.0..=1000.0).contains(&r[f]))
+            .collect();
+        let fl: Vec<f64> = rows.iter().map(|r| r[f]).collect();
+        let twin = ambid_twin::Twin::new(ambid_twin::random_rig(47).unwrap()).unwrap();
+        let truth = twin.plant_frf(&fl).unwrap();
+        let z2: Vec<f64> = rows
+            .iter()
+            .zip(&truth)
+            .map(|(r, t)| ((r[re] - t.re).powi(2) + (r[im] - t.im).powi(2)) / (r[sd] * r[sd]))
+            .collect();
+        let m = crate::common::mean(&z2);
+        println!(
+            "{signal}: period {p}, {} lines, mean |G - P|²/σ² {m:.3}",
+            z2.len()
+        );
+        assert!(z2.len() > 50 && (0.6..1.6).contains(&m), "{signal}: {m}");
+        // --method welch: Welch whatever the record
+        let w = d.join(format!("{signal}_welch.csv"));
+        let t = text(&ambid(&[
+            "frf",
+            s(&data),
+            "--method",
+            "welch",
+            "--out",
+            s(&w),
+        ]));
+        assert!(t.contains("Welch:") && !t.contains("repeats"), "{t}");
+    }
+    let data = d.join("prbs").join("data.csv");
+    // a record cut to 8.5 periods (rows 1–43 478): the found period, the tail ignored
+    let cut = d.join("cut.csv");
+    let t = text(&ambid(&[
+        "frf",
+        s(&data),
+        "--to",
+        "#43478",
+        "--out",
+        s(&cut),
+    ]));
+    assert!(
+        t.contains("repeats every 5115 samples (8 periods") && t.contains("incomplete period"),
+        "{t}"
+    );
+    // 20 periods, 19 dropped: one left, Welch
+    let few = d.join("few.csv");
+    let t = text(&ambid(&[
+        "frf",
+        s(&data),
+        "--skip-periods",
+        "19",
+        "--out",
+        s(&few),
+    ]));
+    assert!(t.contains("fewer than 2") && t.contains("Welch:"), "{t}");
+    // a noise excitation does not repeat: Welch, no period claimed
+    let sim = d.join("noise");
+    let o = ambid(&[
+        "simulate",
+        "--rig-seed",
+        "47",
+        "--mode",
+        "linear",
+        "--signal",
+        "noise",
+        "--out",
+        s(&sim),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let t = text(&ambid(&[
+        "frf",
+        s(&sim.join("data.csv")),
+        "--out",
+        s(&d.join("noise.csv")),
+    ]));
+    assert!(t.contains("Welch:") && !t.contains("repeats"), "{t}");
+    // conflicting options: refused, nothing written
+    for args in [
+        &["--method", "welch", "--period-samples", "5115"][..],
+        &["--period-samples", "5115", "--nperseg", "1024"][..],
+        &["--period-samples", "5115", "--window", "rect"][..],
+    ] {
+        let out = d.join("refused.csv");
+        let mut a = vec!["frf", s(&data), "--out", s(&out)];
+        a.extend_from_slice(args);
+        let o = ambid(&a);
+        let t = text(&o);
+        assert!(
+            !o.status.success() && t.contains("--period-samples"),
+            "{args:?}: {t}"
+        );
+        assert!(!out.exists(), "{args:?}");
+    }
+}

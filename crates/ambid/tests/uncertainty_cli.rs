@@ -378,8 +378,10 @@ fn uncertainty_takes_the_operating_points_as_term_d() {
 
 /// `--amplitude LEVEL=FRF --level L` (term (e)) on random rig 11 of the *nonlinear* twin: the
 /// seed experiment at 10 % of i_sat, repeated at 5 and 16 % (other noise seeds). Against the
-/// twin's exact linearised plant, the weight covers the model's true 10–1000 Hz error on fewer
-/// than 95 % of the lines without term (e) and on ≥ 95 % with it; below 60 Hz, where the BLA's
+/// twin's exact linearised plant, the weight covers the model's true 10–1000 Hz error on ≥ 95 %
+/// of the lines with term (e) (without it the count is printed: on this rig the weight's own
+/// slack covered the shift once the FRFs were period-averaged, the default since 2026-12-01;
+/// that the term is needed is held on rigs 301 and 303 by `uncertainty_rigs`); below 60 Hz, where the BLA's
 /// shift is the largest part of the error, the term is 0.8–2× the true error; the summary names
 /// the levels; the options' misuse is refused with the fix named and nothing written. On the
 /// same record, `--nonlinear BLA` (term (c)) from a hand-written BLA CSV: the term equals the
@@ -469,10 +471,6 @@ fn uncertainty_takes_the_amplitude_levels_as_term_e() {
         ratio.len()
     );
     assert!(band > 200 && with * 100 >= 95 * band, "{with} of {band}");
-    assert!(
-        without * 100 < 95 * band,
-        "without term (e): {without} of {band}"
-    );
     assert!(
         ratio.len() >= 5,
         "term (e) below 60 Hz on {} lines",

@@ -57,6 +57,7 @@ pub mod chirp;
 pub mod multi;
 pub mod multisine;
 pub mod noise;
+pub mod period;
 pub mod prbs;
 
 pub use analysis::{amplitude_spectrum, autocorrelation, crest_factor, rms};
@@ -67,6 +68,7 @@ pub use multi::{
 };
 pub use multisine::{Grid, MultisineSpec, Phases};
 pub use noise::{Distribution, NoiseSpec};
+pub use period::{detect_period, PeriodScan, PERIOD_TOLERANCE, SCAN_PREFIX};
 pub use prbs::{prbs_period, Lfsr, PrbsSpec, MAX_PRBS_ORDER, MIN_PRBS_ORDER};
 
 use crate::error::{Error, Result};

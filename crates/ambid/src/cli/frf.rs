@@ -74,7 +74,8 @@ pub struct FrfArgs {
     /// Controller file (TOML/JSON: pid, tf or ss) for the indirect plant estimate.
     #[arg(long)]
     pub(crate) controller: Option<PathBuf>,
-    /// Samples per excitation period: selects period-synchronous averaging (otherwise Welch);
+    /// Samples per excitation period: selects period-synchronous averaging (default: found in
+    /// the file, the smallest lag at which `r` repeats exactly; Welch when it does not repeat);
     /// with `--method lpm|lrm`, cuts the record to whole periods.
     #[arg(long)]
     pub(crate) period_samples: Option<usize>,
@@ -87,9 +88,9 @@ pub struct FrfArgs {
     /// Welch overlap in samples (default: half a segment).
     #[arg(long)]
     pub(crate) noverlap: Option<usize>,
-    /// Welch window.
-    #[arg(long, value_enum, default_value_t = WindowArg::Hann)]
-    pub(crate) window: WindowArg,
+    /// Welch window (default: Hann).
+    #[arg(long, value_enum)]
+    pub(crate) window: Option<WindowArg>,
     /// Leading samples dropped as transient (Welch).
     #[arg(long, default_value_t = 0)]
     pub(crate) skip_samples: usize,
@@ -114,7 +115,9 @@ pub struct FrfArgs {
     /// Do not screen for NaN/Inf, spikes and stuck samples.
     #[arg(long)]
     pub(crate) no_screen: bool,
-    /// Estimator: `auto` (period averaging with --period-samples, else Welch), `lpm` (the Local
+    /// Estimator: `auto` (period averaging with --period-samples or when `r` repeats itself at
+    /// least twice after --skip-periods, else Welch; any Welch option selects Welch), `welch`
+    /// (Welch averaging in any case), `lpm` (the Local
     /// Polynomial Method on one non-periodic record: T_ry, S and the plant with their
     /// variances, leakage and transients removed; no coherence) or `lrm` (the Local Rational
     /// Method: like `lpm`, better on lightly damped modes narrower than the window).
@@ -141,8 +144,10 @@ pub struct FrfArgs {
 /// FRF estimator choice.
 #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum MethodArg {
-    /// Period averaging (with --period-samples) or Welch.
+    /// Period averaging (with --period-samples, or the period found in `r`) or Welch.
     Auto,
+    /// Welch averaging, even of a periodic record.
+    Welch,
     /// Local Polynomial Method.
     Lpm,
     /// Local Rational Method.
@@ -260,7 +265,10 @@ pub fn frf(mut a: FrfArgs) -> Result<()> {
         && [&a.r.excitation, &a.u.input, &a.y.output, &a.cur.current]
             .iter()
             .all(|c| !c.starts_with('#'));
-    let res = if a.method == MethodArg::Auto && a.noise.is_none() && streamable {
+    let res = if matches!(a.method, MethodArg::Auto | MethodArg::Welch)
+        && a.noise.is_none()
+        && streamable
+    {
         // Welch and period averaging stream the file: memory for one block, segment or period
         let cols = StreamColumns {
             r: &a.r.excitation,
@@ -268,7 +276,9 @@ pub fn frf(mut a: FrfArgs) -> Result<()> {
             y: &a.y.output,
             i: Some(&a.cur.current),
         };
-        analyze_csv(&a.data, &cols, a.file.fs, |n, ts| frf_settings(&a, n, ts))?
+        analyze_csv(&a.data, &cols, a.file.fs, |n, ts, period| {
+            frf_settings(&a, n, ts, period)
+        })?
     } else {
         match frf_in_memory(&a)? {
             Some(res) => res,
@@ -305,7 +315,7 @@ fn frf_in_memory(a: &FrfArgs) -> Result<Option<FrfAnalysis>> {
         frf_local(a, r, u, y, fs)?;
         return Ok(None);
     }
-    let settings = frf_settings(a, r.len(), data.ts)?;
+    let settings = frf_settings(a, r.len(), data.ts, ambid_core::signal::PeriodScan::of(r))?;
     let noise = match &a.noise {
         Some(p) => {
             let d = a.file.file.read(p, a.file.fs.or(Some(fs)))?;
@@ -320,14 +330,62 @@ fn frf_in_memory(a: &FrfArgs) -> Result<Option<FrfAnalysis>> {
     ))
 }
 
-/// The settings of `a` for a record of `n` samples at sample time `ts` (reads the controller).
-fn frf_settings(a: &FrfArgs, n: usize, ts: f64) -> ambid::error::Result<FrfSettings> {
+/// The settings of `a` for a record of `n` samples at sample time `ts` whose `r` repeats every
+/// `found` samples (reads the controller). The estimator of `--method auto`: period averaging
+/// with `--period-samples`; else Welch when a Welch option is given; else period averaging
+/// with the found period when at least two periods remain after `--skip-periods`; else Welch.
+fn frf_settings(
+    a: &FrfArgs,
+    n: usize,
+    ts: f64,
+    found: Option<usize>,
+) -> ambid::error::Result<FrfSettings> {
     if let Some(k) = a.nperseg.filter(|&k| k > n) {
         return Err(ambid::error::Error::usage(format!(
             "--nperseg {k} is longer than the record ({n} samples); give at most {n}, or leave it out to derive it from the record length"
         )));
     }
-    let method = match a.period_samples {
+    let welch_options =
+        a.nperseg.is_some() || a.noverlap.is_some() || a.window.is_some() || a.skip_samples != 0;
+    if a.method == MethodArg::Welch && a.period_samples.is_some() {
+        return Err(ambid::error::Error::usage(
+            "--method welch and --period-samples exclude each other: leave out --period-samples \
+             for Welch averaging, or --method welch for period averaging",
+        ));
+    }
+    if a.period_samples.is_some() && welch_options {
+        return Err(ambid::error::Error::usage(
+            "--nperseg/--noverlap/--window/--skip-samples set Welch averaging, --period-samples \
+             period averaging: give one of them",
+        ));
+    }
+    let detected = match (a.method, a.period_samples, welch_options, found) {
+        (MethodArg::Auto, None, false, Some(p)) => {
+            let periods = n / p;
+            let chosen = FrfSettings::found_period(n, Some(p), a.skip_periods);
+            if chosen.is_some() {
+                let tail = match n % p {
+                    0 => String::new(),
+                    t => format!(", the last {t} samples, an incomplete period, ignored"),
+                };
+                println!(
+                    "period averaging: the excitation repeats every {p} samples ({periods} \
+                     periods, {} dropped as transient{tail}); give --method welch for Welch \
+                     averaging",
+                    a.skip_periods
+                );
+            } else {
+                println!(
+                    "the excitation repeats every {p} samples, but {periods} periods leave fewer \
+                     than 2 after --skip-periods {}: Welch averaging",
+                    a.skip_periods
+                );
+            }
+            chosen.map(|_| p)
+        }
+        _ => None,
+    };
+    let method = match a.period_samples.or(detected) {
         Some(p) => FrfMethod::Periodic {
             period_samples: p,
             skip_periods: a.skip_periods,
@@ -335,7 +393,7 @@ fn frf_settings(a: &FrfArgs, n: usize, ts: f64) -> ambid::error::Result<FrfSetti
         None => FrfMethod::Welch {
             nperseg: a.nperseg.unwrap_or_else(|| FrfSettings::default_nperseg(n)),
             noverlap: a.noverlap,
-            window: a.window.into(),
+            window: a.window.unwrap_or(WindowArg::Hann).into(),
             skip_samples: a.skip_samples,
         },
     };
@@ -356,6 +414,8 @@ fn frf_settings(a: &FrfArgs, n: usize, ts: f64) -> ambid::error::Result<FrfSetti
         controller,
         i_sat: a.i_sat,
         screen: !a.no_screen,
+        // a found period need not divide the record (a cut or split file): the tail is dropped
+        incomplete_tail: detected.is_some(),
     })
 }
 

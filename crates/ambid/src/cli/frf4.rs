@@ -18,7 +18,7 @@
 //!
 //! **Period.** `--period-samples`, else derived from the excitation: the smallest $N \le L/2$
 //! with $r_j[k + N] = r_j[k]$ (to $10^{-9}$ of the column's peak) for every non-constant
-//! `r` column of every file ($L$ samples per file); a record whose excitation does not repeat
+//! `r` column of every file ($L$ samples per file; `ambid_core::signal::detect_period`); a record whose excitation does not repeat
 //! is refused (the MIMO FRF needs periodic excitation).
 
 use super::frf::FrfArgs;
@@ -32,6 +32,7 @@ use ambid_core::frf::mimo::{self, MimoClosedLoopFrf, MimoDesign, MimoOptions};
 use ambid_core::frf::mimo_lpm::{local_polynomial, MimoLpmOptions};
 use ambid_core::frf::synchronous::{synchronous, SynchronousMethod, SynchronousOptions};
 use ambid_core::signal::amplitude_spectrum;
+use ambid_core::signal::detect_period;
 use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};
 
@@ -90,8 +91,12 @@ fn refuse_siso_options(a: &FrfArgs) -> Result<()> {
              average (periodic excitation) or --method lpm (non-periodic)",
         ),
         (
-            a.nperseg.is_some() || a.noverlap.is_some() || a.skip_samples != 0,
-            "--nperseg/--noverlap/--skip-samples",
+            a.nperseg.is_some()
+                || a.noverlap.is_some()
+                || a.window.is_some()
+                || a.skip_samples != 0
+                || a.method == MethodArg::Welch,
+            "--method welch/--nperseg/--noverlap/--window/--skip-samples",
             "Welch averaging is single-axis; the multi-axis FRF averages periods",
         ),
         (a.noise.is_some(), "--noise", "no output SNR is computed"),
@@ -186,21 +191,6 @@ fn check_axes(files: &[TimeData]) -> Result<Vec<&'static str>> {
         }
     }
     Ok(axes)
-}
-
-/// The smallest period $N \le L/2$ of every non-constant column (module docs), `None` if there
-/// is none.
-pub fn detect_period(columns: &[&[f64]]) -> Option<usize> {
-    let cols: Vec<(&[f64], f64)> = columns
-        .iter()
-        .filter(|c| c.iter().any(|v| *v != c[0]))
-        .map(|c| (*c, 1e-9 * c.iter().fold(0.0f64, |m, v| m.max(v.abs()))))
-        .collect();
-    let n = cols.iter().map(|c| c.0.len()).min()?;
-    (1..=n / 2).find(|&p| {
-        cols.iter()
-            .all(|(c, tol)| (0..n - p).all(|k| (c[k + p] - c[k]).abs() <= *tol))
-    })
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -631,7 +621,7 @@ fn write_estimate(
 
 #[cfg(test)]
 mod tests {
-    use super::detect_period;
+    use ambid_core::signal::detect_period;
 
     #[test]
     fn the_period_is_the_smallest_exact_repeat_of_every_varying_column() {

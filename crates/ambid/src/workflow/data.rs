@@ -352,13 +352,33 @@ pub fn load_file(
     let opt = |name: &str, spec: &Option<ColumnSpec>| -> Result<Option<Vec<f64>>, Error> {
         spec.as_ref().map(|s| col(name, s)).transpose()
     };
+    let r = opt("r", &r_spec)?;
+    // the period: [data] period_samples, else the smallest lag at which `r` repeats exactly
+    // (ambid_core::signal::PeriodScan, as `ambid frf` finds it), unless the FRF is Welch's
+    let mut notes = notes;
+    let period = match (d.period_samples, &r) {
+        (Some(p), _) => Some(p),
+        (None, Some(r)) if cfg.frf.method != "welch" => {
+            let found = ambid_core::signal::PeriodScan::of(r);
+            if let Some(p) = found {
+                notes.push(format!(
+                    "{}: the excitation `r` repeats every {p} samples ({} periods): the FRF averages \
+                     periods; set [data] period_samples to override, or [frf] method = \"welch\"",
+                    path.display(),
+                    r.len() / p
+                ));
+            }
+            found
+        }
+        _ => None,
+    };
     let rec = Recording {
         notes,
         ..Recording::from_signals(
             ts,
-            d.period_samples,
+            period,
             Signals {
-                r: opt("r", &r_spec)?,
+                r,
                 u: col("u", &d_u)?,
                 y: col("y", &d_y)?,
                 i: opt("i", &i_spec)?,

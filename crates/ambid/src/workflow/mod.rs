@@ -345,13 +345,18 @@ impl Ctx<'_> {
 
     /// FRF settings for a record of `n` samples (periodic when the period is known).
     pub fn frf_settings(&self, period: Option<usize>, n: usize) -> crate::analysis::FrfSettings {
-        crate::stage::frf_settings(
+        let mut s = crate::stage::frf_settings(
             &self.cfg.frf,
             self.cfg.data.skip_periods,
             period,
             n,
             self.twin.as_ref().map(|t| t.twin.i_sat()),
-        )
+        );
+        // a period found in a file's `r` (data::load_file) need not divide the record (a split
+        // file): its incomplete last period is dropped
+        s.incomplete_tail = self.cfg.source == crate::config::SourceKind::Files
+            && self.cfg.data.period_samples.is_none();
+        s
     }
 
     /// The identification level (fraction of i_sat): the amplitude study's choice, else the
