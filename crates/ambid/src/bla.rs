@@ -237,6 +237,53 @@ impl RecordedLevel {
     }
 }
 
+/// The multisine period shared by every realisation of `levels`: the period of each one's
+/// excitation (`r`, or `u` for open-loop data) as `ambid frf` finds it
+/// ([`PeriodScan`](ambid_core::signal::PeriodScan), docs/frf.md "Which estimator"), `Err` with
+/// the first realisation whose excitation does not repeat or repeats with another period.
+///
+/// # Example
+/// ```
+/// use ambid::bla::{common_period, Realisation, RecordedLevel};
+/// let one: Vec<f64> = (0..50).map(|k| ((k * 7) % 11) as f64 - 5.0).collect();
+/// let rec = |shift: usize, src: &str| Realisation {
+///     r: Some(one.iter().cycle().skip(shift).take(250).copied().collect()),
+///     u: vec![0.0; 250],
+///     y: vec![0.0; 250],
+///     saturated_fraction: None,
+///     source: src.into(),
+/// };
+/// let levels = RecordedLevel::group([(4.0, rec(0, "a")), (4.0, rec(3, "b"))]);
+/// assert_eq!(common_period(&levels), Ok(50));
+/// let levels = RecordedLevel::group([(4.0, rec(0, "a")), (4.0, Realisation { r: Some((0..250).map(f64::from).collect()), ..rec(0, "c") })]);
+/// assert!(common_period(&levels).unwrap_err().contains("c"));
+/// ```
+pub fn common_period(levels: &[RecordedLevel]) -> std::result::Result<usize, String> {
+    let mut found: Option<(usize, &str)> = None;
+    for x in levels.iter().flat_map(|l| &l.realisations) {
+        let exc = x.r.as_deref().unwrap_or(&x.u);
+        match (ambid_core::signal::PeriodScan::of(exc), found) {
+            (None, _) => {
+                return Err(format!(
+                    "{}: the excitation does not repeat (no period of at most half the record)",
+                    x.source
+                ))
+            }
+            (Some(p), Some((q, first))) if p != q => {
+                return Err(format!(
+                    "{}: the excitation repeats every {p} samples, {first}'s every {q}",
+                    x.source
+                ))
+            }
+            (Some(p), None) => found = Some((p, &x.source)),
+            _ => {}
+        }
+    }
+    found
+        .map(|(p, _)| p)
+        .ok_or_else(|| "no realisation is given".to_string())
+}
+
 /// How recorded BLA experiments are cut.
 #[derive(Debug, Clone, Copy)]
 pub struct RecordedPlan {

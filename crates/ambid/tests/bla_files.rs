@@ -124,6 +124,23 @@ fn recorded_bla_on_the_linear_twin_matches_the_exact_plant() {
     let o = run_bla(&record_args(&[(8.0, &files)]), &out);
     assert!(o.status.success(), "{}", text(&o));
     println!("{}", text(&o));
+    // without --period-samples: the period found in every realisation's r, the same output
+    let found = d.join("bla8_found.csv");
+    let mut args = vec!["bla".to_string()];
+    args.extend(record_args(&[(8.0, &files)]));
+    args.extend(["--skip-periods", "1", "--out"].map(String::from));
+    args.push(found.display().to_string());
+    let o = ambid(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(
+        o.status.success() && text(&o).contains(&format!("repeats every {N} samples")),
+        "{}",
+        text(&o)
+    );
+    assert_eq!(
+        std::fs::read(&out).unwrap(),
+        std::fs::read(&found).unwrap(),
+        "the found period's BLA is the given period's"
+    );
     let (h, rows) = read_csv(&out);
     let f: Vec<f64> = rows
         .iter()
@@ -247,28 +264,38 @@ fn recorded_bla_study_on_the_nonlinear_twin_and_in_the_workflow() {
         ),
     )
     .unwrap();
-    let cfg = WorkflowConfig::from_path(&wf).unwrap();
-    let mut progress = Progress::new(Verbosity::Quiet);
-    let outcome = workflow::run(&cfg, &d, &mut progress).unwrap();
-    let bla = outcome
-        .timings
-        .iter()
-        .find(|t| t.step == "bla")
-        .expect("bla step");
-    assert_eq!(bla.status, "done");
-    let levels = outcome.summary["bla"]["levels"].as_array().unwrap();
-    assert_eq!(levels.len(), 2);
-    for (k, lv) in levels.iter().enumerate() {
-        for key in ["noise_rel", "nl_rel", "nl_rel_se"] {
-            let w = lv[key].as_f64().unwrap();
-            let c = v(k, key);
-            // the workflow detrends (mean) like every other file step; the CLI does not
-            assert!(
-                (w - c).abs() <= 1e-6 * c.abs().max(1e-300) + 1e-9 * v(k, "noise_rel"),
-                "level {k} {key}: workflow {w} vs CLI {c}"
-            );
+    // with [data] period_samples, and without it (the period found in the records): the CLI's
+    let given = std::fs::read_to_string(&wf).unwrap();
+    let found = d.join("bla_found.toml");
+    std::fs::write(
+        &found,
+        given.replace(&format!("period_samples = {N}\n"), ""),
+    )
+    .unwrap();
+    for path in [&wf, &found] {
+        let cfg = WorkflowConfig::from_path(path).unwrap();
+        let mut progress = Progress::new(Verbosity::Quiet);
+        let outcome = workflow::run(&cfg, &d, &mut progress).unwrap();
+        let bla = outcome
+            .timings
+            .iter()
+            .find(|t| t.step == "bla")
+            .expect("bla step");
+        assert_eq!(bla.status, "done", "{}", path.display());
+        let levels = outcome.summary["bla"]["levels"].as_array().unwrap();
+        assert_eq!(levels.len(), 2);
+        for (k, lv) in levels.iter().enumerate() {
+            for key in ["noise_rel", "nl_rel", "nl_rel_se"] {
+                let w = lv[key].as_f64().unwrap();
+                let c = v(k, key);
+                // the workflow detrends (mean) like every other file step; the CLI does not
+                assert!(
+                    (w - c).abs() <= 1e-6 * c.abs().max(1e-300) + 1e-9 * v(k, "noise_rel"),
+                    "level {k} {key}: workflow {w} vs CLI {c}"
+                );
+            }
+            assert!(lv["bla_vs_linear_pct"].is_null());
         }
-        assert!(lv["bla_vs_linear_pct"].is_null());
     }
     let _ = std::fs::remove_dir_all(&d);
 }
@@ -306,11 +333,26 @@ fn recorded_bla_bad_input_is_explained() {
     assert!(!o.status.success());
     println!("{}", text(&o));
     assert!(text(&o).contains("period"), "{}", text(&o));
-    // no period at all
+    // no period given, and one realisation's excitation does not repeat (noise): named,
+    // nothing written
+    let noise = d.join("noise");
+    let o = ambid(&["simulate", "--signal", "noise", "--out", s(&noise)]);
+    assert!(o.status.success(), "{}", text(&o));
     let mut args = vec!["bla".to_string()];
-    args.extend(record_args(&[(8.0, &files)]));
+    args.extend(record_args(&[(
+        8.0,
+        &[files[0].clone(), noise.join("data.csv")],
+    )]));
+    let none = d.join("none.csv");
+    args.extend(["--out".to_string(), none.display().to_string()]);
     let o = ambid(&args.iter().map(String::as_str).collect::<Vec<_>>());
-    assert!(text(&o).contains("--period-samples"), "{}", text(&o));
+    let t = text(&o);
+    assert!(
+        !o.status.success() && t.contains("--period-samples") && t.contains("does not repeat"),
+        "{t}"
+    );
+    assert!(t.contains("noise"), "the realisation is named: {t}");
+    assert!(!none.exists());
     // an excitation sampled at another rate than the twin's
     let r = d.join("slow.csv");
     std::fs::write(&r, "t,r\n0,0.1\n0.001,0.2\n0.002,0.1\n").unwrap();

@@ -172,14 +172,23 @@ pub fn bla(a: BlaArgs) -> Result<()> {
 }
 
 fn bla_from_files(a: &BlaArgs) -> Result<()> {
-    let Some(n) = a.period_samples else {
-        return Err(ambid::error::Error::usage(
-            "recorded BLA realisations need the multisine period: pass --period-samples N"
-                .to_string(),
-        )
-        .into());
-    };
     let (levels, fs) = recorded_levels(a)?;
+    let n = match a.period_samples {
+        Some(n) => n,
+        None => {
+            let n = ambid::bla::common_period(&levels).map_err(|e| {
+                ambid::error::Error::usage(format!(
+                    "recorded BLA realisations need the multisine period, and it is not found in \
+                     the records ({e}): pass --period-samples N"
+                ))
+            })?;
+            println!(
+                "period: {n} samples (every realisation's excitation repeats every {n} samples; \
+                 give --period-samples to override)"
+            );
+            n
+        }
+    };
     let plan = RecordedPlan {
         fs,
         period_samples: n,

@@ -399,14 +399,11 @@ pub fn bla(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                 return Ok(StepStatus::Skipped(
                     "the robust BLA on recorded data needs M ≥ 2 random-phase multisine records per level \
                      (whole periods, the same period length): list them in [bla] files = \
-                     [{ level_pct = 4.0, path = \"…\" }, …] (several entries per level) and give \
-                     [data] period_samples"
+                     [{ level_pct = 4.0, path = \"…\" }, …] (several entries per level); the period \
+                     is found in the records unless [data] period_samples gives it"
                         .into(),
                 ));
             }
-            let Some(n) = cfg.data.period_samples else {
-                return Err(Error::input("[bla] files are given but the multisine period is not: set [data] period_samples"));
-            };
             let mut tagged = Vec::with_capacity(cfg.bla.files.len());
             let mut fs = f64::NAN;
             for lf in &cfg.bla.files {
@@ -434,6 +431,16 @@ pub fn bla(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                 tagged.push((lf.level_pct, x));
             }
             let levels = crate::bla::RecordedLevel::group(tagged);
+            // [data] period_samples, else the period every realisation's excitation repeats with
+            let n = match cfg.data.period_samples {
+                Some(n) => n,
+                None => crate::bla::common_period(&levels).map_err(|e| {
+                    Error::input(format!(
+                        "[bla] files are given but the multisine period is not, and it is not found \
+                         in the records ({e}): set [data] period_samples"
+                    ))
+                })?,
+            };
             let band = cfg.frf.quality_band_hz.unwrap_or([10.0, 1000.0]);
             let plan = crate::bla::RecordedPlan {
                 fs,
