@@ -76,6 +76,7 @@ type Row = (
     f64,
     Option<(bool, bool)>,
     Option<(bool, bool)>,
+    f64,
 );
 
 fn main() {
@@ -183,8 +184,14 @@ fn main() {
         } else {
             EntryForm::Relative
         };
+        // SHAPE=mode: the mode-shaped family for every entry (opt-in; docs/uncertainty.md)
+        let shape = if std::env::var("SHAPE").is_ok_and(|v| v == "mode") {
+            ambid_core::validate::weight::WeightShape::ModeShaped
+        } else {
+            ambid_core::validate::weight::WeightShape::Smooth
+        };
         let wfits = u
-            .entry_weights(data.ts, 4, DEFAULT_COVER, form)
+            .entry_weights_shaped(data.ts, 4, DEFAULT_COVER, form, shape)
             .expect("entry weights");
         let t_weights = t_w.elapsed().as_secs_f64();
         let weights: Vec<Weight> = wfits.iter().map(|w| w.weight.clone()).collect();
@@ -376,12 +383,12 @@ fn main() {
             bw,
             t0.elapsed().as_secs_f64()
         );
-        summary.push((cov_e, cov_n, cov_w, loose, bl, bw));
+        summary.push((cov_e, cov_n, cov_w, loose, bl, bw, loose_w));
     }
     let n = summary.len();
     let count = |p: &dyn Fn(&Row) -> bool| summary.iter().filter(|s| p(s)).count();
     println!(
-        "runs {n}: element-wise ≥95 % of pairs {}; norm ≥95 % of lines {}; weight ≥95 % {}; looseness median {:.2}; lines: stable@90 % {} half {}; weight: stable@90 % {} half {}",
+        "runs {n}: element-wise ≥95 % of pairs {}; norm ≥95 % of lines {}; weight ≥95 % {}; looseness median {:.2}; lines: stable@90 % {} half {}; weight: stable@90 % {} half {}; weight looseness median {:.2}",
         count(&|s| s.0 >= 0.95),
         count(&|s| s.1 >= 0.95),
         count(&|s| s.2 >= 0.95),
@@ -390,5 +397,6 @@ fn main() {
         count(&|s| s.4.is_some_and(|b| b.1)),
         count(&|s| s.5.is_some_and(|b| b.0)),
         count(&|s| s.5.is_some_and(|b| b.1)),
+        if n > 0 { median(summary.iter().map(|s| s.6).collect()) } else { f64::NAN },
     );
 }

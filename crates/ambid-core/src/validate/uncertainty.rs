@@ -737,6 +737,29 @@ impl MatrixUncertainty {
         cover: f64,
         form: EntryForm,
     ) -> Result<Vec<super::weight::WeightFit>> {
+        self.entry_weights_shaped(
+            ts,
+            max_order,
+            cover,
+            form,
+            super::weight::WeightShape::Smooth,
+        )
+    }
+
+    /// [`Self::entry_weights`] with the weight family `shape`
+    /// ([`fit_weight_shaped`](super::weight::fit_weight_shaped)); `Smooth` is
+    /// [`Self::entry_weights`].
+    ///
+    /// # Errors
+    /// Those of [`Self::entry_weights`].
+    pub fn entry_weights_shaped(
+        &self,
+        ts: f64,
+        max_order: usize,
+        cover: f64,
+        form: EntryForm,
+        shape: super::weight::WeightShape,
+    ) -> Result<Vec<super::weight::WeightFit>> {
         use rayon::prelude::*;
         let f = self.f_hz().to_vec();
         (0..self.outputs * self.inputs)
@@ -747,9 +770,9 @@ impl MatrixUncertainty {
                     EntryForm::Relative => self.entry_relative(i, j)?,
                     EntryForm::Additive => self.entries[e].additive.clone(),
                 };
-                super::weight::fit_weight(&f, &bound, ts, max_order, cover).map_err(|err| {
-                    Error::numerical(CTX, format!("the weight of entry ({i}, {j}): {err}"))
-                })
+                super::weight::fit_weight_shaped(&f, &bound, ts, max_order, cover, shape).map_err(
+                    |err| Error::numerical(CTX, format!("the weight of entry ({i}, {j}): {err}")),
+                )
             })
             .collect()
     }
@@ -1972,6 +1995,18 @@ mod tests {
                     .filter(|(w, b)| **w < **b * (1.0 - 1e-12));
                 assert!(below.count() <= f.len() / 50, "entry ({i}, {j})");
             }
+        }
+        // the mode-shaped family per entry: each entry's fit_weight_shaped
+        let shaped = crate::validate::weight::WeightShape::ModeShaped;
+        let ws = u
+            .entry_weights_shaped(ts, 4, 0.98, EntryForm::Relative, shaped)
+            .unwrap();
+        for (e, w) in ws.iter().enumerate() {
+            let bound = u.entry_relative(e % 2, e / 2).unwrap();
+            let direct =
+                crate::validate::weight::fit_weight_shaped(&f, &bound, ts, 4, 0.98, shaped)
+                    .unwrap();
+            assert_eq!(*w, direct);
         }
         let w1 = one.entry_weights(ts, 2, 0.98, EntryForm::Relative).unwrap();
         let direct =
