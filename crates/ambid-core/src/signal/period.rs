@@ -11,7 +11,7 @@
 //! # The rule
 //! The period of columns $x_j$ (each of length $\ge L$, the shortest length) is the smallest
 //! $N \le L/2$ with
-//! $$ |x_j[k + N] - x_j[k]| \le 10^{-9} \max_k |x_j[k]| \quad \text{for all } k < L - N \text{ and every } j, $$
+//! $$ |x_j(k + N) - x_j(k)| \le 10^{-9} \max_k |x_j(k)| \quad \text{for all } k < L - N \text{ and every } j, $$
 //! counting only non-constant columns. $N \le L/2$ asks for two whole periods at least, the
 //! fewest the period average can use. Measured signals never pass (their noise is far above
 //! $10^{-9}$ of their peak), so on a measured input the answer is `None`, and the caller keeps
@@ -21,8 +21,8 @@
 //! Testing every lag directly costs $O(L^2)$ on records such as a step, where each lag fails
 //! only late. So every lag is screened first by the demeaned, unit-variance columns' squared
 //! difference
-//! $$ D(N) = \sum_j \sum_{k < L-N} (x_j[k+N] - x_j[k])^2
-//!         = \sum_j \Big(\sum_{k<L-N} x_j[k]^2 + \sum_{k \ge N} x_j[k]^2 - 2 r_j(N)\Big), $$
+//! $$ D(N) = \sum_j \sum_{k < L-N} (x_j(k+N) - x_j(k))^2
+//!         = \sum_j \Big(\sum_{k<L-N} x_j(k)^2 + \sum_{k \ge N} x_j(k)^2 - 2 r_j(N)\Big), $$
 //! with the linear autocorrelation $r_j$ from one zero-padded FFT pair and the two energies from
 //! prefix sums: $O(L \log L)$ per column. Only lags with
 //! $D(N) \le 10^{-6} E(N) + (L - N)\sum_j \tau_j^2/s_j$ go to the exact test ($E(N)$ the same
