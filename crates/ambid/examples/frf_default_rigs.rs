@@ -16,12 +16,8 @@ use ambid::physical::{estimate_with_starts_from_data, twin_drawing, twin_truth, 
 use ambid_core::signal::PeriodScan;
 use ambid_twin::{random_rig, Mode, TwinConfig};
 
-fn range(s: &str) -> Vec<u64> {
-    match s.split_once('-') {
-        Some((a, b)) => (a.parse().unwrap()..=b.parse().unwrap()).collect(),
-        None => s.split(',').map(|x| x.parse().unwrap()).collect(),
-    }
-}
+mod common;
+use common::range;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();

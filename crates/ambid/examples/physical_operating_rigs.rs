@@ -15,12 +15,8 @@ use ambid::experiment::ExcitationPlan;
 use ambid::physical::operating::OperatingRun;
 use ambid_twin::Mode;
 
-fn range(s: &str) -> Vec<u64> {
-    match s.split_once('-') {
-        Some((a, b)) => (a.parse().unwrap()..=b.parse().unwrap()).collect(),
-        None => s.split(',').map(|x| x.parse().unwrap()).collect(),
-    }
-}
+mod common;
+use common::range;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();

@@ -38,12 +38,8 @@
 use ambid::uncertainty::{loop_stable, nominal_gain_interval, UncertaintyRun};
 use ambid_twin::Mode;
 
-fn range(s: &str) -> Vec<u64> {
-    match s.split_once('-') {
-        Some((a, b)) => (a.parse().unwrap()..=b.parse().unwrap()).collect(),
-        None => s.split(',').map(|x| x.parse().unwrap()).collect(),
-    }
-}
+mod common;
+use common::range;
 
 /// The options of every re-analysis here: the default ones with `SHAPE=mode`'s weight family.
 fn shape_opts() -> ambid_core::validate::uncertainty::UncertaintyOptions {
