@@ -175,8 +175,8 @@ fn merge(a: &mut AbnormalReport, b: AbnormalReport, off: usize) {
 
 /// The FRF analysis of the text record at `path`, streamed; `settings(n, ts, period)` gives the
 /// settings for a record of `n` samples at sample time `ts` whose excitation `r` repeats every
-/// `period` samples (found in the first pass by [`PeriodScan`], `None` if it does not repeat;
-/// only Welch and period averaging).
+/// `period` samples (found in the first pass by [`PeriodScan`] when `find_period`; `None` if it
+/// does not repeat or was not looked for; only Welch and period averaging).
 /// `fs` is the sampling rate when the file has no `t` column (and must agree with it when it
 /// has one).
 ///
@@ -199,7 +199,7 @@ fn merge(a: &mut AbnormalReport, b: AbnormalReport, off: usize) {
 /// let p = dir.join("data.csv");
 /// write_time_csv(&p, &[("t", &rec.t), ("r", &rec.r), ("u", &rec.u), ("y", &rec.y)]).unwrap();
 /// let cols = StreamColumns { r: "r", u: "u", y: "y", i: None };
-/// let streamed = analyze_csv(&p, &cols, None, |_n, _ts, period| {
+/// let streamed = analyze_csv(&p, &cols, None, true, |_n, _ts, period| {
 ///     assert_eq!(period, Some(5115)); // the excitation's period, found in the file
 ///     Ok(FrfSettings::periodic(5115, 1))
 /// })
@@ -219,6 +219,7 @@ pub fn analyze_csv(
     path: &Path,
     cols: &StreamColumns<'_>,
     fs: Option<f64>,
+    find_period: bool,
     settings: impl FnOnce(usize, f64, Option<usize>) -> Result<FrfSettings>,
 ) -> Result<FrfAnalysis> {
     let open = || RowStream::open(path);
@@ -249,7 +250,7 @@ pub fn analyze_csv(
     // pass 1: length, time span, extremes of u and i, finiteness
     let mut st = st0;
     let mut n = 0usize;
-    let mut scan = PeriodScan::new();
+    let mut scan = find_period.then(PeriodScan::new);
     let (mut t0, mut t1) = (f64::NAN, f64::NAN);
     let mut ext = [(f64::NEG_INFINITY, f64::INFINITY); 2];
     loop {
@@ -285,7 +286,9 @@ pub fn analyze_csv(
                 )));
             }
         }
-        scan.push(&out[0]);
+        if let Some(sc) = scan.as_mut() {
+            sc.push(&out[0]);
+        }
         for (e, c) in ext.iter_mut().zip([Some(1), ii]) {
             if let Some(c) = c {
                 for &v in &out[c] {
@@ -328,7 +331,7 @@ pub fn analyze_csv(
         }
     };
     crate::analysis::check_fs_matches(fs, ts)?;
-    let settings = settings(n, ts, scan.finish())?;
+    let settings = settings(n, ts, scan.and_then(PeriodScan::finish))?;
     let rate = 1.0 / ts;
 
     // exactly periodic channels (period averaging): found in pass 2 from the raw samples

@@ -626,7 +626,7 @@ fn streamed_frf_equals_the_in_memory_frf_on_a_twin_record() {
     for mut settings in [FrfSettings::periodic(5115, 1), FrfSettings::welch(4096)] {
         settings.controller = Some(ctrl.clone());
         let a = analyze(&record, &settings, None).unwrap();
-        let b = analyze_csv(&data, &cols, None, |n, ts, _| {
+        let b = analyze_csv(&data, &cols, None, false, |n, ts, _| {
             assert_eq!((n, ts), (rec.r.len(), mem.ts));
             Ok(settings.clone())
         })
@@ -698,7 +698,7 @@ fn streamed_frf_equals_the_in_memory_frf_across_blocks() {
     };
     for settings in [FrfSettings::periodic(np, 2), FrfSettings::welch(8192)] {
         let a = analyze(&record, &settings, None).unwrap();
-        let b = analyze_csv(&data, &sc, None, |_, _, _| Ok(settings.clone())).unwrap();
+        let b = analyze_csv(&data, &sc, None, false, |_, _, _| Ok(settings.clone())).unwrap();
         assert!(
             a.abnormal.iter().all(|(_, r)| r.is_clean()),
             "{:?}",

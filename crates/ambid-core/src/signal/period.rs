@@ -156,7 +156,6 @@ pub struct PeriodScan {
     prefix: Vec<f64>,
     /// The prefix's period once the prefix is full, and the last period's samples.
     candidate: Option<(usize, Vec<f64>)>,
-    decided: bool,
     n: usize,
     max_abs: f64,
     max_dev: f64,
@@ -181,12 +180,16 @@ impl PeriodScan {
             limit: limit.max(2),
             prefix: Vec::new(),
             candidate: None,
-            decided: false,
             n: 0,
             max_abs: 0.0,
             max_dev: 0.0,
             finite: true,
         }
+    }
+
+    /// Whether the prefix is full, so that the candidate is fixed.
+    fn decided(&self) -> bool {
+        self.prefix.len() == self.limit
     }
 
     /// The scan of a whole column at once: the answer of pushing it block by block.
@@ -205,10 +208,9 @@ impl PeriodScan {
             self.max_abs = self.max_abs.max(v.abs());
             let g = self.n;
             self.n += 1;
-            if !self.decided {
+            if !self.decided() {
                 self.prefix.push(v);
-                if self.prefix.len() == self.limit {
-                    self.decided = true;
+                if self.decided() {
                     self.candidate = detect_period(&[&self.prefix]).map(|p| {
                         // ring[j] = the latest sample with index ≡ j (mod p)
                         let mut ring = vec![0.0; p];
@@ -233,7 +235,7 @@ impl PeriodScan {
         if !self.finite {
             return None;
         }
-        if !self.decided {
+        if !self.decided() {
             return detect_period(&[&self.prefix]);
         }
         let (p, _) = self.candidate?;

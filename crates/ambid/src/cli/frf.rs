@@ -276,9 +276,13 @@ pub fn frf(mut a: FrfArgs) -> Result<()> {
             y: &a.y.output,
             i: Some(&a.cur.current),
         };
-        analyze_csv(&a.data, &cols, a.file.fs, |n, ts, period| {
-            frf_settings(&a, n, ts, period)
-        })?
+        analyze_csv(
+            &a.data,
+            &cols,
+            a.file.fs,
+            looks_for_period(&a),
+            |n, ts, period| frf_settings(&a, n, ts, period),
+        )?
     } else {
         match frf_in_memory(&a)? {
             Some(res) => res,
@@ -315,7 +319,10 @@ fn frf_in_memory(a: &FrfArgs) -> Result<Option<FrfAnalysis>> {
         frf_local(a, r, u, y, fs)?;
         return Ok(None);
     }
-    let settings = frf_settings(a, r.len(), data.ts, ambid_core::signal::PeriodScan::of(r))?;
+    let found = looks_for_period(a)
+        .then(|| ambid_core::signal::PeriodScan::of(r))
+        .flatten();
+    let settings = frf_settings(a, r.len(), data.ts, found)?;
     let noise = match &a.noise {
         Some(p) => {
             let d = a.file.file.read(p, a.file.fs.or(Some(fs)))?;
@@ -328,6 +335,17 @@ fn frf_in_memory(a: &FrfArgs) -> Result<Option<FrfAnalysis>> {
         analyze(&rec, &settings, noise.as_deref())
             .with_context(|| format!("{}", a.data.display()))?,
     ))
+}
+
+/// A Welch option of `a` (`--nperseg`, `--noverlap`, `--window`, `--skip-samples`).
+pub(crate) fn welch_options(a: &FrfArgs) -> bool {
+    a.nperseg.is_some() || a.noverlap.is_some() || a.window.is_some() || a.skip_samples != 0
+}
+
+/// Whether the estimator of `a` depends on the period of `r`: `--method auto` with neither
+/// `--period-samples` nor a Welch option.
+fn looks_for_period(a: &FrfArgs) -> bool {
+    a.method == MethodArg::Auto && a.period_samples.is_none() && !welch_options(a)
 }
 
 /// The settings of `a` for a record of `n` samples at sample time `ts` whose `r` repeats every
@@ -345,22 +363,20 @@ fn frf_settings(
             "--nperseg {k} is longer than the record ({n} samples); give at most {n}, or leave it out to derive it from the record length"
         )));
     }
-    let welch_options =
-        a.nperseg.is_some() || a.noverlap.is_some() || a.window.is_some() || a.skip_samples != 0;
     if a.method == MethodArg::Welch && a.period_samples.is_some() {
         return Err(ambid::error::Error::usage(
             "--method welch and --period-samples exclude each other: leave out --period-samples \
              for Welch averaging, or --method welch for period averaging",
         ));
     }
-    if a.period_samples.is_some() && welch_options {
+    if a.period_samples.is_some() && welch_options(a) {
         return Err(ambid::error::Error::usage(
             "--nperseg/--noverlap/--window/--skip-samples set Welch averaging, --period-samples \
              period averaging: give one of them",
         ));
     }
-    let detected = match (a.method, a.period_samples, welch_options, found) {
-        (MethodArg::Auto, None, false, Some(p)) => {
+    let detected = match found.filter(|_| looks_for_period(a)) {
+        Some(p) => {
             let periods = n / p;
             let chosen = FrfSettings::found_period(n, Some(p), a.skip_periods);
             if chosen.is_some() {
@@ -383,7 +399,7 @@ fn frf_settings(
             }
             chosen.map(|_| p)
         }
-        _ => None,
+        None => None,
     };
     let method = match a.period_samples.or(detected) {
         Some(p) => FrfMethod::Periodic {

@@ -91,11 +91,7 @@ fn refuse_siso_options(a: &FrfArgs) -> Result<()> {
              average (periodic excitation) or --method lpm (non-periodic)",
         ),
         (
-            a.nperseg.is_some()
-                || a.noverlap.is_some()
-                || a.window.is_some()
-                || a.skip_samples != 0
-                || a.method == MethodArg::Welch,
+            super::frf::welch_options(a) || a.method == MethodArg::Welch,
             "--method welch/--nperseg/--noverlap/--window/--skip-samples",
             "Welch averaging is single-axis; the multi-axis FRF averages periods",
         ),
