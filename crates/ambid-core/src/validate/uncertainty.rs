@@ -126,6 +126,29 @@ const CTX: &str = "uncertainty";
 /// Most windows term (b) tests per line (module docs): $M, 2M, \dots, 2^5 M$.
 const BIAS_SCALES: usize = 6;
 
+/// The half-widths of the windows a smooth term is tested over on `lines` lines: $M, 2M, 4M,
+/// \dots$ from `m_half` $= M$, at most six of them, each wider one while $2M' + 1 \le L/4$ (the
+/// first is always kept). Term (b) tests each at $\alpha_b/S$ for $S$ scales (module docs), as
+/// does the amplitude term of `ambid::uncertainty::amplitude_term`.
+///
+/// ```
+/// use ambid_core::validate::uncertainty::window_scales;
+/// assert_eq!(window_scales(2, 253), vec![2, 4, 8, 16, 32]); // 2·32 + 1 ≤ 63, 2·64 + 1 > 63
+/// assert_eq!(window_scales(3, 20), vec![3]);
+/// assert_eq!(window_scales(1, 10_000), vec![1, 2, 4, 8, 16, 32]);
+/// ```
+pub fn window_scales(m_half: usize, lines: usize) -> Vec<usize> {
+    let mut halves = vec![m_half];
+    while halves.len() < BIAS_SCALES {
+        let next = 2 * halves[halves.len() - 1];
+        if 2 * next + 1 > lines / 4 {
+            break;
+        }
+        halves.push(next);
+    }
+    halves
+}
+
 /// Options of [`uncertainty`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct UncertaintyOptions {
@@ -481,16 +504,8 @@ fn uncertainty_with(
     // (b): the significant smoothed misfit
     let misfit_c: Vec<c64> = (0..l).map(|k| g[k] - p_hat[k]).collect();
     let m_half = window_half_lines(&poles, &f, ts);
-    // the windows: M, 2M, 4M, … while 2M + 1 ≤ L/4 (at most BIAS_SCALES), each tested at
-    // α_b / scales (module docs)
-    let mut halves = vec![m_half];
-    while halves.len() < BIAS_SCALES {
-        let next = 2 * halves[halves.len() - 1];
-        if 2 * next + 1 > l / 4 {
-            break;
-        }
-        halves.push(next);
-    }
+    // the windows, each tested at α_b / scales (module docs)
+    let halves = window_scales(m_half, l);
     let thr = (halves.len() as f64 / opts.bias_alpha).ln();
     let mut bias = vec![0.0f64; l];
     for &half in &halves {

@@ -1,0 +1,176 @@
+//! The workflow's `uncertainty` step as a user runs it (issue 23): per rig the workflow with
+//! `steps = uncertainty` and its prerequisites (the FRF, the order study, the models step and its
+//! choice) on `random_rig(rig)` with noise seed `rig`, the chosen model's bound against the twin.
+//! Unlike `uncertainty_rigs`, whose nominal model is the BIC's choice among state-space fits,
+//! the nominal model here is the one the workflow's models step chooses (`[models] select`,
+//! default the best validation fit).
+//!
+//! Per rig: the chosen model, a resonance of it outside the models' band
+//! ([`ambid::uncertainty::out_of_band_resonance`]), the fraction of the 10–1000 Hz lines where
+//! |W| covers the chosen model's true relative error, median |W| / median error, and both
+//! robust gain margins of the weight and of the check on the lines against the true loop's
+//! interval: whether the true loop stays stable with the gain moved 90 % of the way to each,
+//! and whether each is at least half the true one. A missing margin (not robustly stable)
+//! fails both.
+//!
+//! `cargo run --release -p ambid --example uncertainty_workflow_rigs -- RIGS [linear|nonlinear]`
+//! (e.g. `1-40`, or `3,7,11`). `AMPLITUDE=1` names the `amplitude` step too (term (e));
+//! `SHOW_U=1` prints the step's summary and the amplitude study's, `SHOW_MISS=1` prints the lines where |W| is below the true error, with the terms there.
+
+mod common;
+
+use ambid::uncertainty::{loop_stable, out_of_band_resonance};
+use ambid::workflow::{run, Progress, Step, Verbosity, WorkflowConfig};
+use ambid_twin::{random_rig, Twin};
+
+/// (stable at 90 % of both margins, both ≥ half the true ones) for reported margins `lo`, `hi`
+/// against the true interval `(g_lo, g_hi)`.
+fn judge(twin: &Twin, lo: Option<f64>, hi: Option<f64>, (g_lo, g_hi): (f64, f64)) -> (bool, bool) {
+    let (Some(lo), Some(hi)) = (lo, hi) else {
+        return (false, false);
+    };
+    let stable = [1.0 - 0.9 * (1.0 - lo), 1.0 + 0.9 * (hi - 1.0)]
+        .iter()
+        .all(|g| loop_stable(twin.plant(), twin.controller(), *g).unwrap_or(false));
+    let half = (1.0 - lo) >= 0.5 * (1.0 - g_lo) && (hi - 1.0) >= 0.5 * (g_hi - 1.0);
+    (stable, half)
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let rigs = common::range(args.get(1).map_or("1-10", String::as_str));
+    let mode = args.get(2).cloned().unwrap_or_else(|| "linear".into());
+    let dir = std::env::temp_dir().join(format!("ambid-unc-wf-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("a temporary directory");
+    let wanted: Vec<Step> = if std::env::var("AMPLITUDE").is_ok() {
+        vec![Step::Amplitude, Step::Uncertainty]
+    } else {
+        vec![Step::Uncertainty]
+    };
+    let (steps, _) = Step::with_prerequisites(&wanted);
+    let (mut runs, mut skipped, mut covered, mut oob) = (0, 0, 0, 0);
+    let (mut w_stable, mut w_half, mut l_stable, mut l_half) = (0, 0, 0, 0);
+    let mut ratios = Vec::new();
+    println!("rig | chosen | out-of-band resonance | cov_W med_W/med_err | weight lo hi stable half | lines lo hi stable half | true lo hi");
+    for rig in rigs {
+        let cfg = random_rig(rig).expect("a random rig");
+        let twin = Twin::new(cfg.clone()).expect("the rig's twin");
+        let path = dir.join(format!("rig{rig}.toml"));
+        std::fs::write(&path, cfg.to_toml_string().expect("TOML")).expect("written");
+        let mut wf = WorkflowConfig {
+            steps: Some(steps.clone()),
+            seed: rig,
+            ..WorkflowConfig::default()
+        };
+        wf.twin.mode = mode.clone();
+        wf.twin.config = Some(path);
+        let out = match run(&wf, &dir, &mut Progress::new(Verbosity::Quiet)) {
+            Ok(o) => o,
+            Err(e) => {
+                println!("{rig}: {e}");
+                skipped += 1;
+                continue;
+            }
+        };
+        let stage = out.models_stage.as_ref();
+        let chosen = stage.and_then(|s| s.chosen());
+        let label = chosen.map_or("none".into(), |c| c.label());
+        let beyond = match (
+            chosen.and_then(|c| c.model.as_ref()),
+            stage.and_then(|s| s.band.as_ref()),
+        ) {
+            (Some(m), Some(b)) => out_of_band_resonance(m, b.band_hz).ok().flatten(),
+            _ => None,
+        };
+        oob += usize::from(beyond.is_some());
+        let beyond = beyond.map_or("—".into(), |(f, z)| format!("{f:.0} Hz ζ {z:.4}"));
+        let u = &out.summary["uncertainty"];
+        if std::env::var("SHOW_U").is_ok() {
+            println!(
+                "{rig}: uncertainty {u}\n  amplitude {}",
+                out.summary["amplitude"]
+            );
+        }
+        let pick = |prefix: &str| out.report.series("uncertainty", prefix).cloned();
+        let (Some(w), Some(err)) = (pick("|W|"), pick("twin: true")) else {
+            let why: Vec<String> = out
+                .timings
+                .iter()
+                .filter(|t| t.status != "done")
+                .map(|t| format!("{}: {}", t.step, t.status))
+                .collect();
+            println!("{rig} | {label} | {beyond} | no bound ({})", why.join("; "));
+            skipped += 1;
+            continue;
+        };
+        let idx: Vec<usize> = (0..err.x.len())
+            .filter(|&k| (10.0..=1000.0).contains(&err.x[k]))
+            .collect();
+        let m = idx.len().max(1) as f64;
+        let cov = idx.iter().filter(|&&k| w.y[k] >= err.y[k]).count() as f64 / m;
+        let median = |mut v: Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        let ratio = median(idx.iter().map(|&k| w.y[k]).collect())
+            / median(idx.iter().map(|&k| err.y[k]).collect());
+        if std::env::var("SHOW_MISS").is_ok() {
+            let terms: Vec<(String, ambid::report::Series)> = ["(a)", "(b)", "(e)", "bound ℓ"]
+                .iter()
+                .filter_map(|p| pick(p).map(|s| (p.to_string(), s)))
+                .collect();
+            for &k in idx.iter().filter(|&&k| w.y[k] < err.y[k]) {
+                let t: Vec<String> = terms
+                    .iter()
+                    .map(|(n, s)| format!("{n} {:.2e}", s.y[k]))
+                    .collect();
+                println!(
+                    "    {:.1} Hz: error {:.2e} |W| {:.2e} {}",
+                    err.x[k],
+                    err.y[k],
+                    w.y[k],
+                    t.join(" ")
+                );
+            }
+        }
+        let truth = (
+            u["twin_gain_interval"][0].as_f64().unwrap_or(f64::NAN),
+            u["twin_gain_interval"][1].as_f64().unwrap_or(f64::NAN),
+        );
+        let (wlo, whi) = (
+            u["lower_gain_margin"].as_f64(),
+            u["upper_gain_margin"].as_f64(),
+        );
+        let (llo, lhi) = (
+            u["lines_lower_gain_margin"].as_f64(),
+            u["lines_upper_gain_margin"].as_f64(),
+        );
+        let (ws, wh) = judge(&twin, wlo, whi, truth);
+        let (ls, lh) = judge(&twin, llo, lhi, truth);
+        runs += 1;
+        covered += usize::from(cov >= 0.95);
+        ratios.push(ratio);
+        w_stable += usize::from(ws);
+        w_half += usize::from(wh);
+        l_stable += usize::from(ls);
+        l_half += usize::from(lh);
+        let f = |x: Option<f64>| x.map_or("—".into(), |g| format!("{g:.3}"));
+        println!(
+            "{rig} | {label} | {beyond} | {cov:.3} {ratio:.2} | {} {} {ws} {wh} | {} {} {ls} {lh} | {:.3} {:.3}",
+            f(wlo),
+            f(whi),
+            f(llo),
+            f(lhi),
+            truth.0,
+            truth.1
+        );
+    }
+    ratios.sort_by(f64::total_cmp);
+    let med = ratios.get(ratios.len() / 2).copied().unwrap_or(f64::NAN);
+    println!(
+        "runs {runs} (no bound: {skipped}); chosen model with a resonance outside the band: {oob}; \
+         W covers ≥ 95 %: {covered}; median |W|/error, median over runs {med:.2}; \
+         weight margins: stable at 90 % {w_stable}, ≥ half {w_half}; \
+         lines: stable at 90 % {l_stable}, ≥ half {l_half}"
+    );
+}
