@@ -8,16 +8,15 @@
 //! `cargo run --release -p ambid --example physical_workflow_rigs -- RIGS [linear|nonlinear]`
 //! (e.g. `61-80`).
 
+mod common;
+
 use ambid::physical::{as_array, twin_truth, PARAMETER_NAMES};
-use ambid::workflow::{run, Progress, Step, Verbosity, WorkflowConfig};
-use ambid_twin::{random_rig, Twin};
+use ambid::workflow::Step;
+use ambid_twin::Twin;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let rigs: Vec<u64> = match args.get(1).map_or("61-70", String::as_str).split_once('-') {
-        Some((a, b)) => (a.parse().unwrap()..=b.parse().unwrap()).collect(),
-        None => vec![args[1].parse().unwrap()],
-    };
+    let rigs = common::range(args.get(1).map_or("61-70", String::as_str));
     let mode = args.get(2).cloned().unwrap_or_else(|| "nonlinear".into());
     let dir = std::env::temp_dir().join(format!("ambid-physical-wf-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -29,18 +28,9 @@ fn main() {
         "rig | levels | one record: rel. error % k_i k_x f_b (covered) | zero amplitude: the same"
     );
     for rig in rigs {
-        let cfg = random_rig(rig).unwrap();
-        let truth = as_array(&twin_truth(&Twin::new(cfg.clone()).unwrap()));
-        let path = dir.join(format!("rig{rig}.toml"));
-        std::fs::write(&path, cfg.to_toml_string().unwrap()).unwrap();
-        let mut wf = WorkflowConfig {
-            steps: Some(all.clone()),
-            seed: rig,
-            ..WorkflowConfig::default()
-        };
-        wf.twin.mode = mode.clone();
-        wf.twin.config = Some(path);
-        let out = match run(&wf, &dir, &mut Progress::new(Verbosity::Quiet)) {
+        let (cfg, out) = common::workflow_on_rig(rig, &mode, &all, &dir);
+        let truth = as_array(&twin_truth(&Twin::new(cfg).unwrap()));
+        let out = match out {
             Ok(o) => o,
             Err(e) => {
                 println!("{rig}: {e}");

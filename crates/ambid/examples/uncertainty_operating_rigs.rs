@@ -9,47 +9,31 @@
 //! same margins check for the robust-stability check on the lines (no weight fit).
 //!
 //! `cargo run --release -p ambid --example uncertainty_operating_rigs -- RIGS [linear|nonlinear]`
-//! (e.g. `61-80`). `AMPLITUDE=1` adds the amplitude step (its chosen identification level, and
-//! term (e) from its levels). `SHOW_U=1` prints each rig's uncertainty summary, `SHOW_MODEL=1` the model
+//! (e.g. `61-80`). The `uncertainty` step brings the amplitude step (its chosen identification
+//! level, and term (e) from its levels; before 2026-12-01 only with `AMPLITUDE=1`, which the
+//! older figures in docs/uncertainty.md name). `SHOW_U=1` prints each rig's uncertainty summary, `SHOW_MODEL=1` the model
 //! JSONs of a rig where the step did not run.
+
+mod common;
 
 use ambid::report::Block;
 use ambid::uncertainty::loop_stable;
-use ambid::workflow::{run, Progress, Step, Verbosity, WorkflowConfig};
-use ambid_twin::{random_rig, Twin, TwinConfig};
+use ambid::workflow::{Step, WorkflowConfig};
+use ambid_twin::{Twin, TwinConfig};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let rigs: Vec<u64> = match args.get(1).map_or("61-70", String::as_str).split_once('-') {
-        Some((a, b)) => (a.parse().unwrap()..=b.parse().unwrap()).collect(),
-        None => vec![args[1].parse().unwrap()],
-    };
+    let rigs = common::range(args.get(1).map_or("61-70", String::as_str));
     let mode = args.get(2).cloned().unwrap_or_else(|| "linear".into());
     let dir = std::env::temp_dir().join(format!("ambid-unc-op-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    // AMPLITUDE=1: the amplitude step too (the identification level its choice, term (e) from
-    // its levels)
-    let wanted: Vec<Step> = if std::env::var("AMPLITUDE").is_ok() {
-        vec![Step::Amplitude, Step::OperatingPoint, Step::Uncertainty]
-    } else {
-        vec![Step::OperatingPoint, Step::Uncertainty]
-    };
-    let (all, _) = Step::with_prerequisites(&wanted);
+    let (all, _) = Step::with_prerequisites(&[Step::OperatingPoint, Step::Uncertainty]);
     let (mut runs, mut all_stable, mut medians, mut covered) = (0, 0, Vec::new(), 0);
     let (mut lines_robust, mut weight_robust, mut lines_all_stable) = (0, 0, 0);
     println!("rig | (d)/truth q10 median q90 | spread median | margins lo hi | every case stable at 90 % | chosen model: cov_W cov_l medW/med_err");
     for rig in rigs {
-        let cfg = random_rig(rig).unwrap();
-        let path = dir.join(format!("rig{rig}.toml"));
-        std::fs::write(&path, cfg.to_toml_string().unwrap()).unwrap();
-        let mut wf = WorkflowConfig {
-            steps: Some(all.clone()),
-            seed: rig,
-            ..WorkflowConfig::default()
-        };
-        wf.twin.mode = mode.clone();
-        wf.twin.config = Some(path);
-        let out = match run(&wf, &dir, &mut Progress::new(Verbosity::Quiet)) {
+        let (cfg, out) = common::workflow_on_rig(rig, &mode, &all, &dir);
+        let out = match out {
             Ok(o) => o,
             Err(e) => {
                 println!("{rig}: {e}");
@@ -108,8 +92,8 @@ fn main() {
             continue;
         };
         let (b, g) = (
-            wf.operating_point.bias_pct / 100.0,
-            wf.operating_point.air_gap_um * 1e-6,
+            WorkflowConfig::default().operating_point.bias_pct / 100.0,
+            WorkflowConfig::default().operating_point.air_gap_um * 1e-6,
         );
         let case = |bias: f64, gap: f64| -> TwinConfig {
             let mut c = cfg.clone();

@@ -14,14 +14,15 @@
 //! fails both.
 //!
 //! `cargo run --release -p ambid --example uncertainty_workflow_rigs -- RIGS [linear|nonlinear]`
-//! (e.g. `1-40`, or `3,7,11`). `AMPLITUDE=1` names the `amplitude` step too (term (e));
-//! `SHOW_U=1` prints the step's summary and the amplitude study's, `SHOW_MISS=1` prints the lines where |W| is below the true error, with the terms there.
+//! (e.g. `1-40`, or `3,7,11`). The step's prerequisites bring the amplitude study (term (e)).
+//! `SHOW_U=1` prints the step's summary and the amplitude study's, `SHOW_MISS=1` the lines where
+//! |W| is below the true error, with the terms there.
 
 mod common;
 
 use ambid::uncertainty::{loop_stable, out_of_band_resonance};
-use ambid::workflow::{run, Progress, Step, Verbosity, WorkflowConfig};
-use ambid_twin::{random_rig, Twin};
+use ambid::workflow::Step;
+use ambid_twin::Twin;
 
 /// (stable at 90 % of both margins, both ≥ half the true ones) for reported margins `lo`, `hi`
 /// against the true interval `(g_lo, g_hi)`.
@@ -42,29 +43,15 @@ fn main() {
     let mode = args.get(2).cloned().unwrap_or_else(|| "linear".into());
     let dir = std::env::temp_dir().join(format!("ambid-unc-wf-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("a temporary directory");
-    let wanted: Vec<Step> = if std::env::var("AMPLITUDE").is_ok() {
-        vec![Step::Amplitude, Step::Uncertainty]
-    } else {
-        vec![Step::Uncertainty]
-    };
-    let (steps, _) = Step::with_prerequisites(&wanted);
+    let (steps, _) = Step::with_prerequisites(&[Step::Uncertainty]);
     let (mut runs, mut skipped, mut covered, mut oob) = (0, 0, 0, 0);
     let (mut w_stable, mut w_half, mut l_stable, mut l_half) = (0, 0, 0, 0);
     let mut ratios = Vec::new();
     println!("rig | chosen | out-of-band resonance | cov_W med_W/med_err | weight lo hi stable half | lines lo hi stable half | true lo hi");
     for rig in rigs {
-        let cfg = random_rig(rig).expect("a random rig");
-        let twin = Twin::new(cfg.clone()).expect("the rig's twin");
-        let path = dir.join(format!("rig{rig}.toml"));
-        std::fs::write(&path, cfg.to_toml_string().expect("TOML")).expect("written");
-        let mut wf = WorkflowConfig {
-            steps: Some(steps.clone()),
-            seed: rig,
-            ..WorkflowConfig::default()
-        };
-        wf.twin.mode = mode.clone();
-        wf.twin.config = Some(path);
-        let out = match run(&wf, &dir, &mut Progress::new(Verbosity::Quiet)) {
+        let (cfg, out) = common::workflow_on_rig(rig, &mode, &steps, &dir);
+        let twin = Twin::new(cfg).expect("the rig's twin");
+        let out = match out {
             Ok(o) => o,
             Err(e) => {
                 println!("{rig}: {e}");

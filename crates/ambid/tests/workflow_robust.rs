@@ -17,14 +17,14 @@ use ambid::workflow::{run, Progress, Step, Verbosity, WorkflowConfig};
 use ambid_twin::{Twin, TwinConfig};
 use std::path::Path;
 
-/// The report's `physical` section's blocks, as debug text.
-fn physical_blocks(out: &ambid::workflow::Outcome) -> String {
+/// The blocks of the report's section `id`, as debug text.
+fn section_blocks(out: &ambid::workflow::Outcome, id: &str) -> String {
     let section = out
         .report
         .sections
         .iter()
-        .find(|s| s.id == "physical")
-        .expect("the physical section");
+        .find(|s| s.id == id)
+        .unwrap_or_else(|| panic!("the {id} section"));
     format!("{:?}", section.blocks)
 }
 
@@ -178,7 +178,7 @@ fn physical_after_the_amplitude_study_extrapolates_to_zero_amplitude() {
     assert!((f(&z["parameters"][0]["estimate"]) / lp.k_i - 1.0).abs() < 0.02);
     let fb = TwinConfig::default().rotor.bending_freq_hz;
     assert!((f(&z["parameters"][2]["estimate"]) / fb - 1.0).abs() < 0.005);
-    let html = physical_blocks(&out);
+    let html = section_blocks(&out, "physical");
     println!(
         "{}",
         &html[html.find("At zero amplitude").unwrap_or(0)..]
@@ -270,17 +270,8 @@ fn uncertainty_alone_bounds_the_nonlinear_twins_shift() {
     assert!(out.summary["uncertainty"]
         .get("amplitude_levels_pct")
         .is_none());
-    let section = out
-        .report
-        .sections
-        .iter()
-        .find(|s| s.id == "uncertainty")
-        .expect("the uncertainty section");
-    assert!(
-        format!("{:?}", section.blocks).contains("no amplitude study ran"),
-        "{:?}",
-        section.blocks
-    );
+    let blocks = section_blocks(&out, "uncertainty");
+    assert!(blocks.contains("no amplitude study ran"), "{blocks}");
 }
 
 /// With the operating-point step, the uncertainty step adds term (d): its relative spread
@@ -390,7 +381,7 @@ fn physical_after_the_operating_point_study_fits_the_magnet_law() {
         let (k, g) = (&op["force_constant"], &op["air_gap_m"]);
         assert_eq!(f(&k["twin"]), lp.force_constant);
         assert_eq!(f(&g["twin"]), lp.air_gap_m);
-        let html = physical_blocks(&out);
+        let html = section_blocks(&out, "physical");
         assert!(html.contains("magnet_law") && html.contains("operating_points_physical"));
         if mode == "linear" {
             for (row, truth) in [(k, lp.force_constant), (g, lp.air_gap_m)] {

@@ -7,3 +7,31 @@ pub fn range(s: &str) -> Vec<u64> {
         None => s.split(',').map(|x| x.parse().expect("a number")).collect(),
     }
 }
+
+/// The workflow with `steps` on `random_rig(rig)` with noise seed `rig` and twin mode `mode`
+/// (`linear` or `nonlinear`), the rig's configuration written to `dir/rig<rig>.toml`: the rig's
+/// configuration and the run's outcome.
+#[allow(dead_code)] // not every sweep runs the workflow
+pub fn workflow_on_rig(
+    rig: u64,
+    mode: &str,
+    steps: &[ambid::workflow::Step],
+    dir: &std::path::Path,
+) -> (
+    ambid_twin::TwinConfig,
+    Result<ambid::workflow::Outcome, ambid::error::Error>,
+) {
+    use ambid::workflow::{run, Progress, Verbosity, WorkflowConfig};
+    let cfg = ambid_twin::random_rig(rig).expect("a random rig");
+    let path = dir.join(format!("rig{rig}.toml"));
+    std::fs::write(&path, cfg.to_toml_string().expect("TOML")).expect("the rig file written");
+    let mut wf = WorkflowConfig {
+        steps: Some(steps.to_vec()),
+        seed: rig,
+        ..WorkflowConfig::default()
+    };
+    wf.twin.mode = mode.into();
+    wf.twin.config = Some(path);
+    let out = run(&wf, dir, &mut Progress::new(Verbosity::Quiet));
+    (cfg, out)
+}
