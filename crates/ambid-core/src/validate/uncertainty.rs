@@ -133,7 +133,7 @@ const BIAS_SCALES: usize = 6;
 ///
 /// ```
 /// use ambid_core::validate::uncertainty::window_scales;
-/// assert_eq!(window_scales(2, 253), vec![2, 4, 8, 16, 32]); // 2·32 + 1 ≤ 63, 2·64 + 1 > 63
+/// assert_eq!(window_scales(2, 253), vec![2, 4, 8, 16]); // 2·16 + 1 ≤ 253/4 = 63 < 2·32 + 1
 /// assert_eq!(window_scales(3, 20), vec![3]);
 /// assert_eq!(window_scales(1, 10_000), vec![1, 2, 4, 8, 16, 32]);
 /// ```
