@@ -199,22 +199,14 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                 .filter(|(r, _)| r.saturated_fraction == 0.0)
                 .map(|(r, p)| (r.level_pct / 100.0, p))
                 .collect();
-            // the identification record's own FRF at its level: the BLA the model was fitted
-            // to, and the study's most precise estimate (docs/uncertainty.md, "Term (e) in the
-            // workflow")
-            // (on the study's lines: the twin's study keeps its band)
-            let ident = match (ctx.frf(), levels.first()) {
-                (Some(a), Some((_, p))) => match (p.f_hz().first(), p.f_hz().last()) {
-                    (Some(&lo), Some(&hi)) => a
-                        .frf
-                        .plant
-                        .band(lo, hi)
-                        .ok()
-                        .filter(|g| g.f_hz() == p.f_hz()),
-                    _ => None,
-                },
-                _ => None,
-            };
+            // the identification record's own FRF at its level, on the study's lines (the
+            // twin's study keeps its band): the BLA the model was fitted to, and the study's
+            // most precise estimate (docs/uncertainty.md, "Term (e) in the workflow")
+            let ident = levels.first().and_then(|(_, p)| {
+                let (lo, hi) = (*p.f_hz().first()?, *p.f_hz().last()?);
+                let g = ctx.frf()?.frf.plant.band(lo, hi).ok()?;
+                (g.f_hz() == p.f_hz()).then_some(g)
+            });
             if let Some(g) = ident.as_ref() {
                 levels.push((ctx.ident_frac(), g));
             }
