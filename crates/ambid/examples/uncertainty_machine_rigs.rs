@@ -19,6 +19,8 @@
 //! `MODE=nonlinear` simulates the nonlinear twin (the exact plant is then the linearisation).
 //! `SEED_PER_RIG=1` gives each rig its own noise realisation (base seed rig + 1000); without it
 //! every rig's experiments use the seeds derived from 1, i.e. the same noise sequences.
+//! `DUMP_ENTRIES=dir` writes `dir/rig<k>.txt`: per line the frequency, then for each entry
+//! (column-major) its relative bound $L_{ij}/|\hat P_{ij}|$ and its weight's magnitude.
 //!
 //! Run: `cargo run --release -p ambid --example uncertainty_machine_rigs -- 0,1,2,3`.
 use ambid::config::MachineSection;
@@ -357,6 +359,25 @@ fn main() {
                     .collect();
                 println!("     {}", row.join("  "));
             }
+        }
+        if let Ok(dump) = std::env::var("DUMP_ENTRIES") {
+            // per line: f, then per entry the relative bound and the weight's magnitude
+            let mut out = String::new();
+            for (k, fk) in f.iter().enumerate() {
+                out.push_str(&format!("{fk}"));
+                for j in 0..4 {
+                    for i in 0..4 {
+                        let e = u.entry(i, j).expect("entry");
+                        out.push_str(&format!(
+                            " {} {}",
+                            e.additive[k] / e.nominal[k].norm(),
+                            wmags[i + j * 4][k]
+                        ));
+                    }
+                }
+                out.push('\n');
+            }
+            std::fs::write(format!("{dump}/rig{rig}.txt"), out).expect("dump");
         }
         let bw = bars(&on_w, tp, c, exact_g);
         let fmt = |r: &RobustStability| {

@@ -36,26 +36,45 @@
 //! of $|W_k|/\ell_k$ ($\ge 1$); the lowest order within 10 % of the best looseness is kept.
 //!
 //! # Mode-shaped weights
-//! [`fit_weight_shaped`] with [`WeightShape::ModeShaped`] adds, for each order $n \ge 2$, one
-//! more start: a relative bound peaks at an anti-resonance of $\hat P$ (where $|\hat P|$ dips)
-//! and dips at the resonance beside it (where $|\hat P|$ peaks), which is the magnitude of a
-//! lightly damped pole pair followed by a lightly damped zero pair. The start puts the
-//! denominator's first second-order factor at the bound's most prominent peak and the
-//! numerator's at the dip beside it, both at $\zeta = 0.03$ with the floor $\zeta \ge 0.01$
-//! (a peak at most 50 times its shoulders) instead of [`MIN_ZETA`]; for $n = 3, 4$ the other
-//! factor pair starts with its zero at 1.3 times the higher of the two and its pole at the
-//! top line (the rise of the relative bound above the band, where $|\hat P|$ falls). It is
-//! refined against the bound's envelope over $\pm 0.02$ decade (about a mode's half-power
-//! width) instead of $\pm 0.05$, by the same three stages, and competes with the other starts
-//! by the same looseness. *Peak*: the line of largest prominence — its envelope value over
-//! the median of the envelope within $\pm 0.2$ decade, for lines whose window lies inside the
-//! lines — if it is at least $\ln 2$ (twice its surroundings); *dip*: the line of least
-//! negative prominence within $\pm 0.25$ decade of it (else 1.25 times the peak's
-//! frequency). No such peak: the smooth family alone. With lightly damped factors the
-//! slope argument of docs/uncertainty.md ("Why the looseness bar is not met") no longer
-//! holds: a pole pair followed by a zero pair rises to a peak and falls back within a
-//! fraction of a decade. What this family holds on random rigs, and why it is not the
-//! default, is in docs/uncertainty.md, "Mode-shaped weights".
+//! [`fit_weight_shaped`] with [`WeightShape::ModeShaped`] adds more starts. A relative bound
+//! peaks at an anti-resonance of $\hat P$ (where $|\hat P|$ dips) and dips at a resonance
+//! (where $|\hat P|$ peaks). A peak with the dip beside it is the magnitude of a lightly damped
+//! pole pair followed by a lightly damped zero pair; a notch alone is a lightly damped zero pair
+//! over a well damped pole pair at the same frequency.
+//! - **Peak start** ($n \ge 2$): the denominator's first second-order factor at the bound's most
+//!   prominent peak and the numerator's at the dip beside it, both at $\zeta = 0.03$ with the
+//!   floor $\zeta \ge 0.01$ (a peak at most 50 times its shoulders) instead of [`MIN_ZETA`]; for
+//!   $n = 3, 4$ the other factor pair starts with its zero at 1.3 times the higher of the two
+//!   and its pole at the top line (the rise of the relative bound above the band, where
+//!   $|\hat P|$ falls).
+//! - **Two-peak start** ($n = 4$, when the bound has a second peak of its own): both pole pairs
+//!   at the two peaks, both zero pairs at their dips, all with the low floor.
+//! - **Notch starts** ($n \ge 2$): the best weight of order $n - 2$ times a notch at the
+//!   bound's deepest dip (zero pair $\zeta = 0.03$, pole pair $\zeta = 0.5$, the low floor for
+//!   both); for $n = 4$ also the order-0 weight times notches at the two deepest dips. At
+//!   speed the gyroscopic coupling splits a bending mode in two, so a MIMO entry's bound may
+//!   have two peaks or two notches.
+//!
+//! Each is refined against the bound's envelope over $\pm 0.02$ decade (about a mode's
+//! half-power width) instead of $\pm 0.05$, by the same three stages. *Peak*: the line of
+//! largest prominence (its envelope value over the median of the envelope within $\pm 0.2$
+//! decade, clipped to the lines, for lines at least $2 \times 0.02$ decade inside the lines) if
+//! it is at least $\ln 2$ (twice its surroundings); *dip*: the line of least negative
+//! prominence within $\pm 0.25$ decade of it (else 1.25 times the peak's frequency); *second
+//! peak*: the next most prominent local maximum with a valley of at least $\ln\sqrt 2$ between
+//! it and the first; *notches* likewise with the signs reversed (prominence $\le -\ln 2$, a
+//! ridge of $\ln\sqrt 2$ between two).
+//!
+//! *Which weight is kept.* The family is judged by the geometric mean of $|W_k|/\ell_k$ over
+//! the lines (the same rule of the lowest order within 10 % of the best), not by the median:
+//! a notch or a peak spans a few per cent of the lines, so the median does not see whether a
+//! weight follows it, and the robust test does (at a resonance $|\hat P|$ and the loop's
+//! sensitivity to the plant's error are large). [`WeightFit::looseness`] is still the median.
+//!
+//! With lightly damped factors the slope argument of docs/uncertainty.md ("Why the looseness
+//! bar is not met") no longer holds: a pole pair followed by a zero pair rises to a peak and
+//! falls back within a fraction of a decade. What this family holds on random rigs, and why it
+//! is not the single-axis default, is in docs/uncertainty.md, "Mode-shaped weights".
 //!
 //! # Example
 //! The bound is itself a first-order weight: it is found.
@@ -302,10 +321,11 @@ pub enum WeightShape {
     /// which stays near the bound's highest peak over the band around it (the default).
     #[default]
     Smooth,
-    /// Also the mode-shaped starts: a lightly damped pole pair at the bound's most prominent
-    /// peak and a zero pair at the dip beside it ($\zeta \ge 0.01$), so the weight follows a
-    /// relative bound's peak at an anti-resonance of $\hat P$ and falls back after it. The
-    /// weight of least looseness over both families is kept.
+    /// Also the mode-shaped starts: lightly damped pole pairs at the bound's most prominent
+    /// peaks with zero pairs at the dips beside them, and notches at its deepest dips
+    /// ($\zeta \ge 0.01$), so the weight follows a relative bound's peak at an anti-resonance
+    /// of $\hat P$ and its notch at a resonance. The weight of least geometric-mean looseness
+    /// over both families is kept (module docs, "Mode-shaped weights").
     ModeShaped,
 }
 
@@ -414,13 +434,20 @@ pub fn fit_weight_shaped(
     // the bound's most prominent peak and the dip beside it: the starts that place a lightly
     // damped pole pair and zero pair there (module docs, "Mode-shaped weights")
     let modes = match shape {
-        WeightShape::ModeShaped => bound_mode(f_hz, &raw_l),
-        WeightShape::Smooth => None,
+        WeightShape::ModeShaped => bound_modes(f_hz, &raw_l),
+        WeightShape::Smooth => Vec::new(),
     };
-    let log_m = modes.map(|_| envelope(f_hz, &raw_l, MODE_ENVELOPE_DECADES));
+    let log_m =
+        (shape == WeightShape::ModeShaped).then(|| envelope(f_hz, &raw_l, MODE_ENVELOPE_DECADES));
+    let notches = match shape {
+        WeightShape::ModeShaped => bound_notches(f_hz, &raw_l),
+        WeightShape::Smooth => Vec::new(),
+    };
     let mut per_order = Vec::new();
-    let mut results: Vec<(Weight, f64)> = Vec::new();
+    let mut results: Vec<(Weight, f64, f64)> = Vec::new();
+    let family = shape;
     let mut prev: Option<(Vec<f64>, Floors)> = None;
+    let mut history: Vec<Option<(Vec<f64>, Floors)>> = Vec::new();
     for n in 0..=max_order {
         let mut starts: Vec<(Vec<f64>, Floors, &[f64])> = start_vectors(n, wlo, whi, &log_l)
             .into_iter()
@@ -436,14 +463,36 @@ pub fn fit_weight_shaped(
                 &log_l,
             ));
         }
-        if let (Some(mode), Some(log_m)) = (modes, &log_m) {
+        if let (Some(mode), Some(log_m)) = (modes.first(), &log_m) {
             if n >= 2 {
-                starts.push((mode_start(n, mode, whi, &log_l), Floors::MODE, log_m));
+                starts.push((mode_start(n, *mode, whi, &log_l), Floors::MODE, log_m));
+            }
+            if n == 4 && modes.len() == 2 {
+                starts.push((two_mode_start(&modes, &log_l), Floors::TWO_MODES, log_m));
+            }
+        }
+        // the previous orders' results times a notch at the bound's deepest dips
+        if let (Some(&dip), Some(log_m), Some(Some((p, floors)))) = (
+            notches.first(),
+            &log_m,
+            n.checked_sub(2).and_then(|m| history.get(m)),
+        ) {
+            let p = to_natural(p, n - 2, range);
+            starts.push((notch_start(&p, n - 2, *floors, dip, 1), Floors::MODE, log_m));
+            if let (Some(&dip2), Some(Some((p0, floors0)))) = (notches.get(1), history.first()) {
+                if n == 4 {
+                    let two = notch_start(&to_natural(p0, 0, range), 0, *floors0, dip2, 1);
+                    starts.push((
+                        notch_start(&two, 2, Floors::MODE, dip, 2),
+                        Floors::TWO_MODES,
+                        log_m,
+                    ));
+                }
             }
         }
         // every start refined against a rising penalty below the envelope; each stage's
         // result judged by the looseness of its raised weight
-        let mut best: Option<(Weight, f64, Vec<f64>, Floors)> = None;
+        let mut best: Option<(Weight, f64, f64, Vec<f64>, Floors)> = None;
         for (natural, floors, target) in starts {
             let mut x = to_params(&natural, n, range);
             // the start's gain puts it on the envelope from above (no residual below it)
@@ -470,26 +519,35 @@ pub fn fit_weight_shaped(
                         Err(_) => break,
                     }
                 }
-                let (w, loose) = raised(weight_of(&x, n, ts, range, floors), f_hz, bound, cover);
-                if loose.is_finite() && best.as_ref().is_none_or(|b| loose < b.1) {
-                    best = Some((w, loose, x.clone(), floors));
+                let (w, loose, geometric) =
+                    raised(weight_of(&x, n, ts, range, floors), f_hz, bound, cover);
+                // the mode-shaped family is judged by the geometric mean of |W|/ℓ, which sees
+                // a narrow peak or notch followed; the median would not (module docs)
+                let key = match family {
+                    WeightShape::Smooth => loose,
+                    WeightShape::ModeShaped => geometric,
+                };
+                if key.is_finite() && best.as_ref().is_none_or(|b| key < b.2) {
+                    best = Some((w, loose, key, x.clone(), floors));
                 }
                 if n == 0 {
                     break;
                 }
             }
         }
-        let Some((w, loose, x, floors)) = best else {
+        let Some((w, loose, key, x, floors)) = best else {
+            history.push(None);
             continue;
         };
+        history.push(Some((x.clone(), floors)));
         per_order.push((n, loose));
-        results.push((w, loose));
+        results.push((w, loose, key));
         prev = Some((x, floors));
     }
-    let best = results.iter().map(|r| r.1).fold(f64::INFINITY, f64::min);
-    let (weight, looseness) = results
+    let best = results.iter().map(|r| r.2).fold(f64::INFINITY, f64::min);
+    let (weight, looseness, _) = results
         .into_iter()
-        .find(|r| r.1 <= best * 1.1)
+        .find(|r| r.2 <= best * 1.1)
         .ok_or_else(|| Error::numerical("fit_weight", "no weight could be fitted"))?;
     let uncovered = lines_above(f_hz, bound, &weight.magnitude(f_hz));
     Ok(WeightFit {
@@ -524,7 +582,7 @@ fn lines_above(f_hz: &[f64], bound: &[f64], m: &[f64]) -> Vec<f64> {
 
 /// `w` with its gain raised to overbound the fraction `cover` of `bound`, and its looseness
 /// (the median of $|W_k|/\ell_k$).
-fn raised(mut w: Weight, f_hz: &[f64], bound: &[f64], cover: f64) -> (Weight, f64) {
+fn raised(mut w: Weight, f_hz: &[f64], bound: &[f64], cover: f64) -> (Weight, f64, f64) {
     let l = f_hz.len();
     let m = w.magnitude(f_hz);
     let mut need: Vec<f64> = bound.iter().zip(&m).map(|(b, w)| b / w).collect();
@@ -532,8 +590,9 @@ fn raised(mut w: Weight, f_hz: &[f64], bound: &[f64], cover: f64) -> (Weight, f6
     let raise = need[cover_index(l, cover)];
     w.gain *= raise;
     let mut ratio: Vec<f64> = bound.iter().zip(&m).map(|(b, w)| w * raise / b).collect();
+    let geometric = (ratio.iter().map(|r| r.ln()).sum::<f64>() / l as f64).exp();
     ratio.sort_by(f64::total_cmp);
-    (w, ratio[l / 2])
+    (w, ratio[l / 2], geometric)
 }
 
 /// The index in the ascending needs $\ell_k/|W_k|$ of the one the gain is raised to, so that
@@ -554,7 +613,7 @@ fn weight_of(x: &[f64], n: usize, ts: f64, range: (f64, f64), floors: Floors) ->
     let factors = |p: &[f64], first: f64| -> Vec<Factor> {
         let mut out = Vec::new();
         for i in 0..n / 2 {
-            let floor = if i == 0 { first } else { MIN_ZETA };
+            let floor = if i < floors.lightly { first } else { MIN_ZETA };
             out.push(Factor::Second {
                 omega: omega(p[2 * i]),
                 zeta: floor + p[2 * i + 1].exp(),
@@ -716,7 +775,17 @@ const MIN_PROMINENCE: f64 = std::f64::consts::LN_2;
 /// The damping floor of the mode-shaped factors (a peak of at most $1/(2\cdot 0.01) = 50$ times
 /// its shoulders) and their starting damping.
 const MODE_MIN_ZETA: f64 = 0.01;
+
+/// How far (in $\ln$) the smoothed bound must fall between two peaks for the second to count as
+/// a mode of its own: $\sqrt 2$.
+const VALLEY: f64 = 0.5 * std::f64::consts::LN_2;
 const MODE_START_ZETA: f64 = 0.03;
+
+/// How far inside the lines (a ratio of frequencies) a peak or notch must lie: two mode
+/// windows ([`MODE_ENVELOPE_DECADES`]), so that it is not the edge of the lines.
+fn edge() -> f64 {
+    10f64.powf(2.0 * MODE_ENVELOPE_DECADES)
+}
 
 /// The upper median of `v` (not empty).
 fn median(mut v: Vec<f64>) -> f64 {
@@ -730,52 +799,171 @@ fn median(mut v: Vec<f64>) -> f64 {
 struct Floors {
     numerator: f64,
     denominator: f64,
+    /// How many of each polynomial's leading second-order factors take these floors (1, or 2
+    /// for the two-mode start of order 4).
+    lightly: usize,
 }
 
 impl Floors {
     const PLAIN: Floors = Floors {
         numerator: MIN_ZETA,
         denominator: MIN_ZETA,
+        lightly: 1,
     };
     const MODE: Floors = Floors {
         numerator: MODE_MIN_ZETA,
         denominator: MODE_MIN_ZETA,
+        lightly: 1,
+    };
+    const TWO_MODES: Floors = Floors {
+        numerator: MODE_MIN_ZETA,
+        denominator: MODE_MIN_ZETA,
+        lightly: 2,
     };
 }
 
-/// The bound's most prominent peak and the dip beside it, as $(\omega_\text{peak},
-/// \omega_\text{dip})$ \[rad/s\] (module docs, "Mode-shaped weights"), or `None` when no line
-/// with a full window on both sides stands [`MIN_PROMINENCE`] above its window's median.
-fn bound_mode(f: &[f64], raw_l: &[f64]) -> Option<(f64, f64)> {
+/// The bound smoothed over [`MODE_ENVELOPE_DECADES`] and each line's prominence in it: its
+/// value over the median within $\pm$[`PROMINENCE_DECADES`] (clipped to the lines), for the
+/// lines at least two mode windows inside the lines ([`edge`]).
+fn prominences(f: &[f64], raw_l: &[f64]) -> (Vec<f64>, Vec<(usize, f64)>) {
     let smooth = envelope(f, raw_l, MODE_ENVELOPE_DECADES);
     let r = 10f64.powf(PROMINENCE_DECADES);
     let (first, last) = (f[0], f[f.len() - 1]);
-    let median_around = |k: usize| {
-        median(
-            (0..f.len())
-                .filter(|&j| f[j] >= f[k] / r && f[j] <= f[k] * r)
-                .map(|j| smooth[j])
-                .collect(),
-        )
+    let prominence = (0..f.len())
+        .filter(|&k| f[k] / edge() >= first && f[k] * edge() <= last)
+        .map(|k| {
+            let around = median(
+                (0..f.len())
+                    .filter(|&j| f[j] >= f[k] / r && f[j] <= f[k] * r)
+                    .map(|j| smooth[j])
+                    .collect(),
+            );
+            (k, smooth[k] - around)
+        })
+        .collect();
+    (smooth, prominence)
+}
+
+/// The lines of the most prominent peak of `smooth` (prominence at least [`MIN_PROMINENCE`])
+/// and of the next most prominent one that is a peak of its own: a local maximum, itself
+/// [`MIN_PROMINENCE`] prominent, separated from the first by a valley at least [`VALLEY`]
+/// below the lower of the two. For notches, call it with both arguments negated. Equal
+/// prominences go to the higher line, or with `ties_low` to the lower one.
+fn two_peaks(smooth: &[f64], prominence: &[(usize, f64)], ties_low: bool) -> Vec<usize> {
+    let most = |a: &&(usize, f64), b: &&(usize, f64)| {
+        a.1.total_cmp(&b.1).then(if ties_low {
+            b.0.cmp(&a.0)
+        } else {
+            a.0.cmp(&b.0)
+        })
     };
-    let inner: Vec<usize> = (0..f.len())
-        .filter(|&k| f[k] / r >= first && f[k] * r <= last)
-        .collect();
-    let prominence: Vec<(usize, f64)> = inner
-        .iter()
-        .map(|&k| (k, smooth[k] - median_around(k)))
-        .collect();
-    let &(kp, pp) = prominence.iter().max_by(|a, b| a.1.total_cmp(&b.1))?;
-    if pp < MIN_PROMINENCE {
-        return None;
+    let Some(&(k1, p1)) = prominence.iter().max_by(most) else {
+        return Vec::new();
+    };
+    if p1 < MIN_PROMINENCE {
+        return Vec::new();
     }
-    let near = 10f64.powf(1.25 * PROMINENCE_DECADES);
-    let dip = prominence
+    let local_max = |k: usize| {
+        (k == 0 || smooth[k] >= smooth[k - 1])
+            && (k + 1 == smooth.len() || smooth[k] >= smooth[k + 1])
+    };
+    let second = prominence
         .iter()
-        .filter(|(k, p)| *k != kp && *p < 0.0 && f[*k] <= f[kp] * near && f[*k] >= f[kp] / near)
-        .min_by(|a, b| a.1.total_cmp(&b.1))
-        .map_or(f[kp] * 1.25, |(k, _)| f[*k]);
-    Some((2.0 * PI * f[kp], 2.0 * PI * dip))
+        .filter(|&&(k, p)| {
+            if p < MIN_PROMINENCE || !local_max(k) || k == k1 {
+                return false;
+            }
+            let (a, b) = (k.min(k1), k.max(k1));
+            let valley = smooth[a..=b].iter().copied().fold(f64::INFINITY, f64::min);
+            valley <= smooth[k].min(smooth[k1]) - VALLEY
+        })
+        .max_by(most);
+    std::iter::once(k1).chain(second.map(|s| s.0)).collect()
+}
+
+/// The bound's most prominent peak and the dip beside it, as $(\omega_\text{peak},
+/// \omega_\text{dip})$ \[rad/s\] (module docs, "Mode-shaped weights"), then the second peak of
+/// [`two_peaks`] with its own dip. Empty when no line stands [`MIN_PROMINENCE`] above its
+/// window's median.
+fn bound_modes(f: &[f64], raw_l: &[f64]) -> Vec<(f64, f64)> {
+    let (smooth, prominence) = prominences(f, raw_l);
+    let near = 10f64.powf(1.25 * PROMINENCE_DECADES);
+    let mut dips: Vec<f64> = Vec::new();
+    let mut out = Vec::new();
+    for kp in two_peaks(&smooth, &prominence, false) {
+        // the line of least prominence within ±0.25 decade, not the other peak's dip
+        let dip = prominence
+            .iter()
+            .filter(|(k, p)| {
+                *k != kp
+                    && *p < 0.0
+                    && f[*k] <= f[kp] * near
+                    && f[*k] >= f[kp] / near
+                    && !dips.contains(&f[*k])
+            })
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map_or(f[kp] * 1.25, |(k, _)| f[*k]);
+        dips.push(dip);
+        out.push((2.0 * PI * f[kp], 2.0 * PI * dip));
+    }
+    out
+}
+
+/// The bound's deepest notch and the next one of its own (the peaks of [`two_peaks`] of the
+/// negated bound), $\omega$ \[rad/s\]. A relative bound dips at a lightly damped resonance of
+/// $\hat P$, where $|\hat P|$ is large and the loop's sensitivity to the plant's error peaks.
+fn bound_notches(f: &[f64], raw_l: &[f64]) -> Vec<f64> {
+    let (smooth, prominence) = prominences(f, raw_l);
+    let smooth: Vec<f64> = smooth.iter().map(|v| -v).collect();
+    let prominence: Vec<(usize, f64)> = prominence.iter().map(|(k, p)| (*k, -p)).collect();
+    two_peaks(&smooth, &prominence, true)
+        .into_iter()
+        .map(|k| 2.0 * PI * f[k])
+        .collect()
+}
+
+/// The start of order $m + 2$ (natural parameters) from an order-$m$ result `prev` (natural
+/// parameters, its floors `floors`) times a notch at `dip`: a lightly damped zero pair and a
+/// well damped pole pair at the same frequency, put first in each polynomial (so they take the
+/// mode floor); the previous factors follow, the first `lightly − 1` of them with the mode
+/// floor too, the others with the plain one.
+fn notch_start(prev: &[f64], m: usize, floors: Floors, dip: f64, lightly: usize) -> Vec<f64> {
+    let poly = |p: &[f64], first: f64, zeta: f64| -> Vec<f64> {
+        let mut out = vec![dip.ln(), (zeta - MODE_MIN_ZETA).ln()];
+        for i in 0..m / 2 {
+            let floor = if i < floors.lightly { first } else { MIN_ZETA };
+            // the factor moves to place i + 1, whose floor is the mode floor within `lightly`
+            let to = if i + 1 < lightly {
+                MODE_MIN_ZETA
+            } else {
+                MIN_ZETA
+            };
+            let z = (floor + p[2 * i + 1].exp()).max(to + 0.01);
+            out.extend([p[2 * i], (z - to).ln()]);
+        }
+        if m % 2 == 1 {
+            out.push(p[m - 1]);
+        }
+        out
+    };
+    let mut x = vec![prev[0]];
+    x.extend(poly(&prev[1..1 + m], floors.numerator, MODE_START_ZETA));
+    x.extend(poly(&prev[1 + m..1 + 2 * m], floors.denominator, 0.5));
+    x
+}
+
+/// The two-mode start of order 4 (natural parameters, with [`Floors::TWO_MODES`]): both
+/// denominator factors at the bound's two peaks and both numerator factors at their dips, all
+/// lightly damped.
+fn two_mode_start(modes: &[(f64, f64)], log_l: &[f64]) -> Vec<f64> {
+    let mut x = vec![median(log_l.to_vec())];
+    let mode_zeta = (MODE_START_ZETA - MODE_MIN_ZETA).ln();
+    for pick in [|m: &(f64, f64)| m.1, |m: &(f64, f64)| m.0] {
+        for m in &modes[..2] {
+            x.extend([pick(m).ln(), mode_zeta]);
+        }
+    }
+    x
 }
 
 /// The mode-shaped start of order $n \ge 2$ (natural parameters, with [`Floors::MODE`]): the
@@ -950,7 +1138,7 @@ mod tests {
         // the bound's peak and dip are found (the rise moves the peak a little above the pole);
         // with the plain starts only, the mode's peak sets the level elsewhere
         let log_l: Vec<f64> = ell.iter().map(|b| b.ln()).collect();
-        assert!(bound_mode(&f, &log_l).is_some_and(|(p, d)| {
+        assert!(bound_modes(&f, &log_l).first().is_some_and(|(p, d)| {
             (p / (2.0 * PI) / 560.0 - 1.0).abs() < 0.05
                 && (d / (2.0 * PI) / 700.0 - 1.0).abs() < 0.05
         }));
@@ -966,6 +1154,73 @@ mod tests {
         };
         let (m, p) = (near(&fit.weight), near(&plain.weight));
         assert!(m < 1.25 && p > 1.8 * m, "mode-shaped {m}, smooth {p}");
+    }
+
+    /// A relative bound that rises over the band with a notch at a lightly damped resonance of
+    /// $\hat P$ near the band's top (here 0.1 decade below it): the mode-shaped family follows
+    /// the notch, the smooth one stays at the rise's level across it.
+    #[test]
+    fn a_notch_near_the_top_of_the_lines_is_followed() {
+        let ts = 5e-5;
+        let f: Vec<f64> = (3..=255).map(|k| 3.91 * k as f64).collect();
+        let truth = Weight {
+            ts,
+            gain: 2e-3,
+            numerator: vec![
+                Factor::Second {
+                    omega: 2.0 * PI * 740.0,
+                    zeta: 0.015,
+                },
+                Factor::First {
+                    omega: 2.0 * PI * 150.0,
+                },
+            ],
+            denominator: vec![
+                Factor::Second {
+                    omega: 2.0 * PI * 740.0,
+                    zeta: 0.4,
+                },
+                Factor::First {
+                    omega: 2.0 * PI * 4000.0,
+                },
+            ],
+        };
+        let ell = truth.magnitude(&f);
+        let k = f.iter().position(|x| *x >= 740.0).unwrap();
+        let log_l: Vec<f64> = ell.iter().map(|b| b.ln()).collect();
+        let found = bound_notches(&f, &log_l);
+        assert!(
+            found
+                .first()
+                .is_some_and(|w| (w / (2.0 * PI) / 740.0 - 1.0).abs() < 0.02),
+            "{found:?}"
+        );
+        let mode = fit_weight_shaped(&f, &ell, ts, 4, 1.0, WeightShape::ModeShaped).unwrap();
+        let smooth = fit_weight_shaped(&f, &ell, ts, 4, 1.0, WeightShape::Smooth).unwrap();
+        // the median of |W|/ℓ over the lines within ±5 % of the notch
+        let at = |w: &Weight| {
+            let m = w.magnitude(&f);
+            let mut r: Vec<f64> = (0..f.len())
+                .filter(|&j| (f[j] / f[k] - 1.0).abs() < 0.05)
+                .map(|j| m[j] / ell[j])
+                .collect();
+            r.sort_by(f64::total_cmp);
+            r[r.len() / 2]
+        };
+        let m = mode.weight.magnitude(&f);
+        assert!(m.iter().zip(&ell).all(|(w, l)| *w >= *l * (1.0 - 1e-12)));
+        assert!(mode
+            .weight
+            .poles()
+            .iter()
+            .chain(mode.weight.zeros().iter())
+            .all(|p| p.norm() < 1.0));
+        let (rm, rs) = (at(&mode.weight), at(&smooth.weight));
+        assert!(
+            rm < 2.5 && rs > 2.5 * rm,
+            "at the notch: mode-shaped {rm}, smooth {rs}"
+        );
+        assert!(mode.looseness < 1.3, "{mode:?}");
     }
 
     /// The state-space realisation has the weight's response.
