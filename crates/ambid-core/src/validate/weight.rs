@@ -445,7 +445,6 @@ pub fn fit_weight_shaped(
     };
     let mut per_order = Vec::new();
     let mut results: Vec<(Weight, f64, f64)> = Vec::new();
-    let family = shape;
     let mut prev: Option<(Vec<f64>, Floors)> = None;
     let mut history: Vec<Option<(Vec<f64>, Floors)>> = Vec::new();
     for n in 0..=max_order {
@@ -491,15 +490,15 @@ pub fn fit_weight_shaped(
             }
         }
         // every start refined against a rising penalty below the envelope; each stage's
-        // result judged by the looseness of its raised weight
+        // result judged by its raised weight's looseness (mode-shaped: the geometric mean)
         let mut best: Option<(Weight, f64, f64, Vec<f64>, Floors)> = None;
         for (natural, floors, target) in starts {
             let mut x = to_params(&natural, n, range);
             // the start's gain puts it on the envelope from above (no residual below it)
-            let shape = weight_of(&x, n, ts, range, floors).magnitude(f_hz);
+            let start = weight_of(&x, n, ts, range, floors).magnitude(f_hz);
             x[0] += target
                 .iter()
-                .zip(&shape)
+                .zip(&start)
                 .map(|(l, m)| l - m.ln())
                 .fold(f64::NEG_INFINITY, f64::max);
             for below in BELOW {
@@ -523,7 +522,7 @@ pub fn fit_weight_shaped(
                     raised(weight_of(&x, n, ts, range, floors), f_hz, bound, cover);
                 // the mode-shaped family is judged by the geometric mean of |W|/ℓ, which sees
                 // a narrow peak or notch followed; the median would not (module docs)
-                let key = match family {
+                let key = match shape {
                     WeightShape::Smooth => loose,
                     WeightShape::ModeShaped => geometric,
                 };
