@@ -431,18 +431,19 @@ pub fn fit_weight_shaped(
     let log_l = envelope(f_hz, &raw_l, ENVELOPE_DECADES);
     let (wlo, whi) = (2.0 * PI * f_hz[0], 2.0 * PI * f_hz[l - 1]);
     let range = ((wlo / 10.0).ln(), (PI / ts).ln());
-    // the bound's most prominent peak and the dip beside it: the starts that place a lightly
-    // damped pole pair and zero pair there (module docs, "Mode-shaped weights")
-    let modes = match shape {
-        WeightShape::ModeShaped => bound_modes(f_hz, &raw_l),
-        WeightShape::Smooth => Vec::new(),
-    };
-    let log_m =
-        (shape == WeightShape::ModeShaped).then(|| envelope(f_hz, &raw_l, MODE_ENVELOPE_DECADES));
-    let notches = match shape {
-        WeightShape::ModeShaped => bound_notches(f_hz, &raw_l),
-        WeightShape::Smooth => Vec::new(),
-    };
+    // the bound over ±0.02 decade (the mode-shaped starts' target) and its prominences: its
+    // peaks with the dips beside them and its notches, where the mode-shaped starts place
+    // lightly damped factors (module docs, "Mode-shaped weights")
+    let view = (shape == WeightShape::ModeShaped).then(|| prominences(f_hz, &raw_l));
+    let log_m = view.as_ref().map(|(smooth, _)| smooth);
+    let (modes, notches) = view
+        .as_ref()
+        .map_or((Vec::new(), Vec::new()), |(smooth, prom)| {
+            (
+                bound_modes(f_hz, smooth, prom),
+                bound_notches(f_hz, smooth, prom),
+            )
+        });
     let mut per_order = Vec::new();
     let mut results: Vec<(Weight, f64, f64)> = Vec::new();
     let mut prev: Option<(Vec<f64>, Floors)> = None;
@@ -884,12 +885,11 @@ fn two_peaks(smooth: &[f64], prominence: &[(usize, f64)], ties_low: bool) -> Vec
 /// \omega_\text{dip})$ \[rad/s\] (module docs, "Mode-shaped weights"), then the second peak of
 /// [`two_peaks`] with its own dip. Empty when no line stands [`MIN_PROMINENCE`] above its
 /// window's median.
-fn bound_modes(f: &[f64], raw_l: &[f64]) -> Vec<(f64, f64)> {
-    let (smooth, prominence) = prominences(f, raw_l);
+fn bound_modes(f: &[f64], smooth: &[f64], prominence: &[(usize, f64)]) -> Vec<(f64, f64)> {
     let near = 10f64.powf(1.25 * PROMINENCE_DECADES);
     let mut dips: Vec<f64> = Vec::new();
     let mut out = Vec::new();
-    for kp in two_peaks(&smooth, &prominence, false) {
+    for kp in two_peaks(smooth, prominence, false) {
         // the line of least prominence within ±0.25 decade, not the other peak's dip
         let dip = prominence
             .iter()
@@ -911,8 +911,7 @@ fn bound_modes(f: &[f64], raw_l: &[f64]) -> Vec<(f64, f64)> {
 /// The bound's deepest notch and the next one of its own (the peaks of [`two_peaks`] of the
 /// negated bound), $\omega$ \[rad/s\]. A relative bound dips at a lightly damped resonance of
 /// $\hat P$, where $|\hat P|$ is large and the loop's sensitivity to the plant's error peaks.
-fn bound_notches(f: &[f64], raw_l: &[f64]) -> Vec<f64> {
-    let (smooth, prominence) = prominences(f, raw_l);
+fn bound_notches(f: &[f64], smooth: &[f64], prominence: &[(usize, f64)]) -> Vec<f64> {
     let smooth: Vec<f64> = smooth.iter().map(|v| -v).collect();
     let prominence: Vec<(usize, f64)> = prominence.iter().map(|(k, p)| (*k, -p)).collect();
     two_peaks(&smooth, &prominence, true)
@@ -1137,10 +1136,13 @@ mod tests {
         // the bound's peak and dip are found (the rise moves the peak a little above the pole);
         // with the plain starts only, the mode's peak sets the level elsewhere
         let log_l: Vec<f64> = ell.iter().map(|b| b.ln()).collect();
-        assert!(bound_modes(&f, &log_l).first().is_some_and(|(p, d)| {
-            (p / (2.0 * PI) / 560.0 - 1.0).abs() < 0.05
-                && (d / (2.0 * PI) / 700.0 - 1.0).abs() < 0.05
-        }));
+        let (smooth, prom) = prominences(&f, &log_l);
+        assert!(bound_modes(&f, &smooth, &prom)
+            .first()
+            .is_some_and(|(p, d)| {
+                (p / (2.0 * PI) / 560.0 - 1.0).abs() < 0.05
+                    && (d / (2.0 * PI) / 700.0 - 1.0).abs() < 0.05
+            }));
         let plain = fit_weight(&f, &ell, ts, 4, 1.0).unwrap();
         let near = |w: &Weight| {
             let m = w.magnitude(&f);
@@ -1187,7 +1189,8 @@ mod tests {
         let ell = truth.magnitude(&f);
         let k = f.iter().position(|x| *x >= 740.0).unwrap();
         let log_l: Vec<f64> = ell.iter().map(|b| b.ln()).collect();
-        let found = bound_notches(&f, &log_l);
+        let (smooth, prom) = prominences(&f, &log_l);
+        let found = bound_notches(&f, &smooth, &prom);
         assert!(
             found
                 .first()
