@@ -22,17 +22,23 @@
 //! `DUMP_ENTRIES=dir` writes `dir/rig<k>.txt`: per line the frequency, then for each entry
 //! (column-major) its relative bound $L_{ij}/|\hat P_{ij}|$ and its weight's magnitude.
 //!
+//! `LEVELS=none` runs no amplitude study (else the `[machine]` default with `uncertainty = true`:
+//! the design repeated at 5 and 16 % of i_sat, whose plant FRFs with the identification FRF give
+//! every entry's term (e), `machine_fit::amplitude_terms`); `LEVELS=5,20` other levels.
+//!
 //! Run: `cargo run --release -p ambid --example uncertainty_machine_rigs -- 0,1,2,3`.
 use ambid::config::MachineSection;
 use ambid::workflow::machine::{acquire_twin, MachineModelInput, MachineModels};
-use ambid::workflow::machine_fit::{fit_band, FrequencyFitter};
+use ambid::workflow::machine_fit::{amplitude_terms, fit_band, AmplitudeStudy, FrequencyFitter};
 use ambid_core::lti::Frd;
 use ambid_core::validate::iso::IsoZones;
 use ambid_core::validate::robust::{
     loop_stable, nominal_gain_interval, robust_stability_matrix_on_lines,
     robust_stability_matrix_weight, LineBound, MatrixWeight, RobustStability,
 };
-use ambid_core::validate::uncertainty::{uncertainty_matrix, EntryForm, UncertaintyOptions};
+use ambid_core::validate::uncertainty::{
+    uncertainty_matrix, EntryForm, ExtraTerms, UncertaintyOptions,
+};
 use ambid_core::validate::weight::{Weight, DEFAULT_COVER};
 use faer::Mat;
 use std::path::Path;
@@ -119,6 +125,16 @@ fn main() {
                 ..Default::default()
             }
         };
+        let m = MachineSection {
+            models: "fit".into(),
+            uncertainty: true,
+            amplitude_levels_pct: match std::env::var("LEVELS").ok().as_deref() {
+                None => None,
+                Some("none") => Some(Vec::new()),
+                Some(v) => Some(v.split(',').filter_map(|x| x.parse().ok()).collect()),
+            },
+            ..m
+        };
         // SEED_PER_RIG=1: each rig its own noise realisation (the experiments' seeds derive
         // from rig + 1000 instead of 1 for every rig)
         let noise_seed = if std::env::var("SEED_PER_RIG").is_ok() {
@@ -152,13 +168,56 @@ fn main() {
         };
         let plant = &measured.band(band.0, band.1).expect("band");
         let t_unc = Instant::now();
-        let u = match uncertainty_matrix(&model.model, plant, &[], &UncertaintyOptions::default()) {
-            Ok(u) => u,
-            Err(e) => {
-                println!("rig {rig}: no bound: {e}");
-                continue;
+        // term (e) per entry from the amplitude study, as the workflow computes it
+        let sp = &data.speeds[0];
+        let amp = sp
+            .level_pct
+            .filter(|_| !sp.amplitude.is_empty())
+            .map(|level_pct| {
+                amplitude_terms(
+                    &model.model,
+                    plant,
+                    &AmplitudeStudy {
+                        level_pct,
+                        levels: &sp.amplitude,
+                    },
+                )
+            });
+        let amp = match amp {
+            Some(Ok((t, used))) => {
+                if std::env::var("DEBUG_E").is_ok() {
+                    let med: Vec<String> = t
+                        .iter()
+                        .map(|e| format!("{:.1e}", median(e.clone())))
+                        .collect();
+                    println!(
+                        "  term (e) from levels {used:?}: entry medians {}",
+                        med.join(" ")
+                    );
+                }
+                t
             }
+            Some(Err(e)) => {
+                println!("  term (e) left out: {e}");
+                Vec::new()
+            }
+            None => Vec::new(),
         };
+        let extra: Vec<ExtraTerms<'_>> = amp
+            .iter()
+            .map(|e| ExtraTerms {
+                amplitude_shift: Some(e.as_slice()),
+                ..ExtraTerms::default()
+            })
+            .collect();
+        let u =
+            match uncertainty_matrix(&model.model, plant, &extra, &UncertaintyOptions::default()) {
+                Ok(u) => u,
+                Err(e) => {
+                    println!("rig {rig}: no bound: {e}");
+                    continue;
+                }
+            };
         let t_bound = t_unc.elapsed().as_secs_f64();
         let raise = u
             .joint_raise(DEFAULT_COVER, 0.95, 2000, 0)

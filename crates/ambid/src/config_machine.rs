@@ -10,6 +10,12 @@ use std::path::{Path, PathBuf};
 /// The multi-input designs `[machine] design` accepts (`ambid_core::signal::multi`).
 pub const MACHINE_DESIGNS: [&str; 3] = ["orthogonal", "sequential", "zipper"];
 
+/// The amplitude study's levels on the twin when `[machine] amplitude_levels_pct` is not given
+/// and `uncertainty = true` \[% of i_sat\]: with the identification level (`level_pct`, 10 by
+/// default) three levels for term (e), the plant's shift with the excitation amplitude
+/// (docs/uncertainty.md, "Term (e) for the machine").
+pub const DEFAULT_MACHINE_AMPLITUDE_LEVELS_PCT: [f64; 2] = [5.0, 16.0];
+
 /// The speeds of the twin when `[machine] speeds_rpm` is not given \[rpm\]: standstill, the
 /// nominal 15 000 rpm and 30 000 rpm.
 pub const DEFAULT_MACHINE_SPEEDS_RPM: [f64; 3] = [0.0, 15_000.0, 30_000.0];
@@ -96,6 +102,15 @@ pub struct MachineSection {
     /// four controllers' robust stability against it on the fit's lines (default: off; about
     /// 3 s per speed, docs/uncertainty.md "MIMO entries").
     pub uncertainty: bool,
+    /// With `uncertainty` on the twin: the amplitude study's levels \[% of i_sat\], each a
+    /// repetition of the identification design at that peak level and every speed, whose plant
+    /// FRFs with the identification level's give the uncertainty's term (e) per entry (the best
+    /// linear approximation's shift from its extrapolation to zero amplitude; levels with
+    /// saturated samples are left out). Default with `uncertainty = true`:
+    /// [`DEFAULT_MACHINE_AMPLITUDE_LEVELS_PCT`] (5 and 16 %); `[]` runs no study (the bound
+    /// then holds the best linear approximation at `level_pct`, not the small-signal plant).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub amplitude_levels_pct: Option<Vec<f64>>,
     /// The whole-machine gray box per speed (default: off): $k_i$, $k_x$ of every axis' magnet,
     /// the bending mode and its shape with 95 % intervals from the measured 4×4 plant FRF
     /// (`ambid_core::estimate::graybox::fit_machine_physical`, docs/physical.md "The whole
@@ -150,6 +165,7 @@ impl Default for MachineSection {
             files: Vec::new(),
             models: "none".into(),
             uncertainty: false,
+            amplitude_levels_pct: None,
         }
     }
 }
@@ -203,6 +219,26 @@ impl MachineSection {
         self.speeds_rpm
             .clone()
             .unwrap_or_else(|| DEFAULT_MACHINE_SPEEDS_RPM.to_vec())
+    }
+
+    /// The amplitude study's levels \[% of i_sat\] (`amplitude_levels_pct`): as given, else
+    /// [`DEFAULT_MACHINE_AMPLITUDE_LEVELS_PCT`] on the twin with `uncertainty = true`, else none.
+    ///
+    /// ```
+    /// use ambid::config::MachineSection;
+    /// let mut m = MachineSection { models: "fit".into(), uncertainty: true, ..Default::default() };
+    /// assert_eq!(m.amplitude_levels(), vec![5.0, 16.0]);
+    /// m.amplitude_levels_pct = Some(vec![]);
+    /// assert!(m.amplitude_levels().is_empty());
+    /// ```
+    pub fn amplitude_levels(&self) -> Vec<f64> {
+        match &self.amplitude_levels_pct {
+            Some(v) => v.clone(),
+            None if self.uncertainty && self.files.is_empty() => {
+                DEFAULT_MACHINE_AMPLITUDE_LEVELS_PCT.to_vec()
+            }
+            None => Vec::new(),
+        }
     }
 
     /// Whether the data are recorded files (else the twin).
@@ -260,6 +296,48 @@ impl MachineSection {
                 "machine.uncertainty = true needs a model: set machine.models = \"fit\" (or \"fit-all\")"
                     .into(),
             );
+        }
+        if let Some(levels) = &self.amplitude_levels_pct {
+            if !self.files.is_empty() && !levels.is_empty() {
+                return Err(
+                    "machine.amplitude_levels_pct runs the amplitude study on the twin; recorded \
+                     files at several levels are not read yet — remove amplitude_levels_pct (the \
+                     bound then has no term (e))"
+                        .into(),
+                );
+            }
+            if !self.uncertainty && !levels.is_empty() {
+                return Err(
+                    "machine.amplitude_levels_pct feeds the uncertainty bound's term (e): set \
+                     machine.uncertainty = true, or remove amplitude_levels_pct"
+                        .into(),
+                );
+            }
+            if let Some(l) = levels
+                .iter()
+                .find(|l| !(l.is_finite() && **l > 0.0 && **l <= 100.0))
+            {
+                return Err(format!(
+                    "machine.amplitude_levels_pct has {}: every level must be in (0, 100] % of \
+                     i_sat, e.g. [5, 16]",
+                    fmt_num(*l)
+                ));
+            }
+            let mut sorted = levels.clone();
+            sorted.push(self.level_pct);
+            sorted.sort_by(f64::total_cmp);
+            if sorted.windows(2).any(|w| w[0] == w[1]) {
+                return Err(format!(
+                    "machine.amplitude_levels_pct = [{}] repeats a level or the identification \
+                     level level_pct = {}: give levels other than it and each once, e.g. [5, 16]",
+                    levels
+                        .iter()
+                        .map(|v| fmt_num(*v))
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                    fmt_num(self.level_pct)
+                ));
+            }
         }
         if self.physical && !self.files.is_empty() {
             if self.drawing.is_none() {

@@ -812,3 +812,71 @@ fn the_workflow_estimates_every_axis_magnet_from_files() {
     };
     assert!(e.contains("mass_kg") && e.contains("bad.toml"), "{e}");
 }
+
+/// Issue 23, term (e) for the machine: on the nominal *nonlinear* twin at 15 000 rpm (seed 7,
+/// short records) the bound without an amplitude study holds the best linear approximation at
+/// the identification level, and its norm covers the twin's exact linearisation on fewer than
+/// 95 % of the 10–1000 Hz lines (92.1 % measured); with the default study (5 and 16 % of i_sat
+/// beside the identification level's 10 %) every entry has term (e) and the bound and the
+/// structured weight cover it on ≥ 95 % (100 % measured), and the robust margins stay within
+/// the exact loop's. The report names the levels.
+#[test]
+fn the_machine_amplitude_study_bounds_the_small_signal_plant() {
+    let run = |levels: &str| {
+        let c = cfg(&format!(
+            "seed = 7\n[machine]\nspeeds_rpm = [15000]\nmode = \"nonlinear\"\nprbs_order = 8\nperiods = 6\nmodels = \"fit\"\nuncertainty = true\n{levels}"
+        ));
+        ambid::workflow::run(&c, Path::new("."), &mut Progress::new(Verbosity::Quiet)).unwrap()
+    };
+    let (bare, with) = (run("amplitude_levels_pct = []\n"), run(""));
+    let row = |o: &ambid::workflow::Outcome| o.summary["machine"]["uncertainty"][0].clone();
+    let (b, w) = (row(&bare), row(&with));
+    eprintln!("without: {b}\nwith: {w}");
+    assert!(b.get("amplitude_levels_pct").is_none(), "{b}");
+    assert!(b["truth_coverage"].as_f64().unwrap() < 0.95, "{b}");
+    assert!(bare
+        .report
+        .to_html()
+        .contains("No amplitude study at 15000 rpm"));
+    let levels: Vec<f64> = w["amplitude_levels_pct"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert_eq!(levels, vec![5.0, 10.0, 16.0], "{w}");
+    assert!(w["truth_coverage"].as_f64().unwrap() >= 0.95, "{w}");
+    assert!(w["weight_truth_coverage"].as_f64().unwrap() >= 0.95, "{w}");
+    // conservative margins: inside the exact loop's gain interval
+    let pair = |v: &serde_json::Value| -> Vec<f64> {
+        v.as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect()
+    };
+    let e = pair(&w["exact_gain_margins"]);
+    for key in ["gain_margins", "weight_gain_margins"] {
+        let g = pair(&w[key]);
+        assert!(
+            g[0] >= e[0] * (1.0 - 1e-3) && g[1] <= e[1] * (1.0 + 1e-3) && g[0] < 1.0 && g[1] > 1.0,
+            "{key}: {w}"
+        );
+    }
+    assert!(with.report.to_html().contains("5, 10, 16: "));
+    // levels on recorded files are refused with the reason
+    let bad = WorkflowConfig::from_toml_str(
+        "[machine]\nmodels = \"fit\"\nuncertainty = true\namplitude_levels_pct = [5, 16]\n[[machine.files]]\nspeed_rpm = 0\npath = \"a\"\n",
+        Path::new("wf.toml"),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(bad.contains("not read yet"), "{bad}");
+    let bad = WorkflowConfig::from_toml_str(
+        "[machine]\nmodels = \"fit\"\nuncertainty = true\namplitude_levels_pct = [5, 10]\n",
+        Path::new("wf.toml"),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(bad.contains("identification level level_pct = 10"), "{bad}");
+}

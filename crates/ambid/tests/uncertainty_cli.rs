@@ -574,23 +574,31 @@ fn uncertainty_on_a_4x4_frf_bounds_a_machine_model() {
         })
         .expect("the workflow's model JSON");
     let model = model.to_str().unwrap().to_string();
-    ok(&[
-        "simulate",
-        "--axes",
-        "4",
-        "--config",
-        &d("rig9.toml"),
-        "--speed-rpm",
-        "9000",
-        "--seed",
-        "5",
-        "--out",
-        &d("sim4"),
-    ]);
-    let mut frf = vec!["frf".to_string()];
-    frf.extend((1..=4).map(|e| d(&format!("sim4/exp{e}/data.csv"))));
-    frf.extend(["--out".into(), d("frf4.csv")]);
-    ok(&frf.iter().map(String::as_str).collect::<Vec<_>>());
+    // the 4-axis experiments of rig 9 at 9 000 rpm (noise seed `seed`, excitation level `level`
+    // % of i_sat) and their 4×4 FRF `frf4<tag>.csv`
+    let sim4 = |seed: &str, level: &str, tag: &str| {
+        let out = d(&format!("sim4{tag}"));
+        ok(&[
+            "simulate",
+            "--axes",
+            "4",
+            "--config",
+            &d("rig9.toml"),
+            "--speed-rpm",
+            "9000",
+            "--seed",
+            seed,
+            "--level",
+            level,
+            "--out",
+            &out,
+        ]);
+        let mut frf = vec!["frf".to_string()];
+        frf.extend((1..=4).map(|e| format!("{out}/exp{e}/data.csv")));
+        frf.extend(["--out".into(), d(&format!("frf4{tag}.csv"))]);
+        ok(&frf.iter().map(String::as_str).collect::<Vec<_>>());
+    };
+    sim4("5", "10", "");
     let base = [
         "uncertainty".to_string(),
         d("frf4.csv"),
@@ -655,10 +663,58 @@ fn uncertainty_on_a_4x4_frf_bounds_a_machine_model() {
     for f in ["uncertain.m", "uncertain.mat", "uncertain.npz"] {
         assert!(dir.join("unc").join(f).exists(), "{f}");
     }
+    // term (e): the same design at 5 and 16 % of i_sat (other noise seeds), with the nominal
+    // FRF at 10 %: every entry's bound holds the shift, the levels are reported, and the
+    // margins stay inside the exact ones (the configuration's linearisation)
+    sim4("6", "5", "_5");
+    sim4("7", "16", "_16");
+    let (a5, a16) = (
+        format!("5={}", d("frf4_5.csv")),
+        format!("16={}", d("frf4_16.csv")),
+    );
+    let o = run(&[
+        "--amplitude",
+        &a5,
+        "--amplitude",
+        &a16,
+        "--level",
+        "10",
+        "--out",
+        &d("unc_e"),
+    ]);
+    let t = text(&o);
+    println!("{t}");
+    assert!(
+        o.status.success() && t.contains("term (e) from the levels 5, 10, 16"),
+        "{t}"
+    );
+    let je: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("unc_e/summary.json")).unwrap())
+            .unwrap();
+    let ue = &je["uncertainty"];
+    assert_eq!(
+        ue["amplitude_levels_pct"],
+        serde_json::json!([5.0, 10.0, 16.0])
+    );
+    assert!(f(&ue["amplitude_median_rel_pct"]) >= 0.0, "{ue}");
+    assert!(f(&ue["weight_truth_coverage"]) >= 0.95, "{ue}");
+    assert!(
+        f(&ue["truth_coverage"]) >= f(&u["truth_coverage"]) - 0.02,
+        "{ue}"
+    );
+    for key in ["gain_margins", "weight_gain_margins"] {
+        let (glo, ghi) = (f(&ue[key][0]), f(&ue[key][1]));
+        assert!(glo >= lo && ghi <= hi, "{key} with (e): {glo}…{ghi}");
+    }
     // refused, nothing written
     for (extra, says) in [
         (vec!["--controller", "c.toml"], "--controller"),
         (vec!["--weight-shape", "mode"], "--weight-shape"),
+        (vec!["--level", "10"], "--level without --amplitude"),
+        (
+            vec!["--amplitude", a5.as_str()],
+            "--amplitude needs --level",
+        ),
     ] {
         let mut e = extra.clone();
         let out = d("unc_bad");

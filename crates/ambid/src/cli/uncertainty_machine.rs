@@ -4,7 +4,9 @@
 //! (one stable minimum-phase weight of order ≤ 4 per entry); the robust stability of the four
 //! decentralised controllers against the bound on the lines and against the weight, with the
 //! robust gain margins; the uncertain model exported for MATLAB and Python (docs/uncertainty.md,
-//! "MIMO entries"; the same computation as the workflow's `[machine] uncertainty`).
+//! "MIMO entries"; the same computation as the workflow's `[machine] uncertainty`). With
+//! `--amplitude LEVEL=FRF … --level L` every entry's bound has term (e), from the 4×4 FRFs of the
+//! same design at other excitation levels.
 
 use super::common::machine_base;
 use super::uncertainty::UncertaintyArgs;
@@ -15,8 +17,8 @@ use ambid::io::export::uncertain_matrix::{
     uncertain_matrix_npz_bytes,
 };
 use ambid::io::OutputSet;
-use ambid::workflow::machine::read_machine_frf;
-use ambid::workflow::machine_fit::{fit_band, speed_uncertainty};
+use ambid::workflow::machine::{read_machine_frf, LevelFrf};
+use ambid::workflow::machine_fit::{fit_band, speed_uncertainty, AmplitudeStudy};
 use ambid_core::data::AXES;
 use ambid_core::validate::weight::{WeightShape, DEFAULT_COVER, MAX_WEIGHT_ORDER};
 use ambid_twin::Machine;
@@ -54,10 +56,6 @@ fn single_axis_options(a: &UncertaintyArgs) -> Vec<&'static str> {
         "--fs (the file's fs_hz column gives the sample rate)",
     );
     refuse(!a.operating.is_empty(), "--operating");
-    refuse(
-        !a.amplitude.is_empty() || a.level.is_some(),
-        "--amplitude/--level",
-    );
     refuse(a.nonlinear.is_some(), "--nonlinear");
     refuse(a.line_coverage != 0.95, "--line-coverage");
     refuse(a.max_order != MAX_WEIGHT_ORDER, "--max-order");
@@ -74,7 +72,7 @@ pub fn uncertainty_machine(a: &UncertaintyArgs) -> Result<()> {
     let refused = single_axis_options(a);
     if !refused.is_empty() {
         return Err(Error::usage(format!(
-            "{} do(es) not apply to a 4×4 matrix FRF: the MIMO bound takes terms (a) and (b) with the defaults (line coverage 0.95, weights of order ≤ {MAX_WEIGHT_ORDER} over {} of each entry's lines, raised for 95 % of the error draws; docs/uncertainty.md, \"MIMO entries\")",
+            "{} do(es) not apply to a 4×4 matrix FRF: the MIMO bound takes terms (a), (b) and with --amplitude (e), with the defaults (line coverage 0.95, weights of order ≤ {MAX_WEIGHT_ORDER} over {} of each entry's lines, raised for 95 % of the error draws; docs/uncertainty.md, \"MIMO entries\")",
             refused.join(", "),
             DEFAULT_COVER
         ))
@@ -143,6 +141,40 @@ pub fn uncertainty_machine(a: &UncertaintyArgs) -> Result<()> {
             " (the precise lines of the plant in 10–1000 Hz, as the [machine] fit's)"
         }
     );
+    // term (e): the other levels' 4×4 FRFs, with the nominal FRF at --level (the level's unit
+    // cancels: only the ratios of the squared levels enter)
+    let levels = match (a.amplitude.is_empty(), a.level) {
+        (true, None) => Vec::new(),
+        (true, Some(_)) => {
+            return Err(Error::usage(
+                "--level without --amplitude: give the other levels' 4×4 FRFs as --amplitude LEVEL=FRF, or leave out --level",
+            )
+            .into())
+        }
+        (false, None) => {
+            return Err(Error::usage(
+                "--amplitude needs --level, the nominal FRF's excitation level in the same unit",
+            )
+            .into())
+        }
+        (false, Some(_)) => a
+            .amplitude
+            .iter()
+            .map(|(l, path)| {
+                let m = read_machine_frf(path, speed)?;
+                Ok(LevelFrf {
+                    level_pct: *l,
+                    plant: m.frf.plant,
+                    // a file does not say whether its record saturated: the user's to check
+                    saturated_fraction: 0.0,
+                })
+            })
+            .collect::<Result<Vec<_>>>()?,
+    };
+    let study = a.level.map(|level_pct| AmplitudeStudy {
+        level_pct,
+        levels: &levels,
+    });
     let row = speed_uncertainty(
         speed,
         plant,
@@ -150,8 +182,21 @@ pub fn uncertainty_machine(a: &UncertaintyArgs) -> Result<()> {
         &model,
         controller,
         Some(machine.plant()),
+        study.as_ref(),
     )
     .map_err(|e| Error::computation(format!("the MIMO uncertainty: {e}")))?;
+    if let Some(n) = &row.amplitude_note {
+        return Err(Error::input(format!("--amplitude: {n}")).into());
+    }
+    if let (Some(l), Some(m)) = (&row.amplitude_levels_pct, row.amplitude_median_rel_pct) {
+        println!(
+            "term (e) from the levels {}: median σ̄(E)/σ̄(P̂) {m:.2} %",
+            l.iter()
+                .map(|v| format!("{v}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
     let export = row
         .export
         .as_ref()

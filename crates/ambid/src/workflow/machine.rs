@@ -61,6 +61,24 @@ pub struct SpeedMeasurement {
     pub sync_removed_hz: Option<f64>,
     /// Samples per period of the excitation (0 when read from an FRF file).
     pub period_samples: usize,
+    /// The excitation's peak level \[% of i_sat\] (the twin's `level_pct`; recorded files:
+    /// unknown).
+    pub level_pct: Option<f64>,
+    /// The amplitude study at this speed (`[machine] amplitude_levels_pct`; empty without one).
+    pub amplitude: Vec<LevelFrf>,
+}
+
+/// The plant FRF of the identification design repeated at another excitation level (the
+/// machine's amplitude study, term (e) of the uncertainty).
+#[derive(Debug, Clone)]
+pub struct LevelFrf {
+    /// Peak level \[% of i_sat\].
+    pub level_pct: f64,
+    /// The 4×4 plant FRF (per-entry variances), on the identification FRF's lines.
+    pub plant: Frd,
+    /// The largest fraction of samples where an axis' controller output hit ±i_sat, over the
+    /// axes and experiments (0: no saturation).
+    pub saturated_fraction: f64,
 }
 
 /// The twin's exact model at one speed (source = twin).
@@ -270,6 +288,16 @@ pub struct UncertaintyRow {
     /// Twin: the fraction of the lines in 10–1000 Hz where ‖ |P̂|∘|W| ‖₂ ≥ σ̄(P − P̂).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub weight_truth_coverage: Option<f64>,
+    /// The amplitude study's levels whose plant FRFs gave term (e) \[% of i_sat\], the
+    /// identification level among them (absent: no study, or the term was left out).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub amplitude_levels_pct: Option<Vec<f64>>,
+    /// Term (e)'s size: the median over the lines of σ̄(|E|)/σ̄(P̂) \[%\].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub amplitude_median_rel_pct: Option<f64>,
+    /// Why term (e) was left out, when an amplitude study ran but gave no term.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub amplitude_note: Option<String>,
     /// The uncertain model for export (`models/<model>_uncertain.{json,m,mat,npz}`).
     #[serde(skip)]
     pub export: Option<Box<crate::io::export::uncertain_matrix::UncertainMatrixModel>>,
@@ -816,6 +844,7 @@ pub fn acquire_twin_config(
     for ((k, _), r) in jobs.iter().zip(recs) {
         per_speed[*k].push(r?);
     }
+    let mut studies = amplitude_study(m, &machines, &speeds, &settle, mode, seed)?;
     // the measurements, and beside them the true loops' peak sensitivities (a dense frequency
     // grid each)
     let (measured, peaks): (Vec<Result<Measured, Error>>, Vec<Result<_, Error>>) = rayon::join(
@@ -846,6 +875,8 @@ pub fn acquire_twin_config(
             source: "twin".into(),
             sync_removed_hz: sync,
             period_samples: period,
+            level_pct: Some(m.level_pct),
+            amplitude: std::mem::take(&mut studies[out.len()]),
         });
         truth.push(SpeedTruth {
             speed_rpm,
@@ -861,6 +892,83 @@ pub fn acquire_twin_config(
         mode: Some(mode),
         ts,
     })
+}
+
+/// The amplitude study on the twin (`[machine] amplitude_levels_pct`): the identification design
+/// at each level and every speed of `machines`, each experiment from its own seed (level $l$:
+/// the experiments' seeds of base seed `seed` + 7 919 (l + 1)); per speed the levels' plant FRFs
+/// in increasing level, with their saturated fractions. No level: empty lists.
+fn amplitude_study(
+    m: &MachineSection,
+    machines: &[Machine],
+    speeds: &[f64],
+    settle: &[usize],
+    mode: Mode,
+    seed: u64,
+) -> Result<Vec<Vec<LevelFrf>>, Error> {
+    let mut levels = m.amplitude_levels();
+    levels.sort_by(f64::total_cmp);
+    let mut out: Vec<Vec<LevelFrf>> = vec![Vec::new(); machines.len()];
+    let Some(first) = machines.first() else {
+        return Ok(out);
+    };
+    for (l, &pct) in levels.iter().enumerate() {
+        let at = MachineSection {
+            level_pct: pct,
+            ..m.clone()
+        };
+        let design = machine_design(&at, first.ts(), first.i_sat())?;
+        let exc = design.generate(first.ts())?;
+        let period = design.base.period_samples()?;
+        let samples = exc.samples();
+        let base = seed.wrapping_add(7919 * (l as u64 + 1));
+        let jobs: Vec<(usize, usize)> = (0..machines.len())
+            .flat_map(|k| (0..exc.n_experiments()).map(move |e| (k, e)))
+            .collect();
+        let recs: Vec<Result<(IoData, f64), Error>> = jobs
+            .par_iter()
+            .map(|&(k, e)| {
+                let r = &samples[e];
+                let opts = MachineSimOptions {
+                    mode,
+                    seed: experiment_seed(base, k, e),
+                    noise: m.noise,
+                    w: None,
+                    settle_samples: settle[k],
+                };
+                let rec = machines[k].simulate([&r[0], &r[1], &r[2], &r[3]], &opts)?;
+                let sat = rec
+                    .meta
+                    .saturated_fraction
+                    .iter()
+                    .fold(0.0f64, |a, b| a.max(*b));
+                Ok((rec.to_iodata(Some(period))?, sat))
+            })
+            .collect();
+        let mut per_speed: Vec<(Vec<IoData>, f64)> = vec![(Vec::new(), 0.0); machines.len()];
+        for ((k, _), r) in jobs.iter().zip(recs) {
+            let (rec, sat) = r?;
+            per_speed[*k].0.push(rec);
+            per_speed[*k].1 = per_speed[*k].1.max(sat);
+        }
+        let plants: Vec<Result<LevelFrf, Error>> = per_speed
+            .into_par_iter()
+            .zip(speeds.par_iter())
+            .map(|((recs, sat), &s)| {
+                let what = format!("the twin's amplitude study at {s} rpm, {pct} % of i_sat");
+                let (frf, _, _) = measure(recs, period, m, s, &what)?;
+                Ok(LevelFrf {
+                    level_pct: pct,
+                    plant: frf.plant,
+                    saturated_fraction: sat,
+                })
+            })
+            .collect();
+        for (k, p) in plants.into_iter().enumerate() {
+            out[k].push(p?);
+        }
+    }
+    Ok(out)
 }
 
 /// Reads the recorded experiments of `[[machine.files]]`.
@@ -986,6 +1094,8 @@ fn read_experiment_dir(
         source: what,
         sync_removed_hz: sync,
         period_samples: period,
+        level_pct: None,
+        amplitude: Vec::new(),
     })
 }
 
@@ -1079,6 +1189,8 @@ pub fn read_machine_frf(path: &Path, speed_rpm: f64) -> Result<SpeedMeasurement,
         source: path.display().to_string(),
         sync_removed_hz: None,
         period_samples: 0,
+        level_pct: None,
+        amplitude: Vec::new(),
     })
 }
 

@@ -108,8 +108,8 @@
 //!   planar at standstill.
 
 use super::machine::{
-    AxisValidationRow, ComparisonRow, IsoRow, MachineModelInput, MachineModelOutput, MachineModels,
-    ModePoint, SpeedMeasurement, SpeedModel, UncertaintyRow,
+    AxisValidationRow, ComparisonRow, IsoRow, LevelFrf, MachineModelInput, MachineModelOutput,
+    MachineModels, ModePoint, SpeedMeasurement, SpeedModel, UncertaintyRow,
 };
 use crate::error::Error;
 use ambid_core::data::{IoData, AXES};
@@ -181,6 +181,95 @@ impl Default for FrequencyFitter {
     }
 }
 
+/// The amplitude study of one speed for the uncertainty's term (e): the identification
+/// experiment's level \[% of i_sat\] and the plant FRFs at the study's other levels.
+#[derive(Debug, Clone, Copy)]
+pub struct AmplitudeStudy<'a> {
+    /// The identification experiment's peak level \[% of i_sat\].
+    pub level_pct: f64,
+    /// The study's levels (any order; those with saturated samples are left out).
+    pub levels: &'a [LevelFrf],
+}
+
+/// Term (e) of every entry of a MIMO model (`ambid::uncertainty::amplitude_term` entry by
+/// entry, the SISO rule on the channel $(i, j)$): the model `model`'s entry against the
+/// identification plant FRF's entry `plant` (the fit's lines, the term's lines) at
+/// `study.level_pct` and the study's levels' entries on the same lines; levels with saturated
+/// samples are left out (clipping is not the smooth distortion the $a^2$ rule extrapolates).
+/// Returns the terms in the order of `MatrixUncertainty::entries` (column-major) and the levels
+/// used \[%\], the identification level among them.
+///
+/// # Errors
+/// The reason as text: fewer than two levels without saturation, FRFs on other lines, an entry
+/// whose term cannot be computed (named).
+pub fn amplitude_terms(
+    model: &StateSpace,
+    plant: &Frd,
+    study: &AmplitudeStudy<'_>,
+) -> Result<(Vec<Vec<f64>>, Vec<f64>), String> {
+    let (Some(&lo), Some(&hi)) = (plant.f_hz().first(), plant.f_hz().last()) else {
+        return Err("the FRF has no line".into());
+    };
+    let mut levels: Vec<(f64, Frd)> = Vec::with_capacity(study.levels.len() + 1);
+    let mut saturated = Vec::new();
+    for l in study.levels {
+        if l.saturated_fraction > 0.0 {
+            saturated.push(format!(
+                "{} % ({:.2e} of the samples saturated)",
+                l.level_pct, l.saturated_fraction
+            ));
+            continue;
+        }
+        let g = l.plant.band(lo, hi).map_err(|e| e.to_string())?;
+        if g.f_hz() != plant.f_hz() {
+            return Err(format!(
+                "the FRF at {} % is on other lines than the identification FRF's",
+                l.level_pct
+            ));
+        }
+        levels.push((l.level_pct / 100.0, g));
+    }
+    levels.push((study.level_pct / 100.0, plant.clone()));
+    levels.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let used: Vec<f64> = levels.iter().map(|l| 100.0 * l.0).collect();
+    if levels.len() < 2 {
+        return Err(format!(
+            "only the identification level is left{}; term (e) needs a second level without saturation — lower the study's levels",
+            if saturated.is_empty() {
+                String::new()
+            } else {
+                format!(" (left out: {})", saturated.join(", "))
+            }
+        ));
+    }
+    let line_coverage =
+        ambid_core::validate::uncertainty::UncertaintyOptions::default().line_coverage;
+    let (ny, nu) = (plant.ny(), plant.nu());
+    let mut terms = Vec::with_capacity(ny * nu);
+    for j in 0..nu {
+        for i in 0..ny {
+            let at: Vec<(f64, Frd)> = levels
+                .iter()
+                .map(|(a, g)| g.entry(i, j).map(|e| (*a, e)))
+                .collect::<Result<_, _>>()
+                .map_err(|e| e.to_string())?;
+            let refs: Vec<(f64, &Frd)> = at.iter().map(|(a, g)| (*a, g)).collect();
+            let entry = model.entry(i, j).map_err(|e| e.to_string())?;
+            terms.push(
+                crate::uncertainty::amplitude_term(
+                    &refs,
+                    study.level_pct / 100.0,
+                    plant.f_hz(),
+                    &entry,
+                    line_coverage,
+                )
+                .map_err(|e| format!("entry (output {i}, input {j}): {e}"))?,
+            );
+        }
+    }
+    Ok((terms, used))
+}
+
 /// The chosen model's uncertainty at one speed ([`UncertaintyRow`]): the element-wise bound of
 /// `uncertainty_matrix` on the measured plant FRF's lines in the fit's band `band`, raised by
 /// [`MatrixUncertainty::joint_raise`](ambid_core::validate::uncertainty::MatrixUncertainty::joint_raise)
@@ -190,7 +279,9 @@ impl Default for FrequencyFitter {
 /// robust stability against it on
 /// the dense grid (`MatrixWeight::EntryRelative`), kept with the bound for export; with the
 /// twin's exact model `truth`, its gain interval and the coverage of σ̄(P − P̂) on the lines in
-/// 10–1000 Hz by the bound and by the weights.
+/// 10–1000 Hz by the bound and by the weights. With an amplitude study `amplitude`, every
+/// entry's bound has term (e) ([`amplitude_terms`]); when it cannot be computed the row says
+/// why and the bound goes on without it.
 ///
 /// # Errors
 /// The reason as text (the FRF has no variance on a line, the model is singular on a line, …).
@@ -201,17 +292,33 @@ pub fn speed_uncertainty(
     model: &StateSpace,
     controller: &StateSpace,
     truth: Option<&StateSpace>,
+    amplitude: Option<&AmplitudeStudy<'_>>,
 ) -> Result<UncertaintyRow, String> {
     use ambid_core::validate::robust::{
         nominal_gain_interval, robust_stability_matrix_on_lines, robust_stability_matrix_weight,
         LineBound, MatrixWeight,
     };
-    use ambid_core::validate::uncertainty::{uncertainty_matrix, EntryForm, UncertaintyOptions};
+    use ambid_core::validate::uncertainty::{
+        uncertainty_matrix, EntryForm, ExtraTerms, UncertaintyOptions,
+    };
     use ambid_core::validate::weight::{Weight, WeightShape, DEFAULT_COVER, MAX_WEIGHT_ORDER};
     let err = |e: ambid_core::Error| e.to_string();
     let frd = plant.band(band.0, band.1).map_err(err)?;
+    let (amp, amplitude_note) = match amplitude.map(|a| amplitude_terms(model, &frd, a)) {
+        None => (None, None),
+        Some(Ok(t)) => (Some(t), None),
+        Some(Err(e)) => (None, Some(format!("term (e) left out: {e}"))),
+    };
+    let extra: Vec<ExtraTerms<'_>> = amp.as_ref().map_or_else(Vec::new, |(t, _)| {
+        t.iter()
+            .map(|e| ExtraTerms {
+                amplitude_shift: Some(e.as_slice()),
+                ..ExtraTerms::default()
+            })
+            .collect()
+    });
     let mut u =
-        uncertainty_matrix(model, &frd, &[], &UncertaintyOptions::default()).map_err(err)?;
+        uncertainty_matrix(model, &frd, &extra, &UncertaintyOptions::default()).map_err(err)?;
     let raise = u
         .joint_raise(DEFAULT_COVER, 0.95, 2000, 0)
         .map_err(err)?
@@ -233,6 +340,22 @@ pub fn speed_uncertainty(
         .map(|k| norm[k] / top(&u.nominal_at(k)))
         .collect();
     rel.sort_by(f64::total_cmp);
+    // term (e)'s size: the median over the lines of σ̄(|E|) / σ̄(P̂)
+    let amplitude_median_rel_pct = amp.as_ref().map(|(t, _)| {
+        let ny = model.noutputs();
+        let mut r: Vec<f64> = (0..f.len())
+            .map(|k| {
+                let e = faer::Mat::from_fn(ny, t.len() / ny, |i, j| t[i + j * ny][k]);
+                ambid_core::linalg::singular_values(e.as_ref())
+                    .ok()
+                    .and_then(|v| v.into_iter().reduce(f64::max))
+                    .unwrap_or(f64::NAN)
+                    / top(&u.nominal_at(k))
+            })
+            .collect();
+        r.sort_by(f64::total_cmp);
+        100.0 * r.get(r.len() / 2).copied().unwrap_or(f64::NAN)
+    });
     let bounds = u.bounds();
     let ts = model
         .ts()
@@ -317,6 +440,9 @@ pub fn speed_uncertainty(
         weight_mu_peak_hz: rw.mu_peak_hz,
         weight_gain_margins: margins(&rw),
         weight_truth_coverage,
+        amplitude_levels_pct: amp.map(|(_, l)| l),
+        amplitude_median_rel_pct,
+        amplitude_note,
         export: Some(Box::new(
             crate::io::export::uncertain_matrix::UncertainMatrixModel {
                 nominal: model.clone(),
@@ -1305,7 +1431,21 @@ impl MachineModels for FrequencyFitter {
                         .map(|(si, band, model)| {
                             let sp = &input.speeds[*si];
                             let truth = input.truth.and_then(|t| t.get(*si)).map(|t| &t.plant);
-                            speed_uncertainty(sp.speed_rpm, &sp.frf.plant, *band, model, ctl, truth)
+                            let study = sp.level_pct.filter(|_| !sp.amplitude.is_empty()).map(
+                                |level_pct| AmplitudeStudy {
+                                    level_pct,
+                                    levels: &sp.amplitude,
+                                },
+                            );
+                            speed_uncertainty(
+                                sp.speed_rpm,
+                                &sp.frf.plant,
+                                *band,
+                                model,
+                                ctl,
+                                truth,
+                                study.as_ref(),
+                            )
                                 .map_err(|e| format!("{} rpm: no uncertainty bound: {e}", sp.speed_rpm))
                         })
                         .collect();
@@ -1350,5 +1490,118 @@ impl MachineModels for FrequencyFitter {
         }
         let _ = AXES;
         Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{amplitude_terms, AmplitudeStudy};
+    use crate::workflow::machine::LevelFrf;
+    use ambid_core::lti::{Frd, StateSpace};
+    use faer::mat;
+
+    /// A 2×2 model, and its "measured" FRF at level `a` (fraction of i_sat) whose entry (0, 0)
+    /// is the best linear approximation $P_{00}(1 - a^2)$ and whose other entries do not move.
+    fn setup() -> (StateSpace, impl Fn(f64) -> Frd) {
+        let m = StateSpace::discrete(
+            mat![[0.9, 0.0], [0.0, 0.5]],
+            mat![[1.0, 0.3], [0.2, 1.0]],
+            mat![[0.1, 0.0], [0.0, 0.2]],
+            mat![[0.0, 0.0], [0.0, 0.0]],
+            1e-3,
+        )
+        .unwrap();
+        let f: Vec<f64> = (1..=60).map(|k| k as f64 * 5.0).collect();
+        let exact = Frd::from_model(&m, &f).unwrap();
+        let at = move |a: f64| {
+            let mut v = exact.values().to_vec();
+            for k in 0..f.len() {
+                v[4 * k] *= 1.0 - a * a;
+            }
+            let var: Vec<f64> = v.iter().map(|g| 1e-12 * g.norm_sqr()).collect();
+            Frd::new_matrix(f.clone(), 2, 2, v, Some(var), Some(1e-3)).unwrap()
+        };
+        (m, at)
+    }
+
+    #[test]
+    fn the_amplitude_term_of_each_entry_is_its_own_shift() {
+        let (m, at) = setup();
+        let levels = [
+            LevelFrf {
+                level_pct: 5.0,
+                plant: at(0.05),
+                saturated_fraction: 0.0,
+            },
+            LevelFrf {
+                level_pct: 20.0,
+                plant: at(0.2),
+                saturated_fraction: 0.0,
+            },
+        ];
+        let ident = at(0.1);
+        let study = AmplitudeStudy {
+            level_pct: 10.0,
+            levels: &levels,
+        };
+        let (terms, used) = amplitude_terms(&m, &ident, &study).unwrap();
+        assert_eq!(used, vec![5.0, 10.0, 20.0]);
+        assert_eq!(terms.len(), 4);
+        let p00 = m
+            .entry(0, 0)
+            .unwrap()
+            .freq_response_siso(ident.f_hz())
+            .unwrap();
+        // entry (0, 0): the BLA at 10 % lies 1 % below the small-signal plant (the model is
+        // the small-signal plant itself here, so the relative shift is 0.01 on every line, plus
+        // the quantile of a negligible noise)
+        for (k, p) in p00.iter().enumerate() {
+            let rel = terms[0][k] / p.norm();
+            assert!((rel - 0.01).abs() < 2e-4, "line {k}: {rel}");
+        }
+        // the entries that do not move have no term
+        for e in &terms[1..] {
+            assert!(e.iter().all(|x| *x == 0.0), "{e:?}");
+        }
+        // a saturated level is left out; the other one still gives the term
+        let sat = [
+            levels[0].clone(),
+            LevelFrf {
+                saturated_fraction: 1e-3,
+                ..levels[1].clone()
+            },
+        ];
+        let (t2, used2) = amplitude_terms(
+            &m,
+            &ident,
+            &AmplitudeStudy {
+                level_pct: 10.0,
+                levels: &sat,
+            },
+        )
+        .unwrap();
+        assert_eq!(used2, vec![5.0, 10.0]);
+        assert!((t2[0][30] / p00[30].norm() - 0.01).abs() < 2e-4);
+        // every study level saturated: no term, and the message says why
+        let all_sat: Vec<LevelFrf> = sat
+            .iter()
+            .map(|l| LevelFrf {
+                saturated_fraction: 0.01,
+                ..l.clone()
+            })
+            .collect();
+        let e = amplitude_terms(
+            &m,
+            &ident,
+            &AmplitudeStudy {
+                level_pct: 10.0,
+                levels: &all_sat,
+            },
+        )
+        .unwrap_err();
+        assert!(
+            e.contains("saturated") && e.contains("lower the study's levels"),
+            "{e}"
+        );
     }
 }
