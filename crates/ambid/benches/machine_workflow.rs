@@ -3,7 +3,8 @@
 //! section, defaults otherwise (0, 15 000, 30 000 rpm, the orthogonal PRBS design, n = 10, 5
 //! samples per bit, 12 periods per experiment, nonlinear twin with noise), and the same with
 //! `mode = "linear"`, with the MIMO fitter (`models = "fit"`), and with the fitter and the
-//! uncertainty bound with its structured weight (`uncertainty = true`, issue 23). Median of
+//! uncertainty bound with its structured weight (`uncertainty = true`, issue 23; its default
+//! amplitude study at 5 and 16 % of i_sat, and without it, `amplitude_levels_pct = []`). Median of
 //! `AMBID_BENCH_REPS` runs (default 5); `AMBID_BENCH_ONLY=<text>` runs only the workflows whose
 //! label contains the text. Prints a Markdown table for docs/benchmarks.md.
 //!
@@ -58,6 +59,10 @@ fn main() {
         (
             "[machine] models = \"fit\", uncertainty = true (3 speeds, nonlinear)",
             "[machine]\nmodels = \"fit\"\nuncertainty = true\n",
+        ),
+        (
+            "[machine] models = \"fit\", uncertainty = true, amplitude_levels_pct = [] (3 speeds, nonlinear)",
+            "[machine]\nmodels = \"fit\"\nuncertainty = true\namplitude_levels_pct = []\n",
         ),
     ] {
         if let Ok(only) = std::env::var("AMBID_BENCH_ONLY") {

@@ -455,7 +455,7 @@ pub fn uncertainty_weight_table(rows: &[super::machine::UncertaintyRow]) -> Tabl
                   those on the lines; on 100 random 4-axis rigs of the linear twin the loop was \
                   robustly stable against the weights on 99 and these margins were at least half \
                   the exact ones on 81; on rigs 1–100 of the nonlinear twin, with term (e), \
-                  NL_STABLE and NL_HALF (docs/uncertainty.md, \"Notches and the geometric-mean \
+                  94 and 60 (without it 94 and 72, but covering the small-signal plant on only 54) (docs/uncertainty.md, \"Notches and the geometric-mean \
                   choice\", \"Term (e) for the machine\")."
             .into(),
         header: [
