@@ -811,40 +811,23 @@ pub fn acquire_twin_config(
         .collect::<Result<Vec<_>, _>>()?;
     let ts = machines.first().map_or(5e-5, Machine::ts);
     let design = machine_design(m, ts, machines.first().map_or(1.0, Machine::i_sat))?;
-    let exc = design.generate(ts)?;
     let period = design.base.period_samples()?;
-    let n_exp = exc.n_experiments();
-    let samples = exc.samples();
-    let mut jobs = Vec::new();
-    for k in 0..machines.len() {
-        for e in 0..n_exp {
-            jobs.push((k, e));
-        }
-    }
     let settle = machines
         .iter()
         .map(|mc| settle_samples(mc, period))
         .collect::<Result<Vec<_>, _>>()?;
-    let recs: Vec<Result<IoData, Error>> = jobs
-        .par_iter()
-        .map(|&(k, e)| {
-            let r = &samples[e];
-            let opts = MachineSimOptions {
-                mode,
-                seed: experiment_seed(seed, k, e),
-                noise: m.noise,
-                w: None,
-                settle_samples: settle[k],
-            };
-            let rec = machines[k].simulate([&r[0], &r[1], &r[2], &r[3]], &opts)?;
-            Ok(rec.to_iodata(Some(period))?)
-        })
+    let twin = TwinRun {
+        machines: &machines,
+        settle: &settle,
+        mode,
+        noise: m.noise,
+    };
+    let per_speed: Vec<Vec<IoData>> = twin
+        .records(&design, ts, seed)?
+        .into_iter()
+        .map(|(r, _)| r)
         .collect();
-    let mut per_speed: Vec<Vec<IoData>> = vec![Vec::new(); machines.len()];
-    for ((k, _), r) in jobs.iter().zip(recs) {
-        per_speed[*k].push(r?);
-    }
-    let mut studies = amplitude_study(m, &machines, &speeds, &settle, mode, seed)?;
+    let mut studies = amplitude_study(m, &twin, &speeds, seed)?;
     // the measurements, and beside them the true loops' peak sensitivities (a dense frequency
     // grid each)
     let (measured, peaks): (Vec<Result<Measured, Error>>, Vec<Result<_, Error>>) = rayon::join(
@@ -894,35 +877,29 @@ pub fn acquire_twin_config(
     })
 }
 
-/// The amplitude study on the twin (`[machine] amplitude_levels_pct`): the identification design
-/// at each level and every speed of `machines`, each experiment from its own seed (level $l$:
-/// the experiments' seeds of base seed `seed` + 7 919 (l + 1)); per speed the levels' plant FRFs
-/// in increasing level, with their saturated fractions. No level: empty lists.
-fn amplitude_study(
-    m: &MachineSection,
-    machines: &[Machine],
-    speeds: &[f64],
-    settle: &[usize],
+/// The machines of a twin acquisition, one per speed, with their pre-rolls and physics.
+struct TwinRun<'a> {
+    machines: &'a [Machine],
+    settle: &'a [usize],
     mode: Mode,
-    seed: u64,
-) -> Result<Vec<Vec<LevelFrf>>, Error> {
-    let mut levels = m.amplitude_levels();
-    levels.sort_by(f64::total_cmp);
-    let mut out: Vec<Vec<LevelFrf>> = vec![Vec::new(); machines.len()];
-    let Some(first) = machines.first() else {
-        return Ok(out);
-    };
-    for (l, &pct) in levels.iter().enumerate() {
-        let at = MachineSection {
-            level_pct: pct,
-            ..m.clone()
-        };
-        let design = machine_design(&at, first.ts(), first.i_sat())?;
-        let exc = design.generate(first.ts())?;
+    noise: bool,
+}
+
+impl TwinRun<'_> {
+    /// The experiments of `design` on every machine (speeds and experiments in parallel,
+    /// experiment `e` at speed `k` from the noise seed `experiment_seed(seed, k, e)`, so the
+    /// numbers do not depend on the thread count): per speed the records and the largest
+    /// fraction of samples where an axis' controller output hit ±i_sat.
+    fn records(
+        &self,
+        design: &MultiInputDesign,
+        ts: f64,
+        seed: u64,
+    ) -> Result<Vec<(Vec<IoData>, f64)>, Error> {
+        let exc = design.generate(ts)?;
         let period = design.base.period_samples()?;
         let samples = exc.samples();
-        let base = seed.wrapping_add(7919 * (l as u64 + 1));
-        let jobs: Vec<(usize, usize)> = (0..machines.len())
+        let jobs: Vec<(usize, usize)> = (0..self.machines.len())
             .flat_map(|k| (0..exc.n_experiments()).map(move |e| (k, e)))
             .collect();
         let recs: Vec<Result<(IoData, f64), Error>> = jobs
@@ -930,13 +907,13 @@ fn amplitude_study(
             .map(|&(k, e)| {
                 let r = &samples[e];
                 let opts = MachineSimOptions {
-                    mode,
-                    seed: experiment_seed(base, k, e),
-                    noise: m.noise,
+                    mode: self.mode,
+                    seed: experiment_seed(seed, k, e),
+                    noise: self.noise,
                     w: None,
-                    settle_samples: settle[k],
+                    settle_samples: self.settle[k],
                 };
-                let rec = machines[k].simulate([&r[0], &r[1], &r[2], &r[3]], &opts)?;
+                let rec = self.machines[k].simulate([&r[0], &r[1], &r[2], &r[3]], &opts)?;
                 let sat = rec
                     .meta
                     .saturated_fraction
@@ -945,13 +922,42 @@ fn amplitude_study(
                 Ok((rec.to_iodata(Some(period))?, sat))
             })
             .collect();
-        let mut per_speed: Vec<(Vec<IoData>, f64)> = vec![(Vec::new(), 0.0); machines.len()];
+        let mut per_speed: Vec<(Vec<IoData>, f64)> = vec![(Vec::new(), 0.0); self.machines.len()];
         for ((k, _), r) in jobs.iter().zip(recs) {
             let (rec, sat) = r?;
             per_speed[*k].0.push(rec);
             per_speed[*k].1 = per_speed[*k].1.max(sat);
         }
-        let plants: Vec<Result<LevelFrf, Error>> = per_speed
+        Ok(per_speed)
+    }
+}
+
+/// The amplitude study on the twin (`[machine] amplitude_levels_pct`): the identification design
+/// at each level and every speed of `twin`, each experiment from its own seed (level $l$: the
+/// experiments' seeds of base seed `seed` + 7 919 (l + 1)); per speed the levels' plant FRFs in
+/// increasing level, with their saturated fractions. No level: empty lists.
+fn amplitude_study(
+    m: &MachineSection,
+    twin: &TwinRun<'_>,
+    speeds: &[f64],
+    seed: u64,
+) -> Result<Vec<Vec<LevelFrf>>, Error> {
+    let mut levels = m.amplitude_levels();
+    levels.sort_by(f64::total_cmp);
+    let mut out: Vec<Vec<LevelFrf>> = vec![Vec::new(); twin.machines.len()];
+    let Some(first) = twin.machines.first() else {
+        return Ok(out);
+    };
+    for (l, &pct) in levels.iter().enumerate() {
+        let at = MachineSection {
+            level_pct: pct,
+            ..m.clone()
+        };
+        let design = machine_design(&at, first.ts(), first.i_sat())?;
+        let period = design.base.period_samples()?;
+        let base = seed.wrapping_add(7919 * (l as u64 + 1));
+        let plants: Vec<Result<LevelFrf, Error>> = twin
+            .records(&design, first.ts(), base)?
             .into_par_iter()
             .zip(speeds.par_iter())
             .map(|((recs, sat), &s)| {
