@@ -20,7 +20,8 @@
 //! `SEED_PER_RIG=1` gives each rig its own noise realisation (base seed rig + 1000); without it
 //! every rig's experiments use the seeds derived from 1, i.e. the same noise sequences.
 //! `DUMP_ENTRIES=dir` writes `dir/rig<k>.txt`: per line the frequency, then for each entry
-//! (column-major) its relative bound $L_{ij}/|\hat P_{ij}|$ and its weight's magnitude.
+//! (column-major) its relative bound $L_{ij}/|\hat P_{ij}|$, its weight's magnitude and the true
+//! relative error $|P_{ij} - \hat P_{ij}|/|\hat P_{ij}|$.
 //!
 //! `LEVELS=none` runs no amplitude study (else the `[machine]` default with `uncertainty = true`:
 //! the design repeated at 5 and 16 % of i_sat, whose plant FRFs with the identification FRF give
@@ -427,10 +428,12 @@ fn main() {
                 for j in 0..4 {
                     for i in 0..4 {
                         let e = u.entry(i, j).expect("entry");
+                        let p = exact.at(k).expect("line")[(i, j)];
                         out.push_str(&format!(
-                            " {} {}",
+                            " {} {} {}",
                             e.additive[k] / e.nominal[k].norm(),
-                            wmags[i + j * 4][k]
+                            wmags[i + j * 4][k],
+                            (p - e.nominal[k]).norm() / e.nominal[k].norm()
                         ));
                     }
                 }

@@ -674,7 +674,9 @@ impl Default for IsoSection {
     }
 }
 
-pub use crate::config_machine::{MachineFile, MachineSection};
+pub use crate::config_machine::{
+    MachineFile, MachineSection, DEFAULT_MACHINE_AMPLITUDE_LEVELS_PCT,
+};
 
 /// A workflow file that could not be used.
 #[derive(Debug, thiserror::Error)]

@@ -454,7 +454,7 @@ pub fn uncertainty_weight_table(rows: &[super::machine::UncertaintyRow]) -> Tabl
                   narrow peaks at the lightly damped modes, so these margins are narrower than \
                   those on the lines; on 100 random 4-axis rigs of the linear twin the loop was \
                   robustly stable against the weights on 99 and these margins were at least half \
-                  the exact ones on 81; on rigs 1–100 of the nonlinear twin, with term (e), \
+                  the exact ones on 78 (with the amplitude study); on rigs 1–100 of the nonlinear twin, with term (e), \
                   94 and 60 (without it 94 and 72, but covering the small-signal plant on only 54) (docs/uncertainty.md, \"Notches and the geometric-mean \
                   choice\", \"Term (e) for the machine\")."
             .into(),
