@@ -838,45 +838,48 @@ fn the_machine_amplitude_study_bounds_the_small_signal_plant() {
         .report
         .to_html()
         .contains("No amplitude study at 15000 rpm"));
-    let levels: Vec<f64> = w["amplitude_levels_pct"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
-    assert_eq!(levels, vec![5.0, 10.0, 16.0], "{w}");
-    assert!(w["truth_coverage"].as_f64().unwrap() >= 0.95, "{w}");
-    assert!(w["weight_truth_coverage"].as_f64().unwrap() >= 0.95, "{w}");
-    // conservative margins: inside the exact loop's gain interval
-    let pair = |v: &serde_json::Value| -> Vec<f64> {
+    let floats = |v: &serde_json::Value| -> Vec<f64> {
         v.as_array()
             .unwrap()
             .iter()
             .map(|x| x.as_f64().unwrap())
             .collect()
     };
-    let e = pair(&w["exact_gain_margins"]);
+    assert_eq!(
+        floats(&w["amplitude_levels_pct"]),
+        vec![5.0, 10.0, 16.0],
+        "{w}"
+    );
+    assert!(w["truth_coverage"].as_f64().unwrap() >= 0.95, "{w}");
+    assert!(w["weight_truth_coverage"].as_f64().unwrap() >= 0.95, "{w}");
+    // conservative margins: inside the exact loop's gain interval
+    let e = floats(&w["exact_gain_margins"]);
     for key in ["gain_margins", "weight_gain_margins"] {
-        let g = pair(&w[key]);
+        let g = floats(&w[key]);
         assert!(
             g[0] >= e[0] * (1.0 - 1e-3) && g[1] <= e[1] * (1.0 + 1e-3) && g[0] < 1.0 && g[1] > 1.0,
             "{key}: {w}"
         );
     }
     assert!(with.report.to_html().contains("5, 10, 16: "));
-    // levels on recorded files are refused with the reason
-    let bad = WorkflowConfig::from_toml_str(
-        "[machine]\nmodels = \"fit\"\nuncertainty = true\namplitude_levels_pct = [5, 16]\n[[machine.files]]\nspeed_rpm = 0\npath = \"a\"\n",
-        Path::new("wf.toml"),
-    )
-    .unwrap_err()
-    .to_string();
-    assert!(bad.contains("not read yet"), "{bad}");
-    let bad = WorkflowConfig::from_toml_str(
-        "[machine]\nmodels = \"fit\"\nuncertainty = true\namplitude_levels_pct = [5, 10]\n",
-        Path::new("wf.toml"),
-    )
-    .unwrap_err()
-    .to_string();
-    assert!(bad.contains("identification level level_pct = 10"), "{bad}");
+    // levels on recorded files, or repeating the identification level, are refused with the
+    // reason
+    for (tail, says) in [
+        (
+            "amplitude_levels_pct = [5, 16]\n[[machine.files]]\nspeed_rpm = 0\npath = \"a\"\n",
+            "not read yet",
+        ),
+        (
+            "amplitude_levels_pct = [5, 10]\n",
+            "identification level level_pct = 10",
+        ),
+    ] {
+        let bad = WorkflowConfig::from_toml_str(
+            &format!("[machine]\nmodels = \"fit\"\nuncertainty = true\n{tail}"),
+            Path::new("wf.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(bad.contains(says), "{bad}");
+    }
 }
