@@ -11,9 +11,10 @@ use std::path::{Path, PathBuf};
 pub const MACHINE_DESIGNS: [&str; 3] = ["orthogonal", "sequential", "zipper"];
 
 /// The amplitude study's levels on the twin when `[machine] amplitude_levels_pct` is not given
-/// and `uncertainty = true` \[% of i_sat\]: with the identification level (`level_pct`, 10 by
-/// default) three levels for term (e), the plant's shift with the excitation amplitude
-/// (docs/uncertainty.md, "Term (e) for the machine").
+/// and `uncertainty = true` or `physical = true` \[% of i_sat\]: with the identification level
+/// (`level_pct`, 10 by default) three levels for term (e), the plant's shift with the
+/// excitation amplitude (docs/uncertainty.md, "Term (e) for the machine"), and for the physical
+/// parameters extrapolated to zero amplitude (docs/physical.md, "The whole machine").
 pub const DEFAULT_MACHINE_AMPLITUDE_LEVELS_PCT: [f64; 2] = [5.0, 16.0];
 
 /// The speeds of the twin when `[machine] speeds_rpm` is not given \[rpm\]: standstill, the
@@ -102,13 +103,15 @@ pub struct MachineSection {
     /// four controllers' robust stability against it on the fit's lines (default: off; about
     /// 3 s per speed, docs/uncertainty.md "MIMO entries").
     pub uncertainty: bool,
-    /// With `uncertainty` on the twin: the amplitude study's levels \[% of i_sat\], each a
-    /// repetition of the identification design at that peak level and every speed, whose plant
-    /// FRFs with the identification level's give the uncertainty's term (e) per entry (the best
-    /// linear approximation's shift from its extrapolation to zero amplitude; levels with
-    /// saturated samples are left out). Default with `uncertainty = true`:
-    /// [`DEFAULT_MACHINE_AMPLITUDE_LEVELS_PCT`] (5 and 16 %); `[]` runs no study (the bound
-    /// then holds the best linear approximation at `level_pct`, not the small-signal plant).
+    /// With `uncertainty` or `physical` on the twin: the amplitude study's levels \[% of
+    /// i_sat\], each a repetition of the identification design at that peak level and every
+    /// speed. Their plant FRFs with the identification level's give the uncertainty's term (e)
+    /// per entry (the best linear approximation's shift from its extrapolation to zero
+    /// amplitude) and the physical parameters extrapolated to zero amplitude (the small-signal
+    /// $k_x$ of a nonlinear magnet); levels with saturated samples are left out. Default with
+    /// `uncertainty = true` or `physical = true`: [`DEFAULT_MACHINE_AMPLITUDE_LEVELS_PCT`] (5
+    /// and 16 %); `[]` runs no study (the bound and the physical parameters then hold the best
+    /// linear approximation at `level_pct`, not the small-signal plant).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub amplitude_levels_pct: Option<Vec<f64>>,
     /// The whole-machine gray box per speed (default: off): $k_i$, $k_x$ of every axis' magnet,
@@ -222,7 +225,8 @@ impl MachineSection {
     }
 
     /// The amplitude study's levels \[% of i_sat\] (`amplitude_levels_pct`): as given, else
-    /// [`DEFAULT_MACHINE_AMPLITUDE_LEVELS_PCT`] on the twin with `uncertainty = true`, else none.
+    /// [`DEFAULT_MACHINE_AMPLITUDE_LEVELS_PCT`] on the twin with `uncertainty = true` or
+    /// `physical = true`, else none.
     ///
     /// ```
     /// use ambid::config::MachineSection;
@@ -230,11 +234,14 @@ impl MachineSection {
     /// assert_eq!(m.amplitude_levels(), vec![5.0, 16.0]);
     /// m.amplitude_levels_pct = Some(vec![]);
     /// assert!(m.amplitude_levels().is_empty());
+    /// let p = MachineSection { physical: true, ..Default::default() };
+    /// assert_eq!(p.amplitude_levels(), vec![5.0, 16.0]);
+    /// assert!(MachineSection::default().amplitude_levels().is_empty());
     /// ```
     pub fn amplitude_levels(&self) -> Vec<f64> {
         match &self.amplitude_levels_pct {
             Some(v) => v.clone(),
-            None if self.uncertainty && self.files.is_empty() => {
+            None if (self.uncertainty || self.physical) && self.files.is_empty() => {
                 DEFAULT_MACHINE_AMPLITUDE_LEVELS_PCT.to_vec()
             }
             None => Vec::new(),
@@ -306,10 +313,11 @@ impl MachineSection {
                         .into(),
                 );
             }
-            if !self.uncertainty && !levels.is_empty() {
+            if !self.uncertainty && !self.physical && !levels.is_empty() {
                 return Err(
-                    "machine.amplitude_levels_pct feeds the uncertainty bound's term (e): set \
-                     machine.uncertainty = true, or remove amplitude_levels_pct"
+                    "machine.amplitude_levels_pct feeds the uncertainty bound's term (e) and the \
+                     physical parameters at zero amplitude: set machine.uncertainty = true or \
+                     machine.physical = true, or remove amplitude_levels_pct"
                         .into(),
                 );
             }

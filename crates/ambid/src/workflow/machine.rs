@@ -66,6 +66,10 @@ pub struct SpeedMeasurement {
     pub level_pct: Option<f64>,
     /// The amplitude study at this speed (`[machine] amplitude_levels_pct`; empty without one).
     pub amplitude: Vec<LevelFrf>,
+    /// The largest fraction of samples where an axis' controller output hit ±i_sat in the
+    /// identification experiments, over the axes and experiments (the twin; recorded files:
+    /// unknown).
+    pub saturated_fraction: Option<f64>,
 }
 
 /// The plant FRF of the identification design repeated at another excitation level (the
@@ -822,11 +826,8 @@ pub fn acquire_twin_config(
         mode,
         noise: m.noise,
     };
-    let per_speed: Vec<Vec<IoData>> = twin
-        .records(&design, ts, seed)?
-        .into_iter()
-        .map(|(r, _)| r)
-        .collect();
+    let (per_speed, saturated): (Vec<Vec<IoData>>, Vec<f64>) =
+        twin.records(&design, ts, seed)?.into_iter().unzip();
     let mut studies = amplitude_study(m, &twin, &speeds, seed)?;
     // the measurements, and beside them the true loops' peak sensitivities (a dense frequency
     // grid each)
@@ -860,6 +861,7 @@ pub fn acquire_twin_config(
             period_samples: period,
             level_pct: Some(m.level_pct),
             amplitude: std::mem::take(&mut studies[out.len()]),
+            saturated_fraction: Some(saturated[out.len()]),
         });
         truth.push(SpeedTruth {
             speed_rpm,
@@ -1102,6 +1104,7 @@ fn read_experiment_dir(
         period_samples: period,
         level_pct: None,
         amplitude: Vec::new(),
+        saturated_fraction: None,
     })
 }
 
@@ -1197,6 +1200,7 @@ pub fn read_machine_frf(path: &Path, speed_rpm: f64) -> Result<SpeedMeasurement,
         period_samples: 0,
         level_pct: None,
         amplitude: Vec::new(),
+        saturated_fraction: None,
     })
 }
 
