@@ -4,7 +4,8 @@
 //! samples per bit, 12 periods per experiment, nonlinear twin with noise), and the same with
 //! `mode = "linear"`, with the MIMO fitter (`models = "fit"`), and with the fitter and the
 //! uncertainty bound with its structured weight (`uncertainty = true`, issue 23; its default
-//! amplitude study at 5 and 16 % of i_sat, and without it, `amplitude_levels_pct = []`). Median of
+//! amplitude study at 5 and 16 % of i_sat, and without it, `amplitude_levels_pct = []`), and the
+//! whole-machine gray box (`physical = true`, with the same default study and without it). Median of
 //! `AMBID_BENCH_REPS` runs (default 5); `AMBID_BENCH_ONLY=<text>` runs only the workflows whose
 //! label contains the text. Prints a Markdown table for docs/benchmarks.md.
 //!
@@ -63,6 +64,14 @@ fn main() {
         (
             "[machine] models = \"fit\", uncertainty = true, amplitude_levels_pct = [] (3 speeds, nonlinear)",
             "[machine]\nmodels = \"fit\"\nuncertainty = true\namplitude_levels_pct = []\n",
+        ),
+        (
+            "[machine] physical = true (3 speeds, nonlinear; the default study, parameters at zero amplitude)",
+            "[machine]\nphysical = true\n",
+        ),
+        (
+            "[machine] physical = true, amplitude_levels_pct = [] (3 speeds, nonlinear)",
+            "[machine]\nphysical = true\namplitude_levels_pct = []\n",
         ),
     ] {
         if let Ok(only) = std::env::var("AMBID_BENCH_ONLY") {
