@@ -419,6 +419,53 @@ fn main() {
                     .collect();
                 println!("     {}", row.join("  "));
             }
+            // at the μ peak itself (between lines, on the dense grid): the model's and the
+            // weights' magnitudes against the nearest line's, and the model's poles near it
+            let fp = on_w.mu_peak_hz;
+            let at_p = Frd::from_model(&model.model, &[fp, f[k]]).expect("model");
+            let (pp, pl) = (at_p.at(0).expect("p"), at_p.at(1).expect("l"));
+            let mut worst = (0.0, 0, 0);
+            for i in 0..4 {
+                for j in 0..4 {
+                    let w = &weights[i + j * 4];
+                    let (wp, wl) = (w.magnitude(&[fp])[0], w.magnitude(&[f[k]])[0]);
+                    let r = (pp[(i, j)].norm() * wp) / (pl[(i, j)].norm() * wl);
+                    if r > worst.0 {
+                        worst = (r, i, j);
+                    }
+                }
+            }
+            let (r, i, j) = worst;
+            let w = &weights[i + j * 4];
+            println!(
+                "  at {fp:.2} Hz: largest |P̂||W| over the line's, entry ({i},{j}): {r:.3e} (|P̂| {:.3e} / {:.3e}, |W| {:.3e} / {:.3e})",
+                pp[(i, j)].norm(),
+                pl[(i, j)].norm(),
+                w.magnitude(&[fp])[0],
+                w.magnitude(&[f[k]])[0]
+            );
+            let ts = data.ts;
+            let a = model.model.a();
+            let off = (0..a.nrows())
+                .flat_map(|i| (0..a.ncols()).map(move |j| (i, j)))
+                .filter(|&(i, j)| i.abs_diff(j) > 1 && a[(i, j)] != 0.0)
+                .count();
+            println!(
+                "    A {}×{}: {off} nonzero entries off the tridiagonal band",
+                a.nrows(),
+                a.ncols()
+            );
+            for z in model.model.poles().expect("poles") {
+                let sp = z.ln() / ts;
+                let fz = sp.norm() / (2.0 * std::f64::consts::PI);
+                if (fz / fp - 1.0).abs() < 0.2 {
+                    println!(
+                        "    model pole {fz:.2} Hz ζ {:.2e} |z| {:.6}",
+                        -sp.re / sp.norm(),
+                        z.norm()
+                    );
+                }
+            }
         }
         if let Ok(dump) = std::env::var("DUMP_ENTRIES") {
             // per line: f, then per entry the relative bound and the weight's magnitude
