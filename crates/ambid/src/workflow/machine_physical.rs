@@ -182,8 +182,9 @@ fn zero_amplitude(
 }
 
 /// The gray box at every speed of `data` (module docs) and, where the speed has an amplitude
-/// study, the parameters extrapolated to zero amplitude; the fits (every speed and level) run
-/// in parallel. A fit that fails at one speed is reported in its row; a drawing that cannot be
+/// study, the parameters extrapolated to zero amplitude; the identification level's fits run
+/// in parallel over the speeds, then the study levels' in parallel, each started from its
+/// speed's bending mode at the identification level. A fit that fails at one speed is reported in its row; a drawing that cannot be
 /// read is an error.
 ///
 /// # Errors
@@ -219,36 +220,48 @@ pub fn machine_physical(
             ),
         });
     }
-    let jobs: Vec<Job> = data
-        .speeds
-        .iter()
-        .enumerate()
-        .flat_map(|(i, s)| {
-            std::iter::once((i, None)).chain((0..s.amplitude.len()).map(move |l| (i, Some(l))))
-        })
-        .collect();
-    let fits: Vec<(Job, usize, Result<MachinePhysicalFit, String>)> = jobs
+    let fit_one = |(i, l): Job, bending: &[(f64, f64)]| {
+        let s = &data.speeds[i];
+        let plant = l.map_or(&s.frf.plant, |l| &s.amplitude[l].plant);
+        let mut lines = 0;
+        let fit = plant
+            .band(band.0, band.1)
+            .and_then(|frd| {
+                lines = frd.len();
+                fit_machine_physical(
+                    &frd,
+                    &drawing,
+                    &setup[i].0,
+                    bending,
+                    &PhysicalOptions::default(),
+                )
+            })
+            .map_err(|e| e.to_string());
+        ((i, l), lines, fit)
+    };
+    // the identification level's fits (speeds in parallel), then the study's levels (all in
+    // parallel), each started from its speed's bending mode at the identification level (the
+    // level moves it by hundredths of a per cent), else from the search
+    let mut fits: Vec<(Job, usize, Result<MachinePhysicalFit, String>)> = (0..data.speeds.len())
         .into_par_iter()
-        .map(|(i, l)| {
-            let s = &data.speeds[i];
-            let plant = l.map_or(&s.frf.plant, |l| &s.amplitude[l].plant);
-            let mut lines = 0;
-            let fit = plant
-                .band(band.0, band.1)
-                .and_then(|frd| {
-                    lines = frd.len();
-                    fit_machine_physical(
-                        &frd,
-                        &drawing,
-                        &setup[i].0,
-                        &[],
-                        &PhysicalOptions::default(),
-                    )
-                })
-                .map_err(|e| e.to_string());
-            ((i, l), lines, fit)
+        .map(|i| fit_one((i, None), &[]))
+        .collect();
+    let level_jobs: Vec<(Job, Vec<(f64, f64)>)> = fits
+        .iter()
+        .flat_map(|((i, _), _, fit)| {
+            let hint: Vec<(f64, f64)> = fit
+                .as_ref()
+                .map(|f| vec![(f.params.bending_hz, f.params.bending_damping)])
+                .unwrap_or_default();
+            (0..data.speeds[*i].amplitude.len()).map(move |l| ((*i, Some(l)), hint.clone()))
         })
         .collect();
+    fits.extend(
+        level_jobs
+            .into_par_iter()
+            .map(|(job, hint)| fit_one(job, &hint))
+            .collect::<Vec<_>>(),
+    );
     let mut rows = Vec::with_capacity(data.speeds.len());
     for (i, s) in data.speeds.iter().enumerate() {
         let truth = setup[i].1;
