@@ -316,6 +316,25 @@ pub fn machine_physical(
     Ok(rows)
 }
 
+/// A parameter's table cells: name, unit, estimate, interval, `extra` when given, and with
+/// `twin` the twin's value and the error in % (dashes where the parameter has none).
+fn parameter_cells(p: &PhysicalParameterRow, extra: Option<String>, twin: bool) -> Vec<String> {
+    let mut row = vec![
+        p.name.clone(),
+        p.unit.clone(),
+        fmt(p.estimate),
+        format!("{} … {}", fmt(p.interval[0]), fmt(p.interval[1])),
+    ];
+    row.extend(extra);
+    if let Some(t) = p.twin {
+        row.push(fmt(t));
+        row.push(fmt(100.0 * (p.estimate / t - 1.0)));
+    } else if twin {
+        row.extend(["—".into(), "—".into()]);
+    }
+    row
+}
+
 /// The report section of the rows.
 pub fn physical_section(rows: &[MachinePhysicalRow]) -> Section {
     let mut blocks = Vec::new();
@@ -341,21 +360,7 @@ pub fn physical_section(rows: &[MachinePhysicalRow]) -> Section {
         let mut table_rows: Vec<Vec<String>> = r
             .parameters
             .iter()
-            .map(|p| {
-                let mut row = vec![
-                    p.name.clone(),
-                    p.unit.clone(),
-                    fmt(p.estimate),
-                    format!("{} … {}", fmt(p.interval[0]), fmt(p.interval[1])),
-                ];
-                if let Some(t) = p.twin {
-                    row.push(fmt(t));
-                    row.push(fmt(100.0 * (p.estimate / t - 1.0)));
-                } else if twin {
-                    row.extend(["—".into(), "—".into()]);
-                }
-                row
-            })
+            .map(|p| parameter_cells(p, None, twin))
             .collect();
         for (ax, v, iv) in &r.ratios {
             let mut row = vec![
@@ -443,22 +448,7 @@ fn zero_amplitude_blocks(r: &MachinePhysicalRow) -> Vec<Block> {
         .parameters
         .iter()
         .zip(&z.change_at_top_level)
-        .map(|(p, c)| {
-            let mut row = vec![
-                p.name.clone(),
-                p.unit.clone(),
-                fmt(p.estimate),
-                format!("{} … {}", fmt(p.interval[0]), fmt(p.interval[1])),
-                format!("{:+.3}", 100.0 * c),
-            ];
-            if let Some(t) = p.twin {
-                row.push(fmt(t));
-                row.push(fmt(100.0 * (p.estimate / t - 1.0)));
-            } else if twin {
-                row.extend(["—".into(), "—".into()]);
-            }
-            row
-        })
+        .map(|(p, c)| parameter_cells(p, Some(format!("{:+.3}", 100.0 * c)), twin))
         .collect();
     blocks.push(Block::Table(Table {
         id: format!("machine-physical-zero-{:.0}rpm", r.speed_rpm),
