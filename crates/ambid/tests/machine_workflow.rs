@@ -657,6 +657,24 @@ fn the_workflow_bounds_the_chosen_models_uncertainty_on_request() {
     assert!(bad.contains("models = \"fit\""), "{bad}");
 }
 
+/// The asymmetric machine of the physical tests: its `[machine]` line and its twin at a speed.
+const ASYMMETRY: &str =
+    "asymmetry = { ki_rel = 0.03, kx_rel = -0.04, ki_rel_b = -0.06, kx_rel_b = 0.05 }\n";
+
+fn asymmetric_machine(speed_rpm: f64) -> ambid_twin::Machine {
+    ambid_twin::Machine::new(ambid_twin::MachineConfig {
+        speed_rpm,
+        asymmetry: ambid_twin::AsymmetryConfig {
+            ki_rel: 0.03,
+            kx_rel: -0.04,
+            ki_rel_b: -0.06,
+            kx_rel_b: 0.05,
+        },
+        ..Default::default()
+    })
+    .unwrap()
+}
+
 /// `[machine] physical = true` on an asymmetric linear twin (every axis its own magnet) at 0
 /// and 20 000 rpm with the default experiment: the gray box per speed in `summary.json` and the
 /// report; every $k_i$, $k_x$ within 0.5 % of the machine's linearisation
@@ -664,26 +682,15 @@ fn the_workflow_bounds_the_chosen_models_uncertainty_on_request() {
 #[test]
 fn the_workflow_estimates_every_axis_magnet_on_request() {
     // no amplitude study here (the next test runs it): no zero-amplitude table
-    let c = cfg("seed = 11\n[machine]\nspeeds_rpm = [0, 20000]\nmode = \"linear\"\nphysical = true\namplitude_levels_pct = []\nasymmetry = { ki_rel = 0.03, kx_rel = -0.04, ki_rel_b = -0.06, kx_rel_b = 0.05 }\n");
+    let c = cfg(&format!("seed = 11\n[machine]\nspeeds_rpm = [0, 20000]\nmode = \"linear\"\nphysical = true\namplitude_levels_pct = []\n{ASYMMETRY}"));
     let out =
         ambid::workflow::run(&c, Path::new("."), &mut Progress::new(Verbosity::Quiet)).unwrap();
     let rows = out.summary["machine"]["physical"].as_array().unwrap();
     assert_eq!(rows.len(), 2, "{rows:?}");
-    let asym = ambid_twin::AsymmetryConfig {
-        ki_rel: 0.03,
-        kx_rel: -0.04,
-        ki_rel_b: -0.06,
-        kx_rel_b: 0.05,
-    };
     for (r, speed) in rows.iter().zip([0.0, 20000.0]) {
         assert_eq!(r["speed_rpm"].as_f64(), Some(speed));
         assert!(r["error"].is_null(), "{r}");
-        let m = ambid_twin::Machine::new(ambid_twin::MachineConfig {
-            speed_rpm: speed,
-            asymmetry: asym.clone(),
-            ..Default::default()
-        })
-        .unwrap();
+        let m = asymmetric_machine(speed);
         let (ki, kx) = m.axis_magnets();
         let p = r["parameters"].as_array().unwrap();
         let get = |name: &str| p.iter().find(|q| q["name"] == name).unwrap();
@@ -747,9 +754,8 @@ fn the_workflow_estimates_every_axis_magnet_on_request() {
 /// `uncertainty`.
 #[test]
 fn the_machine_physical_parameters_at_zero_amplitude_are_the_small_signal_ones() {
-    let asym = "asymmetry = { ki_rel = 0.03, kx_rel = -0.04, ki_rel_b = -0.06, kx_rel_b = 0.05 }\n";
     let c = cfg(&format!(
-        "seed = 5\n[machine]\nspeeds_rpm = [12000]\nmode = \"nonlinear\"\nprbs_order = 8\nperiods = 6\nphysical = true\n{asym}"
+        "seed = 5\n[machine]\nspeeds_rpm = [12000]\nmode = \"nonlinear\"\nprbs_order = 8\nperiods = 6\nphysical = true\n{ASYMMETRY}"
     ));
     let out =
         ambid::workflow::run(&c, Path::new("."), &mut Progress::new(Verbosity::Quiet)).unwrap();
@@ -763,17 +769,7 @@ fn the_machine_physical_parameters_at_zero_amplitude_are_the_small_signal_ones()
         .map(|v| v.as_f64().unwrap())
         .collect();
     assert_eq!(levels, vec![5.0, 10.0, 16.0], "{r}");
-    let m = ambid_twin::Machine::new(ambid_twin::MachineConfig {
-        speed_rpm: 12000.0,
-        asymmetry: ambid_twin::AsymmetryConfig {
-            ki_rel: 0.03,
-            kx_rel: -0.04,
-            ki_rel_b: -0.06,
-            kx_rel_b: 0.05,
-        },
-        ..Default::default()
-    })
-    .unwrap();
+    let m = asymmetric_machine(12000.0);
     let (ki, kx) = m.axis_magnets();
     let get = |rows: &serde_json::Value, name: &str| -> (f64, f64) {
         let q = rows
