@@ -466,6 +466,21 @@ fn main() {
                     );
                 }
             }
+            for z in truth[0].plant.poles().expect("poles") {
+                let sp = if let Some(t) = truth[0].plant.ts() {
+                    z.ln() / t
+                } else {
+                    z
+                };
+                let fz = sp.norm() / (2.0 * std::f64::consts::PI);
+                if (fz / fp - 1.0).abs() < 0.2 {
+                    println!(
+                        "    exact pole {fz:.2} Hz ζ {:.2e} re {:.3e}",
+                        -sp.re / sp.norm(),
+                        sp.re
+                    );
+                }
+            }
         }
         if let Ok(dump) = std::env::var("DUMP_ENTRIES") {
             // per line: f, then per entry the relative bound and the weight's magnitude

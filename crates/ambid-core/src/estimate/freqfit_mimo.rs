@@ -186,6 +186,36 @@
 //! unstable poles (a fit of the phase lag of the amplifiers, sensors and delay above the band)
 //! that the loop constraint must then mirror away from a far-off point.
 //!
+//! # 4. Unresolved pairs (the damping floor)
+//! The lines fix a stable pole pair's frequency and residue through the lines beside it, but
+//! not its damping when its half-power bandwidth $B = -2\operatorname{Re}s/2\pi = 2\zeta f_n$
+//! ($s = \ln z / T$) is below the spacing $\Delta$ of the two lines around it: between the
+//! lines the response of such a pair is set by nothing measured. A refinement that uses a pair
+//! for a narrow feature of one or two lines (a remnant of the 1× line, the distortion of a best
+//! linear approximation) may end with $\zeta$ of $10^{-8}$ or less, and the model then
+//! answers up to $10^9$ times the neighbouring lines' size at its pole (random machine rigs 13
+//! and 28 of the nonlinear twin, docs/uncertainty.md); whatever evaluates the model between the
+//! lines (a robust-stability test on a dense grid, a Bode plot, a controller design) sees a
+//! resonance the data never showed. So, with [`MimoFreqOptions::damping_floor`] (the
+//! default), after the refinement each stable complex pair inside the lines with $B < \Delta$,
+//! narrowest relative to its $\Delta$ first, is moved to the bandwidths $B' = \Delta,
+//! \Delta/2, \Delta/4, \dots$ (while $B' > B$; its damped frequency kept), the numerators
+//! $(\beta, D)$ refitted by the linear step, and the first $B'$ is kept whose weighted cost rise
+//! is within the likelihood-ratio test of one real constraint,
+//! $$ 2(V' - V) \le \chi^2_{1,\,0.99}\,\max(1,\; 2V/\nu) $$
+//! ([`FLOOR_CHI2_1`]; the normalised cost scales the threshold where the model class does not
+//! hold the data, as in an F-test), and whose model stays admissible (the unstable-pole limit
+//! and, with a controller, a stable loop). Where no $B'$ passes, the pair stays as fitted. So a
+//! pair is given the largest damping, at most the spacing's, that the data do not reject: a
+//! real lightly damped mode with a line near its peak is kept, because moving it raises the
+//! cost far beyond the threshold (test
+//! `an_unresolved_spurious_pair_is_floored_and_a_real_light_mode_is_kept`: the plant's own pair
+//! of bandwidth 3.2 Hz on 4 Hz lines is kept bit for bit, a pair of $\zeta = 10^{-9}$ between
+//! two lines floored). The numerators alone are refitted, not $C$ or the other poles, so the
+//! rise is an upper bound of the likelihood-ratio statistic and the test errs towards keeping
+//! the fit. The parameter count (and so BIC) is unchanged. [`MimoFreqFit::floored`] lists the
+//! pairs moved; the `[machine]` report names them.
+//!
 //! # Requirements on the problem
 //! * a discrete-time [`Frd`] (its sample time is the model's) with at least one line in the
 //!   band, finite values, and positive variances when inverse-variance weights are used;
@@ -311,6 +341,9 @@ pub struct MimoFreqOptions {
     /// level (a scan of orders that stops at the noise level, or compares by BIC with a fit
     /// it already has), the rest of such a refinement is time lost.
     pub abandon_unless: Option<CostTarget>,
+    /// Give the stable pole pairs the lines do not resolve the damping of their line spacing
+    /// where the data do not reject it (default `true`; module docs, "4. Unresolved pairs").
+    pub damping_floor: bool,
 }
 
 /// A level of the weighted cost $V$ ([`MimoFreqOptions::abandon_unless`]), with
@@ -362,6 +395,7 @@ impl Default for MimoFreqOptions {
             feedthrough: false,
             horizon: None,
             abandon_unless: None,
+            damping_floor: true,
         }
     }
 }
@@ -406,6 +440,24 @@ pub struct MimoFreqFit {
     pub singular_values: Vec<f64>,
     /// The frequencies used \[Hz\].
     pub f_hz: Vec<f64>,
+    /// The pole pairs given the damping floor ([`MimoFreqOptions::damping_floor`]).
+    pub floored: Vec<FlooredPair>,
+}
+
+/// A stable pole pair the lines did not resolve, moved to the damping of its line spacing
+/// (module docs, "4. Unresolved pairs").
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FlooredPair {
+    /// Damped frequency $\operatorname{Im} s / 2\pi$ \[Hz\] (unchanged by the floor).
+    pub f_hz: f64,
+    /// Damping ratio of the fit.
+    pub zeta_fitted: f64,
+    /// Damping ratio after the floor.
+    pub zeta_floored: f64,
+    /// The spacing of the two lines around it \[Hz\].
+    pub spacing_hz: f64,
+    /// $2(V' - V)$, the weighted cost's rise with the numerators refitted.
+    pub cost_rise: f64,
 }
 
 impl MimoFreqFit {
@@ -1124,15 +1176,23 @@ fn fit(
         }
     }
     let abandoned = best_abandoned.is_some();
-    let (cost, layout, theta, iterations, converged) = match (best_abandoned.or(best), first_err) {
-        (Some(b), _) => b,
-        (None, Some(e)) => return Err(e),
-        (None, None) => {
-            return Err(Error::numerical(
-                CTX,
-                "no start was formed; lower the order",
-            ))
-        }
+    let (mut cost, layout, mut theta, iterations, converged) =
+        match (best_abandoned.or(best), first_err) {
+            (Some(b), _) => b,
+            (None, Some(e)) => return Err(e),
+            (None, None) => {
+                return Err(Error::numerical(
+                    CTX,
+                    "no start was formed; lower the order",
+                ))
+            }
+        };
+    let floored = if opts.damping_floor && !abandoned {
+        floor_unresolved(
+            &data, &delta, &layout, &mut theta, &mut cost, controller, limit,
+        )
+    } else {
+        Vec::new()
     };
     let model = layout.realise(&theta, &data)?;
     let errors = errors_of(&model, &data)?;
@@ -1154,7 +1214,106 @@ fn fit(
         errors,
         singular_values: sv,
         f_hz: data.f_hz.clone(),
+        floored,
     })
+}
+
+/// The $\chi^2_1$ 99 % point: a floor whose cost rise $2(V' - V)$ exceeds it (times the
+/// normalised cost) is rejected by the data (module docs, "4. Unresolved pairs").
+///
+/// $\chi^2_1$ is the square of a standard normal, so its 99 % point is the square of the
+/// normal's 99.5 % point, 2.575 829 303 548 9:
+/// ```
+/// use ambid_core::estimate::freqfit_mimo::FLOOR_CHI2_1;
+/// assert!((FLOOR_CHI2_1.sqrt() - 2.575_829_303_548_9).abs() < 1e-12);
+/// ```
+pub const FLOOR_CHI2_1: f64 = 6.634_896_601_021_214;
+
+/// The spacing of the two lines of `f_hz` (ascending) around `f`; `None` outside them.
+fn local_spacing(f_hz: &[f64], f: f64) -> Option<f64> {
+    let k = f_hz.partition_point(|&x| x <= f);
+    (k > 0 && k < f_hz.len()).then(|| f_hz[k] - f_hz[k - 1])
+}
+
+/// The damping floor of the module docs ("4. Unresolved pairs") on the fitted θ: each stable
+/// complex pair inside the lines whose half-power bandwidth is below the spacing of the lines
+/// around it, narrowest (relative to the spacing) first, is moved to that bandwidth at its
+/// damped frequency, the numerators refitted; kept where the weighted cost rises by at most
+/// [`FLOOR_CHI2_1`] times $\max(1, 2V/\nu)$ and the model stays admissible (the unstable-pole
+/// limit and, with a controller, a stable loop). Updates `cost`.
+fn floor_unresolved(
+    data: &Data,
+    delta: &[c64],
+    layout: &Layout,
+    theta: &mut Vec<f64>,
+    cost: &mut f64,
+    controller: Option<&StateSpace>,
+    limit: Option<usize>,
+) -> Vec<FlooredPair> {
+    use std::f64::consts::PI;
+    let mut prob = Problem::new(data, layout, delta, limit);
+    prob.controller = controller;
+    let dof = data.rows().saturating_sub(layout.n_theta).max(1) as f64;
+    let scale = (2.0 * *cost / dof).max(1.0);
+    // (bandwidth / spacing, block, s of the upper pole, spacing)
+    let mut unresolved: Vec<(f64, usize, c64, f64)> = Vec::new();
+    for (i, b) in layout.blocks.iter().enumerate() {
+        if b.dim != 2 {
+            continue;
+        }
+        let [Some(z1), Some(z2)] = layout.block_poles(theta, b) else {
+            continue;
+        };
+        let z = if z1.im >= z2.im { z1 } else { z2 };
+        if z.im <= 0.0 || z.norm() >= 1.0 {
+            continue;
+        }
+        let s = z.ln() / data.ts;
+        // half-power bandwidth 2|Re s| / 2π
+        let bw = -s.re / PI;
+        if let Some(sp) = local_spacing(&data.f_hz, s.im / (2.0 * PI)) {
+            if bw < sp {
+                unresolved.push((bw / sp, i, s, sp));
+            }
+        }
+    }
+    unresolved.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut out = Vec::new();
+    for (rel, i, s, sp) in unresolved {
+        let b = &layout.blocks[i];
+        // the bandwidths Δ, Δ/2, Δ/4, … down to the fitted one: the largest the data accept
+        let mut bw = sp;
+        while bw > rel * sp {
+            let s2 = c64::new(-PI * bw, s.im);
+            bw /= 2.0;
+            let d = ((s2 * data.ts).exp() - 1.0) / layout.h;
+            let mut trial = theta.clone();
+            // δ² + α1 δ + α2 = (δ − d)(δ − d̄)
+            trial[b.off] = -2.0 * d.re;
+            trial[b.off + 1] = d.norm_sqr();
+            if prob.fit_linear(&mut trial).is_err() {
+                continue;
+            }
+            let Some(r) = prob.residuals(&trial) else {
+                continue;
+            };
+            let c = r.iter().map(|x| x * x).sum::<f64>();
+            let rise = 2.0 * (c - *cost);
+            if rise <= FLOOR_CHI2_1 * scale {
+                out.push(FlooredPair {
+                    f_hz: s.im / (2.0 * PI),
+                    zeta_fitted: -s.re / s.norm(),
+                    zeta_floored: -s2.re / s2.norm(),
+                    spacing_hz: sp,
+                    cost_rise: rise,
+                });
+                *theta = trial;
+                *cost = c;
+                break;
+            }
+        }
+    }
+    out
 }
 
 /// The subspace step's $(A_z, C_z)$ (module docs, step 1): the shift invariance of the
@@ -2673,6 +2832,37 @@ mod tests {
         (data, layout, th, delta)
     }
 
+    /// `frd` (an exact response) with noise uniform on $[-s, s]$, $s$ = `rel` × |entry|, on
+    /// each part of every entry (seeded), and its variance $2s^2/3$.
+    fn with_uniform_noise(frd: &Frd, rel: f64, seed: u64) -> Frd {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let noisy: Vec<c64> = frd
+            .values()
+            .iter()
+            .map(|v| {
+                let s = rel * v.norm();
+                v + c64::new(
+                    s * rng.random_range(-1.0..1.0),
+                    s * rng.random_range(-1.0..1.0),
+                )
+            })
+            .collect();
+        let var: Vec<f64> = frd
+            .values()
+            .iter()
+            .map(|v| 2.0 * (rel * v.norm()).powi(2) / 3.0)
+            .collect();
+        Frd::new_matrix(
+            frd.f_hz().to_vec(),
+            frd.ny(),
+            frd.nu(),
+            noisy,
+            Some(var),
+            frd.ts(),
+        )
+        .unwrap()
+    }
+
     /// The problem's Jacobian at `x` against central differences of its residuals.
     fn check_jacobian(prob: &mut impl LeastSquaresProblem, x: &[f64]) {
         let jac = prob.jacobian(x).unwrap();
@@ -2867,6 +3057,112 @@ mod tests {
         assert!((fit.model.d()[(2, 1)] - 0.3).abs() < 1e-8);
     }
 
+    /// The damping floor (module docs, "4. Unresolved pairs") on noisy lines of [`plant`],
+    /// 4 Hz apart. A model of the plant plus a pair of $\zeta = 10^{-9}$ at 42 Hz, between two
+    /// lines, with its numerators fitted to the noise, answers $10^5$ times the plant at 42 Hz;
+    /// the floor moves that pair to a damping the lines accept and its peak to the plant's size.
+    /// The plant's own pair at 12.7 Hz has a half-power bandwidth of 3.2 Hz, also below the
+    /// spacing, but the lines beside its peak pin it down: it is kept, bit for bit.
+    #[test]
+    fn an_unresolved_spurious_pair_is_floored_and_a_real_light_mode_is_kept() {
+        use std::f64::consts::PI;
+        let truth = plant();
+        let ts = 1e-3;
+        let f: Vec<f64> = (1..=40).map(|k| 4.0 * k as f64).collect();
+        let frd = with_uniform_noise(&Frd::from_model(&truth, &f).unwrap(), 1e-3, 11);
+        let opts = MimoFreqOptions {
+            max_iterations: 0,
+            ..Default::default()
+        };
+        let data = Data::new(&frd, &opts).unwrap();
+        let warp = Warp::new(&data.f_hz, data.ts);
+        let delta = deltas(&data, &warp);
+        // the plant plus the spurious pair
+        let (f_s, zeta) = (42.0, 1e-9);
+        let w = 2.0 * PI * f_s;
+        let z = (c64::new(-zeta * w, w * (1.0 - zeta * zeta).sqrt()) * ts).exp();
+        let mut a = Mat::<f64>::zeros(6, 6);
+        a.as_mut().submatrix_mut(0, 0, 4, 4).copy_from(truth.a());
+        a[(4, 4)] = z.re;
+        a[(4, 5)] = z.im;
+        a[(5, 4)] = -z.im;
+        a[(5, 5)] = z.re;
+        let c = Mat::from_fn(3, 6, |i, j| {
+            let v = if j < 4 {
+                truth.c()[(i, j)]
+            } else {
+                0.3 + 0.1 * (i + j) as f64
+            };
+            v / data.a[i]
+        });
+        let (layout, mut th) = to_blocks(&a, &c, warp.h, 3, 2, false).unwrap();
+        let mut prob = Problem::new(&data, &layout, &delta, None);
+        prob.fit_linear(&mut th).unwrap();
+        let mut cost: f64 = prob.residuals(&th).unwrap().iter().map(|x| x * x).sum();
+        let peak = |m: &StateSpace| {
+            let g = Frd::from_model(m, &[f_s]).unwrap();
+            let g = g.at(0).unwrap();
+            (0..3)
+                .flat_map(|i| (0..2).map(move |j| (i, j)))
+                .map(|(i, j)| g[(i, j)].norm())
+                .fold(0.0, f64::max)
+        };
+        let plant_peak = peak(&truth);
+        let before = layout.realise(&th, &data).unwrap();
+        assert!(
+            peak(&before) > 1e3 * plant_peak,
+            "{} {plant_peak}",
+            peak(&before)
+        );
+        let cost_before = cost;
+        let floored = floor_unresolved(&data, &delta, &layout, &mut th, &mut cost, None, None);
+        assert_eq!(floored.len(), 1, "{floored:?}");
+        let p = floored[0];
+        assert!(
+            (p.f_hz - f_s).abs() < 1e-6 && (p.spacing_hz - 4.0).abs() < 1e-9,
+            "{p:?}"
+        );
+        assert!((p.zeta_fitted - zeta).abs() < 1e-10, "{p:?}");
+        // one of Δ, Δ/2, …: half-power bandwidth 2ζf_n = 4 / 2^k Hz, f_n = f_d / √(1 − ζ²)
+        let bw = 2.0 * p.zeta_floored * p.f_hz / (1.0 - p.zeta_floored.powi(2)).sqrt();
+        let k = (4.0 / bw).log2();
+        assert!(
+            k > -1e-6 && (k - k.round()).abs() < 1e-3 && p.zeta_floored > 1e-4,
+            "{p:?}"
+        );
+        let dof = (data.rows() - layout.n_theta) as f64;
+        assert!(
+            p.cost_rise <= FLOOR_CHI2_1 * (2.0 * cost_before / dof).max(1.0),
+            "{p:?}"
+        );
+        assert!((2.0 * (cost - cost_before) - p.cost_rise).abs() < 1e-9);
+        let after = layout.realise(&th, &data).unwrap();
+        assert!(
+            peak(&after) < 2.0 * plant_peak,
+            "{} {plant_peak}",
+            peak(&after)
+        );
+        // the plant's pair: the same poles as before the floor
+        let pair = |m: &StateSpace| {
+            m.poles()
+                .unwrap()
+                .into_iter()
+                .filter(|z| z.im > 0.0 && (z.arg() / (2.0 * PI * ts) - 12.73).abs() < 0.1)
+                .collect::<Vec<_>>()
+        };
+        let (pb, pa) = (pair(&before), pair(&after));
+        assert_eq!(pb.len(), 1);
+        assert!((pb[0] - pa[0]).norm() < 1e-12, "{pb:?} {pa:?}");
+        // and the option off leaves a fit alone: `fit` passes it through
+        assert!(
+            !MimoFreqOptions {
+                damping_floor: false,
+                ..Default::default()
+            }
+            .damping_floor
+        );
+    }
+
     #[test]
     fn the_unstable_limit_holds_and_nothing_is_reflected_without_it() {
         let truth = plant();
@@ -3020,7 +3316,7 @@ mod tests {
     /// the closed forms of [`CostTarget`].
     #[test]
     fn a_fit_held_to_an_unreachable_level_is_abandoned_and_a_reachable_one_changes_nothing() {
-        let (ts, o) = (1e-3, MimoFreqOptions::default());
+        let o = MimoFreqOptions::default();
         let (c, f, first) = neighbour_case();
         let frd = Frd::from_model(&moving_plant(1.04, 1.0, 1.3), &f).unwrap();
         let free = ss_frd_mimo_in_loop_from(&frd, &o, &c, &first.model).unwrap();
@@ -3060,24 +3356,7 @@ mod tests {
         // from scratch: abandoned in a refinement, then resumed without the level, it is the
         // fit without the level, to the bit
         // (noisy lines with their variances, an order below the plant's: a long refinement)
-        let mut rng = ChaCha8Rng::seed_from_u64(7);
-        let noisy: Vec<c64> = frd
-            .values()
-            .iter()
-            .map(|v| {
-                let s = 0.02 * v.norm();
-                v + c64::new(
-                    s * rng.random_range(-1.0..1.0),
-                    s * rng.random_range(-1.0..1.0),
-                )
-            })
-            .collect();
-        let var: Vec<f64> = frd
-            .values()
-            .iter()
-            .map(|v| (0.02 * v.norm()).powi(2) / 1.5)
-            .collect();
-        let frd = Frd::new_matrix(f.clone(), 2, 2, noisy, Some(var), Some(ts)).unwrap();
+        let frd = with_uniform_noise(&frd, 0.02, 7);
         let scratch = ss_frd_mimo_in_loop(&frd, 2, &o, &c).unwrap();
         let held = ss_frd_mimo_in_loop(&frd, 2, &hard, &c).unwrap();
         eprintln!(

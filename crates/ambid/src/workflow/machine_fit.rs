@@ -1022,6 +1022,25 @@ impl FrequencyFitter {
                 }
             }
         }
+        if let Some(Ok(f)) = chosen.map(|c| &cands[c].fit) {
+            if !f.floored.is_empty() {
+                let pairs: Vec<String> = f
+                    .floored
+                    .iter()
+                    .map(|p| {
+                        format!(
+                            "{:.2} Hz (ζ {:.1e} → {:.1e})",
+                            p.f_hz, p.zeta_fitted, p.zeta_floored
+                        )
+                    })
+                    .collect();
+                notes.push(format!(
+                    "{} rpm: the chosen model's pole pairs at {} were narrower than the spacing of the lines around them, which cannot show their damping; each was given the largest damping the data accept, at most the spacing's (the damping floor of ambid_core::estimate::freqfit_mimo)",
+                    sp.speed_rpm,
+                    pairs.join(", ")
+                ));
+            }
+        }
         if chosen.is_none() {
             notes.push(format!(
                 "{} rpm: no candidate model gives a stable closed loop with the controllers that agrees with the measured closed loop above the fitted band (misfit ≤ {MAX_OUT_OF_BAND_MISFIT}) and has the measured loop's number of unstable poles; none was chosen (the table lists why each failed) — try other orders",
@@ -1403,6 +1422,13 @@ impl MachineModels for FrequencyFitter {
                                     "unstable_poles": unstable,
                                     "iterations": fit.iterations,
                                     "converged": fit.converged,
+                                    "damping_floor": fit.floored.iter().map(|p| serde_json::json!({
+                                        "f_hz": p.f_hz,
+                                        "zeta_fitted": p.zeta_fitted,
+                                        "zeta": p.zeta_floored,
+                                        "spacing_hz": p.spacing_hz,
+                                        "cost_rise": p.cost_rise,
+                                    })).collect::<Vec<_>>(),
                                 }),
                             });
                         }
