@@ -168,6 +168,51 @@ fn main() {
             continue;
         };
         let plant = &measured.band(band.0, band.1).expect("band");
+        if std::env::var("DEBUG_1X").is_ok() {
+            // the FRF's error against the exact plant in units of its standard deviation,
+            // largest over the entries, at the lines nearest the 1× frequency and the median
+            let f1 = truth[0].speed_rpm / 60.0;
+            let fl = plant.f_hz().to_vec();
+            let ex = Frd::from_model(&truth[0].plant, &fl).expect("exact");
+            let z: Vec<f64> = (0..fl.len())
+                .map(|k| {
+                    let mut worst = 0.0f64;
+                    for i in 0..4 {
+                        for j in 0..4 {
+                            let e = plant.entry(i, j).expect("entry");
+                            let v = e.variance().expect("variance")[k];
+                            let d = e.values()[k] - ex.at(k).expect("line")[(i, j)];
+                            worst = worst.max(d.norm_sqr() / v);
+                        }
+                    }
+                    worst
+                })
+                .collect();
+            let spacing = fl[1] - fl[0];
+            let near: Vec<String> = (0..fl.len())
+                .filter(|&k| (fl[k] - f1).abs() < 2.5 * spacing)
+                .map(|k| {
+                    format!(
+                        "{:.2} Hz (δ {:+.3}): {:.1}",
+                        fl[k],
+                        (f1 - fl[k]) / spacing,
+                        z[k]
+                    )
+                })
+                .collect();
+            println!(
+                "  1× {f1:.3} Hz; max over entries of |G − P|²/σ² near it: {}; median over the lines {:.2}",
+                near.join(", "),
+                median(z.clone())
+            );
+            for z in model.model.poles().expect("poles") {
+                let sp = z.ln() / data.ts;
+                let fz = sp.im / (2.0 * std::f64::consts::PI);
+                if (fz - f1).abs() < 5.0 {
+                    println!("    model pole {fz:.2} Hz ζ {:.2e}", -sp.re / sp.norm());
+                }
+            }
+        }
         let t_unc = Instant::now();
         // term (e) per entry from the amplitude study, as the workflow computes it
         let sp = &data.speeds[0];

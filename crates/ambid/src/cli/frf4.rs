@@ -30,7 +30,9 @@ use ambid_core::data::{IoData, AXES};
 use ambid_core::frf::band::{excitation_bands, BandRule, ExcitationBands};
 use ambid_core::frf::mimo::{self, MimoClosedLoopFrf, MimoDesign, MimoOptions};
 use ambid_core::frf::mimo_lpm::{local_polynomial, MimoLpmOptions};
-use ambid_core::frf::synchronous::{synchronous, SynchronousMethod, SynchronousOptions};
+use ambid_core::frf::synchronous::{
+    synchronous, SynchronousLine, SynchronousMethod, SynchronousOptions,
+};
 use ambid_core::signal::amplitude_spectrum;
 use ambid_core::signal::detect_period;
 use anyhow::{Context, Result};
@@ -368,12 +370,13 @@ pub fn frf4(a: &FrfArgs) -> Result<()> {
         .collect::<Vec<_>>()
         .join(", ");
     let mut extra_files: Vec<(PathBuf, Vec<u8>)> = Vec::new();
-    let data = match a.speed_rpm {
-        None => data,
+    let (data, sync) = match a.speed_rpm {
+        None => (data, None),
         Some(rpm) => {
-            let (clean, bytes) = synchronous_line(&data, rpm, period, a.skip_periods, &names)?;
+            let (clean, bytes, line) =
+                synchronous_line(&data, rpm, period, a.skip_periods, &names)?;
             extra_files.push((sync_path(&a.out), bytes));
-            clean
+            (clean, Some(line))
         }
     };
     let est = if lpm {
@@ -387,7 +390,22 @@ pub fn frf4(a: &FrfArgs) -> Result<()> {
             .map_err(ambid::error::Error::from)
             .with_context(|| format!("the MIMO local polynomial FRF of {names}"))?
     } else {
-        periodic_estimate(a, &data, &files, &axes, period, &names)?
+        let mut est = periodic_estimate(a, &data, &files, &axes, period, &names)?;
+        // what the 1× removal leaves at the lines beside it, which the periods' spread misses
+        // (`SynchronousLine::variance_factor`)
+        if let Some(line) = &sync {
+            let fs = data.fs();
+            let widen = |f: &ambid_core::lti::Frd| {
+                line.widen(f, fs, period).map_err(ambid::error::Error::from)
+            };
+            est.plant = widen(&est.plant)?;
+            est.t_ry = widen(&est.t_ry)?;
+            est.s = widen(&est.s)?;
+            if let Some(p) = &est.plant_indirect {
+                est.plant_indirect = Some(widen(p)?);
+            }
+        }
+        est
     };
     write_estimate(a, &est, &axes, period, &names, ts, extra_files)
 }
@@ -406,14 +424,15 @@ fn sync_path(out: &Path) -> PathBuf {
 }
 
 /// Measures the 1× line at `rpm`/60 Hz on every u and y channel (printed, and as CSV bytes:
-/// `experiment, channel, f_hz, re, im, abs, phase_deg, std`) and returns the record without it.
+/// `experiment, channel, f_hz, re, im, abs, phase_deg, std`) and returns the record without it
+/// and the line.
 fn synchronous_line(
     data: &IoData,
     rpm: f64,
     period: usize,
     skip: usize,
     names: &str,
-) -> Result<(IoData, Vec<u8>)> {
+) -> Result<(IoData, Vec<u8>, SynchronousLine)> {
     if !(rpm.is_finite() && rpm > 0.0) {
         return Err(Error::usage(format!(
             "--speed-rpm must be a positive speed, got {rpm}; leave it out at standstill"
@@ -459,7 +478,7 @@ fn synchronous_line(
         ));
     }
     let clean = line.remove(data).map_err(ambid::error::Error::from)?;
-    Ok((clean, csv.into_bytes()))
+    Ok((clean, csv.into_bytes(), line))
 }
 
 /// The period-averaged estimate (`frf::mimo::estimate`) in the band of `--band` or the one

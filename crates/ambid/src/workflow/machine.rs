@@ -737,13 +737,14 @@ pub fn measure_records(
     let data = IoData::from_experiments(exps)?;
     let full = IoData::from_experiments(records)?;
     let f1 = speed_rpm / 60.0;
-    let (data, full, sync) = if speed_rpm > 0.0 && f1 < 0.5 * data.fs() {
+    let fs = data.fs();
+    let (data, full, sync) = if speed_rpm > 0.0 && f1 < 0.5 * fs {
         let opts = SynchronousOptions::new().period(period).skip(skip);
         let line = synchronous(&data, f1, &opts)
             .map_err(|e| Error::from(e).context(format!("{what}: the 1× line at {f1} Hz")))?;
         let clean = line.remove(&data)?;
         let full_line = synchronous(&full, f1, &opts)?;
-        (clean, full_line.remove(&full)?, Some(f1))
+        (clean, full_line.remove(&full)?, Some(line))
     } else {
         (data, full, None)
     };
@@ -753,18 +754,25 @@ pub fn measure_records(
     }
     let est = mimo::estimate(&data, &opts)
         .map_err(|e| Error::from(e).context(format!("{what}: the MIMO FRF")))?;
+    // what the 1× removal leaves at the lines beside it, which the periods' spread misses
+    let widen = |frd: Frd| -> Result<Frd, Error> {
+        match &sync {
+            Some(line) => Ok(line.widen(&frd, fs, period)?),
+            None => Ok(frd),
+        }
+    };
     let n = full.n_experiments();
     let exps = (0..n)
         .map(|e| full.experiment(e))
         .collect::<Result<Vec<_>, _>>()?;
     Ok((
         MeasuredFrf {
-            plant: est.plant,
-            t_ry: Some(est.t_ry),
-            s: Some(est.s),
+            plant: widen(est.plant)?,
+            t_ry: Some(widen(est.t_ry)?),
+            s: Some(widen(est.s)?),
         },
         exps,
-        sync,
+        sync.map(|l| l.f_sync_hz),
     ))
 }
 
