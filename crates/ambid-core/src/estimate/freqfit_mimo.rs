@@ -205,7 +205,9 @@
 //! $$ 2(V' - V) \le \chi^2_{1,\,0.99}\,\max(1,\; 2V/\nu) $$
 //! ([`FLOOR_CHI2_1`]; the normalised cost scales the threshold where the model class does not
 //! hold the data, as in an F-test), and whose model stays admissible (the unstable-pole limit
-//! and, with a controller, a stable loop). Where no $B'$ passes, the pair stays as fitted. So a
+//! and, with a controller, a stable loop). Where no $B'$ passes, the pair stays as fitted. The
+//! test needs a cost in units of the noise, so the floor acts only with inverse-variance
+//! weights; with uniform weights (an FRF without variances) nothing is floored. So a
 //! pair is given the largest damping, at most the spacing's, that the data do not reject: a
 //! real lightly damped mode with a line near its peak is kept, because moving it raises the
 //! cost far beyond the threshold (test
@@ -504,6 +506,9 @@ struct Data {
     /// Output scales $a_i$ and input scales $b_j$: $G = \operatorname{diag}(a) G' \operatorname{diag}(b)$.
     a: Vec<f64>,
     b: Vec<f64>,
+    /// Whether the weights are the inverse variances (the cost is then on the scale of a
+    /// $\chi^2$ statistic, which the damping floor's test needs).
+    inverse_variance: bool,
 }
 
 impl Data {
@@ -657,6 +662,7 @@ impl Data {
             ts,
             a,
             b,
+            inverse_variance: use_var,
         })
     }
 
@@ -1187,7 +1193,8 @@ fn fit(
                 ))
             }
         };
-    let floored = if opts.damping_floor && !abandoned {
+    // the floor's test needs a cost in units of the noise: inverse-variance weights only
+    let floored = if opts.damping_floor && !abandoned && data.inverse_variance {
         floor_unresolved(
             &data, &delta, &layout, &mut theta, &mut cost, controller, limit,
         )
@@ -3153,14 +3160,29 @@ mod tests {
         let (pb, pa) = (pair(&before), pair(&after));
         assert_eq!(pb.len(), 1);
         assert!((pb[0] - pa[0]).norm() < 1e-12, "{pb:?} {pa:?}");
-        // and the option off leaves a fit alone: `fit` passes it through
-        assert!(
-            !MimoFreqOptions {
-                damping_floor: false,
-                ..Default::default()
-            }
-            .damping_floor
-        );
+        // without variances (uniform weights) the cost has no noise scale: nothing is floored,
+        // and an exact response is fitted exactly, light pair and all (a pair of bandwidth
+        // 1.6 Hz on lines 2 Hz apart, the Python package's test case)
+        let (r, w) = (0.995f64, 0.05f64);
+        let light = StateSpace::discrete(
+            mat![
+                [1.01, 0.0, 0.0],
+                [0.0, r * w.cos(), r * w.sin()],
+                [0.0, -r * w.sin(), r * w.cos()]
+            ],
+            mat![[1.0, 0.5], [0.0, 1.0], [1.0, -0.3]],
+            mat![[1.0, 0.2, 0.0], [0.4, 0.0, 1.0]],
+            mat![[0.0, 0.0], [0.0, 0.0]],
+            ts,
+        )
+        .unwrap();
+        let lines: Vec<f64> = (1..=80).map(|k| 2.0 * k as f64).collect();
+        let exact = Frd::from_model(&light, &lines).unwrap();
+        for frd in [exact.clone(), exact.entry(0, 0).unwrap()] {
+            let fit = ss_frd_mimo(&frd, 3, &MimoFreqOptions::default()).unwrap();
+            assert!(fit.floored.is_empty(), "{:?}", fit.floored);
+            assert!(fit.errors.max_norm_relative < 1e-9, "{:?}", fit.errors);
+        }
     }
 
     #[test]
