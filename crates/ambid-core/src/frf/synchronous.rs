@@ -665,6 +665,34 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
     use rand_distr::{Distribution, StandardNormal};
 
+    /// `p` periods of `n` samples at `fs` Hz of one channel `y`: a cosine on period line
+    /// `line`, the 1× line $\operatorname{Re}(A e^{j 2\pi f_1 t / f_s})$ and white noise σ
+    /// (seeded); `u` is zero.
+    fn record(
+        (n, p, fs): (usize, usize, f64),
+        line: usize,
+        f1: f64,
+        amp: c64,
+        sigma: f64,
+        seed: u64,
+    ) -> IoData {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let y: Vec<f64> = (0..n * p)
+            .map(|t| {
+                let per = (2.0 * PI * line as f64 * (t % n) as f64 / n as f64).cos();
+                let ph = c64::from_polar(1.0, 2.0 * PI * f1 * t as f64 / fs);
+                let v: f64 = StandardNormal.sample(&mut rng);
+                per + (amp * ph).re + sigma * v
+            })
+            .collect();
+        IoData::new(
+            vec![("u".into(), vec![0.0; n * p]), ("y".into(), y)],
+            1.0 / fs,
+            Some(n),
+        )
+        .unwrap()
+    }
+
     /// A periodic part, a 1× line and white noise σ; the estimate's error against the truth,
     /// normalised by the reported σ_A, pooled over seeds: E|δ|²/σ_A² ≈ 1 (white noise:
     /// σ_A² ≈ 4σ²/L).
@@ -676,21 +704,7 @@ mod tests {
         let mut ratio = 0.0;
         let seeds = 200;
         for seed in 0..seeds {
-            let mut rng = ChaCha8Rng::seed_from_u64(seed);
-            let y: Vec<f64> = (0..n * p)
-                .map(|t| {
-                    let per = (2.0 * PI * 3.0 * (t % n) as f64 / n as f64).cos();
-                    let ph = c64::from_polar(1.0, 2.0 * PI * f1 * t as f64 / fs);
-                    let v: f64 = StandardNormal.sample(&mut rng);
-                    per + (amp * ph).re + sigma * v
-                })
-                .collect();
-            let data = IoData::new(
-                vec![("u".into(), vec![0.0; n * p]), ("y".into(), y)],
-                1.0 / fs,
-                Some(n),
-            )
-            .unwrap();
+            let data = record((n, p, fs), 3, f1, amp, sigma, seed);
             let line = synchronous(&data, f1, &SynchronousOptions::new()).unwrap();
             assert_eq!(line.method, SynchronousMethod::Regression);
             let c = &line.channels[1];
@@ -719,21 +733,7 @@ mod tests {
         let (mut e8, mut e10) = (0.0, 0.0);
         let mut factor = Vec::new();
         for seed in 0..seeds {
-            let mut rng = ChaCha8Rng::seed_from_u64(seed);
-            let y: Vec<f64> = (0..n * p)
-                .map(|t| {
-                    let per = (2.0 * PI * 8.0 * (t % n) as f64 / n as f64).cos();
-                    let ph = c64::from_polar(1.0, 2.0 * PI * f1 * t as f64 / fs);
-                    let v: f64 = StandardNormal.sample(&mut rng);
-                    per + (amp * ph).re + sigma * v
-                })
-                .collect();
-            let data = IoData::new(
-                vec![("u".into(), vec![0.0; n * p]), ("y".into(), y)],
-                1.0 / fs,
-                Some(n),
-            )
-            .unwrap();
+            let data = record((n, p, fs), 8, f1, amp, sigma, seed);
             let line = synchronous(&data, f1, &SynchronousOptions::new().period(n)).unwrap();
             assert_eq!(line.method, SynchronousMethod::Regression);
             assert!((line.grid_offset - 0.01).abs() < 1e-9);
