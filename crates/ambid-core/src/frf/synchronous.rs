@@ -106,6 +106,7 @@
 //! assert!((yline.amplitude.arg().to_degrees() - 40.0).abs() < 1e-6);
 //! ```
 
+use super::mimo::MimoClosedLoopFrf;
 use super::periodic::{PeriodicAnalyzer, PeriodicOptions};
 use crate::data::{IoData, Role};
 use crate::error::{Error, Result};
@@ -205,6 +206,75 @@ pub struct SynchronousLine {
 }
 
 impl SynchronousLine {
+    /// `frd`, a period-averaged FRF of the record the line was removed from, with its variances
+    /// multiplied by [`SynchronousLine::variance_factor`] on its lines (unchanged without
+    /// variances).
+    ///
+    /// # Errors
+    /// None in practice: the FRF is rebuilt from its own lines and values.
+    ///
+    /// # Example
+    /// ```
+    /// use ambid_core::frf::synchronous::{SynchronousLine, SynchronousMethod};
+    /// use ambid_core::lti::Frd;
+    /// let (fs, n) = (20_000.0, 5115);
+    /// let df = fs / n as f64;
+    /// let line = SynchronousLine {
+    ///     f_sync_hz: 50.008 * df,
+    ///     grid_offset: 0.008,
+    ///     method: SynchronousMethod::Regression,
+    ///     channels: vec![],
+    ///     periods: 11,
+    ///     dof: 8.0,
+    /// };
+    /// let frd = Frd::constant(&[49.0 * df, 50.0 * df], 2.0, Some(1.0 / fs)).unwrap();
+    /// let frd = Frd::new(frd.f_hz().to_vec(), frd.values().to_vec(), Some(vec![1e-4; 2]), frd.ts()).unwrap();
+    /// let w = line.widen(&frd, fs, n).unwrap();
+    /// let k = line.variance_factor(frd.f_hz(), fs, n);
+    /// assert_eq!(w.variance().unwrap(), &[1e-4 * k[0], 1e-4 * k[1]]);
+    /// assert_eq!(w.values(), frd.values());
+    /// ```
+    pub fn widen(&self, frd: &Frd, fs: f64, period: usize) -> Result<Frd> {
+        let Some(var) = frd.variance() else {
+            return Ok(frd.clone());
+        };
+        let factor = self.variance_factor(frd.f_hz(), fs, period);
+        let e = frd.ny() * frd.nu();
+        let var: Vec<f64> = var
+            .iter()
+            .enumerate()
+            .map(|(i, v)| v * factor[i / e])
+            .collect();
+        Frd::new_matrix(
+            frd.f_hz().to_vec(),
+            frd.ny(),
+            frd.nu(),
+            frd.values().to_vec(),
+            Some(var),
+            frd.ts(),
+        )
+    }
+
+    /// [`SynchronousLine::widen`] on every FRF of a period-averaged closed-loop estimate of the
+    /// record the line was removed from: the plant, $T_{ry}$, $S$ and the indirect plant.
+    ///
+    /// # Errors
+    /// None in practice (see [`SynchronousLine::widen`]).
+    pub fn widen_estimate(
+        &self,
+        est: &mut MimoClosedLoopFrf,
+        fs: f64,
+        period: usize,
+    ) -> Result<()> {
+        est.plant = self.widen(&est.plant, fs, period)?;
+        est.t_ry = self.widen(&est.t_ry, fs, period)?;
+        est.s = self.widen(&est.s, fs, period)?;
+        if let Some(p) = &est.plant_indirect {
+            est.plant_indirect = Some(self.widen(p, fs, period)?);
+        }
+        Ok(())
+    }
+
     /// The factor by which [`SynchronousLine::remove`] leaves the noise variance of the
     /// period-averaged spectrum raised at each of the lines `f_hz` (module docs, "What the
     /// removal leaves"), for a record of `fs` Hz with `period` samples per period: $1 + r_k$,
@@ -243,59 +313,6 @@ impl SynchronousLine {
     /// assert!(k[0] < 1.01 && k[2] < 1.01); // its neighbours
     /// ```
     pub fn variance_factor(&self, f_hz: &[f64], fs: f64, period: usize) -> Vec<f64> {
-        self.factors(f_hz, fs, period)
-    }
-
-    /// `frd`, a period-averaged FRF of the record the line was removed from, with its variances
-    /// multiplied by [`SynchronousLine::variance_factor`] on its lines (unchanged without
-    /// variances).
-    ///
-    /// # Errors
-    /// None in practice: the FRF is rebuilt from its own lines and values.
-    ///
-    /// # Example
-    /// ```
-    /// use ambid_core::frf::synchronous::{SynchronousLine, SynchronousMethod};
-    /// use ambid_core::lti::Frd;
-    /// let (fs, n) = (20_000.0, 5115);
-    /// let df = fs / n as f64;
-    /// let line = SynchronousLine {
-    ///     f_sync_hz: 50.008 * df,
-    ///     grid_offset: 0.008,
-    ///     method: SynchronousMethod::Regression,
-    ///     channels: vec![],
-    ///     periods: 11,
-    ///     dof: 8.0,
-    /// };
-    /// let frd = Frd::constant(&[49.0 * df, 50.0 * df], 2.0, Some(1.0 / fs)).unwrap();
-    /// let frd = Frd::new(frd.f_hz().to_vec(), frd.values().to_vec(), Some(vec![1e-4; 2]), frd.ts()).unwrap();
-    /// let w = line.widen(&frd, fs, n).unwrap();
-    /// let k = line.variance_factor(frd.f_hz(), fs, n);
-    /// assert_eq!(w.variance().unwrap(), &[1e-4 * k[0], 1e-4 * k[1]]);
-    /// assert_eq!(w.values(), frd.values());
-    /// ```
-    pub fn widen(&self, frd: &Frd, fs: f64, period: usize) -> Result<Frd> {
-        let Some(var) = frd.variance() else {
-            return Ok(frd.clone());
-        };
-        let factor = self.factors(frd.f_hz(), fs, period);
-        let e = frd.ny() * frd.nu();
-        let var: Vec<f64> = var
-            .iter()
-            .enumerate()
-            .map(|(i, v)| v * factor[i / e])
-            .collect();
-        Frd::new_matrix(
-            frd.f_hz().to_vec(),
-            frd.ny(),
-            frd.nu(),
-            frd.values().to_vec(),
-            Some(var),
-            frd.ts(),
-        )
-    }
-
-    fn factors(&self, f_hz: &[f64], fs: f64, period: usize) -> Vec<f64> {
         use std::f64::consts::PI;
         let p = self.periods as f64;
         let delta = self.grid_offset;

@@ -394,16 +394,8 @@ pub fn frf4(a: &FrfArgs) -> Result<()> {
         // what the 1× removal leaves at the lines beside it, which the periods' spread misses
         // (`SynchronousLine::variance_factor`)
         if let Some(line) = &sync {
-            let fs = data.fs();
-            let widen = |f: &ambid_core::lti::Frd| {
-                line.widen(f, fs, period).map_err(ambid::error::Error::from)
-            };
-            est.plant = widen(&est.plant)?;
-            est.t_ry = widen(&est.t_ry)?;
-            est.s = widen(&est.s)?;
-            if let Some(p) = &est.plant_indirect {
-                est.plant_indirect = Some(widen(p)?);
-            }
+            line.widen_estimate(&mut est, data.fs(), period)
+                .map_err(ambid::error::Error::from)?;
         }
         est
     };

@@ -752,24 +752,21 @@ pub fn measure_records(
     if let Some((lo, hi)) = band {
         opts = opts.band(lo, hi);
     }
-    let est = mimo::estimate(&data, &opts)
+    let mut est = mimo::estimate(&data, &opts)
         .map_err(|e| Error::from(e).context(format!("{what}: the MIMO FRF")))?;
     // what the 1× removal leaves at the lines beside it, which the periods' spread misses
-    let widen = |frd: Frd| -> Result<Frd, Error> {
-        match &sync {
-            Some(line) => Ok(line.widen(&frd, fs, period)?),
-            None => Ok(frd),
-        }
-    };
+    if let Some(line) = &sync {
+        line.widen_estimate(&mut est, fs, period)?;
+    }
     let n = full.n_experiments();
     let exps = (0..n)
         .map(|e| full.experiment(e))
         .collect::<Result<Vec<_>, _>>()?;
     Ok((
         MeasuredFrf {
-            plant: widen(est.plant)?,
-            t_ry: Some(widen(est.t_ry)?),
-            s: Some(widen(est.s)?),
+            plant: est.plant,
+            t_ry: Some(est.t_ry),
+            s: Some(est.s),
         },
         exps,
         sync.map(|l| l.f_sync_hz),
