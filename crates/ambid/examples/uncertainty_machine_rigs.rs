@@ -27,10 +27,19 @@
 //! the design repeated at 5 and 16 % of i_sat, whose plant FRFs with the identification FRF give
 //! every entry's term (e), `machine_fit::amplitude_terms`); `LEVELS=5,20` other levels.
 //!
+//! Term (e) is also projected through the model as the workflow does
+//! (`MatrixUncertainty::add_projected_shift`); `NO_PROJECT=1` leaves that out. `DEBUG_E=1`
+//! prints the line terms' medians and the projection's Wald statistic; `DEBUG_AMP=1` the
+//! coherent relative shift κ of each level's FRF (and of the model) against the exact plant on
+//! the diagonal entries per band. `COVER_RAISE` / `COVER_W` set the joint raise's and the
+//! weight fit's `cover` (default 0.98); `NO_RAISE=1` skips the raise.
+//!
 //! Run: `cargo run --release -p ambid --example uncertainty_machine_rigs -- 0,1,2,3`.
 use ambid::config::MachineSection;
 use ambid::workflow::machine::{acquire_twin, MachineModelInput, MachineModels};
-use ambid::workflow::machine_fit::{amplitude_terms, fit_band, AmplitudeStudy, FrequencyFitter};
+use ambid::workflow::machine_fit::{
+    amplitude_shifts, amplitude_terms, fit_band, AmplitudeStudy, FrequencyFitter,
+};
 use ambid_core::lti::Frd;
 use ambid_core::validate::iso::IsoZones;
 use ambid_core::validate::robust::{
@@ -213,6 +222,55 @@ fn main() {
                 }
             }
         }
+        if std::env::var("DEBUG_AMP").is_ok() {
+            // the coherent relative shift of each level's FRF (and of the model) against the
+            // exact plant per band: κ = Σ w conj(P)(G − P) / Σ w |P|², w = 1/σ², with its std
+            let fl = plant.f_hz().to_vec();
+            let ex = Frd::from_model(&truth[0].plant, &fl).expect("exact");
+            let mh = Frd::from_model(&model.model, &fl).expect("model");
+            let sp = &data.speeds[0];
+            let mut srcs: Vec<(String, Frd)> =
+                vec![(format!("id {:?}", sp.level_pct), plant.clone())];
+            for l in &sp.amplitude {
+                let g = l.plant.band(fl[0], fl[fl.len() - 1]).expect("band");
+                srcs.push((format!("{}", l.level_pct), g));
+            }
+            for (lo, hi) in [(10.0, 100.0), (100.0, 300.0), (300.0, 1000.0)] {
+                println!("  band {lo}-{hi} Hz, diagonal entries: κ (re, im) ± std");
+                for (name, g) in &srcs {
+                    let mut row = Vec::new();
+                    for d in 0..4 {
+                        let e = g.entry(d, d).expect("entry");
+                        let var = e.variance().expect("variance");
+                        let (mut num, mut den) = (faer::c64::new(0.0, 0.0), 0.0);
+                        let (mut numm, mut denm) = (faer::c64::new(0.0, 0.0), 0.0);
+                        for k in 0..fl.len() {
+                            if !(lo..hi).contains(&fl[k]) {
+                                continue;
+                            }
+                            let p = ex.at(k).expect("line")[(d, d)];
+                            let w = 1.0 / var[k];
+                            num += p.conj() * (e.values()[k] - p) * w;
+                            den += w * p.norm_sqr();
+                            let pm = mh.at(k).expect("line")[(d, d)];
+                            numm += p.conj() * (pm - p) * w;
+                            denm += w * p.norm_sqr();
+                        }
+                        let k = num / den;
+                        let km = numm / denm;
+                        row.push(format!(
+                            "{:+.4} {:+.4} ±{:.4} (model {:+.4} {:+.4})",
+                            k.re,
+                            k.im,
+                            (1.0 / den).sqrt(),
+                            km.re,
+                            km.im
+                        ));
+                    }
+                    println!("    {name:>10}: {}", row.join(" | "));
+                }
+            }
+        }
         let t_unc = Instant::now();
         // term (e) per entry from the amplitude study, as the workflow computes it
         let sp = &data.speeds[0];
@@ -264,9 +322,42 @@ fn main() {
                     continue;
                 }
             };
+        // term (e) through the model, as the workflow does (NO_PROJECT=1: without it)
+        let mut u = u;
+        if std::env::var("NO_PROJECT").is_err() {
+            if let Some(a) = sp
+                .level_pct
+                .filter(|_| !sp.amplitude.is_empty())
+                .map(|level_pct| AmplitudeStudy {
+                    level_pct,
+                    levels: &sp.amplitude,
+                })
+            {
+                let (shifts, vars) = amplitude_shifts(plant, &a).expect("shifts");
+                let ps = u
+                    .add_projected_shift(
+                        plant,
+                        &shifts,
+                        &vars,
+                        ambid::uncertainty::AMPLITUDE_RUN_ALPHA,
+                    )
+                    .expect("projection");
+                if std::env::var("DEBUG_E").is_ok() {
+                    println!("  projected shift: {ps:?}");
+                }
+            }
+        }
         let t_bound = t_unc.elapsed().as_secs_f64();
+        // COVER_RAISE / COVER_W: the joint raise's and the weight fit's `cover` (default DEFAULT_COVER)
+        let env_f = |k: &str| {
+            std::env::var(k)
+                .ok()
+                .and_then(|v| v.parse::<f64>().ok())
+                .unwrap_or(DEFAULT_COVER)
+        };
+        let (cover_raise, cover_w) = (env_f("COVER_RAISE"), env_f("COVER_W"));
         let raise = u
-            .joint_raise(DEFAULT_COVER, 0.95, 2000, 0)
+            .joint_raise(cover_raise, 0.95, 2000, 0)
             .expect("joint raise")
             .max(1.0);
         let t_raise = t_unc.elapsed().as_secs_f64() - t_bound;
@@ -298,7 +389,7 @@ fn main() {
             ambid_core::validate::weight::WeightShape::Smooth
         };
         let wfits = u
-            .entry_weights_shaped(data.ts, 4, DEFAULT_COVER, form, shape)
+            .entry_weights_shaped(data.ts, 4, cover_w, form, shape)
             .expect("entry weights");
         let t_weights = t_w.elapsed().as_secs_f64();
         let weights: Vec<Weight> = wfits.iter().map(|w| w.weight.clone()).collect();

@@ -10,6 +10,7 @@
 
 use crate::error::{Context, Error, Result};
 use crate::experiment::{run, ExcitationPlan, Experiment};
+use ambid_core::c64;
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::estimate::freqfit_ss::{ss_frd, SsFreqOptions};
 use ambid_core::lti::{Frd, StateSpace};
@@ -382,19 +383,29 @@ pub fn nonlinear_term(
 /// let e = amplitude_term(&[(0.1, &lo), (0.2, &hi)], 0.1, &f, &m, 0.95).unwrap();
 /// assert!((e[10] / nominal_abs - 0.01).abs() < 1e-3); // the 1 % shift at level 0.1
 /// ```
-pub fn amplitude_term(
-    levels: &[(f64, &Frd)],
-    level: f64,
-    f_hz: &[f64],
-    nominal: &StateSpace,
-    line_coverage: f64,
-) -> Result<Vec<f64>> {
+/// The per-line regression of [`amplitude_term`]: on every line $j$ of the study's FRFs
+/// `levels` (level, FRF with variances; two or more distinct levels on the same lines) the
+/// weighted line $G_{i,j} = G_{0,j} + c_j a_i^2$, and the shift at the identification level
+/// `level`, $c_j a_e^2$ (absolute, complex), with its variance $a_e^4/S_{xx,j}$ (of a circular
+/// complex error). [`amplitude_term`] averages it over windows;
+/// [`MatrixUncertainty::add_projected_shift`](ambid_core::validate::uncertainty::MatrixUncertainty::add_projected_shift)
+/// projects it onto the model.
+///
+/// # Errors
+/// As [`amplitude_term`] for the levels.
+///
+/// # Example
+/// ```
+/// use ambid::uncertainty::amplitude_shift_lines;
+/// use ambid_core::{c64, lti::Frd};
+/// let f: Vec<f64> = (1..=20).map(|k| k as f64).collect();
+/// let at = |a: f64| Frd::new(f.clone(), vec![c64::new(1.0 - a * a, 0.0); 20], Some(vec![1e-8; 20]), Some(1e-3)).unwrap();
+/// let (lo, hi) = (at(0.1), at(0.2));
+/// let (s, v) = amplitude_shift_lines(&[(0.1, &lo), (0.2, &hi)], 0.1).unwrap();
+/// assert!((s[3] - c64::new(-0.01, 0.0)).norm() < 1e-9 && v[3] > 0.0);
+/// ```
+pub fn amplitude_shift_lines(levels: &[(f64, &Frd)], level: f64) -> Result<(Vec<c64>, Vec<f64>)> {
     let bad = |why: String| Error::other(format!("the amplitude term: {why}"));
-    if !(line_coverage > 0.0 && line_coverage < 1.0) {
-        return Err(bad(format!(
-            "the coverage per line must lie in (0, 1), got {line_coverage}"
-        )));
-    }
     if !(level.is_finite() && level > 0.0) {
         return Err(bad(format!(
             "the identification experiment's level {level} is not a positive number: give its excitation amplitude in the unit of the study's levels"
@@ -439,17 +450,7 @@ pub fn amplitude_term(
     }
     let ae2 = level * level;
     let l = fs.len();
-    let p_study = nominal.freq_response_siso(fs)?;
-    if let Some(j) = p_study
-        .iter()
-        .position(|p| !(p.norm() > 0.0 && p.norm().is_finite()))
-    {
-        return Err(bad(format!(
-            "the model's response is zero or not finite at {} Hz",
-            fs[j]
-        )));
-    }
-    let (mut rho, mut var) = (Vec::with_capacity(l), Vec::with_capacity(l));
+    let (mut shift, mut var) = (Vec::with_capacity(l), Vec::with_capacity(l));
     for j in 0..l {
         let (mut sw, mut sx, mut sy) = (0.0, 0.0, ambid_core::c64::new(0.0, 0.0));
         for ((_, frd), xi) in levels.iter().zip(&x) {
@@ -465,12 +466,45 @@ pub fn amplitude_term(
             sxx += w * (xi - xm) * (xi - xm);
             sxy += (frd.values()[j] - ym) * (w * (xi - xm));
         }
-        // relative to the model (noise-free), so that ρ stays linear in the data
-        let c = sxy / sxx;
-        let p = p_study[j];
-        rho.push(c * ae2 / p);
-        var.push(ae2 * ae2 / (sxx * p.norm_sqr()));
+        shift.push(sxy / sxx * ae2);
+        var.push(ae2 * ae2 / sxx);
     }
+    Ok((shift, var))
+}
+
+pub fn amplitude_term(
+    levels: &[(f64, &Frd)],
+    level: f64,
+    f_hz: &[f64],
+    nominal: &StateSpace,
+    line_coverage: f64,
+) -> Result<Vec<f64>> {
+    let bad = |why: String| Error::other(format!("the amplitude term: {why}"));
+    if !(line_coverage > 0.0 && line_coverage < 1.0) {
+        return Err(bad(format!(
+            "the coverage per line must lie in (0, 1), got {line_coverage}"
+        )));
+    }
+    let (shift, shift_var) = amplitude_shift_lines(levels, level)?;
+    let fs = levels[0].1.f_hz();
+    let l = fs.len();
+    let p_study = nominal.freq_response_siso(fs)?;
+    if let Some(j) = p_study
+        .iter()
+        .position(|p| !(p.norm() > 0.0 && p.norm().is_finite()))
+    {
+        return Err(bad(format!(
+            "the model's response is zero or not finite at {} Hz",
+            fs[j]
+        )));
+    }
+    // relative to the model (noise-free), so that ρ stays linear in the data
+    let rho: Vec<c64> = shift.iter().zip(&p_study).map(|(s, p)| s / p).collect();
+    let var: Vec<f64> = shift_var
+        .iter()
+        .zip(&p_study)
+        .map(|(v, p)| v / p.norm_sqr())
+        .collect();
     let m_half = window_half_lines_for(nominal, fs)?;
     let halves = window_scales(m_half, l);
     let q = (1.0 / (1.0 - line_coverage)).ln();

@@ -898,7 +898,7 @@ fn the_workflow_estimates_every_axis_magnet_from_files() {
 /// 95 % of the 10–1000 Hz lines (92.1 % measured); with the default study (5 and 16 % of i_sat
 /// beside the identification level's 10 %) every entry has term (e) and the bound and the
 /// structured weight cover it on ≥ 95 % (100 % measured), and the robust margins stay within
-/// the exact loop's. The report names the levels.
+/// the exact loop's; the summary gives the projection's Wald test. The report names the levels.
 #[test]
 fn the_machine_amplitude_study_bounds_the_small_signal_plant() {
     let run = |levels: &str| {
@@ -931,6 +931,15 @@ fn the_machine_amplitude_study_bounds_the_small_signal_plant() {
     );
     assert!(w["truth_coverage"].as_f64().unwrap() >= 0.95, "{w}");
     assert!(w["weight_truth_coverage"].as_f64().unwrap() >= 0.95, "{w}");
+    // term (e) through the model: its Wald test against χ² of the tangent space's dimension
+    let p = &w["amplitude_projected"];
+    let (stat, thr) = (
+        p["statistic"].as_f64().unwrap(),
+        p["threshold"].as_f64().unwrap(),
+    );
+    assert!(stat >= 0.0 && thr > 100.0, "{w}");
+    assert_eq!(p["kept"].as_bool().unwrap(), stat > thr, "{w}");
+    assert!(b.get("amplitude_projected").is_none(), "{b}");
     // conservative margins: inside the exact loop's gain interval
     let e = floats(&w["exact_gain_margins"]);
     for key in ["gain_margins", "weight_gain_margins"] {

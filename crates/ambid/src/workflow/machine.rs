@@ -299,6 +299,11 @@ pub struct UncertaintyRow {
     /// Term (e)'s size: the median over the lines of σ̄(|E|)/σ̄(P̂) \[%\].
     #[serde(skip_serializing_if = "Option::is_none")]
     pub amplitude_median_rel_pct: Option<f64>,
+    /// Term (e) through the model (`MatrixUncertainty::add_projected_shift`): the Wald statistic
+    /// of the amplitude shift projected onto the model, its χ² threshold and whether the
+    /// projection entered the term (absent: no term (e)).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub amplitude_projected: Option<ambid_core::validate::uncertainty::ProjectedShift>,
     /// Why term (e) was left out, when an amplitude study ran but gave no term.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub amplitude_note: Option<String>,

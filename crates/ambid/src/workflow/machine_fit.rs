@@ -191,22 +191,14 @@ pub struct AmplitudeStudy<'a> {
     pub levels: &'a [LevelFrf],
 }
 
-/// Term (e) of every entry of a MIMO model (`ambid::uncertainty::amplitude_term` entry by
-/// entry, the SISO rule on the channel $(i, j)$): the model `model`'s entry against the
-/// identification plant FRF's entry `plant` (the fit's lines, the term's lines) at
-/// `study.level_pct` and the study's levels' entries on the same lines; levels with saturated
-/// samples are left out (clipping is not the smooth distortion the $a^2$ rule extrapolates).
-/// Returns the terms in the order of `MatrixUncertainty::entries` (column-major) and the levels
-/// used \[%\], the identification level among them.
-///
-/// # Errors
-/// The reason as text: fewer than two levels without saturation, FRFs on other lines, an entry
-/// whose term cannot be computed (named).
-pub fn amplitude_terms(
-    model: &StateSpace,
+/// The study's levels without saturation and the identification FRF as `(level, FRF)` in
+/// increasing level (levels as fractions), all on `plant`'s lines, and the levels used \[%\]
+/// (the rules and errors of [`amplitude_terms`]).
+#[allow(clippy::type_complexity)]
+fn study_levels(
     plant: &Frd,
     study: &AmplitudeStudy<'_>,
-) -> Result<(Vec<Vec<f64>>, Vec<f64>), String> {
+) -> Result<(Vec<(f64, Frd)>, Vec<f64>), String> {
     let (Some(&lo), Some(&hi)) = (plant.f_hz().first(), plant.f_hz().last()) else {
         return Err("the FRF has no line".into());
     };
@@ -242,6 +234,58 @@ pub fn amplitude_terms(
             }
         ));
     }
+    Ok((levels, used))
+}
+
+/// The amplitude shift of every entry per line (`ambid::uncertainty::amplitude_shift_lines`:
+/// complex, absolute, with its variance) on `plant`'s lines, from the same levels as
+/// [`amplitude_terms`], in the order of `MatrixUncertainty::entries`; for
+/// `MatrixUncertainty::add_projected_shift`.
+///
+/// # Errors
+/// As [`amplitude_terms`].
+#[allow(clippy::type_complexity)]
+pub fn amplitude_shifts(
+    plant: &Frd,
+    study: &AmplitudeStudy<'_>,
+) -> Result<(Vec<Vec<c64>>, Vec<Vec<f64>>), String> {
+    let (levels, _) = study_levels(plant, study)?;
+    let (ny, nu) = (plant.ny(), plant.nu());
+    let (mut shifts, mut vars) = (Vec::with_capacity(ny * nu), Vec::with_capacity(ny * nu));
+    for j in 0..nu {
+        for i in 0..ny {
+            let at: Vec<(f64, Frd)> = levels
+                .iter()
+                .map(|(a, g)| g.entry(i, j).map(|e| (*a, e)))
+                .collect::<Result<_, _>>()
+                .map_err(|e| e.to_string())?;
+            let refs: Vec<(f64, &Frd)> = at.iter().map(|(a, g)| (*a, g)).collect();
+            let (s, v) = crate::uncertainty::amplitude_shift_lines(&refs, study.level_pct / 100.0)
+                .map_err(|e| format!("entry (output {i}, input {j}): {e}"))?;
+            shifts.push(s);
+            vars.push(v);
+        }
+    }
+    Ok((shifts, vars))
+}
+
+/// Term (e) of every entry of a MIMO model (`ambid::uncertainty::amplitude_term` entry by
+/// entry, the SISO rule on the channel $(i, j)$): the model `model`'s entry against the
+/// identification plant FRF's entry `plant` (the fit's lines, the term's lines) at
+/// `study.level_pct` and the study's levels' entries on the same lines; levels with saturated
+/// samples are left out (clipping is not the smooth distortion the $a^2$ rule extrapolates).
+/// Returns the terms in the order of `MatrixUncertainty::entries` (column-major) and the levels
+/// used \[%\], the identification level among them.
+///
+/// # Errors
+/// The reason as text: fewer than two levels without saturation, FRFs on other lines, an entry
+/// whose term cannot be computed (named).
+pub fn amplitude_terms(
+    model: &StateSpace,
+    plant: &Frd,
+    study: &AmplitudeStudy<'_>,
+) -> Result<(Vec<Vec<f64>>, Vec<f64>), String> {
+    let (levels, used) = study_levels(plant, study)?;
     let line_coverage =
         ambid_core::validate::uncertainty::UncertaintyOptions::default().line_coverage;
     let (ny, nu) = (plant.ny(), plant.nu());
@@ -319,6 +363,23 @@ pub fn speed_uncertainty(
     });
     let mut u =
         uncertainty_matrix(model, &frd, &extra, &UncertaintyOptions::default()).map_err(err)?;
+    // term (e) through the model: the per-line shifts projected onto the model's tangent space
+    // (docs/uncertainty.md, "Term (e) through the model")
+    let amplitude_projected = match (amplitude, &amp) {
+        (Some(a), Some(_)) => {
+            let (shifts, vars) = amplitude_shifts(&frd, a)?;
+            Some(
+                u.add_projected_shift(
+                    &frd,
+                    &shifts,
+                    &vars,
+                    crate::uncertainty::AMPLITUDE_RUN_ALPHA,
+                )
+                .map_err(err)?,
+            )
+        }
+        _ => None,
+    };
     let raise = u
         .joint_raise(DEFAULT_COVER, 0.95, 2000, 0)
         .map_err(err)?
@@ -340,12 +401,19 @@ pub fn speed_uncertainty(
         .map(|k| norm[k] / top(&u.nominal_at(k)))
         .collect();
     rel.sort_by(f64::total_cmp);
-    // term (e)'s size: the median over the lines of σ̄(|E|) / σ̄(P̂)
-    let amplitude_median_rel_pct = amp.as_ref().map(|(t, _)| {
+    // term (e)'s size (after the projection): the median over the lines of σ̄(|E|) / σ̄(P̂)
+    let amplitude_median_rel_pct = amp.as_ref().map(|_| {
         let ny = model.noutputs();
+        let t: Vec<&[f64]> = u
+            .entries
+            .iter()
+            .map(|e| e.amplitude.as_deref().unwrap_or(&[]))
+            .collect();
         let mut r: Vec<f64> = (0..f.len())
             .map(|k| {
-                let e = faer::Mat::from_fn(ny, t.len() / ny, |i, j| t[i + j * ny][k]);
+                let e = faer::Mat::from_fn(ny, t.len() / ny, |i, j| {
+                    t[i + j * ny].get(k).copied().unwrap_or(0.0)
+                });
                 ambid_core::linalg::singular_values(e.as_ref())
                     .ok()
                     .and_then(|v| v.into_iter().reduce(f64::max))
@@ -442,6 +510,7 @@ pub fn speed_uncertainty(
         weight_truth_coverage,
         amplitude_levels_pct: amp.map(|(_, l)| l),
         amplitude_median_rel_pct,
+        amplitude_projected,
         amplitude_note,
         export: Some(Box::new(
             crate::io::export::uncertain_matrix::UncertainMatrixModel {
