@@ -2240,13 +2240,9 @@ mod tests {
         }
     }
 
-    /// A coupled 2×2 model of order 3 against its exact response: the joint tangent space has
-    /// $n(n_y + n_u) = 12$ dimensions, its leverages over all entries and lines sum to 6; the
-    /// element-wise, norm and input-multiplicative bounds relate as their definitions say; a
-    /// 1×1 model gives exactly [`uncertainty`]'s terms and its joint raise is
-    /// [`ErrorModel::joint_factor`]'s; bad input is refused with the entry named.
-    #[test]
-    fn a_matrix_bound_is_built_from_its_entries() {
+    /// The coupled 2×2 model of order 3 of the matrix tests, its 150 lines (1.5 Hz apart), its
+    /// exact response and an FRF of it with the variance `rel_var` |P|² per entry.
+    fn coupled_2x2(rel_var: f64) -> (StateSpace, Vec<f64>, Frd, Frd) {
         let m1 = model();
         let m = StateSpace::discrete(
             m1.a().to_owned(),
@@ -2258,16 +2254,32 @@ mod tests {
         .unwrap();
         let f: Vec<f64> = (1..=150).map(|k| k as f64 * 1.5).collect();
         let exact = Frd::from_model(&m, &f).unwrap();
-        let var: Vec<f64> = exact.values().iter().map(|g| 1e-3 * g.norm_sqr()).collect();
+        let var: Vec<f64> = exact
+            .values()
+            .iter()
+            .map(|g| rel_var * g.norm_sqr())
+            .collect();
         let frd = Frd::new_matrix(
             f.clone(),
             2,
             2,
             exact.values().to_vec(),
-            Some(var.clone()),
+            Some(var),
             Some(1e-3),
         )
         .unwrap();
+        (m, f, exact, frd)
+    }
+
+    /// A coupled 2×2 model of order 3 against its exact response: the joint tangent space has
+    /// $n(n_y + n_u) = 12$ dimensions, its leverages over all entries and lines sum to 6; the
+    /// element-wise, norm and input-multiplicative bounds relate as their definitions say; a
+    /// 1×1 model gives exactly [`uncertainty`]'s terms and its joint raise is
+    /// [`ErrorModel::joint_factor`]'s; bad input is refused with the entry named.
+    #[test]
+    fn a_matrix_bound_is_built_from_its_entries() {
+        let (m, f, exact, frd) = coupled_2x2(1e-3);
+        let var = frd.variance().unwrap().to_vec();
         let u = uncertainty_matrix(&m, &frd, &[], &UncertaintyOptions::default()).unwrap();
         assert_eq!((u.outputs, u.inputs, u.entries.len()), (2, 2, 4));
         assert!(u.entries.iter().all(|e| e.n_params == 12));
@@ -2411,43 +2423,10 @@ mod tests {
         // scipy.stats.chi2.ppf(0.95, n) for n = 12, 100: 21.026, 124.342 (Wilson–Hilferty < 1 %)
         assert!((chi2_upper_quantile(12, 0.05) / 21.026_069_817_483_08 - 1.0).abs() < 0.01);
         assert!((chi2_upper_quantile(100, 0.05) / 124.342_113_404_089_3 - 1.0).abs() < 0.002);
-        let m1 = model();
-        let m = StateSpace::discrete(
-            m1.a().to_owned(),
-            mat![[1.0, 0.5], [0.3, -0.2], [1.0, 0.7]],
-            mat![[0.02, 0.01, 0.004], [0.01, -0.02, 0.006]],
-            mat![[0.0, 0.0], [0.0, 0.0]],
-            1e-3,
-        )
-        .unwrap();
-        let f: Vec<f64> = (1..=150).map(|k| k as f64 * 1.5).collect();
-        let exact = Frd::from_model(&m, &f).unwrap();
-        let var: Vec<f64> = exact.values().iter().map(|g| 1e-3 * g.norm_sqr()).collect();
-        let frd = Frd::new_matrix(
-            f.clone(),
-            2,
-            2,
-            exact.values().to_vec(),
-            Some(var),
-            Some(1e-3),
-        )
-        .unwrap();
+        let (m, f, exact, frd) = coupled_2x2(1e-3);
         let u0 = uncertainty_matrix(&m, &frd, &[], &UncertaintyOptions::default()).unwrap();
         // an FRF 10⁵ times more precise: term (a) is negligible beside the shift
-        let precise_var: Vec<f64> = exact
-            .values()
-            .iter()
-            .map(|g| 1e-13 * g.norm_sqr())
-            .collect();
-        let precise = Frd::new_matrix(
-            f.clone(),
-            2,
-            2,
-            exact.values().to_vec(),
-            Some(precise_var),
-            Some(1e-3),
-        )
-        .unwrap();
+        let (_, _, _, precise) = coupled_2x2(1e-13);
         let u_precise =
             uncertainty_matrix(&m, &precise, &[], &UncertaintyOptions::default()).unwrap();
         let l = f.len();

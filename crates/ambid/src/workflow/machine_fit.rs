@@ -250,8 +250,22 @@ pub fn amplitude_shifts(
     study: &AmplitudeStudy<'_>,
 ) -> Result<(Vec<Vec<c64>>, Vec<Vec<f64>>), String> {
     let (levels, _) = study_levels(plant, study)?;
+    let both = per_entry(plant, &levels, |i, j, refs| {
+        crate::uncertainty::amplitude_shift_lines(refs, study.level_pct / 100.0)
+            .map_err(|e| format!("entry (output {i}, input {j}): {e}"))
+    })?;
+    Ok(both.into_iter().unzip())
+}
+
+/// `f(i, j, levels' entries (i, j))` for every entry of `plant`'s shape, column-major (the
+/// order of `MatrixUncertainty::entries`).
+fn per_entry<T>(
+    plant: &Frd,
+    levels: &[(f64, Frd)],
+    f: impl Fn(usize, usize, &[(f64, &Frd)]) -> Result<T, String>,
+) -> Result<Vec<T>, String> {
     let (ny, nu) = (plant.ny(), plant.nu());
-    let (mut shifts, mut vars) = (Vec::with_capacity(ny * nu), Vec::with_capacity(ny * nu));
+    let mut out = Vec::with_capacity(ny * nu);
     for j in 0..nu {
         for i in 0..ny {
             let at: Vec<(f64, Frd)> = levels
@@ -260,13 +274,10 @@ pub fn amplitude_shifts(
                 .collect::<Result<_, _>>()
                 .map_err(|e| e.to_string())?;
             let refs: Vec<(f64, &Frd)> = at.iter().map(|(a, g)| (*a, g)).collect();
-            let (s, v) = crate::uncertainty::amplitude_shift_lines(&refs, study.level_pct / 100.0)
-                .map_err(|e| format!("entry (output {i}, input {j}): {e}"))?;
-            shifts.push(s);
-            vars.push(v);
+            out.push(f(i, j, &refs)?);
         }
     }
-    Ok((shifts, vars))
+    Ok(out)
 }
 
 /// Term (e) of every entry of a MIMO model (`ambid::uncertainty::amplitude_term` entry by
@@ -288,29 +299,17 @@ pub fn amplitude_terms(
     let (levels, used) = study_levels(plant, study)?;
     let line_coverage =
         ambid_core::validate::uncertainty::UncertaintyOptions::default().line_coverage;
-    let (ny, nu) = (plant.ny(), plant.nu());
-    let mut terms = Vec::with_capacity(ny * nu);
-    for j in 0..nu {
-        for i in 0..ny {
-            let at: Vec<(f64, Frd)> = levels
-                .iter()
-                .map(|(a, g)| g.entry(i, j).map(|e| (*a, e)))
-                .collect::<Result<_, _>>()
-                .map_err(|e| e.to_string())?;
-            let refs: Vec<(f64, &Frd)> = at.iter().map(|(a, g)| (*a, g)).collect();
-            let entry = model.entry(i, j).map_err(|e| e.to_string())?;
-            terms.push(
-                crate::uncertainty::amplitude_term(
-                    &refs,
-                    study.level_pct / 100.0,
-                    plant.f_hz(),
-                    &entry,
-                    line_coverage,
-                )
-                .map_err(|e| format!("entry (output {i}, input {j}): {e}"))?,
-            );
-        }
-    }
+    let terms = per_entry(plant, &levels, |i, j, refs| {
+        let entry = model.entry(i, j).map_err(|e| e.to_string())?;
+        crate::uncertainty::amplitude_term(
+            refs,
+            study.level_pct / 100.0,
+            plant.f_hz(),
+            &entry,
+            line_coverage,
+        )
+        .map_err(|e| format!("entry (output {i}, input {j}): {e}"))
+    })?;
     Ok((terms, used))
 }
 
