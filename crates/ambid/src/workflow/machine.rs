@@ -304,7 +304,8 @@ pub struct UncertaintyRow {
     /// projection entered the term (absent: no term (e)).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub amplitude_projected: Option<ambid_core::validate::uncertainty::ProjectedShift>,
-    /// Why term (e) was left out, when an amplitude study ran but gave no term.
+    /// Why term (e) was left out, when an amplitude study ran but gave no term, or why its
+    /// projection through the model was (the line term then stands alone).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub amplitude_note: Option<String>,
     /// The uncertain model for export (`models/<model>_uncertain.{json,m,mat,npz}`).

@@ -347,7 +347,7 @@ pub fn speed_uncertainty(
     use ambid_core::validate::weight::{Weight, WeightShape, DEFAULT_COVER, MAX_WEIGHT_ORDER};
     let err = |e: ambid_core::Error| e.to_string();
     let frd = plant.band(band.0, band.1).map_err(err)?;
-    let (amp, amplitude_note) = match amplitude.map(|a| amplitude_terms(model, &frd, a)) {
+    let (amp, mut amplitude_note) = match amplitude.map(|a| amplitude_terms(model, &frd, a)) {
         None => (None, None),
         Some(Ok(t)) => (Some(t), None),
         Some(Err(e)) => (None, Some(format!("term (e) left out: {e}"))),
@@ -364,18 +364,25 @@ pub fn speed_uncertainty(
         uncertainty_matrix(model, &frd, &extra, &UncertaintyOptions::default()).map_err(err)?;
     // term (e) through the model: the per-line shifts projected onto the model's tangent space
     // (docs/uncertainty.md, "Term (e) through the model")
+    // (when it cannot be computed the bound keeps the line term, and the row says why)
     let amplitude_projected = match (amplitude, &amp) {
         (Some(a), Some(_)) => {
-            let (shifts, vars) = amplitude_shifts(&frd, a)?;
-            Some(
+            let projected = amplitude_shifts(&frd, a).and_then(|(shifts, vars)| {
                 u.add_projected_shift(
                     &frd,
                     &shifts,
                     &vars,
                     crate::uncertainty::AMPLITUDE_RUN_ALPHA,
                 )
-                .map_err(err)?,
-            )
+                .map_err(err)
+            });
+            match projected {
+                Ok(p) => Some(p),
+                Err(e) => {
+                    amplitude_note = Some(format!("term (e) through the model left out: {e}"));
+                    None
+                }
+            }
         }
         _ => None,
     };
