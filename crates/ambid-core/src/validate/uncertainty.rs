@@ -731,13 +731,29 @@ pub fn normal_upper_quantile(alpha: f64) -> f64 {
         }
     };
     let tail = |z: f64| 0.5 * erfc(z / std::f64::consts::SQRT_2);
-    let (mut lo, mut hi) = (-40.0f64, 40.0f64);
-    for _ in 0..200 {
+    bisect_decreasing(tail, alpha, (-40.0, 40.0), 200, 0.0)
+}
+
+/// The point where the decreasing function `f` crosses `target` in `bracket`, by bisection:
+/// at most `iterations` halvings, stopping early once the interval is within `rel_tol` of its
+/// upper end; the interval's midpoint.
+fn bisect_decreasing(
+    f: impl Fn(f64) -> f64,
+    target: f64,
+    bracket: (f64, f64),
+    iterations: usize,
+    rel_tol: f64,
+) -> f64 {
+    let (mut lo, mut hi) = bracket;
+    for _ in 0..iterations {
         let mid = 0.5 * (lo + hi);
-        if tail(mid) > alpha {
+        if f(mid) > target {
             lo = mid;
         } else {
             hi = mid;
+        }
+        if hi - lo <= rel_tol * hi {
+            break;
         }
     }
     0.5 * (lo + hi)
@@ -1396,19 +1412,14 @@ pub fn abs_quantile(crr: f64, cii: f64, cri: f64, alpha: f64) -> f64 {
         acc / NODES as f64
     };
     // P(|x|² > s) ≤ exp(-s / (2 λ1)): s_hi = 2 λ1 ln(1/α) exceeds with at most α
-    let (mut lo, mut hi) = (0.0, 2.0 * l1 * (1.0 / alpha).ln());
-    for _ in 0..80 {
-        let mid = 0.5 * (lo + hi);
-        if exceed(mid) > alpha {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-        if hi - lo <= 1e-12 * hi {
-            break;
-        }
-    }
-    (0.5 * (lo + hi)).sqrt()
+    bisect_decreasing(
+        exceed,
+        alpha,
+        (0.0, 2.0 * l1 * (1.0 / alpha).ln()),
+        80,
+        1e-12,
+    )
+    .sqrt()
 }
 
 /// Eigenvalues of $A$ at most this magnitude are poles at the origin (delays; a Jordan block at
