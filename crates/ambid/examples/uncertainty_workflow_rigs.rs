@@ -16,7 +16,10 @@
 //! `cargo run --release -p ambid --example uncertainty_workflow_rigs -- RIGS [linear|nonlinear]`
 //! (e.g. `1-40`, or `3,7,11`). The step's prerequisites bring the amplitude study (term (e)).
 //! `SHOW_U=1` prints the step's summary and the amplitude study's, `SHOW_MISS=1` the lines where
-//! |W| is below the true error, with the terms there.
+//! |W| is below the true error, with the terms there. Since 2026-12-02 the prerequisites also
+//! bring the robust BLA study (term (c)); `NO_BLA=1` leaves it out (the bound then has no
+//! term (c), as before). Per rig the last column is term (c): the BLA level it was read at and
+//! its significant groups of lines.
 
 mod common;
 
@@ -43,11 +46,14 @@ fn main() {
     let mode = args.get(2).cloned().unwrap_or_else(|| "linear".into());
     let dir = std::env::temp_dir().join(format!("ambid-unc-wf-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("a temporary directory");
-    let (steps, _) = Step::with_prerequisites(&[Step::Uncertainty]);
-    let (mut runs, mut skipped, mut covered, mut oob) = (0, 0, 0, 0);
+    let (mut steps, _) = Step::with_prerequisites(&[Step::Uncertainty]);
+    if std::env::var("NO_BLA").is_ok() {
+        steps.retain(|s| *s != Step::Bla);
+    }
+    let (mut runs, mut skipped, mut covered, mut oob, mut with_c) = (0, 0, 0, 0, 0);
     let (mut w_stable, mut w_half, mut l_stable, mut l_half) = (0, 0, 0, 0);
     let mut ratios = Vec::new();
-    println!("rig | chosen | out-of-band resonance | cov_W med_W/med_err | weight lo hi stable half | lines lo hi stable half | true lo hi");
+    println!("rig | chosen | out-of-band resonance | cov_W med_W/med_err | weight lo hi stable half | lines lo hi stable half | true lo hi | term (c)");
     for rig in rigs {
         let (cfg, out) = common::workflow_on_rig(rig, &mode, &steps, &dir);
         let twin = Twin::new(cfg).expect("the rig's twin");
@@ -102,10 +108,11 @@ fn main() {
         let ratio = median(idx.iter().map(|&k| w.y[k]).collect())
             / median(idx.iter().map(|&k| err.y[k]).collect());
         if std::env::var("SHOW_MISS").is_ok() {
-            let terms: Vec<(String, ambid::report::Series)> = ["(a)", "(b)", "(e)", "bound ℓ"]
-                .iter()
-                .filter_map(|p| pick(p).map(|s| (p.to_string(), s)))
-                .collect();
+            let terms: Vec<(String, ambid::report::Series)> =
+                ["(a)", "(b)", "(c)", "(e)", "bound ℓ"]
+                    .iter()
+                    .filter_map(|p| pick(p).map(|s| (p.to_string(), s)))
+                    .collect();
             for &k in idx.iter().filter(|&&k| w.y[k] < err.y[k]) {
                 let t: Vec<String> = terms
                     .iter()
@@ -142,8 +149,19 @@ fn main() {
         l_stable += usize::from(ls);
         l_half += usize::from(lh);
         let f = |x: Option<f64>| x.map_or("—".into(), |g| format!("{g:.3}"));
+        let term_c = match (
+            u["nonlinear_level_pct"].as_f64(),
+            u["nonlinear_groups"].as_array(),
+        ) {
+            (Some(l), Some(g)) => {
+                let sig = g.iter().filter(|g| g["significant"] == true).count();
+                with_c += usize::from(sig > 0);
+                format!("{l} %: {sig} of {} groups", g.len())
+            }
+            _ => "—".into(),
+        };
         println!(
-            "{rig} | {label} | {beyond} | {cov:.3} {ratio:.2} | {} {} {ws} {wh} | {} {} {ls} {lh} | {:.3} {:.3}",
+            "{rig} | {label} | {beyond} | {cov:.3} {ratio:.2} | {} {} {ws} {wh} | {} {} {ls} {lh} | {:.3} {:.3} | {term_c}",
             f(wlo),
             f(whi),
             f(llo),
@@ -158,6 +176,6 @@ fn main() {
         "runs {runs} (no bound: {skipped}); chosen model with a resonance outside the band: {oob}; \
          W covers ≥ 95 %: {covered}; median |W|/error, median over runs {med:.2}; \
          weight margins: stable at 90 % {w_stable}, ≥ half {w_half}; \
-         lines: stable at 90 % {l_stable}, ≥ half {l_half}"
+         lines: stable at 90 % {l_stable}, ≥ half {l_half}; term (c) significant somewhere: {with_c}"
     );
 }

@@ -34,7 +34,7 @@
 
 use crate::error::{Context, Error, Result};
 use ambid_core::c64;
-use ambid_core::frf::bla::{random_phase_period, robust_bla, Bla, Record};
+use ambid_core::frf::bla::{random_phase_period, robust_bla, Bla, BlaEstimate, Record};
 use ambid_core::frf::periodic::PeriodicOptions;
 use ambid_core::signal::{Grid, MultisineSpec, Phases};
 use ambid_twin::{Mode, SimOptions, Twin, TwinConfig};
@@ -441,6 +441,10 @@ pub struct LevelBla {
     /// Largest fraction of samples with a limit active (clipping makes even the linear twin
     /// nonlinear).
     pub saturated_fraction: f64,
+    /// The plant's BLA per line with its variances (term (c) of the uncertainty step reads
+    /// it; not in the study's CSV or JSON).
+    #[serde(skip)]
+    pub plant: BlaEstimate,
 }
 
 /// Outcome of the BLA amplitude study.
@@ -505,6 +509,7 @@ pub fn figures_of(
         odd_db: bla.detection.odd.ratio_db,
         bla_vs_linear_rel,
         saturated_fraction,
+        plant: g.clone(),
     })
 }
 

@@ -43,14 +43,16 @@ impl Step {
     /// The steps whose results this step reads: `frf` for `order` (its resonance count),
     /// `models` (the default frequency-domain fit of closed-loop data with r) and `iso` (the
     /// measured S); `models` for `pole_zero`, `validation` and `reconstruction`; `frf` and
-    /// `models` for `physical`, and with them `amplitude` for `uncertainty` (its term (e)).
+    /// `models` for `physical`, and with them `amplitude` and `bla` for `uncertainty` (its
+    /// terms (e) and (c)).
     pub fn prerequisites(self) -> &'static [Step] {
         match self {
             Step::Order | Step::Models | Step::Iso => &[Step::Frf],
             // the amplitude study gives the uncertainty its term (e): without it the bound
             // holds the best linear approximation at the identification level, not the
             // small-signal plant (docs/uncertainty.md, "Term (e) in the workflow")
-            Step::Uncertainty => &[Step::Amplitude, Step::Frf, Step::Models],
+            // and the robust BLA its term (c), the stochastic nonlinear distortion
+            Step::Uncertainty => &[Step::Amplitude, Step::Bla, Step::Frf, Step::Models],
             Step::Physical => &[Step::Frf, Step::Models],
             Step::PoleZero | Step::Validation | Step::Reconstruction => &[Step::Models],
             _ => &[],

@@ -13,6 +13,7 @@ use crate::experiment::{run, ExcitationPlan, Experiment};
 use ambid_core::c64;
 use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
 use ambid_core::estimate::freqfit_ss::{ss_frd, SsFreqOptions};
+use ambid_core::frf::bla::{BlaEstimate, NlGroup};
 use ambid_core::lti::{Frd, StateSpace};
 use ambid_core::validate::compare::unstable_poles_from_loop;
 pub use ambid_core::validate::robust::{loop_stable, nominal_gain_interval};
@@ -241,79 +242,135 @@ fn carry_relative(fs: &[f64], rel: &[f64], f_hz: &[f64], nominal_abs: &[f64]) ->
         .collect()
 }
 
+/// The test level of term (c)'s groups ([`BlaEstimate::nl_groups`]) and of its upper value.
+pub const NONLINEAR_ALPHA: f64 = 0.05;
+
+/// Term (c)'s input on the lines `f_hz` and how it was obtained ([`nonlinear_term`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct NonlinearTerm {
+    /// $\sigma_{\mathrm{nl},k}$ on the lines `f_hz` (0 where no group is significant).
+    pub std: Vec<f64>,
+    /// The BLA's groups of lines, their test and upper values (relative, before the scale).
+    pub groups: Vec<NlGroup>,
+    /// The factor the relative variances were multiplied by (the level rule of
+    /// [`nonlinear_level`]; 1 when the BLA was measured at or above the identification level).
+    pub variance_scale: f64,
+}
+
+impl NonlinearTerm {
+    /// Groups whose nonlinear variance is significant.
+    pub fn significant_groups(&self) -> usize {
+        self.groups.iter().filter(|g| g.significant).count()
+    }
+}
+
 /// Term (c)'s input on the lines `f_hz`: the standard deviation $\sigma_{\mathrm{nl},k}$ of the
-/// stochastic nonlinear contributions of a robust BLA measurement (`ambid bla --level`: its
-/// lines `bla_f_hz`, the BLA `bla` and `nl_std` per line), relative to $|G_{\mathrm{BLA}}|$,
-/// carried to `f_hz` as term (d) is (linear interpolation in frequency, the end line's value
-/// outside the BLA's band) and scaled by $|\hat P(f_k)|$. The relative value is what moves
-/// between the BLA's multisine lines and the identification record's lines.
+/// stochastic nonlinear contributions of one experiment, from a robust BLA measurement `bla`
+/// (the plant's [`BlaEstimate`], `ambid bla --level` or the workflow's `bla` step).
+///
+/// One realisation's relative nonlinear variance $\hat\sigma^2_S/|\hat G|^2$ is far too noisy
+/// line by line ($M - 1$ complex degrees of freedom, 7 at the default $M = 8$) to be a bound, and
+/// its noise is as often positive as negative; so it is tested in groups of neighbouring lines
+/// (at least a third of a decade and 4 lines, [`BlaEstimate::nl_groups`]) at level
+/// [`NONLINEAR_ALPHA`] split over the groups. On the lines of a significant group the relative
+/// standard deviation is $\sqrt{c\,(\bar r + z_{0.95}\,s)}$ (the group's one-sided 95 % upper
+/// value, times the level scale $c$ = `variance_scale`), elsewhere 0: a BLA whose distortion is
+/// not distinguishable from its noise adds nothing (the FRF's own noise is term (a)). The
+/// relative values are carried to `f_hz` as term (d)'s (linear interpolation in frequency, the
+/// end line's value outside the BLA's band) and scaled by $|\hat P(f_k)|$.
 ///
 /// # Errors
-/// Lengths that differ, no line, lines that are not finite and ascending, a standard deviation
-/// that is not finite and non-negative, a BLA of zero, or a model that cannot be evaluated.
+/// A `variance_scale` that is not finite and positive, a BLA whose lines are not finite and
+/// ascending, or the errors of [`BlaEstimate::nl_groups`] and of evaluating the model.
 ///
 /// # Example
 /// ```
-/// use ambid::uncertainty::nonlinear_term;
-/// use ambid_core::{c64, lti::StateSpace};
+/// use ambid::uncertainty::{nonlinear_term, NONLINEAR_ALPHA};
+/// use ambid_core::{c64, frf::bla::BlaEstimate, lti::StateSpace};
 /// use faer::mat;
 /// let m = StateSpace::discrete(mat![[0.5]], mat![[1.0]], mat![[0.5]], mat![[0.0]], 1e-3).unwrap();
-/// // 2 % of the BLA at 10 Hz, 4 % at 30 Hz: 3 % at 20 Hz, times |P̂(20 Hz)|
-/// let s = nonlinear_term(
-///     &[10.0, 30.0],
-///     &[c64::new(2.0, 0.0), c64::new(0.0, 1.0)],
-///     &[0.04, 0.04],
-///     &[20.0],
-///     &m,
-/// )
-/// .unwrap();
-/// let p = m.freq_response_siso(&[20.0]).unwrap()[0].norm();
-/// assert!((s[0] / p - 0.03).abs() < 1e-12);
+/// // 8 lines 20..160 Hz, |G| = 2, one realisation's NL variance 4 % of |G|², exact variances
+/// let (mm, p) = (8usize, 4usize);
+/// let est = BlaEstimate {
+///     lines: (1..=8).collect(),
+///     f_hz: (1..=8).map(|k| 20.0 * k as f64).collect(),
+///     values: vec![c64::new(2.0, 0.0); 8],
+///     var_total: vec![0.16 / mm as f64 + 1e-4; 8],
+///     var_noise: vec![1e-4; 8],
+///     var_nl: vec![0.16; 8],
+///     realisations: mm,
+///     periods: p,
+/// };
+/// let t = nonlinear_term(&est, 1.0, &[50.0], &m, NONLINEAR_ALPHA).unwrap();
+/// assert_eq!(t.significant_groups(), t.groups.len());
+/// let g = t.groups[0];
+/// let p50 = m.freq_response_siso(&[50.0]).unwrap()[0].norm();
+/// assert!((t.std[0] / p50 - g.upper_rel.sqrt()).abs() < 1e-12);
+/// assert!(g.upper_rel > 0.04);
 /// ```
 pub fn nonlinear_term(
-    bla_f_hz: &[f64],
-    bla: &[ambid_core::c64],
-    nl_std: &[f64],
+    bla: &BlaEstimate,
+    variance_scale: f64,
     f_hz: &[f64],
     nominal: &StateSpace,
-) -> Result<Vec<f64>> {
+    alpha: f64,
+) -> Result<NonlinearTerm> {
     let bad = |why: String| Error::other(format!("the nonlinear term: {why}"));
-    let l = bla_f_hz.len();
-    if l == 0 || bla.len() != l || nl_std.len() != l {
+    if !(variance_scale.is_finite() && variance_scale > 0.0) {
         return Err(bad(format!(
-            "{l} lines, {} BLA values and {} standard deviations: give one of each per line",
-            bla.len(),
-            nl_std.len()
+            "the level scale {variance_scale} is not a finite, positive number"
         )));
     }
-    if bla_f_hz.iter().any(|f| !f.is_finite()) || bla_f_hz.windows(2).any(|w| w[1] <= w[0]) {
+    let fs = &bla.f_hz;
+    if fs.iter().any(|f| !f.is_finite()) || fs.windows(2).any(|w| w[1] <= w[0]) {
         return Err(bad(
             "the BLA's frequencies must be finite and ascending".into()
         ));
     }
-    let mut rel = Vec::with_capacity(l);
-    for k in 0..l {
-        if !(nl_std[k].is_finite() && nl_std[k] >= 0.0) {
-            return Err(bad(format!(
-                "the standard deviation {} at {} Hz is not a finite, non-negative number",
-                nl_std[k], bla_f_hz[k]
-            )));
-        }
-        let g = bla[k].norm();
-        if !(g > 0.0 && g.is_finite()) {
-            return Err(bad(format!(
-                "the BLA is zero or not finite at {} Hz",
-                bla_f_hz[k]
-            )));
-        }
-        rel.push(nl_std[k] / g);
+    let groups = bla.nl_groups(alpha).map_err(|e| bad(e.to_string()))?;
+    let mut rel = Vec::with_capacity(fs.len());
+    for g in &groups {
+        let r = if g.significant {
+            (variance_scale * g.upper_rel).sqrt()
+        } else {
+            0.0
+        };
+        rel.extend(std::iter::repeat_n(r, g.lines));
     }
-    Ok(carry_relative(
-        bla_f_hz,
-        &rel,
-        f_hz,
-        &model_abs(nominal, f_hz)?,
-    ))
+    Ok(NonlinearTerm {
+        std: carry_relative(fs, &rel, f_hz, &model_abs(nominal, f_hz)?),
+        groups,
+        variance_scale,
+    })
+}
+
+/// Which of a BLA study's levels feeds term (c) for an identification experiment at level
+/// `ident` (the same unit as `levels`), and the factor its relative nonlinear variance is
+/// scaled by: the lowest level at or above `ident`, unscaled (the distortion grows with the
+/// level, so it is not understated); when every level is below `ident`, the highest, scaled by
+/// $(a_\text{ident}/a)^4$ (an odd, smooth nonlinearity's relative distortion variance grows with
+/// the fourth power of the amplitude to leading order, the rule term (e) extrapolates by).
+/// `None` when no level is a finite, positive number.
+///
+/// # Example
+/// ```
+/// use ambid::uncertainty::nonlinear_level;
+/// assert_eq!(nonlinear_level(&[2.0, 4.0, 8.0, 16.0], 5.0), Some((2, 1.0)));
+/// assert_eq!(nonlinear_level(&[2.0, 4.0], 8.0), Some((1, 16.0)));
+/// assert_eq!(nonlinear_level(&[], 8.0), None);
+/// ```
+pub fn nonlinear_level(levels: &[f64], ident: f64) -> Option<(usize, f64)> {
+    let ok = |l: f64| l.is_finite() && l > 0.0;
+    let above = (0..levels.len())
+        .filter(|&i| ok(levels[i]) && levels[i] >= ident)
+        .min_by(|&a, &b| levels[a].total_cmp(&levels[b]));
+    if let Some(i) = above {
+        return Some((i, 1.0));
+    }
+    let i = (0..levels.len())
+        .filter(|&i| ok(levels[i]))
+        .max_by(|&a, &b| levels[a].total_cmp(&levels[b]))?;
+    Some((i, (ident / levels[i]).powi(4)))
 }
 
 /// Term (e) of the bound around the model `nominal` on the lines `f_hz`: the systematic shift of

@@ -481,42 +481,72 @@ fn uncertainty_takes_the_amplitude_levels_as_term_e() {
         (0.8..=2.0).contains(&median),
         "term (e) / true error {median}"
     );
-    // term (c) from a robust BLA's per-line CSV (written here: 1 % of |BLA| on lines that do
-    // not coincide with the FRF's): on every line the 95 % quantile of a circular complex
-    // Gaussian of that standard deviation, σ √ln 20, times |P̂|
-    let mut bla = String::from("f_hz,bla_re,bla_im,bla_std,noise_std,nl_std,var_nl\n");
-    for k in 0..400 {
-        let fk = 1.5 + 7.3 * k as f64;
+    // term (c) from a robust BLA's per-line CSV (written here: one realisation's NL variance
+    // 1e-4 |BLA|² with exact variances, M = 8, P = 4, no noise, on lines that do not coincide
+    // with the FRF's). In-test oracle: the groups (≥ ⅓ decade and 4 lines), each group's upper
+    // value 1e-4 (1 + z₀.₉₅ / √(7n)) (per line the standard error is 1e-4/√(M−1)), its root
+    // interpolated linearly to the FRF's lines, times √ln 20 (the 95 % quantile of a circular
+    // complex Gaussian) and |P̂|
+    let mut bla =
+        String::from("f_hz,bla_re,bla_im,bla_std,noise_std,nl_std,var_nl,realisations,periods\n");
+    let bf: Vec<f64> = (0..400).map(|k| 1.5 + 7.3 * k as f64).collect();
+    for &fk in &bf {
         let (re, im) = (2.0 + (fk / 500.0).sin(), -1.0);
-        let nl: f64 = 0.01 * (re * re + im * im).sqrt();
-        bla += &format!("{fk},{re},{im},0,0,{nl},0\n");
+        let g2: f64 = re * re + im * im;
+        bla += &format!(
+            "{fk},{re},{im},{},0,{},{},8,4\n",
+            (1e-4 * g2 / 8.0).sqrt(),
+            (1e-4 * g2).sqrt(),
+            1e-4 * g2
+        );
     }
     std::fs::write(dir.join("bla.csv"), bla).unwrap();
+    let mut group_of = vec![0usize; bf.len()];
+    let mut sizes = Vec::new();
+    let mut i = 0;
+    while i < bf.len() {
+        let mut j = i + 1;
+        while j < bf.len() && (bf[j] <= bf[i] * 10f64.powf(1.0 / 3.0) || j - i < 4) {
+            j += 1;
+        }
+        if bf.len() - j < 4 {
+            j = bf.len();
+        }
+        group_of[i..j].fill(sizes.len());
+        sizes.push(j - i);
+        i = j;
+    }
+    let root: Vec<f64> = group_of
+        .iter()
+        .map(|&g| (1e-4 * (1.0 + 1.644_853_626_951_472 / (7.0 * sizes[g] as f64).sqrt())).sqrt())
+        .collect();
     let args = uncertainty_args(&dir, &["--nonlinear", &d("bla.csv")], "unc_nl");
     ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
     let t = std::fs::read_to_string(dir.join("unc_nl/uncertainty.csv")).unwrap();
-    let (tn, re, im) = (
+    let (tf, tn, re, im) = (
+        column(&t, "f_hz"),
         column(&t, "term_nonlinear"),
         column(&t, "nominal_re"),
         column(&t, "nominal_im"),
     );
-    let want = 0.01 * 20f64.ln().sqrt();
     for k in 0..tn.len() {
+        let j = bf.partition_point(|&x| x < tf[k]).clamp(1, bf.len() - 1);
+        let w = ((tf[k] - bf[j - 1]) / (bf[j] - bf[j - 1])).clamp(0.0, 1.0);
+        let want = (root[j - 1] + w * (root[j] - root[j - 1])) * 20f64.ln().sqrt();
         let got = tn[k] / c64::new(re[k], im[k]).norm();
         assert!(
-            (got - want).abs() <= 1e-9 * want,
+            (got - want).abs() <= 1e-6 * want,
             "line {k}: {got} vs {want}"
         );
     }
-    assert_eq!(
-        summary_of(&dir, "unc_nl")["nonlinear"]["file"],
-        d("bla.csv").as_str()
-    );
+    let snl = &summary_of(&dir, "unc_nl")["nonlinear"];
+    assert_eq!(snl["file"], d("bla.csv").as_str());
+    assert_eq!(snl["significant_groups"], sizes.len());
     std::fs::write(dir.join("bla_bad.csv"), "f_hz,bla_re,bla_im\n10,1,0\n").unwrap();
     // misuse: refused, nothing written
     let bla_bad = d("bla_bad.csv");
     for (extra, want) in [
-        (vec!["--nonlinear", bla_bad.as_str()], "nl_std"),
+        (vec!["--nonlinear", bla_bad.as_str()], "var_nl"),
         (vec!["--amplitude", a5.as_str()], "--level"),
         (vec!["--level", "10"], "--amplitude"),
         (

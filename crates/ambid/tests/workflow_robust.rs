@@ -35,6 +35,7 @@ fn uncertainty_and_physical_steps_on_the_twin() {
         all,
         vec![
             Step::Amplitude,
+            Step::Bla,
             Step::Frf,
             Step::Models,
             Step::Uncertainty,
@@ -55,6 +56,30 @@ fn uncertainty_and_physical_steps_on_the_twin() {
 
     // no operating-point step: no term (d), neither plotted nor in the summary
     assert!(out.report.series("uncertainty", "(d)").is_none());
+    // term (c) from the robust BLA study's lowest level at or above the identification
+    // level, unscaled; its groups cover the BLA's lines and the term is plotted
+    let chosen = sm["amplitude"]["chosen_pct"].as_f64().unwrap();
+    let want = sm["bla"]["levels"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| l["level_pct"].as_f64().unwrap())
+        .filter(|l| *l >= chosen)
+        .fold(f64::INFINITY, f64::min);
+    let uc = &sm["uncertainty"];
+    assert_eq!(uc["nonlinear_level_pct"].as_f64(), Some(want), "{chosen}");
+    assert_eq!(uc["nonlinear_variance_scale"].as_f64(), Some(1.0));
+    let groups = uc["nonlinear_groups"].as_array().unwrap();
+    assert!(!groups.is_empty());
+    let significant = groups.iter().filter(|g| g["significant"] == true).count();
+    println!(
+        "term (c): {significant} of {} groups significant",
+        groups.len()
+    );
+    assert_eq!(
+        out.report.series("uncertainty", "(c)").is_some(),
+        significant > 0
+    );
     assert!(sm["uncertainty"].get("operating_cases").is_none());
     let twin = Twin::new(TwinConfig::default()).unwrap();
     let u = &sm["uncertainty"];

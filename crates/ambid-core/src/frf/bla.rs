@@ -181,21 +181,13 @@ impl BlaEstimate {
     /// # Errors
     /// [`Error::InvalidArgument`] when no line lies in the band or the BLA vanishes on one.
     pub fn band_summary(&self, f_min_hz: f64, f_max_hz: f64) -> Result<BlaBandSummary> {
-        let m = self.realisations as f64;
-        let p = self.periods as f64;
+        let (rel, se2) = self.nl_rel_lines()?;
         let (mut n, mut sn, mut snl, mut sse, mut st) = (0usize, 0.0, 0.0, 0.0, 0.0);
-        let rows = self
-            .f_hz
-            .iter()
-            .zip(&self.values)
-            .zip(&self.var_total)
-            .zip(&self.var_noise)
-            .zip(&self.var_nl);
-        for ((((&f, g), &vt), &vn), &vnl) in rows {
+        for (k, &f) in self.f_hz.iter().enumerate() {
             if !(f >= f_min_hz && f <= f_max_hz) {
                 continue;
             }
-            let g2 = g.norm_sqr();
+            let g2 = self.values[k].norm_sqr();
             if g2 <= 0.0 || !g2.is_finite() {
                 return Err(Error::invalid(
                     "band",
@@ -203,11 +195,10 @@ impl BlaEstimate {
                 ));
             }
             n += 1;
-            let (vt, vn) = (vt / g2, vn / g2);
-            sn += vn;
-            snl += vnl / g2;
-            st += vt;
-            sse += m * m * (vt * vt / (m - 1.0) + vn * vn / (m * (p - 1.0)));
+            sn += self.var_noise[k] / g2;
+            snl += rel[k];
+            st += self.var_total[k] / g2;
+            sse += se2[k];
         }
         if n == 0 {
             return Err(Error::invalid(
@@ -224,6 +215,162 @@ impl BlaEstimate {
             total_rel: st / nf,
         })
     }
+
+    /// Per line $k$: the relative stochastic nonlinear variance $\hat\sigma^2_S/|\hat G|^2$ and
+    /// the square of its standard error,
+    /// $M^2\big(\hat\sigma^4_{\mathrm{BLA}}/(M-1) + \hat\sigma^4_n/(M(P-1))\big)/|\hat G|^4$ (the
+    /// two variance estimates' $\chi^2$ spreads with $M-1$ and $M(P-1)$ complex degrees of
+    /// freedom, taken independent).
+    ///
+    /// Where the BLA vanishes (or is not finite) both are NaN.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] when fewer than 2 realisations or periods are recorded.
+    pub fn nl_rel_lines(&self) -> Result<(Vec<f64>, Vec<f64>)> {
+        if self.realisations < 2 || self.periods < 2 {
+            return Err(Error::invalid(
+                "realisations",
+                format!(
+                    "{} realisation(s) of {} period(s): the nonlinear variance needs at least 2 of each",
+                    self.realisations, self.periods
+                ),
+            ));
+        }
+        let m = self.realisations as f64;
+        let p = self.periods as f64;
+        let mut rel = Vec::with_capacity(self.f_hz.len());
+        let mut se2 = Vec::with_capacity(self.f_hz.len());
+        for k in 0..self.f_hz.len() {
+            let g2 = self.values[k].norm_sqr();
+            if g2 <= 0.0 || !g2.is_finite() {
+                rel.push(f64::NAN);
+                se2.push(f64::NAN);
+                continue;
+            }
+            let (vt, vn) = (self.var_total[k] / g2, self.var_noise[k] / g2);
+            rel.push(self.var_nl[k] / g2);
+            se2.push(m * m * (vt * vt / (m - 1.0) + vn * vn / (m * (p - 1.0))));
+        }
+        Ok((rel, se2))
+    }
+
+    /// The stochastic nonlinear variance tested in groups of neighbouring lines: each group
+    /// spans at least a third of a decade and holds at least [`NL_GROUP_MIN_LINES`] lines (a
+    /// last group with fewer joins the one before). Per group the mean $\bar r$ of
+    /// [`nl_rel_lines`](Self::nl_rel_lines) and its standard error $s$ (root of the summed
+    /// squares over the count) give a one-sided test at level `alpha` split over the $B$
+    /// groups, $\bar r > z_{1-\alpha/B}\,s$, and the upper value $\bar r + z_{1-\alpha}\,s$
+    /// ([`NlGroup`]).
+    ///
+    /// # Errors
+    /// `alpha` outside (0, 0.5), no line, a line where the BLA vanishes or a variance is not
+    /// finite, or as [`nl_rel_lines`](Self::nl_rel_lines).
+    ///
+    /// # Example
+    /// ```
+    /// use ambid_core::c64;
+    /// use ambid_core::frf::bla::BlaEstimate;
+    /// // 12 lines at 20..240 Hz, |G| = 1, one realisation's NL variance 0.01 and
+    /// // exact variances (M = 8, P = 4): the NL is far above its standard error
+    /// let (m, p) = (8usize, 4usize);
+    /// let f: Vec<f64> = (1..=12).map(|k| 20.0 * k as f64).collect();
+    /// let vn = 1e-4;
+    /// let est = BlaEstimate {
+    ///     lines: (1..=12).collect(),
+    ///     f_hz: f.clone(),
+    ///     values: vec![c64::new(1.0, 0.0); 12],
+    ///     var_total: vec![0.01 / m as f64 + vn; 12],
+    ///     var_noise: vec![vn; 12],
+    ///     var_nl: vec![0.01; 12],
+    ///     realisations: m,
+    ///     periods: p,
+    /// };
+    /// let g = est.nl_groups(0.05).unwrap();
+    /// assert!(g.iter().all(|g| g.significant && (g.nl_rel - 0.01).abs() < 1e-12));
+    /// assert_eq!(g.iter().map(|g| g.lines).sum::<usize>(), 12);
+    /// ```
+    pub fn nl_groups(&self, alpha: f64) -> Result<Vec<NlGroup>> {
+        if !(alpha > 0.0 && alpha < 0.5) {
+            return Err(Error::invalid(
+                "alpha",
+                format!("the test level must be in (0, 0.5), got {alpha}"),
+            ));
+        }
+        let l = self.f_hz.len();
+        if l == 0 {
+            return Err(Error::invalid("lines", "the BLA has no line"));
+        }
+        let (rel, se2) = self.nl_rel_lines()?;
+        if let Some(k) = (0..l).find(|&k| !(rel[k].is_finite() && se2[k].is_finite())) {
+            return Err(Error::invalid(
+                "lines",
+                format!(
+                    "the BLA or its variances are zero or not finite at {} Hz; cannot normalise by |G|²",
+                    self.f_hz[k]
+                ),
+            ));
+        }
+        let third = 10f64.powf(1.0 / 3.0);
+        let mut bounds = Vec::new();
+        let mut i = 0;
+        while i < l {
+            let mut j = i + 1;
+            while j < l && (self.f_hz[j] <= self.f_hz[i] * third || j - i < NL_GROUP_MIN_LINES) {
+                j += 1;
+            }
+            if l - j < NL_GROUP_MIN_LINES {
+                j = l;
+            }
+            bounds.push((i, j));
+            i = j;
+        }
+        let b = bounds.len() as f64;
+        let z_b = crate::validate::uncertainty::normal_upper_quantile(alpha / b);
+        let z = crate::validate::uncertainty::normal_upper_quantile(alpha);
+        Ok(bounds
+            .into_iter()
+            .map(|(i, j)| {
+                let n = (j - i) as f64;
+                let nl_rel = rel[i..j].iter().sum::<f64>() / n;
+                let nl_rel_se = se2[i..j].iter().sum::<f64>().sqrt() / n;
+                NlGroup {
+                    f_lo_hz: self.f_hz[i],
+                    f_hi_hz: self.f_hz[j - 1],
+                    lines: j - i,
+                    nl_rel,
+                    nl_rel_se,
+                    threshold: z_b * nl_rel_se,
+                    significant: nl_rel > z_b * nl_rel_se,
+                    upper_rel: nl_rel + z * nl_rel_se,
+                }
+            })
+            .collect())
+    }
+}
+
+/// Fewest lines in a group of [`BlaEstimate::nl_groups`].
+pub const NL_GROUP_MIN_LINES: usize = 4;
+
+/// One group of neighbouring lines of [`BlaEstimate::nl_groups`]: relative to $|\hat G|^2$, the
+/// variance of one realisation's stochastic nonlinear distortion.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct NlGroup {
+    /// Lowest line \[Hz\].
+    pub f_lo_hz: f64,
+    /// Highest line \[Hz\].
+    pub f_hi_hz: f64,
+    /// Lines in the group.
+    pub lines: usize,
+    /// Mean relative nonlinear variance $\bar r$ (not clipped: may be negative).
+    pub nl_rel: f64,
+    /// Its standard error $s$.
+    pub nl_rel_se: f64,
+    /// The test's threshold $z_{1-\alpha/B}\,s$.
+    pub threshold: f64,
+    /// $\bar r$ above the threshold.
+    pub significant: bool,
+    /// The one-sided upper value $\bar r + z_{1-\alpha}\,s$.
+    pub upper_rel: f64,
 }
 
 /// Which kind of non-excited line.

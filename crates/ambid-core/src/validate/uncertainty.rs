@@ -250,6 +250,12 @@ impl UncertaintyTerms {
         self.median_rel(self.operating.as_deref()?)
     }
 
+    /// The median over the lines of term (c) (its quantile) relative to $|\hat P|$, when the
+    /// term is present.
+    pub fn nonlinear_median_rel(&self) -> Option<f64> {
+        self.median_rel(self.nonlinear.as_deref()?)
+    }
+
     /// The median over the lines of term (e) relative to $|\hat P|$, when the term is present.
     pub fn amplitude_median_rel(&self) -> Option<f64> {
         self.median_rel(self.amplitude.as_deref()?)

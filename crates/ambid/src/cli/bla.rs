@@ -219,13 +219,22 @@ fn write(path: &std::path::Path, csv: &str, force: bool) -> Result<()> {
 
 fn per_line_csv(bla: &Bla) -> Result<String> {
     let g = &bla.g;
-    let mut csv = String::from("f_hz,bla_re,bla_im,bla_std,noise_std,nl_std,var_nl\n");
+    let mut csv =
+        String::from("f_hz,bla_re,bla_im,bla_std,noise_std,nl_std,var_nl,realisations,periods\n");
     let (st, sn, snl) = (g.std_total(), g.std_noise(), g.std_nl());
     for i in 0..g.f_hz.len() {
         writeln!(
             csv,
-            "{},{:e},{:e},{:e},{:e},{:e},{:e}",
-            g.f_hz[i], g.values[i].re, g.values[i].im, st[i], sn[i], snl[i], g.var_nl[i]
+            "{},{:e},{:e},{:e},{:e},{:e},{:e},{},{}",
+            g.f_hz[i],
+            g.values[i].re,
+            g.values[i].im,
+            st[i],
+            sn[i],
+            snl[i],
+            g.var_nl[i],
+            g.realisations,
+            g.periods
         )?;
     }
     Ok(csv)

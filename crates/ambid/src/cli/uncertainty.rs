@@ -10,7 +10,10 @@ use ambid::io::export::uncertain::{
     UncertainModel, UncertainNames,
 };
 use ambid::io::OutputSet;
-use ambid::uncertainty::{amplitude_term, analyse, nonlinear_term, operating_term};
+use ambid::uncertainty::{
+    amplitude_term, analyse, nonlinear_term, operating_term, NONLINEAR_ALPHA,
+};
+use ambid_core::frf::bla::BlaEstimate;
 use ambid_core::validate::uncertainty::{ExtraTerms, UncertaintyOptions};
 use ambid_core::validate::weight::{WeightShape, DEFAULT_COVER, MAX_WEIGHT_ORDER};
 use anyhow::Result;
@@ -86,9 +89,10 @@ pub struct UncertaintyArgs {
     /// The excitation level of the nominal FRF (needed with `--amplitude`, in its unit).
     #[arg(long)]
     pub(crate) level: Option<f64>,
-    /// Term (c): the per-line CSV of a robust BLA measurement (`ambid bla --level`, columns
-    /// `f_hz`, `bla_re`, `bla_im`, `nl_std`); its relative nonlinear standard deviation is
-    /// carried to the FRF's lines (docs/uncertainty.md).
+    /// Term (c): the per-line CSV of a robust BLA measurement at the identification level
+    /// (`ambid bla --level`, columns `f_hz`, `bla_re`, `bla_im`, `bla_std`, `noise_std`, `var_nl`,
+    /// `realisations`, `periods`); its relative nonlinear variance, tested in groups of lines
+    /// and kept where significant, is carried to the FRF's lines (docs/uncertainty.md).
     #[arg(long, value_name = "BLA")]
     pub(crate) nonlinear: Option<PathBuf>,
     /// Output directory: uncertainty.csv, robust.csv, summary.json and the uncertain model
@@ -247,20 +251,31 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             )
         }
     };
-    // term (c) from a robust BLA's per-line nonlinear standard deviation
+    // term (c) from a robust BLA's nonlinear variance, tested in groups of lines
     let nonlinear = match &a.nonlinear {
         None => None,
         Some(path) => {
-            let (bf, bla, nl) = read_bla(path)?;
+            let bla = read_bla(path)?;
             Some(
-                nonlinear_term(&bf, &bla, &nl, frd.f_hz(), &model).map_err(|e| {
+                nonlinear_term(&bla, 1.0, frd.f_hz(), &model, NONLINEAR_ALPHA).map_err(|e| {
                     ambid::error::Error::input(format!("--nonlinear {}: {e}", path.display()))
                 })?,
             )
         }
     };
+    if let Some(n) = &nonlinear {
+        println!(
+            "term (c): the BLA's nonlinear variance is significant in {} of {} groups of lines",
+            n.significant_groups(),
+            n.groups.len()
+        );
+    }
     let extra = ExtraTerms {
-        nonlinear_std: nonlinear.as_deref(),
+        // no significant group: no term (a zero term would still change the joint draws)
+        nonlinear_std: nonlinear
+            .as_ref()
+            .filter(|n| n.significant_groups() > 0)
+            .map(|n| n.std.as_slice()),
         operating_spread: spread.as_deref(),
         amplitude_shift: amplitude.as_deref(),
     };
@@ -370,8 +385,10 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             "files": a.operating.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
             "spread_median_rel": m,
         })),
-        "nonlinear": a.nonlinear.as_ref().map(|p| json!({
+        "nonlinear": a.nonlinear.as_ref().zip(nonlinear.as_ref()).map(|(p, n)| json!({
             "file": p.display().to_string(),
+            "groups": n.groups,
+            "significant_groups": n.significant_groups(),
         })),
         "amplitude": t.amplitude_median_rel().map(|m| json!({
             "level": a.level,
@@ -496,28 +513,52 @@ fn parse_level_frf(s: &str) -> Result<(f64, PathBuf), String> {
     Ok((level, PathBuf::from(p)))
 }
 
-/// The per-line CSV of `ambid bla --level`: lines, BLA and the nonlinear standard deviation
-/// (read by the data-file reader; their values are checked by `nonlinear_term`).
-fn read_bla(path: &Path) -> Result<(Vec<f64>, Vec<ambid_core::c64>, Vec<f64>)> {
+/// The per-line CSV of `ambid bla --level` as the plant's [`BlaEstimate`]: lines, BLA, the
+/// BLA's total and noise standard deviations, one realisation's nonlinear variance and the
+/// realisation and period counts (read by the data-file reader; the values are checked by
+/// `nonlinear_term`). The DFT line numbers are not in the file: `lines` holds the rows' indices.
+fn read_bla(path: &Path) -> Result<BlaEstimate> {
     use ambid::io::table::{read_table, ColumnRef, ReadOptions};
-    let bad = |e: ambid::io::table::DataFileError| {
+    let bad = |e: String| {
         ambid::error::Error::input(format!(
-            "--nonlinear: {e}; give the per-line CSV of `ambid bla --level` (f_hz, bla_re, bla_im, nl_std)"
+            "--nonlinear {}: {e}; give the per-line CSV of `ambid bla --level` (f_hz, bla_re, bla_im, bla_std, noise_std, var_nl, realisations, periods; files written before 2026-12-02 lack the last two: write it again)",
+            path.display()
         ))
     };
-    let t = read_table(path, &ReadOptions::default()).map_err(bad)?;
+    let t = read_table(path, &ReadOptions::default()).map_err(|e| bad(e.to_string()))?;
     let col = |name: &str| {
         t.column(&ColumnRef::parse(name))
             .map(<[f64]>::to_vec)
-            .map_err(bad)
+            .map_err(|e| bad(e.to_string()))
     };
-    let (f, re, im, nl) = (col("f_hz")?, col("bla_re")?, col("bla_im")?, col("nl_std")?);
-    let g = re
-        .iter()
-        .zip(&im)
-        .map(|(r, i)| ambid_core::c64::new(*r, *i))
-        .collect();
-    Ok((f, g, nl))
+    let (f, re, im) = (col("f_hz")?, col("bla_re")?, col("bla_im")?);
+    let (st, sn, vnl) = (col("bla_std")?, col("noise_std")?, col("var_nl")?);
+    let count = |name: &str| -> Result<usize> {
+        let c = col(name)?;
+        let v = c.first().copied().unwrap_or(f64::NAN);
+        if !(v.is_finite() && v >= 2.0 && v.fract() == 0.0 && c.iter().all(|x| *x == v)) {
+            return Err(bad(format!(
+                "the column `{name}` must hold one whole number ≥ 2 on every row"
+            ))
+            .into());
+        }
+        Ok(v as usize)
+    };
+    let (m, p) = (count("realisations")?, count("periods")?);
+    Ok(BlaEstimate {
+        lines: (0..f.len()).collect(),
+        values: re
+            .iter()
+            .zip(&im)
+            .map(|(r, i)| ambid_core::c64::new(*r, *i))
+            .collect(),
+        var_total: st.iter().map(|s| s * s).collect(),
+        var_noise: sn.iter().map(|s| s * s).collect(),
+        var_nl: vnl,
+        f_hz: f,
+        realisations: m,
+        periods: p,
+    })
 }
 
 /// `--weight-shape`: [`WeightShape::from_name`].

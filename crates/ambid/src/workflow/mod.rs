@@ -644,8 +644,9 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
     progress.finish("data", dt, "done");
     let mut timings: Vec<Option<StepTime>> = vec![None; steps.len()];
     let indexed: Vec<(usize, Step)> = steps.iter().copied().enumerate().collect();
-    // on the twin the robust BLA study (it feeds no other stage) runs beside the steps and is
-    // rendered in its place afterwards; the amplitude study and the noise-only record
+    // on the twin the robust BLA study runs beside the steps and is rendered in its place
+    // afterwards, before the `uncertainty` step (the only one that reads it, for its term
+    // (c)) and the steps after it run; the amplitude study and the noise-only record
     // (independent experiments, each from its own seed) run together first
     let bla = ctx
         .twin
@@ -658,6 +659,11 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
         .copied()
         .filter(|(k, _)| bla.as_ref().is_none_or(|(kb, _)| kb.0 != *k))
         .collect();
+    let split = rest
+        .iter()
+        .position(|(_, s)| *s == Step::Uncertainty)
+        .unwrap_or(rest.len());
+    let (rest, after) = rest.split_at(split);
     // the amplitude study first (its chosen level feeds the identification chain): the BLA
     // study then runs beside the chain and the operating-point study, where the two cores have
     // room, instead of competing with the amplitude study on the critical path
@@ -667,7 +673,7 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
             bla.as_ref()
                 .map(|(kb, i)| (*kb, timed(|| crate::stage::bla_twin(i))))
         },
-        || run_steps(&mut ctx, &rest, progress, &mut timings),
+        || run_steps(&mut ctx, rest, progress, &mut timings),
     );
     // the first failure in the order of the steps
     if let Some(((kb, step), (study, secs))) = bla_out {
@@ -694,6 +700,7 @@ pub fn run(cfg: &WorkflowConfig, base: &Path, progress: &mut Progress) -> Result
     } else {
         result.map_err(|(_, e)| e)?;
     }
+    run_steps(&mut ctx, after, progress, &mut timings).map_err(|(_, e)| e)?;
     let timings: Vec<StepTime> = std::iter::once(StepTime {
         step: "data".into(),
         seconds: dt,

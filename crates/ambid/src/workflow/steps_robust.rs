@@ -12,7 +12,10 @@ use crate::report::{
     Axis, Block, Figure, Marker, NoteKind, Panel, PanelContent, Scale, Section, Series, Style,
     Table,
 };
-use crate::uncertainty::{amplitude_term, analyse, nominal_gain_interval, operating_term};
+use crate::uncertainty::{
+    amplitude_term, analyse, nominal_gain_interval, nonlinear_level, nonlinear_term,
+    operating_term, NONLINEAR_ALPHA,
+};
 use ambid_core::lti::{Frd, StateSpace};
 use ambid_core::validate::uncertainty::{ExtraTerms, UncertaintyOptions};
 use ambid_core::validate::weight::{DEFAULT_COVER, MAX_WEIGHT_ORDER};
@@ -56,6 +59,21 @@ pub struct UncertaintySummary {
     /// Median over the lines of term (e) relative to $|\hat P|$.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub amplitude_shift_median_rel: Option<f64>,
+    /// The robust BLA study's level \[% of i_sat\] whose stochastic nonlinear variance gave
+    /// term (c) ([`crate::uncertainty::nonlinear_level`]; absent: the `bla` step gave no
+    /// study, or the term was left out with a note).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub nonlinear_level_pct: Option<f64>,
+    /// The factor that level's relative variance was scaled by to the identification level.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub nonlinear_variance_scale: Option<f64>,
+    /// Term (c)'s groups of the BLA's lines with their test ([`ambid_core::frf::bla::NlGroup`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub nonlinear_groups: Option<Vec<ambid_core::frf::bla::NlGroup>>,
+    /// Median over the lines of term (c) (its 95 % quantile) relative to $|\hat P|$ (0 when no
+    /// group is significant: the bound then has no term (c)).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub nonlinear_median_rel: Option<f64>,
     /// On the twin: the true loop's gain interval.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub twin_gain_interval: Option<(f64, f64)>,
@@ -232,10 +250,42 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             None
         }
     };
+    // term (c) from the robust BLA study, when it gave one: the stochastic nonlinear variance
+    // of one experiment at the level nonlinear_level picks for the identification level,
+    // tested in groups of lines and kept where significant
+    let mut nonlinear_note = None;
+    let nonlinear = match ctx.bla.as_ref() {
+        Some(study) => {
+            let levels: Vec<f64> = study.rows.iter().map(|r| r.level_pct).collect();
+            match nonlinear_level(&levels, 100.0 * ctx.ident_frac()) {
+                Some((i, scale)) => match nonlinear_term(
+                    &study.rows[i].plant,
+                    scale,
+                    frd.f_hz(),
+                    &model,
+                    NONLINEAR_ALPHA,
+                ) {
+                    Ok(n) => Some((n, study.rows[i].level_pct)),
+                    Err(e) => {
+                        nonlinear_note = Some(format!(
+                            "the stochastic nonlinear distortion (term (c)) left out: {e}"
+                        ));
+                        None
+                    }
+                },
+                None => None,
+            }
+        }
+        None => None,
+    };
     let extra = ExtraTerms {
+        // no significant group: no term (a zero term would still change the joint draws)
+        nonlinear_std: nonlinear
+            .as_ref()
+            .filter(|n| n.0.significant_groups() > 0)
+            .map(|n| n.0.std.as_slice()),
         operating_spread: spread.as_ref().map(|s| s.0.as_slice()),
         amplitude_shift: amplitude.as_ref().map(|s| s.0.as_slice()),
-        ..ExtraTerms::default()
     };
     let a = match analyse(
         &model,
@@ -296,6 +346,23 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                 y: rel(o),
                 style: Style::Line,
                 color: Some(5),
+            },
+        );
+    }
+    // term (c) is plotted where some group is significant (0 on a log axis is no line)
+    if let Some(c) = t
+        .nonlinear
+        .as_deref()
+        .filter(|c| c.iter().any(|x| *x > 0.0))
+    {
+        series.insert(
+            2,
+            Series {
+                name: "(c) nonlinear distortion / |P̂|".into(),
+                x: t.f_hz.clone(),
+                y: rel(c),
+                style: Style::Line,
+                color: Some(7),
             },
         );
     }
@@ -392,7 +459,7 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     let band = (t.f_hz[0], t.f_hz[t.f_hz.len() - 1]);
     let mut blocks = vec![
         Block::Text(format!(
-            "The chosen model's multiplicative uncertainty ℓ over the models' band ({:.1}–{:.1} Hz, {} lines): (a) the FRF's 95 % confidence region carried through the fit, (b) the model's significant systematic error against the FRF, (d) when the operating-point step ran, the largest noise-corrected distance of the other operating points' plant FRFs from the nominal one, (e) when the amplitude step ran, the shift of the best linear approximation at the identification level from its extrapolation to zero amplitude (the line through the levels' plant FRFs in the squared amplitude, smoothed, where significant); the stable minimum-phase weight W (order ≤ 4) that overbounds it, its gain raised until it also overbounds the fitted model's error on 98 % of the lines in 95 % of 2 000 seeded draws, and the controller's robust stability against P = P̂(1 + WΔ) (docs/uncertainty.md; `ambid uncertainty` writes the terms and the uncertain model for MATLAB and Python). This step on random twin rigs 1–100 (docs/uncertainty.md, \"Term (e) in the workflow\"): W covered the chosen model's true error on ≥ 95 % of the 10–1000 Hz lines on 99 of the linear twin and 94 of the nonlinear one (with term (e) from the amplitude study), at a median 11× (linear) and 7× (nonlinear) the error's median (a weight of order ≤ 4 cannot follow the relative error's peaks at the plant's anti-resonances): a conservative bound, not a tight one.",
+            "The chosen model's multiplicative uncertainty ℓ over the models' band ({:.1}–{:.1} Hz, {} lines): (a) the FRF's 95 % confidence region carried through the fit, (b) the model's significant systematic error against the FRF, (c) when the robust BLA step gave a study, the stochastic nonlinear distortion of one experiment (the BLA's nonlinear variance at the identification level, tested in groups of lines, where significant), (d) when the operating-point step ran, the largest noise-corrected distance of the other operating points' plant FRFs from the nominal one, (e) when the amplitude step ran, the shift of the best linear approximation at the identification level from its extrapolation to zero amplitude (the line through the levels' plant FRFs in the squared amplitude, smoothed, where significant); the stable minimum-phase weight W (order ≤ 4) that overbounds it, its gain raised until it also overbounds the fitted model's error on 98 % of the lines in 95 % of 2 000 seeded draws, and the controller's robust stability against P = P̂(1 + WΔ) (docs/uncertainty.md; `ambid uncertainty` writes the terms and the uncertain model for MATLAB and Python). This step on random twin rigs 1–100 (docs/uncertainty.md, \"Term (e) in the workflow\"): W covered the chosen model's true error on ≥ 95 % of the 10–1000 Hz lines on 99 of the linear twin and 94 of the nonlinear one (with term (e) from the amplitude study), at a median 11× (linear) and 7× (nonlinear) the error's median (a weight of order ≤ 4 cannot follow the relative error's peaks at the plant's anti-resonances): a conservative bound, not a tight one.",
             band.0,
             band.1,
             t.f_hz.len()
@@ -428,7 +495,40 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             ..Table::default()
         }),
     ];
-    for n in [spread_note, amplitude_note].into_iter().flatten() {
+    match &nonlinear {
+        Some((n, level)) => blocks.insert(
+            1,
+            Ctx::note(
+                NoteKind::Info,
+                format!(
+                    "Term (c), the stochastic nonlinear distortion of one experiment, from the robust BLA at {} % of i_sat{}: significant in {} of {} groups of the BLA's lines (each ≥ ⅓ decade and 4 lines, tested at 5 % split over the groups; docs/uncertainty.md, \"Term (c) in the workflow\").",
+                    crate::report::format_number(*level),
+                    if n.variance_scale == 1.0 {
+                        String::new()
+                    } else {
+                        format!(
+                            ", its variance scaled ×{:.3} to the identification level",
+                            n.variance_scale
+                        )
+                    },
+                    n.significant_groups(),
+                    n.groups.len()
+                ),
+            ),
+        ),
+        None if nonlinear_note.is_none() => blocks.insert(
+            1,
+            Ctx::note(
+                NoteKind::Info,
+                "No robust BLA study gave a level, so the bound has no term (c), the stochastic nonlinear distortion of one experiment (on the twin the `bla` step runs with this step; on recorded data list the multisine realisations in [bla] files).",
+            ),
+        ),
+        None => {}
+    }
+    for n in [spread_note, amplitude_note, nonlinear_note]
+        .into_iter()
+        .flatten()
+    {
         blocks.insert(1, Ctx::note(NoteKind::Warning, n));
     }
     ctx.sections.push(Section {
@@ -451,6 +551,12 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         operating_spread_median_rel: t.operating_median_rel(),
         amplitude_levels_pct: amplitude.as_ref().map(|s| s.1.clone()),
         amplitude_shift_median_rel: t.amplitude_median_rel(),
+        nonlinear_level_pct: nonlinear.as_ref().map(|n| n.1),
+        nonlinear_variance_scale: nonlinear.as_ref().map(|n| n.0.variance_scale),
+        nonlinear_groups: nonlinear.as_ref().map(|n| n.0.groups.clone()),
+        nonlinear_median_rel: nonlinear
+            .as_ref()
+            .map(|_| t.nonlinear_median_rel().unwrap_or(0.0)),
         twin_gain_interval: twin_interval,
         twin_weight_coverage: twin_cov,
         lines_robustly_stable: a.on_lines.robustly_stable,
