@@ -19,7 +19,8 @@
 //! |W| is below the true error, with the terms there. Since 2026-12-02 the prerequisites also
 //! bring the robust BLA study (term (c)); `NO_BLA=1` leaves it out (the bound then has no
 //! term (c), as before). Per rig the last column is term (c): the BLA level it was read at and
-//! its significant groups of lines.
+//! its significant groups of lines. `PRINT_E=1` prints every 10th line's term (e) and term (a)
+//! (relative) beside the true error.
 
 mod common;
 
@@ -107,6 +108,16 @@ fn main() {
         };
         let ratio = median(idx.iter().map(|&k| w.y[k]).collect())
             / median(idx.iter().map(|&k| err.y[k]).collect());
+        if std::env::var("PRINT_E").is_ok() {
+            if let (Some(e), Some(a)) = (pick("(e)"), pick("(a)")) {
+                for k in (0..e.x.len()).step_by(10) {
+                    println!(
+                        "    {:.1} Hz: (e) {:.2e} (a) {:.2e} err {:.2e}",
+                        e.x[k], e.y[k], a.y[k], err.y[k]
+                    );
+                }
+            }
+        }
         if std::env::var("SHOW_MISS").is_ok() {
             let terms: Vec<(String, ambid::report::Series)> =
                 ["(a)", "(b)", "(c)", "(e)", "bound ℓ"]

@@ -19,8 +19,8 @@ use ambid_core::validate::compare::unstable_poles_from_loop;
 pub use ambid_core::validate::robust::{loop_stable, nominal_gain_interval};
 use ambid_core::validate::robust::{robust_stability, robust_stability_on_lines, RobustStability};
 use ambid_core::validate::uncertainty::{
-    uncertainty, window_half_lines_for, window_scales, ExtraTerms, UncertaintyOptions,
-    UncertaintyTerms,
+    uncertainty_matrix, window_half_lines_for, window_scales, ExtraTerms, ProjectedShift,
+    UncertaintyOptions, UncertaintyTerms,
 };
 use ambid_core::validate::weight::{fit_weight_shaped, WeightFit, DEFAULT_COVER, MAX_WEIGHT_ORDER};
 use ambid_twin::{random_rig, Mode, TwinConfig};
@@ -46,6 +46,71 @@ pub struct UncertaintyAnalysis {
     /// $g_\ell \ge 1$: the factor the bound ℓ was raised by for [`Self::on_lines`], so that it
     /// overbounds the model's error on `cover` of the lines in `run_coverage` of the draws.
     pub lines_raise: f64,
+    /// Term (e) through the model ([`analyse_with_shift`]): its Wald test, or why it could not
+    /// be computed (the bound then keeps the line term); `None` without per-line shifts.
+    pub amplitude_projected: Option<std::result::Result<ProjectedShift, String>>,
+}
+
+/// An amplitude study's per-line shift estimates at the identification level
+/// ([`amplitude_shift_lines`]: complex, absolute, with the variance of a circular complex
+/// error) on the study's lines `f_hz`, for term (e) through the model ([`analyse_with_shift`]).
+#[derive(Debug, Clone, Copy)]
+pub struct ShiftLines<'a> {
+    /// The study's lines \[Hz\].
+    pub f_hz: &'a [f64],
+    /// $c_j a_e^2$ per line.
+    pub shift: &'a [c64],
+    /// Its variance per line.
+    pub var: &'a [f64],
+}
+
+impl ShiftLines<'_> {
+    /// The shifts and variances on the lines `f_hz` (those of the FRF the bound is computed
+    /// on): a line of the study within $10^{-9}$ relative gives its values; a line the study
+    /// does not have gets shift 0 with variance 0, so it adds nothing to the projection's
+    /// right-hand side or to its test.
+    ///
+    /// # Errors
+    /// Lengths that differ.
+    ///
+    /// # Example
+    /// ```
+    /// use ambid::uncertainty::ShiftLines;
+    /// use ambid_core::c64;
+    /// let (f, sh, v) = ([10.0, 20.0], [c64::new(1.0, 0.0), c64::new(2.0, 0.0)], [0.1, 0.2]);
+    /// let lines = ShiftLines { f_hz: &f, shift: &sh, var: &v };
+    /// let (s, var) = lines.on_lines(&[5.0, 20.0, 30.0]).unwrap();
+    /// assert_eq!(s[1], c64::new(2.0, 0.0));
+    /// assert_eq!((var[0], var[1], var[2]), (0.0, 0.2, 0.0));
+    /// ```
+    pub fn on_lines(&self, f_hz: &[f64]) -> Result<(Vec<c64>, Vec<f64>)> {
+        let n = self.f_hz.len();
+        if self.shift.len() != n || self.var.len() != n {
+            return Err(Error::other(format!(
+                "term (e) through the model: {n} lines, {} shifts and {} variances: give one of each per line",
+                self.shift.len(),
+                self.var.len()
+            )));
+        }
+        let mut shift = vec![c64::new(0.0, 0.0); f_hz.len()];
+        let mut var = vec![0.0; f_hz.len()];
+        for (k, &f) in f_hz.iter().enumerate() {
+            let j = self.f_hz.partition_point(|&x| x < f);
+            let near = [j.wrapping_sub(1), j]
+                .into_iter()
+                .filter(|&i| i < n)
+                .min_by(|&a, &b| {
+                    (self.f_hz[a] - f)
+                        .abs()
+                        .total_cmp(&(self.f_hz[b] - f).abs())
+                });
+            if let Some(i) = near.filter(|&i| (self.f_hz[i] - f).abs() <= 1e-9 * f.abs().max(1.0)) {
+                shift[k] = self.shift[i];
+                var[k] = self.var[i];
+            }
+        }
+        Ok((shift, var))
+    }
 }
 
 /// The uncertainty of `nominal` around the measured plant FRF `frd` (with variances), its weight
@@ -58,7 +123,7 @@ pub struct UncertaintyAnalysis {
 /// ([`UncertaintyAnalysis::on_lines`]).
 ///
 /// # Errors
-/// Those of [`uncertainty`], [`fit_weight_shaped`] and [`robust_stability`], with the step named.
+/// Those of [`uncertainty`](ambid_core::validate::uncertainty::uncertainty), [`fit_weight_shaped`] and [`robust_stability`], with the step named.
 ///
 /// # Example
 /// ```
@@ -87,7 +152,78 @@ pub fn analyse(
     max_weight_order: usize,
     cover: f64,
 ) -> Result<UncertaintyAnalysis> {
-    let terms = uncertainty(nominal, frd, extra, opts).context("the uncertainty terms")?;
+    analyse_with_shift(
+        nominal,
+        frd,
+        controller,
+        extra,
+        None,
+        opts,
+        max_weight_order,
+        cover,
+    )
+}
+
+/// [`analyse`] with term (e) also carried through the model: the amplitude study's per-line
+/// shifts `shift` projected onto the model's tangent space
+/// ([`MatrixUncertainty::add_projected_shift`](ambid_core::validate::uncertainty::MatrixUncertainty::add_projected_shift) on the 1×1 bound, Wald test at
+/// [`AMPLITUDE_RUN_ALPHA`]; docs/uncertainty.md, "Term (e) through the model"), the rule the
+/// whole machine's bound uses. A shift that is smooth over the lines moves the fitted model even
+/// where each line's estimate is below its noise and [`ExtraTerms::amplitude_shift`]'s windows
+/// see nothing. When the projection cannot be computed the bound keeps the line term and
+/// [`UncertaintyAnalysis::amplitude_projected`] says why.
+///
+/// # Errors
+/// As [`analyse`].
+///
+/// # Example
+/// A model 2 % above a first-order plant, the amplitude study's per-line shift estimates
+/// telling so at 1 % noise: the projection is kept and the bound covers the shift.
+/// ```
+/// use ambid::uncertainty::{analyse_with_shift, ShiftLines};
+/// use ambid_core::{c64, lti::{Frd, StateSpace}};
+/// use ambid_core::validate::uncertainty::{ExtraTerms, UncertaintyOptions};
+/// use faer::mat;
+/// let ts = 1e-3;
+/// let p = StateSpace::discrete(mat![[0.9]], mat![[1.0]], mat![[0.1]], mat![[0.0]], ts).unwrap();
+/// let c = StateSpace::discrete(mat![[0.0]], mat![[0.0]], mat![[0.0]], mat![[2.0]], ts).unwrap();
+/// let f: Vec<f64> = (1..=100).map(|k| 4.0 * k as f64).collect();
+/// let exact = Frd::from_model(&p, &f).unwrap();
+/// let var: Vec<f64> = exact.values().iter().map(|g| 1e-4 * g.norm_sqr()).collect();
+/// let frd = Frd::new(f.clone(), exact.values().to_vec(), Some(var), Some(ts)).unwrap();
+/// let shift: Vec<c64> = exact.values().iter().map(|g| g * 0.02).collect();
+/// let sv: Vec<f64> = exact.values().iter().map(|g| 1e-4 * g.norm_sqr()).collect();
+/// let lines = ShiftLines { f_hz: &f, shift: &shift, var: &sv };
+/// let a = analyse_with_shift(
+///     &p, &frd, &c, &ExtraTerms::default(), Some(lines), &UncertaintyOptions::default(), 4, 1.0,
+/// )
+/// .unwrap();
+/// assert!(a.amplitude_projected.unwrap().unwrap().kept);
+/// assert!(a.terms.multiplicative.iter().all(|l| *l >= 0.02));
+/// ```
+#[allow(clippy::too_many_arguments)]
+pub fn analyse_with_shift(
+    nominal: &StateSpace,
+    frd: &Frd,
+    controller: &StateSpace,
+    extra: &ExtraTerms<'_>,
+    shift: Option<ShiftLines<'_>>,
+    opts: &UncertaintyOptions,
+    max_weight_order: usize,
+    cover: f64,
+) -> Result<UncertaintyAnalysis> {
+    // the 1×1 case of the matrix bound: the same terms as `uncertainty`, and the projection
+    let mut u = uncertainty_matrix(nominal, frd, std::slice::from_ref(extra), opts)
+        .context("the uncertainty terms")?;
+    let amplitude_projected = shift.map(|s| {
+        s.on_lines(frd.f_hz())
+            .and_then(|(sh, v)| Ok(u.add_projected_shift(frd, &[sh], &[v], AMPLITUDE_RUN_ALPHA)?))
+            .map_err(|e| e.to_string())
+    });
+    let terms = u
+        .entries
+        .pop()
+        .ok_or_else(|| Error::other("the uncertainty terms: the bound has no entry"))?;
     let ts = nominal
         .ts()
         .ok_or_else(|| Error::other("the nominal model must be discrete-time"))?;
@@ -133,6 +269,7 @@ pub fn analyse(
         joint_raise,
         on_lines,
         lines_raise,
+        amplitude_projected,
     })
 }
 
@@ -688,27 +825,30 @@ impl UncertaintyRun {
                 .with_context(|| format!("the run at level {a}"))?;
             study.push((a, g));
         }
+        // term (e): the line term and the per-line shifts for its projection through the model
         let amplitude = if levels.is_empty() {
             None
         } else {
             let refs: Vec<(f64, &Frd)> = study.iter().map(|(a, g)| (*a, g)).collect();
             let opts = UncertaintyOptions::default();
-            Some(amplitude_term(
-                &refs,
-                own,
-                frd.f_hz(),
-                &nominal,
-                opts.line_coverage,
-            )?)
+            Some((
+                amplitude_term(&refs, own, frd.f_hz(), &nominal, opts.line_coverage)?,
+                amplitude_shift_lines(&refs, own)?,
+            ))
         };
-        let analysis = analyse(
+        let analysis = analyse_with_shift(
             &nominal,
             &frd,
             &controller,
             &ExtraTerms {
-                amplitude_shift: amplitude.as_deref(),
+                amplitude_shift: amplitude.as_ref().map(|a| a.0.as_slice()),
                 ..ExtraTerms::default()
             },
+            amplitude.as_ref().map(|a| ShiftLines {
+                f_hz: study[0].1.f_hz(),
+                shift: &a.1 .0,
+                var: &a.1 .1,
+            }),
             &UncertaintyOptions::default(),
             MAX_WEIGHT_ORDER,
             DEFAULT_COVER,

@@ -69,6 +69,14 @@ fn uncertainty_and_physical_steps_on_the_twin() {
     let uc = &sm["uncertainty"];
     assert_eq!(uc["nonlinear_level_pct"].as_f64(), Some(want), "{chosen}");
     assert_eq!(uc["nonlinear_variance_scale"].as_f64(), Some(1.0));
+    // term (e) through the model: the Wald test is in the summary and decides "kept"
+    let ap = &uc["amplitude_projected"];
+    let (stat, thr) = (
+        ap["statistic"].as_f64().unwrap(),
+        ap["threshold"].as_f64().unwrap(),
+    );
+    assert!(thr > 0.0 && stat >= 0.0, "{ap}");
+    assert_eq!(ap["kept"].as_bool(), Some(stat > thr));
     let groups = uc["nonlinear_groups"].as_array().unwrap();
     assert!(!groups.is_empty());
     let significant = groups.iter().filter(|g| g["significant"] == true).count();

@@ -11,7 +11,8 @@ use ambid::io::export::uncertain::{
 };
 use ambid::io::OutputSet;
 use ambid::uncertainty::{
-    amplitude_term, analyse, nonlinear_term, operating_term, NONLINEAR_ALPHA,
+    amplitude_shift_lines, amplitude_term, analyse_with_shift, nonlinear_term, operating_term,
+    ShiftLines, NONLINEAR_ALPHA,
 };
 use ambid_core::frf::bla::BlaEstimate;
 use ambid_core::validate::uncertainty::{ExtraTerms, UncertaintyOptions};
@@ -244,11 +245,13 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             }
             let refs: Vec<(f64, &ambid_core::lti::Frd)> =
                 levels.iter().map(|(l, g)| (*l, g)).collect();
-            Some(
-                amplitude_term(&refs, level, frd.f_hz(), &model, a.line_coverage).map_err(
-                    |e| ambid::error::Error::input(format!("--amplitude: {e}")),
-                )?,
-            )
+            let input = |e: ambid::error::Error| ambid::error::Error::input(format!("--amplitude: {e}"));
+            // the line term, and the per-line shifts for term (e) through the model
+            Some((
+                amplitude_term(&refs, level, frd.f_hz(), &model, a.line_coverage)
+                    .map_err(input)?,
+                amplitude_shift_lines(&refs, level).map_err(input)?,
+            ))
         }
     };
     // term (c) from a robust BLA's nonlinear variance, tested in groups of lines
@@ -277,13 +280,18 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             .filter(|n| n.significant_groups() > 0)
             .map(|n| n.std.as_slice()),
         operating_spread: spread.as_deref(),
-        amplitude_shift: amplitude.as_deref(),
+        amplitude_shift: amplitude.as_ref().map(|a| a.0.as_slice()),
     };
-    let analysis = analyse(
+    let analysis = analyse_with_shift(
         &model,
         &frd,
         ctrl.state_space(),
         &extra,
+        amplitude.as_ref().map(|a| ShiftLines {
+            f_hz: frd.f_hz(),
+            shift: &a.1 .0,
+            var: &a.1 .1,
+        }),
         &UncertaintyOptions {
             line_coverage: a.line_coverage,
             run_coverage: a.run_coverage,
@@ -293,6 +301,16 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         a.max_order,
         a.cover,
     )?;
+    match &analysis.amplitude_projected {
+        Some(Ok(p)) => println!(
+            "term (e) through the model: Wald statistic {:.1} against {:.1} (χ², 5 %): {}",
+            p.statistic,
+            p.threshold,
+            if p.kept { "kept" } else { "not significant" }
+        ),
+        Some(Err(e)) => println!("term (e) through the model left out (the line term stays): {e}"),
+        None => {}
+    }
     let t = &analysis.terms;
     let w = &analysis.weight;
     let r = &analysis.robust;
@@ -394,6 +412,11 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             "level": a.level,
             "levels": a.amplitude.iter().map(|(l, p)| json!({"level": l, "file": p.display().to_string()})).collect::<Vec<_>>(),
             "shift_median_rel": m,
+            "projected": match &analysis.amplitude_projected {
+                Some(Ok(p)) => json!(p),
+                Some(Err(e)) => json!({ "error": e }),
+                None => serde_json::Value::Null,
+            },
         })),
         "robust": robust_json(r),
         "robust_on_lines": {
