@@ -32,7 +32,9 @@
 //! prints the line terms' medians and the projection's Wald statistic; `DEBUG_AMP=1` the
 //! coherent relative shift κ of each level's FRF (and of the model) against the exact plant on
 //! the diagonal entries per band. `COVER_RAISE` / `COVER_W` set the joint raise's and the
-//! weight fit's `cover` (default 0.98); `NO_RAISE=1` skips the raise.
+//! weight fit's `cover` (default 0.98); `NO_RAISE=1` skips the raise. `FRF_ERR=1` prints, per
+//! line in 150–350 Hz, the measured FRF's complex error against the exact plant and its
+//! standard deviation for the entries (xa, ya) and (xa, xa) (`FRFERR f re im std re im std`).
 //!
 //! Run: `cargo run --release -p ambid --example uncertainty_machine_rigs -- 0,1,2,3`.
 use ambid::config::MachineSection;
@@ -410,6 +412,20 @@ fn main() {
                 continue;
             }
             let p = exact.at(k).expect("line");
+            if std::env::var("FRF_ERR").is_ok() && (150.0..=350.0).contains(fk) {
+                let g = plant.at(k).expect("line");
+                let v = plant.variance().expect("var");
+                let e = |i: usize, j: usize| g[(i, j)] - p[(i, j)];
+                println!(
+                    "FRFERR {fk:.1} {:.3e} {:.3e} {:.3e} {:.3e} {:.3e} {:.3e}",
+                    e(0, 2).re,
+                    e(0, 2).im,
+                    v[k * 16 + 2 * 4].sqrt(),
+                    e(0, 0).re,
+                    e(0, 0).im,
+                    v[k * 16].sqrt()
+                );
+            }
             let ph = u.nominal_at(k);
             let l = u.bound_at(k);
             let d = Mat::from_fn(4, 4, |i, j| (p[(i, j)] - ph[(i, j)]).norm());
