@@ -40,7 +40,7 @@
 use ambid::config::MachineSection;
 use ambid::workflow::machine::{acquire_twin, MachineModelInput, MachineModels};
 use ambid::workflow::machine_fit::{
-    amplitude_shifts, amplitude_terms, fit_band, AmplitudeStudy, FrequencyFitter,
+    amplitude_terms, amplitude_terms_and_shifts, fit_band, AmplitudeStudy, FrequencyFitter,
 };
 use ambid_core::lti::Frd;
 use ambid_core::validate::iso::IsoZones;
@@ -335,7 +335,10 @@ fn main() {
                     levels: &sp.amplitude,
                 })
             {
-                let (shifts, vars) = amplitude_shifts(plant, &a).expect("shifts");
+                let (terms, _) =
+                    amplitude_terms_and_shifts(&model.model, plant, &a).expect("shifts");
+                let shifts: Vec<Vec<_>> = terms.iter().map(|t| t.shift.clone()).collect();
+                let vars: Vec<Vec<f64>> = terms.iter().map(|t| t.shift_var.clone()).collect();
                 let ps = u
                     .add_projected_shift(
                         plant,

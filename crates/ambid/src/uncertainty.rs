@@ -673,6 +673,66 @@ pub fn amplitude_term(
     nominal: &StateSpace,
     line_coverage: f64,
 ) -> Result<Vec<f64>> {
+    Ok(amplitude_term_and_shifts(levels, level, f_hz, nominal, line_coverage)?.term)
+}
+
+/// Term (e) in both forms from one per-line regression: what [`amplitude_term`] returns and the
+/// per-line shifts of [`amplitude_shift_lines`] for the projection through the model
+/// ([`AmplitudeTerm::shift_lines`], [`analyse_with_shift`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct AmplitudeTerm {
+    /// The windowed line term on the lines `f_hz` ([`amplitude_term`]).
+    pub term: Vec<f64>,
+    /// The study's lines \[Hz\].
+    pub study_f_hz: Vec<f64>,
+    /// The shift $c_j a_e^2$ per study line.
+    pub shift: Vec<c64>,
+    /// Its variance per study line.
+    pub shift_var: Vec<f64>,
+}
+
+impl AmplitudeTerm {
+    /// The per-line shifts as [`ShiftLines`].
+    pub fn shift_lines(&self) -> ShiftLines<'_> {
+        ShiftLines {
+            f_hz: &self.study_f_hz,
+            shift: &self.shift,
+            var: &self.shift_var,
+        }
+    }
+}
+
+/// [`amplitude_term`] that also keeps the per-line shifts it was computed from
+/// ([`AmplitudeTerm`]), so a caller that projects them runs the regression once.
+///
+/// # Errors
+/// As [`amplitude_term`].
+///
+/// # Example
+/// ```
+/// use ambid::uncertainty::{amplitude_term, amplitude_term_and_shifts};
+/// use ambid_core::{c64, lti::{Frd, StateSpace}};
+/// use faer::mat;
+/// let f: Vec<f64> = (1..=50).map(|k| k as f64 * 4.0).collect();
+/// let at = |a: f64| {
+///     Frd::new(f.clone(), vec![c64::new(1.0 - a * a, 0.0); 50], Some(vec![1e-8; 50]), Some(1e-3))
+///         .unwrap()
+/// };
+/// let (lo, hi) = (at(0.1), at(0.2));
+/// let m = StateSpace::discrete(mat![[0.5]], mat![[1.0]], mat![[0.5]], mat![[0.0]], 1e-3).unwrap();
+/// let levels = [(0.1, &lo), (0.2, &hi)];
+/// let both = amplitude_term_and_shifts(&levels, 0.1, &f, &m, 0.95).unwrap();
+/// assert_eq!(both.term, amplitude_term(&levels, 0.1, &f, &m, 0.95).unwrap());
+/// assert!((both.shift[3] - c64::new(-0.01, 0.0)).norm() < 1e-9);
+/// assert_eq!(both.shift_lines().f_hz, &f[..]);
+/// ```
+pub fn amplitude_term_and_shifts(
+    levels: &[(f64, &Frd)],
+    level: f64,
+    f_hz: &[f64],
+    nominal: &StateSpace,
+    line_coverage: f64,
+) -> Result<AmplitudeTerm> {
     let bad = |why: String| Error::other(format!("the amplitude term: {why}"));
     if !(line_coverage > 0.0 && line_coverage < 1.0) {
         return Err(bad(format!(
@@ -736,7 +796,12 @@ pub fn amplitude_term(
             }
         }
     }
-    Ok(carry_relative(fs, &rel, f_hz, &model_abs(nominal, f_hz)?))
+    Ok(AmplitudeTerm {
+        term: carry_relative(fs, &rel, f_hz, &model_abs(nominal, f_hz)?),
+        study_f_hz: fs.to_vec(),
+        shift,
+        shift_var,
+    })
 }
 
 /// The largest relative standard deviation $\sigma_{i,j}/|\hat P(f_j)|$ of any level's FRF on
@@ -831,24 +896,23 @@ impl UncertaintyRun {
         } else {
             let refs: Vec<(f64, &Frd)> = study.iter().map(|(a, g)| (*a, g)).collect();
             let opts = UncertaintyOptions::default();
-            Some((
-                amplitude_term(&refs, own, frd.f_hz(), &nominal, opts.line_coverage)?,
-                amplitude_shift_lines(&refs, own)?,
-            ))
+            Some(amplitude_term_and_shifts(
+                &refs,
+                own,
+                frd.f_hz(),
+                &nominal,
+                opts.line_coverage,
+            )?)
         };
         let analysis = analyse_with_shift(
             &nominal,
             &frd,
             &controller,
             &ExtraTerms {
-                amplitude_shift: amplitude.as_ref().map(|a| a.0.as_slice()),
+                amplitude_shift: amplitude.as_ref().map(|a| a.term.as_slice()),
                 ..ExtraTerms::default()
             },
-            amplitude.as_ref().map(|a| ShiftLines {
-                f_hz: study[0].1.f_hz(),
-                shift: &a.1 .0,
-                var: &a.1 .1,
-            }),
+            amplitude.as_ref().map(AmplitudeTerm::shift_lines),
             &UncertaintyOptions::default(),
             MAX_WEIGHT_ORDER,
             DEFAULT_COVER,

@@ -11,8 +11,7 @@ use ambid::io::export::uncertain::{
 };
 use ambid::io::OutputSet;
 use ambid::uncertainty::{
-    amplitude_shift_lines, amplitude_term, analyse_with_shift, nonlinear_term, operating_term,
-    ShiftLines, NONLINEAR_ALPHA,
+    amplitude_term_and_shifts, analyse_with_shift, nonlinear_term, operating_term, NONLINEAR_ALPHA,
 };
 use ambid_core::frf::bla::BlaEstimate;
 use ambid_core::validate::uncertainty::{ExtraTerms, UncertaintyOptions};
@@ -247,11 +246,10 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
                 levels.iter().map(|(l, g)| (*l, g)).collect();
             let input = |e: ambid::error::Error| ambid::error::Error::input(format!("--amplitude: {e}"));
             // the line term, and the per-line shifts for term (e) through the model
-            Some((
-                amplitude_term(&refs, level, frd.f_hz(), &model, a.line_coverage)
+            Some(
+                amplitude_term_and_shifts(&refs, level, frd.f_hz(), &model, a.line_coverage)
                     .map_err(input)?,
-                amplitude_shift_lines(&refs, level).map_err(input)?,
-            ))
+            )
         }
     };
     // term (c) from a robust BLA's nonlinear variance, tested in groups of lines
@@ -280,18 +278,14 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             .filter(|n| n.significant_groups() > 0)
             .map(|n| n.std.as_slice()),
         operating_spread: spread.as_deref(),
-        amplitude_shift: amplitude.as_ref().map(|a| a.0.as_slice()),
+        amplitude_shift: amplitude.as_ref().map(|a| a.term.as_slice()),
     };
     let analysis = analyse_with_shift(
         &model,
         &frd,
         ctrl.state_space(),
         &extra,
-        amplitude.as_ref().map(|a| ShiftLines {
-            f_hz: frd.f_hz(),
-            shift: &a.1 .0,
-            var: &a.1 .1,
-        }),
+        amplitude.as_ref().map(|a| a.shift_lines()),
         &UncertaintyOptions {
             line_coverage: a.line_coverage,
             run_coverage: a.run_coverage,

@@ -237,26 +237,6 @@ fn study_levels(
     Ok((levels, used))
 }
 
-/// The amplitude shift of every entry per line (`ambid::uncertainty::amplitude_shift_lines`:
-/// complex, absolute, with its variance) on `plant`'s lines, from the same levels as
-/// [`amplitude_terms`], in the order of `MatrixUncertainty::entries`; for
-/// `MatrixUncertainty::add_projected_shift`.
-///
-/// # Errors
-/// As [`amplitude_terms`].
-#[allow(clippy::type_complexity)]
-pub fn amplitude_shifts(
-    plant: &Frd,
-    study: &AmplitudeStudy<'_>,
-) -> Result<(Vec<Vec<c64>>, Vec<Vec<f64>>), String> {
-    let (levels, _) = study_levels(plant, study)?;
-    let both = per_entry(plant, &levels, |i, j, refs| {
-        crate::uncertainty::amplitude_shift_lines(refs, study.level_pct / 100.0)
-            .map_err(|e| format!("entry (output {i}, input {j}): {e}"))
-    })?;
-    Ok(both.into_iter().unzip())
-}
-
 /// `f(i, j, levels' entries (i, j))` for every entry of `plant`'s shape, column-major (the
 /// order of `MatrixUncertainty::entries`).
 fn per_entry<T>(
@@ -296,12 +276,27 @@ pub fn amplitude_terms(
     plant: &Frd,
     study: &AmplitudeStudy<'_>,
 ) -> Result<(Vec<Vec<f64>>, Vec<f64>), String> {
+    let (terms, used) = amplitude_terms_and_shifts(model, plant, study)?;
+    Ok((terms.into_iter().map(|t| t.term).collect(), used))
+}
+
+/// [`amplitude_terms`] with every entry's per-line shifts kept
+/// (`ambid::uncertainty::amplitude_term_and_shifts`, on `plant`'s lines), for
+/// `MatrixUncertainty::add_projected_shift`: one regression per entry for both.
+///
+/// # Errors
+/// As [`amplitude_terms`].
+pub fn amplitude_terms_and_shifts(
+    model: &StateSpace,
+    plant: &Frd,
+    study: &AmplitudeStudy<'_>,
+) -> Result<(Vec<crate::uncertainty::AmplitudeTerm>, Vec<f64>), String> {
     let (levels, used) = study_levels(plant, study)?;
     let line_coverage =
         ambid_core::validate::uncertainty::UncertaintyOptions::default().line_coverage;
     let terms = per_entry(plant, &levels, |i, j, refs| {
         let entry = model.entry(i, j).map_err(|e| e.to_string())?;
-        crate::uncertainty::amplitude_term(
+        crate::uncertainty::amplitude_term_and_shifts(
             refs,
             study.level_pct / 100.0,
             plant.f_hz(),
@@ -347,15 +342,16 @@ pub fn speed_uncertainty(
     use ambid_core::validate::weight::{Weight, WeightShape, DEFAULT_COVER, MAX_WEIGHT_ORDER};
     let err = |e: ambid_core::Error| e.to_string();
     let frd = plant.band(band.0, band.1).map_err(err)?;
-    let (amp, mut amplitude_note) = match amplitude.map(|a| amplitude_terms(model, &frd, a)) {
-        None => (None, None),
-        Some(Ok(t)) => (Some(t), None),
-        Some(Err(e)) => (None, Some(format!("term (e) left out: {e}"))),
-    };
+    let (amp, mut amplitude_note) =
+        match amplitude.map(|a| amplitude_terms_and_shifts(model, &frd, a)) {
+            None => (None, None),
+            Some(Ok(t)) => (Some(t), None),
+            Some(Err(e)) => (None, Some(format!("term (e) left out: {e}"))),
+        };
     let extra: Vec<ExtraTerms<'_>> = amp.as_ref().map_or_else(Vec::new, |(t, _)| {
         t.iter()
             .map(|e| ExtraTerms {
-                amplitude_shift: Some(e.as_slice()),
+                amplitude_shift: Some(e.term.as_slice()),
                 ..ExtraTerms::default()
             })
             .collect()
@@ -365,17 +361,18 @@ pub fn speed_uncertainty(
     // term (e) through the model: the per-line shifts projected onto the model's tangent space
     // (docs/uncertainty.md, "Term (e) through the model")
     // (when it cannot be computed the bound keeps the line term, and the row says why)
-    let amplitude_projected = match (amplitude, &amp) {
-        (Some(a), Some(_)) => {
-            let projected = amplitude_shifts(&frd, a).and_then(|(shifts, vars)| {
-                u.add_projected_shift(
+    let amplitude_projected = match &amp {
+        Some((t, _)) => {
+            let shifts: Vec<Vec<c64>> = t.iter().map(|e| e.shift.clone()).collect();
+            let vars: Vec<Vec<f64>> = t.iter().map(|e| e.shift_var.clone()).collect();
+            let projected = u
+                .add_projected_shift(
                     &frd,
                     &shifts,
                     &vars,
                     crate::uncertainty::AMPLITUDE_RUN_ALPHA,
                 )
-                .map_err(err)
-            });
+                .map_err(err);
             match projected {
                 Ok(p) => Some(p),
                 Err(e) => {

@@ -13,8 +13,8 @@ use crate::report::{
     Table,
 };
 use crate::uncertainty::{
-    amplitude_shift_lines, amplitude_term, analyse_with_shift, nominal_gain_interval,
-    nonlinear_level, nonlinear_term, operating_term, ShiftLines, NONLINEAR_ALPHA,
+    amplitude_term_and_shifts, analyse_with_shift, nominal_gain_interval, nonlinear_level,
+    nonlinear_term, operating_term, NONLINEAR_ALPHA,
 };
 use ambid_core::lti::{Frd, StateSpace};
 use ambid_core::validate::uncertainty::{ExtraTerms, UncertaintyOptions};
@@ -233,20 +233,15 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             if let Some(g) = ident.as_ref() {
                 levels.push((ctx.ident_frac(), g));
             }
-            match amplitude_term(
+            // the line term, and the per-line shifts for term (e) through the model
+            match amplitude_term_and_shifts(
                 &levels,
                 ctx.ident_frac(),
                 frd.f_hz(),
                 &model,
                 UncertaintyOptions::default().line_coverage,
             ) {
-                Ok(e) => Some((
-                    e,
-                    levels.iter().map(|l| 100.0 * l.0).collect::<Vec<_>>(),
-                    // the per-line shifts on the study's lines, for term (e) through the model
-                    amplitude_shift_lines(&levels, ctx.ident_frac())
-                        .map(|sv| (levels[0].1.f_hz().to_vec(), sv)),
-                )),
+                Ok(e) => Some((e, levels.iter().map(|l| 100.0 * l.0).collect::<Vec<_>>())),
                 Err(e) => {
                     amplitude_note = Some(format!("amplitude shift left out: {e}"));
                     None
@@ -296,25 +291,14 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             .filter(|n| n.0.significant_groups() > 0)
             .map(|n| n.0.std.as_slice()),
         operating_spread: spread.as_ref().map(|s| s.0.as_slice()),
-        amplitude_shift: amplitude.as_ref().map(|s| s.0.as_slice()),
+        amplitude_shift: amplitude.as_ref().map(|s| s.0.term.as_slice()),
     };
-    let shift = amplitude.as_ref().and_then(|a| match &a.2 {
-        Ok((f, (sh, v))) => Some(ShiftLines {
-            f_hz: f,
-            shift: sh,
-            var: v,
-        }),
-        Err(e) => {
-            amplitude_note = Some(format!("term (e) through the model left out: {e}"));
-            None
-        }
-    });
     let a = match analyse_with_shift(
         &model,
         &frd,
         &ctrl,
         &extra,
-        shift,
+        amplitude.as_ref().map(|a| a.0.shift_lines()),
         &UncertaintyOptions::default(),
         MAX_WEIGHT_ORDER,
         DEFAULT_COVER,
