@@ -21,8 +21,9 @@
 //! measured variances; `TWIN_NOISE=noquant` simulates without the ADC quantisation and
 //! `TWIN_NOISE=bias` also prints the noise-free record's FRF against the exact plant
 //! (docs/uncertainty.md, "Mode-shaped weights").
-//! `SHAPE=mode` refits the weight with the mode-shaped family (`WeightShape::ModeShaped`, runs
-//! without `LEVELS`; docs/uncertainty.md, "Mode-shaped weights").
+//! `SHAPE=smooth|mode` refits the weight with that family (`WeightShape`; runs without
+//! `LEVELS`; the default since 2026-12-02 is the mode-shaped one: docs/uncertainty.md,
+//! "Mode-shaped weights" and "The mode-shaped weight as the single-axis default").
 //! `SEED_PER_RIG=1` gives each rig its own noise realisation (seed = rig + each of `SEEDS`);
 //! without it every rig runs with the same `SEEDS`, i.e. the same sensor-noise sequence
 //! (docs/uncertainty.md, "Independent noise realisations"). With `CALIB=1`: `CALIB_FLOOR=1`
@@ -32,8 +33,8 @@
 //! against the periods' prediction (`PERIOD_SEQ=1`: that sum per period, its mean's t
 //! statistics); `SYNTH_DOF=n` (with `CALIB_SYNTH=1`) hands the fit variances estimated with
 //! `n` complex degrees of freedom instead of the true ones. `SMOOTH_VAR=m` refits with the
-//! FRF's variances smoothed over ±m lines (as $\sigma_k^2|\bar U_k|^2$). `SHAPE=mode` applies
-//! to every refit.
+//! FRF's variances smoothed over ±m lines (as $\sigma_k^2|\bar U_k|^2$). `SHAPE` applies to
+//! every refit.
 
 use ambid::uncertainty::{loop_stable, nominal_gain_interval, UncertaintyRun};
 use ambid_twin::Mode;
@@ -41,16 +42,15 @@ use ambid_twin::Mode;
 mod common;
 use common::range;
 
-/// The options of every re-analysis here: the default ones with `SHAPE=mode`'s weight family.
+/// The options of every re-analysis here: the default ones with `SHAPE`'s weight family
+/// (`smooth` or `mode`; unset: the default, the mode-shaped family).
 fn shape_opts() -> ambid_core::validate::uncertainty::UncertaintyOptions {
-    ambid_core::validate::uncertainty::UncertaintyOptions {
-        weight_shape: if std::env::var("SHAPE").as_deref() == Ok("mode") {
-            ambid_core::validate::weight::WeightShape::ModeShaped
-        } else {
-            ambid_core::validate::weight::WeightShape::Smooth
-        },
-        ..Default::default()
+    let mut o = ambid_core::validate::uncertainty::UncertaintyOptions::default();
+    if let Ok(name) = std::env::var("SHAPE") {
+        o.weight_shape =
+            ambid_core::validate::weight::WeightShape::from_name(&name).expect("SHAPE=smooth|mode");
     }
+    o
 }
 
 /// [`ambid::uncertainty::analyse`] of `nominal` on `frd` with [`shape_opts`] and no extra term.
@@ -114,9 +114,9 @@ fn main() {
                     continue;
                 }
             };
-            if std::env::var("SHAPE").as_deref() == Ok("mode") {
-                // the mode-shaped weight family (without levels: term (e) is not re-added)
-                assert!(levels.is_empty(), "SHAPE=mode is for runs without LEVELS");
+            if std::env::var("SHAPE").is_ok() {
+                // the weight family SHAPE names (without levels: term (e) is not re-added)
+                assert!(levels.is_empty(), "SHAPE is for runs without LEVELS");
                 run.analysis = analyse_with_shape(&run.nominal, &run.frd, &run.controller);
             }
             if let Ok(what) = std::env::var("TWIN_NOISE") {

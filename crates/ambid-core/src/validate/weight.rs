@@ -73,8 +73,10 @@
 //!
 //! With lightly damped factors the slope argument of docs/uncertainty.md ("Why the looseness
 //! bar is not met") no longer holds: a pole pair followed by a zero pair rises to a peak and
-//! falls back within a fraction of a decade. What this family holds on random rigs, and why it
-//! is not the single-axis default, is in docs/uncertainty.md, "Mode-shaped weights".
+//! falls back within a fraction of a decade. What this family holds on random rigs is in
+//! docs/uncertainty.md, "Mode-shaped weights" and "The mode-shaped weight as the single-axis
+//! default": it is the default of the uncertainty chain (one axis and per MIMO entry) since
+//! 2026-12-02; [`fit_weight`] stays the smooth family alone.
 //!
 //! # Example
 //! The bound is itself a first-order weight: it is found.
@@ -318,14 +320,15 @@ pub fn fit_weight(
 #[serde(rename_all = "snake_case")]
 pub enum WeightShape {
     /// Every second-order factor has $\zeta \ge$ [`MIN_ZETA`]: a weight without sharp peaks,
-    /// which stays near the bound's highest peak over the band around it (the default).
-    #[default]
+    /// which stays near the bound's highest peak over the band around it ([`fit_weight`]).
     Smooth,
     /// Also the mode-shaped starts: lightly damped pole pairs at the bound's most prominent
     /// peaks with zero pairs at the dips beside them, and notches at its deepest dips
     /// ($\zeta \ge 0.01$), so the weight follows a relative bound's peak at an anti-resonance
     /// of $\hat P$ and its notch at a resonance. The weight of least geometric-mean looseness
-    /// over both families is kept (module docs, "Mode-shaped weights").
+    /// over both families is kept (module docs, "Mode-shaped weights"). The default of the
+    /// uncertainty chain on one axis and per MIMO entry.
+    #[default]
     ModeShaped,
 }
 

@@ -14,7 +14,7 @@ use ambid::uncertainty::{
     amplitude_term_and_shifts, analyse_with_shift, nonlinear_term, operating_term, NONLINEAR_ALPHA,
 };
 use ambid_core::frf::bla::BlaEstimate;
-use ambid_core::validate::uncertainty::{ExtraTerms, UncertaintyOptions};
+use ambid_core::validate::uncertainty::{ExtraTerms, UncertaintyOptions, DEFAULT_RUN_COVERAGE};
 use ambid_core::validate::weight::{WeightShape, DEFAULT_COVER, MAX_WEIGHT_ORDER};
 use anyhow::Result;
 use clap::Args;
@@ -66,13 +66,15 @@ pub struct UncertaintyArgs {
     #[arg(long, default_value_t = DEFAULT_COVER)]
     pub(crate) cover: f64,
     /// Fraction of the fitted model's error draws (2 000, seeded) in which the weight must
-    /// overbound the error on `--cover` of the lines; the weight's gain is raised until it does.
-    #[arg(long, default_value_t = 0.95)]
+    /// overbound the error on `--cover` of the lines; the weight's gain is raised until it does
+    /// (the default 0.99 makes up for draws narrower than the true error; docs/uncertainty.md).
+    #[arg(long, default_value_t = DEFAULT_RUN_COVERAGE)]
     pub(crate) run_coverage: f64,
-    /// The weight's family: `smooth` (every factor damped, ζ ≥ 0.2) or `mode` (also a lightly
-    /// damped pole pair at the bound's peak and a zero pair at its dip: tighter, but on random
-    /// rigs it covers the true error less often; docs/uncertainty.md, "Mode-shaped weights").
-    #[arg(long, default_value = "smooth", value_parser = parse_shape)]
+    /// The weight's family: `mode` (the default: also lightly damped pole pairs at the bound's
+    /// peaks with zero pairs at its dips, and notches; the tighter of it and the smooth fit is
+    /// kept) or `smooth` (every factor damped, ζ ≥ 0.2: looser, with narrower robust margins;
+    /// docs/uncertainty.md, "The mode-shaped weight as the single-axis default").
+    #[arg(long, default_value = "mode", value_parser = parse_shape)]
     pub(crate) weight_shape: WeightShape,
     /// Term (d): the plant FRF CSV of the same experiment at another operating point (bias
     /// current, air gap; `ambid frf` of a record with the same excitation, so the same lines).
