@@ -15,7 +15,8 @@
 //!
 //! `cargo run --release -p ambid --example uncertainty_workflow_rigs -- RIGS [linear|nonlinear]`
 //! (e.g. `1-40`, or `3,7,11`). The step's prerequisites bring the amplitude study (term (e)).
-//! `SHOW_U=1` prints the step's summary and the amplitude study's, `SHOW_MISS=1` the lines where
+//! `SHOW_U=1` prints the step's summary and the amplitude study's, `SHOW_TABLE=1` the step's
+//! tables, `SHOW_MISS=1` the lines where
 //! |W| is below the true error, with the terms there. Since 2026-12-02 the prerequisites also
 //! bring the robust BLA study (term (c)); `NO_BLA=1` leaves it out (the bound then has no
 //! term (c), as before). Per rig the last column is term (c): the BLA level it was read at and
@@ -86,6 +87,21 @@ fn main() {
             );
         }
         let pick = |prefix: &str| out.report.series("uncertainty", prefix).cloned();
+        if std::env::var("SHOW_TABLE").is_ok() {
+            for b in out
+                .report
+                .sections
+                .iter()
+                .filter(|s| s.id == "uncertainty")
+                .flat_map(|s| &s.blocks)
+            {
+                if let ambid::report::Block::Table(t) = b {
+                    for r in &t.rows {
+                        println!("    {}", r.join(" | "));
+                    }
+                }
+            }
+        }
         let (Some(w), Some(err)) = (pick("|W|"), pick("twin: true")) else {
             let why: Vec<String> = out
                 .timings
@@ -108,6 +124,18 @@ fn main() {
         };
         let ratio = median(idx.iter().map(|&k| w.y[k]).collect())
             / median(idx.iter().map(|&k| err.y[k]).collect());
+        if std::env::var("DECOMPOSE").is_ok() {
+            if let Some(b) = pick("bound ℓ") {
+                let e_med = median(idx.iter().map(|&k| err.y[k]).collect());
+                println!(
+                    "    decompose: median ℓ/median err {:.2}, median |W|/ℓ {:.2}, joint raise {:.3}, order {}",
+                    median(idx.iter().map(|&k| b.y[k]).collect()) / e_med,
+                    median(idx.iter().map(|&k| w.y[k] / b.y[k]).collect()),
+                    u["weight_joint_raise"].as_f64().unwrap_or(f64::NAN),
+                    u["weight_order"]
+                );
+            }
+        }
         if std::env::var("PRINT_E").is_ok() {
             if let (Some(e), Some(a)) = (pick("(e)"), pick("(a)")) {
                 for k in (0..e.x.len()).step_by(10) {

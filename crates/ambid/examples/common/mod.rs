@@ -21,13 +21,28 @@ pub fn workflow_on_rig(
     ambid_twin::TwinConfig,
     Result<ambid::workflow::Outcome, ambid::error::Error>,
 ) {
+    workflow_on_rig_seed(rig, rig, mode, steps, dir)
+}
+
+/// [`workflow_on_rig`] with the noise seed `seed` instead of `rig`.
+#[allow(dead_code)]
+pub fn workflow_on_rig_seed(
+    rig: u64,
+    seed: u64,
+    mode: &str,
+    steps: &[ambid::workflow::Step],
+    dir: &std::path::Path,
+) -> (
+    ambid_twin::TwinConfig,
+    Result<ambid::workflow::Outcome, ambid::error::Error>,
+) {
     use ambid::workflow::{run, Progress, Verbosity, WorkflowConfig};
     let cfg = ambid_twin::random_rig(rig).expect("a random rig");
     let path = dir.join(format!("rig{rig}.toml"));
     std::fs::write(&path, cfg.to_toml_string().expect("TOML")).expect("the rig file written");
     let mut wf = WorkflowConfig {
         steps: Some(steps.to_vec()),
-        seed: rig,
+        seed,
         ..WorkflowConfig::default()
     };
     wf.twin.mode = mode.into();
