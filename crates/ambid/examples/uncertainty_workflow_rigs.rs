@@ -16,7 +16,8 @@
 //! `cargo run --release -p ambid --example uncertainty_workflow_rigs -- RIGS [linear|nonlinear]`
 //! (e.g. `1-40`, or `3,7,11`). The step's prerequisites bring the amplitude study (term (e)).
 //! `SHOW_U=1` prints the step's summary and the amplitude study's, `SHOW_TABLE=1` the step's
-//! tables, `SHOW_MISS=1` the lines where
+//! tables, `DECOMPOSE=1` median ℓ / median error, median |W| / ℓ, the joint raise and the
+//! weight's order, `SHOW_MISS=1` the lines where
 //! |W| is below the true error, with the terms there. Since 2026-12-02 the prerequisites also
 //! bring the robust BLA study (term (c)); `NO_BLA=1` leaves it out (the bound then has no
 //! term (c), as before). Per rig the last column is term (c): the BLA level it was read at and
