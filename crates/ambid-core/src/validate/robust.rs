@@ -35,7 +35,8 @@
 //! 4 000 points log-spaced from $10^{-4} f_s$ to the Nyquist frequency $f_N$, and 9 points within
 //! $\pm 2\zeta\omega_n$ around every lightly damped pole of $\hat P$, $C$ and $W$ (where $|T|$ and
 //! $|W|$ change fastest). The weight is fitted on the measured band; outside it the bound is its
-//! extrapolation, and the margins rest on the model there.
+//! extrapolation (with no lightly damped factor of its own there:
+//! [`weight`](super::weight), "Outside the lines"), and the margins rest on the model there.
 //!
 //! # Example
 //! ```
