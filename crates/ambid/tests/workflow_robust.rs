@@ -222,6 +222,25 @@ fn physical_after_the_amplitude_study_extrapolates_to_zero_amplitude() {
     assert!(html.contains("physical_zero_amplitude"));
 }
 
+/// The workflow with `uncertainty` and its prerequisites on random rig `rig` of the nonlinear
+/// twin (noise seed `rig`), the rig written to `dir`: the rig's configuration and the outcome.
+fn uncertainty_on_nonlinear_rig(dir: &Path, rig: u64) -> (TwinConfig, ambid::workflow::Outcome) {
+    let twin_cfg = ambid_twin::random_rig(rig).unwrap();
+    let path = dir.join(format!("rig{rig}.toml"));
+    std::fs::write(&path, twin_cfg.to_toml_string().unwrap()).unwrap();
+    let (all, _) = Step::with_prerequisites(&[Step::Uncertainty]);
+    assert_eq!(all[0], Step::Amplitude);
+    let mut cfg = WorkflowConfig {
+        steps: Some(all),
+        seed: rig,
+        ..WorkflowConfig::default()
+    };
+    cfg.twin.mode = "nonlinear".into();
+    cfg.twin.config = Some(path);
+    let out = run(&cfg, dir, &mut Progress::new(Verbosity::Quiet)).unwrap();
+    (twin_cfg, out)
+}
+
 /// Random rig 53 of the nonlinear twin (noise seed 53), the one rig of 400 workflow runs where
 /// the weight's upper gain margin was below half the true one (1.51 against the true 8.07):
 /// the FRF's band ends at 1060 Hz and the mode-shaped fit had put a lightly damped pole pair
@@ -233,18 +252,7 @@ fn physical_after_the_amplitude_study_extrapolates_to_zero_amplitude() {
 fn the_weight_does_not_peak_outside_the_measured_band() {
     let dir = crate::common::tmpdir("workflow-uncertainty-band-edge");
     let rig = 53u64;
-    let twin_cfg = ambid_twin::random_rig(rig).unwrap();
-    let path = dir.join(format!("rig{rig}.toml"));
-    std::fs::write(&path, twin_cfg.to_toml_string().unwrap()).unwrap();
-    let (all, _) = Step::with_prerequisites(&[Step::Uncertainty]);
-    let mut cfg = WorkflowConfig {
-        steps: Some(all),
-        seed: rig,
-        ..WorkflowConfig::default()
-    };
-    cfg.twin.mode = "nonlinear".into();
-    cfg.twin.config = Some(path);
-    let out = run(&cfg, &dir, &mut Progress::new(Verbosity::Quiet)).unwrap();
+    let (twin_cfg, out) = uncertainty_on_nonlinear_rig(&dir, rig);
     let u = &out.summary["uncertainty"];
     let twin = Twin::new(twin_cfg).unwrap();
     let (g_lo, g_hi) =
@@ -280,19 +288,7 @@ fn the_weight_does_not_peak_outside_the_measured_band() {
 fn uncertainty_alone_bounds_the_nonlinear_twins_shift() {
     let dir = crate::common::tmpdir("workflow-uncertainty-nonlinear");
     for rig in [14u64, 98] {
-        let twin_cfg = ambid_twin::random_rig(rig).unwrap();
-        let path = dir.join(format!("rig{rig}.toml"));
-        std::fs::write(&path, twin_cfg.to_toml_string().unwrap()).unwrap();
-        let (all, _) = Step::with_prerequisites(&[Step::Uncertainty]);
-        assert_eq!(all[0], Step::Amplitude);
-        let mut cfg = WorkflowConfig {
-            steps: Some(all),
-            seed: rig,
-            ..WorkflowConfig::default()
-        };
-        cfg.twin.mode = "nonlinear".into();
-        cfg.twin.config = Some(path);
-        let out = run(&cfg, &dir, &mut Progress::new(Verbosity::Quiet)).unwrap();
+        let (twin_cfg, out) = uncertainty_on_nonlinear_rig(&dir, rig);
         let u = &out.summary["uncertainty"];
         // the identification record's level is among term (e)'s levels
         let chosen = out.summary["amplitude"]["chosen_pct"].as_f64().unwrap();

@@ -1105,6 +1105,24 @@ impl LeastSquaresProblem for LogFit<'_> {
 mod tests {
     use super::*;
 
+    /// An order-4 weight at $T = 50$ µs from two (Hz, ζ) zero pairs and two pole pairs.
+    fn order_four(gain: f64, zeros: [(f64, f64); 2], poles: [(f64, f64); 2]) -> Weight {
+        let pairs = |p: [(f64, f64); 2]| -> Vec<Factor> {
+            p.iter()
+                .map(|&(hz, zeta)| Factor::Second {
+                    omega: 2.0 * PI * hz,
+                    zeta,
+                })
+                .collect()
+        };
+        Weight {
+            ts: 5e-5,
+            gain,
+            numerator: pairs(zeros),
+            denominator: pairs(poles),
+        }
+    }
+
     fn log_grid(a: f64, b: f64, n: usize) -> Vec<f64> {
         (0..n)
             .map(|i| (a.ln() + (b.ln() - a.ln()) * i as f64 / (n - 1) as f64).exp())
@@ -1168,19 +1186,14 @@ mod tests {
         }
         // a bound like a relative one above an anti-resonance at 300 Hz and another at 950 Hz,
         // rising at the top of the lines (4–1060 Hz, evenly spaced as an FRF's)
-        let ts = 5e-5;
         let f: Vec<f64> = (1..=271).map(|k| 3.91 * k as f64).collect();
-        let pair = |hz: f64, zeta: f64| Factor::Second {
-            omega: 2.0 * PI * hz,
-            zeta,
-        };
-        let truth = Weight {
-            ts,
-            gain: 1e-2,
-            numerator: vec![pair(330.0, 0.05), pair(1000.0, 0.05)],
-            denominator: vec![pair(300.0, 0.04), pair(950.0, 0.04)],
-        };
-        let ell = truth.magnitude(&f);
+        let ell = order_four(
+            1e-2,
+            [(330.0, 0.05), (1000.0, 0.05)],
+            [(300.0, 0.04), (950.0, 0.04)],
+        )
+        .magnitude(&f);
+        let ts = 5e-5;
         let fit = fit_weight_shaped(&f, &ell, ts, 4, 0.98, WeightShape::ModeShaped).unwrap();
         let (lo, hi) = (2.0 * PI * f[0], 2.0 * PI * f[f.len() - 1]);
         for x in fit.weight.numerator.iter().chain(&fit.weight.denominator) {
@@ -1203,17 +1216,12 @@ mod tests {
     fn a_bound_shaped_by_a_lightly_damped_mode_is_followed() {
         let ts = 5e-5;
         let f: Vec<f64> = (1..=767).map(|k| 3.91 * k as f64).collect();
-        let pair = |hz: f64, zeta: f64| Factor::Second {
-            omega: 2.0 * PI * hz,
-            zeta,
-        };
-        let truth = Weight {
-            ts,
-            gain: 5e-4,
-            numerator: vec![pair(700.0, 0.04), pair(1000.0, 0.7)],
-            denominator: vec![pair(560.0, 0.03), pair(6000.0, 0.7)],
-        };
-        let ell = truth.magnitude(&f);
+        let ell = order_four(
+            5e-4,
+            [(700.0, 0.04), (1000.0, 0.7)],
+            [(560.0, 0.03), (6000.0, 0.7)],
+        )
+        .magnitude(&f);
         let peak = ell.iter().copied().fold(0.0, f64::max);
         let low = ell[2];
         assert!(
