@@ -643,7 +643,7 @@ fn weight_of(x: &[f64], n: usize, ts: f64, range: Ranges, floors: Floors) -> Wei
     let factors = |p: &[f64], first: f64| -> Vec<Factor> {
         let mut out = Vec::new();
         for i in 0..n / 2 {
-            let floor = if i < floors.lightly { first } else { MIN_ZETA };
+            let floor = floors.of(first, i);
             out.push(Factor::Second {
                 omega: omega(p[2 * i], range.of(floor)),
                 zeta: floor + p[2 * i + 1].exp(),
@@ -694,7 +694,7 @@ fn corner_indices(n: usize, range: Ranges, floors: Floors) -> Vec<(usize, (f64, 
     {
         let base = 1 + poly * n;
         for i in 0..n / 2 {
-            let floor = if i < floors.lightly { first } else { MIN_ZETA };
+            let floor = floors.of(first, i);
             out.push((base + 2 * i, range.of(floor)));
         }
         if n % 2 == 1 {
@@ -861,6 +861,16 @@ struct Floors {
 }
 
 impl Floors {
+    /// The damping floor of second-order factor `i` of a polynomial whose leading factors'
+    /// floor is `first` ([`Floors::numerator`] or [`Floors::denominator`]).
+    fn of(&self, first: f64, i: usize) -> f64 {
+        if i < self.lightly {
+            first
+        } else {
+            MIN_ZETA
+        }
+    }
+
     const PLAIN: Floors = Floors {
         numerator: MIN_ZETA,
         denominator: MIN_ZETA,
@@ -985,7 +995,7 @@ fn notch_start(prev: &[f64], m: usize, floors: Floors, dip: f64, lightly: usize)
     let poly = |p: &[f64], first: f64, zeta: f64| -> Vec<f64> {
         let mut out = vec![dip.ln(), (zeta - MODE_MIN_ZETA).ln()];
         for i in 0..m / 2 {
-            let floor = if i < floors.lightly { first } else { MIN_ZETA };
+            let floor = floors.of(first, i);
             // the factor moves to place i + 1, whose floor is the mode floor within `lightly`
             let to = if i + 1 < lightly {
                 MODE_MIN_ZETA
