@@ -196,7 +196,7 @@ fn main() {
             (Some(l), Some(g)) => {
                 let sig = g.iter().filter(|g| g["significant"] == true).count();
                 with_c += usize::from(sig > 0);
-                format!("{l} %: {sig} of {} groups", g.len())
+                format!("{l:.1} %: {sig} of {} groups", g.len())
             }
             _ => "—".into(),
         };

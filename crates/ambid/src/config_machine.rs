@@ -108,7 +108,10 @@ pub struct MachineSection {
     /// speed. Their plant FRFs with the identification level's give the uncertainty's term (e)
     /// per entry (the best linear approximation's shift from its extrapolation to zero
     /// amplitude) and the physical parameters extrapolated to zero amplitude (the small-signal
-    /// $k_x$ of a nonlinear magnet); levels with saturated samples are left out. Default with
+    /// $k_x$ of a nonlinear magnet); levels with saturated samples are left out of the
+    /// physical parameters' extrapolation, and those saturated on more than
+    /// [`AMPLITUDE_MAX_SATURATED`](crate::uncertainty::AMPLITUDE_MAX_SATURATED) of the samples
+    /// out of term (e). Default with
     /// `uncertainty = true` or `physical = true`: [`DEFAULT_MACHINE_AMPLITUDE_LEVELS_PCT`] (5
     /// and 16 %); `[]` runs no study (the bound and the physical parameters then hold the best
     /// linear approximation at `level_pct`, not the small-signal plant).

@@ -812,6 +812,23 @@ pub fn amplitude_term_and_shifts(
 /// relative at 2–3 kHz, and a looser weight).
 pub const AMPLITUDE_WIDE_REL_STD: f64 = 0.5;
 
+/// The largest fraction of a level's samples with a limit active (controller or DAC clamp,
+/// amplifier output or slew limit) for the level to enter term (e)'s regression
+/// ([`amplitude_term`]; the workflow's `uncertainty` step and `[machine]`). The a² rule holds
+/// for the smooth force law, not for a limit; but a limit that acts on a fraction $p$ of a
+/// Gaussian-like signal's samples changes that signal's linear gain by about $p$ (Bussgang: the
+/// best linear gain of a hard limiter is the probability of staying within it, $1 - p$), and the
+/// twin's controller clamp, before the recorded $u$, does not enter $y/u$ at all. A level just
+/// above the identification level is what makes the extrapolation precise: its variance there
+/// is about $(a_e^2/(a_\text{top}^2 - a_e^2))^2$ times the top level's, and the amplitude
+/// study picks the identification level among the levels without any saturated sample (on the
+/// twin usually the highest), so with a threshold of 0 the levels above it were left out. The same 1 % as the robust BLA
+/// study's [`crate::bla::MAX_SATURATED`]. Measured on the workflow's step (docs/uncertainty.md,
+/// "Lightly saturated levels in term (e)"): random rigs 1–100 of the nonlinear twin, weight
+/// coverage 98 → 99 of 100 and looseness 5.74 → 5.23; unseen rigs 201–300, 98 → 100 and
+/// 5.94 → 5.32; the linear twin unchanged.
+pub const AMPLITUDE_MAX_SATURATED: f64 = 0.01;
+
 /// The probability that term (e) appears anywhere on a plant whose BLA does not move with the
 /// amplitude ([`amplitude_term`]: the significance level per window is this over the number of
 /// independent windows).

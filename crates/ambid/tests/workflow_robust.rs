@@ -276,7 +276,7 @@ fn the_weight_does_not_peak_outside_the_measured_band() {
 }
 
 /// `uncertainty` alone on random rigs 14 and 98 of the nonlinear twin (noise seeds 14 and 98):
-/// naming it runs the amplitude study, whose levels without saturated samples and the
+/// naming it runs the amplitude study, whose levels saturated on at most 1 % of the samples and the
 /// identification record's own FRF at its level give term (e), and the weight then covers the
 /// chosen model's true relative error (against the twin's linearisation) on ≥ 95 % of the
 /// 10–1000 Hz lines (and with steps listed without the study, the section warns that the bound
@@ -287,6 +287,7 @@ fn the_weight_does_not_peak_outside_the_measured_band() {
 #[test]
 fn uncertainty_alone_bounds_the_nonlinear_twins_shift() {
     let dir = crate::common::tmpdir("workflow-uncertainty-nonlinear");
+    let mut above = 0;
     for rig in [14u64, 98] {
         let (twin_cfg, out) = uncertainty_on_nonlinear_rig(&dir, rig);
         let u = &out.summary["uncertainty"];
@@ -302,6 +303,22 @@ fn uncertainty_alone_bounds_the_nonlinear_twins_shift() {
             levels.iter().any(|l| (l - chosen).abs() < 1e-9),
             "rig {rig}: {levels:?} without {chosen}"
         );
+        // the study's levels in term (e) are exactly those saturated on at most 1 % of the
+        // samples: the ones just above the identification level among them
+        for row in out.summary["amplitude"]["levels"].as_array().unwrap() {
+            let (l, sat) = (
+                row["level_pct"].as_f64().unwrap(),
+                row["saturated_pct"].as_f64().unwrap() / 100.0,
+            );
+            let used = levels.iter().filter(|x| (*x - l).abs() < 1e-9).count()
+                > usize::from((l - chosen).abs() < 1e-9);
+            assert_eq!(
+                used,
+                sat <= ambid::uncertainty::AMPLITUDE_MAX_SATURATED,
+                "rig {rig}: level {l} % saturated on {sat:.2e} of the samples, levels {levels:?}"
+            );
+            above += usize::from(used && l > chosen);
+        }
         // coverage of the true error on 10–1000 Hz, from the twin (independent truth)
         let sr = out.report.series("uncertainty", "|W|").unwrap();
         let truth = Twin::new(twin_cfg)
@@ -334,6 +351,12 @@ fn uncertainty_alone_bounds_the_nonlinear_twins_shift() {
             idx.len()
         );
     }
+    // on at least one of the two rigs a lightly saturated level above the identification
+    // level entered (before 2026-12-04 none could)
+    assert!(
+        above > 0,
+        "no level above the identification level entered term (e)"
+    );
     // steps listed without the study (a workflow file's `steps` gets no prerequisites): no
     // term (e), and the section says what the bound then holds
     let cfg = WorkflowConfig {

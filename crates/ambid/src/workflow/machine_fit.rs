@@ -187,11 +187,15 @@ impl Default for FrequencyFitter {
 pub struct AmplitudeStudy<'a> {
     /// The identification experiment's peak level \[% of i_sat\].
     pub level_pct: f64,
-    /// The study's levels (any order; those with saturated samples are left out).
+    /// The study's levels (any order; those with a limit active on more than
+    /// [`AMPLITUDE_MAX_SATURATED`](crate::uncertainty::AMPLITUDE_MAX_SATURATED) of the samples
+    /// are left out).
     pub levels: &'a [LevelFrf],
 }
 
-/// The study's levels without saturation and the identification FRF as `(level, FRF)` in
+/// The study's levels that saturate on at most
+/// [`AMPLITUDE_MAX_SATURATED`](crate::uncertainty::AMPLITUDE_MAX_SATURATED) of the samples and
+/// the identification FRF as `(level, FRF)` in
 /// increasing level (levels as fractions), all on `plant`'s lines, and the levels used \[%\]
 /// (the rules and errors of [`amplitude_terms`]).
 #[allow(clippy::type_complexity)]
@@ -205,7 +209,7 @@ fn study_levels(
     let mut levels: Vec<(f64, Frd)> = Vec::with_capacity(study.levels.len() + 1);
     let mut saturated = Vec::new();
     for l in study.levels {
-        if l.saturated_fraction > 0.0 {
+        if l.saturated_fraction > crate::uncertainty::AMPLITUDE_MAX_SATURATED {
             saturated.push(format!(
                 "{} % ({:.2e} of the samples saturated)",
                 l.level_pct, l.saturated_fraction
@@ -226,12 +230,13 @@ fn study_levels(
     let used: Vec<f64> = levels.iter().map(|l| 100.0 * l.0).collect();
     if levels.len() < 2 {
         return Err(format!(
-            "only the identification level is left{}; term (e) needs a second level without saturation — lower the study's levels",
+            "only the identification level is left{}; term (e) needs a second level that saturates on at most {:.0} % of the samples — lower the study's levels",
             if saturated.is_empty() {
                 String::new()
             } else {
                 format!(" (left out: {})", saturated.join(", "))
-            }
+            },
+            100.0 * crate::uncertainty::AMPLITUDE_MAX_SATURATED
         ));
     }
     Ok((levels, used))
@@ -263,13 +268,15 @@ fn per_entry<T>(
 /// Term (e) of every entry of a MIMO model (`ambid::uncertainty::amplitude_term` entry by
 /// entry, the SISO rule on the channel $(i, j)$): the model `model`'s entry against the
 /// identification plant FRF's entry `plant` (the fit's lines, the term's lines) at
-/// `study.level_pct` and the study's levels' entries on the same lines; levels with saturated
-/// samples are left out (clipping is not the smooth distortion the $a^2$ rule extrapolates).
+/// `study.level_pct` and the study's levels' entries on the same lines; levels with a limit
+/// active on more than [`AMPLITUDE_MAX_SATURATED`](crate::uncertainty::AMPLITUDE_MAX_SATURATED)
+/// of the samples are left out (a limit is not the smooth distortion the $a^2$ rule
+/// extrapolates).
 /// Returns the terms in the order of `MatrixUncertainty::entries` (column-major) and the levels
 /// used \[%\], the identification level among them.
 ///
 /// # Errors
-/// The reason as text: fewer than two levels without saturation, FRFs on other lines, an entry
+/// The reason as text: fewer than two levels within that saturation, FRFs on other lines, an entry
 /// whose term cannot be computed (named).
 pub fn amplitude_terms(
     model: &StateSpace,
@@ -1661,11 +1668,12 @@ mod tests {
         for e in &terms[1..] {
             assert!(e.iter().all(|x| *x == 0.0), "{e:?}");
         }
-        // a saturated level is left out; the other one still gives the term
+        // a level saturated on more than 1 % of the samples is left out; the other one still
+        // gives the term
         let sat = [
             levels[0].clone(),
             LevelFrf {
-                saturated_fraction: 1e-3,
+                saturated_fraction: 0.02,
                 ..levels[1].clone()
             },
         ];
@@ -1680,11 +1688,29 @@ mod tests {
         .unwrap();
         assert_eq!(used2, vec![5.0, 10.0]);
         assert!((t2[0][30] / p00[30].norm() - 0.01).abs() < 2e-4);
+        // a level whose limits act on 0.5 % of the samples stays in
+        let light = [
+            levels[0].clone(),
+            LevelFrf {
+                saturated_fraction: 0.005,
+                ..levels[1].clone()
+            },
+        ];
+        let (_, used3) = amplitude_terms(
+            &m,
+            &ident,
+            &AmplitudeStudy {
+                level_pct: 10.0,
+                levels: &light,
+            },
+        )
+        .unwrap();
+        assert_eq!(used3, used);
         // every study level saturated: no term, and the message says why
         let all_sat: Vec<LevelFrf> = sat
             .iter()
             .map(|l| LevelFrf {
-                saturated_fraction: 0.01,
+                saturated_fraction: 0.05,
                 ..l.clone()
             })
             .collect();

@@ -14,7 +14,7 @@ use crate::report::{
 };
 use crate::uncertainty::{
     amplitude_term_and_shifts, analyse_with_shift, nominal_gain_interval, nonlinear_level,
-    nonlinear_term, operating_term, NONLINEAR_ALPHA,
+    nonlinear_term, operating_term, AMPLITUDE_MAX_SATURATED, NONLINEAR_ALPHA,
 };
 use ambid_core::lti::{Frd, StateSpace};
 use ambid_core::validate::uncertainty::{ExtraTerms, UncertaintyOptions};
@@ -209,8 +209,10 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         },
         None => None,
     };
-    // term (e) from the amplitude study, when it ran: its levels without saturated samples
-    // (clipping is not the smooth distortion the a² rule extrapolates)
+    // term (e) from the amplitude study, when it ran: its levels whose limits acted on at most
+    // AMPLITUDE_MAX_SATURATED of the samples (a limit is not the smooth distortion the a² rule
+    // extrapolates; a level just above the identification level makes the extrapolation far
+    // more precise)
     let mut amplitude_note = None;
     let amplitude = match ctx.typed.amplitude.as_ref() {
         Some(st) => {
@@ -219,7 +221,7 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
                 .rows
                 .iter()
                 .zip(&st.outcome.plants)
-                .filter(|(r, _)| r.saturated_fraction == 0.0)
+                .filter(|(r, _)| r.saturated_fraction <= AMPLITUDE_MAX_SATURATED)
                 .map(|(r, p)| (r.level_pct / 100.0, p))
                 .collect();
             // the identification record's own FRF at its level, on the study's lines (the
@@ -482,7 +484,7 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     let band = (t.f_hz[0], t.f_hz[t.f_hz.len() - 1]);
     let mut blocks = vec![
         Block::Text(format!(
-            "The chosen model's multiplicative uncertainty ℓ over the models' band ({:.1}–{:.1} Hz, {} lines): (a) the FRF's 95 % confidence region carried through the fit, (b) the model's significant systematic error against the FRF, (c) when the robust BLA step gave a study, the stochastic nonlinear distortion of one experiment (the BLA's nonlinear variance at the identification level, tested in groups of lines, where significant), (d) when the operating-point step ran, the largest noise-corrected distance of the other operating points' plant FRFs from the nominal one, (e) when the amplitude step ran, the shift of the best linear approximation at the identification level from its extrapolation to zero amplitude (the line through the levels' plant FRFs in the squared amplitude, smoothed, where significant, and the same per-line shifts projected onto the model where their Wald test is significant: a smooth shift below each line's noise still moves the fitted model); the stable minimum-phase weight W (order ≤ 4, with lightly damped factors at the bound's peaks and dips where they make it tighter) that overbounds it, its gain raised until it also overbounds the fitted model's error on 98 % of the lines in 99 % of 2 000 seeded draws (the draws are narrower than the true error), and the controller's robust stability against P = P̂(1 + WΔ) (docs/uncertainty.md; `ambid uncertainty` writes the terms and the uncertain model for MATLAB and Python). This step on random twin rigs 1–100 and 201–300 (docs/uncertainty.md, \"The mode-shaped weight as the single-axis default\"): W covered the chosen model's true error on ≥ 95 % of the 10–1000 Hz lines on 98 and 99 of 100 of the linear twin and 97 and 98 of the nonlinear one (with term (e) from the amplitude study), at a median 4.5–5.8× the error's median, and its robust gain margins were at least half the true ones on 399 of the 400 runs: a conservative bound, not yet within the 3× of the error's median that issue 23 asks for.",
+            "The chosen model's multiplicative uncertainty ℓ over the models' band ({:.1}–{:.1} Hz, {} lines): (a) the FRF's 95 % confidence region carried through the fit, (b) the model's significant systematic error against the FRF, (c) when the robust BLA step gave a study, the stochastic nonlinear distortion of one experiment (the BLA's nonlinear variance at the identification level, tested in groups of lines, where significant), (d) when the operating-point step ran, the largest noise-corrected distance of the other operating points' plant FRFs from the nominal one, (e) when the amplitude step ran, the shift of the best linear approximation at the identification level from its extrapolation to zero amplitude (the line through the levels' plant FRFs in the squared amplitude, smoothed, where significant, and the same per-line shifts projected onto the model where their Wald test is significant: a smooth shift below each line's noise still moves the fitted model); the stable minimum-phase weight W (order ≤ 4, with lightly damped factors at the bound's peaks and dips where they make it tighter) that overbounds it, its gain raised until it also overbounds the fitted model's error on 98 % of the lines in 99 % of 2 000 seeded draws (the draws are narrower than the true error), and the controller's robust stability against P = P̂(1 + WΔ) (docs/uncertainty.md; `ambid uncertainty` writes the terms and the uncertain model for MATLAB and Python). This step on random twin rigs 1–100 and 201–300 (docs/uncertainty.md, \"Lightly saturated levels in term (e)\"): W covered the chosen model's true error on ≥ 95 % of the 10–1000 Hz lines on 98 and 99 of 100 of the linear twin and 99 and 100 of the nonlinear one (with term (e) from the amplitude study), at a median 4.5–5.3× the error's median, and its robust gain margins were at least half the true ones on all 400 runs: a conservative bound, not yet within the 3× of the error's median that issue 23 asks for.",
             band.0,
             band.1,
             t.f_hz.len()
