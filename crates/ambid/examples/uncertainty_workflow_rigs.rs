@@ -17,7 +17,8 @@
 //! (e.g. `1-40`, or `3,7,11`). The step's prerequisites bring the amplitude study (term (e)).
 //! `SHOW_U=1` prints the step's summary and the amplitude study's, `SHOW_TABLE=1` the step's
 //! tables, `DECOMPOSE=1` median ℓ / median error, median |W| / ℓ, the joint raise and the
-//! weight's order, `SHOW_MISS=1` the lines where
+//! weight's order, and the per-line medians of ℓ_k / e_k and |W_k| / e_k (the looseness read
+//! line by line), `SHOW_MISS=1` the lines where
 //! |W| is below the true error, with the terms there. Since 2026-12-02 the prerequisites also
 //! bring the robust BLA study (term (c)); `NO_BLA=1` leaves it out (the bound then has no
 //! term (c), as before). Per rig the last column is term (c): the BLA level it was read at and
@@ -129,11 +130,13 @@ fn main() {
             if let Some(b) = pick("bound ℓ") {
                 let e_med = median(idx.iter().map(|&k| err.y[k]).collect());
                 println!(
-                    "    decompose: median ℓ/median err {:.2}, median |W|/ℓ {:.2}, joint raise {:.3}, order {}",
+                    "    decompose: median ℓ/median err {:.2}, median |W|/ℓ {:.2}, joint raise {:.3}, order {}; per line: median ℓ_k/e_k {:.2}, median |W_k|/e_k {:.2}",
                     median(idx.iter().map(|&k| b.y[k]).collect()) / e_med,
                     median(idx.iter().map(|&k| w.y[k] / b.y[k]).collect()),
                     u["weight_joint_raise"].as_f64().unwrap_or(f64::NAN),
-                    u["weight_order"]
+                    u["weight_order"],
+                    median(idx.iter().map(|&k| b.y[k] / err.y[k]).collect()),
+                    median(idx.iter().map(|&k| w.y[k] / err.y[k]).collect()),
                 );
             }
         }
