@@ -822,8 +822,8 @@ pub const AMPLITUDE_WIDE_REL_STD: f64 = 0.5;
 /// above the identification level is what makes the extrapolation precise: its variance there
 /// is about $(a_e^2/(a_\text{top}^2 - a_e^2))^2$ times the top level's, and the amplitude
 /// study picks the identification level among the levels without any saturated sample (on the
-/// twin usually the highest), so with a threshold of 0 the levels above it were left out. The same 1 % as the robust BLA
-/// study's [`crate::bla::MAX_SATURATED`]. Measured on the workflow's step (docs/uncertainty.md,
+/// twin usually the highest), so with a threshold of 0 the levels above it were left out. The
+/// same 1 % as the robust BLA study's [`crate::bla::MAX_SATURATED`]. Measured on the workflow's step (docs/uncertainty.md,
 /// "Lightly saturated levels in term (e)"): random rigs 1–100 of the nonlinear twin, weight
 /// coverage 98 → 99 of 100 and looseness 5.74 → 5.23; unseen rigs 201–300, 98 → 100 and
 /// 5.94 → 5.32; the linear twin unchanged.

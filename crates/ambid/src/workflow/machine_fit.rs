@@ -276,7 +276,7 @@ fn per_entry<T>(
 /// used \[%\], the identification level among them.
 ///
 /// # Errors
-/// The reason as text: fewer than two levels within that saturation, FRFs on other lines, an entry
+/// The reason as text: fewer than two levels within that limit, FRFs on other lines, an entry
 /// whose term cannot be computed (named).
 pub fn amplitude_terms(
     model: &StateSpace,
@@ -1668,43 +1668,33 @@ mod tests {
         for e in &terms[1..] {
             assert!(e.iter().all(|x| *x == 0.0), "{e:?}");
         }
+        // the study with its second level's limits active on the fraction `p` of the samples
+        let with_saturation = |p: f64| {
+            let study = [
+                levels[0].clone(),
+                LevelFrf {
+                    saturated_fraction: p,
+                    ..levels[1].clone()
+                },
+            ];
+            let out = amplitude_terms(
+                &m,
+                &ident,
+                &AmplitudeStudy {
+                    level_pct: 10.0,
+                    levels: &study,
+                },
+            );
+            (study, out)
+        };
         // a level saturated on more than 1 % of the samples is left out; the other one still
         // gives the term
-        let sat = [
-            levels[0].clone(),
-            LevelFrf {
-                saturated_fraction: 0.02,
-                ..levels[1].clone()
-            },
-        ];
-        let (t2, used2) = amplitude_terms(
-            &m,
-            &ident,
-            &AmplitudeStudy {
-                level_pct: 10.0,
-                levels: &sat,
-            },
-        )
-        .unwrap();
+        let (sat, out2) = with_saturation(0.02);
+        let (t2, used2) = out2.unwrap();
         assert_eq!(used2, vec![5.0, 10.0]);
         assert!((t2[0][30] / p00[30].norm() - 0.01).abs() < 2e-4);
         // a level whose limits act on 0.5 % of the samples stays in
-        let light = [
-            levels[0].clone(),
-            LevelFrf {
-                saturated_fraction: 0.005,
-                ..levels[1].clone()
-            },
-        ];
-        let (_, used3) = amplitude_terms(
-            &m,
-            &ident,
-            &AmplitudeStudy {
-                level_pct: 10.0,
-                levels: &light,
-            },
-        )
-        .unwrap();
+        let (_, used3) = with_saturation(0.005).1.unwrap();
         assert_eq!(used3, used);
         // every study level saturated: no term, and the message says why
         let all_sat: Vec<LevelFrf> = sat
