@@ -577,8 +577,10 @@ fn main() {
             // at the μ peak itself (between lines, on the dense grid): the model's and the
             // weights' magnitudes against the nearest line's, and the model's poles near it
             let fp = on_w.mu_peak_hz;
-            let at_p = Frd::from_model(&model.model, &[fp, f[k]]).expect("model");
-            let (pp, pl) = (at_p.at(0).expect("p"), at_p.at(1).expect("l"));
+            // two evaluations: the peak may lie on the line itself
+            let at_p = Frd::from_model(&model.model, &[fp]).expect("model");
+            let at_l = Frd::from_model(&model.model, &[f[k]]).expect("model");
+            let (pp, pl) = (at_p.at(0).expect("p"), at_l.at(0).expect("l"));
             let mut worst = (0.0, 0, 0);
             for i in 0..4 {
                 for j in 0..4 {

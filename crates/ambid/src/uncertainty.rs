@@ -35,7 +35,7 @@ pub struct UncertaintyAnalysis {
     /// The controller's robust stability against it.
     pub robust: RobustStability,
     /// The factor the weight's gain was raised by so that it overbounds the model's error on
-    /// the fraction `cover` of the band in the fraction `run_coverage` of the runs
+    /// the fraction `raise_cover` of the band in the fraction `run_coverage` of the runs
     /// ([`ErrorModel::joint_factor`](ambid_core::validate::uncertainty::ErrorModel::joint_factor); 1: the per-line overbound already did).
     pub joint_raise: f64,
     /// The controller's robust stability against the bound on the lines itself, $g_\ell\,\ell_k$
@@ -44,7 +44,7 @@ pub struct UncertaintyAnalysis {
     /// ragged bound; it says nothing outside the band.
     pub on_lines: RobustStability,
     /// $g_\ell \ge 1$: the factor the bound ℓ was raised by for [`Self::on_lines`], so that it
-    /// overbounds the model's error on `cover` of the lines in `run_coverage` of the draws.
+    /// overbounds the model's error on `raise_cover` of the lines in `run_coverage` of the draws.
     pub lines_raise: f64,
     /// Term (e) through the model ([`analyse_with_shift`]): its Wald test, or why it could not
     /// be computed (the bound then keeps the line term); `None` without per-line shifts.
@@ -115,8 +115,8 @@ impl ShiftLines<'_> {
 
 /// The uncertainty of `nominal` around the measured plant FRF `frd` (with variances), its weight
 /// of order ≤ `max_weight_order` overbounding the fraction `cover` of the lines — its gain then
-/// raised, where needed, until it also overbounds the fitted model's error on `cover` of the lines
-/// in `opts.run_coverage` of `opts.draws` seeded draws
+/// raised, where needed, until it also overbounds the fitted model's error on `opts.raise_cover`
+/// of the lines in `opts.run_coverage` of `opts.draws` seeded draws
 /// ([`ErrorModel::joint_factor`](ambid_core::validate::uncertainty::ErrorModel::joint_factor),
 /// [`UncertaintyAnalysis::joint_raise`]) — and the robust stability of `controller` against it,
 /// and against the bound on the lines itself, raised the same way
@@ -249,7 +249,7 @@ pub fn analyse_with_shift(
         .errors
         .joint_factors(
             &[&weight.weight.magnitude(&terms.f_hz), &bound],
-            cover,
+            opts.raise_cover,
             opts.run_coverage,
             opts.draws,
             opts.seed,

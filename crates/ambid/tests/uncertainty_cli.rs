@@ -157,6 +157,7 @@ fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
     let raise = summary["weight"]["joint_raise"].as_f64().unwrap();
     assert!((1.0..2.0).contains(&raise), "{raise}");
     assert_eq!(summary["weight"]["run_coverage"].as_f64(), Some(0.99));
+    assert_eq!(summary["weight"]["raise_cover"].as_f64(), Some(0.95));
 
     // how much of the true error the weight covers here (printed: the coverage bar is over
     // ≥ 100 runs, docs/uncertainty.md)
@@ -264,6 +265,8 @@ fn uncertainty_refuses_bad_input_and_writes_nothing() {
     assert!(t.contains("--line-coverage"), "{t}");
     let t = run(&["--run-coverage", "0"], &d("frf.csv"), &d("model.json"));
     assert!(t.contains("--run-coverage"), "{t}");
+    let t = run(&["--raise-cover", "1.2"], &d("frf.csv"), &d("model.json"));
+    assert!(t.contains("--raise-cover"), "{t}");
     let t = run(
         &["--weight-shape", "peaky"],
         &d("frf.csv"),
@@ -741,6 +744,7 @@ fn uncertainty_on_a_4x4_frf_bounds_a_machine_model() {
     for (extra, says) in [
         (vec!["--controller", "c.toml"], "--controller"),
         (vec!["--weight-shape", "smooth"], "--weight-shape"),
+        (vec!["--raise-cover", "0.98"], "--raise-cover"),
         (vec!["--level", "10"], "--level without --amplitude"),
         (
             vec!["--amplitude", a5.as_str()],

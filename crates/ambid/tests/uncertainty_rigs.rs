@@ -8,7 +8,6 @@
 
 use ambid::uncertainty::{loop_stable, nominal_gain_interval, UncertaintyRun};
 use ambid_core::validate::uncertainty::UncertaintyOptions;
-use ambid_core::validate::weight::DEFAULT_COVER;
 use ambid_twin::Mode;
 
 #[test]
@@ -25,7 +24,13 @@ fn the_raised_weight_covers_the_true_error_on_unseen_rigs() {
         let factor = |m: &[f64]| {
             a.terms
                 .errors
-                .joint_factor(m, DEFAULT_COVER, opts.run_coverage, opts.draws, opts.seed)
+                .joint_factor(
+                    m,
+                    opts.raise_cover,
+                    opts.run_coverage,
+                    opts.draws,
+                    opts.seed,
+                )
                 .unwrap()
         };
         let again = factor(&a.weight.weight.magnitude(&a.terms.f_hz));

@@ -14,7 +14,9 @@ use ambid::uncertainty::{
     amplitude_term_and_shifts, analyse_with_shift, nonlinear_term, operating_term, NONLINEAR_ALPHA,
 };
 use ambid_core::frf::bla::BlaEstimate;
-use ambid_core::validate::uncertainty::{ExtraTerms, UncertaintyOptions, DEFAULT_RUN_COVERAGE};
+use ambid_core::validate::uncertainty::{
+    ExtraTerms, UncertaintyOptions, DEFAULT_RAISE_COVER, DEFAULT_RUN_COVERAGE,
+};
 use ambid_core::validate::weight::{WeightShape, DEFAULT_COVER, MAX_WEIGHT_ORDER};
 use anyhow::Result;
 use clap::Args;
@@ -66,10 +68,15 @@ pub struct UncertaintyArgs {
     #[arg(long, default_value_t = DEFAULT_COVER)]
     pub(crate) cover: f64,
     /// Fraction of the fitted model's error draws (2 000, seeded) in which the weight must
-    /// overbound the error on `--cover` of the lines; the weight's gain is raised until it does
-    /// (the default 0.99 makes up for draws narrower than the true error; docs/uncertainty.md).
+    /// overbound the error on `--raise-cover` of the lines; the weight's gain is raised until it
+    /// does (the default 0.99 makes up for draws narrower than the true error;
+    /// docs/uncertainty.md).
     #[arg(long, default_value_t = DEFAULT_RUN_COVERAGE)]
     pub(crate) run_coverage: f64,
+    /// Fraction of the lines on which the raised weight must overbound each of those draws (the
+    /// default is the coverage bar's 95 %; 1: every line).
+    #[arg(long, default_value_t = DEFAULT_RAISE_COVER)]
+    pub(crate) raise_cover: f64,
     /// The weight's family: `mode` (the default: also lightly damped pole pairs at the bound's
     /// peaks with zero pairs at its dips, and notches; the tighter of it and the smooth fit is
     /// kept) or `smooth` (every factor damped, ζ ≥ 0.2: looser, with narrower robust margins;
@@ -149,6 +156,13 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         return Err(ambid::error::Error::usage(format!(
             "--cover must lie in (0, 1], e.g. 0.98 or 1 (every line); got {}",
             a.cover
+        ))
+        .into());
+    }
+    if !(a.raise_cover > 0.0 && a.raise_cover <= 1.0) {
+        return Err(ambid::error::Error::usage(format!(
+            "--raise-cover must lie in (0, 1], e.g. 0.95 or 1 (every line); got {}",
+            a.raise_cover
         ))
         .into());
     }
@@ -291,6 +305,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         &UncertaintyOptions {
             line_coverage: a.line_coverage,
             run_coverage: a.run_coverage,
+            raise_cover: a.raise_cover,
             weight_shape: a.weight_shape,
             ..UncertaintyOptions::default()
         },
@@ -390,6 +405,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             "per_order": w.per_order,
             "cover": a.cover,
             "run_coverage": a.run_coverage,
+            "raise_cover": a.raise_cover,
             "shape": a.weight_shape.name(),
             "joint_raise": analysis.joint_raise,
             "lines_covered": covered,
@@ -454,10 +470,11 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         t.window_half_lines
     );
     println!(
-        "weight: order {}, looseness {:.2} (median |W|/bound; gain raised ×{:.3} for {:.0} % of the model's error draws), covers {} of {} lines{}",
+        "weight: order {}, looseness {:.2} (median |W|/bound; gain raised ×{:.3} to cover {:.0} % of the lines in {:.0} % of the model's error draws), covers {} of {} lines{}",
         w.weight.order(),
         w.looseness,
         analysis.joint_raise,
+        100.0 * a.raise_cover,
         100.0 * a.run_coverage,
         covered,
         t.f_hz.len(),

@@ -20,7 +20,7 @@ use ambid::io::OutputSet;
 use ambid::workflow::machine::{read_machine_frf, LevelFrf};
 use ambid::workflow::machine_fit::{fit_band, speed_uncertainty, AmplitudeStudy};
 use ambid_core::data::AXES;
-use ambid_core::validate::uncertainty::DEFAULT_RUN_COVERAGE;
+use ambid_core::validate::uncertainty::{DEFAULT_RAISE_COVER, DEFAULT_RUN_COVERAGE};
 use ambid_core::validate::weight::{WeightShape, DEFAULT_COVER, MAX_WEIGHT_ORDER};
 use ambid_twin::Machine;
 use anyhow::{Context, Result};
@@ -62,6 +62,7 @@ fn single_axis_options(a: &UncertaintyArgs) -> Vec<&'static str> {
     refuse(a.max_order != MAX_WEIGHT_ORDER, "--max-order");
     refuse(a.cover != DEFAULT_COVER, "--cover");
     refuse(a.run_coverage != DEFAULT_RUN_COVERAGE, "--run-coverage");
+    refuse(a.raise_cover != DEFAULT_RAISE_COVER, "--raise-cover");
     refuse(a.weight_shape != WeightShape::ModeShaped, "--weight-shape");
     v
 }
