@@ -152,26 +152,18 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         ))
         .into());
     }
-    if !(a.cover > 0.0 && a.cover <= 1.0) {
-        return Err(ambid::error::Error::usage(format!(
-            "--cover must lie in (0, 1], e.g. 0.98 or 1 (every line); got {}",
-            a.cover
-        ))
-        .into());
-    }
-    if !(a.raise_cover > 0.0 && a.raise_cover <= 1.0) {
-        return Err(ambid::error::Error::usage(format!(
-            "--raise-cover must lie in (0, 1], e.g. 0.95 or 1 (every line); got {}",
-            a.raise_cover
-        ))
-        .into());
-    }
-    if !(a.run_coverage > 0.0 && a.run_coverage <= 1.0) {
-        return Err(ambid::error::Error::usage(format!(
-            "--run-coverage must lie in (0, 1], e.g. 0.95; got {}",
-            a.run_coverage
-        ))
-        .into());
+    // the fractions in (0, 1]
+    for (name, value, example) in [
+        ("--cover", a.cover, "0.98 or 1 (every line)"),
+        ("--raise-cover", a.raise_cover, "0.95 or 1 (every line)"),
+        ("--run-coverage", a.run_coverage, "0.95"),
+    ] {
+        if !(value > 0.0 && value <= 1.0) {
+            return Err(ambid::error::Error::usage(format!(
+                "{name} must lie in (0, 1], e.g. {example}; got {value}"
+            ))
+            .into());
+        }
     }
     if a.max_order > MAX_WEIGHT_ORDER {
         return Err(ambid::error::Error::usage(format!(
