@@ -32,7 +32,9 @@
 //! prints the line terms' medians and the projection's Wald statistic; `DEBUG_AMP=1` the
 //! coherent relative shift κ of each level's FRF (and of the model) against the exact plant on
 //! the diagonal entries per band. `COVER_RAISE` / `COVER_W` set the joint raise's and the
-//! weight fit's `cover` (default 0.98); `NO_RAISE=1` skips the raise. `FRF_ERR=1` prints, per
+//! weight fit's `cover` (default 0.98); `COVER_RAISE` may list several values (`0.98,0.95`):
+//! the same rig's data then give one row per value (the rig number tagged `@value`) and one
+//! summary per value. `NO_RAISE=1` skips the raise. `FRF_ERR=1` prints, per
 //! line in 150–350 Hz, the measured FRF's complex error against the exact plant and its
 //! standard deviation for the entries (xa, ya) and (xa, xa) (`FRFERR f re im std re im std`).
 //!
@@ -110,7 +112,11 @@ fn main() {
     let mode = std::env::var("MODE").unwrap_or_else(|_| "linear".into());
     let dir = std::env::temp_dir().join(format!("ambid-unc-machine-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("tmp dir");
-    let mut summary = Vec::new();
+    let covers: Vec<f64> = std::env::var("COVER_RAISE").map_or_else(
+        |_| vec![DEFAULT_COVER],
+        |v| v.split(',').filter_map(|x| x.parse().ok()).collect(),
+    );
+    let mut summaries: Vec<Vec<Row>> = vec![Vec::new(); covers.len()];
     println!("rig rpm | lines | cov_e cov_n cov_w | loose_n loose_w | lines: g- g+ (exact g- g+) stable half | entry weights: max order g- g+ stable half | s");
     for rig in rigs {
         let t0 = Instant::now();
@@ -360,345 +366,362 @@ fn main() {
                 .and_then(|v| v.parse::<f64>().ok())
                 .unwrap_or(DEFAULT_COVER)
         };
-        let (cover_raise, cover_w) = (env_f("COVER_RAISE"), env_f("COVER_W"));
-        let raise = u
-            .joint_raise(cover_raise, 0.95, 2000, 0)
-            .expect("joint raise")
-            .max(1.0);
-        let t_raise = t_unc.elapsed().as_secs_f64() - t_bound;
-        let u = if std::env::var("NO_RAISE").is_ok() {
-            u
-        } else {
-            let mut u = u;
-            for e in &mut u.entries {
-                for b in &mut e.additive {
-                    *b *= raise;
+        let cover_w = env_f("COVER_W");
+        // COVER_RAISE may list several values (e.g. 0.98,0.95): one row per value, same data
+        let u0 = u;
+        for (vi, cover_raise) in covers.iter().copied().enumerate() {
+            let tag = if covers.len() > 1 {
+                format!("@{cover_raise}")
+            } else {
+                String::new()
+            };
+            let u = u0.clone();
+            let raise = u
+                .joint_raise(cover_raise, 0.95, 2000, 0)
+                .expect("joint raise")
+                .max(1.0);
+            let t_raise = t_unc.elapsed().as_secs_f64() - t_bound;
+            let u = if std::env::var("NO_RAISE").is_ok() {
+                u
+            } else {
+                let mut u = u;
+                for e in &mut u.entries {
+                    for b in &mut e.additive {
+                        *b *= raise;
+                    }
+                }
+                u
+            };
+            let f = u.f_hz().to_vec();
+            let exact = Frd::from_model(&truth[0].plant, &f).expect("exact");
+            let norm = u.norm_bound();
+            let t_w = Instant::now();
+            let additive = std::env::var("ADDITIVE").is_ok();
+            let form = if additive {
+                EntryForm::Additive
+            } else {
+                EntryForm::Relative
+            };
+            // SHAPE=mode: the mode-shaped family for every entry (opt-in; docs/uncertainty.md)
+            let shape = if std::env::var("SHAPE").is_ok_and(|v| v == "mode") {
+                ambid_core::validate::weight::WeightShape::ModeShaped
+            } else {
+                ambid_core::validate::weight::WeightShape::Smooth
+            };
+            let wfits = u
+                .entry_weights_shaped(data.ts, 4, cover_w, form, shape)
+                .expect("entry weights");
+            let t_weights = t_w.elapsed().as_secs_f64();
+            let weights: Vec<Weight> = wfits.iter().map(|w| w.weight.clone()).collect();
+            let wmags: Vec<Vec<f64>> = weights.iter().map(|w| w.magnitude(&f)).collect();
+            // the structured weight's element-wise bound |P̂_ij||W_ij| at line k
+            let wbound = |k: usize| {
+                let ph = u.nominal_at(k);
+                Mat::from_fn(4, 4, |i, j| {
+                    let scale = if additive { 1.0 } else { ph[(i, j)].norm() };
+                    scale * wmags[i + j * 4][k]
+                })
+            };
+            let mut wbnds = Vec::new();
+            let (mut pairs, mut pairs_ok, mut n_lines, mut n_ok, mut w_ok) = (0, 0, 0, 0, 0);
+            let (mut errs, mut bnds) = (Vec::new(), Vec::new());
+            for (k, fk) in f.iter().enumerate() {
+                if !(10.0..=1000.0).contains(fk) {
+                    continue;
+                }
+                let p = exact.at(k).expect("line");
+                if std::env::var("FRF_ERR").is_ok() && (150.0..=350.0).contains(fk) {
+                    let g = plant.at(k).expect("line");
+                    let v = plant.variance().expect("var");
+                    let e = |i: usize, j: usize| g[(i, j)] - p[(i, j)];
+                    println!(
+                        "FRFERR {fk:.1} {:.3e} {:.3e} {:.3e} {:.3e} {:.3e} {:.3e}",
+                        e(0, 2).re,
+                        e(0, 2).im,
+                        v[k * 16 + 2 * 4].sqrt(),
+                        e(0, 0).re,
+                        e(0, 0).im,
+                        v[k * 16].sqrt()
+                    );
+                }
+                let ph = u.nominal_at(k);
+                let l = u.bound_at(k);
+                let d = Mat::from_fn(4, 4, |i, j| (p[(i, j)] - ph[(i, j)]).norm());
+                let dc = Mat::from_fn(4, 4, |i, j| p[(i, j)] - ph[(i, j)]);
+                for i in 0..4 {
+                    for j in 0..4 {
+                        pairs += 1;
+                        pairs_ok += usize::from(d[(i, j)] <= l[(i, j)]);
+                    }
+                }
+                let e = dc
+                    .singular_values()
+                    .map(|s| s.into_iter().fold(0.0, f64::max))
+                    .unwrap_or(f64::NAN);
+                n_lines += 1;
+                n_ok += usize::from(e <= norm[k]);
+                if std::env::var("DEBUG_ENTRIES").is_ok() && k % 40 == 0 {
+                    println!(
+                        "   {fk:7.1} Hz (window ±{} lines):",
+                        u.entries[0].window_half_lines
+                    );
+                    for i in 0..4 {
+                        let row: Vec<String> = (0..4)
+                            .map(|j| {
+                                let t = u.entry(i, j).expect("entry");
+                                format!(
+                                    "{:.1e}/{:.1e}/{:.1e}",
+                                    d[(i, j)],
+                                    t.additive[k],
+                                    plant
+                                        .variance()
+                                        .map_or(f64::NAN, |v| v[k * 16 + j * 4 + i].sqrt())
+                                )
+                            })
+                            .collect();
+                        println!("     {}", row.join("  "));
+                    }
+                }
+                if std::env::var("DEBUG_LINES").is_ok() && k % 8 == 0 {
+                    let t = u.entry(0, 0).expect("entry");
+                    println!(
+                        "   {fk:7.1} Hz: σ̄ err {e:.3e} ‖L‖ {:.3e} | (0,0) err {:.3e} a {:.3e} b {:.3e} misfit {:.3e} σ {:.3e} |P̂| {:.3e}",
+                        norm[k], d[(0, 0)], t.frf_confidence[k], t.model_error[k], t.misfit[k],
+                        plant.variance().map_or(f64::NAN, |v| v[k * 16].sqrt()), t.nominal[k].norm()
+                    );
+                }
+                let wb = sigma_max(&wbound(k));
+                w_ok += usize::from(e <= wb);
+                wbnds.push(wb);
+                errs.push(e);
+                bnds.push(sigma_max(&l));
+            }
+            let cov_e = pairs_ok as f64 / pairs as f64;
+            let cov_n = n_ok as f64 / n_lines as f64;
+            let cov_w = w_ok as f64 / n_lines as f64;
+            let loose_w = median(wbnds) / median(errs.clone());
+            let loose = median(bnds) / median(errs);
+            let c = &truth[0].controller;
+            let tp = &truth[0].plant;
+            let exact_g = nominal_gain_interval(tp, c).expect("exact margins");
+            let bounds = u.bounds();
+            let on_lines = robust_stability_matrix_on_lines(
+                &model.model,
+                c,
+                &f,
+                LineBound::Elementwise(&bounds),
+            )
+            .expect("robust on lines");
+            let on_w = robust_stability_matrix_weight(
+                &model.model,
+                c,
+                if additive {
+                    MatrixWeight::EntryAdditive(&weights)
+                } else {
+                    MatrixWeight::EntryRelative(&weights)
+                },
+            )
+            .expect("robust weight");
+            let t_robust = t_unc.elapsed().as_secs_f64() - t_bound - t_raise;
+            if std::env::var("TIMING").is_ok() {
+                println!("  bound {t_bound:.2} s, raise {t_raise:.2} s, entry weights {t_weights:.2} s, bound + raise + weights + exact margins + robust {t_robust:.2} s");
+            }
+            let bl = bars(&on_lines, tp, c, exact_g);
+            if std::env::var("DEBUG").is_ok() {
+                if let Some(g) = on_lines.upper_gain_margin.filter(|g| g.is_finite()) {
+                    let cg = ambid_core::lti::StateSpace::new(
+                        c.a().to_owned(),
+                        c.b().to_owned(),
+                        c.c().to_owned() * (g * 1.001),
+                        c.d().to_owned() * (g * 1.001),
+                        c.ts(),
+                    )
+                    .expect("scaled");
+                    let r = robust_stability_matrix_on_lines(
+                        &model.model,
+                        &cg,
+                        &f,
+                        LineBound::Elementwise(&bounds),
+                    )
+                    .expect("robust");
+                    let k = f.iter().position(|x| *x == r.mu_peak_hz).unwrap_or(0);
+                    println!(
+                        "  at g+ {g:.3}: mu {:.3} at {:.1} Hz (line {k} of {})",
+                        r.mu_peak,
+                        r.mu_peak_hz,
+                        f.len()
+                    );
+                    for (i, j) in [(0, 0), (1, 1), (2, 2), (3, 3), (0, 1), (0, 2)] {
+                        let e = u.entry(i, j).expect("entry");
+                        let p = exact.at(k).expect("line");
+                        println!(
+                            "   ({i},{j}) |P̂| {:.3e} |err| {:.3e} L {:.3e}: (a) {:.3e} (b) {:.3e} misfit {:.3e}",
+                            e.nominal[k].norm(),
+                            (p[(i, j)] - e.nominal[k]).norm(),
+                            e.additive[k],
+                            e.frf_confidence[k],
+                            e.model_error[k],
+                            e.misfit[k]
+                        );
+                    }
                 }
             }
-            u
-        };
-        let f = u.f_hz().to_vec();
-        let exact = Frd::from_model(&truth[0].plant, &f).expect("exact");
-        let norm = u.norm_bound();
-        let t_w = Instant::now();
-        let additive = std::env::var("ADDITIVE").is_ok();
-        let form = if additive {
-            EntryForm::Additive
-        } else {
-            EntryForm::Relative
-        };
-        // SHAPE=mode: the mode-shaped family for every entry (opt-in; docs/uncertainty.md)
-        let shape = if std::env::var("SHAPE").is_ok_and(|v| v == "mode") {
-            ambid_core::validate::weight::WeightShape::ModeShaped
-        } else {
-            ambid_core::validate::weight::WeightShape::Smooth
-        };
-        let wfits = u
-            .entry_weights_shaped(data.ts, 4, cover_w, form, shape)
-            .expect("entry weights");
-        let t_weights = t_w.elapsed().as_secs_f64();
-        let weights: Vec<Weight> = wfits.iter().map(|w| w.weight.clone()).collect();
-        let wmags: Vec<Vec<f64>> = weights.iter().map(|w| w.magnitude(&f)).collect();
-        // the structured weight's element-wise bound |P̂_ij||W_ij| at line k
-        let wbound = |k: usize| {
-            let ph = u.nominal_at(k);
-            Mat::from_fn(4, 4, |i, j| {
-                let scale = if additive { 1.0 } else { ph[(i, j)].norm() };
-                scale * wmags[i + j * 4][k]
-            })
-        };
-        let mut wbnds = Vec::new();
-        let (mut pairs, mut pairs_ok, mut n_lines, mut n_ok, mut w_ok) = (0, 0, 0, 0, 0);
-        let (mut errs, mut bnds) = (Vec::new(), Vec::new());
-        for (k, fk) in f.iter().enumerate() {
-            if !(10.0..=1000.0).contains(fk) {
-                continue;
-            }
-            let p = exact.at(k).expect("line");
-            if std::env::var("FRF_ERR").is_ok() && (150.0..=350.0).contains(fk) {
-                let g = plant.at(k).expect("line");
-                let v = plant.variance().expect("var");
-                let e = |i: usize, j: usize| g[(i, j)] - p[(i, j)];
-                println!(
-                    "FRFERR {fk:.1} {:.3e} {:.3e} {:.3e} {:.3e} {:.3e} {:.3e}",
-                    e(0, 2).re,
-                    e(0, 2).im,
-                    v[k * 16 + 2 * 4].sqrt(),
-                    e(0, 0).re,
-                    e(0, 0).im,
-                    v[k * 16].sqrt()
-                );
-            }
-            let ph = u.nominal_at(k);
-            let l = u.bound_at(k);
-            let d = Mat::from_fn(4, 4, |i, j| (p[(i, j)] - ph[(i, j)]).norm());
-            let dc = Mat::from_fn(4, 4, |i, j| p[(i, j)] - ph[(i, j)]);
-            for i in 0..4 {
-                for j in 0..4 {
-                    pairs += 1;
-                    pairs_ok += usize::from(d[(i, j)] <= l[(i, j)]);
-                }
-            }
-            let e = dc
-                .singular_values()
-                .map(|s| s.into_iter().fold(0.0, f64::max))
-                .unwrap_or(f64::NAN);
-            n_lines += 1;
-            n_ok += usize::from(e <= norm[k]);
-            if std::env::var("DEBUG_ENTRIES").is_ok() && k % 40 == 0 {
-                println!(
-                    "   {fk:7.1} Hz (window ±{} lines):",
-                    u.entries[0].window_half_lines
-                );
+            if std::env::var("DEBUG_W").is_ok() {
+                let k = f
+                    .iter()
+                    .enumerate()
+                    .min_by(|a, b| {
+                        (a.1 - on_w.mu_peak_hz)
+                            .abs()
+                            .total_cmp(&(b.1 - on_w.mu_peak_hz).abs())
+                    })
+                    .map_or(0, |x| x.0);
+                let wb = wbound(k);
+                let l = u.bound_at(k);
+                let ph = u.nominal_at(k);
+                println!("  weight μ peak {:.1} Hz, line {k} at {:.1} Hz: |P̂_ij| / (|P̂||W|)/L / uncovered lines", on_w.mu_peak_hz, f[k]);
                 for i in 0..4 {
                     let row: Vec<String> = (0..4)
                         .map(|j| {
-                            let t = u.entry(i, j).expect("entry");
                             format!(
-                                "{:.1e}/{:.1e}/{:.1e}",
-                                d[(i, j)],
-                                t.additive[k],
-                                plant
-                                    .variance()
-                                    .map_or(f64::NAN, |v| v[k * 16 + j * 4 + i].sqrt())
+                                "{:.1e}/{:6.2}/{}",
+                                ph[(i, j)].norm(),
+                                wb[(i, j)] / l[(i, j)],
+                                wfits[i + j * 4].uncovered_hz.len()
                             )
                         })
                         .collect();
                     println!("     {}", row.join("  "));
                 }
-            }
-            if std::env::var("DEBUG_LINES").is_ok() && k % 8 == 0 {
-                let t = u.entry(0, 0).expect("entry");
+                // at the μ peak itself (between lines, on the dense grid): the model's and the
+                // weights' magnitudes against the nearest line's, and the model's poles near it
+                let fp = on_w.mu_peak_hz;
+                // two evaluations: the peak may lie on the line itself
+                let at_p = Frd::from_model(&model.model, &[fp]).expect("model");
+                let at_l = Frd::from_model(&model.model, &[f[k]]).expect("model");
+                let (pp, pl) = (at_p.at(0).expect("p"), at_l.at(0).expect("l"));
+                let mut worst = (0.0, 0, 0);
+                for i in 0..4 {
+                    for j in 0..4 {
+                        let w = &weights[i + j * 4];
+                        let (wp, wl) = (w.magnitude(&[fp])[0], w.magnitude(&[f[k]])[0]);
+                        let r = (pp[(i, j)].norm() * wp) / (pl[(i, j)].norm() * wl);
+                        if r > worst.0 {
+                            worst = (r, i, j);
+                        }
+                    }
+                }
+                let (r, i, j) = worst;
+                let w = &weights[i + j * 4];
                 println!(
-                    "   {fk:7.1} Hz: σ̄ err {e:.3e} ‖L‖ {:.3e} | (0,0) err {:.3e} a {:.3e} b {:.3e} misfit {:.3e} σ {:.3e} |P̂| {:.3e}",
-                    norm[k], d[(0, 0)], t.frf_confidence[k], t.model_error[k], t.misfit[k],
-                    plant.variance().map_or(f64::NAN, |v| v[k * 16].sqrt()), t.nominal[k].norm()
+                    "  at {fp:.2} Hz: largest |P̂||W| over the line's, entry ({i},{j}): {r:.3e} (|P̂| {:.3e} / {:.3e}, |W| {:.3e} / {:.3e})",
+                    pp[(i, j)].norm(),
+                    pl[(i, j)].norm(),
+                    w.magnitude(&[fp])[0],
+                    w.magnitude(&[f[k]])[0]
                 );
-            }
-            let wb = sigma_max(&wbound(k));
-            w_ok += usize::from(e <= wb);
-            wbnds.push(wb);
-            errs.push(e);
-            bnds.push(sigma_max(&l));
-        }
-        let cov_e = pairs_ok as f64 / pairs as f64;
-        let cov_n = n_ok as f64 / n_lines as f64;
-        let cov_w = w_ok as f64 / n_lines as f64;
-        let loose_w = median(wbnds) / median(errs.clone());
-        let loose = median(bnds) / median(errs);
-        let c = &truth[0].controller;
-        let tp = &truth[0].plant;
-        let exact_g = nominal_gain_interval(tp, c).expect("exact margins");
-        let bounds = u.bounds();
-        let on_lines =
-            robust_stability_matrix_on_lines(&model.model, c, &f, LineBound::Elementwise(&bounds))
-                .expect("robust on lines");
-        let on_w = robust_stability_matrix_weight(
-            &model.model,
-            c,
-            if additive {
-                MatrixWeight::EntryAdditive(&weights)
-            } else {
-                MatrixWeight::EntryRelative(&weights)
-            },
-        )
-        .expect("robust weight");
-        let t_robust = t_unc.elapsed().as_secs_f64() - t_bound - t_raise;
-        if std::env::var("TIMING").is_ok() {
-            println!("  bound {t_bound:.2} s, raise {t_raise:.2} s, entry weights {t_weights:.2} s, bound + raise + weights + exact margins + robust {t_robust:.2} s");
-        }
-        let bl = bars(&on_lines, tp, c, exact_g);
-        if std::env::var("DEBUG").is_ok() {
-            if let Some(g) = on_lines.upper_gain_margin.filter(|g| g.is_finite()) {
-                let cg = ambid_core::lti::StateSpace::new(
-                    c.a().to_owned(),
-                    c.b().to_owned(),
-                    c.c().to_owned() * (g * 1.001),
-                    c.d().to_owned() * (g * 1.001),
-                    c.ts(),
-                )
-                .expect("scaled");
-                let r = robust_stability_matrix_on_lines(
-                    &model.model,
-                    &cg,
-                    &f,
-                    LineBound::Elementwise(&bounds),
-                )
-                .expect("robust");
-                let k = f.iter().position(|x| *x == r.mu_peak_hz).unwrap_or(0);
+                let ts = data.ts;
+                let a = model.model.a();
+                let off = (0..a.nrows())
+                    .flat_map(|i| (0..a.ncols()).map(move |j| (i, j)))
+                    .filter(|&(i, j)| i.abs_diff(j) > 1 && a[(i, j)] != 0.0)
+                    .count();
                 println!(
-                    "  at g+ {g:.3}: mu {:.3} at {:.1} Hz (line {k} of {})",
+                    "    A {}×{}: {off} nonzero entries off the tridiagonal band",
+                    a.nrows(),
+                    a.ncols()
+                );
+                for z in model.model.poles().expect("poles") {
+                    let sp = z.ln() / ts;
+                    let fz = sp.norm() / (2.0 * std::f64::consts::PI);
+                    if (fz / fp - 1.0).abs() < 0.2 {
+                        println!(
+                            "    model pole {fz:.2} Hz ζ {:.2e} |z| {:.6}",
+                            -sp.re / sp.norm(),
+                            z.norm()
+                        );
+                    }
+                }
+                for z in truth[0].plant.poles().expect("poles") {
+                    let sp = if let Some(t) = truth[0].plant.ts() {
+                        z.ln() / t
+                    } else {
+                        z
+                    };
+                    let fz = sp.norm() / (2.0 * std::f64::consts::PI);
+                    if (fz / fp - 1.0).abs() < 0.2 {
+                        println!(
+                            "    exact pole {fz:.2} Hz ζ {:.2e} re {:.3e}",
+                            -sp.re / sp.norm(),
+                            sp.re
+                        );
+                    }
+                }
+            }
+            if let Ok(dump) = std::env::var("DUMP_ENTRIES") {
+                // per line: f, then per entry the relative bound and the weight's magnitude
+                let mut out = String::new();
+                for (k, fk) in f.iter().enumerate() {
+                    out.push_str(&format!("{fk}"));
+                    for j in 0..4 {
+                        for i in 0..4 {
+                            let e = u.entry(i, j).expect("entry");
+                            let p = exact.at(k).expect("line")[(i, j)];
+                            out.push_str(&format!(
+                                " {} {} {}",
+                                e.additive[k] / e.nominal[k].norm(),
+                                wmags[i + j * 4][k],
+                                (p - e.nominal[k]).norm() / e.nominal[k].norm()
+                            ));
+                        }
+                    }
+                    out.push('\n');
+                }
+                std::fs::write(format!("{dump}/rig{rig}.txt"), out).expect("dump");
+            }
+            let bw = bars(&on_w, tp, c, exact_g);
+            let fmt = |r: &RobustStability| {
+                format!(
+                    "[mu {:.2} at {:.0} Hz] {:.3} {:.3}",
                     r.mu_peak,
                     r.mu_peak_hz,
-                    f.len()
-                );
-                for (i, j) in [(0, 0), (1, 1), (2, 2), (3, 3), (0, 1), (0, 2)] {
-                    let e = u.entry(i, j).expect("entry");
-                    let p = exact.at(k).expect("line");
-                    println!(
-                        "   ({i},{j}) |P̂| {:.3e} |err| {:.3e} L {:.3e}: (a) {:.3e} (b) {:.3e} misfit {:.3e}",
-                        e.nominal[k].norm(),
-                        (p[(i, j)] - e.nominal[k]).norm(),
-                        e.additive[k],
-                        e.frf_confidence[k],
-                        e.model_error[k],
-                        e.misfit[k]
-                    );
-                }
-            }
-        }
-        if std::env::var("DEBUG_W").is_ok() {
-            let k = f
-                .iter()
-                .enumerate()
-                .min_by(|a, b| {
-                    (a.1 - on_w.mu_peak_hz)
-                        .abs()
-                        .total_cmp(&(b.1 - on_w.mu_peak_hz).abs())
-                })
-                .map_or(0, |x| x.0);
-            let wb = wbound(k);
-            let l = u.bound_at(k);
-            let ph = u.nominal_at(k);
-            println!("  weight μ peak {:.1} Hz, line {k} at {:.1} Hz: |P̂_ij| / (|P̂||W|)/L / uncovered lines", on_w.mu_peak_hz, f[k]);
-            for i in 0..4 {
-                let row: Vec<String> = (0..4)
-                    .map(|j| {
-                        format!(
-                            "{:.1e}/{:6.2}/{}",
-                            ph[(i, j)].norm(),
-                            wb[(i, j)] / l[(i, j)],
-                            wfits[i + j * 4].uncovered_hz.len()
-                        )
-                    })
-                    .collect();
-                println!("     {}", row.join("  "));
-            }
-            // at the μ peak itself (between lines, on the dense grid): the model's and the
-            // weights' magnitudes against the nearest line's, and the model's poles near it
-            let fp = on_w.mu_peak_hz;
-            // two evaluations: the peak may lie on the line itself
-            let at_p = Frd::from_model(&model.model, &[fp]).expect("model");
-            let at_l = Frd::from_model(&model.model, &[f[k]]).expect("model");
-            let (pp, pl) = (at_p.at(0).expect("p"), at_l.at(0).expect("l"));
-            let mut worst = (0.0, 0, 0);
-            for i in 0..4 {
-                for j in 0..4 {
-                    let w = &weights[i + j * 4];
-                    let (wp, wl) = (w.magnitude(&[fp])[0], w.magnitude(&[f[k]])[0]);
-                    let r = (pp[(i, j)].norm() * wp) / (pl[(i, j)].norm() * wl);
-                    if r > worst.0 {
-                        worst = (r, i, j);
-                    }
-                }
-            }
-            let (r, i, j) = worst;
-            let w = &weights[i + j * 4];
+                    r.lower_gain_margin.unwrap_or(f64::NAN),
+                    r.upper_gain_margin.unwrap_or(f64::NAN)
+                )
+            };
             println!(
-                "  at {fp:.2} Hz: largest |P̂||W| over the line's, entry ({i},{j}): {r:.3e} (|P̂| {:.3e} / {:.3e}, |W| {:.3e} / {:.3e})",
-                pp[(i, j)].norm(),
-                pl[(i, j)].norm(),
-                w.magnitude(&[fp])[0],
-                w.magnitude(&[f[k]])[0]
+                "{rig:3}{tag} {:5.0} | {} ({:.1}-{:.0} Hz) raise {raise:.2} | {cov_e:.3} {cov_n:.3} {cov_w:.3} | {loose:.2} {loose_w:.2} | {} ({:.3} {:.3}) {:?} | {} {} {:?} | {:.1}",
+                truth[0].speed_rpm,
+                f.len(),
+                f[0],
+                f[f.len() - 1],
+                fmt(&on_lines),
+                exact_g.0,
+                exact_g.1,
+                bl,
+                weights.iter().map(Weight::order).max().unwrap_or(0),
+                fmt(&on_w),
+                bw,
+                t0.elapsed().as_secs_f64()
             );
-            let ts = data.ts;
-            let a = model.model.a();
-            let off = (0..a.nrows())
-                .flat_map(|i| (0..a.ncols()).map(move |j| (i, j)))
-                .filter(|&(i, j)| i.abs_diff(j) > 1 && a[(i, j)] != 0.0)
-                .count();
-            println!(
-                "    A {}×{}: {off} nonzero entries off the tridiagonal band",
-                a.nrows(),
-                a.ncols()
-            );
-            for z in model.model.poles().expect("poles") {
-                let sp = z.ln() / ts;
-                let fz = sp.norm() / (2.0 * std::f64::consts::PI);
-                if (fz / fp - 1.0).abs() < 0.2 {
-                    println!(
-                        "    model pole {fz:.2} Hz ζ {:.2e} |z| {:.6}",
-                        -sp.re / sp.norm(),
-                        z.norm()
-                    );
-                }
-            }
-            for z in truth[0].plant.poles().expect("poles") {
-                let sp = if let Some(t) = truth[0].plant.ts() {
-                    z.ln() / t
-                } else {
-                    z
-                };
-                let fz = sp.norm() / (2.0 * std::f64::consts::PI);
-                if (fz / fp - 1.0).abs() < 0.2 {
-                    println!(
-                        "    exact pole {fz:.2} Hz ζ {:.2e} re {:.3e}",
-                        -sp.re / sp.norm(),
-                        sp.re
-                    );
-                }
-            }
+            summaries[vi].push((cov_e, cov_n, cov_w, loose, bl, bw, loose_w));
         }
-        if let Ok(dump) = std::env::var("DUMP_ENTRIES") {
-            // per line: f, then per entry the relative bound and the weight's magnitude
-            let mut out = String::new();
-            for (k, fk) in f.iter().enumerate() {
-                out.push_str(&format!("{fk}"));
-                for j in 0..4 {
-                    for i in 0..4 {
-                        let e = u.entry(i, j).expect("entry");
-                        let p = exact.at(k).expect("line")[(i, j)];
-                        out.push_str(&format!(
-                            " {} {} {}",
-                            e.additive[k] / e.nominal[k].norm(),
-                            wmags[i + j * 4][k],
-                            (p - e.nominal[k]).norm() / e.nominal[k].norm()
-                        ));
-                    }
-                }
-                out.push('\n');
-            }
-            std::fs::write(format!("{dump}/rig{rig}.txt"), out).expect("dump");
-        }
-        let bw = bars(&on_w, tp, c, exact_g);
-        let fmt = |r: &RobustStability| {
-            format!(
-                "[mu {:.2} at {:.0} Hz] {:.3} {:.3}",
-                r.mu_peak,
-                r.mu_peak_hz,
-                r.lower_gain_margin.unwrap_or(f64::NAN),
-                r.upper_gain_margin.unwrap_or(f64::NAN)
-            )
-        };
-        println!(
-            "{rig:3} {:5.0} | {} ({:.1}-{:.0} Hz) raise {raise:.2} | {cov_e:.3} {cov_n:.3} {cov_w:.3} | {loose:.2} {loose_w:.2} | {} ({:.3} {:.3}) {:?} | {} {} {:?} | {:.1}",
-            truth[0].speed_rpm,
-            f.len(),
-            f[0],
-            f[f.len() - 1],
-            fmt(&on_lines),
-            exact_g.0,
-            exact_g.1,
-            bl,
-            weights.iter().map(Weight::order).max().unwrap_or(0),
-            fmt(&on_w),
-            bw,
-            t0.elapsed().as_secs_f64()
-        );
-        summary.push((cov_e, cov_n, cov_w, loose, bl, bw, loose_w));
     }
-    let n = summary.len();
-    let count = |p: &dyn Fn(&Row) -> bool| summary.iter().filter(|s| p(s)).count();
-    println!(
-        "runs {n}: element-wise ≥95 % of pairs {}; norm ≥95 % of lines {}; weight ≥95 % {}; looseness median {:.2}; lines: stable@90 % {} half {}; weight: stable@90 % {} half {}; weight looseness median {:.2}",
-        count(&|s| s.0 >= 0.95),
-        count(&|s| s.1 >= 0.95),
-        count(&|s| s.2 >= 0.95),
-        if n > 0 { median(summary.iter().map(|s| s.3).collect()) } else { f64::NAN },
-        count(&|s| s.4.is_some_and(|b| b.0)),
-        count(&|s| s.4.is_some_and(|b| b.1)),
-        count(&|s| s.5.is_some_and(|b| b.0)),
-        count(&|s| s.5.is_some_and(|b| b.1)),
-        if n > 0 { median(summary.iter().map(|s| s.6).collect()) } else { f64::NAN },
-    );
+    for (summary, cover) in summaries.iter().zip(&covers) {
+        print!("raise cover {cover}: ");
+        let n = summary.len();
+        let count = |p: &dyn Fn(&Row) -> bool| summary.iter().filter(|s| p(s)).count();
+        println!(
+            "runs {n}: element-wise ≥95 % of pairs {}; norm ≥95 % of lines {}; weight ≥95 % {}; looseness median {:.2}; lines: stable@90 % {} half {}; weight: stable@90 % {} half {}; weight looseness median {:.2}",
+            count(&|s| s.0 >= 0.95),
+            count(&|s| s.1 >= 0.95),
+            count(&|s| s.2 >= 0.95),
+            if n > 0 { median(summary.iter().map(|s| s.3).collect()) } else { f64::NAN },
+            count(&|s| s.4.is_some_and(|b| b.0)),
+            count(&|s| s.4.is_some_and(|b| b.1)),
+            count(&|s| s.5.is_some_and(|b| b.0)),
+            count(&|s| s.5.is_some_and(|b| b.1)),
+            if n > 0 { median(summary.iter().map(|s| s.6).collect()) } else { f64::NAN },
+        );
+    }
 }
