@@ -34,7 +34,10 @@
 //! the diagonal entries per band. `COVER_RAISE` / `COVER_W` set the joint raise's and the
 //! weight fit's `cover` (default 0.98); `COVER_RAISE` may list several values (`0.98,0.95`):
 //! the same rig's data then give one row per value (the rig number tagged `@value`) and one
-//! summary per value. `NO_RAISE=1` skips the raise. `FRF_ERR=1` prints, per
+//! summary per value. The entry weights are fitted to the bound raised for `COVER_RAISE_W`
+//! of the pairs on the same draws (default `DEFAULT_RAISE_COVER`, 0.95, as the workflow's
+//! `speed_uncertainty`; `COVER_RAISE_W=same`: each `COVER_RAISE` value, the build before
+//! "Two raises for the machine" in docs/uncertainty.md). `NO_RAISE=1` skips the raise. `FRF_ERR=1` prints, per
 //! line in 150–350 Hz, the measured FRF's complex error against the exact plant and its
 //! standard deviation for the entries (xa, ya) and (xa, xa) (`FRFERR f re im std re im std`).
 //!
@@ -51,7 +54,7 @@ use ambid_core::validate::robust::{
     robust_stability_matrix_weight, LineBound, MatrixWeight, RobustStability,
 };
 use ambid_core::validate::uncertainty::{
-    uncertainty_matrix, EntryForm, ExtraTerms, UncertaintyOptions,
+    uncertainty_matrix, EntryForm, ExtraTerms, MatrixUncertainty, UncertaintyOptions,
 };
 use ambid_core::validate::weight::{Weight, DEFAULT_COVER};
 use faer::Mat;
@@ -124,6 +127,16 @@ fn main() {
                 .collect()
         },
     );
+    // the weights' raise: a fraction, or `same` (each line raise's)
+    let cover_w_raise: Option<f64> = match std::env::var("COVER_RAISE_W") {
+        Err(_) => Some(ambid_core::validate::uncertainty::DEFAULT_RAISE_COVER),
+        Ok(v) if v == "same" => None,
+        Ok(v) => Some(
+            v.trim()
+                .parse()
+                .unwrap_or_else(|_| panic!("COVER_RAISE_W: {v:?} is neither a number nor same")),
+        ),
+    };
     let mut summaries: Vec<Vec<Row>> = vec![Vec::new(); covers.len()];
     println!("rig rpm | lines | cov_e cov_n cov_w | loose_n loose_w | lines: g- g+ (exact g- g+) stable half | entry weights: max order g- g+ stable half | s");
     for rig in rigs {
@@ -400,25 +413,33 @@ fn main() {
             };
             let u = u0.clone();
             let t_r = Instant::now();
-            let raise = u
-                .joint_raise(cover_raise, 0.95, 2000, 0)
-                .expect("joint raise")
-                .max(1.0);
+            // the lines' raise and the weights' on the same draws (machine_fit::speed_uncertainty)
+            let raises = u
+                .joint_raises(
+                    &[cover_raise, cover_w_raise.unwrap_or(cover_raise)],
+                    0.95,
+                    2000,
+                    0,
+                )
+                .expect("joint raise");
+            let (raise, weight_raise) = (raises[0].max(1.0), raises[1].max(1.0));
             let t_raise = t_r.elapsed().as_secs_f64();
-            let u = if std::env::var("NO_RAISE").is_ok() {
-                u
-            } else {
-                let mut u = u;
-                for e in &mut u.entries {
-                    for b in &mut e.additive {
-                        *b *= raise;
+            let raised = |u: &MatrixUncertainty, g: f64| {
+                let mut u = u.clone();
+                if std::env::var("NO_RAISE").is_err() {
+                    for e in &mut u.entries {
+                        for b in &mut e.additive {
+                            *b *= g;
+                        }
                     }
                 }
                 u
             };
+            let for_weights = raised(&u, weight_raise);
+            let u = raised(&u, raise);
             let norm = u.norm_bound();
             let t_w = Instant::now();
-            let wfits = u
+            let wfits = for_weights
                 .entry_weights_shaped(data.ts, 4, cover_w, form, shape)
                 .expect("entry weights");
             let t_weights = t_w.elapsed().as_secs_f64();
@@ -700,7 +721,7 @@ fn main() {
                 )
             };
             println!(
-                "{rig:3}{tag} {:5.0} | {} ({:.1}-{:.0} Hz) raise {raise:.2} | {cov_e:.3} {cov_n:.3} {cov_w:.3} | {loose:.2} {loose_w:.2} | {} ({:.3} {:.3}) {:?} | {} {} {:?} | {:.1}",
+                "{rig:3}{tag} {:5.0} | {} ({:.1}-{:.0} Hz) raise {raise:.2}/{weight_raise:.2} | {cov_e:.3} {cov_n:.3} {cov_w:.3} | {loose:.2} {loose_w:.2} | {} ({:.3} {:.3}) {:?} | {} {} {:?} | {:.1}",
                 truth[0].speed_rpm,
                 f.len(),
                 f[0],

@@ -570,7 +570,7 @@ fn the_fitted_workflow_is_independent_of_the_threads() {
 
 /// `[machine] uncertainty = true` (with `models = "fit"`) adds the chosen model's uncertainty
 /// per speed (short records, one speed, linear): a row in `summary.json` and the report's table;
-/// the raise is at least 1, the robust gain margins lie inside the exact loop's interval (the
+/// the raise is at least 1 and the weights' lower one between 1 and it, the robust gain margins lie inside the exact loop's interval (the
 /// pole oracle: a robust margin is one for every plant of the set, the exact plant among them
 /// when the bound covers it) and the exact loop is stable at 90 % of each; the bound covers
 /// σ̄(P − P̂) on ≥ 95 % of the 10–1000 Hz lines. Asking for it without a model is refused with
@@ -585,6 +585,9 @@ fn the_workflow_bounds_the_chosen_models_uncertainty_on_request() {
     let r = &rows[0];
     eprintln!("{r}");
     assert!(r["raise"].as_f64().unwrap() >= 1.0);
+    // the weights' raise (95 % of the pairs) on the same draws: never above the lines' (98 %)
+    let wr = r["weight_raise"].as_f64().unwrap();
+    assert!((1.0..=r["raise"].as_f64().unwrap()).contains(&wr), "{r}");
     assert_eq!(r["robustly_stable"], true, "{r}");
     let g: Vec<f64> = r["gain_margins"]
         .as_array()

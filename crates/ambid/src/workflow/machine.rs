@@ -257,8 +257,12 @@ pub struct UncertaintyRow {
     pub band_hz: [f64; 2],
     /// Lines.
     pub lines: usize,
-    /// The joint raise applied (98 % of the (line, entry) pairs in 95 % of 2 000 draws; ≥ 1).
+    /// The joint raise applied to the bound on the lines, its check and its export (98 % of the
+    /// (line, entry) pairs in 95 % of 2 000 draws; ≥ 1).
     pub raise: f64,
+    /// The joint raise of the bound the entry weights are fitted to (95 % of the pairs, the
+    /// coverage bar's fraction, on the same draws; ≥ 1, ≤ `raise`).
+    pub weight_raise: f64,
     /// Median over the lines of ‖L‖₂ / σ̄(P̂) \[%\].
     pub median_rel_pct: f64,
     /// Largest over the lines of ‖L‖₂ / σ̄(P̂) \[%\].
