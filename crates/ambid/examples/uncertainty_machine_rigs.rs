@@ -37,7 +37,10 @@
 //! summary per value. The entry weights are fitted to the bound raised for `COVER_RAISE_W`
 //! of the pairs on the same draws (default `DEFAULT_RAISE_COVER`, 0.95, as the workflow's
 //! `speed_uncertainty`; `COVER_RAISE_W=same`: each `COVER_RAISE` value, the build before
-//! "Two raises for the machine" in docs/uncertainty.md). `NO_RAISE=1` skips the raise. `FRF_ERR=1` prints, per
+//! "Two raises for the machine" in docs/uncertainty.md). `NO_RAISE=1` skips the raise.
+//! `DUMP_MU=DIR` writes per rig (and raise) `DIR/rig<N>.json`: the lines' model, controller and
+//! exact plant, the bound on the lines and the weights' on the lines, the exact interval and
+//! the robust margins, for `scripts/mimo_margin_oracle.py`. `FRF_ERR=1` prints, per
 //! line in 150–350 Hz, the measured FRF's complex error against the exact plant and its
 //! standard deviation for the entries (xa, ya) and (xa, xa) (`FRFERR f re im std re im std`).
 //!
@@ -558,6 +561,44 @@ fn main() {
                 println!("  bound {t_bound:.2} s, raise {t_raise:.2} s, entry weights {t_weights:.2} s, weights + exact margins + robust {t_robust:.2} s");
             }
             let bl = bars(&on_lines, tp, c, exact_g);
+            // DUMP_MU=dir: the lines' P̂, C, L and the exact and robust intervals as JSON (one
+            // file per rig and raise), to compare μ bounds outside
+            if let Ok(dir) = std::env::var("DUMP_MU") {
+                let ph = Frd::from_model(&model.model, &f).expect("model");
+                let cf = Frd::from_model(c, &f).expect("controller");
+                let flat = |fr: &Frd| -> Vec<[f64; 2]> {
+                    (0..f.len())
+                        .flat_map(|k| {
+                            let m = fr.at(k).expect("line");
+                            (0..16).map(move |e| [m[(e % 4, e / 4)].re, m[(e % 4, e / 4)].im])
+                        })
+                        .collect()
+                };
+                let lb: Vec<f64> = (0..f.len())
+                    .flat_map(|k| {
+                        let l = u.bound_at(k);
+                        (0..16).map(move |e| l[(e % 4, e / 4)])
+                    })
+                    .collect();
+                let wb: Vec<f64> = (0..f.len())
+                    .flat_map(|k| {
+                        let l = wbound(k);
+                        (0..16).map(move |e| l[(e % 4, e / 4)])
+                    })
+                    .collect();
+                let j = serde_json::json!({
+                    "f": f, "phat": flat(&ph), "c": flat(&cf), "exact": flat(&exact),
+                    "l": lb, "lw": wb,
+                    "exact_interval": [exact_g.0, exact_g.1],
+                    "lines_margins": [on_lines.lower_gain_margin, on_lines.upper_gain_margin],
+                    "weight_margins": [on_w.lower_gain_margin, on_w.upper_gain_margin],
+                });
+                std::fs::write(
+                    Path::new(&dir).join(format!("rig{rig}{tag}.json")),
+                    j.to_string(),
+                )
+                .expect("dump");
+            }
             if std::env::var("DEBUG").is_ok() {
                 if let Some(g) = on_lines.upper_gain_margin.filter(|g| g.is_finite()) {
                     let cg = ambid_core::lti::StateSpace::new(
