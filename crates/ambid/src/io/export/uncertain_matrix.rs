@@ -2,8 +2,9 @@
 //! plant, issue 23): the nominal model $\hat P$, one relative weight per entry,
 //! $$ P_{ij} = \hat P_{ij}\,(1 + W_{ij}\,\delta_{ij}), \qquad |\delta_{ij}| \le 1 \text{ independent,
 //! stable,} $$
-//! the per-line element-wise additive bound $L_{ij,k}$ of the check on the lines (the weights
-//! overbound it, relative to $|\hat P_{ij}|$, after a lower raise in the workflow), and the robust-stability figures on the lines and against the weights — as a
+//! the per-line element-wise additive bound $L_{ij,k}$ of the check on the lines (in the workflow
+//! the weights overbound it relative to $|\hat P_{ij}|$ after it is scaled down to their own,
+//! lower raise: `weight_raise / raise`), and the robust-stability figures on the lines and against the weights — as a
 //! MATLAB script that builds the uncertain model (one `ultidyn` per entry), a MATLAB `.mat`, a
 //! NumPy `.npz` and a JSON file (docs/export.md, "Uncertain MIMO plant models").
 //!
