@@ -428,15 +428,11 @@ fn main() {
             let (raise, weight_raise) = (raises[0].max(1.0), raises[1].max(1.0));
             let t_raise = t_r.elapsed().as_secs_f64();
             let raised = |u: &MatrixUncertainty, g: f64| {
-                let mut u = u.clone();
                 if std::env::var("NO_RAISE").is_err() {
-                    for e in &mut u.entries {
-                        for b in &mut e.additive {
-                            *b *= g;
-                        }
-                    }
+                    u.scaled(g).expect("a positive raise")
+                } else {
+                    u.clone()
                 }
-                u
             };
             let for_weights = raised(&u, weight_raise);
             let u = raised(&u, raise);

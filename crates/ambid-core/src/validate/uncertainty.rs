@@ -944,6 +944,53 @@ impl MatrixUncertainty {
             .collect())
     }
 
+    /// The bound raised by a factor $g$ (a raise of [`joint_raises`](Self::joint_raises)):
+    /// every entry's additive bound $\Delta_{ij,k}$ becomes $g\,\Delta_{ij,k}$ and its relative
+    /// bound $\ell_{ij,k} = \Delta_{ij,k}/\lvert\hat P_{ij,k}\rvert$ with it; the terms it was
+    /// built from, (a)–(e), are kept as they are, so the table of terms still shows what was
+    /// estimated and the bound shows what is claimed.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for a factor that is not finite and positive.
+    ///
+    /// # Example
+    /// A diagonal 2×2 model's bound raised by 1.3: every entry's bound, absolute and relative.
+    /// ```
+    /// use ambid_core::lti::{Frd, StateSpace};
+    /// use ambid_core::validate::uncertainty::{uncertainty_matrix, UncertaintyOptions};
+    /// use faer::mat;
+    /// let m = StateSpace::discrete(
+    ///     mat![[0.9, 0.0], [0.0, 0.5]], mat![[1.0, 0.0], [0.0, 1.0]], mat![[0.1, 0.0], [0.0, 0.2]],
+    ///     mat![[0.0, 0.0], [0.0, 0.0]], 1e-3,
+    /// ).unwrap();
+    /// let f: Vec<f64> = (1..=100).map(|k| k as f64 * 4.0).collect();
+    /// let exact = Frd::from_model(&m, &f).unwrap();
+    /// let var: Vec<f64> = exact.values().iter().map(|g| 1e-4 * g.norm_sqr().max(1e-6)).collect();
+    /// let frd = Frd::new_matrix(f.clone(), 2, 2, exact.values().to_vec(), Some(var), Some(1e-3)).unwrap();
+    /// let u = uncertainty_matrix(&m, &frd, &[], &UncertaintyOptions::default()).unwrap();
+    /// let r = u.scaled(1.3).unwrap();
+    /// let (a, b) = (u.entry(1, 1).unwrap(), r.entry(1, 1).unwrap());
+    /// assert!((b.additive[7] - 1.3 * a.additive[7]).abs() <= 1e-12 * b.additive[7]);
+    /// assert!((b.multiplicative[7] - 1.3 * a.multiplicative[7]).abs() <= 1e-12 * b.multiplicative[7]);
+    /// assert_eq!(b.frf_confidence, a.frf_confidence);
+    /// assert!(u.scaled(f64::NAN).is_err());
+    /// ```
+    pub fn scaled(&self, g: f64) -> Result<Self> {
+        if !(g.is_finite() && g > 0.0) {
+            return Err(Error::invalid(
+                "g",
+                format!("the raise must be finite and positive, got {g}"),
+            ));
+        }
+        let mut u = self.clone();
+        for e in &mut u.entries {
+            for b in e.additive.iter_mut().chain(e.multiplicative.iter_mut()) {
+                *b *= g;
+            }
+        }
+        Ok(u)
+    }
+
     /// Term (e) through the model (module docs, "Term (e) through the model"): the amplitude
     /// shift's per-line estimates `shift` (complex, absolute: $s_{ij,k} = c_{ij,k} a_e^2$, entry
     /// $(i, j)$ at index $i + j\,n_y$) with their variances `var` (of a circular complex error),

@@ -345,8 +345,7 @@ pub fn speed_uncertainty(
         LineBound, MatrixWeight,
     };
     use ambid_core::validate::uncertainty::{
-        uncertainty_matrix, EntryForm, ExtraTerms, MatrixUncertainty, UncertaintyOptions,
-        DEFAULT_RAISE_COVER,
+        uncertainty_matrix, EntryForm, ExtraTerms, UncertaintyOptions, DEFAULT_RAISE_COVER,
     };
     use ambid_core::validate::weight::{Weight, WeightShape, DEFAULT_COVER, MAX_WEIGHT_ORDER};
     let err = |e: ambid_core::Error| e.to_string();
@@ -401,17 +400,8 @@ pub fn speed_uncertainty(
         .joint_raises(&[DEFAULT_COVER, DEFAULT_RAISE_COVER], 0.95, 2000, 0)
         .map_err(err)?;
     let (raise, weight_raise) = (raises[0].max(1.0), raises[1].max(1.0));
-    let raised = |u: &MatrixUncertainty, g: f64| {
-        let mut u = u.clone();
-        for e in &mut u.entries {
-            for b in &mut e.additive {
-                *b *= g;
-            }
-        }
-        u
-    };
-    let for_weights = raised(&u, weight_raise);
-    let u = raised(&u, raise);
+    let for_weights = u.scaled(weight_raise).map_err(err)?;
+    let u = u.scaled(raise).map_err(err)?;
     let f = u.f_hz().to_vec();
     let norm = u.norm_bound();
     let top = |m: &faer::Mat<c64>| {
