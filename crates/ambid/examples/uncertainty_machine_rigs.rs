@@ -53,8 +53,9 @@ use ambid::workflow::machine_fit::{
 use ambid_core::lti::Frd;
 use ambid_core::validate::iso::IsoZones;
 use ambid_core::validate::robust::{
-    loop_stable, nominal_gain_interval, robust_stability_matrix_on_lines,
-    robust_stability_matrix_weight, LineBound, MatrixWeight, RobustStability,
+    loop_stable, nominal_gain_interval, robust_stability_matrix_drawn,
+    robust_stability_matrix_on_lines, robust_stability_matrix_weight, LineBound, MatrixWeight,
+    RobustStability,
 };
 use ambid_core::validate::uncertainty::{
     uncertainty_matrix, EntryForm, ExtraTerms, MatrixUncertainty, UncertaintyOptions,
@@ -83,7 +84,16 @@ fn bars(
     c: &ambid_core::lti::StateSpace,
     exact: (f64, f64),
 ) -> Option<(bool, bool)> {
-    let (hi, lo) = (r.upper_gain_margin?, r.lower_gain_margin?);
+    bars_of(r.lower_gain_margin?, r.upper_gain_margin?, truth, c, exact)
+}
+
+fn bars_of(
+    lo: f64,
+    hi: f64,
+    truth: &ambid_core::lti::StateSpace,
+    c: &ambid_core::lti::StateSpace,
+    exact: (f64, f64),
+) -> Option<(bool, bool)> {
     let up = if hi.is_finite() {
         1.0 + 0.9 * (hi - 1.0)
     } else {
@@ -105,6 +115,7 @@ type Row = (
     Option<(bool, bool)>,
     Option<(bool, bool)>,
     f64,
+    Option<(bool, bool)>,
 );
 
 fn main() {
@@ -552,7 +563,32 @@ fn main() {
                 },
             )
             .expect("robust weight");
-            let t_robust = t_r.elapsed().as_secs_f64() - t_raise;
+            // coherent draws (docs/uncertainty.md, "Coherent draws for the machine")
+            let t_c = Instant::now();
+            let n_draws: usize = std::env::var("COHERENT_DRAWS")
+                .ok()
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(200);
+            let conf: f64 = std::env::var("CONF")
+                .ok()
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(0.95);
+            let cd = u.coherent_draws(n_draws, 0).expect("coherent draws");
+            let coh = robust_stability_matrix_drawn(
+                &model.model,
+                c,
+                &cd.f_hz,
+                &cd.draws,
+                &cd.remainder,
+                conf,
+            )
+            .expect("drawn");
+            let bc = coh
+                .lower_gain_margin
+                .zip(coh.upper_gain_margin)
+                .and_then(|(lo, hi)| bars_of(lo, hi, &truth[0].plant, c, exact_g));
+            let t_coh = t_c.elapsed().as_secs_f64();
+            let t_robust = t_r.elapsed().as_secs_f64() - t_raise - t_coh;
             if std::env::var("TIMING").is_ok() {
                 println!("  bound {t_bound:.2} s, raise {t_raise:.2} s, entry weights {t_weights:.2} s, weights + exact margins + robust {t_robust:.2} s");
             }
@@ -748,6 +784,13 @@ fn main() {
                 std::fs::write(format!("{dump}/rig{rig}.txt"), out).expect("dump");
             }
             let bw = bars(&on_w, tp, c, exact_g);
+            println!(
+                "    coherent ({n_draws} draws, {conf}): stable {:.3}, margins {:.3} {:.3} {:?} ({t_coh:.1} s)",
+                coh.stable_fraction,
+                coh.lower_gain_margin.unwrap_or(f64::NAN),
+                coh.upper_gain_margin.unwrap_or(f64::NAN),
+                bc
+            );
             let fmt = |r: &RobustStability| {
                 format!(
                     "[mu {:.2} at {:.0} Hz] {:.3} {:.3}",
@@ -772,7 +815,7 @@ fn main() {
                 bw,
                 t0.elapsed().as_secs_f64()
             );
-            summaries[vi].push((cov_e, cov_n, cov_w, loose, bl, bw, loose_w));
+            summaries[vi].push((cov_e, cov_n, cov_w, loose, bl, bw, loose_w, bc));
         }
     }
     for (summary, cover) in summaries.iter().zip(&covers) {
@@ -790,6 +833,11 @@ fn main() {
             count(&|s| s.5.is_some_and(|b| b.0)),
             count(&|s| s.5.is_some_and(|b| b.1)),
             if n > 0 { median(summary.iter().map(|s| s.6).collect()) } else { f64::NAN },
+        );
+        println!(
+            "  coherent draws: stable@90 % {} half {}",
+            count(&|s| s.7.is_some_and(|b| b.0)),
+            count(&|s| s.7.is_some_and(|b| b.1)),
         );
     }
 }

@@ -630,6 +630,32 @@ fn the_workflow_bounds_the_chosen_models_uncertainty_on_request() {
         gw[0] >= e[0] * (1.0 - 1e-3) && gw[1] <= e[1] * (1.0 + 1e-3),
         "{r}"
     );
+    // the coherent draws (docs/uncertainty.md, "Coherent draws for the machine"): the margins
+    // of 95 % of 200 draws meet both margin bars against the exact loop's gain interval (which
+    // is one interval around 1, so a gain inside it is stable)
+    assert_eq!(r["coherent_draws"], 200, "{r}");
+    assert!(
+        r["coherent_stable_fraction"].as_f64().unwrap() >= 0.95,
+        "{r}"
+    );
+    let gc: Vec<f64> = r["coherent_gain_margins"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert!(
+        1.0 + 0.9 * (gc[1] - 1.0) < e[1] && 1.0 - 0.9 * (1.0 - gc[0]) > e[0],
+        "{r}"
+    );
+    assert!(
+        gc[1] - 1.0 >= 0.5 * (e[1] - 1.0) && 1.0 - gc[0] >= 0.5 * (1.0 - e[0]),
+        "{r}"
+    );
+    assert!(out
+        .report
+        .to_html()
+        .contains("machine-uncertainty-coherent"));
     // the uncertain model's files, beside the model's
     let dir = common::tmpdir("machine-uncertain-files");
     let written = out.write(&dir.join("o"), false).unwrap();

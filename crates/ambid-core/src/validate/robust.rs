@@ -417,6 +417,563 @@ pub fn robust_stability_matrix_weight(
     }
 }
 
+/// What [`robust_stability_matrix_drawn`] finds: the robust gain margins that a fraction
+/// `confidence` of the drawn error matrices meet.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct DrawnRobustStability {
+    /// The fraction of the draws the margins hold for.
+    pub confidence: f64,
+    /// The nominal closed loop is stable.
+    pub nominal_stable: bool,
+    /// The fraction of the draws whose set (the draw plus the remainder) is stable with the
+    /// controller as it is ($g = 1$).
+    pub stable_fraction: f64,
+    /// Nominally stable and `stable_fraction` $\ge$ `confidence`.
+    pub robustly_stable: bool,
+    /// $g_+$: at least the fraction `confidence` of the draws stay stable for every gain in
+    /// $[1, g_+)$ (`None` when not robustly stable; infinite when nothing limits it).
+    pub upper_gain_margin: Option<f64>,
+    /// $g_-$: the same downwards (`None` when not robustly stable).
+    pub lower_gain_margin: Option<f64>,
+    /// Per draw, its interval $(g_-, g_+)$; $(1, 1)$ for a draw not stable at $g = 1$.
+    pub per_draw: Vec<[f64; 2]>,
+}
+
+/// Robust gain margins of the loop of a plant with several inputs and outputs against drawn
+/// error matrices that keep the coherence between the entries, each with an element-wise
+/// remainder of unknown phase (the draws of
+/// [`MatrixUncertainty::coherent_draws`](super::uncertainty::MatrixUncertainty::coherent_draws);
+/// docs/uncertainty.md, "Coherent draws for the machine").
+///
+/// # The test per draw
+/// Draw $d$ claims $P = \hat P + D_{d} + \Delta_R$ on the lines with $|\Delta_{R,ij,k}| \le
+/// R_{ij,k}$, every entry's phase free. With $M_k(g) = (I + gC\hat P)^{-1}gC$ the loop with $gC$
+/// passes from $\hat P$ to every such plant without a closed-loop pole crossing the unit circle
+/// if the nominal loop is stable and, at every line,
+/// $$ \rho\big(M_k D_{d,k}\big) < 1 \quad\text{and}\quad
+///    \rho\big(R_k\,|X_k|\big) < 1, \qquad X_k = (I + M_k D_{d,k})^{-1} M_k : $$
+/// the first keeps $\det(I + \tau M D)$ away from 0 for $\tau \in [0, 1]$ (the path from
+/// $\hat P$ to $\hat P + D_d$), the second is the element-wise test of
+/// [`robust_stability_matrix_on_lines`] around $\hat P + D_d$, whose $M$ is $X$. Both use the
+/// norm bound first ($\rho \le \min(\lVert\cdot\rVert_1, \lVert\cdot\rVert_\infty)$, then
+/// Collatz–Wielandt's bound of the Perron root) and eigenvalues only where that is not below 1.
+/// The test runs on the lines and, when the lines are increasing, at points around the nominal
+/// loop's lightly damped closed-loop poles at that gain ($|z| \ge 0.9$; at the pole's
+/// frequency and $\pm\tfrac12, \pm 1, \pm 2$ half-bandwidths), where $M$ is evaluated exactly
+/// and $D_d$ and $R$ are interpolated linearly between the neighbouring lines: near the loop's
+/// own stability edge $|M|$ peaks over a band that can be narrower than the lines' spacing.
+/// Outside the lines' span nothing is tested: there only the nominal loop's gain interval
+/// enters, as in [`robust_stability_matrix_on_lines`]. Unlike the element-wise bound alone, the draw does not let the 16 entries'
+/// errors take the phases that line up worst against the loop: the draws hold the error model's
+/// phases and their correlation, and only $R$ is taken at its worst.
+///
+/// # Margins
+/// Per draw the gain is stepped by 2 % from 1 up (down) until the test fails or the nominal
+/// loop's gain interval ([`nominal_gain_interval`]) ends, and the edge is refined by bisection
+/// to $10^{-3}$ relative (its lower end kept). The reported $g_+$ is the value at least $\lceil cN\rceil$ of the $N$
+/// draws reach ($c$ = `confidence`), $g_-$ likewise. Margins at $10^3$ ($10^{-3}$) are
+/// reported unlimited ($\infty$, 0). These are margins *at a confidence* under the error
+/// model, not a worst case over a set: the element-wise check of
+/// [`robust_stability_matrix_on_lines`] stays the worst-case one.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] for models that are not discrete with one sample time, a controller
+/// whose size is not the plant's transpose, no line, lines outside $(0, f_N)$, no draw, draws or
+/// a remainder of another length or size, non-finite values or a negative remainder, or a
+/// confidence outside (0, 1]; [`Error::Numerical`] when the closed loop's poles cannot be
+/// computed.
+///
+/// # Example
+/// Two decoupled first-order loops (poles $0.9 - 0.2g$ and $0.5 - 0.2g$, nominal upper margin
+/// 7.5) and one draw that raises the second plant's gain by 10 % at every line: that plant's
+/// pole is then $0.5 - 0.22g$, at $-1$ for $g = 6.82$. The draw is exact on the lines, so the
+/// margin is close to it (the test is the small-gain one on the draw, hence at or below it).
+/// ```
+/// use ambid_core::lti::{Frd, StateSpace};
+/// use ambid_core::validate::robust::robust_stability_matrix_drawn;
+/// use faer::{mat, Mat};
+/// let p = StateSpace::discrete(mat![[0.9, 0.0], [0.0, 0.5]], mat![[1.0, 0.0], [0.0, 1.0]],
+///     mat![[0.1, 0.0], [0.0, 0.1]], mat![[0.0, 0.0], [0.0, 0.0]], 1e-3).unwrap();
+/// let c = StateSpace::discrete(Mat::zeros(0, 0), Mat::zeros(0, 2), Mat::zeros(2, 0),
+///     mat![[2.0, 0.0], [0.0, 2.0]], 1e-3).unwrap();
+/// let f: Vec<f64> = (1..500).map(|k| k as f64).collect();
+/// let r = Frd::from_model(&p, &f).unwrap();
+/// let draw: Vec<Mat<faer::c64>> = (0..f.len())
+///     .map(|k| { let m = r.at(k).unwrap(); Mat::from_fn(2, 2, |i, j| if (i, j) == (1, 1) { m[(1, 1)] * 0.1 } else { m[(i, j)] * 0.0 }) })
+///     .collect();
+/// let rest = vec![Mat::<f64>::zeros(2, 2); f.len()];
+/// let out = robust_stability_matrix_drawn(&p, &c, &f, &[draw], &rest, 0.95).unwrap();
+/// assert!(out.robustly_stable);
+/// let g = out.upper_gain_margin.unwrap();
+/// assert!(g <= 1.5 / 0.22 + 1e-3 && g > 6.0, "{g}");
+/// ```
+pub fn robust_stability_matrix_drawn(
+    plant: &StateSpace,
+    controller: &StateSpace,
+    f_hz: &[f64],
+    draws: &[Vec<faer::Mat<c64>>],
+    remainder: &[faer::Mat<f64>],
+    confidence: f64,
+) -> Result<DrawnRobustStability> {
+    use rayon::prelude::*;
+    let ts = matrix_loop_ts(plant, controller)?;
+    check_lines("remainder", f_hz, remainder.len(), ts)?;
+    LineBound::Elementwise(remainder).check(plant.noutputs(), plant.ninputs())?;
+    let (ny, nu) = (plant.noutputs(), plant.ninputs());
+    if draws.is_empty() {
+        return Err(Error::invalid("draws", "needs at least one draw"));
+    }
+    if !(confidence > 0.0 && confidence <= 1.0) {
+        return Err(Error::invalid(
+            "confidence",
+            format!("must lie in (0, 1], got {confidence}"),
+        ));
+    }
+    let shape_ok = draws.iter().all(|d| {
+        d.len() == f_hz.len()
+            && d.iter().all(|m| {
+                m.nrows() == ny
+                    && m.ncols() == nu
+                    && (0..ny).all(|i| {
+                        (0..nu).all(|j| m[(i, j)].re.is_finite() && m[(i, j)].im.is_finite())
+                    })
+            })
+    });
+    if !shape_ok {
+        return Err(Error::invalid(
+            "draws",
+            format!(
+                "every draw needs one finite {ny}×{nu} matrix per line ({} lines)",
+                f_hz.len()
+            ),
+        ));
+    }
+    let nominal_stable = loop_stable(plant, controller, 1.0)?;
+    let n = draws.len();
+    if !nominal_stable {
+        return Ok(DrawnRobustStability {
+            confidence,
+            nominal_stable,
+            stable_fraction: 0.0,
+            robustly_stable: false,
+            upper_gain_margin: None,
+            lower_gain_margin: None,
+            per_draw: vec![[1.0, 1.0]; n],
+        });
+    }
+    let pl = plant.freq_response(f_hz)?;
+    let cr = controller.freq_response(f_hz)?;
+    let lines = f_hz.len();
+    // flat row-major copies for the small dense arithmetic of the per-line test
+    let flat = |m: &faer::Mat<c64>| -> Vec<c64> {
+        (0..m.nrows())
+            .flat_map(|i| (0..m.ncols()).map(move |j| m[(i, j)]))
+            .collect()
+    };
+    let (pf, cf): (Vec<Vec<c64>>, Vec<Vec<c64>>) = (
+        pl.iter().map(&flat).collect(),
+        cr.iter().map(&flat).collect(),
+    );
+    let df: Vec<Vec<Vec<c64>>> = draws
+        .iter()
+        .map(|d| d.iter().map(&flat).collect())
+        .collect();
+    let rf: Vec<Vec<f64>> = remainder
+        .iter()
+        .map(|m| {
+            (0..ny)
+                .flat_map(|i| (0..nu).map(move |j| m[(i, j)]))
+                .collect()
+        })
+        .collect();
+    // M_k(g) = (I + gCP̂)⁻¹ gC per line (n_u × n_y; None where singular: the test fails there)
+    let m_line = |g: f64, k: usize| -> Option<Vec<c64>> {
+        let mut gc = cf[k].clone();
+        gc.iter_mut().for_each(|x| *x *= g);
+        let mut a = vec![c64::new(0.0, 0.0); nu * nu];
+        small::matmul(&gc, &pf[k], nu, ny, nu, &mut a);
+        (0..nu).for_each(|i| a[i * nu + i] += 1.0);
+        small::solve(&mut a, nu, &mut gc, ny).then_some(gc)
+    };
+    // M at the lines and at points around the nominal loop's lightly damped closed-loop poles
+    // within the lines' span, where the draw and the remainder are interpolated between lines
+    let probe_at = |g: f64| -> Probe {
+        let mut ms: Vec<Option<Vec<c64>>> = (0..lines).map(|k| m_line(g, k)).collect();
+        let pts = closed_loop_points(plant, controller, g, f_hz);
+        if !pts.is_empty() {
+            let fx: Vec<f64> = pts.iter().map(|p| p.0).collect();
+            match (plant.freq_response(&fx), controller.freq_response(&fx)) {
+                (Ok(px), Ok(cx)) => {
+                    for (pk, ck) in px.iter().zip(&cx) {
+                        let (pk, ck) = (flat(pk), flat(ck));
+                        let mut gc = ck;
+                        gc.iter_mut().for_each(|x| *x *= g);
+                        let mut a = vec![c64::new(0.0, 0.0); nu * nu];
+                        small::matmul(&gc, &pk, nu, ny, nu, &mut a);
+                        (0..nu).for_each(|i| a[i * nu + i] += 1.0);
+                        ms.push(small::solve(&mut a, nu, &mut gc, ny).then_some(gc));
+                    }
+                }
+                // where the responses cannot be evaluated the test fails there
+                _ => ms.extend(pts.iter().map(|_| None)),
+            }
+        }
+        Probe {
+            ms,
+            between: pts.into_iter().map(|p| (p.1, p.2)).collect(),
+        }
+    };
+    let ok_draw = |probe: &Probe, d: &[Vec<c64>]| -> bool {
+        let mut scratch = small::Scratch::new(ny, nu);
+        let on_lines = probe.ms[..lines]
+            .iter()
+            .zip(d)
+            .zip(&rf)
+            .all(|((m, dk), rk)| m.as_ref().is_some_and(|m| scratch.line_ok(m, dk, rk)));
+        on_lines
+            && probe.ms[lines..]
+                .iter()
+                .zip(&probe.between)
+                .all(|(m, &(k, w))| {
+                    let dk: Vec<c64> = d[k]
+                        .iter()
+                        .zip(&d[k + 1])
+                        .map(|(a, b)| *a * (1.0 - w) + *b * w)
+                        .collect();
+                    let rk: Vec<f64> = rf[k]
+                        .iter()
+                        .zip(&rf[k + 1])
+                        .map(|(a, b)| a * (1.0 - w) + b * w)
+                        .collect();
+                    m.as_ref().is_some_and(|m| scratch.line_ok(m, &dk, &rk))
+                })
+    };
+    // the same test at a gain of its own (a bisection's probe)
+    let ok_at = |g: f64, d: &[Vec<c64>]| -> bool { ok_draw(&probe_at(g), d) };
+    let (n_lo, n_hi) = nominal_gain_interval(plant, controller)?;
+    let ms1 = probe_at(1.0);
+    let stable: Vec<bool> = df.par_iter().map(|d| ok_draw(&ms1, d)).collect();
+    // one direction: every draw stable at 1 walked in 2 % steps (the lines' M shared per step),
+    // each failure bracketed and refined on its own
+    let edges = |up: bool| -> Vec<f64> {
+        let limit = if up { n_hi.min(1e3) } else { n_lo.max(1e-3) };
+        let step = if up { 1.02 } else { 1.0 / 1.02 };
+        let mut edge: Vec<Option<f64>> = stable
+            .iter()
+            .map(|s| if *s { None } else { Some(1.0) })
+            .collect();
+        let mut good = 1.0f64;
+        loop {
+            let next = good * step;
+            let past = if up { next >= limit } else { next <= limit };
+            let probe = if past { limit } else { next };
+            let ms = probe_at(probe);
+            let alive: Vec<usize> = (0..n).filter(|i| edge[*i].is_none()).collect();
+            let failed: Vec<(usize, f64)> = alive
+                .par_iter()
+                .filter(|i| !ok_draw(&ms, &df[**i]))
+                .map(|i| {
+                    let (mut a, mut b) = (good, probe);
+                    while (b - a).abs() > 1e-3 * a {
+                        let mid = 0.5 * (a + b);
+                        if ok_at(mid, &df[*i]) {
+                            a = mid;
+                        } else {
+                            b = mid;
+                        }
+                    }
+                    (*i, a)
+                })
+                .collect();
+            for (i, a) in failed {
+                edge[i] = Some(a);
+            }
+            if past || edge.iter().all(Option::is_some) {
+                let open = if up && limit >= 1e3 {
+                    f64::INFINITY
+                } else if !up && limit <= 1e-3 {
+                    0.0
+                } else {
+                    limit
+                };
+                return edge.into_iter().map(|e| e.unwrap_or(open)).collect();
+            }
+            good = next;
+        }
+    };
+    let (hi, lo) = (edges(true), edges(false));
+    let stable_fraction = stable.iter().filter(|s| **s).count() as f64 / n as f64;
+    let robustly_stable = stable_fraction >= confidence;
+    let rank = ((confidence * n as f64).ceil() as usize).clamp(1, n) - 1;
+    let (upper, lower) = if robustly_stable {
+        let mut h = hi.clone();
+        h.sort_by(|a, b| b.total_cmp(a));
+        let mut l = lo.clone();
+        l.sort_by(f64::total_cmp);
+        (Some(h[rank]), Some(l[rank]))
+    } else {
+        (None, None)
+    };
+    Ok(DrawnRobustStability {
+        confidence,
+        nominal_stable,
+        stable_fraction,
+        robustly_stable,
+        upper_gain_margin: upper,
+        lower_gain_margin: lower,
+        per_draw: lo.into_iter().zip(hi).map(|(a, b)| [a, b]).collect(),
+    })
+}
+
+/// The matrices $M(g)$ of one gain in [`robust_stability_matrix_drawn`]: at every line, then at
+/// the points `between` lines $k$ and $k + 1$ at the fraction $w$.
+struct Probe {
+    ms: Vec<Option<Vec<c64>>>,
+    between: Vec<(usize, f64)>,
+}
+
+/// Points around the nominal loop's lightly damped closed-loop poles (gain `g`) within the span
+/// of the lines `f` (as `(f, k, w)`: the frequency, the line below and the fraction towards the
+/// next): for a pole $z = r e^{j\theta}$ with $r \ge 0.9$, the frequency $f_p = \theta / (2\pi
+/// T_s)$ and its half-bandwidth $h = -\ln r / (2\pi T_s)$, the points $f_p + h\,\{0, \pm\tfrac12,
+/// \pm 1, \pm 2\}$. Near the loop's own stability edge $|M|$ peaks within $h$ of $f_p$, which
+/// may be far narrower than the lines' spacing; no points when the poles cannot be computed.
+fn closed_loop_points(
+    plant: &StateSpace,
+    controller: &StateSpace,
+    g: f64,
+    f: &[f64],
+) -> Vec<(f64, usize, f64)> {
+    let Some(ts) = plant.ts() else {
+        return Vec::new();
+    };
+    if f.len() < 2 || f.windows(2).any(|w| w[1] <= w[0]) {
+        return Vec::new();
+    }
+    let poles = with_gain(controller, g)
+        .and_then(|c| plant.feedback(&c))
+        .and_then(|cl| cl.poles())
+        .unwrap_or_default();
+    let (lo, hi) = (f[0], f[f.len() - 1]);
+    let mut out = Vec::new();
+    for z in poles {
+        let r = z.norm();
+        if !(r >= 0.9 && z.im > 0.0) {
+            continue;
+        }
+        let fp = z.im.atan2(z.re) / (2.0 * PI * ts);
+        let h = (-r.ln()).max(0.0) / (2.0 * PI * ts);
+        for s in [-2.0, -1.0, -0.5, 0.0, 0.5, 1.0, 2.0] {
+            let x = fp + s * h;
+            if !(x > lo && x < hi) {
+                continue;
+            }
+            // the line below x (f is increasing)
+            let k = f
+                .partition_point(|v| *v <= x)
+                .saturating_sub(1)
+                .min(f.len() - 2);
+            let w = ((x - f[k]) / (f[k + 1] - f[k])).clamp(0.0, 1.0);
+            out.push((x, k, w));
+        }
+    }
+    out
+}
+
+/// Small dense complex matrices (row-major slices) for the per-line test of
+/// [`robust_stability_matrix_drawn`], without an allocation per line.
+mod small {
+    use faer::c64;
+
+    /// $|z|$ without `hypot`'s care for overflow (the loop's values are far from it).
+    fn abs(z: c64) -> f64 {
+        (z.re * z.re + z.im * z.im).sqrt()
+    }
+
+    /// `out` ($r\times c$) $= a$ ($r\times q$) $b$ ($q\times c$).
+    pub fn matmul(a: &[c64], b: &[c64], r: usize, q: usize, c: usize, out: &mut [c64]) {
+        for i in 0..r {
+            for j in 0..c {
+                out[i * c + j] =
+                    (0..q).fold(c64::new(0.0, 0.0), |s, m| s + a[i * q + m] * b[m * c + j]);
+            }
+        }
+    }
+
+    /// Solves $a x = b$ in place ($a$ $n\times n$, $b$ $n\times c$, overwritten by $x$) by Gaussian
+    /// elimination with partial pivoting; false when $a$ is singular to rounding.
+    pub fn solve(a: &mut [c64], n: usize, b: &mut [c64], c: usize) -> bool {
+        let scale = a.iter().map(|x| x.norm_sqr()).fold(0.0, f64::max);
+        for col in 0..n {
+            let p = (col..n)
+                .max_by(|x, y| {
+                    a[x * n + col]
+                        .norm_sqr()
+                        .total_cmp(&a[y * n + col].norm_sqr())
+                })
+                .unwrap_or(col);
+            // (a NaN pivot fails too)
+            if a[p * n + col].norm_sqr().partial_cmp(&(1e-28 * scale))
+                != Some(std::cmp::Ordering::Greater)
+            {
+                return false;
+            }
+            if p != col {
+                for j in 0..n {
+                    a.swap(p * n + j, col * n + j);
+                }
+                for j in 0..c {
+                    b.swap(p * c + j, col * c + j);
+                }
+            }
+            let inv = c64::new(1.0, 0.0) / a[col * n + col];
+            for row in col + 1..n {
+                let f = a[row * n + col] * inv;
+                if f == c64::new(0.0, 0.0) {
+                    continue;
+                }
+                for j in col..n {
+                    let v = a[col * n + j];
+                    a[row * n + j] -= f * v;
+                }
+                for j in 0..c {
+                    let v = b[col * c + j];
+                    b[row * c + j] -= f * v;
+                }
+            }
+        }
+        for col in (0..n).rev() {
+            let inv = c64::new(1.0, 0.0) / a[col * n + col];
+            for j in 0..c {
+                let mut v = b[col * c + j];
+                for m in col + 1..n {
+                    v -= a[col * n + m] * b[m * c + j];
+                }
+                b[col * c + j] = v * inv;
+            }
+        }
+        b.iter().all(|x| x.re.is_finite() && x.im.is_finite())
+    }
+
+    /// $\min(\lVert x\rVert_1, \lVert x\rVert_\infty)$ of an $n\times n$ matrix of magnitudes
+    /// `abs(i, j)`: a bound of its spectral radius.
+    fn norm_bound(n: usize, abs: impl Fn(usize, usize) -> f64) -> f64 {
+        let rows = (0..n)
+            .map(|i| (0..n).map(|j| abs(i, j)).sum::<f64>())
+            .fold(0.0, f64::max);
+        let cols = (0..n)
+            .map(|j| (0..n).map(|i| abs(i, j)).sum::<f64>())
+            .fold(0.0, f64::max);
+        rows.min(cols)
+    }
+
+    /// An upper bound of the Perron root of the $n\times n$ non-negative matrix `abs(i, j)`
+    /// (which bounds the spectral radius of any matrix of these magnitudes): Collatz–Wielandt's
+    /// $\max_i (Bx)_i/x_i$ after a few power steps from $x = 1$.
+    fn perron_upper(n: usize, abs: impl Fn(usize, usize) -> f64) -> f64 {
+        let mut x = vec![1.0; n];
+        let mut hi = f64::INFINITY;
+        for _ in 0..8 {
+            let y: Vec<f64> = (0..n)
+                .map(|i| (0..n).map(|j| abs(i, j) * x[j]).sum())
+                .collect();
+            hi = hi.min((0..n).map(|i| y[i] / x[i]).fold(0.0, f64::max));
+            let top = y.iter().copied().fold(0.0, f64::max);
+            if !(top > 0.0 && top.is_finite()) {
+                break;
+            }
+            x = y.iter().map(|v| (v / top).max(1e-12)).collect();
+        }
+        hi
+    }
+
+    /// Buffers for one thread's lines.
+    pub struct Scratch {
+        ny: usize,
+        nu: usize,
+        a: Vec<c64>,
+        x: Vec<c64>,
+        b: Vec<f64>,
+    }
+
+    impl Scratch {
+        pub fn new(ny: usize, nu: usize) -> Self {
+            Scratch {
+                ny,
+                nu,
+                a: vec![c64::new(0.0, 0.0); nu * nu],
+                x: vec![c64::new(0.0, 0.0); nu * ny],
+                b: vec![0.0; ny * ny],
+            }
+        }
+
+        /// The two conditions at one line: $\rho(MD) < 1$ and $\rho(R\,|(I + MD)^{-1}M|) < 1$
+        /// ($M$ $n_u\times n_y$, $D$ and $R$ $n_y\times n_u$), each by a norm bound first and
+        /// eigenvalues only where that bound is not below 1.
+        pub fn line_ok(&mut self, m: &[c64], d: &[c64], r: &[f64]) -> bool {
+            let (ny, nu) = (self.ny, self.nu);
+            matmul(m, d, nu, ny, nu, &mut self.a);
+            if norm_bound(nu, |i, j| abs(self.a[i * nu + j])) >= 1.0
+                && perron_upper(nu, |i, j| abs(self.a[i * nu + j])) >= 1.0
+            {
+                let a = faer::Mat::from_fn(nu, nu, |i, j| self.a[i * nu + j]);
+                let rho = a
+                    .eigenvalues()
+                    .map(|e| e.iter().map(|z| z.norm()).fold(0.0, f64::max))
+                    .unwrap_or(f64::INFINITY);
+                if rho.partial_cmp(&1.0) != Some(std::cmp::Ordering::Less) {
+                    return false;
+                }
+            }
+            (0..nu).for_each(|i| self.a[i * nu + i] += 1.0);
+            self.x.copy_from_slice(m);
+            if !solve(&mut self.a, nu, &mut self.x, ny) {
+                return false;
+            }
+            for i in 0..ny {
+                for j in 0..ny {
+                    self.b[i * ny + j] = (0..nu)
+                        .map(|q| r[i * nu + q] * abs(self.x[q * ny + j]))
+                        .sum();
+                }
+            }
+            if norm_bound(ny, |i, j| self.b[i * ny + j]) < 1.0 {
+                return true;
+            }
+            // Collatz–Wielandt: for x > 0, min_i (Bx)_i/x_i ≤ ρ(B) ≤ max_i (Bx)_i/x_i
+            let mut x = vec![1.0; ny];
+            let mut y = vec![0.0; ny];
+            for _ in 0..40 {
+                for (i, yi) in y.iter_mut().enumerate() {
+                    *yi = (0..ny).map(|j| self.b[i * ny + j] * x[j]).sum::<f64>();
+                }
+                let ratio = |i: usize| y[i] / x[i];
+                let (lo, hi) = (0..ny).fold((f64::INFINITY, 0.0f64), |(l, h), i| {
+                    (l.min(ratio(i)), h.max(ratio(i)))
+                });
+                if hi < 1.0 {
+                    return true;
+                }
+                if lo >= 1.0 {
+                    return false;
+                }
+                let top = y.iter().copied().fold(0.0, f64::max);
+                if !(top > 0.0 && top.is_finite()) {
+                    break;
+                }
+                // a floor keeps x positive where B has a zero row
+                for i in 0..ny {
+                    x[i] = (y[i] / top).max(1e-12);
+                }
+            }
+            let b = faer::Mat::from_fn(ny, ny, |i, j| self.b[i * ny + j]);
+            crate::linalg::eigenvalues(b.as_ref())
+                .map(|e| e.iter().map(|z| z.norm()).fold(0.0, f64::max))
+                .is_ok_and(|rho| rho < 1.0)
+        }
+    }
+}
+
 /// The common sample time of a plant and a controller of the transposed size.
 fn matrix_loop_ts(plant: &StateSpace, controller: &StateSpace) -> Result<f64> {
     if controller.ninputs() != plant.noutputs() || controller.noutputs() != plant.ninputs() {
@@ -1051,16 +1608,11 @@ mod tests {
         );
     }
 
-    /// Two bearing axes coupled through a mixing matrix, decentralised control: with a constant
-    /// element-wise bound on dense lines, every static perturbation within 0.98 of the reported
-    /// margin (all sign patterns of the extreme entries) keeps the loop stable (the pole
-    /// oracle), and so does the gain at 98 % of the robust gain margin for them.
-    #[test]
-    fn perturbations_inside_the_margin_keep_a_coupled_loop_stable() {
-        let ts = 1e-4;
+    /// Two bearing axes mixed by `t` at the sensors, $P = T\,\mathrm{diag}(p_1, p_1)$, and the
+    /// decentralised controller $\mathrm{diag}(c_1, c_1)$ of [`bearing_loop`].
+    fn coupled_loop(ts: f64, t: Mat<f64>) -> (StateSpace, StateSpace) {
         let (p1, c1) = bearing_loop(ts);
         let (a, b, cc) = (p1.a(), p1.b(), p1.c());
-        // P = T diag(p1, p1) with T = [[1, 0.3], [0.2, 1]]
         let n = 2 * p1.order();
         let big_a = Mat::from_fn(n, n, |i, j| {
             if i / 2 == j / 2 {
@@ -1070,7 +1622,6 @@ mod tests {
             }
         });
         let big_b = Mat::from_fn(n, 2, |i, j| if i / 2 == j { b[(i % 2, 0)] } else { 0.0 });
-        let t = mat![[1.0, 0.3], [0.2, 1.0]];
         let big_c = Mat::from_fn(2, n, |i, j| t[(i, j / 2)] * cc[(0, j % 2)]);
         let p = StateSpace::discrete(big_a, big_b, big_c, Mat::zeros(2, 2), ts).unwrap();
         let m = c1.order();
@@ -1093,6 +1644,17 @@ mod tests {
         );
         let cd = Mat::from_fn(2, 2, |i, j| if i == j { c1.d()[(0, 0)] } else { 0.0 });
         let c = StateSpace::discrete(ca, cb, ccm, cd, ts).unwrap();
+        (p, c)
+    }
+
+    /// Two bearing axes coupled through a mixing matrix, decentralised control: with a constant
+    /// element-wise bound on dense lines, every static perturbation within 0.98 of the reported
+    /// margin (all sign patterns of the extreme entries) keeps the loop stable (the pole
+    /// oracle), and so does the gain at 98 % of the robust gain margin for them.
+    #[test]
+    fn perturbations_inside_the_margin_keep_a_coupled_loop_stable() {
+        let ts = 1e-4;
+        let (p, c) = coupled_loop(ts, mat![[1.0, 0.3], [0.2, 1.0]]);
         let f: Vec<f64> = (0..1500)
             .map(|i| 0.5 * 1.005f64.powi(i))
             .filter(|f| *f < 4990.0)
@@ -1120,5 +1682,145 @@ mod tests {
             assert!(stable_with_gain(&pp, &c, 1.0), "signs {signs}");
             assert!(stable_with_gain(&pp, &c, g_hi), "signs {signs} at g {g_hi}");
         }
+    }
+
+    /// Lines 0.5 % apart over 0.5 Hz … 4.99 kHz, below f_N = 5 kHz, for the coupled loop.
+    fn dense_lines() -> Vec<f64> {
+        (0..1900)
+            .map(|i| 0.5 * 1.005f64.powi(i))
+            .filter(|f| *f < 4990.0)
+            .collect()
+    }
+
+    /// With zero draws the drawn test is the element-wise one on the lines: the same margins
+    /// (bisection to 1e-3 against 1e-6).
+    #[test]
+    fn drawn_margins_without_a_draw_are_the_elementwise_ones() {
+        let ts = 1e-4;
+        let (p, c) = coupled_loop(ts, mat![[1.0, 0.3], [0.2, 1.0]]);
+        let f = dense_lines();
+        let l = vec![mat![[1.2e-7, 3e-8], [3e-8, 1.2e-7]]; f.len()];
+        let r = robust_stability_matrix_on_lines(&p, &c, &f, LineBound::Elementwise(&l)).unwrap();
+        let zero = vec![vec![Mat::<c64>::zeros(2, 2); f.len()]];
+        let d = robust_stability_matrix_drawn(&p, &c, &f, &zero, &l, 0.95).unwrap();
+        assert!(d.robustly_stable && d.stable_fraction == 1.0);
+        let (a, b) = (r.upper_gain_margin.unwrap(), d.upper_gain_margin.unwrap());
+        assert!(b <= a * (1.0 + 1e-6) && b >= a * (1.0 - 2e-3), "{a} {b}");
+        let (a, b) = (r.lower_gain_margin.unwrap(), d.lower_gain_margin.unwrap());
+        assert!(b >= a * (1.0 - 1e-6) && b <= a * (1.0 + 2e-3), "{a} {b}");
+    }
+
+    /// The exact error of another coupling, as one draw on dense lines: its margin never
+    /// exceeds the true loop's (the pole oracle) and is close to it, while the element-wise
+    /// bound of the same magnitudes with free phases gives less.
+    #[test]
+    fn a_coherent_draw_keeps_the_true_loops_margin() {
+        let ts = 1e-4;
+        let (p, c) = coupled_loop(ts, mat![[1.0, 0.3], [0.2, 1.0]]);
+        let (pt, _) = coupled_loop(ts, mat![[1.06, 0.36], [0.16, 0.97]]);
+        let f = dense_lines();
+        let (rp, rt) = (p.freq_response(&f).unwrap(), pt.freq_response(&f).unwrap());
+        let draw: Vec<Mat<c64>> = rp.iter().zip(&rt).map(|(a, b)| b - a).collect();
+        let zero = vec![Mat::<f64>::zeros(2, 2); f.len()];
+        let d = robust_stability_matrix_drawn(&p, &c, &f, std::slice::from_ref(&draw), &zero, 1.0)
+            .unwrap();
+        let (lo, hi) = nominal_gain_interval(&pt, &c).unwrap();
+        let (dl, dh) = (d.lower_gain_margin.unwrap(), d.upper_gain_margin.unwrap());
+        assert!(
+            dh <= hi * 1.001 && dh - 1.0 >= 0.8 * (hi - 1.0),
+            "{dh} against {hi}"
+        );
+        assert!(
+            dl >= lo * 0.999 && 1.0 - dl >= 0.8 * (1.0 - lo),
+            "{dl} against {lo}"
+        );
+        for g in [dh * 0.999, dl * 1.001] {
+            assert!(stable_with_gain(&pt, &c, g), "{g}");
+        }
+        let abs: Vec<Mat<f64>> = draw
+            .iter()
+            .map(|m| Mat::from_fn(2, 2, |i, j| m[(i, j)].norm()))
+            .collect();
+        let e = robust_stability_matrix_on_lines(&p, &c, &f, LineBound::Elementwise(&abs)).unwrap();
+        assert!(
+            e.upper_gain_margin.unwrap() <= dh,
+            "{:?} {dh}",
+            e.upper_gain_margin
+        );
+        eprintln!(
+            "exact {lo:.4}…{hi:.4}, coherent {dl:.4}…{dh:.4}, element-wise {:.4}…{:.4}",
+            e.lower_gain_margin.unwrap(),
+            e.upper_gain_margin.unwrap()
+        );
+    }
+
+    /// The margin at a confidence is the draw ranked there (a naive oracle: each draw alone).
+    #[test]
+    fn the_margin_at_a_confidence_is_the_ranked_draws() {
+        let ts = 1e-4;
+        let (p, c) = coupled_loop(ts, mat![[1.0, 0.3], [0.2, 1.0]]);
+        let (pt, _) = coupled_loop(ts, mat![[1.06, 0.36], [0.16, 0.97]]);
+        let f = dense_lines();
+        let (rp, rt) = (p.freq_response(&f).unwrap(), pt.freq_response(&f).unwrap());
+        let zero = vec![Mat::<f64>::zeros(2, 2); f.len()];
+        // 10 draws: the error scaled by 0.3 … 3.0
+        let draws: Vec<Vec<Mat<c64>>> = (1..=10)
+            .map(|n| {
+                let s = 0.3 * n as f64;
+                rp.iter()
+                    .zip(&rt)
+                    .map(|(a, b)| Mat::from_fn(2, 2, |i, j| (b[(i, j)] - a[(i, j)]) * s))
+                    .collect()
+            })
+            .collect();
+        let alone: Vec<[f64; 2]> = draws
+            .iter()
+            .map(|d| {
+                let r =
+                    robust_stability_matrix_drawn(&p, &c, &f, std::slice::from_ref(d), &zero, 1.0)
+                        .unwrap();
+                match (r.lower_gain_margin, r.upper_gain_margin) {
+                    (Some(a), Some(b)) => [a, b],
+                    _ => [1.0, 1.0],
+                }
+            })
+            .collect();
+        let all = robust_stability_matrix_drawn(&p, &c, &f, &draws, &zero, 0.8).unwrap();
+        assert_eq!(all.per_draw, alone);
+        let mut hi: Vec<f64> = alone.iter().map(|m| m[1]).collect();
+        hi.sort_by(|a, b| b.total_cmp(a));
+        let mut lo: Vec<f64> = alone.iter().map(|m| m[0]).collect();
+        lo.sort_by(f64::total_cmp);
+        // 0.8 of 10 draws: the 8th best
+        assert_eq!(all.upper_gain_margin, Some(hi[7]));
+        assert_eq!(all.lower_gain_margin, Some(lo[7]));
+        // larger errors leave less margin
+        assert!(alone[9][1] < alone[0][1], "{alone:?}");
+        let frac = alone.iter().filter(|m| m[1] > 1.0).count() as f64 / 10.0;
+        assert_eq!(all.stable_fraction, frac);
+    }
+
+    #[test]
+    fn the_drawn_test_refuses_bad_input() {
+        let ts = 1e-4;
+        let (p, c) = coupled_loop(ts, mat![[1.0, 0.3], [0.2, 1.0]]);
+        let f = dense_lines();
+        let zero = vec![Mat::<f64>::zeros(2, 2); f.len()];
+        let draw = vec![vec![Mat::<c64>::zeros(2, 2); f.len()]];
+        assert!(robust_stability_matrix_drawn(&p, &c, &f, &[], &zero, 0.9).is_err());
+        for conf in [0.0, 1.5, f64::NAN] {
+            assert!(robust_stability_matrix_drawn(&p, &c, &f, &draw, &zero, conf).is_err());
+        }
+        let short = vec![vec![Mat::<c64>::zeros(2, 2); f.len() - 1]];
+        assert!(robust_stability_matrix_drawn(&p, &c, &f, &short, &zero, 0.9).is_err());
+        let mut nan = draw.clone();
+        nan[0][3][(0, 1)] = c64::new(f64::NAN, 0.0);
+        let e = robust_stability_matrix_drawn(&p, &c, &f, &nan, &zero, 0.9).unwrap_err();
+        assert!(e.to_string().contains("finite"), "{e}");
+        let mut neg = zero.clone();
+        neg[2][(1, 1)] = -1.0;
+        assert!(robust_stability_matrix_drawn(&p, &c, &f, &draw, &neg, 0.9).is_err());
+        let wrong = vec![vec![Mat::<c64>::zeros(1, 2); f.len()]];
+        assert!(robust_stability_matrix_drawn(&p, &c, &f, &wrong, &zero, 0.9).is_err());
     }
 }

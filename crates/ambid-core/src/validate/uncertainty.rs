@@ -335,6 +335,12 @@ impl ErrorModel {
     /// The absolute error $|J_k R\,\xi + \nu_k| + b_k + s_k + a_k$ at line `k` for the
     /// parameter draw `xi`, with the line's nonlinear draw from `rng` (when the term is present).
     fn line_error<R: rand::Rng>(&self, k: usize, xi: &[f64], rng: &mut R) -> f64 {
+        self.line_random(k, xi, rng).norm() + self.fixed[k]
+    }
+
+    /// The random part $J_k R\,\xi + \nu_k$ of the error at line `k` (complex), with the
+    /// line's nonlinear draw from `rng` (when the term is present).
+    fn line_random<R: rand::Rng>(&self, k: usize, xi: &[f64], rng: &mut R) -> c64 {
         use rand_distr::{Distribution, StandardNormal};
         let mut e = self.sens[k]
             .iter()
@@ -345,7 +351,7 @@ impl ErrorModel {
             let (re, im): (f64, f64) = (StandardNormal.sample(rng), StandardNormal.sample(rng));
             e += c64::new(h * re, h * im);
         }
-        e.norm() + self.fixed[k]
+        e
     }
 
     /// The smallest factor $g$ such that $g\,m_k$ overbounds a draw of the relative error on at
@@ -638,6 +644,32 @@ pub struct MatrixUncertainty {
     pub inputs: usize,
     /// The entries' terms, entry $(i, j)$ at index $i + j\,n_y$ (as [`Frd`] stores a matrix).
     pub entries: Vec<UncertaintyTerms>,
+    /// Term (e) through the model as a distribution of the joint parameters, kept by
+    /// [`add_projected_shift`](Self::add_projected_shift) for [`coherent_draws`](Self::coherent_draws).
+    shift: Option<ParameterShift>,
+}
+
+/// The projected shift $\xi_s \sim N(\bar\xi_s, \Sigma_s)$ in the coordinates of the joint draws'
+/// $\xi$, and what it added to each entry's deterministic part.
+#[derive(Debug, Clone, PartialEq)]
+struct ParameterShift {
+    mean: Vec<f64>,
+    /// $S$ with $S S^{\mathsf T} = \Sigma_s$ (lower triangular, row-major $n_\theta^2$).
+    factor: Vec<f64>,
+    /// Per entry and line, the increment of the deterministic part $b_k + s_k + a_k$.
+    increment: Vec<Vec<f64>>,
+}
+
+/// Draws of the model's error as whole matrices, with the part of the bound whose phase is not
+/// known ([`MatrixUncertainty::coherent_draws`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CoherentDraws {
+    /// The lines \[Hz\].
+    pub f_hz: Vec<f64>,
+    /// Per draw, per line, the $n_y\times n_u$ error $D_{d,k}$.
+    pub draws: Vec<Vec<faer::Mat<c64>>>,
+    /// Per line, the element-wise bound $R_k$ of the rest of the error (phase unknown).
+    pub remainder: Vec<faer::Mat<f64>>,
 }
 
 /// The outcome of [`MatrixUncertainty::add_projected_shift`].
@@ -649,6 +681,29 @@ pub struct ProjectedShift {
     pub threshold: f64,
     /// Whether the projected shift entered term (e).
     pub kept: bool,
+}
+
+/// $S$ (lower triangular, row-major) with $S S^{\mathsf T} = \tfrac12(A + A^{\mathsf T})$ for a
+/// positive semi-definite $A$: Cholesky with a pivot at or below $10^{-12}$ of the largest
+/// diagonal taken as 0 (that column of $S$ left zero).
+fn psd_factor(a: &faer::Mat<f64>) -> Vec<f64> {
+    let n = a.nrows();
+    let sym = |i: usize, j: usize| 0.5 * (a[(i, j)] + a[(j, i)]);
+    let tol = 1e-12 * (0..n).map(|i| sym(i, i).abs()).fold(0.0, f64::max);
+    let mut s = vec![0.0; n * n];
+    for j in 0..n {
+        let d = sym(j, j) - (0..j).map(|q| s[j * n + q] * s[j * n + q]).sum::<f64>();
+        if d <= tol {
+            continue;
+        }
+        let r = d.sqrt();
+        s[j * n + j] = r;
+        for i in j + 1..n {
+            let v = sym(i, j) - (0..j).map(|q| s[i * n + q] * s[j * n + q]).sum::<f64>();
+            s[i * n + j] = v / r;
+        }
+    }
+    s
 }
 
 /// The quantile $r$ of $|\mu + n|$ at probability `c`, for an offset of magnitude `m` and a
@@ -991,6 +1046,100 @@ impl MatrixUncertainty {
         Ok(u)
     }
 
+    /// Draws of the model's error as whole $n_y\times n_u$ matrices, for a robust check that
+    /// keeps the error's coherence between the entries
+    /// ([`robust_stability_matrix_drawn`](super::robust::robust_stability_matrix_drawn);
+    /// docs/uncertainty.md, "Coherent draws for the machine"). Draw $d$ (seeded `ChaCha8Rng`)
+    /// takes one $\xi \sim N(0, I)$ of the joint parameters (term (a), as
+    /// [`joint_raises`](Self::joint_raises)) and, when term (e) through the model was kept
+    /// ([`add_projected_shift`](Self::add_projected_shift)), one $\xi_s \sim N(\bar\xi_s,
+    /// \Sigma_s)$ of the projected shift, and moves every entry with them:
+    /// $$ D_{d,ij,k} = J_{ij,k} R\,(\xi + \xi_s) + \nu_{d,ij,k} , $$
+    /// with the nonlinear term (c) drawn per line and entry (circular). The rest of the bound
+    /// has no known phase — term (b), the operating spread (d) and the per-line amplitude
+    /// term (e) (without what the projection added) — and is returned as the element-wise
+    /// `remainder` $R_{ij,k} = b_k + s_k + a_k$. The bound's raises are not applied: the
+    /// draws carry the random part themselves.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for no draws or a bound without lines.
+    ///
+    /// # Example
+    /// A diagonal 2×2 model fitted to its exact response: the error is the parameters' alone,
+    /// so the remainder is zero and every draw moves both diagonal entries, never the zero
+    /// cross entries.
+    /// ```
+    /// use ambid_core::lti::{Frd, StateSpace};
+    /// use ambid_core::validate::uncertainty::{uncertainty_matrix, UncertaintyOptions};
+    /// use faer::mat;
+    /// let m = StateSpace::discrete(
+    ///     mat![[0.9, 0.0], [0.0, 0.5]], mat![[1.0, 0.0], [0.0, 1.0]], mat![[0.1, 0.0], [0.0, 0.2]],
+    ///     mat![[0.0, 0.0], [0.0, 0.0]], 1e-3,
+    /// ).unwrap();
+    /// let f: Vec<f64> = (1..=100).map(|k| k as f64 * 4.0).collect();
+    /// let exact = Frd::from_model(&m, &f).unwrap();
+    /// let var: Vec<f64> = exact.values().iter().map(|g| 1e-4 * g.norm_sqr().max(1e-6)).collect();
+    /// let frd = Frd::new_matrix(f.clone(), 2, 2, exact.values().to_vec(), Some(var), Some(1e-3)).unwrap();
+    /// let u = uncertainty_matrix(&m, &frd, &[], &UncertaintyOptions::default()).unwrap();
+    /// let d = u.coherent_draws(20, 7).unwrap();
+    /// assert_eq!((d.draws.len(), d.draws[0].len(), d.remainder.len()), (20, 100, 100));
+    /// assert!(d.remainder.iter().all(|r| (0..2).all(|i| (0..2).all(|j| r[(i, j)] == 0.0))));
+    /// assert!(d.draws[3][10][(0, 0)].norm() > 0.0 && d.draws[3][10][(1, 1)].norm() > 0.0);
+    /// assert!(u.coherent_draws(0, 7).is_err());
+    /// ```
+    pub fn coherent_draws(&self, draws: usize, seed: u64) -> Result<CoherentDraws> {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, StandardNormal};
+        if draws == 0 {
+            return Err(Error::invalid("draws", "needs at least one draw"));
+        }
+        let l = self.f_hz().len();
+        if l == 0 || self.entries.is_empty() {
+            return Err(Error::invalid("bound", "has no line"));
+        }
+        let (ny, nu) = (self.outputs, self.inputs);
+        let dim = self
+            .entries
+            .iter()
+            .flat_map(|e| e.errors.sens.iter().map(Vec::len))
+            .max()
+            .unwrap_or(0);
+        let remainder: Vec<faer::Mat<f64>> = (0..l)
+            .map(|k| {
+                faer::Mat::from_fn(ny, nu, |i, j| {
+                    let e = i + j * ny;
+                    let inc = self.shift.as_ref().map_or(0.0, |s| s.increment[e][k]);
+                    (self.entries[e].errors.fixed[k] - inc).max(0.0)
+                })
+            })
+            .collect();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let mut out = Vec::with_capacity(draws);
+        for _ in 0..draws {
+            let mut xi: Vec<f64> = (0..dim).map(|_| StandardNormal.sample(&mut rng)).collect();
+            if let Some(s) = &self.shift {
+                let z: Vec<f64> = (0..dim).map(|_| StandardNormal.sample(&mut rng)).collect();
+                for (m, x) in xi.iter_mut().enumerate() {
+                    let row = &s.factor[m * dim..(m + 1) * dim];
+                    *x += s.mean[m] + row.iter().zip(&z).map(|(a, b)| a * b).sum::<f64>();
+                }
+            }
+            let mut lines = vec![faer::Mat::<c64>::zeros(ny, nu); l];
+            // entry by entry, as the joint raise draws them
+            for (e, terms) in self.entries.iter().enumerate() {
+                for (k, line) in lines.iter_mut().enumerate() {
+                    line[(e % ny, e / ny)] = terms.errors.line_random(k, &xi, &mut rng);
+                }
+            }
+            out.push(lines);
+        }
+        Ok(CoherentDraws {
+            f_hz: self.f_hz().to_vec(),
+            draws: out,
+            remainder,
+        })
+    }
+
     /// Term (e) through the model (module docs, "Term (e) through the model"): the amplitude
     /// shift's per-line estimates `shift` (complex, absolute: $s_{ij,k} = c_{ij,k} a_e^2$, entry
     /// $(i, j)$ at index $i + j\,n_y$) with their variances `var` (of a circular complex error),
@@ -1136,7 +1285,8 @@ impl MatrixUncertainty {
             let cov = crate::linalg::solve(g.as_ref(), gi_cb.transpose())?;
             let coverage = self.line_coverage();
             let q = (1.0 / (1.0 - coverage)).ln();
-            for terms in &mut self.entries {
+            let mut increment = vec![vec![0.0; l]; n_entries];
+            for (terms, inc) in self.entries.iter_mut().zip(&mut increment) {
                 let mut amp = terms.amplitude.clone().unwrap_or_else(|| vec![0.0; l]);
                 #[allow(clippy::needless_range_loop)] // k indexes six per-line vectors
                 for k in 0..l {
@@ -1160,6 +1310,7 @@ impl MatrixUncertainty {
                     let proj = joint - qa;
                     if proj > amp[k] {
                         let d = proj - amp[k];
+                        inc[k] = d;
                         amp[k] = proj;
                         terms.additive[k] += d;
                         terms.errors.fixed[k] += d;
@@ -1168,6 +1319,11 @@ impl MatrixUncertainty {
                 }
                 terms.amplitude = Some(amp);
             }
+            self.shift = Some(ParameterShift {
+                mean: (0..n).map(|m| xi[(m, 0)]).collect(),
+                factor: psd_factor(&cov),
+                increment,
+            });
         }
         Ok(ProjectedShift {
             statistic,
@@ -1428,6 +1584,7 @@ pub fn uncertainty_matrix(
         outputs: ny,
         inputs: nu,
         entries,
+        shift: None,
     })
 }
 
@@ -2549,6 +2706,95 @@ mod tests {
             assert!(u.joint_raise(c, r, 10, 0).is_err());
         }
         assert!(u.joint_raise(0.9, 0.9, 0, 0).is_err());
+    }
+
+    /// The coherent draws carry the error model's moments: zero mean, each entry's variance
+    /// $\sum_m |s_{ij,k,m}|^2$ and the covariance between two entries $\sum_m s_{00,k,m}
+    /// \overline{s_{11,k,m}}$ (4 000 draws, 5 standard errors), with the deterministic part as
+    /// the remainder; after a noise-free projected shift $\varepsilon\hat P$ every draw is that
+    /// shift, and the remainder holds none of it.
+    #[test]
+    fn coherent_draws_carry_the_error_models_moments() {
+        let (m, f, exact, frd) = coupled_2x2(1e-3);
+        let u = uncertainty_matrix(&m, &frd, &[], &UncertaintyOptions::default()).unwrap();
+        let n = 4000;
+        let d = u.coherent_draws(n, 3).unwrap();
+        assert_eq!(d.f_hz, f);
+        let mut strongest = 0.0f64;
+        for k in [5usize, 60, 140] {
+            let sens = |e: usize| &u.entries[e].errors.sens[k];
+            let var = |e: usize| sens(e).iter().map(|a| a.norm_sqr()).sum::<f64>();
+            let at = |x: &Vec<faer::Mat<c64>>, e: usize| x[k][(e % 2, e / 2)];
+            for e in 0..4 {
+                let v = var(e);
+                let mean: c64 = d.draws.iter().map(|x| at(x, e)).sum::<c64>() / n as f64;
+                let ms: f64 = d.draws.iter().map(|x| at(x, e).norm_sqr()).sum::<f64>() / n as f64;
+                let se = (v / n as f64).sqrt();
+                assert!(
+                    mean.norm() < 5.0 * se,
+                    "line {k} entry {e}: mean {mean} se {se}"
+                );
+                let tol = 5.0 * (2.0 / n as f64).sqrt();
+                assert!((ms / v - 1.0).abs() < tol, "line {k} entry {e}: {ms} {v}");
+                for q in e + 1..4 {
+                    let c: c64 = sens(e).iter().zip(sens(q)).map(|(a, b)| a * b.conj()).sum();
+                    let got: c64 = d
+                        .draws
+                        .iter()
+                        .map(|x| at(x, e) * at(x, q).conj())
+                        .sum::<c64>()
+                        / n as f64;
+                    let se_c = (v * var(q) / n as f64).sqrt();
+                    assert!(
+                        (got - c).norm() < 5.0 * se_c,
+                        "line {k} ({e}, {q}): {got} {c}"
+                    );
+                    strongest = strongest.max(c.norm() / (v * var(q)).sqrt());
+                }
+            }
+            for e in 0..4 {
+                let r = d.remainder[k][(e % 2, e / 2)];
+                assert_eq!(r, u.entries[e].errors.fixed[k]);
+            }
+        }
+        // some entries are correlated (0.1 is 6 standard errors): the test above is not vacuous
+        assert!(strongest > 0.1, "{strongest}");
+        // a noise-free shift ε P̂ projected through an exact model on a precise FRF
+        let (_, _, _, precise) = coupled_2x2(1e-13);
+        let mut u = uncertainty_matrix(&m, &precise, &[], &UncertaintyOptions::default()).unwrap();
+        let eps = 0.01;
+        let truth: Vec<Vec<c64>> = (0..4)
+            .map(|e| {
+                (0..f.len())
+                    .map(|k| exact.values()[k * 4 + e] * eps)
+                    .collect()
+            })
+            .collect();
+        let tiny: Vec<Vec<f64>> = truth
+            .iter()
+            .map(|s| s.iter().map(|x| 1e-20 * x.norm_sqr()).collect())
+            .collect();
+        assert!(
+            u.add_projected_shift(&precise, &truth, &tiny, 0.05)
+                .unwrap()
+                .kept
+        );
+        let d = u.coherent_draws(50, 4).unwrap();
+        for x in &d.draws {
+            for k in [5usize, 60, 140] {
+                for e in 0..4 {
+                    let (got, want) = (x[k][(e % 2, e / 2)], truth[e][k]);
+                    assert!(
+                        (got - want).norm() < 1e-3 * want.norm(),
+                        "line {k} entry {e}: {got} {want}"
+                    );
+                    // the bound holds the shift (term (e)); the remainder does not
+                    assert!(u.entries[e].additive[k] >= want.norm());
+                    assert!(d.remainder[k][(e % 2, e / 2)] < 1e-3 * want.norm());
+                }
+            }
+        }
+        assert!(u.coherent_draws(0, 1).is_err());
     }
 
     /// Term (e) through the model ([`MatrixUncertainty::add_projected_shift`]) on the coupled

@@ -296,6 +296,18 @@ pub struct UncertaintyRow {
     /// Twin: the fraction of the lines in 10–1000 Hz where ‖ |P̂|∘|W| ‖₂ ≥ σ̄(P − P̂).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub weight_truth_coverage: Option<f64>,
+    /// The robust gain margins against coherent draws of the model's error
+    /// (`robust_stability_matrix_drawn`; docs/uncertainty.md, "Coherent draws for the
+    /// machine"): how many draws, at which confidence, the fraction of the draws stable with
+    /// the controllers as they are, and the margins that fraction `coherent_confidence` of the
+    /// draws reach (`None`: fewer than that fraction stable).
+    pub coherent_draws: usize,
+    /// The confidence of the coherent margins (the fraction of the draws they hold for).
+    pub coherent_confidence: f64,
+    /// The fraction of the draws stable at gain 1.
+    pub coherent_stable_fraction: f64,
+    /// The coherent margins `[lower, upper]`.
+    pub coherent_gain_margins: Option<[f64; 2]>,
     /// The amplitude study's levels whose plant FRFs gave term (e) \[% of i_sat\], the
     /// identification level among them (absent: no study, or the term was left out).
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -315,6 +315,13 @@ pub fn amplitude_terms_and_shifts(
     Ok((terms, used))
 }
 
+/// The number of coherent draws of the model's error per speed
+/// ([`MatrixUncertainty::coherent_draws`](ambid_core::validate::uncertainty::MatrixUncertainty::coherent_draws)).
+pub const COHERENT_DRAWS: usize = 200;
+
+/// The fraction of the coherent draws the coherent robust margins hold for.
+pub const COHERENT_CONFIDENCE: f64 = 0.95;
+
 /// The chosen model's uncertainty at one speed ([`UncertaintyRow`]): the element-wise bound of
 /// `uncertainty_matrix` on the measured plant FRF's lines in the fit's band `band`, raised by
 /// [`MatrixUncertainty::joint_raises`](ambid_core::validate::uncertainty::MatrixUncertainty::joint_raises)
@@ -327,7 +334,9 @@ pub fn amplitude_terms_and_shifts(
 /// twin's exact model `truth`, its gain interval and the coverage of σ̄(P − P̂) on the lines in
 /// 10–1000 Hz by the bound and by the weights. With an amplitude study `amplitude`, every
 /// entry's bound has term (e) ([`amplitude_terms`]); when it cannot be computed the row says
-/// why and the bound goes on without it.
+/// why and the bound goes on without it. Beside them, the robust gain margins against
+/// [`COHERENT_DRAWS`] coherent draws of the model's error at [`COHERENT_CONFIDENCE`]
+/// (`robust_stability_matrix_drawn`).
 ///
 /// # Errors
 /// The reason as text (the FRF has no variance on a line, the model is singular on a line, …).
@@ -341,8 +350,8 @@ pub fn speed_uncertainty(
     amplitude: Option<&AmplitudeStudy<'_>>,
 ) -> Result<UncertaintyRow, String> {
     use ambid_core::validate::robust::{
-        nominal_gain_interval, robust_stability_matrix_on_lines, robust_stability_matrix_weight,
-        LineBound, MatrixWeight,
+        nominal_gain_interval, robust_stability_matrix_drawn, robust_stability_matrix_on_lines,
+        robust_stability_matrix_weight, LineBound, MatrixWeight,
     };
     use ambid_core::validate::uncertainty::{
         uncertainty_matrix, EntryForm, ExtraTerms, UncertaintyOptions, DEFAULT_RAISE_COVER,
@@ -441,9 +450,36 @@ pub fn speed_uncertainty(
     let ts = model
         .ts()
         .ok_or_else(|| "the model must be discrete-time".to_string())?;
-    // the line test and the structured weight's fit are independent: side by side
-    let (r, weights) = rayon::join(
-        || robust_stability_matrix_on_lines(model, controller, &f, LineBound::Elementwise(&bounds)),
+    // the coherent draws: the model's error as whole matrices (the entries' phases and their
+    // correlation kept), only the part of unknown phase taken element-wise at its worst
+    // (docs/uncertainty.md, "Coherent draws for the machine")
+    let drawn = u.coherent_draws(COHERENT_DRAWS, 0).map_err(err)?;
+    let coherent = || {
+        robust_stability_matrix_drawn(
+            model,
+            controller,
+            &drawn.f_hz,
+            &drawn.draws,
+            &drawn.remainder,
+            COHERENT_CONFIDENCE,
+        )
+    };
+    // the line test, the coherent one and the structured weight's fit are independent: side
+    // by side
+    let ((r, rc), weights) = rayon::join(
+        || {
+            rayon::join(
+                || {
+                    robust_stability_matrix_on_lines(
+                        model,
+                        controller,
+                        &f,
+                        LineBound::Elementwise(&bounds),
+                    )
+                },
+                coherent,
+            )
+        },
         // the mode-shaped family: on machine rigs 1–100 (each its own noise) it kept the
         // coverage (100/100) and raised the rigs whose weight margins are ≥ half the exact ones
         // from 54 to 74 (docs/uncertainty.md, "Mode-shaped entry weights")
@@ -457,7 +493,7 @@ pub fn speed_uncertainty(
             )
         },
     );
-    let (r, weights) = (r.map_err(err)?, weights.map_err(err)?);
+    let (r, rc, weights) = (r.map_err(err)?, rc.map_err(err)?, weights.map_err(err)?);
     let ws: Vec<Weight> = weights.iter().map(|w| w.weight.clone()).collect();
     let rw = robust_stability_matrix_weight(model, controller, MatrixWeight::EntryRelative(&ws))
         .map_err(err)?;
@@ -522,6 +558,13 @@ pub fn speed_uncertainty(
         weight_mu_peak_hz: rw.mu_peak_hz,
         weight_gain_margins: margins(&rw),
         weight_truth_coverage,
+        coherent_draws: COHERENT_DRAWS,
+        coherent_confidence: rc.confidence,
+        coherent_stable_fraction: rc.stable_fraction,
+        coherent_gain_margins: rc
+            .lower_gain_margin
+            .zip(rc.upper_gain_margin)
+            .map(|(a, b)| [a, b]),
         amplitude_levels_pct: amp.map(|(_, l)| l),
         amplitude_median_rel_pct,
         amplitude_projected,
