@@ -958,12 +958,7 @@ impl MatrixUncertainty {
                 "every entry's bound must be positive and finite on every line",
             ));
         }
-        let dim = self
-            .entries
-            .iter()
-            .flat_map(|e| e.errors.sens.iter().map(Vec::len))
-            .max()
-            .unwrap_or(0);
+        let dim = self.tangent_dim();
         let pairs: usize = self.entries.iter().map(|e| e.additive.len()).sum();
         if pairs == 0 {
             return Err(Error::invalid("bound", "has no line"));
@@ -1098,12 +1093,7 @@ impl MatrixUncertainty {
             return Err(Error::invalid("bound", "has no line"));
         }
         let (ny, nu) = (self.outputs, self.inputs);
-        let dim = self
-            .entries
-            .iter()
-            .flat_map(|e| e.errors.sens.iter().map(Vec::len))
-            .max()
-            .unwrap_or(0);
+        let dim = self.tangent_dim();
         let remainder: Vec<faer::Mat<f64>> = (0..l)
             .map(|k| {
                 faer::Mat::from_fn(ny, nu, |i, j| {
@@ -1220,12 +1210,7 @@ impl MatrixUncertainty {
         let fvar = frd.variance().ok_or_else(|| {
             Error::invalid("frd", "has no variances: the projection weighs by them")
         })?;
-        let n = self
-            .entries
-            .iter()
-            .flat_map(|e| e.errors.sens.iter().map(Vec::len))
-            .max()
-            .unwrap_or(0);
+        let n = self.tangent_dim();
         if n == 0 {
             return Err(Error::invalid(
                 "bound",
@@ -1330,6 +1315,15 @@ impl MatrixUncertainty {
             threshold,
             kept,
         })
+    }
+
+    /// The dimension of the joint tangent space the entries' draws share (0 without one).
+    fn tangent_dim(&self) -> usize {
+        self.entries
+            .iter()
+            .flat_map(|e| e.errors.sens.iter().map(Vec::len))
+            .max()
+            .unwrap_or(0)
     }
 
     /// The line coverage the entries' bounds were computed with.
