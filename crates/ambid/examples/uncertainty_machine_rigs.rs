@@ -14,7 +14,11 @@
 //! * `loose`: median $\lVert L\rVert_2$ / median $\bar\sigma(P - \hat P)$;
 //! * robust gain margins (all four controllers' gains together) on the lines (element-wise) and
 //!   against the weight, each with the bars: the exact loop stable at 90 % of the margin, and the
-//!   margin at least half the exact one (`nominal_gain_interval` of the exact plant).
+//!   margin at least half the exact one (`nominal_gain_interval` of the exact plant);
+//! * the coherent margins (`robust_stability_matrix_drawn`, `COHERENT_DRAWS` draws, default
+//!   200, at `CONF`, default 0.95) with the same bars, capped outside the lines by the entry
+//!   weights (`OUTSIDE=0`: not); where the cap is set above, the true relative error of the
+//!   diagonal entries against their weights there.
 //!
 //! `MODE=nonlinear` simulates the nonlinear twin (the exact plant is then the linearisation).
 //! `SEED_PER_RIG=1` gives each rig its own noise realisation (base seed rig + 1000); without it
@@ -553,16 +557,12 @@ fn main() {
                 LineBound::Elementwise(&bounds),
             )
             .expect("robust on lines");
-            let on_w = robust_stability_matrix_weight(
-                &model.model,
-                c,
-                if additive {
-                    MatrixWeight::EntryAdditive(&weights)
-                } else {
-                    MatrixWeight::EntryRelative(&weights)
-                },
-            )
-            .expect("robust weight");
+            let mw = if additive {
+                MatrixWeight::EntryAdditive(&weights)
+            } else {
+                MatrixWeight::EntryRelative(&weights)
+            };
+            let on_w = robust_stability_matrix_weight(&model.model, c, mw).expect("robust weight");
             // coherent draws (docs/uncertainty.md, "Coherent draws for the machine")
             let t_c = Instant::now();
             let n_draws: usize = std::env::var("COHERENT_DRAWS")
@@ -580,6 +580,8 @@ fn main() {
                 &cd.f_hz,
                 &cd.draws,
                 &cd.remainder,
+                // OUTSIDE=0: nothing tested outside the lines (the margins rest on the model)
+                (std::env::var("OUTSIDE").as_deref() != Ok("0")).then_some(mw),
                 conf,
             )
             .expect("drawn");
@@ -784,12 +786,48 @@ fn main() {
                 std::fs::write(format!("{dump}/rig{rig}.txt"), out).expect("dump");
             }
             let bw = bars(&on_w, tp, c, exact_g);
+            // where the weights cap the coherent margin outside the lines: the true relative
+            // error there against the weights' magnitude, per entry
+            if let Some(fc) = coh.outside_critical_hz[1] {
+                let (pt, ph) = (
+                    Frd::from_model(tp, &[fc]).expect("truth"),
+                    Frd::from_model(&model.model, &[fc]).expect("model"),
+                );
+                let (pt, ph) = (pt.at(0).expect("truth"), ph.at(0).expect("model"));
+                let ny = ph.nrows();
+                let mut worst = (0.0f64, 0.0f64, 0usize);
+                for (e, w) in weights.iter().enumerate() {
+                    let (i, j) = (e % ny, e / ny);
+                    let truth_rel = (pt[(i, j)] - ph[(i, j)]).norm() / ph[(i, j)].norm();
+                    let wm = w.magnitude(&[fc])[0];
+                    if truth_rel / wm > worst.0 / worst.1.max(1e-300) || e == 0 {
+                        worst = (truth_rel, wm, e);
+                    }
+                }
+                let diag: Vec<String> = (0..ny)
+                    .map(|i| {
+                        let e = i + i * ny;
+                        format!(
+                            "{:.3}/{:.3}",
+                            (pt[(i, i)] - ph[(i, i)]).norm() / ph[(i, i)].norm(),
+                            weights[e].magnitude(&[fc])[0]
+                        )
+                    })
+                    .collect();
+                println!(
+                    "    outside cap at {fc:.1} Hz: true relative error / weight on the diagonal {diag:?}; entry {} closest {:.3}/{:.3}",
+                    worst.2, worst.0, worst.1
+                );
+            }
             println!(
-                "    coherent ({n_draws} draws, {conf}): stable {:.3}, margins {:.3} {:.3} {:?} ({t_coh:.1} s)",
+                "    coherent ({n_draws} draws, {conf}): stable {:.3}, margins {:.3} {:.3} {:?} outside {:?} exact {:.3} {:.3} ({t_coh:.1} s)",
                 coh.stable_fraction,
                 coh.lower_gain_margin.unwrap_or(f64::NAN),
                 coh.upper_gain_margin.unwrap_or(f64::NAN),
-                bc
+                bc,
+                coh.outside_gain_interval,
+                exact_g.0,
+                exact_g.1
             );
             let fmt = |r: &RobustStability| {
                 format!(

@@ -652,6 +652,14 @@ fn the_workflow_bounds_the_chosen_models_uncertainty_on_request() {
         gc[1] - 1.0 >= 0.5 * (e[1] - 1.0) && 1.0 - gc[0] >= 0.5 * (1.0 - e[0]),
         "{r}"
     );
+    // outside the lines the entry weights cap them: the interval they allow holds the margins
+    let go: Vec<f64> = r["coherent_outside_gain_interval"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert!(go[0] <= gc[0] && go[1] >= gc[1], "{r}");
     assert!(out
         .report
         .to_html()

@@ -308,6 +308,13 @@ pub struct UncertaintyRow {
     pub coherent_stable_fraction: f64,
     /// The coherent margins `[lower, upper]`.
     pub coherent_gain_margins: Option<[f64; 2]>,
+    /// The gain interval in which the loop passes the element-wise test against the entry
+    /// weights at the frequencies outside the lines, where the draws know nothing; it caps
+    /// the coherent margins; it is tested up to an octave beyond the lines.
+    pub coherent_outside_gain_interval: Option<[f64; 2]>,
+    /// Where \[Hz\] that test fails just below and above its interval (`null` at an end the
+    /// nominal loop's interval set).
+    pub coherent_outside_critical_hz: [Option<f64>; 2],
     /// The amplitude study's levels whose plant FRFs gave term (e) \[% of i_sat\], the
     /// identification level among them (absent: no study, or the term was left out).
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -336,7 +336,8 @@ pub const COHERENT_CONFIDENCE: f64 = 0.95;
 /// entry's bound has term (e) ([`amplitude_terms`]); when it cannot be computed the row says
 /// why and the bound goes on without it. Beside them, the robust gain margins against
 /// [`COHERENT_DRAWS`] coherent draws of the model's error at [`COHERENT_CONFIDENCE`]
-/// (`robust_stability_matrix_drawn`).
+/// (`robust_stability_matrix_drawn`), with the structured weight bounding the error outside the
+/// lines, where the draws know nothing.
 ///
 /// # Errors
 /// The reason as text (the FRF has no variance on a line, the model is singular on a line, …).
@@ -454,32 +455,9 @@ pub fn speed_uncertainty(
     // correlation kept), only the part of unknown phase taken element-wise at its worst
     // (docs/uncertainty.md, "Coherent draws for the machine")
     let drawn = u.coherent_draws(COHERENT_DRAWS, 0).map_err(err)?;
-    let coherent = || {
-        robust_stability_matrix_drawn(
-            model,
-            controller,
-            &drawn.f_hz,
-            &drawn.draws,
-            &drawn.remainder,
-            COHERENT_CONFIDENCE,
-        )
-    };
-    // the line test, the coherent one and the structured weight's fit are independent: side
-    // by side
-    let ((r, rc), weights) = rayon::join(
-        || {
-            rayon::join(
-                || {
-                    robust_stability_matrix_on_lines(
-                        model,
-                        controller,
-                        &f,
-                        LineBound::Elementwise(&bounds),
-                    )
-                },
-                coherent,
-            )
-        },
+    // the line test and the structured weight's fit are independent: side by side
+    let (r, weights) = rayon::join(
+        || robust_stability_matrix_on_lines(model, controller, &f, LineBound::Elementwise(&bounds)),
         // the mode-shaped family: on machine rigs 1–100 (each its own noise) it kept the
         // coverage (100/100) and raised the rigs whose weight margins are ≥ half the exact ones
         // from 54 to 74 (docs/uncertainty.md, "Mode-shaped entry weights")
@@ -493,8 +471,20 @@ pub fn speed_uncertainty(
             )
         },
     );
-    let (r, rc, weights) = (r.map_err(err)?, rc.map_err(err)?, weights.map_err(err)?);
+    let (r, weights) = (r.map_err(err)?, weights.map_err(err)?);
     let ws: Vec<Weight> = weights.iter().map(|w| w.weight.clone()).collect();
+    // the draws know nothing outside the lines: there the entry weights bound the error (their
+    // extrapolation; docs/uncertainty.md, "Coherent draws for the machine")
+    let rc = robust_stability_matrix_drawn(
+        model,
+        controller,
+        &drawn.f_hz,
+        &drawn.draws,
+        &drawn.remainder,
+        Some(MatrixWeight::EntryRelative(&ws)),
+        COHERENT_CONFIDENCE,
+    )
+    .map_err(err)?;
     let rw = robust_stability_matrix_weight(model, controller, MatrixWeight::EntryRelative(&ws))
         .map_err(err)?;
     let wmag: Vec<Vec<f64>> = ws.iter().map(|w| w.magnitude(&f)).collect();
@@ -565,6 +555,8 @@ pub fn speed_uncertainty(
             .lower_gain_margin
             .zip(rc.upper_gain_margin)
             .map(|(a, b)| [a, b]),
+        coherent_outside_gain_interval: rc.outside_gain_interval,
+        coherent_outside_critical_hz: rc.outside_critical_hz,
         amplitude_levels_pct: amp.map(|(_, l)| l),
         amplitude_median_rel_pct,
         amplitude_projected,

@@ -455,11 +455,16 @@ pub fn uncertainty_coherent_table(rows: &[super::machine::UncertaintyRow]) -> Ta
                   element-wise check on the lines (previous table) lets the 16 entries' errors \
                   take the phases that line up worst against the loop, which the true error, one \
                   coherent matrix, does not; at a lightly damped mode that costs up to half the \
-                  margin. Nothing is tested outside the fit's lines: where the nominal loop \
-                  goes unstable above them, only the model caps these margins, and on one \
-                  linear test rig the upper one exceeded the exact loop's (docs/uncertainty.md, \
-                  \"Coherent draws for the machine\", with the rigs these margins were \
-                  measured on)."
+                  margin. Outside the fit's lines the draws know nothing: there the entry \
+                  weights of the next table bound the error element-wise (their \
+                  extrapolation, tested up to an octave beyond the lines), and the gain \
+                  interval in which the loop passes that test (column \"outside the lines\", \
+                  with the frequency that ends it above) caps every draw's; farther out a \
+                  weight fitted on the lines bounds nothing, and only the model caps the \
+                  margins. Without that cap the \
+                  upper margin exceeded the exact loop's on a test rig whose loop goes \
+                  unstable above the lines (docs/uncertainty.md, \"Coherent draws for the \
+                  machine\", with the rigs these margins were measured on)."
             .into(),
         header: [
             "speed [rpm]",
@@ -467,6 +472,7 @@ pub fn uncertainty_coherent_table(rows: &[super::machine::UncertaintyRow]) -> Ta
             "confidence",
             "draws stable at gain 1 [%]",
             "robust gain margins, coherent",
+            "outside the lines (entry weights)",
             "robust gain margins, element-wise on the lines",
             "exact gain margins",
         ]
@@ -481,6 +487,13 @@ pub fn uncertainty_coherent_table(rows: &[super::machine::UncertaintyRow]) -> Ta
                     fmt(r.coherent_confidence),
                     fmt(100.0 * r.coherent_stable_fraction),
                     pair(r.coherent_gain_margins),
+                    match (
+                        r.coherent_outside_gain_interval,
+                        r.coherent_outside_critical_hz[1],
+                    ) {
+                        (Some(p), Some(f)) => format!("{} (above: {} Hz)", pair(Some(p)), fmt(f)),
+                        (p, _) => pair(p),
+                    },
                     pair(r.gain_margins),
                     pair(r.exact_gain_margins),
                 ]
