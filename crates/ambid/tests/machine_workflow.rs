@@ -17,6 +17,15 @@ use std::process::Command;
 
 const SHORT: &str = "seed = 7\n[machine]\nspeeds_rpm = [0, 30000]\nmode = \"linear\"\nprbs_order = 8\nperiods = 4\n";
 
+/// A JSON array of numbers.
+fn floats(v: &serde_json::Value) -> Vec<f64> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect()
+}
+
 fn cfg(text: &str) -> WorkflowConfig {
     WorkflowConfig::from_toml_str(text, Path::new("wf.toml")).unwrap()
 }
@@ -589,18 +598,8 @@ fn the_workflow_bounds_the_chosen_models_uncertainty_on_request() {
     let wr = r["weight_raise"].as_f64().unwrap();
     assert!((1.0..=r["raise"].as_f64().unwrap()).contains(&wr), "{r}");
     assert_eq!(r["robustly_stable"], true, "{r}");
-    let g: Vec<f64> = r["gain_margins"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
-    let e: Vec<f64> = r["exact_gain_margins"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
+    let g = floats(&r["gain_margins"]);
+    let e = floats(&r["exact_gain_margins"]);
     assert!(g[0] < 1.0 && g[1] > 1.0, "{r}");
     assert!(
         g[0] >= e[0] * (1.0 - 1e-3) && g[1] <= e[1] * (1.0 + 1e-3),
@@ -619,12 +618,7 @@ fn the_workflow_bounds_the_chosen_models_uncertainty_on_request() {
     assert!(r["weight_max_order"].as_u64().unwrap() <= 4, "{r}");
     assert!(r["weight_truth_coverage"].as_f64().unwrap() >= 0.95, "{r}");
     assert_eq!(r["weight_robustly_stable"], true, "{r}");
-    let gw: Vec<f64> = r["weight_gain_margins"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
+    let gw = floats(&r["weight_gain_margins"]);
     assert!(gw[0] < 1.0 && gw[1] > 1.0, "{r}");
     assert!(
         gw[0] >= e[0] * (1.0 - 1e-3) && gw[1] <= e[1] * (1.0 + 1e-3),
@@ -638,12 +632,7 @@ fn the_workflow_bounds_the_chosen_models_uncertainty_on_request() {
         r["coherent_stable_fraction"].as_f64().unwrap() >= 0.95,
         "{r}"
     );
-    let gc: Vec<f64> = r["coherent_gain_margins"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
+    let gc = floats(&r["coherent_gain_margins"]);
     assert!(
         1.0 + 0.9 * (gc[1] - 1.0) < e[1] && 1.0 - 0.9 * (1.0 - gc[0]) > e[0],
         "{r}"
@@ -653,12 +642,7 @@ fn the_workflow_bounds_the_chosen_models_uncertainty_on_request() {
         "{r}"
     );
     // outside the lines the entry weights cap them: the interval they allow holds the margins
-    let go: Vec<f64> = r["coherent_outside_gain_interval"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
+    let go = floats(&r["coherent_outside_gain_interval"]);
     assert!(go[0] <= gc[0] && go[1] >= gc[1], "{r}");
     assert!(out
         .report

@@ -637,19 +637,9 @@ pub fn robust_stability_matrix_drawn(
     let cr = controller.freq_response(f_hz)?;
     let lines = f_hz.len();
     // flat row-major copies for the small dense arithmetic of the per-line test
-    let flat = |m: &faer::Mat<c64>| -> Vec<c64> {
-        (0..m.nrows())
-            .flat_map(|i| (0..m.ncols()).map(move |j| m[(i, j)]))
-            .collect()
-    };
-    let (pf, cf): (Vec<Vec<c64>>, Vec<Vec<c64>>) = (
-        pl.iter().map(&flat).collect(),
-        cr.iter().map(&flat).collect(),
-    );
-    let df: Vec<Vec<Vec<c64>>> = draws
-        .iter()
-        .map(|d| d.iter().map(&flat).collect())
-        .collect();
+    let (pf, cf): (Vec<Vec<c64>>, Vec<Vec<c64>>) =
+        (pl.iter().map(flat).collect(), cr.iter().map(flat).collect());
+    let df: Vec<Vec<Vec<c64>>> = draws.iter().map(|d| d.iter().map(flat).collect()).collect();
     let rf: Vec<Vec<f64>> = remainder
         .iter()
         .map(|m| {
@@ -659,14 +649,7 @@ pub fn robust_stability_matrix_drawn(
         })
         .collect();
     // M_k(g) = (I + gCP̂)⁻¹ gC per line (n_u × n_y; None where singular: the test fails there)
-    let m_line = |g: f64, k: usize| -> Option<Vec<c64>> {
-        let mut gc = cf[k].clone();
-        gc.iter_mut().for_each(|x| *x *= g);
-        let mut a = vec![c64::new(0.0, 0.0); nu * nu];
-        small::matmul(&gc, &pf[k], nu, ny, nu, &mut a);
-        (0..nu).for_each(|i| a[i * nu + i] += 1.0);
-        small::solve(&mut a, nu, &mut gc, ny).then_some(gc)
-    };
+    let m_line = |g: f64, k: usize| small::loop_m(&cf[k], &pf[k], g, nu, ny);
     // M at the lines and at points around the nominal loop's lightly damped closed-loop poles
     // within the lines' span, where the draw and the remainder are interpolated between lines
     let probe_at = |g: f64| -> Probe {
@@ -677,13 +660,7 @@ pub fn robust_stability_matrix_drawn(
             match (plant.freq_response(&fx), controller.freq_response(&fx)) {
                 (Ok(px), Ok(cx)) => {
                     for (pk, ck) in px.iter().zip(&cx) {
-                        let (pk, ck) = (flat(pk), flat(ck));
-                        let mut gc = ck;
-                        gc.iter_mut().for_each(|x| *x *= g);
-                        let mut a = vec![c64::new(0.0, 0.0); nu * nu];
-                        small::matmul(&gc, &pk, nu, ny, nu, &mut a);
-                        (0..nu).for_each(|i| a[i * nu + i] += 1.0);
-                        ms.push(small::solve(&mut a, nu, &mut gc, ny).then_some(gc));
+                        ms.push(small::loop_m(&flat(ck), &flat(pk), g, nu, ny));
                     }
                 }
                 // where the responses cannot be evaluated the test fails there
@@ -905,11 +882,6 @@ fn outside_interval(
         .into_iter()
         .filter(|x| beyond(*x))
         .collect();
-    let flat = |m: &faer::Mat<c64>| -> Vec<c64> {
-        (0..m.nrows())
-            .flat_map(|i| (0..m.ncols()).map(move |j| m[(i, j)]))
-            .collect()
-    };
     // the responses and the bound at frequencies `x`, flat row-major
     let at = |x: &[f64]| -> Result<Vec<Point>> {
         let (px, cx) = (plant.freq_response(x)?, controller.freq_response(x)?);
@@ -936,12 +908,7 @@ fn outside_interval(
             .chain(&extra)
             .zip(fixed.iter().chain(&near))
             .find(|((p, c, r), _)| {
-                let mut gc = c.clone();
-                gc.iter_mut().for_each(|x| *x *= g);
-                let mut a = vec![c64::new(0.0, 0.0); nu * nu];
-                small::matmul(&gc, p, nu, ny, nu, &mut a);
-                (0..nu).for_each(|i| a[i * nu + i] += 1.0);
-                !(small::solve(&mut a, nu, &mut gc, ny) && scratch.line_ok(&gc, &zero, r))
+                !small::loop_m(c, p, g, nu, ny).is_some_and(|m| scratch.line_ok(&m, &zero, r))
             });
         Ok(fails.map(|(_, x)| *x))
     };
@@ -979,6 +946,13 @@ fn outside_interval(
     })
 }
 
+/// A matrix's entries, flat row-major (the layout of [`small`]).
+fn flat(m: &faer::Mat<c64>) -> Vec<c64> {
+    (0..m.nrows())
+        .flat_map(|i| (0..m.ncols()).map(move |j| m[(i, j)]))
+        .collect()
+}
+
 /// One frequency of [`outside_interval`]: $\hat P$, $C$ and $R$, flat row-major.
 type Point = (Vec<c64>, Vec<c64>, Vec<f64>);
 
@@ -1006,6 +980,16 @@ mod small {
                     (0..q).fold(c64::new(0.0, 0.0), |s, m| s + a[i * q + m] * b[m * c + j]);
             }
         }
+    }
+
+    /// $M(g) = (I + gC\hat P)^{-1} gC$ ($n_u\times n_y$) from $C$ ($n_u\times n_y$) and $\hat P$
+    /// ($n_y\times n_u$) at one frequency; `None` where $I + gC\hat P$ is singular.
+    pub fn loop_m(c: &[c64], p: &[c64], g: f64, nu: usize, ny: usize) -> Option<Vec<c64>> {
+        let mut gc: Vec<c64> = c.iter().map(|x| *x * g).collect();
+        let mut a = vec![c64::new(0.0, 0.0); nu * nu];
+        matmul(&gc, p, nu, ny, nu, &mut a);
+        (0..nu).for_each(|i| a[i * nu + i] += 1.0);
+        solve(&mut a, nu, &mut gc, ny).then_some(gc)
     }
 
     /// Solves $a x = b$ in place ($a$ $n\times n$, $b$ $n\times c$, overwritten by $x$) by Gaussian
