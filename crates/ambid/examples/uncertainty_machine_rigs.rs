@@ -549,6 +549,74 @@ fn main() {
             let c = &truth[0].controller;
             let tp = &truth[0].plant;
             let exact_g = nominal_gain_interval(tp, c).expect("exact margins");
+            if std::env::var("DEBUG_NOM").is_ok() {
+                // the least damped closed-loop poles of the model and of the exact plant near
+                // the model's own gain interval, and the largest pole modulus of the same loop
+                // with the plant through a random similarity (equal when the poles are those of
+                // the model and not of its realisation; docs/uncertainty.md, "Closed-loop poles
+                // of a fitted model")
+                let ts = model.model.ts().unwrap_or(data.ts);
+                let (glo, ghi) = nominal_gain_interval(&model.model, c).expect("model margins");
+                for (name, p) in [("model", &model.model), ("exact", tp)] {
+                    let n = p.order();
+                    let t = Mat::<f64>::from_fn(n, n, |i, j| {
+                        if i == j {
+                            1.0
+                        } else {
+                            0.3 * (((i * 31 + j * 17) % 13) as f64 / 13.0 - 0.5)
+                        }
+                    });
+                    let ti = {
+                        use faer::linalg::solvers::DenseSolveCore;
+                        t.partial_piv_lu().inverse()
+                    };
+                    let pt = ambid_core::lti::StateSpace::new(
+                        &ti * p.a() * &t,
+                        &ti * p.b(),
+                        p.c() * &t,
+                        p.d().to_owned(),
+                        p.ts(),
+                    )
+                    .expect("similar");
+                    for g in [glo * 0.995, glo * 1.005, 1.0, ghi * 0.995, ghi * 1.005] {
+                        let cg = ambid_core::lti::StateSpace::new(
+                            c.a().to_owned(),
+                            c.b().to_owned(),
+                            c.c().to_owned() * g,
+                            c.d().to_owned() * g,
+                            c.ts(),
+                        )
+                        .expect("gain");
+                        let zeta = |z: &faer::c64| {
+                            let sc = z.ln() / ts;
+                            -sc.re / sc.norm()
+                        };
+                        let mut poles = p.feedback(&cg).expect("loop").poles().expect("poles");
+                        let max = |v: &[faer::c64]| v.iter().map(|z| z.norm()).fold(0.0, f64::max);
+                        let sim = max(&pt.feedback(&cg).expect("loop").poles().expect("poles"));
+                        let top = max(&poles);
+                        poles.sort_by(|a, b| zeta(a).total_cmp(&zeta(b)));
+                        let s: Vec<String> = poles
+                            .iter()
+                            .filter(|z| z.im >= 0.0)
+                            .take(4)
+                            .map(|z| {
+                                let sc = z.ln() / ts;
+                                format!(
+                                    "{:.1} Hz |z| {:.5} zeta {:.3}",
+                                    sc.norm() / std::f64::consts::TAU,
+                                    z.norm(),
+                                    zeta(z)
+                                )
+                            })
+                            .collect();
+                        println!(
+                            "    {name} g {g:.4}: max |z| {top:.5} (through a similarity {sim:.5}); {}",
+                            s.join("; ")
+                        );
+                    }
+                }
+            }
             let bounds = u.bounds();
             let on_lines = robust_stability_matrix_on_lines(
                 &model.model,

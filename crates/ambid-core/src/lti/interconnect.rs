@@ -152,23 +152,31 @@ impl StateSpace {
     /// Feedback with the given sign: $u = r + \sigma K y$, $y = G u$, so
     /// $y = (I - \sigma G K)^{-1} G r$. The result maps $r$ to $y$ (outputs of `self`).
     ///
+    /// Both parts enter in their [`StateSpace::well_conditioned`] realisation (the same model;
+    /// bit for bit the given one unless near-equal poles carry cancelling residues), so that the
+    /// closed loop's poles are those of the models and not of their rounding. The result's
+    /// states are those of the two realisations, $x = (x_1, x_2)$.
+    ///
     /// Errors if $I - \sigma D_G D_K$ is singular (an algebraic loop without a solution).
     pub fn feedback_with_sign(&self, k: &StateSpace, sign: FeedbackSign) -> Result<StateSpace> {
         check_same_ts(self.ts(), k.ts())?;
+        let (g, k) = (self.well_conditioned(), k.well_conditioned());
+        let this = &g;
+        let k = &k;
         dims(
             "feedback (plant outputs vs feedback inputs)",
-            self.noutputs(),
+            this.noutputs(),
             k.ninputs(),
         )?;
         dims(
             "feedback (feedback outputs vs plant inputs)",
             k.noutputs(),
-            self.ninputs(),
+            this.ninputs(),
         )?;
         let s = sign.value();
-        let (n1, n2) = (self.order(), k.order());
-        let (p, m) = (self.noutputs(), self.ninputs());
-        let (a1, b1, c1, d1) = (self.a(), self.b(), self.c(), self.d());
+        let (n1, n2) = (this.order(), k.order());
+        let (p, m) = (this.noutputs(), this.ninputs());
+        let (a1, b1, c1, d1) = (this.a(), this.b(), this.c(), this.d());
         let (a2, b2, c2, d2) = (k.a(), k.b(), k.c(), k.d());
         // y1 = E (C1 x1 + s D1 C2 x2 + D1 r),  E = (I - s D1 D2)^{-1}
         let d1d2 = d1 * d2;
@@ -214,6 +222,6 @@ impl StateSpace {
                 b2dy[(i - n1, j)]
             }
         });
-        StateSpace::new(a, b, cy, dy, self.ts())
+        StateSpace::new(a, b, cy, dy, this.ts())
     }
 }

@@ -11,6 +11,7 @@
 //! * [`PidSpec`]: a continuous filtered PID and its discrete equivalent (Tustin, prewarped
 //!   Tustin or ZOH, optional computation delay).
 
+mod condition;
 mod frd;
 mod interconnect;
 pub mod pid;
