@@ -97,6 +97,11 @@ impl StateSpace {
         let lam: Vec<c64> = (0..n).map(|k| s[k]).collect();
         let scale = lam.iter().map(|l| l.norm()).fold(1.0f64, f64::max);
         let is_real = |l: c64| l.im.abs() <= 1e-10 * scale;
+        // the common case, no two poles in one cluster: nothing to combine, so no modal form
+        let clustered = (0..n).any(|j| (0..j).any(|q| near(lam[j], lam[q])));
+        if !clustered {
+            return None;
+        }
         let mut v = Mat::<c64>::from_fn(n, n, |i, k| u[(i, k)] * d[i]);
         for k in 0..n {
             if is_real(lam[k]) {
@@ -260,7 +265,7 @@ impl Part {
         for j in 1..k {
             for q in 0..j {
                 let (lj, lq) = (self.lam[j], self.lam[q]);
-                if (lj - lq).norm() > CLUSTER * lj.norm().max(lq.norm()).max(1.0) {
+                if !near(lj, lq) {
                     continue;
                 }
                 let nq: f64 = (0..m).map(|i| self.b[(q, i)].norm_sqr()).sum();
@@ -345,6 +350,12 @@ impl Part {
         }
         any
     }
+}
+
+/// Whether two poles are in one cluster: closer than [`CLUSTER`] relative to their modulus (at
+/// least 1).
+fn near(a: c64, b: c64) -> bool {
+    (a - b).norm() <= CLUSTER * a.norm().max(b.norm()).max(1.0)
 }
 
 /// The inverse of a complex square matrix by LU with full pivoting; `None` when it is not
