@@ -656,8 +656,6 @@ struct ParameterShift {
     mean: Vec<f64>,
     /// $S$ with $S S^{\mathsf T} = \Sigma_s$ (lower triangular, row-major $n_\theta^2$).
     factor: Vec<f64>,
-    /// Per entry and line, the increment of the deterministic part $b_k + s_k + a_k$.
-    increment: Vec<Vec<f64>>,
 }
 
 /// Draws of the model's error as whole matrices, with the part of the bound whose phase is not
@@ -1051,10 +1049,28 @@ impl MatrixUncertainty {
     /// \Sigma_s)$ of the projected shift, and moves every entry with them:
     /// $$ D_{d,ij,k} = J_{ij,k} R\,(\xi + \xi_s) + \nu_{d,ij,k} , $$
     /// with the nonlinear term (c) drawn per line and entry (circular). The rest of the bound
-    /// has no known phase — term (b), the operating spread (d) and the per-line amplitude
-    /// term (e) (without what the projection added) — and is returned as the element-wise
-    /// `remainder` $R_{ij,k} = b_k + s_k + a_k$. The bound's raises are not applied: the
-    /// draws carry the random part themselves.
+    /// has no known phase — term (b) and the operating spread (d) — and is returned as the
+    /// element-wise `remainder` $R_{ij,k} = b_k + d_k$, plus the per-line amplitude term $a_k$
+    /// when no projected shift was kept. The bound's raises are not applied: the draws carry
+    /// the random part themselves.
+    ///
+    /// *Why the amplitude term leaves the remainder when the projection is kept.* The model is
+    /// fitted to the BLA $G = P_0 + s + n$ (small-signal plant $P_0$, amplitude shift $s$,
+    /// noise $n$). To first order it is $\hat P = P_{\theta_0} + \Pi(s) + \Pi(n)$, with $\Pi$ the
+    /// fit's weighted projection onto the model's tangent space and $P_{\theta_0}$ the model
+    /// set's best approximation of $P_0$. Its error against the small-signal plant is
+    /// $P_0 - \hat P = \beta - \Pi(s) - \Pi(n)$, $\beta = P_0 - P_{\theta_0}$: the shift
+    /// enters only through $\Pi(s)$, which the draws carry ($J R\,\xi_s$), and $\Pi(n)$ is
+    /// term (a). The rest of the shift, $s - \Pi(s)$, is no error of the model against $P_0$;
+    /// it lies in the misfit $G - \hat P = \beta + (s - \Pi(s)) + (n - \Pi(n))$, which term (b)
+    /// bounds at a free phase. Adding $a_k \approx |s_k|$ at a free phase as well counted the
+    /// shift twice; on nonlinear machine rigs it set the coherent margin at the bending modes
+    /// (docs/uncertainty.md, "The amplitude term in the coherent draws"). What this assumes:
+    /// term (b) bounds $\beta$ only where $s - \Pi(s)$ does not cancel part of it at a line
+    /// (both lie outside the tangent space); the per-line shift estimates are too noisy to
+    /// bound $s - \Pi(s)$ by themselves, so that case is not covered, and the rig sweeps are
+    /// the evidence that it does not decide a margin. The element-wise bound (`additive`, the
+    /// weights, the check on the lines) keeps $\max(a_k, \cdot)$, a worst case over the phase.
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] for no draws or a bound without lines.
@@ -1094,12 +1110,17 @@ impl MatrixUncertainty {
         }
         let (ny, nu) = (self.outputs, self.inputs);
         let dim = self.tangent_dim();
+        // with the projected shift kept, the draws carry the shift's effect on the model and
+        // the per-line amplitude term leaves the remainder (doc above); without it, it stays
         let remainder: Vec<faer::Mat<f64>> = (0..l)
             .map(|k| {
                 faer::Mat::from_fn(ny, nu, |i, j| {
-                    let e = i + j * ny;
-                    let inc = self.shift.as_ref().map_or(0.0, |s| s.increment[e][k]);
-                    (self.entries[e].errors.fixed[k] - inc).max(0.0)
+                    let t = &self.entries[i + j * ny];
+                    let amp = match (&self.shift, &t.amplitude) {
+                        (Some(_), Some(a)) => a[k],
+                        _ => 0.0,
+                    };
+                    (t.errors.fixed[k] - amp).max(0.0)
                 })
             })
             .collect();
@@ -1270,8 +1291,7 @@ impl MatrixUncertainty {
             let cov = crate::linalg::solve(g.as_ref(), gi_cb.transpose())?;
             let coverage = self.line_coverage();
             let q = (1.0 / (1.0 - coverage)).ln();
-            let mut increment = vec![vec![0.0; l]; n_entries];
-            for (terms, inc) in self.entries.iter_mut().zip(&mut increment) {
+            for terms in &mut self.entries {
                 let mut amp = terms.amplitude.clone().unwrap_or_else(|| vec![0.0; l]);
                 #[allow(clippy::needless_range_loop)] // k indexes six per-line vectors
                 for k in 0..l {
@@ -1295,7 +1315,6 @@ impl MatrixUncertainty {
                     let proj = joint - qa;
                     if proj > amp[k] {
                         let d = proj - amp[k];
-                        inc[k] = d;
                         amp[k] = proj;
                         terms.additive[k] += d;
                         terms.errors.fixed[k] += d;
@@ -1307,7 +1326,6 @@ impl MatrixUncertainty {
             self.shift = Some(ParameterShift {
                 mean: (0..n).map(|m| xi[(m, 0)]).collect(),
                 factor: psd_factor(&cov),
-                increment,
             });
         }
         Ok(ProjectedShift {
@@ -2705,8 +2723,10 @@ mod tests {
     /// The coherent draws carry the error model's moments: zero mean, each entry's variance
     /// $\sum_m |s_{ij,k,m}|^2$ and the covariance between two entries $\sum_m s_{00,k,m}
     /// \overline{s_{11,k,m}}$ (4 000 draws, 5 standard errors), with the deterministic part as
-    /// the remainder; after a noise-free projected shift $\varepsilon\hat P$ every draw is that
-    /// shift, and the remainder holds none of it.
+    /// the remainder; with the per-line amplitude term $a_k = |\varepsilon\hat P_k|$ given, the
+    /// remainder holds it until a projected shift is kept; after the noise-free projected shift
+    /// $\varepsilon\hat P$ every draw is that shift, and the remainder holds none of it (it
+    /// held $a_k$ again before 2026-12-05: the shift counted twice).
     #[test]
     fn coherent_draws_carry_the_error_models_moments() {
         let (m, f, exact, frd) = coupled_2x2(1e-3);
@@ -2753,9 +2773,9 @@ mod tests {
         }
         // some entries are correlated (0.1 is 6 standard errors): the test above is not vacuous
         assert!(strongest > 0.1, "{strongest}");
-        // a noise-free shift ε P̂ projected through an exact model on a precise FRF
+        // a noise-free shift ε P̂ projected through an exact model on a precise FRF, with the
+        // per-line amplitude term a_k = |s_k| that the amplitude study's windows would give
         let (_, _, _, precise) = coupled_2x2(1e-13);
-        let mut u = uncertainty_matrix(&m, &precise, &[], &UncertaintyOptions::default()).unwrap();
         let eps = 0.01;
         let truth: Vec<Vec<c64>> = (0..4)
             .map(|e| {
@@ -2764,6 +2784,27 @@ mod tests {
                     .collect()
             })
             .collect();
+        let per_line: Vec<Vec<f64>> = truth
+            .iter()
+            .map(|s| s.iter().map(|x| x.norm()).collect())
+            .collect();
+        let extra: Vec<ExtraTerms> = per_line
+            .iter()
+            .map(|a| ExtraTerms {
+                amplitude_shift: Some(a),
+                ..ExtraTerms::default()
+            })
+            .collect();
+        let mut u =
+            uncertainty_matrix(&m, &precise, &extra, &UncertaintyOptions::default()).unwrap();
+        // not projected: the draws do not carry the shift, so the remainder holds a_k
+        let d = u.coherent_draws(5, 4).unwrap();
+        for k in [5usize, 60, 140] {
+            for (e, a) in per_line.iter().enumerate() {
+                let r = d.remainder[k][(e % 2, e / 2)];
+                assert!((r - a[k]).abs() <= 1e-9 * a[k], "{r}");
+            }
+        }
         let tiny: Vec<Vec<f64>> = truth
             .iter()
             .map(|s| s.iter().map(|x| 1e-20 * x.norm_sqr()).collect())
@@ -2773,6 +2814,7 @@ mod tests {
                 .unwrap()
                 .kept
         );
+        // projected: the draws carry it, and it is not counted again at a free phase
         let d = u.coherent_draws(50, 4).unwrap();
         for x in &d.draws {
             for k in [5usize, 60, 140] {
