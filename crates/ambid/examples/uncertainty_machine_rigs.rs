@@ -371,6 +371,7 @@ fn main() {
             };
         // term (e) through the model, as the workflow does (NO_PROJECT=1: without it)
         let mut u = u;
+        let mut projected_kept = false;
         if std::env::var("NO_PROJECT").is_err() {
             if let Some(a) = sp
                 .level_pct
@@ -392,6 +393,7 @@ fn main() {
                         ambid::uncertainty::AMPLITUDE_RUN_ALPHA,
                     )
                     .expect("projection");
+                projected_kept = ps.kept;
                 if std::env::var("DEBUG_E").is_ok() {
                     println!("  projected shift: {ps:?}");
                 }
@@ -641,7 +643,56 @@ fn main() {
                 .ok()
                 .and_then(|v| v.parse().ok())
                 .unwrap_or(0.95);
-            let cd = u.coherent_draws(n_draws, 0).expect("coherent draws");
+            let mut cd = u.coherent_draws(n_draws, 0).expect("coherent draws");
+            // REMAINDER=0: the draws alone, the element-wise remainder left out (a diagnostic of
+            // what sets the coherent margin; not a bound)
+            // REMAINDER=b: term (b) alone; REMAINDER=e: the rest (the per-line amplitude term)
+            match std::env::var("REMAINDER").as_deref() {
+                Ok("0") => cd.remainder.iter_mut().for_each(|r| r.fill(0.0)),
+                // REMAINDER=old: the per-line amplitude term back in beside a kept projection
+                // (the coherent draws before 2026-12-05, tenth session)
+                Ok("old") if projected_kept && !amp.is_empty() => {
+                    for (k, r) in cd.remainder.iter_mut().enumerate() {
+                        for (e, a) in amp.iter().enumerate() {
+                            r[(e % 4, e / 4)] += a[k];
+                        }
+                    }
+                }
+                Ok(part @ ("b" | "e")) => {
+                    for (k, r) in cd.remainder.iter_mut().enumerate() {
+                        for (e, t) in u.entries.iter().enumerate() {
+                            let (rem, b) = (r[(e % 4, e / 4)], t.model_error[k]);
+                            r[(e % 4, e / 4)] = if part == "b" {
+                                rem.min(b)
+                            } else {
+                                (rem - b).max(0.0)
+                            };
+                        }
+                    }
+                }
+                _ => {}
+            }
+            if std::env::var("DEBUG_REM").is_ok() {
+                // per entry, the median over the lines of term (b) and of the rest, relative to |P̂|
+                let ph = Frd::from_model(&model.model, &cd.f_hz).expect("model");
+                let rows: Vec<String> = (0..16)
+                    .map(|e| {
+                        let t = &u.entries[e];
+                        let rel = |x: &dyn Fn(usize) -> f64| {
+                            let mut v: Vec<f64> = (0..cd.f_hz.len())
+                                .map(|k| x(k) / ph.at(k).expect("line")[(e % 4, e / 4)].norm())
+                                .collect();
+                            v.sort_by(f64::total_cmp);
+                            (v[v.len() / 2], v[v.len() - 1])
+                        };
+                        let (bm, bx) = rel(&|k| t.model_error[k]);
+                        let (rm, rx) =
+                            rel(&|k| (cd.remainder[k][(e % 4, e / 4)] - t.model_error[k]).max(0.0));
+                        format!("{e}: b {bm:.4}/{bx:.3} e {rm:.4}/{rx:.3}")
+                    })
+                    .collect();
+                println!("    remainder (median/max relative): {}", rows.join("; "));
+            }
             let coh = robust_stability_matrix_drawn(
                 &model.model,
                 c,
