@@ -658,6 +658,24 @@ fn main() {
                         }
                     }
                 }
+                // REMAINDER=bphase: term (b) moved from the remainder into every draw at the raw
+                // misfit's phase per line, b_k (G_k − P̂_k)/|G_k − P̂_k| (a diagnostic of a coherent
+                // term (b); the per-line phase is noisy where the line is, and it assumes the
+                // misfit's phase is β's)
+                Ok("bphase") => {
+                    for (k, r) in cd.remainder.iter_mut().enumerate() {
+                        for (e, t) in u.entries.iter().enumerate() {
+                            let (i, j) = (e % 4, e / 4);
+                            let b = t.model_error[k].min(r[(i, j)]);
+                            let m = t.measured[k] - t.nominal[k];
+                            if b > 0.0 && m.norm() > 0.0 {
+                                let c = m * (b / m.norm());
+                                cd.draws.iter_mut().for_each(|d| d[k][(i, j)] += c);
+                                r[(i, j)] -= b;
+                            }
+                        }
+                    }
+                }
                 Ok(part @ ("b" | "e")) => {
                     for (k, r) in cd.remainder.iter_mut().enumerate() {
                         for (e, t) in u.entries.iter().enumerate() {
