@@ -679,8 +679,9 @@ fn main() {
                 Ok(part @ ("b" | "e")) => {
                     for (k, r) in cd.remainder.iter_mut().enumerate() {
                         for (e, t) in u.entries.iter().enumerate() {
-                            let (rem, b) = (r[(e % 4, e / 4)], t.model_error[k]);
-                            r[(e % 4, e / 4)] = if part == "b" {
+                            let (i, j) = (e % 4, e / 4);
+                            let (rem, b) = (r[(i, j)], t.model_error[k]);
+                            r[(i, j)] = if part == "b" {
                                 rem.min(b)
                             } else {
                                 (rem - b).max(0.0)
@@ -691,7 +692,8 @@ fn main() {
                 _ => {}
             }
             if std::env::var("DEBUG_REM").is_ok() {
-                // per entry, the median over the lines of term (b) and of the rest, relative to |P̂|
+                // per entry, the median and the maximum over the lines of term (b) and of the rest,
+                // relative to |P̂|
                 let ph = Frd::from_model(&model.model, &cd.f_hz).expect("model");
                 let rows: Vec<String> = (0..16)
                     .map(|e| {
