@@ -48,6 +48,15 @@
 //! line in 150–350 Hz, the measured FRF's complex error against the exact plant and its
 //! standard deviation for the entries (xa, ya) and (xa, xa) (`FRFERR f re im std re im std`).
 //!
+//! The coherent draws' diagnostics: `REMAINDER=0` leaves the element-wise remainder out,
+//! `REMAINDER=old` adds the per-line amplitude term back beside a kept projection (the double
+//! count before the tenth session of 2026-12-05), `REMAINDER=freeb` puts term (b) back at a free
+//! phase (before the eleventh), `REMAINDER=b|e` keeps term (b)'s spread alone or the rest alone;
+//! `DEBUG_REM=1` prints per entry term (b) and the rest relative to $|\hat P|$; `DEBUG_SHIFT=1`
+//! regresses the exact error $P_0 - \hat P$ on the draws' mean (diagonal and cross entries
+//! apart) and prints the draws' mean and the per-line shift estimates as relative shifts κ per
+//! band on the diagonal.
+//!
 //! Run: `cargo run --release -p ambid --example uncertainty_machine_rigs -- 0,1,2,3`.
 use ambid::config::MachineSection;
 use ambid::workflow::machine::{acquire_twin, MachineModelInput, MachineModels};
@@ -372,6 +381,7 @@ fn main() {
         // term (e) through the model, as the workflow does (NO_PROJECT=1: without it)
         let mut u = u;
         let mut projected_kept = false;
+        let mut shifts_seen: Vec<Vec<faer::c64>> = Vec::new();
         if std::env::var("NO_PROJECT").is_err() {
             if let Some(a) = sp
                 .level_pct
@@ -394,6 +404,7 @@ fn main() {
                     )
                     .expect("projection");
                 projected_kept = ps.kept;
+                shifts_seen = shifts;
                 if std::env::var("DEBUG_E").is_ok() {
                     println!("  projected shift: {ps:?}");
                 }
@@ -644,9 +655,121 @@ fn main() {
                 .and_then(|v| v.parse().ok())
                 .unwrap_or(0.95);
             let mut cd = u.coherent_draws(n_draws, 0).expect("coherent draws");
+            if std::env::var("DEBUG_SHIFT").is_ok() {
+                // the exact error E = P0 − P̂ on the lines regressed on the draws' mean D̄ (the
+                // projected shift's effect) and on the misfit G − P̂ where term (b) is positive,
+                // relative to |P̂| per entry: coefficient Σ Re(E D̄*)/Σ|D̄|² and the share of Σ|E|²
+                // the fit explains
+                let n = cd.draws.len() as f64;
+                let (mut ed, mut dd, mut ee, mut em, mut mm, mut eeb) =
+                    (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+                let mut gd = 0.0;
+                for (e, t) in u.entries.iter().enumerate() {
+                    let (i, j) = (e % 4, e / 4);
+                    for k in 0..cd.f_hz.len() {
+                        let w = 1.0 / t.nominal[k].norm_sqr().max(f64::MIN_POSITIVE);
+                        let err = exact.at(k).expect("line")[(i, j)] - t.nominal[k];
+                        let mean: faer::c64 =
+                            cd.draws.iter().map(|d| d[k][(i, j)]).sum::<faer::c64>() / n;
+                        ed += w * (err * mean.conj()).re;
+                        gd += w
+                            * ((t.measured[k] - exact.at(k).expect("line")[(i, j)]) * mean.conj())
+                                .re;
+                        dd += w * mean.norm_sqr();
+                        ee += w * err.norm_sqr();
+                        if t.model_error[k] > 0.0 {
+                            let m = t.measured[k] - t.nominal[k];
+                            em += w * (err * m.conj()).re;
+                            mm += w * m.norm_sqr();
+                            eeb += w * err.norm_sqr();
+                        }
+                    }
+                }
+                // diagonal and cross entries apart, weighted by 1/(|P̂_ii| |P̂_jj|) (the cross
+                // entries' own |P̂_ij| has zeros that take a relative weighting over)
+                for (name, diag) in [("diagonal", true), ("cross", false)] {
+                    let (mut a, mut b, mut c2) = (0.0, 0.0, 0.0);
+                    for (e, t) in u.entries.iter().enumerate() {
+                        let (i, j) = (e % 4, e / 4);
+                        if (i == j) != diag {
+                            continue;
+                        }
+                        for k in 0..cd.f_hz.len() {
+                            let w = 1.0
+                                / (u.entries[i * 5].nominal[k].norm()
+                                    * u.entries[j * 5].nominal[k].norm())
+                                .max(f64::MIN_POSITIVE);
+                            let err = exact.at(k).expect("line")[(i, j)] - t.nominal[k];
+                            let mean: faer::c64 =
+                                cd.draws.iter().map(|d| d[k][(i, j)]).sum::<faer::c64>() / n;
+                            a += w * (err * mean.conj()).re;
+                            b += w * mean.norm_sqr();
+                            c2 += w * err.norm_sqr();
+                        }
+                    }
+                    println!(
+                        "    shift ({name}): E on D̄ coefficient {:.3}, explains {:.3}",
+                        a / b,
+                        a * a / b / c2
+                    );
+                }
+                let c = ed / dd.max(f64::MIN_POSITIVE);
+                println!(
+                    "    shift: G − P0 on D̄ coefficient {:.3}",
+                    gd / dd.max(f64::MIN_POSITIVE)
+                );
+                for (lo, hi) in [(10.0, 100.0), (100.0, 300.0), (300.0, 1000.0)] {
+                    let row: Vec<String> = (0..4)
+                        .map(|dg| {
+                            let t = &u.entries[dg * 5];
+                            let (mut a, mut b, mut den) =
+                                (faer::c64::new(0.0, 0.0), faer::c64::new(0.0, 0.0), 0.0);
+                            for k in 0..cd.f_hz.len() {
+                                if !(lo..hi).contains(&cd.f_hz[k]) {
+                                    continue;
+                                }
+                                let mean: faer::c64 =
+                                    cd.draws.iter().map(|d| d[k][(dg, dg)]).sum::<faer::c64>() / n;
+                                a += t.nominal[k].conj() * mean;
+                                if !shifts_seen.is_empty() {
+                                    b += t.nominal[k].conj() * shifts_seen[dg * 5][k];
+                                }
+                                den += t.nominal[k].norm_sqr();
+                            }
+                            format!("D̄ {:+.4} ŝ {:+.4}", (a / den).re, (b / den).re)
+                        })
+                        .collect();
+                    println!("    band {lo}-{hi}: κ {}", row.join(" | "));
+                }
+                let cm = em / mm.max(f64::MIN_POSITIVE);
+                // G − P0 regressed on the per-line shift estimates s (should be +1 if s is the
+                // BLA's shift from the small-signal plant)
+                if !shifts_seen.is_empty() {
+                    let (mut gs, mut ss, mut ps) = (0.0, 0.0, 0.0);
+                    for ((e, t), se) in u.entries.iter().enumerate().zip(&shifts_seen) {
+                        let (i, j) = (e % 4, e / 4);
+                        for (k, &sk) in se.iter().enumerate() {
+                            let w = 1.0 / t.nominal[k].norm_sqr().max(f64::MIN_POSITIVE);
+                            let p0 = exact.at(k).expect("line")[(i, j)];
+                            gs += w * ((t.measured[k] - p0) * sk.conj()).re;
+                            ps += w * ((t.nominal[k] - p0) * sk.conj()).re;
+                            ss += w * sk.norm_sqr();
+                        }
+                    }
+                    println!(
+                        "    shift: G − P0 on s coefficient {:.3}; P̂ − P0 on s coefficient {:.3}",
+                        gs / ss,
+                        ps / ss
+                    );
+                }
+                println!(
+                    "    shift: E on D̄ coefficient {c:.3}, explains {:.3} of |E|²; E on misfit where b > 0: coefficient {cm:.3}, explains {:.3}",
+                    c * ed / ee.max(f64::MIN_POSITIVE),
+                    cm * em / eeb.max(f64::MIN_POSITIVE)
+                );
+            }
             // REMAINDER=0: the draws alone, the element-wise remainder left out (a diagnostic of
             // what sets the coherent margin; not a bound)
-            // REMAINDER=b: term (b) alone; REMAINDER=e: the rest (the per-line amplitude term)
             match std::env::var("REMAINDER").as_deref() {
                 Ok("0") => cd.remainder.iter_mut().for_each(|r| r.fill(0.0)),
                 // REMAINDER=old: the per-line amplitude term back in beside a kept projection
@@ -658,29 +781,25 @@ fn main() {
                         }
                     }
                 }
-                // REMAINDER=bphase: term (b) moved from the remainder into every draw at the raw
-                // misfit's phase per line, b_k (G_k − P̂_k)/|G_k − P̂_k| (a diagnostic of a coherent
-                // term (b); the per-line phase is noisy where the line is, and it assumes the
-                // misfit's phase is β's)
-                Ok("bphase") => {
+                // REMAINDER=freeb: term (b) back at a free phase (its centre out of every draw,
+                // all of b_k in the remainder; the coherent draws before 2026-12-05, eleventh
+                // session)
+                Ok("freeb") => {
                     for (k, r) in cd.remainder.iter_mut().enumerate() {
                         for (e, t) in u.entries.iter().enumerate() {
                             let (i, j) = (e % 4, e / 4);
-                            let b = t.model_error[k].min(r[(i, j)]);
-                            let m = t.measured[k] - t.nominal[k];
-                            if b > 0.0 && m.norm() > 0.0 {
-                                let c = m * (b / m.norm());
-                                cd.draws.iter_mut().for_each(|d| d[k][(i, j)] += c);
-                                r[(i, j)] -= b;
-                            }
+                            let c = cd.bias_centre[k][(i, j)];
+                            cd.draws.iter_mut().for_each(|d| d[k][(i, j)] -= c);
+                            r[(i, j)] += t.model_error[k] - cd.bias_spread[k][(i, j)];
                         }
                     }
                 }
+                // REMAINDER=b: term (b)'s spread alone; REMAINDER=e: the rest
                 Ok(part @ ("b" | "e")) => {
                     for (k, r) in cd.remainder.iter_mut().enumerate() {
-                        for (e, t) in u.entries.iter().enumerate() {
+                        for e in 0..16 {
                             let (i, j) = (e % 4, e / 4);
-                            let (rem, b) = (r[(i, j)], t.model_error[k]);
+                            let (rem, b) = (r[(i, j)], cd.bias_spread[k][(i, j)]);
                             r[(i, j)] = if part == "b" {
                                 rem.min(b)
                             } else {

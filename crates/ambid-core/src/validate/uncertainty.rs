@@ -223,6 +223,38 @@ impl Default for UncertaintyOptions {
     }
 }
 
+/// Term (b) with its phase, for [`MatrixUncertainty::coherent_draws`]: per line the centre
+/// $c_k$ and the radius $r_k$ of a disc that holds the model-set error term (b) stands for.
+///
+/// Term (b) is $b_k = \sqrt{(|\bar e|^2 - t v)_+}$ of the window that gave the largest value,
+/// with $\bar e$ the window's weighted mean misfit, $v$ its variance and $t$ the test's
+/// threshold (module docs). The misfit's noise part moves $\bar e$ by a circular error of
+/// variance $v$, at most $\sqrt{t v}$ at the test's level, so the windowed systematic misfit
+/// lies within the angle $\delta_k = \arcsin\rho_k$, $\rho_k = \sqrt{t v}/|\bar e|$ ($< 1$
+/// where $b_k > 0$), of $\bar e$'s phase. The centre takes term (b)'s modulus at that phase,
+/// $c_k = b_k\,\bar e/|\bar e|$, and the radius is the chord of that angle,
+/// $r_k = 2 b_k \sin(\delta_k / 2)$. Where the chord is not shorter than $b_k$ ($\delta_k \ge
+/// 60°$: a misfit just past the test's edge) the phase says nothing useful and the free phase is
+/// kept: $c_k = 0$, $r_k = b_k$. The modulus is term (b)'s in both cases.
+fn coherent_bias(bias: &[f64], at_max: &[(c64, f64)], thr: f64) -> (Vec<c64>, Vec<f64>) {
+    bias.iter()
+        .zip(at_max)
+        .map(|(&b, &(mean, v))| {
+            let m = mean.norm();
+            if b <= 0.0 || m <= 0.0 {
+                return (c64::new(0.0, 0.0), b);
+            }
+            let rho = ((thr * v).sqrt() / m).min(1.0);
+            let chord = 2.0 * b * (0.5 * rho.asin()).sin();
+            if chord < b {
+                (mean * (b / m), chord)
+            } else {
+                (c64::new(0.0, 0.0), b)
+            }
+        })
+        .unzip()
+}
+
 /// The terms (c), (d) and (e) of the module docs, per line of the FRF (absolute, plant units).
 #[derive(Debug, Clone, Copy, Default)]
 pub struct ExtraTerms<'a> {
@@ -311,6 +343,11 @@ pub struct ErrorModel {
     sens: Vec<Vec<c64>>,
     nonlinear_std: Option<Vec<f64>>,
     fixed: Vec<f64>,
+    /// Term (b) at the windowed misfit's phase, $c_k$ (0 where its phase is not known;
+    /// `coherent_bias`).
+    bias_center: Vec<c64>,
+    /// The bound $r_k$ of term (b)'s error about $c_k$ ($b_k$ where the phase is not known).
+    bias_spread: Vec<f64>,
     nominal_abs: Vec<f64>,
 }
 
@@ -562,8 +599,10 @@ fn uncertainty_with(
     let halves = window_scales(m_half, l);
     let thr = (halves.len() as f64 / opts.bias_alpha).ln();
     let mut bias = vec![0.0f64; l];
+    // per line, the windowed mean and its variance of the window that set b_k (for its phase)
+    let mut at_max = vec![(c64::new(0.0, 0.0), 0.0f64); l];
     for &half in &halves {
-        for (k, b) in bias.iter_mut().enumerate() {
+        for (k, (b, best)) in bias.iter_mut().zip(&mut at_max).enumerate() {
             let (lo, hi) = (k.saturating_sub(half), (k + half).min(l - 1));
             let (mut num, mut sw, mut vv) = (c64::new(0.0, 0.0), 0.0, 0.0);
             for j in lo..=hi {
@@ -576,9 +615,14 @@ fn uncertainty_with(
             let v = vv / (sw * sw);
             // the excess over the test's threshold: 0 at the edge of significance, |ē| for a
             // misfit far above the noise (a noise excursion that just passes adds little)
-            *b = b.max((mean.norm_sqr() - thr * v).max(0.0).sqrt());
+            let excess = (mean.norm_sqr() - thr * v).max(0.0).sqrt();
+            if excess > *b {
+                *b = excess;
+                *best = (mean, v);
+            }
         }
     }
+    let (bias_center, bias_spread) = coherent_bias(&bias, &at_max, thr);
     let nonlinear = extra.nonlinear_std.map(|s| {
         s.iter()
             .map(|&x| abs_quantile(0.5 * x * x, 0.5 * x * x, 0.0, alpha))
@@ -602,6 +646,8 @@ fn uncertainty_with(
         sens,
         nonlinear_std: extra.nonlinear_std.map(<[f64]>::to_vec),
         fixed: (0..l).map(|k| bias[k] + fixed_extra(extra, k)).collect(),
+        bias_center,
+        bias_spread,
         nominal_abs: p_hat
             .iter()
             .map(|p| p.norm().max(f64::MIN_POSITIVE))
@@ -668,6 +714,12 @@ pub struct CoherentDraws {
     pub draws: Vec<Vec<faer::Mat<c64>>>,
     /// Per line, the element-wise bound $R_k$ of the rest of the error (phase unknown).
     pub remainder: Vec<faer::Mat<f64>>,
+    /// Per line, the part $c_{ij,k}$ of every draw that is term (b) at its phase (0 where the
+    /// phase is not known).
+    pub bias_centre: Vec<faer::Mat<c64>>,
+    /// Per line, the part $r_{ij,k}$ of the remainder that is term (b)'s spread about that
+    /// centre ($b_{ij,k}$ where the phase is not known).
+    pub bias_spread: Vec<faer::Mat<f64>>,
 }
 
 /// The outcome of [`MatrixUncertainty::add_projected_shift`].
@@ -1047,12 +1099,22 @@ impl MatrixUncertainty {
     /// [`joint_raises`](Self::joint_raises)) and, when term (e) through the model was kept
     /// ([`add_projected_shift`](Self::add_projected_shift)), one $\xi_s \sim N(\bar\xi_s,
     /// \Sigma_s)$ of the projected shift, and moves every entry with them:
-    /// $$ D_{d,ij,k} = J_{ij,k} R\,(\xi + \xi_s) + \nu_{d,ij,k} , $$
-    /// with the nonlinear term (c) drawn per line and entry (circular). The rest of the bound
-    /// has no known phase — term (b) and the operating spread (d) — and is returned as the
-    /// element-wise `remainder` $R_{ij,k} = b_k + d_k$, plus the per-line amplitude term $a_k$
+    /// $$ D_{d,ij,k} = J_{ij,k} R\,(\xi - \xi_s) + c_{ij,k} + \nu_{d,ij,k} , $$
+    /// with the nonlinear term (c) drawn per line and entry (circular) and $c_{ij,k}$ term (b)
+    /// at the windowed misfit's phase where that phase is known: $c_{ij,k} = b_k\,\bar e/|\bar e|$
+    /// with $\bar e$ the mean misfit of the window that set $b_k$, and the spread
+    /// $r_k = 2 b_k \sin(\tfrac12\arcsin(\sqrt{t v}/|\bar e|))$ of that phase's error at the
+    /// test's level ($t$ the threshold, $v$ the mean's variance); where $r_k \ge b_k$ the phase
+    /// is not known, $c_{ij,k} = 0$ and $r_k = b_k$. The misfit $G - \hat P$ holds the model
+    /// set's error $+\beta$, so its phase is the error's.
+    /// The rest of the bound has no known phase — term (b)'s spread $r_k$ about $c_k$ ($b_k$
+    /// where the phase is not known) and the operating spread (d) — and is returned as the
+    /// element-wise `remainder` $R_{ij,k} = r_k + d_k$, plus the per-line amplitude term $a_k$
     /// when no projected shift was kept. The bound's raises are not applied: the draws carry
-    /// the random part themselves.
+    /// the random part themselves. Term (b) at its phase dates from 2026-12-05 (eleventh
+    /// session; before, all of $b_k$ was in the remainder: on one nonlinear machine rig it set
+    /// the coherent margin at a free phase on the cross entries, docs/uncertainty.md, "Term (b)
+    /// at the misfit's phase").
     ///
     /// *Why the amplitude term leaves the remainder when the projection is kept.* The model is
     /// fitted to the BLA $G = P_0 + s + n$ (small-signal plant $P_0$, amplitude shift $s$,
@@ -1060,8 +1122,12 @@ impl MatrixUncertainty {
     /// fit's weighted projection onto the model's tangent space and $P_{\theta_0}$ the model
     /// set's best approximation of $P_0$. Its error against the small-signal plant is
     /// $P_0 - \hat P = \beta - \Pi(s) - \Pi(n)$, $\beta = P_0 - P_{\theta_0}$: the shift
-    /// enters only through $\Pi(s)$, which the draws carry ($J R\,\xi_s$), and $\Pi(n)$ is
-    /// term (a). The rest of the shift, $s - \Pi(s)$, is no error of the model against $P_0$;
+    /// enters only through $-\Pi(s)$, which the draws carry ($-J R\,\xi_s$; the model moved
+    /// *with* the shift, so its error against $P_0$ is the shift's negative — until
+    /// 2026-12-05, eleventh session, the draws added $+J R\,\xi_s$ and stood $2\Pi(s)$ from
+    /// the truth), and $\Pi(n)$ is term (a). The projected shift's noise and term (a) share the
+    /// identification FRF's noise (the amplitude study's regression includes that FRF), a
+    /// correlation the draws leave out: they draw the two independently. The rest of the shift, $s - \Pi(s)$, is no error of the model against $P_0$;
     /// it lies in the misfit $G - \hat P = \beta + (s - \Pi(s)) + (n - \Pi(n))$, which term (b)
     /// bounds at a free phase. Adding $a_k \approx |s_k|$ at a free phase as well counted the
     /// shift twice; on nonlinear machine rigs it set the coherent margin at the bending modes
@@ -1120,7 +1186,10 @@ impl MatrixUncertainty {
                         (Some(_), Some(a)) => a[k],
                         _ => 0.0,
                     };
-                    (t.errors.fixed[k] - amp).max(0.0)
+                    // term (b) is carried at its phase where that is known (its centre in
+                    // every draw) and only its spread about it stays here
+                    let b = t.model_error[k];
+                    (t.errors.fixed[k] - amp - b).max(0.0) + t.errors.bias_spread[k]
                 })
             })
             .collect();
@@ -1132,22 +1201,32 @@ impl MatrixUncertainty {
                 let z: Vec<f64> = (0..dim).map(|_| StandardNormal.sample(&mut rng)).collect();
                 for (m, x) in xi.iter_mut().enumerate() {
                     let row = &s.factor[m * dim..(m + 1) * dim];
-                    *x += s.mean[m] + row.iter().zip(&z).map(|(a, b)| a * b).sum::<f64>();
+                    // the model moved by +Π(s) with the shift, so its error against the
+                    // small-signal plant holds −Π(s) (doc above)
+                    *x -= s.mean[m] + row.iter().zip(&z).map(|(a, b)| a * b).sum::<f64>();
                 }
             }
             let mut lines = vec![faer::Mat::<c64>::zeros(ny, nu); l];
             // entry by entry, as the joint raise draws them
             for (e, terms) in self.entries.iter().enumerate() {
                 for (k, line) in lines.iter_mut().enumerate() {
-                    line[(e % ny, e / ny)] = terms.errors.line_random(k, &xi, &mut rng);
+                    line[(e % ny, e / ny)] =
+                        terms.errors.line_random(k, &xi, &mut rng) + terms.errors.bias_center[k];
                 }
             }
             out.push(lines);
         }
+        let at = |i: usize, j: usize| &self.entries[i + j * ny].errors;
         Ok(CoherentDraws {
             f_hz: self.f_hz().to_vec(),
             draws: out,
             remainder,
+            bias_centre: (0..l)
+                .map(|k| faer::Mat::from_fn(ny, nu, |i, j| at(i, j).bias_center[k]))
+                .collect(),
+            bias_spread: (0..l)
+                .map(|k| faer::Mat::from_fn(ny, nu, |i, j| at(i, j).bias_spread[k]))
+                .collect(),
         })
     }
 
@@ -2725,8 +2804,9 @@ mod tests {
     /// \overline{s_{11,k,m}}$ (4 000 draws, 5 standard errors), with the deterministic part as
     /// the remainder; with the per-line amplitude term $a_k = |\varepsilon\hat P_k|$ given, the
     /// remainder holds it until a projected shift is kept; after the noise-free projected shift
-    /// $\varepsilon\hat P$ every draw is that shift, and the remainder holds none of it (it
-    /// held $a_k$ again before 2026-12-05: the shift counted twice).
+    /// $\varepsilon\hat P$ every draw is the model's error it implies, $-\varepsilon\hat P$
+    /// (the model moved with the shift), and the remainder holds none of it (it held $a_k$
+    /// again before 2026-12-05: the shift counted twice).
     #[test]
     fn coherent_draws_carry_the_error_models_moments() {
         let (m, f, exact, frd) = coupled_2x2(1e-3);
@@ -2814,12 +2894,15 @@ mod tests {
                 .unwrap()
                 .kept
         );
-        // projected: the draws carry it, and it is not counted again at a free phase
+        // projected: the draws carry it, and it is not counted again at a free phase. The
+        // shift is the BLA's departure from the small-signal plant, G = P0 + s; the model fitted
+        // to G moved by +s, so its error P0 − P̂ is −s (the draws held +s before 2026-12-05,
+        // eleventh session)
         let d = u.coherent_draws(50, 4).unwrap();
         for x in &d.draws {
             for k in [5usize, 60, 140] {
                 for e in 0..4 {
-                    let (got, want) = (x[k][(e % 2, e / 2)], truth[e][k]);
+                    let (got, want) = (x[k][(e % 2, e / 2)], -truth[e][k]);
                     assert!(
                         (got - want).norm() < 1e-3 * want.norm(),
                         "line {k} entry {e}: {got} {want}"
@@ -2831,6 +2914,84 @@ mod tests {
             }
         }
         assert!(u.coherent_draws(0, 1).is_err());
+    }
+
+    /// Term (b) at its phase in the coherent draws: an exact 2×2 model against an FRF with a
+    /// known systematic misfit $\beta_k = 0.15\,(k/L)^2 e^{0.7i} P_{00,k}$ on entry (0, 0)
+    /// only, in 0.5 % noise. Where the misfit is far above the noise the draws' mean is $\beta$
+    /// (the truth, analytic) to within the spread, which is then a small part of $b_k$; the
+    /// disc (centre, spread) holds $\beta_k$ on ≥ 95 % of those lines; where the misfit is
+    /// just past the test's edge the phase is left free (centre 0, spread $b_k$); the entries
+    /// without misfit carry nothing. The free phase alone (the build before) would put all of
+    /// $b_k$ in the remainder.
+    #[test]
+    fn term_b_enters_the_coherent_draws_at_the_misfits_phase() {
+        let (m, f, exact, _) = coupled_2x2(1e-3);
+        let l = f.len();
+        let phase = c64::from_polar(1.0, 0.7);
+        let beta: Vec<c64> = (0..l)
+            .map(|k| exact.values()[k * 4] * phase * (0.15 * ((k + 1) as f64 / l as f64).powi(2)))
+            .collect();
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let rel = 0.005f64;
+        let (mut g, mut var) = (Vec::with_capacity(4 * l), Vec::with_capacity(4 * l));
+        for (k, bk) in beta.iter().enumerate() {
+            for e in 0..4 {
+                let p = exact.values()[k * 4 + e];
+                let v = rel * rel * p.norm_sqr();
+                let (a, b) = gauss_pair(&mut rng);
+                let noise = c64::new(a, b) * (v / 2.0).sqrt();
+                g.push(p + noise + if e == 0 { *bk } else { c64::new(0.0, 0.0) });
+                var.push(v);
+            }
+        }
+        let frd = Frd::new_matrix(f.clone(), 2, 2, g, Some(var), Some(1e-3)).unwrap();
+        let u = uncertainty_matrix(&m, &frd, &[], &UncertaintyOptions::default()).unwrap();
+        let n = 400;
+        let d = u.coherent_draws(n, 2).unwrap();
+        let b = &u.entries[0].model_error;
+        let (mut strong, mut held, mut free_edge) = (0, 0, 0);
+        for k in 0..l {
+            let (c, r) = (d.bias_centre[k][(0, 0)], d.bias_spread[k][(0, 0)]);
+            if b[k] == 0.0 {
+                assert!(c.norm() == 0.0 && r == 0.0, "line {k}: {c} {r}");
+                continue;
+            }
+            // the modulus is term (b)'s; the spread is below it where a phase is kept
+            assert!(c.norm() == 0.0 || ((c.norm() - b[k]).abs() <= 1e-9 * b[k] && r < b[k]));
+            if c.norm() == 0.0 {
+                assert_eq!(r, b[k]);
+                free_edge += 1;
+                continue;
+            }
+            // the remainder holds the spread, not b_k
+            assert!((d.remainder[k][(0, 0)] - r).abs() <= 1e-12 * b[k]);
+            let sd = (rel * exact.values()[k * 4].norm()) / (2.0f64).sqrt();
+            if beta[k].norm() > 20.0 * sd {
+                strong += 1;
+                let mean: c64 = d.draws.iter().map(|x| x[k][(0, 0)]).sum::<c64>() / n as f64;
+                // the draws' mean is the centre (term (a) averages out over the draws)
+                let sa = u.entries[0].errors.sens[k]
+                    .iter()
+                    .map(|a| a.norm_sqr())
+                    .sum::<f64>();
+                assert!((mean - c).norm() < 5.0 * (sa / n as f64).sqrt() + 1e-12);
+                held += usize::from((c - beta[k]).norm() <= r);
+                assert!(r < 0.5 * b[k], "line {k}: spread {r} of b {}", b[k]);
+            }
+        }
+        assert!(strong > 30, "{strong}");
+        assert!(held as f64 >= 0.95 * strong as f64, "{held} of {strong}");
+        assert!(free_edge > 0, "no line at the test's edge");
+        // the entries without misfit: term (b) (hence its centre) is 0 on ≥ 95 % of the lines
+        for e in 1..4 {
+            let (i, j) = (e % 2, e / 2);
+            let b = &u.entries[e].model_error;
+            let quiet = (0..l)
+                .filter(|&k| b[k] == 0.0 && d.bias_centre[k][(i, j)].norm() == 0.0)
+                .count();
+            assert!(quiet as f64 >= 0.95 * l as f64, "entry {e}: {quiet}");
+        }
     }
 
     /// Term (e) through the model ([`MatrixUncertainty::add_projected_shift`]) on the coupled
