@@ -53,9 +53,7 @@
 //! count before the tenth session of 2026-12-05), `REMAINDER=freeb` puts term (b) back at a free
 //! phase (before the eleventh), `REMAINDER=b|e` keeps term (b)'s spread alone or the rest alone;
 //! `DEBUG_REM=1` prints per entry term (b) and the rest relative to $|\hat P|$; `DEBUG_SHIFT=1`
-//! regresses the exact error $P_0 - \hat P$ on the draws' mean (diagonal and cross entries
-//! apart) and prints the draws' mean and the per-line shift estimates as relative shifts κ per
-//! band on the diagonal.
+//! compares the draws' mean and the amplitude shift with the exact error (`debug_shift`).
 //!
 //! Run: `cargo run --release -p ambid --example uncertainty_machine_rigs -- 0,1,2,3`.
 use ambid::config::MachineSection;
@@ -71,7 +69,7 @@ use ambid_core::validate::robust::{
     RobustStability,
 };
 use ambid_core::validate::uncertainty::{
-    uncertainty_matrix, EntryForm, ExtraTerms, MatrixUncertainty, UncertaintyOptions,
+    uncertainty_matrix, CoherentDraws, EntryForm, ExtraTerms, MatrixUncertainty, UncertaintyOptions,
 };
 use ambid_core::validate::weight::{Weight, DEFAULT_COVER};
 use faer::Mat;
@@ -130,6 +128,83 @@ type Row = (
     f64,
     Option<(bool, bool)>,
 );
+
+/// `DEBUG_SHIFT=1`: the exact error $E = P_0 - \hat P$ on the lines regressed on the coherent
+/// draws' mean $\bar D$, diagonal and cross entries apart (weights $1/(|\hat P_{ii}||\hat
+/// P_{jj}|)$: a cross entry's own $|\hat P_{ij}|$ has zeros that would take a relative weighting
+/// over), as the coefficient $\sum \operatorname{Re}(E\bar D^*)/\sum|\bar D|^2$ and the share
+/// of $\sum|E|^2$ it explains; per band, $\bar D$ and the per-line shift estimates $s$ as
+/// relative shifts κ on the diagonal; and $G - P_0$ and $\hat P - P_0$ regressed on $s$
+/// (weights $1/|\hat P_{ij}|^2$).
+fn debug_shift(u: &MatrixUncertainty, cd: &CoherentDraws, exact: &Frd, shifts: &[Vec<faer::c64>]) {
+    let lines = cd.f_hz.len();
+    let n = cd.draws.len() as f64;
+    let p0: Vec<Mat<faer::c64>> = (0..lines).map(|k| exact.at(k).expect("line")).collect();
+    let mean: Vec<Mat<faer::c64>> = (0..lines)
+        .map(|k| {
+            Mat::from_fn(4, 4, |i, j| {
+                cd.draws.iter().map(|d| d[k][(i, j)]).sum::<faer::c64>() / n
+            })
+        })
+        .collect();
+    let nominal = |i: usize, j: usize, k: usize| u.entries[i + 4 * j].nominal[k];
+    for (name, diag) in [("diagonal", true), ("cross", false)] {
+        let (mut ed, mut dd, mut ee) = (0.0, 0.0, 0.0);
+        for (i, j) in (0..16)
+            .map(|e| (e % 4, e / 4))
+            .filter(|(i, j)| (i == j) == diag)
+        {
+            for k in 0..lines {
+                let w = 1.0
+                    / (nominal(i, i, k).norm() * nominal(j, j, k).norm()).max(f64::MIN_POSITIVE);
+                let (err, m) = (p0[k][(i, j)] - nominal(i, j, k), mean[k][(i, j)]);
+                ed += w * (err * m.conj()).re;
+                dd += w * m.norm_sqr();
+                ee += w * err.norm_sqr();
+            }
+        }
+        println!(
+            "    shift ({name}): E on D̄ coefficient {:.3}, explains {:.3}",
+            ed / dd,
+            ed * ed / dd / ee
+        );
+    }
+    for (lo, hi) in [(10.0, 100.0), (100.0, 300.0), (300.0, 1000.0)] {
+        let row: Vec<String> = (0..4)
+            .map(|d| {
+                let (mut a, mut b, mut den) =
+                    (faer::c64::new(0.0, 0.0), faer::c64::new(0.0, 0.0), 0.0);
+                for k in (0..lines).filter(|&k| (lo..hi).contains(&cd.f_hz[k])) {
+                    let p = nominal(d, d, k);
+                    a += p.conj() * mean[k][(d, d)];
+                    if let Some(s) = shifts.get(d * 5) {
+                        b += p.conj() * s[k];
+                    }
+                    den += p.norm_sqr();
+                }
+                format!("D̄ {:+.4} ŝ {:+.4}", (a / den).re, (b / den).re)
+            })
+            .collect();
+        println!("    band {lo}-{hi}: κ {}", row.join(" | "));
+    }
+    if !shifts.is_empty() {
+        let (mut gs, mut ps, mut ss) = (0.0, 0.0, 0.0);
+        for ((e, t), se) in u.entries.iter().enumerate().zip(shifts) {
+            for (k, &sk) in se.iter().enumerate() {
+                let w = 1.0 / t.nominal[k].norm_sqr().max(f64::MIN_POSITIVE);
+                let p = p0[k][(e % 4, e / 4)];
+                gs += w * ((t.measured[k] - p) * sk.conj()).re;
+                ps += w * ((t.nominal[k] - p) * sk.conj()).re;
+                ss += w * sk.norm_sqr();
+            }
+        }
+        println!(
+            "    shift: G − P0 on s coefficient {:.3}; P̂ − P0 on s coefficient {:.3}",
+            gs / ss,
+            ps / ss
+        );
+    }
+}
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -656,117 +731,7 @@ fn main() {
                 .unwrap_or(0.95);
             let mut cd = u.coherent_draws(n_draws, 0).expect("coherent draws");
             if std::env::var("DEBUG_SHIFT").is_ok() {
-                // the exact error E = P0 − P̂ on the lines regressed on the draws' mean D̄ (the
-                // projected shift's effect) and on the misfit G − P̂ where term (b) is positive,
-                // relative to |P̂| per entry: coefficient Σ Re(E D̄*)/Σ|D̄|² and the share of Σ|E|²
-                // the fit explains
-                let n = cd.draws.len() as f64;
-                let (mut ed, mut dd, mut ee, mut em, mut mm, mut eeb) =
-                    (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
-                let mut gd = 0.0;
-                for (e, t) in u.entries.iter().enumerate() {
-                    let (i, j) = (e % 4, e / 4);
-                    for k in 0..cd.f_hz.len() {
-                        let w = 1.0 / t.nominal[k].norm_sqr().max(f64::MIN_POSITIVE);
-                        let err = exact.at(k).expect("line")[(i, j)] - t.nominal[k];
-                        let mean: faer::c64 =
-                            cd.draws.iter().map(|d| d[k][(i, j)]).sum::<faer::c64>() / n;
-                        ed += w * (err * mean.conj()).re;
-                        gd += w
-                            * ((t.measured[k] - exact.at(k).expect("line")[(i, j)]) * mean.conj())
-                                .re;
-                        dd += w * mean.norm_sqr();
-                        ee += w * err.norm_sqr();
-                        if t.model_error[k] > 0.0 {
-                            let m = t.measured[k] - t.nominal[k];
-                            em += w * (err * m.conj()).re;
-                            mm += w * m.norm_sqr();
-                            eeb += w * err.norm_sqr();
-                        }
-                    }
-                }
-                // diagonal and cross entries apart, weighted by 1/(|P̂_ii| |P̂_jj|) (the cross
-                // entries' own |P̂_ij| has zeros that take a relative weighting over)
-                for (name, diag) in [("diagonal", true), ("cross", false)] {
-                    let (mut a, mut b, mut c2) = (0.0, 0.0, 0.0);
-                    for (e, t) in u.entries.iter().enumerate() {
-                        let (i, j) = (e % 4, e / 4);
-                        if (i == j) != diag {
-                            continue;
-                        }
-                        for k in 0..cd.f_hz.len() {
-                            let w = 1.0
-                                / (u.entries[i * 5].nominal[k].norm()
-                                    * u.entries[j * 5].nominal[k].norm())
-                                .max(f64::MIN_POSITIVE);
-                            let err = exact.at(k).expect("line")[(i, j)] - t.nominal[k];
-                            let mean: faer::c64 =
-                                cd.draws.iter().map(|d| d[k][(i, j)]).sum::<faer::c64>() / n;
-                            a += w * (err * mean.conj()).re;
-                            b += w * mean.norm_sqr();
-                            c2 += w * err.norm_sqr();
-                        }
-                    }
-                    println!(
-                        "    shift ({name}): E on D̄ coefficient {:.3}, explains {:.3}",
-                        a / b,
-                        a * a / b / c2
-                    );
-                }
-                let c = ed / dd.max(f64::MIN_POSITIVE);
-                println!(
-                    "    shift: G − P0 on D̄ coefficient {:.3}",
-                    gd / dd.max(f64::MIN_POSITIVE)
-                );
-                for (lo, hi) in [(10.0, 100.0), (100.0, 300.0), (300.0, 1000.0)] {
-                    let row: Vec<String> = (0..4)
-                        .map(|dg| {
-                            let t = &u.entries[dg * 5];
-                            let (mut a, mut b, mut den) =
-                                (faer::c64::new(0.0, 0.0), faer::c64::new(0.0, 0.0), 0.0);
-                            for k in 0..cd.f_hz.len() {
-                                if !(lo..hi).contains(&cd.f_hz[k]) {
-                                    continue;
-                                }
-                                let mean: faer::c64 =
-                                    cd.draws.iter().map(|d| d[k][(dg, dg)]).sum::<faer::c64>() / n;
-                                a += t.nominal[k].conj() * mean;
-                                if !shifts_seen.is_empty() {
-                                    b += t.nominal[k].conj() * shifts_seen[dg * 5][k];
-                                }
-                                den += t.nominal[k].norm_sqr();
-                            }
-                            format!("D̄ {:+.4} ŝ {:+.4}", (a / den).re, (b / den).re)
-                        })
-                        .collect();
-                    println!("    band {lo}-{hi}: κ {}", row.join(" | "));
-                }
-                let cm = em / mm.max(f64::MIN_POSITIVE);
-                // G − P0 regressed on the per-line shift estimates s (should be +1 if s is the
-                // BLA's shift from the small-signal plant)
-                if !shifts_seen.is_empty() {
-                    let (mut gs, mut ss, mut ps) = (0.0, 0.0, 0.0);
-                    for ((e, t), se) in u.entries.iter().enumerate().zip(&shifts_seen) {
-                        let (i, j) = (e % 4, e / 4);
-                        for (k, &sk) in se.iter().enumerate() {
-                            let w = 1.0 / t.nominal[k].norm_sqr().max(f64::MIN_POSITIVE);
-                            let p0 = exact.at(k).expect("line")[(i, j)];
-                            gs += w * ((t.measured[k] - p0) * sk.conj()).re;
-                            ps += w * ((t.nominal[k] - p0) * sk.conj()).re;
-                            ss += w * sk.norm_sqr();
-                        }
-                    }
-                    println!(
-                        "    shift: G − P0 on s coefficient {:.3}; P̂ − P0 on s coefficient {:.3}",
-                        gs / ss,
-                        ps / ss
-                    );
-                }
-                println!(
-                    "    shift: E on D̄ coefficient {c:.3}, explains {:.3} of |E|²; E on misfit where b > 0: coefficient {cm:.3}, explains {:.3}",
-                    c * ed / ee.max(f64::MIN_POSITIVE),
-                    cm * em / eeb.max(f64::MIN_POSITIVE)
-                );
+                debug_shift(&u, &cd, &exact, &shifts_seen);
             }
             // REMAINDER=0: the draws alone, the element-wise remainder left out (a diagnostic of
             // what sets the coherent margin; not a bound)

@@ -1127,9 +1127,9 @@ impl MatrixUncertainty {
     /// 2026-12-05, eleventh session, the draws added $+J R\,\xi_s$ and stood $2\Pi(s)$ from
     /// the truth), and $\Pi(n)$ is term (a). The projected shift's noise and term (a) share the
     /// identification FRF's noise (the amplitude study's regression includes that FRF), a
-    /// correlation the draws leave out: they draw the two independently. The rest of the shift, $s - \Pi(s)$, is no error of the model against $P_0$;
-    /// it lies in the misfit $G - \hat P = \beta + (s - \Pi(s)) + (n - \Pi(n))$, which term (b)
-    /// bounds at a free phase. Adding $a_k \approx |s_k|$ at a free phase as well counted the
+    /// correlation the draws leave out: they draw the two independently. The rest of the
+    /// shift, $s - \Pi(s)$, is no error of the model against $P_0$; it lies in the misfit
+    /// $G - \hat P = \beta + (s - \Pi(s)) + (n - \Pi(n))$, which term (b) bounds. Adding $a_k \approx |s_k|$ at a free phase as well counted the
     /// shift twice; on nonlinear machine rigs it set the coherent margin at the bending modes
     /// (docs/uncertainty.md, "The amplitude term in the coherent draws"). What this assumes:
     /// term (b) bounds $\beta$ only where $s - \Pi(s)$ does not cancel part of it at a line
