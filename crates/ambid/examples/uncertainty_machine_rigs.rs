@@ -66,7 +66,7 @@ use ambid_core::validate::iso::IsoZones;
 use ambid_core::validate::robust::{
     loop_stable, nominal_gain_interval, robust_stability_matrix_drawn,
     robust_stability_matrix_on_lines, robust_stability_matrix_weight, LineBound, MatrixWeight,
-    RobustStability,
+    Outside, RobustStability,
 };
 use ambid_core::validate::uncertainty::{
     uncertainty_matrix, CoherentDraws, EntryForm, ExtraTerms, MatrixUncertainty, UncertaintyOptions,
@@ -167,6 +167,28 @@ fn debug_shift(u: &MatrixUncertainty, cd: &CoherentDraws, exact: &Frd, shifts: &
             "    shift ({name}): E on D̄ coefficient {:.3}, explains {:.3}",
             ed / dd,
             ed * ed / dd / ee
+        );
+    }
+    // the top lines: per diagonal entry, the exact error, its part the draws' mean leaves and
+    // the remainder, each relative to |P̂| (what a draw extended beyond the lines would carry)
+    for k in lines.saturating_sub(6)..lines {
+        let row: Vec<String> = (0..4)
+            .map(|d| {
+                let p = nominal(d, d, k);
+                let err = p0[k][(d, d)] - p;
+                format!(
+                    "{:.3}/{:.3}/{:.3}/{:.3}",
+                    err.norm() / p.norm(),
+                    (err - mean[k][(d, d)]).norm() / p.norm(),
+                    (err - mean[k][(d, d)] + cd.bias_centre[k][(d, d)]).norm() / p.norm(),
+                    cd.remainder[k][(d, d)] / p.norm()
+                )
+            })
+            .collect();
+        println!(
+            "    top line {:.1} Hz: |E| / |E − D̄| / R {}",
+            cd.f_hz[k],
+            row.join(" | ")
         );
     }
     for (lo, hi) in [(10.0, 100.0), (100.0, 300.0), (300.0, 1000.0)] {
@@ -797,14 +819,49 @@ fn main() {
                     .collect();
                 println!("    remainder (median/max relative): {}", rows.join("; "));
             }
+            if let (Ok("draws"), Some(b)) = (std::env::var("OUTSIDE").as_deref(), &cd.beyond) {
+                for (side, r) in ["below", "above"].iter().zip(b.relative_rest()) {
+                    let v: Vec<String> = (0..16)
+                        .map(|e| format!("{:.3}", r[(e % 4, e / 4)]))
+                        .collect();
+                    println!("    beyond, relative rest {side}: {}", v.join(" "));
+                }
+                if std::env::var("DEBUG_BEYOND").is_ok() {
+                    let l = cd.f_hz.len();
+                    for k in (0..l)
+                        .filter(|k| cd.f_hz[*k] >= cd.f_hz[l - 1] / 2f64.sqrt())
+                        .step_by(3)
+                    {
+                        let row: Vec<String> = [0usize, 5, 10, 15, 8]
+                            .iter()
+                            .map(|&e| {
+                                let t = &u.entries[e];
+                                let (i, j) = (e % 4, e / 4);
+                                format!(
+                                    "{:.2e} {:.2e} {:.2e}",
+                                    t.nominal[k].norm(),
+                                    cd.remainder[k][(i, j)],
+                                    cd.bias_centre[k][(i, j)].norm()
+                                )
+                            })
+                            .collect();
+                        println!("    {:.1}: {}", cd.f_hz[k], row.join(" | "));
+                    }
+                }
+            }
             let coh = robust_stability_matrix_drawn(
                 &model.model,
                 c,
                 &cd.f_hz,
                 &cd.draws,
                 &cd.remainder,
-                // OUTSIDE=0: nothing tested outside the lines (the margins rest on the model)
-                (std::env::var("OUTSIDE").as_deref() != Ok("0")).then_some(mw),
+                // OUTSIDE=0: nothing tested outside the lines (the margins rest on the model);
+                // OUTSIDE=draws: the draws continued beyond them
+                match std::env::var("OUTSIDE").as_deref() {
+                    Ok("0") => None,
+                    Ok("draws") => cd.beyond.as_ref().map(Outside::Draws),
+                    _ => Some(Outside::Weight(mw)),
+                },
                 conf,
             )
             .expect("drawn");
