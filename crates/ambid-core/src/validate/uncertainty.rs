@@ -739,6 +739,7 @@ pub struct CoherentDraws {
 /// bound beyond the data is.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DrawsBeyond {
+    kappa: [faer::Mat<c64>; 2],
     span: (f64, f64),
     map: TangentMap,
     coords: Vec<Vec<f64>>,
@@ -802,12 +803,15 @@ impl DrawsBeyond {
             .iter()
             .map(|xi| {
                 sens.iter()
-                    .map(|s| {
+                    .zip(f_hz.iter().zip(&p))
+                    .map(|(s, (x, pk))| {
+                        let kap = &self.kappa[usize::from(*x > self.span.1)];
                         faer::Mat::from_fn(ny, nu, |i, j| {
-                            s[i + j * ny]
-                                .iter()
-                                .zip(xi)
-                                .fold(c64::new(0.0, 0.0), |acc, (a, x)| acc + a * *x)
+                            kap[(i, j)] * pk[(i, j)]
+                                + s[i + j * ny]
+                                    .iter()
+                                    .zip(xi)
+                                    .fold(c64::new(0.0, 0.0), |acc, (a, x)| acc + a * *x)
                         })
                     })
                     .collect()
@@ -1365,7 +1369,7 @@ impl MatrixUncertainty {
                     .filter(|&k| edge(below, f[k]))
                     .map(|k| {
                         let nl = t.errors.nonlinear_std.as_ref().map_or(0.0, |s| q95 * s[k]);
-                        let r = remainder[k][(i, j)] + t.errors.bias_center[k].norm() + nl;
+                        let r = remainder[k][(i, j)] + nl;
                         // relative to the model at the end line (its dips within the band
                         // would make a per-line ratio explode)
                         let end = if below { 0 } else { f.len() - 1 };
@@ -1374,7 +1378,18 @@ impl MatrixUncertainty {
                     .fold(0.0, f64::max)
             })
         });
+        let kappa = [0usize, f.len() - 1].map(|end| {
+            faer::Mat::from_fn(ny, nu, |i, j| {
+                let t = &self.entries[i + j * ny];
+                if t.nominal[end].norm() > 0.0 {
+                    t.errors.bias_center[end] / t.nominal[end]
+                } else {
+                    c64::new(0.0, 0.0)
+                }
+            })
+        });
         DrawsBeyond {
+            kappa,
             span: (lo, hi),
             map: map.clone(),
             coords,
