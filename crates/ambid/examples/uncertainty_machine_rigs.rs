@@ -66,7 +66,7 @@ use ambid_core::validate::iso::IsoZones;
 use ambid_core::validate::robust::{
     loop_stable, nominal_gain_interval, robust_stability_matrix_drawn,
     robust_stability_matrix_on_lines, robust_stability_matrix_weight, LineBound, MatrixWeight,
-    Outside, RobustStability,
+    RobustStability,
 };
 use ambid_core::validate::uncertainty::{
     uncertainty_matrix, CoherentDraws, EntryForm, ExtraTerms, MatrixUncertainty, UncertaintyOptions,
@@ -135,7 +135,9 @@ type Row = (
 /// over), as the coefficient $\sum \operatorname{Re}(E\bar D^*)/\sum|\bar D|^2$ and the share
 /// of $\sum|E|^2$ it explains; per band, $\bar D$ and the per-line shift estimates $s$ as
 /// relative shifts κ on the diagonal; and $G - P_0$ and $\hat P - P_0$ regressed on $s$
-/// (weights $1/|\hat P_{ij}|^2$).
+/// (weights $1/|\hat P_{ij}|^2$); on the six top lines, per diagonal entry, $|E|$, $|E - \bar
+/// D|$, $|E - \bar D + c|$ (the mean without term (b)'s centre $c$) and the remainder, each
+/// relative to $|\hat P|$ (what sets the error just beyond the lines).
 fn debug_shift(u: &MatrixUncertainty, cd: &CoherentDraws, exact: &Frd, shifts: &[Vec<faer::c64>]) {
     let lines = cd.f_hz.len();
     let n = cd.draws.len() as f64;
@@ -169,8 +171,8 @@ fn debug_shift(u: &MatrixUncertainty, cd: &CoherentDraws, exact: &Frd, shifts: &
             ed * ed / dd / ee
         );
     }
-    // the top lines: per diagonal entry, the exact error, its part the draws' mean leaves and
-    // the remainder, each relative to |P̂| (what a draw extended beyond the lines would carry)
+    // the top lines: per diagonal entry, the exact error, what the draws' mean leaves of it,
+    // what it leaves without term (b)'s centre, and the remainder, each relative to |P̂|
     for k in lines.saturating_sub(6)..lines {
         let row: Vec<String> = (0..4)
             .map(|d| {
@@ -186,7 +188,7 @@ fn debug_shift(u: &MatrixUncertainty, cd: &CoherentDraws, exact: &Frd, shifts: &
             })
             .collect();
         println!(
-            "    top line {:.1} Hz: |E| / |E − D̄| / R {}",
+            "    top line {:.1} Hz: |E| / |E − D̄| / |E − D̄ + c| / R {}",
             cd.f_hz[k],
             row.join(" | ")
         );
@@ -819,49 +821,14 @@ fn main() {
                     .collect();
                 println!("    remainder (median/max relative): {}", rows.join("; "));
             }
-            if let (Ok("draws"), Some(b)) = (std::env::var("OUTSIDE").as_deref(), &cd.beyond) {
-                for (side, r) in ["below", "above"].iter().zip(b.relative_rest()) {
-                    let v: Vec<String> = (0..16)
-                        .map(|e| format!("{:.3}", r[(e % 4, e / 4)]))
-                        .collect();
-                    println!("    beyond, relative rest {side}: {}", v.join(" "));
-                }
-                if std::env::var("DEBUG_BEYOND").is_ok() {
-                    let l = cd.f_hz.len();
-                    for k in (0..l)
-                        .filter(|k| cd.f_hz[*k] >= cd.f_hz[l - 1] / 2f64.sqrt())
-                        .step_by(3)
-                    {
-                        let row: Vec<String> = [0usize, 5, 10, 15, 8]
-                            .iter()
-                            .map(|&e| {
-                                let t = &u.entries[e];
-                                let (i, j) = (e % 4, e / 4);
-                                format!(
-                                    "{:.2e} {:.2e} {:.2e}",
-                                    t.nominal[k].norm(),
-                                    cd.remainder[k][(i, j)],
-                                    cd.bias_centre[k][(i, j)].norm()
-                                )
-                            })
-                            .collect();
-                        println!("    {:.1}: {}", cd.f_hz[k], row.join(" | "));
-                    }
-                }
-            }
             let coh = robust_stability_matrix_drawn(
                 &model.model,
                 c,
                 &cd.f_hz,
                 &cd.draws,
                 &cd.remainder,
-                // OUTSIDE=0: nothing tested outside the lines (the margins rest on the model);
-                // OUTSIDE=draws: the draws continued beyond them
-                match std::env::var("OUTSIDE").as_deref() {
-                    Ok("0") => None,
-                    Ok("draws") => cd.beyond.as_ref().map(Outside::Draws),
-                    _ => Some(Outside::Weight(mw)),
-                },
+                // OUTSIDE=0: nothing tested outside the lines (the margins rest on the model)
+                (std::env::var("OUTSIDE").as_deref() != Ok("0")).then_some(mw),
                 conf,
             )
             .expect("drawn");

@@ -477,7 +477,7 @@ fn campbell_from_identified_models_at_five_speeds() {
 fn the_mimo_bound_and_its_robust_margins_on_random_rigs() {
     use ambid_core::validate::robust::{
         loop_stable, nominal_gain_interval, robust_stability_matrix_drawn,
-        robust_stability_matrix_on_lines, LineBound, MatrixWeight, Outside,
+        robust_stability_matrix_on_lines, LineBound, MatrixWeight,
     };
     use ambid_core::validate::uncertainty::{uncertainty_matrix, UncertaintyOptions};
     use ambid_core::validate::weight::Weight;
@@ -572,7 +572,7 @@ fn the_mimo_bound_and_its_robust_margins_on_random_rigs() {
             &cd.f_hz,
             &cd.draws,
             &cd.remainder,
-            Some(Outside::Weight(MatrixWeight::EntryRelative(&weights))),
+            Some(MatrixWeight::EntryRelative(&weights)),
             0.95,
         )
         .unwrap();

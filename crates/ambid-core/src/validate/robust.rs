@@ -564,7 +564,7 @@ pub fn robust_stability_matrix_drawn(
     f_hz: &[f64],
     draws: &[Vec<faer::Mat<c64>>],
     remainder: &[faer::Mat<f64>],
-    outside: Option<Outside<'_>>,
+    outside: Option<MatrixWeight<'_>>,
     confidence: f64,
 ) -> Result<DrawnRobustStability> {
     use rayon::prelude::*;
@@ -600,19 +600,9 @@ pub fn robust_stability_matrix_drawn(
             ),
         ));
     }
-    match &outside {
-        Some(Outside::Weight(w)) => w.check(ts, ny, nu)?,
-        Some(Outside::Draws(b)) => check_beyond(b, f_hz, draws.len())?,
-        None => {}
+    if let Some(w) = &outside {
+        w.check(ts, ny, nu)?;
     }
-    let weight_outside = match outside {
-        Some(Outside::Weight(w)) => Some(w),
-        _ => None,
-    };
-    let beyond_draws = match outside {
-        Some(Outside::Draws(b)) => Some(b),
-        _ => None,
-    };
     let nominal_stable = loop_stable(plant, controller, 1.0)?;
     let n = draws.len();
     if !nominal_stable {
@@ -624,7 +614,7 @@ pub fn robust_stability_matrix_drawn(
             upper_gain_margin: None,
             lower_gain_margin: None,
             per_draw: vec![[1.0, 1.0]; n],
-            outside_gain_interval: weight_outside.map(|_| [1.0, 1.0]),
+            outside_gain_interval: outside.map(|_| [1.0, 1.0]),
             outside_critical_hz: [None, None],
         });
     }
@@ -635,56 +625,9 @@ pub fn robust_stability_matrix_drawn(
         f_hz.iter().copied().fold(f64::INFINITY, f64::min),
         f_hz.iter().copied().fold(0.0, f64::max),
     );
-    let cap = weight_outside
+    let cap = outside
         .map(|w| outside_interval(plant, controller, span, w, (n_lo, n_hi)))
         .transpose()?;
-    // with the draws continued beyond the lines: each draw and the rest on the grid within an
-    // octave beyond them (the gain's closed-loop points there are added per probe)
-    let beyond = |x: f64| (x < span.0 && x >= 0.5 * span.0) || (x > span.1 && x <= 2.0 * span.1);
-    let flat_r = |m: &faer::Mat<f64>| -> Vec<f64> {
-        (0..ny)
-            .flat_map(|i| (0..nu).map(move |j| m[(i, j)]))
-            .collect()
-    };
-    // per draw, per point, D flat; per point, R flat
-    type Cont = (Vec<Vec<Vec<c64>>>, Vec<Vec<f64>>);
-    let continued = |x: &[f64]| -> Option<Cont> {
-        let b = beyond_draws?;
-        if x.is_empty() {
-            return Some((vec![Vec::new(); b.draws()], Vec::new()));
-        }
-        // where the draws cannot be evaluated the test fails there
-        let (d, r) = b.at(x).ok()?;
-        Some((
-            d.iter().map(|dd| dd.iter().map(flat).collect()).collect(),
-            r.iter().map(flat_r).collect(),
-        ))
-    };
-    let beyond_fixed: Vec<f64> = if beyond_draws.is_some() {
-        grid(&[plant, controller], &[], ts)?
-            .into_iter()
-            .filter(|x| beyond(*x))
-            .collect()
-    } else {
-        Vec::new()
-    };
-    let fixed_cont = continued(&beyond_fixed);
-    let (beyond_p, beyond_c) = if beyond_fixed.is_empty() {
-        (Vec::new(), Vec::new())
-    } else {
-        (
-            plant
-                .freq_response(&beyond_fixed)?
-                .iter()
-                .map(flat)
-                .collect(),
-            controller
-                .freq_response(&beyond_fixed)?
-                .iter()
-                .map(flat)
-                .collect::<Vec<_>>(),
-        )
-    };
     let out_interval = cap.as_ref().map(|c| c.interval);
     let (n_lo, n_hi) = match out_interval {
         Some((a, b)) => (n_lo.max(a), n_hi.min(b)),
@@ -724,44 +667,12 @@ pub fn robust_stability_matrix_drawn(
                 _ => ms.extend(pts.iter().map(|_| None)),
             }
         }
-        // beyond the lines (draws continued): the fixed points, then the gain's closed-loop
-        // points there
-        let (mut beyond_ms, mut beyond_extra) = (Vec::new(), None);
-        if beyond_draws.is_some() {
-            beyond_ms = beyond_p
-                .iter()
-                .zip(&beyond_c)
-                .map(|(p, c)| small::loop_m(c, p, g, nu, ny))
-                .collect();
-            let near: Vec<f64> = closed_loop_freqs(plant, controller, g)
-                .into_iter()
-                .filter(|x| beyond(*x))
-                .collect();
-            if !near.is_empty() {
-                match (
-                    plant.freq_response(&near),
-                    controller.freq_response(&near),
-                    continued(&near),
-                ) {
-                    (Ok(px), Ok(cx), Some(cont)) => {
-                        for (pk, ck) in px.iter().zip(&cx) {
-                            beyond_ms.push(small::loop_m(&flat(ck), &flat(pk), g, nu, ny));
-                        }
-                        beyond_extra = Some(cont);
-                    }
-                    _ => beyond_ms.push(None),
-                }
-            }
-        }
         Probe {
             ms,
             between: pts.into_iter().map(|p| (p.1, p.2)).collect(),
-            beyond_ms,
-            beyond_extra,
         }
     };
-    let ok_draw = |probe: &Probe, i: usize| -> bool {
-        let d = &df[i][..];
+    let ok_draw = |probe: &Probe, d: &[Vec<c64>]| -> bool {
         let mut scratch = small::Scratch::new(ny, nu);
         let on_lines = probe.ms[..lines]
             .iter()
@@ -785,32 +696,12 @@ pub fn robust_stability_matrix_drawn(
                         .collect();
                     m.as_ref().is_some_and(|m| scratch.line_ok(m, &dk, &rk))
                 })
-            && (probe.beyond_ms.is_empty() || {
-                // the fixed points beyond, then the gain's closed-loop points there
-                let fixed = fixed_cont.as_ref();
-                let extra = probe.beyond_extra.as_ref();
-                let (nf, ne) = (
-                    fixed.map_or(0, |c| c.1.len()),
-                    extra.map_or(0, |c| c.1.len()),
-                );
-                probe.beyond_ms.len() == nf + ne
-                    && probe.beyond_ms.iter().enumerate().all(|(p, m)| {
-                        let (dk, rk) = if p < nf {
-                            let c = fixed.expect("counted");
-                            (&c.0[i][p], &c.1[p])
-                        } else {
-                            let c = extra.expect("counted");
-                            (&c.0[i][p - nf], &c.1[p - nf])
-                        };
-                        m.as_ref().is_some_and(|m| scratch.line_ok(m, dk, rk))
-                    })
-            })
     };
     // the same test at a gain of its own (a bisection's probe); the draws failing in one step
     // share a bracket, so their bisections meet the same gains: each probe is computed once
     let cache: std::sync::Mutex<std::collections::HashMap<u64, std::sync::Arc<Probe>>> =
         std::sync::Mutex::new(std::collections::HashMap::new());
-    let ok_at = |g: f64, i: usize| -> bool {
+    let ok_at = |g: f64, d: &[Vec<c64>]| -> bool {
         let hit = cache.lock().ok().and_then(|c| c.get(&g.to_bits()).cloned());
         let probe = hit.unwrap_or_else(|| {
             let p = std::sync::Arc::new(probe_at(g));
@@ -819,13 +710,13 @@ pub fn robust_stability_matrix_drawn(
             }
             p
         });
-        ok_draw(&probe, i)
+        ok_draw(&probe, d)
     };
     let ms1 = probe_at(1.0);
     let outside_ok = out_interval.is_none_or(|(a, b)| a < 1.0 && b > 1.0);
-    let stable: Vec<bool> = (0..n)
-        .into_par_iter()
-        .map(|i| outside_ok && ok_draw(&ms1, i))
+    let stable: Vec<bool> = df
+        .par_iter()
+        .map(|d| outside_ok && ok_draw(&ms1, d))
         .collect();
     // one direction: every draw stable at 1 walked in 2 % steps (the lines' M shared per step),
     // each failure bracketed and refined on its own
@@ -845,12 +736,12 @@ pub fn robust_stability_matrix_drawn(
             let alive: Vec<usize> = (0..n).filter(|i| edge[*i].is_none()).collect();
             let failed: Vec<(usize, f64)> = alive
                 .par_iter()
-                .filter(|i| !ok_draw(&ms, **i))
+                .filter(|i| !ok_draw(&ms, &df[**i]))
                 .map(|i| {
                     let (mut a, mut b) = (good, probe);
                     while (b - a).abs() > 1e-3 * a {
                         let mid = 0.5 * (a + b);
-                        if ok_at(mid, *i) {
+                        if ok_at(mid, &df[*i]) {
                             a = mid;
                         } else {
                             b = mid;
@@ -906,45 +797,6 @@ pub fn robust_stability_matrix_drawn(
 struct Probe {
     ms: Vec<Option<Vec<c64>>>,
     between: Vec<(usize, f64)>,
-    /// With the draws continued beyond the lines: $M$ at the fixed points there, then at the
-    /// gain's closed-loop points there (one `None` where those could not be evaluated).
-    beyond_ms: Vec<Option<Vec<c64>>>,
-    /// The draws (per draw, per point) and the rest (per point) at those closed-loop points.
-    #[allow(clippy::type_complexity)]
-    beyond_extra: Option<(Vec<Vec<Vec<c64>>>, Vec<Vec<f64>>)>,
-}
-
-/// What bounds the error outside the lines' span in [`robust_stability_matrix_drawn`].
-#[derive(Debug, Clone, Copy)]
-pub enum Outside<'a> {
-    /// A weight, element-wise and the same for every draw: a cap on every draw's interval.
-    Weight(MatrixWeight<'a>),
-    /// Every draw continued through the model with a rest relative to it
-    /// ([`DrawsBeyond`](super::uncertainty::DrawsBeyond), from
-    /// [`CoherentDraws::beyond`](super::uncertainty::CoherentDraws::beyond)).
-    Draws(&'a super::uncertainty::DrawsBeyond),
-}
-
-/// The continued draws fit the lines and draws of [`robust_stability_matrix_drawn`].
-fn check_beyond(b: &super::uncertainty::DrawsBeyond, f_hz: &[f64], draws: usize) -> Result<()> {
-    let span = (
-        f_hz.iter().copied().fold(f64::INFINITY, f64::min),
-        f_hz.iter().copied().fold(0.0, f64::max),
-    );
-    let (lo, hi) = b.span();
-    let near = |a: f64, c: f64| (a - c).abs() <= 1e-9 * a.abs().max(c.abs());
-    if b.draws() != draws || !near(lo, span.0) || !near(hi, span.1) {
-        return Err(Error::invalid(
-            "outside",
-            format!(
-                "the continued draws ({} draws beyond {lo}…{hi} Hz) are not those of these {draws} draws on {}…{} Hz: take both from one CoherentDraws",
-                b.draws(),
-                span.0,
-                span.1
-            ),
-        ));
-    }
-    Ok(())
 }
 
 /// The frequencies around the nominal loop's lightly damped closed-loop poles (gain `g`) in
@@ -2220,7 +2072,7 @@ mod tests {
             &f,
             one,
             &zero,
-            Some(Outside::Weight(MatrixWeight::EntryAdditive(&ws))),
+            Some(MatrixWeight::EntryAdditive(&ws)),
             1.0,
         )
         .unwrap();
@@ -2277,7 +2129,7 @@ mod tests {
                 &f,
                 &draw,
                 &zero,
-                Some(Outside::Weight(MatrixWeight::EntryRelative(&ws))),
+                Some(MatrixWeight::EntryRelative(&ws)),
                 0.9,
             )
             .unwrap_err();

@@ -352,7 +352,7 @@ pub fn speed_uncertainty(
 ) -> Result<UncertaintyRow, String> {
     use ambid_core::validate::robust::{
         nominal_gain_interval, robust_stability_matrix_drawn, robust_stability_matrix_on_lines,
-        robust_stability_matrix_weight, LineBound, MatrixWeight, Outside,
+        robust_stability_matrix_weight, LineBound, MatrixWeight,
     };
     use ambid_core::validate::uncertainty::{
         uncertainty_matrix, EntryForm, ExtraTerms, UncertaintyOptions, DEFAULT_RAISE_COVER,
@@ -481,7 +481,7 @@ pub fn speed_uncertainty(
         &drawn.f_hz,
         &drawn.draws,
         &drawn.remainder,
-        Some(Outside::Weight(MatrixWeight::EntryRelative(&ws))),
+        Some(MatrixWeight::EntryRelative(&ws)),
         COHERENT_CONFIDENCE,
     )
     .map_err(err)?;
