@@ -352,7 +352,7 @@ pub fn speed_uncertainty(
 ) -> Result<UncertaintyRow, String> {
     use ambid_core::validate::robust::{
         nominal_gain_interval, robust_stability_matrix_drawn, robust_stability_matrix_on_lines,
-        robust_stability_matrix_weight, LineBound, MatrixWeight,
+        robust_stability_matrix_weight, LineBound, MatrixWeight, Outside,
     };
     use ambid_core::validate::uncertainty::{
         uncertainty_matrix, EntryForm, ExtraTerms, UncertaintyOptions, DEFAULT_RAISE_COVER,
@@ -473,15 +473,24 @@ pub fn speed_uncertainty(
     );
     let (r, weights) = (r.map_err(err)?, weights.map_err(err)?);
     let ws: Vec<Weight> = weights.iter().map(|w| w.weight.clone()).collect();
-    // the draws know nothing outside the lines: there the entry weights bound the error (their
-    // extrapolation; docs/uncertainty.md, "Coherent draws for the machine")
+    // up to an octave beyond the lines every draw is continued through the model, term (b)'s
+    // misfit held at its phase (docs/uncertainty.md, "The draws beyond the lines"); where the
+    // bound has no joint tangent map the entry weights' extrapolation caps the draws instead
+    let outside = match &drawn.beyond {
+        Some(b) => Outside::Draws(b),
+        None => Outside::Weight(MatrixWeight::EntryRelative(&ws)),
+    };
+    let coherent_outside = match outside {
+        Outside::Draws(_) => "draws",
+        Outside::Weight(_) => "entry weights",
+    };
     let rc = robust_stability_matrix_drawn(
         model,
         controller,
         &drawn.f_hz,
         &drawn.draws,
         &drawn.remainder,
-        Some(MatrixWeight::EntryRelative(&ws)),
+        Some(outside),
         COHERENT_CONFIDENCE,
     )
     .map_err(err)?;
@@ -555,6 +564,7 @@ pub fn speed_uncertainty(
             .lower_gain_margin
             .zip(rc.upper_gain_margin)
             .map(|(a, b)| [a, b]),
+        coherent_outside: coherent_outside.to_string(),
         coherent_outside_gain_interval: rc.outside_gain_interval,
         coherent_outside_critical_hz: rc.outside_critical_hz,
         amplitude_levels_pct: amp.map(|(_, l)| l),
