@@ -1267,6 +1267,9 @@ impl MatrixUncertainty {
     /// the evidence that it does not decide a margin. The element-wise bound (`additive`, the
     /// weights, the check on the lines) keeps $\max(a_k, \cdot)$, a worst case over the phase.
     ///
+    /// With a joint tangent space (a model with several entries) the draws also come continued
+    /// beyond the lines, in the same coordinates ([`CoherentDraws::beyond`], [`DrawsBeyond`]).
+    ///
     /// # Errors
     /// [`Error::InvalidArgument`] for no draws or a bound without lines.
     ///
