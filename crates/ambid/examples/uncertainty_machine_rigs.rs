@@ -16,11 +16,9 @@
 //!   against the weight, each with the bars: the exact loop stable at 90 % of the margin, and the
 //!   margin at least half the exact one (`nominal_gain_interval` of the exact plant);
 //! * the coherent margins (`robust_stability_matrix_drawn`, `COHERENT_DRAWS` draws, default
-//!   200, at `CONF`, default 0.95) with the same bars, every draw continued an octave beyond
-//!   the lines as the workflow does (`OUTSIDE=weights`: the entry weights' cap there instead,
-//!   the rule before 2026-12-05, twelfth session, and where that cap is set above, the true
-//!   relative error of the diagonal entries against their weights there; `OUTSIDE=0`: nothing
-//!   tested beyond the lines; `DEBUG_BEYOND=1` prints the continued draws' relative rest).
+//!   200, at `CONF`, default 0.95) with the same bars, capped outside the lines by the entry
+//!   weights (`OUTSIDE=0`: not); where the cap is set above, the true relative error of the
+//!   diagonal entries against their weights there.
 //!
 //! `MODE=nonlinear` simulates the nonlinear twin (the exact plant is then the linearisation).
 //! `SEED_PER_RIG=1` gives each rig its own noise realisation (base seed rig + 1000); without it
@@ -68,7 +66,7 @@ use ambid_core::validate::iso::IsoZones;
 use ambid_core::validate::robust::{
     loop_stable, nominal_gain_interval, robust_stability_matrix_drawn,
     robust_stability_matrix_on_lines, robust_stability_matrix_weight, LineBound, MatrixWeight,
-    Outside, RobustStability,
+    RobustStability,
 };
 use ambid_core::validate::uncertainty::{
     uncertainty_matrix, CoherentDraws, EntryForm, ExtraTerms, MatrixUncertainty, UncertaintyOptions,
@@ -823,29 +821,14 @@ fn main() {
                     .collect();
                 println!("    remainder (median/max relative): {}", rows.join("; "));
             }
-            if let (Ok(_), Some(b)) = (std::env::var("DEBUG_BEYOND"), &cd.beyond) {
-                // the continued draws' relative rest per entry, below and above the lines
-                for (side, r) in ["below", "above"].iter().zip(b.relative_rest()) {
-                    let v: Vec<String> = (0..16)
-                        .map(|e| format!("{:.3}", r[(e % 4, e / 4)]))
-                        .collect();
-                    println!("    beyond, relative rest {side}: {}", v.join(" "));
-                }
-            }
             let coh = robust_stability_matrix_drawn(
                 &model.model,
                 c,
                 &cd.f_hz,
                 &cd.draws,
                 &cd.remainder,
-                // beyond the lines the draws continued (the workflow's rule); OUTSIDE=weights:
-                // the entry weights' cap there instead (before 2026-12-05, twelfth session);
                 // OUTSIDE=0: nothing tested outside the lines (the margins rest on the model)
-                match (std::env::var("OUTSIDE").as_deref(), &cd.beyond) {
-                    (Ok("0"), _) => None,
-                    (Ok("weights"), _) | (_, None) => Some(Outside::Weight(mw)),
-                    (_, Some(b)) => Some(Outside::Draws(b)),
-                },
+                (std::env::var("OUTSIDE").as_deref() != Ok("0")).then_some(mw),
                 conf,
             )
             .expect("drawn");

@@ -693,9 +693,6 @@ pub struct MatrixUncertainty {
     /// Term (e) through the model as a distribution of the joint parameters, kept by
     /// [`add_projected_shift`](Self::add_projected_shift) for [`coherent_draws`](Self::coherent_draws).
     shift: Option<ParameterShift>,
-    /// The joint tangent space's map at any frequency (a model with several entries), for the
-    /// draws beyond the lines ([`CoherentDraws::beyond`]).
-    tangent: Option<TangentMap>,
 }
 
 /// The projected shift $\xi_s \sim N(\bar\xi_s, \Sigma_s)$ in the coordinates of the joint draws'
@@ -723,132 +720,6 @@ pub struct CoherentDraws {
     /// Per line, the part $r_{ij,k}$ of the remainder that is term (b)'s spread about that
     /// centre ($b_{ij,k}$ where the phase is not known).
     pub bias_spread: Vec<faer::Mat<f64>>,
-    /// The draws continued beyond the lines (a model with several entries; `None` for a SISO
-    /// model, whose bound has no joint tangent space).
-    pub beyond: Option<DrawsBeyond>,
-}
-
-/// The coherent draws continued beyond the lines' span ([`CoherentDraws::beyond`];
-/// docs/uncertainty.md, "The draws beyond the lines"). Off the lines a draw is
-/// $$ D_d(f) = J(f) R\,(\xi_d - \xi_{s,d}) + \kappa\,\hat P(f) , $$
-/// element by element, with a rest of free phase $|\Delta_{R,ij}(f)| \le \rho_{ij}|\hat
-/// P_{ij}(f)|$. The first term is the draw's parametric part (term (a) and the projected
-/// shift) through the model's own $\partial\hat P/\partial\theta$ at $f$, in the draw's
-/// coordinates. The second is term (b)'s centre (the model's structural misfit at its phase)
-/// held relative to the model from the nearest end line: just beyond the lines the model's
-/// error is that misfit, not its parametric part (on nonlinear machine rig 11 the misfit was
-/// all of the 10–13 % error at the top lines and grew to 15 % at 1.06 times the top line). $\rho$ is
-/// the rest of the lines near that end (remainder and nonlinear term), relative to the end
-/// line's model. Both are extrapolations, as every bound beyond the data is; the robust check
-/// uses them within an octave of the lines only.
-///
-/// # Example
-/// A diagonal 2×2 model fitted to its exact response on 4–400 Hz: no misfit and no rest, so
-/// beyond the lines every draw is its parametric part alone.
-/// ```
-/// use ambid_core::lti::{Frd, StateSpace};
-/// use ambid_core::validate::uncertainty::{uncertainty_matrix, UncertaintyOptions};
-/// use faer::mat;
-/// let m = StateSpace::discrete(
-///     mat![[0.9, 0.0], [0.0, 0.5]], mat![[1.0, 0.0], [0.0, 1.0]], mat![[0.1, 0.0], [0.0, 0.2]],
-///     mat![[0.0, 0.0], [0.0, 0.0]], 1e-3,
-/// ).unwrap();
-/// let f: Vec<f64> = (1..=100).map(|k| k as f64 * 4.0).collect();
-/// let exact = Frd::from_model(&m, &f).unwrap();
-/// let var: Vec<f64> = exact.values().iter().map(|g| 1e-4 * g.norm_sqr().max(1e-6)).collect();
-/// let frd = Frd::new_matrix(f.clone(), 2, 2, exact.values().to_vec(), Some(var), Some(1e-3)).unwrap();
-/// let u = uncertainty_matrix(&m, &frd, &[], &UncertaintyOptions::default()).unwrap();
-/// let d = u.coherent_draws(20, 7).unwrap();
-/// let b = d.beyond.as_ref().unwrap();
-/// assert_eq!((b.draws(), b.span()), (20, (4.0, 400.0)));
-/// let (draws, rest) = b.at(&[2.5, 450.0]).unwrap();
-/// assert_eq!((draws.len(), draws[0].len(), rest.len()), (20, 2, 2));
-/// assert!(rest.iter().all(|r| r[(0, 0)] == 0.0 && r[(1, 1)] == 0.0));
-/// assert!(draws[3][1][(0, 0)].norm() > 0.0);
-/// assert!(b.at(&[100.0]).is_err()); // within the lines
-/// ```
-#[derive(Debug, Clone, PartialEq)]
-pub struct DrawsBeyond {
-    kappa: [faer::Mat<c64>; 2],
-    span: (f64, f64),
-    map: TangentMap,
-    coords: Vec<Vec<f64>>,
-    rest: [faer::Mat<f64>; 2],
-}
-
-impl DrawsBeyond {
-    /// The lines' span $(f_1, f_K)$ \[Hz\] the draws are continued beyond.
-    pub fn span(&self) -> (f64, f64) {
-        self.span
-    }
-
-    /// The draws' count.
-    pub fn draws(&self) -> usize {
-        self.coords.len()
-    }
-
-    /// The relative rest $\rho$ below $f_1$ and above $f_K$.
-    pub fn relative_rest(&self) -> &[faer::Mat<f64>; 2] {
-        &self.rest
-    }
-
-    /// At frequencies `f_hz` outside the span: per draw, per frequency, $D_d(f)$, and per
-    /// frequency the element-wise rest $R(f)$.
-    ///
-    /// # Errors
-    /// [`Error::InvalidArgument`] for a frequency within the span or not in $(0, f_N)$;
-    /// [`Error::Numerical`] where a pole of the model lies on the unit circle at one of them.
-    #[allow(clippy::type_complexity)]
-    pub fn at(&self, f_hz: &[f64]) -> Result<(Vec<Vec<faer::Mat<c64>>>, Vec<faer::Mat<f64>>)> {
-        let m = &self.map.model;
-        let nyq = 0.5 / m.ts().unwrap_or(1.0);
-        if let Some(x) = f_hz
-            .iter()
-            .find(|x| !(**x > 0.0 && **x < nyq) || (**x >= self.span.0 && **x <= self.span.1))
-        {
-            return Err(Error::invalid(
-                "f_hz",
-                format!(
-                    "{x} Hz is not beyond the lines ({}…{} Hz) within (0, {nyq}) Hz",
-                    self.span.0, self.span.1
-                ),
-            ));
-        }
-        let (ny, nu) = (m.noutputs(), m.ninputs());
-        let p = m.freq_response(f_hz)?;
-        let sens: Vec<Vec<Vec<c64>>> = f_hz
-            .iter()
-            .map(|x| self.map.at(*x))
-            .collect::<Result<_>>()?;
-        let rest = f_hz
-            .iter()
-            .zip(&p)
-            .map(|(x, pk)| {
-                let rho = &self.rest[usize::from(*x > self.span.1)];
-                faer::Mat::from_fn(ny, nu, |i, j| rho[(i, j)] * pk[(i, j)].norm())
-            })
-            .collect();
-        let draws = self
-            .coords
-            .iter()
-            .map(|xi| {
-                sens.iter()
-                    .zip(f_hz.iter().zip(&p))
-                    .map(|(s, (x, pk))| {
-                        let kap = &self.kappa[usize::from(*x > self.span.1)];
-                        faer::Mat::from_fn(ny, nu, |i, j| {
-                            kap[(i, j)] * pk[(i, j)]
-                                + s[i + j * ny]
-                                    .iter()
-                                    .zip(xi)
-                                    .fold(c64::new(0.0, 0.0), |acc, (a, x)| acc + a * *x)
-                        })
-                    })
-                    .collect()
-            })
-            .collect();
-        Ok((draws, rest))
-    }
 }
 
 /// The outcome of [`MatrixUncertainty::add_projected_shift`].
@@ -1267,9 +1138,6 @@ impl MatrixUncertainty {
     /// the evidence that it does not decide a margin. The element-wise bound (`additive`, the
     /// weights, the check on the lines) keeps $\max(a_k, \cdot)$, a worst case over the phase.
     ///
-    /// With a joint tangent space (a model with several entries) the draws also come continued
-    /// beyond the lines, in the same coordinates ([`CoherentDraws::beyond`], [`DrawsBeyond`]).
-    ///
     /// # Errors
     /// [`Error::InvalidArgument`] for no draws or a bound without lines.
     ///
@@ -1327,7 +1195,6 @@ impl MatrixUncertainty {
             .collect();
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let mut out = Vec::with_capacity(draws);
-        let mut coords = Vec::with_capacity(draws);
         for _ in 0..draws {
             let mut xi: Vec<f64> = (0..dim).map(|_| StandardNormal.sample(&mut rng)).collect();
             if let Some(s) = &self.shift {
@@ -1348,17 +1215,10 @@ impl MatrixUncertainty {
                 }
             }
             out.push(lines);
-            coords.push(xi);
         }
         let at = |i: usize, j: usize| &self.entries[i + j * ny].errors;
-        let beyond = self
-            .tangent
-            .as_ref()
-            .filter(|m| m.rank == dim)
-            .map(|map| self.draws_beyond(map, &remainder, coords));
         Ok(CoherentDraws {
             f_hz: self.f_hz().to_vec(),
-            beyond,
             draws: out,
             remainder,
             bias_centre: (0..l)
@@ -1368,69 +1228,6 @@ impl MatrixUncertainty {
                 .map(|k| faer::Mat::from_fn(ny, nu, |i, j| at(i, j).bias_spread[k]))
                 .collect(),
         })
-    }
-
-    /// The draws of [`coherent_draws`](Self::coherent_draws) continued beyond the lines
-    /// ([`DrawsBeyond`]): their coordinates `coords`; per side, term (b)'s centre relative to
-    /// the model at the end line, $\kappa_{ij} = c_{ij,K}/\hat P_{ij,K}$ (0 where $\hat P_{ij,K} =
-    /// 0$); and per entry and side the relative rest $\rho_{ij}$, the largest over the lines
-    /// within half an octave of that end of $(R_k + \sqrt{\ln 20}\,\sigma_{c,k})$ (the
-    /// remainder and the 95 % magnitude of the nonlinear term's circular draw) over the end
-    /// line's $|\hat P_{ij,K}|$ (a per-line ratio would follow the model's anti-resonances
-    /// within that band: on one machine rig it reached 3.5).
-    fn draws_beyond(
-        &self,
-        map: &TangentMap,
-        remainder: &[faer::Mat<f64>],
-        coords: Vec<Vec<f64>>,
-    ) -> DrawsBeyond {
-        let (ny, nu) = (self.outputs, self.inputs);
-        let f = self.f_hz();
-        let (lo, hi) = (
-            f.iter().copied().fold(f64::INFINITY, f64::min),
-            f.iter().copied().fold(0.0, f64::max),
-        );
-        let edge = |below: bool, x: f64| {
-            if below {
-                x <= lo * std::f64::consts::SQRT_2
-            } else {
-                x >= hi / std::f64::consts::SQRT_2
-            }
-        };
-        let q95 = 20f64.ln().sqrt();
-        let rest = [true, false].map(|below| {
-            faer::Mat::from_fn(ny, nu, |i, j| {
-                let t = &self.entries[i + j * ny];
-                (0..f.len())
-                    .filter(|&k| edge(below, f[k]))
-                    .map(|k| {
-                        let nl = t.errors.nonlinear_std.as_ref().map_or(0.0, |s| q95 * s[k]);
-                        let r = remainder[k][(i, j)] + nl;
-                        // relative to the model at the end line (its dips within the band
-                        // would make a per-line ratio explode)
-                        let end = if below { 0 } else { f.len() - 1 };
-                        r / t.nominal[end].norm().max(f64::MIN_POSITIVE)
-                    })
-                    .fold(0.0, f64::max)
-            })
-        });
-        let kappa = [0usize, f.len() - 1].map(|end| {
-            faer::Mat::from_fn(ny, nu, |i, j| {
-                let t = &self.entries[i + j * ny];
-                if t.nominal[end].norm() > 0.0 {
-                    t.errors.bias_center[end] / t.nominal[end]
-                } else {
-                    c64::new(0.0, 0.0)
-                }
-            })
-        });
-        DrawsBeyond {
-            kappa,
-            span: (lo, hi),
-            map: map.clone(),
-            coords,
-            rest,
-        }
     }
 
     /// Term (e) through the model (module docs, "Term (e) through the model"): the amplitude
@@ -1857,14 +1654,11 @@ pub fn uncertainty_matrix(
         ));
     }
     // a SISO model: the SISO tangent space; else the joint one, split per entry
-    let (mut joint, map) = if ny * nu > 1 {
-        let (sens, n_theta, map) = joint_tangent_sensitivities(nominal, frd)?;
-        (
-            sens.into_iter().map(|s| Some((s, n_theta))).collect(),
-            Some(map),
-        )
+    let mut joint = if ny * nu > 1 {
+        let (sens, n_theta) = joint_tangent_sensitivities(nominal, frd)?;
+        sens.into_iter().map(|s| Some((s, n_theta))).collect()
     } else {
-        (vec![None], None)
+        vec![None]
     };
     let mut entries = Vec::with_capacity(ny * nu);
     for j in 0..nu {
@@ -1882,7 +1676,6 @@ pub fn uncertainty_matrix(
         inputs: nu,
         entries,
         shift: None,
-        tangent: map,
     })
 }
 
@@ -2018,11 +1811,10 @@ const ORIGIN_POLE: f64 = 1e-4;
 /// whitened Jacobian (rows $\sqrt{2/\sigma^2_{ij,k}}\,(\operatorname{Re}, \operatorname{Im})$,
 /// columns scaled to unit norm), as many as exceed $10^{-9}$ of the largest, capped at that
 /// dimension. Returns the sensitivities and the dimension $n_\theta$.
-#[allow(clippy::type_complexity)]
 fn joint_tangent_sensitivities(
     model: &StateSpace,
     frd: &Frd,
-) -> Result<(Vec<Vec<Vec<c64>>>, usize, TangentMap)> {
+) -> Result<(Vec<Vec<Vec<c64>>>, usize)> {
     let (n, ny, nu) = (model.order(), model.noutputs(), model.ninputs());
     let e = ny * nu;
     let l = frd.len();
@@ -2041,8 +1833,16 @@ fn joint_tangent_sensitivities(
         ));
     }
     let mut jac = faer::Mat::<f64>::zeros(rows, n_cols);
+    let a = model.a();
     for k in 0..l {
-        let (x, yt) = resolvents(model, ts, frd.f_hz()[k]).map_err(|_| {
+        let z = c64::from_polar(1.0, 2.0 * std::f64::consts::PI * frd.f_hz()[k] * ts);
+        let zi_a = faer::Mat::from_fn(n, n, |r, c| {
+            let d = if r == c { z } else { c64::new(0.0, 0.0) };
+            d - c64::new(a[(r, c)], 0.0)
+        });
+        let b = faer::Mat::from_fn(n, nu, |r, c| c64::new(model.b()[(r, c)], 0.0));
+        let ct = faer::Mat::from_fn(n, ny, |r, c| c64::new(model.c()[(c, r)], 0.0));
+        let on_pole = |_| {
             Error::numerical(
                 CTX,
                 format!(
@@ -2050,21 +1850,34 @@ fn joint_tangent_sensitivities(
                     frd.f_hz()[k]
                 ),
             )
-        })?;
+        };
+        let x = crate::linalg::solve_c64(zi_a.as_ref(), b.as_ref()).map_err(on_pole)?;
+        let yt = crate::linalg::solve_c64(zi_a.transpose().to_owned().as_ref(), ct.as_ref())
+            .map_err(on_pole)?;
         for j in 0..nu {
             for i in 0..ny {
                 let w = (2.0 / var[k * e + j * ny + i]).sqrt();
                 let row = 2 * (k * e + j * ny + i);
-                jacobian_row(&x, &yt, i, j, has_d, |col, v| {
+                let mut put = |col: usize, v: c64| {
                     jac[(row, col)] = w * v.re;
                     jac[(row + 1, col)] = w * v.im;
-                });
+                };
+                for r in 0..n {
+                    for s2 in 0..n {
+                        put(r * n + s2, yt[(r, i)] * x[(s2, j)]);
+                    }
+                    put(n * n + r * nu + j, yt[(r, i)]);
+                }
+                for s2 in 0..n {
+                    put(n * n + n * nu + i * n + s2, x[(s2, j)]);
+                }
+                if has_d {
+                    put(n * n + n * nu + ny * n + j * ny + i, c64::new(1.0, 0.0));
+                }
             }
         }
     }
-    // each column scaled to unit norm (1 where it vanishes), the scale kept for the map
-    let mut scale = vec![1.0; n_cols];
-    for (c, sc) in scale.iter_mut().enumerate() {
+    for c in 0..n_cols {
         let norm = (0..rows)
             .map(|r| jac[(r, c)] * jac[(r, c)])
             .sum::<f64>()
@@ -2073,7 +1886,6 @@ fn joint_tangent_sensitivities(
             for r in 0..rows {
                 jac[(r, c)] /= norm;
             }
-            *sc = 1.0 / norm;
         }
     }
     let svd = jac.thin_svd().map_err(|err| {
@@ -2105,103 +1917,7 @@ fn joint_tangent_sensitivities(
                 .collect()
         })
         .collect();
-    // J(f) R at any f: the raw Jacobian's row times diag(scale) V Σ⁻¹ (its first `rank` columns)
-    let v = svd.V();
-    let basis = (0..n_cols)
-        .flat_map(|col| {
-            let (sc, v, sv) = (scale[col], &v, &sv);
-            (0..rank).map(move |c| sc * v[(col, c)] / sv[c])
-        })
-        .collect();
-    Ok((
-        sens,
-        rank,
-        TangentMap {
-            model: model.clone(),
-            has_d,
-            rank,
-            basis,
-        },
-    ))
-}
-
-/// $X = (zI - A)^{-1}B$ and $Y^{\mathsf T} = (zI - A)^{-\mathsf T}C^{\mathsf T}$ of a discrete model
-/// at `f_hz` ($z = e^{j2\pi f T_s}$); an error where $zI - A$ is singular (a pole at $z$).
-fn resolvents(model: &StateSpace, ts: f64, f_hz: f64) -> Result<(faer::Mat<c64>, faer::Mat<c64>)> {
-    let (n, ny, nu) = (model.order(), model.noutputs(), model.ninputs());
-    let a = model.a();
-    let z = c64::from_polar(1.0, 2.0 * std::f64::consts::PI * f_hz * ts);
-    let zi_a = faer::Mat::from_fn(n, n, |r, c| {
-        let d = if r == c { z } else { c64::new(0.0, 0.0) };
-        d - c64::new(a[(r, c)], 0.0)
-    });
-    let b = faer::Mat::from_fn(n, nu, |r, c| c64::new(model.b()[(r, c)], 0.0));
-    let ct = faer::Mat::from_fn(n, ny, |r, c| c64::new(model.c()[(c, r)], 0.0));
-    let on_pole = |_| Error::numerical(CTX, format!("a pole of the model lies at {f_hz} Hz"));
-    let x = crate::linalg::solve_c64(zi_a.as_ref(), b.as_ref()).map_err(on_pole)?;
-    let yt = crate::linalg::solve_c64(zi_a.transpose().to_owned().as_ref(), ct.as_ref())
-        .map_err(on_pole)?;
-    Ok((x, yt))
-}
-
-/// The row of $\partial\hat P_{ij}/\partial\theta$ at one frequency from its resolvents
-/// ([`resolvents`]), column by column into `put` (the layout of [`joint_tangent_sensitivities`]:
-/// $A$ row-major, then $B$, $C$, and $D$ with `has_d`).
-fn jacobian_row(
-    x: &faer::Mat<c64>,
-    yt: &faer::Mat<c64>,
-    i: usize,
-    j: usize,
-    has_d: bool,
-    mut put: impl FnMut(usize, c64),
-) {
-    let (n, nu, ny) = (x.nrows(), x.ncols(), yt.ncols());
-    for r in 0..n {
-        for s2 in 0..n {
-            put(r * n + s2, yt[(r, i)] * x[(s2, j)]);
-        }
-        put(n * n + r * nu + j, yt[(r, i)]);
-    }
-    for s2 in 0..n {
-        put(n * n + n * nu + i * n + s2, x[(s2, j)]);
-    }
-    if has_d {
-        put(n * n + n * nu + ny * n + j * ny + i, c64::new(1.0, 0.0));
-    }
-}
-
-/// The joint tangent space's map from the draws' coordinates $\xi$ to the model's error at any
-/// frequency: $J_{ij}(f) R$ (the sensitivities of [`joint_tangent_sensitivities`] on the lines,
-/// continued through the model's own $\partial\hat P/\partial\theta$ off them).
-#[derive(Debug, Clone, PartialEq)]
-struct TangentMap {
-    model: StateSpace,
-    has_d: bool,
-    rank: usize,
-    /// $\operatorname{diag}(s)\,V\Sigma^{-1}$, row-major $n_{\text{cols}}\times$ `rank`.
-    basis: Vec<f64>,
-}
-
-impl TangentMap {
-    /// $J_{ij}(f) R$ per entry ($i + j n_y$) at `f_hz`.
-    fn at(&self, f_hz: f64) -> Result<Vec<Vec<c64>>> {
-        let m = &self.model;
-        let ts = m.ts().unwrap_or(1.0);
-        let (x, yt) = resolvents(m, ts, f_hz)?;
-        let (ny, nu, r) = (m.noutputs(), m.ninputs(), self.rank);
-        let mut out = vec![vec![c64::new(0.0, 0.0); r]; ny * nu];
-        for j in 0..nu {
-            for i in 0..ny {
-                let row = &mut out[i + j * ny];
-                jacobian_row(&x, &yt, i, j, self.has_d, |col, v| {
-                    for (o, b) in row.iter_mut().zip(&self.basis[col * r..(col + 1) * r]) {
-                        *o += v * *b;
-                    }
-                });
-            }
-        }
-        Ok(out)
-    }
+    Ok((sens, rank))
 }
 
 /// The FRF's variances, every one positive and finite.
@@ -2893,7 +2609,7 @@ mod tests {
             )
             .unwrap();
             let frd = with_var(&Frd::from_model(&m, &f).unwrap(), Some(var.clone()), 1e-3);
-            let (joint, dim, _) = joint_tangent_sensitivities(&m, &frd).unwrap();
+            let (joint, dim) = joint_tangent_sensitivities(&m, &frd).unwrap();
             assert_eq!(dim, 6 + usize::from(with_d));
             let poles = m.poles().unwrap();
             let siso = tangent_sensitivities(&poles, with_d, &lines_z(&f, 1e-3), &var).unwrap();
@@ -3091,46 +2807,6 @@ mod tests {
     /// $\varepsilon\hat P$ every draw is the model's error it implies, $-\varepsilon\hat P$
     /// (the model moved with the shift), and the remainder holds none of it (it held $a_k$
     /// again before 2026-12-05: the shift counted twice).
-    /// The tangent map continued off the lines is the sensitivities on them: at every line
-    /// $J(f_k)R$ from the model equals the stored $J_k R$, and the continued draws beyond
-    /// the lines are that map times each draw's coordinates, whose draws on the lines are
-    /// $J_k R\,\xi_d$ (no other term in an exact fit with no term (b) centre).
-    #[test]
-    #[allow(clippy::needless_range_loop)]
-    fn the_tangent_map_continues_the_sensitivities_off_the_lines() {
-        let (m, f, _exact, frd) = coupled_2x2(1e-3);
-        let u = uncertainty_matrix(&m, &frd, &[], &UncertaintyOptions::default()).unwrap();
-        let map = u.tangent.as_ref().unwrap();
-        let mut worst = 0.0f64;
-        for k in [0usize, 37, 111, f.len() - 1] {
-            let at = map.at(f[k]).unwrap();
-            for e in 0..4 {
-                let s = &u.entries[e].errors.sens[k];
-                let scale = s.iter().map(|a| a.norm()).fold(0.0, f64::max);
-                for (a, b) in at[e].iter().zip(s) {
-                    worst = worst.max((a - b).norm() / scale);
-                }
-            }
-        }
-        assert!(worst < 1e-8, "{worst}");
-        let d = u.coherent_draws(5, 2).unwrap();
-        let b = d.beyond.as_ref().unwrap();
-        assert_eq!(b.draws(), 5);
-        assert_eq!(b.span(), (f[0], f[f.len() - 1]));
-        let top = f[f.len() - 1] * 1.3;
-        let (dd, rr) = b.at(&[top]).unwrap();
-        let sens = map.at(top).unwrap();
-        for (x, xi) in dd.iter().zip(&b.coords) {
-            for e in 0..4 {
-                let want: c64 = sens[e].iter().zip(xi).map(|(a, z)| a * *z).sum();
-                assert!((x[0][(e % 2, e / 2)] - want).norm() <= 1e-12 * want.norm().max(1e-300));
-            }
-        }
-        assert_eq!((rr.len(), rr[0].nrows(), rr[0].ncols()), (1, 2, 2));
-        assert!(b.at(&[f[3]]).is_err());
-        assert!(b.at(&[0.6 / 1e-3]).is_err());
-    }
-
     #[test]
     fn coherent_draws_carry_the_error_models_moments() {
         let (m, f, exact, frd) = coupled_2x2(1e-3);

@@ -225,18 +225,11 @@ pub fn uncertainty_machine(a: &UncertaintyArgs) -> Result<()> {
         margins(row.gain_margins)
     );
     println!(
-        "against {} coherent draws of the model's error (whole matrices; the misfit element-wise around each; up to an octave outside the lines {}): {:.1} % of the draws stable, robust gain margins at {:.0} % of the draws {}",
+        "against {} coherent draws of the model's error (whole matrices; the misfit element-wise around each; up to an octave outside the lines the entry weights, gains {}{}): {:.1} % of the draws stable, robust gain margins at {:.0} % of the draws {}",
         row.coherent_draws,
-        match row.coherent_outside_gain_interval {
-            Some(g) => format!(
-                "the {}, gains {}{}",
-                row.coherent_outside,
-                margins(Some(g)),
-                row.coherent_outside_critical_hz[1]
-                    .map_or(String::new(), |f| format!(", ended above at {f:.1} Hz"))
-            ),
-            None => "every draw continued through the model".to_string(),
-        },
+        margins(row.coherent_outside_gain_interval),
+        row.coherent_outside_critical_hz[1]
+            .map_or(String::new(), |f| format!(", ended above at {f:.1} Hz")),
         100.0 * row.coherent_stable_fraction,
         100.0 * row.coherent_confidence,
         margins(row.coherent_gain_margins)

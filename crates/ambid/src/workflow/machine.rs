@@ -308,15 +308,9 @@ pub struct UncertaintyRow {
     pub coherent_stable_fraction: f64,
     /// The coherent margins `[lower, upper]`.
     pub coherent_gain_margins: Option<[f64; 2]>,
-    /// What bounds the error up to an octave beyond the lines in the coherent check: `draws`
-    /// (every draw continued through the model with term (b)'s misfit held at its phase,
-    /// `DrawsBeyond`; docs/uncertainty.md, "The draws beyond the lines") or `entry weights`
-    /// (their element-wise extrapolation, a cap on every draw; only where the bound has no
-    /// joint tangent map).
-    pub coherent_outside: String,
-    /// With the entry weights beyond the lines, the gain interval in which the loop passes the
-    /// element-wise test against them there; it caps the coherent margins (`null` with the
-    /// continued draws, which are tested per draw).
+    /// The gain interval in which the loop passes the element-wise test against the entry
+    /// weights at the frequencies outside the lines, where the draws know nothing; it caps
+    /// the coherent margins; it is tested up to an octave beyond the lines.
     pub coherent_outside_gain_interval: Option<[f64; 2]>,
     /// Where \[Hz\] that test fails just below and above its interval (`null` at an end the
     /// nominal loop's interval set).

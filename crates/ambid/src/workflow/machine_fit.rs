@@ -352,7 +352,7 @@ pub fn speed_uncertainty(
 ) -> Result<UncertaintyRow, String> {
     use ambid_core::validate::robust::{
         nominal_gain_interval, robust_stability_matrix_drawn, robust_stability_matrix_on_lines,
-        robust_stability_matrix_weight, LineBound, MatrixWeight, Outside,
+        robust_stability_matrix_weight, LineBound, MatrixWeight,
     };
     use ambid_core::validate::uncertainty::{
         uncertainty_matrix, EntryForm, ExtraTerms, UncertaintyOptions, DEFAULT_RAISE_COVER,
@@ -473,24 +473,15 @@ pub fn speed_uncertainty(
     );
     let (r, weights) = (r.map_err(err)?, weights.map_err(err)?);
     let ws: Vec<Weight> = weights.iter().map(|w| w.weight.clone()).collect();
-    // up to an octave beyond the lines every draw is continued through the model, term (b)'s
-    // misfit held at its phase (docs/uncertainty.md, "The draws beyond the lines"); where the
-    // bound has no joint tangent map the entry weights' extrapolation caps the draws instead
-    let outside = match &drawn.beyond {
-        Some(b) => Outside::Draws(b),
-        None => Outside::Weight(MatrixWeight::EntryRelative(&ws)),
-    };
-    let coherent_outside = match outside {
-        Outside::Draws(_) => "draws",
-        Outside::Weight(_) => "entry weights",
-    };
+    // the draws know nothing outside the lines: there the entry weights bound the error (their
+    // extrapolation; docs/uncertainty.md, "Coherent draws for the machine")
     let rc = robust_stability_matrix_drawn(
         model,
         controller,
         &drawn.f_hz,
         &drawn.draws,
         &drawn.remainder,
-        Some(outside),
+        Some(MatrixWeight::EntryRelative(&ws)),
         COHERENT_CONFIDENCE,
     )
     .map_err(err)?;
@@ -564,7 +555,6 @@ pub fn speed_uncertainty(
             .lower_gain_margin
             .zip(rc.upper_gain_margin)
             .map(|(a, b)| [a, b]),
-        coherent_outside: coherent_outside.to_string(),
         coherent_outside_gain_interval: rc.outside_gain_interval,
         coherent_outside_critical_hz: rc.outside_critical_hz,
         amplitude_levels_pct: amp.map(|(_, l)| l),

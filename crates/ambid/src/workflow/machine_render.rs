@@ -472,7 +472,7 @@ pub fn uncertainty_coherent_table(rows: &[super::machine::UncertaintyRow]) -> Ta
             "confidence",
             "draws stable at gain 1 [%]",
             "robust gain margins, coherent",
-            "up to an octave beyond the lines",
+            "outside the lines (entry weights)",
             "robust gain margins, element-wise on the lines",
             "exact gain margins",
         ]
@@ -491,14 +491,8 @@ pub fn uncertainty_coherent_table(rows: &[super::machine::UncertaintyRow]) -> Ta
                         r.coherent_outside_gain_interval,
                         r.coherent_outside_critical_hz[1],
                     ) {
-                        (Some(p), Some(f)) => format!(
-                            "{}: {} (above: {} Hz)",
-                            r.coherent_outside,
-                            pair(Some(p)),
-                            fmt(f)
-                        ),
-                        (Some(p), None) => format!("{}: {}", r.coherent_outside, pair(Some(p))),
-                        (None, _) => format!("{} continued", r.coherent_outside),
+                        (Some(p), Some(f)) => format!("{} (above: {} Hz)", pair(Some(p)), fmt(f)),
+                        (p, _) => pair(p),
                     },
                     pair(r.gain_margins),
                     pair(r.exact_gain_margins),
