@@ -176,14 +176,15 @@ fn debug_shift(u: &MatrixUncertainty, cd: &CoherentDraws, exact: &Frd, shifts: &
     for k in lines.saturating_sub(6)..lines {
         let row: Vec<String> = (0..4)
             .map(|d| {
-                let p = nominal(d, d, k);
-                let err = p0[k][(d, d)] - p;
+                let p = nominal(d, d, k).norm();
+                let err = p0[k][(d, d)] - nominal(d, d, k);
+                let left = err - mean[k][(d, d)];
                 format!(
                     "{:.3}/{:.3}/{:.3}/{:.3}",
-                    err.norm() / p.norm(),
-                    (err - mean[k][(d, d)]).norm() / p.norm(),
-                    (err - mean[k][(d, d)] + cd.bias_centre[k][(d, d)]).norm() / p.norm(),
-                    cd.remainder[k][(d, d)] / p.norm()
+                    err.norm() / p,
+                    left.norm() / p,
+                    (left + cd.bias_centre[k][(d, d)]).norm() / p,
+                    cd.remainder[k][(d, d)] / p
                 )
             })
             .collect();

@@ -1129,8 +1129,9 @@ impl MatrixUncertainty {
     /// identification FRF's noise (the amplitude study's regression includes that FRF), a
     /// correlation the draws leave out: they draw the two independently. The rest of the
     /// shift, $s - \Pi(s)$, is no error of the model against $P_0$; it lies in the misfit
-    /// $G - \hat P = \beta + (s - \Pi(s)) + (n - \Pi(n))$, which term (b) bounds. Adding $a_k \approx |s_k|$ at a free phase as well counted the
-    /// shift twice; on nonlinear machine rigs it set the coherent margin at the bending modes
+    /// $G - \hat P = \beta + (s - \Pi(s)) + (n - \Pi(n))$, which term (b) bounds. Adding
+    /// $a_k \approx |s_k|$ at a free phase as well counted the shift twice; on nonlinear
+    /// machine rigs it set the coherent margin at the bending modes
     /// (docs/uncertainty.md, "The amplitude term in the coherent draws"). What this assumes:
     /// term (b) bounds $\beta$ only where $s - \Pi(s)$ does not cancel part of it at a line
     /// (both lie outside the tangent space); the per-line shift estimates are too noisy to
