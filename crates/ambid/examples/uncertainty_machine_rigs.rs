@@ -59,7 +59,8 @@
 use ambid::config::MachineSection;
 use ambid::workflow::machine::{acquire_twin, MachineModelInput, MachineModels};
 use ambid::workflow::machine_fit::{
-    amplitude_terms, amplitude_terms_and_shifts, fit_band, AmplitudeStudy, FrequencyFitter,
+    amplitude_terms, amplitude_terms_and_shifts, fit_band, uncertainty_band, AmplitudeStudy,
+    FrequencyFitter,
 };
 use ambid_core::lti::Frd;
 use ambid_core::validate::iso::IsoZones;
@@ -332,7 +333,18 @@ fn main() {
             println!("rig {rig}: no band");
             continue;
         };
-        let plant = &measured.band(band.0, band.1).expect("band");
+        // the bound's lines: the fit band and the validation lines above it, as the workflow's
+        // (UNC_BAND=fit: the fit band alone, the rule before 2026-12-05)
+        let unc_end = if std::env::var("UNC_BAND").as_deref() == Ok("fit") {
+            band.1
+        } else {
+            uncertainty_band(measured, band).expect("band").1
+        };
+        let plant = &measured.band(band.0, unc_end).expect("band");
+        let unc_opts = UncertaintyOptions {
+            fitted_band_hz: (unc_end > band.1).then_some([band.0, band.1]),
+            ..UncertaintyOptions::default()
+        };
         if std::env::var("DEBUG_1X").is_ok() {
             // the FRF's error against the exact plant in units of its standard deviation,
             // largest over the entries, at the lines nearest the 1× frequency and the median
@@ -376,6 +388,53 @@ fn main() {
                 if (fz - f1).abs() < 5.0 {
                     println!("    model pole {fz:.2} Hz ζ {:.2e}", -sp.re / sp.norm());
                 }
+            }
+        }
+        if std::env::var("DEBUG_BEYOND").is_ok() {
+            // the measured FRF beyond the fit band: per diagonal entry, relative std, the
+            // windowed (±4 lines) misfit to the model and the true error, both relative to |P̂|
+            let fl: Vec<f64> = measured
+                .f_hz()
+                .iter()
+                .copied()
+                .filter(|f| *f > band.1 * 0.9 && *f < band.1 * 1.5)
+                .collect();
+            let g = measured.band(fl[0], fl[fl.len() - 1]).expect("band");
+            let ex = Frd::from_model(&truth[0].plant, &fl).expect("exact");
+            let mh = Frd::from_model(&model.model, &fl).expect("model");
+            for k in (0..fl.len()).step_by(4) {
+                let e = 16;
+                let vs: f64 = g.variance().expect("v")[k * e..(k + 1) * e].iter().sum();
+                let gs: f64 = g.values()[k * e..(k + 1) * e]
+                    .iter()
+                    .map(|x| x.norm_sqr())
+                    .sum();
+                print!("  summed rel std {:.3}", (vs / gs).sqrt());
+                let row: Vec<String> = (0..4)
+                    .map(|d| {
+                        let e = g.entry(d, d).expect("entry");
+                        let v = e.variance().expect("variance");
+                        let ph = mh.at(k).expect("l")[(d, d)];
+                        let lo = k.saturating_sub(4);
+                        let hi = (k + 5).min(fl.len());
+                        let mut w = faer::c64::new(0.0, 0.0);
+                        for q in lo..hi {
+                            w += (e.values()[q] - mh.at(q).expect("l")[(d, d)])
+                                / mh.at(q).expect("l")[(d, d)];
+                        }
+                        w /= (hi - lo) as f64;
+                        let t = (ex.at(k).expect("l")[(d, d)] - ph) / ph;
+                        format!(
+                            "σ {:.3} mis {:.3}∠{:+.0} true {:.3}∠{:+.0}",
+                            v[k].sqrt() / ph.norm(),
+                            w.norm(),
+                            w.arg().to_degrees(),
+                            t.norm(),
+                            t.arg().to_degrees()
+                        )
+                    })
+                    .collect();
+                println!("  {:.1} Hz: {}", fl[k], row.join(" | "));
             }
         }
         if std::env::var("DEBUG_AMP").is_ok() {
@@ -470,14 +529,13 @@ fn main() {
                 ..ExtraTerms::default()
             })
             .collect();
-        let u =
-            match uncertainty_matrix(&model.model, plant, &extra, &UncertaintyOptions::default()) {
-                Ok(u) => u,
-                Err(e) => {
-                    println!("rig {rig}: no bound: {e}");
-                    continue;
-                }
-            };
+        let u = match uncertainty_matrix(&model.model, plant, &extra, &unc_opts) {
+            Ok(u) => u,
+            Err(e) => {
+                println!("rig {rig}: no bound: {e}");
+                continue;
+            }
+        };
         // term (e) through the model, as the workflow does (NO_PROJECT=1: without it)
         let mut u = u;
         let mut projected_kept = false;

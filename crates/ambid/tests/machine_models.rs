@@ -491,8 +491,15 @@ fn the_mimo_bound_and_its_robust_margins_on_random_rigs() {
         let band = ambid::workflow::machine_fit::fit_band(measured, m.quality_band_hz)
             .unwrap()
             .unwrap();
-        let plant = measured.band(band.0, band.1).unwrap();
-        let mut u = uncertainty_matrix(model, &plant, &[], &UncertaintyOptions::default()).unwrap();
+        // the workflow's lines: the fit band and the validation lines above it
+        let bound_band = ambid::workflow::machine_fit::uncertainty_band(measured, band).unwrap();
+        assert!(bound_band.0 == band.0 && bound_band.1 >= band.1 && bound_band.1 <= 2.0 * band.1);
+        let plant = measured.band(bound_band.0, bound_band.1).unwrap();
+        let opts = UncertaintyOptions {
+            fitted_band_hz: (bound_band.1 > band.1).then_some([band.0, band.1]),
+            ..UncertaintyOptions::default()
+        };
+        let mut u = uncertainty_matrix(model, &plant, &[], &opts).unwrap();
         let raise = u.joint_raise(0.98, 0.95, 2000, 0).unwrap().max(1.0);
         // the workflow's entry weights (over the bound raised for 95 % of the pairs), the
         // coherent check's bound outside the lines

@@ -608,6 +608,12 @@ fn the_workflow_bounds_the_chosen_models_uncertainty_on_request() {
     assert!(r["truth_coverage"].as_f64().unwrap() >= 0.95, "{r}");
     let med = r["median_rel_pct"].as_f64().unwrap();
     assert!(med > 0.0 && med < 10.0, "{r}");
+    // the bound's lines: the fit band and the validation lines above it, up to an octave
+    let (fit, bound) = (floats(&r["band_hz"]), floats(&r["bound_band_hz"]));
+    assert!(
+        bound[0] == fit[0] && bound[1] >= fit[1] && bound[1] <= 2.0 * fit[1],
+        "{r}"
+    );
     assert!(out
         .report
         .to_html()

@@ -187,6 +187,16 @@ pub struct UncertaintyOptions {
     /// "Mode-shaped weights" and "The mode-shaped weight as the single-axis default", gives
     /// what each holds on random rigs).
     pub weight_shape: super::weight::WeightShape,
+    /// The band $[f_a, f_b]$ \[Hz\] the nominal model was fitted on, when the FRF reaches beyond
+    /// it (default `None`: every line was fitted). Lines outside it are *validation* lines:
+    /// the parameter covariance of term (a) comes from the fitted lines alone, a validation
+    /// line's $J_k R$ is the tangent map evaluated there, and its residual's noise variance in
+    /// term (b) is $\sigma_k^2(1 + h_k)$ (the model's prediction variance adds to the line's)
+    /// instead of a fitted line's $\sigma_k^2(1 - h_k)$. The bound then rests on the measured
+    /// misfit where the model was not fitted, not on an extrapolation (docs/uncertainty.md,
+    /// "Lines beyond the fit band"). Any model goes through the joint tangent space of
+    /// [`uncertainty_matrix`] then, a SISO one as its 1×1 case.
+    pub fitted_band_hz: Option<[f64; 2]>,
 }
 
 /// The default fraction of the first-order error model's draws a single-axis weight is raised
@@ -219,6 +229,7 @@ impl Default for UncertaintyOptions {
             draws: 2000,
             seed: 0,
             weight_shape: super::weight::WeightShape::ModeShaped,
+            fitted_band_hz: None,
         }
     }
 }
@@ -499,7 +510,7 @@ fn uncertainty_with(
     frd: &Frd,
     extra: &ExtraTerms<'_>,
     opts: &UncertaintyOptions,
-    tangent: Option<(Vec<Vec<c64>>, usize)>,
+    tangent: Option<Tangent>,
 ) -> Result<UncertaintyTerms> {
     frd.require_siso("uncertainty")?;
     if nominal.ninputs() != 1 || nominal.noutputs() != 1 {
@@ -557,8 +568,8 @@ fn uncertainty_with(
         .map(|&fk| c64::from_polar(1.0, 2.0 * std::f64::consts::PI * fk * ts))
         .collect();
     let poles = nominal.poles()?;
-    let (sens, n_theta) = match tangent {
-        Some(t) => t,
+    let (sens, n_theta, fitted) = match tangent {
+        Some(t) => (t.sens, t.dim, t.fitted),
         None => {
             let has_d = nominal.d()[(0, 0)] != 0.0;
             let n_theta = tangent_dim(&poles, has_d);
@@ -572,7 +583,11 @@ fn uncertainty_with(
                 ));
             }
             // J_k R with R R^T = F^-1, from an orthonormal basis of the tangent space
-            (tangent_sensitivities(&poles, has_d, &z, var)?, n_theta)
+            (
+                tangent_sensitivities(&poles, has_d, &z, var)?,
+                n_theta,
+                vec![true; l],
+            )
         }
     };
     let p_hat = nominal.freq_response_siso(&f)?;
@@ -588,7 +603,9 @@ fn uncertainty_with(
             cii += s.im * s.im;
             cri += s.re * s.im;
         }
-        lever.push(((crr + cii) / var[k]).clamp(0.0, 1.0));
+        // a fitted line's residual has the variance σ²(1 − h), a validation line's σ²(1 + h)
+        let h = ((crr + cii) / var[k]).max(0.0);
+        lever.push(if fitted[k] { 1.0 - h.min(1.0) } else { 1.0 + h });
         frf_conf.push(abs_quantile(crr, cii, cri, alpha));
         gauss_cov.push((crr, cii, cri));
     }
@@ -609,7 +626,7 @@ fn uncertainty_with(
                 let w = 1.0 / var[j];
                 num += misfit_c[j] * w;
                 sw += w;
-                vv += w * w * var[j] * (1.0 - lever[j]).max(0.0);
+                vv += w * w * var[j] * lever[j];
             }
             let mean = num / sw;
             let v = vv / (sw * sw);
@@ -1654,10 +1671,13 @@ pub fn uncertainty_matrix(
             ),
         ));
     }
-    // a SISO model: the SISO tangent space; else the joint one, split per entry
-    let mut joint = if ny * nu > 1 {
-        let (sens, n_theta) = joint_tangent_sensitivities(nominal, frd)?;
-        sens.into_iter().map(|s| Some((s, n_theta))).collect()
+    // a SISO model fitted on every line: the SISO tangent space; else the joint one, split
+    // per entry
+    let mut joint = if ny * nu > 1 || opts.fitted_band_hz.is_some() {
+        joint_tangent_sensitivities(nominal, frd, opts.fitted_band_hz)?
+            .into_iter()
+            .map(Some)
+            .collect()
     } else {
         vec![None]
     };
@@ -1811,11 +1831,15 @@ const ORIGIN_POLE: f64 = 1e-4;
 /// n_u)\ (+ n_y n_u)$ at most: the orthonormal basis is the leading left singular vectors of the
 /// whitened Jacobian (rows $\sqrt{2/\sigma^2_{ij,k}}\,(\operatorname{Re}, \operatorname{Im})$,
 /// columns scaled to unit norm), as many as exceed $10^{-9}$ of the largest, capped at that
-/// dimension. Returns the sensitivities and the dimension $n_\theta$.
+/// dimension. Returns per entry the sensitivities, the dimension $n_\theta$ and which lines lie
+/// in `fitted_band_hz` (all without one): the SVD is of the fitted lines' rows alone, and every
+/// line's sensitivity is its whitened row times $V\Sigma^{-1}$ (on a fitted line the left
+/// singular vector's row).
 fn joint_tangent_sensitivities(
     model: &StateSpace,
     frd: &Frd,
-) -> Result<(Vec<Vec<Vec<c64>>>, usize)> {
+    fitted_band_hz: Option<[f64; 2]>,
+) -> Result<Vec<Tangent>> {
     let (n, ny, nu) = (model.order(), model.noutputs(), model.ninputs());
     let e = ny * nu;
     let l = frd.len();
@@ -1823,16 +1847,38 @@ fn joint_tangent_sensitivities(
         .ts()
         .ok_or_else(|| Error::invalid("nominal", "needs a discrete-time model"))?;
     let var = positive_variances(frd)?;
+    let fitted: Vec<bool> = match fitted_band_hz {
+        None => vec![true; l],
+        Some([a, b]) if a.is_finite() && b.is_finite() && a <= b => {
+            let tol = 1e-9 * b.abs().max(1.0);
+            frd.f_hz()
+                .iter()
+                .map(|f| *f >= a - tol && *f <= b + tol)
+                .collect()
+        }
+        Some(band) => {
+            return Err(Error::invalid(
+                "fitted_band_hz",
+                format!("must be a finite band [low, high] with low ≤ high, got {band:?}"),
+            ))
+        }
+    };
+    let fit_lines: Vec<usize> = (0..l).filter(|k| fitted[*k]).collect();
     let has_d = (0..ny).any(|i| (0..nu).any(|j| model.d()[(i, j)] != 0.0));
     let n_cols = n * n + n * nu + ny * n + if has_d { e } else { 0 };
     let dim = (n * (ny + nu) + if has_d { e } else { 0 }).min(n_cols);
-    let rows = 2 * l * e;
-    if rows <= dim {
+    let rows_fit = 2 * fit_lines.len() * e;
+    if rows_fit <= dim {
         return Err(Error::invalid(
             "frd",
-            format!("{l} lines of {e} entries give {rows} real equations for {dim} model parameters; widen the band"),
+            format!(
+                "{} fitted lines of {e} entries give {rows_fit} real equations for {dim} model parameters; widen the band{}",
+                fit_lines.len(),
+                if fitted_band_hz.is_some() { " (or the fitted band)" } else { "" }
+            ),
         ));
     }
+    let rows = 2 * l * e;
     let mut jac = faer::Mat::<f64>::zeros(rows, n_cols);
     let a = model.a();
     for k in 0..l {
@@ -1878,18 +1924,27 @@ fn joint_tangent_sensitivities(
             }
         }
     }
+    // the rows of the fitted lines: the fit's whitened Jacobian
+    let fit_row = |r: usize| {
+        let (k, rest) = (fit_lines[r / (2 * e)], r % (2 * e));
+        2 * k * e + rest
+    };
+    let mut jf = faer::Mat::<f64>::from_fn(rows_fit, n_cols, |r, c| jac[(fit_row(r), c)]);
     for c in 0..n_cols {
-        let norm = (0..rows)
-            .map(|r| jac[(r, c)] * jac[(r, c)])
+        let norm = (0..rows_fit)
+            .map(|r| jf[(r, c)] * jf[(r, c)])
             .sum::<f64>()
             .sqrt();
         if norm > 0.0 && norm.is_finite() {
+            for r in 0..rows_fit {
+                jf[(r, c)] /= norm;
+            }
             for r in 0..rows {
                 jac[(r, c)] /= norm;
             }
         }
     }
-    let svd = jac.thin_svd().map_err(|err| {
+    let svd = jf.thin_svd().map_err(|err| {
         Error::numerical(
             CTX,
             format!("the SVD of the model's Jacobian failed ({err:?})"),
@@ -1904,21 +1959,41 @@ fn joint_tangent_sensitivities(
         ));
     }
     let rank = sv.iter().filter(|v| **v > 1e-9 * top).count().min(dim);
-    let u = svd.U();
-    let sens = (0..e)
+    // every line's whitened row mapped into the fit's orthonormal basis, Ĵ V Σ⁻¹: on a fitted
+    // line the left singular vector's row itself, on a validation line the tangent map there
+    let basis: faer::Mat<f64> = if fit_lines.len() == l {
+        svd.U().subcols(0, rank).to_owned()
+    } else {
+        let v = svd.V();
+        let vs = faer::Mat::<f64>::from_fn(n_cols, rank, |r, c| v[(r, c)] / sv[c]);
+        &jac * &vs
+    };
+    Ok((0..e)
         .map(|ent| {
-            (0..l)
+            let sens = (0..l)
                 .map(|k| {
                     let row = 2 * (k * e + ent);
                     let h = (0.5 * var[k * e + ent]).sqrt();
                     (0..rank)
-                        .map(|c| c64::new(h * u[(row, c)], h * u[(row + 1, c)]))
+                        .map(|c| c64::new(h * basis[(row, c)], h * basis[(row + 1, c)]))
                         .collect()
                 })
-                .collect()
+                .collect();
+            Tangent {
+                sens,
+                dim: rank,
+                fitted: fitted.clone(),
+            }
         })
-        .collect();
-    Ok((sens, rank))
+        .collect())
+}
+
+/// A tangent space handed to [`uncertainty_with`]: $J_k R$ per line, its dimension and which
+/// lines were fitted ([`UncertaintyOptions::fitted_band_hz`]).
+struct Tangent {
+    sens: Vec<Vec<c64>>,
+    dim: usize,
+    fitted: Vec<bool>,
 }
 
 /// The FRF's variances, every one positive and finite.
@@ -2316,6 +2391,118 @@ mod tests {
         }
     }
 
+    /// Lines beyond the fitted band ([`UncertaintyOptions::fitted_band_hz`]): every line's
+    /// $J_k R$ gives the covariance $J_k F^{+} J_k^{\mathsf T}$ of the model at that line, with
+    /// the information $F$ of the fitted lines alone. The oracle is computed here from finite
+    /// differences of the state-space entries (rank 6 of 15 columns), the lines 1–100 fitted,
+    /// 101–150 validation lines. A SISO model
+    /// goes through the joint tangent space as its 1×1 case.
+    #[test]
+    fn validation_lines_carry_the_fitted_lines_covariance() {
+        let (m, f, frd, var) = model_on_lines();
+        let fitted = [f[0], f[99]];
+        let opts = UncertaintyOptions {
+            fitted_band_hz: Some(fitted),
+            ..UncertaintyOptions::default()
+        };
+        let u = uncertainty_matrix(&m, &frd, &[], &opts).unwrap();
+        let e = &u.entries[0];
+        assert_eq!(e.n_params, 6);
+        let cols = fd_state_space_columns(&m, &f, false);
+        // whitened Jacobian of the fitted lines, its pseudo-inverse information of rank 6
+        let jw = Mat::<f64>::from_fn(200, cols.len(), |r, c| {
+            let v = cols[c][r / 2] * (2.0 / var[r / 2]).sqrt();
+            if r % 2 == 0 {
+                v.re
+            } else {
+                v.im
+            }
+        });
+        let svd = jw.thin_svd().unwrap();
+        let v = svd.V();
+        let sv: Vec<f64> = (0..cols.len()).map(|i| svd.S()[i]).collect();
+        assert!(sv[5] > 1e-5 * sv[0] && sv[6] < 1e-8 * sv[0], "{sv:?}");
+        let mut worst = 0.0f64;
+        for k in 0..f.len() {
+            // t_c = r_k · v_c / s_c for the real and imaginary rows
+            let t: Vec<c64> = (0..6)
+                .map(|c| {
+                    let x: c64 = (0..cols.len()).map(|q| cols[q][k] * v[(q, c)]).sum();
+                    x / sv[c]
+                })
+                .collect();
+            let oracle = [
+                t.iter().map(|x| x.re * x.re).sum::<f64>(),
+                t.iter().map(|x| x.im * x.im).sum::<f64>(),
+                t.iter().map(|x| x.re * x.im).sum::<f64>(),
+            ];
+            let sk = &e.errors.sens[k];
+            let mine = [
+                sk.iter().map(|x| x.re * x.re).sum::<f64>(),
+                sk.iter().map(|x| x.im * x.im).sum::<f64>(),
+                sk.iter().map(|x| x.re * x.im).sum::<f64>(),
+            ];
+            let scale = oracle[0] + oracle[1];
+            assert!(scale > 0.0, "line {k}");
+            for q in 0..3 {
+                worst = worst.max((mine[q] - oracle[q]).abs() / scale);
+            }
+        }
+        assert!(worst < 1e-6, "covariance differs by {worst} of its trace");
+        // on the fitted lines it is the bound of the FRF cut to them
+        let cut = frd.band(fitted[0], fitted[1]).unwrap();
+        let alone = uncertainty_matrix(&m, &cut, &[], &UncertaintyOptions::default()).unwrap();
+        for k in 0..100 {
+            let (a, b) = (e.frf_confidence[k], alone.entries[0].frf_confidence[k]);
+            assert!((a - b).abs() < 1e-6 * b, "line {k}: {a} vs {b}");
+        }
+    }
+
+    /// A misfit above the fitted band, where the model was never fitted: term (b) measures it
+    /// on the validation lines (0.1 |P̂| of a model 10 % below the FRF there) and stays 0 on
+    /// the fitted lines away from the edge; bad fitted bands are refused.
+    #[test]
+    fn term_b_measures_a_misfit_on_the_validation_lines() {
+        let (m, f, frd, var) = model_on_lines();
+        let g: Vec<c64> = frd
+            .values()
+            .iter()
+            .zip(&f)
+            .map(|(g, fk)| if *fk > f[99] { g * 1.1 } else { *g })
+            .collect();
+        let var: Vec<f64> = var.iter().map(|v| v * 0.1).collect();
+        let frd = Frd::new(f.clone(), g, Some(var), Some(1e-3)).unwrap();
+        let opts = UncertaintyOptions {
+            fitted_band_hz: Some([f[0], f[99]]),
+            ..UncertaintyOptions::default()
+        };
+        let u = uncertainty_matrix(&m, &frd, &[], &opts).unwrap();
+        let e = &u.entries[0];
+        for k in 0..f.len() {
+            let rel = e.model_error[k] / e.nominal[k].norm();
+            if k >= 110 {
+                assert!((rel - 0.1).abs() < 0.02, "line {k}: term (b) {rel}");
+                assert!(e.additive[k] >= (frd.values()[k] - e.nominal[k]).norm());
+            } else if k < 80 {
+                assert_eq!(e.model_error[k], 0.0, "line {k}");
+            }
+        }
+        for bad in [[f64::NAN, 10.0], [50.0, 10.0]] {
+            let opts = UncertaintyOptions {
+                fitted_band_hz: Some(bad),
+                ..UncertaintyOptions::default()
+            };
+            let err = uncertainty_matrix(&m, &frd, &[], &opts).unwrap_err();
+            assert!(err.to_string().contains("fitted_band_hz"), "{err}");
+        }
+        let opts = UncertaintyOptions {
+            fitted_band_hz: Some([f[0], f[1]]),
+            ..UncertaintyOptions::default()
+        };
+        let err = uncertainty_matrix(&m, &frd, &[], &opts).unwrap_err();
+        assert!(err.to_string().contains("fitted lines"), "{err}");
+    }
+
     /// A model with two delay poles at the origin (a Jordan block: no eigenvector basis) has
     /// the tangent space of its other poles' partial fractions plus $c_1 z^{-1} + c_2 z^{-2}$:
     /// the projector matches the one of that explicit basis ($1/(z-p)$ and $1/(z-p)^2$ by real
@@ -2610,7 +2797,8 @@ mod tests {
             )
             .unwrap();
             let frd = with_var(&Frd::from_model(&m, &f).unwrap(), Some(var.clone()), 1e-3);
-            let (joint, dim) = joint_tangent_sensitivities(&m, &frd).unwrap();
+            let t = joint_tangent_sensitivities(&m, &frd, None).unwrap();
+            let (joint, dim) = (vec![t[0].sens.clone()], t[0].dim);
             assert_eq!(dim, 6 + usize::from(with_d));
             let poles = m.poles().unwrap();
             let siso = tangent_sensitivities(&poles, with_d, &lines_z(&f, 1e-3), &var).unwrap();

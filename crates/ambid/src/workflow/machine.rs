@@ -253,9 +253,12 @@ pub struct MachineModelOutput {
 pub struct UncertaintyRow {
     /// The speed \[rpm\].
     pub speed_rpm: f64,
-    /// The fit's band \[Hz\] and its lines.
+    /// The fit's band \[Hz\].
     pub band_hz: [f64; 2],
-    /// Lines.
+    /// The bound's band \[Hz\]: the fit band and the validation lines above it
+    /// (`machine_fit::uncertainty_band`).
+    pub bound_band_hz: [f64; 2],
+    /// The bound's lines.
     pub lines: usize,
     /// The joint raise applied to the bound on the lines, its check and its export (98 % of the
     /// (line, entry) pairs in 95 % of 2 000 draws; ≥ 1).

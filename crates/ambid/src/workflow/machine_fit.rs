@@ -359,7 +359,14 @@ pub fn speed_uncertainty(
     };
     use ambid_core::validate::weight::{Weight, WeightShape, DEFAULT_COVER, MAX_WEIGHT_ORDER};
     let err = |e: ambid_core::Error| e.to_string();
-    let frd = plant.band(band.0, band.1).map_err(err)?;
+    // the bound's lines: the fit band and the validation lines above it (docs/uncertainty.md,
+    // "Lines beyond the fit band")
+    let bound_band = uncertainty_band(plant, band).map_err(|e| e.to_string())?;
+    let frd = plant.band(bound_band.0, bound_band.1).map_err(err)?;
+    let opts = UncertaintyOptions {
+        fitted_band_hz: (bound_band.1 > band.1).then_some([band.0, band.1]),
+        ..UncertaintyOptions::default()
+    };
     let (amp, mut amplitude_note) =
         match amplitude.map(|a| amplitude_terms_and_shifts(model, &frd, a)) {
             None => (None, None),
@@ -374,8 +381,7 @@ pub fn speed_uncertainty(
             })
             .collect()
     });
-    let mut u =
-        uncertainty_matrix(model, &frd, &extra, &UncertaintyOptions::default()).map_err(err)?;
+    let mut u = uncertainty_matrix(model, &frd, &extra, &opts).map_err(err)?;
     // term (e) through the model: the per-line shifts projected onto the model's tangent space
     // (docs/uncertainty.md, "Term (e) through the model")
     // (when it cannot be computed the bound keeps the line term, and the row says why)
@@ -530,6 +536,7 @@ pub fn speed_uncertainty(
     Ok(UncertaintyRow {
         speed_rpm,
         band_hz: [band.0, band.1],
+        bound_band_hz: [bound_band.0, bound_band.1],
         lines: f.len(),
         raise,
         weight_raise,
@@ -723,6 +730,65 @@ pub fn fit_band(plant: &Frd, quality_band_hz: [f64; 2]) -> Result<Option<(f64, f
         (Some(&a), Some(&b)) => Some((plant.f_hz()[a], plant.f_hz()[b + 2])),
         _ => None,
     })
+}
+
+/// Relative standard deviation (of the line's entries together, as in [`fit_band`]) up to which
+/// the lines above the fit band still carry the uncertainty bound ([`uncertainty_band`]): a
+/// line's 95 % interval within ±50 %. Over term (b)'s window of up to 17 lines the misfit is
+/// then known to about ±0.12 relative, far tighter than the weights' extrapolation there.
+pub const MAX_VALIDATION_RELATIVE_STD: f64 = 0.25;
+
+/// The lines of a measured plant FRF that the uncertainty bound is built on, around a model
+/// fitted on `fit` (docs/uncertainty.md, "Lines beyond the fit band"): the fit band, extended
+/// upwards over the contiguous lines whose relative standard deviation (all entries together)
+/// is at most [`MAX_VALIDATION_RELATIVE_STD`], no further than an octave above the fit band's
+/// end. The model was not fitted there, so these are validation lines
+/// ([`UncertaintyOptions::fitted_band_hz`](ambid_core::validate::uncertainty::UncertaintyOptions::fitted_band_hz)):
+/// the bound there is the measured misfit, where a gain margin above the fitted band is
+/// otherwise decided by the weights' extrapolation. The fit band's own limit,
+/// [`MAX_RELATIVE_STD`], asks more of a line that a fit leans on than of one a windowed mean
+/// averages.
+///
+/// # Errors
+/// [`Error`] when the FRF has no variance.
+///
+/// # Example
+/// ```
+/// use ambid::workflow::machine_fit::uncertainty_band;
+/// use ambid_core::{c64, lti::Frd};
+/// let f: Vec<f64> = (1..=40).map(|k| 25.0 * k as f64).collect();
+/// // relative std 0.05 up to 600 Hz, 0.2 up to 800 Hz, 0.5 above
+/// let var: Vec<f64> = f.iter().map(|f| if *f <= 600.0 { 0.05f64 } else if *f <= 800.0 { 0.2 } else { 0.5 }.powi(2)).collect();
+/// let g = Frd::new(f.clone(), vec![c64::new(1.0, 0.0); 40], Some(var), Some(1e-4)).unwrap();
+/// assert_eq!(uncertainty_band(&g, (25.0, 600.0)).unwrap(), (25.0, 800.0));
+/// assert_eq!(uncertainty_band(&g, (25.0, 300.0)).unwrap(), (25.0, 600.0)); // an octave
+/// ```
+pub fn uncertainty_band(plant: &Frd, fit: (f64, f64)) -> Result<(f64, f64), Error> {
+    let var = plant.variance().ok_or_else(|| {
+        Error::input("the measured plant FRF has no variance; the uncertainty bound needs the lines' confidence regions")
+    })?;
+    let e = plant.ny() * plant.nu();
+    let mut end = fit.1;
+    for k in 0..plant.len() {
+        let f = plant.f_hz()[k];
+        if f <= fit.1 {
+            continue;
+        }
+        if f > 2.0 * fit.1 {
+            break;
+        }
+        let v: f64 = var[k * e..(k + 1) * e].iter().sum();
+        let g: f64 = plant.values()[k * e..(k + 1) * e]
+            .iter()
+            .map(|x| x.norm_sqr())
+            .sum();
+        // a NaN ratio (no response) ends the run too
+        if !(g > 0.0 && (v / g).sqrt() <= MAX_VALIDATION_RELATIVE_STD) {
+            break;
+        }
+        end = f;
+    }
+    Ok((fit.0, end))
 }
 
 /// Fits the candidate orders to one speed's plant FRF, with the loop check against

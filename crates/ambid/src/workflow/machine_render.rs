@@ -367,7 +367,7 @@ pub fn uncertainty_table(rows: &[super::machine::UncertaintyRow]) -> Table {
             .into(),
         header: [
             "speed [rpm]",
-            "band [Hz] (lines)",
+            "fit band; bound to [Hz] (lines)",
             "raise",
             "‖L‖/σ̄(P̂) median / max [%]",
             "robustly stable",
@@ -384,7 +384,13 @@ pub fn uncertainty_table(rows: &[super::machine::UncertaintyRow]) -> Table {
             .map(|r| {
                 vec![
                     fmt(r.speed_rpm),
-                    format!("{}–{} ({})", fmt(r.band_hz[0]), fmt(r.band_hz[1]), r.lines),
+                    format!(
+                        "{}–{}; {} ({})",
+                        fmt(r.band_hz[0]),
+                        fmt(r.band_hz[1]),
+                        fmt(r.bound_band_hz[1]),
+                        r.lines
+                    ),
                     fmt(r.raise),
                     format!("{} / {}", fmt(r.median_rel_pct), fmt(r.max_rel_pct)),
                     if r.robustly_stable { "yes" } else { "no" }.into(),
