@@ -3,8 +3,9 @@
 //! rpm), default noise, the `[machine]` defaults and the default fitter's chosen model (as `ambid
 //! run` with a `[machine]` section), the element-wise bound of
 //! `ambid_core::validate::uncertainty::uncertainty_matrix` on the plant FRF's lines of the fit's
-//! band (`machine_fit::fit_band`: its precise lines in the quality band), judged
-//! against the twin's exact plant on 10–1000 Hz:
+//! band (`machine_fit::fit_band`: its precise lines in the quality band) and the validation
+//! lines above it (`machine_fit::uncertainty_band`, as the workflow's; `UNC_BAND=fit`: the fit
+//! band alone, the rule before 2026-12-05), judged against the twin's exact plant on 10–1000 Hz:
 //!
 //! * `cov_e`: the fraction of (line, entry) pairs with $|P_{ij} - \hat P_{ij}| \le L_{ij}$;
 //! * `cov_n`: the fraction of lines with $\bar\sigma(P - \hat P) \le \lVert L\rVert_2$;
@@ -54,6 +55,10 @@
 //! phase (before the eleventh), `REMAINDER=b|e` keeps term (b)'s spread alone or the rest alone;
 //! `DEBUG_REM=1` prints per entry term (b) and the rest relative to $|\hat P|$; `DEBUG_SHIFT=1`
 //! compares the draws' mean and the amplitude shift with the exact error (`debug_shift`).
+//! `DEBUG_BEYOND=1` prints, every fourth line from 0.9× to 1.5× the fit band's end, the lines'
+//! relative standard deviation (all entries together, and per diagonal entry) and the model's
+//! misfit against the FRF averaged over ±4 lines beside its true error, relative to $|\hat P|$
+//! (docs/uncertainty.md, "Lines beyond the fit band").
 //!
 //! Run: `cargo run --release -p ambid --example uncertainty_machine_rigs -- 0,1,2,3`.
 use ambid::config::MachineSection;

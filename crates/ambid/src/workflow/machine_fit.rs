@@ -323,7 +323,9 @@ pub const COHERENT_DRAWS: usize = 200;
 pub const COHERENT_CONFIDENCE: f64 = 0.95;
 
 /// The chosen model's uncertainty at one speed ([`UncertaintyRow`]): the element-wise bound of
-/// `uncertainty_matrix` on the measured plant FRF's lines in the fit's band `band`, raised by
+/// `uncertainty_matrix` on the measured plant FRF's lines in the fit's band `band` and the
+/// validation lines above it ([`uncertainty_band`]; the model's covariance from the fitted lines
+/// alone, `UncertaintyOptions::fitted_band_hz`), raised by
 /// [`MatrixUncertainty::joint_raises`](ambid_core::validate::uncertainty::MatrixUncertainty::joint_raises)
 /// (98 % of the pairs in 95 % of 2 000 draws, seed 0; never lowered), and the robust stability of
 /// `controller` against it on those lines; the structured weight (one relative weight of order
