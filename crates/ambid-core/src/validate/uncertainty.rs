@@ -591,10 +591,10 @@ fn uncertainty_with(
         }
     };
     let p_hat = nominal.freq_response_siso(&f)?;
-    // per line: 2x2 covariance of (Re, Im) δP̂ and the leverage
+    // per line: 2x2 covariance of (Re, Im) δP̂ and the residual's noise variance over σ²
     let mut frf_conf = Vec::with_capacity(l);
     let mut gauss_cov = Vec::with_capacity(l);
-    let mut lever = Vec::with_capacity(l);
+    let mut noise_factor = Vec::with_capacity(l);
     let alpha = 1.0 - opts.line_coverage;
     for k in 0..l {
         let (mut crr, mut cii, mut cri) = (0.0, 0.0, 0.0);
@@ -605,7 +605,7 @@ fn uncertainty_with(
         }
         // a fitted line's residual has the variance σ²(1 − h), a validation line's σ²(1 + h)
         let h = ((crr + cii) / var[k]).max(0.0);
-        lever.push(if fitted[k] { 1.0 - h.min(1.0) } else { 1.0 + h });
+        noise_factor.push(if fitted[k] { 1.0 - h.min(1.0) } else { 1.0 + h });
         frf_conf.push(abs_quantile(crr, cii, cri, alpha));
         gauss_cov.push((crr, cii, cri));
     }
@@ -626,7 +626,7 @@ fn uncertainty_with(
                 let w = 1.0 / var[j];
                 num += misfit_c[j] * w;
                 sw += w;
-                vv += w * w * var[j] * lever[j];
+                vv += w * w * var[j] * noise_factor[j];
             }
             let mean = num / sw;
             let v = vv / (sw * sw);
@@ -1924,27 +1924,27 @@ fn joint_tangent_sensitivities(
             }
         }
     }
-    // the rows of the fitted lines: the fit's whitened Jacobian
-    let fit_row = |r: usize| {
-        let (k, rest) = (fit_lines[r / (2 * e)], r % (2 * e));
-        2 * k * e + rest
-    };
-    let mut jf = faer::Mat::<f64>::from_fn(rows_fit, n_cols, |r, c| jac[(fit_row(r), c)]);
+    // the rows of the fitted lines: the fit's whitened Jacobian (every row when all lines were
+    // fitted); its columns scaled to unit norm over those rows, every line's row with them
+    let all_fitted = fit_lines.len() == l;
+    let fit_row = |r: usize| 2 * fit_lines[r / (2 * e)] * e + r % (2 * e);
     for c in 0..n_cols {
         let norm = (0..rows_fit)
-            .map(|r| jf[(r, c)] * jf[(r, c)])
+            .map(|r| jac[(fit_row(r), c)].powi(2))
             .sum::<f64>()
             .sqrt();
         if norm > 0.0 && norm.is_finite() {
-            for r in 0..rows_fit {
-                jf[(r, c)] /= norm;
-            }
             for r in 0..rows {
                 jac[(r, c)] /= norm;
             }
         }
     }
-    let svd = jf.thin_svd().map_err(|err| {
+    let svd = if all_fitted {
+        jac.thin_svd()
+    } else {
+        faer::Mat::<f64>::from_fn(rows_fit, n_cols, |r, c| jac[(fit_row(r), c)]).thin_svd()
+    }
+    .map_err(|err| {
         Error::numerical(
             CTX,
             format!("the SVD of the model's Jacobian failed ({err:?})"),
@@ -1961,7 +1961,7 @@ fn joint_tangent_sensitivities(
     let rank = sv.iter().filter(|v| **v > 1e-9 * top).count().min(dim);
     // every line's whitened row mapped into the fit's orthonormal basis, Ĵ V Σ⁻¹: on a fitted
     // line the left singular vector's row itself, on a validation line the tangent map there
-    let basis: faer::Mat<f64> = if fit_lines.len() == l {
+    let basis: faer::Mat<f64> = if all_fitted {
         svd.U().subcols(0, rank).to_owned()
     } else {
         let v = svd.V();

@@ -710,19 +710,12 @@ pub fn fit_band(plant: &Frd, quality_band_hz: [f64; 2]) -> Result<Option<(f64, f
     let var = plant.variance().ok_or_else(|| {
         Error::input("the measured plant FRF has no variance; the MIMO fit weights every entry by its inverse variance")
     })?;
-    let e = plant.ny() * plant.nu();
     let good: Vec<bool> = (0..plant.len())
         .map(|k| {
             let f = plant.f_hz()[k];
-            let v: f64 = var[k * e..(k + 1) * e].iter().sum();
-            let g: f64 = plant.values()[k * e..(k + 1) * e]
-                .iter()
-                .map(|x| x.norm_sqr())
-                .sum();
             f >= quality_band_hz[0]
                 && f <= quality_band_hz[1]
-                && g > 0.0
-                && (v / g).sqrt() <= MAX_RELATIVE_STD
+                && line_relative_std(plant, var, k) <= MAX_RELATIVE_STD
         })
         .collect();
     let runs: Vec<usize> = (0..good.len().saturating_sub(2))
@@ -769,28 +762,37 @@ pub fn uncertainty_band(plant: &Frd, fit: (f64, f64)) -> Result<(f64, f64), Erro
     let var = plant.variance().ok_or_else(|| {
         Error::input("the measured plant FRF has no variance; the uncertainty bound needs the lines' confidence regions")
     })?;
-    let e = plant.ny() * plant.nu();
     let mut end = fit.1;
     for k in 0..plant.len() {
         let f = plant.f_hz()[k];
         if f <= fit.1 {
             continue;
         }
-        if f > 2.0 * fit.1 {
-            break;
-        }
-        let v: f64 = var[k * e..(k + 1) * e].iter().sum();
-        let g: f64 = plant.values()[k * e..(k + 1) * e]
-            .iter()
-            .map(|x| x.norm_sqr())
-            .sum();
-        // a NaN ratio (no response) ends the run too
-        if !(g > 0.0 && (v / g).sqrt() <= MAX_VALIDATION_RELATIVE_STD) {
+        // a line without response (NaN) ends the run too
+        let precise = line_relative_std(plant, var, k) <= MAX_VALIDATION_RELATIVE_STD;
+        if f > 2.0 * fit.1 || !precise {
             break;
         }
         end = f;
     }
     Ok((fit.0, end))
+}
+
+/// The relative standard deviation of line `k` of the matrix FRF `plant` with the variances
+/// `var`, all entries together: $\sqrt{\sum_{ij}\sigma^2_{ij,k} / \sum_{ij}|G_{ij,k}|^2}$ (NaN
+/// on a line without response), the measure of [`fit_band`] and [`uncertainty_band`].
+fn line_relative_std(plant: &Frd, var: &[f64], k: usize) -> f64 {
+    let e = plant.ny() * plant.nu();
+    let v: f64 = var[k * e..(k + 1) * e].iter().sum();
+    let g: f64 = plant.values()[k * e..(k + 1) * e]
+        .iter()
+        .map(|x| x.norm_sqr())
+        .sum();
+    if g > 0.0 {
+        (v / g).sqrt()
+    } else {
+        f64::NAN
+    }
 }
 
 /// Fits the candidate orders to one speed's plant FRF, with the loop check against
