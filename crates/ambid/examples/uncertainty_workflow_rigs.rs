@@ -23,7 +23,9 @@
 //! bring the robust BLA study (term (c)); `NO_BLA=1` leaves it out (the bound then has no
 //! term (c), as before). Per rig the last column is term (c): the BLA level it was read at and
 //! its significant groups of lines. `PRINT_E=1` prints every 10th line's term (e) and term (a)
-//! (relative) beside the true error.
+//! (relative) beside the true error. `DUMP_SERIES=DIR` writes per run `DIR/<mode>_<rig>_raise<g>.csv`
+//! (`f_hz`, `bound`, `weight`, `error` on the weight's lines; g the joint raise) for
+//! `scripts/weight_global_fit.py`.
 
 mod common;
 
@@ -138,6 +140,17 @@ fn main() {
                     median(idx.iter().map(|&k| b.y[k] / err.y[k]).collect()),
                     median(idx.iter().map(|&k| w.y[k] / err.y[k]).collect()),
                 );
+            }
+        }
+        if let Ok(d) = std::env::var("DUMP_SERIES") {
+            if let Some(b) = pick("bound ℓ") {
+                let mut s = String::from("f_hz,bound,weight,error\n");
+                for k in 0..err.x.len() {
+                    s += &format!("{},{},{},{}\n", err.x[k], b.y[k], w.y[k], err.y[k]);
+                }
+                let raise = u["weight_joint_raise"].as_f64().unwrap_or(f64::NAN);
+                std::fs::create_dir_all(&d).expect("the dump directory");
+                std::fs::write(format!("{d}/{mode}_{rig}_raise{raise}.csv"), s).expect("a dump");
             }
         }
         if std::env::var("PRINT_E").is_ok() {
