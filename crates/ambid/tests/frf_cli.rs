@@ -480,3 +480,65 @@ fn frf_finds_the_period_of_a_periodic_record() {
         assert!(!out.exists(), "{args:?}");
     }
 }
+
+/// An FRF file is read only when every field is a finite number, every `_std` non-negative and
+/// `f_hz` strictly increasing; each refusal names the column and the data row. A negative
+/// standard deviation was read before as its square, a variance, unnoticed (found on
+/// 2026-12-05: `ambid uncertainty` wrote its files from such an FRF).
+#[test]
+fn frf_files_with_bad_fields_are_refused_with_the_row_named() {
+    let d = tmpdir("frf-bad-fields");
+    let good = "f_hz,plant_re,plant_im,plant_std\n1,1,0,0.1\n2,0.5,-0.5,0.1\n3,0.2,-0.4,0.1\n";
+    let p = d.join("good.csv");
+    std::fs::write(&p, good).unwrap();
+    let f = ambid::io::csv::read_frf_csv(&p).unwrap();
+    let frd = f.frd("plant", 1e-3).unwrap();
+    let var = frd.variance().unwrap();
+    assert!(
+        var.len() == 3 && var.iter().all(|v| (v - 0.01).abs() < 1e-15),
+        "{var:?}"
+    );
+    let cases = [
+        (
+            "2,0.5,-0.5,-0.1",
+            "column `plant_std`, data row 2",
+            "negative",
+        ),
+        (
+            "2,NaN,-0.5,0.1",
+            "column `plant_re`, data row 2",
+            "not finite",
+        ),
+        (
+            "1,0.5,-0.5,0.1",
+            "f_hz must increase strictly",
+            "data row 2",
+        ),
+    ];
+    for (row, what, why) in cases {
+        let text_in = good.replace("2,0.5,-0.5,0.1", row);
+        let p = d.join("bad.csv");
+        std::fs::write(&p, &text_in).unwrap();
+        let e = ambid::io::csv::read_frf_csv(&p).unwrap_err().to_string();
+        assert!(e.contains(what) && e.contains(why), "{row}: {e}");
+        // and through a command: refused, nothing written
+        let out = d.join("model.json");
+        let o = ambid(&[
+            "fit",
+            s(&p),
+            "--quantity",
+            "plant",
+            "--structure",
+            "ss",
+            "--order",
+            "1",
+            "--fs",
+            "1000",
+            "--out",
+            s(&out),
+        ]);
+        assert!(!o.status.success(), "{row}: {}", text(&o));
+        assert!(text(&o).contains(what), "{row}: {}", text(&o));
+        assert!(!out.exists(), "{row}: a model was written");
+    }
+}

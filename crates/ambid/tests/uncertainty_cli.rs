@@ -547,10 +547,22 @@ fn uncertainty_takes_the_amplitude_levels_as_term_e() {
     assert_eq!(snl["file"], d("bla.csv").as_str());
     assert_eq!(snl["significant_groups"], sizes.len());
     std::fs::write(dir.join("bla_bad.csv"), "f_hz,bla_re,bla_im\n10,1,0\n").unwrap();
+    // a negative standard deviation (its square would pass for a variance)
+    let neg = std::fs::read_to_string(dir.join("bla.csv")).unwrap();
+    let mut rows: Vec<String> = neg.lines().map(String::from).collect();
+    let mut f: Vec<String> = rows[3].split(',').map(String::from).collect();
+    f[4] = "-0.01".into(); // noise_std
+    rows[3] = f.join(",");
+    std::fs::write(dir.join("bla_neg.csv"), rows.join("\n") + "\n").unwrap();
     // misuse: refused, nothing written
     let bla_bad = d("bla_bad.csv");
+    let bla_neg = d("bla_neg.csv");
     for (extra, want) in [
         (vec!["--nonlinear", bla_bad.as_str()], "var_nl"),
+        (
+            vec!["--nonlinear", bla_neg.as_str()],
+            "`noise_std`, data row 3, holds -0.01",
+        ),
         (vec!["--amplitude", a5.as_str()], "--level"),
         (vec!["--level", "10"], "--amplitude"),
         (

@@ -561,6 +561,17 @@ fn read_bla(path: &Path) -> Result<BlaEstimate> {
     };
     let (f, re, im) = (col("f_hz")?, col("bla_re")?, col("bla_im")?);
     let (st, sn, vnl) = (col("bla_std")?, col("noise_std")?, col("var_nl")?);
+    // standard deviations are squared below: a negative one would pass for a variance
+    for (name, c) in [("bla_std", &st), ("noise_std", &sn)] {
+        if let Some(k) = c.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
+            return Err(bad(format!(
+                "the column `{name}`, data row {}, holds {}: a standard deviation is a finite number ≥ 0",
+                k + 1,
+                c[k]
+            ))
+            .into());
+        }
+    }
     let count = |name: &str| -> Result<usize> {
         let c = col(name)?;
         let v = c.first().copied().unwrap_or(f64::NAN);

@@ -229,7 +229,7 @@ impl FrfFile {
 
 /// Reads an FRF CSV (`f_hz`, then `<q>_re, <q>_im, <q>_std` per quantity, then extra real
 /// columns), in the one text dialect of [`crate::io::table`]. Every field must be a finite
-/// number and `f_hz` strictly increasing.
+/// number, every `_std` column non-negative and `f_hz` strictly increasing.
 pub fn read_frf_csv(path: &Path) -> Result<FrfFile> {
     let table = read_text(path)?;
     let (header, mut cols) = (table.names, table.columns);
@@ -249,6 +249,24 @@ pub fn read_frf_csv(path: &Path) -> Result<FrfFile> {
                 message: format!(
                     "column `{h}`, data row {}: the value is missing or not finite; every field of an FRF file must be a finite number",
                     k + 1
+                ),
+            }
+            .into());
+        }
+    }
+    // a standard deviation is not negative: its square would pass for a variance unnoticed
+    for (h, c) in header.iter().zip(&cols) {
+        if let Some(k) = h
+            .ends_with("_std")
+            .then(|| c.iter().position(|v| *v < 0.0))
+            .flatten()
+        {
+            return Err(DataFileError::Invalid {
+                path: path.to_path_buf(),
+                message: format!(
+                    "column `{h}`, data row {}: the standard deviation {} is negative; a `_std` column holds sqrt(E|Ĝ − G|²) ≥ 0 (0 for exact data)",
+                    k + 1,
+                    c[k]
                 ),
             }
             .into());
