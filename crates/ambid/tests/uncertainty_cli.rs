@@ -256,6 +256,9 @@ fn uncertainty_refuses_bad_input_and_writes_nothing() {
     std::fs::write(dir.join("model_ts.json"), j.to_string()).unwrap();
     let t = run(&[], &d("frf.csv"), &d("model_ts.json"));
     assert!(t.contains("sample time"), "{t}");
+    // a band that holds no line of the FRF
+    let t = run(&["--band", "15000:16000"], &d("frf.csv"), &d("model.json"));
+    assert!(t.contains("--band 15000:16000 holds no line of"), "{t}");
     // options out of range
     let t = run(&["--cover", "1.5"], &d("frf.csv"), &d("model.json"));
     assert!(t.contains("--cover"), "{t}");

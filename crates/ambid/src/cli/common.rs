@@ -218,7 +218,22 @@ pub fn frf_input(
     let frd = file.frd(quantity, 1.0 / fs)?;
     // the band: --band, else where the file measures the quantity reliably (band::fit_band)
     let fit_band = match band {
-        Some(b) => b,
+        Some(b) => {
+            let f = frd.f_hz();
+            let inside = f.iter().filter(|x| **x >= b.0 && **x <= b.1).count();
+            if inside == 0 {
+                return Err(ambid::error::Error::usage(format!(
+                    "--band {}:{} holds no line of {} (its lines lie in {:.4}–{:.4} Hz): give a band that overlaps them",
+                    b.0,
+                    b.1,
+                    path.display(),
+                    f.first().copied().unwrap_or(f64::NAN),
+                    f.last().copied().unwrap_or(f64::NAN)
+                ))
+                .into());
+            }
+            b
+        }
         None => {
             let d = fit_band(&frd, FIT_REL_HALFWIDTH)?;
             println!("{}", d.describe());
