@@ -194,7 +194,7 @@ impl FrfFile {
         ) {
             (Some(re), Some(im), sd) => (re, im, sd),
             _ => {
-                return Err(Error::other(format!(
+                return Err(Error::input(format!(
                     "the FRF file has no quantity `{q}` (columns {q}_re, {q}_im); it has: {}",
                     self.quantities.join(", ")
                 )))
@@ -219,7 +219,7 @@ impl FrfFile {
     /// A real extra column such as `coh_ry`.
     pub fn extra(&self, name: &str) -> Result<&[f64]> {
         self.col(name).ok_or_else(|| {
-            Error::other(format!(
+            Error::input(format!(
                 "the FRF file has no column `{name}`; it has: {}",
                 self.names.join(", ")
             ))
@@ -234,7 +234,7 @@ pub fn read_frf_csv(path: &Path) -> Result<FrfFile> {
     let table = read_text(path)?;
     let (header, mut cols) = (table.names, table.columns);
     if header.first().map(String::as_str) != Some("f_hz") {
-        return Err(Error::other(format!(
+        return Err(Error::input(format!(
             "{}: an FRF file starts with the column `f_hz` (got {}); see docs/formats.md",
             path.display(),
             header
@@ -273,7 +273,7 @@ pub fn read_frf_csv(path: &Path) -> Result<FrfFile> {
         }
     }
     if let Some(k) = (1..cols[0].len()).find(|&k| cols[0][k] <= cols[0][k - 1]) {
-        return Err(Error::other(format!(
+        return Err(Error::input(format!(
             "{}: f_hz must increase strictly (data row {} has {:.6e} after {:.6e})",
             path.display(),
             k + 1,
