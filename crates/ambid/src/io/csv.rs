@@ -242,34 +242,27 @@ pub fn read_frf_csv(path: &Path) -> Result<FrfFile> {
                 .map_or("no column".to_string(), |h| format!("`{h}`"))
         )));
     }
+    // a field refused at column `h`, data row `k + 1`
+    let invalid = |h: &str, k: usize, why: String| -> Error {
+        DataFileError::Invalid {
+            path: path.to_path_buf(),
+            message: format!("column `{h}`, data row {}: {why}", k + 1),
+        }
+        .into()
+    };
     for (h, c) in header.iter().zip(&cols) {
         if let Some(k) = c.iter().position(|v| !v.is_finite()) {
-            return Err(DataFileError::Invalid {
-                path: path.to_path_buf(),
-                message: format!(
-                    "column `{h}`, data row {}: the value is missing or not finite; every field of an FRF file must be a finite number",
-                    k + 1
-                ),
-            }
-            .into());
+            return Err(invalid(h, k, "the value is missing or not finite; every field of an FRF file must be a finite number".into()));
         }
     }
     // a standard deviation is not negative: its square would pass for a variance unnoticed
-    for (h, c) in header.iter().zip(&cols) {
-        if let Some(k) = h
-            .ends_with("_std")
-            .then(|| c.iter().position(|v| *v < 0.0))
-            .flatten()
-        {
-            return Err(DataFileError::Invalid {
-                path: path.to_path_buf(),
-                message: format!(
-                    "column `{h}`, data row {}: the standard deviation {} is negative; a `_std` column holds sqrt(E|Ĝ − G|²) ≥ 0 (0 for exact data)",
-                    k + 1,
-                    c[k]
-                ),
-            }
-            .into());
+    for (h, c) in header
+        .iter()
+        .zip(&cols)
+        .filter(|(h, _)| h.ends_with("_std"))
+    {
+        if let Some(k) = c.iter().position(|v| *v < 0.0) {
+            return Err(invalid(h, k, format!("the standard deviation {} is negative; a `_std` column holds sqrt(E|Ĝ − G|²) ≥ 0 (0 for exact data)", c[k])));
         }
     }
     if let Some(k) = (1..cols[0].len()).find(|&k| cols[0][k] <= cols[0][k - 1]) {
