@@ -212,6 +212,98 @@ pub fn analyse_with_shift(
     max_weight_order: usize,
     cover: f64,
 ) -> Result<UncertaintyAnalysis> {
+    let b = bound_and_weight(nominal, frd, extra, shift, opts, max_weight_order, cover)?;
+    let robust = robust_stability(nominal, controller, &b.weight.weight)
+        .context("the robust-stability check")?;
+    let raised = b.raised_bound();
+    let on_lines = robust_stability_on_lines(nominal, controller, &b.terms.f_hz, &raised)
+        .context("the robust-stability check on the lines")?;
+    Ok(UncertaintyAnalysis {
+        terms: b.terms,
+        weight: b.weight,
+        robust,
+        joint_raise: b.joint_raise,
+        on_lines,
+        lines_raise: b.lines_raise,
+        amplitude_projected: b.amplitude_projected,
+    })
+}
+
+/// What [`bound_and_weight`] returns: the uncertainty model without a controller's check.
+#[derive(Debug, Clone)]
+pub struct UncertainBound {
+    /// The terms and the bounds per line.
+    pub terms: UncertaintyTerms,
+    /// The weight overbounding the multiplicative bound, raised by [`Self::joint_raise`].
+    pub weight: WeightFit,
+    /// As [`UncertaintyAnalysis::joint_raise`].
+    pub joint_raise: f64,
+    /// As [`UncertaintyAnalysis::lines_raise`].
+    pub lines_raise: f64,
+    /// As [`UncertaintyAnalysis::amplitude_projected`].
+    pub amplitude_projected: Option<std::result::Result<ProjectedShift, String>>,
+}
+
+impl UncertainBound {
+    /// The bound on the lines as the check on the lines uses it: $g_\ell\,\ell_k$, the
+    /// multiplicative bound (floored as the weight's fit floors it) raised by
+    /// [`Self::lines_raise`].
+    pub fn raised_bound(&self) -> Vec<f64> {
+        floored(&self.terms.multiplicative)
+            .into_iter()
+            .map(|b| b * self.lines_raise)
+            .collect()
+    }
+}
+
+/// The multiplicative bound with a floor of 1e-12 of its largest value: a line where every
+/// term is 0 (no noise, no misfit) cannot be overbounded in log scale.
+fn floored(multiplicative: &[f64]) -> Vec<f64> {
+    let top = multiplicative.iter().copied().fold(0.0f64, f64::max);
+    multiplicative
+        .iter()
+        .map(|b| b.max(1e-12 * top).max(f64::MIN_POSITIVE))
+        .collect()
+}
+
+/// The uncertainty model of [`analyse_with_shift`] without a controller: the terms, the weight
+/// of order ≤ `max_weight_order` fitted over the fraction `cover` of the lines and raised to
+/// the joint coverage, and the raise of the bound on the lines. For a plant whose controller is
+/// still to be designed, and for data without a loop (the real-data check of the bound,
+/// docs/uncertainty.md, "Real data: held-out measurements").
+///
+/// # Errors
+/// As [`analyse`], without the robust-stability checks.
+///
+/// # Example
+/// A first-order plant's exact response with 1 % noise variance: the weight is of order ≤ 4
+/// and lies above the bound on the lines it overbounds.
+/// ```
+/// use ambid::uncertainty::bound_and_weight;
+/// use ambid_core::lti::{Frd, StateSpace};
+/// use ambid_core::validate::uncertainty::{ExtraTerms, UncertaintyOptions};
+/// use faer::mat;
+/// let ts = 1e-3;
+/// let p = StateSpace::discrete(mat![[0.9]], mat![[1.0]], mat![[0.1]], mat![[0.0]], ts).unwrap();
+/// let f: Vec<f64> = (1..=100).map(|k| 4.0 * k as f64).collect();
+/// let exact = Frd::from_model(&p, &f).unwrap();
+/// let var: Vec<f64> = exact.values().iter().map(|g| 1e-4 * g.norm_sqr()).collect();
+/// let frd = Frd::new(f.clone(), exact.values().to_vec(), Some(var), Some(ts)).unwrap();
+/// let b = bound_and_weight(&p, &frd, &ExtraTerms::default(), None, &UncertaintyOptions::default(), 4, 1.0)
+///     .unwrap();
+/// assert!(b.weight.weight.order() <= 4 && b.joint_raise >= 1.0);
+/// let w = b.weight.weight.magnitude(&f);
+/// assert!(w.iter().zip(&b.terms.multiplicative).all(|(w, l)| *w >= *l * (1.0 - 1e-9)));
+/// ```
+pub fn bound_and_weight(
+    nominal: &StateSpace,
+    frd: &Frd,
+    extra: &ExtraTerms<'_>,
+    shift: Option<ShiftLines<'_>>,
+    opts: &UncertaintyOptions,
+    max_weight_order: usize,
+    cover: f64,
+) -> Result<UncertainBound> {
     // the 1×1 case of the matrix bound: the same terms as `uncertainty`, and the projection
     let mut u = uncertainty_matrix(nominal, frd, std::slice::from_ref(extra), opts)
         .context("the uncertainty terms")?;
@@ -227,14 +319,7 @@ pub fn analyse_with_shift(
     let ts = nominal
         .ts()
         .ok_or_else(|| Error::other("the nominal model must be discrete-time"))?;
-    // a line where every term is 0 (no noise, no misfit) cannot be overbounded in log scale:
-    // the floor is 1e-12 of the largest bound
-    let top = terms.multiplicative.iter().copied().fold(0.0f64, f64::max);
-    let bound: Vec<f64> = terms
-        .multiplicative
-        .iter()
-        .map(|b| b.max(1e-12 * top).max(f64::MIN_POSITIVE))
-        .collect();
+    let bound = floored(&terms.multiplicative);
     let mut weight = fit_weight_shaped(
         &terms.f_hz,
         &bound,
@@ -257,17 +342,10 @@ pub fn analyse_with_shift(
         .context("the joint coverage of the weight and the bound")?;
     let (joint_raise, lines_raise) = (factors[0].max(1.0), factors[1].max(1.0));
     weight.raise(joint_raise, &terms.f_hz, &bound);
-    let robust = robust_stability(nominal, controller, &weight.weight)
-        .context("the robust-stability check")?;
-    let raised: Vec<f64> = bound.iter().map(|b| b * lines_raise).collect();
-    let on_lines = robust_stability_on_lines(nominal, controller, &terms.f_hz, &raised)
-        .context("the robust-stability check on the lines")?;
-    Ok(UncertaintyAnalysis {
+    Ok(UncertainBound {
         terms,
         weight,
-        robust,
         joint_raise,
-        on_lines,
         lines_raise,
         amplitude_projected,
     })
@@ -1059,6 +1137,20 @@ pub fn twin_seed_frf_at(
 /// ```
 pub fn nominal_by_bic(frd: &Frd, controller: &StateSpace) -> Result<StateSpace> {
     let unstable = unstable_poles_from_loop(frd, controller, None).ok();
+    nominal_by_bic_of(frd, unstable, TWIN_ORDERS)
+}
+
+/// [`nominal_by_bic`] over the given `orders`, with at most `max_unstable_poles` unstable poles
+/// (`None`: unconstrained), for data without a controller.
+///
+/// # Errors
+/// As [`nominal_by_bic`].
+pub fn nominal_by_bic_of(
+    frd: &Frd,
+    max_unstable_poles: Option<usize>,
+    orders: impl IntoIterator<Item = usize>,
+) -> Result<StateSpace> {
+    let unstable = max_unstable_poles;
     let opts = FreqFitOptions {
         weights: FreqWeights::InverseVariance,
         max_unstable_poles: unstable,
@@ -1073,7 +1165,7 @@ pub fn nominal_by_bic(frd: &Frd, controller: &StateSpace) -> Result<StateSpace> 
         _ => return Err(Error::other("the FRF has no lines")),
     };
     let mut best: Option<(f64, StateSpace)> = None;
-    for order in TWIN_ORDERS {
+    for order in orders {
         let Ok(fit) = ss_frd(frd, order, &opts, &SsFreqOptions::default()) else {
             continue;
         };
@@ -1095,7 +1187,7 @@ pub fn nominal_by_bic(frd: &Frd, controller: &StateSpace) -> Result<StateSpace> 
     }
     best.map(|b| b.1).ok_or_else(|| {
         Error::other(
-            "no nominal model could be fitted to the twin's FRF without a resonance outside its band",
+            "no nominal model could be fitted to the FRF without a resonance outside its band",
         )
     })
 }

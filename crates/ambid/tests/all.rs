@@ -56,6 +56,7 @@ mod study;
 mod summary_golden;
 mod uncertainty_cli;
 mod uncertainty_export;
+mod uncertainty_real;
 mod uncertainty_rigs;
 mod validation_stages;
 mod workflow;
