@@ -202,6 +202,20 @@ fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
     let (tight, smooth) = (in_band(&wmag), in_band(&smooth_w));
     println!("median |W|/bound on 10-1000 Hz: mode-shaped {tight:.2}, smooth {smooth:.2}");
     assert!(tight < smooth, "{tight} vs {smooth}");
+
+    // `--per-line-misfit`: term (b) over more scales, each at its upper value, so never below
+    // the default's on any line; the summary says it was on
+    let args = uncertainty_args(&dir, &["--per-line-misfit"], "unc_per_line");
+    ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert_eq!(summary["per_line_misfit"], false, "{summary}");
+    assert_eq!(summary_of(&dir, "unc_per_line")["per_line_misfit"], true);
+    let pl_table = std::fs::read_to_string(dir.join("unc_per_line/uncertainty.csv")).unwrap();
+    let (b0, b1) = (
+        column(&table, "term_model_error"),
+        column(&pl_table, "term_model_error"),
+    );
+    assert_eq!(column(&pl_table, "f_hz"), f);
+    assert!((0..f.len()).all(|k| b1[k] >= b0[k]), "term (b) fell");
 }
 
 #[test]
@@ -760,6 +774,7 @@ fn uncertainty_on_a_4x4_frf_bounds_a_machine_model() {
         (vec!["--controller", "c.toml"], "--controller"),
         (vec!["--weight-shape", "smooth"], "--weight-shape"),
         (vec!["--raise-cover", "0.98"], "--raise-cover"),
+        (vec!["--per-line-misfit"], "--per-line-misfit"),
         (vec!["--level", "10"], "--level without --amplitude"),
         (
             vec!["--amplitude", a5.as_str()],

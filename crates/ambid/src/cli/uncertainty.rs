@@ -83,6 +83,13 @@ pub struct UncertaintyArgs {
     /// docs/uncertainty.md, "The mode-shaped weight as the single-axis default").
     #[arg(long, default_value = "mode", value_parser = parse_shape)]
     pub(crate) weight_shape: WeightShape,
+    /// Term (b) also tests each line alone, a significant misfit entering as its upper value:
+    /// for an FRF from one multisine realisation without a BLA study (`--nonlinear`), whose
+    /// nonlinear distortion shows as a per-line misfit far above the noise that the windows
+    /// average away (docs/uncertainty.md, "Real data: a held-out measurement"). Single-axis FRFs
+    /// only.
+    #[arg(long)]
+    pub(crate) per_line_misfit: bool,
     /// Term (d): the plant FRF CSV of the same experiment at another operating point (bias
     /// current, air gap; `ambid frf` of a record with the same excitation, so the same lines).
     /// Repeat it for each; the bound then holds the largest noise-corrected distance of them from
@@ -299,6 +306,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             run_coverage: a.run_coverage,
             raise_cover: a.raise_cover,
             weight_shape: a.weight_shape,
+            per_line_misfit: a.per_line_misfit,
             ..UncertaintyOptions::default()
         },
         a.max_order,
@@ -391,6 +399,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         "lines": t.f_hz.len(),
         "line_coverage": t.line_coverage,
         "window_half_lines": t.window_half_lines,
+        "per_line_misfit": a.per_line_misfit,
         "weight": {
             "order": w.weight.order(),
             "looseness": w.looseness,
