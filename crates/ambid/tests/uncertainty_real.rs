@@ -125,7 +125,12 @@ fn the_bound_covers_a_held_out_measurement_of_the_f16() {
         let w = b.weight.weight.magnitude(f);
         let ell = &b.terms.multiplicative;
         let me = median(err.clone());
-        let noise = median((0..err.len()).map(|k| allow[k] / err[k]).collect()) / 20f64.ln().sqrt();
+        // the held-out FRF's standard deviation against its error (relative to |Ĝ| both)
+        let noise = median(
+            (0..err.len())
+                .map(|k| allow[k] / err[k] / 20f64.ln().sqrt())
+                .collect(),
+        );
         let (cw, cl, cr) = (covered(&w), covered(ell), covered(&b.raised_bound()));
         let (dw, dl) = (
             covered(&default.weight.weight.magnitude(f)),

@@ -659,14 +659,16 @@ fn uncertainty_with(
             let v = vv / (sw * sw);
             // the excess over the test's threshold: 0 at the edge of significance, |ē| for a
             // misfit far above the noise (a noise excursion that just passes adds little)
-            let mut excess = (mean.norm_sqr() - thr * v).max(0.0).sqrt();
-            if opts.per_line_misfit && excess > 0.0 {
-                // the misfit's upper value at the line coverage, not its excess: the line
-                // alone has no neighbours to average its noise away
-                excess = rice_quantile(mean.norm(), v, opts.line_coverage);
-            }
-            if excess > *b {
-                *b = excess;
+            let excess = (mean.norm_sqr() - thr * v).max(0.0).sqrt();
+            // on request a significant misfit enters at its upper value at the line coverage,
+            // not its excess: the line alone has no neighbours to average its noise away
+            let term = if opts.per_line_misfit && excess > 0.0 {
+                rice_quantile(mean.norm(), v, opts.line_coverage)
+            } else {
+                excess
+            };
+            if term > *b {
+                *b = term;
                 *best = (mean, v);
             }
         }
