@@ -213,11 +213,7 @@ pub fn analyse_with_shift(
     cover: f64,
 ) -> Result<UncertaintyAnalysis> {
     let b = bound_and_weight(nominal, frd, extra, shift, opts, max_weight_order, cover)?;
-    let robust = robust_stability(nominal, controller, &b.weight.weight)
-        .context("the robust-stability check")?;
-    let raised = b.raised_bound();
-    let on_lines = robust_stability_on_lines(nominal, controller, &b.terms.f_hz, &raised)
-        .context("the robust-stability check on the lines")?;
+    let (robust, on_lines) = b.robust_checks(nominal, controller)?;
     Ok(UncertaintyAnalysis {
         terms: b.terms,
         weight: b.weight,
@@ -253,6 +249,26 @@ impl UncertainBound {
             .into_iter()
             .map(|b| b * self.lines_raise)
             .collect()
+    }
+
+    /// The robust stability of the loop with `controller` around `nominal` (the model this
+    /// bound was computed for): against the weight ([`UncertaintyAnalysis::robust`]) and
+    /// against the bound on the lines raised by $g_\ell$ ([`UncertaintyAnalysis::on_lines`]).
+    ///
+    /// # Errors
+    /// A controller whose sample time differs from the model's, or a loop that cannot be
+    /// evaluated.
+    pub fn robust_checks(
+        &self,
+        nominal: &StateSpace,
+        controller: &StateSpace,
+    ) -> Result<(RobustStability, RobustStability)> {
+        let robust = robust_stability(nominal, controller, &self.weight.weight)
+            .context("the robust-stability check")?;
+        let on_lines =
+            robust_stability_on_lines(nominal, controller, &self.terms.f_hz, &self.raised_bound())
+                .context("the robust-stability check on the lines")?;
+        Ok((robust, on_lines))
     }
 }
 

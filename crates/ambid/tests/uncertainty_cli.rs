@@ -216,6 +216,60 @@ fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
     );
     assert_eq!(column(&pl_table, "f_hz"), f);
     assert!((0..f.len()).all(|k| b1[k] >= b0[k]), "term (b) fell");
+
+    // without --controller: the same bound, weight and uncertain model (they do not depend on
+    // the loop), no robust check: no robust.csv, `robust` and `robust_on_lines` null
+    let mut args = uncertainty_args(&dir, &[], "unc_plant");
+    let c = args.iter().position(|s| s == "--controller").unwrap();
+    args.drain(c..c + 2);
+    let t = ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(
+        t.contains("robust stability: not checked (no --controller)"),
+        "{t}"
+    );
+    let plain = summary_of(&dir, "unc_plant");
+    for key in ["robust", "robust_on_lines", "controller"] {
+        assert!(plain[key].is_null(), "{key}: {plain}");
+    }
+    assert_eq!(plain["weight"], summary["weight"]);
+    assert_eq!(plain["lines_raise"], summary["robust_on_lines"]["raise"]);
+    assert_eq!(
+        std::fs::read(dir.join("unc_plant/uncertainty.csv")).unwrap(),
+        std::fs::read(dir.join("unc/uncertainty.csv")).unwrap()
+    );
+    assert!(dir.join("unc_plant/uncertain.mat").is_file());
+    assert!(dir.join("unc_plant/uncertain.npz").is_file());
+    assert!(!dir.join("unc_plant/robust.csv").exists());
+    let uj: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("unc_plant/uncertain.json")).unwrap(),
+    )
+    .unwrap();
+    assert!(uj["robust"].is_null(), "{uj}");
+    let w_plain =
+        script_numbers(&std::fs::read_to_string(dir.join("unc_plant/uncertain.m")).unwrap());
+    for key in [
+        "W_gain",
+        "W_zeros_re",
+        "W_zeros_im",
+        "W_poles_re",
+        "W_poles_im",
+    ] {
+        assert_eq!(w_plain[key].1, v[key].1, "{key}");
+    }
+    // into the controller run's directory with --force: its robust.csv would be left beside a
+    // summary without a check, so it is refused and nothing changes
+    let before = std::fs::read(dir.join("unc/summary.json")).unwrap();
+    let mut again = args.clone();
+    let o = args.iter().position(|s| s == "--out").unwrap();
+    again[o + 1] = dir.join("unc").to_str().unwrap().to_string();
+    again.push("--force".into());
+    let o = ambid(&again.iter().map(String::as_str).collect::<Vec<_>>());
+    let t = text(&o);
+    assert!(
+        !o.status.success() && t.contains("robust.csv") && t.contains("--controller"),
+        "{t}"
+    );
+    assert_eq!(std::fs::read(dir.join("unc/summary.json")).unwrap(), before);
 }
 
 #[test]

@@ -385,6 +385,35 @@ pub fn frf_with_variance(
     Ok((frd, band))
 }
 
+/// The plant FRF with its standard deviations on the band (given, or the file's reliable band),
+/// that band, and the nominal model: [`ModelOnFrf`] without the controller.
+pub fn frf_and_model(
+    frf: &Path,
+    quantity: &str,
+    fs: Option<f64>,
+    band: Option<(f64, f64)>,
+    model: &Path,
+    needs: &str,
+) -> Result<(
+    ambid_core::lti::Frd,
+    (f64, f64),
+    ambid_core::lti::StateSpace,
+)> {
+    let (frd, band) = frf_with_variance(frf, quantity, fs, band, needs)?;
+    let model = ambid::io::model::read_model_json(model)?;
+    Ok((frd, band, model))
+}
+
+/// The loop's controller file, its sample time checked against the FRF's `frd`.
+pub fn controller_for(
+    controller: &Path,
+    frd: &ambid_core::lti::Frd,
+) -> Result<ambid::io::ControllerModel> {
+    let controller = ambid::io::read_controller(controller)?;
+    controller.check_ts(frd.ts().unwrap_or(1.0 / controller.fs_hz()))?;
+    Ok(controller)
+}
+
 /// Reads [`ModelOnFrf`]; `needs` says what the standard deviations are needed for (the error
 /// when they are all zero).
 pub fn model_on_frf(
@@ -396,10 +425,8 @@ pub fn model_on_frf(
     controller: &Path,
     needs: &str,
 ) -> Result<ModelOnFrf> {
-    let (frd, band) = frf_with_variance(frf, quantity, fs, band, needs)?;
-    let model = ambid::io::model::read_model_json(model)?;
-    let controller = ambid::io::read_controller(controller)?;
-    controller.check_ts(frd.ts().unwrap_or(1.0 / controller.fs_hz()))?;
+    let (frd, band, model) = frf_and_model(frf, quantity, fs, band, model, needs)?;
+    let controller = controller_for(controller, &frd)?;
     Ok(ModelOnFrf {
         frd,
         band,

@@ -4,14 +4,14 @@
 //! uncertain model exported for MATLAB and Python.
 
 use super::args::parse_band;
-use super::common::{frf_with_variance, model_on_frf, ModelOnFrf};
+use super::common::{controller_for, frf_and_model, frf_with_variance};
 use ambid::io::export::uncertain::{
     robust_json, uncertain_json, uncertain_mat_bytes, uncertain_matlab_script, uncertain_npz_bytes,
     UncertainModel, UncertainNames,
 };
 use ambid::io::OutputSet;
 use ambid::uncertainty::{
-    amplitude_term_and_shifts, analyse_with_shift, nonlinear_term, operating_term, NONLINEAR_ALPHA,
+    amplitude_term_and_shifts, bound_and_weight, nonlinear_term, operating_term, NONLINEAR_ALPHA,
 };
 use ambid_core::frf::bla::BlaEstimate;
 use ambid_core::validate::uncertainty::{
@@ -34,9 +34,12 @@ pub struct UncertaintyArgs {
     /// models/ssN_<speed>rpm.json.
     #[arg(long)]
     pub(crate) model: PathBuf,
-    /// Controller file (TOML/JSON) of the loop, for the robust-stability check. Required for a
-    /// single-axis FRF; with a 4×4 matrix FRF the four controllers come from the machine
-    /// configuration (--config machine.toml, --rig-seed, or the nominal machine).
+    /// Controller file (TOML/JSON) of the loop, for the robust-stability check. Without it a
+    /// single-axis FRF gets the bound, the weight and the uncertain model only (a plant whose
+    /// controller is still to be designed, or a record without a loop): no robust.csv, and
+    /// `robust`/`robust_on_lines` null in summary.json. With a 4×4 matrix FRF the four
+    /// controllers come from the machine configuration (--config machine.toml, --rig-seed, or
+    /// the nominal machine).
     #[arg(long)]
     pub(crate) controller: Option<PathBuf>,
     /// 4×4 matrix FRF only: the machine configuration (its four controllers, and its exact
@@ -111,8 +114,8 @@ pub struct UncertaintyArgs {
     /// and kept where significant, is carried to the FRF's lines (docs/uncertainty.md).
     #[arg(long, value_name = "BLA")]
     pub(crate) nonlinear: Option<PathBuf>,
-    /// Output directory: uncertainty.csv, robust.csv, summary.json and the uncertain model
-    /// (uncertain.m, uncertain.mat, uncertain.npz, uncertain.json).
+    /// Output directory: uncertainty.csv, robust.csv (with --controller), summary.json and the
+    /// uncertain model (uncertain.m, uncertain.mat, uncertain.npz, uncertain.json).
     #[arg(long, default_value = "uncertainty")]
     pub(crate) out: PathBuf,
     /// Replace those files if they exist (other files in the directory are left alone).
@@ -185,30 +188,31 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         || a.twin.gap.is_some();
     if twin_given || a.speed_rpm.is_some() {
         return Err(ambid::error::Error::usage(
-            "--config, --rig-seed, --bias, --gap and --speed-rpm belong to a 4×4 matrix FRF (P_xa_xa_re, …); this file is a single-axis FRF: give the loop's --controller",
+            "--config, --rig-seed, --bias, --gap and --speed-rpm belong to a 4×4 matrix FRF (P_xa_xa_re, …); this file is a single-axis FRF: its loop's controller, for the robust-stability check, is --controller",
         )
         .into());
     }
-    let Some(controller_path) = &a.controller else {
-        return Err(ambid::error::Error::usage(
-            "a single-axis FRF needs --controller, the loop's controller file (TOML/JSON) for the robust-stability check",
-        )
+    let robust_csv_path = path_in(&a.out, "robust.csv");
+    if a.controller.is_none() && robust_csv_path.is_file() {
+        // --force replaces files; it would leave this one beside a summary without a check
+        return Err(ambid::error::Error::usage(format!(
+            "{} holds a robust-stability check of an earlier run, and without --controller none is made: remove it, give --controller, or choose another --out",
+            robust_csv_path.display()
+        ))
         .into());
-    };
-    let ModelOnFrf {
-        frd,
-        band,
-        model,
-        controller: ctrl,
-    } = model_on_frf(
+    }
+    let (frd, band, model) = frf_and_model(
         &a.frf,
         &a.quantity,
         a.fs,
         a.band,
         &a.model,
-        controller_path,
         "the uncertainty needs the FRF's standard deviations (an FRF of `ambid frf` from several periods or realisations)",
     )?;
+    let ctrl = match &a.controller {
+        Some(p) => Some(controller_for(p, &frd)?),
+        None => None,
+    };
     // term (d) from the other operating points' FRFs, on the nominal FRF's lines
     let spread = if a.operating.is_empty() {
         None
@@ -295,10 +299,9 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         operating_spread: spread.as_deref(),
         amplitude_shift: amplitude.as_ref().map(|a| a.term.as_slice()),
     };
-    let analysis = analyse_with_shift(
+    let analysis = bound_and_weight(
         &model,
         &frd,
-        ctrl.state_space(),
         &extra,
         amplitude.as_ref().map(|a| a.shift_lines()),
         &UncertaintyOptions {
@@ -312,6 +315,10 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         a.max_order,
         a.cover,
     )?;
+    let checks = match &ctrl {
+        Some(c) => Some(analysis.robust_checks(&model, c.state_space())?),
+        None => None,
+    };
     match &analysis.amplitude_projected {
         Some(Ok(p)) => println!(
             "term (e) through the model: Wald statistic {:.1} against {:.1} (χ², 5 %): {}",
@@ -324,7 +331,6 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
     }
     let t = &analysis.terms;
     let w = &analysis.weight;
-    let r = &analysis.robust;
 
     // the per-line table
     let wmag = w.weight.magnitude(&t.f_hz);
@@ -372,7 +378,10 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
     }
     let refs: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
     let table = csv_bytes(&header, &refs)?;
-    let robust_csv = csv_bytes(&["f_hz".into(), "mu".into()], &[&r.f_hz, &r.mu])?;
+    let robust_csv = match &checks {
+        Some((r, _)) => Some(csv_bytes(&["f_hz".into(), "mu".into()], &[&r.f_hz, &r.mu])?),
+        None => None,
+    };
 
     let names = UncertainNames {
         name: "uncertain_plant".into(),
@@ -383,7 +392,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         nominal: &model,
         weight: w,
         terms: t,
-        robust: Some(r),
+        robust: checks.as_ref().map(|(r, _)| r),
     };
     let covered = wmag
         .iter()
@@ -393,13 +402,14 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
     let summary = json!({
         "frf": a.frf.display().to_string(),
         "model": a.model.display().to_string(),
-        "controller": controller_path.display().to_string(),
+        "controller": a.controller.as_ref().map(|p| p.display().to_string()),
         "band_hz": [band.0, band.1],
         "band_from_file": a.band.is_none(),
         "lines": t.f_hz.len(),
         "line_coverage": t.line_coverage,
         "window_half_lines": t.window_half_lines,
         "per_line_misfit": a.per_line_misfit,
+        "lines_raise": analysis.lines_raise,
         "weight": {
             "order": w.weight.order(),
             "looseness": w.looseness,
@@ -431,16 +441,18 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
                 None => serde_json::Value::Null,
             },
         })),
-        "robust": robust_json(r),
-        "robust_on_lines": {
+        "robust": checks.as_ref().map(|(r, _)| robust_json(r)),
+        "robust_on_lines": checks.as_ref().map(|(_, ol)| json!({
             "raise": analysis.lines_raise,
-            "check": robust_json(&analysis.on_lines),
-        },
+            "check": robust_json(ol),
+        })),
     });
 
     let mut set = OutputSet::new(a.force);
     set.write(&path_in(&a.out, "uncertainty.csv"), &table)?;
-    set.write(&path_in(&a.out, "robust.csv"), &robust_csv)?;
+    if let Some(bytes) = &robust_csv {
+        set.write(&robust_csv_path, bytes)?;
+    }
     set.write(
         &path_in(&a.out, "summary.json"),
         serde_json::to_string_pretty(&summary)?.as_bytes(),
@@ -497,31 +509,38 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         Some(g) => format!("{g:.3}"),
         None => "-".to_string(),
     };
-    println!(
-        "robust stability: {} (max |W T| = {:.3} at {:.1} Hz, margin {:.3}); robust gain margins: down to {}, up to {}",
-        if r.robustly_stable {
-            "yes"
-        } else if r.nominal_stable {
-            "NO (the nominal loop is stable, the uncertain set is not)"
-        } else {
-            "NO (the nominal loop is unstable)"
-        },
-        r.mu_peak,
-        r.mu_peak_hz,
-        r.stability_margin,
-        margin(r.lower_gain_margin),
-        margin(r.upper_gain_margin),
-    );
-    let ol = &analysis.on_lines;
-    println!(
-        "on the lines (the bound itself ×{:.3}, no weight fit; the band only): {} (max ℓ|T| = {:.3} at {:.1} Hz); robust gain margins: down to {}, up to {}",
-        analysis.lines_raise,
-        if ol.robustly_stable { "robustly stable" } else { "NOT robustly stable" },
-        ol.mu_peak,
-        ol.mu_peak_hz,
-        margin(ol.lower_gain_margin),
-        margin(ol.upper_gain_margin),
-    );
+    match &checks {
+        Some((r, ol)) => {
+            println!(
+                "robust stability: {} (max |W T| = {:.3} at {:.1} Hz, margin {:.3}); robust gain margins: down to {}, up to {}",
+                if r.robustly_stable {
+                    "yes"
+                } else if r.nominal_stable {
+                    "NO (the nominal loop is stable, the uncertain set is not)"
+                } else {
+                    "NO (the nominal loop is unstable)"
+                },
+                r.mu_peak,
+                r.mu_peak_hz,
+                r.stability_margin,
+                margin(r.lower_gain_margin),
+                margin(r.upper_gain_margin),
+            );
+            println!(
+                "on the lines (the bound itself ×{:.3}, no weight fit; the band only): {} (max ℓ|T| = {:.3} at {:.1} Hz); robust gain margins: down to {}, up to {}",
+                analysis.lines_raise,
+                if ol.robustly_stable { "robustly stable" } else { "NOT robustly stable" },
+                ol.mu_peak,
+                ol.mu_peak_hz,
+                margin(ol.lower_gain_margin),
+                margin(ol.upper_gain_margin),
+            );
+        }
+        None => println!(
+            "robust stability: not checked (no --controller); the bound on the lines would be raised ×{:.3} for its check",
+            analysis.lines_raise
+        ),
+    }
     let written = set.commit()?;
     println!("written: {}", written.len());
     for p in written {
