@@ -203,11 +203,15 @@ fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
     println!("median |W|/bound on 10-1000 Hz: mode-shaped {tight:.2}, smooth {smooth:.2}");
     assert!(tight < smooth, "{tight} vs {smooth}");
 
-    // `--per-line-misfit`: term (b) over more scales, each at its upper value, so never below
-    // the default's on any line; the summary says it was on
-    let args = uncertainty_args(&dir, &["--per-line-misfit"], "unc_per_line");
+    // `--per-line-misfit on`: term (b) over more scales, each at its upper value, so never
+    // below the default's on any line; the summary says it was on. The default (`auto`) left
+    // it off: the twin's FRF is noise-limited, its misfit's roughness about 1
+    let args = uncertainty_args(&dir, &["--per-line-misfit", "on"], "unc_per_line");
     ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
     assert_eq!(summary["per_line_misfit"], false, "{summary}");
+    assert_eq!(summary["per_line_misfit_setting"], "auto", "{summary}");
+    let rough = summary["misfit_roughness"].as_f64().unwrap();
+    assert!((0.7..1.5).contains(&rough), "{rough}");
     assert_eq!(summary_of(&dir, "unc_per_line")["per_line_misfit"], true);
     let pl_table = std::fs::read_to_string(dir.join("unc_per_line/uncertainty.csv")).unwrap();
     let (b0, b1) = (
@@ -344,6 +348,12 @@ fn uncertainty_refuses_bad_input_and_writes_nothing() {
         &d("model.json"),
     );
     assert!(t.contains("`smooth` or `mode`"), "{t}");
+    let t = run(
+        &["--per-line-misfit", "maybe"],
+        &d("frf.csv"),
+        &d("model.json"),
+    );
+    assert!(t.contains("`auto`, `on` or `off`"), "{t}");
     // the machine's options on a single-axis FRF
     let t = run(&["--rig-seed", "3"], &d("frf.csv"), &d("model.json"));
     assert!(t.contains("belong to a 4×4 matrix FRF"), "{t}");
@@ -828,7 +838,7 @@ fn uncertainty_on_a_4x4_frf_bounds_a_machine_model() {
         (vec!["--controller", "c.toml"], "--controller"),
         (vec!["--weight-shape", "smooth"], "--weight-shape"),
         (vec!["--raise-cover", "0.98"], "--raise-cover"),
-        (vec!["--per-line-misfit"], "--per-line-misfit"),
+        (vec!["--per-line-misfit", "on"], "--per-line-misfit"),
         (vec!["--level", "10"], "--level without --amplitude"),
         (
             vec!["--amplitude", a5.as_str()],

@@ -193,6 +193,8 @@ fn terms(r: &Reference) -> UncertaintyTerms {
         window_half_lines: 2,
         n_params: 4,
         line_coverage: 0.95,
+        misfit_roughness: None,
+        per_line_misfit: false,
         errors: ErrorModel::default(),
     }
 }

@@ -15,16 +15,17 @@
 //! its nonlinear distortion is the same in both halves and looks like a per-line misfit of the
 //! model, far above the period-to-period noise.
 //!
-//! With the defaults the bound on the lines covers only 79, 53 and 66 % of the lines and the
-//! weight 94.8, 91.4 and 95.1 %: term (b)'s narrowest window of 3 lines averages that per-line
-//! misfit away. With `UncertaintyOptions::per_line_misfit` (the line alone as one more scale,
-//! a significant misfit as its upper value) both cover ≥ 95 % of the lines on every output;
-//! the test holds that, and that the defaults fall short on at least one output (the finding
-//! the option answers).
+//! With term (b)'s windows alone (`PerLineMisfit::Off`, the default before 2026-12-06) the
+//! bound on the lines covers only 79, 53 and 66 % of the lines and the weight 94.8, 91.4 and
+//! 95.1 %: the narrowest window of 3 lines averages that per-line misfit away. The default
+//! (`PerLineMisfit::Auto`) measures the misfit's roughness (16–92 on the three outputs, about 1
+//! on the twin), takes each line alone too, and both cover ≥ 95 % of the lines on every
+//! output; the test holds that, and that the windows alone fall short on at least one output.
 //!
 //! On acceleration 1 the same bound also goes through the command a user runs on a record
-//! without a loop (`ambid uncertainty --per-line-misfit`, no `--controller`): the bound equals
-//! the library's to 1e-12 and its weight and bound cover ≥ 95 % of the held-out lines.
+//! without a loop (`ambid uncertainty` with its defaults, no `--controller`): the line-alone
+//! scale is on, the bound equals the library's to 1e-12 and its weight and bound cover ≥ 95 %
+//! of the held-out lines.
 //!
 //! `cargo test -p ambid --all-features --test all -- uncertainty_real:: --nocapture` prints the
 //! table of the docs.
@@ -34,7 +35,9 @@ use crate::common::median;
 use ambid::uncertainty::{bound_and_weight, nominal_by_bic_of};
 use ambid_core::data::{IoData, Role};
 use ambid_core::frf::mimo::{periodic, MimoOptions};
-use ambid_core::validate::uncertainty::{ExtraTerms, UncertaintyOptions};
+use ambid_core::validate::uncertainty::{
+    ExtraTerms, PerLineMisfit, UncertaintyOptions, ROUGH_MISFIT,
+};
 use ambid_core::validate::weight::DEFAULT_COVER;
 
 const PERIOD: usize = 8192;
@@ -81,13 +84,13 @@ fn the_bound_covers_a_held_out_measurement_of_the_f16() {
     let est = periodic(&periods(&cols, 1, 5), &opts).unwrap().plant;
     let held = periodic(&periods(&cols, 5, 9), &opts).unwrap().plant;
     println!(
-        "per_line_misfit (defaults in brackets)\noutput | order | lines | W covers | l covers | l*raise covers | med |W| / med e | med l / med e | med sigma_v / e | med e"
+        "the default, per-line scale on (the windows alone in brackets)\noutput | order | lines | W covers | l covers | l*raise covers | med |W| / med e | med l / med e | med sigma_v / e | med e"
     );
     let mut short_by_default = false;
     for out in 0..3 {
         let (e1, v1) = (est.entry(out, 0).unwrap(), held.entry(out, 0).unwrap());
         let model = nominal_by_bic_of(&e1, Some(0), 10..=32).unwrap();
-        let bound = |per_line_misfit: bool| {
+        let bound = |per_line_misfit: PerLineMisfit| {
             let opts = UncertaintyOptions {
                 per_line_misfit,
                 ..UncertaintyOptions::default()
@@ -103,7 +106,13 @@ fn the_bound_covers_a_held_out_measurement_of_the_f16() {
             )
             .unwrap()
         };
-        let (b, default) = (bound(true), bound(false));
+        // the default (`Auto`) sees the rough misfit and takes each line alone too; `Off` is
+        // the windows alone, the default before 2026-12-06
+        let (b, default) = (bound(PerLineMisfit::Auto), bound(PerLineMisfit::Off));
+        let rough = b.terms.misfit_roughness.unwrap();
+        println!("y_{}: misfit roughness {rough:.1}", out + 1);
+        assert!(rough >= ROUGH_MISFIT && b.terms.per_line_misfit, "{rough}");
+        assert!(!default.terms.per_line_misfit);
         let f = &b.terms.f_hz;
         assert_eq!(f.as_slice(), v1.f_hz(), "the halves' lines");
         assert_eq!(f.len(), 267);
@@ -171,7 +180,7 @@ fn the_bound_covers_a_held_out_measurement_of_the_f16() {
             cli_without_a_controller(&e1, &model, &err, &allow, &b);
         }
     }
-    assert!(short_by_default, "the defaults covered every output");
+    assert!(short_by_default, "the windows alone covered every output");
 }
 
 /// The same bound through the command a user runs on a record without a loop: the estimation
@@ -207,7 +216,6 @@ fn cli_without_a_controller(
         "400",
         "--band",
         "2:15",
-        "--per-line-misfit",
         "--out",
         &d("unc"),
     ]);
@@ -217,6 +225,8 @@ fn cli_without_a_controller(
             .unwrap();
     assert!(summary["robust"].is_null() && summary["controller"].is_null());
     assert_eq!(summary["per_line_misfit"], true);
+    assert_eq!(summary["per_line_misfit_setting"], "auto");
+    assert!(summary["misfit_roughness"].as_f64().unwrap() >= ROUGH_MISFIT);
     assert!(!dir.join("unc/robust.csv").exists());
     let table = std::fs::read_to_string(dir.join("unc/uncertainty.csv")).unwrap();
     let col = |name: &str| -> Vec<f64> {

@@ -105,6 +105,12 @@ fn uncertainty_and_physical_steps_on_the_twin() {
     // the check on the lines (no weight fit): the same bars on the nominal twin
     assert_eq!(u["lines_robustly_stable"], true);
     assert!(u["lines_raise"].as_f64().unwrap() >= 1.0);
+    // the twin's FRF is noise-limited: its misfit is not rough, term (b) keeps its windows
+    let rough = u["misfit_roughness"].as_f64().unwrap();
+    assert!(
+        (0.6..1.6).contains(&rough) && u["per_line_misfit"] == false,
+        "{rough}"
+    );
     let (l_lo, l_hi) = (
         u["lines_lower_gain_margin"].as_f64().unwrap(),
         u["lines_upper_gain_margin"].as_f64().unwrap(),

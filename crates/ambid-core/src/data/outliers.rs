@@ -313,7 +313,7 @@ fn check_nonempty(x: &[f64]) -> Result<()> {
 
 /// Median of `v` (mean of the two middle values for an even count), reordering `v`.
 /// `v` must be non-empty and finite.
-fn median_in_place(v: &mut [f64]) -> f64 {
+pub(crate) fn median_in_place(v: &mut [f64]) -> f64 {
     let n = v.len();
     let mid = n / 2;
     let (lower, m, _) = v.select_nth_unstable_by(mid, f64::total_cmp);

@@ -52,13 +52,16 @@
 //!   2M, 4M, \dots$ (at most six, while $2M' + 1 \le L/4$), each at the level $\alpha_b/S$ for
 //!   $S$ scales (so a correct model still gets a term on $\alpha_b$ of its lines), and $b_k$ is
 //!   the largest excess over the scales. A misfit that changes from line to line is averaged
-//!   away by any window; [`UncertaintyOptions::per_line_misfit`] adds the line alone (half-width
-//!   0) as one more scale, with the significant misfit's upper value in place of its excess.
-//!   On real data from one multisine realisation without a BLA study
-//!   (the F-16 ground vibration test, whose nonlinear distortion is a fixed per-line misfit far
-//!   above the period-to-period noise) the windows alone left the bound below a held-out
-//!   measurement's error on 21–47 % of the lines (docs/uncertainty.md, "Real data: a held-out
-//!   measurement"). (Keeping $M$ at $\alpha_b$ and the wider ones at
+//!   away by any window; the line alone (half-width 0) is then one more scale, with the
+//!   significant misfit's upper value in place of its excess ([`PerLineMisfit`]). By default
+//!   ([`PerLineMisfit::Auto`]) it is taken when no term (c) is given and the misfit's
+//!   [`misfit_roughness`] (its line-to-line part over the noise, about 1 when the model is
+//!   right but for smooth errors) is at least [`ROUGH_MISFIT`] = 4. On real data from one
+//!   multisine realisation without a BLA study (the F-16 ground vibration test, whose nonlinear
+//!   distortion is a fixed per-line misfit far above the period-to-period noise: roughness
+//!   16–92) the windows alone left the bound below a held-out measurement's error on 21–47 % of
+//!   the lines (docs/uncertainty.md, "Real data: a held-out measurement", and "The line alone
+//!   when the misfit is rough"). (Keeping $M$ at $\alpha_b$ and the wider ones at
 //!   $\alpha_b/(S-1)$ gave a term never below the one-window one, but moved the weight of random
 //!   rig 167 so that its robust margin fell below half the exact one on both twins.) With one scale, on the 4-axis twin's random rigs at
 //!   10 000–27 000 rpm the MIMO model's systematic error of about 0.8 of a line's noise in the
@@ -204,17 +207,129 @@ pub struct UncertaintyOptions {
     /// "Lines beyond the fit band"). Any model goes through the joint tangent space of
     /// [`uncertainty_matrix`] then, a SISO one as its 1×1 case.
     pub fitted_band_hz: Option<[f64; 2]>,
-    /// Term (b) also tests each line alone (half-width 0) besides its windows, and a
-    /// significant misfit enters as its upper value at [`Self::line_coverage`] (the Rice
-    /// quantile of its magnitude, [`rice_quantile`]) instead of its excess over the test's
-    /// threshold (default `false`). For an FRF from one multisine realisation without a BLA
-    /// study (no term (c)): that realisation's nonlinear distortion is a fixed per-line
-    /// misfit, far above the noise of the periods, which every window averages away. On the
-    /// F-16 ground vibration test the default bound stayed below a held-out measurement's error
-    /// on 21–47 % of the lines, this one on at most 0.4 %. The line alone as the default (with
-    /// the excess) cost the weight's margin on 2 of 400 workflow runs of the twin, whose
-    /// workflow measures term (c) (docs/uncertainty.md, "Real data: a held-out measurement").
-    pub per_line_misfit: bool,
+    /// Whether term (b) also tests each line alone ([`PerLineMisfit`]; default
+    /// [`PerLineMisfit::Auto`]: when the misfit is rough from line to line and no term (c) is
+    /// given).
+    pub per_line_misfit: PerLineMisfit,
+}
+
+/// Term (b)'s line-alone scale ([`UncertaintyOptions::per_line_misfit`]; module docs, term (b)).
+///
+/// With it, term (b) also tests each line alone (half-width 0) besides its windows, and a
+/// significant misfit enters as its upper value at the line coverage (the Rice quantile of its
+/// magnitude, [`rice_quantile`]) instead of its excess over the test's threshold. It is for an
+/// FRF from one multisine realisation without a BLA study (no term (c)): that realisation's
+/// nonlinear distortion is a fixed per-line misfit, far above the noise of the periods, which
+/// every window averages away. On the F-16 ground vibration test the bound without it stayed
+/// below a held-out measurement's error on 21–47 % of the lines, with it on at most 0.4 %
+/// (docs/uncertainty.md, "Real data: a held-out measurement").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PerLineMisfit {
+    /// Never (the windows alone, the behaviour before 2026-12-06).
+    Off,
+    /// Always.
+    On,
+    /// When no term (c) is given and the misfit's [`misfit_roughness`] is at least
+    /// [`ROUGH_MISFIT`]: a misfit whose line-to-line part stands clearly above the noise. On
+    /// 444 bounds of the twin's random rigs (single-axis and 4×4 entries, both twins) the
+    /// roughness was 0.72–1.45, so it was never taken there; on the F-16 ground vibration test
+    /// 16–92 (docs/uncertainty.md, "The line alone when the misfit is rough").
+    #[default]
+    Auto,
+}
+
+impl PerLineMisfit {
+    /// `auto`, `on` or `off`.
+    ///
+    /// # Errors
+    /// Any other name.
+    pub fn from_name(s: &str) -> Result<Self> {
+        match s {
+            "auto" => Ok(Self::Auto),
+            "on" => Ok(Self::On),
+            "off" => Ok(Self::Off),
+            _ => Err(Error::invalid(
+                "per_line_misfit",
+                format!("`{s}`: give `auto`, `on` or `off`"),
+            )),
+        }
+    }
+
+    /// The name [`Self::from_name`] reads.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Off => "off",
+            Self::On => "on",
+            Self::Auto => "auto",
+        }
+    }
+}
+
+/// The roughness of the misfit at which [`PerLineMisfit::Auto`] turns the line-alone scale on:
+/// the misfit's line-to-line part is twice the noise in amplitude at the median line. Under a
+/// model that is right but for smooth errors the roughness is about 1 (with variances estimated
+/// from $P$ periods it is the median of an $F(2, 2(P-1))$ variable over $\ln 2$: 1.44 for two
+/// periods, 1.13 for four), so 4 is not reached by noise.
+pub const ROUGH_MISFIT: f64 = 4.0;
+
+/// How rough the misfit $e_k = G_k - \hat P(z_k)$ is from line to line, against the FRF's
+/// noise: per line $k$ with three lines on each side, the residual $r_k$ of a complex quadratic
+/// in the line index fitted (unweighted) to $e_{k-3}, \dots, e_{k+3}$, at the centre line,
+/// $$ r_k = \sum_{j=-3}^{3} c_j\, e_{k+j}, \qquad
+///    c_j = \delta_{j0} - \Bigl(\tfrac17 - \tfrac{4\,(j^2 - 4)}{84}\Bigr), $$
+/// normalised by its noise variance $V_k = \sum_j c_j^2 \sigma_{k+j}^2$; the roughness is
+/// $\operatorname{median}_k |r_k|^2 / V_k$ over $\ln 2$. A smooth model error (anything a
+/// quadratic follows over seven lines) is removed, so under noise alone $|r_k|^2/V_k$ is
+/// exponential and the roughness about 1; one multisine realisation's nonlinear distortion, a
+/// fixed error that changes from line to line, makes it the distortion's power over the noise's
+/// (F-16: 16–170). The median keeps a few sharp features (a resonance narrower than the window)
+/// from deciding it. `None` with fewer than 7 lines or a zero variance.
+///
+/// # Example
+/// Noise alone gives about 1; the same noise plus a fixed per-line error of five times its
+/// standard deviation gives about 25 and more.
+/// ```
+/// use ambid_core::c64;
+/// use ambid_core::validate::uncertainty::misfit_roughness;
+/// use rand::{RngExt, SeedableRng};
+/// let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+/// let mut gauss = || {
+///     // one circular complex normal of unit variance: exponential power, uniform phase
+///     let u: f64 = rng.random_range(1e-300..1.0);
+///     let phase: f64 = rng.random_range(0.0..2.0 * std::f64::consts::PI);
+///     c64::from_polar((-u.ln()).sqrt(), phase)
+/// };
+/// let noise: Vec<c64> = (0..400).map(|_| gauss()).collect();
+/// let var = vec![1.0; 400];
+/// let r0 = misfit_roughness(&noise, &var).unwrap();
+/// assert!((0.8..1.25).contains(&r0), "{r0}");
+/// let rough: Vec<c64> = noise.iter().map(|n| n + gauss() * 5.0).collect();
+/// assert!(misfit_roughness(&rough, &var).unwrap() > 15.0);
+/// ```
+pub fn misfit_roughness(misfit: &[c64], var: &[f64]) -> Option<f64> {
+    const H: usize = 3;
+    let l = misfit.len();
+    if l < 2 * H + 1 || var.len() != l || var.iter().any(|v| !(*v > 0.0 && v.is_finite())) {
+        return None;
+    }
+    // the centre row of the quadratic's hat matrix on -3..3: 1/7 + (0 - 4)(j² - 4)/84
+    let c: Vec<f64> = (-(H as i64)..=H as i64)
+        .map(|j| {
+            let x2 = (j * j) as f64;
+            f64::from(u8::from(j == 0)) - (1.0 / 7.0 - 4.0 * (x2 - 4.0) / 84.0)
+        })
+        .collect();
+    let mut z: Vec<f64> = (H..l - H)
+        .map(|k| {
+            let (mut r, mut v) = (c64::new(0.0, 0.0), 0.0);
+            for (i, cj) in c.iter().enumerate() {
+                r += misfit[k + i - H] * *cj;
+                v += cj * cj * var[k + i - H];
+            }
+            r.norm_sqr() / v
+        })
+        .collect();
+    Some(crate::data::outliers::median_in_place(&mut z) / std::f64::consts::LN_2)
 }
 
 /// The default fraction of the first-order error model's draws a single-axis weight is raised
@@ -248,7 +363,7 @@ impl Default for UncertaintyOptions {
             seed: 0,
             weight_shape: super::weight::WeightShape::ModeShaped,
             fitted_band_hz: None,
-            per_line_misfit: false,
+            per_line_misfit: PerLineMisfit::Auto,
         }
     }
 }
@@ -329,6 +444,10 @@ pub struct UncertaintyTerms {
     pub n_params: usize,
     /// The coverage per line used.
     pub line_coverage: f64,
+    /// The misfit's [`misfit_roughness`] (`None` with fewer than 7 lines).
+    pub misfit_roughness: Option<f64>,
+    /// Whether term (b) tested each line alone ([`PerLineMisfit`], resolved).
+    pub per_line_misfit: bool,
     /// The model's error as a random function of frequency, for coverage over the lines
     /// jointly ([`ErrorModel`]).
     pub errors: ErrorModel,
@@ -632,11 +751,18 @@ fn uncertainty_with(
     let misfit_c: Vec<c64> = (0..l).map(|k| g[k] - p_hat[k]).collect();
     let m_half = window_half_lines(&poles, &f, ts);
     // the windows, each tested at α_b / scales (module docs)
-    // on request the line alone first: a misfit that changes from line to line (a single
-    // realisation's nonlinear distortion, far above the noise of the periods) is averaged away
-    // by any window
-    let halves: Vec<usize> = opts
-        .per_line_misfit
+    // the line alone first when asked or when the misfit is rough without a term (c): a misfit
+    // that changes from line to line (a single realisation's nonlinear distortion, far above
+    // the noise of the periods) is averaged away by any window
+    let roughness = misfit_roughness(&misfit_c, var);
+    let per_line = match opts.per_line_misfit {
+        PerLineMisfit::Off => false,
+        PerLineMisfit::On => true,
+        PerLineMisfit::Auto => {
+            extra.nonlinear_std.is_none() && roughness.is_some_and(|r| r >= ROUGH_MISFIT)
+        }
+    };
+    let halves: Vec<usize> = per_line
         .then_some(0)
         .into_iter()
         .chain(window_scales(m_half, l))
@@ -662,7 +788,7 @@ fn uncertainty_with(
             let excess = (mean.norm_sqr() - thr * v).max(0.0).sqrt();
             // on request a significant misfit enters at its upper value at the line coverage,
             // not its excess: the line alone has no neighbours to average its noise away
-            let term = if opts.per_line_misfit && excess > 0.0 {
+            let term = if per_line && excess > 0.0 {
                 rice_quantile(mean.norm(), v, opts.line_coverage)
             } else {
                 excess
@@ -719,6 +845,8 @@ fn uncertainty_with(
         window_half_lines: m_half,
         n_params: n_theta,
         line_coverage: opts.line_coverage,
+        misfit_roughness: roughness,
+        per_line_misfit: per_line,
         errors,
     })
 }
@@ -2771,12 +2899,94 @@ mod tests {
         }
     }
 
+    /// `misfit_roughness` against a naive oracle: per line the complex quadratic in the line
+    /// index fitted by solving its 3×3 normal equations over the seven lines, its residual at
+    /// the centre over that residual's variance (from the same solve, line by line), the median
+    /// over ln 2. A quadratic misfit (what a smooth model error looks like over seven lines) has
+    /// roughness 0; fewer than seven lines or a zero variance give none.
+    #[test]
+    fn misfit_roughness_matches_a_naive_quadratic_fit() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let l = 60;
+        let e: Vec<c64> = (0..l)
+            .map(|_| c64::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)))
+            .collect();
+        let var: Vec<f64> = (0..l).map(|_| rng.random_range(0.5..2.0)).collect();
+        // the centre value of the least-squares quadratic through (x, y), x = -3..3, as the
+        // weights it puts on y: solve the normal equations for each unit vector
+        let centre_weights = || -> Vec<f64> {
+            let xs: Vec<f64> = (-3..=3).map(f64::from).collect();
+            let mut a = [[0.0f64; 3]; 3];
+            for x in &xs {
+                let row = [1.0, *x, x * x];
+                for i in 0..3 {
+                    for j in 0..3 {
+                        a[i][j] += row[i] * row[j];
+                    }
+                }
+            }
+            (0..7)
+                .map(|unit| {
+                    // A c = X^T e_unit by Gauss elimination; the centre value is c_0
+                    let (mut m, mut r) = (a, [1.0, xs[unit], xs[unit] * xs[unit]]);
+                    for p in 0..3 {
+                        for q in p + 1..3 {
+                            let f = m[q][p] / m[p][p];
+                            let pivot = m[p];
+                            for (mc, pc) in m[q].iter_mut().zip(pivot).skip(p) {
+                                *mc -= f * pc;
+                            }
+                            r[q] -= f * r[p];
+                        }
+                    }
+                    let mut c = [0.0f64; 3];
+                    for p in (0..3).rev() {
+                        let s: f64 = (p + 1..3).map(|c2| m[p][c2] * c[c2]).sum();
+                        c[p] = (r[p] - s) / m[p][p];
+                    }
+                    c[0]
+                })
+                .collect()
+        };
+        let h = centre_weights();
+        let mut z: Vec<f64> = (3..l - 3)
+            .map(|k| {
+                let mut r = e[k];
+                let mut v = 0.0;
+                for j in 0..7 {
+                    let c = f64::from(u8::from(j == 3)) - h[j];
+                    r -= e[k + j - 3] * h[j];
+                    v += c * c * var[k + j - 3];
+                }
+                r.norm_sqr() / v
+            })
+            .collect();
+        z.sort_by(f64::total_cmp);
+        let oracle = 0.5 * (z[z.len() / 2 - 1] + z[z.len() / 2]) / std::f64::consts::LN_2;
+        let got = misfit_roughness(&e, &var).unwrap();
+        assert!((got - oracle).abs() <= 1e-12 * oracle, "{got} vs {oracle}");
+        // a quadratic misfit is smooth: nothing is left
+        let q: Vec<c64> = (0..l)
+            .map(|k| {
+                let x = k as f64;
+                c64::new(0.3 + 0.01 * x - 2e-4 * x * x, -0.1 + 3e-4 * x * x)
+            })
+            .collect();
+        assert!(misfit_roughness(&q, &var).unwrap() < 1e-16);
+        assert_eq!(misfit_roughness(&e[..6], &var[..6]), None);
+        let mut zero = var.clone();
+        zero[10] = 0.0;
+        assert_eq!(misfit_roughness(&e, &zero), None);
+    }
+
     /// A fixed misfit that is white over the lines, 5 σ on every line (one multisine
     /// realisation's nonlinear distortion, shared by any second measurement of it): the windows
-    /// average it to about 5 σ/√3 and below, so the default bound stays under it on most lines;
-    /// with `per_line_misfit` the line alone carries it, as its upper value, and the bound
-    /// covers it on ≥ 95 % of the lines. A smooth 5 % misfit gets a term at least the
-    /// default's, above the misfit on every line, and at most 5 σ above the larger of the two.
+    /// average it to about 5 σ/√3 and below, so the windows alone stay under it on most lines;
+    /// with the line alone ([`PerLineMisfit::On`]) it carries the misfit, as its upper value,
+    /// and the bound covers it on ≥ 95 % of the lines. The default ([`PerLineMisfit::Auto`])
+    /// sees the roughness and does the same, but not when a term (c) is given. A smooth 5 %
+    /// misfit gets a term with the line alone at least the windows', above the misfit on every
+    /// line, and at most 5 σ above the larger of the two; the default keeps the windows there.
     #[test]
     fn the_line_alone_bounds_a_misfit_that_changes_from_line_to_line() {
         let m = model();
@@ -2802,13 +3012,28 @@ mod tests {
                 .count() as f64
                 / f.len() as f64
         };
-        let windows = covered(&UncertaintyOptions::default());
-        let alone = covered(&UncertaintyOptions {
-            per_line_misfit: true,
+        let with = |per_line_misfit| UncertaintyOptions {
+            per_line_misfit,
             ..UncertaintyOptions::default()
-        });
+        };
+        let windows = covered(&with(PerLineMisfit::Off));
+        let alone = covered(&with(PerLineMisfit::On));
         assert!(windows < 0.5, "the windows cover {windows}");
         assert!(alone >= 0.95, "the line alone covers {alone}");
+        // the default sees the misfit's roughness and takes the line alone, unless a term (c)
+        // is given
+        let auto =
+            uncertainty(&m, &frd, &ExtraTerms::default(), &with(PerLineMisfit::Auto)).unwrap();
+        let rough = auto.misfit_roughness.unwrap();
+        assert!(rough >= ROUGH_MISFIT && auto.per_line_misfit, "{rough}");
+        assert_eq!(covered(&UncertaintyOptions::default()), alone);
+        let nl = vec![1e-9; f.len()];
+        let given_c = ExtraTerms {
+            nonlinear_std: Some(&nl),
+            ..ExtraTerms::default()
+        };
+        let u = uncertainty(&m, &frd, &given_c, &with(PerLineMisfit::Auto)).unwrap();
+        assert!(!u.per_line_misfit);
         // a smooth misfit: the windows already see it
         let g: Vec<c64> = exact.values().iter().map(|v| v * 1.05).collect();
         let frd = Frd::new(f.clone(), g, Some(var.clone()), Some(1e-3)).unwrap();
@@ -2817,13 +3042,18 @@ mod tests {
                 .unwrap()
                 .model_error
         };
-        let (w, a) = (
-            b(&UncertaintyOptions::default()),
-            b(&UncertaintyOptions {
-                per_line_misfit: true,
-                ..UncertaintyOptions::default()
-            }),
-        );
+        let (w, a) = (b(&with(PerLineMisfit::Off)), b(&with(PerLineMisfit::On)));
+        // smooth: the default keeps the windows alone
+        let auto = uncertainty(
+            &m,
+            &frd,
+            &ExtraTerms::default(),
+            &UncertaintyOptions::default(),
+        )
+        .unwrap();
+        assert!(!auto.per_line_misfit, "{:?}", auto.misfit_roughness);
+        assert!(auto.misfit_roughness.unwrap() < 1.0);
+        assert_eq!(auto.model_error, w);
         for k in 0..f.len() {
             let (sd, e) = (var[k].sqrt(), 0.05 * exact.values()[k].norm());
             assert!(w[k] > 10.0 * sd, "line {k}: the smooth misfit is seen");

@@ -15,7 +15,8 @@ use ambid::uncertainty::{
 };
 use ambid_core::frf::bla::BlaEstimate;
 use ambid_core::validate::uncertainty::{
-    ExtraTerms, UncertaintyOptions, DEFAULT_RAISE_COVER, DEFAULT_RUN_COVERAGE,
+    ExtraTerms, PerLineMisfit, UncertaintyOptions, DEFAULT_RAISE_COVER, DEFAULT_RUN_COVERAGE,
+    ROUGH_MISFIT,
 };
 use ambid_core::validate::weight::{WeightShape, DEFAULT_COVER, MAX_WEIGHT_ORDER};
 use anyhow::Result;
@@ -86,13 +87,14 @@ pub struct UncertaintyArgs {
     /// docs/uncertainty.md, "The mode-shaped weight as the single-axis default").
     #[arg(long, default_value = "mode", value_parser = parse_shape)]
     pub(crate) weight_shape: WeightShape,
-    /// Term (b) also tests each line alone, a significant misfit entering as its upper value:
-    /// for an FRF from one multisine realisation without a BLA study (`--nonlinear`), whose
-    /// nonlinear distortion shows as a per-line misfit far above the noise that the windows
-    /// average away (docs/uncertainty.md, "Real data: a held-out measurement"). Single-axis FRFs
-    /// only.
-    #[arg(long)]
-    pub(crate) per_line_misfit: bool,
+    /// Whether term (b) also tests each line alone, a significant misfit entering as its upper
+    /// value: `auto` (the default) when the misfit is rough from line to line (roughness ≥ 4,
+    /// printed) and no `--nonlinear` is given, as for an FRF from one multisine realisation
+    /// whose nonlinear distortion shows as a per-line misfit far above the noise that the
+    /// windows average away; `on`; `off` (the windows alone). docs/uncertainty.md, "The line
+    /// alone when the misfit is rough". Single-axis FRFs only (a 4×4 FRF's entries use `auto`).
+    #[arg(long, value_name = "auto|on|off", value_parser = parse_per_line)]
+    pub(crate) per_line_misfit: Option<PerLineMisfit>,
     /// Term (d): the plant FRF CSV of the same experiment at another operating point (bias
     /// current, air gap; `ambid frf` of a record with the same excitation, so the same lines).
     /// Repeat it for each; the bound then holds the largest noise-corrected distance of them from
@@ -309,7 +311,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             run_coverage: a.run_coverage,
             raise_cover: a.raise_cover,
             weight_shape: a.weight_shape,
-            per_line_misfit: a.per_line_misfit,
+            per_line_misfit: a.per_line_misfit.unwrap_or_default(),
             ..UncertaintyOptions::default()
         },
         a.max_order,
@@ -331,6 +333,13 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
     }
     let t = &analysis.terms;
     let w = &analysis.weight;
+    println!(
+        "term (b): the misfit's roughness {} (line to line against the noise; ≥ {ROUGH_MISFIT} is rough); each line alone also tested: {} ({})",
+        t.misfit_roughness
+            .map_or_else(|| "-".to_string(), |r| format!("{r:.2}")),
+        if t.per_line_misfit { "yes" } else { "no" },
+        a.per_line_misfit.unwrap_or_default().name(),
+    );
 
     // the per-line table
     let wmag = w.weight.magnitude(&t.f_hz);
@@ -408,7 +417,9 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         "lines": t.f_hz.len(),
         "line_coverage": t.line_coverage,
         "window_half_lines": t.window_half_lines,
-        "per_line_misfit": a.per_line_misfit,
+        "per_line_misfit": t.per_line_misfit,
+        "per_line_misfit_setting": a.per_line_misfit.unwrap_or_default().name(),
+        "misfit_roughness": t.misfit_roughness,
         "lines_raise": analysis.lines_raise,
         "weight": {
             "order": w.weight.order(),
@@ -626,6 +637,11 @@ fn read_bla(path: &Path) -> Result<BlaEstimate> {
         realisations: m,
         periods: p,
     })
+}
+
+/// `--per-line-misfit`: [`PerLineMisfit::from_name`].
+fn parse_per_line(s: &str) -> std::result::Result<PerLineMisfit, String> {
+    PerLineMisfit::from_name(s).map_err(|e| e.to_string())
 }
 
 /// `--weight-shape`: [`WeightShape::from_name`].

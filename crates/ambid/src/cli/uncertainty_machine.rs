@@ -66,7 +66,7 @@ fn single_axis_options(a: &UncertaintyArgs) -> Vec<&'static str> {
     refuse(a.run_coverage != DEFAULT_RUN_COVERAGE, "--run-coverage");
     refuse(a.raise_cover != DEFAULT_RAISE_COVER, "--raise-cover");
     refuse(a.weight_shape != WeightShape::ModeShaped, "--weight-shape");
-    refuse(a.per_line_misfit, "--per-line-misfit");
+    refuse(a.per_line_misfit.is_some(), "--per-line-misfit");
     v
 }
 

@@ -36,6 +36,13 @@ pub struct UncertaintySummary {
     pub weight_joint_raise: f64,
     /// Lines left above the weight \[Hz\].
     pub uncovered_hz: Vec<f64>,
+    /// The misfit's roughness, line to line against the FRF's noise
+    /// ([`misfit_roughness`](ambid_core::validate::uncertainty::misfit_roughness); `None` with
+    /// fewer than 7 lines).
+    pub misfit_roughness: Option<f64>,
+    /// Whether term (b) took each line alone too (the roughness at least
+    /// [`ROUGH_MISFIT`](ambid_core::validate::uncertainty::ROUGH_MISFIT) without a term (c)).
+    pub per_line_misfit: bool,
     /// Robustly stable.
     pub robustly_stable: bool,
     /// $1/\max|WT|$.
@@ -550,6 +557,18 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         ),
         None => {}
     }
+    if t.per_line_misfit {
+        blocks.insert(
+            1,
+            Ctx::note(
+                NoteKind::Info,
+                format!(
+                    "The model's misfit is rough from line to line (roughness {:.1}, 4 or more; about 1 when the noise explains it) and no BLA study gave term (c): term (b) holds each line's misfit alone too, as one multisine realisation's nonlinear distortion needs (docs/uncertainty.md, \"The line alone when the misfit is rough\").",
+                    t.misfit_roughness.unwrap_or(f64::NAN)
+                ),
+            ),
+        );
+    }
     for n in [spread_note, amplitude_note, nonlinear_note]
         .into_iter()
         .flatten()
@@ -568,6 +587,8 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         weight_looseness: a.weight.looseness,
         weight_joint_raise: a.joint_raise,
         uncovered_hz: a.weight.uncovered_hz.clone(),
+        misfit_roughness: t.misfit_roughness,
+        per_line_misfit: t.per_line_misfit,
         robustly_stable: r.robustly_stable,
         stability_margin: r.stability_margin,
         lower_gain_margin: r.lower_gain_margin.filter(|g| g.is_finite()),
