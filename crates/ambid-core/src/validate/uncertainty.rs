@@ -231,7 +231,7 @@ pub enum PerLineMisfit {
     On,
     /// When no term (c) is given and the misfit's [`misfit_roughness`] is at least
     /// [`ROUGH_MISFIT`]: a misfit whose line-to-line part stands clearly above the noise. On
-    /// 444 bounds of the twin's random rigs (single-axis and 4×4 entries, both twins) the
+    /// 564 bounds of the twin's random rigs (single-axis and 4×4 entries, both twins) the
     /// roughness was 0.72–1.45, so it was never taken there; on the F-16 ground vibration test
     /// 16–92 (docs/uncertainty.md, "The line alone when the misfit is rough").
     #[default]
