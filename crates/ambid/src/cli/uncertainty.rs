@@ -211,6 +211,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         &a.model,
         "the uncertainty needs the FRF's standard deviations (an FRF of `ambid frf` from several periods or realisations)",
     )?;
+    let per_line_setting = a.per_line_misfit.unwrap_or_default();
     let ctrl = match &a.controller {
         Some(p) => Some(controller_for(p, &frd)?),
         None => None,
@@ -311,7 +312,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             run_coverage: a.run_coverage,
             raise_cover: a.raise_cover,
             weight_shape: a.weight_shape,
-            per_line_misfit: a.per_line_misfit.unwrap_or_default(),
+            per_line_misfit: per_line_setting,
             ..UncertaintyOptions::default()
         },
         a.max_order,
@@ -338,7 +339,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         t.misfit_roughness
             .map_or_else(|| "-".to_string(), |r| format!("{r:.2}")),
         if t.per_line_misfit { "yes" } else { "no" },
-        a.per_line_misfit.unwrap_or_default().name(),
+        per_line_setting.name(),
     );
 
     // the per-line table
@@ -418,7 +419,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         "line_coverage": t.line_coverage,
         "window_half_lines": t.window_half_lines,
         "per_line_misfit": t.per_line_misfit,
-        "per_line_misfit_setting": a.per_line_misfit.unwrap_or_default().name(),
+        "per_line_misfit_setting": per_line_setting.name(),
         "misfit_roughness": t.misfit_roughness,
         "lines_raise": analysis.lines_raise,
         "weight": {
