@@ -280,9 +280,10 @@ fn cli_without_a_controller(
 /// period's last few hundred samples. Those lead-ins are where the input repeats itself one
 /// period later: $|u_t - u_{t+N}|$, averaged over 9 samples, falls below a tenth of its median
 /// over the record for a run of at least 200 samples. The period analysed is the $N$ samples
-/// that end 8 samples after such a run, within the periodic stretch and as late as possible,
-/// so the output's transient from the switch has died out (the output repeats there to its
-/// noise). Returns each realisation's first sample.
+/// that start 8 samples before such a run ends: within the periodic stretch (the lead-in and
+/// the period after it) and as late in it as the smoothing's reach allows, so the output's
+/// transient from the switch has died out (the output repeats there to its noise). Returns
+/// each realisation's first sample.
 fn silverbox_periods(u: &[f64]) -> Vec<usize> {
     const N: usize = 8192;
     const ARROW: usize = 40_575;
