@@ -96,22 +96,7 @@ fn the_bound_covers_a_held_out_measurement_of_the_f16() {
     for out in 0..3 {
         let (e1, v1) = (est.entry(out, 0).unwrap(), held.entry(out, 0).unwrap());
         let model = nominal_by_bic_of(&e1, Some(0), 10..=32).unwrap();
-        let bound = |per_line_misfit: PerLineMisfit| {
-            let opts = UncertaintyOptions {
-                per_line_misfit,
-                ..UncertaintyOptions::default()
-            };
-            bound_and_weight(
-                &model,
-                &e1,
-                &ExtraTerms::default(),
-                None,
-                &opts,
-                4,
-                DEFAULT_COVER,
-            )
-            .unwrap()
-        };
+        let bound = |setting| default_bound(&model, &e1, setting);
         // the default (`Auto`) sees the rough misfit and takes each line alone too; `Off` is
         // the windows alone, the default before 2026-12-06
         let (b, default) = (bound(PerLineMisfit::Auto), bound(PerLineMisfit::Off));
@@ -122,19 +107,7 @@ fn the_bound_covers_a_held_out_measurement_of_the_f16() {
         let f = &b.terms.f_hz;
         assert_eq!(f.as_slice(), v1.f_hz(), "the halves' lines");
         assert_eq!(f.len(), 267);
-        let g_hat = model.freq_response_siso(f).unwrap();
-        let var_v = v1.variance().unwrap();
-        // the held-out error relative to |Ĝ|, and its own noise's 95 % value
-        let err: Vec<f64> = g_hat
-            .iter()
-            .zip(v1.values())
-            .map(|(m, g)| (g - m).norm() / m.norm())
-            .collect();
-        let allow: Vec<f64> = g_hat
-            .iter()
-            .zip(var_v)
-            .map(|(m, v)| 20f64.ln().sqrt() * v.sqrt() / m.norm())
-            .collect();
+        let (err, allow) = held_out_error(&model, &v1);
         let covered = |bound: &[f64]| {
             let n = (0..err.len())
                 .filter(|&k| bound[k] + allow[k] >= err[k])
@@ -187,6 +160,49 @@ fn the_bound_covers_a_held_out_measurement_of_the_f16() {
         }
     }
     assert!(short_by_default, "the windows alone covered every output");
+}
+
+/// The held-out FRF's error against the model relative to $|\hat G|$, and its own noise's 95 %
+/// value, $\sqrt{\ln 20}\,\sigma_v/|\hat G|$ (a circular complex error), on `held`'s lines.
+fn held_out_error(
+    model: &ambid_core::lti::StateSpace,
+    held: &ambid_core::lti::Frd,
+) -> (Vec<f64>, Vec<f64>) {
+    let g_hat = model.freq_response_siso(held.f_hz()).unwrap();
+    let err = g_hat
+        .iter()
+        .zip(held.values())
+        .map(|(m, g)| (g - m).norm() / m.norm())
+        .collect();
+    let allow = g_hat
+        .iter()
+        .zip(held.variance().unwrap())
+        .map(|(m, v)| 20f64.ln().sqrt() * v.sqrt() / m.norm())
+        .collect();
+    (err, allow)
+}
+
+/// The bound and weight with every default but term (b)'s line-alone `setting`, without a
+/// controller's check.
+fn default_bound(
+    model: &ambid_core::lti::StateSpace,
+    frd: &ambid_core::lti::Frd,
+    per_line_misfit: PerLineMisfit,
+) -> ambid::uncertainty::UncertainBound {
+    let opts = UncertaintyOptions {
+        per_line_misfit,
+        ..UncertaintyOptions::default()
+    };
+    bound_and_weight(
+        model,
+        frd,
+        &ExtraTerms::default(),
+        None,
+        &opts,
+        4,
+        DEFAULT_COVER,
+    )
+    .unwrap()
 }
 
 /// The same bound through the command a user runs on a record without a loop: the estimation
@@ -418,17 +434,7 @@ fn held_out_split(part: usize, est: &ambid_core::lti::Frd, held: &ambid_core::lt
     assert!((0.7..1.6).contains(&agree), "{agree}");
 
     let model = nominal_by_bic_of(est, Some(0), 2..=10).unwrap();
-    let g_hat = model.freq_response_siso(f).unwrap();
-    let err: Vec<f64> = g_hat
-        .iter()
-        .zip(held.values())
-        .map(|(m, g)| (g - m).norm() / m.norm())
-        .collect();
-    let allow: Vec<f64> = g_hat
-        .iter()
-        .zip(vh)
-        .map(|(m, v)| 20f64.ln().sqrt() * v.sqrt() / m.norm())
-        .collect();
+    let (err, allow) = held_out_error(&model, held);
     let me = median(err.clone());
     let noise = median(
         (0..err.len())
@@ -441,22 +447,7 @@ fn held_out_split(part: usize, est: &ambid_core::lti::Frd, held: &ambid_core::lt
             .count() as f64
             / err.len() as f64
     };
-    let bound = |per_line_misfit: PerLineMisfit| {
-        let opts = UncertaintyOptions {
-            per_line_misfit,
-            ..UncertaintyOptions::default()
-        };
-        bound_and_weight(
-            &model,
-            est,
-            &ExtraTerms::default(),
-            None,
-            &opts,
-            4,
-            DEFAULT_COVER,
-        )
-        .unwrap()
-    };
+    let bound = |setting| default_bound(&model, est, setting);
     let (b, on) = (bound(PerLineMisfit::Auto), bound(PerLineMisfit::On));
     let rough = b.terms.misfit_roughness.unwrap();
     let w = b.weight.weight.magnitude(f);
