@@ -16,6 +16,7 @@ use crate::common::{self, ambid, ok, text};
 use crate::export::script_numbers;
 use ambid::uncertainty::{loop_stable, nominal_gain_interval};
 use ambid_core::c64;
+use ambid_core::validate::uncertainty::SMOOTH_MISFIT;
 use std::f64::consts::PI;
 
 const RIG: &str = "11";
@@ -82,6 +83,7 @@ fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
     let args = uncertainty_args(&dir, &[], "unc");
     let out = ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
     println!("{out}");
+    assert!(!out.contains(SMOOTH_WARNING), "{out}");
     let summary = summary_of(&dir, "unc");
     let r = &summary["robust"];
     assert_eq!(r["nominal_stable"], true, "{summary}");
@@ -274,7 +276,45 @@ fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
         "{t}"
     );
     assert_eq!(std::fs::read(dir.join("unc/summary.json")).unwrap(), before);
+
+    // the same FRF with its plant averaged over 15 lines and its std kept: its lines are no
+    // longer independent (as a local polynomial FRF's are not), the misfit is far smoother than
+    // the std says, and the command warns that the bound's calibration is not known for it
+    let frf = std::fs::read_to_string(dir.join("frf.csv")).unwrap();
+    let header: Vec<&str> = frf.lines().next().unwrap().split(',').collect();
+    let (re, im) = (column(&frf, "plant_re"), column(&frf, "plant_im"));
+    let (kr, ki) = (
+        header.iter().position(|h| *h == "plant_re").unwrap(),
+        header.iter().position(|h| *h == "plant_im").unwrap(),
+    );
+    let avg = |x: &[f64], k: usize| {
+        let (a, b) = (k.saturating_sub(7), (k + 8).min(x.len()));
+        x[a..b].iter().sum::<f64>() / (b - a) as f64
+    };
+    let mut smoothed = vec![header.join(",")];
+    for (k, line) in frf.lines().skip(1).enumerate() {
+        let mut cells: Vec<String> = line.split(',').map(str::to_string).collect();
+        cells[kr] = format!("{:e}", avg(&re, k));
+        cells[ki] = format!("{:e}", avg(&im, k));
+        smoothed.push(cells.join(","));
+    }
+    std::fs::write(dir.join("frf_smoothed.csv"), smoothed.join("\n") + "\n").unwrap();
+    let mut args = uncertainty_args(&dir, &[], "unc_smoothed");
+    args[1] = dir.join("frf_smoothed.csv").to_str().unwrap().to_string();
+    let c = args.iter().position(|s| s == "--controller").unwrap();
+    args.drain(c..c + 2);
+    let t = ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let rough = summary_of(&dir, "unc_smoothed")["misfit_roughness"]
+        .as_f64()
+        .unwrap();
+    println!("averaged over 15 lines: misfit roughness {rough:.3}");
+    assert!(rough < SMOOTH_MISFIT, "{rough}");
+    assert!(t.contains(SMOOTH_WARNING), "{t}");
 }
+
+/// The start of `ambid uncertainty`'s warning when the misfit's roughness is below
+/// [`SMOOTH_MISFIT`].
+const SMOOTH_WARNING: &str = "warning: the misfit is far smoother from line to line";
 
 #[test]
 fn uncertainty_refuses_bad_input_and_writes_nothing() {

@@ -275,6 +275,15 @@ impl PerLineMisfit {
 /// periods, 1.13 for four), so 4 is not reached by noise.
 pub const ROUGH_MISFIT: f64 = 4.0;
 
+/// The roughness below which the misfit is far smoother from line to line than the FRF's
+/// variances say, as much below the noise's 1 as [`ROUGH_MISFIT`] is above it: the FRF's lines
+/// are then not independent (a Local Polynomial Method's FRF is a fit over a window of lines:
+/// 0.01 on the linear twin with its window of 91 lines) or its variances are too large. Terms
+/// (a) and (b) take the lines as independent, so `ambid uncertainty` warns (docs/uncertainty.md,
+/// "The line alone when the misfit is rough"). On the twin's periodic FRFs the roughness was
+/// 0.72–1.45 (564 bounds), on the Silverbox's BLA 1.09–1.11.
+pub const SMOOTH_MISFIT: f64 = 0.25;
+
 /// How rough the misfit $e_k = G_k - \hat P(z_k)$ is from line to line, against the FRF's
 /// noise: per line $k$ with three lines on each side, the residual $r_k$ of a complex quadratic
 /// in the line index fitted (unweighted) to $e_{k-3}, \dots, e_{k+3}$, at the centre line,

@@ -16,7 +16,7 @@ use ambid::uncertainty::{
 use ambid_core::frf::bla::BlaEstimate;
 use ambid_core::validate::uncertainty::{
     ExtraTerms, PerLineMisfit, UncertaintyOptions, DEFAULT_RAISE_COVER, DEFAULT_RUN_COVERAGE,
-    ROUGH_MISFIT,
+    ROUGH_MISFIT, SMOOTH_MISFIT,
 };
 use ambid_core::validate::weight::{WeightShape, DEFAULT_COVER, MAX_WEIGHT_ORDER};
 use anyhow::Result;
@@ -341,6 +341,15 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         if t.per_line_misfit { "yes" } else { "no" },
         per_line_setting.name(),
     );
+    if let Some(r) = t.misfit_roughness.filter(|r| *r < SMOOTH_MISFIT) {
+        println!(
+            "warning: the misfit is far smoother from line to line than the FRF's variances say \
+             (roughness {r:.2} < {SMOOTH_MISFIT}): its lines are not independent (a local \
+             polynomial or smoothed FRF?) or its variances are too large. Terms (a) and (b) take \
+             the lines as independent, so the bound's calibration is not known for this FRF; an \
+             FRF from period averaging (`ambid frf --period-samples N`) has independent lines"
+        );
+    }
 
     // the per-line table
     let wmag = w.weight.magnitude(&t.f_hz);
