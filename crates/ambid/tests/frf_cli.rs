@@ -372,6 +372,11 @@ fn frf_finds_the_period_of_a_periodic_record() {
             t.contains(&format!("repeats every {p} samples")) && t.contains("period averaging"),
             "{signal}: {t}"
         );
+        // the leakage note is Welch's alone
+        assert!(
+            !t.contains("not the leakage bias at lightly"),
+            "{signal}: {t}"
+        );
         let given = d.join(format!("{signal}_given.csv"));
         let ps = p.to_string();
         let o = ambid(&["frf", s(&data), "--period-samples", &ps, "--out", s(&given)]);
@@ -414,6 +419,7 @@ fn frf_finds_the_period_of_a_periodic_record() {
             s(&w),
         ]));
         assert!(t.contains("Welch:") && !t.contains("repeats"), "{t}");
+        assert!(t.contains("not the leakage bias at lightly"), "{t}");
     }
     let data = d.join("prbs").join("data.csv");
     // a record cut to 8.5 periods (rows 1–43 478): the found period, the tail ignored

@@ -450,10 +450,19 @@ fn report_and_write(a: &FrfArgs, res: &FrfAnalysis) -> Result<()> {
         ambid_core::frf::closed_loop::Averaging::Welch {
             segments,
             effective,
-        } => println!(
-            "Welch: {segments} segments ({effective:.1} effective averages), {} bins",
-            res.frf.f_hz().len()
-        ),
+        } => {
+            println!(
+                "Welch: {segments} segments ({effective:.1} effective averages), {} bins",
+                res.frf.f_hz().len()
+            );
+            println!(
+                "Welch: the standard deviations hold the noise, not the leakage bias at lightly \
+                 damped modes nor the correlation of neighbouring lines; an uncertainty bound \
+                 built on a Welch FRF (`ambid uncertainty`) was short of the truth on a twin rig \
+                 (docs/uncertainty.md, \"The line alone when the misfit is rough\"); periodic \
+                 excitation avoids both"
+            );
+        }
     }
     println!("bands: {}", res.bands.describe());
     print_quality(res);
