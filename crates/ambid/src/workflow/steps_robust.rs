@@ -563,8 +563,9 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             Ctx::note(
                 NoteKind::Info,
                 format!(
-                    "The model's misfit is rough from line to line (roughness {:.1}, 4 or more; about 1 when the noise explains it) and no BLA study gave term (c): term (b) holds each line's misfit alone too, as one multisine realisation's nonlinear distortion needs (docs/uncertainty.md, \"The line alone when the misfit is rough\").",
-                    t.misfit_roughness.unwrap_or(f64::NAN)
+                    "The model's misfit is rough from line to line (roughness {:.1}, {} or more; about 1 when the noise explains it) and no BLA study gave term (c): term (b) holds each line's misfit alone too, as one multisine realisation's nonlinear distortion needs (docs/uncertainty.md, \"The line alone when the misfit is rough\").",
+                    t.misfit_roughness.unwrap_or(f64::NAN),
+                    ambid_core::validate::uncertainty::ROUGH_MISFIT
                 ),
             ),
         );
