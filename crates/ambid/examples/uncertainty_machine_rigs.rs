@@ -541,6 +541,12 @@ fn main() {
                 continue;
             }
         };
+        // the lines' correlation the bound found (period averaging: independent, factor 1)
+        let lc = u.entries[0].line_correlation;
+        println!(
+            "    line correlation: ρ₁ {:+.3} ρ₂ {:+.3} z {:+.1} factor {:.2}",
+            lc.rho1, lc.rho2, lc.z, lc.factor
+        );
         // term (e) through the model, as the workflow does (NO_PROJECT=1: without it)
         let mut u = u;
         let mut projected_kept = false;

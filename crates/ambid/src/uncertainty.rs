@@ -1075,6 +1075,62 @@ impl UncertaintyRun {
     }
 }
 
+/// Twin rig `rig`: 0 the nominal one, else `random_rig(rig)`.
+fn twin_rig(rig: u64) -> Result<TwinConfig> {
+    Ok(if rig == 0 {
+        TwinConfig::default()
+    } else {
+        random_rig(rig).context("drawing the rig")?
+    })
+}
+
+/// A Gaussian-noise experiment on twin rig `rig` (0 = nominal, else `random_rig(rig)`) with
+/// noise seed `seed` (sensor noise on when `sensor_noise`), and its plant FRF by the Welch
+/// defaults of `ambid frf` (Hann, [`FrfSettings::default_nperseg`](crate::analysis::FrfSettings::default_nperseg),
+/// 50 % overlap, the derived band): the chain of `ambid simulate --signal noise --level 5%
+/// --band 1:2000` and `ambid frf`, whose lines are correlated (docs/uncertainty.md, "Welch
+/// FRFs: correlated lines").
+///
+/// # Errors
+/// Drawing the rig, the simulation or the FRF.
+pub fn twin_noise_welch_frf(
+    rig: u64,
+    seed: u64,
+    mode: Mode,
+    sensor_noise: bool,
+) -> Result<(crate::experiment::ExperimentOutput, Frd)> {
+    use crate::analysis::{analyze, FrfSettings, Record};
+    let exp = Experiment {
+        twin: twin_rig(rig)?,
+        excitation: ExcitationPlan {
+            kind: crate::experiment::ExcitationKind::Noise,
+            amplitude_frac: 0.05,
+            seed,
+            ..ExcitationPlan::default()
+        },
+        mode,
+        seed,
+        noise: sensor_noise,
+        record_b: false,
+    };
+    let out = run(&exp)?;
+    let rec = &out.record;
+    let settings = FrfSettings::welch(FrfSettings::default_nperseg(rec.r.len()));
+    let a = analyze(
+        &Record {
+            r: &rec.r,
+            u: &rec.u,
+            y: &rec.y,
+            i: None,
+            fs: 1.0 / rec.ts,
+        },
+        &settings,
+        None,
+    )?;
+    let frd = a.frf.plant;
+    Ok((out, frd))
+}
+
 /// The seed experiment on twin rig `rig` (0 = nominal, else `random_rig(rig)`) with noise seed
 /// `seed`, and its period-averaged plant FRF on [`TWIN_BAND_HZ`] (the twin checks of
 /// [`UncertaintyRun`] and [`crate::physical::PhysicalRun`]).
@@ -1101,13 +1157,8 @@ pub fn twin_seed_frf_at(
     mode: Mode,
     amplitude_frac: f64,
 ) -> Result<(crate::experiment::ExperimentOutput, Frd)> {
-    let twin = if rig == 0 {
-        TwinConfig::default()
-    } else {
-        random_rig(rig).context("drawing the rig")?
-    };
     let exp = Experiment {
-        twin,
+        twin: twin_rig(rig)?,
         excitation: ExcitationPlan {
             amplitude_frac,
             ..ExcitationPlan::default()

@@ -212,6 +212,10 @@ fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
     ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
     assert_eq!(summary["per_line_misfit"], false, "{summary}");
     assert_eq!(summary["per_line_misfit_setting"], "auto", "{summary}");
+    // period averaging: independent lines, no variance factor
+    let lc = &summary["line_correlation"];
+    assert_eq!(lc["setting"], "auto", "{summary}");
+    assert_eq!(lc["variance_factor"].as_f64(), Some(1.0), "{summary}");
     let rough = summary["misfit_roughness"].as_f64().unwrap();
     assert!((0.7..1.5).contains(&rough), "{rough}");
     assert_eq!(summary_of(&dir, "unc_per_line")["per_line_misfit"], true);

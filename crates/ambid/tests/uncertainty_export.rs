@@ -195,6 +195,7 @@ fn terms(r: &Reference) -> UncertaintyTerms {
         line_coverage: 0.95,
         misfit_roughness: None,
         per_line_misfit: false,
+        line_correlation: ambid_core::validate::uncertainty::LineCorrelation::independent(n),
         errors: ErrorModel::default(),
     }
 }

@@ -193,7 +193,7 @@ fn default_bound(
         per_line_misfit,
         ..UncertaintyOptions::default()
     };
-    bound_and_weight(
+    let b = bound_and_weight(
         model,
         frd,
         &ExtraTerms::default(),
@@ -202,7 +202,11 @@ fn default_bound(
         4,
         DEFAULT_COVER,
     )
-    .unwrap()
+    .unwrap();
+    // averages over periods or realisations have independent lines: no variance factor
+    let lc = b.terms.line_correlation;
+    assert_eq!(lc.factor, 1.0, "{lc:?}");
+    b
 }
 
 /// The same bound through the command a user runs on a record without a loop: the estimation

@@ -457,10 +457,10 @@ fn report_and_write(a: &FrfArgs, res: &FrfAnalysis) -> Result<()> {
             );
             println!(
                 "Welch: the standard deviations hold the noise, not the leakage bias at lightly \
-                 damped modes nor the correlation of neighbouring lines; an uncertainty bound \
-                 built on a Welch FRF (`ambid uncertainty`) was short of the truth on a twin rig \
-                 (docs/uncertainty.md, \"The line alone when the misfit is rough\"); periodic \
-                 excitation avoids both"
+                 damped modes nor the correlation of neighbouring lines (about 0.4 with Hann); \
+                 `ambid uncertainty` allows for the correlation, but its bound on Welch FRFs \
+                 still fell short of the truth on 3 of 40 twin rigs (docs/uncertainty.md, \
+                 \"Welch FRFs: correlated lines\"); periodic excitation avoids both"
             );
         }
     }

@@ -15,8 +15,8 @@ use ambid::uncertainty::{
 };
 use ambid_core::frf::bla::BlaEstimate;
 use ambid_core::validate::uncertainty::{
-    ExtraTerms, PerLineMisfit, UncertaintyOptions, DEFAULT_RAISE_COVER, DEFAULT_RUN_COVERAGE,
-    ROUGH_MISFIT, SMOOTH_MISFIT,
+    CorrelatedLines, ExtraTerms, PerLineMisfit, UncertaintyOptions, DEFAULT_RAISE_COVER,
+    DEFAULT_RUN_COVERAGE, ROUGH_MISFIT, SMOOTH_MISFIT,
 };
 use ambid_core::validate::weight::{WeightShape, DEFAULT_COVER, MAX_WEIGHT_ORDER};
 use anyhow::Result;
@@ -95,6 +95,13 @@ pub struct UncertaintyArgs {
     /// alone when the misfit is rough". Single-axis FRFs only (a 4×4 FRF's entries use `auto`).
     #[arg(long, value_name = "auto|on|off", value_parser = parse_per_line)]
     pub(crate) per_line_misfit: Option<PerLineMisfit>,
+    /// Whether terms (a) and (b) allow for noise correlated between neighbouring lines: `auto`
+    /// (the default) multiplies the FRF's variances by $\kappa = 1 + 2(\rho_1 + \rho_2)$ when the
+    /// misfit's lag-1 correlation is significant and short-range (a Welch FRF's lines correlate
+    /// at about 0.4; printed), `off` takes the lines as independent. docs/uncertainty.md,
+    /// "Welch FRFs: correlated lines".
+    #[arg(long, value_name = "auto|off", value_parser = parse_correlated)]
+    pub(crate) correlated_lines: Option<CorrelatedLines>,
     /// Term (d): the plant FRF CSV of the same experiment at another operating point (bias
     /// current, air gap; `ambid frf` of a record with the same excitation, so the same lines).
     /// Repeat it for each; the bound then holds the largest noise-corrected distance of them from
@@ -212,6 +219,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         "the uncertainty needs the FRF's standard deviations (an FRF of `ambid frf` from several periods or realisations)",
     )?;
     let per_line_setting = a.per_line_misfit.unwrap_or_default();
+    let corr_setting = a.correlated_lines.unwrap_or_default();
     let ctrl = match &a.controller {
         Some(p) => Some(controller_for(p, &frd)?),
         None => None,
@@ -313,6 +321,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             raise_cover: a.raise_cover,
             weight_shape: a.weight_shape,
             per_line_misfit: per_line_setting,
+            correlated_lines: corr_setting,
             ..UncertaintyOptions::default()
         },
         a.max_order,
@@ -341,6 +350,19 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         if t.per_line_misfit { "yes" } else { "no" },
         per_line_setting.name(),
     );
+    let lc = &t.line_correlation;
+    if lc.factor > 1.0 {
+        println!(
+            "terms (a) and (b): the FRF's neighbouring lines are correlated (ρ₁ {:.2}, ρ₂ {:.2}: \
+             {:.1} standard errors; a windowed (Welch) FRF?), so its variances are taken × {:.2} \
+             for every average over lines ({})",
+            lc.rho1,
+            lc.rho2,
+            lc.z,
+            lc.factor,
+            corr_setting.name()
+        );
+    }
     if let Some(r) = t.misfit_roughness.filter(|r| *r < SMOOTH_MISFIT) {
         println!(
             "warning: the misfit is far smoother from line to line than the FRF's variances say \
@@ -430,6 +452,13 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         "per_line_misfit": t.per_line_misfit,
         "per_line_misfit_setting": per_line_setting.name(),
         "misfit_roughness": t.misfit_roughness,
+        "line_correlation": {
+            "setting": corr_setting.name(),
+            "rho1": lc.rho1,
+            "rho2": lc.rho2,
+            "z": lc.z,
+            "variance_factor": lc.factor,
+        },
         "lines_raise": analysis.lines_raise,
         "weight": {
             "order": w.weight.order(),
@@ -647,6 +676,11 @@ fn read_bla(path: &Path) -> Result<BlaEstimate> {
         realisations: m,
         periods: p,
     })
+}
+
+/// `--correlated-lines`: [`CorrelatedLines::from_name`].
+fn parse_correlated(s: &str) -> std::result::Result<CorrelatedLines, String> {
+    CorrelatedLines::from_name(s).map_err(|e| e.to_string())
 }
 
 /// `--per-line-misfit`: [`PerLineMisfit::from_name`].
