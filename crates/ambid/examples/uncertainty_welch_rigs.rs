@@ -16,10 +16,19 @@
 //! - the bound's and the weight's coverage of the model's true relative error and the weight's
 //!   looseness (as every sweep);
 //! - the lines' correlation the bound found and its variance factor κ (`CorrelatedLines::Auto`;
-//!   `OFF=1` takes the lines as independent, the rule before 2026-12-07);
+//!   `OFF=1` takes the lines as independent, the rule before 2026-12-06);
+//! - with `BIC_KAPPA=1`, the BIC's order chosen again with the variances times that factor
+//!   (a diagnostic; the bound then estimates its factor from the new model's misfit);
+//! - with `DUMP=prefix`, per line the true relative error, ℓ, |W| and terms (a), (b) in
+//!   `prefix_<rig>_<seed>.csv`;
 //! - with `NOISE_FREE=1`, the same excitation without sensor noise: its FRF's error against the
 //!   truth, over the noisy FRF's $\sigma_k$ (the part of the error that does not average out
-//!   with more data of the same noise realisation; a leakage bias or a leakage noise).
+//!   with more data of the same noise realisation; a leakage bias or a leakage noise), and the
+//!   error of a model fitted to that FRF against the noisy run's bound;
+//! - with `DIAG=1`, the medians of the true error and of terms (a) and (b), block means of the
+//!   normalised FRF error over 4, 16 and 64 lines against the short-range prediction, and the
+//!   chain on synthetic FRFs (the truth plus circular noise of the measured variances,
+//!   independent or with the measured lag-1 correlation).
 //!
 //! With several `SEEDS` per rig it also prints, per rig, the mean over the seeds of the
 //! normalised FRF error per line: a bias shows as $|\bar e_k|\sqrt{S}$ well above 1 on lines
@@ -58,7 +67,7 @@ fn lag_corr(e: &[c64], l: usize) -> f64 {
 }
 
 /// The default options, or with `OFF=1` the lines taken as independent (the rule before
-/// 2026-12-07).
+/// 2026-12-06).
 fn opts() -> UncertaintyOptions {
     let mut o = UncertaintyOptions::default();
     if std::env::var("OFF").is_ok() {
@@ -115,6 +124,24 @@ fn main() {
                     println!("{rig} {seed}: {err}");
                     continue;
                 }
+            };
+            // BIC_KAPPA=1: the order chosen again with the variances times the lines' factor
+            // (the likelihood of correlated lines, roughly), the fit on the FRF as measured
+            let nominal = if std::env::var("BIC_KAPPA").is_ok() {
+                let p = nominal.freq_response_siso(&f).expect("model");
+                let m: Vec<c64> = (0..f.len()).map(|k| frd.values()[k] - p[k]).collect();
+                let lc = ambid_core::validate::uncertainty::line_correlation(&[(&m, var)])
+                    .expect("correlation");
+                let scaled = ambid_core::lti::Frd::new(
+                    f.clone(),
+                    frd.values().to_vec(),
+                    Some(var.iter().map(|v| v * lc.factor).collect()),
+                    frd.ts(),
+                )
+                .expect("scaled FRF");
+                nominal_by_bic(&scaled, &controller).unwrap_or(nominal)
+            } else {
+                nominal
             };
             let analysis = analyse(
                 &nominal,
@@ -194,6 +221,30 @@ fn main() {
                     median(b.clone()),
                     worst
                 );
+            }
+            if let Ok(path) = std::env::var("DUMP") {
+                // per line in 10–1000 Hz: f, true relative error, ℓ, |W|, term (a) and (b)
+                // relative, the FRF's relative std
+                use std::fmt::Write;
+                let t = &ur.analysis.terms;
+                let mut out = String::from("f_hz,err,ell,w,a_rel,b_rel,std_rel\n");
+                for &k in &idx {
+                    let gt = truth.freq_response_siso(&[t.f_hz[k]]).expect("truth")[0];
+                    let pn = t.nominal[k].norm();
+                    let w = ur.analysis.weight.weight.magnitude(&[t.f_hz[k]])[0];
+                    let _ = writeln!(
+                        out,
+                        "{},{:e},{:e},{:e},{:e},{:e},{:e}",
+                        t.f_hz[k],
+                        (gt - t.nominal[k]).norm() / pn,
+                        t.multiplicative[k],
+                        w,
+                        t.frf_confidence[k] / pn,
+                        t.model_error[k] / pn,
+                        var[k].sqrt() / pn
+                    );
+                }
+                std::fs::write(format!("{path}_{rig}_{seed}.csv"), out).expect("dump");
             }
             if std::env::var("DIAG").is_ok() {
                 let t = &ur.analysis.terms;

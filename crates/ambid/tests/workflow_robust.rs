@@ -584,3 +584,42 @@ fn physical_with_recorded_operating_points_fits_the_magnet_law() {
     let html = std::fs::read_to_string(dir.join("out2/report.html")).unwrap();
     assert!(html.contains("`gap-10um` does not give bias_current_a and gap_offset_um"));
 }
+
+/// The workflow on a noise excitation (a Welch FRF, whose neighbouring lines correlate at about
+/// 0.4 with Hann): the `uncertainty` step finds the correlation in the misfit, takes the
+/// variances times its factor (Hann theory: $1 + 2 \cdot 0.44 = 1.89$), and says so in the
+/// report and `summary.json`; the same workflow on the default PRBS (period averaging,
+/// independent lines) has no factor and no note (docs/uncertainty.md, "Welch FRFs: correlated
+/// lines").
+#[test]
+fn uncertainty_on_a_welch_frf_allows_for_its_correlated_lines() {
+    for kind in ["noise", "prbs"] {
+        let mut cfg = WorkflowConfig {
+            steps: Some(vec![Step::Frf, Step::Models, Step::Uncertainty]),
+            seed: 3,
+            ..WorkflowConfig::default()
+        };
+        cfg.twin.mode = "linear".into();
+        cfg.excitation.kind = kind.into();
+        cfg.excitation.amplitude_pct = Some(5.0);
+        let out = run(&cfg, Path::new("."), &mut Progress::new(Verbosity::Quiet)).unwrap();
+        let u = &out.summary["uncertainty"];
+        let blocks = section_blocks(&out, "uncertainty");
+        if kind == "noise" {
+            let k = u["line_variance_factor"]
+                .as_f64()
+                .expect("a variance factor");
+            assert!((1.5..2.3).contains(&k), "{k}");
+            assert!(
+                blocks.contains("neighbouring lines are correlated"),
+                "{blocks}"
+            );
+        } else {
+            assert!(u.get("line_variance_factor").is_none(), "{u}");
+            assert!(
+                !blocks.contains("neighbouring lines are correlated"),
+                "{blocks}"
+            );
+        }
+    }
+}

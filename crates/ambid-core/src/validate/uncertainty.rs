@@ -229,7 +229,7 @@ pub struct UncertaintyOptions {
 /// FRFs: correlated lines").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum CorrelatedLines {
-    /// The lines are taken as independent (the behaviour before 2026-12-07).
+    /// The lines are taken as independent (the behaviour before 2026-12-06).
     Off,
     /// The factor [`LineCorrelation::factor`] of the misfit's lag correlations is applied
     /// when they show a short-range correlation ([`line_correlation`]).

@@ -458,8 +458,8 @@ fn report_and_write(a: &FrfArgs, res: &FrfAnalysis) -> Result<()> {
             println!(
                 "Welch: the standard deviations hold the noise, not the leakage bias at lightly \
                  damped modes nor the correlation of neighbouring lines (about 0.4 with Hann); \
-                 `ambid uncertainty` allows for the correlation, but its bound on Welch FRFs \
-                 still fell short of the truth on 3 of 40 twin rigs (docs/uncertainty.md, \
+                 `ambid uncertainty` allows for the correlation, but its weight on Welch FRFs \
+                 still fell short of the truth on 3 of 40 linear and 2 of 40 nonlinear twin rigs (docs/uncertainty.md, \
                  \"Welch FRFs: correlated lines\"); periodic excitation avoids both"
             );
         }
