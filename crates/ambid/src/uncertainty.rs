@@ -1127,8 +1127,7 @@ pub fn twin_noise_welch_frf(
         &settings,
         None,
     )?;
-    let frd = a.frf.plant;
-    Ok((out, frd))
+    Ok((out, a.frf.plant))
 }
 
 /// The seed experiment on twin rig `rig` (0 = nominal, else `random_rig(rig)`) with noise seed

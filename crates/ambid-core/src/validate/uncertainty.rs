@@ -408,16 +408,35 @@ fn line_correlation_of(
                 .map(|(&k, pk)| e.values()[k] - pk)
                 .collect();
             let v: Vec<f64> = keep.iter().map(|&k| var[k]).collect();
-            // a rough misfit is a per-line systematic error (one realisation's distortion),
-            // not the noise: its correlations say nothing about the noise's
-            if misfit_roughness(&m, &v).is_some_and(|r| r >= ROUGH_MISFIT) {
-                continue;
+            if noise_like(misfit_roughness(&m, &v)) {
+                seqs.push((m, v));
             }
-            seqs.push((m, v));
         }
     }
     let refs: Vec<(&[c64], &[f64])> = seqs.iter().map(|(m, v)| (&m[..], &v[..])).collect();
     Ok(line_correlation(&refs).unwrap_or(LineCorrelation::independent(l)))
+}
+
+/// Whether a misfit of this [`misfit_roughness`] can tell the noise's correlation: a rough one
+/// (≥ [`ROUGH_MISFIT`]) is a per-line systematic error (one realisation's distortion), whose
+/// correlations say nothing about the noise's.
+fn noise_like(roughness: Option<f64>) -> bool {
+    !roughness.is_some_and(|r| r >= ROUGH_MISFIT)
+}
+
+/// [`line_correlation_of`] for one SISO channel from its misfit, variances and roughness,
+/// already computed.
+fn channel_correlation(
+    misfit: &[c64],
+    var: &[f64],
+    roughness: Option<f64>,
+    opts: &UncertaintyOptions,
+) -> LineCorrelation {
+    let independent = LineCorrelation::independent(misfit.len());
+    if opts.correlated_lines == CorrelatedLines::Off || !noise_like(roughness) {
+        return independent;
+    }
+    line_correlation(&[(misfit, var)]).unwrap_or(independent)
 }
 
 /// `frd` with every variance multiplied by `factor` (the FRF itself when it is 1).
@@ -927,14 +946,6 @@ fn uncertainty_with(
     };
     let var_raw = positive_variances(frd)?;
     let l = frd.len();
-    // noise correlated between neighbouring lines: every average over lines (the fit's, the
-    // windows') has κ times the variance of independent lines' (module docs)
-    let corr = match corr {
-        Some(c) => c,
-        None => line_correlation_of(nominal, frd, None, opts)?,
-    };
-    let var_scaled: Vec<f64> = var_raw.iter().map(|v| v * corr.factor).collect();
-    let var = &var_scaled[..];
     for (name, v) in [
         ("nonlinear_std", extra.nonlinear_std),
         ("operating_spread", extra.operating_spread),
@@ -959,6 +970,17 @@ fn uncertainty_with(
         .map(|&fk| c64::from_polar(1.0, 2.0 * std::f64::consts::PI * fk * ts))
         .collect();
     let poles = nominal.poles()?;
+    let p_hat = nominal.freq_response_siso(&f)?;
+    let misfit_c: Vec<c64> = (0..l).map(|k| g[k] - p_hat[k]).collect();
+    let roughness = misfit_roughness(&misfit_c, var_raw);
+    // noise correlated between neighbouring lines: every average over lines (the fit's, the
+    // windows') has κ times the variance of independent lines' (module docs)
+    let corr = match corr {
+        Some(c) => c,
+        None => channel_correlation(&misfit_c, var_raw, roughness, opts),
+    };
+    let var_scaled: Vec<f64> = var_raw.iter().map(|v| v * corr.factor).collect();
+    let var = &var_scaled[..];
     let (sens, n_theta, fitted) = match tangent {
         Some(t) => (t.sens, t.dim, t.fitted),
         None => {
@@ -981,7 +1003,6 @@ fn uncertainty_with(
             )
         }
     };
-    let p_hat = nominal.freq_response_siso(&f)?;
     // per line: 2x2 covariance of (Re, Im) δP̂ and the residual's noise variance over σ²
     let mut frf_conf = Vec::with_capacity(l);
     let mut gauss_cov = Vec::with_capacity(l);
@@ -1001,13 +1022,11 @@ fn uncertainty_with(
         gauss_cov.push((crr, cii, cri));
     }
     // (b): the significant smoothed misfit
-    let misfit_c: Vec<c64> = (0..l).map(|k| g[k] - p_hat[k]).collect();
     let m_half = window_half_lines(&poles, &f, ts);
     // the windows, each tested at α_b / scales (module docs)
     // the line alone first when asked or when the misfit is rough without a term (c): a misfit
     // that changes from line to line (a single realisation's nonlinear distortion, far above
     // the noise of the periods) is averaged away by any window
-    let roughness = misfit_roughness(&misfit_c, var_raw);
     let per_line = match opts.per_line_misfit {
         PerLineMisfit::Off => false,
         PerLineMisfit::On => true,
@@ -2627,17 +2646,21 @@ mod tests {
     /// The projector $\tilde J \tilde J^{+}$ onto the span of the whitened real Jacobian
     /// columns `cols` (each one complex value per line) and its singular values: the oracle's
     /// side of the tangent-space tests, from an SVD of the columns themselves.
-    fn span_projector(cols: &[Vec<c64>], var: &[f64], rank: usize) -> (Mat<f64>, Vec<f64>) {
-        let l = var.len();
-        let j = Mat::<f64>::from_fn(2 * l, cols.len(), |r, c| {
+    /// The columns whitened: rows $\sqrt{2/\sigma_k^2}\,(\operatorname{Re}, \operatorname{Im})$.
+    fn whitened(cols: &[Vec<c64>], var: &[f64]) -> Mat<f64> {
+        Mat::<f64>::from_fn(2 * var.len(), cols.len(), |r, c| {
             let v = cols[c][r / 2] * (2.0 / var[r / 2]).sqrt();
             if r % 2 == 0 {
                 v.re
             } else {
                 v.im
             }
-        });
-        let svd = j.thin_svd().unwrap();
+        })
+    }
+
+    fn span_projector(cols: &[Vec<c64>], var: &[f64], rank: usize) -> (Mat<f64>, Vec<f64>) {
+        let l = var.len();
+        let svd = whitened(cols, var).thin_svd().unwrap();
         let s: Vec<f64> = (0..cols.len()).map(|i| svd.S()[i]).collect();
         let u = svd.U();
         let p = Mat::<f64>::from_fn(2 * l, 2 * l, |a, b| {
@@ -3395,15 +3418,7 @@ mod tests {
         let cols = partial_fraction_columns(&poles, &z);
         let dim = tangent_dim(&poles, false);
         // the oracle's basis: leading left singular vectors of the whitened columns
-        let j = Mat::<f64>::from_fn(2 * l, cols.len(), |r, c| {
-            let v = cols[c][r / 2] * (2.0 / var[r / 2]).sqrt();
-            if r % 2 == 0 {
-                v.re
-            } else {
-                v.im
-            }
-        });
-        let svd = j.thin_svd().unwrap();
+        let svd = whitened(&cols, &var).thin_svd().unwrap();
         let u = svd.U();
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
         let mut gauss = || {

@@ -608,7 +608,7 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
         uncovered_hz: a.weight.uncovered_hz.clone(),
         misfit_roughness: t.misfit_roughness,
         per_line_misfit: t.per_line_misfit,
-        line_variance_factor: (lc.factor != 1.0).then_some(lc.factor),
+        line_variance_factor: (lc.factor > 1.0).then_some(lc.factor),
         robustly_stable: r.robustly_stable,
         stability_margin: r.stability_margin,
         lower_gain_margin: r.lower_gain_margin.filter(|g| g.is_finite()),
