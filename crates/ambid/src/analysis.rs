@@ -138,6 +138,38 @@ impl FrfSettings {
         Some(s)
     }
 
+    /// The estimator for a record of `n` samples whose excitation has `period` samples per
+    /// period (`None`: not periodic), the one rule of the workflow's FRF step and its studies:
+    /// period averaging when at least two periods are recorded, dropping `skip_periods` (at most
+    /// all but one); otherwise Welch with `nperseg` samples per segment (`None`:
+    /// [`Self::default_nperseg`], never above the record). A noise excitation on the twin is one
+    /// "period" as long as the record, so it gets Welch, as `ambid frf` gives it.
+    ///
+    /// # Example
+    /// ```
+    /// use ambid::analysis::{FrfMethod, FrfSettings};
+    /// let prbs = FrfSettings::for_record(Some(5115), 20 * 5115, 1, None);
+    /// assert!(matches!(prbs.method, FrfMethod::Periodic { period_samples: 5115, skip_periods: 1 }));
+    /// // two periods: one is kept
+    /// let two = FrfSettings::for_record(Some(5115), 2 * 5115, 3, None);
+    /// assert!(matches!(two.method, FrfMethod::Periodic { skip_periods: 1, .. }));
+    /// let noise = FrfSettings::for_record(Some(102_300), 102_300, 1, None);
+    /// assert!(matches!(noise.method, FrfMethod::Welch { nperseg: 8192, .. }));
+    /// let short = FrfSettings::for_record(None, 40, 1, Some(64));
+    /// assert!(matches!(short.method, FrfMethod::Welch { nperseg: 40, .. }));
+    /// ```
+    pub fn for_record(
+        period: Option<usize>,
+        n: usize,
+        skip_periods: usize,
+        nperseg: Option<usize>,
+    ) -> Self {
+        match period.filter(|&p| p > 0 && n / p >= 2) {
+            Some(p) => Self::periodic(p, skip_periods.min(n / p - 1)),
+            None => Self::welch(nperseg.unwrap_or_else(|| Self::default_nperseg(n)).min(n)),
+        }
+    }
+
     /// Welch with a Hann window of `nperseg` samples and 50 % overlap.
     pub fn welch(nperseg: usize) -> Self {
         Self::with_method(FrfMethod::Welch {

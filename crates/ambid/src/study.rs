@@ -294,10 +294,11 @@ pub fn amplitude_on_twin(study: &TwinAmplitudeStudy) -> Result<AmplitudeOutcome>
     let noise = if study.noise { outs.pop() } else { None };
     let mut records = Vec::with_capacity(study.levels.len());
     let mut twin = None;
-    let mut period = 0;
+    let (mut period, mut samples) = (0, 0);
     for (out, &level) in outs.into_iter().zip(&study.levels) {
         let out = out?;
         period = out.excitation.period_samples;
+        samples = out.record.r.len();
         records.push(LevelRecord {
             level,
             r: out.record.r,
@@ -310,7 +311,8 @@ pub fn amplitude_on_twin(study: &TwinAmplitudeStudy) -> Result<AmplitudeOutcome>
     }
     let noise = noise.transpose()?;
     let twin = twin.ok_or_else(|| Error::other("no level given"))?;
-    let mut settings = FrfSettings::periodic(period, study.skip_periods);
+    // the identification's estimator: period averaging, or Welch for a noise excitation
+    let mut settings = FrfSettings::for_record(Some(period), samples, study.skip_periods, None);
     settings.band = study.band;
     settings.quality_band = study.band;
     settings.i_sat = Some(twin.i_sat());
@@ -602,7 +604,12 @@ pub fn operating_point_on_twin(
         .zip(run_batch(&exps))
         .map(|(case, out)| {
             let out = out.with_context(|| format!("operating point `{}`", case.name))?;
-            let mut settings = FrfSettings::periodic(out.excitation.period_samples, skip_periods);
+            let mut settings = FrfSettings::for_record(
+                Some(out.excitation.period_samples),
+                out.record.r.len(),
+                skip_periods,
+                None,
+            );
             settings.band = band;
             settings.quality_band = band;
             settings.i_sat = Some(out.twin.i_sat());

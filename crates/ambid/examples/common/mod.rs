@@ -47,6 +47,10 @@ pub fn workflow_on_rig_seed(
     };
     wf.twin.mode = mode.into();
     wf.twin.config = Some(path);
+    // EXCITATION=noise|chirp|…: the workflow's excitation kind instead of its default PRBS
+    if let Ok(kind) = std::env::var("EXCITATION") {
+        wf.excitation.kind = kind;
+    }
     let out = run(&wf, dir, &mut Progress::new(Verbosity::Quiet));
     (cfg, out)
 }

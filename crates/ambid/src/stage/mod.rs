@@ -135,19 +135,11 @@ pub fn frf_settings(
     n: usize,
     i_sat: Option<f64>,
 ) -> FrfSettings {
-    let periodic = match frf.method.as_str() {
+    let period = match frf.method.as_str() {
         "welch" => None,
-        _ => period.filter(|p| n / p.max(&1) >= 2),
+        _ => period,
     };
-    let mut s = match periodic {
-        Some(p) => FrfSettings::periodic(p, skip_periods.min(n / p - 1)),
-        None => {
-            let nper = frf
-                .nperseg
-                .unwrap_or_else(|| FrfSettings::default_nperseg(n));
-            FrfSettings::welch(nper.min(n))
-        }
-    };
+    let mut s = FrfSettings::for_record(period, n, skip_periods, frf.nperseg);
     // an explicit band wins; otherwise both bands are derived from the excitation of the record
     // (ambid_core::frf::band), on the twin and on files alike
     s.band = frf.band_hz.map(|[a, b]| (a, b));
