@@ -682,7 +682,7 @@ fn main() {
             lines_half += usize::from(l_half);
             lines_within += usize::from(lu <= g_hi * (1.0 + 1e-3) && ll >= g_lo * (1.0 - 1e-3));
             println!(
-                "{rig:3} {seed:3} {:2} | {:.3} {:.3} | {:.2e} {:.2e} {:.2} | {:.3} {:.3} | {} {} | W order {} loose {:.2} | raise {:.2} W0 cov {:.3} ratio {:.2} | lines {ll:.3} {lu:.3} (true {g_lo:.3} {g_hi:.3}) {l_stable} {l_half} | (e) on {} lines | {:.1}s",
+                "{rig:3} {seed:3} {:2} | {:.3} {:.3} | {:.2e} {:.2e} {:.2} | {:.3} {:.3} | {} {} | W order {} loose {:.2} | raise {:.2} W0 cov {:.3} ratio {:.2} | lines {ll:.3} {lu:.3} (true {g_lo:.3} {g_hi:.3}) {l_stable} {l_half} | (e) on {} lines | (f) {:.1e} | {:.1}s",
                 run.nominal.order(),
                 c.bound_coverage,
                 c.weight_coverage,
@@ -703,6 +703,8 @@ fn main() {
                     .amplitude
                     .as_ref()
                     .map_or(0, |e| e.iter().filter(|x| **x > 0.0).count()),
+                // term (f): 0 for the BIC's own fit (a model of another estimator has a distance)
+                run.analysis.terms.fit_distance_median_rel().unwrap_or(f64::NAN),
                 t.elapsed().as_secs_f64()
             );
         }

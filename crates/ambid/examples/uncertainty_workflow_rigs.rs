@@ -128,6 +128,42 @@ fn main() {
         };
         let ratio = median(idx.iter().map(|&k| w.y[k]).collect())
             / median(idx.iter().map(|&k| err.y[k]).collect());
+        if std::env::var("REF_FIT").is_ok() {
+            // a diagnostic: the BIC's inverse-variance fit to the step's FRF (what term (a)
+            // describes) against the chosen model, both against the truth on 10–1000 Hz
+            let frd = out
+                .frf_stage
+                .as_ref()
+                .zip(stage.and_then(|s| s.band.as_ref()))
+                .and_then(|(f, b)| f.analysis.frf.plant.band(b.band_hz.0, b.band_hz.1).ok());
+            let chosen_model = chosen.and_then(|c| c.model.clone());
+            if let (Some(frd), Some(cm)) = (frd, chosen_model) {
+                if let Ok(r) = ambid::uncertainty::nominal_by_bic(&frd, twin.controller()) {
+                    let fx: Vec<f64> = idx.iter().map(|&k| err.x[k]).collect();
+                    let g = twin.plant().freq_response_siso(&fx).expect("truth");
+                    let rel = |m: &ambid_core::lti::StateSpace| -> Vec<f64> {
+                        let p = m.freq_response_siso(&fx).expect("model");
+                        p.iter()
+                            .zip(&g)
+                            .map(|(a, b)| (a - b).norm() / a.norm())
+                            .collect()
+                    };
+                    let (ec, er) = (rel(&cm), rel(&r));
+                    let b = pick("bound ℓ");
+                    let under = b.map_or(f64::NAN, |b| {
+                        idx.iter().zip(&er).filter(|(&k, e)| b.y[k] >= **e).count() as f64 / m
+                    });
+                    println!(
+                        "    ref fit: SS {} median err {:.2e}, chosen's {:.2e} (ratio {:.2}); ℓ covers the ref fit's error on {:.3}",
+                        r.order(),
+                        median(er.clone()),
+                        median(ec.clone()),
+                        median(ec) / median(er),
+                        under
+                    );
+                }
+            }
+        }
         if std::env::var("DECOMPOSE").is_ok() {
             if let Some(b) = pick("bound ℓ") {
                 let e_med = median(idx.iter().map(|&k| err.y[k]).collect());

@@ -187,6 +187,8 @@ fn terms(r: &Reference) -> UncertaintyTerms {
         nonlinear: None,
         operating: Some(vec![1e-9; n]),
         amplitude: None,
+        fit_distance: None,
+        fit_distance_failed: None,
         additive: ell.iter().zip(&p).map(|(l, g)| l * g.norm()).collect(),
         multiplicative: ell,
         nominal: p,

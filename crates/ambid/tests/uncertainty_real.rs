@@ -24,7 +24,7 @@
 //!
 //! On acceleration 1 the same bound also goes through the command a user runs on a record
 //! without a loop (`ambid uncertainty` with its defaults, no `--controller`): the line-alone
-//! scale is on, the bound equals the library's to 1e-12 and its weight and bound cover ≥ 95 %
+//! scale is on, the bound equals the library's to 1e-6 (term (f) re-fits the FRF read from its file) and its weight and bound cover ≥ 95 %
 //! of the held-out lines.
 //!
 //! A second real record, the Silverbox (`shared/data/real/silverbox`, SNLS80mV.csv: ten
@@ -268,9 +268,14 @@ fn cli_without_a_controller(
             .collect()
     };
     assert_eq!(col("f_hz").len(), err.len());
-    // the bound is the library's (the FRF and the model round-trip through their files); the
-    // weight is printed only: its order-4 fit moves with the bound's last bits
+    // the bound is the library's (the FRF and the model round-trip through their files) but
+    // for term (f): the command fits the FRF read from its file again (order 25), which lands
+    // within about 1e-7 of the model read from its file, where the library's term (f) is 0.
+    // The weight is printed only: its order-4 fit moves with the bound's last bits
     // (docs/uncertainty.md, "Real data: a held-out measurement")
+    let f_med = summary["fit_distance"]["median_rel"].as_f64().unwrap();
+    assert!(f_med < 1e-6, "term (f) {f_med}");
+    assert_eq!(lib.terms.fit_distance_median_rel(), Some(0.0));
     let bm = col("bound_multiplicative");
     let wm = col("weight_mag");
     let wl = lib.weight.weight.magnitude(&lib.terms.f_hz);
@@ -282,7 +287,7 @@ fn cli_without_a_controller(
     };
     let (db, dw) = (largest(&bm, &lib.terms.multiplicative), largest(&wm, &wl));
     println!("ambid uncertainty against the library: bound within {db:.1e}, weight within {dw:.2} (relative, largest over the lines)");
-    assert!(db < 1e-12, "{db}");
+    assert!(db < 1e-6, "{db}");
     for name in ["weight_mag", "bound_multiplicative"] {
         let b = col(name);
         let n = (0..err.len())

@@ -102,6 +102,13 @@ pub struct UncertaintyArgs {
     /// "Welch FRFs: correlated lines".
     #[arg(long, value_name = "auto|off", value_parser = parse_correlated)]
     pub(crate) correlated_lines: Option<CorrelatedLines>,
+    /// Term (f): `on` (the default) adds the model's distance from the FRF's own fit of its
+    /// order (the inverse-variance state-space fit that terms (a) and (b) describe; 0 when the
+    /// model is that fit, as `ambid fit --structure ss` on this FRF gives it), which keeps the
+    /// bound a bound for a model estimated otherwise (time domain, other weights); `off` leaves
+    /// it out. docs/uncertainty.md, "A model not fitted to the FRF".
+    #[arg(long, value_name = "on|off", value_parser = parse_on_off)]
+    pub(crate) fit_distance: Option<bool>,
     /// Term (d): the plant FRF CSV of the same experiment at another operating point (bias
     /// current, air gap; `ambid frf` of a record with the same excitation, so the same lines).
     /// Repeat it for each; the bound then holds the largest noise-corrected distance of them from
@@ -322,6 +329,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             weight_shape: a.weight_shape,
             per_line_misfit: per_line_setting,
             correlated_lines: corr_setting,
+            fit_distance: a.fit_distance.unwrap_or(true),
             ..UncertaintyOptions::default()
         },
         a.max_order,
@@ -362,6 +370,16 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             lc.factor,
             corr_setting.name()
         );
+    }
+    match (&t.fit_distance, &t.fit_distance_failed) {
+        (Some(_), _) => println!(
+            "term (f): the model's distance from the FRF's own fit of its order, median {:.3} % of |P̂| (0 when the model is that fit)",
+            100.0 * t.fit_distance_median_rel().unwrap_or(0.0)
+        ),
+        (None, Some(e)) => println!(
+            "warning: term (f) left out, the FRF's own fit failed ({e}); the bound then holds for a model fitted to this FRF with inverse-variance weights only"
+        ),
+        (None, None) => {}
     }
     if let Some(r) = t.misfit_roughness.filter(|r| *r < SMOOTH_MISFIT) {
         println!(
@@ -417,6 +435,10 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         cols.push(e.clone());
         header.push("term_amplitude".into());
     }
+    if let Some(d) = &t.fit_distance {
+        cols.push(d.clone());
+        header.push("term_fit_distance".into());
+    }
     let refs: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
     let table = csv_bytes(&header, &refs)?;
     let robust_csv = match &checks {
@@ -458,6 +480,11 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             "rho2": lc.rho2,
             "z": lc.z,
             "variance_factor": lc.factor,
+        },
+        "fit_distance": {
+            "setting": if a.fit_distance.unwrap_or(true) { "on" } else { "off" },
+            "median_rel": t.fit_distance_median_rel(),
+            "failed": t.fit_distance_failed,
         },
         "lines_raise": analysis.lines_raise,
         "weight": {
@@ -681,6 +708,15 @@ fn read_bla(path: &Path) -> Result<BlaEstimate> {
 /// `--correlated-lines`: [`CorrelatedLines::from_name`].
 fn parse_correlated(s: &str) -> std::result::Result<CorrelatedLines, String> {
     CorrelatedLines::from_name(s).map_err(|e| e.to_string())
+}
+
+/// `--fit-distance`: `on` or `off`.
+fn parse_on_off(s: &str) -> std::result::Result<bool, String> {
+    match s {
+        "on" => Ok(true),
+        "off" => Ok(false),
+        _ => Err(format!("`{s}`: use on or off")),
+    }
 }
 
 /// `--per-line-misfit`: [`PerLineMisfit::from_name`].
