@@ -677,14 +677,15 @@ fn the_whole_workflow_runs_on_a_noise_excitation() {
 }
 
 /// The `uncertainty` step on a noise excitation (a Welch FRF) on random rig 42 of the linear
-/// twin (noise seed 42). The models step chooses a time-domain model (OE 8) about twice as far
-/// from the truth as the FRF's own inverse-variance fit of its order, in the upper band where
-/// the Welch FRF is too noisy for term (b) to see the difference; without term (f) the weight
+/// twin (noise seed 42). The models step chooses an output-error polynomial model (OE 8, fitted
+/// to the FRF by its own iteration) about twice as far from the truth as the FRF's own
+/// inverse-variance state-space fit of its order, in the upper band where the Welch FRF is too
+/// noisy for term (b) to see the difference; without term (f) the weight
 /// covered its true error on 68 % of the 10–1000 Hz lines (docs/uncertainty.md, "A model not
 /// fitted to the FRF"). Term (f), the model's distance from that fit, is in the bound and the
 /// weight covers the true error (against the twin's exact plant) on ≥ 95 % of those lines.
 #[test]
-fn term_f_bounds_a_time_domain_model_on_a_welch_frf() {
+fn term_f_bounds_an_output_error_model_on_a_welch_frf() {
     let dir = crate::common::tmpdir("workflow-uncertainty-term-f");
     let (_, out) = uncertainty_on_rig(&dir, 42, "linear", Some("noise"));
     let u = &out.summary["uncertainty"];

@@ -216,9 +216,10 @@ pub struct UncertaintyOptions {
     pub correlated_lines: CorrelatedLines,
     /// Whether the bound adds term (f), the nominal model's distance from the FRF's own fit of
     /// its order ([`fit_distance`]; default `true`). Zero when the nominal model is that fit;
-    /// for a model estimated otherwise (in the time domain, or with other weights) it is what
-    /// terms (a) and (b) cannot see. Only for a SISO model in its own tangent space (no
-    /// [`Self::fitted_band_hz`]); the MIMO entries have no term (f).
+    /// for a model of another structure or estimator (an output-error polynomial, a time-domain
+    /// fit) or with other weights it is what terms (a) and (b) cannot see. Only for a SISO
+    /// model in its own tangent space (no [`Self::fitted_band_hz`]); the MIMO entries have no
+    /// term (f).
     pub fit_distance: bool,
 }
 
@@ -2203,13 +2204,14 @@ fn in_entry(err: Error, i: usize, j: usize, several: bool) -> Error {
 /// ([`ss_frd`](crate::estimate::freqfit_ss::ss_frd), default options).
 ///
 /// Term (a) is the error of *that* fit from the FRF's noise, and term (b) its misfit where the
-/// data show one. A model estimated otherwise (in the time domain, or with other weights) has
-/// its own error, which can be larger than the fit's where the FRF is too noisy for its misfit
-/// to be significant. Since $\hat P - P = (\hat P - \tilde P) + (\tilde P - P)$ exactly, the
-/// known distance $|\hat P - \tilde P|$ added to the bound keeps it a bound for such a model;
-/// it is zero when the nominal model is $\tilde P$. On the twin's workflow with a noise
-/// excitation (Welch FRF, time-domain models chosen) the weight covered the true error on 89 of
-/// 100 linear rigs without it (docs/uncertainty.md, "A model not fitted to the FRF").
+/// data show one. A model of another structure or estimator (an output-error polynomial fitted
+/// by its own iteration, a time-domain fit) or with other weights has its own error, which can
+/// be larger than the fit's where the FRF is too noisy for its misfit to be significant. Since
+/// $\hat P - P = (\hat P - \tilde P) + (\tilde P - P)$ exactly, the known distance
+/// $|\hat P - \tilde P|$ added to the bound keeps it a bound for such a model; it is zero when
+/// the nominal model is $\tilde P$. On the twin's workflow with a noise excitation (Welch FRF;
+/// output-error polynomial models chosen on most rigs) the weight covered the true error on 89
+/// of 100 linear rigs without it (docs/uncertainty.md, "A model not fitted to the FRF").
 ///
 /// # Errors
 /// A model that is not SISO or not discrete-time, or the fit failing (too few lines, a

@@ -104,9 +104,9 @@ pub struct UncertaintyArgs {
     pub(crate) correlated_lines: Option<CorrelatedLines>,
     /// Term (f): `on` (the default) adds the model's distance from the FRF's own fit of its
     /// order (the inverse-variance state-space fit that terms (a) and (b) describe; 0 when the
-    /// model is that fit, as `ambid fit --structure ss` on this FRF gives it), which keeps the
-    /// bound a bound for a model estimated otherwise (time domain, other weights); `off` leaves
-    /// it out. docs/uncertainty.md, "A model not fitted to the FRF".
+    /// model is that fit), which keeps the bound a bound for a model of another structure or
+    /// estimator (an output-error polynomial, a time-domain fit) or other weights; `off` leaves
+    /// it out. Single-axis FRFs only. docs/uncertainty.md, "A model not fitted to the FRF".
     #[arg(long, value_name = "on|off", value_parser = parse_on_off)]
     pub(crate) fit_distance: Option<bool>,
     /// Term (d): the plant FRF CSV of the same experiment at another operating point (bias
