@@ -25,7 +25,11 @@
 //! its significant groups of lines. `PRINT_E=1` prints every 10th line's term (e) and term (a)
 //! (relative) beside the true error. `DUMP_SERIES=DIR` writes per run `DIR/<mode>_<rig>_raise<g>.csv`
 //! (`f_hz`, `bound`, `weight`, `error` on the weight's lines; g the joint raise) for
-//! `scripts/weight_global_fit.py`.
+//! `scripts/weight_global_fit.py`. `EXCITATION=noise` (or `chirp`, `multisine`) runs the
+//! workflow with that excitation instead of the default PRBS (a noise excitation gives a Welch
+//! FRF); `REF_FIT=1` prints the BIC's inverse-variance state-space fit to the step's FRF beside
+//! the chosen model, both against the truth (docs/uncertainty.md, "A model not fitted to the
+//! FRF").
 
 mod common;
 
