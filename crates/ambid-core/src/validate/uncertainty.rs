@@ -994,7 +994,7 @@ fn uncertainty_with(
     let roughness = misfit_roughness(&misfit_c, var_raw);
     // (f): in its own tangent space, the distance from the FRF's own fit of the model's order
     let (distance, distance_failed) = match (&tangent, opts.fit_distance) {
-        (None, true) => match fit_distance(nominal, frd) {
+        (None, true) => match own_fit_distance(nominal, &poles, &p_hat, frd) {
             Ok(d) => (Some(d), None),
             Err(e) => (None, Some(e.to_string())),
         },
@@ -2245,12 +2245,24 @@ fn in_entry(err: Error, i: usize, j: usize, several: bool) -> Error {
 /// assert!(d.iter().zip(&p_off).all(|(d, p)| (d / p.norm() - 0.01 / 1.01).abs() < 1e-6));
 /// ```
 pub fn fit_distance(nominal: &StateSpace, frd: &Frd) -> Result<Vec<f64>> {
-    use crate::estimate::freqfit::{FreqFitOptions, FreqWeights};
-    use crate::estimate::freqfit_ss::{ss_frd, SsFreqOptions};
     if nominal.ninputs() != 1 || nominal.noutputs() != 1 {
         return Err(Error::invalid("nominal", "term (f) needs a SISO model"));
     }
-    let unstable = nominal.poles()?.iter().filter(|p| p.norm() > 1.0).count();
+    let p_hat = nominal.freq_response_siso(frd.f_hz())?;
+    own_fit_distance(nominal, &nominal.poles()?, &p_hat, frd)
+}
+
+/// [`fit_distance`] with the nominal model's `poles` and response `p_hat` on `frd`'s lines,
+/// already computed.
+fn own_fit_distance(
+    nominal: &StateSpace,
+    poles: &[c64],
+    p_hat: &[c64],
+    frd: &Frd,
+) -> Result<Vec<f64>> {
+    use crate::estimate::freqfit::{FreqFitOptions, FreqWeights};
+    use crate::estimate::freqfit_ss::{ss_frd, SsFreqOptions};
+    let unstable = poles.iter().filter(|p| p.norm() > 1.0).count();
     let opts = FreqFitOptions {
         weights: FreqWeights::InverseVariance,
         max_unstable_poles: Some(unstable),
@@ -2272,9 +2284,8 @@ pub fn fit_distance(nominal: &StateSpace, frd: &Frd) -> Result<Vec<f64>> {
         )
     })?
     .model;
-    let a = nominal.freq_response_siso(frd.f_hz())?;
     let b = own.freq_response_siso(frd.f_hz())?;
-    Ok(a.iter().zip(&b).map(|(x, y)| (x - y).norm()).collect())
+    Ok(p_hat.iter().zip(&b).map(|(x, y)| (x - y).norm()).collect())
 }
 
 /// The deterministic terms (d) and (e) at line `k`, added in magnitude.
