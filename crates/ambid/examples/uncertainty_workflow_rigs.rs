@@ -29,7 +29,9 @@
 //! workflow with that excitation instead of the default PRBS (a noise excitation gives a Welch
 //! FRF); `REF_FIT=1` prints the BIC's inverse-variance state-space fit to the step's FRF beside
 //! the chosen model, both against the truth (docs/uncertainty.md, "A model not fitted to the
-//! FRF").
+//! FRF"); `AMP_LEVELS_AT=F` prints each amplitude-study level's plant FRF against the exact plant
+//! on the lines within 20 Hz of F Hz (error and standard deviation relative to |P|, and their
+//! ratio; docs/uncertainty.md, "Term (e) on a Welch FRF").
 
 mod common;
 
@@ -165,6 +167,29 @@ fn main() {
                         median(ec) / median(er),
                         under
                     );
+                }
+            }
+        }
+        if let Ok(at) = std::env::var("AMP_LEVELS_AT") {
+            // each level's plant FRF against the truth near a frequency
+            let at: f64 = at.parse().expect("a frequency");
+            if let Some(a) = out.stages.amplitude.as_ref() {
+                for (row, p) in a.levels.iter().zip(&a.outcome.plants) {
+                    let f = p.f_hz();
+                    let g = twin.plant().freq_response_siso(f).expect("truth");
+                    let v = p.variance().expect("variances");
+                    let mut s = format!("    level {:.1} %:", row.level_pct);
+                    for k in (0..f.len()).filter(|&k| (f[k] - at).abs() < 20.0) {
+                        let e = p.values()[k] - g[k];
+                        s += &format!(
+                            " [{:.0} Hz e/|P| {:.3} std/|P| {:.3} z {:.1}]",
+                            f[k],
+                            e.norm() / g[k].norm(),
+                            v[k].sqrt() / g[k].norm(),
+                            e.norm() / v[k].sqrt()
+                        );
+                    }
+                    println!("{s}");
                 }
             }
         }

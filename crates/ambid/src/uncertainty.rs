@@ -674,10 +674,20 @@ pub fn nonlinear_level(levels: &[f64], ident: f64) -> Option<(usize, f64)> {
 /// The per-line regression of [`amplitude_term`]: on every line $j$ of the study's FRFs
 /// `levels` (level, FRF with variances; two or more distinct levels on the same lines) the
 /// weighted line $G_{i,j} = G_{0,j} + c_j a_i^2$, and the shift at the identification level
-/// `level`, $c_j a_e^2$ (absolute, complex), with its variance $a_e^4/S_{xx,j}$ (of a circular
-/// complex error). [`amplitude_term`] averages it over windows;
+/// `level`, $c_j a_e^2$ (absolute, complex), with its variance $\kappa\,a_e^4/S_{xx,j}$ (of a
+/// circular complex error). [`amplitude_term`] averages it over windows;
 /// [`MatrixUncertainty::add_projected_shift`](ambid_core::validate::uncertainty::MatrixUncertainty::add_projected_shift)
-/// projects it onto the model.
+/// projects it onto the model. Both are sums over neighbouring lines, and the lines of a
+/// windowed (Welch) FRF share noise: the variance of such a sum is about $\kappa$ times the sum
+/// of the per-line variances. $\kappa$ is
+/// [`line_correlation`](ambid_core::validate::uncertainty::line_correlation)'s factor (its
+/// lag-1 and lag-2 correlations, kept when significant and short-range, else 1) read on the
+/// regression's normalised residuals $(G_{i,j} - \hat G_{0,j} - \hat c_j a_i^2)/
+/// \sqrt{\sigma_{i,j}^2(1 - h_{i,j})}$ of every level ($h$ the leverage), which a shift linear in
+/// $a^2$ does not enter; with two levels (no residual) it is 1. Periodic FRFs have independent
+/// lines and $\kappa = 1$; on the twin's noise excitation (Welch, Hann, 50 % overlap) it is
+/// about 2, and without it term (e)'s test took the shared noise for a shift on the linear
+/// twin, whose BLA does not move (docs/uncertainty.md, "Term (e) on a Welch FRF").
 ///
 /// # Errors
 /// As [`amplitude_term`] for the levels.
@@ -739,6 +749,9 @@ pub fn amplitude_shift_lines(levels: &[(f64, &Frd)], level: f64) -> Result<(Vec<
     let ae2 = level * level;
     let l = fs.len();
     let (mut shift, mut var) = (Vec::with_capacity(l), Vec::with_capacity(l));
+    // per level, the regression's residuals and their variances (for the lines' correlation)
+    let mut resid: Vec<(Vec<ambid_core::c64>, Vec<f64>)> =
+        vec![(Vec::with_capacity(l), Vec::with_capacity(l)); levels.len()];
     for j in 0..l {
         let (mut sw, mut sx, mut sy) = (0.0, 0.0, ambid_core::c64::new(0.0, 0.0));
         for ((_, frd), xi) in levels.iter().zip(&x) {
@@ -754,9 +767,30 @@ pub fn amplitude_shift_lines(levels: &[(f64, &Frd)], level: f64) -> Result<(Vec<
             sxx += w * (xi - xm) * (xi - xm);
             sxy += (frd.values()[j] - ym) * (w * (xi - xm));
         }
-        shift.push(sxy / sxx * ae2);
+        let slope = sxy / sxx;
+        for (((_, frd), xi), r) in levels.iter().zip(&x).zip(&mut resid) {
+            let v = frd.variance().map_or(1.0, |v| v[j]);
+            // the residual's variance: the level's times 1 − its leverage
+            let h = (1.0 / sw + (xi - xm) * (xi - xm) / sxx) / v;
+            r.0.push(frd.values()[j] - ym - slope * (xi - xm));
+            r.1.push((v * (1.0 - h)).max(f64::MIN_POSITIVE));
+        }
+        shift.push(slope * ae2);
         var.push(ae2 * ae2 / sxx);
     }
+    // neighbouring lines of a windowed (Welch) estimate share noise: the variance of a smooth
+    // average over the lines is κ times the per-line one's (`line_correlation`'s rule, read on
+    // the residuals, which no shift linear in a² enters; 1 for independent lines)
+    let entries: Vec<(&[ambid_core::c64], &[f64])> = resid
+        .iter()
+        .map(|(r, v)| (r.as_slice(), v.as_slice()))
+        .collect();
+    let kappa = if levels.len() > 2 {
+        ambid_core::validate::uncertainty::line_correlation(&entries).map_or(1.0, |c| c.factor)
+    } else {
+        1.0
+    };
+    var.iter_mut().for_each(|v| *v *= kappa);
     Ok((shift, var))
 }
 

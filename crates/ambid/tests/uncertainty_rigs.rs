@@ -337,3 +337,94 @@ fn the_amplitude_term_recovers_a_known_shift_and_refuses_bad_input() {
     assert!(msg(amplitude_term(&nv, 0.1, &f, &m, 0.95)).contains("two or more periods"));
     assert!(msg(amplitude_term(&refs, 0.1, &f, &m, 1.0)).contains("(0, 1)"));
 }
+
+/// The shifts' variances allow for lines that share noise (a Welch FRF's): with independent
+/// lines they are the regression's own $a_e^4/S_{xx}$ (a naive weighted regression in the test);
+/// with noise that is a moving average over neighbouring lines, $x_k = a w_k + b w_{k-1}$, they
+/// are that times about $1 + 2ab$ (the variance of a smooth average over the lines), read on the
+/// regression's residuals, so a shift linear in $a^2$ does not enter the factor. Each line's
+/// shift keeps the regression's estimate, whose error has the per-line variance.
+#[test]
+fn the_amplitude_shifts_variance_allows_for_correlated_lines() {
+    use ambid::uncertainty::amplitude_shift_lines;
+    use ambid_core::{c64, lti::Frd, lti::StateSpace};
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
+    let ts = 1e-4;
+    let m = StateSpace::discrete(
+        faer::mat![[1.9, -0.96], [1.0, 0.0]],
+        faer::mat![[1.0], [0.0]],
+        faer::mat![[1.0, 0.5]],
+        faer::mat![[0.0]],
+        ts,
+    )
+    .unwrap();
+    let f: Vec<f64> = (1..=600).map(|k| 2.0 * k as f64).collect();
+    let p = m.freq_response_siso(&f).unwrap();
+    let levels = [0.05, 0.08, 0.1, 0.13, 0.16];
+    let (ae, noise): (f64, f64) = (0.1, 2e-3);
+    // (a, b) of the moving average, a² + b² = 1
+    let measure = |shift: f64, b: f64, seed: u64| -> Vec<(f64, Frd)> {
+        let a = (1.0 - b * b).sqrt();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let mut gauss = || {
+            let (re, im): (f64, f64) = (
+                StandardNormal.sample(&mut rng),
+                StandardNormal.sample(&mut rng),
+            );
+            c64::new(re, im) * std::f64::consts::FRAC_1_SQRT_2
+        };
+        levels
+            .iter()
+            .map(|&lv| {
+                let w: Vec<c64> = (0..=f.len()).map(|_| gauss()).collect();
+                let (mut g, mut v) = (Vec::new(), Vec::new());
+                for k in 0..f.len() {
+                    let s = noise * p[k].norm();
+                    let n = (w[k + 1] * a + w[k] * b) * s;
+                    g.push(p[k] * (1.0 - shift * lv * lv) + n);
+                    v.push(s * s);
+                }
+                (lv, Frd::new(f.clone(), g, Some(v), Some(ts)).unwrap())
+            })
+            .collect()
+    };
+    // the naive weighted regression's variance of the shift at a_e
+    let naive = |data: &[(f64, Frd)], k: usize| {
+        let w: Vec<f64> = data
+            .iter()
+            .map(|(_, g)| 1.0 / g.variance().unwrap()[k])
+            .collect();
+        let x: Vec<f64> = data.iter().map(|(a, _)| a * a).collect();
+        let sw: f64 = w.iter().sum();
+        let xm = w.iter().zip(&x).map(|(w, x)| w * x).sum::<f64>() / sw;
+        let sxx: f64 = w.iter().zip(&x).map(|(w, x)| w * (x - xm) * (x - xm)).sum();
+        ae.powi(4) / sxx
+    };
+    for (b, shift, seed, want) in [
+        (0.0, 3.0, 1, (1.0, 1.0)),
+        (0.5, 3.0, 2, (1.6, 2.1)),
+        (0.5, 0.0, 3, (1.6, 2.1)),
+    ] {
+        let data = measure(shift, b, seed);
+        let r: Vec<(f64, &Frd)> = data.iter().map(|(a, g)| (*a, g)).collect();
+        let (s, v) = amplitude_shift_lines(&r, ae).unwrap();
+        let factor = v[100] / naive(&data, 100);
+        // every line carries the same factor
+        assert!(
+            (0..f.len()).all(|k| (v[k] / naive(&data, k) - factor).abs() < 1e-9 * factor),
+            "b {b}: the factor differs between lines"
+        );
+        assert!(
+            factor >= want.0 - 1e-12 && factor <= want.1 + 1e-12,
+            "b {b}, shift {shift}: factor {factor}, expected {want:?} (1 + 2ab = {})",
+            1.0 + 2.0 * b * (1.0 - b * b).sqrt()
+        );
+        // the shift itself is the regression's, relative error below its noise
+        let z = (0..f.len())
+            .map(|k| (s[k] + p[k] * shift * ae * ae).norm_sqr() / naive(&data, k))
+            .sum::<f64>()
+            / f.len() as f64;
+        assert!(z > 0.8 && z < 1.25, "b {b}: mean |ŝ − s|² / var {z}");
+    }
+}
