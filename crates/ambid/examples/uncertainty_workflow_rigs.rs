@@ -31,7 +31,8 @@
 //! the chosen model, both against the truth (docs/uncertainty.md, "A model not fitted to the
 //! FRF"); `AMP_LEVELS_AT=F` prints each amplitude-study level's plant FRF against the exact plant
 //! on the lines within 20 Hz of F Hz (error and standard deviation relative to |P|, and their
-//! ratio; docs/uncertainty.md, "Term (e) on a Welch FRF").
+//! ratio; docs/uncertainty.md, "Term (e) on a Welch FRF"); `NOMINAL_GM=1` prints the chosen
+//! model's own gain interval with the twin's controller (no robust margin can exceed it).
 
 mod common;
 
@@ -168,6 +169,16 @@ fn main() {
                         under
                     );
                 }
+            }
+        }
+        if std::env::var("NOMINAL_GM").is_ok() {
+            // the chosen model's own loop: the gain interval no robust margin can exceed
+            if let Some(m) = chosen.and_then(|c| c.model.as_ref()) {
+                let c = twin.controller();
+                println!(
+                    "    chosen model's own gain interval: {:?}",
+                    ambid_core::validate::robust::nominal_gain_interval(m, c)
+                );
             }
         }
         if let Ok(at) = std::env::var("AMP_LEVELS_AT") {
