@@ -211,15 +211,10 @@ fn the_amplitude_term_covers_the_nonlinear_twins_shift() {
 /// alone: 44 %); noise-free, it is the shift to 0.2 % (the
 /// smoothing window's average of a κ that moves with frequency); bad
 /// input is refused with the fix named.
-#[test]
-fn the_amplitude_term_recovers_a_known_shift_and_refuses_bad_input() {
-    use ambid::uncertainty::amplitude_term;
-    use ambid_core::{c64, lti::Frd, lti::StateSpace};
-    use rand::SeedableRng;
-    use rand_distr::{Distribution, StandardNormal};
+/// A plant with a lightly damped resonance at about 300 Hz, at $T = 0.1$ ms.
+fn resonance_model() -> (ambid_core::lti::StateSpace, f64) {
     let ts = 1e-4;
-    // a lightly damped resonance at about 300 Hz
-    let m = StateSpace::discrete(
+    let m = ambid_core::lti::StateSpace::discrete(
         faer::mat![[1.9, -0.96], [1.0, 0.0]],
         faer::mat![[1.0], [0.0]],
         faer::mat![[1.0, 0.5]],
@@ -227,6 +222,16 @@ fn the_amplitude_term_recovers_a_known_shift_and_refuses_bad_input() {
         ts,
     )
     .unwrap();
+    (m, ts)
+}
+
+#[test]
+fn the_amplitude_term_recovers_a_known_shift_and_refuses_bad_input() {
+    use ambid::uncertainty::amplitude_term;
+    use ambid_core::{c64, lti::Frd};
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
+    let (m, ts) = resonance_model();
     let f: Vec<f64> = (1..=250).map(|k| 4.0 * k as f64).collect();
     let p = m.freq_response_siso(&f).unwrap();
     let kappa = |fk: f64, scale: f64| c64::new(-0.4 * scale, 0.12 * scale * fk / 1000.0);
@@ -347,18 +352,10 @@ fn the_amplitude_term_recovers_a_known_shift_and_refuses_bad_input() {
 #[test]
 fn the_amplitude_shifts_variance_allows_for_correlated_lines() {
     use ambid::uncertainty::amplitude_shift_lines;
-    use ambid_core::{c64, lti::Frd, lti::StateSpace};
+    use ambid_core::{c64, lti::Frd};
     use rand::SeedableRng;
     use rand_distr::{Distribution, StandardNormal};
-    let ts = 1e-4;
-    let m = StateSpace::discrete(
-        faer::mat![[1.9, -0.96], [1.0, 0.0]],
-        faer::mat![[1.0], [0.0]],
-        faer::mat![[1.0, 0.5]],
-        faer::mat![[0.0]],
-        ts,
-    )
-    .unwrap();
+    let (m, ts) = resonance_model();
     let f: Vec<f64> = (1..=600).map(|k| 2.0 * k as f64).collect();
     let p = m.freq_response_siso(&f).unwrap();
     let levels = [0.05, 0.08, 0.1, 0.13, 0.16];
