@@ -752,27 +752,34 @@ pub fn amplitude_shift_lines(levels: &[(f64, &Frd)], level: f64) -> Result<(Vec<
     // per level, the regression's residuals and their variances (for the lines' correlation)
     let mut resid: Vec<(Vec<ambid_core::c64>, Vec<f64>)> =
         vec![(Vec::with_capacity(l), Vec::with_capacity(l)); levels.len()];
+    // per line, each level's value and variance (checked finite and positive above)
+    let mut pts: Vec<(ambid_core::c64, f64)> = Vec::with_capacity(levels.len());
     for j in 0..l {
+        pts.clear();
+        pts.extend(
+            levels
+                .iter()
+                .map(|(_, frd)| (frd.values()[j], frd.variance().map_or(1.0, |v| v[j]))),
+        );
         let (mut sw, mut sx, mut sy) = (0.0, 0.0, ambid_core::c64::new(0.0, 0.0));
-        for ((_, frd), xi) in levels.iter().zip(&x) {
-            let w = 1.0 / frd.variance().map_or(1.0, |v| v[j]);
+        for ((g, v), xi) in pts.iter().zip(&x) {
+            let w = 1.0 / v;
             sw += w;
             sx += w * xi;
-            sy += frd.values()[j] * w;
+            sy += g * w;
         }
         let (xm, ym) = (sx / sw, sy / sw);
         let (mut sxx, mut sxy) = (0.0, ambid_core::c64::new(0.0, 0.0));
-        for ((_, frd), xi) in levels.iter().zip(&x) {
-            let w = 1.0 / frd.variance().map_or(1.0, |v| v[j]);
+        for ((g, v), xi) in pts.iter().zip(&x) {
+            let w = 1.0 / v;
             sxx += w * (xi - xm) * (xi - xm);
-            sxy += (frd.values()[j] - ym) * (w * (xi - xm));
+            sxy += (g - ym) * (w * (xi - xm));
         }
         let slope = sxy / sxx;
-        for (((_, frd), xi), r) in levels.iter().zip(&x).zip(&mut resid) {
-            let v = frd.variance().map_or(1.0, |v| v[j]);
+        for (((g, v), xi), r) in pts.iter().zip(&x).zip(&mut resid) {
             // the residual's variance: the level's times 1 − its leverage
             let h = (1.0 / sw + (xi - xm) * (xi - xm) / sxx) / v;
-            r.0.push(frd.values()[j] - ym - slope * (xi - xm));
+            r.0.push(g - ym - slope * (xi - xm));
             r.1.push((v * (1.0 - h)).max(f64::MIN_POSITIVE));
         }
         shift.push(slope * ae2);
