@@ -40,5 +40,6 @@ mod signal_waveforms;
 #[path = "../../ambid/tests/common/skip.rs"]
 mod skip;
 mod structure;
+mod validate_cancelling;
 mod validate_pz;
 mod validate_residuals;

@@ -564,9 +564,31 @@ fn main() {
                 let t = &run.analysis.terms;
                 let b: Vec<f64> = t.additive.iter().map(|x| x.max(1e-300)).collect();
                 let ts = run.nominal.ts().unwrap();
-                match ambid_core::validate::weight::fit_weight(&t.f_hz, &b, ts, 4, 0.98) {
+                let o = shape_opts();
+                match ambid_core::validate::weight::fit_weight_shaped(
+                    &t.f_hz,
+                    &b,
+                    ts,
+                    4,
+                    0.98,
+                    o.weight_shape,
+                ) {
                     Ok(wf) => {
-                        let wa = wf.weight.magnitude(&t.f_hz);
+                        let mut wa = wf.weight.magnitude(&t.f_hz);
+                        // raised as the tool raises its weight: the draws of the model's error
+                        // against |W_a| / |P̂|
+                        let rel: Vec<f64> = wa
+                            .iter()
+                            .zip(&t.nominal)
+                            .map(|(w, p)| w / p.norm())
+                            .collect();
+                        let g = t
+                            .errors
+                            .joint_factors(&[&rel], o.raise_cover, o.run_coverage, o.draws, o.seed)
+                            .map_or(f64::NAN, |v| v[0].max(1.0));
+                        for x in &mut wa {
+                            *x *= g;
+                        }
                         let truth = run.truth_plant.freq_response_siso(&t.f_hz).unwrap();
                         let (mut cov, mut n, mut e, mut w) = (0, 0, vec![], vec![]);
                         for k in 0..t.f_hz.len() {
@@ -582,7 +604,7 @@ fn main() {
                         e.sort_by(f64::total_cmp);
                         w.sort_by(f64::total_cmp);
                         println!(
-                            "    additive weight: order {} cov {:.3} ratio {:.2} loose {:.2}",
+                            "    additive weight: order {} raise {g:.3} cov {:.3} ratio {:.2} loose {:.2}",
                             wf.weight.order(),
                             cov as f64 / n as f64,
                             w[n / 2] / e[n / 2],

@@ -180,6 +180,47 @@ fn main() {
                     ambid_core::validate::robust::nominal_gain_interval(m, c)
                 );
             }
+            if std::env::var("NOMINAL_GM").as_deref() == Ok("all") {
+                // every candidate's own loop beside its scores
+                for cand in stage.map_or(&[][..], |s| &s.candidates[..]) {
+                    if let Some(m) = cand.model.as_ref() {
+                        println!(
+                            "      {} valid {} fit {:?} rel {:?} bic {:?}: {:?}",
+                            cand.label(),
+                            cand.valid,
+                            cand.validation_fit,
+                            cand.relative_rmse,
+                            cand.bic,
+                            ambid_core::validate::robust::nominal_gain_interval(
+                                m,
+                                twin.controller()
+                            )
+                        );
+                        if std::env::var("SHOW_PZ").is_ok() {
+                            let ts = m.ts().unwrap_or(1.0);
+                            let hz = |z: &ambid_core::c64| {
+                                let s = z.ln() / ts;
+                                (s.norm() / std::f64::consts::TAU, -s.re / s.norm())
+                            };
+                            let fmt = |v: Vec<ambid_core::c64>| -> String {
+                                v.iter()
+                                    .filter(|z| z.im >= 0.0)
+                                    .map(|z| {
+                                        let (f, d) = hz(z);
+                                        format!("{f:.0}Hz/{d:.3}")
+                                    })
+                                    .collect::<Vec<_>>()
+                                    .join(" ")
+                            };
+                            println!(
+                                "        poles {}\n        zeros {}",
+                                fmt(m.poles().unwrap_or_default()),
+                                fmt(m.zeros().unwrap_or_default())
+                            );
+                        }
+                    }
+                }
+            }
         }
         if let Ok(at) = std::env::var("AMP_LEVELS_AT") {
             // each level's plant FRF against the truth near a frequency

@@ -182,6 +182,8 @@ fn row(valid: bool, fit: Option<f64>, bic: Option<f64>, fitted: bool) -> Compare
         converged: None,
         closed_loop_stable: None,
         valid,
+        admissible: valid,
+        cancelling_pairs: Vec::new(),
         note: None,
         model: fitted.then(|| {
             StateSpace::discrete(

@@ -360,8 +360,10 @@ pub struct FrfCandidates<'a> {
 
 /// Fits every structure × order of `fits` to the measured plant FRF and scores it
 /// (`ambid_core::validate::compare::compare_models`): each fit held to the unstable-pole count
-/// of `unstable` ([`unstable_pole_rule`]), a row valid only with that count and a stable loop
-/// with `controller`, the closed-loop validation fit on `validation` when given. The comparison
+/// of `unstable` ([`unstable_pole_rule`]), a row valid only with that count, a stable loop
+/// with `controller` and no pole–zero pair that cancels within the data
+/// (`ambid_core::validate::compare::cancelling_pairs`), the closed-loop validation fit on
+/// `validation` when given. The comparison
 /// of `ambid run`'s models stage, `compare-models` and `ambid fit` on an FRF file.
 ///
 /// # Errors
@@ -415,8 +417,8 @@ fn orders_with_recommendation(
 /// the measured plant $\hat P = \hat T_{ry} \hat S^{-1}$ in the band of
 /// `ambid_core::frf::band::fit_band` (or `[models] band_hz`); each is held to the number of
 /// unstable poles the measured loop supports (the Nyquist count
-/// $n_u(P) = W - n_u(C)$) and must close a stable loop with the controller
-/// (`ambid_core::validate::compare`). Domain `time`: ARX (least squares), OE (prediction-error
+/// $n_u(P) = W - n_u(C)$), must close a stable loop with the controller and may hold no
+/// pole–zero pair that cancels within the data (`ambid_core::validate::compare`). Domain `time`: ARX (least squares), OE (prediction-error
 /// method) and state-space (N4SID + PEM) fits to the identification record, scored on the
 /// validation record. The choice is [`choose`] with `[models] select`.
 ///

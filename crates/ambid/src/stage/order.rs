@@ -431,7 +431,9 @@ fn recommend(input: &OrderInput<'_>) -> std::result::Result<OrderRecommendation,
             .map_err(|e| format!("the state-space fits of the order scan failed ({e})"))?;
         let errs: Vec<(usize, Option<f64>)> = rows
             .iter()
-            .map(|r| (r.order, r.relative_rmse.filter(|_| r.valid)))
+            // a pair that cancels within the data does not take an order out of the scan:
+            // its error is that of the order the data support
+            .map(|r| (r.order, r.relative_rmse.filter(|_| r.admissible)))
             .collect();
         let Some(best) = errs
             .iter()
