@@ -197,26 +197,28 @@ fn main() {
                             )
                         );
                         if std::env::var("SHOW_PZ").is_ok() {
-                            let ts = m.ts().unwrap_or(1.0);
-                            let hz = |z: &ambid_core::c64| {
-                                let s = z.ln() / ts;
-                                (s.norm() / std::f64::consts::TAU, -s.re / s.norm())
-                            };
-                            let fmt = |v: Vec<ambid_core::c64>| -> String {
-                                v.iter()
-                                    .filter(|z| z.im >= 0.0)
-                                    .map(|z| {
-                                        let (f, d) = hz(z);
-                                        format!("{f:.0}Hz/{d:.3}")
+                            // the pole–zero table's own map of each root to (Hz, ζ)
+                            use ambid_core::validate::pz::{PzAnalysis, PzOptions};
+                            let fmt = |r: &[ambid_core::validate::pz::Root]| -> String {
+                                r.iter()
+                                    .filter(|r| r.z.im >= 0.0)
+                                    .map(|r| {
+                                        format!(
+                                            "{:.0}Hz/{:.3}",
+                                            r.f_hz.unwrap_or(0.0),
+                                            r.damping.unwrap_or(0.0)
+                                        )
                                     })
                                     .collect::<Vec<_>>()
                                     .join(" ")
                             };
-                            println!(
-                                "        poles {}\n        zeros {}",
-                                fmt(m.poles().unwrap_or_default()),
-                                fmt(m.zeros().unwrap_or_default())
-                            );
+                            if let Ok(pz) = PzAnalysis::from_state_space(m, &PzOptions::default()) {
+                                println!(
+                                    "        poles {}\n        zeros {}",
+                                    fmt(&pz.poles),
+                                    fmt(&pz.zeros)
+                                );
+                            }
                         }
                     }
                 }

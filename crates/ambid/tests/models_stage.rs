@@ -183,7 +183,6 @@ fn row(valid: bool, fit: Option<f64>, bic: Option<f64>, fitted: bool) -> Compare
         closed_loop_stable: None,
         valid,
         admissible: valid,
-        cancelling_pairs: Vec::new(),
         note: None,
         model: fitted.then(|| {
             StateSpace::discrete(

@@ -147,9 +147,6 @@ pub struct CompareRow {
     /// cancels leaves the error of the order the data support.
     #[serde(skip)]
     pub admissible: bool,
-    /// The pairs that cancel within the data ([`cancelling_pairs`]; not serialised).
-    #[serde(skip)]
-    pub cancelling_pairs: Vec<PoleZeroPair>,
     /// Why a fit or the validation failed, or why the row is not valid.
     pub note: Option<String>,
     /// The fitted model as a state-space realisation (not serialised).
@@ -220,7 +217,6 @@ fn candidate(
         closed_loop_stable: None,
         valid: false,
         admissible: false,
-        cancelling_pairs: Vec::new(),
         note: None,
         model: None,
     };
@@ -347,7 +343,6 @@ fn candidate(
                     "not valid: pole–zero pairs cancel within the data at {}: the data do not support order {order}",
                     each.join(", ")
                 ));
-                row.cancelling_pairs = pairs;
             }
         }
         Err(e) => notes.push(format!("the pole–zero cancellation test failed: {e}")),
@@ -420,9 +415,9 @@ impl PoleZeroPair {
 /// use ambid_core::estimate::freqfit::{FreqData, FreqFitOptions, FreqWeights};
 /// use ambid_core::lti::{Frd, TransferFunction};
 /// use ambid_core::validate::compare::cancelling_pairs;
+/// # fn main() -> ambid_core::Result<()> {
 /// let ts = 1e-3;
-/// let tf = |b: Vec<f64>, a: Vec<f64>| TransferFunction::new(b, a, ts)
-///     .unwrap().to_state_space().unwrap();
+/// let tf = |b: Vec<f64>, a: Vec<f64>| TransferFunction::new(b, a, ts)?.to_state_space();
 /// let conv = |a: &[f64], b: &[f64]| {
 ///     let mut c = vec![0.0; a.len() + b.len() - 1];
 ///     for (i, x) in a.iter().enumerate() {
@@ -440,23 +435,25 @@ impl PoleZeroPair {
 /// // the plant: a real pole, a resonance at 50 Hz and an anti-resonance at 70 Hz; measured on
 /// // 200 lines 2 Hz apart with 1 % noise
 /// let (num, den) = (conv(&[0.1], &pair(0.97, 70.0)), conv(&[1.0, -0.9], &pair(0.99, 50.0)));
-/// let plant = tf(num.clone(), den.clone());
+/// let plant = tf(num.clone(), den.clone())?;
 /// let f: Vec<f64> = (1..=200).map(|k| 2.0 * k as f64).collect();
-/// let g = plant.freq_response_siso(&f).unwrap();
+/// let g = plant.freq_response_siso(&f)?;
 /// let noisy: Vec<_> = g.iter().enumerate()
 ///     .map(|(k, v)| v * (1.0 + 0.01 * ((k * 7919 % 101) as f64 / 50.0 - 1.0)))
 ///     .collect();
-/// let frd = Frd::new(f, noisy, None, Some(ts)).unwrap();
+/// let frd = Frd::new(f, noisy, None, Some(ts))?;
 /// let opts = FreqFitOptions { weights: FreqWeights::Uniform, ..FreqFitOptions::default() };
-/// let data = FreqData::new(&frd, &opts).unwrap();
+/// let data = FreqData::new(&frd, &opts)?;
 /// // the plant's own pairs are seen by the data
-/// assert!(cancelling_pairs(&plant, &data).unwrap().is_empty());
+/// assert!(cancelling_pairs(&plant, &data)?.is_empty());
 /// // the plant times an undamped pole pair at 101 Hz, between two lines, and a zero pair
 /// // 0.1 % above it: that pair, and only it, cancels within the data
-/// let over = tf(conv(&num, &pair(0.999_999, 101.1)), conv(&den, &pair(0.999_999, 101.0)));
-/// let pairs = cancelling_pairs(&over, &data).unwrap();
+/// let over = tf(conv(&num, &pair(0.999_999, 101.1)), conv(&den, &pair(0.999_999, 101.0)))?;
+/// let pairs = cancelling_pairs(&over, &data)?;
 /// assert_eq!(pairs.len(), 1);
 /// assert!((pairs[0].f_hz - 101.0).abs() < 0.5 && pairs[0].statistic <= pairs[0].critical);
+/// # Ok(())
+/// # }
 /// ```
 pub fn cancelling_pairs(
     model: &StateSpace,
@@ -541,12 +538,13 @@ pub fn pole_zero_pairs(
         }
         let statistic = l2 * (vr / v).ln();
         let d = if real { 2.0 } else { 4.0 };
-        let s = c64::new(p.norm().ln(), p.im.atan2(p.re)) / data.ts;
+        // a pole at the origin has no continuous equivalent: 0 Hz, ζ 0
+        let root = crate::validate::pz::Root::new(p, data.ts, 0.0);
         out.push(PoleZeroPair {
             pole: p,
             zero: q,
-            f_hz: s.norm() / std::f64::consts::TAU,
-            damping: -s.re / s.norm().max(f64::MIN_POSITIVE),
+            f_hz: root.f_hz.unwrap_or(0.0),
+            damping: root.damping.unwrap_or(0.0),
             statistic,
             critical: d * l2.ln(),
         });

@@ -144,7 +144,7 @@ pub struct Root {
 impl Root {
     /// Maps `z` to its continuous equivalent (see the module docs); `z` and `ts` must be finite
     /// and `ts > 0`, `origin_tol` the radius below which `z` counts as the origin.
-    fn new(z: c64, ts: f64, origin_tol: f64) -> Self {
+    pub(crate) fn new(z: c64, ts: f64, origin_tol: f64) -> Self {
         let unstable = z.norm() > 1.0;
         if z.norm() <= origin_tol {
             return Root {
