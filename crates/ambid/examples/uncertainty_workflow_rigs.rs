@@ -32,7 +32,12 @@
 //! FRF"); `AMP_LEVELS_AT=F` prints each amplitude-study level's plant FRF against the exact plant
 //! on the lines within 20 Hz of F Hz (error and standard deviation relative to |P|, and their
 //! ratio; docs/uncertainty.md, "Term (e) on a Welch FRF"); `NOMINAL_GM=1` prints the chosen
-//! model's own gain interval with the twin's controller (no robust margin can exceed it).
+//! model's own gain interval with the twin's controller (no robust margin can exceed it);
+//! `EXACT_FIT=7,8` fits state-space models of those orders (inverse-variance weights, at most one
+//! unstable pole) to the twin's exact plant and to the measured FRF on the step's lines and
+//! prints their and the chosen model's median error against the truth on 10–1000 Hz and
+//! 800–1000 Hz: the exact-data fit's error is the order's bias alone (docs/uncertainty.md,
+//! "Coverage lost on order-7 choices").
 
 mod common;
 
@@ -171,7 +176,98 @@ fn main() {
                 }
             }
         }
+        if let Ok(orders) = std::env::var("EXACT_FIT") {
+            // a diagnostic: inverse-variance state-space fits of the given orders to the twin's
+            // *exact* plant on the step's lines, weighted by the step FRF's variances. Their error
+            // against the truth is the order's bias alone (no noise); beside it the chosen
+            // model's error, on 10–1000 Hz and at 800–1000 Hz
+            let frd = out
+                .frf_stage
+                .as_ref()
+                .zip(stage.and_then(|s| s.band.as_ref()))
+                .and_then(|(f, b)| f.analysis.frf.plant.band(b.band_hz.0, b.band_hz.1).ok());
+            if let Some(frd) = frd {
+                let exact = twin.plant().freq_response_siso(frd.f_hz()).expect("truth");
+                let frd_exact = ambid_core::lti::Frd::new(
+                    frd.f_hz().to_vec(),
+                    exact.clone(),
+                    frd.variance().map(<[f64]>::to_vec),
+                    frd.ts(),
+                )
+                .expect("the exact FRF");
+                let fx: Vec<f64> = idx.iter().map(|&k| err.x[k]).collect();
+                let g = twin.plant().freq_response_siso(&fx).expect("truth");
+                let hi: Vec<usize> = (0..fx.len()).filter(|&i| fx[i] >= 800.0).collect();
+                let show = |name: String, m: &ambid_core::lti::StateSpace| {
+                    let p = m.freq_response_siso(&fx).expect("model");
+                    let e: Vec<f64> = p
+                        .iter()
+                        .zip(&g)
+                        .map(|(a, b)| (a - b).norm() / a.norm())
+                        .collect();
+                    println!(
+                        "    {name}: median error 10–1000 Hz {:.2e}, 800–1000 Hz {:.2e}",
+                        median(e.clone()),
+                        median(hi.iter().map(|&i| e[i]).collect())
+                    );
+                };
+                if let Some(cm) = chosen.and_then(|c| c.model.as_ref()) {
+                    show(format!("chosen {label}"), cm);
+                }
+                let opts = ambid_core::estimate::freqfit::FreqFitOptions {
+                    weights: ambid_core::estimate::freqfit::FreqWeights::InverseVariance,
+                    max_unstable_poles: Some(1),
+                    ..Default::default()
+                };
+                for n in orders.split(',').filter_map(|s| s.parse::<usize>().ok()) {
+                    for (what, d) in [("exact", &frd_exact), ("measured", &frd)] {
+                        match ambid_core::estimate::freqfit_ss::ss_frd(
+                            d,
+                            n,
+                            &opts,
+                            &Default::default(),
+                        ) {
+                            Ok(fit) => show(format!("SS {n} fitted to the {what} FRF"), &fit.model),
+                            Err(e) => println!("    SS {n} on the {what} FRF: {e}"),
+                        }
+                    }
+                }
+            }
+        }
         if std::env::var("NOMINAL_GM").is_ok() {
+            // where the pole–zero rule acted: the candidates refused for a pair that cancels
+            // within the data, and those of them with a better validation fit than the choice's
+            // (the rule changed the choice when there is one)
+            if let Some(s) = stage {
+                let vf = chosen
+                    .and_then(|c| c.validation_fit)
+                    .unwrap_or(f64::NEG_INFINITY);
+                let refused: Vec<&ambid::stage::Candidate> = s
+                    .candidates
+                    .iter()
+                    .filter(|c| {
+                        c.note.as_deref().is_some_and(|n| {
+                            n.contains("pole–zero pairs cancel")
+                                && !n.contains("unstable poles, the data support")
+                                && !n.contains("loop with the controller is unstable")
+                        })
+                    })
+                    .collect();
+                let better: Vec<String> = refused
+                    .iter()
+                    .filter(|c| c.validation_fit.is_some_and(|v| v > vf))
+                    .map(|c| c.label())
+                    .collect();
+                println!(
+                    "    pair rule: {} candidates refused for a pair alone; better validation fit than the choice: {}",
+                    refused.len(),
+                    if better.is_empty() {
+                        "none".into()
+                    } else {
+                        better.join(", ")
+                    }
+                );
+            }
             // the chosen model's own loop: the gain interval no robust margin can exceed
             if let Some(m) = chosen.and_then(|c| c.model.as_ref()) {
                 let c = twin.controller();
@@ -270,6 +366,23 @@ fn main() {
                 let raise = u["weight_joint_raise"].as_f64().unwrap_or(f64::NAN);
                 std::fs::create_dir_all(&d).expect("the dump directory");
                 std::fs::write(format!("{d}/{mode}_{rig}_raise{raise}.csv"), s).expect("a dump");
+            }
+        }
+        if std::env::var("E_EDGE").is_ok() {
+            // term (e) relative to |P̂| above the twin's amplitude study's band (10–1000 Hz),
+            // where the line term holds the study's last line, against its median within it
+            if let Some(e) = pick("(e)") {
+                let above: Vec<f64> = (0..e.x.len())
+                    .filter(|&k| e.x[k] > 1000.0)
+                    .map(|k| e.y[k])
+                    .collect();
+                let within: Vec<f64> = idx.iter().map(|&k| e.y[k]).collect();
+                println!(
+                    "    term (e) above 1000 Hz: {} lines, max {:.2e}; median within 10–1000 Hz {:.2e}",
+                    above.len(),
+                    above.iter().copied().fold(0.0, f64::max),
+                    median(within)
+                );
             }
         }
         if std::env::var("PRINT_E").is_ok() {
