@@ -36,8 +36,11 @@
 //! `EXACT_FIT=7,8` fits state-space models of those orders (inverse-variance weights, at most one
 //! unstable pole) to the twin's exact plant and to the measured FRF on the step's lines and
 //! prints their and the chosen model's median error against the truth on 10–1000 Hz and
-//! 800–1000 Hz: the exact-data fit's error is the order's bias alone (docs/uncertainty.md,
-//! "Coverage lost on order-7 choices").
+//! 800–1000 Hz: the exact-data fit's error is the order's bias alone; with `NOMINAL_GM` also the
+//! candidates refused for a pole–zero pair alone and those of them with a better validation fit
+//! than the choice; `E_EDGE=1` term (e) above 1000 Hz (the twin's amplitude study's band ends
+//! there) against its median within 10–1000 Hz (docs/uncertainty.md, "Unseen rigs 301–400, and
+//! where the coverage misses come from").
 
 mod common;
 
@@ -140,14 +143,17 @@ fn main() {
         };
         let ratio = median(idx.iter().map(|&k| w.y[k]).collect())
             / median(idx.iter().map(|&k| err.y[k]).collect());
+        // the step's plant FRF on the models' band (the lines the models were fitted on)
+        let step_frd = || {
+            out.frf_stage
+                .as_ref()
+                .zip(stage.and_then(|s| s.band.as_ref()))
+                .and_then(|(f, b)| f.analysis.frf.plant.band(b.band_hz.0, b.band_hz.1).ok())
+        };
         if std::env::var("REF_FIT").is_ok() {
             // a diagnostic: the BIC's inverse-variance fit to the step's FRF (what term (a)
             // describes) against the chosen model, both against the truth on 10–1000 Hz
-            let frd = out
-                .frf_stage
-                .as_ref()
-                .zip(stage.and_then(|s| s.band.as_ref()))
-                .and_then(|(f, b)| f.analysis.frf.plant.band(b.band_hz.0, b.band_hz.1).ok());
+            let frd = step_frd();
             let chosen_model = chosen.and_then(|c| c.model.clone());
             if let (Some(frd), Some(cm)) = (frd, chosen_model) {
                 if let Ok(r) = ambid::uncertainty::nominal_by_bic(&frd, twin.controller()) {
@@ -181,11 +187,7 @@ fn main() {
             // *exact* plant on the step's lines, weighted by the step FRF's variances. Their error
             // against the truth is the order's bias alone (no noise); beside it the chosen
             // model's error, on 10–1000 Hz and at 800–1000 Hz
-            let frd = out
-                .frf_stage
-                .as_ref()
-                .zip(stage.and_then(|s| s.band.as_ref()))
-                .and_then(|(f, b)| f.analysis.frf.plant.band(b.band_hz.0, b.band_hz.1).ok());
+            let frd = step_frd();
             if let Some(frd) = frd {
                 let exact = twin.plant().freq_response_siso(frd.f_hz()).expect("truth");
                 let frd_exact = ambid_core::lti::Frd::new(

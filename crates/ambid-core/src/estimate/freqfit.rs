@@ -196,6 +196,17 @@ impl FreqData {
         Ok(data)
     }
 
+    /// The weighted cost $V = \sum_k w_k |\hat G_k - G_k|^2$ of a model's response `model` on
+    /// the lines (the fits' criterion).
+    pub fn weighted_cost(&self, model: impl IntoIterator<Item = c64>) -> f64 {
+        model
+            .into_iter()
+            .zip(&self.g)
+            .zip(&self.w)
+            .map(|((m, g), w)| w * (m - g).norm_sqr())
+            .sum()
+    }
+
     /// Number of lines.
     pub fn len(&self) -> usize {
         self.f_hz.len()
@@ -715,12 +726,7 @@ fn finish_tf(
             "the fitted model has a pole on a data line (infinite response); lower the order or narrow the band",
         ));
     }
-    let cost = resp
-        .iter()
-        .zip(&data.g)
-        .zip(&data.w)
-        .map(|((m, g), w)| w * (m - g).norm_sqr())
-        .sum();
+    let cost = data.weighted_cost(resp.iter().copied());
     Ok(FreqFit {
         errors: FreqErrors::of(&resp, data),
         model,

@@ -496,13 +496,7 @@ pub fn pole_zero_pairs(
         }
     }
     let resp = model.freq_response_siso(&data.f_hz)?;
-    let cost = |r: &mut dyn Iterator<Item = c64>| -> f64 {
-        r.zip(&data.g)
-            .zip(&data.w)
-            .map(|((m, g), w)| w * (m - g).norm_sqr())
-            .sum()
-    };
-    let v = cost(&mut resp.iter().copied());
+    let v = data.weighted_cost(resp.iter().copied());
     let l2 = 2.0 * data.len() as f64;
     if !(v > 0.0 && v.is_finite()) {
         return Ok(Vec::new());
@@ -532,7 +526,7 @@ pub fn pole_zero_pairs(
                 (z - q) * (z - q.conj()) / ((z - p) * (z - p.conj()))
             }
         };
-        let vr = cost(&mut resp.iter().zip(&data.z).map(|(g, z)| g / dipole(*z)));
+        let vr = data.weighted_cost(resp.iter().zip(&data.z).map(|(g, z)| g / dipole(*z)));
         if !vr.is_finite() {
             continue;
         }
