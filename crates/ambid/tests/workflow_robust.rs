@@ -270,8 +270,31 @@ fn uncertainty_on_rig(
 /// keep the true loop stable 90 % of the way and are at least half the true ones.
 #[test]
 fn the_weight_does_not_peak_outside_the_measured_band() {
-    let dir = crate::common::tmpdir("workflow-uncertainty-band-edge");
-    let rig = 53u64;
+    let band_hi = weight_margins_hold_on_nonlinear_rig(53);
+    // the step's band is the FRF's, well below the loop's high-frequency range on this rig
+    assert!(band_hi < 1500.0, "band to {band_hi} Hz");
+}
+
+/// Random rig 336 of the nonlinear twin (noise seed 336), unseen while the rules were set and the
+/// one rig of 1 200 workflow runs (rigs 1–100, 201–400; PRBS and noise; both twins) whose weight's
+/// upper gain margin was below half the true one (2.017 against 2.034 needed): its models' band
+/// reaches 1255 Hz while the amplitude study's ends at 1000 Hz, and term (e)'s line term held
+/// the study's top line value (a false positive of the windows' test at its noisiest lines,
+/// 0.11–0.135 of $|\hat P|$ against a true error of 0.002–0.009) over 1000–1255 Hz. Above the
+/// study's lines only the projection through the model now carries the shift
+/// (`amplitude_term_and_shifts`). Checked against the twin's exact plant as rig 53 is.
+#[test]
+fn term_e_is_not_held_above_the_amplitude_studys_band() {
+    let band_hi = weight_margins_hold_on_nonlinear_rig(336);
+    // the case this rig stands for: the models' band reaches beyond the study's 1000 Hz
+    assert!(band_hi > 1000.0, "band to {band_hi} Hz");
+}
+
+/// The workflow's `uncertainty` step on random rig `rig` of the nonlinear twin (noise seed
+/// `rig`), against the twin's exact plant: both weight margins keep the true loop stable 90 % of
+/// the way and are at least half the true ones. Returns the top of the step's band \[Hz\].
+fn weight_margins_hold_on_nonlinear_rig(rig: u64) -> f64 {
+    let dir = crate::common::tmpdir(&format!("workflow-uncertainty-margins-{rig}"));
     let (twin_cfg, out) = uncertainty_on_nonlinear_rig(&dir, rig);
     let u = &out.summary["uncertainty"];
     let twin = Twin::new(twin_cfg).unwrap();
@@ -283,16 +306,21 @@ fn the_weight_does_not_peak_outside_the_measured_band() {
     println!(
         "rig {rig}: weight margins {lo:.3} … {hi:.3}, true {g_lo:.3} … {g_hi:.3}, band to {band_hi:.0} Hz, summary {u}"
     );
-    // the step's band is the FRF's, well below the loop's high-frequency range on this rig
-    assert!(band_hi < 1500.0, "band to {band_hi} Hz");
     for g in [1.0 - 0.9 * (1.0 - lo), 1.0 + 0.9 * (hi - 1.0)] {
         assert!(
             loop_stable(twin.plant(), twin.controller(), g).unwrap(),
-            "the true loop at gain {g}"
+            "rig {rig}: the true loop at gain {g}"
         );
     }
-    assert!(hi - 1.0 >= 0.5 * (g_hi - 1.0), "upper {hi} vs true {g_hi}");
-    assert!(1.0 - lo >= 0.5 * (1.0 - g_lo), "lower {lo} vs true {g_lo}");
+    assert!(
+        hi - 1.0 >= 0.5 * (g_hi - 1.0),
+        "rig {rig}: upper {hi} vs true {g_hi}"
+    );
+    assert!(
+        1.0 - lo >= 0.5 * (1.0 - g_lo),
+        "rig {rig}: lower {lo} vs true {g_lo}"
+    );
+    band_hi
 }
 
 /// `uncertainty` alone on random rigs 14 and 98 of the nonlinear twin (noise seeds 14 and 98):
