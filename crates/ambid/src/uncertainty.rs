@@ -656,9 +656,8 @@ pub fn nonlinear_level(levels: &[f64], ident: f64) -> Option<(usize, f64)> {
 /// ([`MatrixUncertainty::add_projected_shift`](ambid_core::validate::uncertainty::MatrixUncertainty::add_projected_shift)),
 /// which the model's dynamics extend beyond the measured lines. Below the study's bottom line
 /// the end value is still held (the rigid-body band, where the shift is largest and smooth).
-/// A curvature beyond
-/// $a^2$ over the study's levels is not modelled: keep the levels within the range where the
-/// amplitude study's coherence is not yet saturated by distortion.
+/// A curvature beyond $a^2$ over the study's levels is not modelled: keep the levels within the
+/// range where the amplitude study's coherence is not yet saturated by distortion.
 ///
 /// # Errors
 /// Fewer than two distinct levels, a level that is not finite and positive, FRFs on other lines

@@ -61,21 +61,6 @@ fn gain_margins(check: &serde_json::Value) -> (f64, f64) {
     )
 }
 
-/// Issue 23's two margin bars for robust gain margins `lo..hi` against the true `t_lo..t_hi`:
-/// the true loop is stable with the gain moved 90 % of the way to either, and each is at least
-/// half the true one.
-fn assert_margin_bars(
-    plant: &ambid_core::lti::StateSpace,
-    ctrl: &ambid_core::lti::StateSpace,
-    (lo, hi): (f64, f64),
-    (t_lo, t_hi): (f64, f64),
-) {
-    assert!(loop_stable(plant, ctrl, 1.0 + 0.9 * (hi - 1.0)).unwrap());
-    assert!(loop_stable(plant, ctrl, 1.0 - 0.9 * (1.0 - lo)).unwrap());
-    assert!(hi - 1.0 >= 0.5 * (t_hi - 1.0), "{hi} vs {t_hi}");
-    assert!(1.0 - lo >= 0.5 * (1.0 - t_lo), "{lo} vs {t_lo}");
-}
-
 #[test]
 fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
     let dir = common::tmpdir("uncertainty-cli");
@@ -97,14 +82,14 @@ fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
     let (g_lo, g_hi) = gain_margins(r);
     println!("robust gain margins {g_lo:.3}..{g_hi:.3}, true {true_lo:.3}..{true_hi:.3}");
     assert!(g_hi > 1.0 && g_lo < 1.0);
-    assert_margin_bars(plant, ctrl, (g_lo, g_hi), (true_lo, true_hi));
+    crate::common::assert_margin_bars(plant, ctrl, (g_lo, g_hi), (true_lo, true_hi), "the weight");
     // the check on the lines (the bound itself, no weight fit): the same two bars
     let ol = &summary["robust_on_lines"]["check"];
     assert_eq!(ol["robustly_stable"], true, "{summary}");
     assert!(summary["robust_on_lines"]["raise"].as_f64().unwrap() >= 1.0);
     let (l_lo, l_hi) = gain_margins(ol);
     println!("on the lines {l_lo:.3}..{l_hi:.3}");
-    assert_margin_bars(plant, ctrl, (l_lo, l_hi), (true_lo, true_hi));
+    crate::common::assert_margin_bars(plant, ctrl, (l_lo, l_hi), (true_lo, true_hi), "the lines");
 
     // the files agree: the script's weight on the lines is the table's weight_mag
     let table = std::fs::read_to_string(dir.join("unc/uncertainty.csv")).unwrap();
@@ -190,7 +175,7 @@ fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
     assert_eq!(r["robustly_stable"], true, "{smooth_run}");
     let (m_lo, m_hi) = gain_margins(r);
     println!("smooth weight: robust gain margins {m_lo:.3}..{m_hi:.3}");
-    assert_margin_bars(plant, ctrl, (m_lo, m_hi), (true_lo, true_hi));
+    crate::common::assert_margin_bars(plant, ctrl, (m_lo, m_hi), (true_lo, true_hi), "the model");
     let smooth_table = std::fs::read_to_string(dir.join("unc_smooth/uncertainty.csv")).unwrap();
     let smooth_w = column(&smooth_table, "weight_mag");
     let in_band = |w: &[f64]| {

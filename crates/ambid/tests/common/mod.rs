@@ -230,3 +230,31 @@ pub fn identify_on_twin(dir: &Path, simulate_args: &[&str]) {
         &model,
     ]);
 }
+
+/// Issue 23's two margin bars for robust gain margins `lo..hi` against the true loop's
+/// `t_lo..t_hi` (its exact gain interval): the true loop is stable with the gain moved 90 % of
+/// the way to either, and each is at least half the true one. `what` names the case in the
+/// messages.
+pub fn assert_margin_bars(
+    plant: &ambid_core::lti::StateSpace,
+    ctrl: &ambid_core::lti::StateSpace,
+    (lo, hi): (f64, f64),
+    (t_lo, t_hi): (f64, f64),
+    what: &str,
+) {
+    use ambid::uncertainty::loop_stable;
+    for g in [1.0 - 0.9 * (1.0 - lo), 1.0 + 0.9 * (hi - 1.0)] {
+        assert!(
+            loop_stable(plant, ctrl, g).unwrap(),
+            "{what}: the true loop at gain {g} (margins {lo} … {hi})"
+        );
+    }
+    assert!(
+        hi - 1.0 >= 0.5 * (t_hi - 1.0),
+        "{what}: upper {hi} vs true {t_hi}"
+    );
+    assert!(
+        1.0 - lo >= 0.5 * (1.0 - t_lo),
+        "{what}: lower {lo} vs true {t_lo}"
+    );
+}
