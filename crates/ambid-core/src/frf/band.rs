@@ -15,11 +15,30 @@
 //!   $\propto |\sin(\pi f N_b/f_s) / (N_b \sin(\pi f/f_s))|^2$ (≈ $\operatorname{sinc}^2$) with
 //!   nulls at multiples of $f_s/N_b$; for $N_b = 5$ it is 10 dB down at $0.7465\,f_s/N_b$ and its
 //!   highest side lobe peaks at −12.0 dB (−13.3 dB for large $N_b$), so 10 dB keeps the main lobe
-//!   and never a side lobe (where the estimate of the seed experiment failed at 4 and 8 kHz). A multisine or chirp falls by far more than 10 dB at its band edge, so the band is
-//!   its design band; a multisine's non-excited lines inside the band are skipped by the
+//!   and never a side lobe (where the estimate of the seed experiment failed at 4 and 8 kHz). A
+//!   flat multisine or linear chirp falls by far more than 10 dB at its band edge, so the band
+//!   is its design band; a multisine's non-excited lines inside the band are skipped by the
 //!   estimators anyway. $k_0$ excludes DC and the lines a window's leakage of the mean spoils:
 //!   $k_0 = 1$ for period-synchronous data (no leakage), $k_0 = 2$ for Welch with a Hann
 //!   window (its main lobe is ±2 bins wide, so bin 1 holds the DC leakage).
+//!
+//!   **A spectrum that slopes by design.** A logarithmic sweep spends the same time per octave,
+//!   so its power per line falls as $1/f$ (3 dB per octave) over its whole design band: ambid's
+//!   own identification chirp (1–2000 Hz) is 10 dB below its strongest line by about 40 Hz, and
+//!   the 10 dB rule alone ended its band at 58.65 Hz. The models were then fitted on 4–59 Hz, and
+//!   the robust gain margin of the workflow's `uncertainty` step, decided by the model's loop
+//!   far above that band, was 7–94 where the true loop goes unstable at 2.9–5.2 (random rigs
+//!   501–600 of the linear twin: the true loop was unstable at 90 % of the reported margin on 68
+//!   of 100; docs/frf.md, "A spectrum that slopes by design"). So each edge of the 10 dB band is
+//!   then carried outward, line by line, while a line's power is within
+//!   [`BandRule::slope_db_per_octave`] = 6 dB of the strongest line in the octave on the band's
+//!   side of it ($[f_k/2, f_k)$ above the band, $(f_k, 2f_k]$ below it), up to
+//!   [`EDGE_GAP`] = 2 failing lines in a row (the non-excited lines of an odd or random-odd
+//!   multisine grid); the edge is the last line that passed. A fall steeper than 6 dB per octave
+//!   (20 dB per decade) is an edge: a PRBS's main lobe falls by 8.2 dB over the octave below its
+//!   10 dB point (by more beyond it), so its band is the 10 dB rule's; a flat design band's
+//!   edge falls by tens of dB within a line or two. Where an edge was carried, the quality band
+//!   reaches it too (the power there falls by design, not by the excitation's roll-off).
 //! * **Quality band**: the part of the excited band where the excitation is within
 //!   $\Delta_q$ = [`BandRule::quality_db`] = 3 dB of its maximum (its half-power bandwidth;
 //!   $0.450\,f_s/N_b$ for a PRBS with $N_b = 5$, the whole design band of a flat multisine). There the
@@ -73,7 +92,16 @@ pub struct BandRule {
     pub quality_db: f64,
     /// ISO search: largest 95 % half-width of $|\hat S_k|$ relative to $|\hat S_k|$ (default 0.1).
     pub iso_rel_halfwidth: f64,
+    /// A line beyond the excited band's edge is still excited when its power is within this
+    /// many dB of the strongest line in the octave on the band's side of it (default 6 dB: a
+    /// logarithmic sweep's 3 dB per octave is a design slope, a PRBS main lobe's 8.2 dB per
+    /// octave at its 10 dB point is an edge; module docs, "A spectrum that slopes by design").
+    pub slope_db_per_octave: f64,
 }
+
+/// Failing lines in a row an excited band's edge is carried across (module docs, "A spectrum
+/// that slopes by design": the non-excited lines of an odd or random-odd multisine grid).
+pub const EDGE_GAP: usize = 2;
 
 impl Default for BandRule {
     fn default() -> Self {
@@ -81,6 +109,7 @@ impl Default for BandRule {
             excited_db: 10.0,
             quality_db: 3.0,
             iso_rel_halfwidth: 0.1,
+            slope_db_per_octave: 6.0,
         }
     }
 }
@@ -91,13 +120,14 @@ impl BandRule {
         if !(ok(self.excited_db)
             && ok(self.quality_db)
             && self.quality_db <= self.excited_db
-            && ok(self.iso_rel_halfwidth))
+            && ok(self.iso_rel_halfwidth)
+            && ok(self.slope_db_per_octave))
         {
             return Err(Error::invalid(
                 "rule",
                 format!(
-                    "need 0 < quality_db ≤ excited_db and iso_rel_halfwidth > 0, got {} / {} / {}",
-                    self.quality_db, self.excited_db, self.iso_rel_halfwidth
+                    "need 0 < quality_db ≤ excited_db, iso_rel_halfwidth > 0 and slope_db_per_octave > 0, got {} / {} / {} / {}",
+                    self.quality_db, self.excited_db, self.iso_rel_halfwidth, self.slope_db_per_octave
                 ),
             ));
         }
@@ -177,23 +207,97 @@ pub fn excitation_bands(
             "the excitation has no power on any line above DC: check the excitation column (r, or u for open-loop data) and that the excitation was on",
         ));
     }
-    let span = |db: f64| -> (f64, f64, usize) {
+    let span = |db: f64| -> (usize, usize, usize) {
         let thr = pmax * 10f64.powf(-db / 10.0);
         let lines: Vec<usize> = idx.clone().filter(|&k| power[k] >= thr).collect();
         // non-empty: the strongest line passes
         let lo = lines.first().copied().unwrap_or(kmax);
         let hi = lines.last().copied().unwrap_or(kmax);
-        (f_hz[lo], f_hz[hi], lines.len())
+        (lo, hi, lines.len())
     };
     let (e0, e1, n) = span(rule.excited_db);
     let (q0, q1, _) = span(rule.quality_db);
+    // each edge carried outward over a spectrum that slopes by design (module docs)
+    let slope = 10f64.powf(-rule.slope_db_per_octave / 10.0);
+    let (up, down) = (
+        carried_edge(f_hz, power, first_line, e1, true, slope),
+        carried_edge(f_hz, power, first_line, e0, false, slope),
+    );
+    let added = up.1 + down.1;
+    let (e0, e1) = (down.0, up.0);
+    let q1 = if up.1 > 0 { e1 } else { q1 };
+    let q0 = if down.1 > 0 { e0 } else { q0 };
     Ok(ExcitationBands {
-        excited: (e0, e1),
-        quality: (q0, q1),
-        excited_lines: n,
+        excited: (f_hz[e0], f_hz[e1]),
+        quality: (f_hz[q0], f_hz[q1]),
+        excited_lines: n + added,
         f_max_power_hz: f_hz[kmax],
         thresholds_db: (rule.excited_db, rule.quality_db),
     })
+}
+
+/// The excited band's edge `start` carried outward (`up`: to higher lines) over the lines from
+/// `first_line` on: the last line of the run whose power is at least `slope` times the strongest
+/// line in the octave on the band's side of it (and the last line that passed), at most
+/// [`EDGE_GAP`] failing lines in a row
+/// (module docs, "A spectrum that slopes by design"), and the number of lines that passed. The
+/// octave's maximum is a sliding-window maximum (a monotone deque): linear in the lines.
+fn carried_edge(
+    f: &[f64],
+    p: &[f64],
+    first_line: usize,
+    start: usize,
+    up: bool,
+    slope: f64,
+) -> (usize, usize) {
+    use std::collections::VecDeque;
+    let order: Vec<usize> = if up {
+        (first_line..f.len()).collect()
+    } else {
+        (first_line..f.len()).rev().collect()
+    };
+    let Some(pos) = order.iter().position(|&j| j == start) else {
+        return (start, 0);
+    };
+    // the lines of the octave on the band's side of line k
+    let within = |j: usize, k: usize| {
+        if up {
+            f[j] >= 0.5 * f[k]
+        } else {
+            f[j] <= 2.0 * f[k]
+        }
+    };
+    let push = |dq: &mut VecDeque<usize>, j: usize| {
+        while dq.back().is_some_and(|&b| p[b] <= p[j]) {
+            dq.pop_back();
+        }
+        dq.push_back(j);
+    };
+    let mut dq = VecDeque::new();
+    for &j in &order[..=pos] {
+        push(&mut dq, j);
+    }
+    let (mut last, mut passed, mut misses) = (start, 0, 0);
+    for &k in &order[pos + 1..] {
+        while dq.front().is_some_and(|&j| !within(j, k)) {
+            dq.pop_front();
+        }
+        // the octave's strongest line, and the last line that passed (a failing line must not
+        // become the reference of the next: lines sparser than an octave)
+        let strongest = dq.front().map_or(p[last], |&j| p[j].max(p[last]));
+        if p[k] > 0.0 && p[k] >= slope * strongest {
+            passed += 1;
+            last = k;
+            misses = 0;
+        } else {
+            misses += 1;
+            if misses > EDGE_GAP {
+                break;
+            }
+        }
+        push(&mut dq, k);
+    }
+    (last, passed)
 }
 
 /// The lines of a measured sensitivity `s` inside `band` on which the ISO 14839-3 peak search
@@ -495,6 +599,129 @@ mod tests {
         assert_eq!(b.quality, (1.5, 99.5));
         assert_eq!(b.excited_lines, 99);
         assert!(b.describe().contains("derived from the excitation"));
+    }
+
+    /// $|X_k|^2$ of one period of `x` on the lines $k f_s / N$, $k = 0 \dots N/2$.
+    fn period_power(x: &[f64], fs: f64) -> (Vec<f64>, Vec<f64>) {
+        let n = x.len();
+        let fft = realfft::RealFftPlanner::<f64>::new().plan_fft_forward(n);
+        let (mut inp, mut out) = (x.to_vec(), fft.make_output_vec());
+        fft.process(&mut inp, &mut out).unwrap();
+        let f = (0..out.len()).map(|k| k as f64 * fs / n as f64).collect();
+        (f, out.iter().map(|v| v.norm_sqr()).collect())
+    }
+
+    /// One period of the workflow's identification chirp (`ambid::experiment::ExcitationPlan`:
+    /// 1–2000 Hz in 0.25575 s at 20 kHz).
+    fn chirp_power(sweep: crate::signal::Sweep) -> (Vec<f64>, Vec<f64>) {
+        let spec = crate::signal::ChirpSpec {
+            f0_hz: 1.0,
+            f1_hz: 2000.0,
+            duration_s: 0.25575,
+            amplitude: 1.0,
+            sweep,
+            periods: 1,
+        };
+        period_power(&spec.generate(5e-5).unwrap().values, 20_000.0)
+    }
+
+    #[test]
+    fn a_logarithmic_sweep_gives_its_design_band() {
+        let (f, p) = chirp_power(crate::signal::Sweep::Logarithmic);
+        let b = excitation_bands(&f, &p, 1, &BandRule::default()).unwrap();
+        // the first line (3.91 Hz) to the sweep's end at 2000 Hz, within its edge's ripple
+        assert_eq!(b.excited.0, f[1]);
+        assert!(
+            b.excited.1 > 1900.0 && b.excited.1 < 2030.0,
+            "{:?}",
+            b.excited
+        );
+        assert_eq!(b.quality, b.excited);
+        // the 10 dB rule alone (no line is carried) ends the band below 100 Hz
+        let strict = BandRule {
+            slope_db_per_octave: 1e-9,
+            ..BandRule::default()
+        };
+        let b10 = excitation_bands(&f, &p, 1, &strict).unwrap();
+        assert!(b10.excited.1 < 100.0, "{:?}", b10.excited);
+        assert!(b.excited_lines > 480 && b10.excited_lines < 30);
+        // a linear sweep is flat: its design band by the 10 dB rule, nothing carried
+        let (f, p) = chirp_power(crate::signal::Sweep::Linear);
+        let lin = excitation_bands(&f, &p, 1, &BandRule::default()).unwrap();
+        let lin10 = excitation_bands(&f, &p, 1, &strict).unwrap();
+        assert!(
+            lin.excited.1 > 1950.0 && lin.excited.1 < 2030.0,
+            "{:?}",
+            lin.excited
+        );
+        assert_eq!(
+            (lin.excited, lin.excited_lines),
+            (lin10.excited, lin10.excited_lines)
+        );
+    }
+
+    #[test]
+    fn a_sloped_odd_multisine_is_carried_and_a_steep_roll_off_is_an_edge() {
+        // odd lines of 1–100 Hz with power ∝ 1/f (pink), −80 dB elsewhere
+        let f: Vec<f64> = (0..500).map(|k| 0.5 * k as f64).collect();
+        let pink: Vec<f64> = f
+            .iter()
+            .enumerate()
+            .map(|(k, &f)| {
+                if (1.0..=100.0).contains(&f) && k % 2 == 1 {
+                    1.0 / f
+                } else {
+                    1e-8
+                }
+            })
+            .collect();
+        let b = excitation_bands(&f, &pink, 1, &BandRule::default()).unwrap();
+        assert_eq!(b.excited, (1.5, 99.5));
+        assert_eq!(b.quality, (1.5, 99.5));
+        assert_eq!(b.excited_lines, 99);
+        // the same lines rising with f (a spectrum ∝ f): the lower edge is carried down
+        let blue: Vec<f64> = pink
+            .iter()
+            .zip(&f)
+            .map(|(p, f)| if *p > 1e-6 { f * f * p } else { *p })
+            .collect();
+        assert_eq!(
+            excitation_bands(&f, &blue, 1, &BandRule::default())
+                .unwrap()
+                .excited,
+            (1.5, 99.5)
+        );
+        // flat to 20 Hz, then 12 dB per octave (a second-order roll-off): the 10 dB point
+        let steep: Vec<f64> = f
+            .iter()
+            .map(|&f| if f <= 20.0 { 1.0 } else { (20.0 / f).powi(4) })
+            .collect();
+        let b = excitation_bands(&f, &steep, 1, &BandRule::default()).unwrap();
+        let ten_db = 20.0 * 10f64.powf(0.25); // (20/f)^4 = 0.1
+        assert!(
+            (b.excited.1 - ten_db).abs() <= 0.5,
+            "{:?} against {ten_db}",
+            b.excited
+        );
+        // 4 dB per octave is a design slope: carried to the end of the lines
+        let gentle: Vec<f64> = f
+            .iter()
+            .map(|&f| {
+                if f <= 20.0 {
+                    1.0
+                } else {
+                    (20.0 / f).powf(4.0 / 3.0103)
+                }
+            })
+            .collect();
+        let b = excitation_bands(&f, &gentle, 1, &BandRule::default()).unwrap();
+        assert_eq!(b.excited.1, f[f.len() - 1]);
+        // a malformed slope is an error
+        let bad = BandRule {
+            slope_db_per_octave: 0.0,
+            ..BandRule::default()
+        };
+        assert!(excitation_bands(&f, &gentle, 1, &bad).is_err());
     }
 
     #[test]

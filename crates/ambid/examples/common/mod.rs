@@ -51,6 +51,14 @@ pub fn workflow_on_rig_seed(
     if let Ok(kind) = std::env::var("EXCITATION") {
         wf.excitation.kind = kind;
     }
+    // FRF_BAND=lo,hi: the FRF's band given ([frf] band_hz) instead of derived from the excitation
+    if let Ok(b) = std::env::var("FRF_BAND") {
+        let v: Vec<f64> = b
+            .split(',')
+            .map(|x| x.parse().expect("FRF_BAND=lo,hi"))
+            .collect();
+        wf.frf.band_hz = Some([v[0], v[1]]);
+    }
     let out = run(&wf, dir, &mut Progress::new(Verbosity::Quiet));
     (cfg, out)
 }
