@@ -27,7 +27,8 @@
 //! (`f_hz`, `bound`, `weight`, `error` on the weight's lines; g the joint raise) for
 //! `scripts/weight_global_fit.py`. `EXCITATION=noise` (or `chirp`, `multisine`) runs the
 //! workflow with that excitation instead of the default PRBS (a noise excitation gives a Welch
-//! FRF); `REF_FIT=1` prints the BIC's inverse-variance state-space fit to the step's FRF beside
+//! FRF); `FRF_BAND=lo,hi` gives the FRF's band (`[frf] band_hz`) instead of deriving it from the
+//! excitation; `REF_FIT=1` prints the BIC's inverse-variance state-space fit to the step's FRF beside
 //! the chosen model, both against the truth (docs/uncertainty.md, "A model not fitted to the
 //! FRF"); `AMP_LEVELS_AT=F` prints each amplitude-study level's plant FRF against the exact plant
 //! on the lines within 20 Hz of F Hz (error and standard deviation relative to |P|, and their

@@ -231,7 +231,7 @@ impl UsedBands {
             BandOrigin::FrfBand => "the given FRF band",
         };
         format!(
-            "FRF band {:.4}–{:.4} Hz ({}), quality band {:.4}–{:.4} Hz ({}); the excitation has {} lines within {} dB of its strongest in {:.4}–{:.4} Hz and is within {} dB of it in {:.4}–{:.4} Hz",
+            "FRF band {:.4}–{:.4} Hz ({}), quality band {:.4}–{:.4} Hz ({}); the excitation has {} lines within {} dB of its strongest{} in {:.4}–{:.4} Hz and is within {} dB of it{} in {:.4}–{:.4} Hz",
             self.band.0,
             self.band.1,
             why(self.band_origin),
@@ -240,9 +240,15 @@ impl UsedBands {
             why(self.quality_origin),
             self.derived.excited_lines,
             self.derived.thresholds_db.0,
+            self.derived.carried(),
             self.derived.excited.0,
             self.derived.excited.1,
             self.derived.thresholds_db.1,
+            if self.derived.carried_lines > 0 {
+                " (or on its design slope)"
+            } else {
+                ""
+            },
             self.derived.quality.0,
             self.derived.quality.1,
         )

@@ -142,8 +142,11 @@ pub struct ExcitationBands {
     pub excited: (f64, f64),
     /// Lowest and highest line within [`BandRule::quality_db`] of the largest \[Hz\].
     pub quality: (f64, f64),
-    /// Number of excited lines (power within [`BandRule::excited_db`]).
+    /// Number of excited lines (power within [`BandRule::excited_db`], and the carried ones).
     pub excited_lines: usize,
+    /// Of those, the lines beyond the 10 dB band carried over a spectrum that slopes by design
+    /// (module docs; 0 for a PRBS or a flat multisine).
+    pub carried_lines: usize,
     /// The frequency of the strongest line \[Hz\].
     pub f_max_power_hz: f64,
     /// The thresholds used \[dB below the largest line\] (excited, quality).
@@ -154,15 +157,30 @@ impl ExcitationBands {
     /// One sentence saying which bands were derived and why (for reports and CLI output).
     pub fn describe(&self) -> String {
         format!(
-            "derived from the excitation: {} excited lines within {} dB of the strongest in {:.4}–{:.4} Hz; quality band (within {} dB) {:.4}–{:.4} Hz",
+            "derived from the excitation: {} excited lines within {} dB of the strongest{} in {:.4}–{:.4} Hz; quality band (within {} dB{}) {:.4}–{:.4} Hz",
             self.excited_lines,
             self.thresholds_db.0,
+            self.carried(),
             self.excited.0,
             self.excited.1,
             self.thresholds_db.1,
+            if self.carried_lines > 0 { ", to the carried edge" } else { "" },
             self.quality.0,
             self.quality.1
         )
+    }
+
+    /// `" or on its design slope (N lines)"` when lines were carried, else empty (module docs,
+    /// "A spectrum that slopes by design").
+    pub fn carried(&self) -> String {
+        if self.carried_lines > 0 {
+            format!(
+                " or, {} of them, on its design slope (within 6 dB of the octave's strongest)",
+                self.carried_lines
+            )
+        } else {
+            String::new()
+        }
     }
 }
 
@@ -231,6 +249,7 @@ pub fn excitation_bands(
         excited: (f_hz[e0], f_hz[e1]),
         quality: (f_hz[q0], f_hz[q1]),
         excited_lines: n + added,
+        carried_lines: added,
         f_max_power_hz: f_hz[kmax],
         thresholds_db: (rule.excited_db, rule.quality_db),
     })
@@ -645,6 +664,9 @@ mod tests {
         let b10 = excitation_bands(&f, &p, 1, &strict).unwrap();
         assert!(b10.excited.1 < 100.0, "{:?}", b10.excited);
         assert!(b.excited_lines > 480 && b10.excited_lines < 30);
+        assert_eq!(b.excited_lines - b.carried_lines, b10.excited_lines);
+        assert!(b.describe().contains("design slope"), "{}", b.describe());
+        assert!(!b10.describe().contains("design slope"));
         // a linear sweep is flat: its design band by the 10 dB rule, nothing carried
         let (f, p) = chirp_power(crate::signal::Sweep::Linear);
         let lin = excitation_bands(&f, &p, 1, &BandRule::default()).unwrap();

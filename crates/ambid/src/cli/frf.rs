@@ -39,7 +39,7 @@ impl From<WindowArg> for Window {
 }
 
 #[derive(Args)]
-#[command(mut_arg("band", |a| a.help("Band of the written FRF, Hz (f_min:f_max; default: derived from the excitation, the lines within 10 dB of its strongest; docs/frf.md)")))]
+#[command(mut_arg("band", |a| a.help("Band of the written FRF, Hz (f_min:f_max; default: derived from the excitation, the lines within 10 dB of its strongest, carried on over a design slope; docs/frf.md)")))]
 #[command(mut_arg("input", |a| a.help("Column of the controller output u (including r)")))]
 pub struct FrfArgs {
     /// Time-data file (CSV with a header row and an optional `t` column in seconds, or .npy,
