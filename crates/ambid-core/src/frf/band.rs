@@ -598,21 +598,28 @@ mod tests {
     use super::*;
     use faer::c64;
 
-    #[test]
-    fn a_multisine_band_edge_gives_its_design_band() {
-        // 1–100 Hz flat, odd lines only, −60 dB elsewhere (noise floor)
+    /// Lines every 0.5 Hz to 249.5 Hz: power `level(f)` on the odd lines of 1–100 Hz (an odd
+    /// multisine grid), `floor` elsewhere.
+    fn odd_grid(level: impl Fn(f64) -> f64, floor: f64) -> (Vec<f64>, Vec<f64>) {
         let f: Vec<f64> = (0..500).map(|k| 0.5 * k as f64).collect();
-        let p: Vec<f64> = f
+        let p = f
             .iter()
             .enumerate()
             .map(|(k, &f)| {
                 if (1.0..=100.0).contains(&f) && k % 2 == 1 {
-                    1.0
+                    level(f)
                 } else {
-                    1e-6
+                    floor
                 }
             })
             .collect();
+        (f, p)
+    }
+
+    #[test]
+    fn a_multisine_band_edge_gives_its_design_band() {
+        // 1–100 Hz flat, odd lines only, −60 dB elsewhere (noise floor)
+        let (f, p) = odd_grid(|_| 1.0, 1e-6);
         let b = excitation_bands(&f, &p, 1, &BandRule::default()).unwrap();
         assert_eq!(b.excited, (1.5, 99.5));
         assert_eq!(b.quality, (1.5, 99.5));
@@ -685,18 +692,7 @@ mod tests {
     #[test]
     fn a_sloped_odd_multisine_is_carried_and_a_steep_roll_off_is_an_edge() {
         // odd lines of 1–100 Hz with power ∝ 1/f (pink), −80 dB elsewhere
-        let f: Vec<f64> = (0..500).map(|k| 0.5 * k as f64).collect();
-        let pink: Vec<f64> = f
-            .iter()
-            .enumerate()
-            .map(|(k, &f)| {
-                if (1.0..=100.0).contains(&f) && k % 2 == 1 {
-                    1.0 / f
-                } else {
-                    1e-8
-                }
-            })
-            .collect();
+        let (f, pink) = odd_grid(|f| 1.0 / f, 1e-8);
         let b = excitation_bands(&f, &pink, 1, &BandRule::default()).unwrap();
         assert_eq!(b.excited, (1.5, 99.5));
         assert_eq!(b.quality, (1.5, 99.5));
