@@ -336,6 +336,84 @@ fn the_amplitude_term_recovers_a_known_shift_and_refuses_bad_input() {
     assert!(msg(amplitude_term(&refs, 0.1, &f, &m, 1.0)).contains("(0, 1)"));
 }
 
+/// Term (e)'s projection through the model uses only the lines where every level's FRF is
+/// within [`AMPLITUDE_PROJECTION_REL_STD`](ambid::uncertainty::AMPLITUDE_PROJECTION_REL_STD) of
+/// $|\hat P|$: with 30 % relative noise on the lowest 100 of 250 lines (one level's only on
+/// lines 100–119) and 0.2 % elsewhere, exactly the lines whose every level's standard deviation
+/// is within 10 % are flagged, [`AmplitudeTerm::shift_lines`](ambid::uncertainty::AmplitudeTerm)
+/// gives shift 0 with variance 0 on the others and the regression's shift and variance on the
+/// flagged ones, and the line term is the one without the flags (the windows keep their own
+/// rule).
+#[test]
+fn the_amplitude_projection_uses_only_precise_lines() {
+    use ambid::uncertainty::{
+        amplitude_term, amplitude_term_and_shifts, AMPLITUDE_PROJECTION_REL_STD,
+    };
+    use ambid_core::{c64, lti::Frd};
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
+    let (m, ts) = resonance_model();
+    let f: Vec<f64> = (1..=250).map(|k| 4.0 * k as f64).collect();
+    let p = m.freq_response_siso(&f).unwrap();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(21);
+    let levels = [0.05, 0.1, 0.16];
+    let noise = |i: usize, k: usize| {
+        if k < 100 || (i == 2 && k < 120) {
+            0.3
+        } else {
+            2e-3
+        }
+    };
+    let data: Vec<(f64, Frd)> = levels
+        .iter()
+        .enumerate()
+        .map(|(i, &a)| {
+            let (mut g, mut v) = (Vec::new(), Vec::new());
+            for k in 0..f.len() {
+                let s = noise(i, k) * p[k].norm();
+                let (re, im): (f64, f64) = (
+                    StandardNormal.sample(&mut rng),
+                    StandardNormal.sample(&mut rng),
+                );
+                let n = c64::new(re, im) * (s * std::f64::consts::FRAC_1_SQRT_2);
+                g.push(p[k] * c64::new(1.0 - 0.4 * a * a, 0.0) + n);
+                v.push(s * s);
+            }
+            (a, Frd::new(f.clone(), g, Some(v), Some(ts)).unwrap())
+        })
+        .collect();
+    let refs: Vec<(f64, &Frd)> = data.iter().map(|(a, g)| (*a, g)).collect();
+    let both = amplitude_term_and_shifts(&refs, 0.1, &f, &m, 0.95).unwrap();
+    let want: Vec<bool> = (0..f.len())
+        .map(|k| (0..3).all(|i| noise(i, k) <= AMPLITUDE_PROJECTION_REL_STD))
+        .collect();
+    assert_eq!(both.projected, want);
+    assert_eq!(want.iter().filter(|b| **b).count(), 130);
+    let lines = both.shift_lines();
+    assert_eq!(lines.f_hz, &f[..]);
+    for k in 0..f.len() {
+        if want[k] {
+            assert_eq!(lines.shift[k], both.shift[k], "line {k}");
+            assert_eq!(lines.var[k], both.shift_var[k], "line {k}");
+            assert!(lines.var[k] > 0.0);
+        } else {
+            assert_eq!(lines.shift[k], c64::new(0.0, 0.0), "line {k}");
+            assert_eq!(lines.var[k], 0.0, "line {k}");
+        }
+    }
+    // on the precise lines the shift is the truth's, -0.4 a_e² P, within its noise
+    for k in (120..f.len()).step_by(10) {
+        let truth = p[k] * (-0.4 * 0.01);
+        let err = (lines.shift[k] - truth).norm();
+        assert!(
+            err <= 4.0 * lines.var[k].sqrt(),
+            "line {k}: {err} against sd {}",
+            lines.var[k].sqrt()
+        );
+    }
+    assert_eq!(both.term, amplitude_term(&refs, 0.1, &f, &m, 0.95).unwrap());
+}
+
 /// The shifts' variances allow for lines that share noise (a Welch FRF's): with independent
 /// lines they are the regression's own $a_e^4/S_{xx}$ (a naive weighted regression in the test);
 /// with noise that is a moving average over neighbouring lines, $x_k = a w_k + b w_{k-1}$, they
