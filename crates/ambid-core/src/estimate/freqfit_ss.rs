@@ -146,7 +146,28 @@ pub fn ss_frd(
     opts: &FreqFitOptions,
     ss_opts: &SsFreqOptions,
 ) -> Result<FreqFit<StateSpace>> {
+    ss_frd_started(frd, order, opts, ss_opts, None)
+}
+
+/// [`ss_frd`] with the refinement started from the poles `start` (in $z$, `order` of them in
+/// conjugate pairs) instead of the subspace step's; `None` is [`ss_frd`]. The numerators are
+/// fitted to the start's poles as for the subspace start, and the same admissibility rule
+/// (unstable pole count) applies. Term (f) of the uncertainty bound starts the FRF's own fit
+/// from the nominal model's poles too (`validate::uncertainty::fit_distance`).
+pub(crate) fn ss_frd_started(
+    frd: &Frd,
+    order: usize,
+    opts: &FreqFitOptions,
+    ss_opts: &SsFreqOptions,
+    start: Option<&[c64]>,
+) -> Result<FreqFit<StateSpace>> {
     frd.require_siso("freqfit_ss::ss_frd")?;
+    if start.is_some_and(|p| p.len() != order) {
+        return Err(Error::invalid(
+            "start",
+            format!("the start needs {order} poles, one per state"),
+        ));
+    }
     if order == 0 {
         return Err(Error::invalid(
             "order",
@@ -184,7 +205,10 @@ pub fn ss_frd(
     let warp = Warp::new(&data)?;
 
     // 1. subspace poles, mapped back to z; blocks in delta form
-    let mut poles = subspace_poles(&data, &warp, order, q)?;
+    let mut poles = match start {
+        Some(p) => p.to_vec(),
+        None => subspace_poles(&data, &warp, order, q)?,
+    };
     let limit = if opts.enforce_stability {
         for p in &mut poles {
             *p = reflect(*p);
