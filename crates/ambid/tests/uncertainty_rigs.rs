@@ -369,14 +369,14 @@ fn the_amplitude_projection_uses_only_precise_lines() {
         .enumerate()
         .map(|(i, &a)| {
             let (mut g, mut v) = (Vec::new(), Vec::new());
-            for k in 0..f.len() {
-                let s = noise(i, k) * p[k].norm();
+            for (k, pk) in p.iter().enumerate() {
+                let s = noise(i, k) * pk.norm();
                 let (re, im): (f64, f64) = (
                     StandardNormal.sample(&mut rng),
                     StandardNormal.sample(&mut rng),
                 );
                 let n = c64::new(re, im) * (s * std::f64::consts::FRAC_1_SQRT_2);
-                g.push(p[k] * c64::new(1.0 - 0.4 * a * a, 0.0) + n);
+                g.push(pk * c64::new(1.0 - 0.4 * a * a, 0.0) + n);
                 v.push(s * s);
             }
             (a, Frd::new(f.clone(), g, Some(v), Some(ts)).unwrap())
@@ -391,8 +391,8 @@ fn the_amplitude_projection_uses_only_precise_lines() {
     assert_eq!(want.iter().filter(|b| **b).count(), 130);
     let lines = both.shift_lines();
     assert_eq!(lines.f_hz, &f[..]);
-    for k in 0..f.len() {
-        if want[k] {
+    for (k, &precise) in want.iter().enumerate() {
+        if precise {
             assert_eq!(lines.shift[k], both.shift[k], "line {k}");
             assert_eq!(lines.var[k], both.shift_var[k], "line {k}");
             assert!(lines.var[k] > 0.0);
