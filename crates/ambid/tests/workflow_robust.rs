@@ -306,6 +306,14 @@ fn a_logarithmic_chirp_is_measured_over_its_design_band() {
     let u = &out.summary["uncertainty"];
     let band_hi = u["band_hz"][1].as_f64().unwrap();
     assert!(band_hi > 1000.0, "band to {band_hi} Hz");
+    println!("rig {rig}, chirp: band to {band_hi:.0} Hz");
+    weight_margins_hold(twin_cfg, u, "rig 501, chirp: the weight");
+}
+
+/// The `uncertainty` step's weight margins in the summary `u` against the exact loop of the
+/// twin `twin_cfg`: the true loop stable 90 % of the way to each, and each at least half the
+/// true one (`common::assert_margin_bars`, with `label`).
+fn weight_margins_hold(twin_cfg: TwinConfig, u: &serde_json::Value, label: &str) {
     let twin = Twin::new(twin_cfg).unwrap();
     let (g_lo, g_hi) =
         ambid::uncertainty::nominal_gain_interval(twin.plant(), twin.controller()).unwrap();
@@ -313,13 +321,13 @@ fn a_logarithmic_chirp_is_measured_over_its_design_band() {
         u["lower_gain_margin"].as_f64().unwrap(),
         u["upper_gain_margin"].as_f64().unwrap(),
     );
-    println!("rig {rig}, chirp: band to {band_hi:.0} Hz, weight margins {lo:.3} … {hi:.3}, true {g_lo:.3} … {g_hi:.3}");
+    println!("{label}: margins {lo:.3} … {hi:.3}, true {g_lo:.3} … {g_hi:.3}");
     crate::common::assert_margin_bars(
         twin.plant(),
         twin.controller(),
         (lo, hi),
         (g_lo, g_hi),
-        "rig 501, chirp: the weight",
+        label,
     );
 }
 
@@ -339,22 +347,9 @@ fn term_f_starts_the_frfs_own_fit_from_the_nominals_poles() {
     let (twin_cfg, out) = uncertainty_on_rig(&dir, rig, "nonlinear", Some("multisine"));
     let u = &out.summary["uncertainty"];
     let d = u["fit_distance_median_rel"].as_f64().expect("term (f)");
-    let twin = Twin::new(twin_cfg).unwrap();
-    let (g_lo, g_hi) =
-        ambid::uncertainty::nominal_gain_interval(twin.plant(), twin.controller()).unwrap();
-    let (lo, hi) = (
-        u["lower_gain_margin"].as_f64().unwrap(),
-        u["upper_gain_margin"].as_f64().unwrap(),
-    );
-    println!("rig {rig}, multisine: term (f) median {d:.2e} of |P̂|, weight margins {lo:.3} … {hi:.3}, true {g_lo:.3} … {g_hi:.3}");
+    println!("rig {rig}, multisine: term (f) median {d:.2e} of |P̂|");
     assert!(d < 0.01, "term (f) median {d}");
-    crate::common::assert_margin_bars(
-        twin.plant(),
-        twin.controller(),
-        (lo, hi),
-        (g_lo, g_hi),
-        "rig 531, multisine: the weight",
-    );
+    weight_margins_hold(twin_cfg, u, "rig 531, multisine: the weight");
 }
 
 /// The workflow's `uncertainty` step on random rig `rig` of the nonlinear twin (noise seed
@@ -364,22 +359,9 @@ fn weight_margins_hold_on_nonlinear_rig(rig: u64) -> f64 {
     let dir = crate::common::tmpdir(&format!("workflow-uncertainty-margins-{rig}"));
     let (twin_cfg, out) = uncertainty_on_nonlinear_rig(&dir, rig);
     let u = &out.summary["uncertainty"];
-    let twin = Twin::new(twin_cfg).unwrap();
-    let (g_lo, g_hi) =
-        ambid::uncertainty::nominal_gain_interval(twin.plant(), twin.controller()).unwrap();
-    let lo = u["lower_gain_margin"].as_f64().unwrap();
-    let hi = u["upper_gain_margin"].as_f64().unwrap();
     let band_hi = u["band_hz"][1].as_f64().unwrap();
-    println!(
-        "rig {rig}: weight margins {lo:.3} … {hi:.3}, true {g_lo:.3} … {g_hi:.3}, band to {band_hi:.0} Hz, summary {u}"
-    );
-    crate::common::assert_margin_bars(
-        twin.plant(),
-        twin.controller(),
-        (lo, hi),
-        (g_lo, g_hi),
-        &format!("rig {rig}: the weight"),
-    );
+    println!("rig {rig}: band to {band_hi:.0} Hz, summary {u}");
+    weight_margins_hold(twin_cfg, u, &format!("rig {rig}: the weight"));
     band_hi
 }
 
