@@ -2203,10 +2203,11 @@ fn in_entry(err: Error, i: usize, j: usize, several: bool) -> Error {
 /// to `frd` of the nominal's order with at most its number of unstable poles
 /// ([`ss_frd`](crate::estimate::freqfit_ss::ss_frd), default options).
 ///
-/// That fit is refined from two starts, the subspace step's poles and the nominal model's own,
-/// and the one of lower cost is $\tilde P$ (the nominal's start only when its cost is lower by
-/// more than one part in $10^6$, so that a nominal model that is the subspace-started fit keeps
-/// the term at exactly 0). A fit is a local optimum, and the subspace start can end in a poor
+/// When the nominal model is the subspace-started fit (within $10^{-6}$ of $|\hat P|$ at the
+/// median: the models step's own state-space fit, or one read back from a file), the term is
+/// that distance (0 for the fit itself). Otherwise the fit is also refined from the nominal
+/// model's own poles, and the one of lower cost is $\tilde P$ (the nominal's start when its
+/// cost is lower by more than one part in $10^6$). A fit is a local optimum, and the subspace start can end in a poor
 /// one: on random rig 531 of the nonlinear twin with a multisine excitation the order-7 fit from
 /// the subspace start erred by 10.4 % of $|P|$ at the median, the chosen OE 7 by 0.51 %, and the
 /// term was 15.6 % of $|\hat P|$, the weight 33 times the true error and its upper gain margin
@@ -2282,9 +2283,26 @@ fn own_fit_distance(
     let order = nominal.order().max(1);
     let fit =
         |start: Option<&[c64]>| ss_frd_started(frd, order, &opts, &SsFreqOptions::default(), start);
+    let distance = |own: &StateSpace| -> Result<Vec<f64>> {
+        let b = own.freq_response_siso(frd.f_hz())?;
+        Ok(p_hat.iter().zip(&b).map(|(x, y)| (x - y).norm()).collect())
+    };
+    let subspace = fit(None);
+    // the nominal is the subspace-started fit itself: the term is that distance ([`fit_distance`])
+    if let Ok(s) = &subspace {
+        let d = distance(&s.model)?;
+        let mut rel: Vec<f64> = d.iter().zip(p_hat).map(|(d, p)| d / p.norm()).collect();
+        rel.sort_by(f64::total_cmp);
+        if rel
+            .get(rel.len() / 2)
+            .is_some_and(|m| *m <= FIT_DISTANCE_SAME_FIT)
+        {
+            return Ok(d);
+        }
+    }
     // both starts; the nominal's own poles' fit where it is the better one ([`fit_distance`])
     let warm = conjugate_poles(poles).and_then(|p| fit(Some(&p)).ok());
-    let own = match (fit(None), warm) {
+    let own = match (subspace, warm) {
         (Ok(s), Some(w)) if w.cost < s.cost * (1.0 - FIT_DISTANCE_START_MARGIN) => w,
         (Ok(s), _) => s,
         (Err(_), Some(w)) => w,
@@ -2299,14 +2317,18 @@ fn own_fit_distance(
         }
     }
     .model;
-    let b = own.freq_response_siso(frd.f_hz())?;
-    Ok(p_hat.iter().zip(&b).map(|(x, y)| (x - y).norm()).collect())
+    distance(&own)
 }
 
 /// How much lower (relative) the cost of term (f)'s fit started from the nominal model's poles
 /// must be than the subspace-started fit's for it to be taken ([`fit_distance`]): rounding
-/// apart, so that a nominal model that *is* the subspace-started fit keeps term (f) at exactly 0.
+/// apart.
 const FIT_DISTANCE_START_MARGIN: f64 = 1e-6;
+
+/// The median distance, relative to $|\hat P|$, within which the nominal model *is* the
+/// subspace-started fit ([`fit_distance`]): a model written to a file and read back, or the
+/// models step's own fit. Term (f) is then that distance, and the second start is not tried.
+const FIT_DISTANCE_SAME_FIT: f64 = 1e-6;
 
 /// `poles` as exact conjugate pairs and real poles (an imaginary part within $10^{-10}(1 + |p|)$
 /// of 0 taken as real), or `None` when they do not pair up.
