@@ -922,15 +922,19 @@ pub fn amplitude_term_and_shifts(
     let m_half = window_half_lines_for(nominal, fs)?;
     let halves = window_scales(m_half, l);
     let q = (1.0 / (1.0 - line_coverage)).ln();
-    // lines where every level's FRF is precise enough for the wider windows (type docs)
-    let precise: Vec<bool> = (0..l)
-        .map(|j| {
-            levels.iter().all(|(_, frd)| {
-                frd.variance()
-                    .is_some_and(|v| v[j].sqrt() <= AMPLITUDE_WIDE_REL_STD * p_study[j].norm())
+    // the lines where every level's FRF has a relative standard deviation of at most `rel`
+    let every_level_within = |rel: f64| -> Vec<bool> {
+        (0..l)
+            .map(|j| {
+                levels.iter().all(|(_, frd)| {
+                    frd.variance()
+                        .is_some_and(|v| v[j].sqrt() <= rel * p_study[j].norm())
+                })
             })
-        })
-        .collect();
+            .collect()
+    };
+    // lines where every level's FRF is precise enough for the wider windows (type docs)
+    let precise = every_level_within(AMPLITUDE_WIDE_REL_STD);
     let mut rel = vec![0.0f64; l];
     for (s_idx, &half) in halves.iter().enumerate() {
         // the significance level per window: 5 % over the run's independent windows of every
@@ -965,15 +969,7 @@ pub fn amplitude_term_and_shifts(
         }
     }
     // the projection's lines: every level's FRF within AMPLITUDE_PROJECTION_REL_STD (type docs)
-    let projected: Vec<bool> = (0..l)
-        .map(|j| {
-            levels.iter().all(|(_, frd)| {
-                frd.variance().is_some_and(|v| {
-                    v[j].sqrt() <= AMPLITUDE_PROJECTION_REL_STD * p_study[j].norm()
-                })
-            })
-        })
-        .collect();
+    let projected = every_level_within(AMPLITUDE_PROJECTION_REL_STD);
     let projected_shift = (0..l)
         .map(|j| {
             if projected[j] {

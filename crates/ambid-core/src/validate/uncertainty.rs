@@ -2207,8 +2207,8 @@ fn in_entry(err: Error, i: usize, j: usize, several: bool) -> Error {
 /// median: the models step's own state-space fit, or one read back from a file), the term is
 /// that distance (0 for the fit itself). Otherwise the fit is also refined from the nominal
 /// model's own poles, and the one of lower cost is $\tilde P$ (the nominal's start when its
-/// cost is lower by more than one part in $10^6$). A fit is a local optimum, and the subspace start can end in a poor
-/// one: on random rig 531 of the nonlinear twin with a multisine excitation the order-7 fit from
+/// cost is lower by more than one part in $10^6$). A fit is a local optimum, and the subspace
+/// start can end in a poor one: on random rig 531 of the nonlinear twin with a multisine excitation the order-7 fit from
 /// the subspace start erred by 10.4 % of $|P|$ at the median, the chosen OE 7 by 0.51 %, and the
 /// term was 15.6 % of $|\hat P|$, the weight 33 times the true error and its upper gain margin
 /// short of half the true one. Started from the OE model's poles the fit's cost is 9 times
@@ -2345,10 +2345,9 @@ fn conjugate_poles(poles: &[c64]) -> Option<Vec<c64>> {
     for p in clean.iter().filter(|p| p.im > 0.0) {
         out.extend([*p, p.conj()]);
     }
-    let lower = clean.iter().filter(|p| p.im < 0.0).count();
-    (out.len() == poles.len()
-        && 2 * lower + out.iter().filter(|p| p.im == 0.0).count() == poles.len())
-    .then_some(out)
+    // `out` has real + 2 × upper poles: all of them exactly when as many lie below the real
+    // axis as above it
+    (out.len() == poles.len()).then_some(out)
 }
 
 /// The deterministic terms (d) and (e) at line `k`, added in magnitude.

@@ -84,14 +84,13 @@
 //! the bound on past the band's top, while below the lowest line it levels off: a first-order
 //! factor there moves $|W|$ by at most $\sqrt 2$, a pair with $\zeta \le 1$ by at most
 //! $1/(2\zeta) \le 2.5$ (an overdamped pair still has one real root near $\omega/(2\zeta)$,
-//! below the lines: the damping is not capped). Below the lines a PID loop's $|T|$ is about 1, so there a
-//! rise of $W$ decides the robust verdict from no data: with corners allowed down to a decade
-//! below the lowest line, the fit on random rig 423 of the nonlinear twin (a PRBS; lines from
-//! 3.9 Hz) put a corner below the lines, $|WT|$ reached
-//! 1.005 at 2 Hz and the weight's upper gain margin fell below half the true one; with the
-//! floor it is 4.68 against the true loop's 4.97 (docs/uncertainty.md, "Term (e)'s projection
-//! on precise lines"). The corners of the lightly damped
-//! factors (the mode-shaped starts' floor $\zeta \ge 0.01$) lie within the lines,
+//! below the lines: the damping is not capped). Below the lines a PID loop's $|T|$ is about 1,
+//! so there a rise of $W$ decides the robust verdict from no data: with corners allowed down to
+//! a decade below the lowest line, the fit on random rig 423 of the nonlinear twin (a PRBS;
+//! lines from 3.9 Hz) put a corner below the lines, $|WT|$ reached 1.005 at 2 Hz and the
+//! weight's upper gain margin fell below half the true one; with the floor it is 4.68 against
+//! the true loop's 4.97 (docs/uncertainty.md, "Term (e)'s projection on precise lines"). The
+//! corners of the lightly damped factors (the mode-shaped starts' floor $\zeta \ge 0.01$) lie within the lines,
 //! $2\pi f_1 \le \omega \le 2\pi f_L$ (the same logistic map onto that narrower range): a
 //! lightly damped pole pair outside the lines is a peak of up to 50 times its shoulders that
 //! no line constrains, and the robust test, which evaluates $W$ up to the Nyquist frequency,
