@@ -2,7 +2,7 @@
 //! per rig and noise seed, the identified plant's error against the exact one, the bound's and
 //! the weight's coverage of it on 10–1000 Hz, the weight's looseness, the robust upper gain
 //! margin against the true loop's, and both robust gain margins of the check on the lines
-//! (`on_lines`) against the true ones.
+//! (`on_lines`) and of the coherent draws (`coherent`, the reported ones) against the true ones.
 //!
 //! `cargo run --release -p ambid --example uncertainty_rigs -- RIGS SEEDS [linear|nonlinear] [LEVELS]`
 //! (e.g. `1-20 1-5`; `LEVELS` such as `0.05,0.16` adds an amplitude study at those fractions of
@@ -96,6 +96,7 @@ fn main() {
     let (mut runs, mut ok_runs, mut ratios) = (0, 0, Vec::new());
     let (mut rs_ok, mut rs_half) = (0, 0);
     let (mut lines_ok, mut lines_half, mut lines_within) = (0, 0, 0);
+    let (mut co_ok, mut co_half) = (0, 0);
     println!("rig seed order | cov_l cov_W | med_err med_W ratio | g_rob g_true | stable@90% half");
     for &rig in &rigs {
         // SEED_PER_RIG=1: the noise seed of each rig is the rig's number plus the given seed,
@@ -689,20 +690,28 @@ fn main() {
             let half = (g - 1.0) >= 0.5 * (g_hi - 1.0);
             rs_ok += usize::from(stable);
             rs_half += usize::from(half);
-            // the check on the lines (both margins): stable at 90 % of each, at least half of
-            // each true one, and never beyond it
+            // both margins of a check: (lower, upper), stable at 90 % of each, at least half of
+            // each true one
+            let both = |lo: Option<f64>, hi: Option<f64>| {
+                let (l, u) = (lo.unwrap_or(f64::NAN), hi.unwrap_or(f64::NAN));
+                let stable = [1.0 + 0.9 * (u - 1.0), 1.0 - 0.9 * (1.0 - l)]
+                    .iter()
+                    .all(|g| loop_stable(&run.truth_plant, &run.controller, *g).unwrap_or(false));
+                let half = (u - 1.0) >= 0.5 * (g_hi - 1.0) && (1.0 - l) >= 0.5 * (1.0 - g_lo);
+                (l, u, stable, half)
+            };
+            // the check on the lines, and never beyond the true margins
             let ol = &run.analysis.on_lines;
-            let (lu, ll) = (
-                ol.upper_gain_margin.unwrap_or(f64::NAN),
-                ol.lower_gain_margin.unwrap_or(f64::NAN),
-            );
-            let l_stable = [1.0 + 0.9 * (lu - 1.0), 1.0 - 0.9 * (1.0 - ll)]
-                .iter()
-                .all(|g| loop_stable(&run.truth_plant, &run.controller, *g).unwrap_or(false));
-            let l_half = (lu - 1.0) >= 0.5 * (g_hi - 1.0) && (1.0 - ll) >= 0.5 * (1.0 - g_lo);
+            let (ll, lu, l_stable, l_half) = both(ol.lower_gain_margin, ol.upper_gain_margin);
             lines_ok += usize::from(l_stable);
             lines_half += usize::from(l_half);
             lines_within += usize::from(lu <= g_hi * (1.0 + 1e-3) && ll >= g_lo * (1.0 - 1e-3));
+            // the coherent draws (the reported margins)
+            let co = &run.analysis.coherent;
+            let (cl, cu, c_stable, c_half) = both(co.lower_gain_margin, co.upper_gain_margin);
+            co_ok += usize::from(c_stable);
+            co_half += usize::from(c_half);
+            println!("    coherent {cl:.3} {cu:.3} {c_stable} {c_half}");
             println!(
                 "{rig:3} {seed:3} {:2} | {:.3} {:.3} | {:.2e} {:.2e} {:.2} | {:.3} {:.3} | {} {} | W order {} loose {:.2} | raise {:.2} W0 cov {:.3} ratio {:.2} | lines {ll:.3} {lu:.3} (true {g_lo:.3} {g_hi:.3}) {l_stable} {l_half} | (e) on {} lines | (f) {:.1e} | {:.1}s",
                 run.nominal.order(),
@@ -733,7 +742,7 @@ fn main() {
     }
     ratios.sort_by(f64::total_cmp);
     println!(
-        "runs {runs}: weight covers ≥95 % of lines in {ok_runs} ({:.1} %); ratio median {:.2}, max {:.2}; RS stable at 90 %: {rs_ok}, margin ≥ half: {rs_half}; on the lines (both margins): stable at 90 % {lines_ok}, ≥ half {lines_half}, within the true {lines_within}",
+        "runs {runs}: weight covers ≥95 % of lines in {ok_runs} ({:.1} %); ratio median {:.2}, max {:.2}; RS stable at 90 %: {rs_ok}, margin ≥ half: {rs_half}; on the lines (both margins): stable at 90 % {lines_ok}, ≥ half {lines_half}, within the true {lines_within}; coherent (both margins): stable at 90 % {co_ok}, ≥ half {co_half}",
         100.0 * ok_runs as f64 / runs.max(1) as f64,
         ratios.get(ratios.len() / 2).copied().unwrap_or(f64::NAN),
         ratios.last().copied().unwrap_or(f64::NAN)

@@ -10,8 +10,10 @@
 //! |W| covers the chosen model's true relative error, median |W| / median error, and both
 //! robust gain margins of the weight and of the check on the lines against the true loop's
 //! interval: whether the true loop stays stable with the gain moved 90 % of the way to each,
-//! and whether each is at least half the true one. A missing margin (not robustly stable)
-//! fails both.
+//! and whether each is at least half the true one; the same for the coherent margins (the
+//! reported ones since 2026-12-07, docs/uncertainty.md "Coherent margins on one axis") on a
+//! line `coherent | rig | lower upper | stable half` per rig and in the summary. A missing
+//! margin (not robustly stable) fails both.
 //!
 //! `cargo run --release -p ambid --example uncertainty_workflow_rigs -- RIGS [linear|nonlinear]`
 //! (e.g. `1-40`, or `3,7,11`). The step's prerequisites bring the amplitude study (term (e)).
@@ -74,6 +76,7 @@ fn main() {
     }
     let (mut runs, mut skipped, mut covered, mut oob, mut with_c) = (0, 0, 0, 0, 0);
     let (mut w_stable, mut w_half, mut l_stable, mut l_half) = (0, 0, 0, 0);
+    let (mut c_stable, mut c_half) = (0usize, 0usize);
     let mut ratios = Vec::new();
     println!("rig | chosen | out-of-band resonance | cov_W med_W/med_err | weight lo hi stable half | lines lo hi stable half | true lo hi | term (c)");
     for rig in rigs {
@@ -430,6 +433,20 @@ fn main() {
             u["lines_lower_gain_margin"].as_f64(),
             u["lines_upper_gain_margin"].as_f64(),
         );
+        let (clo, chi) = (
+            u["coherent_gain_margins"][0].as_f64(),
+            u["coherent_gain_margins"][1].as_f64(),
+        );
+        let (cs, ch) = judge(&twin, clo, chi, truth);
+        c_stable += usize::from(cs);
+        c_half += usize::from(ch);
+        let fm = |x: Option<f64>| x.map_or("—".into(), |g| format!("{g:.3}"));
+        println!(
+            "    coherent | {rig} | {} {} {cs} {ch} | {} of the draws stable",
+            fm(clo),
+            fm(chi),
+            u["coherent_stable_fraction"]
+        );
         let (ws, wh) = judge(&twin, wlo, whi, truth);
         let (ls, lh) = judge(&twin, llo, lhi, truth);
         runs += 1;
@@ -467,6 +484,6 @@ fn main() {
         "runs {runs} (no bound: {skipped}); chosen model with a resonance outside the band: {oob}; \
          W covers ≥ 95 %: {covered}; median |W|/error, median over runs {med:.2}; \
          weight margins: stable at 90 % {w_stable}, ≥ half {w_half}; \
-         lines: stable at 90 % {l_stable}, ≥ half {l_half}; term (c) significant somewhere: {with_c}"
+         lines: stable at 90 % {l_stable}, ≥ half {l_half}; term (c) significant somewhere: {with_c}; coherent: stable at 90 % {c_stable}, ≥ half {c_half}"
     );
 }

@@ -17,10 +17,13 @@ use ambid_core::frf::bla::{BlaEstimate, NlGroup};
 use ambid_core::lti::{Frd, StateSpace};
 use ambid_core::validate::compare::unstable_poles_from_loop;
 pub use ambid_core::validate::robust::{loop_stable, nominal_gain_interval};
-use ambid_core::validate::robust::{robust_stability, robust_stability_on_lines, RobustStability};
+use ambid_core::validate::robust::{
+    robust_stability, robust_stability_matrix_drawn, robust_stability_on_lines,
+    DrawnRobustStability, MatrixWeight, RobustStability,
+};
 use ambid_core::validate::uncertainty::{
-    uncertainty_matrix, window_half_lines_for, window_scales, ExtraTerms, ProjectedShift,
-    UncertaintyOptions, UncertaintyTerms,
+    uncertainty_matrix, window_half_lines_for, window_scales, CoherentDraws, ExtraTerms,
+    ProjectedShift, UncertaintyOptions, UncertaintyTerms,
 };
 use ambid_core::validate::weight::{fit_weight_shaped, WeightFit, DEFAULT_COVER, MAX_WEIGHT_ORDER};
 use ambid_twin::{random_rig, Mode, TwinConfig};
@@ -49,6 +52,42 @@ pub struct UncertaintyAnalysis {
     /// Term (e) through the model ([`analyse_with_shift`]): its Wald test, or why it could not
     /// be computed (the bound then keeps the line term); `None` without per-line shifts.
     pub amplitude_projected: Option<std::result::Result<ProjectedShift, String>>,
+    /// The controller's robust stability against [`COHERENT_DRAWS`] coherent draws of the
+    /// model's error, each a whole curve over the lines, with the misfit of unknown phase
+    /// around each and the weight outside the lines ([`RobustChecks::coherent`]): its margins
+    /// are the reported ones, as on the machine (docs/uncertainty.md, "Coherent margins on one
+    /// axis").
+    pub coherent: DrawnRobustStability,
+}
+
+/// The number of coherent draws of the model's error
+/// ([`MatrixUncertainty::coherent_draws`](ambid_core::validate::uncertainty::MatrixUncertainty::coherent_draws))
+/// behind the coherent robust margins, on one axis and per speed of the machine.
+pub const COHERENT_DRAWS: usize = 200;
+
+/// The fraction of the coherent draws the coherent robust margins hold for.
+pub const COHERENT_CONFIDENCE: f64 = 0.95;
+
+/// The controller's robust stability against an uncertainty bound, three ways
+/// ([`UncertainBound::robust_checks`]).
+#[derive(Debug, Clone)]
+pub struct RobustChecks {
+    /// Against the weight, $P = \hat P(1 + W\Delta)$: $\mu = |W T|$ on a dense grid
+    /// ([`robust_stability`]), the small-gain certificate of the uncertain model that is
+    /// exported.
+    pub weight: RobustStability,
+    /// Against the bound on the lines raised by $g_\ell$ ([`robust_stability_on_lines`]): the
+    /// band only.
+    pub on_lines: RobustStability,
+    /// Against [`COHERENT_DRAWS`] coherent draws $D_d$ of the model's error
+    /// ([`robust_stability_matrix_drawn`], the $1\times 1$ case of the machine's check): per
+    /// draw, the gain interval in which $\hat P + D_d$, with the part of the bound whose phase
+    /// is not known (term (b)'s spread, (d), the per-line term (e)) as an element-wise
+    /// remainder, keeps the loop stable at every line, capped by the weight's test up to an
+    /// octave beyond the lines; the margins that [`COHERENT_CONFIDENCE`] of the draws reach.
+    /// A statement at that confidence under the error model, not a worst case: the weight's
+    /// and the lines' checks are the worst-case certificates beside it.
+    pub coherent: DrawnRobustStability,
 }
 
 /// An amplitude study's per-line shift estimates at the identification level
@@ -213,15 +252,16 @@ pub fn analyse_with_shift(
     cover: f64,
 ) -> Result<UncertaintyAnalysis> {
     let b = bound_and_weight(nominal, frd, extra, shift, opts, max_weight_order, cover)?;
-    let (robust, on_lines) = b.robust_checks(nominal, controller)?;
+    let checks = b.robust_checks(nominal, controller)?;
     Ok(UncertaintyAnalysis {
         terms: b.terms,
         weight: b.weight,
-        robust,
+        robust: checks.weight,
         joint_raise: b.joint_raise,
-        on_lines,
+        on_lines: checks.on_lines,
         lines_raise: b.lines_raise,
         amplitude_projected: b.amplitude_projected,
+        coherent: checks.coherent,
     })
 }
 
@@ -238,6 +278,10 @@ pub struct UncertainBound {
     pub lines_raise: f64,
     /// As [`UncertaintyAnalysis::amplitude_projected`].
     pub amplitude_projected: Option<std::result::Result<ProjectedShift, String>>,
+    /// [`COHERENT_DRAWS`] coherent draws of the model's error on the lines (seed
+    /// `UncertaintyOptions::seed`), with the remainder of unknown phase, for
+    /// [`RobustChecks::coherent`].
+    pub coherent: CoherentDraws,
 }
 
 impl UncertainBound {
@@ -252,8 +296,8 @@ impl UncertainBound {
     }
 
     /// The robust stability of the loop with `controller` around `nominal` (the model this
-    /// bound was computed for): against the weight ([`UncertaintyAnalysis::robust`]) and
-    /// against the bound on the lines raised by $g_\ell$ ([`UncertaintyAnalysis::on_lines`]).
+    /// bound was computed for): against the weight, against the bound on the lines raised by
+    /// $g_\ell$, and against the coherent draws ([`RobustChecks`]).
     ///
     /// # Errors
     /// A controller whose sample time differs from the model's, or a loop that cannot be
@@ -262,13 +306,31 @@ impl UncertainBound {
         &self,
         nominal: &StateSpace,
         controller: &StateSpace,
-    ) -> Result<(RobustStability, RobustStability)> {
-        let robust = robust_stability(nominal, controller, &self.weight.weight)
+    ) -> Result<RobustChecks> {
+        let weight = robust_stability(nominal, controller, &self.weight.weight)
             .context("the robust-stability check")?;
         let on_lines =
             robust_stability_on_lines(nominal, controller, &self.terms.f_hz, &self.raised_bound())
                 .context("the robust-stability check on the lines")?;
-        Ok((robust, on_lines))
+        // the draws know nothing outside the lines: there the weight bounds the error
+        let d = &self.coherent;
+        let coherent = robust_stability_matrix_drawn(
+            nominal,
+            controller,
+            &d.f_hz,
+            &d.draws,
+            &d.remainder,
+            Some(MatrixWeight::EntryRelative(std::slice::from_ref(
+                &self.weight.weight,
+            ))),
+            COHERENT_CONFIDENCE,
+        )
+        .context("the robust-stability check against the coherent draws")?;
+        Ok(RobustChecks {
+            weight,
+            on_lines,
+            coherent,
+        })
     }
 }
 
@@ -328,6 +390,10 @@ pub fn bound_and_weight(
             .and_then(|(sh, v)| Ok(u.add_projected_shift(frd, &[sh], &[v], AMPLITUDE_RUN_ALPHA)?))
             .map_err(|e| e.to_string())
     });
+    // the model's error drawn as whole curves, before the entry leaves the matrix bound
+    let coherent = u
+        .coherent_draws(COHERENT_DRAWS, opts.seed)
+        .context("the coherent draws of the model's error")?;
     let terms = u
         .entries
         .pop()
@@ -359,6 +425,7 @@ pub fn bound_and_weight(
     let (joint_raise, lines_raise) = (factors[0].max(1.0), factors[1].max(1.0));
     weight.raise(joint_raise, &terms.f_hz, &bound);
     Ok(UncertainBound {
+        coherent,
         terms,
         weight,
         joint_raise,

@@ -90,6 +90,19 @@ fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
     let (l_lo, l_hi) = gain_margins(ol);
     println!("on the lines {l_lo:.3}..{l_hi:.3}");
     crate::common::assert_margin_bars(plant, ctrl, (l_lo, l_hi), (true_lo, true_hi), "the lines");
+    // the coherent draws (the reported margins): robustly stable and the same two bars
+    let co = &summary["robust_coherent"];
+    assert_eq!(co["robustly_stable"], true, "{summary}");
+    assert_eq!(co["draws"], 200, "{summary}");
+    let (c_lo, c_hi) = gain_margins(co);
+    println!("coherent {c_lo:.3}..{c_hi:.3}");
+    crate::common::assert_margin_bars(
+        plant,
+        ctrl,
+        (c_lo, c_hi),
+        (true_lo, true_hi),
+        "the coherent draws",
+    );
 
     // the files agree: the script's weight on the lines is the table's weight_mag
     let table = std::fs::read_to_string(dir.join("unc/uncertainty.csv")).unwrap();
@@ -223,7 +236,7 @@ fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
         "{t}"
     );
     let plain = summary_of(&dir, "unc_plant");
-    for key in ["robust", "robust_on_lines", "controller"] {
+    for key in ["robust", "robust_on_lines", "robust_coherent", "controller"] {
         assert!(plain[key].is_null(), "{key}: {plain}");
     }
     assert_eq!(plain["weight"], summary["weight"]);

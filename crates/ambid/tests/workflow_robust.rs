@@ -310,17 +310,40 @@ fn a_logarithmic_chirp_is_measured_over_its_design_band() {
     weight_margins_hold(twin_cfg, u, "rig 501, chirp: the weight");
 }
 
-/// The `uncertainty` step's weight margins in the summary `u` against the exact loop of the
-/// twin `twin_cfg`: the true loop stable 90 % of the way to each, and each at least half the
-/// true one (`common::assert_margin_bars`, with `label`).
+/// The `uncertainty` step's weight margins and its coherent (reported) margins in the summary
+/// `u` against the exact loop of the twin `twin_cfg`: the true loop stable 90 % of the way to
+/// each, and each at least half the true one (`common::assert_margin_bars`, with `label`).
 fn weight_margins_hold(twin_cfg: TwinConfig, u: &serde_json::Value, label: &str) {
     let twin = Twin::new(twin_cfg).unwrap();
+    let weight = (
+        u["lower_gain_margin"].as_f64(),
+        u["upper_gain_margin"].as_f64(),
+    );
+    margins_hold(&twin, weight, label);
+    coherent_margins_hold(&twin, u, label);
+}
+
+/// The `uncertainty` step's coherent margins (`coherent_gain_margins`, the reported ones) in
+/// the summary `u` against the exact loop of `twin`: both bars, as [`weight_margins_hold`].
+fn coherent_margins_hold(twin: &Twin, u: &serde_json::Value, label: &str) {
+    let m = &u["coherent_gain_margins"];
+    assert_eq!(u["coherent_draws"], 200, "{u}");
+    println!(
+        "{label}: {} of the coherent draws stable",
+        u["coherent_stable_fraction"]
+    );
+    margins_hold(
+        twin,
+        (m[0].as_f64(), m[1].as_f64()),
+        &format!("{label}, coherent"),
+    );
+}
+
+/// Margins `(lower, upper)` against the exact loop of `twin`: both present, and both bars.
+fn margins_hold(twin: &Twin, (lo, hi): (Option<f64>, Option<f64>), label: &str) {
     let (g_lo, g_hi) =
         ambid::uncertainty::nominal_gain_interval(twin.plant(), twin.controller()).unwrap();
-    let (lo, hi) = (
-        u["lower_gain_margin"].as_f64().unwrap(),
-        u["upper_gain_margin"].as_f64().unwrap(),
-    );
+    let (lo, hi) = (lo.expect(label), hi.expect(label));
     println!("{label}: margins {lo:.3} … {hi:.3}, true {g_lo:.3} … {g_hi:.3}");
     crate::common::assert_margin_bars(
         twin.plant(),
@@ -328,6 +351,43 @@ fn weight_margins_hold(twin_cfg: TwinConfig, u: &serde_json::Value, label: &str)
         (lo, hi),
         (g_lo, g_hi),
         label,
+    );
+}
+
+/// Random rig 605 of the nonlinear twin with a logarithmic chirp (noise seed 605), SS 8: the
+/// relative bound has a notch of about 15 lines at the model's bending resonance (≈ 907 Hz),
+/// where $|T|$ decides the upper margin, and the order-≤ 4 weight does not follow it (3–9 times
+/// the bound there). Its upper margin was 1.406 against the true 2.343, short of half the raise
+/// (the only miss of 2 200 workflow runs). The coherent draws carry the model's error as whole
+/// curves and see the notch line by line: both their margins hold against the twin's exact
+/// loop (docs/uncertainty.md, "Coherent margins on one axis").
+#[test]
+fn the_coherent_margins_hold_where_the_weight_misses_a_notch() {
+    let rig = 605;
+    let dir = crate::common::tmpdir("workflow-uncertainty-chirp-605");
+    let (twin_cfg, out) = uncertainty_on_rig(&dir, rig, "nonlinear", Some("chirp"));
+    let u = &out.summary["uncertainty"];
+    println!(
+        "rig {rig}, chirp: the weight's margins {} … {}",
+        u["lower_gain_margin"], u["upper_gain_margin"]
+    );
+    coherent_margins_hold(&Twin::new(twin_cfg).unwrap(), u, "rig 605, chirp");
+    // the report's table carries them
+    let rows: Vec<&Vec<String>> = out
+        .report
+        .sections
+        .iter()
+        .flat_map(|s| &s.blocks)
+        .filter_map(|b| match b {
+            ambid::report::Block::Table(t) if t.id == "robust_stability" => Some(&t.rows),
+            _ => None,
+        })
+        .flatten()
+        .collect();
+    assert!(
+        rows.iter()
+            .any(|r| r[0] == "robust gain margins, coherent (reported)"),
+        "{rows:?}"
     );
 }
 

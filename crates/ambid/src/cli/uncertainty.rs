@@ -6,12 +6,13 @@
 use super::args::parse_band;
 use super::common::{controller_for, frf_and_model, frf_with_variance};
 use ambid::io::export::uncertain::{
-    robust_json, uncertain_json, uncertain_mat_bytes, uncertain_matlab_script, uncertain_npz_bytes,
-    UncertainModel, UncertainNames,
+    coherent_json, robust_json, uncertain_json, uncertain_mat_bytes, uncertain_matlab_script,
+    uncertain_npz_bytes, UncertainModel, UncertainNames,
 };
 use ambid::io::OutputSet;
 use ambid::uncertainty::{
-    amplitude_term_and_shifts, bound_and_weight, nonlinear_term, operating_term, NONLINEAR_ALPHA,
+    amplitude_term_and_shifts, bound_and_weight, nonlinear_term, operating_term, RobustChecks,
+    COHERENT_DRAWS, NONLINEAR_ALPHA,
 };
 use ambid_core::frf::bla::BlaEstimate;
 use ambid_core::validate::uncertainty::{
@@ -442,7 +443,10 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
     let refs: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
     let table = csv_bytes(&header, &refs)?;
     let robust_csv = match &checks {
-        Some((r, _)) => Some(csv_bytes(&["f_hz".into(), "mu".into()], &[&r.f_hz, &r.mu])?),
+        Some(c) => Some(csv_bytes(
+            &["f_hz".into(), "mu".into()],
+            &[&c.weight.f_hz, &c.weight.mu],
+        )?),
         None => None,
     };
 
@@ -455,7 +459,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         nominal: &model,
         weight: w,
         terms: t,
-        robust: checks.as_ref().map(|(r, _)| r),
+        robust: checks.as_ref().map(|c| &c.weight),
     };
     let covered = wmag
         .iter()
@@ -518,11 +522,12 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
                 None => serde_json::Value::Null,
             },
         })),
-        "robust": checks.as_ref().map(|(r, _)| robust_json(r)),
-        "robust_on_lines": checks.as_ref().map(|(_, ol)| json!({
+        "robust": checks.as_ref().map(|c| robust_json(&c.weight)),
+        "robust_on_lines": checks.as_ref().map(|c| json!({
             "raise": analysis.lines_raise,
-            "check": robust_json(ol),
+            "check": robust_json(&c.on_lines),
         })),
+        "robust_coherent": checks.as_ref().map(|c| coherent_json(&c.coherent)),
     });
 
     let mut set = OutputSet::new(a.force);
@@ -587,7 +592,20 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         None => "-".to_string(),
     };
     match &checks {
-        Some((r, ol)) => {
+        Some(RobustChecks {
+            weight: r,
+            on_lines: ol,
+            coherent: co,
+        }) => {
+            println!(
+                "against {COHERENT_DRAWS} coherent draws of the model's error (whole curves; the misfit of unknown phase around each; up to an octave outside the lines the weight, gains {}): {:.1} % of the draws stable, robust gain margins at {:.0} % of the draws: down to {}, up to {} (the reported margins, docs/uncertainty.md)",
+                co.outside_gain_interval
+                    .map_or("-".to_string(), |[lo, hi]| format!("{} … {}", margin(Some(lo)), margin(Some(hi)))),
+                100.0 * co.stable_fraction,
+                100.0 * co.confidence,
+                margin(co.lower_gain_margin),
+                margin(co.upper_gain_margin),
+            );
             println!(
                 "robust stability: {} (max |W T| = {:.3} at {:.1} Hz, margin {:.3}); robust gain margins: down to {}, up to {}",
                 if r.robustly_stable {

@@ -315,12 +315,7 @@ pub fn amplitude_terms_and_shifts(
     Ok((terms, used))
 }
 
-/// The number of coherent draws of the model's error per speed
-/// ([`MatrixUncertainty::coherent_draws`](ambid_core::validate::uncertainty::MatrixUncertainty::coherent_draws)).
-pub const COHERENT_DRAWS: usize = 200;
-
-/// The fraction of the coherent draws the coherent robust margins hold for.
-pub const COHERENT_CONFIDENCE: f64 = 0.95;
+pub use crate::uncertainty::{COHERENT_CONFIDENCE, COHERENT_DRAWS};
 
 /// The chosen model's uncertainty at one speed ([`UncertaintyRow`]): the element-wise bound of
 /// `uncertainty_matrix` on the measured plant FRF's lines in the fit's band `band` and the

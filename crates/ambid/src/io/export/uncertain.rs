@@ -33,7 +33,7 @@ use super::{
     Var,
 };
 use ambid_core::lti::StateSpace;
-use ambid_core::validate::robust::RobustStability;
+use ambid_core::validate::robust::{DrawnRobustStability, RobustStability};
 use ambid_core::validate::uncertainty::UncertaintyTerms;
 use ambid_core::validate::weight::WeightFit;
 use serde_json::{json, Value as Json};
@@ -352,5 +352,27 @@ pub fn robust_json(r: &RobustStability) -> Json {
         "upper_gain_margin": fin(r.upper_gain_margin),
         "upper_gain_margin_unlimited": r.upper_gain_margin == Some(f64::INFINITY),
         "lower_gain_margin": fin(r.lower_gain_margin),
+    })
+}
+
+/// The coherent robust-stability check
+/// ([`RobustChecks::coherent`](crate::uncertainty::RobustChecks::coherent)) as JSON: `draws`,
+/// `confidence`, `nominal_stable`, `stable_fraction`, `robustly_stable`, the margins
+/// (`lower_gain_margin`, `upper_gain_margin`, null when not robustly stable or unlimited, with
+/// `upper_gain_margin_unlimited`), and the weight's test outside the lines
+/// (`outside_gain_interval`, `outside_critical_hz`).
+pub fn coherent_json(r: &DrawnRobustStability) -> Json {
+    let fin = |x: Option<f64>| x.filter(|x| x.is_finite());
+    json!({
+        "draws": r.per_draw.len(),
+        "confidence": r.confidence,
+        "nominal_stable": r.nominal_stable,
+        "stable_fraction": r.stable_fraction,
+        "robustly_stable": r.robustly_stable,
+        "upper_gain_margin": fin(r.upper_gain_margin),
+        "upper_gain_margin_unlimited": r.upper_gain_margin == Some(f64::INFINITY),
+        "lower_gain_margin": fin(r.lower_gain_margin),
+        "outside_gain_interval": r.outside_gain_interval,
+        "outside_critical_hz": r.outside_critical_hz,
     })
 }
