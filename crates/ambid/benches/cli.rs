@@ -7,6 +7,9 @@
 //! computation, writing): the median of `AMBID_BENCH_REPS` runs (default 5). It prints a Markdown
 //! table for docs/benchmarks.md. A command that fails is reported as failed with its message.
 //!
+//! Every rig also times one axis' `uncertainty` of the order-8 plant model on its FRF with the
+//! loop's controller (the bound, the weight, and the three robust checks).
+//!
 //! On the nominal rig it also times the studies that simulate their own experiments (`study
 //! amplitude`, `study operating-point`, `bla` on the twin) and the whole machine's gray box
 //! (`simulate --axes 4`, the 4×4 `frf`, `physical` on it, the `[machine]` workflow's 4×4 model
@@ -305,6 +308,19 @@ fn main() {
                     ctrl.clone(),
                     "--out".into(),
                     o("validation"),
+                ],
+            ),
+            (
+                "uncertainty frf.csv --model plant.json --controller (one axis: bound, weight, three robust checks)",
+                vec![
+                    "uncertainty".into(),
+                    frf.clone(),
+                    "--model".into(),
+                    plant.clone(),
+                    "--controller".into(),
+                    ctrl.clone(),
+                    "--out".into(),
+                    o("unc1"),
                 ],
             ),
         ];
