@@ -440,11 +440,11 @@ fn main() {
         let (cs, ch) = judge(&twin, clo, chi, truth);
         c_stable += usize::from(cs);
         c_half += usize::from(ch);
-        let fm = |x: Option<f64>| x.map_or("—".into(), |g| format!("{g:.3}"));
+        let f = |x: Option<f64>| x.map_or("—".into(), |g| format!("{g:.3}"));
         println!(
             "    coherent | {rig} | {} {} {cs} {ch} | {} of the draws stable",
-            fm(clo),
-            fm(chi),
+            f(clo),
+            f(chi),
             u["coherent_stable_fraction"]
         );
         let (ws, wh) = judge(&twin, wlo, whi, truth);
@@ -456,7 +456,6 @@ fn main() {
         w_half += usize::from(wh);
         l_stable += usize::from(ls);
         l_half += usize::from(lh);
-        let f = |x: Option<f64>| x.map_or("—".into(), |g| format!("{g:.3}"));
         let term_c = match (
             u["nonlinear_level_pct"].as_f64(),
             u["nonlinear_groups"].as_array(),

@@ -22,7 +22,7 @@ use ambid_core::validate::robust::{
     DrawnRobustStability, MatrixWeight, RobustStability,
 };
 use ambid_core::validate::uncertainty::{
-    uncertainty_matrix, window_half_lines_for, window_scales, CoherentDraws, ExtraTerms,
+    uncertainty_matrix, window_half_lines_for, window_scales, ExtraTerms, MatrixUncertainty,
     ProjectedShift, UncertaintyOptions, UncertaintyTerms,
 };
 use ambid_core::validate::weight::{fit_weight_shaped, WeightFit, DEFAULT_COVER, MAX_WEIGHT_ORDER};
@@ -278,10 +278,11 @@ pub struct UncertainBound {
     pub lines_raise: f64,
     /// As [`UncertaintyAnalysis::amplitude_projected`].
     pub amplitude_projected: Option<std::result::Result<ProjectedShift, String>>,
-    /// [`COHERENT_DRAWS`] coherent draws of the model's error on the lines (seed
-    /// `UncertaintyOptions::seed`), with the remainder of unknown phase, for
-    /// [`RobustChecks::coherent`].
-    pub coherent: CoherentDraws,
+    /// The $1\times 1$ matrix bound whose entry is [`Self::terms`], which draws the model's
+    /// error as whole curves for [`RobustChecks::coherent`].
+    matrix: MatrixUncertainty,
+    /// The draws' seed (`UncertaintyOptions::seed`).
+    seed: u64,
 }
 
 impl UncertainBound {
@@ -313,22 +314,25 @@ impl UncertainBound {
     /// use ambid_core::lti::{Frd, StateSpace};
     /// use ambid_core::validate::uncertainty::{ExtraTerms, UncertaintyOptions};
     /// use faer::{mat, Mat};
+    /// # fn main() -> Result<(), Box<dyn std::error::Error>> {
     /// let ts = 1e-3;
-    /// let p = StateSpace::discrete(mat![[0.9]], mat![[1.0]], mat![[0.1]], mat![[0.0]], ts).unwrap();
+    /// let p = StateSpace::discrete(mat![[0.9]], mat![[1.0]], mat![[0.1]], mat![[0.0]], ts)?;
     /// let c = StateSpace::discrete(Mat::zeros(0, 0), Mat::zeros(0, 1), Mat::zeros(1, 0),
-    ///     mat![[2.0]], ts).unwrap();
+    ///     mat![[2.0]], ts)?;
     /// let f: Vec<f64> = (1..=100).map(|k| 4.0 * k as f64).collect();
-    /// let exact = Frd::from_model(&p, &f).unwrap();
+    /// let exact = Frd::from_model(&p, &f)?;
     /// let var: Vec<f64> = exact.values().iter().map(|g| 1e-4 * g.norm_sqr()).collect();
-    /// let frd = Frd::new(f.clone(), exact.values().to_vec(), Some(var), Some(ts)).unwrap();
-    /// let b = bound_and_weight(&p, &frd, &ExtraTerms::default(), None, &UncertaintyOptions::default(), 4, 1.0)
-    ///     .unwrap();
-    /// let checks = b.robust_checks(&p, &c).unwrap();
+    /// let frd = Frd::new(f.clone(), exact.values().to_vec(), Some(var), Some(ts))?;
+    /// let opts = UncertaintyOptions::default();
+    /// let b = bound_and_weight(&p, &frd, &ExtraTerms::default(), None, &opts, 4, 1.0)?;
+    /// let checks = b.robust_checks(&p, &c)?;
     /// assert!(checks.weight.robustly_stable && checks.on_lines.robustly_stable);
     /// let co = &checks.coherent;
     /// assert!(co.robustly_stable && co.per_draw.len() == 200);
-    /// let hi = co.upper_gain_margin.unwrap();
+    /// let hi = co.upper_gain_margin.ok_or("no coherent upper margin")?;
     /// assert!(hi > 9.0 && hi <= 9.5 * (1.0 + 1e-6), "{hi}");
+    /// # Ok(())
+    /// # }
     /// ```
     pub fn robust_checks(
         &self,
@@ -340,8 +344,11 @@ impl UncertainBound {
         let on_lines =
             robust_stability_on_lines(nominal, controller, &self.terms.f_hz, &self.raised_bound())
                 .context("the robust-stability check on the lines")?;
+        let d = self
+            .matrix
+            .coherent_draws(COHERENT_DRAWS, self.seed)
+            .context("the coherent draws of the model's error")?;
         // the draws know nothing outside the lines: there the weight bounds the error
-        let d = &self.coherent;
         let coherent = robust_stability_matrix_drawn(
             nominal,
             controller,
@@ -418,13 +425,12 @@ pub fn bound_and_weight(
             .and_then(|(sh, v)| Ok(u.add_projected_shift(frd, &[sh], &[v], AMPLITUDE_RUN_ALPHA)?))
             .map_err(|e| e.to_string())
     });
-    // the model's error drawn as whole curves, before the entry leaves the matrix bound
-    let coherent = u
-        .coherent_draws(COHERENT_DRAWS, opts.seed)
-        .context("the coherent draws of the model's error")?;
+    // the matrix bound stays with the result: the coherent draws come from it when a
+    // controller is checked (`robust_checks`)
     let terms = u
         .entries
-        .pop()
+        .first()
+        .cloned()
         .ok_or_else(|| Error::other("the uncertainty terms: the bound has no entry"))?;
     let ts = nominal
         .ts()
@@ -453,7 +459,8 @@ pub fn bound_and_weight(
     let (joint_raise, lines_raise) = (factors[0].max(1.0), factors[1].max(1.0));
     weight.raise(joint_raise, &terms.f_hz, &bound);
     Ok(UncertainBound {
-        coherent,
+        matrix: u,
+        seed: opts.seed,
         terms,
         weight,
         joint_raise,
