@@ -34,7 +34,11 @@
 //! statistics); `SYNTH_DOF=n` (with `CALIB_SYNTH=1`) hands the fit variances estimated with
 //! `n` complex degrees of freedom instead of the true ones. `SMOOTH_VAR=m` refits with the
 //! FRF's variances smoothed over ±m lines (as $\sigma_k^2|\bar U_k|^2$). `SHAPE` applies to
-//! every refit.
+//! every refit. `SML=1` refits the nominal model by sample maximum likelihood (the FRF's variance
+//! at the model, `FreqWeights::SampleMaximumLikelihood` with the estimate's `plant_noise`) and
+//! bounds it with the variance at the chosen model; `SMOOTH_VAR_PLAIN=m` refits with the
+//! variances themselves averaged over ±m lines (both without `LEVELS`; docs/uncertainty.md,
+//! "Weights that follow the data's noise").
 
 use ambid::uncertainty::{loop_stable, nominal_gain_interval, UncertaintyRun};
 use ambid_twin::Mode;
@@ -222,6 +226,69 @@ fn main() {
                     .map(|k| {
                         let (lo, hi) = (k.saturating_sub(m), (k + m).min(l - 1));
                         sv[lo..=hi].iter().sum::<f64>() / (hi - lo + 1) as f64 / u2[k]
+                    })
+                    .collect();
+                let frd = ambid_core::lti::Frd::new(
+                    run.frd.f_hz().to_vec(),
+                    run.frd.values().to_vec(),
+                    Some(smooth),
+                    run.frd.ts(),
+                )
+                .unwrap();
+                refit(&mut run, frd);
+            }
+            if std::env::var("SML").is_ok() {
+                // the nominal model by sample maximum likelihood (the FRF's variance at the
+                // model in the fits and the BIC), bounded with the variance at the chosen model
+                assert!(levels.is_empty(), "SML is for runs without LEVELS");
+                let (out, frd) = ambid::uncertainty::twin_seed_frf(rig, seed, mode).unwrap();
+                let noise = out
+                    .periodic_frf(ambid::uncertainty::TWIN_BAND_HZ, None)
+                    .unwrap()
+                    .plant_noise
+                    .unwrap();
+                let unstable = ambid_core::validate::compare::unstable_poles_from_loop(
+                    &frd,
+                    &run.controller,
+                    None,
+                )
+                .ok();
+                let nominal = ambid::uncertainty::nominal_by_bic_weighted(
+                    &frd,
+                    ambid_core::estimate::freqfit::FreqWeights::SampleMaximumLikelihood(
+                        noise.clone(),
+                    ),
+                    unstable,
+                    ambid::uncertainty::TWIN_ORDERS,
+                )
+                .unwrap();
+                let pm = nominal.freq_response_siso(frd.f_hz()).unwrap();
+                let v: Vec<f64> = noise
+                    .iter()
+                    .zip(&pm)
+                    .map(|(n, p)| n.variance_at(*p))
+                    .collect();
+                let frd = ambid_core::lti::Frd::new(
+                    frd.f_hz().to_vec(),
+                    frd.values().to_vec(),
+                    Some(v),
+                    frd.ts(),
+                )
+                .unwrap();
+                run.analysis = analyse_with_shape(&nominal, &frd, &run.controller);
+                run.nominal = nominal;
+                run.frd = frd;
+            }
+            if let Ok(m) = std::env::var("SMOOTH_VAR_PLAIN") {
+                // diagnostic: the FRF's variances themselves averaged over ±m lines before the
+                // fit and the bound (weights that do not follow each line's own noise)
+                let m: usize = m.parse().unwrap();
+                let var = run.frd.variance().unwrap();
+                let l = var.len();
+                let smooth: Vec<f64> = (0..l)
+                    .map(|k| {
+                        let (lo, hi) = (k.saturating_sub(m), (k + m).min(l - 1));
+                        var[lo..=hi].iter().sum::<f64>() / (hi - lo + 1) as f64
                     })
                     .collect();
                 let frd = ambid_core::lti::Frd::new(

@@ -1452,8 +1452,67 @@ pub fn nominal_by_bic_of(
     max_unstable_poles: Option<usize>,
     orders: impl IntoIterator<Item = usize>,
 ) -> Result<StateSpace> {
+    nominal_by_bic_weighted(
+        frd,
+        FreqWeights::InverseVariance,
+        max_unstable_poles,
+        orders,
+    )
+}
+
+/// [`nominal_by_bic_of`] with the fits' `weights`: [`FreqWeights::InverseVariance`], or
+/// [`FreqWeights::SampleMaximumLikelihood`] with the FRF's per-line noise
+/// ([`ClosedLoopFrf::plant_noise`](ambid_core::frf::closed_loop::ClosedLoopFrf::plant_noise)),
+/// whose $\chi^2$ takes each line's variance at the model. Any other weights are refused.
+///
+/// # Errors
+/// As [`nominal_by_bic`]; weights other than those two.
+///
+/// # Example
+/// A stable second-order plant's exact response with output noise of 1 % of $|P|$ described
+/// per line: order 2 of the orders 2–4 reproduces it.
+/// ```
+/// use ambid::uncertainty::nominal_by_bic_weighted;
+/// use ambid_core::c64;
+/// use ambid_core::estimate::freqfit::FreqWeights;
+/// use ambid_core::frf::closed_loop::RatioNoise;
+/// use ambid_core::lti::{Frd, StateSpace};
+/// use faer::mat;
+/// # fn main() -> Result<(), Box<dyn std::error::Error>> {
+/// let ts = 1e-3;
+/// let p = StateSpace::discrete(
+///     mat![[1.6, -0.8], [1.0, 0.0]], mat![[1.0], [0.0]], mat![[0.1, 0.05]], mat![[0.0]], ts,
+/// )?;
+/// let f: Vec<f64> = (1..=200).map(|k| 2.0 * k as f64).collect();
+/// let exact = Frd::from_model(&p, &f)?;
+/// let noise: Vec<RatioNoise> = exact.values().iter()
+///     .map(|g| RatioNoise { a: 0.0, b: 1e-4 * g.norm_sqr(), c: c64::new(0.0, 0.0) })
+///     .collect();
+/// let var: Vec<f64> = noise.iter().zip(exact.values()).map(|(n, g)| n.variance_at(*g)).collect();
+/// let frd = Frd::new(f.clone(), exact.values().to_vec(), Some(var), Some(ts))?;
+/// let m = nominal_by_bic_weighted(&frd, FreqWeights::SampleMaximumLikelihood(noise), Some(0), 2..=4)?;
+/// let fit = m.freq_response_siso(&f)?;
+/// let worst = fit.iter().zip(exact.values()).map(|(a, b)| (a - b).norm() / b.norm()).fold(0.0, f64::max);
+/// assert!(worst < 1e-3, "{worst}");
+/// # Ok(())
+/// # }
+/// ```
+pub fn nominal_by_bic_weighted(
+    frd: &Frd,
+    weights: FreqWeights,
+    max_unstable_poles: Option<usize>,
+    orders: impl IntoIterator<Item = usize>,
+) -> Result<StateSpace> {
+    let noise =
+        match &weights {
+            FreqWeights::InverseVariance => None,
+            FreqWeights::SampleMaximumLikelihood(n) => Some(n.clone()),
+            _ => return Err(Error::other(
+                "the BIC's chi-square needs inverse-variance or sample maximum-likelihood weights",
+            )),
+        };
     let opts = FreqFitOptions {
-        weights: FreqWeights::InverseVariance,
+        weights,
         max_unstable_poles,
         ..FreqFitOptions::default()
     };
@@ -1478,8 +1537,11 @@ pub fn nominal_by_bic_of(
         let chi2: f64 = resp
             .iter()
             .zip(frd.values())
-            .zip(var)
-            .map(|((m, g), v)| (m - g).norm_sqr() / v)
+            .enumerate()
+            .map(|(k, (m, g))| {
+                let v = noise.as_ref().map_or(var[k], |n| n[k].variance_at(*m));
+                (m - g).norm_sqr() / v
+            })
             .sum();
         let bic = 2.0 * chi2 + fit.n_params as f64 * n_eq.ln();
         if best.as_ref().is_none_or(|b| bic < b.0) {

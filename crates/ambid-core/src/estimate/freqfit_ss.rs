@@ -110,6 +110,7 @@
 use super::freqfit::{constrained_start, FreqData, FreqErrors, FreqFit, FreqFitOptions};
 use super::pem::lm::{minimize, LeastSquaresProblem, LmOptions};
 use crate::error::{Error, Result};
+use crate::frf::closed_loop::RatioNoise;
 use crate::linalg;
 use crate::lti::{Frd, StateSpace};
 use faer::{c64, Mat};
@@ -410,6 +411,9 @@ struct Problem<'a> {
     delta: Vec<c64>,
     g: &'a [c64],
     sw: Vec<f64>,
+    /// Sample maximum likelihood ([`FreqData::noise`]): the weights follow the model; empty for
+    /// fixed weights.
+    noise: &'a [RatioNoise],
     /// Section orders (2 or 1).
     sections: Vec<usize>,
     feedthrough: bool,
@@ -442,6 +446,7 @@ impl<'a> Problem<'a> {
             delta: data.z.iter().map(|&z| warp.delta(z)).collect(),
             g: &data.g,
             sw: data.w.iter().map(|w| w.sqrt()).collect(),
+            noise: &data.noise,
             sections,
             feedthrough,
             limit,
@@ -631,6 +636,19 @@ impl<'a> Problem<'a> {
     }
 }
 
+impl Problem<'_> {
+    /// Line `k`'s variance at the model value `p` under sample maximum likelihood, held at
+    /// least $10^{-6}$ of its value at the data (a model value where the noise would vanish,
+    /// $1 + \hat P C = 0$ for sensor noise alone, cannot take an unbounded weight), and whether
+    /// it was held; `None` with fixed weights.
+    fn model_variance(&self, k: usize, p: c64) -> Option<(f64, bool)> {
+        let noise = self.noise.get(k)?;
+        let floor = 1e-6 / (self.sw[k] * self.sw[k]);
+        let v = noise.variance_at(p);
+        Some(if v > floor { (v, false) } else { (floor, true) })
+    }
+}
+
 impl LeastSquaresProblem for Problem<'_> {
     fn residuals(&mut self, th: &[f64]) -> Option<Vec<f64>> {
         if !self.admissible(th) {
@@ -639,7 +657,11 @@ impl LeastSquaresProblem for Problem<'_> {
         let l = self.delta.len();
         let mut r = vec![0.0; 2 * l];
         for k in 0..l {
-            let e = (self.eval_line(th, k, None) - self.g[k]) * self.sw[k];
+            let p = self.eval_line(th, k, None);
+            let sw = self
+                .model_variance(k, p)
+                .map_or(self.sw[k], |(v, _)| 1.0 / v.sqrt());
+            let e = (p - self.g[k]) * sw;
             r[k] = e.re;
             r[l + k] = e.im;
         }
@@ -652,10 +674,28 @@ impl LeastSquaresProblem for Problem<'_> {
         let mut j = Mat::<f64>::zeros(2 * l, np);
         let mut row = vec![c64::new(0.0, 0.0); np];
         for k in 0..l {
-            self.eval_line(th, k, Some(&mut row));
-            for (p, v) in row.iter().enumerate() {
-                j[(k, p)] = self.sw[k] * v.re;
-                j[(l + k, p)] = self.sw[k] * v.im;
+            let p = self.eval_line(th, k, Some(&mut row));
+            match self.model_variance(k, p) {
+                None => {
+                    for (q, v) in row.iter().enumerate() {
+                        j[(k, q)] = self.sw[k] * v.re;
+                        j[(l + k, q)] = self.sw[k] * v.im;
+                    }
+                }
+                // r = (P − G)/√v(P): ∂r = ∂P/√v − (P − G) ∂v/(2 v^{3/2})
+                Some((v, held)) => {
+                    let (sw, e) = (1.0 / v.sqrt(), p - self.g[k]);
+                    for (q, dp) in row.iter().enumerate() {
+                        let dv = if held {
+                            0.0
+                        } else {
+                            self.noise[k].variance_slope(p, *dp)
+                        };
+                        let d = *dp * sw - e * (0.5 * dv * sw / v);
+                        j[(k, q)] = d.re;
+                        j[(l + k, q)] = d.im;
+                    }
+                }
             }
         }
         Some(j)
@@ -665,6 +705,38 @@ impl LeastSquaresProblem for Problem<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A pair, an unstable real pole and two stable ones: the Jacobian tests' sections.
+    const TEST_POLES: [c64; 5] = [
+        c64::new(0.9, 0.2),
+        c64::new(0.9, -0.2),
+        c64::new(1.01, 0.0),
+        c64::new(0.5, 0.0),
+        c64::new(0.7, 0.0),
+    ];
+
+    /// The problem's Jacobian at `th` against central differences of its residuals, to the
+    /// relative tolerance `tol`; returned for further checks.
+    fn jacobian_against_differences(prob: &mut Problem<'_>, th: &[f64], tol: f64) -> Mat<f64> {
+        let j = prob.jacobian(th).unwrap();
+        for p in 0..th.len() {
+            let eps = 1e-6 * (1.0 + th[p].abs());
+            let mut tp = th.to_vec();
+            tp[p] += eps;
+            let mut tm = th.to_vec();
+            tm[p] -= eps;
+            let (rp, rm) = (prob.residuals(&tp).unwrap(), prob.residuals(&tm).unwrap());
+            for i in 0..rp.len() {
+                let fd = (rp[i] - rm[i]) / (2.0 * eps);
+                assert!(
+                    (fd - j[(i, p)]).abs() <= tol * (1.0 + fd.abs()),
+                    "param {p} row {i}: {fd} vs {}",
+                    j[(i, p)]
+                );
+            }
+        }
+        j
+    }
 
     #[test]
     fn jacobian_matches_finite_differences() {
@@ -676,33 +748,11 @@ mod tests {
         let frd = Frd::new(f, vals, None, Some(1e-3)).unwrap();
         let data = FreqData::new(&frd, &FreqFitOptions::default()).unwrap();
         let warp = Warp::new(&data).unwrap();
-        let poles = [
-            c64::new(0.9, 0.2),
-            c64::new(0.9, -0.2),
-            c64::new(1.01, 0.0),
-            c64::new(0.5, 0.0),
-            c64::new(0.7, 0.0),
-        ];
+        let poles = TEST_POLES;
         let mut prob = Problem::new(&data, &warp, &poles, true, None).unwrap();
         let mut th = prob.denominators_from_poles(&poles);
         prob.fit_numerators(&mut th).unwrap();
-        let j = prob.jacobian(&th).unwrap();
-        for p in 0..th.len() {
-            let eps = 1e-6 * (1.0 + th[p].abs());
-            let mut tp = th.clone();
-            tp[p] += eps;
-            let mut tm = th.clone();
-            tm[p] -= eps;
-            let (rp, rm) = (prob.residuals(&tp).unwrap(), prob.residuals(&tm).unwrap());
-            for i in 0..rp.len() {
-                let fd = (rp[i] - rm[i]) / (2.0 * eps);
-                assert!(
-                    (fd - j[(i, p)]).abs() <= 1e-6 * (1.0 + fd.abs()),
-                    "param {p} row {i}: {fd} vs {}",
-                    j[(i, p)]
-                );
-            }
-        }
+        jacobian_against_differences(&mut prob, &th, 1e-6);
         // the realisation has the section poles and the same response
         let model = prob.realise(&th, 1e-3).unwrap();
         let resp = model.freq_response_siso(&data.f_hz).unwrap();
@@ -715,6 +765,57 @@ mod tests {
         for p in poles {
             assert!(mp.iter().any(|m| (m - p).norm() < 1e-12), "{p} in {mp:?}");
         }
+    }
+
+    /// With sample maximum-likelihood weights the residual $(P_\theta - G)/\sqrt{v(P_\theta)}$
+    /// has the variance's slope in its Jacobian: checked against central differences.
+    #[test]
+    fn sml_jacobian_matches_finite_differences() {
+        let f: Vec<f64> = (1..60).map(|k| 7.0 * k as f64).collect();
+        let vals: Vec<c64> = f
+            .iter()
+            .map(|x| c64::new(1.0 / (1.0 + x / 50.0), -0.01 * x))
+            .collect();
+        let noise: Vec<RatioNoise> = f
+            .iter()
+            .map(|x| RatioNoise {
+                a: 1e-3 * (1.0 + x / 400.0),
+                b: 2e-3,
+                c: c64::new(3e-4, -1e-4 * x / 400.0),
+            })
+            .collect();
+        let frd = Frd::new(f, vals, None, Some(1e-3)).unwrap();
+        let opts = FreqFitOptions {
+            weights: super::super::freqfit::FreqWeights::SampleMaximumLikelihood(noise),
+            ..FreqFitOptions::default()
+        };
+        let data = FreqData::new(&frd, &opts).unwrap();
+        let warp = Warp::new(&data).unwrap();
+        let poles = TEST_POLES;
+        let mut prob = Problem::new(&data, &warp, &poles, true, None).unwrap();
+        let mut th = prob.denominators_from_poles(&poles);
+        prob.fit_numerators(&mut th).unwrap();
+        // off the numerators' optimum, so that the residual's weight term matters
+        for v in th.iter_mut() {
+            *v *= 1.05;
+        }
+        let j = jacobian_against_differences(&mut prob, &th, 1e-5);
+        let mut weight_term = 0.0f64;
+        // the slope term matters: the Jacobian without it (∂P/√v alone) is off by more than
+        // the differences' tolerance
+        let l = data.len();
+        let mut row = vec![c64::new(0.0, 0.0); th.len()];
+        for k in 0..l {
+            let pk = prob.eval_line(&th, k, Some(&mut row));
+            let sw = 1.0 / prob.model_variance(k, pk).unwrap().0.sqrt();
+            for (q, dp) in row.iter().enumerate() {
+                let d = *dp * sw;
+                weight_term = weight_term
+                    .max((d.re - j[(k, q)]).abs() / (1.0 + d.re.abs()))
+                    .max((d.im - j[(l + k, q)]).abs() / (1.0 + d.im.abs()));
+            }
+        }
+        assert!(weight_term > 1e-3, "{weight_term}");
     }
 
     /// An AMB-like plant (unstable and stable real poles at 1.0206 and 0.9795, pairs at 125 Hz

@@ -103,6 +103,55 @@ pub enum Averaging {
     },
 }
 
+/// The noise of a SISO ratio estimate $\hat G = \bar Y/\bar U$ on one line as a function of the
+/// plant value $G$ it is compared with:
+/// $$ v(G) = \frac{\operatorname{Var}(\bar Y - G\,\bar U)}{|\bar U|^2}
+///         = a\,|G|^2 + b - 2\,\operatorname{Re}(G\,c) , $$
+/// with $a = \Sigma_{UU}/|\bar U|^2$, $b = \Sigma_{YY}/|\bar U|^2$ and $c = \Sigma_{UY}/|\bar
+/// U|^2$ (Welch: the residual spectra over $n S_{rr} |T_{ru}|^2$; module docs). At the estimate
+/// itself, $v(\hat G)$ is the variance [`from_periodic`] and [`from_welch`] report; a model fit
+/// that evaluates it at the *model* instead,
+/// $|\hat G_k - G_\theta|^2 / v_k(G_\theta) = |\bar Y_k - G_\theta \bar U_k|^2 /
+/// \operatorname{Var}(\bar Y_k - G_\theta \bar U_k)$, minimises the sample maximum-likelihood cost of errors-in-variables data
+/// ([`FreqWeights::SampleMaximumLikelihood`](crate::estimate::freqfit::FreqWeights::SampleMaximumLikelihood)):
+/// weights that do not follow the line's own error (docs/uncertainty.md, "Weights that follow
+/// the data's noise").
+///
+/// # Example
+/// At the estimate the value is the reported variance; elsewhere it follows the model value.
+/// ```
+/// use ambid_core::frf::closed_loop::RatioNoise;
+/// use faer::c64;
+/// // noise on y only: v(G) = b whatever G is
+/// let n = RatioNoise { a: 0.0, b: 0.25, c: c64::new(0.0, 0.0) };
+/// assert_eq!(n.variance_at(c64::new(3.0, -1.0)), 0.25);
+/// // noise on u only: v(G) = a |G|²
+/// let n = RatioNoise { a: 0.01, b: 0.0, c: c64::new(0.0, 0.0) };
+/// assert!((n.variance_at(c64::new(3.0, 4.0)) - 0.25).abs() < 1e-15);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RatioNoise {
+    /// $\Sigma_{UU}/|\bar U|^2$, the input noise's part (times $|G|^2$).
+    pub a: f64,
+    /// $\Sigma_{YY}/|\bar U|^2$, the output noise's part.
+    pub b: f64,
+    /// $\Sigma_{UY}/|\bar U|^2$, their cross term.
+    pub c: c64,
+}
+
+impl RatioNoise {
+    /// $v(G) = a|G|^2 + b - 2\operatorname{Re}(G c)$ (type docs), never below 0.
+    pub fn variance_at(&self, g: c64) -> f64 {
+        (self.a * g.norm_sqr() + self.b - 2.0 * (g * self.c).re).max(0.0)
+    }
+
+    /// $\partial v / \partial G$ along a change $\delta G$: $2\operatorname{Re}(\delta G\,(a \bar G -
+    /// c))$, for fits that differentiate [`variance_at`](Self::variance_at).
+    pub fn variance_slope(&self, g: c64, dg: c64) -> f64 {
+        2.0 * (dg * (g.conj() * self.a - self.c)).re
+    }
+}
+
 /// Closed-loop FRFs on a common frequency grid, each with its variance, plus coherences.
 ///
 /// Every response is an [`Frd`] matrix ($T_{ry}$ and $P$: $n_y \times n_u$; $S$: $n_u \times n_u$;
@@ -128,6 +177,10 @@ pub struct ClosedLoopFrf {
     pub averaging: Averaging,
     /// Complex degrees of freedom $\nu$ of the variance estimates (for [`band_radius_factor`]).
     pub dof: f64,
+    /// Per line, the plant estimate's variance as a function of the plant value ([`RatioNoise`];
+    /// SISO estimates with variances from [`from_periodic`] and [`from_welch`], `None`
+    /// otherwise): what a sample maximum-likelihood fit needs.
+    pub plant_noise: Option<Vec<RatioNoise>>,
 }
 
 impl ClosedLoopFrf {
@@ -201,6 +254,7 @@ impl ClosedLoopFrf {
             coh_ru,
             averaging,
             dof,
+            plant_noise: None,
         })
     }
 }
@@ -446,6 +500,7 @@ pub fn from_periodic(
         Vec::with_capacity(n),
     );
     let (mut coh_ry, mut coh_ru) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    let mut noise = Vec::with_capacity(n);
     let covs: Vec<Vec<(&[c64], bool)>> = idx
         .iter()
         .map(|&i| idx.iter().map(|&j| s.cov_slice(i, j)).collect())
@@ -501,6 +556,12 @@ pub fn from_periodic(
             sig[1][2],
         ));
         vc.push(quad_form(&[iy, -iy, -ck * iy], cov));
+        let u2 = uu.norm_sqr();
+        noise.push(RatioNoise {
+            a: sig[1][1].re / u2,
+            b: sig[2][2].re / u2,
+            c: sig[1][2] / u2,
+        });
         t.push(tk);
         sv.push(sk);
         pl.push(pk);
@@ -528,6 +589,7 @@ pub fn from_periodic(
         coh_ru,
         averaging: Averaging::Periods(s.periods()),
         dof: (s.periods() as f64 - 1.0).max(0.0),
+        plant_noise: has_var.then_some(noise),
     })
 }
 
@@ -815,6 +877,7 @@ pub fn from_welch(
     let (mut t, mut sv, mut pl, mut c) = (vec![], vec![], vec![], vec![]);
     let (mut vt, mut vs, mut vp, mut vc) = (vec![], vec![], vec![], vec![]);
     let (mut coh_ry, mut coh_ru) = (vec![], vec![]);
+    let mut noise = Vec::with_capacity(bins.len());
     for &k in &bins {
         f.push(f_all[k]);
         let rr = srr[k].re;
@@ -829,10 +892,13 @@ pub fn from_welch(
         let nr = n_eff * rr;
         vt.push(phi_yy / nr);
         vs.push(phi_uu / nr);
-        vp.push(
-            ((phi_yy + pk.norm_sqr() * phi_uu - 2.0 * (pk * phi_yu).re).max(0.0))
-                / (nr * sk.norm_sqr()),
-        );
+        let den = nr * sk.norm_sqr();
+        vp.push(((phi_yy + pk.norm_sqr() * phi_uu - 2.0 * (pk * phi_yu).re).max(0.0)) / den);
+        noise.push(RatioNoise {
+            a: phi_uu / den,
+            b: phi_yy / den,
+            c: phi_yu / den,
+        });
         vc.push(
             ((phi_uu + ck.norm_sqr() * phi_yy + 2.0 * (ck * phi_yu.conj()).re).max(0.0))
                 / (nr * tk.norm_sqr()),
@@ -861,12 +927,32 @@ pub fn from_welch(
             effective: n_eff,
         },
         dof: (n_eff - 1.0).max(1.0),
+        plant_noise: Some(noise),
     })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// $u = r - 0.4 y$, $y_k = 0.8 y_{k-1} + 0.5 u_{k-1} + 0.05 e_k$: a noisy loop with memory
+    /// (sensor-like noise $e$ that the controller feeds back).
+    fn loop_with_memory(r: &[f64], rng: &mut rand_chacha::ChaCha8Rng) -> (Vec<f64>, Vec<f64>) {
+        use rand_distr::{Distribution, StandardNormal};
+        let len = r.len();
+        let (mut u, mut y) = (vec![0.0; len], vec![0.0; len]);
+        for k in 0..len {
+            let (yp, up) = if k > 0 {
+                (y[k - 1], u[k - 1])
+            } else {
+                (0.0, 0.0)
+            };
+            let e: f64 = StandardNormal.sample(rng);
+            y[k] = 0.8 * yp + 0.5 * up + 0.05 * e;
+            u[k] = r[k] - 0.4 * y[k];
+        }
+        (u, y)
+    }
 
     #[test]
     fn band_factor_matches_f_distribution_quantile() {
@@ -894,18 +980,7 @@ mod tests {
         let base: Vec<f64> = (0..n).map(|_| StandardNormal.sample(&mut rng)).collect();
         let len = n * periods;
         let r: Vec<f64> = (0..len).map(|k| base[k % n]).collect();
-        // u = r - 0.4 y_prev, y = 0.8 y_prev + 0.5 u_prev + noise: a loop with memory
-        let (mut u, mut y) = (vec![0.0; len], vec![0.0; len]);
-        for k in 0..len {
-            let (yp, up) = if k > 0 {
-                (y[k - 1], u[k - 1])
-            } else {
-                (0.0, 0.0)
-            };
-            let e: f64 = StandardNormal.sample(&mut rng);
-            y[k] = 0.8 * yp + 0.5 * up + 0.05 * e;
-            u[k] = r[k] - 0.4 * y[k];
-        }
+        let (u, y) = loop_with_memory(&r, &mut rng);
         let opts = PeriodicOptions::new(n).skip(1);
         let ch = Channels { r: 0, u: 1, y: 2 };
         let lines: Vec<usize> = (1..n / 2).collect();
@@ -940,6 +1015,58 @@ mod tests {
             })
             .sum();
         assert!((per[2][0][0] - naive).norm() < 1e-10 * naive.norm());
+        // the plant's noise as a function of the plant value (`plant_noise`): at the estimate
+        // it is the reported variance; at another value G it is the periods' sample variance
+        // of Y_p − G U_p over P (the mean's) and |Ū|², computed here from the period DFTs
+        let noise = frf.plant_noise.as_ref().unwrap();
+        let per = PeriodicAnalyzer::new(n)
+            .unwrap()
+            .period_lines(&[&u, &y], 1.0, &opts, &lines)
+            .unwrap();
+        let m = per.len() as f64;
+        for (i, _) in lines.iter().enumerate() {
+            let ph = frf.plant.values()[i];
+            assert!((noise[i].variance_at(ph) - var[i]).abs() <= 1e-9 * var[i]);
+            let g = ph * c64::new(1.3, 0.2);
+            let ub = per.iter().map(|x| x[0][i]).sum::<c64>() / m;
+            let e: Vec<c64> = per.iter().map(|x| x[1][i] - g * x[0][i]).collect();
+            let eb = e.iter().sum::<c64>() / m;
+            let naive = e.iter().map(|x| (x - eb).norm_sqr()).sum::<f64>()
+                / ((m - 1.0) * m)
+                / ub.norm_sqr();
+            let v = noise[i].variance_at(g);
+            assert!((v - naive).abs() <= 1e-9 * naive, "line {i}: {v} {naive}");
+        }
+    }
+
+    /// A noisy loop under Welch averaging: `plant_noise` evaluated at the estimate is the plant
+    /// variance [`from_welch`] reports, and it grows with |1 + G C| away from it (sensor noise
+    /// through the controller: $v(G) \propto |1 + G C|^2$ with $C = 0.4$ here).
+    #[test]
+    fn welch_plant_noise_is_the_reported_variance_at_the_estimate() {
+        use crate::frf::welch::{welch_spectra, WelchOptions};
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, StandardNormal};
+        let len = 8192;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let r: Vec<f64> = (0..len).map(|_| StandardNormal.sample(&mut rng)).collect();
+        let (u, y) = loop_with_memory(&r, &mut rng);
+        let sp = welch_spectra(&[&r, &u, &y], &WelchOptions::new(1.0, 128)).unwrap();
+        let frf = from_welch(&sp, Channels { r: 0, u: 1, y: 2 }, (0.01, 0.45), 1e-6, None).unwrap();
+        let noise = frf.plant_noise.as_ref().unwrap();
+        let var = frf.plant.variance().unwrap();
+        assert_eq!(noise.len(), var.len());
+        for (i, g) in frf.plant.values().iter().enumerate() {
+            let v = noise[i].variance_at(*g);
+            assert!(
+                (v - var[i]).abs() <= 1e-9 * var[i],
+                "line {i}: {v} {}",
+                var[i]
+            );
+            // the output-noise part dominates: at G = -1/C the noise would vanish
+            let at_pole = noise[i].variance_at(c64::new(-1.0 / 0.4, 0.0));
+            assert!(at_pole < 0.05 * v, "line {i}: {at_pole} {v}");
+        }
     }
 
     #[test]
