@@ -1,4 +1,4 @@
-//! Sample maximum-likelihood weights in the state-space fit to an FRF
+//! Sample maximum-likelihood weights in the state-space and output-error fits to an FRF
 //! ([`FreqWeights::SampleMaximumLikelihood`]): a closed-loop ratio estimate $\hat G = \bar Y /
 //! \bar U$ whose variance is estimated from the same periods. Weighting each line by its
 //! variance evaluated at the data, $1/v_k(\hat G_k)$, ties the weight to the line's own error,
@@ -8,7 +8,7 @@
 //! closed loop's equations (seeded `ChaCha8Rng`), the sample covariances from the periods.
 
 use ambid_core::c64;
-use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
+use ambid_core::estimate::freqfit::{oe_frd, FreqFitOptions, FreqWeights, TfOrders};
 use ambid_core::estimate::freqfit_ss::{ss_frd, SsFreqOptions};
 use ambid_core::frf::closed_loop::RatioNoise;
 use ambid_core::lti::{Frd, StateSpace};
@@ -96,47 +96,67 @@ fn sample_maximum_likelihood_removes_the_bias_of_weights_taken_at_the_data() {
     // the AMB loop's 300–1000 Hz, where the library chain's fits were pulled off
     let (ctrl, sig) = (30.0, 0.02);
     let runs = 40;
-    let fit = |frd: &Frd, weights: FreqWeights| -> Vec<c64> {
+    // the state-space fit, and the output-error fit B/F with nb = nf = 2, nk = 1 (the plant's
+    // own structure)
+    let fit = |frd: &Frd, weights: FreqWeights, oe: bool| -> Vec<c64> {
         let opts = FreqFitOptions {
             weights,
             ..FreqFitOptions::default()
         };
-        let m = ss_frd(frd, 2, &opts, &SsFreqOptions::default())
-            .unwrap()
-            .model;
-        m.freq_response_siso(&f).unwrap()
+        if oe {
+            let o = TfOrders {
+                nb: 2,
+                nf: 2,
+                nk: 1,
+            };
+            let m = oe_frd(frd, &o, &opts).unwrap().model;
+            m.freq_response(&f).unwrap()
+        } else {
+            let m = ss_frd(frd, 2, &opts, &SsFreqOptions::default())
+                .unwrap()
+                .model;
+            m.freq_response_siso(&f).unwrap()
+        }
     };
-    // per run, the relative error averaged over the lines (complex: a coherent pull shows)
-    let (mut at_data, mut at_model) = (Vec::new(), Vec::new());
+    // per run, the relative error averaged over the lines (complex: a coherent pull shows);
+    // [state-space, output-error][weights at the data, at the model]
+    let mut pulls = [vec![Vec::new(), Vec::new()], vec![Vec::new(), Vec::new()]];
     for _ in 0..runs {
         let (frd, noise) = record(&p0, &f, sig, ctrl, &mut rng);
-
-        for (out, w) in [
-            (&mut at_data, FreqWeights::InverseVariance),
-            (&mut at_model, FreqWeights::SampleMaximumLikelihood(noise)),
-        ] {
-            let r = fit(&frd, w);
-            let e: c64 = r.iter().zip(&p0).map(|(m, p)| (m - p) / p).sum::<c64>() / f.len() as f64;
-            out.push(e);
+        for (s, oe) in [(0, false), (1, true)] {
+            for (w, weights) in [
+                FreqWeights::InverseVariance,
+                FreqWeights::SampleMaximumLikelihood(noise.clone()),
+            ]
+            .into_iter()
+            .enumerate()
+            {
+                let r = fit(&frd, weights, oe);
+                let e: c64 =
+                    r.iter().zip(&p0).map(|(m, p)| (m - p) / p).sum::<c64>() / f.len() as f64;
+                pulls[s][w].push(e);
+            }
         }
     }
-    // mean over the runs and its standard error (per component)
+    // mean over the runs and its standard error
     let stats = |v: &[c64]| -> (c64, f64) {
         let n = v.len() as f64;
         let mean = v.iter().sum::<c64>() / n;
         let var = v.iter().map(|x| (x - mean).norm_sqr()).sum::<f64>() / (n - 1.0);
         (mean, (var / n).sqrt())
     };
-    let (md, sd) = stats(&at_data);
-    let (mm, sm) = stats(&at_model);
-    eprintln!(
-        "weights at the data: mean {md:.3e} se {sd:.3e}; at the model: mean {mm:.3e} se {sm:.3e}"
-    );
-    // at the data: a coherent pull of about 4 % of |P|, tens of standard errors
-    assert!(md.norm() > 10.0 * sd, "{md} {sd}");
-    // at the model: no pull the runs can tell from zero, and a tenth of the other at most
-    assert!(mm.norm() < 3.0 * sm, "{mm} {sm}");
-    assert!(mm.norm() < 0.1 * md.norm(), "{mm} {md}");
+    for (s, name) in [(0, "state space"), (1, "output error")] {
+        let (md, sd) = stats(&pulls[s][0]);
+        let (mm, sm) = stats(&pulls[s][1]);
+        eprintln!(
+            "{name}: weights at the data: mean {md:.3e} se {sd:.3e}; at the model: mean {mm:.3e} se {sm:.3e}"
+        );
+        // at the data: a coherent pull of about 4 % of |P|, tens of standard errors
+        assert!(md.norm() > 10.0 * sd, "{name}: {md} {sd}");
+        // at the model: no pull the runs can tell from zero, and a tenth of the other at most
+        assert!(mm.norm() < 3.0 * sm, "{name}: {mm} {sm}");
+        assert!(mm.norm() < 0.1 * md.norm(), "{name}: {mm} {md}");
+    }
 }
 
 #[test]
@@ -159,18 +179,18 @@ fn sample_maximum_likelihood_weights_are_checked() {
         e.to_string().contains("19 noise descriptions for 20 lines"),
         "{e}"
     );
-    // the polynomial fits hold their weights fixed and refuse them
+    // ARX (linear in its parameters) holds its weights fixed and refuses them
     let opts = FreqFitOptions {
         weights: FreqWeights::SampleMaximumLikelihood(vec![one; 20]),
         ..FreqFitOptions::default()
     };
-    let o = ambid_core::estimate::freqfit::TfOrders {
+    let o = TfOrders {
         nb: 2,
         nf: 2,
         nk: 1,
     };
-    let e = ambid_core::estimate::freqfit::oe_frd(&frd, &o, &opts).unwrap_err();
-    assert!(e.to_string().contains("ss_frd"), "{e}");
+    let e = ambid_core::estimate::freqfit::arx_frd(&frd, &o, &opts).unwrap_err();
+    assert!(e.to_string().contains("ss_frd, oe_frd"), "{e}");
     // a noise of the output alone: the weights are constant and the fit is the plain one
     let sml = ss_frd(&frd, 2, &opts, &SsFreqOptions::default())
         .unwrap()

@@ -36,9 +36,9 @@
 //! FRF's variances smoothed over ±m lines (as $\sigma_k^2|\bar U_k|^2$). `SHAPE` applies to
 //! every refit. `SML=1` refits the nominal model by sample maximum likelihood (the FRF's variance
 //! at the model, `FreqWeights::SampleMaximumLikelihood` with the estimate's `plant_noise`) and
-//! bounds it with the variance at the chosen model; `SMOOTH_VAR_PLAIN=m` refits with the
-//! variances themselves averaged over ±m lines (both without `LEVELS`; docs/uncertainty.md,
-//! "Weights that follow the data's noise").
+//! bounds it with the variance at the chosen model (`UncertaintyRun::on_twin_weighted`);
+//! `SMOOTH_VAR_PLAIN=m` refits with the variances themselves averaged over ±m lines (without
+//! `LEVELS`; docs/uncertainty.md, "Weights that follow the data's noise").
 
 use ambid::uncertainty::{loop_stable, nominal_gain_interval, UncertaintyRun};
 use ambid_twin::Mode;
@@ -112,7 +112,14 @@ fn main() {
         };
         for &seed in &seeds {
             let t = std::time::Instant::now();
-            let mut run = match UncertaintyRun::on_twin_with_levels(rig, seed, mode, &levels) {
+            // SML=1: the nominal model's fits by sample maximum likelihood
+            let weights = if std::env::var("SML").is_ok() {
+                ambid::uncertainty::FitWeights::AtModel
+            } else {
+                ambid::uncertainty::FitWeights::AtData
+            };
+            let mut run = match UncertaintyRun::on_twin_weighted(rig, seed, mode, &levels, weights)
+            {
                 Ok(r) => r,
                 Err(e) => {
                     println!("{rig} {seed}: {e}");
@@ -236,48 +243,6 @@ fn main() {
                 )
                 .unwrap();
                 refit(&mut run, frd);
-            }
-            if std::env::var("SML").is_ok() {
-                // the nominal model by sample maximum likelihood (the FRF's variance at the
-                // model in the fits and the BIC), bounded with the variance at the chosen model
-                assert!(levels.is_empty(), "SML is for runs without LEVELS");
-                let (out, frd) = ambid::uncertainty::twin_seed_frf(rig, seed, mode).unwrap();
-                let noise = out
-                    .periodic_frf(ambid::uncertainty::TWIN_BAND_HZ, None)
-                    .unwrap()
-                    .plant_noise
-                    .unwrap();
-                let unstable = ambid_core::validate::compare::unstable_poles_from_loop(
-                    &frd,
-                    &run.controller,
-                    None,
-                )
-                .ok();
-                let nominal = ambid::uncertainty::nominal_by_bic_weighted(
-                    &frd,
-                    ambid_core::estimate::freqfit::FreqWeights::SampleMaximumLikelihood(
-                        noise.clone(),
-                    ),
-                    unstable,
-                    ambid::uncertainty::TWIN_ORDERS,
-                )
-                .unwrap();
-                let pm = nominal.freq_response_siso(frd.f_hz()).unwrap();
-                let v: Vec<f64> = noise
-                    .iter()
-                    .zip(&pm)
-                    .map(|(n, p)| n.variance_at(*p))
-                    .collect();
-                let frd = ambid_core::lti::Frd::new(
-                    frd.f_hz().to_vec(),
-                    frd.values().to_vec(),
-                    Some(v),
-                    frd.ts(),
-                )
-                .unwrap();
-                run.analysis = analyse_with_shape(&nominal, &frd, &run.controller);
-                run.nominal = nominal;
-                run.frd = frd;
             }
             if let Ok(m) = std::env::var("SMOOTH_VAR_PLAIN") {
                 // diagnostic: the FRF's variances themselves averaged over ±m lines before the

@@ -59,7 +59,9 @@ pub enum FreqWeights {
     /// evaluated at the *model* ([`RatioNoise`] per line, same length as the [`Frd`]; e.g.
     /// [`ClosedLoopFrf::plant_noise`](crate::frf::closed_loop::ClosedLoopFrf::plant_noise)),
     /// not at the data (module docs, "Weights that follow the data's noise"). The state-space
-    /// fit [`ss_frd`](super::freqfit_ss::ss_frd) refines with it; the polynomial fits refuse it.
+    /// fit [`ss_frd`](super::freqfit_ss::ss_frd) and the output-error fit [`oe_frd`] refine
+    /// with it (their Sanathanan–Koerner and subspace starts take the weights at the data);
+    /// [`arx_frd`] (linear in its parameters) and [`coprime_frd`] refuse it.
     SampleMaximumLikelihood(Vec<RatioNoise>),
 }
 
@@ -264,9 +266,47 @@ impl FreqData {
         Ok(data)
     }
 
+    /// Line `k`'s variance at the model value `p` under sample maximum likelihood, held at
+    /// least $10^{-6}$ of its value at the data (a model value where the noise would vanish,
+    /// $1 + \hat P C = 0$ for sensor noise alone, cannot take an unbounded weight), and whether
+    /// it was held; `None` with fixed weights.
+    pub(crate) fn model_variance(&self, k: usize, p: c64) -> Option<(f64, bool)> {
+        let noise = self.noise.get(k)?;
+        let floor = 1e-6 / self.w[k];
+        let v = noise.variance_at(p);
+        Some(if v > floor { (v, false) } else { (floor, true) })
+    }
+
+    /// Line `k`'s weighted residual $\sqrt{w_k}(p - G_k)$ at the model value `p`, the weight at
+    /// the model under sample maximum likelihood.
+    pub(crate) fn residual(&self, k: usize, p: c64) -> c64 {
+        let sw = self
+            .model_variance(k, p)
+            .map_or(self.w[k].sqrt(), |(v, _)| 1.0 / v.sqrt());
+        (p - self.g[k]) * sw
+    }
+
+    /// The derivative of [`residual`](Self::residual) along a change `dp` of the model value
+    /// `p`: $\sqrt{w_k}\,\delta p$ with fixed weights; under sample maximum likelihood, with $r
+    /// = (p - G)/\sqrt{v(p)}$, $\delta r = \delta p/\sqrt v - (p - G)\,\delta v/(2 v^{3/2})$.
+    pub(crate) fn residual_slope(&self, k: usize, p: c64, dp: c64) -> c64 {
+        match self.model_variance(k, p) {
+            None => dp * self.w[k].sqrt(),
+            Some((v, held)) => {
+                let sw = 1.0 / v.sqrt();
+                let dv = if held {
+                    0.0
+                } else {
+                    self.noise[k].variance_slope(p, dp)
+                };
+                dp * sw - (p - self.g[k]) * (0.5 * dv * sw / v)
+            }
+        }
+    }
+
     /// An error for a fit that holds the weights fixed when they are to follow the model
     /// ([`FreqWeights::SampleMaximumLikelihood`]): only [`ss_frd`](super::freqfit_ss::ss_frd)
-    /// refines with them.
+    /// and [`oe_frd`] refine with them.
     pub fn require_fixed_weights(&self, fit: &'static str) -> Result<()> {
         if self.noise.is_empty() {
             Ok(())
@@ -275,7 +315,8 @@ impl FreqData {
                 "weights",
                 format!(
                     "{fit} holds its weights fixed; sample maximum-likelihood weights are for the \
-                     state-space fit (ss_frd): use inverse-variance weights here"
+                     state-space and output-error fits (ss_frd, oe_frd): use inverse-variance \
+                     weights here"
                 ),
             ))
         }
@@ -856,7 +897,6 @@ pub fn oe_frd(
     frd.require_siso("freqfit::oe_frd")?;
     o.check()?;
     let data = FreqData::new(frd, opts)?;
-    data.require_fixed_weights("oe_frd")?;
     data.check_params(o.n_params())?;
     let zp = zeta_powers(&data, (o.nk + o.nb).max(o.nf + 1) + o.nf);
     let (mut b, mut f) = levy_step(&data, o, &zp, &data.w)?;
@@ -939,7 +979,8 @@ pub fn oe_frd(
 }
 
 /// The OE criterion for the Levenberg–Marquardt solver: residuals (re, im) of
-/// $\sqrt{w_k}(\zeta^{n_k}B/F - G_k)$.
+/// $\sqrt{w_k}(\zeta^{n_k}B/F - G_k)$ ([`FreqData::residual`]: the weight at the model under
+/// sample maximum likelihood).
 struct TfProblem<'a> {
     data: &'a FreqData,
     o: TfOrders,
@@ -959,8 +1000,9 @@ impl super::pem::lm::LeastSquaresProblem for TfProblem<'_> {
         let mut r = Vec::with_capacity(2 * self.data.len());
         for k in 0..self.data.len() {
             let fk = c64::new(1.0, 0.0) + poly_at(f, 1, self.zp, k);
-            let e =
-                (poly_at(b, self.o.nk, self.zp, k) / fk - self.data.g[k]) * self.data.w[k].sqrt();
+            let e = self
+                .data
+                .residual(k, poly_at(b, self.o.nk, self.zp, k) / fk);
             r.push(e.re);
             r.push(e.im);
         }
@@ -972,16 +1014,18 @@ impl super::pem::lm::LeastSquaresProblem for TfProblem<'_> {
         let l = self.data.len();
         let mut j = faer::Mat::<f64>::zeros(2 * l, x.len());
         for k in 0..l {
-            let sw = self.data.w[k].sqrt();
             let fk = c64::new(1.0, 0.0) + poly_at(f, 1, self.zp, k);
             let bk = poly_at(b, nk, self.zp, k);
+            let pk = bk / fk;
             for (p, _) in b.iter().enumerate() {
-                let d = self.zp[nk + p][k] / fk * sw;
+                let d = self.data.residual_slope(k, pk, self.zp[nk + p][k] / fk);
                 j[(2 * k, p)] = d.re;
                 j[(2 * k + 1, p)] = d.im;
             }
             for i in 1..=f.len() {
-                let d = -(self.zp[i][k] * bk) / (fk * fk) * sw;
+                let d = self
+                    .data
+                    .residual_slope(k, pk, -(self.zp[i][k] * bk) / (fk * fk));
                 j[(2 * k, nb + i - 1)] = d.re;
                 j[(2 * k + 1, nb + i - 1)] = d.im;
             }
@@ -1269,5 +1313,71 @@ pub fn estimate_delay(
         (Some(b), _) => Ok(b),
         (None, Some(e)) => Err(e),
         (None, None) => Err(Error::invalid("max_nk", "no delay was tried")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::estimate::pem::lm::LeastSquaresProblem;
+
+    /// The output-error criterion's Jacobian against central differences, with weights fixed
+    /// and with sample maximum-likelihood weights (the variance's slope in the residual).
+    #[test]
+    fn oe_jacobian_matches_finite_differences() {
+        let f: Vec<f64> = (1..50).map(|k| 9.0 * k as f64).collect();
+        let vals: Vec<c64> = f
+            .iter()
+            .map(|x| c64::new(1.0 / (1.0 + x / 60.0), -0.02 * x / 60.0))
+            .collect();
+        let noise: Vec<RatioNoise> = f
+            .iter()
+            .map(|x| RatioNoise {
+                a: 2e-3 * (1.0 + x / 300.0),
+                b: 1e-3,
+                c: c64::new(4e-4, 1e-4),
+            })
+            .collect();
+        let frd = Frd::new(f, vals, None, Some(1e-3)).unwrap();
+        let o = TfOrders {
+            nb: 2,
+            nf: 2,
+            nk: 1,
+        };
+        for weights in [
+            FreqWeights::Uniform,
+            FreqWeights::SampleMaximumLikelihood(noise),
+        ] {
+            let opts = FreqFitOptions {
+                weights,
+                ..FreqFitOptions::default()
+            };
+            let data = FreqData::new(&frd, &opts).unwrap();
+            let zp = zeta_powers(&data, 4);
+            let mut prob = TfProblem {
+                data: &data,
+                o,
+                zp: &zp,
+                limit: None,
+            };
+            let x = [0.3, -0.1, -1.2, 0.5];
+            let j = prob.jacobian(&x).unwrap();
+            for p in 0..x.len() {
+                let eps = 1e-6;
+                let (mut xp, mut xm) = (x, x);
+                xp[p] += eps;
+                xm[p] -= eps;
+                let (rp, rm) = (prob.residuals(&xp).unwrap(), prob.residuals(&xm).unwrap());
+                for i in 0..rp.len() {
+                    let fd = (rp[i] - rm[i]) / (2.0 * eps);
+                    assert!(
+                        (fd - j[(i, p)]).abs() <= 1e-5 * (1.0 + fd.abs()),
+                        "{:?} param {p} row {i}: {fd} vs {}",
+                        data.noise.len(),
+                        j[(i, p)]
+                    );
+                }
+            }
+        }
     }
 }

@@ -110,7 +110,6 @@
 use super::freqfit::{constrained_start, FreqData, FreqErrors, FreqFit, FreqFitOptions};
 use super::pem::lm::{minimize, LeastSquaresProblem, LmOptions};
 use crate::error::{Error, Result};
-use crate::frf::closed_loop::RatioNoise;
 use crate::linalg;
 use crate::lti::{Frd, StateSpace};
 use faer::{c64, Mat};
@@ -411,9 +410,8 @@ struct Problem<'a> {
     delta: Vec<c64>,
     g: &'a [c64],
     sw: Vec<f64>,
-    /// Sample maximum likelihood ([`FreqData::noise`]): the weights follow the model; empty for
-    /// fixed weights.
-    noise: &'a [RatioNoise],
+    /// The lines and weights (the residual and its slope, [`FreqData::residual`]).
+    data: &'a FreqData,
     /// Section orders (2 or 1).
     sections: Vec<usize>,
     feedthrough: bool,
@@ -446,7 +444,7 @@ impl<'a> Problem<'a> {
             delta: data.z.iter().map(|&z| warp.delta(z)).collect(),
             g: &data.g,
             sw: data.w.iter().map(|w| w.sqrt()).collect(),
-            noise: &data.noise,
+            data,
             sections,
             feedthrough,
             limit,
@@ -636,19 +634,6 @@ impl<'a> Problem<'a> {
     }
 }
 
-impl Problem<'_> {
-    /// Line `k`'s variance at the model value `p` under sample maximum likelihood, held at
-    /// least $10^{-6}$ of its value at the data (a model value where the noise would vanish,
-    /// $1 + \hat P C = 0$ for sensor noise alone, cannot take an unbounded weight), and whether
-    /// it was held; `None` with fixed weights.
-    fn model_variance(&self, k: usize, p: c64) -> Option<(f64, bool)> {
-        let noise = self.noise.get(k)?;
-        let floor = 1e-6 / (self.sw[k] * self.sw[k]);
-        let v = noise.variance_at(p);
-        Some(if v > floor { (v, false) } else { (floor, true) })
-    }
-}
-
 impl LeastSquaresProblem for Problem<'_> {
     fn residuals(&mut self, th: &[f64]) -> Option<Vec<f64>> {
         if !self.admissible(th) {
@@ -657,11 +642,7 @@ impl LeastSquaresProblem for Problem<'_> {
         let l = self.delta.len();
         let mut r = vec![0.0; 2 * l];
         for k in 0..l {
-            let p = self.eval_line(th, k, None);
-            let sw = self
-                .model_variance(k, p)
-                .map_or(self.sw[k], |(v, _)| 1.0 / v.sqrt());
-            let e = (p - self.g[k]) * sw;
+            let e = self.data.residual(k, self.eval_line(th, k, None));
             r[k] = e.re;
             r[l + k] = e.im;
         }
@@ -675,27 +656,10 @@ impl LeastSquaresProblem for Problem<'_> {
         let mut row = vec![c64::new(0.0, 0.0); np];
         for k in 0..l {
             let p = self.eval_line(th, k, Some(&mut row));
-            match self.model_variance(k, p) {
-                None => {
-                    for (q, v) in row.iter().enumerate() {
-                        j[(k, q)] = self.sw[k] * v.re;
-                        j[(l + k, q)] = self.sw[k] * v.im;
-                    }
-                }
-                // r = (P − G)/√v(P): ∂r = ∂P/√v − (P − G) ∂v/(2 v^{3/2})
-                Some((v, held)) => {
-                    let (sw, e) = (1.0 / v.sqrt(), p - self.g[k]);
-                    for (q, dp) in row.iter().enumerate() {
-                        let dv = if held {
-                            0.0
-                        } else {
-                            self.noise[k].variance_slope(p, *dp)
-                        };
-                        let d = *dp * sw - e * (0.5 * dv * sw / v);
-                        j[(k, q)] = d.re;
-                        j[(l + k, q)] = d.im;
-                    }
-                }
+            for (q, dp) in row.iter().enumerate() {
+                let d = self.data.residual_slope(k, p, *dp);
+                j[(k, q)] = d.re;
+                j[(l + k, q)] = d.im;
             }
         }
         Some(j)
@@ -705,6 +669,7 @@ impl LeastSquaresProblem for Problem<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::frf::closed_loop::RatioNoise;
 
     /// A pair, an unstable real pole and two stable ones: the Jacobian tests' sections.
     const TEST_POLES: [c64; 5] = [
@@ -807,7 +772,7 @@ mod tests {
         let mut row = vec![c64::new(0.0, 0.0); th.len()];
         for k in 0..l {
             let pk = prob.eval_line(&th, k, Some(&mut row));
-            let sw = 1.0 / prob.model_variance(k, pk).unwrap().0.sqrt();
+            let sw = 1.0 / prob.data.model_variance(k, pk).unwrap().0.sqrt();
             for (q, dp) in row.iter().enumerate() {
                 let d = *dp * sw;
                 weight_term = weight_term
