@@ -1222,12 +1222,15 @@ pub fn variances_at_model(
 }
 
 /// One run of the whole chain on the twin: the seed experiment on rig `rig` (0 = nominal) with
-/// noise seed `seed`, the period-averaged plant FRF, the nominal model (the BIC choice among
-/// [`TWIN_ORDERS`] of inverse-variance frequency-domain state-space fits with the loop's unstable
-/// pole count), [`analyse`], and the truth to check it against.
+/// noise seed `seed`, the period-averaged plant FRF, the nominal model ([`nominal_by_bic`]: the
+/// BIC choice among [`TWIN_ORDERS`] of inverse-variance frequency-domain state-space fits with
+/// the loop's unstable pole count and a stable loop with the controller; sample
+/// maximum-likelihood fits with [`UncertaintyRun::on_twin_weighted`]), [`analyse`], and the
+/// truth to check it against.
 #[derive(Debug, Clone)]
 pub struct UncertaintyRun {
-    /// The measured plant FRF.
+    /// The measured plant FRF (with [`FitWeights::AtModel`], its variances at the nominal
+    /// model).
     pub frd: Frd,
     /// The nominal model.
     pub nominal: StateSpace,
