@@ -1302,7 +1302,9 @@ impl UncertaintyRun {
         levels: &[f64],
         weights: FitWeights,
     ) -> Result<Self> {
-        let (out, measured) = twin_seed_frf(rig, seed, mode)?;
+        let (out, cl) =
+            twin_seed_closed_loop(rig, seed, mode, ExcitationPlan::default().amplitude_frac)?;
+        let measured = cl.plant;
         let frf_periods = out
             .period_deviations(&measured)
             .context("the FRF's periods")?;
@@ -1310,8 +1312,7 @@ impl UncertaintyRun {
         let (nominal, frd) = match weights {
             FitWeights::AtData => (nominal_by_bic(&measured, &controller)?, measured),
             FitWeights::AtModel => {
-                let noise = out
-                    .periodic_frf(TWIN_BAND_HZ, None)?
+                let noise = cl
                     .plant_noise
                     .ok_or_else(|| Error::other("the periodic estimate has no noise per line"))?;
                 let unstable = unstable_poles_from_loop(&measured, &controller, None).ok();
@@ -1493,6 +1494,21 @@ pub fn twin_seed_frf_at(
     mode: Mode,
     amplitude_frac: f64,
 ) -> Result<(crate::experiment::ExperimentOutput, Frd)> {
+    let (out, cl) = twin_seed_closed_loop(rig, seed, mode, amplitude_frac)?;
+    Ok((out, cl.plant))
+}
+
+/// [`twin_seed_frf_at`]'s experiment and its whole closed-loop estimate (the plant's noise per
+/// line with it).
+fn twin_seed_closed_loop(
+    rig: u64,
+    seed: u64,
+    mode: Mode,
+    amplitude_frac: f64,
+) -> Result<(
+    crate::experiment::ExperimentOutput,
+    ambid_core::frf::closed_loop::ClosedLoopFrf,
+)> {
     let exp = Experiment {
         twin: twin_rig(rig)?,
         excitation: ExcitationPlan {
@@ -1505,8 +1521,8 @@ pub fn twin_seed_frf_at(
         record_b: false,
     };
     let out = run(&exp)?;
-    let frd = out.periodic_frf(TWIN_BAND_HZ, None)?.plant;
-    Ok((out, frd))
+    let cl = out.periodic_frf(TWIN_BAND_HZ, None)?;
+    Ok((out, cl))
 }
 
 /// The nominal model of a twin run (type docs of [`UncertaintyRun`]): of the inverse-variance

@@ -669,6 +669,7 @@ impl LeastSquaresProblem for Problem<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::estimate::pem::lm::jacobian_against_differences;
     use crate::frf::closed_loop::RatioNoise;
 
     /// A pair, an unstable real pole and two stable ones: the Jacobian tests' sections.
@@ -680,62 +681,42 @@ mod tests {
         c64::new(0.7, 0.0),
     ];
 
-    /// The problem's Jacobian at `th` against central differences of its residuals, to the
-    /// relative tolerance `tol`; returned for further checks.
-    fn jacobian_against_differences(prob: &mut Problem<'_>, th: &[f64], tol: f64) -> Mat<f64> {
-        let j = prob.jacobian(th).unwrap();
-        for p in 0..th.len() {
-            let eps = 1e-6 * (1.0 + th[p].abs());
-            let mut tp = th.to_vec();
-            tp[p] += eps;
-            let mut tm = th.to_vec();
-            tm[p] -= eps;
-            let (rp, rm) = (prob.residuals(&tp).unwrap(), prob.residuals(&tm).unwrap());
-            for i in 0..rp.len() {
-                let fd = (rp[i] - rm[i]) / (2.0 * eps);
-                assert!(
-                    (fd - j[(i, p)]).abs() <= tol * (1.0 + fd.abs()),
-                    "param {p} row {i}: {fd} vs {}",
-                    j[(i, p)]
-                );
-            }
-        }
-        j
-    }
-
     #[test]
-    fn jacobian_matches_finite_differences() {
+    fn jacobian_matches_finite_differences() -> std::result::Result<(), Box<dyn std::error::Error>>
+    {
         let f: Vec<f64> = (1..60).map(|k| 7.0 * k as f64).collect();
         let vals: Vec<c64> = f
             .iter()
             .map(|x| c64::new(1.0 / (1.0 + x / 50.0), -0.01 * x))
             .collect();
-        let frd = Frd::new(f, vals, None, Some(1e-3)).unwrap();
-        let data = FreqData::new(&frd, &FreqFitOptions::default()).unwrap();
-        let warp = Warp::new(&data).unwrap();
+        let frd = Frd::new(f, vals, None, Some(1e-3))?;
+        let data = FreqData::new(&frd, &FreqFitOptions::default())?;
+        let warp = Warp::new(&data)?;
         let poles = TEST_POLES;
-        let mut prob = Problem::new(&data, &warp, &poles, true, None).unwrap();
+        let mut prob = Problem::new(&data, &warp, &poles, true, None)?;
         let mut th = prob.denominators_from_poles(&poles);
-        prob.fit_numerators(&mut th).unwrap();
-        jacobian_against_differences(&mut prob, &th, 1e-6);
+        prob.fit_numerators(&mut th)?;
+        jacobian_against_differences(&mut prob, &th, 1e-6)?;
         // the realisation has the section poles and the same response
-        let model = prob.realise(&th, 1e-3).unwrap();
-        let resp = model.freq_response_siso(&data.f_hz).unwrap();
+        let model = prob.realise(&th, 1e-3)?;
+        let resp = model.freq_response_siso(&data.f_hz)?;
         for (k, rk) in resp.iter().enumerate() {
             let pf = prob.eval_line(&th, k, None);
             assert!((rk - pf).norm() <= 1e-10 * (1.0 + pf.norm()));
         }
-        let mut mp = model.poles().unwrap();
+        let mut mp = model.poles()?;
         mp.sort_by(|a, b| a.re.total_cmp(&b.re).then(a.im.total_cmp(&b.im)));
         for p in poles {
             assert!(mp.iter().any(|m| (m - p).norm() < 1e-12), "{p} in {mp:?}");
         }
+        Ok(())
     }
 
     /// With sample maximum-likelihood weights the residual $(P_\theta - G)/\sqrt{v(P_\theta)}$
     /// has the variance's slope in its Jacobian: checked against central differences.
     #[test]
-    fn sml_jacobian_matches_finite_differences() {
+    fn sml_jacobian_matches_finite_differences(
+    ) -> std::result::Result<(), Box<dyn std::error::Error>> {
         let f: Vec<f64> = (1..60).map(|k| 7.0 * k as f64).collect();
         let vals: Vec<c64> = f
             .iter()
@@ -749,22 +730,22 @@ mod tests {
                 c: c64::new(3e-4, -1e-4 * x / 400.0),
             })
             .collect();
-        let frd = Frd::new(f, vals, None, Some(1e-3)).unwrap();
+        let frd = Frd::new(f, vals, None, Some(1e-3))?;
         let opts = FreqFitOptions {
             weights: super::super::freqfit::FreqWeights::SampleMaximumLikelihood(noise),
             ..FreqFitOptions::default()
         };
-        let data = FreqData::new(&frd, &opts).unwrap();
-        let warp = Warp::new(&data).unwrap();
+        let data = FreqData::new(&frd, &opts)?;
+        let warp = Warp::new(&data)?;
         let poles = TEST_POLES;
-        let mut prob = Problem::new(&data, &warp, &poles, true, None).unwrap();
+        let mut prob = Problem::new(&data, &warp, &poles, true, None)?;
         let mut th = prob.denominators_from_poles(&poles);
-        prob.fit_numerators(&mut th).unwrap();
+        prob.fit_numerators(&mut th)?;
         // off the numerators' optimum, so that the residual's weight term matters
         for v in th.iter_mut() {
             *v *= 1.05;
         }
-        let j = jacobian_against_differences(&mut prob, &th, 1e-5);
+        let j = jacobian_against_differences(&mut prob, &th, 1e-5)?;
         let mut weight_term = 0.0f64;
         // the slope term matters: the Jacobian without it (∂P/√v alone) is off by more than
         // the differences' tolerance
@@ -772,7 +753,13 @@ mod tests {
         let mut row = vec![c64::new(0.0, 0.0); th.len()];
         for k in 0..l {
             let pk = prob.eval_line(&th, k, Some(&mut row));
-            let sw = 1.0 / prob.data.model_variance(k, pk).unwrap().0.sqrt();
+            let sw = 1.0
+                / prob
+                    .data
+                    .model_variance(k, pk)
+                    .ok_or("fixed weights")?
+                    .0
+                    .sqrt();
             for (q, dp) in row.iter().enumerate() {
                 let d = *dp * sw;
                 weight_term = weight_term
@@ -781,6 +768,7 @@ mod tests {
             }
         }
         assert!(weight_term > 1e-3, "{weight_term}");
+        Ok(())
     }
 
     /// An AMB-like plant (unstable and stable real poles at 1.0206 and 0.9795, pairs at 125 Hz

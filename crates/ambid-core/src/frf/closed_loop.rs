@@ -1018,11 +1018,13 @@ mod tests {
         // the plant's noise as a function of the plant value (`plant_noise`): at the estimate
         // it is the reported variance; at another value G it is the periods' sample variance
         // of Y_p − G U_p over P (the mean's) and |Ū|², computed here from the period DFTs
-        let noise = frf.plant_noise.as_ref().unwrap();
-        let per = PeriodicAnalyzer::new(n)
-            .unwrap()
+        let (Some(noise), Ok(mut an)) = (frf.plant_noise.as_ref(), PeriodicAnalyzer::new(n)) else {
+            panic!("a periodic estimate with variances has its plant noise");
+        };
+        let per = an
             .period_lines(&[&u, &y], 1.0, &opts, &lines)
-            .unwrap();
+            .map_err(|e| e.to_string());
+        let Ok(per) = per else { panic!("{per:?}") };
         let m = per.len() as f64;
         for (i, _) in lines.iter().enumerate() {
             let ph = frf.plant.values()[i];
@@ -1043,7 +1045,8 @@ mod tests {
     /// variance [`from_welch`] reports, and it grows with |1 + G C| away from it (sensor noise
     /// through the controller: $v(G) \propto |1 + G C|^2$ with $C = 0.4$ here).
     #[test]
-    fn welch_plant_noise_is_the_reported_variance_at_the_estimate() {
+    fn welch_plant_noise_is_the_reported_variance_at_the_estimate(
+    ) -> std::result::Result<(), Box<dyn std::error::Error>> {
         use crate::frf::welch::{welch_spectra, WelchOptions};
         use rand::SeedableRng;
         use rand_distr::{Distribution, StandardNormal};
@@ -1051,10 +1054,10 @@ mod tests {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
         let r: Vec<f64> = (0..len).map(|_| StandardNormal.sample(&mut rng)).collect();
         let (u, y) = loop_with_memory(&r, &mut rng);
-        let sp = welch_spectra(&[&r, &u, &y], &WelchOptions::new(1.0, 128)).unwrap();
-        let frf = from_welch(&sp, Channels { r: 0, u: 1, y: 2 }, (0.01, 0.45), 1e-6, None).unwrap();
-        let noise = frf.plant_noise.as_ref().unwrap();
-        let var = frf.plant.variance().unwrap();
+        let sp = welch_spectra(&[&r, &u, &y], &WelchOptions::new(1.0, 128))?;
+        let frf = from_welch(&sp, Channels { r: 0, u: 1, y: 2 }, (0.01, 0.45), 1e-6, None)?;
+        let noise = frf.plant_noise.as_ref().ok_or("no plant noise")?;
+        let var = frf.plant.variance().ok_or("no variance")?;
         assert_eq!(noise.len(), var.len());
         for (i, g) in frf.plant.values().iter().enumerate() {
             let v = noise[i].variance_at(*g);
@@ -1067,6 +1070,7 @@ mod tests {
             let at_pole = noise[i].variance_at(c64::new(-1.0 / 0.4, 0.0));
             assert!(at_pole < 0.05 * v, "line {i}: {at_pole} {v}");
         }
+        Ok(())
     }
 
     #[test]

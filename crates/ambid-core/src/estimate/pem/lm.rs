@@ -1026,6 +1026,37 @@ fn gauss_newton_leaves<P: LeastSquaresProblem + ?Sized>(
     Some(finite_residuals(problem, &xt, m).is_none())
 }
 
+/// Test support: a problem's Jacobian at `th` against central differences of its residuals, to the
+/// relative tolerance `tol`; returned for further checks.
+#[cfg(test)]
+pub(crate) fn jacobian_against_differences(
+    prob: &mut impl LeastSquaresProblem,
+    th: &[f64],
+    tol: f64,
+) -> std::result::Result<Mat<f64>, Box<dyn std::error::Error>> {
+    let j = prob.jacobian(th).ok_or("no Jacobian")?;
+    for p in 0..th.len() {
+        let eps = 1e-6 * (1.0 + th[p].abs());
+        let mut tp = th.to_vec();
+        tp[p] += eps;
+        let mut tm = th.to_vec();
+        tm[p] -= eps;
+        let (rp, rm) = (
+            prob.residuals(&tp).ok_or("no residuals")?,
+            prob.residuals(&tm).ok_or("no residuals")?,
+        );
+        for i in 0..rp.len() {
+            let fd = (rp[i] - rm[i]) / (2.0 * eps);
+            assert!(
+                (fd - j[(i, p)]).abs() <= tol * (1.0 + fd.abs()),
+                "param {p} row {i}: {fd} vs {}",
+                j[(i, p)]
+            );
+        }
+    }
+    Ok(j)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
