@@ -212,3 +212,87 @@ fn sample_maximum_likelihood_weights_are_checked() {
         .zip(&b)
         .all(|(x, y)| (x - y).norm() <= 1e-9 * y.norm()));
 }
+
+/// Term (f) with the FRF's noise ([`ExtraTerms::fit_noise`]): its reference is the sample
+/// maximum-likelihood fit, so the SML fit itself is at distance 0, and the inverse-variance fit
+/// is at its distance from the SML fit computed here by hand, the pull of the weights at the
+/// data (which the reference without the noise would not show).
+#[test]
+fn term_f_takes_the_sample_maximum_likelihood_fit_as_its_reference_with_the_noise() {
+    use ambid_core::validate::uncertainty::{uncertainty, ExtraTerms, UncertaintyOptions};
+    let truth = plant();
+    let f: Vec<f64> = (1..=300).map(|k| 1.5 * k as f64).collect();
+    let p0 = truth.freq_response_siso(&f).unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    let (frd, noise) = record(&p0, &f, 0.02, 30.0, &mut rng);
+    let fit = |weights: FreqWeights| {
+        let opts = FreqFitOptions {
+            weights,
+            max_unstable_poles: Some(0),
+            ..FreqFitOptions::default()
+        };
+        ss_frd(&frd, 2, &opts, &SsFreqOptions::default())
+            .unwrap()
+            .model
+    };
+    let sml = fit(FreqWeights::SampleMaximumLikelihood(noise.clone()));
+    let iv = fit(FreqWeights::InverseVariance);
+    let (ps, pi) = (
+        sml.freq_response_siso(&f).unwrap(),
+        iv.freq_response_siso(&f).unwrap(),
+    );
+    // the bound's variances at the SML model, as the workflow passes them
+    let at_model: Vec<f64> = noise
+        .iter()
+        .zip(&ps)
+        .map(|(n, p)| n.variance_at(*p))
+        .collect();
+    let frd_m = Frd::new(f.clone(), frd.values().to_vec(), Some(at_model), Some(TS)).unwrap();
+    let with = ExtraTerms {
+        fit_noise: Some(&noise),
+        ..ExtraTerms::default()
+    };
+    let opts = UncertaintyOptions::default();
+    let own = uncertainty(&sml, &frd_m, &with, &opts).unwrap();
+    let d = own.fit_distance.expect("term (f)");
+    assert!(
+        d.iter().zip(&ps).all(|(d, p)| *d <= 1e-6 * p.norm()),
+        "the SML fit's own term (f): {:?}",
+        d.iter()
+            .zip(&ps)
+            .map(|(d, p)| d / p.norm())
+            .fold(0.0, f64::max)
+    );
+    // the inverse-variance fit: its distance from the SML fit, line by line
+    let other = uncertainty(&iv, &frd_m, &with, &opts).unwrap();
+    let d = other.fit_distance.expect("term (f)");
+    let mut rel = Vec::new();
+    for ((d, a), b) in d.iter().zip(&pi).zip(&ps) {
+        let want = (a - b).norm();
+        assert!(
+            (d - want).abs() <= 1e-5 * b.norm() + 1e-3 * want,
+            "{d} {want}"
+        );
+        rel.push(want / b.norm());
+    }
+    rel.sort_by(f64::total_cmp);
+    // the pull of the weights at the data is of the order of the first test's 4 % of |P|
+    assert!(rel[rel.len() / 2] > 1e-3, "median {}", rel[rel.len() / 2]);
+    // without the noise the reference is the inverse-variance fit to these variances at the
+    // model, which is not the SML fit: the SML model is then not at distance 0
+    let plain = uncertainty(&sml, &frd_m, &ExtraTerms::default(), &opts).unwrap();
+    let d = plain.fit_distance.expect("term (f)");
+    let mut rel: Vec<f64> = d.iter().zip(&ps).map(|(d, p)| d / p.norm()).collect();
+    rel.sort_by(f64::total_cmp);
+    eprintln!(
+        "without the noise, the SML fit's term (f): median {:.3e}",
+        rel[rel.len() / 2]
+    );
+    // a wrong length is a typed error
+    let short = ExtraTerms {
+        fit_noise: Some(&noise[1..]),
+        ..ExtraTerms::default()
+    };
+    let e = uncertainty(&sml, &frd_m, &short, &opts).unwrap_err();
+    assert!(e.to_string().contains("fit_noise"), "{e}");
+}

@@ -34,9 +34,12 @@
 //! statistics); `SYNTH_DOF=n` (with `CALIB_SYNTH=1`) hands the fit variances estimated with
 //! `n` complex degrees of freedom instead of the true ones. `SMOOTH_VAR=m` refits with the
 //! FRF's variances smoothed over ±m lines (as $\sigma_k^2|\bar U_k|^2$). `SHAPE` applies to
-//! every refit. `SML=1` refits the nominal model by sample maximum likelihood (the FRF's variance
-//! at the model, `FreqWeights::SampleMaximumLikelihood` with the estimate's `plant_noise`) and
-//! bounds it with the variance at the chosen model (`UncertaintyRun::on_twin_weighted`);
+//! every refit. The nominal model's fits are by sample maximum likelihood (the FRF's variance
+//! at the model, `FreqWeights::SampleMaximumLikelihood` with the estimate's `plant_noise`, the
+//! default since the twenty-ninth session; the bound with the variance at the chosen model);
+//! `AT_DATA=1` fits and bounds with the variance at the data instead
+//! (`UncertaintyRun::on_twin_weighted`; `SML=1`, the option's old name, is accepted and changes
+//! nothing);
 //! `SMOOTH_VAR_PLAIN=m` refits with the variances themselves averaged over ±m lines (without
 //! `LEVELS`; docs/uncertainty.md, "Weights that follow the data's noise").
 
@@ -112,11 +115,11 @@ fn main() {
         };
         for &seed in &seeds {
             let t = std::time::Instant::now();
-            // SML=1: the nominal model's fits by sample maximum likelihood
-            let weights = if std::env::var("SML").is_ok() {
-                ambid::uncertainty::FitWeights::AtModel
-            } else {
+            // AT_DATA=1: the nominal model's fits with the variance at the data
+            let weights = if std::env::var("AT_DATA").is_ok() {
                 ambid::uncertainty::FitWeights::AtData
+            } else {
+                ambid::uncertainty::FitWeights::AtModel
             };
             let mut run = match UncertaintyRun::on_twin_weighted(rig, seed, mode, &levels, weights)
             {

@@ -274,6 +274,24 @@ pub struct FrfAnalysis {
     pub warnings: Vec<String>,
 }
 
+impl FrfAnalysis {
+    /// The plant's noise per line as a function of the plant value, for fits weighted by the
+    /// variance at the model (sample maximum likelihood): the estimate's
+    /// [`plant_noise`](ambid_core::frf::closed_loop::ClosedLoopFrf::plant_noise) when it
+    /// averaged periods, `None` for a Welch estimate.
+    ///
+    /// The period means and the periods' sample covariances are independent for Gaussian
+    /// noise, so weights from the covariances at the model do not follow the error. A Welch
+    /// estimate's noise description comes from the same overlapping, windowed segments as its
+    /// value: on random twin rigs 1–100 with a noise excitation the SML fits covered the true
+    /// error on 95 (linear) and 99 (nonlinear) runs against 98 and 99 with the variance at the
+    /// data (docs/uncertainty.md, "Sample maximum likelihood as the default").
+    pub fn model_weight_noise(&self) -> Option<&[ambid_core::frf::closed_loop::RatioNoise]> {
+        self.spectra.as_ref()?;
+        self.frf.plant_noise.as_deref()
+    }
+}
+
 /// Recorded closed-loop channels (equal lengths).
 #[derive(Debug, Clone, Copy)]
 pub struct Record<'a> {

@@ -559,7 +559,9 @@ pub struct ModelsSection {
     /// `frf` (fit to the FRF; default in closed loop with an excitation) or `time` (fit to the
     /// time record; default otherwise).
     pub domain: Option<String>,
-    /// FRF weights: `variance` (default), `coherence` or `uniform`.
+    /// FRF weights: `model` (default: the variance at the model, sample maximum likelihood;
+    /// [`frf_weights`](crate::stage::frf_weights)), `variance` (at the data),
+    /// `coherence` or `uniform`.
     pub weights: String,
     /// Maximum iterations of the iterative fits.
     pub max_iterations: usize,
@@ -585,7 +587,7 @@ impl Default for ModelsSection {
             nk: 1,
             band_hz: None,
             domain: None,
-            weights: "variance".into(),
+            weights: "model".into(),
             max_iterations: 100,
             focus: "auto".into(),
             select: "validation".into(),
@@ -802,7 +804,7 @@ impl WorkflowConfig {
         one_of(
             "models.weights",
             &self.models.weights,
-            &["variance", "coherence", "uniform"],
+            &["model", "variance", "coherence", "uniform"],
         )?;
         one_of(
             "models.select",

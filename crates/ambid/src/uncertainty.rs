@@ -1154,9 +1154,10 @@ pub const TWIN_BAND_HZ: (f64, f64) = (3.0, 3000.0);
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FitWeights {
     /// $1/\sigma_k^2$ with the FRF's variance at the data ([`FreqWeights::InverseVariance`];
-    /// [`UncertaintyRun::on_twin`]).
+    /// [`nominal_by_bic`]).
     AtData,
-    /// The variance at the model ([`FreqWeights::SampleMaximumLikelihood`]).
+    /// The variance at the model ([`FreqWeights::SampleMaximumLikelihood`]; the default of
+    /// [`UncertaintyRun::on_twin`] since the twenty-ninth session).
     AtModel,
 }
 
@@ -1222,11 +1223,11 @@ pub fn variances_at_model(
 }
 
 /// One run of the whole chain on the twin: the seed experiment on rig `rig` (0 = nominal) with
-/// noise seed `seed`, the period-averaged plant FRF, the nominal model ([`nominal_by_bic`]: the
-/// BIC choice among [`TWIN_ORDERS`] of inverse-variance frequency-domain state-space fits with
-/// the loop's unstable pole count and a stable loop with the controller; sample
-/// maximum-likelihood fits with [`UncertaintyRun::on_twin_weighted`]), [`analyse`], and the
-/// truth to check it against.
+/// noise seed `seed`, the period-averaged plant FRF, the nominal model ([`nominal_by_bic_weighted`]:
+/// the BIC choice among [`TWIN_ORDERS`] of sample maximum-likelihood frequency-domain
+/// state-space fits with the loop's unstable pole count and a stable loop with the controller;
+/// inverse-variance fits, [`nominal_by_bic`], with [`FitWeights::AtData`]), [`analyse`], and
+/// the truth to check it against.
 #[derive(Debug, Clone)]
 pub struct UncertaintyRun {
     /// The measured plant FRF (with [`FitWeights::AtModel`], its variances at the nominal
@@ -1279,7 +1280,7 @@ impl UncertaintyRun {
     /// # Errors
     /// Those of [`UncertaintyRun::on_twin`], a level's run (named) and [`amplitude_term`].
     pub fn on_twin_with_levels(rig: u64, seed: u64, mode: Mode, levels: &[f64]) -> Result<Self> {
-        Self::on_twin_weighted(rig, seed, mode, levels, FitWeights::AtData)
+        Self::on_twin_weighted(rig, seed, mode, levels, FitWeights::AtModel)
     }
 
     /// [`UncertaintyRun::on_twin_with_levels`] with the nominal model's fits weighted as
@@ -1288,10 +1289,10 @@ impl UncertaintyRun {
     /// and the estimate's
     /// [`plant_noise`](ambid_core::frf::closed_loop::ClosedLoopFrf::plant_noise)), and the
     /// run's [`frd`](Self::frd) carries the variances at the chosen model, which the bound uses;
-    /// term (f) is off, the nominal being the FRF's own fit under that criterion (an
-    /// inverse-variance reference fit would measure the weights' pull itself: a median of
-    /// 0.45 % of $|\hat P|$ on linear rigs 101–200; docs/uncertainty.md, "Weights that follow
-    /// the data's noise").
+    /// term (f)'s reference is then the SML fit too ([`ExtraTerms::fit_noise`]), 0 for the
+    /// nominal (an inverse-variance reference fit would measure the weights' pull itself: a
+    /// median of 0.45 % of $|\hat P|$ on linear rigs 101–200; docs/uncertainty.md, "Weights
+    /// that follow the data's noise").
     ///
     /// # Errors
     /// Those of [`UncertaintyRun::on_twin_with_levels`].
@@ -1309,12 +1310,16 @@ impl UncertaintyRun {
             .period_deviations(&measured)
             .context("the FRF's periods")?;
         let controller = out.twin.controller().clone();
-        let (nominal, frd) = match weights {
-            FitWeights::AtData => (nominal_by_bic(&measured, &controller)?, measured),
-            FitWeights::AtModel => {
-                let noise = cl
-                    .plant_noise
-                    .ok_or_else(|| Error::other("the periodic estimate has no noise per line"))?;
+        let noise = match weights {
+            FitWeights::AtData => None,
+            FitWeights::AtModel => Some(
+                cl.plant_noise
+                    .ok_or_else(|| Error::other("the periodic estimate has no noise per line"))?,
+            ),
+        };
+        let (nominal, frd) = match &noise {
+            None => (nominal_by_bic(&measured, &controller)?, measured),
+            Some(noise) => {
                 let unstable = unstable_poles_from_loop(&measured, &controller, None).ok();
                 let nominal = nominal_by_bic_weighted(
                     &measured,
@@ -1323,7 +1328,7 @@ impl UncertaintyRun {
                     TWIN_ORDERS,
                     Some(&controller),
                 )?;
-                let frd = variances_at_model(&measured, &noise, &nominal)?;
+                let frd = variances_at_model(&measured, noise, &nominal)?;
                 (nominal, frd)
             }
         };
@@ -1354,15 +1359,12 @@ impl UncertaintyRun {
             &controller,
             &ExtraTerms {
                 amplitude_shift: amplitude.as_ref().map(|a| a.term.as_slice()),
+                // term (f)'s reference is the FRF's fit under the nominal's own criterion
+                fit_noise: noise.as_deref(),
                 ..ExtraTerms::default()
             },
             amplitude.as_ref().map(AmplitudeTerm::shift_lines),
-            &UncertaintyOptions {
-                // the SML nominal *is* the FRF's own fit under its criterion: term (f)'s
-                // reference, an inverse-variance fit, would measure the weights' pull itself
-                fit_distance: weights == FitWeights::AtData,
-                ..UncertaintyOptions::default()
-            },
+            &UncertaintyOptions::default(),
             MAX_WEIGHT_ORDER,
             DEFAULT_COVER,
         )?;

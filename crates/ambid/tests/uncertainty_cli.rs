@@ -318,6 +318,121 @@ fn uncertainty_on_an_unseen_rig_gives_conservative_useful_margins() {
 /// [`SMOOTH_MISFIT`].
 const SMOOTH_WARNING: &str = "warning: the misfit is far smoother from line to line";
 
+/// The CLI chain weights by the variance at the model (sample maximum likelihood) by default:
+/// `ambid frf` writes the plant's noise as a function of the plant value, whose value at the
+/// estimate is the reported variance (`plant_std²`, checked line by line); `ambid fit` takes it
+/// (the model file says so) and `ambid uncertainty` evaluates the variances at the model, with
+/// term (f)'s reference the same fit, so that term (f) of the fitted model is 0. With
+/// `--weights variance` the fit is the inverse-variance one and `ambid uncertainty` reads it
+/// as another model: its term (f) is its distance from the SML fit.
+#[test]
+fn the_cli_chain_weights_by_the_variance_at_the_model() {
+    let dir = common::tmpdir("uncertainty-cli-sml");
+    common::identify_on_twin(&dir, &["--rig-seed", RIG]);
+    let d = |f: &str| dir.join(f).to_str().unwrap().to_string();
+    let csv = std::fs::read_to_string(dir.join("frf.csv")).unwrap();
+    let (re, im, sd) = (
+        column(&csv, "plant_re"),
+        column(&csv, "plant_im"),
+        column(&csv, "plant_std"),
+    );
+    let (a, b, cr, ci) = (
+        column(&csv, "plant_noise_a"),
+        column(&csv, "plant_noise_b"),
+        column(&csv, "plant_noise_c_re"),
+        column(&csv, "plant_noise_c_im"),
+    );
+    for k in 0..re.len() {
+        let g = c64::new(re[k], im[k]);
+        let v = a[k] * g.norm_sqr() + b[k] - 2.0 * (g * c64::new(cr[k], ci[k])).re;
+        assert!(
+            (v - sd[k] * sd[k]).abs() <= 1e-6 * sd[k] * sd[k],
+            "line {k}: the noise gives {v}, plant_std² is {}",
+            sd[k] * sd[k]
+        );
+    }
+    let model: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("model.json")).unwrap()).unwrap();
+    let meta = model.to_string();
+    assert!(meta.contains("variance at the model"), "{meta}");
+    let args = uncertainty_args(&dir, &[], "unc");
+    let out = ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(out.contains("variances: at the model"), "{out}");
+    let summary = summary_of(&dir, "unc");
+    assert!(
+        summary["variances"]
+            .as_str()
+            .unwrap()
+            .starts_with("at the model"),
+        "{summary}"
+    );
+    let own = summary["fit_distance"]["median_rel"].as_f64().unwrap();
+    assert!(own <= 1e-6, "term (f) of the SML fit itself: {own}");
+    // the inverse-variance fit of the same order: another model for the bound
+    let ctrl = d("sim/controller.toml");
+    let iv = d("model_iv.json");
+    let o = ambid(&[
+        "fit",
+        &d("frf.csv"),
+        "--quantity",
+        "plant",
+        "--structure",
+        "ss",
+        "--order",
+        "8",
+        "--controller",
+        &ctrl,
+        "--weights",
+        "variance",
+        "--out",
+        &iv,
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let meta = std::fs::read_to_string(&iv).unwrap();
+    assert!(meta.contains("inverse variance at the data"), "{meta}");
+    let mut args = uncertainty_args(&dir, &[], "unc_iv");
+    args[3] = iv.clone();
+    ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let other = summary_of(&dir, "unc_iv")["fit_distance"]["median_rel"]
+        .as_f64()
+        .unwrap();
+    println!("term (f): SML fit {own:.2e}, inverse-variance fit {other:.2e}");
+    assert!(other > 100.0 * own.max(1e-9), "{other} against {own}");
+    // a file with some of the noise columns but not all is refused, nothing written
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let drop = header.iter().position(|h| *h == "plant_noise_b").unwrap();
+    let cut: String = csv
+        .lines()
+        .map(|l| {
+            let mut f: Vec<&str> = l.split(',').collect();
+            f.remove(drop);
+            f.join(",") + "\n"
+        })
+        .collect();
+    let bad = d("frf_cut.csv");
+    std::fs::write(&bad, cut).unwrap();
+    let out_bad = d("model_bad.json");
+    let o = ambid(&[
+        "fit",
+        &bad,
+        "--quantity",
+        "plant",
+        "--structure",
+        "ss",
+        "--order",
+        "8",
+        "--out",
+        &out_bad,
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        text(&o).contains("some of the noise columns"),
+        "{}",
+        text(&o)
+    );
+    assert!(!std::path::Path::new(&out_bad).exists());
+}
+
 #[test]
 fn uncertainty_refuses_bad_input_and_writes_nothing() {
     let dir = common::tmpdir("uncertainty-cli-bad");

@@ -55,7 +55,9 @@
 
 use crate::c64;
 use crate::error::{Error, Result};
-use crate::estimate::freqfit::{arx_frd, oe_frd, FreqErrors, FreqFitOptions, TfOrders};
+use crate::estimate::freqfit::{
+    arx_frd, oe_frd, FreqErrors, FreqFitOptions, FreqWeights, TfOrders,
+};
 use crate::lti::{Frd, StateSpace, Structure, TransferFunction};
 use crate::validate::closed_loop::simulate_loop;
 use crate::validate::fit::fit_percent;
@@ -235,7 +237,19 @@ fn candidate(
         let tf = |t: TransferFunction| t.to_state_space();
         match structure {
             Structure::Arx => {
-                let f = arx_frd(frd, &o, fit_opts)?;
+                // linear in its parameters, ARX cannot take the variance at the model: with
+                // sample maximum-likelihood weights it keeps the variance at the data
+                let f = match &fit_opts.weights {
+                    FreqWeights::SampleMaximumLikelihood(_) => arx_frd(
+                        frd,
+                        &o,
+                        &FreqFitOptions {
+                            weights: FreqWeights::InverseVariance,
+                            ..fit_opts.clone()
+                        },
+                    )?,
+                    _ => arx_frd(frd, &o, fit_opts)?,
+                };
                 Ok((tf(f.model)?, f.n_params, f.cost, f.errors, f.converged))
             }
             Structure::Oe => {

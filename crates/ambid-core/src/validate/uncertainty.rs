@@ -676,6 +676,14 @@ pub struct ExtraTerms<'a> {
     /// $a_k$: the amplitude study's systematic shift of the best linear approximation at the
     /// experiment's level from its extrapolation to zero amplitude (term (e)).
     pub amplitude_shift: Option<&'a [f64]>,
+    /// The FRF's noise per line as a function of the plant value (e.g. the
+    /// [`plant_noise`](crate::frf::closed_loop::ClosedLoopFrf::plant_noise) of the FRF's
+    /// estimate on its lines). With it, term (f)'s reference $\tilde P$ is the FRF's sample
+    /// maximum-likelihood fit ([`FreqWeights::SampleMaximumLikelihood`](crate::estimate::freqfit::FreqWeights::SampleMaximumLikelihood))
+    /// instead of its inverse-variance one: the fit a nominal model fitted with those weights
+    /// is, so that term (f) is 0 for it and does not measure the inverse-variance fit's pull
+    /// (docs/uncertainty.md, "Weights that follow the data's noise").
+    pub fit_noise: Option<&'a [crate::frf::closed_loop::RatioNoise]>,
 }
 
 /// The uncertainty of a nominal model over the FRF's lines (module docs). Absolute terms are in
@@ -982,6 +990,17 @@ fn uncertainty_with(
             }
         }
     }
+    if let Some(n) = extra.fit_noise {
+        if n.len() != l {
+            return Err(Error::invalid(
+                "fit_noise",
+                format!(
+                    "needs one noise description per FRF line ({l}), got {}",
+                    n.len()
+                ),
+            ));
+        }
+    }
     let f = frd.f_hz().to_vec();
     let g = frd.values().to_vec();
     let z: Vec<c64> = f
@@ -994,7 +1013,7 @@ fn uncertainty_with(
     let roughness = misfit_roughness(&misfit_c, var_raw);
     // (f): in its own tangent space, the distance from the FRF's own fit of the model's order
     let (distance, distance_failed) = match (&tangent, opts.fit_distance) {
-        (None, true) => match own_fit_distance(nominal, &poles, &p_hat, frd) {
+        (None, true) => match own_fit_distance(nominal, &poles, &p_hat, frd, extra.fit_noise) {
             Ok(d) => (Some(d), None),
             Err(e) => (None, Some(e.to_string())),
         },
@@ -2261,22 +2280,26 @@ pub fn fit_distance(nominal: &StateSpace, frd: &Frd) -> Result<Vec<f64>> {
         return Err(Error::invalid("nominal", "term (f) needs a SISO model"));
     }
     let p_hat = nominal.freq_response_siso(frd.f_hz())?;
-    own_fit_distance(nominal, &nominal.poles()?, &p_hat, frd)
+    own_fit_distance(nominal, &nominal.poles()?, &p_hat, frd, None)
 }
 
 /// [`fit_distance`] with the nominal model's `poles` and response `p_hat` on `frd`'s lines,
-/// already computed.
+/// already computed; with `noise` ([`ExtraTerms::fit_noise`]) the reference fit is the sample
+/// maximum-likelihood one.
 fn own_fit_distance(
     nominal: &StateSpace,
     poles: &[c64],
     p_hat: &[c64],
     frd: &Frd,
+    noise: Option<&[crate::frf::closed_loop::RatioNoise]>,
 ) -> Result<Vec<f64>> {
     use crate::estimate::freqfit::{FreqFitOptions, FreqWeights};
     use crate::estimate::freqfit_ss::{ss_frd_started, SsFreqOptions};
     let unstable = poles.iter().filter(|p| p.norm() > 1.0).count();
     let opts = FreqFitOptions {
-        weights: FreqWeights::InverseVariance,
+        weights: noise.map_or(FreqWeights::InverseVariance, |n| {
+            FreqWeights::SampleMaximumLikelihood(n.to_vec())
+        }),
         max_unstable_poles: Some(unstable),
         ..FreqFitOptions::default()
     };
@@ -3435,6 +3458,7 @@ mod tests {
             nonlinear_std: Some(&nl),
             operating_spread: Some(&spread),
             amplitude_shift: Some(&shift),
+            fit_noise: None,
         };
         let more = uncertainty(&m, &frd, &ext, &UncertaintyOptions::default()).unwrap();
         assert_eq!(more.amplitude.as_deref(), Some(shift.as_slice()));

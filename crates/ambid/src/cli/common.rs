@@ -177,12 +177,29 @@ pub fn plant_unit(y: Option<&str>, u: Option<&str>) -> String {
 /// Weights of the FRF lines.
 #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum WeightsArg {
+    /// The variance evaluated at the model, sample maximum likelihood (the default), from the
+    /// `plant_noise_*` columns `ambid frf` writes; state-space and output-error fits refine
+    /// with it, ARX keeps the variance at the data. Without those columns, as `variance`.
+    Model,
     /// All lines alike.
     Uniform,
-    /// Inverse variance from the file's `<q>_std` column (the default).
+    /// Inverse variance at the data, from the file's `<q>_std` column.
     Variance,
     /// From the coherence column (`coh_ry`).
     Coherence,
+}
+
+/// The weights in words, for a model file's metadata.
+pub fn weights_name(w: &FreqWeights) -> &'static str {
+    match w {
+        FreqWeights::Uniform => "uniform",
+        FreqWeights::InverseVariance => "inverse variance at the data",
+        FreqWeights::Coherence(_) => "coherence",
+        FreqWeights::Given(_) => "given",
+        FreqWeights::SampleMaximumLikelihood(_) => {
+            "variance at the model (sample maximum likelihood; ARX at the data)"
+        }
+    }
 }
 
 /// The FRF and the fit options common to `fit --quantity` and `compare-models`.
@@ -240,14 +257,24 @@ pub fn frf_input(
             d.band
         }
     };
-    let weights = match weights {
-        WeightsArg::Uniform => FreqWeights::Uniform,
-        WeightsArg::Variance if frd.variance().is_some() => FreqWeights::InverseVariance,
-        WeightsArg::Variance => {
+    let noise = file.ratio_noise(quantity)?;
+    let weights = match (weights, &noise) {
+        (WeightsArg::Model, Some(n)) if frd.variance().is_some() => {
+            FreqWeights::SampleMaximumLikelihood(n.clone())
+        }
+        (WeightsArg::Model, None) if frd.variance().is_some() => {
+            println!(
+                "weights: the variance at the data (the file has no `{quantity}_noise_*` columns for the variance at the model)"
+            );
+            FreqWeights::InverseVariance
+        }
+        (WeightsArg::Model | WeightsArg::Variance, _) if frd.variance().is_none() => {
             eprintln!("note: `{quantity}_std` is zero everywhere (exact data): uniform weights");
             FreqWeights::Uniform
         }
-        WeightsArg::Coherence => FreqWeights::Coherence(
+        (WeightsArg::Uniform, _) => FreqWeights::Uniform,
+        (WeightsArg::Model | WeightsArg::Variance, _) => FreqWeights::InverseVariance,
+        (WeightsArg::Coherence, _) => FreqWeights::Coherence(
             file.extra("coh_ry")
                 .context("coherence weights need the `coh_ry` column of `ambid frf`")?
                 .to_vec(),
@@ -383,6 +410,40 @@ pub fn frf_with_variance(
     let band = input.opts.band_hz.unwrap_or((0.0, f64::INFINITY));
     let frd = input.frd.band(band.0, band.1)?;
     Ok((frd, band))
+}
+
+/// Quantity `quantity`'s noise per line as a function of its value (the `<q>_noise_*` columns
+/// of `ambid frf`, [`FrfFile::ratio_noise`](ambid::io::csv::FrfFile::ratio_noise)) on the lines
+/// of `frd` (a band of the same file); `None` when the file has no such columns.
+pub fn frf_noise_on(
+    frf: &Path,
+    quantity: &str,
+    frd: &ambid_core::lti::Frd,
+) -> Result<Option<Vec<ambid_core::frf::closed_loop::RatioNoise>>> {
+    let file = read_frf_csv(frf)?;
+    let Some(noise) = file.ratio_noise(quantity)? else {
+        return Ok(None);
+    };
+    let (Some(&lo), Some(&hi)) = (frd.f_hz().first(), frd.f_hz().last()) else {
+        return Ok(None);
+    };
+    let on: Vec<_> = file
+        .f_hz
+        .iter()
+        .zip(noise)
+        .filter(|(f, _)| (lo..=hi).contains(*f))
+        .map(|(_, n)| n)
+        .collect();
+    if on.len() != frd.len() {
+        return Err(ambid::error::Error::input(format!(
+            "{}: the `{quantity}_noise_*` columns give {} lines in {lo}–{hi} Hz, the FRF {}",
+            frf.display(),
+            on.len(),
+            frd.len()
+        ))
+        .into());
+    }
+    Ok(Some(on))
 }
 
 /// The plant FRF with its standard deviations on the band (given, or the file's reliable band),

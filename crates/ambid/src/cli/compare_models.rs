@@ -40,7 +40,7 @@ pub struct CompareModelsArgs {
     #[arg(long, value_parser = parse_band)]
     band: Option<(f64, f64)>,
     /// Weights of the lines.
-    #[arg(long, value_enum, default_value_t = WeightsArg::Variance)]
+    #[arg(long, value_enum, default_value_t = WeightsArg::Model)]
     weights: WeightsArg,
     /// Levenberg–Marquardt iteration limit of each fit (400: on 20 random rigs, 5 of the 160
     /// OE/SS fits of orders 6–9 stopped at 100 iterations, 1 at 400; a fit that stops at the

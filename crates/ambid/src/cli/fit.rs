@@ -102,7 +102,7 @@ pub struct FitArgs {
     #[arg(long, value_parser = super::args::parse_band)]
     band: Option<(f64, f64)>,
     /// Weights of the lines of an FRF fit.
-    #[arg(long, value_enum, default_value_t = super::common::WeightsArg::Variance)]
+    #[arg(long, value_enum, default_value_t = super::common::WeightsArg::Model)]
     weights: super::common::WeightsArg,
     /// FRF fit: the controller of the loop the FRF was measured in (TOML/JSON): the fit is held
     /// to the plant's number of unstable poles from the measured loop's Nyquist count, and a
@@ -1210,6 +1210,7 @@ pub fn fit_frf(
         "order": order,
         "n_params": row.n_params,
         "band_hz": input.opts.band_hz,
+        "weights": super::common::weights_name(&input.opts.weights),
         "band_origin": if input.explicit_band.is_some() { "given (--band)" } else { "derived from the FRF's standard deviations (ambid_core::frf::band::fit_band)" },
         "relative_rmse": row.relative_rmse,
         "median_relative": row.median_relative,

@@ -192,15 +192,28 @@ fn write_analysis(path: &Path, a: &FrfAnalysis, force: bool) -> Result<()> {
     }
     // the sample rate of the data, so that fits to this FRF know their sample time
     let fs = vec![frf.t_ry.ts().map_or(f64::NAN, |t| 1.0 / t); frf.f_hz().len()];
-    let bytes = frf_csv_bytes(
-        frf.f_hz(),
-        &q,
-        &[
-            ("coh_ry", &frf.coh_ry),
-            ("coh_ru", &frf.coh_ru),
-            ("fs_hz", &fs),
-        ],
-    )?;
+    let mut extra: Vec<(&str, &[f64])> = vec![("coh_ry", &frf.coh_ry), ("coh_ru", &frf.coh_ru)];
+    // the plant's noise as a function of the plant value, for fits weighted by the variance at
+    // the model (`ambid fit --weights model`, `ambid uncertainty`): periodic estimates only
+    // (`FrfAnalysis::model_weight_noise`)
+    let noise: Option<[Vec<f64>; 4]> = a.model_weight_noise().map(|n| {
+        [
+            n.iter().map(|x| x.a).collect(),
+            n.iter().map(|x| x.b).collect(),
+            n.iter().map(|x| x.c.re).collect(),
+            n.iter().map(|x| x.c.im).collect(),
+        ]
+    });
+    if let Some([a, b, cr, ci]) = &noise {
+        extra.extend([
+            ("plant_noise_a", a.as_slice()),
+            ("plant_noise_b", b.as_slice()),
+            ("plant_noise_c_re", cr.as_slice()),
+            ("plant_noise_c_im", ci.as_slice()),
+        ]);
+    }
+    extra.push(("fs_hz", &fs));
+    let bytes = frf_csv_bytes(frf.f_hz(), &q, &extra)?;
     write_file(path, &bytes, force)?;
     Ok(())
 }

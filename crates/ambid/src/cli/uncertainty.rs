@@ -4,7 +4,7 @@
 //! uncertain model exported for MATLAB and Python.
 
 use super::args::parse_band;
-use super::common::{controller_for, frf_and_model, frf_with_variance};
+use super::common::{controller_for, frf_and_model, frf_noise_on, frf_with_variance};
 use ambid::io::export::uncertain::{
     coherent_json, robust_json, uncertain_json, uncertain_mat_bytes, uncertain_matlab_script,
     uncertain_npz_bytes, UncertainModel, UncertainNames,
@@ -226,6 +226,21 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         &a.model,
         "the uncertainty needs the FRF's standard deviations (an FRF of `ambid frf` from several periods or realisations)",
     )?;
+    // with the plant's noise as a function of its value (`plant_noise_*`, `ambid frf`): each
+    // line's variance at the model (the variance at the data follows the line's own error) and
+    // term (f)'s reference fit under the same criterion, as the workflow's step
+    // (docs/uncertainty.md, "Weights that follow the data's noise")
+    let fit_noise = frf_noise_on(&a.frf, &a.quantity, &frd)?;
+    let frd = match &fit_noise {
+        Some(n) => {
+            println!(
+                "variances: at the model (the file's `{}_noise_*` columns)",
+                a.quantity
+            );
+            ambid::uncertainty::variances_at_model(&frd, n, &model)?
+        }
+        None => frd,
+    };
     let per_line_setting = a.per_line_misfit.unwrap_or_default();
     let corr_setting = a.correlated_lines.unwrap_or_default();
     let ctrl = match &a.controller {
@@ -317,6 +332,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             .map(|n| n.std.as_slice()),
         operating_spread: spread.as_deref(),
         amplitude_shift: amplitude.as_ref().map(|a| a.term.as_slice()),
+        fit_noise: fit_noise.as_deref(),
     };
     let analysis = bound_and_weight(
         &model,
@@ -485,6 +501,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
             "z": lc.z,
             "variance_factor": lc.factor,
         },
+        "variances": if fit_noise.is_some() { "at the model (plant_noise_* columns)" } else { "at the data (<q>_std)" },
         "fit_distance": {
             "setting": if a.fit_distance.unwrap_or(true) { "on" } else { "off" },
             "median_rel": t.fit_distance_median_rel(),

@@ -216,6 +216,48 @@ impl FrfFile {
         )?)
     }
 
+    /// Quantity `q`'s noise per line as a function of its value, from the columns
+    /// `<q>_noise_a, <q>_noise_b, <q>_noise_c_re, <q>_noise_c_im` that `ambid frf` writes for
+    /// the plant ([`RatioNoise`](ambid_core::frf::closed_loop::RatioNoise): the variance at a
+    /// value $G$ is $a|G|^2 + b - 2\operatorname{Re}(G c)$); `None` when the file has none of
+    /// them (another tool's FRF, or an estimate without one).
+    ///
+    /// # Errors
+    /// Some of the four columns but not all, or a negative `a` or `b`.
+    pub fn ratio_noise(
+        &self,
+        q: &str,
+    ) -> Result<Option<Vec<ambid_core::frf::closed_loop::RatioNoise>>> {
+        let names = ["a", "b", "c_re", "c_im"].map(|s| format!("{q}_noise_{s}"));
+        let cols: Vec<Option<&[f64]>> = names.iter().map(|n| self.col(n)).collect();
+        match cols.as_slice() {
+            [None, None, None, None] => Ok(None),
+            [Some(a), Some(b), Some(cr), Some(ci)] => {
+                if let Some(k) = (0..a.len()).find(|&k| !(a[k] >= 0.0 && b[k] >= 0.0)) {
+                    return Err(Error::input(format!(
+                        "`{q}_noise_a` and `{q}_noise_b` must be non-negative (variances); data row {} has {} and {}",
+                        k + 1,
+                        a[k],
+                        b[k]
+                    )));
+                }
+                Ok(Some(
+                    (0..a.len())
+                        .map(|k| ambid_core::frf::closed_loop::RatioNoise {
+                            a: a[k],
+                            b: b[k],
+                            c: ambid_core::c64::new(cr[k], ci[k]),
+                        })
+                        .collect(),
+                ))
+            }
+            _ => Err(Error::input(format!(
+                "the FRF file has some of the noise columns {} but not all: give all four or none",
+                names.join(", ")
+            ))),
+        }
+    }
+
     /// A real extra column such as `coh_ry`.
     pub fn extra(&self, name: &str) -> Result<&[f64]> {
         self.col(name).ok_or_else(|| {

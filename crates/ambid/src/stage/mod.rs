@@ -69,7 +69,7 @@ pub use self::excitation::{
 pub use self::frf::{frf, FrfInput, FrfStage, PlantEstimator, TruthErrors, TwinTruth};
 pub use self::iso::{iso, GridSensitivity, IsoInput, IsoStage, MeasuredSensitivity};
 pub use self::models::{
-    choose, frf_candidates, models, unstable_pole_rule, BandChoice, Choice, FitCurve,
+    choose, frf_candidates, frf_weights, models, unstable_pole_rule, BandChoice, Choice, FitCurve,
     FrfCandidates, MeasuredPlant, ModelOut, ModelsInput, ModelsStage, Overlay, Scored, Select,
     UnstableChoice,
 };

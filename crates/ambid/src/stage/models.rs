@@ -388,6 +388,34 @@ pub fn frf_candidates(
     compare_models(plant, &spec, validation)
 }
 
+/// The weights of the FRF fits for `[models] weights` (`setting`) on the closed-loop analysis
+/// `a`:
+/// - `model` (default): each line's variance evaluated at the model, the sample
+///   maximum-likelihood weights ([`FreqWeights::SampleMaximumLikelihood`] with
+///   [`FrfAnalysis::model_weight_noise`]); the state-space and output-error fits refine with
+///   them, ARX (linear in its parameters) keeps the variance at the data. Without that noise
+///   description (a Welch estimate), as `variance`.
+/// - `variance`: $1/\sigma_k^2$ with the variance at the data ([`FreqWeights::InverseVariance`]);
+///   uniform without variances.
+/// - `coherence`, `uniform`.
+///
+/// The variance at the data follows each line's own error (in a loop with sensor noise it is
+/// $\propto |1 + \hat G_k C_k|^2$), which pulls the fit off the plant by about its own standard
+/// deviation at 300–1000 Hz on random twin rigs (docs/uncertainty.md, "Weights that follow the
+/// data's noise").
+pub fn frf_weights(setting: &str, a: &FrfAnalysis) -> FreqWeights {
+    let has_variance = a.frf.plant.variance().is_some();
+    match (setting, a.model_weight_noise()) {
+        ("uniform", _) => FreqWeights::Uniform,
+        ("coherence", _) => FreqWeights::Coherence(a.frf.coh_ry.clone()),
+        ("model", Some(noise)) if has_variance => {
+            FreqWeights::SampleMaximumLikelihood(noise.to_vec())
+        }
+        _ if has_variance => FreqWeights::InverseVariance,
+        _ => FreqWeights::Uniform,
+    }
+}
+
 /// `orders` with the recommended range `(lo, hi)` added, sorted, each added order capped by
 /// the record's parameter budget (`n / SAMPLES_PER_PARAMETER` samples per parameter) and
 /// [`MAX_MODEL_ORDER`].
@@ -528,12 +556,7 @@ pub fn models(input: &ModelsInput<'_>) -> Result<ModelsStage> {
         };
         let fit_band_hz = b.band_hz;
         band = Some(b);
-        let weights = match cfg.weights.as_str() {
-            "uniform" => FreqWeights::Uniform,
-            "coherence" => FreqWeights::Coherence(a.frf.coh_ry.clone()),
-            _ if frd.variance().is_some() => FreqWeights::InverseVariance,
-            _ => FreqWeights::Uniform,
-        };
+        let weights = frf_weights(&cfg.weights, a);
         let fits = FrfCandidates {
             structures: &cfg.structures,
             orders: &cfg.orders,

@@ -10,7 +10,7 @@ use crate::config::{ModelsSection, OrderSection};
 use crate::error::{Error, FailureClass, Result};
 use crate::fitting::{identify_state_space, SsFitOptions, SsFocus};
 use crate::io::ControllerModel;
-use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
+use ambid_core::estimate::freqfit::FreqFitOptions;
 use ambid_core::estimate::order::{arx_order_scan, ArxScanSpec, OrderScan};
 use ambid_core::estimate::subspace::{n4sid_detailed, SubspaceOptions};
 use ambid_core::frf::band::{fit_band, FIT_REL_HALFWIDTH};
@@ -405,12 +405,7 @@ fn recommend(input: &OrderInput<'_>) -> std::result::Result<OrderRecommendation,
                     .band
             }
         };
-        let weights = match mcfg.weights.as_str() {
-            "uniform" => FreqWeights::Uniform,
-            "coherence" => FreqWeights::Coherence(a.frf.coh_ry.clone()),
-            _ if frd.variance().is_some() => FreqWeights::InverseVariance,
-            _ => FreqWeights::Uniform,
-        };
+        let weights = super::models::frf_weights(&mcfg.weights, a);
         let ctrl = input.controller.map(|c| c.state_space());
         let (n_u, _) = supported_unstable_poles(frd, ctrl, explicit_band, mcfg.unstable_poles);
         let spec = CompareSpec {

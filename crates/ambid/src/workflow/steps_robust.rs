@@ -14,8 +14,9 @@ use crate::report::{
 };
 use crate::uncertainty::{
     amplitude_term_and_shifts, analyse_with_shift, nominal_gain_interval, nonlinear_level,
-    nonlinear_term, operating_term, AMPLITUDE_MAX_SATURATED, NONLINEAR_ALPHA,
+    nonlinear_term, operating_term, variances_at_model, AMPLITUDE_MAX_SATURATED, NONLINEAR_ALPHA,
 };
+use ambid_core::frf::closed_loop::RatioNoise;
 use ambid_core::lti::{Frd, StateSpace};
 use ambid_core::validate::uncertainty::{ExtraTerms, UncertaintyOptions};
 use ambid_core::validate::weight::{DEFAULT_COVER, MAX_WEIGHT_ORDER};
@@ -203,6 +204,28 @@ fn inputs(ctx: &Ctx<'_>) -> Result<(Frd, StateSpace, StateSpace), String> {
     Ok((frd, model, ctrl))
 }
 
+/// The FRF's noise per line on `frd`'s lines (the models' band) when the models step fitted
+/// with the variance at the model (`[models] weights = "model"` and a periodic estimate,
+/// [`frf_weights`](crate::stage::frf_weights)); `None` otherwise.
+fn model_weight_noise(ctx: &Ctx<'_>, frd: &Frd) -> Option<Vec<RatioNoise>> {
+    let a = ctx.frf()?;
+    if ctx.cfg.models.weights != "model" {
+        return None;
+    }
+    let noise = a.model_weight_noise()?;
+    let (lo, hi) = (*frd.f_hz().first()?, *frd.f_hz().last()?);
+    let on: Vec<RatioNoise> = a
+        .frf
+        .plant
+        .f_hz()
+        .iter()
+        .zip(noise)
+        .filter(|(f, _)| (lo..=hi).contains(*f))
+        .map(|(_, n)| *n)
+        .collect();
+    (on.len() == frd.len()).then_some(on)
+}
+
 fn fmt_margin(x: Option<f64>) -> String {
     match x {
         Some(g) if g.is_infinite() => "unlimited".into(),
@@ -216,6 +239,22 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
     let (frd, model, ctrl) = match inputs(ctx) {
         Ok(x) => x,
         Err(why) => return Ok(StepStatus::Skipped(why)),
+    };
+    // with the models step's sample maximum-likelihood weights, each line's variance at the
+    // chosen model (the variance at the data follows the line's own error), and term (f)'s
+    // reference fit under the same criterion (docs/uncertainty.md, "Weights that follow the
+    // data's noise")
+    let fit_noise = model_weight_noise(ctx, &frd);
+    let frd = match &fit_noise {
+        Some(n) => match variances_at_model(&frd, n, &model) {
+            Ok(at) => at,
+            Err(e) => {
+                return Ok(StepStatus::Skipped(format!(
+                    "the variances at the model: {e}"
+                )))
+            }
+        },
+        None => frd,
     };
     // term (d) from the operating-point study, when it ran
     let mut spread_note = None;
@@ -321,6 +360,7 @@ pub fn uncertainty(ctx: &mut Ctx<'_>) -> Result<StepStatus, Error> {
             .map(|n| n.0.std.as_slice()),
         operating_spread: spread.as_ref().map(|s| s.0.as_slice()),
         amplitude_shift: amplitude.as_ref().map(|s| s.0.term.as_slice()),
+        fit_noise: fit_noise.as_deref(),
     };
     let a = match analyse_with_shift(
         &model,
