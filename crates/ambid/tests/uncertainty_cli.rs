@@ -371,22 +371,12 @@ fn the_cli_chain_weights_by_the_variance_at_the_model() {
     // the inverse-variance fit of the same order: another model for the bound
     let ctrl = d("sim/controller.toml");
     let iv = d("model_iv.json");
-    let o = ambid(&[
-        "fit",
+    let o = common::fit_plant_ss(
         &d("frf.csv"),
-        "--quantity",
-        "plant",
-        "--structure",
-        "ss",
-        "--order",
         "8",
-        "--controller",
-        &ctrl,
-        "--weights",
-        "variance",
-        "--out",
         &iv,
-    ]);
+        &["--controller", &ctrl, "--weights", "variance"],
+    );
     assert!(o.status.success(), "{}", text(&o));
     let meta = std::fs::read_to_string(&iv).unwrap();
     assert!(meta.contains("inverse variance at the data"), "{meta}");
@@ -412,18 +402,7 @@ fn the_cli_chain_weights_by_the_variance_at_the_model() {
     let bad = d("frf_cut.csv");
     std::fs::write(&bad, cut).unwrap();
     let out_bad = d("model_bad.json");
-    let o = ambid(&[
-        "fit",
-        &bad,
-        "--quantity",
-        "plant",
-        "--structure",
-        "ss",
-        "--order",
-        "8",
-        "--out",
-        &out_bad,
-    ]);
+    let o = common::fit_plant_ss(&bad, "8", &out_bad, &[]);
     assert!(!o.status.success());
     assert!(
         text(&o).contains("some of the noise columns"),

@@ -734,7 +734,7 @@ fn physical_with_recorded_operating_points_fits_the_magnet_law() {
 /// variances times its factor (Hann theory: $1 + 2 \cdot 0.44 = 1.89$), and says so in the
 /// report and `summary.json`; the same workflow on the default PRBS (period averaging,
 /// independent lines) has no factor and no note (docs/uncertainty.md, "Welch FRFs: correlated
-/// lines").
+/// lines"). The periodic FRF's variances are taken at the model, the Welch FRF's at the data.
 #[test]
 fn uncertainty_on_a_welch_frf_allows_for_its_correlated_lines() {
     for kind in ["noise", "prbs"] {
@@ -749,6 +749,11 @@ fn uncertainty_on_a_welch_frf_allows_for_its_correlated_lines() {
         let out = run(&cfg, Path::new("."), &mut Progress::new(Verbosity::Quiet)).unwrap();
         let u = &out.summary["uncertainty"];
         let blocks = section_blocks(&out, "uncertainty");
+        // the variances at the model (sample maximum likelihood) on the periodic FRF only; a
+        // Welch FRF's noise description is not independent of its value (docs/uncertainty.md,
+        // "Sample maximum likelihood as the default")
+        let at = if kind == "noise" { "data" } else { "model" };
+        assert_eq!(u["variances_at"], at, "{u}");
         if kind == "noise" {
             let k = u["line_variance_factor"]
                 .as_f64()

@@ -215,20 +215,26 @@ pub fn identify_on_twin(dir: &Path, simulate_args: &[&str]) {
         d("model.json"),
     );
     run(&["frf", &data, "--controller", &ctrl, "--out", &frf]);
-    run(&[
+    let o = fit_plant_ss(&frf, "8", &model, &["--controller", &ctrl]);
+    assert!(o.status.success(), "ambid fit: {}", text(&o));
+}
+
+/// `ambid fit FRF --quantity plant --structure ss --order ORDER` with `extra` arguments, writing
+/// `out`: the command's output.
+pub fn fit_plant_ss(frf: &str, order: &str, out: &str, extra: &[&str]) -> std::process::Output {
+    let mut args = vec![
         "fit",
-        &frf,
+        frf,
         "--quantity",
         "plant",
         "--structure",
         "ss",
         "--order",
-        "8",
-        "--controller",
-        &ctrl,
-        "--out",
-        &model,
-    ]);
+        order,
+    ];
+    args.extend_from_slice(extra);
+    args.extend_from_slice(&["--out", out]);
+    ambid(&args)
 }
 
 /// Issue 23's two margin bars for robust gain margins `lo..hi` against the true loop's
