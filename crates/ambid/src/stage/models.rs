@@ -403,6 +403,23 @@ pub fn frf_candidates(
 /// $\propto |1 + \hat G_k C_k|^2$), which pulls the fit off the plant by about its own standard
 /// deviation at 300–1000 Hz on random twin rigs (docs/uncertainty.md, "Weights that follow the
 /// data's noise").
+///
+/// # Example
+/// ```
+/// use ambid::analysis::{analyze, FrfSettings, Record};
+/// use ambid::experiment::{run, Experiment};
+/// use ambid::stage::frf_weights;
+/// use ambid_core::estimate::freqfit::FreqWeights;
+/// let mut exp = Experiment::seed_paper(ambid_twin::Mode::Linear, 1e-7, 1);
+/// exp.excitation.periods = 4;
+/// let rec = run(&exp).unwrap().record;
+/// let r = Record { r: &rec.r, u: &rec.u, y: &rec.y, i: None, fs: 1.0 / rec.ts };
+/// let periodic = analyze(&r, &FrfSettings::periodic(5115, 1), None).unwrap();
+/// let welch = analyze(&r, &FrfSettings::welch(4096), None).unwrap();
+/// assert!(matches!(frf_weights("model", &periodic), FreqWeights::SampleMaximumLikelihood(_)));
+/// assert_eq!(frf_weights("model", &welch), FreqWeights::InverseVariance);
+/// assert_eq!(frf_weights("variance", &periodic), FreqWeights::InverseVariance);
+/// ```
 pub fn frf_weights(setting: &str, a: &FrfAnalysis) -> FreqWeights {
     let has_variance = a.frf.plant.variance().is_some();
     match (setting, a.model_weight_noise()) {
