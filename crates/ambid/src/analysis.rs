@@ -293,18 +293,21 @@ impl FrfAnalysis {
     /// ```
     /// use ambid::analysis::{analyze, FrfSettings, Record};
     /// use ambid::experiment::{run, Experiment};
+    /// # fn main() -> Result<(), Box<dyn std::error::Error>> {
     /// let mut exp = Experiment::seed_paper(ambid_twin::Mode::Linear, 1e-7, 1);
     /// exp.excitation.periods = 4;
-    /// let rec = run(&exp).unwrap().record;
+    /// let rec = run(&exp)?.record;
     /// let r = Record { r: &rec.r, u: &rec.u, y: &rec.y, i: None, fs: 1.0 / rec.ts };
-    /// let periodic = analyze(&r, &FrfSettings::periodic(5115, 1), None).unwrap();
-    /// let noise = periodic.model_weight_noise().expect("a periodic estimate has it");
-    /// let var = periodic.frf.plant.variance().unwrap();
+    /// let periodic = analyze(&r, &FrfSettings::periodic(5115, 1), None)?;
+    /// let noise = periodic.model_weight_noise().ok_or("a periodic estimate has it")?;
+    /// let var = periodic.frf.plant.variance().ok_or("variances")?;
     /// for ((n, g), v) in noise.iter().zip(periodic.frf.plant.values()).zip(var) {
     ///     assert!((n.variance_at(*g) - v).abs() <= 1e-9 * v);
     /// }
-    /// let welch = analyze(&r, &FrfSettings::welch(4096), None).unwrap();
+    /// let welch = analyze(&r, &FrfSettings::welch(4096), None)?;
     /// assert!(welch.model_weight_noise().is_none());
+    /// # Ok(())
+    /// # }
     /// ```
     pub fn model_weight_noise(&self) -> Option<&[ambid_core::frf::closed_loop::RatioNoise]> {
         self.spectra.as_ref()?;

@@ -1222,6 +1222,63 @@ pub fn variances_at_model(
     )?)
 }
 
+/// The noise descriptions of `frd`'s lines out of `noise`, one per line of `f_hz` (an FRF and
+/// its [`plant_noise`](ambid_core::frf::closed_loop::ClosedLoopFrf::plant_noise)), when `frd`
+/// is a band of those lines ([`Frd::band`]): the description of every line of `f_hz` within
+/// `frd`'s first and last frequency.
+///
+/// # Errors
+/// `noise` of another length than `f_hz`, an empty `frd`, or a band whose line count differs
+/// from `frd`'s (not a band of `f_hz`).
+///
+/// # Example
+/// ```
+/// use ambid::uncertainty::noise_on_lines;
+/// use ambid_core::c64;
+/// use ambid_core::frf::closed_loop::RatioNoise;
+/// use ambid_core::lti::Frd;
+/// # fn main() -> Result<(), Box<dyn std::error::Error>> {
+/// let f = [10.0, 20.0, 30.0, 40.0];
+/// let noise: Vec<RatioNoise> =
+///     f.iter().map(|&x| RatioNoise { a: 0.0, b: x, c: c64::new(0.0, 0.0) }).collect();
+/// let all = Frd::new(f.to_vec(), vec![c64::new(1.0, 0.0); 4], None, Some(1e-3))?;
+/// let band = all.band(15.0, 35.0)?;
+/// let on = noise_on_lines(&f, &noise, &band)?;
+/// assert_eq!(on.iter().map(|n| n.b).collect::<Vec<_>>(), vec![20.0, 30.0]);
+/// # Ok(())
+/// # }
+/// ```
+pub fn noise_on_lines(
+    f_hz: &[f64],
+    noise: &[ambid_core::frf::closed_loop::RatioNoise],
+    frd: &Frd,
+) -> Result<Vec<ambid_core::frf::closed_loop::RatioNoise>> {
+    if noise.len() != f_hz.len() {
+        return Err(Error::other(format!(
+            "{} noise descriptions for {} lines",
+            noise.len(),
+            f_hz.len()
+        )));
+    }
+    let (Some(&lo), Some(&hi)) = (frd.f_hz().first(), frd.f_hz().last()) else {
+        return Err(Error::other("the FRF has no lines"));
+    };
+    let on: Vec<_> = f_hz
+        .iter()
+        .zip(noise)
+        .filter(|(f, _)| (lo..=hi).contains(*f))
+        .map(|(_, n)| *n)
+        .collect();
+    if on.len() != frd.len() {
+        return Err(Error::other(format!(
+            "the noise descriptions give {} lines in {lo}–{hi} Hz, the FRF {}",
+            on.len(),
+            frd.len()
+        )));
+    }
+    Ok(on)
+}
+
 /// One run of the whole chain on the twin: the seed experiment on rig `rig` (0 = nominal) with
 /// noise seed `seed`, the period-averaged plant FRF, the nominal model ([`nominal_by_bic_weighted`]:
 /// the BIC choice among [`TWIN_ORDERS`] of sample maximum-likelihood frequency-domain

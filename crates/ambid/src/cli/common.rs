@@ -205,6 +205,10 @@ pub fn weights_name(w: &FreqWeights) -> &'static str {
 /// The FRF and the fit options common to `fit --quantity` and `compare-models`.
 pub struct FrfInput {
     pub frd: ambid_core::lti::Frd,
+    /// The quantity's noise per line as a function of its value, on every line of `frd`
+    /// (`<q>_noise_*` columns, [`FrfFile::ratio_noise`](ambid::io::csv::FrfFile::ratio_noise)),
+    /// when the file has it.
+    pub noise: Option<Vec<ambid_core::frf::closed_loop::RatioNoise>>,
     pub opts: FreqFitOptions,
     /// The band the user gave (`--band`), `None` when it was derived from the file.
     pub explicit_band: Option<(f64, f64)>,
@@ -288,6 +292,7 @@ pub fn frf_input(
     };
     Ok(FrfInput {
         frd,
+        noise,
         opts,
         explicit_band: band,
     })
@@ -390,15 +395,19 @@ pub struct ModelOnFrf {
     pub controller: ambid::io::ControllerModel,
 }
 
-/// The FRF file's `quantity` on `band` (or the file's reliable band) and that band; an FRF whose
-/// standard deviations are all zero is refused (`needs` says what they are needed for).
+/// The quantity's noise per line on an FRF's band (`FrfInput::noise` on its lines).
+pub type BandNoise = Option<Vec<ambid_core::frf::closed_loop::RatioNoise>>;
+
+/// The FRF file's `quantity` on `band` (or the file's reliable band), that band and the
+/// quantity's noise description on its lines when the file has one; an FRF whose standard
+/// deviations are all zero is refused (`needs` says what they are needed for).
 pub fn frf_with_variance(
     frf: &Path,
     quantity: &str,
     fs: Option<f64>,
     band: Option<(f64, f64)>,
     needs: &str,
-) -> Result<(ambid_core::lti::Frd, (f64, f64))> {
+) -> Result<(ambid_core::lti::Frd, (f64, f64), BandNoise)> {
     let input = frf_input(frf, quantity, fs, band, WeightsArg::Variance, 1)?;
     if input.frd.variance().is_none() {
         return Err(ambid::error::Error::input(format!(
@@ -409,45 +418,19 @@ pub fn frf_with_variance(
     }
     let band = input.opts.band_hz.unwrap_or((0.0, f64::INFINITY));
     let frd = input.frd.band(band.0, band.1)?;
-    Ok((frd, band))
-}
-
-/// Quantity `quantity`'s noise per line as a function of its value (the `<q>_noise_*` columns
-/// of `ambid frf`, [`FrfFile::ratio_noise`](ambid::io::csv::FrfFile::ratio_noise)) on the lines
-/// of `frd` (a band of the same file); `None` when the file has no such columns.
-pub fn frf_noise_on(
-    frf: &Path,
-    quantity: &str,
-    frd: &ambid_core::lti::Frd,
-) -> Result<Option<Vec<ambid_core::frf::closed_loop::RatioNoise>>> {
-    let file = read_frf_csv(frf)?;
-    let Some(noise) = file.ratio_noise(quantity)? else {
-        return Ok(None);
+    let noise = match &input.noise {
+        Some(n) => Some(
+            ambid::uncertainty::noise_on_lines(input.frd.f_hz(), n, &frd)
+                .with_context(|| format!("{}: the `{quantity}_noise_*` columns", frf.display()))?,
+        ),
+        None => None,
     };
-    let (Some(&lo), Some(&hi)) = (frd.f_hz().first(), frd.f_hz().last()) else {
-        return Ok(None);
-    };
-    let on: Vec<_> = file
-        .f_hz
-        .iter()
-        .zip(noise)
-        .filter(|(f, _)| (lo..=hi).contains(*f))
-        .map(|(_, n)| n)
-        .collect();
-    if on.len() != frd.len() {
-        return Err(ambid::error::Error::input(format!(
-            "{}: the `{quantity}_noise_*` columns give {} lines in {lo}–{hi} Hz, the FRF {}",
-            frf.display(),
-            on.len(),
-            frd.len()
-        ))
-        .into());
-    }
-    Ok(Some(on))
+    Ok((frd, band, noise))
 }
 
 /// The plant FRF with its standard deviations on the band (given, or the file's reliable band),
-/// that band, and the nominal model: [`ModelOnFrf`] without the controller.
+/// that band, the nominal model and the FRF's noise description on the band
+/// ([`frf_with_variance`]): [`ModelOnFrf`] without the controller.
 pub fn frf_and_model(
     frf: &Path,
     quantity: &str,
@@ -459,10 +442,11 @@ pub fn frf_and_model(
     ambid_core::lti::Frd,
     (f64, f64),
     ambid_core::lti::StateSpace,
+    BandNoise,
 )> {
-    let (frd, band) = frf_with_variance(frf, quantity, fs, band, needs)?;
+    let (frd, band, noise) = frf_with_variance(frf, quantity, fs, band, needs)?;
     let model = ambid::io::model::read_model_json(model)?;
-    Ok((frd, band, model))
+    Ok((frd, band, model, noise))
 }
 
 /// The loop's controller file, its sample time checked against the FRF's `frd`.
@@ -486,7 +470,7 @@ pub fn model_on_frf(
     controller: &Path,
     needs: &str,
 ) -> Result<ModelOnFrf> {
-    let (frd, band, model) = frf_and_model(frf, quantity, fs, band, model, needs)?;
+    let (frd, band, model, _) = frf_and_model(frf, quantity, fs, band, model, needs)?;
     let controller = controller_for(controller, &frd)?;
     Ok(ModelOnFrf {
         frd,

@@ -320,7 +320,7 @@ pub fn physical(a: PhysicalArgs) -> Result<()> {
         levels.push((l, fit.clone()));
     }
     for (l, file) in &a.also {
-        let (other, _) = frf_with_variance(file, &a.quantity, a.fs, Some(band), NEEDS)?;
+        let (other, _, _) = frf_with_variance(file, &a.quantity, a.fs, Some(band), NEEDS)?;
         ctrl.check_ts(other.ts().unwrap_or(1.0 / ctrl.fs_hz()))?;
         let f = estimate(&other, &model, &drawing, ctrl.state_space(), &popts)
             .with_context(|| format!("the estimate at level {l} ({})", file.display()))?;

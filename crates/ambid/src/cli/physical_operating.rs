@@ -243,7 +243,7 @@ pub(crate) struct OperatingInput<'a> {
 pub(crate) fn operating_section(x: &OperatingInput<'_>) -> Result<serde_json::Value> {
     let mut frds: Vec<Frd> = Vec::with_capacity(x.files.len());
     for (_, _, file) in x.files {
-        let (frd, _) = frf_with_variance(file, x.quantity, x.fs, Some(x.band), x.needs)?;
+        let (frd, _, _) = frf_with_variance(file, x.quantity, x.fs, Some(x.band), x.needs)?;
         match frd.ts() {
             Some(ts) if (ts - x.controller_ts).abs() <= 1e-9 * ts => {}
             _ => {

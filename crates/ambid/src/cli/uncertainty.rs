@@ -4,7 +4,7 @@
 //! uncertain model exported for MATLAB and Python.
 
 use super::args::parse_band;
-use super::common::{controller_for, frf_and_model, frf_noise_on, frf_with_variance};
+use super::common::{controller_for, frf_and_model, frf_with_variance};
 use ambid::io::export::uncertain::{
     coherent_json, robust_json, uncertain_json, uncertain_mat_bytes, uncertain_matlab_script,
     uncertain_npz_bytes, UncertainModel, UncertainNames,
@@ -218,7 +218,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         ))
         .into());
     }
-    let (frd, band, model) = frf_and_model(
+    let (frd, band, model, fit_noise) = frf_and_model(
         &a.frf,
         &a.quantity,
         a.fs,
@@ -230,7 +230,6 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
     // line's variance at the model (the variance at the data follows the line's own error) and
     // term (f)'s reference fit under the same criterion, as the workflow's step
     // (docs/uncertainty.md, "Weights that follow the data's noise")
-    let fit_noise = frf_noise_on(&a.frf, &a.quantity, &frd)?;
     let frd = match &fit_noise {
         Some(n) => {
             println!(
@@ -253,7 +252,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
     } else {
         let mut plants = vec![frd.clone()];
         for path in &a.operating {
-            let (other, _) = frf_with_variance(
+            let (other, _, _) = frf_with_variance(
                 path,
                 &a.quantity,
                 a.fs,
@@ -286,7 +285,7 @@ pub fn uncertainty(a: UncertaintyArgs) -> Result<()> {
         (false, Some(level)) => {
             let mut levels = vec![(level, frd.clone())];
             for (l, path) in &a.amplitude {
-                let (other, _) = frf_with_variance(
+                let (other, _, _) = frf_with_variance(
                     path,
                     &a.quantity,
                     a.fs,

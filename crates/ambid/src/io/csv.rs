@@ -228,6 +228,7 @@ impl FrfFile {
     /// # Example
     /// ```
     /// use ambid::io::csv::FrfFile;
+    /// # fn main() -> Result<(), Box<dyn std::error::Error>> {
     /// let mut file = FrfFile {
     ///     f_hz: vec![10.0, 20.0],
     ///     quantities: vec!["plant".into()],
@@ -236,14 +237,16 @@ impl FrfFile {
     ///         .to_vec(),
     ///     columns: vec![vec![0.1, 0.2], vec![1e-4, 2e-4], vec![0.0, 1e-3], vec![0.0, 0.0]],
     /// };
-    /// let n = file.ratio_noise("plant").unwrap().unwrap();
+    /// let n = file.ratio_noise("plant")?.ok_or("the four columns")?;
     /// // a|G|² + b − 2 Re(G c) at G = 1 on the second line
     /// let v = n[1].variance_at(ambid_core::c64::new(1.0, 0.0));
     /// assert!((v - (0.2 + 2e-4 - 2e-3)).abs() < 1e-15);
-    /// assert!(file.ratio_noise("t_ry").unwrap().is_none()); // no columns: none
+    /// assert!(file.ratio_noise("t_ry")?.is_none()); // no columns: none
     /// file.names.pop();
     /// file.columns.pop();
     /// assert!(file.ratio_noise("plant").is_err()); // three of the four
+    /// # Ok(())
+    /// # }
     /// ```
     pub fn ratio_noise(
         &self,

@@ -410,15 +410,18 @@ pub fn frf_candidates(
 /// use ambid::experiment::{run, Experiment};
 /// use ambid::stage::frf_weights;
 /// use ambid_core::estimate::freqfit::FreqWeights;
+/// # fn main() -> Result<(), Box<dyn std::error::Error>> {
 /// let mut exp = Experiment::seed_paper(ambid_twin::Mode::Linear, 1e-7, 1);
 /// exp.excitation.periods = 4;
-/// let rec = run(&exp).unwrap().record;
+/// let rec = run(&exp)?.record;
 /// let r = Record { r: &rec.r, u: &rec.u, y: &rec.y, i: None, fs: 1.0 / rec.ts };
-/// let periodic = analyze(&r, &FrfSettings::periodic(5115, 1), None).unwrap();
-/// let welch = analyze(&r, &FrfSettings::welch(4096), None).unwrap();
+/// let periodic = analyze(&r, &FrfSettings::periodic(5115, 1), None)?;
+/// let welch = analyze(&r, &FrfSettings::welch(4096), None)?;
 /// assert!(matches!(frf_weights("model", &periodic), FreqWeights::SampleMaximumLikelihood(_)));
 /// assert_eq!(frf_weights("model", &welch), FreqWeights::InverseVariance);
 /// assert_eq!(frf_weights("variance", &periodic), FreqWeights::InverseVariance);
+/// # Ok(())
+/// # }
 /// ```
 pub fn frf_weights(setting: &str, a: &FrfAnalysis) -> FreqWeights {
     let has_variance = a.frf.plant.variance().is_some();

@@ -13,9 +13,11 @@ use crate::report::{
     Table,
 };
 use crate::uncertainty::{
-    amplitude_term_and_shifts, analyse_with_shift, nominal_gain_interval, nonlinear_level,
-    nonlinear_term, operating_term, variances_at_model, AMPLITUDE_MAX_SATURATED, NONLINEAR_ALPHA,
+    amplitude_term_and_shifts, analyse_with_shift, noise_on_lines, nominal_gain_interval,
+    nonlinear_level, nonlinear_term, operating_term, variances_at_model, AMPLITUDE_MAX_SATURATED,
+    NONLINEAR_ALPHA,
 };
+use ambid_core::estimate::freqfit::FreqWeights;
 use ambid_core::frf::closed_loop::RatioNoise;
 use ambid_core::lti::{Frd, StateSpace};
 use ambid_core::validate::uncertainty::{ExtraTerms, UncertaintyOptions};
@@ -209,25 +211,17 @@ fn inputs(ctx: &Ctx<'_>) -> Result<(Frd, StateSpace, StateSpace), String> {
 }
 
 /// The FRF's noise per line on `frd`'s lines (the models' band) when the models step fitted
-/// with the variance at the model (`[models] weights = "model"` and a periodic estimate,
-/// [`frf_weights`](crate::stage::frf_weights)); `None` otherwise.
+/// with the variance at the model ([`frf_weights`](crate::stage::frf_weights) gave sample
+/// maximum-likelihood weights: `[models] weights = "model"` and a periodic estimate); `None`
+/// otherwise.
 fn model_weight_noise(ctx: &Ctx<'_>, frd: &Frd) -> Option<Vec<RatioNoise>> {
     let a = ctx.frf()?;
-    if ctx.cfg.models.weights != "model" {
-        return None;
+    match crate::stage::frf_weights(&ctx.cfg.models.weights, a) {
+        FreqWeights::SampleMaximumLikelihood(noise) => {
+            noise_on_lines(a.frf.plant.f_hz(), &noise, frd).ok()
+        }
+        _ => None,
     }
-    let noise = a.model_weight_noise()?;
-    let (lo, hi) = (*frd.f_hz().first()?, *frd.f_hz().last()?);
-    let on: Vec<RatioNoise> = a
-        .frf
-        .plant
-        .f_hz()
-        .iter()
-        .zip(noise)
-        .filter(|(f, _)| (lo..=hi).contains(*f))
-        .map(|(_, n)| *n)
-        .collect();
-    (on.len() == frd.len()).then_some(on)
 }
 
 fn fmt_margin(x: Option<f64>) -> String {
