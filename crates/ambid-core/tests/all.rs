@@ -12,6 +12,7 @@ mod estimate_ss_pem;
 mod estimate_ss_pem_mimo;
 mod estimate_subspace;
 mod frd_matrix;
+mod freqfit_real;
 mod freqfit_sml;
 mod freqfit_ss;
 mod freqfit_tf;

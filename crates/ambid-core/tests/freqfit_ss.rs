@@ -122,7 +122,7 @@ fn fit_exact(truth: &StateSpace, feedthrough: bool) -> (f64, f64, StateSpace) {
         &FreqFitOptions::default(),
         &SsFreqOptions {
             feedthrough,
-            horizon: None,
+            ..SsFreqOptions::default()
         },
     )
     .unwrap();
@@ -190,8 +190,8 @@ fn the_subspace_start_alone_is_already_exact_and_horizons_agree() {
             4,
             &opts,
             &SsFreqOptions {
-                feedthrough: false,
                 horizon: Some(q),
+                ..SsFreqOptions::default()
             },
         )
         .unwrap();
@@ -268,8 +268,8 @@ fn bad_input_gives_typed_errors() {
     // horizon outside [n + 1, L]
     for q in [4, 201] {
         let h = SsFreqOptions {
-            feedthrough: false,
             horizon: Some(q),
+            ..SsFreqOptions::default()
         };
         is_invalid(ss_frd(&frd, 4, &d, &h).map(|_| ()), "horizon");
     }

@@ -22,7 +22,7 @@ const SCRIPT: &str = concat!(
     "/tests/fixtures/f16_gvt/reference.py"
 );
 
-fn data_path(check: &str) -> Option<PathBuf> {
+pub(crate) fn data_path(check: &str) -> Option<PathBuf> {
     let base = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let found = base
         .ancestors()
@@ -44,7 +44,7 @@ fn data_path(check: &str) -> Option<PathBuf> {
 }
 
 /// The record as IoData: r = Voltage, u = Force, y_1..y_3 = Acceleration1..3, period 8192.
-fn read(path: &PathBuf) -> IoData {
+pub(crate) fn read(path: &PathBuf) -> IoData {
     let text = std::fs::read_to_string(path).unwrap();
     let mut cols = vec![Vec::new(); 5];
     for line in text.lines().skip(1).filter(|l| !l.trim().is_empty()) {
