@@ -565,7 +565,9 @@ fn sml_on_the_f16_holds_out_as_well_as_the_inverse_variance() {
         .unwrap();
         from_periodic_iodata(&d, (2.0, 15.0), 1e-3, None).unwrap()
     };
-    println!("output | estimation periods | held-out median relative error: inverse variance | SML");
+    println!(
+        "output | estimation periods | held-out median relative error: inverse variance | SML"
+    );
     let mut ratios = Vec::new();
     for out in 0..3 {
         for (est_p, held_p) in [((1, 5), (5, 9)), ((5, 9), (1, 5))] {
