@@ -171,6 +171,29 @@ pub struct SsFreqOptions {
 
 /// When a fit held to a number of unstable poles refines from a second start too
 /// ([`SsFreqOptions::second_start`]; module docs, "Second start").
+///
+/// # Example
+/// A stable lightly damped mode fitted held to 0 unstable poles, with the second start where
+/// the first refinement ends pinned: the fit is stable and exact.
+/// ```
+/// use ambid_core::estimate::freqfit::FreqFitOptions;
+/// use ambid_core::estimate::freqfit_ss::{ss_frd, SecondStart, SsFreqOptions};
+/// use ambid_core::lti::{Frd, StateSpace};
+/// use faer::mat;
+/// # fn main() -> Result<(), Box<dyn std::error::Error>> {
+/// let (re, im) = (0.995 * 0.1f64.cos(), 0.995 * 0.1f64.sin());
+/// let truth = StateSpace::discrete(mat![[re, im], [-im, re]], mat![[1.0], [0.0]],
+///                                  mat![[0.0, 1.0]], mat![[0.0]], 1e-3)?;
+/// let f: Vec<f64> = (1..60).map(|k| 0.5 * k as f64).collect();
+/// let frd = Frd::from_model(&truth, &f)?;
+/// let opts = FreqFitOptions { max_unstable_poles: Some(0), ..FreqFitOptions::default() };
+/// let ss = SsFreqOptions { second_start: SecondStart::WhenPinned, ..SsFreqOptions::default() };
+/// let fit = ss_frd(&frd, 2, &opts, &ss)?;
+/// assert!(fit.errors.relative_rmse < 1e-8);
+/// assert!(fit.model.poles()?.iter().all(|z| z.norm() < 1.0));
+/// # Ok(())
+/// # }
+/// ```
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum SecondStart {
     /// When the first refinement ends with a pole pinned to the unit circle
