@@ -97,8 +97,8 @@
 //! the second start changes 20, all of orders 10–12, with the median error against the exact
 //! plant ×0.994 (lower on 12, higher on 8), and the fit time of the 280 rises from 5.6 s to
 //! 7.0 s; on the unseen nonlinear rigs 41–100, 49 of 420 end pinned, 31 change (orders 10–12),
-//! the error ×0.989 (lower on 18, higher on 13), the time 11.2 s → 13.9 s. Either start can still end with a stable pole on the unit circle: the admissible set
-//! is closed.
+//! the error ×0.989 (lower on 18, higher on 13), the time 11.2 s → 13.9 s. Either start can
+//! still end with a stable pole on the unit circle: the admissible set is closed.
 //!
 //! *Why not the default yet.* With `WhenPinned` as the default the twin's tests and the nominal
 //! twin's summary are unchanged, but four real-data tests of `ambid` change their outcome:
@@ -317,12 +317,12 @@ pub(crate) fn ss_frd_started(
     let mut best = refine(&poles, limit)?;
     // 2'. with a limit, a second start (module docs, "Second start"): the unconstrained
     // refinement's poles, the surplus unstable ones mirrored
-    let second = match ss_opts.second_start {
+    let try_second = match ss_opts.second_start {
         SecondStart::Never => false,
         SecondStart::Always => true,
         SecondStart::WhenPinned => best.poles.iter().any(|p| (p.norm() - 1.0).abs() < PINNED),
     };
-    if let (Some(lim), None, true) = (limit, start, second && opts.max_iterations > 0) {
+    if let (Some(lim), None, true) = (limit, start, try_second && opts.max_iterations > 0) {
         let second = refine(&poles, None).and_then(|free| {
             if count_unstable(&free.poles) <= lim {
                 Ok(free)
