@@ -97,3 +97,53 @@ fn a_stable_fit_of_the_f16_comes_close_to_the_unconstrained_one() {
     assert!(fr <= 1.25 && fr_worst <= 3.0, "{fr} {fr_worst}");
     assert!(g >= 2.0, "the second start does not matter here: {g}");
 }
+
+/// The comparison's rows note poles the unstable-pole limit holds on the unit circle
+/// (`validate::compare`, module docs): on the F-16's output 1 (periods 2–9) state-space fits of
+/// orders 13–25 held to 0 unstable poles, each row's note names such poles exactly when its
+/// model has them (the oracle: the model's own poles within 1e-9 of the circle), they do not
+/// change the row's validity, and most of these fits have one (the stall this file is about).
+#[test]
+fn the_comparison_notes_poles_on_the_unit_circle() {
+    use ambid_core::lti::Structure;
+    use ambid_core::validate::compare::{compare_models, CompareSpec};
+    let check = "freqfit_real: poles on the unit circle in the comparison";
+    let Some(path) = data_path(check) else {
+        return;
+    };
+    let frf = periodic(&read(&path), &MimoOptions::new().skip(1).band(2.0, 15.0)).unwrap();
+    let frd = frf.plant.entry(0, 0).unwrap();
+    let spec = CompareSpec {
+        structures: vec![Structure::Ss],
+        orders: (13..=25).step_by(2).collect(),
+        fit: FreqFitOptions {
+            weights: FreqWeights::InverseVariance,
+            ..FreqFitOptions::default()
+        },
+        unstable_poles: Some(0),
+        ..CompareSpec::default()
+    };
+    let rows = compare_models(&frd, &spec, None).unwrap();
+    let mut with = 0;
+    for r in &rows {
+        let m = r.model.as_ref().expect("a model");
+        let on = m
+            .poles()
+            .unwrap()
+            .iter()
+            .filter(|z| z.im >= 0.0 && (z.norm() - 1.0).abs() < 1e-9)
+            .count();
+        let note = r.note.as_deref().unwrap_or("");
+        println!(
+            "order {}: {on} on the circle; valid {}; {note}",
+            r.order, r.valid
+        );
+        assert_eq!(note.contains("poles on the unit circle"), on > 0, "{note}");
+        // the note alone never makes a row invalid
+        if on > 0 && !note.contains("not valid") {
+            assert!(r.valid, "{note}");
+        }
+        with += usize::from(on > 0);
+    }
+    assert!(2 * with > rows.len(), "{with} of {}", rows.len());
+}

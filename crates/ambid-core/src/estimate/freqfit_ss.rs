@@ -83,7 +83,7 @@
 //! constraint. [`SsFreqOptions::second_start`] says when: [`SecondStart::WhenPinned`] when
 //! the first refinement ends with a pole pinned to the unit circle ($\bigl||z| - 1\bigr| <$
 //! [`PINNED`]), the sign that the constraint, not the data, stopped it; [`SecondStart::Always`];
-//! or [`SecondStart::Never`], the default for now.
+//! or [`SecondStart::Never`], the default.
 //!
 //! Why: on a narrow band the unconstrained fit of a stable structure puts unstable poles
 //! outside the band to absorb the modes beyond it, the subspace start mirrors them, and the
@@ -97,19 +97,29 @@
 //! the second start changes 20, all of orders 10–12, with the median error against the exact
 //! plant ×0.994 (lower on 12, higher on 8), and the fit time of the 280 rises from 5.6 s to
 //! 7.0 s; on the unseen nonlinear rigs 41–100, 49 of 420 end pinned, 31 change (orders 10–12),
-//! the error ×0.989 (lower on 18, higher on 13), the time 11.2 s → 13.9 s. Either start can
-//! still end with a stable pole on the unit circle: the admissible set is closed.
+//! the error ×0.989 (lower on 18, higher on 13), the time 11.2 s → 13.9 s.
 //!
-//! *Why not the default yet.* With `WhenPinned` as the default the twin's tests and the nominal
+//! *What it does not do.* Either start can still end with a pole on the unit circle (the
+//! admissible set is closed), and on the F-16 most do: from the subspace start 23, 15 and 21
+//! of the 23 fits of orders 10–32 of its three outputs end with one ([`poles_on_unit_circle`]:
+//! a real pole at $z = \pm 1$ or an undamped pair), and with the second start 23, 12 and 21,
+//! more of them undamped pairs beside the band (flagged by `ambid`'s
+//! `uncertainty::out_of_band_resonance` on 21, 18 and 6 fits against 8, 11 and 1). Which
+//! result the second start gives depends on how far its unconstrained refinement runs (with
+//! ten times the iteration limit, the BIC's model of output 1 fell from order 23 to 13 and its
+//! held-out error rose from 1.8 % to 15.8 %). So it moves the stall more than it removes it
+//! (example `freqfit_f16_orders` of `ambid`; docs/estimation.md).
+//!
+//! *Why not the default.* With `WhenPinned` as the default the twin's tests and the nominal
 //! twin's summary are unchanged, but four real-data tests of `ambid` change their outcome:
 //! the Silverbox's stable BLA model improves until its error is within 1.4 times the held-out
 //! BLA's noise, so the held-out BLA no longer stands in for the truth there; on the F-16 the
-//! BIC's model of output 3 (now order 31) holds two pole–zero pairs that cancel within the
-//! data; SML against the inverse variance on the F-16 moves from 0.82–1.12 to 0.20–1.28; and
-//! `ambid uncertainty` on an FRF read back from its file refits it 0.24 % away from the
-//! library's model (term (f), 1e-7 before): the unconstrained refinement stops at its
-//! iteration limit and follows the file's last bits. Each needs its test re-derived, and the
-//! BIC's nominal should skip fits with cancelling pairs as the workflow's choice does.
+//! BIC's model of output 3 (then order 31) held two pole–zero pairs that cancel within the
+//! data (the BIC's nominal skips such fits now); SML against the inverse variance on the F-16
+//! moves from 0.82–1.12 to 0.20–1.28; and `ambid uncertainty` on an FRF read back from its
+//! file refits it 0.24 % away from the library's model (term (f), 1e-7 before): the
+//! unconstrained refinement stops at its iteration limit and follows the file's last bits.
+//! Together with the dependence above, the second start is not a fix to make the default.
 //!
 //! # Result
 //! The returned [`StateSpace`] is the block-diagonal delta-companion realisation of the sections:
@@ -165,8 +175,8 @@ pub struct SsFreqOptions {
     /// With a limit on the unstable poles ([`FreqFitOptions::max_unstable_poles`] or
     /// [`FreqFitOptions::enforce_stability`]), when to refine from a second start as well: the
     /// unconstrained refinement's poles with the surplus unstable ones mirrored, the lower cost
-    /// kept (module docs, "Second start"). Default [`SecondStart::Never`] (for now: module
-    /// docs).
+    /// kept (module docs, "Second start"). Default [`SecondStart::Never`] (module docs, "Why
+    /// not the default").
     pub second_start: SecondStart,
 }
 
@@ -212,6 +222,38 @@ pub enum SecondStart {
 /// (at 20 kHz a 100 Hz mode would need $\zeta < 3\cdot10^{-8}$); the stalled fits of the
 /// module docs end within $10^{-11}$ of the circle.
 pub const PINNED: f64 = 1e-9;
+
+/// The poles of `model` within [`PINNED`] of the unit circle, $\bigl||z| - 1\bigr| <$
+/// [`PINNED`]: of a fit held to a number of unstable poles, the ones its constraint holds there
+/// (module docs, "Second start"). The data want them outside; the fit stopped on the
+/// constraint, not at the data's optimum, and the model has an undamped mode there. Poles of a
+/// complex pair are both listed. Empty for a fit whose constraint is inactive.
+///
+/// # Errors
+/// When the model's poles cannot be computed.
+///
+/// # Example
+/// ```
+/// use ambid_core::estimate::freqfit_ss::poles_on_unit_circle;
+/// use ambid_core::lti::StateSpace;
+/// use faer::mat;
+/// # fn main() -> Result<(), Box<dyn std::error::Error>> {
+/// // an integrator (z = 1) and a damped pole (z = 0.5)
+/// let m = StateSpace::discrete(mat![[1.0, 0.0], [0.0, 0.5]], mat![[1.0], [1.0]],
+///                              mat![[1.0, 1.0]], mat![[0.0]], 1e-3)?;
+/// let on = poles_on_unit_circle(&m)?;
+/// assert_eq!(on.len(), 1);
+/// assert!((on[0].re - 1.0).abs() < 1e-12);
+/// # Ok(())
+/// # }
+/// ```
+pub fn poles_on_unit_circle(model: &StateSpace) -> Result<Vec<c64>> {
+    Ok(model
+        .poles()?
+        .into_iter()
+        .filter(|p| (p.norm() - 1.0).abs() < PINNED)
+        .collect())
+}
 
 /// Fits an `order`-th order discrete-time SISO state-space model to `frd` (module docs):
 /// frequency-domain subspace start, then Levenberg–Marquardt on the weighted complex error.

@@ -51,7 +51,10 @@
 //! that cancels within the data ([`cancelling_pairs`]: removing the pair does not raise the
 //! fit's BIC, so the order exceeds what the data support); a row that is not valid stays in the
 //! table with the reason in its note. [`choose`] picks among the valid rows
-//! the best validation fit when there is one, else the smallest BIC.
+//! the best validation fit when there is one, else the smallest BIC. A fit whose model has
+//! poles within [`PINNED`](crate::estimate::freqfit_ss::PINNED) of the unit circle under that
+//! limit gets a note naming them (the limit holds them there: the fit stopped on the
+//! constraint, and the model has an undamped mode); that is not a validity rule.
 
 use crate::c64;
 use crate::error::{Error, Result};
@@ -282,6 +285,28 @@ fn candidate(
             "the refinement stopped at its iteration limit ({}) before converging: the model may not be at the optimum",
             spec.fit.max_iterations
         ));
+    }
+    // poles the unstable-pole limit holds on the unit circle: the fit stopped on the
+    // constraint (`freqfit_ss`, "Second start"); a note, not a validity rule
+    if let Some(lim) = spec.unstable_poles {
+        if let Ok(on) = crate::estimate::freqfit_ss::poles_on_unit_circle(&model) {
+            let at: Vec<String> = on
+                .iter()
+                .filter(|z| z.im >= 0.0)
+                .map(|z| {
+                    format!(
+                        "{:.1} Hz",
+                        z.arg().abs() / (2.0 * std::f64::consts::PI * data.ts)
+                    )
+                })
+                .collect();
+            if !at.is_empty() {
+                notes.push(format!(
+                    "poles on the unit circle at {}: the limit of {lim} unstable pole(s) holds them there, so the fit stopped on that constraint and the model is undamped there",
+                    at.join(", ")
+                ));
+            }
+        }
     }
     row.rmse = Some(errors.rmse);
     row.relative_rmse = Some(errors.relative_rmse);
