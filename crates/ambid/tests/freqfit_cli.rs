@@ -531,7 +531,12 @@ fn fit_warns_of_a_resonance_beyond_the_band() {
         let j: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
         let flag = &j["meta"]["out_of_band_resonance"];
-        println!("order {order}, weights {weights}: {beyond:?}; {flag}");
+        // held to the loop's one unstable pole: poles the limit pins to the unit circle are
+        // listed and warned of exactly when the model has them
+        let pinned = crate::common::check_poles_on_unit_circle(std::path::Path::new(&out), &t);
+        println!(
+            "order {order}, weights {weights}: {beyond:?}; {flag}; on the unit circle {pinned:?}"
+        );
         assert_eq!(
             t.contains("outside the fitted band"),
             !beyond.is_empty(),

@@ -1203,9 +1203,37 @@ pub fn fit_frf(
             fitted.0, fitted.1
         );
     }
+    // poles the unstable-pole limit holds on the unit circle: the fit stopped on the constraint
+    // (ambid_core::estimate::freqfit_ss, "Second start")
+    let ts = input.frd.ts().unwrap_or(1.0);
+    let on_circle: Vec<serde_json::Value> = match n_u {
+        Some(_) => ambid_core::estimate::freqfit_ss::poles_on_unit_circle(model)?
+            .iter()
+            .filter(|z| z.im >= 0.0)
+            .map(|z| {
+                json!({
+                    "f_hz": z.arg().abs() / (2.0 * std::f64::consts::PI * ts),
+                    "abs_z": z.norm(),
+                })
+            })
+            .collect(),
+        None => Vec::new(),
+    };
+    if let (Some(lim), false) = (n_u, on_circle.is_empty()) {
+        let at: Vec<String> = on_circle
+            .iter()
+            .map(|p| format!("{:.2} Hz", p["f_hz"].as_f64().unwrap_or(f64::NAN)))
+            .collect();
+        eprintln!(
+            "warning: the model has poles on the unit circle (within {:.0e}) at {}: the limit of {lim} unstable pole(s) holds them there, so the fit stopped on that constraint, not at the data's optimum, and the model has an undamped mode at each; at this order and band the data ask for more unstable poles than the limit allows. Check the unstable-pole count, or try another order or a wider band (docs/estimation.md, \"A second start for constrained fits\")",
+            ambid_core::estimate::freqfit_ss::PINNED,
+            at.join(", ")
+        );
+    }
     let meta = json!({
         "method": format!("{}_frd", structure.name()),
         "out_of_band_resonance": beyond.map(|(f, z)| json!({"f_hz": f, "damping": z})),
+        "poles_on_unit_circle": on_circle,
         "quantity": quantity,
         "order": order,
         "n_params": row.n_params,

@@ -264,3 +264,40 @@ pub fn assert_margin_bars(
         "{what}: lower {lo} vs true {t_lo}"
     );
 }
+
+/// The oracle of `ambid fit`'s `meta.poles_on_unit_circle`: the written model's poles (upper
+/// half-plane and real) with $\bigl||z| - 1\bigr| < 10^{-9}$, as frequencies $|\arg z| / 2\pi T$
+/// in Hz, computed here from the model file; checked against the meta's list and the warning.
+/// Returns those frequencies.
+pub fn check_poles_on_unit_circle(model_path: &Path, printed: &str) -> Vec<f64> {
+    let m = ambid::io::model::read_model_json(model_path).unwrap();
+    let ts = m.ts().unwrap();
+    let oracle: Vec<f64> = m
+        .poles()
+        .unwrap()
+        .iter()
+        .filter(|z| z.im >= 0.0 && (z.norm() - 1.0).abs() < 1e-9)
+        .map(|z| z.arg().abs() / (2.0 * std::f64::consts::PI * ts))
+        .collect();
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(model_path).unwrap()).unwrap();
+    let listed: Vec<f64> = j["meta"]["poles_on_unit_circle"]
+        .as_array()
+        .expect("meta.poles_on_unit_circle")
+        .iter()
+        .map(|p| p["f_hz"].as_f64().unwrap())
+        .collect();
+    assert_eq!(listed.len(), oracle.len(), "{listed:?} against {oracle:?}");
+    for f in &oracle {
+        assert!(
+            listed.iter().any(|g| (g - f).abs() <= 1e-9 * (1.0 + f)),
+            "{f} not in {listed:?}"
+        );
+    }
+    assert_eq!(
+        printed.contains("poles on the unit circle"),
+        !oracle.is_empty(),
+        "{printed}"
+    );
+    oracle
+}
