@@ -11,11 +11,11 @@
 use crate::error::{Context, Error, Result};
 use crate::experiment::{run, ExcitationPlan, Experiment};
 use ambid_core::c64;
-use ambid_core::estimate::freqfit::{FreqFitOptions, FreqWeights};
+use ambid_core::estimate::freqfit::{FreqData, FreqFitOptions, FreqWeights};
 use ambid_core::estimate::freqfit_ss::{ss_frd, SsFreqOptions};
 use ambid_core::frf::bla::{BlaEstimate, NlGroup};
 use ambid_core::lti::{Frd, StateSpace};
-use ambid_core::validate::compare::unstable_poles_from_loop;
+use ambid_core::validate::compare::{cancelling_pairs, unstable_poles_from_loop};
 pub use ambid_core::validate::robust::{loop_stable, nominal_gain_interval};
 use ambid_core::validate::robust::{
     robust_stability, robust_stability_matrix_drawn, robust_stability_on_lines,
@@ -1586,8 +1586,10 @@ fn twin_seed_closed_loop(
 
 /// The nominal model of a twin run (type docs of [`UncertaintyRun`]): of the inverse-variance
 /// `ss_frd` fits of the orders [`TWIN_ORDERS`] to `frd` (the loop's unstable pole count from
-/// `controller` kept) whose loop with `controller` is stable, the one of least BIC $2\chi^2 +
-/// n_\theta \ln(2L)$, with $L$ lines. The measured loop was stable, so a fit whose loop is not
+/// `controller` kept) whose loop with `controller` is stable, with no resonance beyond the
+/// band ([`out_of_band_resonance`]) and no pole–zero pair that cancels within the data
+/// (`validate::compare::cancelling_pairs`, the models step's validity rule; since 2026-12-08),
+/// the one of least BIC $2\chi^2 + n_\theta \ln(2L)$, with $L$ lines. The measured loop was stable, so a fit whose loop is not
 /// contradicts the data; it is refused, never stabilised (random rig 110 of the nonlinear twin,
 /// noise seed 1110: the order-12 fit of least BIC had a closed-loop pole outside the unit
 /// circle, $|\hat T| = 5.4$ at 56 Hz against the true 1.5, and no robust margin came from any
@@ -1736,12 +1738,18 @@ pub fn nominal_by_bic_weighted(
         (Some(&lo), Some(&hi)) => (lo, hi),
         _ => return Err(Error::other("the FRF has no lines")),
     };
+    let data = FreqData::new(frd, &opts)?;
     let mut best: Option<(f64, StateSpace)> = None;
     for order in orders {
         let Ok(fit) = ss_frd(frd, order, &opts, &SsFreqOptions::default()) else {
             continue;
         };
         if out_of_band_resonance(&fit.model, band)?.is_some() {
+            continue;
+        }
+        // a fit whose pole–zero pairs cancel within the data: the data do not support its
+        // order (the models step's validity rule, `validate::compare::cancelling_pairs`)
+        if !cancelling_pairs(&fit.model, &data)?.is_empty() {
             continue;
         }
         if let Some(c) = controller {
