@@ -31,13 +31,18 @@ fn median_rel(frd: &Frd, model: &ambid_core::lti::StateSpace) -> f64 {
     rel[rel.len() / 2]
 }
 
+/// The F-16's FRFs of periods 2–9 on 2–15 Hz; `None` (skipped, saying why as `check`) without
+/// the data set.
+fn f16_frf(check: &str) -> Option<ambid_core::frf::mimo::MimoClosedLoopFrf> {
+    let path = data_path(check)?;
+    Some(periodic(&read(&path), &MimoOptions::new().skip(1).band(2.0, 15.0)).unwrap())
+}
+
 #[test]
 fn a_stable_fit_of_the_f16_comes_close_to_the_unconstrained_one() {
-    let check = "freqfit_real: stability-constrained fits of the F-16";
-    let Some(path) = data_path(check) else {
+    let Some(frf) = f16_frf("freqfit_real: stability-constrained fits of the F-16") else {
         return;
     };
-    let frf = periodic(&read(&path), &MimoOptions::new().skip(1).band(2.0, 15.0)).unwrap();
     let (mut free_ratio, mut default_ratio, mut gain) = (Vec::new(), Vec::new(), Vec::new());
     println!("output | order | subspace start alone | with the second start (WhenPinned) | unconstrained (median relative misfit)");
     for out in 0..3 {
@@ -107,11 +112,9 @@ fn a_stable_fit_of_the_f16_comes_close_to_the_unconstrained_one() {
 fn the_comparison_notes_poles_on_the_unit_circle() {
     use ambid_core::lti::Structure;
     use ambid_core::validate::compare::{compare_models, CompareSpec};
-    let check = "freqfit_real: poles on the unit circle in the comparison";
-    let Some(path) = data_path(check) else {
+    let Some(frf) = f16_frf("freqfit_real: poles on the unit circle in the comparison") else {
         return;
     };
-    let frf = periodic(&read(&path), &MimoOptions::new().skip(1).band(2.0, 15.0)).unwrap();
     let frd = frf.plant.entry(0, 0).unwrap();
     let spec = CompareSpec {
         structures: vec![Structure::Ss],

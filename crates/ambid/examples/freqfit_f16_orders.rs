@@ -88,7 +88,6 @@ fn main() -> Result<(), Box<dyn Error>> {
             let ts = 1.0 / 400.0;
             let pinned: Vec<String> = poles_on_unit_circle(&fit.model)?
                 .iter()
-                .filter(|p| p.im >= 0.0)
                 .map(|p| {
                     let f = p.arg().abs() / (2.0 * std::f64::consts::PI * ts);
                     if p.im == 0.0 {

@@ -1589,8 +1589,8 @@ fn twin_seed_closed_loop(
 /// `controller` kept) whose loop with `controller` is stable, with no resonance beyond the
 /// band ([`out_of_band_resonance`]) and no pole–zero pair that cancels within the data
 /// (`validate::compare::cancelling_pairs`, the models step's validity rule; since 2026-12-08),
-/// the one of least BIC $2\chi^2 + n_\theta \ln(2L)$, with $L$ lines. The measured loop was stable, so a fit whose loop is not
-/// contradicts the data; it is refused, never stabilised (random rig 110 of the nonlinear twin,
+/// the one of least BIC $2\chi^2 + n_\theta \ln(2L)$, with $L$ lines. The measured loop was
+/// stable, so a fit whose loop is not contradicts the data; it is refused, never stabilised (random rig 110 of the nonlinear twin,
 /// noise seed 1110: the order-12 fit of least BIC had a closed-loop pole outside the unit
 /// circle, $|\hat T| = 5.4$ at 56 Hz against the true 1.5, and no robust margin came from any
 /// check; docs/uncertainty.md, "Weights that follow the data's noise").

@@ -216,6 +216,19 @@ fn default_bound(
     b
 }
 
+/// `frd` written as an FRF file with the column `plant` (and its standard deviations), as
+/// `ambid frf` writes one.
+fn write_plant_frf(path: &std::path::Path, frd: &ambid_core::lti::Frd) {
+    use ambid::io::csv::{write_frf_csv, FrfColumn};
+    let std: Vec<f64> = frd.variance().unwrap().iter().map(|v| v.sqrt()).collect();
+    let plant = FrfColumn {
+        name: "plant",
+        values: frd.values(),
+        std: Some(&std),
+    };
+    write_frf_csv(path, frd.f_hz(), &[plant]).unwrap();
+}
+
 /// The same bound through the command a user runs on a record without a loop: the estimation
 /// FRF `frd` and the `model` as files, `ambid uncertainty --per-line-misfit` without
 /// `--controller`. Its weight and bound (read back from uncertainty.csv) cover the held-out error
@@ -228,16 +241,9 @@ fn cli_without_a_controller(
     allow: &[f64],
     lib: &ambid::uncertainty::UncertainBound,
 ) {
-    use ambid::io::csv::{write_frf_csv, FrfColumn};
     let dir = common::tmpdir("uncertainty-real-cli");
     let d = |f: &str| dir.join(f).to_str().unwrap().to_string();
-    let std: Vec<f64> = frd.variance().unwrap().iter().map(|v| v.sqrt()).collect();
-    let plant = FrfColumn {
-        name: "plant",
-        values: frd.values(),
-        std: Some(&std),
-    };
-    write_frf_csv(&dir.join("frf.csv"), frd.f_hz(), &[plant]).unwrap();
+    write_plant_frf(&dir.join("frf.csv"), frd);
     let json = ambid::io::model::state_space_json(model, "u", "y_1", serde_json::json!({}));
     ambid::io::model::write_model_json(&dir.join("model.json"), &json).unwrap();
     let t = common::ok(&[
@@ -650,42 +656,32 @@ fn sml_on_the_f16_holds_out_as_well_as_the_inverse_variance() {
 /// here must show the stall.
 #[test]
 fn a_stable_fit_of_the_f16_warns_of_poles_on_the_unit_circle() {
-    use ambid::io::csv::{write_frf_csv, FrfColumn};
     let Some((est, _)) = f16_plants() else {
         return;
     };
     let e1 = est.entry(0, 0).unwrap();
     let dir = common::tmpdir("f16-fit-on-circle");
     let d = |f: &str| dir.join(f).to_str().unwrap().to_string();
-    let std: Vec<f64> = e1.variance().unwrap().iter().map(|v| v.sqrt()).collect();
-    let plant = FrfColumn {
-        name: "plant",
-        values: e1.values(),
-        std: Some(&std),
-    };
-    write_frf_csv(&dir.join("frf.csv"), e1.f_hz(), &[plant]).unwrap();
+    write_plant_frf(&dir.join("frf.csv"), &e1);
     for order in ["13", "19", "25"] {
         let out = d(&format!("ss{order}.json"));
-        let t = common::ok(&[
-            "fit",
+        let o = common::fit_plant_ss(
             &d("frf.csv"),
-            "--quantity",
-            "plant",
-            "--structure",
-            "ss",
-            "--order",
             order,
-            "--unstable-poles",
-            "0",
-            "--weights",
-            "variance",
-            "--fs",
-            "400",
-            "--band",
-            "2:15",
-            "--out",
             &out,
-        ]);
+            &[
+                "--unstable-poles",
+                "0",
+                "--weights",
+                "variance",
+                "--fs",
+                "400",
+                "--band",
+                "2:15",
+            ],
+        );
+        let t = common::text(&o);
+        assert!(o.status.success(), "{t}");
         let pinned = common::check_poles_on_unit_circle(std::path::Path::new(&out), &t);
         println!("order {order}: poles on the unit circle at {pinned:.3?} Hz");
         assert!(!pinned.is_empty(), "order {order}: {t}");

@@ -226,8 +226,9 @@ pub const PINNED: f64 = 1e-9;
 /// The poles of `model` within [`PINNED`] of the unit circle, $\bigl||z| - 1\bigr| <$
 /// [`PINNED`]: of a fit held to a number of unstable poles, the ones its constraint holds there
 /// (module docs, "Second start"). The data want them outside; the fit stopped on the
-/// constraint, not at the data's optimum, and the model has an undamped mode there. Poles of a
-/// complex pair are both listed. Empty for a fit whose constraint is inactive.
+/// constraint, not at the data's optimum, and the model has an undamped mode there. One pole
+/// per mode: of a complex pair the one in the upper half-plane. Empty for a fit whose
+/// constraint is inactive.
 ///
 /// # Errors
 /// When the model's poles cannot be computed.
@@ -251,8 +252,13 @@ pub fn poles_on_unit_circle(model: &StateSpace) -> Result<Vec<c64>> {
     Ok(model
         .poles()?
         .into_iter()
-        .filter(|p| (p.norm() - 1.0).abs() < PINNED)
+        .filter(|p| p.im >= 0.0 && on_unit_circle(p))
         .collect())
+}
+
+/// Whether the pole `p` lies within [`PINNED`] of the unit circle.
+fn on_unit_circle(p: &c64) -> bool {
+    (p.norm() - 1.0).abs() < PINNED
 }
 
 /// Fits an `order`-th order discrete-time SISO state-space model to `frd` (module docs):
@@ -362,7 +368,7 @@ pub(crate) fn ss_frd_started(
     let try_second = match ss_opts.second_start {
         SecondStart::Never => false,
         SecondStart::Always => true,
-        SecondStart::WhenPinned => best.poles.iter().any(|p| (p.norm() - 1.0).abs() < PINNED),
+        SecondStart::WhenPinned => best.poles.iter().any(on_unit_circle),
     };
     if let (Some(lim), None, true) = (limit, start, try_second && opts.max_iterations > 0) {
         let second = refine(&poles, None).and_then(|free| {

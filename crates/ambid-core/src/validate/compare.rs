@@ -292,7 +292,6 @@ fn candidate(
         if let Ok(on) = crate::estimate::freqfit_ss::poles_on_unit_circle(&model) {
             let at: Vec<String> = on
                 .iter()
-                .filter(|z| z.im >= 0.0)
                 .map(|z| {
                     format!(
                         "{:.1} Hz",

@@ -1209,7 +1209,6 @@ pub fn fit_frf(
     let on_circle: Vec<serde_json::Value> = match n_u {
         Some(_) => ambid_core::estimate::freqfit_ss::poles_on_unit_circle(model)?
             .iter()
-            .filter(|z| z.im >= 0.0)
             .map(|z| {
                 json!({
                     "f_hz": z.arg().abs() / (2.0 * std::f64::consts::PI * ts),
